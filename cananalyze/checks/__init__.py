@@ -1,0 +1,1 @@
+"""Timing analysis and conformance rules."""

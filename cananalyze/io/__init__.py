@@ -1,0 +1,1 @@
+"""Log readers: one module per format, each yielding FrameBatch columns."""

@@ -1,0 +1,1 @@
+"""Network model: device profiles, node map, configuration tracked from the log."""

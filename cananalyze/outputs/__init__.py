@@ -1,0 +1,1 @@
+"""Output writers: text, JSONL, Parquet, MCAP, rerun, JUnit."""

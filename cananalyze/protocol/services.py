@@ -1,0 +1,80 @@
+"""Service codes: the CiA 301 service each frame belongs to, as small integers.
+
+Columns of these codes are what the classifier produces; the names are the
+`service` values of the JSONL frame records (stable API).
+"""
+
+from __future__ import annotations
+
+from enum import IntEnum
+
+
+class Service(IntEnum):
+    OTHER = 0
+    NMT = 1
+    SYNC = 2
+    TIME = 3
+    EMCY = 4
+    TPDO = 5
+    RPDO = 6
+    SDO_REQUEST = 7
+    SDO_RESPONSE = 8
+    HEARTBEAT = 9
+    BOOTUP = 10
+    GUARD_REQUEST = 11
+    GUARD_RESPONSE = 12
+    LSS_MASTER = 13
+    LSS_SLAVE = 14
+    ERROR_FRAME = 15
+
+    @property
+    def label(self) -> str:
+        return SERVICE_NAMES[self]
+
+
+SERVICE_NAMES: tuple[str, ...] = (
+    "other",
+    "nmt",
+    "sync",
+    "time",
+    "emcy",
+    "tpdo",
+    "rpdo",
+    "sdo_request",
+    "sdo_response",
+    "heartbeat",
+    "bootup",
+    "guard_request",
+    "guard_response",
+    "lss_master",
+    "lss_slave",
+    "error_frame",
+)
+
+SERVICE_BY_NAME: dict[str, Service] = {name: Service(i) for i, name in enumerate(SERVICE_NAMES)}
+
+# Friendly groupings accepted by `--service` filters.
+SERVICE_GROUPS: dict[str, tuple[Service, ...]] = {
+    "pdo": (Service.TPDO, Service.RPDO),
+    "sdo": (Service.SDO_REQUEST, Service.SDO_RESPONSE),
+    "errctl": (Service.HEARTBEAT, Service.BOOTUP, Service.GUARD_REQUEST, Service.GUARD_RESPONSE),
+    "guard": (Service.GUARD_REQUEST, Service.GUARD_RESPONSE),
+    "lss": (Service.LSS_MASTER, Service.LSS_SLAVE),
+}
+
+
+def parse_services(names: str) -> set[Service]:
+    """'sdo,emcy' -> the set of services; raises ValueError naming the unknown one."""
+    out: set[Service] = set()
+    for raw in names.split(","):
+        name = raw.strip().lower().replace("-", "_")
+        if not name:
+            continue
+        if name in SERVICE_BY_NAME:
+            out.add(SERVICE_BY_NAME[name])
+        elif name in SERVICE_GROUPS:
+            out.update(SERVICE_GROUPS[name])
+        else:
+            known = ", ".join(list(SERVICE_NAMES) + list(SERVICE_GROUPS))
+            raise ValueError(f"unknown service {raw!r} (known: {known})")
+    return out

@@ -1,0 +1,1 @@
+"""Device simulator for samples and live tests."""
