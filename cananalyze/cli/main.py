@@ -1,0 +1,59 @@
+"""`cananalyze` entry point: builds the sub-command parsers and turns errors into exit codes.
+
+Exit codes: 0 ok, 1 check violations, 2 usage or input error. Bad input never
+shows a traceback: CananalyzeError becomes one line on stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import signal
+import sys
+
+from .. import __version__
+from ..errors import CananalyzeError
+
+# One module per sub-command, each with add_parser(subparsers) and run(args) -> int.
+SUBCOMMANDS = ["decode", "devices"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="cananalyze",
+        description="CANopen bus traffic analyser and log decoder.",
+    )
+    parser.add_argument("--version", action="version", version=f"cananalyze {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in SUBCOMMANDS:
+        try:
+            module = importlib.import_module(f"{__package__}.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name == f"{__package__}.{name}":
+                continue  # sub-command not part of this build
+            raise
+        module.add_parser(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except CananalyzeError as exc:
+        print(f"cananalyze: error: {exc}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:
+        # output piped into `head` and closed: not an error worth a traceback
+        signal.signal(signal.SIGPIPE, signal.SIG_DFL)
+        return 0
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

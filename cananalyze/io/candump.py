@@ -1,0 +1,404 @@
+"""candump logs: `-l`/`-L` log-file lines and the screen format, with or without times.
+
+Log-file lines `(1700000000.123456) can0 181#0102 [R|T]` are parsed in bulk with
+numpy over the raw bytes of a chunk (python-can's CanutilsLogReader makes one
+Message per frame and converts hex byte by byte: about 140k frames/s; this path
+runs in the millions). Lines the bulk path cannot vouch for, and every screen
+format line (`  can0  181   [2]  01 02`, optionally after `(time)`), go through
+the line parser below, which is also where problems are reported.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator
+from datetime import datetime
+from typing import BinaryIO
+
+import numpy as np
+
+from ..frames import (
+    FLAG_BRS,
+    FLAG_ERR,
+    FLAG_ESI,
+    FLAG_EXT,
+    FLAG_FD,
+    FLAG_RTR,
+    FLAG_TX,
+    FrameBatch,
+    concat,
+)
+from .registry import LogFormat, ReadContext, register
+
+CHUNK = 1 << 22  # bytes per bulk parse (about 90k log-file lines)
+CAN_ERR_FLAG = 0x20000000
+
+_HEX = np.full(256, 255, np.uint8)
+for _i, _c in enumerate(b"0123456789abcdef"):
+    _HEX[_c] = _i
+for _i, _c in enumerate(b"ABCDEF"):
+    _HEX[_c] = 10 + _i
+_DIGIT = np.full(256, 255, np.uint8)
+for _i, _c in enumerate(b"0123456789"):
+    _DIGIT[_c] = _i
+
+_LOG_RE = re.compile(rb"^\s*\((?P<t>[^)]*)\)\s+(?P<ch>\S+)\s+(?P<id>[0-9A-Fa-f]+)#(?P<rest>\S*)(?:\s+(?P<dir>[RT]))?\s*$")
+_SCREEN_RE = re.compile(
+    rb"^\s*(?:\((?P<t>[^)]*)\)\s+)?(?P<ch>\S+)\s+(?P<id>[0-9A-Fa-f]{3}|[0-9A-Fa-f]{8})\s+"
+    rb"(?:(?P<fl>[BEI-]{3})\s+)?\[(?P<len>\d+)\]\s*(?P<rest>.*)$"
+)
+_HEXBYTE = re.compile(rb"^[0-9A-Fa-f]{2}$")
+
+
+class _Channels:
+    """Interface names to stable small integers across the batches of one log."""
+
+    def __init__(self) -> None:
+        self.names: list[str] = []
+        self.index: dict[str, int] = {}
+
+    def get(self, name: str) -> int:
+        i = self.index.get(name)
+        if i is None:
+            i = self.index[name] = len(self.names)
+            self.names.append(name)
+        return i
+
+    def tuple(self) -> tuple[str, ...]:
+        return tuple(self.names)
+
+
+def _first_after(positions: np.ndarray, starts: np.ndarray, limit: np.ndarray) -> np.ndarray:
+    """Position of the first occurrence at or after each start, or `limit` if none before it."""
+    if positions.size == 0:
+        return limit.copy()
+    k = np.searchsorted(positions, starts)
+    found = np.where(k < positions.size, positions[np.minimum(k, positions.size - 1)], limit)
+    return np.minimum(found, limit)
+
+
+def _window(arr: np.ndarray, start: np.ndarray, width: int) -> np.ndarray:
+    idx = start[:, None] + np.arange(width)
+    np.clip(idx, 0, arr.size - 1, out=idx)
+    return arr[idx]
+
+
+def _parse_hex(arr: np.ndarray, start: np.ndarray, length: np.ndarray, width: int):
+    """Value of the hex field [start, start+length) per row; second result: all digits valid."""
+    win = _HEX[_window(arr, start, width)]
+    inside = np.arange(width) < length[:, None]
+    ok = np.all((win != 255) | ~inside, axis=1)
+    val = np.zeros(start.size, np.uint64)
+    for j in range(width):
+        use = inside[:, j]
+        val = np.where(use, (val << np.uint64(4)) | win[:, j].astype(np.uint64), val)
+    return val, ok
+
+
+def _parse_time(arr: np.ndarray, start: np.ndarray, end: np.ndarray):
+    """Seconds from 'digits.digits' in [start, end); second result: well formed."""
+    width = 24
+    win = _DIGIT[_window(arr, start, width)]
+    raw = _window(arr, start, width)
+    col = np.arange(width)
+    inside = col < (end - start)[:, None]
+    is_dot = (raw == ord(".")) & inside
+    has_dot = is_dot.any(axis=1)
+    dot = np.where(has_dot, is_dot.argmax(axis=1), end - start)
+    int_part = col < dot[:, None]
+    frac_part = (col > dot[:, None]) & inside
+    ok = np.all((win != 255) | ~(int_part | frac_part), axis=1) & (dot > 0) & ((end - start) <= width)
+    sec = np.zeros(start.size, np.int64)
+    frac = np.zeros(start.size, np.int64)
+    scale = np.ones(start.size, np.int64)
+    for j in range(width):
+        d = win[:, j].astype(np.int64)
+        ip = int_part[:, j]
+        fp = frac_part[:, j] & (scale < 10**15)
+        sec = np.where(ip, sec * 10 + d, sec)
+        frac = np.where(fp, frac * 10 + d, frac)
+        scale = np.where(fp, scale * 10, scale)
+    return sec + frac / scale, ok
+
+
+def _bulk_log_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, chans: _Channels):
+    """Parse `(t) iface id#data [dir]` lines as columns.
+
+    Returns (batch columns for the good rows, mask of rows the line parser must see).
+    """
+    n = starts.size
+    good = arr[np.minimum(starts, arr.size - 1)] == ord("(")
+    close = _first_after(np.flatnonzero(arr == ord(")")), starts, ends)
+    spaces = np.flatnonzero(arr == ord(" "))
+    hashes = np.flatnonzero(arr == ord("#"))
+    t, t_ok = _parse_time(arr, starts + 1, close)
+    good &= t_ok & (close < ends) & (arr[np.minimum(close + 1, arr.size - 1)] == ord(" "))
+    ch_start = close + 2
+    ch_end = _first_after(spaces, ch_start, ends)
+    id_start = ch_end + 1
+    hash_pos = _first_after(hashes, id_start, ends)
+    id_len = hash_pos - id_start
+    good &= (hash_pos < ends) & ((id_len == 3) | (id_len == 8))
+    can_id, id_ok = _parse_hex(arr, id_start, id_len, 8)
+    good &= id_ok
+    d_start = hash_pos + 1
+    d_end = _first_after(spaces, d_start, ends)
+    first = arr[np.minimum(d_start, arr.size - 1)]
+    rtr = (first == ord("R")) & (d_start < ends)
+    fd = (first == ord("#")) & (d_start < ends)
+    d_len2 = d_end - d_start
+    good &= ~fd & ((d_len2 % 2 == 0) | rtr) & (d_len2 <= 16)
+    good &= ~(rtr & (d_len2 > 2))
+    # direction flag written by python-can: " R" (received) or " T" (sent)
+    tail = d_end < ends
+    dir_ch = arr[np.minimum(d_end + 1, arr.size - 1)]
+    tx = tail & (dir_ch == ord("T"))
+    good &= ~tail | (((dir_ch == ord("R")) | tx) & (ends - d_end == 2))
+    win = _HEX[_window(arr, d_start, 16)].reshape(n, 8, 2)
+    nbytes = np.where(rtr, 0, d_len2 // 2)
+    inside = np.arange(8) < nbytes[:, None]
+    valid = (win[:, :, 0] != 255) & (win[:, :, 1] != 255)
+    good &= np.all(valid | ~inside, axis=1)
+    data = np.where(inside, (win[:, :, 0] << 4) | (win[:, :, 1] & 0x0F), 0).astype(np.uint8)
+    rtr_len = np.where(d_len2 == 2, _DIGIT[arr[np.minimum(d_start + 1, arr.size - 1)]], 0)
+    good &= ~rtr | (rtr_len <= 8)
+    dlc = np.where(rtr, rtr_len, nbytes).astype(np.uint8)
+
+    flags = np.zeros(n, np.uint8)
+    err = (id_len == 8) & ((can_id & np.uint64(CAN_ERR_FLAG)) != 0)
+    flags[(id_len == 8) & ~err] |= FLAG_EXT
+    flags[err] |= FLAG_ERR
+    flags[rtr] |= FLAG_RTR
+    flags[tx] |= FLAG_TX
+    can_id = (can_id & np.uint64(0x1FFFFFFF)).astype(np.uint32)
+
+    # interface names: the usual log has one; compare every row with the first
+    channel = np.zeros(n, np.uint16)
+    if n:
+        rows = np.flatnonzero(good)
+        if rows.size:
+            ch_len = ch_end - ch_start
+            names = _window(arr, ch_start, 16)
+            names[np.arange(16) >= ch_len[:, None]] = 0
+            r0 = rows[0]
+            first_name = bytes(names[r0, : ch_len[r0]]).decode("latin-1")
+            same = np.all(names == names[r0], axis=1)
+            channel[:] = chans.get(first_name)
+            for r in rows[~same[rows]]:  # several interfaces: rare, per distinct row
+                channel[r] = chans.get(bytes(names[r, : ch_len[r]]).decode("latin-1"))
+    return (t, can_id, flags, dlc, data, channel), ~good
+
+
+def _parse_time_text(text: bytes) -> float | None:
+    s = text.decode("latin-1").strip()
+    try:
+        return float(s)
+    except ValueError:
+        pass
+    try:  # candump -tA: (2023-11-09 10:11:12.123456)
+        return datetime.fromisoformat(s).timestamp()
+    except ValueError:
+        return None
+
+
+def _parse_line(line: bytes):
+    """One candump line of any variant -> (t, channel, can_id, flags, payload) or an error text."""
+    m = _LOG_RE.match(line)
+    if m:
+        t = _parse_time_text(m["t"])
+        if t is None:
+            return f"bad timestamp {m['t'].decode('latin-1')!r}"
+        ident = m["id"]
+        if len(ident) not in (3, 8):
+            return f"identifier {ident.decode('latin-1')!r} is neither 3 (11-bit) nor 8 (29-bit) hex digits"
+        can_id = int(ident, 16)
+        flags = FLAG_TX if m["dir"] == b"T" else 0
+        if len(ident) == 8:
+            if can_id & CAN_ERR_FLAG:
+                flags |= FLAG_ERR
+            else:
+                flags |= FLAG_EXT
+            can_id &= 0x1FFFFFFF
+        rest = m["rest"]
+        if rest.startswith(b"#"):  # CAN FD: ##<flags nibble><data>
+            if len(rest) < 2 or rest[1:2] not in b"0123456789ABCDEFabcdef":
+                return "CAN FD frame without its flags digit after '##'"
+            fd_flags = int(rest[1:2], 16)
+            flags |= FLAG_FD | (FLAG_BRS if fd_flags & 1 else 0) | (FLAG_ESI if fd_flags & 2 else 0)
+            rest = rest[2:]
+        elif rest[:1] in (b"R", b"r"):
+            flags |= FLAG_RTR
+            n = rest[1:]
+            if n and not (n.isdigit() and int(n) <= 8):
+                return f"bad remote-frame length {n.decode('latin-1')!r}"
+            return t, m["ch"], can_id, flags, bytes(int(n) if n else 0)
+        if len(rest) % 2:
+            return f"odd number of hex digits in data {rest.decode('latin-1')!r}"
+        try:
+            payload = bytes.fromhex(rest.decode("latin-1"))
+        except ValueError:
+            return f"invalid hex in data {rest.decode('latin-1')!r}"
+        if len(payload) > (64 if flags & FLAG_FD else 8):
+            return f"{len(payload)} data bytes is more than a CAN frame carries"
+        return t, m["ch"], can_id, flags, payload
+    m = _SCREEN_RE.match(line)
+    if m:
+        t = None
+        if m["t"] is not None:
+            t = _parse_time_text(m["t"])
+            if t is None:
+                return f"bad timestamp {m['t'].decode('latin-1')!r}"
+        ident = m["id"]
+        can_id = int(ident, 16)
+        flags = FLAG_EXT if len(ident) == 8 else 0
+        if len(ident) == 8 and can_id & CAN_ERR_FLAG:
+            flags = FLAG_ERR
+            can_id &= 0x1FFFFFFF
+        length = int(m["len"])
+        rest = m["rest"].split()
+        if rest[:2] == [b"remote", b"request"]:
+            return t, m["ch"], can_id, flags | FLAG_RTR, bytes(length)
+        fields = rest[:length]
+        if length > 64 or len(fields) < length or not all(_HEXBYTE.match(f) for f in fields):
+            return f"expected {length} hex data bytes after [{length}]"
+        if length > 8:
+            flags |= FLAG_FD
+        # anything after the data bytes (a user's comment) is ignored
+        return t, m["ch"], can_id, flags, bytes(int(f, 16) for f in fields)
+    return "not a candump line"
+
+
+def sniff(head: bytes) -> bool:
+    lines = [ln for ln in head.splitlines()[1:40] if ln.strip()]  # first line may be cut or a command
+    if not lines:
+        lines = [ln for ln in head.splitlines() if ln.strip()]
+    hits = sum(1 for ln in lines if _LOG_RE.match(ln) or _SCREEN_RE.match(ln))
+    return bool(lines) and hits >= max(1, len(lines) // 2)
+
+
+class _Builder:
+    """Collects line-parser rows (rare path) as lists, then makes a batch."""
+
+    def __init__(self) -> None:
+        self.rows: list[tuple] = []
+
+    def batch(self, chans: _Channels) -> FrameBatch:
+        rows = self.rows
+        b = FrameBatch.allocate(len(rows))
+        for i, (line_no, t, ch, can_id, flags, payload) in enumerate(rows):
+            b.t[i] = t
+            b.can_id[i] = can_id
+            b.flags[i] = flags
+            b.dlc[i] = len(payload)
+            b.data[i, : min(8, len(payload))] = np.frombuffer(payload[:8], np.uint8)
+            if len(payload) > 8:
+                b.long_data[i] = payload
+            b.channel[i] = chans.get(ch.decode("latin-1"))
+            b.line[i] = line_no
+        self.rows = []
+        return b
+
+
+def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
+    ctx.format = "candump"
+    chans = _Channels()
+    line_base = 0  # lines before the current chunk
+    carry = b""
+    absolute = None
+    pending: list[FrameBatch] = []
+    pending_rows = 0
+    eof = False
+    while not eof:
+        block = stream.read(CHUNK)
+        eof = not block
+        chunk = carry + block
+        if not eof:
+            cut = chunk.rfind(b"\n") + 1
+            if cut == 0:
+                carry = chunk
+                if len(carry) > 1 << 24:
+                    ctx.problems.add(ctx.source, f"line {line_base + 1}", "line longer than 16 MiB, skipped")
+                    carry = b""
+                continue
+            chunk, carry = chunk[:cut], chunk[cut:]
+        elif not chunk:
+            break
+        arr = np.frombuffer(chunk, np.uint8)
+        nl = np.flatnonzero(arr == 10)
+        if nl.size == 0 or nl[-1] != arr.size - 1:
+            nl = np.append(nl, arr.size)
+        starts = np.empty(nl.size, np.int64)
+        starts[0] = 0
+        starts[1:] = nl[:-1] + 1
+        ends = nl.astype(np.int64)
+        # strip '\r' before '\n'
+        cr = (ends > starts) & (arr[np.maximum(ends - 1, 0)] == 13)
+        ends = ends - cr
+        line_no = line_base + 1 + np.arange(starts.size, dtype=np.int64)
+        line_base += starts.size
+        nonblank = ends > starts
+        cols, slow = _bulk_log_lines(arr, starts, ends, chans)
+        slow &= nonblank
+        good = ~slow & nonblank
+        parts: list[FrameBatch] = []
+        if good.any():
+            t, can_id, flags, dlc, data, channel = cols
+            g = np.flatnonzero(good)
+            parts.append(
+                FrameBatch(t[g], can_id[g], flags[g], dlc[g], data[g], channel[g], line_no[g])
+            )
+            if absolute is None:
+                absolute = bool(t[g[0]] > 1e8)
+        if slow.any():
+            builder = _Builder()
+            for r in np.flatnonzero(slow):
+                raw = chunk[starts[r] : ends[r]]
+                parsed = _parse_line(raw)
+                if isinstance(parsed, str):
+                    if r == 0 and line_no[r] == 1 and raw.lstrip().startswith(b"candump"):
+                        continue  # the shell command some captures begin with
+                    ctx.problems.add(ctx.source, f"line {line_no[r]}", f"{parsed}: {raw[:80]!r}")
+                    continue
+                t, ch, can_id, flags, payload = parsed
+                if t is None:
+                    t = 0.0  # screen output without -t: order is all there is
+                elif absolute is None:
+                    absolute = t > 1e8
+                builder.rows.append((int(line_no[r]), t, ch, can_id, flags, payload))
+            if builder.rows:
+                parts.append(builder.batch(chans))
+        if len(parts) == 2:  # keep file order when both paths produced rows
+            merged = concat(parts)
+            order = np.argsort(merged.line, kind="stable")
+            parts = [merged.take(order)]
+        for p in parts:
+            p.channels = chans.tuple()
+            pending.append(p)
+            pending_rows += len(p)
+        if pending_rows >= ctx.batch_size or (eof and pending):
+            out = concat(pending) if len(pending) > 1 else pending[0]
+            out.channels = chans.tuple()
+            pending, pending_rows = [], 0
+            ctx.frames += len(out)
+            ctx.absolute_time = bool(absolute)
+            ctx.extras["timestamps"] = absolute is not None
+            yield out
+    if pending:
+        out = concat(pending)
+        out.channels = chans.tuple()
+        ctx.frames += len(out)
+        yield out
+    ctx.absolute_time = bool(absolute)
+    ctx.extras["timestamps"] = absolute is not None
+
+
+register(
+    LogFormat(
+        name="candump",
+        description="SocketCAN candump (-l/-L log file, or screen output)",
+        sniff=sniff,
+        read=read,
+        suffixes=(".log", ".candump", ".txt"),
+        priority=30,
+    )
+)

@@ -1,0 +1,3 @@
+"""The format modules the facade imports (each registers itself in registry.FORMATS)."""
+
+FORMAT_MODULES = ["candump"]

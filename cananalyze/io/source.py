@@ -1,0 +1,163 @@
+"""open_log(): the one facade from a path (or '-') to a stream of FrameBatch.
+
+Decompresses .gz, reads stdin, picks the format from the content (suffix only
+breaks ties), and turns unreadable files into one-line InputErrors.
+"""
+
+from __future__ import annotations
+
+import gzip
+import importlib
+import io
+import sys
+import zlib
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import BinaryIO
+
+from ..errors import InputError, ProblemLog
+from ..frames import FrameBatch
+from . import registry
+from .formats import FORMAT_MODULES
+from .registry import DEFAULT_BATCH, LogFormat, ReadContext
+
+SNIFF_BYTES = 65536
+
+for _name in FORMAT_MODULES:
+    importlib.import_module(f"{__package__}.{_name}")
+
+
+def _describe(head: bytes) -> str:
+    """A few words on what an unrecognised file looks like, for the error message."""
+    if not head:
+        return "the file is empty"
+    if head[:4] == b"LOGG":
+        return "it looks like a BLF file but no BLF reader is available"
+    if head[:4] in (b"\x89MCA", b"PK\x03\x04"):
+        return "it looks like an MCAP or ZIP file, not a CAN log"
+    text = sum(32 <= c < 127 or c in (9, 10, 13) for c in head[:4096]) / max(1, len(head[:4096]))
+    if text < 0.9:
+        return "it is binary data of no known CAN log format"
+    lower = head[:4096].lower()
+    if b"[fileinfo]" in lower or b"[deviceinfo]" in lower:
+        return "it is an EDS/DCF device description, not a log (give it with --eds NODE=FILE)"
+    if lower.startswith(b"version") and b"bo_ " in lower:
+        return "it is a DBC database, not a log"
+    first = head.splitlines()[0][:60].decode("latin-1", "replace") if head.strip() else ""
+    return f"it is text of no known CAN log format (first line: {first!r})"
+
+
+@dataclass
+class LogSource:
+    """An opened log: its format, the reading context, and its batches (read once)."""
+
+    path: str
+    fmt: LogFormat
+    ctx: ReadContext
+    _stream: BinaryIO
+    _closers: list = field(default_factory=list)
+
+    @property
+    def problems(self) -> ProblemLog:
+        return self.ctx.problems
+
+    def batches(self) -> Iterator[FrameBatch]:
+        try:
+            yield from self.fmt.read(self._stream, self.ctx)
+        except (EOFError, zlib.error, gzip.BadGzipFile) as exc:
+            self.ctx.problems.add(self.path, f"after frame {self.ctx.frames}", f"file ends early or is corrupt ({exc})")
+        except OSError as exc:
+            raise InputError(f"{self.path}: cannot read: {exc.strerror or exc}") from None
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        for c in self._closers:
+            c.close()
+        self._closers.clear()
+
+
+def _detect(head: bytes, name: str, forced: str | None) -> LogFormat:
+    formats = registry.FORMATS
+    if forced:
+        for f in formats:
+            if f.name == forced:
+                return f
+        raise InputError(f"{name}: unknown format {forced!r} (known: {', '.join(f.name for f in formats)})")
+    suffix = Path(name[:-3] if name.endswith(".gz") else name).suffix.lower()
+    claims = [f for f in formats if _safe_sniff(f, head)]
+    if not claims:
+        raise InputError(f"{name}: not a log cananalyze can read: {_describe(head)}")
+    for f in claims:
+        if suffix in f.suffixes:
+            return f
+    return claims[0]
+
+
+def _safe_sniff(fmt: LogFormat, head: bytes) -> bool:
+    try:
+        return bool(fmt.sniff(head))
+    except Exception:  # a sniffer must never take the program down on odd bytes
+        return False
+
+
+def open_log(
+    path: str | Path,
+    strict: bool = False,
+    batch_size: int = DEFAULT_BATCH,
+    fmt: str | None = None,
+    problems: ProblemLog | None = None,
+) -> LogSource:
+    """Open a log for batch reading; raises InputError with a one-line reason."""
+    name = str(path)
+    closers: list = []
+    try:
+        if name == "-":
+            raw: BinaryIO = sys.stdin.buffer
+        else:
+            raw = open(name, "rb")  # noqa: SIM115 - closed by LogSource
+            closers.append(raw)
+    except FileNotFoundError:
+        raise InputError(f"{name}: no such file") from None
+    except IsADirectoryError:
+        raise InputError(f"{name}: is a directory, not a log file") from None
+    except OSError as exc:
+        raise InputError(f"{name}: cannot open: {exc.strerror or exc}") from None
+    stream: BinaryIO = raw if hasattr(raw, "peek") else io.BufferedReader(raw)  # type: ignore[arg-type]
+    magic = stream.peek(2)[:2]
+    if magic == b"\x1f\x8b":
+        stream = gzip.GzipFile(fileobj=stream, mode="rb")  # type: ignore[assignment]
+        stream = io.BufferedReader(stream, buffer_size=SNIFF_BYTES)  # type: ignore[arg-type]
+        closers.append(stream)
+    try:
+        head = _peek(stream, SNIFF_BYTES)
+    except (EOFError, gzip.BadGzipFile, zlib.error, OSError) as exc:
+        for c in closers:
+            c.close()
+        raise InputError(f"{name}: cannot read: {exc}") from None
+    try:
+        chosen = _detect(head, name, fmt)
+    except InputError:
+        for c in closers:
+            c.close()
+        raise
+    ctx = ReadContext(source=name, problems=problems or ProblemLog(strict=strict), batch_size=batch_size)
+    return LogSource(name, chosen, ctx, stream, closers)
+
+
+def _peek(stream: BinaryIO, size: int) -> bytes:
+    """First `size` bytes without consuming them (BufferedReader.peek may return fewer)."""
+    head = stream.peek(size)  # type: ignore[attr-defined]
+    if len(head) >= size or not head:
+        return head[:size]
+    # peek returns at most one buffer: grow the buffer by wrapping once more
+    return head[:size]
+
+
+def read_all(path: str | Path, strict: bool = False, fmt: str | None = None) -> FrameBatch:
+    """Every frame of a small log in one batch (tests, samples, notebooks)."""
+    from ..frames import concat
+
+    src = open_log(path, strict=strict, fmt=fmt)
+    return concat(src.batches())

@@ -1,0 +1,115 @@
+"""Writing frames back out as logs: candump (fast, columnar), ASC and BLF (python-can).
+
+Used for samples, benchmark logs and `live --record`. python-can's ASC/BLF
+writers are the reference implementations of those formats, so they are used
+as they are; candump is written in bulk because benchmark logs run to 10M lines.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, FrameBatch
+
+_HEX2 = np.array([f"{i:02X}" for i in range(256)])
+
+
+def candump_lines(batch: FrameBatch) -> list[str]:
+    """`(t) ch id#data` lines of a batch (candump -l format)."""
+    n = len(batch)
+    if n == 0:
+        return []
+    t = np.char.mod("%.6f", batch.t)
+    ids = batch.can_id
+    ext = (batch.flags & (FLAG_EXT | FLAG_ERR)) != 0
+    id_txt = np.where(ext, np.char.mod("%08X", ids | np.where((batch.flags & FLAG_ERR) != 0, 0x20000000, 0).astype(np.uint32)),
+                      np.char.mod("%03X", ids))
+    out = []
+    hexed = _HEX2[batch.data]
+    chans = batch.channels or ("can0",)
+    for i in range(n):
+        fl = int(batch.flags[i])
+        dlc = int(batch.dlc[i])
+        if fl & FLAG_RTR:
+            body = "R" if dlc == 0 else f"R{dlc}"
+        elif fl & FLAG_FD:
+            payload = batch.payload(i)
+            body = f"#{(1 if fl & 0x10 else 0) | (2 if fl & 0x20 else 0):X}" + payload.hex().upper()
+        else:
+            body = "".join(hexed[i, :dlc])
+        ch = chans[int(batch.channel[i])] if int(batch.channel[i]) < len(chans) else "can0"
+        line = f"({t[i]}) {ch} {id_txt[i]}#{body}"
+        if fl & FLAG_TX:
+            line += " T"
+        out.append(line)
+    return out
+
+
+def to_messages(batch: FrameBatch):
+    """python-can Messages for a (small) batch: only for the ASC/BLF writers."""
+    import can
+
+    chans = batch.channels or ("can0",)
+    for i in range(len(batch)):
+        fl = int(batch.flags[i])
+        yield can.Message(
+            timestamp=float(batch.t[i]),
+            arbitration_id=int(batch.can_id[i]),
+            is_extended_id=bool(fl & FLAG_EXT),
+            is_remote_frame=bool(fl & FLAG_RTR),
+            is_error_frame=bool(fl & FLAG_ERR),
+            is_fd=bool(fl & FLAG_FD),
+            bitrate_switch=bool(fl & 0x10),
+            error_state_indicator=bool(fl & 0x20),
+            is_rx=not fl & FLAG_TX,
+            dlc=int(batch.dlc[i]),
+            data=b"" if fl & FLAG_RTR else batch.payload(i),
+            channel=chans[int(batch.channel[i])] if int(batch.channel[i]) < len(chans) else 0,
+        )
+
+
+def _set_asc_date(path: Path, start: float) -> None:
+    """python-can stamps the ASC `date` line with the wall clock; use the log's start.
+
+    Keeps written files reproducible and the header's absolute time meaningful.
+    """
+    from datetime import datetime
+
+    import can
+
+    lines = path.read_text(encoding="ascii").split("\n")
+    if lines and lines[0].startswith("date "):
+        stamp = can.ASCWriter._format_header_datetime(can.ASCWriter, datetime.fromtimestamp(start))  # type: ignore[arg-type]
+        lines[0] = f"date {stamp}"
+        path.write_text("\n".join(lines), encoding="ascii")
+
+
+def write_log(batch: FrameBatch, path: str | Path) -> None:
+    """Write a batch as candump (.log), ASC (.asc) or BLF (.blf), atomically."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp")
+    suffix = path.suffix.lower()
+    if suffix in (".log", ".candump", ".txt"):
+        with open(tmp, "w", encoding="ascii", newline="\n") as f:
+            lines = candump_lines(batch)
+            f.write("\n".join(lines) + ("\n" if lines else ""))
+    elif suffix in (".asc", ".blf"):
+        import can
+
+        writer_cls = can.ASCWriter if suffix == ".asc" else can.BLFWriter
+        # python-can picks the format from the suffix; write to a temp name with the right one
+        tmp = path.with_name(f".{path.stem}.tmp{suffix}")
+        writer = writer_cls(str(tmp))
+        try:
+            for msg in to_messages(batch):
+                writer.on_message_received(msg)
+        finally:
+            writer.stop()
+        if suffix == ".asc" and len(batch):
+            _set_asc_date(tmp, float(batch.t[0]))
+    else:
+        raise ValueError(f"{path}: write .log, .asc or .blf")
+    os.replace(tmp, path)
