@@ -31,6 +31,7 @@ from ..frames import (
 from .registry import LogFormat, ReadContext, register
 
 CHUNK = 1 << 22  # bytes per bulk parse (about 90k log-file lines)
+PAD = 128  # zero bytes after a chunk, so fixed-width windows never run off its end
 CAN_ERR_FLAG = 0x20000000
 
 _HEX = np.full(256, 255, np.uint8)
@@ -78,47 +79,60 @@ def _first_after(positions: np.ndarray, starts: np.ndarray, limit: np.ndarray) -
 
 
 def _window(arr: np.ndarray, start: np.ndarray, width: int) -> np.ndarray:
-    idx = start[:, None] + np.arange(width)
-    np.clip(idx, 0, arr.size - 1, out=idx)
-    return arr[idx]
+    """(n, width) bytes from each start: rows of a strided view, no index matrix.
+
+    `arr` is padded by the caller (PAD bytes past the end), so every window fits.
+    """
+    return np.lib.stride_tricks.sliding_window_view(arr, width)[start]
 
 
 def _parse_hex(arr: np.ndarray, start: np.ndarray, length: np.ndarray, width: int):
-    """Value of the hex field [start, start+length) per row; second result: all digits valid."""
-    win = _HEX[_window(arr, start, width)]
-    inside = np.arange(width) < length[:, None]
-    ok = np.all((win != 255) | ~inside, axis=1)
+    """Value of the hex field [start, start+length) per row; second result: all digits valid.
+
+    Rows are grouped by field length (a log has one or two: 3 and 8 digits), and
+    each group is a fixed-width gather and a dot product with powers of 16.
+    """
     val = np.zeros(start.size, np.uint64)
-    for j in range(width):
-        use = inside[:, j]
-        val = np.where(use, (val << np.uint64(4)) | win[:, j].astype(np.uint64), val)
+    ok = np.zeros(start.size, bool)
+    for n_digits in np.unique(length):
+        if n_digits <= 0 or n_digits > width:
+            continue
+        rows = np.flatnonzero(length == n_digits)
+        digits = _HEX[_window(arr, start[rows], int(n_digits))]
+        ok[rows] = np.all(digits != 255, axis=1)
+        powers = np.uint64(16) ** np.arange(n_digits - 1, -1, -1, dtype=np.uint64)
+        val[rows] = digits.astype(np.uint64) @ powers
     return val, ok
 
 
-def _parse_time(arr: np.ndarray, start: np.ndarray, end: np.ndarray):
-    """Seconds from 'digits.digits' in [start, end); second result: well formed."""
-    width = 24
-    win = _DIGIT[_window(arr, start, width)]
-    raw = _window(arr, start, width)
-    col = np.arange(width)
-    inside = col < (end - start)[:, None]
-    is_dot = (raw == ord(".")) & inside
-    has_dot = is_dot.any(axis=1)
-    dot = np.where(has_dot, is_dot.argmax(axis=1), end - start)
-    int_part = col < dot[:, None]
-    frac_part = (col > dot[:, None]) & inside
-    ok = np.all((win != 255) | ~(int_part | frac_part), axis=1) & (dot > 0) & ((end - start) <= width)
-    sec = np.zeros(start.size, np.int64)
-    frac = np.zeros(start.size, np.int64)
-    scale = np.ones(start.size, np.int64)
-    for j in range(width):
-        d = win[:, j].astype(np.int64)
-        ip = int_part[:, j]
-        fp = frac_part[:, j] & (scale < 10**15)
-        sec = np.where(ip, sec * 10 + d, sec)
-        frac = np.where(fp, frac * 10 + d, frac)
-        scale = np.where(fp, scale * 10, scale)
-    return sec + frac / scale, ok
+def _parse_time(arr: np.ndarray, start: np.ndarray, end: np.ndarray, dots: np.ndarray):
+    """Seconds from 'digits.digits' in [start, end); second result: well formed.
+
+    Grouped by (integer digits, fraction digits): usually one group per chunk.
+    """
+    dot = _first_after(dots, start, end)
+    n_int = dot - start
+    n_frac = np.where(dot < end, end - dot - 1, 0)
+    t = np.zeros(start.size, np.float64)
+    ok = np.zeros(start.size, bool)
+    keys = n_int * 64 + n_frac
+    for key in np.unique(keys):
+        ni, nf = int(key // 64), int(key % 64)
+        if ni < 1 or ni > 18 or nf > 12:
+            continue
+        rows = np.flatnonzero(keys == key)
+        digits = _DIGIT[_window(arr, start[rows], ni + 1 + nf)]
+        good = np.all(digits[:, :ni] != 255, axis=1)
+        sec = digits[:, :ni].astype(np.int64) @ (10 ** np.arange(ni - 1, -1, -1, dtype=np.int64))
+        if nf:
+            fd = digits[:, ni + 1 :]
+            good &= np.all(fd != 255, axis=1)
+            frac = fd.astype(np.int64) @ (10 ** np.arange(nf - 1, -1, -1, dtype=np.int64))
+            t[rows] = sec + frac / 10.0**nf
+        else:
+            t[rows] = sec
+        ok[rows] = good
+    return t, ok
 
 
 def _bulk_log_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, chans: _Channels):
@@ -131,7 +145,7 @@ def _bulk_log_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, chans
     close = _first_after(np.flatnonzero(arr == ord(")")), starts, ends)
     spaces = np.flatnonzero(arr == ord(" "))
     hashes = np.flatnonzero(arr == ord("#"))
-    t, t_ok = _parse_time(arr, starts + 1, close)
+    t, t_ok = _parse_time(arr, starts + 1, close, np.flatnonzero(arr == ord(".")))
     good &= t_ok & (close < ends) & (arr[np.minimum(close + 1, arr.size - 1)] == ord(" "))
     ch_start = close + 2
     ch_end = _first_after(spaces, ch_start, ends)
@@ -174,18 +188,16 @@ def _bulk_log_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, chans
 
     # interface names: the usual log has one; compare every row with the first
     channel = np.zeros(n, np.uint16)
-    if n:
-        rows = np.flatnonzero(good)
-        if rows.size:
-            ch_len = ch_end - ch_start
-            names = _window(arr, ch_start, 16)
-            names[np.arange(16) >= ch_len[:, None]] = 0
-            r0 = rows[0]
-            first_name = bytes(names[r0, : ch_len[r0]]).decode("latin-1")
-            same = np.all(names == names[r0], axis=1)
-            channel[:] = chans.get(first_name)
-            for r in rows[~same[rows]]:  # several interfaces: rare, per distinct row
-                channel[r] = chans.get(bytes(names[r, : ch_len[r]]).decode("latin-1"))
+    rows = np.flatnonzero(good)
+    if rows.size:
+        ch_len = ch_end - ch_start
+        r0 = rows[0]
+        width = int(ch_len[r0])
+        first_name = arr[ch_start[r0] : ch_start[r0] + width]
+        same = (ch_len == width) & np.all(_window(arr, ch_start, width) == first_name, axis=1)
+        channel[:] = chans.get(first_name.tobytes().decode("latin-1"))
+        for r in rows[~same[rows]]:  # several interfaces: rare, per distinct row
+            channel[r] = chans.get(arr[ch_start[r] : ch_end[r]].tobytes().decode("latin-1"))
     return (t, can_id, flags, dlc, data, channel), ~good
 
 
@@ -323,10 +335,10 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
             chunk, carry = chunk[:cut], chunk[cut:]
         elif not chunk:
             break
-        arr = np.frombuffer(chunk, np.uint8)
-        nl = np.flatnonzero(arr == 10)
-        if nl.size == 0 or nl[-1] != arr.size - 1:
-            nl = np.append(nl, arr.size)
+        arr = np.frombuffer(chunk + bytes(PAD), np.uint8)[: len(chunk) + PAD]
+        nl = np.flatnonzero(arr[: len(chunk)] == 10)
+        if nl.size == 0 or nl[-1] != len(chunk) - 1:
+            nl = np.append(nl, len(chunk))
         starts = np.empty(nl.size, np.int64)
         starts[0] = 0
         starts[1:] = nl[:-1] + 1

@@ -48,6 +48,36 @@ def _describe(head: bytes) -> str:
     return f"it is text of no known CAN log format (first line: {first!r})"
 
 
+class _TolerantGzip(io.RawIOBase):
+    """gzip stream that hands over what it decompressed before a cut or corrupt end.
+
+    GzipFile.read(n) raises EOFError and drops the partial block, which would lose
+    frames a half-copied log still holds; read1() in a loop keeps them.
+    """
+
+    def __init__(self, raw: BinaryIO) -> None:
+        self._gz = gzip.GzipFile(fileobj=raw, mode="rb")
+        self.error: str | None = None
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, buf) -> int:  # type: ignore[override]
+        if self.error:
+            return 0
+        try:
+            data = self._gz.read1(len(buf))
+        except (EOFError, gzip.BadGzipFile, zlib.error, OSError) as exc:
+            self.error = str(exc) or exc.__class__.__name__
+            return 0
+        buf[: len(data)] = data
+        return len(data)
+
+    def close(self) -> None:
+        self._gz.close()
+        super().close()
+
+
 @dataclass
 class LogSource:
     """An opened log: its format, the reading context, and its batches (read once)."""
@@ -65,6 +95,11 @@ class LogSource:
     def batches(self) -> Iterator[FrameBatch]:
         try:
             yield from self.fmt.read(self._stream, self.ctx)
+            for c in self._closers:
+                if isinstance(c, _TolerantGzip) and c.error:
+                    self.ctx.problems.add(
+                        self.path, f"after frame {self.ctx.frames}", f"gzip data ends early or is corrupt ({c.error})"
+                    )
         except (EOFError, zlib.error, gzip.BadGzipFile) as exc:
             self.ctx.problems.add(self.path, f"after frame {self.ctx.frames}", f"file ends early or is corrupt ({exc})")
         except OSError as exc:
@@ -127,9 +162,9 @@ def open_log(
     stream: BinaryIO = raw if hasattr(raw, "peek") else io.BufferedReader(raw)  # type: ignore[arg-type]
     magic = stream.peek(2)[:2]
     if magic == b"\x1f\x8b":
-        stream = gzip.GzipFile(fileobj=stream, mode="rb")  # type: ignore[assignment]
-        stream = io.BufferedReader(stream, buffer_size=SNIFF_BYTES)  # type: ignore[arg-type]
-        closers.append(stream)
+        gz = _TolerantGzip(stream)
+        closers.append(gz)
+        stream = io.BufferedReader(gz, buffer_size=SNIFF_BYTES)  # type: ignore[assignment]
     try:
         head = _peek(stream, SNIFF_BYTES)
     except (EOFError, gzip.BadGzipFile, zlib.error, OSError) as exc:

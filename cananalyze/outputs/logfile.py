@@ -48,6 +48,70 @@ def candump_lines(batch: FrameBatch) -> list[str]:
     return out
 
 
+def _digits(values: np.ndarray, width: int) -> np.ndarray:
+    """(n, width) ASCII digits of non-negative integers, zero padded."""
+    out = np.empty((values.size, width), np.uint8)
+    v = values.astype(np.int64).copy()
+    for j in range(width - 1, -1, -1):
+        out[:, j] = 48 + v % 10
+        v //= 10
+    return out
+
+
+_HEXCHARS = np.frombuffer(b"0123456789ABCDEF", np.uint8)
+_PAD = 0
+
+
+def candump_bytes(batch: FrameBatch) -> bytes:
+    """candump -l text of a batch of classic frames, built as one byte matrix.
+
+    Every line is laid out at fixed width with pad bytes, then the pads are
+    dropped in one boolean selection: no Python per frame.
+    """
+    n = len(batch)
+    if n == 0:
+        return b""
+    chans = batch.channels or ("can0",)
+    if len(chans) > 1 or (batch.flags & (FLAG_FD | FLAG_ERR)).any() or (batch.t < 0).any():
+        return ("\n".join(candump_lines(batch)) + "\n").encode("ascii")
+    us = np.round(batch.t * 1e6).astype(np.int64)
+    sec, frac = np.divmod(us, 1_000_000)
+    sec_w = max(1, len(str(int(sec.max()))))
+    ch = chans[0].encode("ascii")
+    ext = (batch.flags & FLAG_EXT) != 0
+    rtr = (batch.flags & FLAG_RTR) != 0
+    tx = (batch.flags & FLAG_TX) != 0
+    parts = [
+        np.full((n, 1), ord("("), np.uint8),
+        _digits(sec, sec_w),
+        np.full((n, 1), ord("."), np.uint8),
+        _digits(frac, 6),
+        np.frombuffer(b") " + ch + b" ", np.uint8)[None, :].repeat(n, 0),
+    ]
+    ident = np.empty((n, 8), np.uint8)
+    for j in range(8):
+        ident[:, j] = _HEXCHARS[(batch.can_id >> (4 * (7 - j))) & 0xF]
+    ident[~ext, :5] = _PAD  # 3-digit standard identifiers
+    parts.append(ident)
+    parts.append(np.full((n, 1), ord("#"), np.uint8))
+    data = np.empty((n, 16), np.uint8)
+    data[:, 0::2] = _HEXCHARS[batch.data >> 4]
+    data[:, 1::2] = _HEXCHARS[batch.data & 0xF]
+    data[np.arange(16) >= 2 * batch.dlc[:, None].astype(np.int64)] = _PAD
+    data[rtr] = _PAD
+    data[rtr, 0] = ord("R")
+    rtr_len = rtr & (batch.dlc > 0)
+    data[rtr_len, 1] = 48 + batch.dlc[rtr_len]
+    parts.append(data)
+    tail = np.full((n, 3), _PAD, np.uint8)
+    tail[tx, 0] = ord(" ")
+    tail[tx, 1] = ord("T")
+    tail[:, 2] = ord("\n")
+    parts.append(tail)
+    mat = np.concatenate(parts, axis=1)
+    return mat[mat != _PAD].tobytes()
+
+
 def to_messages(batch: FrameBatch):
     """python-can Messages for a (small) batch: only for the ASC/BLF writers."""
     import can
@@ -93,9 +157,8 @@ def write_log(batch: FrameBatch, path: str | Path) -> None:
     tmp = path.with_name(f".{path.name}.tmp")
     suffix = path.suffix.lower()
     if suffix in (".log", ".candump", ".txt"):
-        with open(tmp, "w", encoding="ascii", newline="\n") as f:
-            lines = candump_lines(batch)
-            f.write("\n".join(lines) + ("\n" if lines else ""))
+        with open(tmp, "wb") as f:
+            f.write(candump_bytes(batch))
     elif suffix in (".asc", ".blf"):
         import can
 

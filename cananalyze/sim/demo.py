@@ -79,8 +79,8 @@ def demo_rows() -> list[tuple[float, int, bytes, int]]:
             at(base + 50_000, [(0x700 + GUARDED, b"", FLAG_RTR | FLAG_TX)])
             at(base + 50_600, [(0x700 + GUARDED, bytes([0x05 | toggle << 7]), 0)])
             toggle ^= 1
-        if k == 9:  # MCB-560 emergency: CAN error passive, Chip-EC "error warning"
-            at(base + 60_000, [(0x080 + MCB560, bytes.fromhex("2081110200000000"), 0)])
+        if k == 9:  # MCB-560 emergency: CAN error warning (Chip-EC 0x40000000)
+            at(base + 60_000, [(0x080 + MCB560, bytes.fromhex("0081010000000040"), 0)])
         if k == 15:  # and its reset
             at(base + 60_000, [(0x080 + MCB560, bytes(8), 0)])
     rows.sort(key=lambda r: r[0])
