@@ -5,14 +5,23 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import real_file
 
 from cananalyze.network.pdo_map import MapEntry
 from cananalyze.protocol.pdo_decode import decode_pdo
 
-from conftest import real_file
-
 U8, U16, U32, I16, I32, REAL32, REAL64, I24, U64, I64, BOOL = (
-    0x05, 0x06, 0x07, 0x03, 0x04, 0x08, 0x11, 0x10, 0x1B, 0x15, 0x01,
+    0x05,
+    0x06,
+    0x07,
+    0x03,
+    0x04,
+    0x08,
+    0x11,
+    0x10,
+    0x1B,
+    0x15,
+    0x01,
 )
 
 

@@ -45,8 +45,10 @@ def run(args: argparse.Namespace) -> int:
     else:
         raise UsageError(f"unknown device {args.key!r}: use one of {', '.join(BUILTIN_KEYS)}")
     print(f"{prof.key}: {prof.name}")
-    print(f"  vendor ID {_hex(prof.vendor_id)}  product {_hex(prof.product_code)}  "
-          f"device type {_hex(prof.device_type)}  device name {prof.device_name or '-'}")
+    print(
+        f"  vendor ID {_hex(prof.vendor_id)}  product {_hex(prof.product_code)}  "
+        f"device type {_hex(prof.device_type)}  device name {prof.device_name or '-'}"
+    )
     print(f"  source {prof.source}")
     print(f"PDOs for node {args.node}:")
     for pdo in prof.pdos(args.node):
@@ -60,7 +62,9 @@ def run(args: argparse.Namespace) -> int:
         for e in pdo.mapping:
             unit = f" [{e.unit}]" if e.unit else ""
             scale = f" x{e.scale:g}" if e.scale is not None else ""
-            print(f"    bit {bit:2d}+{e.bits:<2d} {e.index:04X}:{e.subindex:02X} {e.name}{unit}{scale}")
+            print(
+                f"    bit {bit:2d}+{e.bits:<2d} {e.index:04X}:{e.subindex:02X} {e.name}{unit}{scale}"
+            )
             bit += e.bits
     if prof.notes:
         print("Notes:")

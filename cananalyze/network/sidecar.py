@@ -119,7 +119,9 @@ def _signals(raw: list[dict]) -> dict[tuple[int, int], SignalSpec]:
 def _emcy(raw: dict) -> EmcySpec:
     spec = EmcySpec()
     for f in raw.get("field", []):
-        spec.fields.append((f["name"], _int(f["byte"], "emcy field"), _int(f["size"], "emcy field")))
+        spec.fields.append(
+            (f["name"], _int(f["byte"], "emcy field"), _int(f["size"], "emcy field"))
+        )
     for f in raw.get("flag", []):
         mask = _int(f["mask"], "emcy flag")
         spec.flags.append((f["field"], mask, _int(f.get("value", mask), "emcy flag"), f["name"]))
