@@ -1,0 +1,73 @@
+"""`cananalyze devices [KEY|FILE]`: list built-in device profiles, or show one's PDOs and notes."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from cananalyze.errors import UsageError
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    parser = subparsers.add_parser(
+        "devices",
+        help="list built-in device profiles, or show one (PDOs, notes)",
+        description="Without KEY: list the built-in device profiles. With KEY (or an "
+        "EDS/DCF path): show its default PDOs for --node and the notes on manual quirks.",
+    )
+    parser.add_argument("key", nargs="?", help="profile key (e.g. dat7130) or an EDS/DCF file")
+    parser.add_argument("--node", type=int, default=1, help="node ID for $NODEID defaults (1)")
+    parser.set_defaults(func=run)
+    return parser
+
+
+def _hex(value: int | None, width: int = 8) -> str:
+    return "-" if value is None else f"0x{value:0{width}X}"
+
+
+def run(args: argparse.Namespace) -> int:
+    from cananalyze.network.profile import BUILTIN_KEYS, builtin_profiles, load_builtin, load_eds
+
+    if not args.key:
+        print(f"{'key':<9} {'vendor ID':<11} {'product':<11} {'device type':<11} name")
+        for p in builtin_profiles():
+            print(
+                f"{p.key:<9} {_hex(p.vendor_id):<11} {_hex(p.product_code):<11} "
+                f"{_hex(p.device_type):<11} {p.name}"
+            )
+        return 0
+    if not 1 <= args.node <= 127:
+        raise UsageError(f"--node {args.node}: node ID must be 1..127")
+    if args.key in BUILTIN_KEYS:
+        prof = load_builtin(args.key)
+    elif Path(args.key).suffix.lower() in (".eds", ".dcf"):
+        prof = load_eds(args.key)
+    else:
+        raise UsageError(f"unknown device {args.key!r}: use one of {', '.join(BUILTIN_KEYS)}")
+    print(f"{prof.key}: {prof.name}")
+    print(
+        f"  vendor ID {_hex(prof.vendor_id)}  product {_hex(prof.product_code)}  "
+        f"device type {_hex(prof.device_type)}  device name {prof.device_name or '-'}"
+    )
+    print(f"  source {prof.source}")
+    print(f"PDOs for node {args.node}:")
+    for pdo in prof.pdos(args.node):
+        state = "" if pdo.valid else "  (not valid)"
+        print(
+            f"  {pdo.direction.upper()}PDO{pdo.number} COB-ID 0x{pdo.cob_id:03X} "
+            f"type {pdo.transmission_type} inhibit {pdo.inhibit_time}x100us "
+            f"event {pdo.event_timer} ms{state}"
+        )
+        bit = 0
+        for e in pdo.mapping:
+            unit = f" [{e.unit}]" if e.unit else ""
+            scale = f" x{e.scale:g}" if e.scale is not None else ""
+            print(
+                f"    bit {bit:2d}+{e.bits:<2d} {e.index:04X}:{e.subindex:02X} {e.name}{unit}{scale}"
+            )
+            bit += e.bits
+    if prof.notes:
+        print("Notes:")
+        for note in prof.notes:
+            print(f"  - {note}")
+    return 0

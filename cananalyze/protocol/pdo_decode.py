@@ -1,0 +1,104 @@
+"""Columnar PDO decoding: one numpy column per mapped signal, never a loop over frames.
+
+All rows given to `decode_pdo` share one COB-ID and one mapping (the caller splits a
+batch where the mapping changes). The first 8 data bytes of each row are read as one
+little-endian 64-bit word; every mapped object is then a shift and a mask of that
+word, which is how CiA 301 packs PDOs (bit-level, LSB first, no alignment).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cananalyze.network.pdo_map import MapEntry
+from cananalyze.protocol.datatypes import DATA_TYPES, DUMMY_INDICES
+
+
+@dataclass
+class PdoColumns:
+    """Decoded values per signal name, and which rows could not be decoded.
+
+    Rows flagged `short` (DLC shorter than the mapping) hold 0 / NaN / False in
+    every column and must be ignored; `extra` rows (DLC longer) are decoded.
+    """
+
+    values: dict[str, np.ndarray] = field(default_factory=dict)
+    short: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    extra: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    bytes_needed: int = 0
+
+
+def _words(data: np.ndarray) -> np.ndarray:
+    """(n, 8) uint8 -> n little-endian uint64 words."""
+    block = np.ascontiguousarray(data[:, :8], dtype=np.uint8)
+    if block.shape[1] < 8:
+        block = np.pad(block, ((0, 0), (0, 8 - block.shape[1])))
+    return block.view("<u8").reshape(-1)
+
+
+def _extract(words: np.ndarray, offset: int, bits: int) -> np.ndarray:
+    raw = words >> np.uint64(offset)
+    if bits < 64:
+        raw = raw & np.uint64((1 << bits) - 1)
+    return raw
+
+
+def _column(raw: np.ndarray, entry: MapEntry) -> np.ndarray:
+    dtype = DATA_TYPES.get(entry.datatype)
+    kind = dtype.kind if dtype is not None else "uint"
+    bits = entry.bits
+    if kind == "bool":
+        return raw != 0
+    if kind == "float":
+        if bits == 32:
+            return raw.astype(np.uint32).view(np.float32).astype(np.float64)
+        if bits == 64:
+            return raw.view(np.float64).copy()
+        kind = "uint"  # a REAL mapped with an odd width cannot be a float: show the bits
+    if kind == "int":
+        shift = np.uint64(64 - bits)
+        return ((raw << shift).view(np.int64)) >> np.int64(64 - bits)
+    return raw.copy()
+
+
+def decode_pdo(data: np.ndarray, dlc: np.ndarray, mapping: list[MapEntry]) -> PdoColumns:
+    """Decode every mapped signal of n PDO frames at once.
+
+    data: (n, 8) uint8; dlc: n byte counts; mapping: in PDO order (dummy entries,
+    index 1..7, take space but give no column). Scaled signals come out as float64
+    (value * scale + offset); integers as int64/uint64, booleans as bool.
+    """
+    n = int(data.shape[0])
+    dlc = np.asarray(dlc).astype(np.int64, copy=False)
+    total = sum(e.bits for e in mapping)
+    needed = (total + 7) // 8
+    short = dlc < needed
+    extra = dlc > needed
+    out = PdoColumns(short=short, extra=extra, bytes_needed=needed)
+    if total > 64:
+        # Classic CAN PDOs carry at most 64 bits; a longer mapping cannot be in 8 bytes.
+        out.short = np.ones(n, bool)
+        return out
+    words = _words(data) if n else np.zeros(0, np.uint64)
+    offset = 0
+    for entry in mapping:
+        if entry.index in DUMMY_INDICES or entry.bits == 0:
+            offset += entry.bits
+            continue
+        col = _column(_extract(words, offset, entry.bits), entry)
+        offset += entry.bits
+        if entry.scale is not None or entry.offset:
+            scale = 1.0 if entry.scale is None else entry.scale
+            col = col.astype(np.float64) * scale + entry.offset
+        if short.any():
+            col = col.copy()
+            col[short] = np.nan if col.dtype.kind == "f" else 0
+        name = entry.name
+        k = 2
+        while name in out.values:  # same object mapped twice: keep both
+            name = f"{entry.name}_{k}"
+            k += 1
+        out.values[name] = col
+    return out
