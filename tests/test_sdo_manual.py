@@ -71,7 +71,7 @@ def test_frames_are_the_manuals(manual_text: str) -> None:
     # The OCR glues a bit column to some first bytes ("100 43 50 ...", "C2108 10"):
     # check the unambiguous tails of every frame against the text.
     flat = re.sub(r"\s+", " ", manual_text).upper().replace("O", "0")
-    for cob, text in (
+    for _cob, text in (
         SEGMENTED_UPLOAD_1008 + BLOCK_UPLOAD_1008 + BLOCK_DOWNLOAD_1400_2 + ABORT_1008_1
     ):
         tail = text[9:] if text.endswith("00 00 00 00 00") else text[3:]

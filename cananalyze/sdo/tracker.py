@@ -61,6 +61,9 @@ class SdoTracker:
         self._channels = ChannelTable()
         self._pending: dict[int, Transfer] = {}  # request COB-ID -> transfer in progress
         self._completed: list[SdoTransaction] = []
+        # Request COB-ID -> how the last transfer there ended, while no new one started:
+        # lets a late abort (a client giving up after our timeout) join it, not stand alone.
+        self._ended: dict[int, str] = {}
 
     # -- channels ---------------------------------------------------------------
 
@@ -147,6 +150,7 @@ class SdoTracker:
         abort_code: int | None = None,
     ) -> SdoTransaction:
         self._pending.pop(xfer.channel.request_cob, None)
+        self._ended[xfer.channel.request_cob] = result
         if result == "ok" and xfer.size is not None and xfer.size != len(xfer.data):
             result = "protocol_error"
             xfer.note(f"size announced {xfer.size}, assembled {len(xfer.data)}")
@@ -213,6 +217,11 @@ class SdoTracker:
         text = f"abort by {side}{_mux(index, subindex)}: 0x{code:08X} {info['abort_text']}"
         role = FrameRole("abort", text, index, subindex)
         xfer = self._pending.get(channel.request_cob)
+        if xfer is None and self._ended.get(channel.request_cob) in ("timeout", "protocol_error"):
+            role.text += (
+                f" (the transfer had already ended: {self._ended.pop(channel.request_cob)})"
+            )
+            return role
         if xfer is None:
             xfer = Transfer(channel, None, None, index, subindex, t, t, ref)  # type: ignore[arg-type]
             if not is_request:
@@ -256,6 +265,7 @@ class SdoTracker:
             if not xfer.failed:
                 xfer.note("new request on the channel before this transfer ended")
             self._finish(xfer, xfer.t_last, "protocol_error")
+        self._ended.pop(channel.request_cob, None)
         new = Transfer(
             channel, direction, protocol, info.get("index"), info.get("subindex"), t, t, ref
         )

@@ -1,0 +1,173 @@
+"""SdoTracker against real traffic of the `canopen` package on python-can's virtual bus.
+
+canopen's SDO client talks to canopen's own server (LocalNode) for expedited and
+segmented transfers, and to tests/helpers/sdo_block_server.py for block ones
+(canopen has no block server). A third bus instance records the bus as a
+passive analyser would; every transaction the tracker rebuilds must match what
+the client asked for and got.
+"""
+
+from __future__ import annotations
+
+import struct
+
+import can
+import canopen
+import pytest
+from canopen.objectdictionary import DOMAIN, INTEGER16, REAL32, UNSIGNED32, VISIBLE_STRING
+from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
+
+from cananalyze.sdo import SdoTracker
+from tests.helpers.sdo_block_server import BlockSdoServer
+from tests.helpers.virtual_bus import drain, od_info, track, unique_channel, variable
+
+NODE = 5
+NAME = b"cananalyze test device, segmented"
+
+
+def _od() -> canopen.ObjectDictionary:
+    od = canopen.ObjectDictionary()
+    od.add_object(
+        variable(0x1008, 0, "Manufacturer device name", VISIBLE_STRING, "ro", NAME.decode())
+    )
+    od.add_object(variable(0x2000, 0, "Counter", UNSIGNED32, "rw", 0x12345678))
+    od.add_object(variable(0x2001, 0, "Offset", INTEGER16, "rw", -300))
+    od.add_object(variable(0x2002, 0, "Gain", REAL32, "rw", 1.5))
+    od.add_object(variable(0x2003, 0, "Blob", DOMAIN, "rw", b""))
+    return od
+
+
+@pytest.fixture
+def bus():
+    channel = unique_channel("sdo")
+    od = _od()
+    server_net, client_net = canopen.Network(), canopen.Network()
+    server_net.connect(interface="virtual", channel=channel)
+    client_net.connect(interface="virtual", channel=channel)
+    recorder = can.Bus(interface="virtual", channel=channel)
+    local = server_net.create_node(NODE, od) if hasattr(server_net, "create_node") else None
+    if local is None:
+        local = canopen.LocalNode(NODE, od)
+        server_net.add_node(local)
+    remote = canopen.RemoteNode(NODE, _od())
+    client_net.add_node(remote)
+    yield client_net, remote, recorder, od
+    recorder.shutdown()
+    client_net.disconnect()
+    server_net.disconnect()
+
+
+def test_expedited_segmented_reads_writes_abort(bus) -> None:
+    client_net, remote, recorder, od = bus
+    sdo = remote.sdo
+    expected = []  # (direction, protocol, index, result, data or abort code)
+
+    expected.append(("upload", "expedited", 0x2000, "ok", sdo.upload(0x2000, 0)))
+    expected.append(("upload", "segmented", 0x1008, "ok", sdo.upload(0x1008, 0)))
+    sdo.download(0x2001, 0, struct.pack("<h", -1234))
+    expected.append(("download", "expedited", 0x2001, "ok", struct.pack("<h", -1234)))
+    sdo.download(0x2002, 0, struct.pack("<f", -2.25))
+    expected.append(("download", "expedited", 0x2002, "ok", struct.pack("<f", -2.25)))
+    blob = bytes(range(40))
+    sdo.download(0x2003, 0, blob)  # > 4 bytes: segmented with size
+    expected.append(("download", "segmented", 0x2003, "ok", blob))
+    sdo.download(0x2000, 0, b"\x01\x02\x03\x04", force_segment=True)
+    expected.append(("download", "segmented", 0x2000, "ok", b"\x01\x02\x03\x04"))
+    expected.append(("upload", "segmented", 0x2003, "ok", sdo.upload(0x2003, 0)))
+    with pytest.raises(SdoAbortedError) as aborted:
+        sdo.upload(0x3000, 0)
+    expected.append(("upload", None, 0x3000, "abort", aborted.value.code))
+
+    tracker = SdoTracker(object_info=od_info(od))
+    transactions = track(drain(recorder), tracker)
+    assert len(transactions) == len(expected)
+    for tx, (direction, protocol, index, result, got) in zip(transactions, expected, strict=True):
+        assert (tx.direction, tx.protocol, tx.index, tx.subindex, tx.result) == (
+            direction,
+            protocol,
+            index,
+            0,
+            result,
+        ), tx
+        assert tx.node == NODE and tx.channel == (0x600 + NODE, 0x580 + NODE)
+        if result == "ok":
+            assert bytes.fromhex(tx.data) == got and tx.size == len(got) and tx.detail is None
+        else:
+            assert tx.abort_code == got == 0x06020000
+    by_index = {tx.index: tx for tx in transactions if tx.result == "ok"}
+    assert transactions[1].value == NAME.decode()
+    assert transactions[2].value == -1234 and transactions[2].name == "Offset"
+    assert transactions[3].value == -2.25
+    assert transactions[4].value == blob.hex()
+    assert by_index[0x2000].value == 0x04030201
+    assert all(tx.latency_ms is not None and tx.latency_ms >= 0 for tx in transactions)
+
+
+def test_missing_node_times_out(bus) -> None:
+    client_net, remote, recorder, od = bus
+    ghost = canopen.RemoteNode(42, _od())
+    client_net.add_node(ghost)
+    ghost.sdo.RESPONSE_TIMEOUT = 0.05
+    with pytest.raises(SdoCommunicationError):
+        ghost.sdo.upload(0x1000, 0)
+    frames = drain(recorder)
+    # canopen gives up with an abort 0x05040000 (index 0:0) after its own timeout.
+    assert [f.data[0] for f in frames] == [0x40, 0x80]
+
+    # An analyser whose timeout is shorter than the client's sees a timeout first, and
+    # the client's late abort is then attached as a frame role, not a second transaction.
+    (tx,) = track(frames, SdoTracker(timeout=0.01))
+    assert (tx.result, tx.node, tx.index, tx.direction) == ("timeout", 42, 0x1000, "upload")
+    assert tx.latency_ms is None and "no frame within" in tx.detail
+
+    # With a longer one, what ends the transfer is the client's abort.
+    (tx,) = track(frames, SdoTracker(timeout=1.0))
+    assert (tx.result, tx.abort_code, tx.index) == ("abort", 0x05040000, 0x1000)
+    assert "aborted by client" in tx.detail
+
+
+@pytest.mark.parametrize("crc", [True, False])
+@pytest.mark.parametrize("blksizes", [(127,), (4, 7, 2)])
+def test_block_transfers_with_canopen_client(crc: bool, blksizes: tuple[int, ...]) -> None:
+    channel = unique_channel("block")
+    big = bytes((i * 7 + 3) & 0xFF for i in range(1000))  # > 127 * 7: two upload sub-blocks
+    objects = {(0x2100, 0): big, (0x2101, 0): b"short", (0x2102, 0): b"\x2a\x00"}
+    server_bus = can.Bus(interface="virtual", channel=channel)
+    server = BlockSdoServer(server_bus, NODE, objects, blksizes=blksizes, crc=crc)
+    notifier = can.Notifier(server_bus, [server])
+    recorder = can.Bus(interface="virtual", channel=channel)
+    net = canopen.Network()
+    net.connect(interface="virtual", channel=channel)
+    remote = canopen.RemoteNode(NODE, canopen.ObjectDictionary())
+    net.add_node(remote)
+    try:
+        with remote.sdo.open(0x2100, 0, "rb", block_transfer=True, request_crc_support=crc) as f:
+            read_big = f.read()
+        payload = bytes(range(256)) * 2 + b"tail"
+        with remote.sdo.open(
+            0x2200, 0, "wb", size=len(payload), block_transfer=True, request_crc_support=crc
+        ) as f:
+            f.write(payload)
+    finally:
+        notifier.stop()
+        frames = drain(recorder)
+        net.disconnect()
+        server_bus.shutdown()
+        recorder.shutdown()
+    assert read_big == big and objects[(0x2200, 0)] == payload
+
+    upload, download = track(frames, SdoTracker())
+    assert (upload.direction, upload.protocol, upload.result) == ("upload", "block", "ok")
+    assert bytes.fromhex(upload.data) == big and upload.size == len(big)
+    assert (download.direction, download.protocol, download.result) == ("download", "block", "ok")
+    assert bytes.fromhex(download.data) == payload and download.index == 0x2200
+    segments = -(-len(payload) // 7)
+    assert download.frames == segments + 4 + _sub_blocks(segments, blksizes)
+
+
+def _sub_blocks(segments: int, blksizes: tuple[int, ...]) -> int:
+    count = 0
+    while segments > 0:
+        segments -= blksizes[min(count, len(blksizes) - 1)]
+        count += 1
+    return count
