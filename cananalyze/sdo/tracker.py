@@ -262,9 +262,16 @@ class SdoTracker:
             # This frame belongs to the new transfer, not to the one it cuts short.
             xfer.frames -= 1
             xfer.t_last, xfer.ref = xfer.prev_t, xfer.prev_ref
-            if not xfer.failed:
+            if xfer.failed:
+                self._finish(xfer, xfer.t_last, "protocol_error")
+            elif xfer.t_first_response is None:
+                # Unanswered, and the client moved on (its own timeout or a retry).
+                waited = (t - xfer.t_start) * 1000.0
+                xfer.note(f"no response; the client sent a new request after {waited:.1f} ms")
+                self._finish(xfer, t, "timeout")
+            else:
                 xfer.note("new request on the channel before this transfer ended")
-            self._finish(xfer, xfer.t_last, "protocol_error")
+                self._finish(xfer, xfer.t_last, "protocol_error")
         self._ended.pop(channel.request_cob, None)
         new = Transfer(
             channel, direction, protocol, info.get("index"), info.get("subindex"), t, t, ref
