@@ -10,13 +10,12 @@ import sys
 import can
 import numpy as np
 import pytest
+from conftest import ROOT, real_file
 
 from cananalyze.errors import InputError
 from cananalyze.frames import FLAG_BRS, FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, concat
 from cananalyze.io import candump
 from cananalyze.io.source import open_log, read_all
-
-from conftest import ROOT, real_file
 
 
 def _read(tmp_path, text: str, strict: bool = False, name: str = "x.log"):

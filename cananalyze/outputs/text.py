@@ -96,11 +96,10 @@ class TextWriter:
                 lines.append(line)
                 for rec in by_row.get(i, ()):
                     lines.append("    └─ " + format_record(rec))
-        if self.only_records or mask is not None:
-            # records of rows filtered out (or a records-only view) still print
-            shown = set(rows) if not self.only_records else set()
-            for row, rec in batch.records:
-                if row not in shown:
-                    lines.append(format_record(rec))
+        # records of rows not printed (filtered out, records-only view, end of log) still print
+        shown = set() if self.only_records else (set(rows) if mask is not None else set(range(len(fb))))
+        for row, rec in batch.records:
+            if row not in shown:
+                lines.append(format_record(rec))
         if lines:
             self.out.write("\n".join(lines) + "\n")

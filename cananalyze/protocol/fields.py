@@ -9,64 +9,24 @@ from __future__ import annotations
 
 from datetime import UTC, datetime, timedelta
 
+from .sdo import describe_sdo
 from .services import Service
 from .tables import (
     LSS_COMMANDS,
     NMT_COMMANDS,
     NMT_STATES,
-    abort_text,
     emcy_class,
     error_register_names,
 )
 
 CANOPEN_EPOCH = datetime(1984, 1, 1, tzinfo=UTC)
 
-# SDO command byte, stateless: client (request) ccs and server (response) scs.
-_CCS = {
-    0: "download_segment_request",
-    1: "initiate_download_request",
-    2: "initiate_upload_request",
-    3: "upload_segment_request",
-    4: "abort",
-    5: "block_upload",
-    6: "block_download",
-}
-_SCS = {
-    0: "upload_segment_response",
-    1: "download_segment_response",
-    2: "initiate_upload_response",
-    3: "initiate_download_response",
-    4: "abort",
-    5: "block_download",
-    6: "block_upload",
-}
-
-
 def sdo_fields(data: bytes, is_request: bool) -> dict:
-    """What one SDO frame's command byte says without the transfer's context."""
-    if not data:
-        return {"command": "empty"}
-    cmd = data[0]
-    spec = cmd >> 5
-    name = (_CCS if is_request else _SCS).get(spec, f"unknown_cs_{spec}")
-    out: dict = {"command": name}
-    has_mux = (is_request and spec in (1, 2, 4)) or (not is_request and spec in (2, 3, 4))
-    if is_request and spec == 5 and cmd & 0x03 == 0:
-        has_mux = True  # block upload initiate
-    if is_request and spec == 6 and cmd & 0x01 == 0:
-        has_mux = True  # block download initiate
-    if not is_request and spec == 6 and cmd & 0x03 == 2:
-        has_mux = True  # block upload initiate response
-    if not is_request and spec == 5 and cmd & 0x03 == 0:
-        has_mux = True  # block download initiate response
-    if has_mux and len(data) >= 4:
-        out["index"] = data[1] | data[2] << 8
-        out["subindex"] = data[3]
-    if spec == 4 and len(data) >= 8:
-        code = int.from_bytes(data[4:8], "little")
-        out["abort_code"] = code
-        out["abort_text"] = abort_text(code)
-    return out
+    """What one SDO frame says without its transfer's context (see protocol.sdo)."""
+    fields = describe_sdo(data, is_request)
+    if "data" in fields:  # the segment's valid bytes; the frame record's `data` is the raw payload
+        fields["sdo_data"] = fields.pop("data")
+    return fields
 
 
 def time_of_day(data: bytes) -> str | None:

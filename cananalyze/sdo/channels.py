@@ -39,6 +39,10 @@ class ChannelTable:
         for cob in (request_cob, response_cob):
             self._by_cob.pop(cob, None)
 
+    def explicit(self) -> list[int]:
+        """COB-IDs of channels declared or learnt (not the predefined 0x600+n/0x580+n)."""
+        return list(self._by_cob)
+
     def lookup(self, cob_id: int) -> tuple[SdoChannel, bool] | None:
         found = self._by_cob.get(cob_id)
         if found is not None:

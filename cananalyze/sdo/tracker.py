@@ -71,6 +71,10 @@ class SdoTracker:
         """Declare an extra SDO channel (server `node` listens on request_cob)."""
         self._channels.add(node, request_cob, response_cob)
 
+    def extra_cob_ids(self) -> list[int]:
+        """COB-IDs of explicit channels, which the predefined set does not classify as SDO."""
+        return self._channels.explicit()
+
     def channel_of(self, cob_id: int) -> tuple[int, bool] | None:
         """(server node, is_request) if `cob_id` carries SDO, else None."""
         found = self._channels.lookup(cob_id)

@@ -52,7 +52,7 @@ class SdoTransaction:
             "kind": self.kind,
             "t_start": self.t_start,
             "t": self.t,
-            "latency_ms": self.latency_ms,
+            "latency_ms": None if self.latency_ms is None else round(self.latency_ms, 3),
             "node": self.node,
             "direction": self.direction,
             "protocol": self.protocol,
