@@ -1,3 +1,6 @@
-"""The format modules the facade imports (each registers itself in registry.FORMATS)."""
+"""Format modules the source facade imports so that each registers its LogFormat."""
 
-FORMAT_MODULES = ["candump"]
+FORMAT_MODULES = [
+    "candump",
+    "asc",
+]
