@@ -3,4 +3,5 @@
 FORMAT_MODULES = [
     "candump",
     "asc",
+    "blf",
 ]
