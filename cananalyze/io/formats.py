@@ -4,4 +4,5 @@ FORMAT_MODULES = [
     "candump",
     "asc",
     "blf",
+    "trc",
 ]
