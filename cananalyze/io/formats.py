@@ -5,4 +5,5 @@ FORMAT_MODULES = [
     "asc",
     "blf",
     "trc",
+    "ixxat",
 ]
