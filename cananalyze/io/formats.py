@@ -6,4 +6,6 @@ FORMAT_MODULES = [
     "blf",
     "trc",
     "ixxat",
+    "gvret",
+    "pycan_csv",
 ]
