@@ -8,4 +8,5 @@ FORMAT_MODULES = [
     "ixxat",
     "gvret",
     "pycan_csv",
+    "pycan_fallback",
 ]
