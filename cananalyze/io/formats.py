@@ -8,5 +8,6 @@ FORMAT_MODULES = [
     "ixxat",
     "gvret",
     "pycan_csv",
+    "sevcon",
     "pycan_fallback",
 ]
