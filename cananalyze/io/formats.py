@@ -5,6 +5,7 @@ FORMAT_MODULES = [
     "asc",
     "blf",
     "trc",
+    "canbusanalyzer",
     "ixxat",
     "gvret",
     "pycan_csv",
