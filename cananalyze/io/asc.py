@@ -82,6 +82,8 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     prev = 0.0
     add = sink.add
     channel = sink.channel
+    chan_of: dict[str, int] = {}
+    fromhex = bytes.fromhex
     for n, raw in text_lines(stream):
         tok = raw.split()
         if not tok:
@@ -122,16 +124,33 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
             continue
         ch = tok[1]
         try:
-            if ch.isdigit():
+            chan = chan_of.get(ch)
+            if chan is None and ch.isdigit():
+                chan = chan_of[ch] = channel(str(int(ch)))
+            if chan is not None:
                 third = tok[2]
-                if third.lower().startswith("errorframe"):
-                    add(start + t, 0, FLAG_ERR, 0, b"", channel(str(int(ch))), n)
+                if third[0] in "Ee" and third.lower().startswith("errorframe"):
+                    add(start + t, 0, FLAG_ERR, 0, b"", chan, n)
                     continue
-                if len(tok) < 5 or tok[3] not in ("Rx", "Tx"):
+                if len(tok) < 5:
+                    continue
+                direction = tok[3]
+                if direction == "Rx":
+                    flags = 0
+                elif direction == "Tx":
+                    flags = FLAG_TX
+                else:
                     continue  # statistics, status, J1939TP and other events
-                can_id, flags = _can_id(third, base)
-                if tok[3] == "Tx":
-                    flags |= FLAG_TX
+                if third[-1] in "xX":
+                    flags |= FLAG_EXT
+                    can_id, _ = _can_id(third, base)
+                else:
+                    try:
+                        can_id = int(third, base)
+                    except ValueError:
+                        raise _Bad(f"invalid identifier {third!r}") from None
+                    if not 0 <= can_id <= 0x7FF:
+                        raise _Bad(f"identifier {third!r} out of range")
                 kind = tok[4]
                 if kind == "d":
                     if len(tok) < 6:
@@ -142,15 +161,21 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
                         raise _Bad(f"invalid DLC {tok[5]!r}") from None
                     if code < 0:
                         raise _Bad(f"invalid DLC {tok[5]!r}")
-                    size = min(8, code)  # classic CAN: DLC codes 9..15 still mean 8 bytes
-                    data = _payload(tok[6:], size, base)
-                    full = add(start + t, can_id, flags, size, data, channel(str(int(ch))), n)
+                    size = code if code < 8 else 8  # classic CAN: DLC 9..15 still mean 8 bytes
+                    if base == 16 and len(tok) >= 6 + size:
+                        try:
+                            data = fromhex(" ".join(tok[6 : 6 + size]))
+                        except ValueError:
+                            data = _payload(tok[6:], size, base)
+                        else:
+                            if len(data) != size:
+                                data = _payload(tok[6:], size, base)
+                    else:
+                        data = _payload(tok[6:], size, base)
+                    full = add(start + t, can_id, flags, size, data, chan, n)
                 elif kind in ("r", "R"):
                     size = int(tok[5], base) if len(tok) > 5 and tok[5].isdigit() else 0
-                    full = add(
-                        start + t, can_id, flags | FLAG_RTR, min(size, 8), b"",
-                        channel(str(int(ch))), n,
-                    )  # fmt: skip
+                    full = add(start + t, can_id, flags | FLAG_RTR, min(size, 8), b"", chan, n)
                 else:
                     raise _Bad(f"unknown frame type {kind!r}")
             elif ch == "CANFD":
