@@ -42,3 +42,23 @@ def test_only_its_own_reader_claims_it(name, fmt):
     head = real_file(name).read_bytes()[:65536]
     claimed = [f.name for f in FORMATS if f.name in MINE and f.sniff(head)]
     assert claimed == ([fmt] if fmt else [])
+
+
+FACADE = [
+    ("hardbyte__python-can/test_CanMessage.asc.gz", "asc", 2),
+    ("hardbyte__python-can/issue_1905.blf", "blf", 22),
+    ("hilch__canopen-message-interpreter/pcan3.trc", "trc", 45422),
+    ("hilch__canopen-message-interpreter/ixxat1.trc", "ixxat", 781),
+    ("collin80__SavvyCAN/CarBusAnalyzer.trc", "canbusanalyzer", 55),
+    ("collin80__SavvyCAN/GVRET_Log.csv", "gvret", 12974),
+    ("isPointless__Sevcon/can_230309_150427.txt", "sevcon", 1649),
+]
+
+
+@pytest.mark.parametrize("name,fmt,count", FACADE)
+def test_open_log_picks_the_reader_and_reads_everything(name, fmt, count):
+    from cananalyze.io.source import open_log
+
+    src = open_log(real_file(name), batch_size=10000)
+    assert src.fmt.name == fmt
+    assert sum(len(b) for b in src.batches()) == count == src.ctx.frames
