@@ -1,3 +1,14 @@
-"""The format modules the facade imports (each registers itself in registry.FORMATS)."""
+"""Format modules the source facade imports so that each registers its LogFormat."""
 
-FORMAT_MODULES = ["candump"]
+FORMAT_MODULES = [
+    "candump",
+    "asc",
+    "blf",
+    "trc",
+    "canbusanalyzer",
+    "ixxat",
+    "gvret",
+    "pycan_csv",
+    "sevcon",
+    "pycan_fallback",
+]

@@ -1,0 +1,112 @@
+"""RowSink: fills one FrameBatch at a time for text readers that parse line by line.
+
+Text formats (ASC, TRC, IXXAT, CSV) have to be tokenised per line, but the rows
+must not live as Python objects: the sink appends to compact ``array.array``
+columns and a ``bytearray`` of 8-byte data slots, and hands out a FrameBatch of
+``ctx.batch_size`` rows at a time, so memory does not grow with the log.
+"""
+
+from __future__ import annotations
+
+from array import array
+from collections.abc import Iterator
+
+import numpy as np
+
+from ..frames import FrameBatch
+from .registry import ReadContext
+
+_ZERO8 = bytes(8)
+
+
+class RowSink:
+    """Append rows, flush full batches; keeps the channel table stable across batches."""
+
+    def __init__(self, ctx: ReadContext) -> None:
+        self.ctx = ctx
+        self.size = max(1, int(ctx.batch_size))
+        self.channels: list[str] = []
+        self._chan_index: dict[str, int] = {}
+        self._reset()
+
+    def _reset(self) -> None:
+        self.t = array("d")
+        self.can_id = array("I")
+        self.flags = array("B")
+        self.dlc = array("B")
+        self.chan = array("H")
+        self.line = array("q")
+        self.data = bytearray()
+        self.long: dict[int, bytes] = {}
+
+    def channel(self, name: str) -> int:
+        """Index of a channel name, adding it to the table on first sight."""
+        idx = self._chan_index.get(name)
+        if idx is None:
+            idx = len(self.channels)
+            self._chan_index[name] = idx
+            self.channels.append(name)
+        return idx
+
+    def add(
+        self, t: float, can_id: int, flags: int, dlc: int, payload: bytes, chan: int, line: int
+    ) -> bool:
+        """Append one row; ``payload`` is the data bytes (may exceed 8 for CAN FD).
+
+        Returns True when the batch is full and should be flushed.
+        """
+        n = len(self.line)
+        self.t.append(t)
+        self.can_id.append(can_id)
+        self.flags.append(flags)
+        self.dlc.append(dlc)
+        self.chan.append(chan)
+        self.line.append(line)
+        k = len(payload)
+        if k >= 8:
+            self.data += payload[:8]
+            if k > 8:
+                self.long[n] = bytes(payload)
+        else:
+            self.data += payload
+            self.data += _ZERO8[k:]
+        return n + 1 >= self.size
+
+    def __len__(self) -> int:
+        return len(self.line)
+
+    def flush(self) -> FrameBatch | None:
+        """The rows gathered so far as a FrameBatch (None if empty); starts a new batch."""
+        n = len(self.line)
+        if n == 0:
+            return None
+        batch = FrameBatch(
+            t=np.frombuffer(self.t, np.float64).copy(),
+            can_id=np.frombuffer(self.can_id, np.uint32).copy(),
+            flags=np.frombuffer(self.flags, np.uint8).copy(),
+            dlc=np.frombuffer(self.dlc, np.uint8).copy(),
+            data=np.frombuffer(bytes(self.data), np.uint8).reshape(n, 8),
+            channel=np.frombuffer(self.chan, np.uint16).copy(),
+            line=np.frombuffer(self.line, np.int64).copy(),
+            channels=tuple(self.channels),
+            long_data=self.long,
+        )
+        self.ctx.frames += n
+        self._reset()
+        return batch
+
+    def drain(self) -> Iterator[FrameBatch]:
+        """Yield the final partial batch, if any."""
+        batch = self.flush()
+        if batch is not None:
+            yield batch
+
+
+def text_lines(stream, encoding: str = "latin-1") -> Iterator[tuple[int, str]]:
+    """(1-based line number, line without end-of-line) of a binary stream, streamed.
+
+    Latin-1 never fails to decode, so a stray byte becomes a parse problem on
+    its own line rather than a UnicodeDecodeError for the whole file.
+    """
+    for n, raw in enumerate(stream, 1):
+        yield n, raw.decode(encoding).rstrip("\r\n")

@@ -1,0 +1,90 @@
+"""Sevcon DVT ``can_cli_dump`` text: ``0xID  time  -  d<delta>  0  name  { 0xB0 0xB1 ... }``.
+
+Written by Sevcon's DVT tool; no library reads it. Time is in units of 0.1 ms.
+Frames without braces carry no data bytes (SYNC). EMCY lines hold only DVT's
+decoded text, not the bytes, so they cannot become frames: each is skipped with
+a counted problem.
+
+Frames DVT sent itself are logged with time 0 (and a meaningless negative
+delta); they are marked FLAG_TX and given the time of the frame before them so
+the log stays in time order.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator
+from typing import BinaryIO
+
+from ..frames import FLAG_TX, FrameBatch
+from ._rows import RowSink, text_lines
+from .registry import LogFormat, ReadContext, register
+
+_LINE = re.compile(rb"(?m)^0x[0-9A-Fa-f]{1,8}\s+\d+\s+-\s+d\s*-?[\d.]+\s+\d+\s+\S+")
+_ROW = re.compile(r"^0x([0-9A-Fa-f]{1,8})\s+(\d+)\s+\S*\s+d\s*(-?[\d.]+)\s+(\d+)\s+(\S+)(.*)$")
+
+
+def sniff(head: bytes) -> bool:
+    return len(_LINE.findall(head[:16384])) >= 3
+
+
+def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
+    ctx.format = "sevcon"
+    sink = RowSink(ctx)
+    chan = sink.channel("1")
+    last_t = 0.0
+    for n, line in text_lines(stream):
+        s = line.strip()
+        if not s:
+            continue
+        m = _ROW.match(s)
+        if m is None:
+            ctx.problems.add(ctx.source, f"line {n}", f"not a DVT dump line: {s[:60]!r}")
+            continue
+        can_id = int(m.group(1), 16)
+        if can_id > 0x7FF:
+            ctx.problems.add(ctx.source, f"line {n}", f"identifier 0x{m.group(1)} out of range")
+            continue
+        ticks = int(m.group(2))
+        rest = m.group(6).strip()
+        if rest.startswith("{"):
+            if not rest.endswith("}"):
+                ctx.problems.add(ctx.source, f"line {n}", "data bytes without closing '}'")
+                continue
+            cells = rest[1:-1].split()
+            try:
+                data = bytes(int(c, 16) for c in cells)
+            except ValueError:
+                ctx.problems.add(ctx.source, f"line {n}", f"invalid data bytes {rest!r}")
+                continue
+            if len(data) > 8 or not all(c.lower().startswith("0x") for c in cells):
+                ctx.problems.add(ctx.source, f"line {n}", f"invalid data bytes {rest!r}")
+                continue
+        elif rest:
+            ctx.problems.add(
+                ctx.source, f"line {n}", f"{m.group(5)} shown as decoded text only, no raw bytes"
+            )
+            continue
+        else:
+            data = b""
+        flags = 0
+        if ticks == 0 and last_t > 0:
+            flags = FLAG_TX
+            t = last_t
+        else:
+            t = last_t = ticks * 1e-4
+        if sink.add(t, can_id, flags, len(data), data, chan, n):
+            yield sink.flush()
+    yield from sink.drain()
+
+
+FORMAT = register(
+    LogFormat(
+        name="sevcon",
+        description="Sevcon DVT can_cli_dump text",
+        sniff=sniff,
+        read=read,
+        suffixes=(".txt",),
+        priority=45,
+    )
+)

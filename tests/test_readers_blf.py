@@ -1,0 +1,136 @@
+"""Vector BLF reader against python-can's BLFReader on real fixtures and on written files."""
+
+from __future__ import annotations
+
+import random
+import struct
+import zlib
+
+import can
+import pytest
+from conftest import real_file
+from readers_util import assert_same_as_python_can, run
+
+from cananalyze.errors import InputError
+from cananalyze.frames import FLAG_ERR, FLAG_FD
+from cananalyze.io import blf
+
+FIXTURES = [
+    "test_CanMessage.blf",
+    "test_CanMessage2.blf",
+    "test_CanFdMessage.blf",
+    "test_CanFdMessage64.blf",
+    "test_CanErrorFrameExt.blf",
+    "issue_1905.blf",
+]
+
+
+@pytest.mark.parametrize("name", FIXTURES)
+def test_same_rows_as_python_can(name):
+    path = real_file(f"hardbyte__python-can/{name}")
+    batch, ctx, _ = run(blf.read, path, batch_size=5)
+    expected = list(can.BLFReader(str(path)))
+    assert len(batch) > 0
+    assert_same_as_python_can(batch, expected)
+    assert ctx.problems.count == 0 and ctx.format == "blf"
+
+
+def test_fd_and_error_records():
+    fd, _, _ = run(blf.read, real_file("hardbyte__python-can/test_CanFdMessage64.blf"))
+    assert fd.flags[0] & FLAG_FD and len(fd.payload(0)) == 64
+    err, _, _ = run(blf.read, real_file("hardbyte__python-can/test_CanErrorFrameExt.blf"))
+    assert all(f & FLAG_ERR for f in err.flags)
+    padded, ctx, _ = run(blf.read, real_file("hardbyte__python-can/issue_1905.blf"))
+    assert ctx.absolute_time and ctx.start_time == pytest.approx(1735654180.222)
+
+
+def _messages(n: int) -> list[can.Message]:
+    rnd = random.Random(7)
+    out = []
+    for i in range(n):
+        ext = rnd.random() < 0.2
+        out.append(
+            can.Message(
+                timestamp=1700000000.0 + i * 0.0007,
+                arbitration_id=rnd.randrange(0x20000000 if ext else 0x800),
+                is_extended_id=ext,
+                is_remote_frame=i % 97 == 0,
+                data=b""
+                if i % 97 == 0
+                else bytes(rnd.randrange(256) for _ in range(rnd.randrange(9))),
+                channel=rnd.randrange(3),
+                is_rx=i % 5 != 0,
+            )
+        )
+    return out
+
+
+@pytest.fixture(scope="module", params=[0, 6], ids=["plain", "zlib"])
+def written(request, tmp_path_factory):
+    path = tmp_path_factory.mktemp("blf") / f"w{request.param}.blf"
+    with can.BLFWriter(str(path), compression_level=request.param) as w:
+        for m in _messages(12000):  # several 128 KiB containers, records straddle them
+            w.on_message_received(m)
+    return path
+
+
+def test_written_files_match_python_can(written):
+    batch, ctx, batches = run(blf.read, written, batch_size=5000)
+    expected = list(can.BLFReader(str(written)))
+    assert len(expected) == 12000
+    assert [len(b) for b in batches] == [5000, 5000, 2000]
+    assert_same_as_python_can(batch, expected)
+    assert batch.line.tolist() == list(range(1, 12001))
+    assert ctx.problems.count == 0 and ctx.frames == 12000
+
+
+def test_file_cut_inside_a_container_reads_what_is_complete(written):
+    data = written.read_bytes()
+    cut = data[: len(data) * 2 // 3]
+    batch, ctx, _ = run(blf.read, cut, source="cut.blf")
+    expected = list(can.BLFReader(str(written)))
+    assert 4000 < len(batch) < 12000
+    assert_same_as_python_can(batch, expected[: len(batch)])
+    assert ctx.problems.count >= 1
+    assert any("file ends inside a container" in p.message for p in ctx.problems.shown)
+    with pytest.raises(InputError, match=r"cut\.blf:offset \d+: "):
+        run(blf.read, cut, strict=True, source="cut.blf")
+
+
+def test_decompression_bomb_is_refused(written, monkeypatch):
+    monkeypatch.setattr(blf, "MAX_CONTAINER", 50000)
+    batch, ctx, _ = run(blf.read, written)
+    if "w0" in written.name:  # plain containers of 128 KiB are bigger than the limit
+        assert any("absurd" in p.message for p in ctx.problems.shown)
+    else:
+        assert any("inflates beyond" in p.message for p in ctx.problems.shown)
+    assert len(batch) < 12000
+
+
+def _container(payload: bytes) -> bytes:
+    body = struct.pack("<H6xL4x", 2, len(payload)) + zlib.compress(payload)
+    size = 16 + len(body)
+    return struct.pack("<4sHHLL", b"LOBJ", 16, 1, size, 10) + body + bytes(size % 4)
+
+
+def test_garbage_between_records_is_skipped_and_counted(tmp_path):
+    src = tmp_path / "one.blf"
+    with can.BLFWriter(str(src), compression_level=0) as w:
+        for m in _messages(3):
+            w.on_message_received(m)
+    raw = src.read_bytes()
+    header_size = struct.unpack_from("<L", raw, 4)[0]
+    # one CAN_MESSAGE record, then 8 junk bytes, then the same record again
+    record = raw[raw.index(b"LOBJ", header_size + 32) :][:48]
+    assert struct.unpack_from("<L", record, 12)[0] == 1
+    data = raw[:header_size] + _container(record + b"JUNKJUNK" + record)
+    batch, ctx, _ = run(blf.read, data)
+    assert len(batch) == 2 and batch.can_id[0] == batch.can_id[1]
+    assert ctx.problems.count == 1 and "garbage" in ctx.problems.shown[0].message
+
+
+def test_not_blf_is_a_problem():
+    batch, ctx, _ = run(blf.read, b"hello world, not a BLF at all" * 10, source="x.blf")
+    assert len(batch) == 0 and ctx.problems.count == 1
+    assert blf.sniff(real_file("hardbyte__python-can/test_CanMessage.blf").read_bytes())
+    assert not blf.sniff(b"date Sat Sep 30\nbase hex")
