@@ -43,6 +43,22 @@ def _node_set(text: str | None) -> np.ndarray | None:
     return np.array(nodes, np.int16)
 
 
+_RECORD_SERVICES = {"sdo": {"sdo_request", "sdo_response"}, "signal": {"tpdo", "rpdo"}}
+
+
+def _record_passes(rec: dict, args: argparse.Namespace, nodes, services, t0: float) -> bool:
+    """Records obey the same filters as frames (findings pass the service filter)."""
+    if nodes is not None and rec.get("node") not in set(nodes.tolist()):
+        return False
+    wanted = _RECORD_SERVICES.get(rec.get("kind"))
+    if services is not None and wanted is not None and not wanted & {s.label for s in services}:
+        return False
+    t = rec.get("t")
+    if t is not None and args.t_from is not None and t - t0 < args.t_from:
+        return False
+    return not (t is not None and args.t_to is not None and t - t0 > args.t_to)
+
+
 def run(args: argparse.Namespace) -> int:
     try:
         services = parse_services(args.service) if args.service else None
@@ -84,6 +100,8 @@ def run(args: argparse.Namespace) -> int:
                     mask &= fb.t - t0 >= args.t_from
                 if args.t_to is not None:
                     mask &= fb.t - t0 <= args.t_to
+            if mask is not None:
+                batch.records = [(row, rec) for row, rec in batch.records if _record_passes(rec, args, nodes, services, t0)]
             writer.write(batch, mask)
         tail = decoder.finish()
         summary.add(tail)

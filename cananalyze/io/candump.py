@@ -244,12 +244,11 @@ def _parse_line(line: bytes):
             if n and not (n.isdigit() and int(n) <= 8):
                 return f"bad remote-frame length {n.decode('latin-1')!r}"
             return t, m["ch"], can_id, flags, bytes(int(n) if n else 0)
+        if not all(c in b"0123456789ABCDEFabcdef" for c in rest):
+            return f"invalid hex in data {rest.decode('latin-1')!r}"
         if len(rest) % 2:
             return f"odd number of hex digits in data {rest.decode('latin-1')!r}"
-        try:
-            payload = bytes.fromhex(rest.decode("latin-1"))
-        except ValueError:
-            return f"invalid hex in data {rest.decode('latin-1')!r}"
+        payload = bytes.fromhex(rest.decode("latin-1"))
         if len(payload) > (64 if flags & FLAG_FD else 8):
             return f"{len(payload)} data bytes is more than a CAN frame carries"
         return t, m["ch"], can_id, flags, payload

@@ -87,12 +87,32 @@ class LogSource:
     ctx: ReadContext
     _stream: BinaryIO
     _closers: list = field(default_factory=list)
+    strict: bool = False
 
     @property
     def problems(self) -> ProblemLog:
         return self.ctx.problems
 
     def batches(self) -> Iterator[FrameBatch]:
+        """The log's frames in batches; in strict mode, those before the first problem, then InputError.
+
+        Readers always run leniently; strictness is applied here, once for every
+        format, so the frames read before a bad line are never lost.
+        """
+        for batch in self._lenient_batches():
+            if self.strict and self.ctx.problems.count:
+                first = self.ctx.problems.shown[0]
+                kind, _, number = first.location.partition(" ")
+                if kind in ("line", "record") and number.isdigit():
+                    batch = batch.take(batch.line < int(number))
+                if len(batch):
+                    yield batch
+                raise InputError(str(first))
+            yield batch
+        if self.strict and self.ctx.problems.count:
+            raise InputError(str(self.ctx.problems.shown[0]))
+
+    def _lenient_batches(self) -> Iterator[FrameBatch]:
         try:
             yield from self.fmt.read(self._stream, self.ctx)
             for c in self._closers:
@@ -177,8 +197,8 @@ def open_log(
         for c in closers:
             c.close()
         raise
-    ctx = ReadContext(source=name, problems=problems or ProblemLog(strict=strict), batch_size=batch_size)
-    return LogSource(name, chosen, ctx, stream, closers)
+    ctx = ReadContext(source=name, problems=problems or ProblemLog(), batch_size=batch_size)
+    return LogSource(name, chosen, ctx, stream, closers, strict=strict)
 
 
 def _peek(stream: BinaryIO, size: int) -> bytes:

@@ -1,0 +1,74 @@
+"""Frames printed in the device manuals decode to the manuals' meanings (stateless CiA 301 view)."""
+
+from __future__ import annotations
+
+import pytest
+from conftest import seed_file
+
+from cananalyze.frames import FLAG_RTR, from_rows
+from cananalyze.protocol.cobid import CobClassifier
+from cananalyze.protocol.fields import annotation, frame_fields
+from cananalyze.protocol.services import SERVICE_NAMES
+
+
+def _decode(rows):
+    batch = from_rows(rows)
+    c = CobClassifier().classify(batch)
+    out = []
+    for i in range(len(batch)):
+        svc = int(c.service[i])
+        f = frame_fields(svc, batch.payload(i), bool(batch.flags[i] & FLAG_RTR))
+        out.append((SERVICE_NAMES[svc], int(c.node[i]), f, annotation(svc, int(c.node[i]), int(c.pdo[i]), f)))
+    return out
+
+
+def test_i7231d_nmt_guarding_emcy_sync():
+    text = seed_file("002_8af3d3370e33cdbc.txt").read_text(encoding="utf-8", errors="replace")
+    # the manual's frames, as printed (the OCR keeps these byte strings legible)
+    assert "cs z 1 Node ID 5" in text and "COB ID 0x701" in text
+    assert "FF 81 OB 01" in text and "30 81 11 07" in text and "COB ID 0x80" in text
+    frames = _decode([
+        (0.0, 0x000, bytes([0x01, 0x05])),  # NMT start remote node 5
+        (0.1, 0x701, b"", FLAG_RTR),  # node guarding request to node 1
+        (0.2, 0x701, b"\x7f"),  # response: pre-operational, toggle 0
+        (0.3, 0x081, bytes.fromhex("00FF810B01000000")),  # I-7231D EMCY: DCON module failure
+        (0.4, 0x081, bytes.fromhex("3081110700000000")),  # guarding failure (life guard)
+        (0.5, 0x080, b""),  # SYNC, no counter
+        (0.6, 0x081, bytes(8)),  # error reset
+    ])
+    nmt, rtr, resp, emcy1, emcy2, sync, reset = frames
+    assert nmt[0] == "nmt" and nmt[2] == {"command": "start", "target": 5}
+    assert nmt[3] == "NMT start node 5"
+    assert rtr[0] == "guard_request" and rtr[1] == 1
+    assert resp[0] == "guard_response" and resp[2] == {"state": "pre-operational", "toggle": 0}
+    assert emcy1[0] == "emcy" and emcy1[1] == 1
+    assert emcy1[2]["error_code"] == 0xFF00 and emcy1[2]["error_class"] == "Device specific"
+    assert emcy1[2]["error_register"] == 0x81
+    assert emcy1[2]["error_register_bits"] == ["generic", "manufacturer specific"]
+    assert emcy1[2]["manufacturer"] == "0b01000000"  # vendor code 0x0B, module address 1
+    assert emcy2[2]["error_code"] == 0x8130
+    assert emcy2[2]["error_class"] == "Life guard error or heartbeat error"
+    assert emcy2[2]["error_register_bits"] == ["generic", "communication"]
+    assert sync[0] == "sync" and sync[2] == {"counter": None}
+    assert reset[2]["reset"] is True and reset[3] == "EMCY error reset / no error"
+
+
+@pytest.mark.parametrize(
+    ("frame", "code", "klass", "register", "mfr"),
+    [
+        ("3081010000000010", 0x8130, "Life guard error or heartbeat error", 0x01, "0000000010"),  # heartbeat error
+        ("3081010000000020", 0x8130, "Life guard error or heartbeat error", 0x01, "0000000020"),  # node guarding warning
+        ("3081110000000030", 0x8130, "Life guard error or heartbeat error", 0x11, "0000000030"),  # life guarding
+        ("1023010001000000", 0x2310, "Current, CANopen device output side", 0x01, "0001000000"),  # output overload
+        ("0081010000000040", 0x8100, "Communication", 0x01, "0000000040"),  # CAN error warning
+        ("40810100000000C0", 0x8140, "Recovered from bus off", 0x01, "00000000c0"),  # return from bus off
+    ],
+)
+def test_mcb560_emergency_list(frame, code, klass, register, mfr):
+    text = seed_file("004_b12e0f30c6bded9a.txt").read_text(encoding="utf-8")
+    assert " ".join(frame[i : i + 2] for i in range(0, 8, 2)).upper() in text.replace("\t", " ")
+    [(svc, node, f, _)] = _decode([(0.0, 0x085, bytes.fromhex(frame))])
+    assert svc == "emcy" and node == 5
+    assert f["error_code"] == code and f["error_class"] == klass
+    assert f["error_register"] == register
+    assert f["manufacturer"] == mfr
