@@ -1,0 +1,119 @@
+"""PdoDecoder: PDO rows become named values with units, one numpy column per signal.
+
+Rows classified TPDO/RPDO are grouped by COB-ID and by the stretch of the batch in
+which one configuration held (the network model's segments), and each group is
+decoded at once by `decode_pdo`. The result stays columnar (`batch.signals`); the
+per-row `signals`/`units` fields of the outputs are derived from it only when a row
+is printed. Problems (short or long DLC, PDO not valid) are shared notes per group.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cananalyze.decoded import DecodedBatch, SignalBlock
+from cananalyze.frames import FLAG_RTR
+from cananalyze.network.model import NetworkModel
+from cananalyze.protocol.pdo_decode import decode_pdo
+from cananalyze.protocol.services import Service
+
+
+class PdoDecoder:
+    """Processor after the network model: decodes PDOs with the mapping in force."""
+
+    def __init__(self, model: NetworkModel) -> None:
+        self.model = model
+
+    def process(self, batch: DecodedBatch) -> None:
+        if not self.model.bindings and len(self.model.segments) <= 1:
+            return  # nothing mapped anywhere: skip the PDO scan entirely
+        svc = batch.service
+        fb = batch.frames
+        is_pdo = ((svc == Service.TPDO) | (svc == Service.RPDO)) & ((fb.flags & FLAG_RTR) == 0)
+        rows = np.flatnonzero(is_pdo)
+        if rows.size == 0:
+            return
+        segments = self.model.segments
+        bounds = [start for start, _ in segments[1:]]
+        seg_of = (
+            np.searchsorted(np.asarray(bounds, np.int64), rows, side="right") if bounds else None
+        )
+        # one sort groups rows by (segment, COB-ID), keeping row order inside each group
+        key = fb.can_id[rows].astype(np.int64)
+        if seg_of is not None:
+            key = key + seg_of.astype(np.int64) * 4096
+        order = np.argsort(key, kind="stable")
+        key_sorted = key[order]
+        cuts = np.flatnonzero(np.diff(key_sorted)) + 1
+        starts = np.concatenate(([0], cuts))
+        ends = np.concatenate((cuts, [key_sorted.size]))
+        for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
+            k = int(key_sorted[a])
+            seg, cob = divmod(k, 4096)
+            binding = segments[seg][1].get(cob)
+            if binding is None:
+                continue
+            group = rows[order[a:b]]
+            self._decode_group(batch, group, binding)
+
+    def _decode_group(self, batch: DecodedBatch, group: np.ndarray, binding) -> None:
+        fb = batch.frames
+        mapping = binding.config.mapping
+        if binding.problem:
+            batch.row_notes.append((group, {"pdo_problem": binding.problem}))
+        if not mapping:
+            if not binding.problem:
+                batch.row_notes.append(
+                    (
+                        group,
+                        {
+                            "pdo_problem": f"{binding.kind.upper()}{binding.number} "
+                            f"of node {binding.node} has no mapped objects"
+                        },
+                    )
+                )
+            return
+        cols = decode_pdo(fb.data[group], fb.dlc[group], mapping)
+        ok = ~cols.short
+        if cols.short.any():
+            have = sorted(set(fb.dlc[group][cols.short].tolist()))
+            batch.row_notes.append(
+                (
+                    group[cols.short],
+                    {
+                        "pdo_problem": f"DLC {','.join(map(str, have))} shorter than the {cols.bytes_needed} bytes "
+                        f"mapped in {binding.kind.upper()}{binding.number}: not decoded"
+                    },
+                )
+            )
+        if cols.extra.any():
+            have = sorted(set(fb.dlc[group][cols.extra].tolist()))
+            batch.row_notes.append(
+                (
+                    group[cols.extra],
+                    {
+                        "pdo_problem": f"DLC {','.join(map(str, have))} longer than the {cols.bytes_needed} bytes "
+                        f"mapped: extra bytes ignored"
+                    },
+                )
+            )
+        if not ok.any() or not cols.values:
+            return
+        all_ok = bool(ok.all())
+        units = {}
+        for e in mapping:
+            units.setdefault(e.name, e.unit)
+        batch.signals.append(
+            SignalBlock(
+                rows=group if all_ok else group[ok],
+                node=binding.node,
+                pdo=f"{binding.kind}{binding.number}",
+                cob_id=int(fb.can_id[group[0]]),
+                columns={name: (v if all_ok else v[ok]) for name, v in cols.values.items()},
+                units={name: units.get(name) for name in cols.values},
+                mapped_bytes=cols.bytes_needed,
+            )
+        )
+
+    def finish(self, batch: DecodedBatch) -> None:
+        pass
