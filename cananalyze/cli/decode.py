@@ -28,6 +28,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--to", dest="t_to", type=float, metavar="S", help="end, seconds after the first frame")
     p.add_argument("--summary", action="store_true", help="print only the summary")
     p.add_argument("--sdo", action="store_true", help="print only the SDO transaction table")
+    p.add_argument("--signals", action="store_true",
+                   help="print only decoded PDO values, one signal record per value (t, node, pdo, signal, value, unit)")
     p.add_argument("--bitrate", type=int, metavar="BIT/S", help="bus bitrate, for the bus load in --summary")
     p.add_argument("-o", "--output", metavar="FILE", help="write to FILE instead of stdout")
     p.set_defaults(func=run)
@@ -70,7 +72,11 @@ def run(args: argparse.Namespace) -> int:
     out = open(args.output, "w", encoding="utf-8") if args.output else sys.stdout  # noqa: SIM115
     summary = Summary()
     only_records = args.sdo
-    if args.format == "jsonl":
+    if args.signals:
+        from ..outputs.signals import SignalWriter
+
+        writer = SignalWriter(out, args.format)
+    elif args.format == "jsonl":
         from ..outputs.jsonl import JsonlWriter
 
         writer = JsonlWriter(out, frames=not only_records)
