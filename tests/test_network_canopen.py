@@ -73,4 +73,7 @@ def test_canopen_pdo_api_mapping_is_followed(with_eds):
     state = cfg.pdos[("tx", 1)]
     assert state.cob_id == 0x1A2 and state.valid and state.transmission_type == 254
     row = int(blocks[0].rows[0])
-    assert batch.fields(row)["signals"] == {k: v[0] for k, v in values.items()} and batch.node[row] == 2
+    assert (
+        batch.fields(row)["signals"] == {k: v[0] for k, v in values.items()}
+        and batch.node[row] == 2
+    )
