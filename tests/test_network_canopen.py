@@ -14,8 +14,8 @@ from cananalyze.network.model import NetworkModel
 from cananalyze.network.pdo_processor import PdoDecoder
 from cananalyze.network.profile import load_eds
 from cananalyze.network.spec import NetworkSpec, NodeSpec
+from cananalyze.sdo.processor import SdoProcessor
 from tests.conftest import real_file
-from tests.helpers.sdo_feed import SdoFeed
 
 
 def _record_configuration(eds: str, channel: str) -> list[tuple[float, int, bytes]]:
@@ -59,7 +59,7 @@ def test_canopen_pdo_api_mapping_is_followed(with_eds):
     assert any(cob == 0x1A2 for _, cob, _ in frames), "the local node sent no PDO on the new COB-ID"
     spec = NetworkSpec({2: NodeSpec(load_eds(eds, 2), "user --eds")}) if with_eds else NetworkSpec()
     model = NetworkModel(spec)
-    decoder = Decoder([SdoFeed(), model, PdoDecoder(model)])
+    decoder = Decoder([SdoProcessor(), model, PdoDecoder(model)])
     model.attach(decoder)
     batch = decoder.decode(from_rows(frames))
     blocks = [b for b in batch.signals if b.cob_id == 0x1A2]

@@ -16,13 +16,13 @@ from cananalyze.network.pdo_processor import PdoDecoder
 from cananalyze.network.profile import load_builtin, load_eds
 from cananalyze.network.spec import NetworkSpec, NodeSpec
 from cananalyze.protocol.services import Service
+from cananalyze.sdo.processor import SdoProcessor
 from tests.conftest import real_file, seed_file
-from tests.helpers.sdo_feed import SdoFeed
 
 
 def run(fb, spec=None):
     model = NetworkModel(spec or NetworkSpec())
-    decoder = Decoder([SdoFeed(), model, PdoDecoder(model)])
+    decoder = Decoder([SdoProcessor(), model, PdoDecoder(model)])
     model.attach(decoder)
     return model, decoder.decode(fb)
 
