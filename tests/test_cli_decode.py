@@ -84,6 +84,17 @@ def test_sdo_table_only():
     assert len(lines) == 7 and all(" SDO " in ln for ln in lines)
 
 
+def test_sdo_values_named_and_decoded():
+    out = cli("decode", DEMO, "--sdo")
+    text = out.stdout.decode()
+    assert "node 5 SDO read 0x1018:01 Identity object: Vendor-ID expedited -> ok: 973 (0x3CD)" in text
+    assert "0x1008:00 Manufacturer device name segmented -> ok: 'DAT7014'" in text
+    assert "0x1017:00 Producer heartbeat time expedited -> ok: 100 (0x64)" in text
+    recs = [json.loads(x) for x in cli("decode", DEMO, "--sdo", "--format", "jsonl").stdout.splitlines()]
+    assert [r["value"] for r in recs[:4]] == [0x3CD, 2, 0x191, "DAT7014"]
+    assert recs[0]["name"] == "Identity object: Vendor-ID"
+
+
 def test_bad_input_is_one_line_never_a_traceback(tmp_path):
     bad = tmp_path / "bad.log"
     bad.write_text("(1.0) can0 181#0102\n(2.0) can0 181#XYZ\n(3.0) can0 181#03\n")

@@ -55,7 +55,7 @@ def build_decoder(args: argparse.Namespace) -> Decoder:
     from ..network.pdo_processor import PdoDecoder
 
     model = NetworkModel(network_spec(args))
-    tracker = SdoTracker(timeout=getattr(args, "sdo_timeout", 1.0))
+    tracker = SdoTracker(timeout=getattr(args, "sdo_timeout", 1.0), object_info=model.object_info)
     for node, request, response in model.sdo_channels:
         tracker.add_channel(node, request, response)
     processors: list = [SdoProcessor(tracker), model, PdoDecoder(model), EmcyDecoder(model)]

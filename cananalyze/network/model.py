@@ -25,6 +25,8 @@ from cananalyze.network.spec import NetworkSpec
 from cananalyze.protocol.cobid import NO_NODE, CobClassifier
 from cananalyze.protocol.services import Service
 
+from ..protocol.comm_objects import comm_object
+
 USER_SOURCES = ("user --device", "user --eds", "network file")
 _IDENTITY = {
     (0x1018, 1): "vendor_id",
@@ -115,6 +117,19 @@ class NetworkModel:
         ]
 
     # --- queries -----------------------------------------------------------------
+    def object_info(self, node: int, index: int, subindex: int) -> tuple[str, int] | None:
+        """(name, data type) of an object on a node: its profile, else CiA 301's common objects.
+
+        The SDO tracker calls this to name and decode transaction values.
+        """
+        cfg = self.nodes.get(node)
+        profile = cfg.profile if cfg is not None else None
+        if profile is not None:
+            info = profile.object(index, subindex)
+            if info is not None:
+                return info.name, info.datatype
+        return comm_object(index, subindex)
+
     def config_at(self, node: int) -> NodeConfig:
         """Current configuration of a node (an empty 'unknown' one if never seen)."""
         cfg = self.nodes.get(node)

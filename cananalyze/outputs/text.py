@@ -38,8 +38,14 @@ def format_record(rec: dict) -> str:
         line = f"node {rec.get('node')} SDO {what} {obj}{name} {rec.get('protocol')} -> {rec.get('result')}"
         if rec.get("result") == "ok":
             value = rec.get("value")
-            shown = value if value is not None else (rec.get("data") or "")
-            line += f": {shown!r}" if isinstance(shown, str) else f": {shown}"
+            if value is None:
+                line += f": data {rec.get('data') or '-'}"
+            elif isinstance(value, str):
+                line += f": {value!r}"
+            elif isinstance(value, int) and not isinstance(value, bool) and abs(value) > 9:
+                line += f": {value} (0x{value & 0xFFFFFFFFFFFFFFFF:X})"
+            else:
+                line += f": {value}"
             line += f" ({rec.get('size')} bytes)"
         elif rec.get("abort_code") is not None:
             line += f": 0x{rec['abort_code']:08X} {rec.get('abort_text')}"

@@ -101,7 +101,8 @@ def annotation(service: int, node: int, pdo: int, fields: dict, rtr: bool = Fals
                 f"register 0x{fields['error_register']:02X} [{regs}]; mfr {fields['manufacturer'] or '-'}")
         decoded = fields.get("manufacturer_decoded")
         if decoded:
-            text += f" ({decoded.get('text') or decoded})"
+            words = decoded.get("meaning") or ", ".join(decoded.get("flags") or []) or str(decoded)
+            text += f" ({words})"
         return text
     if s in (Service.TPDO, Service.RPDO):
         kind = "TPDO" if s is Service.TPDO else "RPDO"
