@@ -35,7 +35,7 @@ def test_text_output_names_every_service():
         "EMCY 0x8100 Communication; register 0x01 [generic]; mfr 0000000040",
         "EMCY error reset / no error",
         "0x06020000 Object does not exist in the object dictionary",
-        "node 5 SDO read 0x1008:00 segmented -> ok",
+        "node 5 SDO read 0x1008:00 Manufacturer device name segmented -> ok",
     ):
         assert expected in text, expected
 
@@ -91,7 +91,7 @@ def test_sdo_values_named_and_decoded():
     assert "0x1008:00 Manufacturer device name segmented -> ok: 'DAT7014'" in text
     assert "0x1017:00 Producer heartbeat time expedited -> ok: 100 (0x64)" in text
     recs = [json.loads(x) for x in cli("decode", DEMO, "--sdo", "--format", "jsonl").stdout.splitlines()]
-    assert [r["value"] for r in recs[:4]] == [0x3CD, 2, 0x191, "DAT7014"]
+    assert [r["value"] for r in recs[:4]] == [0x3CD, 2, 0x40191, "DAT7014"]
     assert recs[0]["name"] == "Identity object: Vendor-ID"
 
 
