@@ -534,13 +534,17 @@ def _pipeline_args(
     )
 
 
-def run_pipeline(args: argparse.Namespace, progress=None) -> Capture:
-    """Read and decode the log named by `args` (CLI options) into a Capture."""
+def run_pipeline(args: argparse.Namespace, progress=None, decoder=None) -> Capture:
+    """Read and decode the log named by `args` (CLI options) into a Capture.
+
+    progress(n) is called after each batch of n frames; decoder defaults to the
+    one the options describe (`cli.pipeline.build_decoder`).
+    """
     from .cli.pipeline import build_decoder
     from .io.source import open_log
 
     source = open_log(args.log, strict=args.strict, fmt=getattr(args, "input_format", None))
-    decoder = build_decoder(args)
+    decoder = decoder or build_decoder(args)
     collector = Collector(str(args.log))
     for fb in source.batches():
         collector.add(decoder.decode(fb))
