@@ -207,7 +207,12 @@ class Capture:
     @cached_property
     def events(self) -> pd.DataFrame:
         """NMT commands, EMCY, boot-ups, NMT state changes, SDO transactions, findings."""
-        return _event_frame(sorted(self.event_list, key=lambda e: e.t))
+        return _event_frame(self.sorted_events())
+
+    def sorted_events(self) -> list[Event]:
+        """Events by time, then by frame row (logs without timestamps have t = 0 throughout)."""
+        big = len(self.batch)
+        return sorted(self.event_list, key=lambda e: (e.t, big if e.row is None else e.row))
 
     @cached_property
     def findings(self) -> pd.DataFrame:
@@ -330,7 +335,14 @@ def _identity(records: list[tuple[int, dict]]) -> dict[int, dict]:
             continue
         what = _IDENTITY.get((r.get("index"), r.get("subindex")))
         if what and r.get("node") is not None:
-            out.setdefault(r["node"], {})[what] = r.get("value")
+            value = r.get("value")
+            if value is None and r.get("data"):  # no dictionary known: the CiA 301 types
+                raw = bytes.fromhex(r["data"])
+                if what == "device_name":
+                    value = raw.split(b"\0", 1)[0].decode("latin-1")
+                else:
+                    value = int.from_bytes(raw[:4], "little")
+            out.setdefault(r["node"], {})[what] = value
     return out
 
 
@@ -360,6 +372,8 @@ def _sdo_event(row: int, r: dict) -> Event:
         text += f" {r['name']}"
     if ok and r.get("value") is not None:
         text += f" = {r['value']}"
+    elif ok and r.get("data"):
+        text += f" data {r['data']}"
     text += f" {r.get('result', '?')}"
     if r.get("abort_text"):
         text += f": {r['abort_text']}"

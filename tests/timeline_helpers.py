@@ -11,6 +11,7 @@ import argparse
 import numpy as np
 
 from cananalyze.capture import Capture, run_pipeline
+from cananalyze.cli.pipeline import build_decoder
 from cananalyze.decoded import DecodedBatch, SignalBlock
 from cananalyze.decoder import Decoder
 from cananalyze.network.profile import load_builtin
@@ -55,4 +56,5 @@ DEMO_DEVICES = {3: "mcb560", 5: "dat7014"}
 
 def demo_capture(path, devices=None) -> Capture:
     args = argparse.Namespace(log=str(path), strict=False, input_format=None, sdo_timeout=1.0)
-    return run_pipeline(args, decoder=Decoder([ProfilePdos(devices or DEMO_DEVICES)]))
+    processors = build_decoder(args).processors + [ProfilePdos(devices or DEMO_DEVICES)]
+    return run_pipeline(args, decoder=Decoder(processors))

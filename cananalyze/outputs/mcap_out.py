@@ -190,7 +190,7 @@ def write_mcap(cap: Capture, path: str | Path, compression: str = "zstd") -> dic
             data = [json.dumps({"state": e.message}).encode() for e in evs]
             streams.append((channel(topic, STATE_SCHEMA), _ns(t), data))
             counts[topic] = len(evs)
-        events = sorted(cap.event_list, key=lambda e: e.t)
+        events = cap.sorted_events()
         if events:
             t = np.array([e.t for e in events])
             ns = _ns(t)

@@ -90,7 +90,7 @@ def send(cap: Capture, rec, bitrate: int | None = None) -> dict[str, int]:
             columns=rr.StateChange.columns(state=[e.message for e in evs]),
         )
         counts[path] = len(evs)
-    events = sorted(cap.event_list, key=lambda e: e.t)
+    events = cap.sorted_events()
     if events:
         rec.send_columns(
             "/events",

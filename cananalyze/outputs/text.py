@@ -112,7 +112,9 @@ class TextWriter:
                 for rec in by_row.get(i, ()):
                     lines.append("    └─ " + format_record(rec))
         # records of rows not printed (filtered out, records-only view, end of log) still print
-        shown = set() if self.only_records else (set(rows) if mask is not None else set(range(len(fb))))
+        shown = (
+            set() if self.only_records else (set(rows) if mask is not None else set(range(len(fb))))
+        )
         for row, rec in batch.records:
             if row not in shown:
                 lines.append(format_record(rec))
