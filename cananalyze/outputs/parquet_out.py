@@ -44,11 +44,29 @@ def write_parquet(cap: Capture, path: str | Path) -> dict[str, int]:
 
 
 def write_csv(cap: Capture, path: str | Path) -> dict[str, int]:
-    """<dir>/<table>.csv for every table; returns rows per table."""
+    """<dir>/<table>.csv for every table; returns rows per table.
+
+    Written by pyarrow's C++ CSV writer: pandas' to_csv takes ~15 s on a
+    million-frame log, Arrow about one.
+    """
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
     d = _outdir(path)
     rows = {}
     for name, df in _tables(cap):
+        if name == "nodes":
+            df = df.reset_index()
+        table = pa.Table.from_pandas(df, preserve_index=False)
+        cols = []
+        for col in table.columns:
+            if pa.types.is_dictionary(col.type):
+                col = col.cast(pa.string())
+            elif pa.types.is_null(col.type):
+                col = col.cast(pa.string())
+            cols.append(col)
+        table = pa.table(cols, names=table.column_names)
         with atomic_path(d / f"{name}.csv") as tmp:
-            df.to_csv(tmp, index=name == "nodes", float_format="%.9g" if name != "frames" else None)
+            pacsv.write_csv(table, tmp)
         rows[name] = len(df)
     return rows
