@@ -13,6 +13,7 @@ from ..outputs.summary import Summary
 from ..protocol.services import parse_services
 from .common import add_input_options, report_problems
 from .pipeline import build_decoder
+from .timeline import add_timeline_options, timeline_collector, write_timelines
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -32,6 +33,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="print only decoded PDO values, one signal record per value (t, node, pdo, signal, value, unit)")
     p.add_argument("--bitrate", type=int, metavar="BIT/S", help="bus bitrate, for the bus load in --summary")
     p.add_argument("-o", "--output", metavar="FILE", help="write to FILE instead of stdout")
+    add_timeline_options(p)
     p.set_defaults(func=run)
 
 
@@ -85,6 +87,7 @@ def run(args: argparse.Namespace) -> int:
 
         color = out.isatty() and not args.no_color
         writer = TextWriter(out, color=color, only_records=only_records)
+    collector = timeline_collector(args)
     t0 = None
     svc_codes = np.array(sorted(services), np.uint8) if services else None
     try:
@@ -93,6 +96,8 @@ def run(args: argparse.Namespace) -> int:
             if t0 is None and len(fb):
                 t0 = float(fb.t[0])
             summary.add(batch)
+            if collector:
+                collector.add(batch)
             if args.summary:
                 continue
             mask = None
@@ -111,6 +116,8 @@ def run(args: argparse.Namespace) -> int:
             writer.write(batch, mask)
         tail = decoder.finish()
         summary.add(tail)
+        if collector:
+            collector.add(tail)
         if not args.summary:
             writer.write(tail)
     finally:
@@ -120,4 +127,6 @@ def run(args: argparse.Namespace) -> int:
         print("\n".join(summary.lines(args.bitrate, source.problems.count)), file=out)
     if out is not sys.stdout:
         out.close()
+    if collector:
+        write_timelines(args, collector.capture(source.problems, getattr(args, "network", None) or ""))
     return 0

@@ -25,8 +25,13 @@ def candump_lines(batch: FrameBatch) -> list[str]:
     t = np.char.mod("%.6f", batch.t)
     ids = batch.can_id
     ext = (batch.flags & (FLAG_EXT | FLAG_ERR)) != 0
-    id_txt = np.where(ext, np.char.mod("%08X", ids | np.where((batch.flags & FLAG_ERR) != 0, 0x20000000, 0).astype(np.uint32)),
-                      np.char.mod("%03X", ids))
+    id_txt = np.where(
+        ext,
+        np.char.mod(
+            "%08X", ids | np.where((batch.flags & FLAG_ERR) != 0, 0x20000000, 0).astype(np.uint32)
+        ),
+        np.char.mod("%03X", ids),
+    )
     out = []
     hexed = _HEX2[batch.data]
     chans = batch.channels or ("can0",)

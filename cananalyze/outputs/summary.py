@@ -67,14 +67,20 @@ class Summary:
         if self.frames == 0:
             return "The log holds no frames."
         other = int(self.by_service[Service.OTHER]) + int(self.by_service[Service.ERROR_FRAME])
-        markers = sum(int(self.by_service[s]) for s in (Service.HEARTBEAT, Service.BOOTUP,
-                                                         Service.NMT, Service.GUARD_REQUEST))
+        markers = sum(
+            int(self.by_service[s])
+            for s in (Service.HEARTBEAT, Service.BOOTUP, Service.NMT, Service.GUARD_REQUEST)
+        )
         if other / self.frames > 0.5:
-            return (f"This does not look like CANopen: {other} of {self.frames} frames use identifiers "
-                    "outside the predefined connection set.")
+            return (
+                f"This does not look like CANopen: {other} of {self.frames} frames use identifiers "
+                "outside the predefined connection set."
+            )
         if markers == 0 and self.frames > 200:
-            return ("This may not be CANopen: no heartbeat, boot-up, guarding or NMT frame in "
-                    f"{self.frames} frames; identifiers merely fall into CANopen ranges.")
+            return (
+                "This may not be CANopen: no heartbeat, boot-up, guarding or NMT frame in "
+                f"{self.frames} frames; identifiers merely fall into CANopen ranges."
+            )
         return None
 
     def lines(self, bitrate: int | None = None, problems: int = 0) -> list[str]:
@@ -94,8 +100,15 @@ class Summary:
         if nodes.size:
             out.append("frames per node:")
             for n in nodes:
-                parts = [f"{SERVICE_NAMES[s]}={int(c)}" for s, c in enumerate(self.by_node_service[n]) if c]
-                out.append(f"  node {int(n):>3}: {int(self.by_node_service[n].sum()):>8}  " + " ".join(parts))
+                parts = [
+                    f"{SERVICE_NAMES[s]}={int(c)}"
+                    for s, c in enumerate(self.by_node_service[n])
+                    if c
+                ]
+                out.append(
+                    f"  node {int(n):>3}: {int(self.by_node_service[n].sum()):>8}  "
+                    + " ".join(parts)
+                )
         if self.sdo:
             out.append("SDO transactions per node:")
             by_node: dict = {}
@@ -107,10 +120,16 @@ class Summary:
                 for r in recs:
                     results[r.get("result")] = results.get(r.get("result"), 0) + 1
                 lat = [r["latency_ms"] for r in recs if r.get("latency_ms") is not None]
-                text = f"  node {node}: {len(recs)} (" + ", ".join(f"{k} {v}" for k, v in sorted(results.items())) + ")"
+                text = (
+                    f"  node {node}: {len(recs)} ("
+                    + ", ".join(f"{k} {v}" for k, v in sorted(results.items()))
+                    + ")"
+                )
                 if lat:
-                    text += (f"; latency ms min {min(lat):.2f} median {float(np.median(lat)):.2f} "
-                             f"max {max(lat):.2f}")
+                    text += (
+                        f"; latency ms min {min(lat):.2f} median {float(np.median(lat)):.2f} "
+                        f"max {max(lat):.2f}"
+                    )
                 out.append(text)
         verdict = self.canopen_verdict()
         if verdict:

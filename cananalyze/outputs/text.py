@@ -19,11 +19,22 @@ _HEX3 = [f"{i:02X} " for i in range(256)]
 
 # ANSI colours per service group, only on a terminal.
 _COLOURS = {
-    "nmt": "\033[1;35m", "sync": "\033[2m", "time": "\033[2m", "emcy": "\033[1;31m",
-    "tpdo": "\033[36m", "rpdo": "\033[34m", "sdo_request": "\033[33m", "sdo_response": "\033[33m",
-    "heartbeat": "\033[32m", "bootup": "\033[1;32m", "guard_request": "\033[32m",
-    "guard_response": "\033[32m", "lss_master": "\033[35m", "lss_slave": "\033[35m",
-    "error_frame": "\033[1;31m", "other": "\033[2m",
+    "nmt": "\033[1;35m",
+    "sync": "\033[2m",
+    "time": "\033[2m",
+    "emcy": "\033[1;31m",
+    "tpdo": "\033[36m",
+    "rpdo": "\033[34m",
+    "sdo_request": "\033[33m",
+    "sdo_response": "\033[33m",
+    "heartbeat": "\033[32m",
+    "bootup": "\033[1;32m",
+    "guard_request": "\033[32m",
+    "guard_response": "\033[32m",
+    "lss_master": "\033[35m",
+    "lss_slave": "\033[35m",
+    "error_frame": "\033[1;31m",
+    "other": "\033[2m",
 }
 _RESET = "\033[0m"
 
@@ -60,7 +71,9 @@ def format_record(rec: dict) -> str:
 
 
 class TextWriter:
-    def __init__(self, out: TextIO, color: bool = False, t0: float | None = None, only_records: bool = False) -> None:
+    def __init__(
+        self, out: TextIO, color: bool = False, t0: float | None = None, only_records: bool = False
+    ) -> None:
         self.out = out
         self.color = color
         self.t0 = t0
@@ -95,15 +108,19 @@ class TextWriter:
                 node = nodes[i]
                 text = annotation(services[i], node, pdos[i], batch.fields(i), bool(fl & FLAG_RTR))
                 ch = fb.channel_name(i)
-                line = (f"{rel[i]:12.6f}  {ch:<5} {ident:>8}  [{dlcs[i]}]  {data:<23}  "
-                        f"{svc:<14} {'' if node < 0 else node:>3}  {text}")
+                line = (
+                    f"{rel[i]:12.6f}  {ch:<5} {ident:>8}  [{dlcs[i]}]  {data:<23}  "
+                    f"{svc:<14} {'' if node < 0 else node:>3}  {text}"
+                )
                 if self.color:
                     line = f"{_COLOURS.get(svc, '')}{line}{_RESET}"
                 lines.append(line)
                 for rec in by_row.get(i, ()):
                     lines.append("    └─ " + format_record(rec))
         # records of rows not printed (filtered out, records-only view, end of log) still print
-        shown = set() if self.only_records else (set(rows) if mask is not None else set(range(len(fb))))
+        shown = (
+            set() if self.only_records else (set(rows) if mask is not None else set(range(len(fb))))
+        )
         for row, rec in batch.records:
             if row not in shown:
                 lines.append(format_record(rec))

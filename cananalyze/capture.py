@@ -1,0 +1,597 @@
+"""Capture: a whole decoded log as columns, for pandas and the timeline exporters.
+
+`load()` runs the same pipeline as `decode` and keeps what it produced as numpy
+columns (frames, PDO signal series per node and PDO) plus the rare, stateful
+results as small lists (SDO transactions, events, findings). DataFrames are built
+from those columns on first access, so exporters that do not need pandas never
+import it (`cananalyze --help` stays fast, MCAP/rerun export skip 0.5 s of imports).
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .decoded import DecodedBatch
+from .errors import ProblemLog
+from .frames import FLAG_RTR, FrameBatch, concat
+from .protocol.fields import annotation
+from .protocol.services import SERVICE_NAMES, Service
+from .protocol.tables import NMT_STATES
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+# foxglove.Log levels, used for every event (MCAP, rerun, the events table).
+DEBUG, INFO, WARNING, ERROR, FATAL = 1, 2, 3, 4, 5
+LEVEL_NAMES = {DEBUG: "debug", INFO: "info", WARNING: "warning", ERROR: "error", FATAL: "fatal"}
+_LEVEL_BY_NAME = {v: k for k, v in LEVEL_NAMES.items()} | {"critical": FATAL, "warn": WARNING}
+
+_STATE_SERVICES = (Service.HEARTBEAT, Service.BOOTUP, Service.GUARD_RESPONSE)
+_EVENT_SERVICES = np.array([Service.NMT, Service.EMCY, Service.BOOTUP], np.uint8)
+
+
+@dataclass
+class SignalSeries:
+    """All decoded values of one PDO of one node, over the whole log."""
+
+    node: int
+    pdo: str
+    cob_id: int
+    t: np.ndarray
+    rows: np.ndarray  # frame rows in Capture.batch
+    columns: dict[str, np.ndarray]
+    units: dict[str, str | None]
+
+    @property
+    def key(self) -> str:
+        return f"{self.node}/{self.pdo}"
+
+
+@dataclass
+class Event:
+    """One line of the event log: rare traffic or a record, at its time."""
+
+    t: float
+    kind: str  # nmt, emcy, bootup, nmt_state, sdo, finding
+    node: int | None
+    level: int
+    message: str
+    row: int | None = None
+
+
+@dataclass
+class Capture:
+    """A decoded log: raw columns plus tables built on demand."""
+
+    source: str
+    batch: FrameBatch
+    service: np.ndarray
+    node: np.ndarray
+    pdo: np.ndarray
+    series: list[SignalSeries]
+    records: list[tuple[int, dict]]
+    event_list: list[Event]
+    state_changes: list[Event]  # kind nmt_state, message = state name
+    problems: ProblemLog
+    network: str = ""
+    profiles: dict[int, tuple[str, str]] = field(default_factory=dict)  # node -> (profile, how)
+
+    def __len__(self) -> int:
+        return len(self.batch)
+
+    # --- tables -------------------------------------------------------------
+    @cached_property
+    def frames(self) -> pd.DataFrame:
+        """One row per frame: t, channel, can_id, dlc, data (hex), flags, service, node, pdo."""
+        import pandas as pd
+        import pyarrow as pa
+
+        fb = self.batch
+        channels = list(fb.channels) or ["can0"]
+        chan_codes = np.minimum(fb.channel, len(channels) - 1).astype(np.int32)
+        return pd.DataFrame(
+            {
+                "t": fb.t,
+                "channel": pd.Categorical.from_codes(chan_codes, categories=channels),
+                "can_id": fb.can_id,
+                "dlc": fb.dlc,
+                "data": pd.Series(pd.arrays.ArrowExtensionArray(_hex_column(fb, pa)), copy=False),
+                "flags": fb.flags,
+                "service": pd.Categorical.from_codes(
+                    self.service.astype(np.int16), categories=list(SERVICE_NAMES)
+                ),
+                "node": pd.arrays.IntegerArray(self.node.astype(np.int16), self.node < 0),
+                "pdo": pd.arrays.IntegerArray(self.pdo.astype(np.int8), self.pdo == 0),
+            }
+        )
+
+    @cached_property
+    def signals(self) -> pd.DataFrame:
+        """Long table of PDO values: t, node, pdo, cob_id, signal, value (float64), unit."""
+        import pandas as pd
+
+        parts: dict[str, list[np.ndarray]] = {k: [] for k in ("t", "node", "cob", "code", "value")}
+        names: list[str] = []
+        pdos: list[str] = []
+        units: list[str | None] = []
+        for s in self.series:
+            for name, values in s.columns.items():
+                n = len(values)
+                parts["t"].append(s.t)
+                parts["node"].append(np.full(n, s.node, np.int16))
+                parts["cob"].append(np.full(n, s.cob_id, np.uint32))
+                parts["code"].append(np.full(n, len(names), np.int32))
+                parts["value"].append(np.asarray(values, np.float64))
+                names.append(name)
+                pdos.append(s.pdo)
+                units.append(s.units.get(name))
+        if not names:
+            return pd.DataFrame(
+                {
+                    "t": np.zeros(0),
+                    "node": np.zeros(0, np.int16),
+                    "pdo": pd.Categorical([]),
+                    "cob_id": np.zeros(0, np.uint32),
+                    "signal": pd.Categorical([]),
+                    "value": np.zeros(0),
+                    "unit": pd.Categorical([]),
+                }
+            )
+        code = np.concatenate(parts["code"])
+        t = np.concatenate(parts["t"])
+        order = np.argsort(t, kind="stable")
+        code = code[order]
+        return pd.DataFrame(
+            {
+                "t": t[order],
+                "node": np.concatenate(parts["node"])[order],
+                "pdo": _categorical(pd, code, pdos),
+                "cob_id": np.concatenate(parts["cob"])[order],
+                "signal": _categorical(pd, code, names),
+                "value": np.concatenate(parts["value"])[order],
+                "unit": _categorical(pd, code, [u or "" for u in units]),
+            }
+        )
+
+    def signals_wide(self) -> pd.DataFrame:
+        """Time index, one column per `node/pdo/signal`; NaN where a PDO was not sent."""
+        import pandas as pd
+
+        if not self.series:
+            return pd.DataFrame(index=pd.Index([], name="t", dtype=float))
+        index = np.unique(np.concatenate([s.t for s in self.series]))
+        cols: dict[str, np.ndarray] = {}
+        for s in self.series:
+            pos = np.searchsorted(index, s.t)
+            for name, values in s.columns.items():
+                col = np.full(index.size, np.nan)
+                col[pos] = np.asarray(values, np.float64)  # same time twice: the last wins
+                cols[f"{s.key}/{name}"] = col
+        return pd.DataFrame(cols, index=pd.Index(index, name="t"))
+
+    @cached_property
+    def sdo(self) -> pd.DataFrame:
+        """The SDO transaction records, one row each, in completion order."""
+        import pandas as pd
+
+        cols = [
+            "t_start",
+            "t",
+            "latency_ms",
+            "node",
+            "direction",
+            "protocol",
+            "index",
+            "subindex",
+            "size",
+            "data",
+            "value",
+            "name",
+            "result",
+            "abort_code",
+            "abort_text",
+            "detail",
+        ]
+        recs = [r for _, r in self.records if r.get("kind") == "sdo"]
+        df = pd.DataFrame.from_records(recs, columns=cols) if recs else pd.DataFrame(columns=cols)
+        if "value" in df:
+            df["value"] = df["value"].astype(object)  # mixed ints, floats, strings
+        return df
+
+    @cached_property
+    def events(self) -> pd.DataFrame:
+        """NMT commands, EMCY, boot-ups, NMT state changes, SDO transactions, findings."""
+        return _event_frame(self.sorted_events())
+
+    def sorted_events(self) -> list[Event]:
+        """Events by time, then by frame row (logs without timestamps have t = 0 throughout)."""
+        big = len(self.batch)
+        return sorted(self.event_list, key=lambda e: (e.t, big if e.row is None else e.row))
+
+    @cached_property
+    def findings(self) -> pd.DataFrame:
+        import pandas as pd
+
+        recs = [dict(r, row=row) for row, r in self.records if r.get("kind") == "finding"]
+        if not recs:
+            return pd.DataFrame(columns=["t", "node", "rule", "level", "message"])
+        return pd.DataFrame.from_records(recs)
+
+    @cached_property
+    def nodes(self) -> pd.DataFrame:
+        """Per node: frame counts, last NMT state, identity read by SDO, profile and how."""
+        import pandas as pd
+
+        return pd.DataFrame.from_records(self.node_rows(), index="node")
+
+    def node_rows(self) -> list[dict]:
+        """Plain rows of the nodes table (also used by MCAP metadata, without pandas)."""
+        has = self.node >= 0
+        key = self.node[has].astype(np.int64) * len(SERVICE_NAMES) + self.service[has]
+        counts = np.bincount(key, minlength=128 * len(SERVICE_NAMES)).reshape(128, -1)
+        last: dict[int, tuple[float, str]] = {}
+        for e in self.state_changes:
+            last[e.node] = (e.t, e.message)
+        ident = _identity(self.records)
+        rows = []
+        seen = np.flatnonzero(counts.sum(axis=0)).tolist()
+        for n in np.flatnonzero(counts.sum(axis=1)).tolist():
+            row: dict[str, Any] = {"node": n, "frames": int(counts[n].sum())}
+            for s in seen:
+                row[f"frames_{SERVICE_NAMES[s]}"] = int(counts[n, s])
+            row["last_state"] = last.get(n, (None, None))[1]
+            row["last_state_t"] = last.get(n, (None, None))[0]
+            info = ident.get(n, {})
+            row.update(
+                {
+                    k: info.get(k)
+                    for k in (
+                        "device_type",
+                        "vendor_id",
+                        "product_code",
+                        "revision",
+                        "serial",
+                        "device_name",
+                    )
+                }
+            )
+            prof, how = self.profiles.get(n, (None, None))
+            if prof is None and info:
+                prof, how = _match_profile(info)
+            row["profile"] = prof
+            row["identified_by"] = how
+            rows.append(row)
+        return rows
+
+
+def _categorical(pd, codes: np.ndarray, labels: list[str]):
+    """Categorical over possibly repeated labels: map codes onto the unique labels."""
+    uniq, inverse = np.unique(np.array(labels, dtype=object), return_inverse=True)
+    return pd.Categorical.from_codes(inverse[codes], categories=list(uniq))
+
+
+_HEX = np.frombuffer(b"0123456789abcdef", np.uint8)
+
+
+def _hex_column(fb: FrameBatch, pa):
+    """Payloads as an Arrow string column, built from buffers (no Python string per frame)."""
+    n = len(fb)
+    chars = np.empty((n, 16), np.uint8)
+    chars[:, 0::2] = _HEX[fb.data >> 4]
+    chars[:, 1::2] = _HEX[fb.data & 0x0F]
+    length = np.where((fb.flags & FLAG_RTR) != 0, 0, np.minimum(fb.dlc, 8).astype(np.int32) * 2)
+    keep = np.arange(16)[None, :] < length[:, None]
+    offsets = np.zeros(n + 1, np.int32)
+    np.cumsum(length, out=offsets[1:])
+    arr = pa.Array.from_buffers(
+        pa.string(), n, [None, pa.py_buffer(offsets), pa.py_buffer(chars[keep])]
+    )
+    if fb.long_data:  # CAN FD payloads over 8 bytes: rare, patch them in
+        values = arr.to_pylist()
+        for row, payload in fb.long_data.items():
+            values[row] = payload.hex()
+        arr = pa.array(values, pa.string())
+    return arr
+
+
+def _event_frame(events: list[Event]):
+    import pandas as pd
+
+    return pd.DataFrame(
+        {
+            "t": np.array([e.t for e in events], np.float64),
+            "kind": pd.Categorical([e.kind for e in events]),
+            "node": pd.array([e.node for e in events], dtype="Int16"),
+            "level": pd.Categorical(
+                [LEVEL_NAMES[e.level] for e in events], categories=list(LEVEL_NAMES.values())
+            ),
+            "message": pd.array([e.message for e in events], dtype="string"),
+            "row": pd.array([e.row for e in events], dtype="Int64"),
+        }
+    )
+
+
+_IDENTITY = {
+    (0x1000, 0): "device_type",
+    (0x1018, 1): "vendor_id",
+    (0x1018, 2): "product_code",
+    (0x1018, 3): "revision",
+    (0x1018, 4): "serial",
+    (0x1008, 0): "device_name",
+}
+
+
+def _identity(records: list[tuple[int, dict]]) -> dict[int, dict]:
+    """Identity objects a node answered to SDO uploads (0x1000, 0x1008, 0x1018)."""
+    out: dict[int, dict] = {}
+    for _, r in records:
+        if r.get("kind") != "sdo" or r.get("result") != "ok" or r.get("direction") != "upload":
+            continue
+        what = _IDENTITY.get((r.get("index"), r.get("subindex")))
+        if what and r.get("node") is not None:
+            value = r.get("value")
+            if value is None and r.get("data"):  # no dictionary known: the CiA 301 types
+                raw = bytes.fromhex(r["data"])
+                if what == "device_name":
+                    value = raw.split(b"\0", 1)[0].decode("latin-1")
+                else:
+                    value = int.from_bytes(raw[:4], "little")
+            out.setdefault(r["node"], {})[what] = value
+    return out
+
+
+def _match_profile(info: dict) -> tuple[str | None, str | None]:
+    try:
+        from .network.profile import identify
+
+        ints = {
+            k: info.get(k) if isinstance(info.get(k), int) else None
+            for k in ("vendor_id", "product_code", "device_type")
+        }
+        name = info.get("device_name")
+        prof = identify(device_name=name if isinstance(name, str) else None, **ints)
+    except (
+        Exception
+    ):  # identification is a nicety; a profile that fails to load must not stop a table
+        return None, None
+    return (prof.key, "sdo identity") if prof else (None, None)
+
+
+def _sdo_event(row: int, r: dict) -> Event:
+    ok = r.get("result") == "ok"
+    index, sub = r.get("index"), r.get("subindex")
+    where = f" 0x{index:04X}:{sub:02X}" if isinstance(index, int) and isinstance(sub, int) else ""
+    text = f"SDO {r.get('direction', '?')}{where}"
+    if r.get("name"):
+        text += f" {r['name']}"
+    if ok and r.get("value") is not None:
+        text += f" = {r['value']}"
+    elif ok and r.get("data"):
+        text += f" data {r['data']}"
+    text += f" {r.get('result', '?')}"
+    if r.get("abort_text"):
+        text += f": {r['abort_text']}"
+    elif r.get("detail") and not ok:
+        text += f": {r['detail']}"
+    node = r.get("node")
+    return Event(float(r.get("t", 0.0)), "sdo", node, INFO if ok else WARNING, text, row)
+
+
+def _finding_event(row: int, r: dict, t: float) -> Event:
+    level = r.get("level") or r.get("severity") or "warning"
+    lvl = level if isinstance(level, int) else _LEVEL_BY_NAME.get(str(level).lower(), WARNING)
+    text = r.get("message") or r.get("text") or r.get("rule") or "finding"
+    if r.get("rule") and r.get("message"):
+        text = f"[{r['rule']}] {text}"
+    return Event(float(r.get("t", t)), "finding", r.get("node"), lvl, str(text), row)
+
+
+class Collector:
+    """Accumulates DecodedBatches; `capture()` joins them once at the end."""
+
+    def __init__(self, source: str = "") -> None:
+        self.source = source
+        self._frames: list[FrameBatch] = []
+        self._cols: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self._blocks: dict[tuple[int, str, int, tuple[str, ...]], list] = {}
+        self.records: list[tuple[int, dict]] = []
+        self.events: list[Event] = []
+        self.states: list[Event] = []
+        self._last_state: dict[int, str] = {}
+        self.offset = 0
+
+    def add(self, batch: DecodedBatch) -> None:
+        fb = batch.frames
+        off = self.offset
+        if len(fb):
+            self._frames.append(fb)
+            self._cols.append((batch.service, batch.node, batch.pdo))
+        for blk in batch.signals:
+            key = (blk.node, blk.pdo, blk.cob_id, tuple(blk.columns))
+            self._blocks.setdefault(key, []).append((fb.t[blk.rows], blk.rows + off, blk))
+        last_t = float(fb.t[-1]) if len(fb) else (self.events[-1].t if self.events else 0.0)
+        for row, rec in batch.records:
+            self.records.append((row + off, rec))
+            kind = rec.get("kind")
+            t = float(fb.t[row]) if 0 <= row < len(fb) else last_t
+            if kind == "sdo":
+                self.events.append(_sdo_event(row + off, rec))
+            elif kind == "finding":
+                self.events.append(_finding_event(row + off, rec, t))
+        if len(fb):
+            self._frame_events(batch, off)
+        self.offset += len(fb)
+
+    def _frame_events(self, batch: DecodedBatch, off: int) -> None:
+        """NMT, EMCY and boot-up lines, and NMT state changes (only changes, per node)."""
+        fb = batch.frames
+        for i in np.flatnonzero(np.isin(batch.service, _EVENT_SERVICES)).tolist():
+            s = int(batch.service[i])
+            node = int(batch.node[i])
+            f = batch.fields(i)
+            text = annotation(s, node, int(batch.pdo[i]), f, bool(fb.flags[i] & FLAG_RTR))
+            if s == Service.EMCY:
+                level = INFO if f.get("reset") else ERROR
+                kind = "emcy"
+            elif s == Service.NMT:
+                level, kind = INFO, "nmt"
+            else:
+                level, kind = INFO, "bootup"
+            if node >= 0 and s != Service.NMT:
+                text = f"node {node}: {text}"
+            self.events.append(
+                Event(float(fb.t[i]), kind, node if node >= 0 else None, level, text, i + off)
+            )
+        is_state = np.isin(batch.service, np.array(_STATE_SERVICES, np.uint8)) & (fb.dlc > 0)
+        rows = np.flatnonzero(is_state)
+        if rows.size == 0:
+            return
+        code = fb.data[rows, 0] & 0x7F
+        nodes = batch.node[rows]
+        for n in np.unique(nodes).tolist():
+            sel = rows[nodes == n]
+            c = code[nodes == n]
+            change = np.ones(c.size, bool)
+            change[1:] = c[1:] != c[:-1]
+            for i, v in zip(sel[change].tolist(), c[change].tolist(), strict=True):
+                state = NMT_STATES.get(v, f"unknown 0x{v:02X}")
+                if self._last_state.get(n) == state:
+                    continue
+                self._last_state[n] = state
+                ev = Event(float(fb.t[i]), "nmt_state", n, INFO, state, i + off)
+                self.states.append(ev)
+                self.events.append(
+                    Event(
+                        ev.t,
+                        "nmt_state",
+                        n,
+                        INFO if state != "stopped" else WARNING,
+                        f"node {n}: NMT state {state}",
+                        i + off,
+                    )
+                )
+
+    def capture(
+        self,
+        problems: ProblemLog,
+        network: str = "",
+        profiles: dict[int, tuple[str, str]] | None = None,
+    ) -> Capture:
+        fb = concat(self._frames) if self._frames else FrameBatch.empty()
+        if self._cols:
+            service = np.concatenate([c[0] for c in self._cols])
+            node = np.concatenate([c[1] for c in self._cols])
+            pdo = np.concatenate([c[2] for c in self._cols])
+        else:
+            service = np.zeros(0, np.uint8)
+            node = np.zeros(0, np.int16)
+            pdo = np.zeros(0, np.uint8)
+        series = []
+        for (n, p, cob, names), parts in sorted(self._blocks.items(), key=lambda kv: kv[0][:3]):
+            blk = parts[0][2]
+            series.append(
+                SignalSeries(
+                    node=n,
+                    pdo=p,
+                    cob_id=cob,
+                    t=np.concatenate([x[0] for x in parts]),
+                    rows=np.concatenate([x[1] for x in parts]),
+                    columns={k: np.concatenate([x[2].columns[k] for x in parts]) for k in names},
+                    units=dict(blk.units),
+                )
+            )
+        self.states.sort(key=lambda e: e.t)
+        return Capture(
+            self.source,
+            fb,
+            service,
+            node,
+            pdo,
+            series,
+            self.records,
+            self.events,
+            self.states,
+            problems,
+            network,
+            profiles or {},
+        )
+
+
+def _pipeline_args(
+    path: str, network, eds, device, strict: bool, fmt: str | None, sdo_timeout: float
+) -> argparse.Namespace:
+    """The options `build_decoder` reads from the command line, from keyword arguments."""
+
+    def pairs(value) -> list[str] | None:
+        if value is None:
+            return None
+        if isinstance(value, dict):
+            return [f"{k}={v}" for k, v in value.items()]
+        if isinstance(value, (str, Path)):
+            return [str(value)]
+        return [str(v) for v in value]
+
+    return argparse.Namespace(
+        log=path,
+        network=str(network) if network else None,
+        eds=pairs(eds),
+        device=pairs(device),
+        strict=strict,
+        input_format=fmt,
+        sdo_timeout=sdo_timeout,
+    )
+
+
+def run_pipeline(args: argparse.Namespace, progress=None, decoder=None) -> Capture:
+    """Read and decode the log named by `args` (CLI options) into a Capture.
+
+    progress(n) is called after each batch of n frames; decoder defaults to the
+    one the options describe (`cli.pipeline.build_decoder`).
+    """
+    from .cli.pipeline import build_decoder
+    from .io.source import open_log
+
+    source = open_log(args.log, strict=args.strict, fmt=getattr(args, "input_format", None))
+    decoder = decoder or build_decoder(args)
+    collector = Collector(str(args.log))
+    for fb in source.batches():
+        collector.add(decoder.decode(fb))
+        if progress:
+            progress(len(fb))
+    collector.add(decoder.finish())
+    network = getattr(args, "network", None) or ""
+    profiles: dict[int, tuple[str, str]] = {}
+    for spec in getattr(args, "device", None) or []:
+        node, _, key = str(spec).partition("=")
+        if node.strip().isdigit():
+            profiles[int(node)] = (key, "given")
+    for spec in getattr(args, "eds", None) or []:
+        node, _, path = str(spec).partition("=")
+        if node.strip().isdigit():
+            profiles[int(node)] = (Path(path).name, "given")
+    return collector.capture(source.problems, str(network), profiles)
+
+
+def load(
+    path: str | Path,
+    *,
+    network: str | Path | None = None,
+    eds: dict[int, str | Path] | list[str] | None = None,
+    device: dict[int, str] | list[str] | None = None,
+    strict: bool = False,
+    input_format: str | None = None,
+    sdo_timeout: float = 1.0,
+) -> Capture:
+    """Decode a log into a Capture (DataFrames `frames`, `signals`, `sdo`, `events`, ...).
+
+    eds / device map node-IDs to EDS/DCF files / built-in profile keys
+    ({5: "dat7014"}), as `--eds 5=FILE` / `--device 5=KEY` do on the command line.
+    """
+    args = _pipeline_args(str(path), network, eds, device, strict, input_format, sdo_timeout)
+    return run_pipeline(args)

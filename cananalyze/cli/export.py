@@ -1,0 +1,100 @@
+"""`cananalyze export LOG --mcap F --rrd F --parquet DIR --csv DIR`: timelines and tables."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from ..errors import UsageError
+from .common import add_input_options, report_problems
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "export",
+        help="write a log as MCAP (Foxglove), .rrd (Rerun), Parquet or CSV",
+        description="Decode a log once and write it in one or more timeline/table formats.",
+    )
+    add_input_options(p)
+    p.add_argument(
+        "--mcap", metavar="FILE", help="MCAP file for Foxglove (PDO signal topics, events)"
+    )
+    p.add_argument(
+        "--mcap-compression",
+        choices=["zstd", "lz4", "none"],
+        default="zstd",
+        help="MCAP chunk compression (default zstd)",
+    )
+    p.add_argument("--rrd", metavar="FILE", help="Rerun recording (.rrd)")
+    p.add_argument(
+        "--parquet", metavar="DIR", help="directory for frames/signals/sdo/events/... .parquet"
+    )
+    p.add_argument("--csv", metavar="DIR", help="directory for the same tables as CSV")
+    p.add_argument("--bitrate", type=int, metavar="BIT/S", help="bus bitrate: bus load in percent")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary line")
+    p.set_defaults(func=run)
+
+
+def _progress(enabled: bool):
+    """A rich progress bar counting frames, only on a terminal."""
+    if not enabled:
+        return None, None
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    bar = Progress(
+        SpinnerColumn(),
+        TextColumn("{task.description}"),
+        TextColumn("{task.completed:,} frames"),
+        TimeElapsedColumn(),
+        transient=True,
+        console=None,
+    )
+    return bar, bar.add_task("decoding", total=None)
+
+
+def run(args: argparse.Namespace) -> int:
+    outputs = [o for o in ("mcap", "rrd", "parquet", "csv") if getattr(args, o)]
+    if not outputs:
+        raise UsageError(
+            "export: give at least one of --mcap FILE, --rrd FILE, --parquet DIR, --csv DIR"
+        )
+    from ..capture import run_pipeline
+    from ..outputs.atomic import check_writable
+
+    for kind in ("mcap", "rrd"):
+        if getattr(args, kind):
+            check_writable(getattr(args, kind))
+
+    bar, task = _progress(sys.stderr.isatty() and not args.quiet)
+    t0 = time.perf_counter()
+    if bar:
+        with bar:
+            cap = run_pipeline(args, progress=lambda n: bar.advance(task, n))
+    else:
+        cap = run_pipeline(args)
+    report_problems(cap.problems)
+    timings = [f"decode {time.perf_counter() - t0:.2f} s"]
+    for kind in outputs:
+        t1 = time.perf_counter()
+        dest = getattr(args, kind)
+        if kind == "mcap":
+            from ..outputs.mcap_out import write_mcap
+
+            write_mcap(cap, dest, args.mcap_compression)
+        elif kind == "rrd":
+            from ..outputs.rerun_out import write_rrd
+
+            write_rrd(cap, dest, args.bitrate)
+        elif kind == "parquet":
+            from ..outputs.parquet_out import write_parquet
+
+            write_parquet(cap, dest)
+        else:
+            from ..outputs.parquet_out import write_csv
+
+            write_csv(cap, dest)
+        timings.append(f"{kind} {dest} {time.perf_counter() - t1:.2f} s")
+    if not args.quiet:
+        print(f"exported {len(cap):,} frames: " + "; ".join(timings), file=sys.stderr)
+    return 0

@@ -1,0 +1,72 @@
+"""Parquet and CSV export of the Capture tables: one file per table in a directory.
+
+Tables: frames, signals, sdo, events, findings, nodes. Parquet keeps the column
+types (categoricals, nullable node-IDs); CSV is for spreadsheets. Each file is
+written atomically, so a cut-off export never leaves a truncated table.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..capture import Capture
+from ..errors import UsageError
+from .atomic import atomic_path
+
+TABLES = ("frames", "signals", "sdo", "events", "findings", "nodes")
+
+
+def _tables(cap: Capture):
+    for name in TABLES:
+        df = getattr(cap, name)
+        if name == "sdo" and "value" in df:
+            df = df.assign(value=df["value"].map(lambda v: None if v is None else str(v)))
+        yield name, df
+
+
+def _outdir(path: str | Path) -> Path:
+    d = Path(path)
+    if d.exists() and not d.is_dir():
+        raise UsageError(f"{d}: exists and is not a directory")
+    d.mkdir(parents=True, exist_ok=True)
+    return d
+
+
+def write_parquet(cap: Capture, path: str | Path) -> dict[str, int]:
+    """<dir>/<table>.parquet for every table; returns rows per table."""
+    d = _outdir(path)
+    rows = {}
+    for name, df in _tables(cap):
+        with atomic_path(d / f"{name}.parquet") as tmp:
+            df.to_parquet(tmp, engine="pyarrow", index=name == "nodes")
+        rows[name] = len(df)
+    return rows
+
+
+def write_csv(cap: Capture, path: str | Path) -> dict[str, int]:
+    """<dir>/<table>.csv for every table; returns rows per table.
+
+    Written by pyarrow's C++ CSV writer: pandas' to_csv takes ~15 s on a
+    million-frame log, Arrow about one.
+    """
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
+    d = _outdir(path)
+    rows = {}
+    for name, df in _tables(cap):
+        if name == "nodes":
+            df = df.reset_index()
+        table = pa.Table.from_pandas(df, preserve_index=False)
+        cols = []
+        for col in table.columns:
+            if pa.types.is_dictionary(col.type):
+                col = col.cast(pa.string())
+            elif pa.types.is_null(col.type):
+                col = col.cast(pa.string())
+            cols.append(col)
+        table = pa.table(cols, names=table.column_names)
+        with atomic_path(d / f"{name}.csv") as tmp:
+            pacsv.write_csv(table, tmp)
+        rows[name] = len(df)
+    return rows

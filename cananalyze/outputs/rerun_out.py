@@ -1,0 +1,147 @@
+"""Rerun export: PDO signals as plots, NMT states as lanes, events as a text log.
+
+Entities:
+  /node/<N>/<pdo>/<signal>  Scalars (series named "signal [unit]")
+  /node/<N>/nmt             StateChange lane (heartbeat, boot-up, guarding)
+  /events                   TextLog with levels (SDO, EMCY, NMT, findings)
+  /bus/load                 Scalars: bits/s, or percent with a bitrate
+Everything is sent with `send_columns`, one call per series, never one `log` per
+frame, so a million-frame log exports in about a second. Time is the `time`
+timeline: a timestamp when the log has absolute (epoch) times, else a duration.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from ..busload import frame_bits, load_series
+from ..capture import Capture
+
+TIMELINE = "time"
+_RR_LEVEL = {1: "DEBUG", 2: "INFO", 3: "WARN", 4: "ERROR", 5: "CRITICAL"}
+ABSOLUTE_AFTER = 1e8  # seconds: times beyond ~1973 are taken as Unix epoch
+
+
+def _time(rr, t: np.ndarray, absolute: bool):
+    t = np.asarray(t, np.float64)
+    if absolute:
+        return rr.TimeColumn(TIMELINE, timestamp=t)
+    return rr.TimeColumn(TIMELINE, duration=t)
+
+
+def blueprint(cap: Capture):
+    """A plot per node, the NMT state lanes and the event log."""
+    import rerun.blueprint as rrb
+
+    nodes = sorted({s.node for s in cap.series})
+    plots = [
+        rrb.TimeSeriesView(
+            origin=f"/node/{n}", contents=[f"+ /node/{n}/**", f"- /node/{n}/nmt"], name=f"node {n}"
+        )
+        for n in nodes
+    ]
+    plots.append(rrb.TimeSeriesView(origin="/bus", name="bus load"))
+    return rrb.Blueprint(
+        rrb.Vertical(
+            rrb.Grid(*plots),
+            rrb.StateTimelineView(origin="/node", contents="+ /node/*/nmt", name="NMT states"),
+            rrb.TextLogView(origin="/events", name="events"),
+            row_shares=[3, 1, 2],
+        ),
+        collapse_panels=True,
+    )
+
+
+def send(cap: Capture, rec, bitrate: int | None = None) -> dict[str, int]:
+    """Send the whole capture to a RecordingStream; returns value counts per entity."""
+    import rerun as rr
+
+    counts: dict[str, int] = {}
+    t_all = cap.batch.t
+    absolute = bool(t_all.size and t_all[0] > ABSOLUTE_AFTER)
+    rec.log(
+        "/",
+        rr.AnyValues(
+            cananalyze_version=__version__, source=str(cap.source), network=cap.network or ""
+        ),
+        static=True,
+    )
+    for s in cap.series:
+        for name, values in s.columns.items():
+            path = f"/node/{s.node}/{s.pdo}/{name}"
+            unit = s.units.get(name)
+            rec.log(path, rr.SeriesLines(names=f"{name} [{unit}]" if unit else name), static=True)
+            v = np.asarray(values, np.float64)
+            rec.send_columns(
+                path, indexes=[_time(rr, s.t, absolute)], columns=rr.Scalars.columns(scalars=v)
+            )
+            counts[path] = int(v.size)
+    by_node: dict[int, list] = {}
+    for e in cap.state_changes:
+        by_node.setdefault(e.node, []).append(e)
+    for node, evs in sorted(by_node.items()):
+        path = f"/node/{node}/nmt"
+        rec.send_columns(
+            path,
+            indexes=[_time(rr, np.array([e.t for e in evs]), absolute)],
+            columns=rr.StateChange.columns(state=[e.message for e in evs]),
+        )
+        counts[path] = len(evs)
+    events = cap.sorted_events()
+    if events:
+        rec.send_columns(
+            "/events",
+            indexes=[_time(rr, np.array([e.t for e in events]), absolute)],
+            columns=rr.TextLog.columns(
+                text=[e.message for e in events], level=[_RR_LEVEL[e.level] for e in events]
+            ),
+        )
+        counts["/events"] = len(events)
+    if len(cap.batch):
+        starts, load = load_series(t_all, frame_bits(cap.batch.flags, cap.batch.dlc), 0.1, bitrate)
+        name = "bus load [%]" if bitrate else "bus load [bit/s]"
+        rec.log("/bus/load", rr.SeriesLines(names=name), static=True)
+        rec.send_columns(
+            "/bus/load",
+            indexes=[_time(rr, starts, absolute)],
+            columns=rr.Scalars.columns(scalars=load),
+        )
+        counts["/bus/load"] = int(load.size)
+    return counts
+
+
+def _stream(cap: Capture):
+    import rerun as rr
+
+    rec = rr.RecordingStream("cananalyze", send_properties=True)
+    rec.send_recording_name(Path(str(cap.source)).name)
+    return rec
+
+
+def write_rrd(cap: Capture, path: str | Path, bitrate: int | None = None) -> dict[str, int]:
+    """Write an .rrd file (atomically) with the default blueprint."""
+    from .atomic import atomic_path
+
+    rec = _stream(cap)
+    with atomic_path(path) as tmp:
+        rec.save(tmp, default_blueprint=blueprint(cap))
+        counts = send(cap, rec, bitrate)
+        rec.flush()
+        rec.disconnect()
+    return counts
+
+
+def show(cap: Capture, connect: str | None = None, bitrate: int | None = None) -> dict[str, int]:
+    """Spawn a viewer (connect=None) or stream to a running one (gRPC URL or host:port)."""
+    rec = _stream(cap)
+    if connect:
+        url = connect if "://" in connect else f"rerun+http://{connect}/proxy"
+        rec.connect_grpc(url, default_blueprint=blueprint(cap))
+    else:
+        rec.spawn(default_blueprint=blueprint(cap))
+    counts = send(cap, rec, bitrate)
+    rec.flush()
+    return counts
