@@ -51,8 +51,8 @@ def test_demo_frames_arrive_whole_and_decode_like_offline():
     np.testing.assert_array_equal(live.can_id, offline.can_id)
     np.testing.assert_array_equal(live.dlc, offline.dlc)
     np.testing.assert_array_equal(live.data, offline.data)
-    # virtual bus delivers with the sender's timestamp; direction becomes "received"
-    np.testing.assert_array_equal(live.t, offline.t)
+    # the virtual bus stamps frames when sent; direction becomes "received"
+    assert (np.diff(live.t) >= 0).all() and abs(live.t[-1] - time.time()) < 60
     np.testing.assert_array_equal(live.flags, offline.flags & ~np.uint8(FLAG_TX))
     np.testing.assert_array_equal(live.line, np.arange(1, 186))
     assert live.channels == ("live-demo",)
