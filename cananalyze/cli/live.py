@@ -115,10 +115,15 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _label(channel: str | None, bus) -> str:
-    """Channel name for frames whose Message carries none: short, like candump's can0."""
-    name = channel or getattr(bus, "channel_info", None) or "can0"
-    name = str(name)
-    return name if len(name) <= 12 else name.rsplit("/", 1)[-1][:12]
+    """Channel name for frames whose Message carries none: short, like candump's can0.
+
+    A serial device path becomes its file name (/dev/ttyACM0 -> ttyACM0, /dev/pts/3 -> pts3).
+    """
+    name = str(channel or getattr(bus, "channel_info", None) or "can0")
+    if "/" in name:
+        parent, _, base = name.rstrip("/").rpartition("/")
+        name = parent.rpartition("/")[2] + base if base.isdigit() else base
+    return name[:12] or "can0"
 
 
 def _serve(args, source, decoder, view, recorder, plain: bool) -> None:
