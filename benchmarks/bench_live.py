@@ -30,7 +30,10 @@ def producer(channel: str, rate: float, seconds: float, sent: list[int]) -> None
     bus = can.Bus(interface="virtual", channel=channel)
     ids = [0x180 + n for n in range(1, 33)] + [0x280 + n for n in range(1, 33)] + [0x080]
     msgs = [can.Message(arbitration_id=i, data=bytes(range(8)), is_extended_id=False) for i in ids]
-    msgs += [can.Message(arbitration_id=0x700 + n, data=b"\x05", is_extended_id=False) for n in range(1, 5)]
+    msgs += [
+        can.Message(arbitration_id=0x700 + n, data=b"\x05", is_extended_id=False)
+        for n in range(1, 5)
+    ]
     per_burst = max(1, int(rate * 0.005))
     start = time.perf_counter()
     n = 0
@@ -83,12 +86,18 @@ def main() -> int:
         batches += 1
     elapsed = time.perf_counter() - t_start
     latency = np.concatenate(lat) * 1e3 if lat else np.zeros(1)
-    print(f"offered  {sent[0]} frames in {args.seconds:.1f} s = {sent[0] / args.seconds:,.0f} frames/s")
-    print(f"kept     {decoded} frames = {decoded / args.seconds:,.0f} frames/s "
-          f"(wall {elapsed:.1f} s incl. drain), {batches} batches, ring high-water {source.high_water}")
+    print(
+        f"offered  {sent[0]} frames in {args.seconds:.1f} s = {sent[0] / args.seconds:,.0f} frames/s"
+    )
+    print(
+        f"kept     {decoded} frames = {decoded / args.seconds:,.0f} frames/s "
+        f"(wall {elapsed:.1f} s incl. drain), {batches} batches, ring high-water {source.high_water}"
+    )
     print(f"dropped  {sent[0] - decoded}")
-    print(f"latency  send -> decoded: median {np.median(latency):.1f} ms, p99 {np.percentile(latency, 99):.1f} ms, "
-          f"max {latency.max():.1f} ms")
+    print(
+        f"latency  send -> decoded: median {np.median(latency):.1f} ms, p99 {np.percentile(latency, 99):.1f} ms, "
+        f"max {latency.max():.1f} ms"
+    )
     return 0 if sent[0] == decoded else 1
 
 

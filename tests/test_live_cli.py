@@ -30,9 +30,24 @@ def _start_live(args: list[str]) -> tuple[subprocess.Popen, SlcanAdapter, int]:
     tty.setraw(slave)
     env = dict(os.environ, PYTHONPATH=str(ROOT), TERM="dumb")
     proc = subprocess.Popen(
-        [sys.executable, "-m", "cananalyze", "live", "-i", "slcan", "-c", os.ttyname(slave),
-         "-b", "500000", *args],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT,
+        [
+            sys.executable,
+            "-m",
+            "cananalyze",
+            "live",
+            "-i",
+            "slcan",
+            "-c",
+            os.ttyname(slave),
+            "-b",
+            "500000",
+            *args,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        cwd=ROOT,
     )
     adapter = SlcanAdapter(master)
     if not adapter.wait_open(timeout=30):
@@ -54,7 +69,11 @@ def _same_frames(got: list[can.Message], sent: list[can.Message]) -> None:
     assert len(got) == len(sent)
     for g, s in zip(got, sent, strict=True):
         assert (g.arbitration_id, g.is_extended_id, g.is_remote_frame, g.dlc) == (
-            s.arbitration_id, s.is_extended_id, s.is_remote_frame, s.dlc)
+            s.arbitration_id,
+            s.is_extended_id,
+            s.is_remote_frame,
+            s.dlc,
+        )
         if not s.is_remote_frame:
             assert bytes(g.data) == bytes(s.data)
 
@@ -88,7 +107,9 @@ def test_plain_decode_and_candump_record_match_what_was_sent(tmp_path):
     assert f"recorded 185 frames to {rec}" in err
 
     _same_frames(list(can.LogReader(str(rec))), _sent())
-    assert [m.timestamp for m in can.LogReader(str(rec))] == sorted(m.timestamp for m in can.LogReader(str(rec)))
+    assert [m.timestamp for m in can.LogReader(str(rec))] == sorted(
+        m.timestamp for m in can.LogReader(str(rec))
+    )
 
 
 @pytest.mark.parametrize(("suffix", "sig"), [(".blf", signal.SIGINT), (".mcap", signal.SIGTERM)])
@@ -118,9 +139,15 @@ def test_interrupted_session_leaves_a_valid_recording(tmp_path, suffix, sig):
                 assert schema.name == "cananalyze.CanFrame" and channel.message_encoding == "json"
                 d = json.loads(message.data)
                 assert message.log_time == round(d["timestamp"] * 1e9)
-                got.append(can.Message(arbitration_id=d["id"], is_extended_id=d["extended"],
-                                       is_remote_frame=d["remote"], dlc=d["dlc"],
-                                       data=bytes.fromhex(d["data"])))
+                got.append(
+                    can.Message(
+                        arbitration_id=d["id"],
+                        is_extended_id=d["extended"],
+                        is_remote_frame=d["remote"],
+                        dlc=d["dlc"],
+                        data=bytes.fromhex(d["data"]),
+                    )
+                )
     _same_frames(got, sent)
 
 
@@ -154,18 +181,42 @@ def test_adapter_unplugged_gives_one_line_and_a_valid_recording(tmp_path):
 )
 def test_interface_and_usage_errors_are_one_line(tmp_path, args, needle):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.run([sys.executable, "-m", "cananalyze", "live", *args, "--plain"],
-                          capture_output=True, text=True, env=env, cwd=tmp_path, timeout=60)
+    proc = subprocess.run(
+        [sys.executable, "-m", "cananalyze", "live", *args, "--plain"],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=tmp_path,
+        timeout=60,
+    )
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("cananalyze: error:") and needle in lines[0], proc.stderr
+    assert len(lines) == 1 and lines[0].startswith("cananalyze: error:") and needle in lines[0], (
+        proc.stderr
+    )
 
 
 def test_duration_stops_by_itself():
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     t = time.monotonic()
-    proc = subprocess.run([sys.executable, "-m", "cananalyze", "live", "-i", "virtual", "-c", "quiet",
-                           "--duration", "0.5"], capture_output=True, text=True, env=env, timeout=60)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "cananalyze",
+            "live",
+            "-i",
+            "virtual",
+            "-c",
+            "quiet",
+            "--duration",
+            "0.5",
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+    )
     assert proc.returncode == 0, proc.stderr
     assert time.monotonic() - t < 10
     assert "frames: 0" in proc.stdout  # stdout is a pipe: plain mode, then the summary

@@ -4,6 +4,7 @@ PDO values with units and the event log, from the demo session's real frames."""
 from __future__ import annotations
 
 import numpy as np
+from conftest import SAMPLES
 from rich.console import Console
 
 from cananalyze.decoded import SignalBlock
@@ -12,7 +13,6 @@ from cananalyze.io.source import read_all
 from cananalyze.network.profile import load_builtin
 from cananalyze.outputs.dashboard import LiveView
 from cananalyze.protocol.pdo_decode import decode_pdo
-from conftest import SAMPLES
 
 
 class Dat7014Pdo:

@@ -9,6 +9,7 @@ import time
 import can
 import numpy as np
 import pytest
+from conftest import SAMPLES
 
 from cananalyze.decoder import Decoder
 from cananalyze.frames import FLAG_TX, concat
@@ -16,8 +17,6 @@ from cananalyze.io.live import HwFilter, LiveError, LiveSource, open_bus
 from cananalyze.io.source import read_all
 from cananalyze.outputs.logfile import to_messages
 from cananalyze.protocol.fields import annotation
-
-from conftest import SAMPLES
 
 
 def _pump(channel: str, messages, source: LiveSource, pause_every: int = 0) -> threading.Thread:
@@ -62,11 +61,15 @@ def test_demo_frames_arrive_whole_and_decode_like_offline():
     live_fields = []
     for b in got:
         d = dec_live.decode(b)
-        live_fields += [annotation(int(d.service[i]), int(d.node[i]), int(d.pdo[i]), d.fields(i))
-                        for i in range(len(b))]
+        live_fields += [
+            annotation(int(d.service[i]), int(d.node[i]), int(d.pdo[i]), d.fields(i))
+            for i in range(len(b))
+        ]
     d = dec_off.decode(offline)
-    off_fields = [annotation(int(d.service[i]), int(d.node[i]), int(d.pdo[i]), d.fields(i))
-                  for i in range(len(offline))]
+    off_fields = [
+        annotation(int(d.service[i]), int(d.node[i]), int(d.pdo[i]), d.fields(i))
+        for i in range(len(offline))
+    ]
     assert live_fields == off_fields
     assert "EMCY 0x8100" in " ".join(live_fields)
 
@@ -75,8 +78,12 @@ def test_ring_full_waits_instead_of_dropping():
     rx = can.Bus(interface="virtual", channel="live-ring")
     source = LiveSource(rx, interval=0.05, batch_max=1 << 20, ring_size=64)
     n = 5000
-    msgs = [can.Message(arbitration_id=0x180 + (k % 7), data=k.to_bytes(4, "little"),
-                        is_extended_id=False) for k in range(n)]
+    msgs = [
+        can.Message(
+            arbitration_id=0x180 + (k % 7), data=k.to_bytes(4, "little"), is_extended_id=False
+        )
+        for k in range(n)
+    ]
     th = _pump("live-ring", msgs, source)
     batches = []
     for b in source.batches():
@@ -95,7 +102,9 @@ def test_long_and_remote_frames_keep_their_lengths():
     rx = can.Bus(interface="virtual", channel="live-fd", fd=True)
     source = LiveSource(rx, interval=0.01)
     msgs = [
-        can.Message(arbitration_id=0x1ABCDE0, data=bytes(range(12)), is_fd=True, bitrate_switch=True),
+        can.Message(
+            arbitration_id=0x1ABCDE0, data=bytes(range(12)), is_fd=True, bitrate_switch=True
+        ),
         can.Message(arbitration_id=0x705, is_remote_frame=True, dlc=1, is_extended_id=False),
         can.Message(arbitration_id=0x181, data=b"\x01\x02", is_extended_id=False),
     ]
@@ -111,8 +120,10 @@ def test_long_and_remote_frames_keep_their_lengths():
 def test_hardware_filter_reaches_the_interface():
     rx = open_bus("virtual", "live-filter", None, [HwFilter.parse("580:780")])
     source = LiveSource(rx, interval=0.01)
-    msgs = [can.Message(arbitration_id=i, data=b"\x00", is_extended_id=False)
-            for i in (0x585, 0x605, 0x183, 0x5FF, 0x581)]
+    msgs = [
+        can.Message(arbitration_id=i, data=b"\x00", is_extended_id=False)
+        for i in (0x585, 0x605, 0x183, 0x5FF, 0x581)
+    ]
     th = _pump("live-filter", msgs, source)
     live = concat([b for b in source.batches() if len(b)])
     th.join()

@@ -23,22 +23,50 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Decode a live CAN bus through python-can. Without -i/-c python-can's own "
         "configuration (~/.canrc, CAN_INTERFACE/CAN_CHANNEL/CAN_BITRATE) applies.",
     )
-    p.add_argument("-i", "--interface", help="python-can interface (socketcan, pcan, slcan, virtual, ...)")
+    p.add_argument(
+        "-i", "--interface", help="python-can interface (socketcan, pcan, slcan, virtual, ...)"
+    )
     p.add_argument("-c", "--channel", help="channel (can0, PCAN_USBBUS1, /dev/ttyACM0, ...)")
-    p.add_argument("-b", "--bitrate", type=int, metavar="BIT/S", help="bus bitrate (also for the bus load)")
-    p.add_argument("--filter", action="append", default=[], metavar="ID:MASK",
-                   help="hardware acceptance filter, hex (e.g. 580:780 = SDO responses); repeatable")
-    p.add_argument("--bus-option", action="append", default=[], metavar="KEY=VALUE",
-                   help="extra python-can interface argument (e.g. tty_baudrate=921600); repeatable")
+    p.add_argument(
+        "-b", "--bitrate", type=int, metavar="BIT/S", help="bus bitrate (also for the bus load)"
+    )
+    p.add_argument(
+        "--filter",
+        action="append",
+        default=[],
+        metavar="ID:MASK",
+        help="hardware acceptance filter, hex (e.g. 580:780 = SDO responses); repeatable",
+    )
+    p.add_argument(
+        "--bus-option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="extra python-can interface argument (e.g. tty_baudrate=921600); repeatable",
+    )
     p.add_argument("--network", metavar="FILE", help="network description (nodes, profiles)")
-    p.add_argument("--eds", action="append", default=[], metavar="NODE=FILE",
-                   help="EDS/DCF of a node; repeatable")
-    p.add_argument("--plain", action="store_true", help="decode-style lines instead of the dashboard")
+    p.add_argument(
+        "--eds",
+        action="append",
+        default=[],
+        metavar="NODE=FILE",
+        help="EDS/DCF of a node; repeatable",
+    )
+    p.add_argument(
+        "--plain", action="store_true", help="decode-style lines instead of the dashboard"
+    )
     p.add_argument("--no-color", action="store_true", help="no ANSI colours in --plain output")
-    p.add_argument("--record", metavar="FILE", help="record the raw frames (.log candump, .asc, .blf, .mcap)")
+    p.add_argument(
+        "--record", metavar="FILE", help="record the raw frames (.log candump, .asc, .blf, .mcap)"
+    )
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
-    p.add_argument("--sdo-timeout", type=float, default=1.0, metavar="S",
-                   help="an SDO request unanswered this long is a timeout (default 1 s)")
+    p.add_argument(
+        "--sdo-timeout",
+        type=float,
+        default=1.0,
+        metavar="S",
+        help="an SDO request unanswered this long is a timeout (default 1 s)",
+    )
     p.set_defaults(func=run, strict=False, input_format=None)
 
 
@@ -132,7 +160,9 @@ def _serve(args, source, decoder, view, recorder, plain: bool) -> None:
 
     def stop(signum, frame):
         source.stop()
-        signal.signal(signum, signal.default_int_handler if signum == signal.SIGINT else signal.SIG_DFL)
+        signal.signal(
+            signum, signal.default_int_handler if signum == signal.SIGINT else signal.SIG_DFL
+        )
 
     old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
     if recorder is not None:
@@ -162,8 +192,14 @@ def _serve(args, source, decoder, view, recorder, plain: bool) -> None:
 
             console = Console()
             shown = 0.0
-            with Live(view.render(height=console.height), console=console, auto_refresh=False,
-                      screen=False, transient=False, redirect_stderr=False) as live:
+            with Live(
+                view.render(height=console.height),
+                console=console,
+                auto_refresh=False,
+                screen=False,
+                transient=False,
+                redirect_stderr=False,
+            ) as live:
                 for fb in source.batches():
                     view.add(decoder.decode(fb))
                     if recorder is not None:

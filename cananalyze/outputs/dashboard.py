@@ -191,10 +191,12 @@ class LiveView:
         self._event(t, text)
 
     def _identity(self, st: NodeState, rec: dict) -> None:
-        key = {(0x1000, 0): "device_type", (0x1008, 0): "device_name",
-               (0x1018, 1): "vendor_id", (0x1018, 2): "product_code"}.get(
-            (rec.get("index"), rec.get("subindex"))
-        )
+        key = {
+            (0x1000, 0): "device_type",
+            (0x1008, 0): "device_name",
+            (0x1018, 1): "vendor_id",
+            (0x1018, 2): "product_code",
+        }.get((rec.get("index"), rec.get("subindex")))
         if key is None:
             return
         st.identity[key] = rec.get("value")
@@ -205,9 +207,15 @@ class LiveView:
             name = ident.get("device_name")
             try:
                 prof = identify(
-                    vendor_id=ident.get("vendor_id") if isinstance(ident.get("vendor_id"), int) else None,
-                    product_code=ident.get("product_code") if isinstance(ident.get("product_code"), int) else None,
-                    device_type=ident.get("device_type") if isinstance(ident.get("device_type"), int) else None,
+                    vendor_id=ident.get("vendor_id")
+                    if isinstance(ident.get("vendor_id"), int)
+                    else None,
+                    product_code=ident.get("product_code")
+                    if isinstance(ident.get("product_code"), int)
+                    else None,
+                    device_type=ident.get("device_type")
+                    if isinstance(ident.get("device_type"), int)
+                    else None,
                     device_name=name if isinstance(name, str) else None,
                 )
             except Exception:  # noqa: BLE001 - identification is a nicety, never fatal
@@ -257,31 +265,57 @@ class LiveView:
             head.append(f"  {self.status}", style="dim")
 
         nodes = Table(title="Nodes", title_justify="left", expand=True, pad_edge=False)
-        for col in ("node", "device", "NMT state", "hb age", "hb period", "active EMCY", "last SDO"):
+        for col in (
+            "node",
+            "device",
+            "NMT state",
+            "hb age",
+            "hb period",
+            "active EMCY",
+            "last SDO",
+        ):
             nodes.add_column(col, overflow="ellipsis", no_wrap=True)
         for n in sorted(self.nodes):
             st = self.nodes[n]
             age = f"{(now - st.last_seen) * 1e3:.0f} ms" if st.last_seen is not None else "-"
             period = f"{st.period_ms:.0f} ms" if st.period_ms is not None else "-"
-            state_style = {"operational": "green", "pre-operational": "yellow",
-                           "stopped": "red", "boot-up": "cyan"}.get(st.state or "", "")
+            state_style = {
+                "operational": "green",
+                "pre-operational": "yellow",
+                "stopped": "red",
+                "boot-up": "cyan",
+            }.get(st.state or "", "")
             emcy = ", ".join(st.emcy.values()) or "-"
             nodes.add_row(
-                str(n), st.device or "-", Text(st.state or "-", style=state_style), age, period,
-                Text(emcy, style="bold red" if st.emcy else ""), st.last_sdo or "-",
+                str(n),
+                st.device or "-",
+                Text(st.state or "-", style=state_style),
+                age,
+                period,
+                Text(emcy, style="bold red" if st.emcy else ""),
+                st.last_sdo or "-",
             )
 
-        sigs = Table(title="PDO signals (latest)", title_justify="left", expand=True, pad_edge=False)
+        sigs = Table(
+            title="PDO signals (latest)", title_justify="left", expand=True, pad_edge=False
+        )
         for col in ("node", "PDO", "signal", "value", "unit", "age"):
             sigs.add_column(col, no_wrap=True, overflow="ellipsis")
         for key in sorted(self.signals):
             s = self.signals[key]
             value = f"{s.value:.6g}" if isinstance(s.value, float) else str(s.value)
-            sigs.add_row(str(s.node), s.pdo, s.name, value, s.unit or "",
-                         f"{(now - s.t) * 1e3:.0f} ms")
+            sigs.add_row(
+                str(s.node), s.pdo, s.name, value, s.unit or "", f"{(now - s.t) * 1e3:.0f} ms"
+            )
         if not self.signals:
-            sigs.add_row("-", "-", "(no decoded PDO yet: a profile, --eds or --network gives names)",
-                         "", "", "")
+            sigs.add_row(
+                "-",
+                "-",
+                "(no decoded PDO yet: a profile, --eds or --network gives names)",
+                "",
+                "",
+                "",
+            )
 
         used = 3 + len(self.nodes) + 4 + max(1, len(self.signals)) + 4
         room = max(4, height - used - 3)
