@@ -4,9 +4,11 @@ against what was sent, also when the session is interrupted or the adapter vanis
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import pty
+import re
 import signal
 import subprocess
 import sys
@@ -17,7 +19,7 @@ import can
 import pytest
 from conftest import ROOT, SAMPLES
 
-from cananalyze.decoder import Decoder
+from cananalyze.cli.pipeline import build_decoder
 from cananalyze.io.source import read_all
 from cananalyze.outputs.text import TextWriter
 from cananalyze.sim.slcan_replay import SlcanAdapter, replay
@@ -61,6 +63,10 @@ def _frame_part(line: str) -> str:
     return line.split(None, 2)[2]
 
 
+def _no_latency(line: str) -> str:
+    return re.sub(r", latency [0-9.]+ ms", "", line)
+
+
 def _sent() -> list[can.Message]:
     return list(can.LogReader(str(DEMO)))
 
@@ -92,14 +98,20 @@ def test_plain_decode_and_candump_record_match_what_was_sent(tmp_path):
     import io
 
     buf = io.StringIO()
-    dec = Decoder()
+    dec = build_decoder(argparse.Namespace(sdo_timeout=1.0))  # as `cananalyze decode` builds it
     TextWriter(buf).write(dec.decode(read_all(DEMO)))
     TextWriter(buf).write(dec.finish())
     expected = [_frame_part(x) for x in buf.getvalue().splitlines() if "└─" not in x]
     assert len(expected) == 185
+    # SDO transaction records: same, but latencies are measured on the live clock
+    expected_recs = [_no_latency(x) for x in buf.getvalue().splitlines() if "└─" in x]
+    assert len(expected_recs) == 7  # 5 reads, one abort, one write
     lines = out.splitlines()
     frame_lines = [x for x in lines[: lines.index("frames: 185")] if "└─" not in x]
     assert [_frame_part(x) for x in frame_lines] == expected
+    recs = [_no_latency(x) for x in lines[: lines.index("frames: 185")] if "└─" in x]
+    assert recs == expected_recs
+    assert any("0x1008:00 segmented -> ok: '4441543730313400'" in x for x in recs)
     assert {x.split()[1] for x in frame_lines} == {"pts" + os.ttyname(slave).rpartition("/")[2]}
     assert any("EMCY 0x8100" in x for x in frame_lines)
     # the summary at exit

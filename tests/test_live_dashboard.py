@@ -3,10 +3,13 @@ PDO values with units and the event log, from the demo session's real frames."""
 
 from __future__ import annotations
 
+import argparse
+
 import numpy as np
 from conftest import SAMPLES
 from rich.console import Console
 
+from cananalyze.cli.pipeline import build_decoder
 from cananalyze.decoded import SignalBlock
 from cananalyze.decoder import Decoder
 from cananalyze.io.source import read_all
@@ -49,8 +52,9 @@ def _render(view: LiveView, wall: float) -> str:
 
 def test_dashboard_shows_nodes_signals_and_events():
     frames = read_all(SAMPLES / "demo.log")
-    dec = Decoder([Dat7014Pdo()])
-    view = LiveView(bitrate=500_000, devices={5: "Datexel DAT 7014"})
+    # the SDO tracker as `decode` wires it, then the PDO decoding
+    dec = Decoder(build_decoder(argparse.Namespace(sdo_timeout=1.0)).processors + [Dat7014Pdo()])
+    view = LiveView(bitrate=500_000, devices={10: "guarded node"})
     t0 = float(frames.t[0])
     # feed the session in 50 ms slices, as the live source would, up to 1.25 s (EMCY active)
     cut = t0 + 1.25
@@ -62,7 +66,10 @@ def test_dashboard_shows_nodes_signals_and_events():
     cells = _cells(text)
     row = {int(c[0]): " | ".join(c) for c in cells if len(c) == 7}
     assert set(row) == {3, 5, 10}
+    # identified from the SDO-read 0x1018/0x1000/0x1008 against the built-in profiles
     assert "Datexel DAT 7014" in row[5] and "operational" in row[5]
+    assert "guarded node" in row[10]
+    assert "SDO write 0x1017:00" in row[5]  # the last SDO transaction
     assert "100 ms" in row[5] and "100 ms" in row[3]  # measured heartbeat period
     assert "0x8100" in row[3]  # MCB-560 EMCY raised at 1.06 s, still active
     assert "0x8100" not in row[5]

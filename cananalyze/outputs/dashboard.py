@@ -199,7 +199,15 @@ class LiveView:
         }.get((rec.get("index"), rec.get("subindex")))
         if key is None:
             return
-        st.identity[key] = rec.get("value")
+        value = rec.get("value")
+        raw = bytes.fromhex(rec.get("data") or "")
+        # without an object dictionary the tracker leaves the value as hex: CiA 301 types apply
+        if key == "device_name":
+            if raw:
+                value = raw.rstrip(b"\0").decode("latin-1")
+        elif not isinstance(value, int) and raw:
+            value = int.from_bytes(raw[:4], "little")
+        st.identity[key] = value
         if st.device is None or st.device.startswith("?"):
             from ..network.profile import identify
 
@@ -265,16 +273,17 @@ class LiveView:
             head.append(f"  {self.status}", style="dim")
 
         nodes = Table(title="Nodes", title_justify="left", expand=True, pad_edge=False)
-        for col in (
-            "node",
-            "device",
-            "NMT state",
-            "hb age",
-            "hb period",
-            "active EMCY",
-            "last SDO",
+        # fixed widths for the short columns so long device names or SDO texts never squeeze them
+        for col, kw in (
+            ("node", {"width": 4}),
+            ("device", {"ratio": 2, "max_width": 32}),
+            ("NMT state", {"width": 15}),
+            ("hb age", {"width": 8}),
+            ("hb period", {"width": 9}),
+            ("active EMCY", {"ratio": 2}),
+            ("last SDO", {"ratio": 3}),
         ):
-            nodes.add_column(col, overflow="ellipsis", no_wrap=True)
+            nodes.add_column(col, overflow="ellipsis", no_wrap=True, **kw)
         for n in sorted(self.nodes):
             st = self.nodes[n]
             age = f"{(now - st.last_seen) * 1e3:.0f} ms" if st.last_seen is not None else "-"
