@@ -15,7 +15,7 @@ from .. import __version__
 from ..errors import CananalyzeError
 
 # One module per sub-command, each with add_parser(subparsers) and run(args) -> int.
-SUBCOMMANDS = ["decode", "devices", "export"]
+SUBCOMMANDS = ["decode", "check", "export", "live", "simulate", "devices"]
 
 
 def build_parser() -> argparse.ArgumentParser:

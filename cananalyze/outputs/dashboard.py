@@ -1,0 +1,337 @@
+"""The live dashboard: what a commissioning engineer wants to see on a running bus.
+
+`LiveView` keeps the state (nodes, latest PDO signal values, an event log, frame
+rate and bus load) and is fed DecodedBatches as they land; `render()` builds a rich
+renderable from it, so the same view runs under `rich.live.Live` or prints into a
+recording Console in tests. Updates are columnar per batch; only the rare rows
+(heartbeats' last state per node, EMCY, NMT, records) are looked at one by one.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..decoded import DecodedBatch
+from ..protocol.fields import annotation
+from ..protocol.services import Service
+from ..protocol.tables import NMT_STATES
+from .summary import Summary
+from .text import format_record
+
+_ERRCTL = np.array([Service.HEARTBEAT, Service.BOOTUP, Service.GUARD_RESPONSE], np.uint8)
+_RARE = np.array([Service.NMT, Service.EMCY], np.uint8)
+_SDO = np.array([Service.SDO_REQUEST, Service.SDO_RESPONSE], np.uint8)
+RATE_WINDOW = 1.0  # seconds of wall time over which frame rate and bus load are measured
+
+
+@dataclass
+class NodeState:
+    node: int
+    device: str | None = None
+    state: str | None = None
+    last_seen: float | None = None  # frame time of the last heartbeat / boot-up / guard reply
+    last_hb: float | None = None
+    periods: deque = field(default_factory=lambda: deque(maxlen=16))
+    emcy: dict[int, str] = field(default_factory=dict)  # active error code -> text
+    last_sdo: str | None = None
+    identity: dict[str, object] = field(default_factory=dict)
+
+    @property
+    def period_ms(self) -> float | None:
+        return float(np.median(self.periods)) * 1e3 if self.periods else None
+
+
+@dataclass
+class SignalValue:
+    node: int
+    pdo: str
+    name: str
+    value: object
+    unit: str | None
+    t: float
+
+
+class LiveView:
+    """State behind the dashboard. `add(batch)` after every decode; `render()` to show it."""
+
+    def __init__(
+        self, bitrate: int | None = None, devices: dict[int, str] | None = None, events: int = 200
+    ) -> None:
+        self.bitrate = bitrate
+        self.summary = Summary()
+        self.nodes: dict[int, NodeState] = {}
+        self.signals: dict[tuple[int, str, str], SignalValue] = {}
+        self.events: deque[tuple[float, str]] = deque(maxlen=events)
+        self.t0: float | None = None
+        self.t_last: float | None = None  # newest frame time
+        self.clock_offset = 0.0  # frame time minus wall time at the newest frame
+        self._window: deque[tuple[float, int, int]] = deque()  # (wall, frames, bits) per batch
+        self.status = ""  # e.g. "recording to x.blf"
+        for node, name in (devices or {}).items():
+            self._node(node).device = name
+
+    def _node(self, n: int) -> NodeState:
+        st = self.nodes.get(n)
+        if st is None:
+            st = self.nodes[n] = NodeState(n)
+        return st
+
+    def _event(self, t: float, text: str) -> None:
+        self.events.append((t, text))
+
+    # --- feeding --------------------------------------------------------------
+    def add(self, batch: DecodedBatch, wall: float | None = None) -> None:
+        wall = time.time() if wall is None else wall
+        bits_before = self.summary.bits
+        self.summary.add(batch)
+        n = len(batch)
+        self._window.append((wall, n, self.summary.bits - bits_before))
+        while self._window and self._window[0][0] < wall - RATE_WINDOW:
+            self._window.popleft()
+        fb = batch.frames
+        if n:
+            if self.t0 is None:
+                self.t0 = float(fb.t[0])
+            self.t_last = float(fb.t[-1])
+            self.clock_offset = self.t_last - wall
+            self._error_control(batch)
+            self._rare(batch)
+            self._sdo_frames(batch)
+        for row, rec in batch.records:
+            self._record(batch, row, rec)
+        for block in batch.signals:
+            if not len(block.rows):
+                continue
+            t = float(fb.t[block.rows[-1]])
+            for name, col in block.columns.items():
+                value = col[-1]
+                value = value.item() if hasattr(value, "item") else value
+                key = (block.node, block.pdo, name)
+                self.signals[key] = SignalValue(
+                    block.node, block.pdo, name, value, block.units.get(name), t
+                )
+
+    def _error_control(self, batch: DecodedBatch) -> None:
+        fb = batch.frames
+        rows = np.flatnonzero(np.isin(batch.service, _ERRCTL) & (batch.node >= 0))
+        if not rows.size:
+            return
+        nodes = batch.node[rows]
+        for node in np.unique(nodes).tolist():
+            mine = rows[nodes == node]
+            st = self._node(node)
+            t = fb.t[mine]
+            hb = mine[batch.service[mine] == Service.HEARTBEAT]
+            if hb.size:
+                th = fb.t[hb]
+                if st.last_hb is not None:
+                    th = np.concatenate([[st.last_hb], th])
+                st.periods.extend(np.diff(th).tolist())
+                st.last_hb = float(th[-1])
+            last = int(mine[-1])
+            if batch.service[last] == Service.BOOTUP:
+                st.state = "boot-up"
+            elif fb.dlc[last]:
+                code = int(fb.data[last, 0]) & 0x7F
+                st.state = NMT_STATES.get(code, f"0x{code:02X}")
+            st.last_seen = float(t[-1])
+            boots = mine[batch.service[mine] == Service.BOOTUP]
+            for r in boots.tolist():
+                self._event(float(fb.t[r]), f"node {node} boot-up")
+                st.emcy.clear()
+
+    def _rare(self, batch: DecodedBatch) -> None:
+        fb = batch.frames
+        for r in np.flatnonzero(np.isin(batch.service, _RARE)).tolist():
+            svc = int(batch.service[r])
+            node = int(batch.node[r])
+            f = batch.fields(r)
+            text = annotation(svc, node, 0, f)
+            if svc == Service.EMCY and node >= 0:
+                st = self._node(node)
+                if f.get("reset"):
+                    st.emcy.clear()
+                elif f.get("error_code") is not None:
+                    short = f"0x{f['error_code']:04X} {f.get('error_class') or ''}".strip()
+                    st.emcy[f["error_code"]] = short
+                text = f"node {node} {text}"
+            self._event(float(fb.t[r]), text)
+
+    def _sdo_frames(self, batch: DecodedBatch) -> None:
+        """Last SDO frame per node, stateless: shown until an SDO transaction record replaces it."""
+        rows = np.flatnonzero(np.isin(batch.service, _SDO) & (batch.node >= 0))
+        if not rows.size:
+            return
+        nodes = batch.node[rows]
+        for node in np.unique(nodes).tolist():
+            r = int(rows[nodes == node][-1])
+            st = self._node(node)
+            if st.last_sdo is None or st.last_sdo.startswith("frame: "):
+                text = annotation(int(batch.service[r]), node, 0, batch.fields(r))
+                st.last_sdo = f"frame: {text}"
+
+    def _record(self, batch: DecodedBatch, row: int, rec: dict) -> None:
+        fb = batch.frames
+        t = float(rec.get("t") or (fb.t[row] if 0 <= row < len(fb) else (self.t_last or 0.0)))
+        kind = rec.get("kind")
+        text = format_record(rec)
+        if kind == "sdo":
+            node = rec.get("node")
+            if isinstance(node, int) and node >= 0:
+                st = self._node(node)
+                st.last_sdo = text.removeprefix(f"node {node} ")
+                if rec.get("result") == "ok" and rec.get("index") in (0x1000, 0x1008, 0x1018):
+                    self._identity(st, rec)
+        elif kind == "finding":
+            text = "finding: " + text
+        self._event(t, text)
+
+    def _identity(self, st: NodeState, rec: dict) -> None:
+        key = {
+            (0x1000, 0): "device_type",
+            (0x1008, 0): "device_name",
+            (0x1018, 1): "vendor_id",
+            (0x1018, 2): "product_code",
+        }.get((rec.get("index"), rec.get("subindex")))
+        if key is None:
+            return
+        value = rec.get("value")
+        raw = bytes.fromhex(rec.get("data") or "")
+        # without an object dictionary the tracker leaves the value as hex: CiA 301 types apply
+        if key == "device_name":
+            if raw:
+                value = raw.rstrip(b"\0").decode("latin-1")
+        elif not isinstance(value, int) and raw:
+            value = int.from_bytes(raw[:4], "little")
+        st.identity[key] = value
+        if st.device is None or st.device.startswith("?"):
+            from ..network.profile import identify
+
+            ident = {k: v for k, v in st.identity.items()}
+            name = ident.get("device_name")
+            try:
+                prof = identify(
+                    vendor_id=ident.get("vendor_id")
+                    if isinstance(ident.get("vendor_id"), int)
+                    else None,
+                    product_code=ident.get("product_code")
+                    if isinstance(ident.get("product_code"), int)
+                    else None,
+                    device_type=ident.get("device_type")
+                    if isinstance(ident.get("device_type"), int)
+                    else None,
+                    device_name=name if isinstance(name, str) else None,
+                )
+            except Exception:  # noqa: BLE001 - identification is a nicety, never fatal
+                prof = None
+            if prof is not None:
+                st.device = prof.name
+            elif isinstance(name, str):
+                st.device = f"? {name}"
+
+    # --- measures -------------------------------------------------------------
+    def frame_rate(self) -> float:
+        if len(self._window) < 2:
+            return 0.0
+        span = self._window[-1][0] - self._window[0][0]
+        frames = sum(n for _, n, _ in list(self._window)[1:])
+        return frames / span if span > 0 else 0.0
+
+    def bus_load(self) -> float | None:
+        """Percent of the bitrate used over the last second (nominal bits, no stuffing)."""
+        if not self.bitrate or len(self._window) < 2:
+            return None
+        span = self._window[-1][0] - self._window[0][0]
+        bits = sum(b for _, _, b in list(self._window)[1:])
+        return bits / (self.bitrate * span) * 100 if span > 0 else None
+
+    def now(self, wall: float | None = None) -> float:
+        """The current time on the frames' clock (frame times are not always wall time)."""
+        wall = time.time() if wall is None else wall
+        return wall + self.clock_offset
+
+    # --- rendering ------------------------------------------------------------
+    def render(self, wall: float | None = None, height: int = 40):
+        """A rich renderable of the whole dashboard."""
+        from rich.console import Group
+        from rich.panel import Panel
+        from rich.table import Table
+        from rich.text import Text
+
+        now = self.now(wall)
+        load = self.bus_load()
+        head = Text()
+        head.append("cananalyze live  ", style="bold")
+        head.append(f"frames {self.summary.frames}  ")
+        head.append(f"rate {self.frame_rate():.0f}/s  ")
+        head.append(f"bus load {load:.1f} %" if load is not None else "bus load - (give -b)")
+        if self.status:
+            head.append(f"  {self.status}", style="dim")
+
+        nodes = Table(title="Nodes", title_justify="left", expand=True, pad_edge=False)
+        # fixed widths for the short columns so long device names or SDO texts never squeeze them
+        for col, kw in (
+            ("node", {"width": 4}),
+            ("device", {"ratio": 2, "max_width": 32}),
+            ("NMT state", {"width": 15}),
+            ("hb age", {"width": 8}),
+            ("hb period", {"width": 9}),
+            ("active EMCY", {"ratio": 2}),
+            ("last SDO", {"ratio": 3}),
+        ):
+            nodes.add_column(col, overflow="ellipsis", no_wrap=True, **kw)
+        for n in sorted(self.nodes):
+            st = self.nodes[n]
+            age = f"{(now - st.last_seen) * 1e3:.0f} ms" if st.last_seen is not None else "-"
+            period = f"{st.period_ms:.0f} ms" if st.period_ms is not None else "-"
+            state_style = {
+                "operational": "green",
+                "pre-operational": "yellow",
+                "stopped": "red",
+                "boot-up": "cyan",
+            }.get(st.state or "", "")
+            emcy = ", ".join(st.emcy.values()) or "-"
+            nodes.add_row(
+                str(n),
+                st.device or "-",
+                Text(st.state or "-", style=state_style),
+                age,
+                period,
+                Text(emcy, style="bold red" if st.emcy else ""),
+                st.last_sdo or "-",
+            )
+
+        sigs = Table(
+            title="PDO signals (latest)", title_justify="left", expand=True, pad_edge=False
+        )
+        for col in ("node", "PDO", "signal", "value", "unit", "age"):
+            sigs.add_column(col, no_wrap=True, overflow="ellipsis")
+        for key in sorted(self.signals):
+            s = self.signals[key]
+            value = f"{s.value:.6g}" if isinstance(s.value, float) else str(s.value)
+            sigs.add_row(
+                str(s.node), s.pdo, s.name, value, s.unit or "", f"{(now - s.t) * 1e3:.0f} ms"
+            )
+        if not self.signals:
+            sigs.add_row(
+                "-",
+                "-",
+                "(no decoded PDO yet: a profile, --eds or --network gives names)",
+                "",
+                "",
+                "",
+            )
+
+        used = 3 + len(self.nodes) + 4 + max(1, len(self.signals)) + 4
+        room = max(4, height - used - 3)
+        t0 = self.t0 or 0.0
+        log = Text()
+        for t, text in list(self.events)[-room:]:
+            log.append(f"{t - t0:10.3f}  ", style="dim")
+            log.append(text + "\n")
+        events = Panel(log, title="Events", title_align="left")
+        return Group(head, nodes, sigs, events)
