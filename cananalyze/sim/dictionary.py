@@ -1,0 +1,118 @@
+"""The simulated node's object dictionary: raw values per (index, subindex).
+
+Built from a DeviceProfile's canopen ObjectDictionary so any EDS works. Values
+are kept as encoded bytes, which is what SDO and PDO move; the typed accessors
+exist for the node's own logic (NMT, heartbeat, PDO parameters, signals).
+"""
+
+from __future__ import annotations
+
+from ..network.profile import DeviceProfile
+
+# CiA 301 abort codes the server raises.
+ABORT_NO_OBJECT = 0x06020000
+ABORT_NO_SUBINDEX = 0x06090011
+ABORT_READ_ONLY = 0x06010002
+ABORT_WRITE_ONLY = 0x06010001
+ABORT_LENGTH = 0x06070010
+ABORT_TOO_LONG = 0x06070012
+ABORT_TOO_SHORT = 0x06070013
+ABORT_VALUE_RANGE = 0x06090030
+
+
+class SdoAbort(Exception):
+    """An access the object dictionary refuses, with its CiA 301 abort code."""
+
+    def __init__(self, code: int):
+        super().__init__(f"SDO abort 0x{code:08X}")
+        self.code = code
+
+
+class Dictionary:
+    """Encoded values and access rights of every object of one node."""
+
+    def __init__(self, profile: DeviceProfile, node_id: int):
+        self.profile = profile
+        self.node_id = node_id
+        self.values: dict[tuple[int, int], bytes] = {}
+        self.vars: dict[tuple[int, int], object] = {}
+        self.indices: set[int] = set()
+        self.reset()
+
+    def reset(self, communication_only: bool = False) -> None:
+        """Defaults from the EDS/DCF (reset node), or only 0x1000-0x1FFF (reset communication)."""
+        import canopen.objectdictionary as cod
+
+        for obj in self.profile.od.values():
+            self.indices.add(obj.index)
+            if isinstance(obj, cod.ODVariable):
+                members = [obj]
+            else:
+                members = list(obj.values())
+            for var in members:
+                key = (obj.index, var.subindex)
+                if communication_only and not 0x1000 <= obj.index < 0x2000:
+                    continue
+                self.vars[key] = var
+                self.values[key] = self._default(var)
+
+    def _default(self, var) -> bytes:
+        value = self.profile.value(var.index, var.subindex, self.node_id)
+        if value is None:
+            value = "" if var.data_type in (0x09, 0x0A, 0x0B, 0x0F) else 0
+        try:
+            return bytes(var.encode_raw(value))
+        except (TypeError, ValueError, AttributeError):
+            return b""
+
+    def _var(self, index: int, subindex: int):
+        var = self.vars.get((index, subindex))
+        if var is None:
+            raise SdoAbort(ABORT_NO_SUBINDEX if index in self.indices else ABORT_NO_OBJECT)
+        return var
+
+    # --- SDO side: checked access ------------------------------------------------
+    def read(self, index: int, subindex: int) -> bytes:
+        var = self._var(index, subindex)
+        if var.access_type == "wo":
+            raise SdoAbort(ABORT_WRITE_ONLY)
+        return self.values[(index, subindex)]
+
+    def check_write(self, index: int, subindex: int):
+        """The object's variable if it exists and is writable, else SdoAbort."""
+        var = self._var(index, subindex)
+        if var.access_type in ("ro", "const"):
+            raise SdoAbort(ABORT_READ_ONLY)
+        return var
+
+    def write(self, index: int, subindex: int, data: bytes) -> None:
+        var = self.check_write(index, subindex)
+        fixed = len(self.values[(index, subindex)]) if var.fixed_size else None
+        if fixed is not None and len(data) != fixed:
+            raise SdoAbort(ABORT_TOO_LONG if len(data) > fixed else ABORT_TOO_SHORT)
+        self.values[(index, subindex)] = bytes(data)
+
+    # --- device side: unchecked typed access ---------------------------------------
+    def has(self, index: int, subindex: int) -> bool:
+        return (index, subindex) in self.values
+
+    def get(self, index: int, subindex: int, default: int = 0) -> int:
+        raw = self.values.get((index, subindex))
+        if raw is None or not raw:
+            return default
+        var = self.vars[(index, subindex)]
+        try:
+            value = var.decode_raw(raw)
+        except (ValueError, TypeError):
+            return default
+        return value if isinstance(value, int) else default
+
+    def set(self, index: int, subindex: int, value: int) -> None:
+        var = self.vars.get((index, subindex))
+        if var is None:
+            return
+        self.values[(index, subindex)] = bytes(var.encode_raw(value))
+
+    def set_raw(self, index: int, subindex: int, raw: bytes) -> None:
+        if (index, subindex) in self.values:
+            self.values[(index, subindex)] = bytes(raw)

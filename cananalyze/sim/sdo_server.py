@@ -1,0 +1,237 @@
+"""SDO server of a simulated node: every CiA 301 transfer, frame in, frames out.
+
+Hand-written because canopen's SdoServer is bound to a live Network and its
+clock, while the simulator must also run on a discrete-event clock; this one
+only maps request bytes to response bytes, so both modes share it. Covers
+expedited, segmented and block transfers (with CRC and the protocol switch
+threshold) in both directions, and answers bad requests with abort codes.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass, field
+
+from .crc import crc16
+from .dictionary import Dictionary, SdoAbort
+
+ABORT_TOGGLE = 0x05030000
+ABORT_COMMAND = 0x05040001
+ABORT_BLOCK_SIZE = 0x05040002
+ABORT_SEQUENCE = 0x05040003
+ABORT_CRC = 0x05040004
+BLOCK_SIZE = 127  # segments per block the server accepts in block downloads
+
+
+def abort_frame(index: int, subindex: int, code: int) -> bytes:
+    return struct.pack("<BHBI", 0x80, index, subindex, code)
+
+
+@dataclass
+class _Transfer:
+    kind: str  # "up", "down", "block_up", "block_down"
+    index: int
+    subindex: int
+    data: bytearray = field(default_factory=bytearray)
+    size: int | None = None
+    toggle: int = 0
+    pos: int = 0  # upload: bytes sent and acknowledged
+    crc: bool = False
+    blksize: int = 0
+    seq: int = 0  # block download: last good sequence number
+    sent: list[bytes] = field(default_factory=list)  # block upload: segments of the current block
+    done: bool = False  # block: last segment sent / received
+
+
+class SdoServer:
+    """Request bytes -> response bytes over a Dictionary; one transfer at a time."""
+
+    def __init__(self, od: Dictionary):
+        self.od = od
+        self.t: _Transfer | None = None
+        self.abort_codes: dict[tuple[int, int], int] = {}  # fault injection: forced aborts
+
+    def handle(self, req: bytes) -> list[bytes]:
+        req = bytes(req).ljust(8, b"\x00")
+        t = self.t
+        try:
+            if t is not None and t.kind == "block_down" and not t.done and req[0] != 0x80:
+                return self._block_down_segment(req)
+            ccs = req[0] >> 5
+            if ccs == 4:  # abort from the client: drop the transfer silently
+                self.t = None
+                return []
+            if ccs == 1:
+                return self._init_download(req)
+            if ccs == 0 and t is not None and t.kind == "down":
+                return self._download_segment(req)
+            if ccs == 2:
+                return self._init_upload(req)
+            if ccs == 3 and t is not None and t.kind == "up":
+                return self._upload_segment(req)
+            if ccs == 5:
+                return self._block_upload(req)
+            if ccs == 6:
+                return self._block_download(req)
+            raise SdoAbort(ABORT_COMMAND)
+        except SdoAbort as exc:
+            index, sub = (t.index, t.subindex) if t else struct.unpack_from("<HB", req, 1)
+            if ccs in (1, 2, 5, 6) and (req[0] & 0x03 == 0 or ccs in (1, 2)):
+                index, sub = struct.unpack_from("<HB", req, 1)
+            self.t = None
+            return [abort_frame(index, sub, exc.code)]
+
+    def _forced(self, index: int, sub: int) -> None:
+        code = self.abort_codes.get((index, sub))
+        if code is not None:
+            raise SdoAbort(code)
+
+    # --- download (client writes) ---------------------------------------------------
+    def _init_download(self, req: bytes) -> list[bytes]:
+        index, sub = struct.unpack_from("<HB", req, 1)
+        self._forced(index, sub)
+        mux = req[1:4]
+        e, s = req[0] & 0x02, req[0] & 0x01
+        if e:
+            n = 4 - ((req[0] >> 2) & 0x03) if s else 4
+            self.od.write(index, sub, req[4 : 4 + n])
+            self.t = None
+        else:
+            self.od.check_write(index, sub)
+            self.t = _Transfer("down", index, sub, size=struct.unpack_from("<I", req, 4)[0] if s else None)
+        return [b"\x60" + mux + b"\x00" * 4]
+
+    def _download_segment(self, req: bytes) -> list[bytes]:
+        t = self.t
+        toggle = (req[0] >> 4) & 1
+        if toggle != t.toggle:
+            raise SdoAbort(ABORT_TOGGLE)
+        n = 7 - ((req[0] >> 1) & 0x07)
+        t.data += req[1 : 1 + n]
+        t.toggle ^= 1
+        if req[0] & 0x01:
+            self.t = None
+            self.od.write(t.index, t.subindex, bytes(t.data))
+        return [bytes([0x20 | toggle << 4]) + b"\x00" * 7]
+
+    # --- upload (client reads) -------------------------------------------------------
+    def _init_upload(self, req: bytes) -> list[bytes]:
+        index, sub = struct.unpack_from("<HB", req, 1)
+        self._forced(index, sub)
+        data = self.od.read(index, sub)
+        return self._upload_start(index, sub, data)
+
+    def _upload_start(self, index: int, sub: int, data: bytes) -> list[bytes]:
+        mux = struct.pack("<HB", index, sub)
+        if 0 < len(data) <= 4:
+            self.t = None
+            return [bytes([0x43 | (4 - len(data)) << 2]) + mux + data.ljust(4, b"\x00")]
+        self.t = _Transfer("up", index, sub, data=bytearray(data))
+        return [b"\x41" + mux + struct.pack("<I", len(data))]
+
+    def _upload_segment(self, req: bytes) -> list[bytes]:
+        t = self.t
+        toggle = (req[0] >> 4) & 1
+        if toggle != t.toggle:
+            raise SdoAbort(ABORT_TOGGLE)
+        chunk = bytes(t.data[t.pos : t.pos + 7])
+        t.pos += len(chunk)
+        t.toggle ^= 1
+        last = t.pos >= len(t.data)
+        if last:
+            self.t = None
+        head = toggle << 4 | (7 - len(chunk)) << 1 | int(last)
+        return [bytes([head]) + chunk.ljust(7, b"\x00")]
+
+    # --- block upload ------------------------------------------------------------------
+    def _block_upload(self, req: bytes) -> list[bytes]:
+        cs = req[0] & 0x03
+        t = self.t
+        if cs == 0:  # initiate
+            index, sub = struct.unpack_from("<HB", req, 1)
+            self._forced(index, sub)
+            data = self.od.read(index, sub)
+            blksize, pst = req[4], req[5]
+            if not 0 < blksize < 128:
+                raise SdoAbort(ABORT_BLOCK_SIZE)
+            if pst and len(data) <= pst:  # protocol switch: answer as a normal upload
+                return self._upload_start(index, sub, data)
+            crc = bool(req[0] & 0x04)
+            self.t = _Transfer("block_up", index, sub, data=bytearray(data), crc=crc, blksize=blksize)
+            return [bytes([0xC6]) + struct.pack("<HBI", index, sub, len(data))]
+        if cs == 1 and t is not None and t.kind == "block_up_end":  # client confirms the end
+            self.t = None
+            return []
+        if t is None or t.kind != "block_up":
+            raise SdoAbort(ABORT_COMMAND)
+        if cs == 3:  # start
+            return self._next_block()
+        if cs == 2:  # block acknowledged
+            ackseq, blksize = req[1], req[2]
+            if not 0 < blksize < 128:
+                raise SdoAbort(ABORT_BLOCK_SIZE)
+            if ackseq > len(t.sent):
+                raise SdoAbort(ABORT_SEQUENCE)
+            t.pos += sum(len(s) for s in t.sent[:ackseq])
+            t.blksize = blksize
+            if ackseq < len(t.sent):
+                t.done = False
+            if t.done or t.pos >= len(t.data):
+                last = len(t.data) % 7 or (7 if t.data else 0)
+                crc = crc16(bytes(t.data)) if t.crc else 0
+                t.kind = "block_up_end"
+                return [bytes([0xC1 | (7 - last) << 2]) + struct.pack("<H", crc) + b"\x00" * 5]
+            return self._next_block()
+        raise SdoAbort(ABORT_COMMAND)
+
+    def _next_block(self) -> list[bytes]:
+        t = self.t
+        t.sent = []
+        frames = []
+        pos = t.pos
+        for seq in range(1, t.blksize + 1):
+            chunk = bytes(t.data[pos : pos + 7])
+            pos += len(chunk)
+            last = pos >= len(t.data)
+            t.sent.append(chunk)
+            frames.append(bytes([seq | (0x80 if last else 0)]) + chunk.ljust(7, b"\x00"))
+            if last:
+                t.done = True
+                break
+        return frames
+
+    # --- block download ------------------------------------------------------------------
+    def _block_download(self, req: bytes) -> list[bytes]:
+        cs = req[0] & 0x01
+        t = self.t
+        if cs == 0:  # initiate
+            index, sub = struct.unpack_from("<HB", req, 1)
+            self._forced(index, sub)
+            self.od.check_write(index, sub)
+            size = struct.unpack_from("<I", req, 4)[0] if req[0] & 0x02 else None
+            self.t = _Transfer("block_down", index, sub, size=size, crc=bool(req[0] & 0x04), blksize=BLOCK_SIZE)
+            return [bytes([0xA4]) + struct.pack("<HBB", index, sub, BLOCK_SIZE) + b"\x00" * 3]
+        if t is None or t.kind != "block_down" or not t.done:
+            raise SdoAbort(ABORT_COMMAND)
+        unused = (req[0] >> 2) & 0x07  # end: bytes of the last segment without data
+        if unused:
+            del t.data[-unused:]
+        if t.crc and struct.unpack_from("<H", req, 1)[0] != crc16(bytes(t.data)):
+            raise SdoAbort(ABORT_CRC)
+        self.t = None
+        self.od.write(t.index, t.subindex, bytes(t.data))
+        return [b"\xa1" + b"\x00" * 7]
+
+    def _block_down_segment(self, req: bytes) -> list[bytes]:
+        t = self.t
+        seq, last = req[0] & 0x7F, bool(req[0] & 0x80)
+        if seq == t.seq + 1:
+            t.seq = seq
+            t.data += req[1:8]
+            if last:
+                t.done = True
+        if t.done or seq >= t.blksize:
+            ack = bytes([0xA2, t.seq, BLOCK_SIZE]) + b"\x00" * 5
+            t.seq = 0
+            return [ack]
+        return []
