@@ -1,0 +1,134 @@
+"""The simulation clock and bus: a discrete-event queue, or real time on a python-can bus.
+
+Offline (`--to FILE`) the clock jumps from event to event, so ten minutes of
+traffic take a moment and a seed gives the same frames every time. Frames are
+serialized on the simulated bus (one after the other, each taking its time at
+the bit rate) and delivered to the other participants when they end. In real
+time the same participants run against `time.monotonic()` and a python-can bus.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import time
+from collections.abc import Callable
+from typing import Protocol
+
+from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR, FLAG_TX, FrameBatch, from_rows
+
+START = 1767225600.0  # 2026-01-01T00:00:00Z: the simulated wall clock of offline logs
+
+
+class Participant(Protocol):
+    def start(self, sim: Simulation) -> None: ...
+
+    def on_frame(self, cob: int, data: bytes, flags: int) -> None: ...
+
+
+def frame_seconds(dlc: int, bitrate: int) -> float:
+    """Worst-case duration of a classic 11-bit frame with stuff bits."""
+    return (47 + 8 * dlc) * 1.2 / bitrate
+
+
+class Simulation:
+    """Event queue plus bus; participants schedule callbacks and send frames."""
+
+    def __init__(self, bitrate: int = 500_000, start: float = START):
+        self.now = 0.0  # seconds since the start of the simulation
+        self.start_time = start
+        self.bitrate = bitrate
+        self.participants: list[Participant] = []
+        self.rows: list[tuple[float, int, bytes, int]] = []
+        self._queue: list[tuple[float, int, Callable[[], None]]] = []
+        self._seq = itertools.count()
+        self._bus_free = 0.0
+        self.bus = None  # python-can bus in real-time mode
+        self._t0 = 0.0
+
+    def add(self, participant: Participant) -> Participant:
+        self.participants.append(participant)
+        return participant
+
+    def at(self, t: float, fn: Callable[[], None]) -> None:
+        heapq.heappush(self._queue, (t, next(self._seq), fn))
+
+    def after(self, dt: float, fn: Callable[[], None]) -> None:
+        self.at(self.now + dt, fn)
+
+    def send(self, sender: object, cob: int, data: bytes = b"", flags: int = 0) -> None:
+        """Put a frame on the bus now; the others receive it when it has been transmitted."""
+        data = bytes(data)
+        if self.bus is not None:
+            self._send_real(cob, data, flags)
+            t_end = self.now
+        else:
+            t = max(self.now, self._bus_free)
+            t_end = t + frame_seconds(len(data), self.bitrate)
+            self._bus_free = t_end
+            self.rows.append((self.start_time + round(t, 6), cob, data, flags))
+        if flags & FLAG_ERR:
+            return
+        for p in self.participants:
+            if p is not sender:
+                self.at(t_end, lambda p=p: p.on_frame(cob, data, flags))
+
+    def run(self, duration: float) -> None:
+        """Offline: process events up to duration seconds."""
+        for p in self.participants:
+            p.start(self)
+        while self._queue and self._queue[0][0] <= duration:
+            t, _, fn = heapq.heappop(self._queue)
+            self.now = max(self.now, t)
+            fn()
+        self.now = duration
+
+    def batch(self) -> FrameBatch:
+        rows = sorted(self.rows, key=lambda r: r[0])
+        return from_rows(rows, channels=("can0",))
+
+    # --- real time ------------------------------------------------------------------
+    def run_realtime(self, bus, duration: float, on_frame: Callable | None = None) -> None:
+        """Run against a python-can bus until duration seconds have passed."""
+        self.bus = bus
+        self._t0 = time.monotonic()
+        for p in self.participants:
+            p.start(self)
+        while True:
+            self.now = time.monotonic() - self._t0
+            if self.now >= duration:
+                break
+            while self._queue and self._queue[0][0] <= self.now:
+                _, _, fn = heapq.heappop(self._queue)
+                fn()
+            nxt = self._queue[0][0] if self._queue else duration
+            timeout = max(0.0, min(nxt, duration) - (time.monotonic() - self._t0))
+            msg = bus.recv(timeout=min(timeout, 0.05))
+            if msg is None or msg.is_error_frame:
+                continue
+            self.now = time.monotonic() - self._t0
+            flags = FLAG_RTR if msg.is_remote_frame else 0
+            data = b"" if msg.is_remote_frame else bytes(msg.data)
+            if on_frame is not None:
+                on_frame(msg)
+            for p in self.participants:
+                p.on_frame(msg.arbitration_id, data, flags)
+
+    def _send_real(self, cob: int, data: bytes, flags: int) -> None:
+        import can
+
+        msg = can.Message(
+            arbitration_id=cob,
+            data=data if not flags & FLAG_RTR else None,
+            dlc=len(data) if not flags & FLAG_RTR else 0,
+            is_extended_id=bool(flags & FLAG_EXT),
+            is_remote_frame=bool(flags & FLAG_RTR),
+            is_error_frame=bool(flags & FLAG_ERR),
+        )
+        try:
+            self.bus.send(msg)
+        except can.CanError:
+            pass  # a full transmit queue drops the frame, as a real controller would
+
+
+__all__ = ["FLAG_TX", "START", "Simulation", "Participant", "frame_seconds"]

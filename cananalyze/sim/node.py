@@ -1,0 +1,358 @@
+"""One simulated CANopen device: NMT state machine, heartbeat or guarding, SDO
+server, TPDOs by transmission type, RPDOs into outputs, and EMCY.
+
+Everything the node does is driven by its object dictionary, so a master's SDO
+writes (heartbeat time, PDO remaps, event timers) change its behaviour exactly
+as they would on the real device.
+"""
+
+from __future__ import annotations
+
+import random
+import struct
+from dataclasses import dataclass, field
+
+from ..frames import FLAG_RTR
+from ..network.profile import DeviceProfile
+from .dictionary import Dictionary
+from .engine import Simulation
+from .sdo_server import SdoServer
+from .waveforms import Waveform, default_signals
+
+# NMT states as the heartbeat reports them (CiA 301 7.2.8.3.2)
+BOOTUP, STOPPED, OPERATIONAL, PRE_OPERATIONAL = 0x00, 0x04, 0x05, 0x7F
+SCAN_PERIOD = 0.010  # how often inputs are sampled for change-driven TPDOs
+SDO_DELAY = 0.0004  # server processing time before a response
+
+
+@dataclass
+class Tpdo:
+    number: int
+    last: bytes | None = None
+    last_sent: float = -1e9
+    sync_count: int = 0
+    pending: bool = False
+    timer_token: int = 0
+
+
+@dataclass
+class Faults:
+    """Misbehaviour switched on by scenarios, as (start, end) windows in seconds."""
+
+    heartbeat_off: list[tuple[float, float]] = field(default_factory=list)
+    sdo_mute: list[tuple[float, float]] = field(default_factory=list)
+    timer_stall: list[tuple[float, float]] = field(default_factory=list)
+
+    @staticmethod
+    def inside(windows: list[tuple[float, float]], t: float) -> bool:
+        return any(a <= t < b for a, b in windows)
+
+
+class SimNode:
+    """A CiA 301 slave built from a DeviceProfile."""
+
+    def __init__(
+        self,
+        node_id: int,
+        profile: DeviceProfile,
+        rng: random.Random | None = None,
+        signals: dict[tuple[int, int], Waveform] | None = None,
+        boot_delay: float | None = None,
+    ):
+        self.node_id = node_id
+        self.profile = profile
+        self.rng = rng or random.Random(node_id)
+        self.od = Dictionary(profile, node_id)
+        self.sdo = SdoServer(self.od)
+        self.signals = signals if signals is not None else default_signals(profile.key, self.rng)
+        self.boot_delay = boot_delay if boot_delay is not None else self.rng.uniform(0.05, 0.3)
+        self.state = BOOTUP
+        self.faults = Faults()
+        self.sim: Simulation | None = None
+        self.tpdos: dict[int, Tpdo] = {}
+        self._gen = 0  # bumped on every reset: events of an older life are ignored
+        self._toggle = 0
+        self.emcy_sent: list[tuple[float, int, int, bytes]] = []
+
+    # --- life cycle ---------------------------------------------------------------------
+    def start(self, sim: Simulation) -> None:
+        self.sim = sim
+        sim.at(sim.now + self.boot_delay, lambda: self._boot(communication_only=False))
+
+    def _boot(self, communication_only: bool) -> None:
+        self._gen += 1
+        self.od.reset(communication_only)
+        self.sdo.t = None
+        self.tpdos = {}
+        self._toggle = 0
+        self.state = PRE_OPERATIONAL
+        self.sim.send(self, 0x700 + self.node_id, b"\x00")
+        self._restart_heartbeat()
+
+    def _restart_heartbeat(self) -> None:
+        self._gen += 1
+        period = self.od.get(0x1017, 0) / 1000.0
+        if period > 0:
+            gen = self._gen
+            self.sim.after(period, lambda: self._heartbeat(gen, period))
+        if self.state == OPERATIONAL:
+            self._start_pdos()
+
+    def _heartbeat(self, gen: int, period: float) -> None:
+        if gen != self._gen:
+            return
+        if not Faults.inside(self.faults.heartbeat_off, self.sim.now):
+            self.sim.send(self, 0x700 + self.node_id, bytes([self.state]))
+        self.sim.after(period, lambda: self._heartbeat(gen, period))
+
+    def set_state(self, state: int) -> None:
+        old, self.state = self.state, state
+        if state == OPERATIONAL and old != OPERATIONAL:
+            self._start_pdos()
+        elif state != OPERATIONAL and old == OPERATIONAL:
+            self._gen += 1  # stops scan and timers; heartbeat restarts below
+            self._restart_heartbeat()
+
+    # --- frames in ---------------------------------------------------------------------
+    def on_frame(self, cob: int, data: bytes, flags: int) -> None:
+        nid = self.node_id
+        if cob == 0x000 and len(data) >= 2 and data[1] in (0, nid):
+            self._nmt(data[0])
+        elif self.state == BOOTUP:
+            return
+        elif cob == 0x700 + nid and flags & FLAG_RTR:  # node guarding request
+            self.sim.after(SDO_DELAY, lambda: self._guard_reply())
+        elif self.state == STOPPED:
+            return
+        elif cob == 0x600 + nid and not flags & FLAG_RTR:
+            self._sdo_request(data)
+        elif cob == 0x080 and not flags & FLAG_RTR:
+            if self.state == OPERATIONAL:
+                self._on_sync()
+        elif self.state == OPERATIONAL:
+            self._pdo_frame(cob, data, flags)
+
+    def _nmt(self, cs: int) -> None:
+        if cs == 0x01:
+            self.set_state(OPERATIONAL)
+        elif cs == 0x02:
+            self.set_state(STOPPED)
+        elif cs == 0x80:
+            self.set_state(PRE_OPERATIONAL)
+        elif cs in (0x81, 0x82):
+            self.state = BOOTUP
+            self._gen += 1
+            self.sim.after(0.02, lambda: self._boot(communication_only=cs == 0x82))
+
+    def _guard_reply(self) -> None:
+        self.sim.send(self, 0x700 + self.node_id, bytes([self.state | self._toggle << 7]))
+        self._toggle ^= 1
+
+    def _sdo_request(self, data: bytes) -> None:
+        if Faults.inside(self.faults.sdo_mute, self.sim.now):
+            return
+        self._sample_inputs()  # reads of input objects see the current measurement
+        before = dict(self.od.values)
+        responses = self.sdo.handle(data)
+        changed = {k for k, v in self.od.values.items() if before.get(k) != v}
+        for k, resp in enumerate(responses):
+            self.sim.after(SDO_DELAY + k * 1e-6, lambda r=resp: self.sim.send(self, 0x580 + self.node_id, r))
+        if any(k[0] == 0x1017 for k in changed):
+            self._restart_heartbeat()
+        elif any(0x1800 <= k[0] < 0x1C00 for k in changed) and self.state == OPERATIONAL:
+            self._gen += 1
+            self._restart_heartbeat()
+
+    # --- TPDOs ----------------------------------------------------------------------------
+    def tpdo_params(self, n: int) -> tuple[int, bool, bool, int, float, float] | None:
+        """(cob_id, valid, rtr_allowed, transmission type, inhibit s, event timer s) of TPDO n."""
+        base = 0x1800 + n - 1
+        if not self.od.has(base, 1):
+            return None
+        cob = self.od.get(base, 1)
+        return (
+            cob & 0x7FF,
+            not cob & 0x80000000,
+            not cob & 0x40000000,
+            self.od.get(base, 2, 255),
+            self.od.get(base, 3) * 100e-6,
+            self.od.get(base, 5) / 1000.0,
+        )
+
+    def tpdo_payload(self, n: int) -> bytes:
+        """The mapped objects of TPDO n, packed little-endian bit by bit (CiA 301 7.4.7)."""
+        base = 0x1A00 + n - 1
+        acc = bits = 0
+        for sub in range(1, self.od.get(base, 0) + 1):
+            word = self.od.get(base, sub)
+            index, subindex, length = word >> 16, (word >> 8) & 0xFF, word & 0xFF
+            if 0x1 <= index < 0x1000:  # dummy entry
+                value = 0
+            else:
+                raw = self.od.values.get((index, subindex), b"")
+                value = int.from_bytes(raw, "little") if raw else 0
+            acc |= (value & ((1 << length) - 1)) << bits
+            bits += length
+        return acc.to_bytes((bits + 7) // 8, "little")[:8]
+
+    def _sample_inputs(self) -> None:
+        t = self.sim.now
+        for (index, sub), wave in self.signals.items():
+            self.od.set(index, sub, wave(t))
+
+    def _start_pdos(self) -> None:
+        gen = self._gen
+        self.tpdos = {}
+        for n in range(1, 513):
+            params = self.tpdo_params(n)
+            if params is None:
+                if n > 8:
+                    break
+                continue
+            self.tpdos[n] = Tpdo(n)
+            if params[1] and params[3] >= 254 and params[5] > 0:
+                self._arm_timer(n, params[5])
+        self.sim.after(0.0, lambda: self._scan(gen))
+
+    def _scan(self, gen: int) -> None:
+        if gen != self._gen or self.state != OPERATIONAL:
+            return
+        self._sample_inputs()
+        for n in self.tpdos:
+            params = self.tpdo_params(n)
+            if params and params[1] and params[3] >= 254:
+                self._maybe_send(n, params)
+        self.sim.after(SCAN_PERIOD, lambda: self._scan(gen))
+
+    def _maybe_send(self, n: int, params, force: bool = False) -> None:
+        pdo = self.tpdos[n]
+        payload = self.tpdo_payload(n)
+        if not force and payload == pdo.last:
+            return
+        ready = pdo.last_sent + params[4]
+        if force or self.sim.now >= ready:
+            self.send_tpdo(n)
+        elif not pdo.pending:  # inhibit time: send when it has passed
+            pdo.pending = True
+            gen = self._gen
+
+            def later() -> None:
+                pdo.pending = False
+                if gen == self._gen and self.state == OPERATIONAL:
+                    self.send_tpdo(n)
+
+            self.sim.at(ready, later)
+
+    def send_tpdo(self, n: int) -> None:
+        """Transmit TPDO n now with current values (fault scenarios call this to break the inhibit time)."""
+        params = self.tpdo_params(n)
+        if params is None or not params[1]:
+            return
+        pdo = self.tpdos.setdefault(n, Tpdo(n))
+        self._sample_inputs()
+        payload = self.tpdo_payload(n)
+        pdo.last, pdo.last_sent = payload, self.sim.now
+        self.sim.send(self, params[0], payload)
+        if params[3] >= 254 and params[5] > 0:
+            self._arm_timer(n, params[5])
+
+    def _arm_timer(self, n: int, period: float) -> None:
+        pdo = self.tpdos[n]
+        pdo.timer_token += 1
+        token, gen = pdo.timer_token, self._gen
+
+        def expire() -> None:
+            if gen != self._gen or token != pdo.timer_token or self.state != OPERATIONAL:
+                return
+            if Faults.inside(self.faults.timer_stall, self.sim.now):
+                self.sim.after(SCAN_PERIOD, expire)  # late: the event timer is violated
+                return
+            self.send_tpdo(n)
+
+        self.sim.after(period, expire)
+
+    def _on_sync(self) -> None:
+        self._sample_inputs()
+        for n, pdo in self.tpdos.items():
+            params = self.tpdo_params(n)
+            if not params or not params[1]:
+                continue
+            ttype = params[3]
+            if ttype == 0:  # synchronous acyclic: on SYNC, only if the data changed
+                if self.tpdo_payload(n) != pdo.last:
+                    self.send_tpdo(n)
+            elif 1 <= ttype <= 240:
+                pdo.sync_count += 1
+                if pdo.sync_count >= ttype:
+                    pdo.sync_count = 0
+                    self.send_tpdo(n)
+
+    def _pdo_frame(self, cob: int, data: bytes, flags: int) -> None:
+        if flags & FLAG_RTR:
+            for n in self.tpdos:
+                params = self.tpdo_params(n)
+                if params and params[1] and params[2] and params[0] == cob:
+                    self.sim.after(SDO_DELAY, lambda n=n: self.send_tpdo(n))
+            return
+        for n in range(1, 513):
+            base = 0x1400 + n - 1
+            if not self.od.has(base, 1):
+                if n > 8:
+                    break
+                continue
+            cob_param = self.od.get(base, 1)
+            if cob_param & 0x80000000 or cob_param & 0x7FF != cob:
+                continue
+            self._apply_rpdo(n, data)
+
+    def _apply_rpdo(self, n: int, data: bytes) -> None:
+        """Write the RPDO's bytes into the mapped output objects."""
+        base = 0x1600 + n - 1
+        value = int.from_bytes(data, "little")
+        bits = 0
+        for sub in range(1, self.od.get(base, 0) + 1):
+            word = self.od.get(base, sub)
+            index, subindex, length = word >> 16, (word >> 8) & 0xFF, word & 0xFF
+            part = (value >> bits) & ((1 << length) - 1)
+            bits += length
+            if index >= 0x1000 and self.od.has(index, subindex):
+                old = self.od.values[(index, subindex)]
+                if length < 8 * len(old):  # a bit-mapped output: merge into the byte
+                    cur = int.from_bytes(old, "little")
+                    shift = sum(  # position of this bit among entries mapping the same object
+                        1 for s in range(1, sub) if self.od.get(base, s) >> 8 == word >> 8
+                    )
+                    cur = (cur & ~(((1 << length) - 1) << shift)) | part << shift
+                    self.od.set_raw(index, subindex, cur.to_bytes(len(old), "little"))
+                else:
+                    self.od.set_raw(index, subindex, part.to_bytes(len(old), "little"))
+
+    # --- EMCY -------------------------------------------------------------------------------
+    def emcy(self, error_code: int, register: int | None = None, manufacturer: bytes = b"") -> None:
+        """Send an emergency (CiA 301 7.2.7) and keep 0x1001/0x1003 in step."""
+        if self.state not in (PRE_OPERATIONAL, OPERATIONAL):
+            return
+        if register is None:
+            register = 0 if error_code == 0 else 0x01 | (0x10 if error_code >> 8 == 0x81 else 0)
+        self.od.set(0x1001, 0, register)
+        if error_code and self.od.has(0x1003, 1):
+            count = min(self.od.get(0x1003, 0) + 1, 254)
+            for sub in range(count, 1, -1):
+                if self.od.has(0x1003, sub):
+                    self.od.set(0x1003, sub, self.od.get(0x1003, sub - 1))
+            self.od.set(0x1003, 1, error_code)
+            self.od.set(0x1003, 0, sum(1 for s in range(1, count + 1) if self.od.has(0x1003, s)))
+        cob = self.od.get(0x1014, 0, 0x80 + self.node_id) & 0x7FF or 0x80 + self.node_id
+        data = struct.pack("<HB", error_code, register) + bytes(manufacturer).ljust(5, b"\x00")[:5]
+        self.emcy_sent.append((self.sim.now, error_code, register, data[3:]))
+        self.sim.send(self, cob, data)
+
+
+def mcb560_emcy(node: SimNode, error_code: int, chip_ec: int) -> None:
+    """MCB-560 emergency: byte 3 zero, bytes 4-7 the CO4201 Chip-EC (manual 004)."""
+    node.emcy(error_code, None, b"\x00" + struct.pack("<I", chip_ec))
+
+
+def i7231d_emcy(node: SimNode, error_code: int, vendor_code: int, module_address: int = 0) -> None:
+    """I-7231D emergency: byte 3 the ICP DAS error code, byte 4 the RS-485 module address."""
+    node.emcy(error_code, None, bytes([vendor_code, module_address]))
