@@ -246,8 +246,8 @@ class SimNode:
     def send_tpdo(self, n: int) -> None:
         """Transmit TPDO n now with current values (fault scenarios call this to break the inhibit time)."""
         params = self.tpdo_params(n)
-        if params is None or not params[1]:
-            return
+        if params is None or not params[1] or not self.od.get(0x1A00 + n - 1, 0):
+            return  # not valid, or nothing mapped
         pdo = self.tpdos.setdefault(n, Tpdo(n))
         self._sample_inputs()
         payload = self.tpdo_payload(n)
@@ -340,7 +340,9 @@ class SimNode:
             for sub in range(count, 1, -1):
                 if self.od.has(0x1003, sub):
                     self.od.set(0x1003, sub, self.od.get(0x1003, sub - 1))
-            self.od.set(0x1003, 1, error_code)
+            # low word the error code, high word manufacturer info (as the I-7231D's 00 FF 0B 02)
+            extra = int.from_bytes(bytes(manufacturer)[:2].ljust(2, b"\x00"), "little")
+            self.od.set(0x1003, 1, error_code | extra << 16)
             self.od.set(0x1003, 0, sum(1 for s in range(1, count + 1) if self.od.has(0x1003, s)))
         cob = self.od.get(0x1014, 0, 0x80 + self.node_id) & 0x7FF or 0x80 + self.node_id
         data = struct.pack("<HB", error_code, register) + bytes(manufacturer).ljust(5, b"\x00")[:5]
