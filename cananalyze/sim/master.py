@@ -13,7 +13,7 @@ import struct
 from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
 
-from ..frames import FLAG_RTR, FLAG_TX
+from ..frames import FLAG_ERR, FLAG_RTR, FLAG_TX
 from .crc import crc16
 from .engine import Simulation
 
@@ -131,7 +131,8 @@ class Master:
             sim.at(sim.now, lambda: self._advance(None))
 
     def send(self, cob: int, data: bytes = b"", flags: int = 0) -> None:
-        self.sim.send(self, cob, data, flags | FLAG_TX)
+        # error frames are the bus's, not the master's: no TX direction flag
+        self.sim.send(self, cob, data, flags if flags & FLAG_ERR else flags | FLAG_TX)
 
     # --- script ---------------------------------------------------------------------
     def _advance(self, value: object) -> None:
