@@ -56,22 +56,25 @@ class Simulation:
     def after(self, dt: float, fn: Callable[[], None]) -> None:
         self.at(self.now + dt, fn)
 
-    def send(self, sender: object, cob: int, data: bytes = b"", flags: int = 0) -> None:
-        """Put a frame on the bus now; the others receive it when it has been transmitted."""
+    def send(self, sender: object, cob: int, data: bytes = b"", flags: int = 0) -> float:
+        """Put a frame on the bus now; the others receive it when it has been transmitted.
+
+        Returns when the frame started: later than now when the bus was busy.
+        """
         data = bytes(data)
         if self.bus is not None:
             self._send_real(cob, data, flags)
-            t_end = self.now
+            t = t_end = self.now
         else:
             t = max(self.now, self._bus_free)
             t_end = t + frame_seconds(len(data), self.bitrate)
             self._bus_free = t_end
             self.rows.append((self.start_time + round(t, 6), cob, data, flags))
-        if flags & FLAG_ERR:
-            return
-        for p in self.participants:
-            if p is not sender:
-                self.at(t_end, lambda p=p: p.on_frame(cob, data, flags))
+        if not flags & FLAG_ERR:
+            for p in self.participants:
+                if p is not sender:
+                    self.at(t_end, lambda p=p: p.on_frame(cob, data, flags))
+        return t
 
     def run(self, duration: float) -> None:
         """Offline: process events up to duration seconds."""

@@ -230,7 +230,7 @@ class SimNode:
         payload = self.tpdo_payload(n)
         if not force and payload == pdo.last:
             return
-        ready = pdo.last_sent + params[4]
+        ready = pdo.last_sent + params[4] + 1e-6 if params[4] else 0.0  # 1 us: clear of rounding
         if force or self.sim.now >= ready:
             self.send_tpdo(n)
         elif not pdo.pending:  # inhibit time: send when it has passed
@@ -252,8 +252,9 @@ class SimNode:
         pdo = self.tpdos.setdefault(n, Tpdo(n))
         self._sample_inputs()
         payload = self.tpdo_payload(n)
-        pdo.last, pdo.last_sent = payload, self.sim.now
-        self.sim.send(self, params[0], payload)
+        pdo.last = payload
+        # the inhibit time runs from when the frame really went out (the bus may have been busy)
+        pdo.last_sent = self.sim.send(self, params[0], payload)
         if params[3] >= 254 and params[5] > 0:
             self._arm_timer(n, params[5])
 
@@ -334,7 +335,7 @@ class SimNode:
         if self.state not in (PRE_OPERATIONAL, OPERATIONAL):
             return
         if register is None:
-            register = 0 if error_code == 0 else 0x01 | (0x10 if error_code >> 8 == 0x81 else 0)
+            register = error_register(error_code)
         self.od.set(0x1001, 0, register)
         if error_code and self.od.has(0x1003, 1):
             count = min(self.od.get(0x1003, 0) + 1, 254)
@@ -349,6 +350,17 @@ class SimNode:
         data = struct.pack("<HB", error_code, register) + bytes(manufacturer).ljust(5, b"\x00")[:5]
         self.emcy_sent.append((self.sim.now, error_code, register, data[3:]))
         self.sim.send(self, cob, data)
+
+
+# CiA 301 Table 48: error code class -> error register bit (besides bit 0, generic)
+_REGISTER_BITS = {0x2: 0x02, 0x3: 0x04, 0x4: 0x08, 0x8: 0x10, 0xF: 0x80}
+
+
+def error_register(error_code: int) -> int:
+    """The 0x1001 value that goes with an error code (0 for an error reset)."""
+    if error_code == 0:
+        return 0
+    return 0x01 | _REGISTER_BITS.get(error_code >> 12, 0)
 
 
 def mcb560_emcy(node: SimNode, error_code: int, chip_ec: int) -> None:

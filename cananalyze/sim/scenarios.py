@@ -187,14 +187,14 @@ def faults(nodes: Nodes, duration: float):
         yield Write(node.node_id, 0x1018, 1, u32(0))
     for node in mcb:
         yield Read(node.node_id, 0x2FFF, 0)
+    yield Until(7.2)  # MCB-560 analog inputs freeze: TPDO2 only by its 200 ms event timer,
+    for node in mcb:  # which stalls from 8.0 to 8.6 s
+        node.faults.timer_stall.append((8.0, 8.6))
+        node.signals = {k: v for k, v in node.signals.items() if k[0] != 0x6401}
     yield Until(7.5)  # DAT 7014 stops answering SDO: the master times out after 1 s
     for node in dat14:
         node.faults.sdo_mute.append((7.5, 9.0))
         yield Read(node.node_id, 0x1008, 0)
-    yield Until(8.0)  # MCB-560 analog TPDO: event timer (200 ms) stalls for 0.6 s
-    for node in mcb:
-        node.faults.timer_stall.append((8.0, 8.6))
-        node.signals = {k: v for k, v in node.signals.items() if k[0] != 0x6401}  # frozen input
     yield Until(duration)
 
 
