@@ -21,7 +21,9 @@ SUFFIXES = (".log", ".asc", ".blf")
 def test_samples_regenerate_identically(tmp_path):
     for path in write_samples(tmp_path):
         committed = SAMPLES / path.name
-        assert committed.read_bytes() == path.read_bytes(), f"{path.name} differs: rerun python -m cananalyze.sim.samples samples/"
+        assert committed.read_bytes() == path.read_bytes(), (
+            f"{path.name} differs: rerun python -m cananalyze.sim.samples samples/"
+        )
         assert committed.stat().st_size < 1_000_000
 
 
@@ -58,10 +60,19 @@ def test_commissioning_sample(suffix):
     block = [r for r in sdo if r["protocol"] == "block"]
     assert len(block) == 1 and bytes.fromhex(block[0]["data"]) == b"DAT 7130"
     # the DAT 7014 TPDO2 remap: disable, clear, map ch1 and ch3, every 5th SYNC, enable
-    remap = [(r["index"], r["subindex"], r["data"]) for r in sdo if r["node"] == 5 and r["direction"] == "download"]
+    remap = [
+        (r["index"], r["subindex"], r["data"])
+        for r in sdo
+        if r["node"] == 5 and r["direction"] == "download"
+    ]
     assert remap[1:] == [
-        (0x1801, 1, "85020080"), (0x1A01, 0, "00"), (0x1A01, 1, "10010164"),
-        (0x1A01, 2, "10030164"), (0x1A01, 0, "02"), (0x1801, 2, "05"), (0x1801, 1, "85020000"),
+        (0x1801, 1, "85020080"),
+        (0x1A01, 0, "00"),
+        (0x1A01, 1, "10010164"),
+        (0x1A01, 2, "10030164"),
+        (0x1A01, 0, "02"),
+        (0x1801, 2, "05"),
+        (0x1801, 1, "85020000"),
     ]
     t_sync, _ = _frames(batch, 0x080)
     assert np.allclose(np.diff(t_sync), 0.1, atol=0.002)
@@ -84,7 +95,11 @@ def test_faults_sample(suffix):
     t0 = batch.t[0] - 0.1 if suffix == ".asc" else 1767225600.0  # ASC times are relative
     rows = np.flatnonzero(out.service == Service.EMCY)
     emcy = [(int(out.node[i]), batch.payload(int(i))) for i in rows]
-    mcb = [(struct.unpack_from("<H", d)[0], struct.unpack_from("<I", d, 4)[0]) for n, d in emcy if n == 3]
+    mcb = [
+        (struct.unpack_from("<H", d)[0], struct.unpack_from("<I", d, 4)[0])
+        for n, d in emcy
+        if n == 3
+    ]
     assert mcb == [(0x8100, 0x40000000), (0x8130, 0x10000000), (0x8140, 0xC0000000), (0x0000, 0)]
     gw = [d for n, d in emcy if n == 7]
     assert gw == [bytes.fromhex("00FF810B02000000")]  # RS-485 module 0x02 timed out
@@ -100,5 +115,11 @@ def test_faults_sample(suffix):
     t_ch, ch = _frames(batch, 0x285)  # DAT 7014 channel 3 out of range (0x7FFF)
     ch3 = np.array([struct.unpack("<2h", p)[1] for p in ch])
     assert (ch3 == 0x7FFF).any() and (ch3 < 500).sum() > 5
-    failed = {(r["node"], r["index"], r["subindex"], r["abort_code"]) for r in sdo if r["result"] != "ok"}
-    assert failed == {(5, 0x1018, 1, 0x06010002), (3, 0x2FFF, 0, 0x06020000), (5, 0x1008, 0, 0x05040000)}
+    failed = {
+        (r["node"], r["index"], r["subindex"], r["abort_code"]) for r in sdo if r["result"] != "ok"
+    }
+    assert failed == {
+        (5, 0x1018, 1, 0x06010002),
+        (3, 0x2FFF, 0, 0x06020000),
+        (5, 0x1008, 0, 0x05040000),
+    }

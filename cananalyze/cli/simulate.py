@@ -19,15 +19,45 @@ def add_parser(subparsers) -> None:
         help="emulate CANopen devices and a master: write a log or drive a bus",
         description=__doc__.splitlines()[0],
     )
-    p.add_argument("--network", metavar="FILE", help="network file with [nodes.N] device/eds (default: one of each seed device)")
-    p.add_argument("-i", "--interface", help="python-can interface for real-time mode (e.g. socketcan, virtual)")
+    p.add_argument(
+        "--network",
+        metavar="FILE",
+        help="network file with [nodes.N] device/eds (default: one of each seed device)",
+    )
+    p.add_argument(
+        "-i",
+        "--interface",
+        help="python-can interface for real-time mode (e.g. socketcan, virtual)",
+    )
     p.add_argument("-c", "--channel", help="python-can channel for real-time mode (e.g. can0)")
-    p.add_argument("--to", metavar="FILE", help="write the traffic to a log (.log candump, .asc, .blf) on a simulated clock")
-    p.add_argument("--duration", type=float, default=10.0, metavar="S", help="seconds to simulate (default 10)")
-    p.add_argument("--seed", type=int, default=0, help="random seed: same seed, same log (default 0)")
-    p.add_argument("--scenario", default="steady", choices=sorted(SCENARIOS), help="what the master does (default steady)")
-    p.add_argument("--bitrate", type=int, default=None, help="bus bit rate for frame timing (default: network file or 500000)")
-    p.add_argument("--no-master", action="store_true", help="real-time mode: emulate only the devices, another tool is the master")
+    p.add_argument(
+        "--to",
+        metavar="FILE",
+        help="write the traffic to a log (.log candump, .asc, .blf) on a simulated clock",
+    )
+    p.add_argument(
+        "--duration", type=float, default=10.0, metavar="S", help="seconds to simulate (default 10)"
+    )
+    p.add_argument(
+        "--seed", type=int, default=0, help="random seed: same seed, same log (default 0)"
+    )
+    p.add_argument(
+        "--scenario",
+        default="steady",
+        choices=sorted(SCENARIOS),
+        help="what the master does (default steady)",
+    )
+    p.add_argument(
+        "--bitrate",
+        type=int,
+        default=None,
+        help="bus bit rate for frame timing (default: network file or 500000)",
+    )
+    p.add_argument(
+        "--no-master",
+        action="store_true",
+        help="real-time mode: emulate only the devices, another tool is the master",
+    )
     p.set_defaults(func=run)
 
 
@@ -58,11 +88,15 @@ def run(args: argparse.Namespace) -> int:
             write_log(batch, args.to)
         except OSError as exc:
             raise InputError(f"{args.to}: cannot write: {exc.strerror}") from None
-        print(f"wrote {len(batch)} frames ({args.duration:g} s, scenario {args.scenario}) to {args.to}")
+        print(
+            f"wrote {len(batch)} frames ({args.duration:g} s, scenario {args.scenario}) to {args.to}"
+        )
         return 0
     import can
 
-    sim, _, _ = build(profiles, args.scenario, args.duration, args.seed, bitrate, master=not args.no_master)
+    sim, _, _ = build(
+        profiles, args.scenario, args.duration, args.seed, bitrate, master=not args.no_master
+    )
     try:
         bus = can.Bus(interface=args.interface, channel=args.channel)
     except (can.CanError, ValueError, ImportError, OSError) as exc:

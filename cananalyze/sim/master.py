@@ -290,7 +290,9 @@ class Master:
         chunk = bytes(c.data[c.pos : c.pos + 7])
         c.pos += len(chunk)
         last = c.pos >= len(c.data)
-        self._req(bytes([c.toggle << 4 | (7 - len(chunk)) << 1 | int(last)]) + chunk.ljust(7, b"\x00"))
+        self._req(
+            bytes([c.toggle << 4 | (7 - len(chunk)) << 1 | int(last)]) + chunk.ljust(7, b"\x00")
+        )
 
     def _block_segment(self, data: bytes) -> None:
         c = self.client

@@ -45,7 +45,7 @@ def load_network(path: str | Path) -> tuple[dict[int, DeviceProfile], int]:
         if not 1 <= node <= 127:
             raise InputError(f"{where}: node id must be 1-127")
         if not isinstance(spec, dict) or ("device" in spec) == ("eds" in spec):
-            raise InputError(f"{where}: give exactly one of device = \"key\" or eds = \"file\"")
+            raise InputError(f'{where}: give exactly one of device = "key" or eds = "file"')
         if "device" in spec:
             nodes[node] = load_builtin(str(spec["device"]))
         else:

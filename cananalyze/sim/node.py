@@ -157,7 +157,9 @@ class SimNode:
         changed = {k for k, v in self.od.values.items() if before.get(k) != v}
         delay = SDO_DELAY + self.rng.uniform(0, 0.0006)  # firmware response time varies
         for k, resp in enumerate(responses):
-            self.sim.after(delay + k * 1e-6, lambda r=resp: self.sim.send(self, 0x580 + self.node_id, r))
+            self.sim.after(
+                delay + k * 1e-6, lambda r=resp: self.sim.send(self, 0x580 + self.node_id, r)
+            )
         if any(k[0] == 0x1017 for k in changed):
             self._restart_heartbeat()
         elif any(0x1800 <= k[0] < 0x1C00 for k in changed) and self.state == OPERATIONAL:

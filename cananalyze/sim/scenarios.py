@@ -162,7 +162,9 @@ def faults(nodes: Nodes, duration: float):
     yield each(mcb, lambda n: mcb560_emcy(n, 0x8130, 0x10000000))
     yield Until(2.5)
     for _ in range(3):
-        yield Send(0x004, bytes([0, 0x04, 0, 0, 0, 0, 0, 0]), FLAG_ERR | FLAG_EXT)  # controller problem
+        yield Send(
+            0x004, bytes([0, 0x04, 0, 0, 0, 0, 0, 0]), FLAG_ERR | FLAG_EXT
+        )  # controller problem
         yield Wait(0.001)
     yield Until(2.6)
     yield each(mcb, lambda n: mcb560_emcy(n, 0x8140, 0xC0000000))

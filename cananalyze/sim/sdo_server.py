@@ -98,7 +98,9 @@ class SdoServer:
             self.t = None
         else:
             self.od.check_write(index, sub)
-            self.t = _Transfer("down", index, sub, size=struct.unpack_from("<I", req, 4)[0] if s else None)
+            self.t = _Transfer(
+                "down", index, sub, size=struct.unpack_from("<I", req, 4)[0] if s else None
+            )
         return [b"\x60" + mux + b"\x00" * 4]
 
     def _download_segment(self, req: bytes) -> list[bytes]:
@@ -157,7 +159,9 @@ class SdoServer:
             if pst and len(data) <= pst:  # protocol switch: answer as a normal upload
                 return self._upload_start(index, sub, data)
             crc = bool(req[0] & 0x04)
-            self.t = _Transfer("block_up", index, sub, data=bytearray(data), crc=crc, blksize=blksize)
+            self.t = _Transfer(
+                "block_up", index, sub, data=bytearray(data), crc=crc, blksize=blksize
+            )
             return [bytes([0xC6]) + struct.pack("<HBI", index, sub, len(data))]
         if cs == 1 and t is not None and t.kind == "block_up_end":  # client confirms the end
             self.t = None
@@ -209,7 +213,9 @@ class SdoServer:
             self._forced(index, sub)
             self.od.check_write(index, sub)
             size = struct.unpack_from("<I", req, 4)[0] if req[0] & 0x02 else None
-            self.t = _Transfer("block_down", index, sub, size=size, crc=bool(req[0] & 0x04), blksize=BLOCK_SIZE)
+            self.t = _Transfer(
+                "block_down", index, sub, size=size, crc=bool(req[0] & 0x04), blksize=BLOCK_SIZE
+            )
             return [bytes([0xA4]) + struct.pack("<HBB", index, sub, BLOCK_SIZE) + b"\x00" * 3]
         if t is None or t.kind != "block_down" or not t.done:
             raise SdoAbort(ABORT_COMMAND)

@@ -77,7 +77,9 @@ def default_signals(device: str, rng: random.Random) -> dict[tuple[int, int], Wa
 
     if device == "dat7014":  # four Pt100 channels in 0.1 degC, drifting slowly
         bases = (215, 232, 187, 254)
-        return {(0x6401, k + 1): Drift(b, 12, rng.uniform(40, 80), phase()) for k, b in enumerate(bases)}
+        return {
+            (0x6401, k + 1): Drift(b, 12, rng.uniform(40, 80), phase()) for k, b in enumerate(bases)
+        }
     if device == "dat7130":  # eight digital inputs, eight counters
         sig: dict[tuple[int, int], Waveform] = {
             (0x6000, 1): Toggle((0.7, 1.3, 2.9, 0, 5.1, 0, 0, 11.0), rng.uniform(0, 1)),
