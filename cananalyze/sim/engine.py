@@ -45,6 +45,11 @@ class Simulation:
         self._bus_free = 0.0
         self.bus = None  # python-can bus in real-time mode
         self._t0 = 0.0
+        self._stopped = False
+
+    def stop(self) -> None:
+        """End a real-time run early (safe to call from another thread)."""
+        self._stopped = True
 
     def add(self, participant: Participant) -> Participant:
         self.participants.append(participant)
@@ -99,7 +104,7 @@ class Simulation:
             p.start(self)
         while True:
             self.now = time.monotonic() - self._t0
-            if self.now >= duration:
+            if self.now >= duration or self._stopped:
                 break
             while self._queue and self._queue[0][0] <= self.now:
                 _, _, fn = heapq.heappop(self._queue)
