@@ -71,6 +71,8 @@ class SimNode:
         self.sim: Simulation | None = None
         self.tpdos: dict[int, Tpdo] = {}
         self._gen = 0  # bumped on every reset: events of an older life are ignored
+        self._hb_gen = 0  # bumped when the heartbeat time changes
+        self._hb_due = 0.0
         self._toggle = 0
         self.emcy_sent: list[tuple[float, int, int, bytes]] = []
 
@@ -90,28 +92,39 @@ class SimNode:
         self._restart_heartbeat()
 
     def _restart_heartbeat(self) -> None:
-        self._gen += 1
+        self._hb_gen += 1
         period = self.od.get(0x1017, 0) / 1000.0
+        self._hb_due = self.sim.now + period
         if period > 0:
-            gen = self._gen
-            self.sim.after(period, lambda: self._heartbeat(gen, period))
+            gen, hb = self._gen, self._hb_gen
+            self.sim.after(period, lambda: self._heartbeat(gen, hb, period))
+
+    def _restart_pdos(self) -> None:
+        """Forget PDO timers and state (a PDO parameter changed or the node left OPERATIONAL)."""
+        self._gen += 1
+        gen = self._gen
+        hb_period = self.od.get(0x1017, 0) / 1000.0
+        if hb_period > 0:  # the heartbeat keeps its rhythm across the new generation
+            self._hb_gen += 1
+            hb = self._hb_gen
+            self.sim.after(self._hb_due - self.sim.now, lambda: self._heartbeat(gen, hb, hb_period))
         if self.state == OPERATIONAL:
             self._start_pdos()
 
-    def _heartbeat(self, gen: int, period: float) -> None:
-        if gen != self._gen:
+    def _heartbeat(self, gen: int, hb: int, period: float) -> None:
+        if gen != self._gen or hb != self._hb_gen:
             return
         if not Faults.inside(self.faults.heartbeat_off, self.sim.now):
             self.sim.send(self, 0x700 + self.node_id, bytes([self.state]))
-        self.sim.after(period, lambda: self._heartbeat(gen, period))
+        self._hb_due = self.sim.now + period
+        self.sim.after(period, lambda: self._heartbeat(gen, hb, period))
 
     def set_state(self, state: int) -> None:
         old, self.state = self.state, state
         if state == OPERATIONAL and old != OPERATIONAL:
             self._start_pdos()
         elif state != OPERATIONAL and old == OPERATIONAL:
-            self._gen += 1  # stops scan and timers; heartbeat restarts below
-            self._restart_heartbeat()
+            self._restart_pdos()  # stops input scan and timers
 
     # --- frames in ---------------------------------------------------------------------
     def on_frame(self, cob: int, data: bytes, flags: int) -> None:
@@ -163,8 +176,7 @@ class SimNode:
         if any(k[0] == 0x1017 for k in changed):
             self._restart_heartbeat()
         elif any(0x1800 <= k[0] < 0x1C00 for k in changed) and self.state == OPERATIONAL:
-            self._gen += 1
-            self._restart_heartbeat()
+            self._restart_pdos()
 
     # --- TPDOs ----------------------------------------------------------------------------
     def tpdo_params(self, n: int) -> tuple[int, bool, bool, int, float, float] | None:
