@@ -46,7 +46,7 @@ def test_boot_heartbeat_and_nmt_states():
     batch, node, _ = run("dat7014", 5, script, 4.0)
     t, data = times(batch, 0x705)
     assert data[0] == b"\x00" and abs(t[0] - 0.1) < 1e-3
-    states = {round(tt, 1): d[0] for tt, d in zip(t[1:], data[1:])}
+    states = {round(tt, 1): d[0] for tt, d in zip(t[1:], data[1:], strict=True)}
     assert states[0.5] == 0x7F and states[1.5] == 0x05 and states[2.5] == 0x04
     assert np.allclose(np.diff(t[1:-1]), 0.1, atol=1e-3)
     assert data[-1] == b"\x00" and 3.0 < t[-1] < 3.1  # boot-up after the reset, then silence
@@ -83,7 +83,9 @@ def test_sync_cyclic_sync_acyclic_and_rtr():
     assert len(t1) == len(t_sync) // 3
     assert np.allclose(np.diff(t1), 0.3, atol=1e-3)
     t2, d2 = times(batch, 0x286)
-    assert len(t2) < len(t_sync) and all(a != b for a, b in zip(d2, d2[1:]))  # only changes
+    assert len(t2) < len(t_sync) and all(
+        a != b for a, b in zip(d2[:-1], d2[1:], strict=True)
+    )  # only changes
     t3, d3 = times(batch, 0x386)
     assert len(t3) == 2 and 1.05 < t3[1] < 1.06  # the RTR (empty) and the answer
     assert d3[0] == b"" and len(d3[1]) == 8
