@@ -85,8 +85,10 @@ def test_commissioning_sample(suffix):
     assert set(hb[-5:]) == {b"\x05"} and np.allclose(np.diff(t_hb[5:]), 0.1, atol=0.001)
     assert (services == Service.GUARD_REQUEST).sum() > 50  # I-7231D supervised by guarding
     assert (services == Service.RPDO).sum() >= 16  # DAT 7130 and I-7231D outputs
-    t_di, _ = _frames(batch, 0x183)  # MCB-560 digital inputs: inhibit 50 ms respected
-    assert np.diff(t_di).min() >= 0.05 - 1e-5
+    t_di, _ = _frames(batch, 0x183)  # MCB-560 digital inputs: inhibit 100 ms respected
+    assert np.diff(t_di).min() >= 0.1 - 1e-5
+    t_ai, _ = _frames(batch, 0x283)  # analog: inhibit 100 ms, event timer 200 ms
+    assert np.diff(t_ai).min() >= 0.1 - 1e-5 and np.diff(t_ai).max() < 0.2 + 1e-3
 
 
 @pytest.mark.parametrize("suffix", SUFFIXES)

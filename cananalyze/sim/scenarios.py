@@ -63,14 +63,14 @@ def _remap_dat7014(node: SimNode):
     yield Write(nid, 0x1801, 1, u32(cob))  # enable again
 
 
-def _configure(nodes: Nodes, inhibit_ms: int = 50):
+def _configure(nodes: Nodes):
     """Transmission types, inhibit times and event timers per device."""
     for node in _of(nodes, "dat7014"):
         yield from _remap_dat7014(node)
     for node in _of(nodes, "mcb560"):
-        yield _write(node, 0x1800, 3, u16(inhibit_ms * 10))  # digital inputs: inhibit time
+        yield _write(node, 0x1800, 3, u16(1000))  # digital inputs: inhibit 100 ms
         yield _write(node, 0x1801, 3, u16(1000))  # analog: inhibit 100 ms
-        yield _write(node, 0x1801, 5, u16(500))  # and at least every 500 ms
+        yield _write(node, 0x1801, 5, u16(200))  # and at least every 200 ms
         yield _write(node, 0x1802, 1, u32(0x80000380 + node.node_id))  # analog 4-7: not wired
     for node in _of(nodes, "dat7130"):
         yield _write(node, 0x1801, 2, u8(0))  # counters 1-2: synchronous acyclic
@@ -142,9 +142,7 @@ def faults(nodes: Nodes, duration: float):
     """Steady operation with faults at fixed times (see samples/README.md)."""
     yield Wait(0.4)
     yield from _supervision(nodes)
-    yield from _configure(nodes, inhibit_ms=100)
-    for node in _of(nodes, "mcb560"):
-        yield _write(node, 0x1801, 5, u16(200))  # analog event timer 200 ms
+    yield from _configure(nodes)
     yield Nmt(0x01)
     yield Sync(SYNC_PERIOD)
     yield from _guarding(nodes)
