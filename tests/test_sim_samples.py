@@ -45,6 +45,12 @@ def _frames(batch, cob):
 def test_commissioning_sample(suffix):
     batch, out, sdo = _decode(SAMPLES / f"commissioning{suffix}")
     services = out.service
+    counts = {s: int((services == s).sum()) for s in Service}
+    assert len(batch) == 1200  # the counts samples/README.md gives
+    assert counts[Service.SYNC] == 114 and counts[Service.HEARTBEAT] == 345
+    assert counts[Service.TPDO] == 376 and counts[Service.RPDO] == 20
+    assert counts[Service.EMCY] == counts[Service.ERROR_FRAME] == 0
+    assert len(sdo) == 46
     assert (services == Service.BOOTUP).sum() == 4
     assert sorted(out.node[services == Service.BOOTUP].tolist()) == [3, 5, 6, 7]
     _, nmt = _frames(batch, 0x000)
@@ -106,6 +112,7 @@ def test_faults_sample(suffix):
     gw = [d for n, d in emcy if n == 7]
     assert gw == [bytes.fromhex("00FF810B02000000")]  # RS-485 module 0x02 timed out
     assert (out.service == Service.ERROR_FRAME).sum() == 3
+    assert len(batch) == 933 and len(rows) == 5
     t_hb, _ = _frames(batch, 0x706)  # DAT 7130 heartbeat dropout (first frame: boot-up)
     gaps = np.diff(t_hb[1:])
     assert gaps.max() > 1.4 and np.sort(gaps)[-2] < 0.11
