@@ -46,10 +46,13 @@ def load_network(path: str | Path) -> tuple[dict[int, DeviceProfile], int]:
             raise InputError(f"{where}: node id must be 1-127")
         if not isinstance(spec, dict) or ("device" in spec) == ("eds" in spec):
             raise InputError(f'{where}: give exactly one of device = "key" or eds = "file"')
-        if "device" in spec:
-            nodes[node] = load_builtin(str(spec["device"]))
-        else:
-            nodes[node] = load_eds(path.parent / str(spec["eds"]), node)
+        try:
+            if "device" in spec:
+                nodes[node] = load_builtin(str(spec["device"]))
+            else:
+                nodes[node] = load_eds(path.parent / str(spec["eds"]), node)
+        except InputError as exc:
+            raise InputError(f"{where}: {exc}") from None
     if not nodes:
         raise InputError(f"{path}: no [nodes.N] tables")
     bitrate = raw.get("bitrate", 500_000)
