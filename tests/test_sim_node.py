@@ -165,3 +165,57 @@ def test_same_seed_same_frames_other_seed_differs():
     c = simulate(scenario="steady", duration=2.0, seed=4)
     assert np.array_equal(a.t, b.t) and np.array_equal(a.data, b.data)
     assert len(a) != len(c) or not np.array_equal(a.t, c.t)
+
+
+def test_synchronous_rpdo_waits_for_sync_and_rtr_only_252_sends_the_sync_sample():
+    def script(node):
+        yield Wait(0.2)
+        yield Write(7, 0x1400, 2, u8(1))  # RPDO1 synchronous
+        yield Write(7, 0x1801, 2, u8(252))  # TPDO2 (AI): sampled at SYNC, sent on RTR
+        yield Nmt(0x01)
+        yield Wait(0.1)
+        yield Send(0x207, bytes([0x11, 0x22, 0x33]))
+        yield Wait(0.05)
+        assert node.od.get(0x6200, 1) == 0  # not applied before the SYNC
+        yield Send(0x080)
+        yield Wait(0.05)
+        assert [node.od.get(0x6200, s) for s in (1, 2, 3)] == [0x11, 0x22, 0x33]
+        yield Until(1.0)
+        yield Send(0x287, b"", FLAG_RTR)
+
+    sim = Simulation()
+    node = SimNode(7, load_builtin("i7231d"), random.Random(1), boot_delay=0.1)
+    node.signals[(0x6401, 1)] = lambda t: int(t * 1000)  # changes every millisecond
+    from cananalyze.sim.master import Master
+
+    sim.add(node)
+    master = sim.add(Master(script(node)))
+    sim.run(1.5)
+    assert master.results and all(isinstance(r, bytes) for _, r in master.results)
+    batch = sim.batch()
+    t, data = times(batch, 0x287)
+    answer = [d for d in data if d]
+    assert len(answer) == 1  # only the RTR answer, with the value sampled at the SYNC
+    t_sync = times(batch, 0x080)[0][0]
+    assert abs(struct.unpack("<h", answer[0])[0] / 1000 - t_sync) < 0.002
+
+
+def test_life_guarding_error_emcy_per_device():
+    for key, nid, expected in (
+        ("mcb560", 3, "3081110000000030"),  # Chip-EC 0x30000000: life-guarding error
+        ("i7231d", 7, "3081110700000000"),  # ICP DAS code 0x07: life guarding fails
+    ):
+
+        def script(node, nid=nid):
+            yield Wait(0.2)
+            yield Write(nid, 0x100C, 0, u16(100))
+            yield Write(nid, 0x100D, 0, u8(3))
+            yield Guard(nid, 0.1)
+            yield Wait(0.5)
+            yield Guard(nid, 0)  # the master stops guarding
+
+        batch, node, _ = run(key, nid, script, 2.0)
+        t, data = times(batch, 0x80 + nid)
+        assert [d.hex().upper() for d in data] == [expected]
+        last_guard = times(batch, 0x700 + nid)[0][-1]
+        assert abs(t[0] - last_guard - 0.3) < 0.01  # guard time x life time factor

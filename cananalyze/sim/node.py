@@ -33,6 +33,7 @@ class Tpdo:
     sync_count: int = 0
     pending: bool = False
     timer_token: int = 0
+    snapshot: bytes | None = None  # type 252: data sampled at the last SYNC
 
 
 @dataclass
@@ -75,6 +76,9 @@ class SimNode:
         self._hb_due = 0.0
         self._toggle = 0
         self.emcy_sent: list[tuple[float, int, int, bytes]] = []
+        self._rpdo_pending: dict[int, bytes] = {}  # synchronous RPDOs wait for the next SYNC
+        self._guard_token = 0
+        self.life_guard_emcy = life_guard_emcy_for(profile.key)
 
     # --- life cycle ---------------------------------------------------------------------
     def start(self, sim: Simulation) -> None:
@@ -86,7 +90,9 @@ class SimNode:
         self.od.reset(communication_only)
         self.sdo.t = None
         self.tpdos = {}
+        self._rpdo_pending = {}
         self._toggle = 0
+        self._guard_token += 1
         self.state = PRE_OPERATIONAL
         self.sim.send(self, 0x700 + self.node_id, b"\x00")
         self._restart_heartbeat()
@@ -160,6 +166,21 @@ class SimNode:
     def _guard_reply(self) -> None:
         self.sim.send(self, 0x700 + self.node_id, bytes([self.state | self._toggle << 7]))
         self._toggle ^= 1
+        self._arm_life_guarding()
+
+    def _arm_life_guarding(self) -> None:
+        """Life guarding: no guard request within guard time x life time factor is an error."""
+        life = self.od.get(0x100C, 0) * self.od.get(0x100D, 0) / 1000.0
+        self._guard_token += 1
+        if life <= 0:
+            return
+        token, gen = self._guard_token, self._gen
+
+        def expire() -> None:
+            if token == self._guard_token and gen == self._gen:
+                self.life_guard_emcy(self)
+
+        self.sim.after(life, expire)
 
     def _sdo_request(self, data: bytes) -> None:
         if Faults.inside(self.faults.sdo_mute, self.sim.now):
@@ -288,13 +309,18 @@ class SimNode:
         self.sim.after(period, expire)
 
     def _on_sync(self) -> None:
+        for n, data in sorted(self._rpdo_pending.items()):
+            self._apply_rpdo(n, data)
+        self._rpdo_pending = {}
         self._sample_inputs()
         for n, pdo in self.tpdos.items():
             params = self.tpdo_params(n)
             if not params or not params[1]:
                 continue
             ttype = params[3]
-            if ttype == 0:  # synchronous acyclic: on SYNC, only if the data changed
+            if ttype == 252:  # synchronous RTR-only: sample now, send on request
+                pdo.snapshot = self.tpdo_payload(n)
+            elif ttype == 0:  # synchronous acyclic: on SYNC, only if the data changed
                 if self.tpdo_payload(n) != pdo.last:
                     self.send_tpdo(n)
             elif 1 <= ttype <= 240:
@@ -308,7 +334,7 @@ class SimNode:
             for n in self.tpdos:
                 params = self.tpdo_params(n)
                 if params and params[1] and params[2] and params[0] == cob:
-                    self.sim.after(SDO_DELAY, lambda n=n: self.send_tpdo(n))
+                    self.sim.after(SDO_DELAY, lambda n=n: self._answer_rtr(n))
             return
         for n in range(1, 513):
             base = 0x1400 + n - 1
@@ -319,7 +345,18 @@ class SimNode:
             cob_param = self.od.get(base, 1)
             if cob_param & 0x80000000 or cob_param & 0x7FF != cob:
                 continue
-            self._apply_rpdo(n, data)
+            if self.od.get(base, 2, 255) <= 240:  # synchronous: takes effect at the next SYNC
+                self._rpdo_pending[n] = bytes(data)
+            else:
+                self._apply_rpdo(n, data)
+
+    def _answer_rtr(self, n: int) -> None:
+        pdo = self.tpdos.get(n)
+        params = self.tpdo_params(n)
+        if pdo is not None and params and params[3] == 252 and pdo.snapshot is not None:
+            pdo.last, pdo.last_sent = pdo.snapshot, self.sim.send(self, params[0], pdo.snapshot)
+        else:
+            self.send_tpdo(n)
 
     def _apply_rpdo(self, n: int, data: bytes) -> None:
         """Write the RPDO's bytes into the mapped output objects."""
@@ -375,6 +412,19 @@ def error_register(error_code: int) -> int:
     if error_code == 0:
         return 0
     return 0x01 | _REGISTER_BITS.get(error_code >> 12, 0)
+
+
+def generic_life_guard_emcy(node: SimNode) -> None:
+    node.emcy(0x8130)
+
+
+def life_guard_emcy_for(key: str):
+    """How a device reports a life-guarding error: CiA 301 0x8130 plus its vendor bytes."""
+    if key == "mcb560":
+        return lambda node: mcb560_emcy(node, 0x8130, 0x30000000)
+    if key == "i7231d":
+        return lambda node: i7231d_emcy(node, 0x8130, 0x07)  # "life guarding fails"
+    return generic_life_guard_emcy
 
 
 def mcb560_emcy(node: SimNode, error_code: int, chip_ec: int) -> None:
