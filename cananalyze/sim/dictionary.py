@@ -19,6 +19,11 @@ ABORT_TOO_LONG = 0x06070012
 ABORT_TOO_SHORT = 0x06070013
 ABORT_VALUE_RANGE = 0x06090030
 
+# CiA 301 integer data types: little-endian, fixed size; read without canopen's codec
+# because the node reads PDO parameters on every input scan.
+_SIGNED = {0x02, 0x03, 0x04, 0x10, 0x12, 0x13, 0x14, 0x15}
+_UNSIGNED = {0x01, 0x05, 0x06, 0x07, 0x16, 0x18, 0x19, 0x1A, 0x1B}
+
 
 class SdoAbort(Exception):
     """An access the object dictionary refuses, with its CiA 301 abort code."""
@@ -101,6 +106,10 @@ class Dictionary:
         if raw is None or not raw:
             return default
         var = self.vars[(index, subindex)]
+        if var.data_type in _UNSIGNED:
+            return int.from_bytes(raw, "little")
+        if var.data_type in _SIGNED:
+            return int.from_bytes(raw, "little", signed=True)
         try:
             value = var.decode_raw(raw)
         except (ValueError, TypeError):
@@ -110,6 +119,13 @@ class Dictionary:
     def set(self, index: int, subindex: int, value: int) -> None:
         var = self.vars.get((index, subindex))
         if var is None:
+            return
+        old = self.values[(index, subindex)]
+        if old and (var.data_type in _UNSIGNED or var.data_type in _SIGNED):
+            bits = 8 * len(old)
+            self.values[(index, subindex)] = (value & ((1 << bits) - 1)).to_bytes(
+                len(old), "little"
+            )
             return
         self.values[(index, subindex)] = bytes(var.encode_raw(value))
 
