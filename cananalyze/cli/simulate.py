@@ -22,7 +22,7 @@ def add_parser(subparsers) -> None:
     p.add_argument(
         "--network",
         metavar="FILE",
-        help="network file with [nodes.N] device/eds (default: one of each seed device)",
+        help="network file (docs/network-file.md; default: one of each seed device)",
     )
     p.add_argument(
         "-i",
@@ -72,16 +72,17 @@ def run(args: argparse.Namespace) -> int:
     if args.interface and not args.channel:
         raise UsageError("-i needs -c CHANNEL")
     if args.network:
-        profiles, bitrate = load_network(args.network)
+        net = load_network(args.network)
+        profiles, bitrate, config = net.profiles, net.bitrate, net.config
     else:
-        profiles, bitrate = default_network(), 500_000
+        profiles, bitrate, config = default_network(), 500_000, {}
     bitrate = args.bitrate or bitrate
     if args.to:
         from ..outputs.logfile import write_log
 
         if not args.to.lower().endswith((".log", ".asc", ".blf")):
             raise UsageError(f"{args.to}: --to writes .log (candump), .asc or .blf")
-        sim, _, _ = build(profiles, args.scenario, args.duration, args.seed, bitrate)
+        sim, _, _ = build(profiles, args.scenario, args.duration, args.seed, bitrate, config=config)
         sim.run(args.duration)
         batch = sim.batch()
         try:
@@ -95,7 +96,13 @@ def run(args: argparse.Namespace) -> int:
     import can
 
     sim, _, _ = build(
-        profiles, args.scenario, args.duration, args.seed, bitrate, master=not args.no_master
+        profiles,
+        args.scenario,
+        args.duration,
+        args.seed,
+        bitrate,
+        master=not args.no_master,
+        config=config,
     )
     try:
         bus = can.Bus(interface=args.interface, channel=args.channel)

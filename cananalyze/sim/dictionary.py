@@ -36,9 +36,12 @@ class SdoAbort(Exception):
 class Dictionary:
     """Encoded values and access rights of every object of one node."""
 
-    def __init__(self, profile: DeviceProfile, node_id: int):
+    def __init__(
+        self, profile: DeviceProfile, node_id: int, config: list[tuple[int, int, int]] = ()
+    ):
         self.profile = profile
         self.node_id = node_id
+        self.config = list(config)  # stored parameters (index, subindex, value) over defaults
         self.values: dict[tuple[int, int], bytes] = {}
         self.vars: dict[tuple[int, int], object] = {}
         self.indices: set[int] = set()
@@ -60,6 +63,10 @@ class Dictionary:
                     continue
                 self.vars[key] = var
                 self.values[key] = self._default(var)
+        for index, subindex, value in self.config:
+            if communication_only and not 0x1000 <= index < 0x2000:
+                continue
+            self.set(index, subindex, value)
 
     def _default(self, var) -> bytes:
         value = self.profile.value(var.index, var.subindex, self.node_id)

@@ -1,61 +1,47 @@
-"""Which nodes the simulator emulates: a network file, or the four seed devices.
+"""Which nodes the simulator emulates: the project's network file, or the four seed devices.
 
-Format (TOML), until the project's own network file documents more:
-
-    bitrate = 500000
-    [nodes.3]
-    device = "mcb560"          # a built-in profile
-    [nodes.12]
-    eds = "my_device.eds"      # or any EDS/DCF, relative to this file
+The network file is the analyser's own (docs/network-file.md, read by
+`cananalyze.network.netfile`), so one file describes the bus to both. Its
+configuration (heartbeat_ms, PDO settings) becomes the node's stored parameters:
+applied over the profile defaults at every reset, as a configured device keeps them.
 """
 
 from __future__ import annotations
 
-import tomllib
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import InputError
-from ..network.profile import DeviceProfile, load_builtin, load_eds
+from ..network.profile import DeviceProfile, load_builtin
 
 # The default bus: one of each seed device (node IDs as in samples/network.toml).
 DEFAULT_NODES = {3: "mcb560", 5: "dat7014", 6: "dat7130", 7: "i7231d"}
+DEFAULT_BITRATE = 500_000
+
+
+@dataclass
+class SimNetwork:
+    profiles: dict[int, DeviceProfile]
+    bitrate: int = DEFAULT_BITRATE
+    config: dict[int, list[tuple[int, int, int]]] = field(default_factory=dict)
 
 
 def default_network() -> dict[int, DeviceProfile]:
     return {node: load_builtin(key) for node, key in DEFAULT_NODES.items()}
 
 
-def load_network(path: str | Path) -> tuple[dict[int, DeviceProfile], int]:
-    """(node id -> profile, bitrate) from a network file; InputError naming the problem."""
-    path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            raw = tomllib.load(fh)
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read network file: {exc.strerror}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{path}: not valid TOML: {exc}") from None
-    nodes: dict[int, DeviceProfile] = {}
-    for key, spec in raw.get("nodes", {}).items():
-        where = f"{path}: [nodes.{key}]"
-        try:
-            node = int(key, 0)
-        except ValueError:
-            raise InputError(f"{where}: node id must be a number 1-127") from None
-        if not 1 <= node <= 127:
-            raise InputError(f"{where}: node id must be 1-127")
-        if not isinstance(spec, dict) or ("device" in spec) == ("eds" in spec):
-            raise InputError(f'{where}: give exactly one of device = "key" or eds = "file"')
-        try:
-            if "device" in spec:
-                nodes[node] = load_builtin(str(spec["device"]))
-            else:
-                nodes[node] = load_eds(path.parent / str(spec["eds"]), node)
-        except InputError as exc:
-            raise InputError(f"{where}: {exc}") from None
-    if not nodes:
-        raise InputError(f"{path}: no [nodes.N] tables")
-    bitrate = raw.get("bitrate", 500_000)
-    if not isinstance(bitrate, int) or bitrate <= 0:
-        raise InputError(f"{path}: bitrate must be a positive integer")
-    return nodes, bitrate
+def load_network(path: str | Path) -> SimNetwork:
+    """The nodes of a network file; InputError when a node has no device or EDS."""
+    from ..network.netfile import load_network as read_netfile
+
+    spec = read_netfile(path)
+    profiles: dict[int, DeviceProfile] = {}
+    config: dict[int, list[tuple[int, int, int]]] = {}
+    for node, ns in sorted(spec.nodes.items()):
+        if ns.profile is None:
+            raise InputError(f"{path}: node {node}: the simulator needs its device or eds")
+        profiles[node] = ns.profile
+        config[node] = list(ns.writes)
+    if not profiles:
+        raise InputError(f"{path}: no nodes to simulate")
+    return SimNetwork(profiles, spec.bitrate or DEFAULT_BITRATE, config)

@@ -59,11 +59,12 @@ class SimNode:
         rng: random.Random | None = None,
         signals: dict[tuple[int, int], Waveform] | None = None,
         boot_delay: float | None = None,
+        config: list[tuple[int, int, int]] = (),
     ):
         self.node_id = node_id
         self.profile = profile
         self.rng = rng or random.Random(node_id)
-        self.od = Dictionary(profile, node_id)
+        self.od = Dictionary(profile, node_id, config)
         self.sdo = SdoServer(self.od)
         self.signals = signals if signals is not None else default_signals(profile.key, self.rng)
         self.boot_delay = boot_delay if boot_delay is not None else self.rng.uniform(0.05, 0.3)

@@ -20,14 +20,20 @@ def build(
     seed: int = 0,
     bitrate: int = 500_000,
     master: bool = True,
+    config: dict[int, list[tuple[int, int, int]]] | None = None,
 ) -> tuple[Simulation, dict[int, SimNode], Master | None]:
-    """A Simulation with one SimNode per profile and (optionally) the scenario's master."""
+    """A Simulation with one SimNode per profile and (optionally) the scenario's master.
+
+    config: per node, stored parameters (index, subindex, value) from a network file.
+    """
     if scenario not in SCENARIOS:
         raise ValueError(f"unknown scenario {scenario!r}")
     profiles = profiles if profiles is not None else default_network()
     sim = Simulation(bitrate=bitrate)
     nodes = {
-        nid: sim.add(SimNode(nid, prof, random.Random(seed * 1000 + nid)))
+        nid: sim.add(
+            SimNode(nid, prof, random.Random(seed * 1000 + nid), config=(config or {}).get(nid, ()))
+        )
         for nid, prof in sorted(profiles.items())
     }
     m = sim.add(Master(script(scenario, nodes, duration))) if master else None
