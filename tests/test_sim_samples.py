@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import argparse
 import struct
 
 import numpy as np
 import pytest
 from conftest import SAMPLES
 
+from cananalyze.cli.pipeline import build_decoder
 from cananalyze.decoder import Decoder
 from cananalyze.io.source import read_all
 from cananalyze.protocol.services import Service
@@ -132,3 +134,20 @@ def test_faults_sample(suffix):
         (3, 0x2FFF, 0, 0x06020000),
         (5, 0x1008, 0, 0x05040000),
     }
+
+
+def test_faults_signals_with_the_network_model():
+    """Decoded as `decode --network samples/network.toml` does: the model follows the
+    DAT 7014 remap, so TPDO2 carries ch1 and ch3 in degC, and ch3 leaves the Pt100 range."""
+    args = argparse.Namespace(network=str(SAMPLES / "network.toml"), sdo_timeout=1.0)
+    dec = build_decoder(args)
+    out = dec.decode(read_all(SAMPLES / "faults.log"))
+    blocks = [b for b in out.signals if b.node == 5 and b.pdo == "tpdo2"]
+    assert blocks and all(set(b.columns) == {"ch1", "ch3"} for b in blocks)
+    ch3 = np.concatenate([b.columns["ch3"] for b in blocks]).astype(float)
+    assert blocks[0].units["ch3"] == "°C"
+    assert np.isclose(ch3.max(), 3276.7)  # 0x7FFF: beyond the Pt100 range (-200..850 degC)
+    normal = ch3[ch3 < 850]
+    assert normal.size > 5 and ((normal > 15) & (normal < 25)).all()
+    mcb = [b for b in out.signals if b.node == 3 and b.pdo == "tpdo2"]
+    assert mcb and mcb[0].units.get("analog0") == "mV"
