@@ -1,1 +1,7 @@
-"""Timing analysis and conformance rules."""
+"""Timing analysis, conformance rules and log assertions (`cananalyze check`)."""
+
+from .config import ConfigSource, FileConfig
+from .engine import Checker
+from .finding import Finding
+
+__all__ = ["Checker", "ConfigSource", "FileConfig", "Finding"]
