@@ -40,7 +40,9 @@ def run_rules(source: Source, rules: list[Rule], config=None) -> list[Finding]:
         # caller's batches are not changed), then an empty end-of-log batch
         last = None
         for b in source:
-            view = DecodedBatch(b.frames, b.service, b.node, b.pdo, b.notes, list(b.records), b.signals)
+            view = DecodedBatch(
+                b.frames, b.service, b.node, b.pdo, b.notes, list(b.records), b.signals
+            )
             checker.process(view)
             last = b
         tail = Decoder().decode(FrameBatch.empty(last.frames.channels if last else ()))
@@ -61,14 +63,20 @@ def _fail(findings: list[Finding], what: str) -> None:
 def assert_heartbeat(source: Source, node: int, period_ms: float, tolerance: float = 0.1) -> None:
     from .checks.assert_heartbeat import AssertHeartbeat
 
-    _fail(run_rules(source, [AssertHeartbeat(node=node, period_ms=period_ms, tolerance=tolerance)]),
-          f"heartbeat of node {node} every {period_ms:g} ms ± {tolerance:.0%}")
+    _fail(
+        run_rules(source, [AssertHeartbeat(node=node, period_ms=period_ms, tolerance=tolerance)]),
+        f"heartbeat of node {node} every {period_ms:g} ms ± {tolerance:.0%}",
+    )
 
 
 def assert_no_emcy(source: Source, allow: Iterable[int] = (), node: int | None = None) -> None:
     from .checks.emcy import EmcyRule
 
-    found = [f for f in run_rules(source, [EmcyRule(allow=list(allow))]) if node is None or f.node == node]
+    found = [
+        f
+        for f in run_rules(source, [EmcyRule(allow=list(allow))])
+        if node is None or f.node == node
+    ]
     _fail(found, "no EMCY" + (f" from node {node}" if node is not None else ""))
 
 
@@ -81,25 +89,33 @@ def assert_sdo_ok(source: Source, max_latency_ms: float | None = None) -> None:
 def assert_pdo_rate(source: Source, cob_id: int, min_hz: float, max_hz: float) -> None:
     from .checks.assert_pdo_rate import AssertPdoRate
 
-    _fail(run_rules(source, [AssertPdoRate(cob_id=cob_id, min_hz=min_hz, max_hz=max_hz)]),
-          f"PDO 0x{cob_id:03X} between {min_hz:g} and {max_hz:g} Hz")
+    _fail(
+        run_rules(source, [AssertPdoRate(cob_id=cob_id, min_hz=min_hz, max_hz=max_hz)]),
+        f"PDO 0x{cob_id:03X} between {min_hz:g} and {max_hz:g} Hz",
+    )
 
 
 def assert_signal_range(source: Source, node: int, signal: str, lo: float, hi: float) -> None:
     from .checks.assert_signal import AssertSignal
 
-    _fail(run_rules(source, [AssertSignal(node=node, signal=signal, min=lo, max=hi)]),
-          f"{signal} of node {node} within {lo:g}..{hi:g}")
+    _fail(
+        run_rules(source, [AssertSignal(node=node, signal=signal, min=lo, max=hi)]),
+        f"{signal} of node {node} within {lo:g}..{hi:g}",
+    )
 
 
 def assert_operational_after_boot(source: Source, node: int, within_s: float) -> None:
     from .checks.assert_boot import AssertOperational
 
-    _fail(run_rules(source, [AssertOperational(node=node, within_s=within_s)]),
-          f"node {node} operational within {within_s:g} s of boot-up")
+    _fail(
+        run_rules(source, [AssertOperational(node=node, within_s=within_s)]),
+        f"node {node} operational within {within_s:g} s of boot-up",
+    )
 
 
-def assert_clean(source: Source, rules_file: str | Path | None = None, network_file: str | Path | None = None) -> None:
+def assert_clean(
+    source: Source, rules_file: str | Path | None = None, network_file: str | Path | None = None
+) -> None:
     """Every default rule (or the rules file's) passes."""
     from .checks.build import build_checker
 

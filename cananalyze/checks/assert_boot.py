@@ -21,12 +21,26 @@ class AssertOperational(Rule):
         sources = ctx.nmt.sources.get(self.node, [])
         boots = [i for i, s in enumerate(sources) if s == "bootup"]
         if not boots:
-            self.emit(ctx.t_end or 0.0, self.node, None, f"no boot-up of node {self.node} in the log",
-                      None, f"operational within {self.within:g} s of boot-up")
+            self.emit(
+                ctx.t_end or 0.0,
+                self.node,
+                None,
+                f"no boot-up of node {self.node} in the log",
+                None,
+                f"operational within {self.within:g} s of boot-up",
+            )
         for i in boots:
             t_boot = times[i]
-            op = next((times[j] for j in range(i + 1, len(times)) if states[j] == OPERATIONAL), None)
+            op = next(
+                (times[j] for j in range(i + 1, len(times)) if states[j] == OPERATIONAL), None
+            )
             if op is None or op - t_boot > self.within:
                 got = "never" if op is None else f"after {op - t_boot:.3f} s"
-                self.emit(t_boot, self.node, None, f"node {self.node} operational {got} after its boot-up",
-                          None if op is None else round(op - t_boot, 6), self.within)
+                self.emit(
+                    t_boot,
+                    self.node,
+                    None,
+                    f"node {self.node} operational {got} after its boot-up",
+                    None if op is None else round(op - t_boot, 6),
+                    self.within,
+                )

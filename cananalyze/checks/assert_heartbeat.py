@@ -27,10 +27,24 @@ class AssertHeartbeat(Rule):
             gap = g.gap[sl]
             p = self.period / 1000.0
             for i in (np.flatnonzero(np.abs(gap - p) > p * self.tolerance) + sl.start).tolist():
-                self.emit(g.t[i], node, 0x700 + node, f"heartbeat gap {ms(g.gap[i])} ms, required "
-                          f"{self.period:g} ms ± {self.tolerance:.0%}", ms(g.gap[i]), self.period, row=g.row[i])
+                self.emit(
+                    g.t[i],
+                    node,
+                    0x700 + node,
+                    f"heartbeat gap {ms(g.gap[i])} ms, required "
+                    f"{self.period:g} ms ± {self.tolerance:.0%}",
+                    ms(g.gap[i]),
+                    self.period,
+                    row=g.row[i],
+                )
 
     def finish(self, ctx: Context) -> None:
         if not self.seen:
-            self.emit(ctx.t_end or 0.0, self.node, 0x700 + self.node, f"no heartbeat from node {self.node}",
-                      0, self.period)
+            self.emit(
+                ctx.t_end or 0.0,
+                self.node,
+                0x700 + self.node,
+                f"no heartbeat from node {self.node}",
+                0,
+                self.period,
+            )

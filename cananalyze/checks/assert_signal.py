@@ -11,7 +11,9 @@ class AssertSignal(Rule):
     name = "assert_signal"
     why = "A process value left its allowed range; check the sensor, its scaling and the process itself."
 
-    def __init__(self, node: int, signal: str, min: float = -np.inf, max: float = np.inf, **kw) -> None:  # noqa: A002
+    def __init__(
+        self, node: int, signal: str, min: float = -np.inf, max: float = np.inf, **kw
+    ) -> None:  # noqa: A002
         super().__init__(**kw)
         self.node, self.signal = int(node), str(signal)
         self.lo, self.hi = float(min), float(max)
@@ -26,10 +28,23 @@ class AssertSignal(Rule):
             v = np.asarray(block.columns[self.signal], float)
             for i in np.flatnonzero((v < self.lo) | (v > self.hi)).tolist():
                 row = int(block.rows[i])
-                self.emit(ctx.t[row], self.node, block.cob_id, f"{self.signal} = {v[i]:g} outside "
-                          f"{self.lo:g}..{self.hi:g}", float(v[i]), [self.lo, self.hi], row=row)
+                self.emit(
+                    ctx.t[row],
+                    self.node,
+                    block.cob_id,
+                    f"{self.signal} = {v[i]:g} outside {self.lo:g}..{self.hi:g}",
+                    float(v[i]),
+                    [self.lo, self.hi],
+                    row=row,
+                )
 
     def finish(self, ctx: Context) -> None:
         if not self.seen:
-            self.emit(ctx.t_end or 0.0, self.node, None, f"signal {self.signal} of node {self.node} never seen",
-                      None, [self.lo, self.hi])
+            self.emit(
+                ctx.t_end or 0.0,
+                self.node,
+                None,
+                f"signal {self.signal} of node {self.node} never seen",
+                None,
+                [self.lo, self.hi],
+            )

@@ -7,14 +7,25 @@ import numpy as np
 from ..protocol.services import Service
 from .rule import Context, Rule
 
-_SENT_BY_NODE = np.array([Service.HEARTBEAT, Service.TPDO, Service.EMCY, Service.SDO_RESPONSE,
-                          Service.GUARD_RESPONSE, Service.BOOTUP], np.uint8)
+_SENT_BY_NODE = np.array(
+    [
+        Service.HEARTBEAT,
+        Service.TPDO,
+        Service.EMCY,
+        Service.SDO_RESPONSE,
+        Service.GUARD_RESPONSE,
+        Service.BOOTUP,
+    ],
+    np.uint8,
+)
 
 
 class BootupRule(Rule):
     name = "unexpected_bootup"
-    why = ("A node that boots without being told to has reset itself (watchdog, brown-out, crash); "
-           "it lost its configuration and is pre-operational; check its supply and EMCY history.")
+    why = (
+        "A node that boots without being told to has reset itself (watchdog, brown-out, crash); "
+        "it lost its configuration and is pre-operational; check its supply and EMCY history."
+    )
 
     def __init__(self, reset_window_s: float = 10.0, **kw) -> None:
         super().__init__(**kw)
@@ -31,7 +42,9 @@ class BootupRule(Rule):
             self.alive[sent] = True
             return
         fb = b.frames
-        events = sorted([(int(r), "boot") for r in boots.tolist()] + [(int(r), "nmt") for r in nmt.tolist()])
+        events = sorted(
+            [(int(r), "boot") for r in boots.tolist()] + [(int(r), "nmt") for r in nmt.tolist()]
+        )
         sent_mask = np.isin(b.service, _SENT_BY_NODE) & (b.node >= 0)
         first_row = np.full(128, len(b), np.int64)
         rows = np.flatnonzero(sent_mask)
@@ -49,7 +62,14 @@ class BootupRule(Rule):
             seen_before = self.alive[node] or first_row[node] < row
             reset = self.last_reset.get(node)
             if seen_before and (reset is None or t - reset > self.window):
-                self.emit(t, node, 0x700 + node, f"node {node} booted without an NMT reset command",
-                          "boot-up", "no boot-up while running", row=row)
+                self.emit(
+                    t,
+                    node,
+                    0x700 + node,
+                    f"node {node} booted without an NMT reset command",
+                    "boot-up",
+                    "no boot-up while running",
+                    row=row,
+                )
             self.last_reset.pop(node, None)
         self.alive[b.node[rows]] = True

@@ -9,8 +9,11 @@ from .engine import Checker
 from .rule import Rule
 
 
-def build_checker(rules_file: str | Path | None = None, network_file: str | Path | None = None,
-                  rules: list[Rule] | None = None) -> Checker:
+def build_checker(
+    rules_file: str | Path | None = None,
+    network_file: str | Path | None = None,
+    rules: list[Rule] | None = None,
+) -> Checker:
     from .rulesfile import load_network, load_rules
 
     network, base = None, None

@@ -48,7 +48,9 @@ class FileConfig:
 
     def __init__(self, network: dict | None = None, base: Path | None = None) -> None:
         network = network or {}
-        self.nodes: dict[int, dict] = {int(k): dict(v or {}) for k, v in (network.get("nodes") or {}).items()}
+        self.nodes: dict[int, dict] = {
+            int(k): dict(v or {}) for k, v in (network.get("nodes") or {}).items()
+        }
         self.sync: dict = dict(network.get("sync") or {})
         self.extra_ids: set[int] = {int(x) for x in network.get("known_cob_ids") or []}
         self._pdos: dict[int, tuple[int, PdoConfig]] = {}
@@ -61,7 +63,10 @@ class FileConfig:
                     if p.valid:
                         self._pdos[p.cob_id] = (node, p)
         for cob, spec in (network.get("pdos") or {}).items():
-            self._pdos[int(cob)] = (int(spec["node"]), _pdo_from_spec(int(cob), spec, self._pdos.get(int(cob))))
+            self._pdos[int(cob)] = (
+                int(spec["node"]),
+                _pdo_from_spec(int(cob), spec, self._pdos.get(int(cob))),
+            )
 
     def _od(self, node: int, key: str, index: int, sub: int = 0) -> float | None:
         spec = self.nodes.get(node)
@@ -118,7 +123,9 @@ def _load_profile(name: str, node: int, base: Path | None):
     if base is not None and not path.is_absolute():
         path = base / path
     if not path.exists():
-        raise InputError(f"node {node}: profile {name!r} is neither a built-in ({', '.join(BUILTIN_KEYS)}) nor a file")
+        raise InputError(
+            f"node {node}: profile {name!r} is neither a built-in ({', '.join(BUILTIN_KEYS)}) nor a file"
+        )
     return load_eds(path, node)
 
 

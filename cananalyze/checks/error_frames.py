@@ -10,8 +10,10 @@ from .rule import Context, Rule
 
 class ErrorFrameRule(Rule):
     name = "error_frames"
-    why = ("Error frames come from wiring, termination, bit-timing or a failing transceiver; each one "
-           "destroys a frame and repeated ones drive nodes bus-off; check termination and bitrate.")
+    why = (
+        "Error frames come from wiring, termination, bit-timing or a failing transceiver; each one "
+        "destroys a frame and repeated ones drive nodes bus-off; check termination and bitrate."
+    )
 
     def __init__(self, max: int = 0, **kw) -> None:  # noqa: A002 - the rules file's key
         super().__init__(**kw)
@@ -29,5 +31,11 @@ class ErrorFrameRule(Rule):
 
     def finish(self, ctx: Context) -> None:
         if self.count > self.max:
-            self.emit(self.first or 0.0, None, None, f"{self.count} CAN error frames, at most {self.max} allowed",
-                      self.count, self.max)
+            self.emit(
+                self.first or 0.0,
+                None,
+                None,
+                f"{self.count} CAN error frames, at most {self.max} allowed",
+                self.count,
+                self.max,
+            )

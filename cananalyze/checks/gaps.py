@@ -25,6 +25,8 @@ class Gaps:
 
     def groups(self):
         """(key, slice) per key present in the batch: a loop over keys, not frames."""
+        if self.key.size == 0:
+            return
         ends = np.append(self.starts[1:], self.key.size)
         for s, e in zip(self.starts.tolist(), ends.tolist(), strict=True):
             yield int(self.key[s]), slice(s, e)

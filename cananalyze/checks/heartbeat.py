@@ -13,8 +13,10 @@ from .rule import Context, Rule, ms
 
 class HeartbeatRule(Rule):
     name = "heartbeat"
-    why = ("A node whose heartbeat is late looks dead to its consumers, which then stop or fault; "
-           "check the node's load, its 0x1017 setting and the bus load at that moment.")
+    why = (
+        "A node whose heartbeat is late looks dead to its consumers, which then stop or fault; "
+        "check the node's load, its 0x1017 setting and the bus load at that moment."
+    )
 
     def __init__(self, **kw) -> None:
         super().__init__(**kw)
@@ -35,16 +37,29 @@ class HeartbeatRule(Rule):
                 self.configured.add(node)
                 limit = period * (1 + self.tolerance) / 1000.0
                 for i in (np.flatnonzero(gap[sl] > limit) + sl.start).tolist():
-                    self.emit(g.prev[i], node, 0x700 + node,
-                              f"heartbeat dropout: no heartbeat for {ms(gap[i])} ms from {g.prev[i]:.6f}",
-                              ms(gap[i]), period, row=g.row[i])
+                    self.emit(
+                        g.prev[i],
+                        node,
+                        0x700 + node,
+                        f"heartbeat dropout: no heartbeat for {ms(gap[i])} ms from {g.prev[i]:.6f}",
+                        ms(gap[i]),
+                        period,
+                        row=g.row[i],
+                    )
             for consumer, limit_ms in consumers.get(node, ()):
                 for i in (np.flatnonzero(gap[sl] > limit_ms / 1000.0) + sl.start).tolist():
-                    self.emit(g.prev[i] + limit_ms / 1000.0, node, 0x700 + node,
-                              f"node {consumer}'s heartbeat consumer time for node {node} expired "
-                              f"(gap {ms(gap[i])} ms)", ms(gap[i]), limit_ms, row=g.row[i],
-                              why="The consumer raises a heartbeat event (usually an EMCY 0x8130 and a fault "
-                                  "reaction); check the producer and the consumer time in 0x1016.")
+                    self.emit(
+                        g.prev[i] + limit_ms / 1000.0,
+                        node,
+                        0x700 + node,
+                        f"node {consumer}'s heartbeat consumer time for node {node} expired "
+                        f"(gap {ms(gap[i])} ms)",
+                        ms(gap[i]),
+                        limit_ms,
+                        row=g.row[i],
+                        why="The consumer raises a heartbeat event (usually an EMCY 0x8130 and a fault "
+                        "reaction); check the producer and the consumer time in 0x1016.",
+                    )
 
     def _consumers(self, ctx: Context) -> dict[int, list[tuple[int, float]]]:
         out: dict[int, list[tuple[int, float]]] = {}
@@ -67,14 +82,28 @@ class HeartbeatRule(Rule):
                 inferred = True
                 limit = max(2.0, 1 + self.tolerance) * period / 1000.0
                 for i in np.flatnonzero(gaps > limit).tolist():
-                    self.emit(t[i], node, 0x700 + node,
-                              f"heartbeat dropout: no heartbeat for {ms(gaps[i])} ms from {t[i]:.6f} "
-                              f"(expected period inferred from the median, 0x1017 not configured)",
-                              ms(gaps[i]), round(period, 3), severity="warning")
-            limit = period * (max(2.0, 1 + self.tolerance) if inferred else 1 + self.tolerance) / 1000.0
+                    self.emit(
+                        t[i],
+                        node,
+                        0x700 + node,
+                        f"heartbeat dropout: no heartbeat for {ms(gaps[i])} ms from {t[i]:.6f} "
+                        f"(expected period inferred from the median, 0x1017 not configured)",
+                        ms(gaps[i]),
+                        round(period, 3),
+                        severity="warning",
+                    )
+            limit = (
+                period * (max(2.0, 1 + self.tolerance) if inferred else 1 + self.tolerance) / 1000.0
+            )
             if ctx.t_end is not None and ctx.t_end - last > limit:
-                self.emit(last + period / 1000.0, node, 0x700 + node,
-                          f"heartbeat stopped: last one at {last:.6f}, log goes on for "
-                          f"{ms(ctx.t_end - last)} ms", ms(ctx.t_end - last), round(period, 3),
-                          why="The node fell silent (power, reset loop, bus-off or crash); check its supply "
-                              "and whether it went bus-off (error frames just before).")
+                self.emit(
+                    last + period / 1000.0,
+                    node,
+                    0x700 + node,
+                    f"heartbeat stopped: last one at {last:.6f}, log goes on for "
+                    f"{ms(ctx.t_end - last)} ms",
+                    ms(ctx.t_end - last),
+                    round(period, 3),
+                    why="The node fell silent (power, reset loop, bus-off or crash); check its supply "
+                    "and whether it went bus-off (error frames just before).",
+                )

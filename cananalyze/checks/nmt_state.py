@@ -18,7 +18,13 @@ PRE_OPERATIONAL = 0x7F
 STOPPED = 0x04
 BOOTUP = 0x00
 # NMT command specifier -> state the command puts a node in (reset: boot-up follows)
-_COMMAND_STATE = {0x01: OPERATIONAL, 0x02: STOPPED, 0x80: PRE_OPERATIONAL, 0x81: BOOTUP, 0x82: BOOTUP}
+_COMMAND_STATE = {
+    0x01: OPERATIONAL,
+    0x02: STOPPED,
+    0x80: PRE_OPERATIONAL,
+    0x81: BOOTUP,
+    0x82: BOOTUP,
+}
 
 
 def state_name(state: int | None) -> str:
@@ -88,5 +94,10 @@ class NmtStates:
         return np.where(idx >= 0, states[np.maximum(idx, 0)], -1).astype(np.int16)
 
     def timeline(self) -> dict[int, list[tuple[float, str, str]]]:
-        return {n: [(t, state_name(s), src) for t, s, src in zip(self.times[n], self.states[n], self.sources[n], strict=True)]
-                for n in sorted(self.times)}
+        return {
+            n: [
+                (t, state_name(s), src)
+                for t, s, src in zip(self.times[n], self.states[n], self.sources[n], strict=True)
+            ]
+            for n in sorted(self.times)
+        }

@@ -10,8 +10,10 @@ from .rule import Context, Rule, ms
 
 class PdoAsyncRule(Rule):
     name = "pdo_async"
-    why = ("An inhibit time violation floods the bus; an event-timer overrun means consumers see stale "
-           "values or time out; check 0x18xx:3 and 0x18xx:5 and the node's cycle time.")
+    why = (
+        "An inhibit time violation floods the bus; an event-timer overrun means consumers see stale "
+        "values or time out; check 0x18xx:3 and 0x18xx:5 and the node's cycle time."
+    )
 
     def process(self, ctx: Context) -> None:
         g = ctx.gaps("pdo")
@@ -28,9 +30,16 @@ class PdoAsyncRule(Rule):
             if pdo.inhibit_time:
                 inhibit = pdo.inhibit_time * 1e-4
                 for i in (np.flatnonzero(gg < inhibit * (1 - self.tolerance)) + sl.start).tolist():
-                    self.emit(g.t[i], node, cob, f"{ms(gap[i])} ms after the previous one, inhibit time "
-                              f"{pdo.inhibit_time * 0.1:g} ms", ms(gap[i]), pdo.inhibit_time * 0.1,
-                              row=g.row[i])
+                    self.emit(
+                        g.t[i],
+                        node,
+                        cob,
+                        f"{ms(gap[i])} ms after the previous one, inhibit time "
+                        f"{pdo.inhibit_time * 0.1:g} ms",
+                        ms(gap[i]),
+                        pdo.inhibit_time * 0.1,
+                        row=g.row[i],
+                    )
             if pdo.event_timer:
                 limit = pdo.event_timer * (1 + self.tolerance) / 1000.0
                 cand = np.flatnonzero(gg > limit) + sl.start
@@ -39,6 +48,13 @@ class PdoAsyncRule(Rule):
                     after = ctx.nmt.state_at(node, g.t[cand])
                     for j, i in enumerate(cand.tolist()):
                         if before[j] == OPERATIONAL and after[j] == OPERATIONAL:
-                            self.emit(g.prev[i], node, cob, f"no PDO for {ms(gap[i])} ms while operational, "
-                                      f"event timer {pdo.event_timer} ms", ms(gap[i]), pdo.event_timer,
-                                      row=g.row[i])
+                            self.emit(
+                                g.prev[i],
+                                node,
+                                cob,
+                                f"no PDO for {ms(gap[i])} ms while operational, "
+                                f"event timer {pdo.event_timer} ms",
+                                ms(gap[i]),
+                                pdo.event_timer,
+                                row=g.row[i],
+                            )

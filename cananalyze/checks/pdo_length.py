@@ -10,9 +10,11 @@ from .rule import Context, Rule
 
 class PdoLengthRule(Rule):
     name = "pdo_length"
-    why = ("A PDO shorter than its mapping cannot be applied (the receiver should raise EMCY 0x8210); "
-           "one longer than mapped hints at a mapping mismatch between producer and consumer; compare "
-           "both nodes' 0x1600/0x1A00 mappings.")
+    why = (
+        "A PDO shorter than its mapping cannot be applied (the receiver should raise EMCY 0x8210); "
+        "one longer than mapped hints at a mapping mismatch between producer and consumer; compare "
+        "both nodes' 0x1600/0x1A00 mappings."
+    )
 
     def process(self, ctx: Context) -> None:
         g = ctx.gaps("pdo")
@@ -32,6 +34,13 @@ class PdoLengthRule(Rule):
             d = dlc[rows]
             for i in np.flatnonzero(d != want).tolist():
                 short = d[i] < want
-                self.emit(g.t[sl][i], node, cob,
-                          f"{pdo.direction.upper()}PDO{pdo.number} has {int(d[i])} bytes, mapping needs {want}",
-                          int(d[i]), want, row=rows[i], severity=None if short else "warning")
+                self.emit(
+                    g.t[sl][i],
+                    node,
+                    cob,
+                    f"{pdo.direction.upper()}PDO{pdo.number} has {int(d[i])} bytes, mapping needs {want}",
+                    int(d[i]),
+                    want,
+                    row=rows[i],
+                    severity=None if short else "warning",
+                )

@@ -11,8 +11,10 @@ from .rule import Context, Rule
 
 class PdoStateRule(Rule):
     name = "pdo_not_operational"
-    why = ("A node sending PDOs while not operational ignores NMT or reports a wrong state; consumers "
-           "may act on data the master did not enable; check the node's NMT handling.")
+    why = (
+        "A node sending PDOs while not operational ignores NMT or reports a wrong state; consumers "
+        "may act on data the master did not enable; check the node's NMT handling."
+    )
 
     def process(self, ctx: Context) -> None:
         b = ctx.batch
@@ -29,5 +31,12 @@ class PdoStateRule(Rule):
             self.subjects.add(node)
             state = ctx.nmt.state_at(node, g.t[sl])
             for i in np.flatnonzero((state >= 0) & (state != OPERATIONAL)).tolist():
-                self.emit(g.t[sl][i], node, cob, f"PDO while node is {state_name(int(state[i]))}",
-                          state_name(int(state[i])), "operational", row=rows[i])
+                self.emit(
+                    g.t[sl][i],
+                    node,
+                    cob,
+                    f"PDO while node is {state_name(int(state[i]))}",
+                    state_name(int(state[i])),
+                    "operational",
+                    row=rows[i],
+                )

@@ -10,9 +10,11 @@ from .rule import Context, Rule, ms
 
 class PdoSyncRule(Rule):
     name = "pdo_sync"
-    why = ("A synchronous PDO outside its SYNC slot carries data sampled at the wrong time or arrives "
-           "after the consumers applied their inputs; check the transmission type (0x18xx:2) and the "
-           "node's processing time against 0x1007.")
+    why = (
+        "A synchronous PDO outside its SYNC slot carries data sampled at the wrong time or arrives "
+        "after the consumers applied their inputs; check the transmission type (0x18xx:2) and the "
+        "node's processing time against 0x1007."
+    )
 
     def __init__(self, **kw) -> None:
         super().__init__(**kw)
@@ -50,13 +52,28 @@ class PdoSyncRule(Rule):
                     bad = np.flatnonzero((prev >= 0) & (no - prev != n))
                     text = f"sent {{}} SYNCs after the previous one, transmission type {n}"
                 for i in bad.tolist():
-                    self.emit(t[i], node, cob, text.format(int(no[i] - prev[i])), int(no[i] - prev[i]),
-                              max(n, 1), row=rows[i])
+                    self.emit(
+                        t[i],
+                        node,
+                        cob,
+                        text.format(int(no[i] - prev[i])),
+                        int(no[i] - prev[i]),
+                        max(n, 1),
+                        row=rows[i],
+                    )
                 if window:
                     late = t - last_t
                     for i in np.flatnonzero(late > window / 1e6).tolist():
-                        self.emit(t[i], node, cob, f"sent {ms(late[i])} ms after SYNC, window 0x1007 is "
-                                  f"{window / 1000:g} ms", ms(late[i]), window / 1000, row=rows[i])
+                        self.emit(
+                            t[i],
+                            node,
+                            cob,
+                            f"sent {ms(late[i])} ms after SYNC, window 0x1007 is "
+                            f"{window / 1000:g} ms",
+                            ms(late[i]),
+                            window / 1000,
+                            row=rows[i],
+                        )
         self.sync_count += srows.size
         if srows.size:
             self.last_sync_t = float(st[-1])

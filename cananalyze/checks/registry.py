@@ -21,9 +21,23 @@ from .sync import SyncRule
 from .unknown_cobid import UnknownCobIdRule
 
 # Enabled unless the rules file disables them.
-RULES: dict[str, type[Rule]] = {r.name: r for r in (
-    HeartbeatRule, BootupRule, GuardingRule, SyncRule, PdoSyncRule, PdoAsyncRule, PdoStateRule,
-    PdoLengthRule, UnknownCobIdRule, EmcyRule, SdoRule, ErrorFrameRule)}
+RULES: dict[str, type[Rule]] = {
+    r.name: r
+    for r in (
+        HeartbeatRule,
+        BootupRule,
+        GuardingRule,
+        SyncRule,
+        PdoSyncRule,
+        PdoAsyncRule,
+        PdoStateRule,
+        PdoLengthRule,
+        UnknownCobIdRule,
+        EmcyRule,
+        SdoRule,
+        ErrorFrameRule,
+    )
+}
 
 # Assertions: stated in the rules file's `assert:` list, each with its own parameters.
 ASSERTIONS: dict[str, type[Rule]] = {

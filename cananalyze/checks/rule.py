@@ -34,8 +34,14 @@ class GapState:
 
 
 class Context:
-    def __init__(self, batch: DecodedBatch, config: ConfigSource, nmt: NmtStates,
-                 state: GapState, t_end: float | None = None) -> None:
+    def __init__(
+        self,
+        batch: DecodedBatch,
+        config: ConfigSource,
+        nmt: NmtStates,
+        state: GapState,
+        t_end: float | None = None,
+    ) -> None:
         self.batch = batch
         self.config = config
         self.nmt = nmt
@@ -74,7 +80,9 @@ class Rule:
     why = ""
     max_findings = 20  # per rule and node/COB-ID; the rest are counted in one closing finding
 
-    def __init__(self, severity: str | None = None, tolerance: float | None = None, **params) -> None:
+    def __init__(
+        self, severity: str | None = None, tolerance: float | None = None, **params
+    ) -> None:
         if severity:
             self.severity = severity
         if tolerance is not None:
@@ -91,24 +99,57 @@ class Rule:
     def finish(self, ctx: Context) -> None:
         """End of log checks (ctx.t_end set, zero rows)."""
 
-    def emit(self, t: float, node: int | None, cob_id: int | None, message: str,
-             measured=None, expected=None, row: int = 0, why: str | None = None,
-             severity: str | None = None) -> None:
+    def emit(
+        self,
+        t: float,
+        node: int | None,
+        cob_id: int | None,
+        message: str,
+        measured=None,
+        expected=None,
+        row: int = 0,
+        why: str | None = None,
+        severity: str | None = None,
+    ) -> None:
         key = (node, cob_id)
         self._count[key] += 1
         if self._count[key] > self.max_findings:
             self._first_dropped.setdefault(key, t)
             return
-        self.out.append(Finding(float(t), self.name, severity or self.severity, node, cob_id, message,
-                                measured, expected, why if why is not None else self.why, int(row)))
+        self.out.append(
+            Finding(
+                float(t),
+                self.name,
+                severity or self.severity,
+                node,
+                cob_id,
+                message,
+                measured,
+                expected,
+                why if why is not None else self.why,
+                int(row),
+            )
+        )
 
     def close(self, t_end: float) -> None:
         """One finding per node/COB-ID that had more than max_findings."""
         for (node, cob), n in self._count.items():
             if n > self.max_findings:
                 extra = n - self.max_findings
-                self.out.append(Finding(self._first_dropped[(node, cob)], self.name, self.severity, node, cob,
-                                        f"{extra} more like this not listed ({n} in all)", n, 0, self.why, 0))
+                self.out.append(
+                    Finding(
+                        self._first_dropped[(node, cob)],
+                        self.name,
+                        self.severity,
+                        node,
+                        cob,
+                        f"{extra} more like this not listed ({n} in all)",
+                        n,
+                        0,
+                        self.why,
+                        0,
+                    )
+                )
 
     def take(self) -> list[Finding]:
         out, self.out = self.out, []

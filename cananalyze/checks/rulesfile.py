@@ -32,7 +32,9 @@ class _Doc:
         except yaml.YAMLError as exc:
             mark = getattr(exc, "problem_mark", None)
             where = f":{mark.line + 1}" if mark else ""
-            raise InputError(f"{path}{where}: not valid YAML: {getattr(exc, 'problem', exc)}") from None
+            raise InputError(
+                f"{path}{where}: not valid YAML: {getattr(exc, 'problem', exc)}"
+            ) from None
         if self.data is None:
             self.data = {}
         if not isinstance(self.data, dict):
@@ -75,14 +77,23 @@ def _check_params(doc: _Doc, keys: list, cls: type[Rule], params: dict) -> dict:
     allowed = {p for p in sig.parameters if p not in ("self", "kw")} | _COMMON
     for k, v in params.items():
         if k not in allowed:
-            doc.fail(keys + [k], f"unknown setting {k!r} for {cls.name} (known: {', '.join(sorted(allowed))})")
+            doc.fail(
+                keys + [k],
+                f"unknown setting {k!r} for {cls.name} (known: {', '.join(sorted(allowed))})",
+            )
         if k == "severity" and v not in SEVERITIES:
             doc.fail(keys + [k], f"severity must be one of {', '.join(SEVERITIES)}, not {v!r}")
-        if k == "tolerance" and (not isinstance(v, (int, float)) or isinstance(v, bool) or not 0 <= v < 10):
+        if k == "tolerance" and (
+            not isinstance(v, (int, float)) or isinstance(v, bool) or not 0 <= v < 10
+        ):
             doc.fail(keys + [k], f"tolerance is a fraction like 0.1 (10 %), not {v!r}")
     for name, p in sig.parameters.items():
-        if name not in ("self", "kw") and p.default is inspect.Parameter.empty and p.kind != p.VAR_KEYWORD \
-                and name not in params:
+        if (
+            name not in ("self", "kw")
+            and p.default is inspect.Parameter.empty
+            and p.kind != p.VAR_KEYWORD
+            and name not in params
+        ):
             doc.fail(keys, f"{cls.name} needs {name!r}")
     return {k: v for k, v in params.items() if k != "enabled"}
 
@@ -122,20 +133,42 @@ def load_rules(path: str | Path) -> tuple[list[Rule], dict | None, Path]:
     for i, item in enumerate(asserts):
         if not isinstance(item, dict) or len(item) != 1:
             doc.fail(["assert", i], "each assertion is one 'kind: {settings}' mapping")
-        (kind, params), = item.items()
+        ((kind, params),) = item.items()
         keys = ["assert", i, kind]
         if kind == "no_emcy":
-            _replace(rules, "emcy", _make(doc, keys, RULES["emcy"], _check_params(
-                doc, keys, RULES["emcy"], {"allow": (params or {}).get("except", [])})))
+            _replace(
+                rules,
+                "emcy",
+                _make(
+                    doc,
+                    keys,
+                    RULES["emcy"],
+                    _check_params(
+                        doc, keys, RULES["emcy"], {"allow": (params or {}).get("except", [])}
+                    ),
+                ),
+            )
             continue
         if kind == "sdo":
             p = dict(params or {})
             p.pop("success", None)
-            _replace(rules, "sdo", _make(doc, keys, RULES["sdo"], _check_params(doc, keys, RULES["sdo"], p)))
+            _replace(
+                rules,
+                "sdo",
+                _make(doc, keys, RULES["sdo"], _check_params(doc, keys, RULES["sdo"], p)),
+            )
             continue
         if kind == "error_frames":
-            _replace(rules, "error_frames", _make(doc, keys, RULES["error_frames"],
-                                                 _check_params(doc, keys, RULES["error_frames"], params or {})))
+            _replace(
+                rules,
+                "error_frames",
+                _make(
+                    doc,
+                    keys,
+                    RULES["error_frames"],
+                    _check_params(doc, keys, RULES["error_frames"], params or {}),
+                ),
+            )
             continue
         cls = ASSERTIONS.get(kind)
         if cls is None:
@@ -168,9 +201,23 @@ def _replace(rules: list[Rule], name: str, new: Rule) -> None:
     rules.append(new)
 
 
-_NODE_KEYS = {"profile", "heartbeat_ms", "heartbeat_consumer", "guard_time_ms", "life_time_factor",
-              "emcy_inhibit_100us"}
-_PDO_KEYS = {"node", "direction", "number", "transmission_type", "inhibit_100us", "event_timer_ms", "length"}
+_NODE_KEYS = {
+    "profile",
+    "heartbeat_ms",
+    "heartbeat_consumer",
+    "guard_time_ms",
+    "life_time_factor",
+    "emcy_inhibit_100us",
+}
+_PDO_KEYS = {
+    "node",
+    "direction",
+    "number",
+    "transmission_type",
+    "inhibit_100us",
+    "event_timer_ms",
+    "length",
+}
 
 
 def validate_network(doc: _Doc, net, keys: list) -> None:
@@ -178,26 +225,38 @@ def validate_network(doc: _Doc, net, keys: list) -> None:
         doc.fail(keys, "network must be a mapping with nodes:, sync:, pdos:, known_cob_ids:")
     for k in net:
         if k not in ("nodes", "sync", "pdos", "known_cob_ids"):
-            doc.fail(keys + [k], f"unknown network key {k!r} (known: nodes, sync, pdos, known_cob_ids)")
+            doc.fail(
+                keys + [k], f"unknown network key {k!r} (known: nodes, sync, pdos, known_cob_ids)"
+            )
     for node, spec in (net.get("nodes") or {}).items():
         if not isinstance(node, int) or not 1 <= node <= 127:
             doc.fail(keys + ["nodes", node], f"node-ID {node!r} must be 1..127")
         for k, v in (spec or {}).items():
             if k not in _NODE_KEYS:
-                doc.fail(keys + ["nodes", node, k], f"unknown node setting {k!r} (known: {', '.join(sorted(_NODE_KEYS))})")
-            if k not in ("profile", "heartbeat_consumer") and (not isinstance(v, (int, float)) or v < 0):
+                doc.fail(
+                    keys + ["nodes", node, k],
+                    f"unknown node setting {k!r} (known: {', '.join(sorted(_NODE_KEYS))})",
+                )
+            if k not in ("profile", "heartbeat_consumer") and (
+                not isinstance(v, (int, float)) or v < 0
+            ):
                 doc.fail(keys + ["nodes", node, k], f"{k} must be a non-negative number, not {v!r}")
     for k, v in (net.get("sync") or {}).items():
         if k not in ("period_us", "window_us") or not isinstance(v, (int, float)):
             doc.fail(keys + ["sync", k], "sync: takes period_us and window_us (numbers)")
     for cob, spec in (net.get("pdos") or {}).items():
         if not isinstance(cob, int) or not 0 < cob < 0x800:
-            doc.fail(keys + ["pdos", cob], f"PDO COB-ID {cob!r} must be an 11-bit identifier like 0x285")
+            doc.fail(
+                keys + ["pdos", cob], f"PDO COB-ID {cob!r} must be an 11-bit identifier like 0x285"
+            )
         if not isinstance(spec, dict) or "node" not in spec:
             doc.fail(keys + ["pdos", cob], "each PDO needs at least node:")
         for k in spec:
             if k not in _PDO_KEYS:
-                doc.fail(keys + ["pdos", cob, k], f"unknown PDO setting {k!r} (known: {', '.join(sorted(_PDO_KEYS))})")
+                doc.fail(
+                    keys + ["pdos", cob, k],
+                    f"unknown PDO setting {k!r} (known: {', '.join(sorted(_PDO_KEYS))})",
+                )
 
 
 def load_network(path: str | Path) -> tuple[dict, Path]:

@@ -9,8 +9,10 @@ from .rule import Context, Rule, ms
 
 class SyncRule(Rule):
     name = "sync"
-    why = ("Synchronous PDOs are sampled and applied on SYNC; a late or irregular SYNC skews every "
-           "synchronous control loop; check the SYNC producer's load and 0x1006.")
+    why = (
+        "Synchronous PDOs are sampled and applied on SYNC; a late or irregular SYNC skews every "
+        "synchronous control loop; check the SYNC producer's load and 0x1006."
+    )
 
     def __init__(self, **kw) -> None:
         super().__init__(**kw)
@@ -27,8 +29,15 @@ class SyncRule(Rule):
             p = period / 1e6
             bad = np.flatnonzero(np.abs(gap - p) > p * self.tolerance)
             for i in bad.tolist():
-                self.emit(g.t[i], None, 0x080, f"SYNC period {ms(gap[i])} ms, 0x1006 is {period / 1000:g} ms",
-                          ms(gap[i]), period / 1000, row=g.row[i])
+                self.emit(
+                    g.t[i],
+                    None,
+                    0x080,
+                    f"SYNC period {ms(gap[i])} ms, 0x1006 is {period / 1000:g} ms",
+                    ms(gap[i]),
+                    period / 1000,
+                    row=g.row[i],
+                )
         fb = ctx.batch.frames
         has = fb.dlc[g.row] >= 1
         if not has.any():
@@ -40,8 +49,15 @@ class SyncRule(Rule):
         prev[1:] = c[:-1]
         bad = np.flatnonzero((prev >= 0) & (c != prev + 1) & (c != 1))
         for i in bad.tolist():
-            self.emit(fb.t[rows[i]], None, 0x080, f"SYNC counter {int(c[i])} after {int(prev[i])}",
-                      int(c[i]), int(prev[i]) + 1, row=rows[i],
-                      why="A jump in the SYNC counter means lost SYNC frames or a second SYNC producer; "
-                          "check 0x1019 and that only one node produces SYNC.")
+            self.emit(
+                fb.t[rows[i]],
+                None,
+                0x080,
+                f"SYNC counter {int(c[i])} after {int(prev[i])}",
+                int(c[i]),
+                int(prev[i]) + 1,
+                row=rows[i],
+                why="A jump in the SYNC counter means lost SYNC frames or a second SYNC producer; "
+                "check 0x1019 and that only one node produces SYNC.",
+            )
         self.last_counter = int(c[-1])

@@ -33,8 +33,16 @@ def stats(gaps_s: np.ndarray) -> dict:
 class Timing:
     def __init__(self) -> None:
         self.gaps: dict[str, dict[int, list[np.ndarray]]] = {"heartbeat": {}, "pdo": {}, "sync": {}}
-        self.gap_t: dict[str, dict[int, list[np.ndarray]]] = {"heartbeat": {}, "pdo": {}, "sync": {}}
-        self.count: dict[str, Counter] = {"heartbeat": Counter(), "pdo": Counter(), "sync": Counter()}
+        self.gap_t: dict[str, dict[int, list[np.ndarray]]] = {
+            "heartbeat": {},
+            "pdo": {},
+            "sync": {},
+        }
+        self.count: dict[str, Counter] = {
+            "heartbeat": Counter(),
+            "pdo": Counter(),
+            "sync": Counter(),
+        }
         self.span: dict[str, dict[int, list[float]]] = {"heartbeat": {}, "pdo": {}, "sync": {}}
         self.emcy: Counter = Counter()
         self.bootups: Counter = Counter()
@@ -68,7 +76,9 @@ class Timing:
             if rec.get("kind") == "sdo":
                 self.sdo_results[rec.get("result")] += 1
                 if rec.get("latency_ms") is not None:
-                    self.sdo_latency.setdefault(rec.get("node"), []).append(float(rec["latency_ms"]))
+                    self.sdo_latency.setdefault(rec.get("node"), []).append(
+                        float(rec["latency_ms"])
+                    )
 
     def all_gaps(self, name: str, key: int) -> tuple[np.ndarray, np.ndarray]:
         """(gap start times, gaps in s) of one node / COB-ID over the whole log."""
@@ -109,8 +119,10 @@ class Timing:
         def fmt(s: dict) -> str:
             if not s.get("count"):
                 return "no gaps"
-            return (f"n={s['count']} min {s['min']:.2f} median {s['median']:.2f} mean {s['mean']:.2f} "
-                    f"p99 {s['p99']:.2f} max {s['max']:.2f} jitter {s['jitter']:.2f} ms")
+            return (
+                f"n={s['count']} min {s['min']:.2f} median {s['median']:.2f} mean {s['mean']:.2f} "
+                f"p99 {s['p99']:.2f} max {s['max']:.2f} jitter {s['jitter']:.2f} ms"
+            )
 
         out = []
         if r["heartbeat"]:
@@ -125,11 +137,20 @@ class Timing:
                 out.append(f"  0x{cob:03X}:{rate} {fmt(s)}")
         if r["sdo_latency"]:
             out.append("SDO latency per node:")
-            out += [f"  node {n}: {fmt(s)}" for n, s in sorted(r["sdo_latency"].items(), key=lambda x: str(x[0]))]
+            out += [
+                f"  node {n}: {fmt(s)}"
+                for n, s in sorted(r["sdo_latency"].items(), key=lambda x: str(x[0]))
+            ]
         if r["emcy"]:
-            out.append("EMCY per node: " + ", ".join(f"node {n}: {c}" for n, c in sorted(r["emcy"].items())))
+            out.append(
+                "EMCY per node: "
+                + ", ".join(f"node {n}: {c}" for n, c in sorted(r["emcy"].items()))
+            )
         if r["bootups"]:
-            out.append("boot-ups per node: " + ", ".join(f"node {n}: {c}" for n, c in sorted(r["bootups"].items())))
+            out.append(
+                "boot-ups per node: "
+                + ", ".join(f"node {n}: {c}" for n, c in sorted(r["bootups"].items()))
+            )
         if r["error_frames"]:
             out.append(f"error frames: {r['error_frames']}")
         for node, changes in (r.get("nmt") or {}).items():

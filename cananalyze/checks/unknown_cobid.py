@@ -12,8 +12,10 @@ from .rule import Context, Rule
 class UnknownCobIdRule(Rule):
     name = "unknown_cob_id"
     severity = "warning"
-    why = ("Traffic no node is configured to send: a misconfigured COB-ID, a foreign device, or a "
-           "node-ID clash; find the sender and declare it in the network file if it belongs.")
+    why = (
+        "Traffic no node is configured to send: a misconfigured COB-ID, a foreign device, or a "
+        "node-ID clash; find the sender and declare it in the network file if it belongs."
+    )
 
     def __init__(self, **kw) -> None:
         super().__init__(**kw)
@@ -35,5 +37,12 @@ class UnknownCobIdRule(Rule):
             self.reported.add(cid)
             ext = cid >> 32
             text = f"0x{ident:08X} (29-bit)" if ext else f"0x{ident:03X}"
-            self.emit(fb.t[rows[i]], None, ident, f"frames on unknown identifier {text}",
-                      text, "a configured COB-ID", row=rows[i])
+            self.emit(
+                fb.t[rows[i]],
+                None,
+                ident,
+                f"frames on unknown identifier {text}",
+                text,
+                "a configured COB-ID",
+                row=rows[i],
+            )

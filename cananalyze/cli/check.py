@@ -12,12 +12,17 @@ from .pipeline import build_decoder
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("check", help="check a log against CANopen rules and assertions (CI-friendly)",
-                       description="Check timing and conformance of a CANopen log; exit 0 when every "
-                                   "enabled rule passes, 1 on violations, 2 on bad input.")
+    p = sub.add_parser(
+        "check",
+        help="check a log against CANopen rules and assertions (CI-friendly)",
+        description="Check timing and conformance of a CANopen log; exit 0 when every "
+        "enabled rule passes, 1 on violations, 2 on bad input.",
+    )
     add_input_options(p)
     p.add_argument("--rules", metavar="FILE", help="rules file (YAML, see docs/rules-file.md)")
-    p.add_argument("--network", metavar="FILE", help="network file: configured values per node (YAML)")
+    p.add_argument(
+        "--network", metavar="FILE", help="network file: configured values per node (YAML)"
+    )
     p.add_argument("--junit", metavar="FILE", help="write a JUnit XML report")
     p.add_argument("--json", metavar="FILE", help="write the findings as a JSON list")
     p.add_argument("--timing", action="store_true", help="also print the timing analysis")
@@ -44,8 +49,11 @@ def run(args: argparse.Namespace) -> int:
         print("\n".join(checker.timing.lines(checker.nmt)), file=out)
     failing = [f for f in checker.findings if f.fails]
     names = ", ".join(r.name for r in checker.rules)
-    print(f"{len(checker.rules)} rules ({names}): {len(failing)} violation(s), "
-          f"{len(checker.findings) - len(failing)} note(s)", file=out)
+    print(
+        f"{len(checker.rules)} rules ({names}): {len(failing)} violation(s), "
+        f"{len(checker.findings) - len(failing)} note(s)",
+        file=out,
+    )
     if args.junit:
         write_junit(args.junit, checker.rules, checker.findings)
     if args.json:

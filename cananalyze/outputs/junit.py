@@ -35,13 +35,19 @@ def junit_xml(rules: list[Rule], findings: list[Finding], name: str = "cananalyz
         key = f.cob_id if rule and rule.name in ("assert_pdo_rate", "unknown_cob_id") else f.node
         cases.setdefault(_subject(rule, key) if rule else f.rule, []).append(f)
     failing = sum(1 for fs in cases.values() if any(f.fails for f in fs))
-    suite = ET.Element("testsuite", name=name, tests=str(len(cases)), failures=str(failing), errors="0")
+    suite = ET.Element(
+        "testsuite", name=name, tests=str(len(cases)), failures=str(failing), errors="0"
+    )
     for case, fs in cases.items():
         tc = ET.SubElement(suite, "testcase", classname=f"cananalyze.{case.split()[0]}", name=case)
         bad = [f for f in fs if f.fails]
         if bad:
-            fail = ET.SubElement(tc, "failure", message=f"{len(bad)} finding(s): {bad[0].message}",
-                                 type=bad[0].severity)
+            fail = ET.SubElement(
+                tc,
+                "failure",
+                message=f"{len(bad)} finding(s): {bad[0].message}",
+                type=bad[0].severity,
+            )
             fail.text = "\n".join(format_finding(f) for f in bad)
         info = [f for f in fs if not f.fails]
         if info:
@@ -55,8 +61,10 @@ def junit_xml(rules: list[Rule], findings: list[Finding], name: str = "cananalyz
 def format_finding(f: Finding) -> str:
     node = "-" if f.node is None else str(f.node)
     cob = "" if f.cob_id is None else f" 0x{f.cob_id:03X}"
-    return (f"{f.t:.6f} node {node}{cob} [{f.severity}] {f.rule}: {f.message} "
-            f"(measured {f.measured}, expected {f.expected}). {f.why}")
+    return (
+        f"{f.t:.6f} node {node}{cob} [{f.severity}] {f.rule}: {f.message} "
+        f"(measured {f.measured}, expected {f.expected}). {f.why}"
+    )
 
 
 def write_junit(path: str | Path, rules: list[Rule], findings: list[Finding]) -> None:
