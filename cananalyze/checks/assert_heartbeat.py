@@ -26,7 +26,8 @@ class AssertHeartbeat(Rule):
             self.seen = True
             gap = g.gap[sl]
             p = self.period / 1000.0
-            for i in (np.flatnonzero(np.abs(gap - p) > p * self.tolerance) + sl.start).tolist():
+            bad = np.flatnonzero(np.abs(gap - p) > p * self.tolerance) + sl.start
+            for i in self.capped(bad, g.t[bad], node, 0x700 + node).tolist():
                 self.emit(
                     g.t[i],
                     node,

@@ -26,7 +26,8 @@ class AssertSignal(Rule):
                 continue
             self.seen = True
             v = np.asarray(block.columns[self.signal], float)
-            for i in np.flatnonzero((v < self.lo) | (v > self.hi)).tolist():
+            bad = np.flatnonzero((v < self.lo) | (v > self.hi))
+            for i in self.capped(bad, ctx.t[block.rows[bad]], self.node, block.cob_id).tolist():
                 row = int(block.rows[i])
                 self.emit(
                     ctx.t[row],

@@ -36,7 +36,8 @@ class HeartbeatRule(Rule):
             if period:
                 self.configured.add(node)
                 limit = period * (1 + self.tolerance) / 1000.0
-                for i in (np.flatnonzero(gap[sl] > limit) + sl.start).tolist():
+                bad = np.flatnonzero(gap[sl] > limit) + sl.start
+                for i in self.capped(bad, g.prev[bad], node, 0x700 + node).tolist():
                     self.emit(
                         g.prev[i],
                         node,
@@ -81,7 +82,8 @@ class HeartbeatRule(Rule):
                 period = float(np.median(gaps)) * 1000.0
                 inferred = True
                 limit = max(2.0, 1 + self.tolerance) * period / 1000.0
-                for i in np.flatnonzero(gaps > limit).tolist():
+                bad = np.flatnonzero(gaps > limit)
+                for i in self.capped(bad, t[bad], node, 0x700 + node).tolist():
                     self.emit(
                         t[i],
                         node,

@@ -29,7 +29,8 @@ class PdoAsyncRule(Rule):
             gg = gap[sl]
             if pdo.inhibit_time:
                 inhibit = pdo.inhibit_time * 1e-4
-                for i in (np.flatnonzero(gg < inhibit * (1 - self.tolerance)) + sl.start).tolist():
+                bad = np.flatnonzero(gg < inhibit * (1 - self.tolerance)) + sl.start
+                for i in self.capped(bad, g.t[bad], node, cob).tolist():
                     self.emit(
                         g.t[i],
                         node,
@@ -43,6 +44,7 @@ class PdoAsyncRule(Rule):
             if pdo.event_timer:
                 limit = pdo.event_timer * (1 + self.tolerance) / 1000.0
                 cand = np.flatnonzero(gg > limit) + sl.start
+                cand = self.capped(cand, g.prev[cand], node, cob)
                 if cand.size:
                     before = ctx.nmt.state_at(node, g.prev[cand])
                     after = ctx.nmt.state_at(node, g.t[cand])

@@ -32,7 +32,8 @@ class PdoLengthRule(Rule):
             self.subjects.add(node)
             rows = g.row[sl]
             d = dlc[rows]
-            for i in np.flatnonzero(d != want).tolist():
+            bad = np.flatnonzero(d != want)
+            for i in self.capped(bad, g.t[sl][bad], node, cob).tolist():
                 short = d[i] < want
                 self.emit(
                     g.t[sl][i],

@@ -30,7 +30,8 @@ class PdoStateRule(Rule):
                 continue
             self.subjects.add(node)
             state = ctx.nmt.state_at(node, g.t[sl])
-            for i in np.flatnonzero((state >= 0) & (state != OPERATIONAL)).tolist():
+            bad = np.flatnonzero((state >= 0) & (state != OPERATIONAL))
+            for i in self.capped(bad, g.t[sl][bad], node, cob).tolist():
                 self.emit(
                     g.t[sl][i],
                     node,

@@ -51,7 +51,7 @@ class PdoSyncRule(Rule):
                 else:
                     bad = np.flatnonzero((prev >= 0) & (no - prev != n))
                     text = f"sent {{}} SYNCs after the previous one, transmission type {n}"
-                for i in bad.tolist():
+                for i in self.capped(bad, t[bad], node, cob).tolist():
                     self.emit(
                         t[i],
                         node,
@@ -63,7 +63,8 @@ class PdoSyncRule(Rule):
                     )
                 if window:
                     late = t - last_t
-                    for i in np.flatnonzero(late > window / 1e6).tolist():
+                    bad = np.flatnonzero(late > window / 1e6)
+                    for i in self.capped(bad, t[bad], node, cob).tolist():
                         self.emit(
                             t[i],
                             node,

@@ -99,6 +99,21 @@ class Rule:
     def finish(self, ctx: Context) -> None:
         """End of log checks (ctx.t_end set, zero rows)."""
 
+    def capped(
+        self, idx: np.ndarray, times: np.ndarray, node: int | None, cob_id: int | None
+    ) -> np.ndarray:
+        """The first candidates this rule may still list for node/COB-ID; the rest only counted.
+
+        Keeps a badly misconfigured log from costing one Python call per violating frame.
+        """
+        key = (node, cob_id)
+        left = max(self.max_findings - self._count[key], 0)
+        if idx.size > left:
+            self._count[key] += idx.size - left
+            self._first_dropped.setdefault(key, float(times[left]))
+            return idx[:left]
+        return idx
+
     def emit(
         self,
         t: float,

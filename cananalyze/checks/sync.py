@@ -28,7 +28,7 @@ class SyncRule(Rule):
         if period:
             p = period / 1e6
             bad = np.flatnonzero(np.abs(gap - p) > p * self.tolerance)
-            for i in bad.tolist():
+            for i in self.capped(bad, g.t[bad], None, 0x080).tolist():
                 self.emit(
                     g.t[i],
                     None,
@@ -48,7 +48,7 @@ class SyncRule(Rule):
         prev[0] = self.last_counter
         prev[1:] = c[:-1]
         bad = np.flatnonzero((prev >= 0) & (c != prev + 1) & (c != 1))
-        for i in bad.tolist():
+        for i in self.capped(bad, fb.t[rows[bad]], None, 0x080).tolist():
             self.emit(
                 fb.t[rows[i]],
                 None,
