@@ -22,17 +22,19 @@ Source = str | Path | FrameBatch | Iterable[DecodedBatch]
 def run_rules(source: Source, rules: list[Rule], config=None) -> list[Finding]:
     """Run `rules` over a log path, a FrameBatch, or already decoded batches; return the findings."""
     from .decoder import Decoder
+    from .sdo.processor import SdoProcessor
+    from .sdo.tracker import SdoTracker
 
     checker = Checker(rules, config)
     if isinstance(source, (str, Path)):
         from .io.source import open_log
 
-        decoder = Decoder([checker])
+        decoder = Decoder([SdoProcessor(SdoTracker()), checker])
         for fb in open_log(source).batches():
             decoder.decode(fb)
         decoder.finish()
     elif isinstance(source, FrameBatch):
-        decoder = Decoder([checker])
+        decoder = Decoder([SdoProcessor(SdoTracker()), checker])
         decoder.decode(source)
         decoder.finish()
     else:

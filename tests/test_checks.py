@@ -52,10 +52,11 @@ def boot_start(nodes):
 def test_demo_log_is_clean_but_for_its_emcy():
     checker = run_rules(DEMO, build_checker().rules)
     rules = {f.rule for f in checker}
-    # the demo raises and clears one EMCY on node 3; the SDO abort needs the SDO tracker
-    assert rules == {"emcy"}
-    (f,) = checker
-    assert f.node == 3 and f.measured == "0x8100"
+    # the demo raises and clears one EMCY on node 3 and has one deliberate SDO abort
+    assert rules == {"emcy", "sdo"}
+    emcy, sdo = sorted(checker, key=lambda f: f.rule)
+    assert emcy.node == 3 and emcy.measured == "0x8100"
+    assert sdo.node == 3 and sdo.measured == "0x06020000" and sdo.t == pytest.approx(1767225600.0355)
 
 
 def test_heartbeat_dropout_in_second_batch_and_stop():
@@ -327,7 +328,7 @@ def test_cli_exit_codes_junit_and_json(tmp_path):
     from junitparser import JUnitXml
 
     rules = tmp_path / "rules.yaml"
-    rules.write_text("rules:\n  emcy: {severity: info}\n")
+    rules.write_text("rules:\n  emcy: {severity: info}\n  sdo: {severity: info}\n")
     ok = cli(DEMO, "--rules", rules)
     assert ok.returncode == 0, ok.stdout + ok.stderr
     junit, js = tmp_path / "out.xml", tmp_path / "out.json"
@@ -339,7 +340,8 @@ def test_cli_exit_codes_junit_and_json(tmp_path):
     assert "heartbeat node 5" in cases and cases["heartbeat node 5"].is_passed
     assert not cases["emcy node 3"].is_passed
     recs = json.loads(js.read_text())
-    assert recs[0]["kind"] == "finding" and recs[0]["rule"] == "emcy" and recs[0]["why"]
+    assert [r["rule"] for r in recs] == ["sdo", "emcy"]
+    assert all(r["kind"] == "finding" and r["why"] for r in recs)
     assert cli(tmp_path / "missing.log").returncode == 2
     assert cli(DEMO, "--rules", tmp_path / "nope.yaml").returncode == 2
 
