@@ -56,7 +56,9 @@ def test_demo_log_is_clean_but_for_its_emcy():
     assert rules == {"emcy", "sdo"}
     emcy, sdo = sorted(checker, key=lambda f: f.rule)
     assert emcy.node == 3 and emcy.measured == "0x8100"
-    assert sdo.node == 3 and sdo.measured == "0x06020000" and sdo.t == pytest.approx(1767225600.0355)
+    assert (
+        sdo.node == 3 and sdo.measured == "0x06020000" and sdo.t == pytest.approx(1767225600.0355)
+    )
 
 
 def test_heartbeat_dropout_in_second_batch_and_stop():
@@ -356,3 +358,33 @@ def test_findings_stream_in_decode_jsonl(tmp_path):
     assert out.returncode == 1
     (f,) = json.loads((tmp_path / "f.json").read_text())
     assert f["rule"] == "heartbeat" and f["measured"] == pytest.approx(400.0)
+
+
+def test_real_ixxat_guarding_node9_stops_replying():
+    from conftest import real_file
+
+    path = real_file("hilch__canopen-message-interpreter/ixxat1.trc")
+    found = run_rules(path, build_checker().rules)
+    no_reply = [f for f in found if f.rule == "guarding" and f.node == 9]
+    # node 9 answers every request until 00:02:47.31, then only requests follow
+    assert no_reply and all("no reply" in f.message for f in no_reply)
+    assert min(f.t for f in no_reply) == pytest.approx(170.31, abs=0.01)
+    # pcan2 starts mid-session: its first guard reply's toggle is not a violation
+    pcan2 = run_rules(
+        real_file("hilch__canopen-message-interpreter/pcan2.trc"), build_checker().rules
+    )
+    assert not [f for f in pcan2 if "toggle" in f.message]
+
+
+def test_real_tmcm_rpdo4_length_matches_its_mapping(tmp_path):
+    from conftest import real_file
+
+    log = real_file("nigel-bruce-khan__ros_canopen-tmcm-1636/candump.txt")
+    dcf = real_file("nigel-bruce-khan__ros_canopen-tmcm-1636/TMCM-1636-CANopen.dcf")
+    net = tmp_path / "net.yaml"
+    net.write_text(f"nodes:\n  1: {{profile: {dcf}}}\n")
+    checker = build_checker(network_file=net)
+    found = run_rules(log, checker.rules, checker.config)
+    # 0x1603 maps one 8-bit object (0x6060): the 1-byte RPDO4 on 0x501 is right
+    assert not [f for f in found if f.rule == "pdo_length"]
+    assert [f.measured for f in found if f.rule == "emcy"] == ["0x6320"]

@@ -41,7 +41,7 @@ class GuardingRule(Rule):
             t = float(fb.t[row])
             svc = b.service[row]
             if svc == Service.BOOTUP:
-                self.toggle.pop(node, None)  # toggle restarts at 0 after a reset
+                self.toggle[node] = 1  # toggle restarts: the first reply after boot-up has 0
                 self.req_t.pop(node, None)
                 self.pending.pop(node, None)
                 continue
@@ -51,7 +51,8 @@ class GuardingRule(Rule):
             else:
                 self.pending.pop(node, None)
                 tog = int(fb.data[row, 0]) >> 7
-                expect = 1 - self.toggle[node] if node in self.toggle else 0
+                # a log that starts mid-session gives no reference for the first reply
+                expect = 1 - self.toggle[node] if node in self.toggle else tog
                 if tog != expect:
                     self.emit(
                         t,
