@@ -352,9 +352,9 @@ def test_findings_stream_in_decode_jsonl(tmp_path):
     rows = boot_start([5]) + hb(5, [0.1, 0.2, 0.6, 0.7])
     log = tmp_path / "x.log"
     write_log(from_rows(rows), log)
-    net = tmp_path / "net.yaml"
-    net.write_text("nodes:\n  5: {heartbeat_ms: 100}\n")
-    out = cli(log, "--network", net, "--json", tmp_path / "f.json")
+    rules = tmp_path / "rules.yaml"
+    rules.write_text("network:\n  nodes:\n    5: {heartbeat_ms: 100}\n")
+    out = cli(log, "--rules", rules, "--json", tmp_path / "f.json")
     assert out.returncode == 1
     (f,) = json.loads((tmp_path / "f.json").read_text())
     assert f["rule"] == "heartbeat" and f["measured"] == pytest.approx(400.0)

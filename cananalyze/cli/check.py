@@ -20,9 +20,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     add_input_options(p)
     p.add_argument("--rules", metavar="FILE", help="rules file (YAML, see docs/rules-file.md)")
-    p.add_argument(
-        "--network", metavar="FILE", help="network file: configured values per node (YAML)"
-    )
     p.add_argument("--junit", metavar="FILE", help="write a JUnit XML report")
     p.add_argument("--json", metavar="FILE", help="write the findings as a JSON list")
     p.add_argument("--timing", action="store_true", help="also print the timing analysis")
@@ -32,9 +29,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..outputs.junit import format_finding, write_findings_json, write_junit
 
-    checker = build_checker(args.rules, args.network)
+    checker = build_checker(args.rules)
     source = open_log(args.log, strict=args.strict, fmt=args.input_format)
     decoder = build_decoder(args)
+    from ..checks.model_config import ModelConfig
+    from ..network.model import NetworkModel
+
+    model = next((p for p in decoder.processors if isinstance(p, NetworkModel)), None)
+    if model is not None:  # values written by SDO in the log win over the rules file's
+        checker.config = ModelConfig(model, checker.config)
     decoder.processors.append(checker)
     try:
         for fb in source.batches():
