@@ -111,7 +111,7 @@ def test_plain_decode_and_candump_record_match_what_was_sent(tmp_path):
     assert [_frame_part(x) for x in frame_lines] == expected
     recs = [_no_latency(x) for x in lines[: lines.index("frames: 185")] if "└─" in x]
     assert recs == expected_recs
-    assert any("0x1008:00 segmented -> ok: '4441543730313400'" in x for x in recs)
+    assert any("0x1008:00 Manufacturer device name segmented -> ok: 'DAT7014'" in x for x in recs)
     assert {x.split()[1] for x in frame_lines} == {"pts" + os.ttyname(slave).rpartition("/")[2]}
     assert any("EMCY 0x8100" in x for x in frame_lines)
     # the summary at exit

@@ -1,4 +1,4 @@
-"""Timing analysis, conformance rules and log assertions (`cananalyze check`)."""
+"""Timing analysis and conformance rules (`cananalyze check`)."""
 
 from .config import ConfigSource, FileConfig
 from .engine import Checker

@@ -5,15 +5,12 @@ from __future__ import annotations
 import argparse
 import sys
 
-import numpy as np
-
 from ..errors import UsageError
-from ..io.source import open_log
-from ..outputs.summary import Summary
-from ..protocol.services import parse_services
 from .common import add_input_options, report_problems
-from .pipeline import build_decoder
 from .timeline import add_timeline_options, timeline_collector, write_timelines
+
+# Readers, numpy and the decoder are imported in run(): `cananalyze --help` builds
+# every sub-command's parser and must stay fast.
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -37,7 +34,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _node_set(text: str | None) -> np.ndarray | None:
+def _node_set(text: str | None):
+    import numpy as np
+
     if not text:
         return None
     try:
@@ -64,6 +63,13 @@ def _record_passes(rec: dict, args: argparse.Namespace, nodes, services, t0: flo
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from ..io.source import open_log
+    from ..outputs.summary import Summary
+    from ..protocol.services import parse_services
+    from .pipeline import build_decoder
+
     try:
         services = parse_services(args.service) if args.service else None
     except ValueError as exc:

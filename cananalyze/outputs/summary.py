@@ -1,8 +1,6 @@
 """`decode --summary`: frames per service and node, duration, bus load. Columnar counts.
 
-Bus load counts the nominal bits of each frame (start of frame to end of frame
-plus the 3-bit interframe space) without stuff bits, so it is a lower bound;
-stuffing adds up to about 20 % on real traffic.
+Bus load is a lower bound (nominal bits, no stuff bits): see cananalyze.busload.
 """
 
 from __future__ import annotations
@@ -11,8 +9,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..busload import frame_bits
 from ..decoded import DecodedBatch
-from ..frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
+from ..frames import FLAG_EXT
 from ..protocol.services import SERVICE_NAMES, Service
 
 N_SVC = len(SERVICE_NAMES)
@@ -46,13 +45,7 @@ class Summary:
         has = batch.node >= 0
         key = batch.node[has].astype(np.int64) * N_SVC + batch.service[has]
         self.by_node_service += np.bincount(key, minlength=128 * N_SVC).reshape(128, N_SVC)
-        ext = (fb.flags & FLAG_EXT) != 0
-        rtr = (fb.flags & FLAG_RTR) != 0
-        payload = np.where(rtr, 0, fb.dlc.astype(np.int64))
-        bits = np.where(ext, 67, 47) + 8 * payload
-        bits = np.where((fb.flags & FLAG_ERR) != 0, 20, bits)  # error flag + delimiter
-        bits = np.where((fb.flags & FLAG_FD) != 0, np.where(ext, 88, 69) + 8 * payload, bits)
-        self.bits += int(bits.sum())
+        self.bits += int(frame_bits(fb.flags, fb.dlc).sum())
         if len(self.ids_seen) < 4096:
             self.ids_seen.update(np.unique(fb.can_id[(fb.flags & FLAG_EXT) == 0]).tolist())
 
