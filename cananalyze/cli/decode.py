@@ -77,6 +77,12 @@ def run(args: argparse.Namespace) -> int:
     nodes = _node_set(args.node)
     source = open_log(args.log, strict=args.strict, fmt=args.input_format)
     decoder = build_decoder(args)
+    timing = None
+    if args.summary:
+        from ..checks.engine import Checker
+
+        timing = Checker(rules=[])  # timing analysis only: columnar, cheap
+        decoder.processors.append(timing)
     out = open(args.output, "w", encoding="utf-8") if args.output else sys.stdout  # noqa: SIM115
     summary = Summary()
     only_records = args.sdo
@@ -131,6 +137,7 @@ def run(args: argparse.Namespace) -> int:
         report_problems(source.problems)
     if args.summary:
         print("\n".join(summary.lines(args.bitrate, source.problems.count)), file=out)
+        print("\n".join(timing.timing.lines(timing.nmt)), file=out)
     if out is not sys.stdout:
         out.close()
     if collector:

@@ -46,3 +46,9 @@ def atomic_path(dest: str | Path) -> Iterator[Path]:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+
+
+def write_text_atomic(dest: str | Path, text: str) -> None:
+    """A whole text file (JUnit, JSON reports) written atomically."""
+    with atomic_path(dest) as tmp:
+        tmp.write_text(text, encoding="utf-8")

@@ -1,0 +1,71 @@
+"""Checker: the processor that runs the timing analysis and every enabled rule on each batch.
+
+Findings go into `batch.records` at their row (so `decode --format jsonl` streams
+them) and into `self.findings` for the CLI, JUnit and the Python assertions.
+"""
+
+from __future__ import annotations
+
+from ..decoded import DecodedBatch
+from .config import ConfigSource, FileConfig
+from .finding import Finding
+from .nmt_state import NmtStates
+from .rule import Context, GapState, Rule
+from .timing import Timing
+
+
+class Checker:
+    def __init__(self, rules: list[Rule] | None = None, config: ConfigSource | None = None) -> None:
+        if rules is None:
+            from .registry import default_rules
+
+            rules = default_rules()
+        self.rules = rules
+        self.config: ConfigSource = config if config is not None else FileConfig()
+        self.nmt = NmtStates()
+        self.timing = Timing()
+        self.findings: list[Finding] = []
+        self._gaps = GapState()
+        self.t_last: float | None = None
+
+    def _context(self, batch: DecodedBatch, t_end: float | None = None) -> Context:
+        ctx = Context(batch, self.config, self.nmt, self._gaps, t_end)
+        ctx.timing = self.timing
+        return ctx
+
+    def process(self, batch: DecodedBatch) -> None:
+        if len(batch) == 0 and not batch.records:
+            return
+        ctx = self._context(batch)
+        if len(batch):
+            self.nmt.update(batch)
+            self.t_last = float(batch.frames.t[-1])
+        self.timing.update(ctx)
+        for rule in self.rules:
+            rule.process(ctx)
+        self._collect(batch)
+
+    def finish(self, batch: DecodedBatch) -> None:
+        ctx = self._context(batch, t_end=self.t_last)
+        self.timing.update(ctx)
+        for rule in self.rules:
+            rule.process(ctx)  # records that only the end completes (pending SDO timeouts)
+            rule.finish(ctx)
+            rule.close(self.t_last or 0.0)
+        self._collect(batch, at_end=True)
+
+    def _collect(self, batch: DecodedBatch, at_end: bool = False) -> None:
+        new: list[Finding] = []
+        for rule in self.rules:
+            new.extend(rule.take())
+        new.sort(key=lambda f: f.t)
+        for f in new:
+            batch.add_record(0 if at_end else f.row, f.record())
+        self.findings.extend(new)
+
+    @property
+    def failed(self) -> bool:
+        return any(f.fails for f in self.findings)
+
+    def report(self) -> dict:
+        return self.timing.report(self.nmt)

@@ -1,0 +1,103 @@
+"""Each node's NMT state over time, from heartbeats, guard responses, boot-ups and NMT commands.
+
+Heartbeats are bulk traffic, so state changes are found columnar (a heartbeat whose
+state byte differs from that node's previous one); NMT commands and boot-ups are
+rare and handled one by one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..decoded import DecodedBatch
+from ..protocol.services import Service
+from ..protocol.tables import NMT_STATES
+
+OPERATIONAL = 0x05
+PRE_OPERATIONAL = 0x7F
+STOPPED = 0x04
+BOOTUP = 0x00
+# NMT command specifier -> state the command puts a node in (reset: boot-up follows)
+_COMMAND_STATE = {
+    0x01: OPERATIONAL,
+    0x02: STOPPED,
+    0x80: PRE_OPERATIONAL,
+    0x81: BOOTUP,
+    0x82: BOOTUP,
+}
+
+
+def state_name(state: int | None) -> str:
+    if state is None:
+        return "unknown"
+    return NMT_STATES.get(state, f"0x{state:02X}")
+
+
+class NmtStates:
+    def __init__(self) -> None:
+        self.times: dict[int, list[float]] = {}
+        self.states: dict[int, list[int]] = {}
+        self.sources: dict[int, list[str]] = {}
+        self._last = np.full(128, -1, np.int16)
+
+    def _add(self, node: int, t: float, state: int, source: str) -> None:
+        ts = self.times.setdefault(node, [])
+        ss = self.states.setdefault(node, [])
+        if ss and ss[-1] == state and source != "bootup":
+            return
+        ts.append(t)
+        ss.append(state)
+        self.sources.setdefault(node, []).append(source)
+        self._last[node] = state
+
+    def update(self, batch: DecodedBatch) -> None:
+        svc = batch.service
+        fb = batch.frames
+        report = np.flatnonzero((svc == Service.HEARTBEAT) | (svc == Service.GUARD_RESPONSE))
+        events: list[tuple[float, int, int, str]] = []
+        if report.size:
+            nodes = batch.node[report].astype(np.intp)
+            state = (fb.data[report, 0] & 0x7F).astype(np.int16)
+            order = np.argsort(nodes, kind="stable")
+            n, s, r = nodes[order], state[order], report[order]
+            prev = np.empty_like(s)
+            prev[1:] = s[:-1]
+            first = np.ones(n.size, bool)
+            first[1:] = n[1:] != n[:-1]
+            prev[first] = self._last[n[first]]
+            change = np.flatnonzero(s != prev)
+            for i in change.tolist():
+                events.append((float(fb.t[r[i]]), int(n[i]), int(s[i]), "heartbeat"))
+        for i in np.flatnonzero(svc == Service.BOOTUP).tolist():
+            events.append((float(fb.t[i]), int(batch.node[i]), PRE_OPERATIONAL, "bootup"))
+        for i in np.flatnonzero(svc == Service.NMT).tolist():
+            if fb.dlc[i] < 2:
+                continue
+            state = _COMMAND_STATE.get(int(fb.data[i, 0]))
+            if state is None:
+                continue
+            target = int(fb.data[i, 1])
+            if 0 <= target < 128:
+                events.append((float(fb.t[i]), target, state, "nmt"))
+        events.sort(key=lambda e: e[0])
+        for t, node, state, source in events:
+            for n in list(self.times) if node == 0 else [node]:  # 0 = all nodes known so far
+                self._add(n, t, state, source)
+
+    def state_at(self, node: int, t: np.ndarray) -> np.ndarray:
+        """State in effect at each time (-1 unknown), by binary search over the changes."""
+        ts = self.times.get(node)
+        if not ts:
+            return np.full(np.shape(t), -1, np.int16)
+        idx = np.searchsorted(np.asarray(ts), t, side="right") - 1
+        states = np.asarray(self.states[node], np.int16)
+        return np.where(idx >= 0, states[np.maximum(idx, 0)], -1).astype(np.int16)
+
+    def timeline(self) -> dict[int, list[tuple[float, str, str]]]:
+        return {
+            n: [
+                (t, state_name(s), src)
+                for t, s, src in zip(self.times[n], self.states[n], self.sources[n], strict=True)
+            ]
+            for n in sorted(self.times)
+        }

@@ -1,0 +1,175 @@
+"""Rule base and the per-batch context every rule reads.
+
+A rule looks at columns (gaps per node or COB-ID, computed once per batch by the
+context) and emits Findings; per-frame Python only for rare rows. Each rule keeps
+the set of nodes it judged, so a JUnit report can show passing testcases too.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+
+import numpy as np
+
+from ..decoded import DecodedBatch
+from ..protocol.services import Service
+from .config import ConfigSource
+from .finding import Finding
+from .gaps import Gaps, grouped_gaps
+from .nmt_state import NmtStates
+
+# Which rows each shared gap table covers, and its key column.
+_GAP_TABLES = {
+    "heartbeat": ((Service.HEARTBEAT,), "node", 128),
+    "pdo": ((Service.TPDO, Service.RPDO), "can_id", 2048),
+    "sync": ((Service.SYNC,), None, 1),
+}
+
+
+class GapState:
+    """Carried last-frame times per gap table, owned by the Checker."""
+
+    def __init__(self) -> None:
+        self.last = {name: np.full(size, np.nan) for name, (_, _, size) in _GAP_TABLES.items()}
+
+
+class Context:
+    def __init__(
+        self,
+        batch: DecodedBatch,
+        config: ConfigSource,
+        nmt: NmtStates,
+        state: GapState,
+        t_end: float | None = None,
+    ) -> None:
+        self.batch = batch
+        self.config = config
+        self.nmt = nmt
+        self.t = batch.frames.t
+        self.t_first = float(self.t[0]) if len(batch) else (t_end or 0.0)
+        self.t_end = t_end  # set only at finish: time of the last frame of the log
+        self._state = state
+        self._gaps: dict[str, Gaps] = {}
+
+    def rows(self, *services: Service) -> np.ndarray:
+        if len(services) == 1:
+            return np.flatnonzero(self.batch.service == services[0])
+        return np.flatnonzero(np.isin(self.batch.service, np.array(services, np.uint8)))
+
+    def gaps(self, name: str) -> Gaps:
+        g = self._gaps.get(name)
+        if g is None:
+            services, keycol, _ = _GAP_TABLES[name]
+            rows = self.rows(*services)
+            fb = self.batch.frames
+            if keycol == "node":
+                keys = self.batch.node[rows]
+            elif keycol == "can_id":
+                keys = fb.can_id[rows]
+            else:
+                keys = np.zeros(rows.size, np.intp)
+            g = grouped_gaps(fb.t, keys, rows, self._state.last[name])
+            self._gaps[name] = g
+        return g
+
+
+class Rule:
+    name = ""
+    severity = "error"
+    tolerance = 0.1
+    why = ""
+    max_findings = 20  # per rule and node/COB-ID; the rest are counted in one closing finding
+
+    def __init__(
+        self, severity: str | None = None, tolerance: float | None = None, **params
+    ) -> None:
+        if severity:
+            self.severity = severity
+        if tolerance is not None:
+            self.tolerance = float(tolerance)
+        self.params = params
+        self.subjects: set[int | None] = set()
+        self.out: list[Finding] = []
+        self._count: Counter = Counter()
+        self._first_dropped: dict = {}
+
+    def process(self, ctx: Context) -> None:
+        """Check one batch; append to self.out."""
+
+    def finish(self, ctx: Context) -> None:
+        """End of log checks (ctx.t_end set, zero rows)."""
+
+    def capped(
+        self, idx: np.ndarray, times: np.ndarray, node: int | None, cob_id: int | None
+    ) -> np.ndarray:
+        """The first candidates this rule may still list for node/COB-ID; the rest only counted.
+
+        Keeps a badly misconfigured log from costing one Python call per violating frame.
+        """
+        key = (node, cob_id)
+        left = max(self.max_findings - self._count[key], 0)
+        if idx.size > left:
+            self._count[key] += idx.size - left
+            self._first_dropped.setdefault(key, float(times[left]))
+            return idx[:left]
+        return idx
+
+    def emit(
+        self,
+        t: float,
+        node: int | None,
+        cob_id: int | None,
+        message: str,
+        measured=None,
+        expected=None,
+        row: int = 0,
+        why: str | None = None,
+        severity: str | None = None,
+    ) -> None:
+        key = (node, cob_id)
+        self._count[key] += 1
+        if self._count[key] > self.max_findings:
+            self._first_dropped.setdefault(key, t)
+            return
+        self.out.append(
+            Finding(
+                float(t),
+                self.name,
+                severity or self.severity,
+                node,
+                cob_id,
+                message,
+                measured,
+                expected,
+                why if why is not None else self.why,
+                int(row),
+            )
+        )
+
+    def close(self, t_end: float) -> None:
+        """One finding per node/COB-ID that had more than max_findings."""
+        for (node, cob), n in self._count.items():
+            if n > self.max_findings:
+                extra = n - self.max_findings
+                self.out.append(
+                    Finding(
+                        self._first_dropped[(node, cob)],
+                        self.name,
+                        self.severity,
+                        node,
+                        cob,
+                        f"{extra} more like this not listed ({n} in all)",
+                        n,
+                        0,
+                        self.why,
+                        0,
+                    )
+                )
+
+    def take(self) -> list[Finding]:
+        out, self.out = self.out, []
+        return out
+
+
+def ms(seconds: float) -> float:
+    return round(float(seconds) * 1000.0, 3)

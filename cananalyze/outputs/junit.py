@@ -1,0 +1,75 @@
+"""JUnit XML: one testcase per rule and node (or COB-ID), failures carrying the findings.
+
+Written with the standard library's ElementTree (the format is five elements);
+junitparser reads it back in the tests.
+"""
+
+from __future__ import annotations
+
+import json
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+from ..checks.finding import Finding
+from ..checks.rule import Rule
+from .atomic import write_text_atomic
+
+
+def _subject(rule: Rule, s) -> str:
+    if s is None:
+        return rule.name
+    if rule.name in ("assert_pdo_rate", "unknown_cob_id"):
+        return f"{rule.name} 0x{s:03X}"
+    return f"{rule.name} node {s}"
+
+
+def junit_xml(rules: list[Rule], findings: list[Finding], name: str = "cananalyze check") -> str:
+    cases: dict[str, list[Finding]] = {}
+    for rule in rules:
+        subjects = rule.subjects or {None}
+        for s in sorted(subjects, key=lambda x: (x is not None, x or 0)):
+            cases.setdefault(_subject(rule, s), [])
+    by_rule = {r.name: r for r in rules}
+    for f in findings:
+        rule = by_rule.get(f.rule)
+        key = f.cob_id if rule and rule.name in ("assert_pdo_rate", "unknown_cob_id") else f.node
+        cases.setdefault(_subject(rule, key) if rule else f.rule, []).append(f)
+    failing = sum(1 for fs in cases.values() if any(f.fails for f in fs))
+    suite = ET.Element(
+        "testsuite", name=name, tests=str(len(cases)), failures=str(failing), errors="0"
+    )
+    for case, fs in cases.items():
+        tc = ET.SubElement(suite, "testcase", classname=f"cananalyze.{case.split()[0]}", name=case)
+        bad = [f for f in fs if f.fails]
+        if bad:
+            fail = ET.SubElement(
+                tc,
+                "failure",
+                message=f"{len(bad)} finding(s): {bad[0].message}",
+                type=bad[0].severity,
+            )
+            fail.text = "\n".join(format_finding(f) for f in bad)
+        info = [f for f in fs if not f.fails]
+        if info:
+            ET.SubElement(tc, "system-out").text = "\n".join(format_finding(f) for f in info)
+    root = ET.Element("testsuites")
+    root.append(suite)
+    ET.indent(root)
+    return ET.tostring(root, encoding="unicode", xml_declaration=True) + "\n"
+
+
+def format_finding(f: Finding) -> str:
+    node = "-" if f.node is None else str(f.node)
+    cob = "" if f.cob_id is None else f" 0x{f.cob_id:03X}"
+    return (
+        f"{f.t:.6f} node {node}{cob} [{f.severity}] {f.rule}: {f.message} "
+        f"(measured {f.measured}, expected {f.expected}). {f.why}"
+    )
+
+
+def write_junit(path: str | Path, rules: list[Rule], findings: list[Finding]) -> None:
+    write_text_atomic(path, junit_xml(rules, findings))
+
+
+def write_findings_json(path: str | Path, findings: list[Finding]) -> None:
+    write_text_atomic(path, json.dumps([f.record() for f in findings], indent=1) + "\n")
