@@ -5,10 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..checks.build import build_checker
-from ..io.source import open_log
 from .common import add_input_options, report_problems
-from .pipeline import build_decoder
+
+# The checker, readers and decoder are imported in run(): `cananalyze --help` stays light.
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -27,7 +26,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..checks.build import build_checker
+    from ..io.source import open_log
     from ..outputs.junit import format_finding, write_findings_json, write_junit
+    from .pipeline import build_decoder
 
     checker = build_checker(args.rules)
     source = open_log(args.log, strict=args.strict, fmt=args.input_format)
