@@ -139,7 +139,7 @@ def test_real_tmcm_log_events_in_frame_order():
 def test_import_and_help_stay_light():
     code = (
         "import sys, cananalyze; from cananalyze.cli.main import build_parser; build_parser();"
-        "print(sorted(m for m in ('pandas','rerun','mcap','pyarrow') if m in sys.modules))"
+        "print(sorted(m for m in ('pandas','rerun','mcap','pyarrow','can','canopen','numpy','yaml') if m in sys.modules))"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
