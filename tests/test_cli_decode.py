@@ -76,6 +76,11 @@ def test_filters_and_summary():
     assert "frames: 185" in text and "duration: 2.020300 s" in text
     assert "bus load:" in text and "node   5:" in text
     assert "node 3: 2 (abort 1, ok 1)" in text
+    # how each node was identified
+    assert "node   5: Datexel DAT 7014" in text and "(identified by SDO 0x1018 vendor/product)" in text
+    assert "node  10: unknown device" in text
+    out = cli("decode", DEMO, "--summary", "--device", "3=mcb560")
+    assert "node   3: ANDIG MCB-560" in out.stdout.decode() and "(identified by user --device)" in out.stdout.decode()
 
 
 def test_sdo_table_only():

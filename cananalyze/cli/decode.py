@@ -137,6 +137,9 @@ def run(args: argparse.Namespace) -> int:
         report_problems(source.problems)
     if args.summary:
         print("\n".join(summary.lines(args.bitrate, source.problems.count)), file=out)
+        from ..outputs.summary import device_lines
+
+        print("\n".join(device_lines(decoder.network, summary)), file=out)
         print("\n".join(timing.timing.lines(timing.nmt)), file=out)
     if out is not sys.stdout:
         out.close()

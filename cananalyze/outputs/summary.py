@@ -128,3 +128,25 @@ class Summary:
         if verdict:
             out.append(verdict)
         return out
+
+
+def device_lines(model, summary: Summary | None = None) -> list[str]:
+    """Each node seen or declared: its device and how it was identified."""
+    known = dict(getattr(model, "nodes", {}))
+    seen_nodes = set(known)
+    if summary is not None:
+        seen_nodes |= {int(n) for n in np.flatnonzero(summary.by_node_service.sum(axis=1))}
+    out = []
+    for node in sorted(seen_nodes):
+        cfg = known.get(node)
+        if cfg is None:
+            out.append(f"  node {node:>3}: unknown device (no identity read in the log; give --device or --eds)")
+            continue
+        name = cfg.profile.name if cfg.profile is not None else "unknown device"
+        seen = ", ".join(
+            f"{k} 0x{v:X}" if isinstance(v, int) else f"{k} {v!r}" for k, v in sorted(cfg.identity.items())
+        )
+        line = f"  node {node:>3}: {name} (identified by {cfg.identified_by})"
+        out.append(line + (f"; seen {seen}" if seen else ""))
+    return ["devices:", *out] if out else []
+
