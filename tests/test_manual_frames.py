@@ -72,3 +72,23 @@ def test_mcb560_emergency_list(frame, code, klass, register, mfr):
     assert f["error_code"] == code and f["error_class"] == klass
     assert f["error_register"] == register
     assert f["manufacturer"] == mfr
+
+
+def test_lss_and_time_and_other():
+    """CiA 305 LSS exchanges by name, TIME_OF_DAY as a date, and non-CANopen IDs left alone."""
+    frames = _decode([
+        (0.0, 0x7E5, bytes([0x04, 0x01]) + bytes(6)),  # switch state global: configuration
+        (0.1, 0x7E5, bytes([0x11, 0x05]) + bytes(6)),  # configure node-ID 5
+        (0.2, 0x7E4, bytes([0x11, 0x00]) + bytes(6)),  # slave: success
+        (0.3, 0x7E5, bytes([0x5E]) + bytes(7)),  # inquire node-ID
+        (0.4, 0x100, (100).to_bytes(4, "little") + (15341).to_bytes(2, "little")),
+        (0.5, 0x18FF0001, b"\x01"),  # J1939-style 29-bit identifier
+        (0.6, 0x7F0, b"\x01"),  # 11-bit, outside the predefined connection set
+        (0.7, 0x180, b"\x01"),  # node-ID 0 is not a node
+    ])
+    assert [f[0] for f in frames] == ["lss_master"] * 2 + ["lss_slave", "lss_master", "time"] + ["other"] * 3
+    assert [f[2]["command"] for f in frames[:4]] == [
+        "switch state global", "configure node-ID", "configure node-ID", "inquire node-ID",
+    ]
+    assert frames[4][2]["time"] == "2026-01-01T00:00:00.100Z"
+    assert all(f[1] == -1 for f in frames[5:])
