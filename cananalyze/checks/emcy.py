@@ -95,7 +95,7 @@ class EmcyRule(Rule):
                     t,
                     node,
                     0x80 + node,
-                    f"EMCY 0x{code:04X} ({emcy_class(code)}) raised at {t:.6f} "
+                    f"EMCY 0x{code:04X} ({emcy_class(code)}) raised at {ctx.rel(t)} "
                     "still active at the end of the log",
                     f"0x{code:04X}",
                     "cleared",

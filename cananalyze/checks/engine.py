@@ -27,9 +27,12 @@ class Checker:
         self.findings: list[Finding] = []
         self._gaps = GapState()
         self.t_last: float | None = None
+        self.t0: float | None = None  # first frame of the log: findings read time from here
 
     def _context(self, batch: DecodedBatch, t_end: float | None = None) -> Context:
-        ctx = Context(batch, self.config, self.nmt, self._gaps, t_end)
+        if self.t0 is None and len(batch):
+            self.t0 = float(batch.frames.t[0])
+        ctx = Context(batch, self.config, self.nmt, self._gaps, t_end, self.t0)
         ctx.timing = self.timing
         return ctx
 
@@ -60,6 +63,7 @@ class Checker:
             new.extend(rule.take())
         new.sort(key=lambda f: f.t)
         for f in new:
+            f.t_rel = f.t - (self.t0 if self.t0 is not None else f.t)
             batch.add_record(0 if at_end else f.row, f.record())
         self.findings.extend(new)
 

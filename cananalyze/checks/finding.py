@@ -19,6 +19,11 @@ class Finding:
     expected: object = None
     why: str = ""
     row: int = 0  # row of the batch the finding belongs to (for JSONL placement)
+    t_rel: float | None = None  # seconds since the first frame of the log (set by the Checker)
+
+    def __post_init__(self) -> None:
+        self.measured = tidy(self.measured)
+        self.expected = tidy(self.expected)
 
     @property
     def fails(self) -> bool:
@@ -30,6 +35,7 @@ class Finding:
         return {
             "kind": "finding",
             "t": self.t,
+            "t_rel": None if self.t_rel is None else round(self.t_rel, 6),
             "rule": self.rule,
             "severity": self.severity,
             "node": self.node,
@@ -39,3 +45,29 @@ class Finding:
             "expected": self.expected,
             "why": self.why,
         }
+
+
+def tidy(value: object) -> object:
+    """Floats rounded to 12 significant digits: 3276.7, not 3276.7000000000003 (float noise
+    from scaling), in the printed line and in JSON alike. Lists are tidied item by item."""
+    if isinstance(value, float):
+        return float(f"{value:.12g}")
+    if isinstance(value, (list, tuple)):
+        return [tidy(v) for v in value]
+    return value
+
+
+def show(value: object) -> str:
+    """A measured/expected value as a person reads it: 100 not 100.0, ranges as lo..hi."""
+    if isinstance(value, float):
+        return f"{value:.12g}"
+    if isinstance(value, (list, tuple)) and len(value) == 2:
+        return f"{show(value[0])}..{show(value[1])}"
+    if value is None:
+        return "none"
+    return str(value)
+
+
+def rel_time(t: float, t0: float | None) -> str:
+    """Time since the first frame, as engineers read a log: '+4.407 s'."""
+    return f"+{t - (t0 if t0 is not None else 0.0):.3f} s"

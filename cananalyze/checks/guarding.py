@@ -72,7 +72,7 @@ class GuardingRule(Rule):
                 sent,
                 node,
                 0x700 + node,
-                f"no reply to the guard request at {sent:.6f}",
+                f"no reply to the guard request at {ctx.rel(sent)}",
                 "no reply",
                 "reply",
                 row=row,
@@ -113,7 +113,7 @@ class GuardingRule(Rule):
                     sent,
                     node,
                     0x700 + node,
-                    f"no reply to the guard request at {sent:.6f}",
+                    f"no reply to the guard request at {ctx.rel(sent)}",
                     "no reply",
                     "reply",
                 )

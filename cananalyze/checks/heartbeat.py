@@ -42,7 +42,7 @@ class HeartbeatRule(Rule):
                         g.prev[i],
                         node,
                         0x700 + node,
-                        f"heartbeat dropout: no heartbeat for {ms(gap[i])} ms from {g.prev[i]:.6f}",
+                        f"heartbeat dropout: no heartbeat for {ms(gap[i])} ms from {ctx.rel(g.prev[i])}",
                         ms(gap[i]),
                         period,
                         row=g.row[i],
@@ -88,7 +88,7 @@ class HeartbeatRule(Rule):
                         t[i],
                         node,
                         0x700 + node,
-                        f"heartbeat dropout: no heartbeat for {ms(gaps[i])} ms from {t[i]:.6f} "
+                        f"heartbeat dropout: no heartbeat for {ms(gaps[i])} ms from {ctx.rel(t[i])} "
                         f"(expected period inferred from the median, 0x1017 not configured)",
                         ms(gaps[i]),
                         round(period, 3),
@@ -102,7 +102,7 @@ class HeartbeatRule(Rule):
                     last + period / 1000.0,
                     node,
                     0x700 + node,
-                    f"heartbeat stopped: last one at {last:.6f}, log goes on for "
+                    f"heartbeat stopped: last one at {ctx.rel(last)}, log goes on for "
                     f"{ms(ctx.t_end - last)} ms",
                     ms(ctx.t_end - last),
                     round(period, 3),

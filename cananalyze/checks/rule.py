@@ -14,7 +14,7 @@ import numpy as np
 from ..decoded import DecodedBatch
 from ..protocol.services import Service
 from .config import ConfigSource
-from .finding import Finding
+from .finding import Finding, rel_time
 from .gaps import Gaps, grouped_gaps
 from .nmt_state import NmtStates
 
@@ -41,6 +41,7 @@ class Context:
         nmt: NmtStates,
         state: GapState,
         t_end: float | None = None,
+        t0: float | None = None,
     ) -> None:
         self.batch = batch
         self.config = config
@@ -48,8 +49,13 @@ class Context:
         self.t = batch.frames.t
         self.t_first = float(self.t[0]) if len(batch) else (t_end or 0.0)
         self.t_end = t_end  # set only at finish: time of the last frame of the log
+        self.t0 = t0 if t0 is not None else self.t_first  # first frame of the log
         self._state = state
         self._gaps: dict[str, Gaps] = {}
+
+    def rel(self, t: float) -> str:
+        """A time in a finding's message, from the start of the log ('+4.407 s')."""
+        return rel_time(t, self.t0)
 
     def rows(self, *services: Service) -> np.ndarray:
         if len(services) == 1:

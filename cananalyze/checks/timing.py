@@ -11,6 +11,7 @@ from collections import Counter
 import numpy as np
 
 from ..protocol.services import Service
+from .finding import rel_time
 from .rule import Context
 
 
@@ -113,7 +114,7 @@ class Timing:
             out["nmt"] = nmt.timeline()
         return out
 
-    def lines(self, nmt=None) -> list[str]:
+    def lines(self, nmt=None, t0: float | None = None) -> list[str]:
         r = self.report(nmt)
 
         def fmt(s: dict) -> str:
@@ -154,7 +155,7 @@ class Timing:
         if r["error_frames"]:
             out.append(f"error frames: {r['error_frames']}")
         for node, changes in (r.get("nmt") or {}).items():
-            steps = ", ".join(f"{t:.6f} {s} ({src})" for t, s, src in changes[:12])
+            steps = ", ".join(f"{rel_time(t, t0)} {s} ({src})" for t, s, src in changes[:12])
             more = f", ... {len(changes) - 12} more" if len(changes) > 12 else ""
             out.append(f"NMT state node {node}: {steps}{more}")
         return out

@@ -51,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
     for f in sorted(checker.findings, key=lambda f: f.t):
         print(format_finding(f), file=out)
     if args.timing:
-        print("\n".join(checker.timing.lines(checker.nmt)), file=out)
+        print("\n".join(checker.timing.lines(checker.nmt, checker.t0)), file=out)
     failing = [f for f in checker.findings if f.fails]
     names = ", ".join(r.name for r in checker.rules)
     print(

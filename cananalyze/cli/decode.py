@@ -140,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
         from ..outputs.summary import device_lines
 
         print("\n".join(device_lines(decoder.network, summary)), file=out)
-        print("\n".join(timing.timing.lines(timing.nmt)), file=out)
+        print("\n".join(timing.timing.lines(timing.nmt, timing.t0)), file=out)
     if out is not sys.stdout:
         out.close()
     if collector:

@@ -10,7 +10,7 @@ import json
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from ..checks.finding import Finding
+from ..checks.finding import Finding, show
 from ..checks.rule import Rule
 from .atomic import write_text_atomic
 
@@ -59,11 +59,13 @@ def junit_xml(rules: list[Rule], findings: list[Finding], name: str = "cananalyz
 
 
 def format_finding(f: Finding) -> str:
+    """One line per finding, time from the start of the log (absolute `t` stays in JSON)."""
     node = "-" if f.node is None else str(f.node)
     cob = "" if f.cob_id is None else f" 0x{f.cob_id:03X}"
+    when = f"{f.t_rel:+.3f} s" if f.t_rel is not None else f"{f.t:.6f}"
     return (
-        f"{f.t:.6f} node {node}{cob} [{f.severity}] {f.rule}: {f.message} "
-        f"(measured {f.measured}, expected {f.expected}). {f.why}"
+        f"{when} node {node}{cob} [{f.severity}] {f.rule}: {f.message} "
+        f"(measured {show(f.measured)}, expected {show(f.expected)}). {f.why}"
     )
 
 
