@@ -22,6 +22,9 @@ class HeartbeatRule(Rule):
         super().__init__(**kw)
         self.last_seen: dict[int, float] = {}
         self.configured: set[int] = set()
+        # node -> time of its last heartbeat judged without a configured period (no 0x1017
+        # known yet, e.g. written by SDO later in the log): finish() infers the period for these
+        self.unjudged: dict[int, float] = {}
 
     def process(self, ctx: Context) -> None:
         g = ctx.gaps("heartbeat")
@@ -33,7 +36,9 @@ class HeartbeatRule(Rule):
             self.subjects.add(node)
             self.last_seen[node] = float(g.t[sl.stop - 1])
             period = ctx.config.heartbeat_ms(node, ctx.t_first)
-            if period:
+            if not period:
+                self.unjudged[node] = self.last_seen[node]
+            else:
                 self.configured.add(node)
                 limit = period * (1 + self.tolerance) / 1000.0
                 bad = np.flatnonzero(gap[sl] > limit) + sl.start
@@ -75,23 +80,24 @@ class HeartbeatRule(Rule):
         for node, last in sorted(self.last_seen.items()):
             period = ctx.config.heartbeat_ms(node, last)
             inferred = False
-            if not period:
-                t, gaps = timing.all_gaps("heartbeat", node)
-                if gaps.size < 5:
-                    continue
-                period = float(np.median(gaps)) * 1000.0
-                inferred = True
-                limit = max(2.0, 1 + self.tolerance) * period / 1000.0
-                bad = np.flatnonzero(gaps > limit)
+            t, gaps = timing.all_gaps("heartbeat", node)
+            if not period and gaps.size < 5:
+                continue  # too few heartbeats to infer a period from
+            if node in self.unjudged and gaps.size >= 5:
+                median = float(np.median(gaps)) * 1000.0
+                if not period:
+                    period, inferred = median, True
+                limit = max(2.0, 1 + self.tolerance) * median / 1000.0
+                bad = np.flatnonzero((gaps > limit) & (t <= self.unjudged[node]))
                 for i in self.capped(bad, t[bad], node, 0x700 + node).tolist():
                     self.emit(
                         t[i],
                         node,
                         0x700 + node,
                         f"heartbeat dropout: no heartbeat for {ms(gaps[i])} ms from {ctx.rel(t[i])} "
-                        f"(expected period inferred from the median, 0x1017 not configured)",
+                        "(period inferred from the median gap: 0x1017 not known at that time)",
                         ms(gaps[i]),
-                        round(period, 3),
+                        round(median, 3),
                         severity="warning",
                     )
             limit = (
