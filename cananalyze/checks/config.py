@@ -69,17 +69,23 @@ class FileConfig:
             )
 
     def _od(self, node: int, key: str, index: int, sub: int = 0) -> float | None:
+        v = self.declared(node, key)
+        return v if v is not None else self.default(node, index, sub)
+
+    def declared(self, node: int, key: str) -> float | None:
+        """A value the user wrote down for this node (an override), or None."""
         spec = self.nodes.get(node)
-        if spec is None:
+        if spec is None or key not in spec:
             return None
-        if key in spec:
-            return float(spec[key])
+        return float(spec[key])
+
+    def default(self, node: int, index: int, sub: int = 0) -> float | None:
+        """The node's device profile value (DCF value, else EDS default), or None."""
         prof = self._profiles.get(node)
-        if prof is not None:
-            v = prof.value(index, sub, node)
-            if v is not None:
-                return float(v)
-        return None
+        if prof is None:
+            return None
+        v = prof.value(index, sub, node)
+        return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else None
 
     def heartbeat_ms(self, node: int, t: float) -> float | None:
         return self._od(node, "heartbeat_ms", 0x1017)

@@ -136,7 +136,9 @@ def run(args: argparse.Namespace) -> int:
         out.flush()
         report_problems(source.problems)
     if args.summary:
-        print("\n".join(summary.lines(args.bitrate, source.problems.count)), file=out)
+        # --bitrate wins; else the network file's `bitrate`
+        bitrate = args.bitrate or decoder.network.spec.bitrate
+        print("\n".join(summary.lines(bitrate, source.problems.count)), file=out)
         from ..outputs.summary import device_lines
 
         print("\n".join(device_lines(decoder.network, summary)), file=out)
