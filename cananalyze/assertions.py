@@ -1,8 +1,8 @@
 """Assertions for pytest: check a log (path, FrameBatch or DecodedBatches) and fail readably.
 
 Each helper raises AssertionError listing the findings (time, node, measured vs
-expected, why), so a failing test explains itself. A Capture can expose these as
-methods by passing its batches.
+expected, why), so a failing test explains itself. `Capture.assert_*` call these
+with the capture's decoded columns and the configuration its pipeline saw (`config`).
 """
 
 from __future__ import annotations
@@ -62,55 +62,68 @@ def _fail(findings: list[Finding], what: str) -> None:
         raise AssertionError(f"{what}: {len(bad)} violation(s)\n  {lines}{more}")
 
 
-def assert_heartbeat(source: Source, node: int, period_ms: float, tolerance: float = 0.1) -> None:
+def assert_heartbeat(
+    source: Source, node: int, period_ms: float, tolerance: float = 0.1, config=None
+) -> None:
     from .checks.assert_heartbeat import AssertHeartbeat
 
     _fail(
-        run_rules(source, [AssertHeartbeat(node=node, period_ms=period_ms, tolerance=tolerance)]),
+        run_rules(
+            source,
+            [AssertHeartbeat(node=node, period_ms=period_ms, tolerance=tolerance)],
+            config,
+        ),
         f"heartbeat of node {node} every {period_ms:g} ms ± {tolerance:.0%}",
     )
 
 
-def assert_no_emcy(source: Source, allow: Iterable[int] = (), node: int | None = None) -> None:
+def assert_no_emcy(
+    source: Source, allow: Iterable[int] = (), node: int | None = None, config=None
+) -> None:
     from .checks.emcy import EmcyRule
 
     found = [
         f
-        for f in run_rules(source, [EmcyRule(allow=list(allow))])
+        for f in run_rules(source, [EmcyRule(allow=list(allow))], config)
         if node is None or f.node == node
     ]
     _fail(found, "no EMCY" + (f" from node {node}" if node is not None else ""))
 
 
-def assert_sdo_ok(source: Source, max_latency_ms: float | None = None) -> None:
+def assert_sdo_ok(source: Source, max_latency_ms: float | None = None, config=None) -> None:
     from .checks.sdo import SdoRule
 
-    _fail(run_rules(source, [SdoRule(max_latency_ms=max_latency_ms)]), "all SDO transfers succeed")
+    _fail(
+        run_rules(source, [SdoRule(max_latency_ms=max_latency_ms)], config),
+        "all SDO transfers succeed",
+    )
 
 
-def assert_pdo_rate(source: Source, cob_id: int, min_hz: float, max_hz: float) -> None:
+def assert_pdo_rate(source: Source, cob_id: int, min_hz: float, max_hz: float, config=None) -> None:
     from .checks.assert_pdo_rate import AssertPdoRate
 
     _fail(
-        run_rules(source, [AssertPdoRate(cob_id=cob_id, min_hz=min_hz, max_hz=max_hz)]),
+        run_rules(source, [AssertPdoRate(cob_id=cob_id, min_hz=min_hz, max_hz=max_hz)], config),
         f"PDO 0x{cob_id:03X} between {min_hz:g} and {max_hz:g} Hz",
     )
 
 
-def assert_signal_range(source: Source, node: int, signal: str, lo: float, hi: float) -> None:
+def assert_signal_range(
+    source: Source, node: int, signal: str, lo: float, hi: float, config=None
+) -> None:
     from .checks.assert_signal import AssertSignal
 
     _fail(
-        run_rules(source, [AssertSignal(node=node, signal=signal, min=lo, max=hi)]),
+        run_rules(source, [AssertSignal(node=node, signal=signal, min=lo, max=hi)], config),
         f"{signal} of node {node} within {lo:g}..{hi:g}",
     )
 
 
-def assert_operational_after_boot(source: Source, node: int, within_s: float) -> None:
+def assert_operational_after_boot(source: Source, node: int, within_s: float, config=None) -> None:
     from .checks.assert_boot import AssertOperational
 
     _fail(
-        run_rules(source, [AssertOperational(node=node, within_s=within_s)]),
+        run_rules(source, [AssertOperational(node=node, within_s=within_s)], config),
         f"node {node} operational within {within_s:g} s of boot-up",
     )
 

@@ -10,6 +10,7 @@ import it (`cananalyze --help` stays fast, MCAP/rerun export skip 0.5 s of impor
 from __future__ import annotations
 
 import argparse
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -81,6 +82,7 @@ class Capture:
     problems: ProblemLog
     network: str = ""
     profiles: dict[int, tuple[str, str]] = field(default_factory=dict)  # node -> (profile, how)
+    checker: Any = None  # the Checker that ran in the pipeline (load() attaches one)
 
     def __len__(self) -> int:
         return len(self.batch)
@@ -216,12 +218,84 @@ class Capture:
 
     @cached_property
     def findings(self) -> pd.DataFrame:
+        """Rule violations, one row each by time: the same Checker and records as
+        `cananalyze check` (t absolute, t_rel from the first frame, measured, expected, why)."""
         import pandas as pd
 
-        recs = [dict(r, row=row) for row, r in self.records if r.get("kind") == "finding"]
-        if not recs:
-            return pd.DataFrame(columns=["t", "node", "rule", "level", "message"])
-        return pd.DataFrame.from_records(recs)
+        cols = ["t", "t_rel", "rule", "severity", "node", "cob_id", "message"]
+        cols += ["measured", "expected", "why"]
+        if self.checker is not None:
+            recs = [f.record() for f in sorted(self.checker.findings, key=lambda f: f.t)]
+        else:
+            recs = [r for _, r in self.records if r.get("kind") == "finding"]
+        df = pd.DataFrame.from_records(recs, columns=cols) if recs else pd.DataFrame(columns=cols)
+        for c in ("node", "cob_id"):
+            df[c] = df[c].astype("Int64")
+        return df
+
+    # --- statistics and assertions for tests -------------------------------------
+    def heartbeat(self, node: int) -> dict:
+        """Heartbeat gaps of one node in ms: count, min, median, mean, p99, max, jitter
+        (the numbers of `check --timing`; {"count": 0} with fewer than two heartbeats)."""
+        from .checks.timing import stats
+
+        t = self.batch.t[(self.service == Service.HEARTBEAT) & (self.node == node)]
+        # to the microsecond: epoch-second floats carry sub-us noise into every gap
+        return {k: round(v, 3) if isinstance(v, float) else v for k, v in stats(np.diff(t)).items()}
+
+    def decoded(self) -> list[DecodedBatch]:
+        """The whole capture as one DecodedBatch again, for rules run after the fact."""
+        from .decoded import SignalBlock
+
+        blocks = [
+            SignalBlock(s.rows, s.node, s.pdo, s.cob_id, s.columns, s.units) for s in self.series
+        ]
+        return [
+            DecodedBatch(
+                self.batch, self.service, self.node, self.pdo, records=self.records, signals=blocks
+            )
+        ]
+
+    @property
+    def config(self):
+        """What the checks compare against (network file, rules file, SDO writes, profiles)."""
+        return self.checker.config if self.checker is not None else None
+
+    def assert_heartbeat(self, node: int, period_ms: float, tolerance: float = 0.1) -> None:
+        """Every heartbeat gap of `node` within period_ms ± tolerance (a fraction)."""
+        from .assertions import assert_heartbeat
+
+        assert_heartbeat(self.decoded(), node, period_ms, tolerance, config=self.config)
+
+    def assert_no_emcy(self, allow: Iterable[int] = (), node: int | None = None) -> None:
+        """No EMCY (other than the `allow`ed error codes), from any node or from `node`."""
+        from .assertions import assert_no_emcy
+
+        assert_no_emcy(self.decoded(), allow, node, config=self.config)
+
+    def assert_sdo_ok(self, max_latency_ms: float | None = None) -> None:
+        """Every SDO transfer ends ok (no abort, timeout or protocol error), none slower."""
+        from .assertions import assert_sdo_ok
+
+        assert_sdo_ok(self.decoded(), max_latency_ms, config=self.config)
+
+    def assert_pdo_rate(self, cob_id: int, min_hz: float, max_hz: float) -> None:
+        """The PDO on `cob_id` arrives at min_hz..max_hz over the log."""
+        from .assertions import assert_pdo_rate
+
+        assert_pdo_rate(self.decoded(), cob_id, min_hz, max_hz, config=self.config)
+
+    def assert_signal_range(self, node: int, signal: str, lo: float, hi: float) -> None:
+        """Every decoded value of `signal` from `node` within lo..hi (and seen at all)."""
+        from .assertions import assert_signal_range
+
+        assert_signal_range(self.decoded(), node, signal, lo, hi, config=self.config)
+
+    def assert_operational_after_boot(self, node: int, within_s: float) -> None:
+        """After each boot-up, `node` is operational within `within_s` seconds."""
+        from .assertions import assert_operational_after_boot
+
+        assert_operational_after_boot(self.decoded(), node, within_s, config=self.config)
 
     @cached_property
     def nodes(self) -> pd.DataFrame:
@@ -587,11 +661,21 @@ def load(
     strict: bool = False,
     input_format: str | None = None,
     sdo_timeout: float = 1.0,
+    rules: str | Path | None = None,
 ) -> Capture:
-    """Decode a log into a Capture (DataFrames `frames`, `signals`, `sdo`, `events`, ...).
+    """Decode and check a log into a Capture (DataFrames `frames`, `signals`, `sdo`,
+    `events`, `findings`; `heartbeat(node)`; `assert_*` methods for pytest).
 
     eds / device map node-IDs to EDS/DCF files / built-in profile keys
-    ({5: "dat7014"}), as `--eds 5=FILE` / `--device 5=KEY` do on the command line.
+    ({5: "dat7014"}), as `--eds 5=FILE` / `--device 5=KEY` do on the command line;
+    network and rules are the files `--network` and `check --rules` take.
     """
+    from .checks.build import attach_checker
+    from .cli.pipeline import build_decoder
+
     args = _pipeline_args(str(path), network, eds, device, strict, input_format, sdo_timeout)
-    return run_pipeline(args)
+    decoder = build_decoder(args)
+    checker = attach_checker(decoder, rules)
+    cap = run_pipeline(args, decoder=decoder)
+    cap.checker = checker
+    return cap

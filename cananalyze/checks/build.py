@@ -23,3 +23,22 @@ def build_checker(
     if network_file:
         network, base = load_network(network_file)
     return Checker(rules, FileConfig(network, base))
+
+
+def attach_checker(decoder, rules_file: str | Path | None = None) -> Checker:
+    """Append the rules file's Checker to a decoder built by `cli.pipeline.build_decoder`.
+
+    The one place `cananalyze check` and `cananalyze.load(..., rules=...)` get their
+    Checker from, so the CLI and the Python API find the same things. When the decoder
+    has a network model, the Checker reads configuration through it (SDO writes seen in
+    the log, the network file), see `model_config`.
+    """
+    from ..network.model import NetworkModel
+    from .model_config import ModelConfig
+
+    checker = build_checker(rules_file)
+    model = next((p for p in decoder.processors if isinstance(p, NetworkModel)), None)
+    if model is not None:
+        checker.config = ModelConfig(model, checker.config)
+    decoder.processors.append(checker)
+    return checker

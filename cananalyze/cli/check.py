@@ -26,21 +26,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..checks.build import build_checker
+    from ..checks.build import attach_checker
     from ..io.source import open_log
     from ..outputs.junit import format_finding, write_findings_json, write_junit
     from .pipeline import build_decoder
 
-    checker = build_checker(args.rules)
-    source = open_log(args.log, strict=args.strict, fmt=args.input_format)
     decoder = build_decoder(args)
-    from ..checks.model_config import ModelConfig
-    from ..network.model import NetworkModel
-
-    model = next((p for p in decoder.processors if isinstance(p, NetworkModel)), None)
-    if model is not None:  # values written by SDO in the log win over the rules file's
-        checker.config = ModelConfig(model, checker.config)
-    decoder.processors.append(checker)
+    checker = attach_checker(decoder, args.rules)
+    source = open_log(args.log, strict=args.strict, fmt=args.input_format)
     try:
         for fb in source.batches():
             decoder.decode(fb)
