@@ -15,6 +15,7 @@ from .pdo_async import PdoAsyncRule
 from .pdo_length import PdoLengthRule
 from .pdo_state import PdoStateRule
 from .pdo_sync import PdoSyncRule
+from .pdo_valid import PdoValidRule
 from .rule import Rule
 from .sdo import SdoRule
 from .sync import SyncRule
@@ -32,6 +33,7 @@ RULES: dict[str, type[Rule]] = {
         PdoAsyncRule,
         PdoStateRule,
         PdoLengthRule,
+        PdoValidRule,
         UnknownCobIdRule,
         EmcyRule,
         SdoRule,

@@ -27,6 +27,9 @@ from cananalyze.protocol.services import Service
 
 from ..protocol.comm_objects import comm_object
 
+NOT_VALID = (
+    "is not valid (COB-ID bit 31 set)"  # PdoBinding.problem; the pdo_not_valid rule looks for it
+)
 USER_SOURCES = ("user --device", "user --eds", "network file")
 _IDENTITY = {
     (0x1018, 1): "vendor_id",
@@ -247,7 +250,7 @@ class NetworkModel:
                             kind,
                             number,
                             cfg.pdo_config(state),
-                            f"{kind.upper()}{number} of node {node} is not valid (COB-ID bit 31 set)",
+                            f"{kind.upper()}{number} of node {node} {NOT_VALID}",
                         ),
                     )
         for cob, b in fallback.items():
