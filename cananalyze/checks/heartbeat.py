@@ -35,10 +35,11 @@ class HeartbeatRule(Rule):
         for node, sl in g.groups():
             self.subjects.add(node)
             self.last_seen[node] = float(g.t[sl.stop - 1])
-            period = ctx.config.heartbeat_ms(node, ctx.t_first)
-            if not period:
-                self.unjudged[node] = self.last_seen[node]
-            else:
+            period = self._periods(ctx, node, g.t[sl])
+            unknown = np.isnan(period)
+            if unknown.any():
+                self.unjudged[node] = float(g.t[sl][unknown][-1])
+            if not unknown.all():
                 self.configured.add(node)
                 limit = period * (1 + self.tolerance) / 1000.0
                 bad = np.flatnonzero(gap[sl] > limit) + sl.start
@@ -49,7 +50,7 @@ class HeartbeatRule(Rule):
                         0x700 + node,
                         f"heartbeat dropout: no heartbeat for {ms(gap[i])} ms from {ctx.rel(g.prev[i])}",
                         ms(gap[i]),
-                        period,
+                        float(period[i - sl.start]),
                         row=g.row[i],
                     )
             for consumer, limit_ms in consumers.get(node, ()):
@@ -66,6 +67,20 @@ class HeartbeatRule(Rule):
                         why="The consumer raises a heartbeat event (usually an EMCY 0x8130 and a fault "
                         "reaction); check the producer and the consumer time in 0x1016.",
                     )
+
+    @staticmethod
+    def _periods(ctx: Context, node: int, t: np.ndarray) -> np.ndarray:
+        """0x1017 in force at each heartbeat (NaN: unknown or 0). One lookup per batch unless
+        the value changes inside it (an SDO write mid-batch): then one per heartbeat, rarely."""
+
+        def at(x: float) -> float:
+            v = ctx.config.heartbeat_ms(node, float(x))
+            return float(v) if v else np.nan
+
+        first, last = at(t[0]), at(t[-1])
+        if first == last or (np.isnan(first) and np.isnan(last)):
+            return np.full(t.size, first)
+        return np.array([at(x) for x in t.tolist()])
 
     def _consumers(self, ctx: Context) -> dict[int, list[tuple[int, float]]]:
         out: dict[int, list[tuple[int, float]]] = {}
