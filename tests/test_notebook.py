@@ -56,7 +56,8 @@ def test_walkthrough_executes(kernel_env):
         if cell.cell_type == "code"
         for out in cell.outputs
     )
-    assert "185 frames, 19 events, 7 SDO transactions" in text
+    # 19 events plus two findings (the demo's SDO abort and EMCY): load() runs the checks
+    assert "185 frames, 21 events, 7 SDO transactions" in text
     assert "Object does not exist in the object dictionary" in text  # the SDO table
     assert "operational" in text  # nodes table
     hb = next(c for c in nb.cells if "hb_stats" in c.source)
