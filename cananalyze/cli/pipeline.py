@@ -63,3 +63,18 @@ def build_decoder(args: argparse.Namespace) -> Decoder:
     model.attach(decoder)
     decoder.network = model  # for checks and outputs that ask about the configuration
     return decoder
+
+
+def attach_checker(decoder: Decoder, checker):
+    """Append the Checker to the decoder (as `check` and `live --check` run it).
+
+    Values the log writes by SDO (heartbeat, PDO parameters) win over the rules file's,
+    through the decoder's network model.
+    """
+    from ..checks.model_config import ModelConfig
+
+    model = getattr(decoder, "network", None)
+    if model is not None:
+        checker.config = ModelConfig(model, checker.config)
+    decoder.processors.append(checker)
+    return checker
