@@ -84,7 +84,11 @@ class SlcanAdapter:
 
 
 def replay(adapter: SlcanAdapter, log_path: str, timed: bool = True) -> int:
-    """Send every frame of the log (paced like the original unless timed=False); returns the count."""
+    """Send the log's frames (paced like the original unless timed=False); returns the count.
+
+    Error frames are left out: the slcan protocol has no way to carry them (an adapter
+    would report bus errors through its status flags, which python-can does not read).
+    """
     import can
 
     reader = can.LogReader(log_path)
@@ -92,6 +96,8 @@ def replay(adapter: SlcanAdapter, log_path: str, timed: bool = True) -> int:
     n = 0
     for msg in messages:
         adapter.poll()
+        if msg.is_error_frame:
+            continue
         adapter.send(msg)
         n += 1
     return n
