@@ -60,13 +60,13 @@ def test_dashboard_shows_nodes_signals_and_events():
     # guarded node 10: state from the guard reply, no heartbeat period
     assert "operational" in row[10]
     # TPDO2 of the DAT 7014 at 1.2 s: k=11 -> 226, 209, 7, 1000 (x0.1 degC)
-    sig = {(c[0], c[2]): c for c in cells if len(c) == 6 and c[1] == "tpdo2"}
-    assert {s for n, s in sig if n == "5"} == {"ch1", "ch2", "ch3", "ch4"}
-    assert sig["5", "ch1"][3:5] == ["22.6", "°C"]
-    assert sig["5", "ch4"][3:5] == ["100", "°C"]
-    # MCB-560 TPDO2 (analog inputs in mV) through its built-in profile
-    assert {s for n, s in sig if n == "3"} == {"analog0", "analog1", "analog2", "analog3"}
-    assert all(sig["3", f"analog{k}"][4] == "mV" for k in range(4))
+    # one row per PDO with its signals side by side, units from the profiles
+    sig = {(c[0], c[1]): c[2] for c in cells if len(c) == 4 and c[1].startswith("tpdo")}
+    assert set(sig) == {("3", "tpdo1"), ("3", "tpdo2"), ("5", "tpdo2")}
+    # TPDO2 of the DAT 7014 at 1.2 s: k=11 -> 226, 209, 7, 1000 (x0.1 degC)
+    assert sig["5", "tpdo2"] == "ch1 22.6 °C   ch2 20.9 °C   ch3 0.7 °C   ch4 100 °C"
+    # MCB-560 TPDO2: analog inputs in mV through its built-in profile
+    assert sig["3", "tpdo2"].startswith("analog0 ") and sig["3", "tpdo2"].count(" mV") == 4
     assert "NMT start all nodes" in text
     assert "node 3 EMCY 0x8100" in text
     assert "bus load" in text and "frames" in text
@@ -103,7 +103,7 @@ def test_findings_and_steady_columns(tmp_path):
     view.add(dec.finish(), wall=200)
     text = _render(view, wall=200)
     assert len({s for s in seps if len(s) == 8}) == 1  # nodes table (7 columns)
-    assert len({s for s in seps if len(s) == 7}) == 1  # signals table (6 columns)
+    assert len({s for s in seps if len(s) == 5}) == 1  # signals table (4 columns)
     failing = [f for f in checker.findings if f.fails]
     assert view.violations == len(failing) > 10
     assert f"check: {len(failing)} violation(s)" in text

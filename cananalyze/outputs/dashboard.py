@@ -60,6 +60,14 @@ class SignalValue:
     t: float
 
 
+def _value_text(value) -> str:
+    if isinstance(value, bool):
+        return "1" if value else "0"
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return str(value)
+
+
 class LiveView:
     """State behind the dashboard. `add(batch)` after every decode; `render()` to show it."""
 
@@ -350,35 +358,55 @@ class LiveView:
                 st.last_sdo or "-",
             )
 
+        # one row per PDO, its signals side by side: a node with 8 inputs takes one line,
+        # not eight, so the event log (where findings appear) keeps its room
+        by_pdo: dict[tuple[int, str], list[SignalValue]] = {}
+        for key in sorted(self.signals):
+            s = self.signals[key]
+            by_pdo.setdefault((s.node, s.pdo), []).append(s)
+        # lines: header 1, each table title + borders + heading 5 + rows, the log panel 2 + room,
+        # one spare so the cursor line never scrolls the screen
+        nodes_h = 5 + max(1, len(self.nodes))
+        room_sigs = max(2, height - 1 - nodes_h - 5 - (2 + 8) - 1)  # 8 lines kept for the log
+        rows = list(by_pdo.items())
+        shown = rows if len(rows) <= room_sigs else rows[: room_sigs - 1]
         sigs = Table(
             title="PDO signals (latest)", title_justify="left", expand=True, pad_edge=False
         )
         for col, kw in (
             ("node", {"width": 4, "justify": "right"}),
             ("PDO", {"width": 6}),
-            ("signal", {"ratio": 3}),
-            ("value", {"width": 14, "justify": "right"}),
-            ("unit", {"width": 8}),
+            ("values", {"ratio": 1}),
             ("age", {"width": 9, "justify": "right"}),
         ):
             sigs.add_column(col, no_wrap=True, overflow="ellipsis", **kw)
-        for key in sorted(self.signals):
-            s = self.signals[key]
-            value = f"{s.value:.6g}" if isinstance(s.value, float) else str(s.value)
+        for (node, pdo), values in shown:
+            cells = Text()
+            for k, s in enumerate(values):
+                if k:
+                    cells.append("   ")
+                cells.append(f"{s.name} ", style="dim")
+                cells.append(_value_text(s.value))
+                if s.unit:
+                    cells.append(f" {s.unit}")
+            age = (now - max(s.t for s in values)) * 1e3
+            sigs.add_row(str(node), pdo, cells, f"{age:.0f} ms")
+        if len(shown) < len(rows):
+            sigs.add_row("", "", Text(f"... {len(rows) - len(shown)} more PDOs", style="dim"), "")
+        if not rows:
             sigs.add_row(
-                str(s.node), s.pdo, s.name, value, s.unit or "", f"{(now - s.t) * 1e3:.0f} ms"
-            )
-        if not self.signals:
-            sigs.add_row(
-                "-", "-", "(no decoded PDO yet: --device, --eds or --network name them)", "", "", ""
+                "-", "-", "(no decoded PDO yet: --device, --eds or --network name them)", ""
             )
 
-        used = 3 + len(self.nodes) + 4 + max(1, len(self.signals)) + 4
-        room = max(4, height - used - 3)
+        sigs_h = 5 + max(1, len(shown) + (len(shown) < len(rows)))
+        room = max(4, height - 1 - nodes_h - sigs_h - 2 - 1)
         t0 = self.t0 or 0.0
         log = Text(no_wrap=True, overflow="ellipsis")
-        for t, level, text in list(self.events)[-room:]:
+        events = list(self.events)[-room:]
+        for k, (t, level, text) in enumerate(events):
             log.append(f"{t - t0:10.3f}  ", style="dim")
-            log.append(text + "\n", style=_LEVEL_STYLE.get(level, ""))
+            log.append(
+                text + ("\n" if k < len(events) - 1 else ""), style=_LEVEL_STYLE.get(level, "")
+            )
         events = Panel(log, title="Events", title_align="left")
         return Group(head, nodes, sigs, events)
