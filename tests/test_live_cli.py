@@ -7,17 +7,16 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import pty
 import re
 import signal
 import subprocess
 import sys
 import time
-import tty
 
 import can
 import pytest
 from conftest import ROOT, SAMPLES
+from helpers.live_slcan import start_live
 
 from cananalyze.cli.pipeline import build_decoder
 from cananalyze.io.source import read_all
@@ -28,34 +27,7 @@ DEMO = SAMPLES / "demo.log"
 
 
 def _start_live(args: list[str]) -> tuple[subprocess.Popen, SlcanAdapter, int]:
-    master, slave = pty.openpty()
-    tty.setraw(slave)
-    env = dict(os.environ, PYTHONPATH=str(ROOT), TERM="dumb")
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "cananalyze",
-            "live",
-            "-i",
-            "slcan",
-            "-c",
-            os.ttyname(slave),
-            "-b",
-            "500000",
-            *args,
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=env,
-        cwd=ROOT,
-    )
-    adapter = SlcanAdapter(master)
-    if not adapter.wait_open(timeout=30):
-        proc.kill()
-        pytest.fail(f"live never opened the slcan channel: {proc.communicate()}")
-    return proc, adapter, slave
+    return start_live(args)
 
 
 def _frame_part(line: str) -> str:

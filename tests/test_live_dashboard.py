@@ -1,5 +1,6 @@
 """The live dashboard, rendered to text: nodes, states, heartbeat periods, EMCYs,
-PDO values with units and the event log, from the demo session's real frames."""
+PDO values with units (from the real PDO decoder) and the event log, from the demo
+session's real frames, and findings when a Checker runs."""
 
 from __future__ import annotations
 
@@ -9,30 +10,11 @@ import numpy as np
 from conftest import SAMPLES
 from rich.console import Console
 
+from cananalyze.checks.build import attach_checker, build_checker
 from cananalyze.cli.pipeline import build_decoder
-from cananalyze.decoded import SignalBlock
 from cananalyze.decoder import Decoder
 from cananalyze.io.source import read_all
-from cananalyze.network.profile import load_builtin
 from cananalyze.outputs.dashboard import LiveView
-from cananalyze.protocol.pdo_decode import decode_pdo
-
-
-class Dat7014Pdo:
-    """Stands in for the PDO processor: the DAT 7014 profile's TPDO2 decoded with decode_pdo."""
-
-    def __init__(self) -> None:
-        self.cfg = next(p for p in load_builtin("dat7014").pdos(5) if p.number == 2)
-
-    def process(self, batch) -> None:
-        rows = np.flatnonzero(batch.frames.can_id == self.cfg.cob_id)
-        if rows.size:
-            cols = decode_pdo(batch.frames.data[rows], batch.frames.dlc[rows], self.cfg.mapping)
-            units = {e.name: e.unit for e in self.cfg.mapping}
-            batch.signals.append(SignalBlock(rows, 5, "tpdo2", self.cfg.cob_id, cols.values, units))
-
-    def finish(self, batch) -> None:
-        pass
 
 
 def _cells(text: str) -> list[list[str]]:
@@ -52,9 +34,9 @@ def _render(view: LiveView, wall: float) -> str:
 
 def test_dashboard_shows_nodes_signals_and_events():
     frames = read_all(SAMPLES / "demo.log")
-    # the SDO tracker as `decode` wires it, then the PDO decoding
-    dec = Decoder(build_decoder(argparse.Namespace(sdo_timeout=1.0)).processors + [Dat7014Pdo()])
-    view = LiveView(bitrate=500_000, devices={10: "guarded node"})
+    # the pipeline as `live --device 3=mcb560` builds it; node 5 is left to SDO identification
+    dec = build_decoder(argparse.Namespace(sdo_timeout=1.0, device=["3=mcb560"]))
+    view = LiveView(bitrate=500_000, devices={10: "guarded node"}, model=dec.network)
     t0 = float(frames.t[0])
     # feed the session in 50 ms slices, as the live source would, up to 1.25 s (EMCY active)
     cut = t0 + 1.25
@@ -68,6 +50,7 @@ def test_dashboard_shows_nodes_signals_and_events():
     assert set(row) == {3, 5, 10}
     # identified from the SDO-read 0x1018/0x1000/0x1008 against the built-in profiles
     assert "Datexel DAT 7014" in row[5] and "operational" in row[5]
+    assert "ANDIG MCB-560" in row[3]  # from --device
     assert "guarded node" in row[10]
     assert "SDO write 0x1017:00" in row[5]  # the last SDO transaction
     assert "100 ms" in row[5] and "100 ms" in row[3]  # measured heartbeat period
@@ -77,10 +60,13 @@ def test_dashboard_shows_nodes_signals_and_events():
     # guarded node 10: state from the guard reply, no heartbeat period
     assert "operational" in row[10]
     # TPDO2 of the DAT 7014 at 1.2 s: k=11 -> 226, 209, 7, 1000 (x0.1 degC)
-    sig = {c[2]: " | ".join(c) for c in cells if len(c) == 6 and c[1] == "tpdo2"}
-    assert set(sig) == {"ch1", "ch2", "ch3", "ch4"}
-    assert "22.6" in sig["ch1"] and "°C" in sig["ch1"]
-    assert "100" in sig["ch4"]
+    # one row per PDO with its signals side by side, units from the profiles
+    sig = {(c[0], c[1]): c[2] for c in cells if len(c) == 4 and c[1].startswith("tpdo")}
+    assert set(sig) == {("3", "tpdo1"), ("3", "tpdo2"), ("5", "tpdo2")}
+    # TPDO2 of the DAT 7014 at 1.2 s: k=11 -> 226, 209, 7, 1000 (x0.1 degC)
+    assert sig["5", "tpdo2"] == "ch1 22.6 °C   ch2 20.9 °C   ch3 0.7 °C   ch4 100 °C"
+    # MCB-560 TPDO2: analog inputs in mV through its built-in profile
+    assert sig["3", "tpdo2"].startswith("analog0 ") and sig["3", "tpdo2"].count(" mV") == 4
     assert "NMT start all nodes" in text
     assert "node 3 EMCY 0x8100" in text
     assert "bus load" in text and "frames" in text
@@ -92,6 +78,43 @@ def test_dashboard_shows_nodes_signals_and_events():
     row3 = " | ".join(next(c for c in _cells(text) if len(c) == 7 and c[0] == "3"))
     assert "0x8100" not in row3
     assert "EMCY error reset" in text
+
+
+def _widths(text: str) -> list[list[int]]:
+    """Column separator positions of every table line."""
+    return [[i for i, ch in enumerate(x) if ch in "│┃"] for x in text.splitlines() if "│" in x]
+
+
+def test_findings_and_steady_columns(tmp_path):
+    """A Checker on the live decoder: findings land in the event log with their level and
+    in the header count; column positions do not move as values change between refreshes."""
+    frames = read_all(SAMPLES / "faults.log")
+    dec = build_decoder(argparse.Namespace(sdo_timeout=1.0, network=str(SAMPLES / "network.toml")))
+    checker = attach_checker(dec, build_checker(SAMPLES / "rules.yaml"))
+    view = LiveView(bitrate=500_000, model=dec.network, checking=True)
+    t0 = float(frames.t[0])
+    seps = set()
+    texts = []
+    for k, a in enumerate(np.arange(t0, t0 + 10.0, 0.5)):
+        view.add(dec.decode(frames.take((frames.t >= a) & (frames.t < a + 0.5))), wall=100 + k)
+        text = _render(view, wall=100 + k + 0.5)
+        texts.append(text)
+        seps.update(tuple(w) for w in _widths(text))
+    view.add(dec.finish(), wall=200)
+    text = _render(view, wall=200)
+    assert len({s for s in seps if len(s) == 8}) == 1  # nodes table (7 columns)
+    assert len({s for s in seps if len(s) == 5}) == 1  # signals table (4 columns)
+    failing = [f for f in checker.findings if f.fails]
+    assert view.violations == len(failing) > 10
+    assert f"check: {len(failing)} violation(s)" in text
+    assert "assert_signal: node 5 ch3 = 3276.7 outside -200..850" in text
+    levels = {lvl for _, lvl, txt in view.events if txt.startswith("assert_signal")}
+    assert levels == {"error"}
+    # the devices the network file declares
+    rows = {c[0]: c for c in _cells(text) if len(c) == 7}
+    assert rows["7"][1].startswith("ICP DAS I-7231D") and rows["6"][1].startswith(
+        "Datexel DAT 7130"
+    )
 
 
 def test_rate_and_load_follow_the_wall_clock():

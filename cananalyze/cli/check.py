@@ -26,24 +26,33 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..checks.build import attach_checker
+    from ..checks.build import attach_checker, build_checker
     from ..io.source import open_log
-    from ..outputs.junit import format_finding, write_findings_json, write_junit
     from .pipeline import build_decoder
 
-    decoder = build_decoder(args)
-    checker = attach_checker(decoder, args.rules)
+    checker = build_checker(args.rules)  # a bad rules file fails before the log is read
     source = open_log(args.log, strict=args.strict, fmt=args.input_format)
+    decoder = build_decoder(args)
+    attach_checker(decoder, checker)
     try:
         for fb in source.batches():
             decoder.decode(fb)
         decoder.finish()
     finally:
         report_problems(source.problems)
-    out = sys.stdout
+    return check_result(checker, args.junit, args.json, timing=args.timing)
+
+
+def check_result(
+    checker, junit: str | None = None, json_file: str | None = None, timing: bool = False, out=None
+) -> int:
+    """Findings in time order, the verdict line, the reports; returns the exit code (0 or 1)."""
+    from ..outputs.junit import format_finding, write_findings_json, write_junit
+
+    out = out or sys.stdout
     for f in sorted(checker.findings, key=lambda f: f.t):
         print(format_finding(f), file=out)
-    if args.timing:
+    if timing:
         print("\n".join(checker.timing.lines(checker.nmt, checker.t0)), file=out)
     failing = [f for f in checker.findings if f.fails]
     names = ", ".join(r.name for r in checker.rules)
@@ -52,8 +61,8 @@ def run(args: argparse.Namespace) -> int:
         f"{len(checker.findings) - len(failing)} note(s)",
         file=out,
     )
-    if args.junit:
-        write_junit(args.junit, checker.rules, checker.findings)
-    if args.json:
-        write_findings_json(args.json, checker.findings)
+    if junit:
+        write_junit(junit, checker.rules, checker.findings)
+    if json_file:
+        write_findings_json(json_file, checker.findings)
     return 1 if failing else 0

@@ -1,9 +1,12 @@
 """`cananalyze live`: sniff a running bus through any python-can interface.
 
 A dashboard on a terminal (nodes, PDO values, events), decode-style lines with
---plain or when stdout is not a terminal; optionally records the raw frames.
+--plain or when stdout is not a terminal; optionally records the raw frames,
+streams the timelines to rerun (--rrd/--rerun) and checks the rules of a rules
+file as frames arrive (--check: same rules, report and exit codes as `check`).
 Ctrl-C / SIGTERM end the session cleanly: recordings are finalised, the summary
-printed. Interface failures end it the same way, then one line and exit 2.
+and the check result printed. Interface failures end it the same way, then one
+line and exit 2.
 """
 
 from __future__ import annotations
@@ -44,7 +47,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="KEY=VALUE",
         help="extra python-can interface argument (e.g. tty_baudrate=921600); repeatable",
     )
-    p.add_argument("--network", metavar="FILE", help="network description (nodes, profiles)")
+    p.add_argument(
+        "--network",
+        metavar="FILE",
+        help="network file (TOML/YAML): nodes, profiles, PDO/heartbeat overrides, SDO channels",
+    )
+    p.add_argument(
+        "--device",
+        action="append",
+        default=[],
+        metavar="NODE=NAME",
+        help="node NODE is this built-in device (dat7130, dat7014, i7231d, mcb560); repeatable",
+    )
     p.add_argument(
         "--eds",
         action="append",
@@ -52,6 +66,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="NODE=FILE",
         help="EDS/DCF of a node; repeatable",
     )
+    p.add_argument(
+        "--check",
+        metavar="RULES",
+        help="check the rules of this rules file live; exit 1 on violations, as `check` does",
+    )
+    p.add_argument("--junit", metavar="FILE", help="with --check: write a JUnit XML report at exit")
+    p.add_argument(
+        "--json", metavar="FILE", help="with --check: write the findings as JSON at exit"
+    )
+    p.add_argument(
+        "--rerun", action="store_true", help="stream the timelines to a spawned Rerun viewer"
+    )
+    p.add_argument("--rrd", metavar="FILE", help="stream the timelines into a Rerun .rrd file")
     p.add_argument(
         "--plain", action="store_true", help="decode-style lines instead of the dashboard"
     )
@@ -89,24 +116,8 @@ def _bus_options(items: list[str]) -> dict:
     return out
 
 
-def _eds_devices(items: list[str]) -> dict[int, str]:
-    """Node -> device name from --eds NODE=FILE (the decoder gets the files too, via args)."""
-    from ..network.profile import load_eds
-
-    out = {}
-    for item in items:
-        node, sep, path = item.partition("=")
-        try:
-            n = int(node, 0)
-        except ValueError:
-            n = -1
-        if not sep or not 1 <= n <= 127:
-            raise UsageError(f"--eds {item!r}: expected NODE=FILE with NODE 1..127")
-        out[n] = load_eds(path, n).name
-    return out
-
-
 def run(args: argparse.Namespace) -> int:
+    from ..checks.build import attach_checker
     from ..io.live import HwFilter, LiveSource, open_bus
     from ..io.record import FrameRecorder
     from ..outputs.dashboard import LiveView
@@ -118,27 +129,60 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--filter: {exc}") from None
     if args.duration is not None and args.duration <= 0:
         raise UsageError("--duration must be positive")
+    if (args.junit or args.json) and not args.check:
+        raise UsageError("--junit and --json report a check: give --check RULES too")
     options = _bus_options(args.bus_option)
-    devices = _eds_devices(args.eds)
+    # Frames are time-stamped on the reader thread as they are read; with the default 5 ms
+    # GIL switch interval a decode on the main thread can hold them back that long, which
+    # shows up as SDO latency and heartbeat jitter that the bus never had.
+    sys.setswitchinterval(0.0005)
+    checker = None
+    if args.check:
+        from ..checks.build import build_checker
+
+        checker = build_checker(args.check)
     decoder = build_decoder(args)
+    if checker is not None:
+        attach_checker(decoder, checker)
     plain = args.plain or not sys.stdout.isatty()
     recorder = FrameRecorder(args.record) if args.record else None
-    view = LiveView(bitrate=args.bitrate, devices=devices)
+    view = LiveView(
+        bitrate=args.bitrate, model=getattr(decoder, "network", None), checking=checker is not None
+    )
+    timeline = None
     source = None
     try:
+        if args.rrd or args.rerun:
+            from ..outputs.rerun_live import RerunLive
+
+            timeline = RerunLive(
+                rrd=args.rrd,
+                spawn=args.rerun,
+                bitrate=args.bitrate,
+                name=f"live {args.interface or ''} {args.channel or ''}".strip(),
+                network=args.network or "",
+            )
         bus = open_bus(args.interface, args.channel, args.bitrate, filters, **options)
         source = LiveSource(bus, channel_name=_label(args.channel, bus))
-        _serve(args, source, decoder, view, recorder, plain)
+        _serve(args, source, decoder, view, recorder, timeline, plain)
     finally:
         if source is not None:
             source.close()
         if recorder is not None:
             recorder.close()
             print(f"recorded {recorder.frames} frames to {args.record}", file=sys.stderr)
+        if timeline is not None:
+            timeline.close()
+            if args.rrd:
+                print(f"wrote {args.rrd}", file=sys.stderr)
         if source is not None:
             sys.stdout.flush()
             print("\n".join(view.summary.lines(args.bitrate)))
             sys.stdout.flush()
+    if checker is not None:
+        from .check import check_result
+
+        return check_result(checker, args.junit, args.json)
     return 0
 
 
@@ -154,7 +198,7 @@ def _label(channel: str | None, bus) -> str:
     return name[:12] or "can0"
 
 
-def _serve(args, source, decoder, view, recorder, plain: bool) -> None:
+def _serve(args, source, decoder, view, recorder, timeline, plain: bool) -> None:
     """The loop: decode each batch, record it, show it; until stopped, timed out or failed."""
     deadline = time.monotonic() + args.duration if args.duration else None
 
@@ -175,6 +219,8 @@ def _serve(args, source, decoder, view, recorder, plain: bool) -> None:
             for fb in source.batches():
                 batch = decoder.decode(fb)  # empty batches too: they carry time forward
                 view.add(batch)
+                if timeline is not None:
+                    timeline.add(batch)
                 if len(fb):
                     if recorder is not None:
                         recorder.write(fb)
@@ -184,6 +230,8 @@ def _serve(args, source, decoder, view, recorder, plain: bool) -> None:
                     source.stop()
             tail = decoder.finish()
             view.add(tail)
+            if timeline is not None:
+                timeline.add(tail)
             writer.write(tail)
             sys.stdout.flush()
         else:
@@ -201,7 +249,10 @@ def _serve(args, source, decoder, view, recorder, plain: bool) -> None:
                 redirect_stderr=False,
             ) as live:
                 for fb in source.batches():
-                    view.add(decoder.decode(fb))
+                    batch = decoder.decode(fb)
+                    view.add(batch)
+                    if timeline is not None:
+                        timeline.add(batch)
                     if recorder is not None:
                         recorder.write(fb)
                     now = time.monotonic()
@@ -210,7 +261,10 @@ def _serve(args, source, decoder, view, recorder, plain: bool) -> None:
                         shown = now
                     if deadline is not None and now >= deadline:
                         source.stop()
-                view.add(decoder.finish())
+                tail = decoder.finish()
+                view.add(tail)
+                if timeline is not None:
+                    timeline.add(tail)
                 live.update(view.render(height=console.height), refresh=True)
     finally:
         for s, h in old.items():

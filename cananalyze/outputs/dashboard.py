@@ -1,7 +1,9 @@
 """The live dashboard: what a commissioning engineer wants to see on a running bus.
 
-`LiveView` keeps the state (nodes, latest PDO signal values, an event log, frame
-rate and bus load) and is fed DecodedBatches as they land; `render()` builds a rich
+`LiveView` keeps the state (nodes, latest PDO signal values, an event log with
+levels, check findings, frame rate and bus load) and is fed DecodedBatches as they
+land; device names come from the decoder's network model (--network, --eds,
+--device, SDO identification) when it is given one; `render()` builds a rich
 renderable from it, so the same view runs under `rich.live.Live` or prints into a
 recording Console in tests. Updates are columnar per batch; only the rare rows
 (heartbeats' last state per node, EMCY, NMT, records) are looked at one by one.
@@ -26,6 +28,9 @@ _ERRCTL = np.array([Service.HEARTBEAT, Service.BOOTUP, Service.GUARD_RESPONSE], 
 _RARE = np.array([Service.NMT, Service.EMCY], np.uint8)
 _SDO = np.array([Service.SDO_REQUEST, Service.SDO_RESPONSE], np.uint8)
 RATE_WINDOW = 1.0  # seconds of wall time over which frame rate and bus load are measured
+INFO, WARNING, ERROR = "info", "warning", "error"
+_LEVEL_STYLE = {INFO: "", WARNING: "yellow", ERROR: "bold red"}
+_SEVERITY_LEVEL = {"error": ERROR, "warning": WARNING, "info": INFO}
 
 
 @dataclass
@@ -55,17 +60,34 @@ class SignalValue:
     t: float
 
 
+def _value_text(value) -> str:
+    if isinstance(value, bool):
+        return "1" if value else "0"
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return str(value)
+
+
 class LiveView:
     """State behind the dashboard. `add(batch)` after every decode; `render()` to show it."""
 
     def __init__(
-        self, bitrate: int | None = None, devices: dict[int, str] | None = None, events: int = 200
+        self,
+        bitrate: int | None = None,
+        devices: dict[int, str] | None = None,
+        events: int = 200,
+        model=None,
+        checking: bool = False,
     ) -> None:
         self.bitrate = bitrate
+        self.model = model  # NetworkModel: profiles declared or identified, per node
+        self.checking = checking
+        self.violations = 0
+        self.notes = 0
         self.summary = Summary()
         self.nodes: dict[int, NodeState] = {}
         self.signals: dict[tuple[int, str, str], SignalValue] = {}
-        self.events: deque[tuple[float, str]] = deque(maxlen=events)
+        self.events: deque[tuple[float, str, str]] = deque(maxlen=events)  # (t, level, text)
         self.t0: float | None = None
         self.t_last: float | None = None  # newest frame time
         self.clock_offset = 0.0  # frame time minus wall time at the newest frame
@@ -80,8 +102,15 @@ class LiveView:
             st = self.nodes[n] = NodeState(n)
         return st
 
-    def _event(self, t: float, text: str) -> None:
-        self.events.append((t, text))
+    def _event(self, t: float, text: str, level: str = INFO) -> None:
+        self.events.append((t, level, text))
+
+    def device(self, n: int) -> str | None:
+        """The node's device: the network model's profile, else what SDO identity told."""
+        cfg = self.model.nodes.get(n) if self.model is not None else None
+        if cfg is not None and cfg.profile is not None:
+            return cfg.profile.name
+        return self.nodes[n].device if n in self.nodes else None
 
     # --- feeding --------------------------------------------------------------
     def add(self, batch: DecodedBatch, wall: float | None = None) -> None:
@@ -159,7 +188,10 @@ class LiveView:
                     short = f"0x{f['error_code']:04X} {f.get('error_class') or ''}".strip()
                     st.emcy[f["error_code"]] = short
                 text = f"node {node} {text}"
-            self._event(float(fb.t[r]), text)
+                level = INFO if f.get("reset") else ERROR
+            else:
+                level = INFO
+            self._event(float(fb.t[r]), text, level)
 
     def _sdo_frames(self, batch: DecodedBatch) -> None:
         """Last SDO frame per node, stateless: shown until an SDO transaction record replaces it."""
@@ -179,7 +211,9 @@ class LiveView:
         t = float(rec.get("t") or (fb.t[row] if 0 <= row < len(fb) else (self.t_last or 0.0)))
         kind = rec.get("kind")
         text = format_record(rec)
+        level = INFO
         if kind == "sdo":
+            level = INFO if rec.get("result") == "ok" else WARNING
             node = rec.get("node")
             if isinstance(node, int) and node >= 0:
                 st = self._node(node)
@@ -187,8 +221,16 @@ class LiveView:
                 if rec.get("result") == "ok" and rec.get("index") in (0x1000, 0x1008, 0x1018):
                     self._identity(st, rec)
         elif kind == "finding":
-            text = "finding: " + text
-        self._event(t, text)
+            severity = str(rec.get("severity") or "warning")
+            level = _SEVERITY_LEVEL.get(severity, WARNING)
+            if severity == "info":
+                self.notes += 1
+            else:
+                self.violations += 1
+            node = rec.get("node")
+            where = f"node {node} " if isinstance(node, int) else ""
+            text = f"{rec.get('rule')}: {where}{rec.get('message')}"
+        self._event(t, text, level)
 
     def _identity(self, st: NodeState, rec: dict) -> None:
         key = {
@@ -256,7 +298,11 @@ class LiveView:
 
     # --- rendering ------------------------------------------------------------
     def render(self, wall: float | None = None, height: int = 40):
-        """A rich renderable of the whole dashboard."""
+        """A rich renderable of the whole dashboard.
+
+        Every column has a fixed width or a ratio of the terminal width, never one
+        measured from its content, so columns stay put between refreshes.
+        """
         from rich.console import Group
         from rich.panel import Panel
         from rich.table import Table
@@ -266,28 +312,35 @@ class LiveView:
         load = self.bus_load()
         head = Text()
         head.append("cananalyze live  ", style="bold")
-        head.append(f"frames {self.summary.frames}  ")
-        head.append(f"rate {self.frame_rate():.0f}/s  ")
-        head.append(f"bus load {load:.1f} %" if load is not None else "bus load - (give -b)")
+        head.append(f"frames {self.summary.frames:>9}  ")
+        head.append(f"rate {self.frame_rate():>6.0f}/s  ")
+        head.append(f"bus load {load:5.1f} %" if load is not None else "bus load - (give -b)")
+        if self.checking:
+            style = "bold red" if self.violations else "green"
+            head.append(f"  check: {self.violations} violation(s)", style=style)
+            if self.notes:
+                head.append(f", {self.notes} note(s)")
         if self.status:
             head.append(f"  {self.status}", style="dim")
 
         nodes = Table(title="Nodes", title_justify="left", expand=True, pad_edge=False)
-        # fixed widths for the short columns so long device names or SDO texts never squeeze them
         for col, kw in (
-            ("node", {"width": 4}),
-            ("device", {"ratio": 2, "max_width": 32}),
+            ("node", {"width": 4, "justify": "right"}),
+            ("device", {"ratio": 2}),
             ("NMT state", {"width": 15}),
-            ("hb age", {"width": 8}),
-            ("hb period", {"width": 9}),
+            ("hb age", {"width": 8, "justify": "right"}),
+            ("hb period", {"width": 9, "justify": "right"}),
             ("active EMCY", {"ratio": 2}),
             ("last SDO", {"ratio": 3}),
         ):
             nodes.add_column(col, overflow="ellipsis", no_wrap=True, **kw)
         for n in sorted(self.nodes):
             st = self.nodes[n]
-            age = f"{(now - st.last_seen) * 1e3:.0f} ms" if st.last_seen is not None else "-"
-            period = f"{st.period_ms:.0f} ms" if st.period_ms is not None else "-"
+            age_s = now - st.last_seen if st.last_seen is not None else None
+            age = Text(f"{age_s * 1e3:.0f} ms" if age_s is not None else "-")
+            period = st.period_ms
+            if age_s is not None and period and age_s * 1e3 > 2 * period:
+                age.stylize("bold red")  # its heartbeat is overdue: the node may be gone
             state_style = {
                 "operational": "green",
                 "pre-operational": "yellow",
@@ -297,41 +350,63 @@ class LiveView:
             emcy = ", ".join(st.emcy.values()) or "-"
             nodes.add_row(
                 str(n),
-                st.device or "-",
+                self.device(n) or "-",
                 Text(st.state or "-", style=state_style),
                 age,
-                period,
+                f"{period:.0f} ms" if period is not None else "-",
                 Text(emcy, style="bold red" if st.emcy else ""),
                 st.last_sdo or "-",
             )
 
+        # one row per PDO, its signals side by side: a node with 8 inputs takes one line,
+        # not eight, so the event log (where findings appear) keeps its room
+        by_pdo: dict[tuple[int, str], list[SignalValue]] = {}
+        for key in sorted(self.signals):
+            s = self.signals[key]
+            by_pdo.setdefault((s.node, s.pdo), []).append(s)
+        # lines: header 1, each table title + borders + heading 5 + rows, the log panel 2 + room,
+        # one spare so the cursor line never scrolls the screen
+        nodes_h = 5 + max(1, len(self.nodes))
+        room_sigs = max(2, height - 1 - nodes_h - 5 - (2 + 8) - 1)  # 8 lines kept for the log
+        rows = list(by_pdo.items())
+        shown = rows if len(rows) <= room_sigs else rows[: room_sigs - 1]
         sigs = Table(
             title="PDO signals (latest)", title_justify="left", expand=True, pad_edge=False
         )
-        for col in ("node", "PDO", "signal", "value", "unit", "age"):
-            sigs.add_column(col, no_wrap=True, overflow="ellipsis")
-        for key in sorted(self.signals):
-            s = self.signals[key]
-            value = f"{s.value:.6g}" if isinstance(s.value, float) else str(s.value)
+        for col, kw in (
+            ("node", {"width": 4, "justify": "right"}),
+            ("PDO", {"width": 6}),
+            ("values", {"ratio": 1}),
+            ("age", {"width": 9, "justify": "right"}),
+        ):
+            sigs.add_column(col, no_wrap=True, overflow="ellipsis", **kw)
+        for (node, pdo), values in shown:
+            cells = Text()
+            for k, s in enumerate(values):
+                if k:
+                    cells.append("   ")
+                cells.append(f"{s.name} ", style="dim")
+                cells.append(_value_text(s.value))
+                if s.unit:
+                    cells.append(f" {s.unit}")
+            age = (now - max(s.t for s in values)) * 1e3
+            sigs.add_row(str(node), pdo, cells, f"{age:.0f} ms")
+        if len(shown) < len(rows):
+            sigs.add_row("", "", Text(f"... {len(rows) - len(shown)} more PDOs", style="dim"), "")
+        if not rows:
             sigs.add_row(
-                str(s.node), s.pdo, s.name, value, s.unit or "", f"{(now - s.t) * 1e3:.0f} ms"
-            )
-        if not self.signals:
-            sigs.add_row(
-                "-",
-                "-",
-                "(no decoded PDO yet: a profile, --eds or --network gives names)",
-                "",
-                "",
-                "",
+                "-", "-", "(no decoded PDO yet: --device, --eds or --network name them)", ""
             )
 
-        used = 3 + len(self.nodes) + 4 + max(1, len(self.signals)) + 4
-        room = max(4, height - used - 3)
+        sigs_h = 5 + max(1, len(shown) + (len(shown) < len(rows)))
+        room = max(4, height - 1 - nodes_h - sigs_h - 2 - 1)
         t0 = self.t0 or 0.0
-        log = Text()
-        for t, text in list(self.events)[-room:]:
+        log = Text(no_wrap=True, overflow="ellipsis")
+        events = list(self.events)[-room:]
+        for k, (t, level, text) in enumerate(events):
             log.append(f"{t - t0:10.3f}  ", style="dim")
-            log.append(text + "\n")
+            log.append(
+                text + ("\n" if k < len(events) - 1 else ""), style=_LEVEL_STYLE.get(level, "")
+            )
         events = Panel(log, title="Events", title_align="left")
         return Group(head, nodes, sigs, events)

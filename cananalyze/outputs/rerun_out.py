@@ -34,9 +34,13 @@ def _time(rr, t: np.ndarray, absolute: bool):
 
 def blueprint(cap: Capture):
     """A plot per node, the NMT state lanes and the event log."""
+    return blueprint_for(sorted({s.node for s in cap.series}))
+
+
+def blueprint_for(nodes: list[int]):
+    """The layout for these nodes' signal plots (live sessions resend it as nodes appear)."""
     import rerun.blueprint as rrb
 
-    nodes = sorted({s.node for s in cap.series})
     plots = [
         rrb.TimeSeriesView(
             origin=f"/node/{n}", contents=[f"+ /node/{n}/**", f"- /node/{n}/nmt"], name=f"node {n}"
@@ -55,30 +59,51 @@ def blueprint(cap: Capture):
     )
 
 
-def send(cap: Capture, rec, bitrate: int | None = None) -> dict[str, int]:
-    """Send the whole capture to a RecordingStream; returns value counts per entity."""
+def is_absolute(t: np.ndarray) -> bool:
+    return bool(t.size and t[0] > ABSOLUTE_AFTER)
+
+
+def send_header(rec, source: str, network: str) -> None:
     import rerun as rr
 
-    counts: dict[str, int] = {}
-    t_all = cap.batch.t
-    absolute = bool(t_all.size and t_all[0] > ABSOLUTE_AFTER)
     rec.log(
         "/",
-        rr.AnyValues(
-            cananalyze_version=__version__, source=str(cap.source), network=cap.network or ""
-        ),
+        rr.AnyValues(cananalyze_version=__version__, source=source, network=network),
         static=True,
     )
+
+
+def send(cap: Capture, rec, bitrate: int | None = None) -> dict[str, int]:
+    """Send the whole capture to a RecordingStream; returns value counts per entity."""
+    counts: dict[str, int] = {}
+    t_all = cap.batch.t
+    absolute = is_absolute(t_all)
+    send_header(rec, str(cap.source), cap.network or "")
+    send_parts(cap, rec, absolute, counts, set())
+    if len(cap.batch):
+        starts, load = load_series(t_all, frame_bits(cap.batch.flags, cap.batch.dlc), 0.1, bitrate)
+        send_load(rec, starts, load, absolute, bitrate, counts, set())
+    return counts
+
+
+def send_parts(cap: Capture, rec, absolute: bool, counts: dict[str, int], named: set[str]) -> None:
+    """Signals, NMT state lanes and events of `cap`; series names only once per path (`named`)."""
+    import rerun as rr
+
     for s in cap.series:
         for name, values in s.columns.items():
             path = f"/node/{s.node}/{s.pdo}/{name}"
-            unit = s.units.get(name)
-            rec.log(path, rr.SeriesLines(names=f"{name} [{unit}]" if unit else name), static=True)
+            if path not in named:
+                unit = s.units.get(name)
+                rec.log(
+                    path, rr.SeriesLines(names=f"{name} [{unit}]" if unit else name), static=True
+                )
+                named.add(path)
             v = np.asarray(values, np.float64)
             rec.send_columns(
                 path, indexes=[_time(rr, s.t, absolute)], columns=rr.Scalars.columns(scalars=v)
             )
-            counts[path] = int(v.size)
+            counts[path] = counts.get(path, 0) + int(v.size)
     by_node: dict[int, list] = {}
     for e in cap.state_changes:
         by_node.setdefault(e.node, []).append(e)
@@ -89,7 +114,7 @@ def send(cap: Capture, rec, bitrate: int | None = None) -> dict[str, int]:
             indexes=[_time(rr, np.array([e.t for e in evs]), absolute)],
             columns=rr.StateChange.columns(state=[e.message for e in evs]),
         )
-        counts[path] = len(evs)
+        counts[path] = counts.get(path, 0) + len(evs)
     events = cap.sorted_events()
     if events:
         rec.send_columns(
@@ -99,18 +124,30 @@ def send(cap: Capture, rec, bitrate: int | None = None) -> dict[str, int]:
                 text=[e.message for e in events], level=[_RR_LEVEL[e.level] for e in events]
             ),
         )
-        counts["/events"] = len(events)
-    if len(cap.batch):
-        starts, load = load_series(t_all, frame_bits(cap.batch.flags, cap.batch.dlc), 0.1, bitrate)
+        counts["/events"] = counts.get("/events", 0) + len(events)
+
+
+def send_load(
+    rec,
+    starts: np.ndarray,
+    load: np.ndarray,
+    absolute: bool,
+    bitrate: int | None,
+    counts: dict[str, int],
+    named: set[str],
+) -> None:
+    import rerun as rr
+
+    if not load.size:
+        return
+    if "/bus/load" not in named:
         name = "bus load [%]" if bitrate else "bus load [bit/s]"
         rec.log("/bus/load", rr.SeriesLines(names=name), static=True)
-        rec.send_columns(
-            "/bus/load",
-            indexes=[_time(rr, starts, absolute)],
-            columns=rr.Scalars.columns(scalars=load),
-        )
-        counts["/bus/load"] = int(load.size)
-    return counts
+        named.add("/bus/load")
+    rec.send_columns(
+        "/bus/load", indexes=[_time(rr, starts, absolute)], columns=rr.Scalars.columns(scalars=load)
+    )
+    counts["/bus/load"] = counts.get("/bus/load", 0) + int(load.size)
 
 
 def _stream(cap: Capture):

@@ -46,7 +46,8 @@ def format_record(rec: dict) -> str:
         what = "read" if rec.get("direction") == "upload" else "write"
         obj = f"0x{rec['index']:04X}:{rec['subindex']:02X}" if rec.get("index") is not None else "?"
         name = f" {rec['name']}" if rec.get("name") else ""
-        line = f"node {rec.get('node')} SDO {what} {obj}{name} {rec.get('protocol')} -> {rec.get('result')}"
+        proto = f" {rec['protocol']}" if rec.get("protocol") else ""  # unknown when aborted at once
+        line = f"node {rec.get('node')} SDO {what} {obj}{name}{proto} -> {rec.get('result')}"
         if rec.get("result") == "ok":
             value = rec.get("value")
             if value is None:

@@ -4,7 +4,8 @@ For live tests and demos without hardware: `cananalyze live -i slcan -c <pty>` r
 from the slave side while this speaks the slcan ASCII protocol on the master side:
 it answers the adapter set-up commands (`S6`, `O`, `C`, `V`, ...) with CR and, once
 the channel is opened (`O`/`L`), sends each frame as `t<id><len><data>\\r`. The log is
-read and paced with python-can (`can.LogReader`, `can.MessageSync`).
+read with cananalyze's own readers (python-can's candump reader takes error
+frames for 29-bit data frames) and paced with python-can's `can.MessageSync`.
 
     python -m cananalyze.sim.slcan_replay samples/demo.log   # prints the pty path
 """
@@ -84,14 +85,23 @@ class SlcanAdapter:
 
 
 def replay(adapter: SlcanAdapter, log_path: str, timed: bool = True) -> int:
-    """Send every frame of the log (paced like the original unless timed=False); returns the count."""
+    """Send the log's frames (paced like the original unless timed=False); returns the count.
+
+    Error frames are left out: the slcan protocol has no way to carry them (an adapter
+    would report bus errors through its status flags, which python-can does not read).
+    """
     import can
 
-    reader = can.LogReader(log_path)
+    from ..io.source import read_all
+    from ..outputs.logfile import to_messages
+
+    reader = to_messages(read_all(log_path))
     messages = can.MessageSync(reader, timestamps=True, skip=3600) if timed else reader
     n = 0
     for msg in messages:
         adapter.poll()
+        if msg.is_error_frame:
+            continue
         adapter.send(msg)
         n += 1
     return n
