@@ -135,7 +135,9 @@ def test_sync_period_and_counter():
     assert len(counter) == 1 and counter[0].measured == 6 and counter[0].expected == 5
 
 
-def test_sync_pdo_every_nth_sync_in_window_and_type0():
+@pytest.mark.parametrize("one_frame_batches", [False, True])
+def test_sync_pdo_every_nth_sync_in_window_and_type0(one_frame_batches):
+    """Also with one frame per batch, as live sniffing feeds them (PDO batches without a SYNC)."""
     rows = boot_start([5])
     for i in range(1, 13):
         rows.append((0.1 * i, 0x080, b""))
@@ -150,7 +152,7 @@ def test_sync_pdo_every_nth_sync_in_window_and_type0():
             0x285: {"node": 5, "transmission_type": 0, "length": 1},
         },
     }
-    c = run(rows, network=net, split=[9])
+    c = run(rows, network=net, split=list(range(1, len(rows))) if one_frame_batches else [9])
     found = by_rule(c, "pdo_sync")
     # the PDO missing at SYNC 8 shows at the next one, 4 SYNCs after the previous
     assert [(f.cob_id, round(f.t, 3), f.measured) for f in found if "SYNCs" in f.message] == [

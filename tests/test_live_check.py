@@ -6,6 +6,7 @@ during the session readable after Ctrl-C."""
 from __future__ import annotations
 
 import json
+import re
 import signal
 import threading
 import time
@@ -58,7 +59,8 @@ def _run(log, args, tmp_path):
     sent = replay(adapter, str(log), timed=True)
     t_end = time.monotonic()
     time.sleep(0.5)
-    assert proc.poll() is None
+    if proc.poll() is not None:  # the session ended by itself: say why
+        raise AssertionError(f"live exited early ({proc.returncode}): {proc.stderr.read()[-2000:]}")
     proc.send_signal(signal.SIGINT)
     proc.wait(timeout=30)
     lines = out.join()
@@ -85,7 +87,7 @@ def test_faults_found_live_with_report_exit_1_and_rrd(tmp_path):
     assert any("heartbeat: heartbeat dropout: no heartbeat for 1" in x for _, x in live)
 
     # at the end: check's report (findings, verdict line), JUnit and JSON
-    verdict = [x for x in lines if x.startswith("21 rules (")]
+    verdict = [x for x in lines if re.match(r"\d+ rules \(", x)]
     assert len(verdict) == 1 and " 0 note(s)" in verdict[0]
     findings = json.loads(js.read_text())
     assert len(findings) == int(verdict[0].split(": ")[1].split()[0])
@@ -117,7 +119,7 @@ def test_faults_found_live_with_report_exit_1_and_rrd(tmp_path):
     assert any(m.startswith("SDO upload 1008:00 ") for m in sdo)
     assert ("error_frames", None) not in got  # slcan delivered none
     for f in findings:
-        assert any(x.startswith(f"{f['t']:.6f} ") and f["message"] in x for x in lines)
+        assert any(x.startswith(f"{f['t_rel']:+.3f} s ") and f["message"] in x for x in lines)
     suite = next(iter(JUnitXml.fromfile(str(junit))))
     failed = {c.name for c in suite if c.result}
     assert {"assert_signal node 5", "heartbeat node 6", "emcy node 3"} <= failed
@@ -151,10 +153,13 @@ def test_commissioning_passes_live_exit_0(tmp_path):
     # by tens of ms (SDO answers, SYNC, guarding). What this test checks is that the live
     # pipeline adds no violations of its own, not the test machine's scheduler.
     rules = yaml.safe_load(RULES.read_text())
-    rules["tolerance"] = 0.5
+    # Seen on a loaded 2-core machine: heartbeat gaps of 157 and 42 ms for 100 ms, SDO
+    # answers 14 ms late. Timing is judged offline (test_samples_check.py); here the
+    # non-timing rules (EMCY, SDO results, PDO length/validity, COB-IDs, states) stay strict.
+    rules["tolerance"] = 1.5
     for a in rules["assert"]:
         if "sdo" in a:
-            a["sdo"]["max_latency_ms"] = 100
+            a["sdo"]["max_latency_ms"] = 250
     loose = tmp_path / "rules.yaml"
     loose.write_text(yaml.safe_dump(rules))
     rc, lines, err, _, sent, _ = _run(
@@ -165,7 +170,7 @@ def test_commissioning_passes_live_exit_0(tmp_path):
     assert sent == 1200
     assert rc == 0, "\n".join(lines[-30:]) + err
     assert not [x for x in lines if "└─ ERROR" in x or "└─ WARNING" in x]
-    assert lines[-1].startswith("21 rules (") and lines[-1].endswith(": 0 violation(s), 0 note(s)")
+    assert re.match(r"\d+ rules \(", lines[-1]) and lines[-1].endswith(": 0 violation(s), 0 note(s)")
     assert "frames: 1200" in lines
 
 

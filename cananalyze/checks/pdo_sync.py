@@ -39,7 +39,11 @@ class PdoSyncRule(Rule):
                 rows = g.row[sl]
                 k = np.searchsorted(srows, rows)  # SYNCs in this batch before each PDO
                 no = self.sync_count + k
-                last_t = np.where(k > 0, st[np.maximum(k - 1, 0)], self.last_sync_t)
+                # the latest SYNC before each PDO: in this batch, else the one carried over
+                # (a live batch often holds PDOs and no SYNC: never index an empty array)
+                last_t = np.full(k.size, self.last_sync_t)
+                if st.size:
+                    last_t = np.where(k > 0, st[np.maximum(k - 1, 0)], last_t)
                 prev = np.empty_like(no)
                 prev[1:] = no[:-1]
                 prev[0] = self.last_sync_no.get(cob, -1)

@@ -1,0 +1,45 @@
+"""Records must not depend on where batches are cut: live sniffing feeds batches of
+one frame, offline reading feeds 64k. Same log, same frames, records and findings."""
+
+from __future__ import annotations
+
+import argparse
+
+import pytest
+from conftest import SAMPLES
+
+from cananalyze.checks.build import attach_checker
+from cananalyze.cli.pipeline import build_decoder
+from cananalyze.io.source import read_all
+from cananalyze.outputs.jsonl import dumps, frame_record
+
+
+def _decode(name: str, size: int) -> list[str]:
+    args = argparse.Namespace(
+        sdo_timeout=1.0, network=str(SAMPLES / "network.toml"), device=None, eds=None
+    )
+    decoder = build_decoder(args)
+    attach_checker(decoder, SAMPLES / "rules.yaml")
+    fb = read_all(SAMPLES / name)
+    out = []
+    for start in range(0, len(fb), size):
+        batch = decoder.decode(fb.take(slice(start, start + size)))
+        by_row: dict[int, list[dict]] = {}
+        for row, rec in batch.records:
+            by_row.setdefault(row, []).append(rec)
+        for i in range(len(batch)):
+            out.append(dumps(frame_record(batch, i)))
+            out.extend(dumps(r) for r in by_row.get(i, ()))
+    out.extend(dumps(r) for _, r in decoder.finish().records)
+    return out
+
+
+@pytest.mark.parametrize("name", ["faults.log", "commissioning.log"])
+def test_same_records_whatever_the_batch_size(name):
+    whole = _decode(name, 1 << 20)
+    assert any('"kind":"finding"' in x for x in whole) or name == "commissioning.log"
+    for size in (1, 7, 100):
+        cut = _decode(name, size)
+        assert len(cut) == len(whole), size
+        diff = [(a, b) for a, b in zip(whole, cut, strict=True) if a != b]
+        assert diff == [], f"batch size {size}: first difference {diff[:1]}"
