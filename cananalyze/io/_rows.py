@@ -19,6 +19,18 @@ from .registry import ReadContext
 _ZERO8 = bytes(8)
 
 
+def _finite(t: float) -> bool:
+    return -1e300 < t < 1e300  # False for NaN and infinities; cheaper than math.isfinite
+
+
+def _why(t: float, can_id: int, dlc: int, payload: bytes) -> str:
+    if not 0 <= can_id <= 0x1FFFFFFF:
+        return f"identifier {can_id:#x} out of range"
+    if not 0 <= dlc <= 64 or len(payload) > 64:
+        return f"{max(dlc, len(payload))} data bytes is more than a CAN frame carries"
+    return f"timestamp {t!r} is not a usable time"
+
+
 class RowSink:
     """Append rows, flush full batches; keeps the channel table stable across batches."""
 
@@ -53,9 +65,15 @@ class RowSink:
     ) -> bool:
         """Append one row; ``payload`` is the data bytes (may exceed 8 for CAN FD).
 
-        Returns True when the batch is full and should be flushed.
+        Returns True when the batch is full and should be flushed. A value no
+        CAN frame can have (negative or over-wide identifier, DLC over 64, a
+        time that is not a finite number) is reported as a problem of that line
+        and the row is dropped, so no reader's parsing slip can corrupt a column.
         """
         n = len(self.line)
+        if not (0 <= can_id <= 0x1FFFFFFF and 0 <= dlc <= 64 and len(payload) <= 64 and _finite(t)):
+            self.ctx.problems.add(self.ctx.source, f"line {line}", _why(t, can_id, dlc, payload))
+            return False
         self.t.append(t)
         self.can_id.append(can_id)
         self.flags.append(flags)

@@ -46,7 +46,7 @@ def _row(f: list[str], col: dict[str, int], first_data: int):
         flags |= FLAG_TX
     bus = f[col["bus"]].strip() if "bus" in col else "0"
     size_text = f[col["len"]].strip()
-    if not size_text.isdigit() or int(size_text) > 64:
+    if not size_text.isdecimal() or int(size_text) > 64:
         raise _Bad(f"invalid LEN {size_text!r}")
     size = int(size_text)
     cells = [c.strip() for c in f[first_data : first_data + size]]

@@ -45,6 +45,9 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
         if can_id > 0x7FF:
             ctx.problems.add(ctx.source, f"line {n}", f"identifier 0x{m.group(1)} out of range")
             continue
+        if len(m.group(2)) > 15:  # beyond float precision (and int * 1e-4 overflows)
+            ctx.problems.add(ctx.source, f"line {n}", f"time {m.group(2)[:20]!r} out of range")
+            continue
         ticks = int(m.group(2))
         rest = m.group(6).strip()
         if rest.startswith("{"):
