@@ -120,11 +120,37 @@ class RowSink:
             yield batch
 
 
-def text_lines(stream, encoding: str = "latin-1") -> Iterator[tuple[int, str]]:
-    """(1-based line number, line without end-of-line) of a binary stream, streamed.
+MAX_LINE = 1 << 16  # bytes; real log lines are under 400 (CAN FD ASC), this bounds memory
+
+
+def text_lines(
+    stream, encoding: str = "latin-1", ctx: ReadContext | None = None
+) -> Iterator[tuple[int, str]]:
+    """(1-based line number, line without end-of-line) of a binary (or text) stream, streamed.
 
     Latin-1 never fails to decode, so a stray byte becomes a parse problem on
-    its own line rather than a UnicodeDecodeError for the whole file.
+    its own line rather than a UnicodeDecodeError for the whole file. A line
+    longer than MAX_LINE (binary junk, a file with no newlines) is never held
+    whole: with ``ctx`` it is reported and skipped, else its start is yielded
+    and the parser will find it malformed.
     """
-    for n, raw in enumerate(stream, 1):
-        yield n, raw.decode(encoding).rstrip("\r\n")
+    readline = stream.readline
+    n = 0
+    while True:
+        raw = readline(MAX_LINE)
+        if not raw:
+            return
+        n += 1
+        text = isinstance(raw, str)  # a TextIOWrapper (universal newlines) works too
+        nl = "\n" if text else b"\n"
+        if len(raw) == MAX_LINE and not raw.endswith(nl):
+            size = len(raw)
+            while True:  # drop the rest of the line, a bounded piece at a time
+                more = readline(MAX_LINE)
+                size += len(more)
+                if not more or more.endswith(nl):
+                    break
+            if ctx is not None:
+                ctx.problems.add(ctx.source, f"line {n}", f"line of {size} bytes is too long for a log line, skipped")
+                continue
+        yield n, (raw if text else raw.decode(encoding)).rstrip("\r\n")

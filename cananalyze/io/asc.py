@@ -84,7 +84,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     channel = sink.channel
     chan_of: dict[str, int] = {}
     fromhex = bytes.fromhex
-    for n, raw in text_lines(stream):
+    for n, raw in text_lines(stream, ctx=ctx):
         tok = raw.split()
         if not tok:
             continue

@@ -14,7 +14,7 @@ from collections.abc import Iterator
 from typing import BinaryIO
 
 from ..frames import FLAG_EXT, FrameBatch
-from ._rows import RowSink
+from ._rows import RowSink, text_lines
 from .registry import LogFormat, ReadContext, register
 
 
@@ -59,8 +59,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     text = io.TextIOWrapper(stream, encoding="latin-1", newline=None)  # CR line ends
     declared = None
     rows = 0
-    for n, line in enumerate(text, 1):
-        line = line.rstrip("\n")
+    for n, line in text_lines(text, ctx=ctx):
         if n == 1:
             fields = [x.strip() for x in line.split("@")]
             if len(fields) > 5 and fields[5].isdecimal():

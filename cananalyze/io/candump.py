@@ -204,12 +204,14 @@ def _bulk_log_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, chans
 def _parse_time_text(text: bytes) -> float | None:
     s = text.decode("latin-1").strip()
     try:
-        return float(s)
+        t = float(s)
     except ValueError:
         pass
+    else:
+        return t if -1e300 < t < 1e300 else None  # "nan", "inf", "1e999" are no times
     try:  # candump -tA: (2023-11-09 10:11:12.123456)
         return datetime.fromisoformat(s).timestamp()
-    except ValueError:
+    except (ValueError, OverflowError, OSError):  # year 1 in local time, out-of-range dates
         return None
 
 
@@ -319,9 +321,18 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     pending: list[FrameBatch] = []
     pending_rows = 0
     eof = False
+    skipping = False  # inside a line too long to keep: drop bytes up to its newline
     while not eof:
         block = stream.read(CHUNK)
         eof = not block
+        if skipping:
+            if eof:
+                break
+            nl = block.find(b"\n")
+            if nl < 0:
+                continue
+            block, skipping = block[nl + 1 :], False
+            line_base += 1
         chunk = carry + block
         if not eof:
             cut = chunk.rfind(b"\n") + 1
@@ -329,7 +340,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
                 carry = chunk
                 if len(carry) > 1 << 24:
                     ctx.problems.add(ctx.source, f"line {line_base + 1}", "line longer than 16 MiB, skipped")
-                    carry = b""
+                    carry, skipping = b"", True
                 continue
             chunk, carry = chunk[:cut], chunk[cut:]
         elif not chunk:

@@ -68,7 +68,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     sink = RowSink(ctx)
     col: dict[str, int] = {}
     first_data = 0
-    for n, line in text_lines(stream):
+    for n, line in text_lines(stream, ctx=ctx):
         if not line.strip():
             continue
         f = line.split(",")

@@ -70,7 +70,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     sink = RowSink(ctx)
     chan = sink.channel("1")
     header = True
-    for n, line in text_lines(stream):
+    for n, line in text_lines(stream, ctx=ctx):
         if header:
             header = False
             if line.strip() != HEADER:

@@ -33,7 +33,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     sink = RowSink(ctx)
     chan = sink.channel("1")
     last_t = 0.0
-    for n, line in text_lines(stream):
+    for n, line in text_lines(stream, ctx=ctx):
         s = line.strip()
         if not s:
             continue

@@ -92,7 +92,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     start = 0.0
     columns: dict[str, int] = {}
     in_header = True
-    for n, line in text_lines(stream):
+    for n, line in text_lines(stream, ctx=ctx):
         s = line.strip()
         if not s:
             continue
