@@ -151,6 +151,10 @@ def text_lines(
                 if not more or more.endswith(nl):
                     break
             if ctx is not None:
-                ctx.problems.add(ctx.source, f"line {n}", f"line of {size} bytes is too long for a log line, skipped")
+                ctx.problems.add(
+                    ctx.source,
+                    f"line {n}",
+                    f"line of {size} bytes is too long for a log line, skipped",
+                )
                 continue
         yield n, (raw if text else raw.decode(encoding)).rstrip("\r\n")

@@ -77,7 +77,6 @@ def _number(text: str, what: str) -> float:
     return value
 
 
-
 def _dlc(text: str) -> int:
     # isdecimal, not isdigit: isdigit() accepts '³', which int() refuses
     if not text.isdecimal() or int(text) > 15:
