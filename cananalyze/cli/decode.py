@@ -134,7 +134,8 @@ def run(args: argparse.Namespace) -> int:
             writer.write(tail)
     finally:
         out.flush()
-        report_problems(source.problems)
+        if not args.strict:  # strict: the InputError already names the first problem, in one line
+            report_problems(source.problems)
     if args.summary:
         # --bitrate wins; else the network file's `bitrate`
         bitrate = args.bitrate or decoder.network.spec.bitrate
