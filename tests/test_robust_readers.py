@@ -366,3 +366,94 @@ def test_mutated_real_logs_never_crash(rel):
         run_log(blob, suffix, strict=True)
 
     check()
+
+
+# ---- regressions: each input crashed a reader (found by the fuzzers) ---------------------------
+
+_ASC_HEAD = "date Mon Jan 1 10:00:00.000 am 2024\nbase hex  timestamps absolute\n"
+_TRC11 = ";$FILEVERSION=1.1\n;$STARTTIME=45000.5\n;\n"
+_CBA_HEAD = "@ TEXT @ 2 @ 64 @ 0 @ 55 @ 10078 @ 00:00:10.078 @\r"
+_GVRET_HEAD = "Time Stamp,ID,Extended,Bus,LEN,D1,D2,D3,D4,D5,D6,D7,D8\n"
+
+
+@pytest.mark.parametrize(
+    "name, text, problem",
+    [
+        # str.isdigit() accepts superscript digits (Latin-1 0xB2/0xB3/0xB9), int() does not: ValueError
+        (
+            "sup.trc",
+            _TRC11 + "   1)  1.0  Rx  0181  \xb3  01\n   2)  2.0  Rx  0181  1  01\n",
+            "invalid DLC",
+        ),
+        (
+            "sup.asc",
+            _ASC_HEAD + "0.1 \xb3 181 Rx d 1 01\n0.2 1 181 Rx d 1 01\n",
+            None,
+        ),  # skipped as an event
+        (
+            "supfd.asc",
+            _ASC_HEAD + "0.1 CANFD \xb2\xb9 Rx 181 1 0 1 1 01\n0.2 1 181 Rx d 1 01\n",
+            "CANFD",
+        ),
+        (
+            "sup.trc",
+            _CBA_HEAD + "46,016\t1\t0004\t45A\t\xb3\t5A\r46,017\t1\t0004\t45A\t1\t5A\r",
+            "invalid DLC",
+        ),
+        (
+            "sup.csv",
+            _GVRET_HEAD + "1000,00000181,false,0,\xb2\xb9,01\n2000,00000181,false,0,1,01\n",
+            "invalid LEN",
+        ),
+        # int * 1e-4 on a 400-digit tick count: OverflowError
+        (
+            "ticks.txt",
+            "0x0181   "
+            + "9" * 400
+            + " - d 0.2 0 PDO { 0x01 }\n"
+            + "0x0181   306585 - d 0.2 0 PDO { 0x01 }\n" * 3,
+            "out of range",
+        ),
+        # timedelta(days=1e300): OverflowError
+        (
+            "start.trc",
+            ";$FILEVERSION=1.1\n;$STARTTIME=1e300\n;\n   1)  1.0  Rx  0181  1  01\n",
+            "STARTTIME",
+        ),
+        # TRC 1.3 line with fewer columns than its layout: IndexError
+        (
+            "short.trc",
+            ";$FILEVERSION=1.3\n;$STARTTIME=45000.5\n;\n   1)  1.0 1 Rx\n   2)  2.0 1 Rx 0181 - 1 01\n",
+            "not a TRC 1.3",
+        ),
+        # int('-181', 16) is negative: OverflowError in the uint32 column
+        (
+            "neg.trc",
+            ";$FILEVERSION=2.1\n;$STARTTIME=45000.5\n;$COLUMNS=N,O,T,B,I,d,R,L,D\n;\n"
+            "      1       1.0 DT 1 -181 Rx - 1 01\n      2       2.0 DT 1 0181 Rx - 1 01\n",
+            "out of range",
+        ),
+        # a long interface name on the first line made the bulk candump path index past its padding
+        (
+            "iface.log",
+            "(1.0) " + "x" * 300 + " 181#01\n(2.0) can0 181#02\n(3.0) can0 18",
+            "not a candump line",
+        ),
+    ],
+)
+def test_fuzzer_crash_regressions(name, text, problem, tmp_path):
+    got, src = _read(text.encode("latin-1"), name, tmp_path)
+    assert len(got) >= 1
+    if problem is None:
+        return
+    assert src.problems.count >= 1 and any(problem in p.message for p in src.problems.shown), (
+        src.problems.shown
+    )
+    with pytest.raises(InputError):
+        _read(text.encode("latin-1"), name, tmp_path, strict=True)
+
+
+def test_blf_cut_inside_file_header_is_reported(tmp_path):
+    data = real_file("hardbyte__python-can/test_CanMessage.blf").read_bytes()
+    got, src = _read(data[:100], "h.blf", tmp_path)
+    assert len(got) == 0 and "file ends inside the BLF file header" in src.problems.shown[0].message

@@ -43,7 +43,9 @@ _DIGIT = np.full(256, 255, np.uint8)
 for _i, _c in enumerate(b"0123456789"):
     _DIGIT[_c] = _i
 
-_LOG_RE = re.compile(rb"^\s*\((?P<t>[^)]*)\)\s+(?P<ch>\S+)\s+(?P<id>[0-9A-Fa-f]+)#(?P<rest>\S*)(?:\s+(?P<dir>[RT]))?\s*$")
+_LOG_RE = re.compile(
+    rb"^\s*\((?P<t>[^)]*)\)\s+(?P<ch>\S+)\s+(?P<id>[0-9A-Fa-f]+)#(?P<rest>\S*)(?:\s+(?P<dir>[RT]))?\s*$"
+)
 _SCREEN_RE = re.compile(
     rb"^\s*(?:\((?P<t>[^)]*)\)\s+)?(?P<ch>\S+)\s+(?P<id>[0-9A-Fa-f]{3}|[0-9A-Fa-f]{8})\s+"
     rb"(?:(?P<fl>[BEI-]{3})\s+)?\[(?P<len>\d+)\]\s*(?P<rest>.*)$"
@@ -194,7 +196,10 @@ def _bulk_log_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, chans
         r0 = rows[0]
         width = int(ch_len[r0])
         first_name = arr[ch_start[r0] : ch_start[r0] + width]
-        same = (ch_len == width) & np.all(_window(arr, ch_start, width) == first_name, axis=1)
+        # clip the window starts: a long first name would run past the padding on other
+        # rows (those rows have another length, so they compare unequal either way)
+        starts = np.clip(ch_start, 0, arr.size - width)
+        same = (ch_len == width) & np.all(_window(arr, starts, width) == first_name, axis=1)
         channel[:] = chans.get(first_name.tobytes().decode("latin-1"))
         for r in rows[~same[rows]]:  # several interfaces: rare, per distinct row
             channel[r] = chans.get(arr[ch_start[r] : ch_end[r]].tobytes().decode("latin-1"))
@@ -282,7 +287,9 @@ def _parse_line(line: bytes):
 
 
 def sniff(head: bytes) -> bool:
-    lines = [ln for ln in head.splitlines()[1:40] if ln.strip()]  # first line may be cut or a command
+    lines = [
+        ln for ln in head.splitlines()[1:40] if ln.strip()
+    ]  # first line may be cut or a command
     if not lines:
         lines = [ln for ln in head.splitlines() if ln.strip()]
     hits = sum(1 for ln in lines if _LOG_RE.match(ln) or _SCREEN_RE.match(ln))
@@ -339,7 +346,9 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
             if cut == 0:
                 carry = chunk
                 if len(carry) > 1 << 24:
-                    ctx.problems.add(ctx.source, f"line {line_base + 1}", "line longer than 16 MiB, skipped")
+                    ctx.problems.add(
+                        ctx.source, f"line {line_base + 1}", "line longer than 16 MiB, skipped"
+                    )
                     carry, skipping = b"", True
                 continue
             chunk, carry = chunk[:cut], chunk[cut:]
