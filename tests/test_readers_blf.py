@@ -123,7 +123,9 @@ def test_garbage_between_records_is_skipped_and_counted(tmp_path):
     # one CAN_MESSAGE record, then 8 junk bytes, then the same record again
     record = raw[raw.index(b"LOBJ", header_size + 32) :][:48]
     assert struct.unpack_from("<L", record, 12)[0] == 1
-    data = raw[:header_size] + _container(record + b"JUNKJUNK" + record)
+    data = bytearray(raw[:header_size] + _container(record + b"JUNKJUNK" + record))
+    struct.pack_into("<Q", data, 16, len(data))  # the header's file size (else: "cut short?")
+    data = bytes(data)
     batch, ctx, _ = run(blf.read, data)
     assert len(batch) == 2 and batch.can_id[0] == batch.can_id[1]
     assert ctx.problems.count == 1 and "garbage" in ctx.problems.shown[0].message

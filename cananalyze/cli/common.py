@@ -23,8 +23,9 @@ def add_input_options(parser: argparse.ArgumentParser) -> None:
                         help="network file (TOML/YAML): nodes, profiles, PDO/heartbeat overrides, SDO channels")
 
 
-def report_problems(problems: ProblemLog, stream=sys.stderr) -> None:
+def report_problems(problems: ProblemLog, stream=None) -> None:
     """Warnings for skipped input, with file and line, and the total at the end."""
+    stream = stream or sys.stderr  # looked up per call: a default would keep a replaced stderr
     for p in problems.shown:
         print(f"warning: {p}", file=stream)
     if problems.count > len(problems.shown):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 
 from ..errors import UsageError
@@ -63,10 +64,7 @@ def _record_passes(rec: dict, args: argparse.Namespace, nodes, services, t0: flo
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np
-
     from ..io.source import open_log
-    from ..outputs.summary import Summary
     from ..protocol.services import parse_services
     from .pipeline import build_decoder
 
@@ -83,7 +81,25 @@ def run(args: argparse.Namespace) -> int:
 
         timing = Checker(rules=[])  # timing analysis only: columnar, cheap
         decoder.processors.append(timing)
-    out = open(args.output, "w", encoding="utf-8") if args.output else sys.stdout  # noqa: SIM115
+    from ..outputs.atomic import atomic_write
+
+    with contextlib.ExitStack() as stack:
+        # -o FILE appears only when complete: an interrupted or failed run leaves none
+        out = sys.stdout
+        if args.output:
+            try:
+                out = stack.enter_context(atomic_write(args.output))
+            except OSError as exc:
+                raise UsageError(f"-o {args.output}: cannot write there: {exc.strerror or exc}") from None
+        _decode_to(out, args, source, decoder, timing, services, nodes)
+    return 0
+
+
+def _decode_to(out, args: argparse.Namespace, source, decoder, timing, services, nodes) -> None:
+    import numpy as np
+
+    from ..outputs.summary import Summary
+
     summary = Summary()
     only_records = args.sdo
     if args.signals:
@@ -134,7 +150,8 @@ def run(args: argparse.Namespace) -> int:
             writer.write(tail)
     finally:
         out.flush()
-        report_problems(source.problems)
+        if not args.strict:  # strict: the InputError already names the first problem, in one line
+            report_problems(source.problems)
     if args.summary:
         # --bitrate wins; else the network file's `bitrate`
         bitrate = args.bitrate or decoder.network.spec.bitrate
@@ -143,8 +160,5 @@ def run(args: argparse.Namespace) -> int:
 
         print("\n".join(device_lines(decoder.network, summary)), file=out)
         print("\n".join(timing.timing.lines(timing.nmt, timing.t0)), file=out)
-    if out is not sys.stdout:
-        out.close()
     if collector:
         write_timelines(args, collector.capture(source.problems, getattr(args, "network", None) or ""))
-    return 0

@@ -19,6 +19,18 @@ from .registry import ReadContext
 _ZERO8 = bytes(8)
 
 
+def _finite(t: float) -> bool:
+    return -1e300 < t < 1e300  # False for NaN and infinities; cheaper than math.isfinite
+
+
+def _why(t: float, can_id: int, dlc: int, payload: bytes) -> str:
+    if not 0 <= can_id <= 0x1FFFFFFF:
+        return f"identifier {can_id:#x} out of range"
+    if not 0 <= dlc <= 64 or len(payload) > 64:
+        return f"{max(dlc, len(payload))} data bytes is more than a CAN frame carries"
+    return f"timestamp {t!r} is not a usable time"
+
+
 class RowSink:
     """Append rows, flush full batches; keeps the channel table stable across batches."""
 
@@ -53,9 +65,15 @@ class RowSink:
     ) -> bool:
         """Append one row; ``payload`` is the data bytes (may exceed 8 for CAN FD).
 
-        Returns True when the batch is full and should be flushed.
+        Returns True when the batch is full and should be flushed. A value no
+        CAN frame can have (negative or over-wide identifier, DLC over 64, a
+        time that is not a finite number) is reported as a problem of that line
+        and the row is dropped, so no reader's parsing slip can corrupt a column.
         """
         n = len(self.line)
+        if not (0 <= can_id <= 0x1FFFFFFF and 0 <= dlc <= 64 and len(payload) <= 64 and _finite(t)):
+            self.ctx.problems.add(self.ctx.source, f"line {line}", _why(t, can_id, dlc, payload))
+            return False
         self.t.append(t)
         self.can_id.append(can_id)
         self.flags.append(flags)
@@ -102,11 +120,41 @@ class RowSink:
             yield batch
 
 
-def text_lines(stream, encoding: str = "latin-1") -> Iterator[tuple[int, str]]:
-    """(1-based line number, line without end-of-line) of a binary stream, streamed.
+MAX_LINE = 1 << 16  # bytes; real log lines are under 400 (CAN FD ASC), this bounds memory
+
+
+def text_lines(
+    stream, encoding: str = "latin-1", ctx: ReadContext | None = None
+) -> Iterator[tuple[int, str]]:
+    """(1-based line number, line without end-of-line) of a binary (or text) stream, streamed.
 
     Latin-1 never fails to decode, so a stray byte becomes a parse problem on
-    its own line rather than a UnicodeDecodeError for the whole file.
+    its own line rather than a UnicodeDecodeError for the whole file. A line
+    longer than MAX_LINE (binary junk, a file with no newlines) is never held
+    whole: with ``ctx`` it is reported and skipped, else its start is yielded
+    and the parser will find it malformed.
     """
-    for n, raw in enumerate(stream, 1):
-        yield n, raw.decode(encoding).rstrip("\r\n")
+    readline = stream.readline
+    n = 0
+    while True:
+        raw = readline(MAX_LINE)
+        if not raw:
+            return
+        n += 1
+        text = isinstance(raw, str)  # a TextIOWrapper (universal newlines) works too
+        nl = "\n" if text else b"\n"
+        if len(raw) == MAX_LINE and not raw.endswith(nl):
+            size = len(raw)
+            while True:  # drop the rest of the line, a bounded piece at a time
+                more = readline(MAX_LINE)
+                size += len(more)
+                if not more or more.endswith(nl):
+                    break
+            if ctx is not None:
+                ctx.problems.add(
+                    ctx.source,
+                    f"line {n}",
+                    f"line of {size} bytes is too long for a log line, skipped",
+                )
+                continue
+        yield n, (raw if text else raw.decode(encoding)).rstrip("\r\n")

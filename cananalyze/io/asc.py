@@ -84,12 +84,12 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     channel = sink.channel
     chan_of: dict[str, int] = {}
     fromhex = bytes.fromhex
-    for n, raw in text_lines(stream):
+    for n, raw in text_lines(stream, ctx=ctx):
         tok = raw.split()
         if not tok:
             continue
         first = tok[0]
-        if not first[0].isdigit():
+        if not first[0].isdecimal():
             low = first.lower()
             if low == "date":
                 date = _date(raw.split(None, 2)[2] if len(tok) > 2 else "")
@@ -125,7 +125,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
         ch = tok[1]
         try:
             chan = chan_of.get(ch)
-            if chan is None and ch.isdigit():
+            if chan is None and ch.isdecimal():
                 chan = chan_of[ch] = channel(str(int(ch)))
             if chan is not None:
                 third = tok[2]
@@ -174,7 +174,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
                         data = _payload(tok[6:], size, base)
                     full = add(start + t, can_id, flags, size, data, chan, n)
                 elif kind in ("r", "R"):
-                    size = int(tok[5], base) if len(tok) > 5 and tok[5].isdigit() else 0
+                    size = int(tok[5], base) if len(tok) > 5 and tok[5].isdecimal() else 0
                     full = add(start + t, can_id, flags | FLAG_RTR, min(size, 8), b"", chan, n)
                 else:
                     raise _Bad(f"unknown frame type {kind!r}")
@@ -192,14 +192,14 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
 
 def _fd_frame(tok: list[str], base: int, t: float, n: int, sink: RowSink) -> bool:
     # t CANFD ch dir id [name] brs esi dlc length data... (see python-can ASCWriter)
-    if len(tok) < 5 or not tok[2].isdigit() or tok[3] not in ("Rx", "Tx"):
+    if len(tok) < 5 or not tok[2].isdecimal() or tok[3] not in ("Rx", "Tx"):
         raise _Bad("malformed CANFD line")
     chan = sink.channel(str(int(tok[2])))
     flags = FLAG_FD | (FLAG_TX if tok[3] == "Tx" else 0)
     if tok[4].lower().startswith("errorframe"):
         return sink.add(t, 0, flags | FLAG_ERR, 0, b"", chan, n)
     can_id, ext = _can_id(tok[4], base)
-    i = 5 if len(tok) > 5 and tok[5].isdigit() else 6
+    i = 5 if len(tok) > 5 and tok[5].isdecimal() else 6
     if len(tok) < i + 4:
         raise _Bad("CANFD line too short")
     brs, esi = tok[i], tok[i + 1]

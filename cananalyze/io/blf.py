@@ -295,14 +295,24 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     if start is not None:
         ctx.absolute_time = True
         ctx.start_time = start
-    stream.read(max(0, fields[1] - _FILE_HEADER.size))
+    rest = max(0, fields[1] - _FILE_HEADER.size)
+    if len(stream.read(rest)) < rest:
+        ctx.problems.add(ctx.source, f"offset {_FILE_HEADER.size}", "file ends inside the BLF file header")
+        return
     offset = max(fields[1], _FILE_HEADER.size)
+    declared_size = fields[10]  # 0 when the logger never closed the file
     records = _Records(ctx, start or 0.0)
     pending: list[FrameBatch] = []
     pending_rows = 0
     while True:
         base = stream.read(16)
         if not base:
+            if declared_size > offset:  # ends cleanly between objects, but short of its own header's size
+                ctx.problems.add(
+                    ctx.source,
+                    f"offset {offset}",
+                    f"file ends here but its header says {declared_size} bytes (cut short?)",
+                )
             break
         where = f"offset {offset}"
         if len(base) < 16:

@@ -14,7 +14,7 @@ from collections.abc import Iterator
 from typing import BinaryIO
 
 from ..frames import FLAG_EXT, FrameBatch
-from ._rows import RowSink
+from ._rows import RowSink, text_lines
 from .registry import LogFormat, ReadContext, register
 
 
@@ -40,7 +40,7 @@ def _row(line: str):
         raise _Bad(f"invalid identifier {f[3]!r}") from None
     if can_id > 0x1FFFFFFF:
         raise _Bad(f"identifier {f[3]!r} out of range")
-    if not f[4].strip().isdigit() or int(f[4]) > 8:
+    if not f[4].strip().isdecimal() or int(f[4]) > 8:
         raise _Bad(f"invalid DLC {f[4]!r}")
     dlc = int(f[4])
     try:
@@ -59,11 +59,10 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     text = io.TextIOWrapper(stream, encoding="latin-1", newline=None)  # CR line ends
     declared = None
     rows = 0
-    for n, line in enumerate(text, 1):
-        line = line.rstrip("\n")
+    for n, line in text_lines(text, ctx=ctx):
         if n == 1:
             fields = [x.strip() for x in line.split("@")]
-            if len(fields) > 5 and fields[5].isdigit():
+            if len(fields) > 5 and fields[5].isdecimal():
                 declared = int(fields[5])
             continue
         if not line.strip():

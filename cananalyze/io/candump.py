@@ -43,7 +43,9 @@ _DIGIT = np.full(256, 255, np.uint8)
 for _i, _c in enumerate(b"0123456789"):
     _DIGIT[_c] = _i
 
-_LOG_RE = re.compile(rb"^\s*\((?P<t>[^)]*)\)\s+(?P<ch>\S+)\s+(?P<id>[0-9A-Fa-f]+)#(?P<rest>\S*)(?:\s+(?P<dir>[RT]))?\s*$")
+_LOG_RE = re.compile(
+    rb"^\s*\((?P<t>[^)]*)\)\s+(?P<ch>\S+)\s+(?P<id>[0-9A-Fa-f]+)#(?P<rest>\S*)(?:\s+(?P<dir>[RT]))?\s*$"
+)
 _SCREEN_RE = re.compile(
     rb"^\s*(?:\((?P<t>[^)]*)\)\s+)?(?P<ch>\S+)\s+(?P<id>[0-9A-Fa-f]{3}|[0-9A-Fa-f]{8})\s+"
     rb"(?:(?P<fl>[BEI-]{3})\s+)?\[(?P<len>\d+)\]\s*(?P<rest>.*)$"
@@ -194,7 +196,10 @@ def _bulk_log_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, chans
         r0 = rows[0]
         width = int(ch_len[r0])
         first_name = arr[ch_start[r0] : ch_start[r0] + width]
-        same = (ch_len == width) & np.all(_window(arr, ch_start, width) == first_name, axis=1)
+        # clip the window starts: a long first name would run past the padding on other
+        # rows (those rows have another length, so they compare unequal either way)
+        starts = np.clip(ch_start, 0, arr.size - width)
+        same = (ch_len == width) & np.all(_window(arr, starts, width) == first_name, axis=1)
         channel[:] = chans.get(first_name.tobytes().decode("latin-1"))
         for r in rows[~same[rows]]:  # several interfaces: rare, per distinct row
             channel[r] = chans.get(arr[ch_start[r] : ch_end[r]].tobytes().decode("latin-1"))
@@ -204,12 +209,14 @@ def _bulk_log_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, chans
 def _parse_time_text(text: bytes) -> float | None:
     s = text.decode("latin-1").strip()
     try:
-        return float(s)
+        t = float(s)
     except ValueError:
         pass
+    else:
+        return t if -1e300 < t < 1e300 else None  # "nan", "inf", "1e999" are no times
     try:  # candump -tA: (2023-11-09 10:11:12.123456)
         return datetime.fromisoformat(s).timestamp()
-    except ValueError:
+    except (ValueError, OverflowError, OSError):  # year 1 in local time, out-of-range dates
         return None
 
 
@@ -280,7 +287,9 @@ def _parse_line(line: bytes):
 
 
 def sniff(head: bytes) -> bool:
-    lines = [ln for ln in head.splitlines()[1:40] if ln.strip()]  # first line may be cut or a command
+    lines = [
+        ln for ln in head.splitlines()[1:40] if ln.strip()
+    ]  # first line may be cut or a command
     if not lines:
         lines = [ln for ln in head.splitlines() if ln.strip()]
     hits = sum(1 for ln in lines if _LOG_RE.match(ln) or _SCREEN_RE.match(ln))
@@ -319,17 +328,28 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     pending: list[FrameBatch] = []
     pending_rows = 0
     eof = False
+    skipping = False  # inside a line too long to keep: drop bytes up to its newline
     while not eof:
         block = stream.read(CHUNK)
         eof = not block
+        if skipping:
+            if eof:
+                break
+            nl = block.find(b"\n")
+            if nl < 0:
+                continue
+            block, skipping = block[nl + 1 :], False
+            line_base += 1
         chunk = carry + block
         if not eof:
             cut = chunk.rfind(b"\n") + 1
             if cut == 0:
                 carry = chunk
                 if len(carry) > 1 << 24:
-                    ctx.problems.add(ctx.source, f"line {line_base + 1}", "line longer than 16 MiB, skipped")
-                    carry = b""
+                    ctx.problems.add(
+                        ctx.source, f"line {line_base + 1}", "line longer than 16 MiB, skipped"
+                    )
+                    carry, skipping = b"", True
                 continue
             chunk, carry = chunk[:cut], chunk[cut:]
         elif not chunk:

@@ -46,7 +46,7 @@ def _row(f: list[str], col: dict[str, int], first_data: int):
         flags |= FLAG_TX
     bus = f[col["bus"]].strip() if "bus" in col else "0"
     size_text = f[col["len"]].strip()
-    if not size_text.isdigit() or int(size_text) > 64:
+    if not size_text.isdecimal() or int(size_text) > 64:
         raise _Bad(f"invalid LEN {size_text!r}")
     size = int(size_text)
     cells = [c.strip() for c in f[first_data : first_data + size]]
@@ -68,7 +68,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     sink = RowSink(ctx)
     col: dict[str, int] = {}
     first_data = 0
-    for n, line in text_lines(stream):
+    for n, line in text_lines(stream, ctx=ctx):
         if not line.strip():
             continue
         f = line.split(",")

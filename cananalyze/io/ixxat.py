@@ -79,7 +79,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     chan = sink.channel("1")
     date = clock = None
     in_header = True
-    for n, line in text_lines(stream):
+    for n, line in text_lines(stream, ctx=ctx):
         if not line.strip():
             continue
         if in_header:

@@ -49,7 +49,7 @@ def _row(line: str):
     ext, rtr, err = _flag(f[2], "extended"), _flag(f[3], "remote"), _flag(f[4], "error")
     if not 0 <= can_id <= (0x1FFFFFFF if ext else 0x7FF):
         raise _Bad(f"arbitration_id {f[1]!r} out of range")
-    if not f[5].isdigit() or int(f[5]) > 64:
+    if not f[5].isdecimal() or int(f[5]) > 64:
         raise _Bad(f"invalid dlc {f[5]!r}")
     dlc = int(f[5])
     try:
@@ -70,7 +70,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     sink = RowSink(ctx)
     chan = sink.channel("1")
     header = True
-    for n, line in text_lines(stream):
+    for n, line in text_lines(stream, ctx=ctx):
         if header:
             header = False
             if line.strip() != HEADER:

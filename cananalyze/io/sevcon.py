@@ -33,7 +33,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     sink = RowSink(ctx)
     chan = sink.channel("1")
     last_t = 0.0
-    for n, line in text_lines(stream):
+    for n, line in text_lines(stream, ctx=ctx):
         s = line.strip()
         if not s:
             continue
@@ -44,6 +44,9 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
         can_id = int(m.group(1), 16)
         if can_id > 0x7FF:
             ctx.problems.add(ctx.source, f"line {n}", f"identifier 0x{m.group(1)} out of range")
+            continue
+        if len(m.group(2)) > 15:  # beyond float precision (and int * 1e-4 overflows)
+            ctx.problems.add(ctx.source, f"line {n}", f"time {m.group(2)[:20]!r} out of range")
             continue
         ticks = int(m.group(2))
         rest = m.group(6).strip()

@@ -103,7 +103,7 @@ class LogSource:
             if self.strict and self.ctx.problems.count:
                 first = self.ctx.problems.shown[0]
                 kind, _, number = first.location.partition(" ")
-                if kind in ("line", "record") and number.isdigit():
+                if kind in ("line", "record") and number.isdecimal():
                     batch = batch.take(batch.line < int(number))
                 if len(batch):
                     yield batch

@@ -15,6 +15,7 @@ are not frames and are skipped silently.
 from __future__ import annotations
 
 import datetime
+import math
 import re
 from collections.abc import Iterator
 from typing import BinaryIO
@@ -68,13 +69,17 @@ def _ident(text: str) -> tuple[int, int]:
 
 def _number(text: str, what: str) -> float:
     try:
-        return float(text)
+        value = float(text)
     except ValueError:
         raise _Bad(f"invalid {what} {text!r}") from None
+    if not math.isfinite(value):
+        raise _Bad(f"invalid {what} {text!r}")
+    return value
 
 
 def _dlc(text: str) -> int:
-    if not text.isdigit() or int(text) > 15:
+    # isdecimal, not isdigit: isdigit() accepts '³', which int() refuses
+    if not text.isdecimal() or int(text) > 15:
         raise _Bad(f"invalid DLC {text!r}")
     return int(text)
 
@@ -86,7 +91,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     start = 0.0
     columns: dict[str, int] = {}
     in_header = True
-    for n, line in text_lines(stream):
+    for n, line in text_lines(stream, ctx=ctx):
         s = line.strip()
         if not s:
             continue
@@ -98,10 +103,10 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
                 elif key == "STARTTIME":
                     try:
                         days = float(value)
-                    except ValueError:
+                        start = (_EPOCH_1899 + datetime.timedelta(days=days)).timestamp()
+                    except (ValueError, OverflowError):  # not a number, NaN, or beyond year 9999
                         ctx.problems.add(ctx.source, f"line {n}", f"invalid $STARTTIME {value!r}")
                         continue
-                    start = (_EPOCH_1899 + datetime.timedelta(days=days)).timestamp()
                     ctx.absolute_time = True
                     ctx.start_time = start
                 elif key == "COLUMNS":
@@ -157,6 +162,8 @@ def _row_v1(s: str, version: str):
             raise _Bad(f"unknown message type {kind!r}")
         flags = FLAG_TX if kind == "Tx" else 0
         i = 3
+    if len(tok) <= i:
+        raise _Bad(f"not a TRC {version} frame line: {s[:60]!r}")
     if tok[i] == "FFFFFFFF":
         return None  # bus status information, not a frame
     can_id, ext = _ident(tok[i])
@@ -188,10 +195,10 @@ def _row_v2(s: str, col: dict[str, int]):
         raise _Bad(f"invalid direction {direction!r}")
     if direction == "Tx":
         flags |= FLAG_TX
-    bus = tok[col["B"]] if "B" in col else "1"
+    bus = tok[col["B"]] if "B" in col and col["B"] < len(tok) else "1"
     if "l" in col:
         text = tok[col["l"]] if len(tok) > col["l"] else ""
-        if not text.isdigit() or int(text) > 64:
+        if not text.isdecimal() or int(text) > 64:
             raise _Bad(f"invalid length {text!r}")
         size = int(text)
     elif "L" in col:

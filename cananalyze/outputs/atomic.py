@@ -1,27 +1,27 @@
-"""Write outputs atomically: into a temporary file next to the target, then rename.
+"""Atomic output files: an interrupted export leaves the complete old file, the new one, or none.
 
-A cut-off export (Ctrl-C, full disk, a crash) must not leave a half-written file
-that a viewer then fails to open or, worse, half-shows.
+Every writer puts its bytes in a temporary file next to the target (same
+directory, so the final rename never crosses file systems), and renames it over
+the target only when writing finished without an exception. Ctrl-C, a full disk
+or a crash mid-way leave no half-written file that a later tool would misread.
+Targets that are not regular files (`/dev/null`, a FIFO, a terminal) are written
+directly: renaming over them would replace the device with a file.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import stat
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
+from typing import IO
 
 from ..errors import UsageError
 
 
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-def check_writable(dest: str | Path) -> None:
+def check_writable(dest: str | os.PathLike) -> None:
     """Fail before a long decode when the output's directory is missing."""
     parent = Path(dest).parent if str(Path(dest).parent) else Path(".")
     if not parent.is_dir():
@@ -30,25 +30,75 @@ def check_writable(dest: str | Path) -> None:
         raise UsageError(f"{dest}: is a directory, give a file name")
 
 
-@contextlib.contextmanager
-def atomic_path(dest: str | Path) -> Iterator[Path]:
-    """A temporary path to write; renamed to `dest` when the block ends without error."""
-    dest = Path(dest)
-    check_writable(dest)
-    parent = dest.parent if str(dest.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".tmp", dir=parent)
-    os.close(fd)
+def _special(path: Path) -> bool:
     try:
-        yield Path(tmp)
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give what open() would
-        os.replace(tmp, dest)
+        return not stat.S_ISREG(path.stat().st_mode)
+    except FileNotFoundError:
+        return False
+
+
+def _suffix(path: Path) -> str:
+    """The suffix libraries choose their format by, kept on the temporary name ('.log.gz' too)."""
+    return "".join(path.suffixes[-2:]) if path.suffix.lower() == ".gz" else path.suffix
+
+
+def _file_mode(path: Path) -> int:
+    """Mode the file would get from a plain open(): the old file's, else 0o666 less the umask."""
+    try:
+        return stat.S_IMODE(path.stat().st_mode)
+    except FileNotFoundError:
+        mask = os.umask(0)
+        os.umask(mask)
+        return 0o666 & ~mask
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+    """A temporary filename to write; it replaces ``path`` when the block ends without error.
+
+    For libraries that want a filename (python-can writers, mcap, pyarrow, rerun).
+    On an exception the temporary file is removed and ``path`` is left as it was.
+    The temporary name keeps the suffix (python-can writers choose the format by it).
+    Raises UsageError when the directory is missing or ``path`` is a directory.
+    """
+    path = Path(path)
+    check_writable(path)
+    if _special(path):
+        yield path
+        return
+    fd, name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=_suffix(path), dir=path.parent)
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        yield tmp
+        os.chmod(tmp, _file_mode(path))
+        os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):
-            os.unlink(tmp)
+            tmp.unlink()
         raise
 
 
-def write_text_atomic(dest: str | Path, text: str) -> None:
+@contextlib.contextmanager
+def atomic_write(
+    path: str | os.PathLike,
+    mode: str = "w",
+    encoding: str | None = None,
+    newline: str | None = None,
+) -> Iterator[IO]:
+    """``open(path, mode)`` whose result appears at ``path`` only once complete (flushed and synced)."""
+    if "r" in mode or "a" in mode or "+" in mode:
+        raise ValueError(f"atomic_write writes a new file; mode {mode!r} is not supported")
+    if "b" not in mode and encoding is None:
+        encoding = "utf-8"
+    with atomic_path(path) as tmp, open(tmp, mode, encoding=encoding, newline=newline) as f:
+        yield f
+        f.flush()
+        if tmp != Path(path):  # a device or FIFO written directly cannot fsync
+            os.fsync(f.fileno())
+
+
+def write_text_atomic(dest: str | os.PathLike, text: str) -> None:
     """A whole text file (JUnit, JSON reports) written atomically."""
-    with atomic_path(dest) as tmp:
-        tmp.write_text(text, encoding="utf-8")
+    with atomic_write(dest, "w", encoding="utf-8") as f:
+        f.write(text)

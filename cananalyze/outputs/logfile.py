@@ -7,12 +7,12 @@ as they are; candump is written in bulk because benchmark logs run to 10M lines.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 
 from ..frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, FrameBatch
+from .atomic import atomic_path
 
 _HEX2 = np.array([f"{i:02X}" for i in range(256)])
 
@@ -157,19 +157,18 @@ def _set_asc_date(path: Path, start: float) -> None:
 
 
 def write_log(batch: FrameBatch, path: str | Path) -> None:
-    """Write a batch as candump (.log), ASC (.asc) or BLF (.blf), atomically."""
+    """Write a batch as candump (.log), ASC (.asc) or BLF (.blf), atomically (outputs/atomic)."""
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
     suffix = path.suffix.lower()
-    if suffix in (".log", ".candump", ".txt"):
-        with open(tmp, "wb") as f:
-            f.write(candump_bytes(batch))
-    elif suffix in (".asc", ".blf"):
+    if suffix not in (".log", ".candump", ".txt", ".asc", ".blf"):
+        raise ValueError(f"{path}: write .log, .asc or .blf")
+    with atomic_path(path) as tmp:  # keeps the suffix: python-can picks the format by it
+        if suffix in (".log", ".candump", ".txt"):
+            tmp.write_bytes(candump_bytes(batch))
+            return
         import can
 
         writer_cls = can.ASCWriter if suffix == ".asc" else can.BLFWriter
-        # python-can picks the format from the suffix; write to a temp name with the right one
-        tmp = path.with_name(f".{path.stem}.tmp{suffix}")
         writer = writer_cls(str(tmp))
         try:
             for msg in to_messages(batch):
@@ -178,6 +177,3 @@ def write_log(batch: FrameBatch, path: str | Path) -> None:
             writer.stop()
         if suffix == ".asc" and len(batch):
             _set_asc_date(tmp, float(batch.t[0]))
-    else:
-        raise ValueError(f"{path}: write .log, .asc or .blf")
-    os.replace(tmp, path)

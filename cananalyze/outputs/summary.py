@@ -11,10 +11,22 @@ import numpy as np
 
 from ..busload import frame_bits
 from ..decoded import DecodedBatch
-from ..frames import FLAG_EXT
+from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from ..protocol.services import SERVICE_NAMES, Service
 
 N_SVC = len(SERVICE_NAMES)
+_NMT_STATES = np.array(
+    [0x00, 0x04, 0x05, 0x7F], np.uint8
+)  # boot-up, stopped, operational, pre-operational
+_NMT_COMMANDS = np.array([0x01, 0x02, 0x80, 0x81, 0x82], np.uint8)
+
+
+def _ids(per_id: np.ndarray, most: int = 6) -> str:
+    """The identifiers with counts, most frequent first: '0x5CB, 0x64B'."""
+    ids = np.flatnonzero(per_id)
+    ids = ids[np.argsort(-per_id[ids], kind="stable")]
+    text = ", ".join(f"0x{int(i):03X}" for i in ids[:most])
+    return text + (f" and {ids.size - most} more" if ids.size > most else "")
 
 
 @dataclass
@@ -28,6 +40,17 @@ class Summary:
     ids_seen: set = field(default_factory=set)
     skipped: int = 0
     sdo: list = field(default_factory=list)  # SDO transaction records, for counts and latency
+    # evidence for and against CANopen (canopen_verdict), counted as columns
+    ext_frames: int = 0  # 29-bit identifiers
+    sdo_frames: int = 0  # data frames in the SDO ranges
+    sdo_bad: np.ndarray = field(
+        default_factory=lambda: np.zeros(2048, np.int64)
+    )  # not 8 bytes, per id
+    ec_frames: int = 0  # data frames in the heartbeat range
+    ec_bad: np.ndarray = field(
+        default_factory=lambda: np.zeros(2048, np.int64)
+    )  # not 1 byte NMT state
+    nmt_good: int = 0  # well-formed NMT commands
 
     def add(self, batch: DecodedBatch) -> None:
         n = len(batch)
@@ -46,8 +69,29 @@ class Summary:
         key = batch.node[has].astype(np.int64) * N_SVC + batch.service[has]
         self.by_node_service += np.bincount(key, minlength=128 * N_SVC).reshape(128, N_SVC)
         self.bits += int(frame_bits(fb.flags, fb.dlc).sum())
+        self._evidence(batch)
         if len(self.ids_seen) < 4096:
             self.ids_seen.update(np.unique(fb.can_id[(fb.flags & FLAG_EXT) == 0]).tolist())
+
+    def _evidence(self, batch: DecodedBatch) -> None:
+        """Count frames whose shape says CANopen or says otherwise (CiA 301 sizes and values)."""
+        fb = batch.frames
+        svc = batch.service
+        data_frame = (fb.flags & (FLAG_RTR | FLAG_ERR)) == 0
+        std = (fb.flags & FLAG_EXT) == 0
+        self.ext_frames += int((~std).sum())
+        ids = fb.can_id & 0x7FF
+        sdo = data_frame & std & ((svc == Service.SDO_REQUEST) | (svc == Service.SDO_RESPONSE))
+        self.sdo_frames += int(sdo.sum())
+        self.sdo_bad += np.bincount(ids[sdo & (fb.dlc != 8)], minlength=2048)
+        ec = data_frame & std & ((svc == Service.HEARTBEAT) | (svc == Service.BOOTUP))
+        self.ec_frames += int(ec.sum())
+        state_ok = np.isin(fb.data[:, 0] & 0x7F, _NMT_STATES)
+        self.ec_bad += np.bincount(ids[ec & ((fb.dlc != 1) | ~state_ok)], minlength=2048)
+        nmt = data_frame & (svc == Service.NMT) & (fb.dlc == 2)
+        self.nmt_good += int(
+            (nmt & np.isin(fb.data[:, 0], _NMT_COMMANDS) & (fb.data[:, 1] < 128)).sum()
+        )
 
     @property
     def duration(self) -> float:
@@ -56,25 +100,64 @@ class Summary:
         return self.t_last - self.t_first
 
     def canopen_verdict(self) -> str | None:
-        """A sentence when the traffic does not look like CANopen, else None."""
+        """Sentences when (part of) the traffic does not look like CANopen, else None.
+
+        Evidence, not identifier ranges alone: every bus has frames whose
+        identifiers fall into CANopen ranges, so the verdict also checks their
+        shape (CiA 301: SDO frames are 8 bytes, heartbeats 1 byte with an NMT
+        state) and how SDO transactions end on each channel.
+        """
         if self.frames == 0:
             return "The log holds no frames."
+        out: list[str] = []
+        n = self.frames
+        if self.ext_frames / n > 0.5:
+            out.append(
+                f"This does not look like CANopen: {self.ext_frames} of {n} frames have 29-bit identifiers "
+                "(J1939 or another protocol); CANopen uses 11-bit identifiers."
+            )
+        ec_bad = int(self.ec_bad.sum())
+        if ec_bad >= 3 and ec_bad > self.ec_frames / 2:
+            out.append(
+                f"Not CANopen error control: {ec_bad} of {self.ec_frames} frames on heartbeat identifiers "
+                f"({_ids(self.ec_bad)}) are not 1 byte holding an NMT state."
+            )
+        sdo_bad = int(self.sdo_bad.sum())
+        if sdo_bad >= 3 and sdo_bad > self.sdo_frames / 2:
+            out.append(
+                f"Not SDO: {sdo_bad} of {self.sdo_frames} frames on SDO identifiers ({_ids(self.sdo_bad)}) "
+                "are not 8 bytes long (a proprietary protocol on these identifiers?)."
+            )
+        for node, total, errors in self._bad_sdo_channels():
+            out.append(
+                f"Node {node}'s SDO channel is probably not SDO: {errors} of {total} transactions "
+                "are protocol errors."
+            )
+        good = (self.ec_frames - ec_bad) + (self.sdo_frames - sdo_bad) + self.nmt_good
         other = int(self.by_service[Service.OTHER]) + int(self.by_service[Service.ERROR_FRAME])
-        markers = sum(
-            int(self.by_service[s])
-            for s in (Service.HEARTBEAT, Service.BOOTUP, Service.NMT, Service.GUARD_REQUEST)
-        )
-        if other / self.frames > 0.5:
-            return (
-                f"This does not look like CANopen: {other} of {self.frames} frames use identifiers "
-                "outside the predefined connection set."
+        if not out and other / n > 0.5 and good == 0:
+            out.append(
+                f"This does not look like CANopen: {other} of {n} frames use identifiers outside the "
+                "predefined connection set, and no frame is a well-formed heartbeat, boot-up, NMT or SDO frame."
             )
-        if markers == 0 and self.frames > 200:
-            return (
-                "This may not be CANopen: no heartbeat, boot-up, guarding or NMT frame in "
-                f"{self.frames} frames; identifiers merely fall into CANopen ranges."
+        elif not out and good == 0 and n > 200:
+            out.append(
+                f"This may not be CANopen: no well-formed heartbeat, boot-up, NMT or SDO frame in {n} frames; "
+                "identifiers merely fall into CANopen ranges."
             )
-        return None
+        return " ".join(out) or None
+
+    def _bad_sdo_channels(self) -> list[tuple[int, int, int]]:
+        by_node: dict = {}
+        for rec in self.sdo:
+            counts = by_node.setdefault(rec.get("node"), [0, 0])
+            counts[0] += 1
+            counts[1] += rec.get("result") == "protocol_error"
+        return [
+            (node, t, e)
+            for node, (t, e) in sorted(by_node.items(), key=lambda kv: str(kv[0]))
+            if t >= 3 and e > t / 2
+        ]
 
     def lines(self, bitrate: int | None = None, problems: int = 0) -> list[str]:
         out = [f"frames: {self.frames}", f"duration: {self.duration:.6f} s"]
@@ -140,13 +223,15 @@ def device_lines(model, summary: Summary | None = None) -> list[str]:
     for node in sorted(seen_nodes):
         cfg = known.get(node)
         if cfg is None:
-            out.append(f"  node {node:>3}: unknown device (no identity read in the log; give --device or --eds)")
+            out.append(
+                f"  node {node:>3}: unknown device (no identity read in the log; give --device or --eds)"
+            )
             continue
         name = cfg.profile.name if cfg.profile is not None else "unknown device"
         seen = ", ".join(
-            f"{k} 0x{v:X}" if isinstance(v, int) else f"{k} {v!r}" for k, v in sorted(cfg.identity.items())
+            f"{k} 0x{v:X}" if isinstance(v, int) else f"{k} {v!r}"
+            for k, v in sorted(cfg.identity.items())
         )
         line = f"  node {node:>3}: {name} (identified by {cfg.identified_by})"
         out.append(line + (f"; seen {seen}" if seen else ""))
     return ["devices:", *out] if out else []
-
