@@ -290,16 +290,14 @@ class TextWriter:
             (svc.astype(np.int64) * 256 + np.where(is_pdo, pdo, 0)) * 2 + (rtr & is_pdo)
         ) * 257 + first
         key = np.where(keyed, key, -1)
-        uniq, inv = np.unique(key, return_inverse=True)
+        uniq, first_at, inv = np.unique(key, return_index=True, return_inverse=True)
         texts: list[bytes] = []
         end = (_RESET if self.color else "") + "\n"
-        for k in uniq.tolist():
+        for k, i in zip(uniq.tolist(), first_at.tolist(), strict=True):
             if k < 0:
                 texts.append(b"")
                 continue
-            i = int(np.flatnonzero(key == k)[0])
-            row = int(sel[i])
-            f = frame_fields(int(svc[i]), fb.payload(row), bool(rtr[i]))
+            f = frame_fields(int(svc[i]), fb.payload(int(sel[i])), bool(rtr[i]))
             texts.append(
                 (annotation(int(svc[i]), int(node[i]), int(pdo[i]), f, bool(rtr[i])) + end).encode()
             )
@@ -314,17 +312,25 @@ class TextWriter:
         ends = np.cumsum(keep.sum(axis=1))
         pieces: list[bytes] = []
         prev = 0
-        for i, e in zip(slow.tolist(), ends[slow].tolist(), strict=True):
-            row = int(sel[i])
-            fl = int(flags[i])
-            text = annotation(
-                int(svc[i]), int(node[i]), int(pdo[i]), batch.fields(row), bool(fl & FLAG_RTR)
-            )
-            tail = [text + end]
-            for rec in by_row.get(row, ()):
-                tail.append("    └─ " + format_record(rec) + "\n")
-            pieces.append(blob[prev:e])
-            pieces.append("".join(tail).encode())
+        notes = batch.notes
+        is_sdo = ((svc == Service.SDO_REQUEST) | (svc == Service.SDO_RESPONSE))[slow].tolist()
+        for i, e, row, sdo in zip(
+            slow.tolist(), ends[slow].tolist(), sel[slow].tolist(), is_sdo, strict=True
+        ):
+            role = notes[row].get("role") if sdo and row in notes else None
+            if role:  # what `annotation` says for a frame the SDO tracker placed
+                text = "SDO " + role
+            else:
+                rtr_i = bool(flags[i] & FLAG_RTR)
+                text = annotation(int(svc[i]), int(node[i]), int(pdo[i]), batch.fields(row), rtr_i)
+            recs = by_row.get(row)
+            if recs:
+                text += end + "".join("    └─ " + format_record(rec) + "\n" for rec in recs)
+                pieces.append(blob[prev:e])
+                pieces.append(text.encode())
+            else:
+                pieces.append(blob[prev:e])
+                pieces.append((text + end).encode())
             prev = e
         pieces.append(blob[prev:])
         if tail_lines:
