@@ -65,6 +65,7 @@ def _record_passes(rec: dict, args: argparse.Namespace, nodes, services, t0: flo
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from ..io.prefetch import prefetch
     from ..io.source import open_log
     from ..outputs.summary import Summary
     from ..protocol.services import parse_services
@@ -102,8 +103,9 @@ def run(args: argparse.Namespace) -> int:
     collector = timeline_collector(args)
     t0 = None
     svc_codes = np.array(sorted(services), np.uint8) if services else None
+    batches = prefetch(source.batches())
     try:
-        for fb in source.batches():
+        for fb in batches:
             batch = decoder.decode(fb)
             if t0 is None and len(fb):
                 t0 = float(fb.t[0])
@@ -133,6 +135,7 @@ def run(args: argparse.Namespace) -> int:
         if not args.summary:
             writer.write(tail)
     finally:
+        batches.close()  # stops the reader thread before its problems are reported
         out.flush()
         report_problems(source.problems)
     if args.summary:
