@@ -128,7 +128,12 @@ def _parse_time(arr: np.ndarray, start: np.ndarray, end: np.ndarray, dots: np.nd
             fd = digits[:, ni + 1 :]
             good &= np.all(fd != 255, axis=1)
             frac = fd.astype(np.int64) @ (10 ** np.arange(nf - 1, -1, -1, dtype=np.int64))
-            t[rows] = sec + frac / 10.0**nf
+            if ni + nf <= 18:
+                # all digits as one integer divided once: exactly float(text) below 2**53
+                whole = sec * 10**nf + frac
+                t[rows] = np.where(whole < 2**53, whole / 10.0**nf, sec + frac / 10.0**nf)
+            else:
+                t[rows] = sec + frac / 10.0**nf
         else:
             t[rows] = sec
         ok[rows] = good
