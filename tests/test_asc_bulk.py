@@ -113,9 +113,14 @@ def _random_asc(rng: random.Random) -> bytes:
             line = f"{t:.6e} {ch} 181 Rx d 1 00"
         elif r < 0.9:
             line = f"{t:.6f} Start of measurement"
-        else:
+        elif r < 0.95:
             line = f"{t:.3f} {ch} 123 Rx d 2 01 02  Length = 0 BitCount = 64 ID = 291"
-        lines.append(line.encode())
+        else:  # separators str.split() knows and a byte it does not split on
+            odd = rng.choice([" ", "\x0b", "\x01", "\x85", "\xa0", "\x1f"])
+            line = f"{t:.6f}\x0b{ch} 181{odd}Rx d 1 00"
+        line = line.encode("latin-1")
+        lines.append(line)
+        continue
     eol = rng.choice([b"\n", b"\r\n"])
     return eol.join(lines) + (eol if rng.random() < 0.7 else b"")
 

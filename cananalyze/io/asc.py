@@ -273,14 +273,18 @@ def _chunks(stream: BinaryIO, parser: _LineParser) -> Iterator[FrameBatch]:
         line_base += starts.size
         # header lines that set the base or the time mode come first, line by line
         head_end = 0
-        for m in _BASE_RE.finditer(chunk):
-            head_end = int(np.searchsorted(starts, m.start(), side="right"))
+        if b"ase" in chunk or b"ASE" in chunk:  # memchr-fast test before the regex
+            for m in _BASE_RE.finditer(chunk):
+                head_end = int(np.searchsorted(starts, m.start(), side="right"))
         for i in range(head_end):
             parser.line(first_line + i, chunk[starts[i] : ends[i]].decode("latin-1"))
         bulk = None
         if parser.base == 16 and not parser.relative and head_end < starts.size:
             bulk = _bulk_lines(arr, starts, ends)
-            bulk[0][:head_end] = False
+            if bulk[1] is None:
+                bulk = None
+            else:
+                bulk[0][:head_end] = False
         fast = np.zeros(starts.size, bool) if bulk is None else bulk[0]
         # every other line, in order, through the line parser; note where the time base moves
         slow_idx = np.flatnonzero(~fast[head_end:]) + head_end
@@ -362,20 +366,27 @@ def _bulk_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray):
     n = starts.size
     size = arr.size - PAD
     body = arr[:size]
-    tokch = (body != 32) & (body != 9) & (body != 10) & (body != 13)
-    edge = np.diff(tokch.astype(np.int8), prepend=np.int8(0), append=np.int8(0))
-    tok_s = np.flatnonzero(edge == 1)
-    tok_e = np.flatnonzero(edge == -1)
+    tokch = np.ones(size + 2, bool)  # token bytes, with a separator either side
+    tokch[0] = tokch[-1] = False
+    inner = tokch[1:-1]
+    inner &= body > 32  # space, tab, CR, LF and other controls separate tokens
+    tok_s = np.flatnonzero(inner & ~tokch[:-2])
+    tok_len = np.flatnonzero(inner & ~tokch[2:]) + 1 - tok_s
     first = np.searchsorted(tok_s, starts)
     ntok = np.searchsorted(tok_s, ends) - first
     ok = ntok >= 6
+    # str.split() also splits on other controls and on latin-1 NBSP/NEL: such lines go slow
+    odd = np.flatnonzero(((body < 32) & (body != 9) & (body != 10) & (body != 13)) | (body >= 127))
+    if odd.size:
+        k = np.searchsorted(odd, starts)
+        ok &= ~((k < odd.size) & (odd[np.minimum(k, odd.size - 1)] < ends))
     nt = tok_s.size
+    if nt == 0:
+        return np.zeros(n, bool), None
 
     def tok(k: int):
-        j = np.minimum(first + k, max(nt - 1, 0))
-        if nt == 0:
-            return np.zeros(n, np.int64), np.zeros(n, np.int64)
-        return tok_s[j], tok_e[j] - tok_s[j]
+        j = np.minimum(first + k, nt - 1)
+        return tok_s[j], tok_len[j]
 
     t_s, t_len = tok(0)
     c_s, c_len = tok(1)
