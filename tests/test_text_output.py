@@ -141,3 +141,29 @@ def test_writes_to_a_real_file(tmp_path: Path) -> None:
     for b in batches:
         ref += lines_per_row(b, None, t0, False, False)
     assert path.read_text(encoding="utf-8") == "".join(x + "\n" for x in ref)
+
+
+def _decode_cli(argv: list[str]):
+    from cananalyze.cli.main import build_parser
+
+    args = build_parser().parse_args(["decode", *argv])
+    dec = build_decoder(args)
+    out = [dec.decode(fb) for fb in open_log(args.log).batches()]
+    out.append(dec.finish())
+    return out
+
+
+def test_pdo_signals_from_a_device_profile() -> None:
+    eds = real_file("jclinton830__canopen_test/roboteq_motor_controllers_v80.eds")
+    log = real_file("jclinton830__canopen_test/candump.txt")
+    batches = _decode_cli([str(log), "--eds", f"12={eds}"])
+    assert any(b.signals for b in batches)
+    assert _check(batches, color=False) > 10
+    assert _check(batches, color=True) > 10
+
+
+def test_signals_of_a_builtin_device(tmp_path: Path) -> None:
+    log = tmp_path / "x.log"
+    log.write_text("(1.0) can0 285#E803000000000000\n(1.1) can0 080#\n(1.2) can0 285#E8030000\n")
+    batches = _decode_cli([str(log), "--device", "5=dat7014"])
+    assert _check(batches, color=False) >= 3

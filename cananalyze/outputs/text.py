@@ -278,6 +278,9 @@ class TextWriter:
             noted_rows = np.zeros(len(fb), bool)
             noted_rows[np.fromiter(batch.notes, np.int64, len(batch.notes))] = True
             noted = noted_rows[sel]
+        lazy = batch._lazy_index()  # rows with PDO signals or shared notes: annotated per row
+        if lazy is not None:
+            noted = noted | (lazy[0][sel] >= 0) | (lazy[2][sel] >= 0)
         with_records = np.zeros(n, bool)
         if by_row:
             rec_rows = np.zeros(len(fb), bool)
