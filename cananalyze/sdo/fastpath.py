@@ -121,6 +121,7 @@ def build_pairs(
     req_notes: list[dict] = []
     resp_notes: list[dict] = []
     records: list[dict] = []
+    info_cache: dict = {}  # a poll loop asks for the same few objects over and over
     for k, (up, ab, n, x, y, i, s, nd) in enumerate(
         zip(
             upload.tolist(),
@@ -179,7 +180,10 @@ def build_pairs(
             )
         name = value = None
         if object_info is not None:
-            known = object_info(nd, i, s)
+            key = (nd, i, s)
+            known = info_cache.get(key, info_cache)
+            if known is info_cache:
+                known = info_cache[key] = object_info(nd, i, s)
             if known is not None:
                 name, datatype = known
                 value = decode_value(bytes.fromhex(data), datatype)
