@@ -101,12 +101,19 @@ def plan(batch: DecodedBatch, rows: np.ndarray, timeout: float, explicit: list[i
 
 
 def build_pairs(
-    fb, a: np.ndarray, b: np.ndarray, object_info: ObjectInfo | None
+    fb,
+    a: np.ndarray,
+    b: np.ndarray,
+    object_info: ObjectInfo | None,
+    notes: bool = True,
+    records: bool = True,
 ) -> tuple[list[dict], list[dict], list[dict]]:
     """Request notes, answer notes and records of taken pairs (request rows a, answer rows b).
 
     Ordinary answers are built column-wise here; aborts go through `pair_outputs`.
+    `notes` / `records` False leave that part out (the lists stay empty).
     """
+    want_notes, want_records = notes, records
     da, db = fb.data[a], fb.data[b]
     upload = da[:, 0] == _UPLOAD_REQ
     aborted = db[:, 0] == _ABORT
@@ -120,8 +127,9 @@ def build_pairs(
     sized = (da[:, 0] & 1).tolist()
     req_notes: list[dict] = []
     resp_notes: list[dict] = []
-    records: list[dict] = []
+    out: list[dict] = []
     info_cache: dict = {}  # a poll loop asks for the same few objects over and over
+    value_cache: dict = {}  # ... and often reads the same values
     for k, (up, ab, n, x, y, i, s, nd) in enumerate(
         zip(
             upload.tolist(),
@@ -137,13 +145,17 @@ def build_pairs(
     ):
         if ab:
             rq, rs, rec, _ = pair_outputs(fb, int(a[k]), int(b[k]), nd, object_info)
-            req_notes.append(rq)
-            resp_notes.append(rs)
-            records.append(rec)
+            if want_notes:
+                req_notes.append(rq)
+                resp_notes.append(rs)
+            if want_records:
+                out.append(rec)
             continue
-        where = f" 0x{i:04X}:{s}"
         data = hexes[8 * k : 8 * k + 2 * n]
-        if up:
+        if not want_notes:
+            pass
+        elif up:
+            where = f" 0x{i:04X}:{s}"
             req_notes.append(
                 {
                     "role": f"upload request{where}",
@@ -161,6 +173,7 @@ def build_pairs(
                 }
             )
         else:
+            where = f" 0x{i:04X}:{s}"
             size = f", {n} bytes" if sized[k] else ""
             req_notes.append(
                 {
@@ -178,6 +191,8 @@ def build_pairs(
                     "subindex": s,
                 }
             )
+        if not want_records:
+            continue
         name = value = None
         if object_info is not None:
             key = (nd, i, s)
@@ -186,8 +201,11 @@ def build_pairs(
                 known = info_cache[key] = object_info(nd, i, s)
             if known is not None:
                 name, datatype = known
-                value = decode_value(bytes.fromhex(data), datatype)
-        records.append(
+                vkey = (data, datatype)
+                value = value_cache.get(vkey, value_cache)
+                if value is value_cache:
+                    value = value_cache[vkey] = decode_value(bytes.fromhex(data), datatype)
+        out.append(
             {
                 "kind": "sdo",
                 "t_start": x,
@@ -210,7 +228,7 @@ def build_pairs(
                 "channel": [0x600 + nd, 0x580 + nd],
             }
         )
-    return req_notes, resp_notes, records
+    return req_notes, resp_notes, out
 
 
 def _mux(index: int, subindex: int) -> str:

@@ -18,6 +18,7 @@ from ..decoded import DecodedBatch
 from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from ..protocol.services import Service
 from . import fastpath
+from .lazynotes import LazyNotes
 from .tracker import SdoTracker
 
 
@@ -151,24 +152,31 @@ class SdoProcessor:
     def _take(self, batch: DecodedBatch, i: int, j: int) -> None:
         """Reserve the record slot of the fast pair (request position i, answer position j)."""
         self._taken.append((i, j, len(batch.records)))
-        batch.records.append((self._cur_rows[j], {}))
+        batch.records.append((self._cur_rows[j], None))  # filled in by _fill
         self.tracker._ended[self._req_cob[i]] = "abort" if self._aborted[j] else "ok"
 
     def _fill(self, batch: DecodedBatch) -> None:
-        """Notes and records of every pair taken in this batch, built column-wise."""
+        """Records of every pair taken in this batch, built column-wise; notes when read."""
         if not self._taken:
             return
         rows = np.asarray(self._cur_rows)
         taken = np.asarray(self._taken)
         a, b = rows[taken[:, 0]], rows[taken[:, 1]]
-        req, resp, records = fastpath.build_pairs(batch.frames, a, b, self.tracker.object_info)
-        notes = batch.notes
-        for ra, rb, na, nb, (_, _, slot), rec in zip(
-            a.tolist(), b.tolist(), req, resp, self._taken, records, strict=True
-        ):
-            notes.setdefault(ra, {}).update(na)
-            notes.setdefault(rb, {}).update(nb)
-            batch.records[slot][1].update(rec)
+        fb = batch.frames
+        _, _, records = fastpath.build_pairs(fb, a, b, self.tracker.object_info, notes=False)
+        for rb, (_, _, slot), rec in zip(b.tolist(), self._taken, records, strict=True):
+            batch.records[slot] = (rb, rec)
+
+        def write_notes(notes: dict) -> None:
+            req, resp, _ = fastpath.build_pairs(fb, a, b, None, records=False)
+            for ra, rb, na, nb in zip(a.tolist(), b.tolist(), req, resp, strict=True):
+                LazyNotes.write(notes, ra, na)
+                LazyNotes.write(notes, rb, nb)
+
+        if isinstance(batch.notes, LazyNotes):
+            batch.notes.defer(write_notes)
+        else:
+            batch.notes = LazyNotes(batch.notes, write_notes)
 
     def finish(self, batch: DecodedBatch) -> None:
         self.tracker.finish()
