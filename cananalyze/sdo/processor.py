@@ -110,8 +110,12 @@ class SdoProcessor:
         self._taken: list[tuple[int, int, int]] = []
         slow_at = np.flatnonzero(p.static_slow).tolist()
         t = fb.t[rows].tolist()
-        rejected: list[int] = []  # answers whose request had to go through the tracker
-        pairs: dict[int, int] = {}  # answer position -> request position, taken pairs
+        req_of = np.full(len(row_of), -1, np.int64)
+        req_of[p.partner[p.cand]] = np.flatnonzero(p.cand)
+        self._req_of = req_of.tolist()
+        answers = np.flatnonzero(p.is_partner).tolist()
+        rejected: list[int] = []  # answers whose request had to go through the tracker (sorted)
+        rejected_set: set[int] = set()
         m = len(row_of)
         pos = 0
         si = 0
@@ -123,11 +127,10 @@ class SdoProcessor:
                 ri = bisect.bisect_left(rejected, pos)
                 if ri < len(rejected) and rejected[ri] < stop:
                     stop = rejected[ri]
-                for i in range(pos, stop):
-                    if cand[i]:
-                        pairs[partner[i]] = i
-                    elif is_partner[i]:
-                        self._take(batch, pairs.pop(i), i)
+                # idle stretch: every answer in it closes a pair whose request was taken
+                lo, hi = bisect.bisect_left(answers, pos), bisect.bisect_left(answers, stop)
+                if hi > lo:
+                    self._take_many(batch, answers[lo:hi])
                 pos = stop
                 if pos >= m:
                     break
@@ -138,22 +141,33 @@ class SdoProcessor:
                     tracker.advance(t[i])
                     self._emit(batch)
                 if req_cob[i] not in tracker._pending:
-                    pairs[partner[i]] = i
-                    continue
+                    continue  # taken: its answer closes it
                 bisect.insort(rejected, partner[i])
-            elif is_partner[i] and i in pairs:
+                rejected_set.add(partner[i])
+            elif is_partner[i] and i not in rejected_set:
                 if tracker._pending:
                     tracker.advance(t[i])
                     self._emit(batch)
-                self._take(batch, pairs.pop(i), i)
+                self._take_many(batch, [i])
                 continue
             self._feed(batch, row_of[i])
 
-    def _take(self, batch: DecodedBatch, i: int, j: int) -> None:
-        """Reserve the record slot of the fast pair (request position i, answer position j)."""
-        self._taken.append((i, j, len(batch.records)))
-        batch.records.append((self._cur_rows[j], None))  # filled in by _fill
-        self.tracker._ended[self._req_cob[i]] = "abort" if self._aborted[j] else "ok"
+    def _take_many(self, batch: DecodedBatch, answers: list[int]) -> None:
+        """Reserve the record slots of fast pairs closed by these answer positions."""
+        req_of, row_of, aborted, req_cob = (
+            self._req_of,
+            self._cur_rows,
+            self._aborted,
+            self._req_cob,
+        )
+        base = len(batch.records)
+        batch.records.extend([(row_of[j], None) for j in answers])  # filled in by _fill
+        self._taken.extend(
+            zip(
+                [req_of[j] for j in answers], answers, range(base, base + len(answers)), strict=True
+            )
+        )
+        self.tracker._ended.update((req_cob[j], "abort" if aborted[j] else "ok") for j in answers)
 
     def _fill(self, batch: DecodedBatch) -> None:
         """Records of every pair taken in this batch, built column-wise; notes when read."""
