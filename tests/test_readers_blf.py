@@ -136,3 +136,31 @@ def test_not_blf_is_a_problem():
     assert len(batch) == 0 and ctx.problems.count == 1
     assert blf.sniff(real_file("hardbyte__python-can/test_CanMessage.blf").read_bytes())
     assert not blf.sniff(b"date Sat Sep 30\nbase hex")
+
+
+def test_runs_of_one_record_type_broken_by_others(tmp_path):
+    """Uniform runs are read in bulk; FD and error records in between end a run."""
+    rnd = random.Random(11)
+    msgs = []
+    for i in range(6000):
+        r = rnd.random()
+        kw = {"timestamp": 1700000000.0 + i * 0.001, "channel": rnd.randrange(2)}
+        if r < 0.03:
+            msgs.append(can.Message(is_error_frame=True, **kw))
+        elif r < 0.08:
+            data = bytes(rnd.randrange(256) for _ in range(rnd.choice([12, 20, 64])))
+            msgs.append(can.Message(arbitration_id=0x181, is_fd=True, data=data, **kw))
+        else:
+            msgs.append(
+                can.Message(arbitration_id=rnd.randrange(0x800), data=bytes(rnd.randrange(9)), **kw)
+            )
+    path = tmp_path / "mixed.blf"
+    with can.BLFWriter(str(path)) as w:
+        for m in msgs:
+            w.on_message_received(m)
+    batch, ctx, _ = run(blf.read, path, batch_size=1000)
+    expected = list(can.BLFReader(str(path)))
+    assert len(batch) == len(expected) == 6000
+    assert_same_as_python_can(batch, expected)
+    assert batch.line.tolist() == list(range(1, 6001))
+    assert ctx.problems.count == 0

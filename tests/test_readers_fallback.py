@@ -50,3 +50,12 @@ def test_mf4_without_asammdf_is_one_problem(tmp_path):
 def test_unknown_suffix_is_a_problem():
     batch, ctx, _ = run(pycan_fallback.read, b"whatever", source="x.xyz")
     assert len(batch) == 0 and "unknown log format" in ctx.problems.shown[0].message
+
+
+def test_suffixes_are_python_cans_other_readers():
+    from can.io.player import MESSAGE_READERS
+
+    from cananalyze.io.pycan_fallback import PYCAN_ONLY_SUFFIXES
+
+    ours = (".asc", ".blf", ".trc", ".csv", ".log")
+    assert set(PYCAN_ONLY_SUFFIXES) == {s for s in MESSAGE_READERS if s not in ours}

@@ -98,6 +98,7 @@ def run(args: argparse.Namespace) -> int:
 def _decode_to(out, args: argparse.Namespace, source, decoder, timing, services, nodes) -> None:
     import numpy as np
 
+    from ..io.prefetch import prefetch
     from ..outputs.summary import Summary
 
     summary = Summary()
@@ -118,8 +119,9 @@ def _decode_to(out, args: argparse.Namespace, source, decoder, timing, services,
     collector = timeline_collector(args)
     t0 = None
     svc_codes = np.array(sorted(services), np.uint8) if services else None
+    batches = prefetch(source.batches())
     try:
-        for fb in source.batches():
+        for fb in batches:
             batch = decoder.decode(fb)
             if t0 is None and len(fb):
                 t0 = float(fb.t[0])
@@ -149,6 +151,7 @@ def _decode_to(out, args: argparse.Namespace, source, decoder, timing, services,
         if not args.summary:
             writer.write(tail)
     finally:
+        batches.close()  # stops the reader thread before its problems are reported
         out.flush()
         if not args.strict:  # strict: the InputError already names the first problem, in one line
             report_problems(source.problems)

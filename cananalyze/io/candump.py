@@ -88,22 +88,32 @@ def _window(arr: np.ndarray, start: np.ndarray, width: int) -> np.ndarray:
     return np.lib.stride_tricks.sliding_window_view(arr, width)[start]
 
 
+def _groups(keys: np.ndarray):
+    """(key, rows) per distinct key; rows is None when every row has the one key (the usual case)."""
+    if keys.size and (keys == keys[0]).all():
+        yield int(keys[0]), None
+        return
+    for key in np.unique(keys):
+        yield int(key), np.flatnonzero(keys == key)
+
+
 def _parse_hex(arr: np.ndarray, start: np.ndarray, length: np.ndarray, width: int):
     """Value of the hex field [start, start+length) per row; second result: all digits valid.
 
     Rows are grouped by field length (a log has one or two: 3 and 8 digits), and
-    each group is a fixed-width gather and a dot product with powers of 16.
+    each group is a fixed-width gather and a dot product with powers of 16
+    (in float64, exact for 8 digits, where numpy uses BLAS).
     """
     val = np.zeros(start.size, np.uint64)
     ok = np.zeros(start.size, bool)
-    for n_digits in np.unique(length):
+    for n_digits, rows in _groups(length):
         if n_digits <= 0 or n_digits > width:
             continue
-        rows = np.flatnonzero(length == n_digits)
-        digits = _HEX[_window(arr, start[rows], int(n_digits))]
-        ok[rows] = np.all(digits != 255, axis=1)
-        powers = np.uint64(16) ** np.arange(n_digits - 1, -1, -1, dtype=np.uint64)
-        val[rows] = digits.astype(np.uint64) @ powers
+        sel = slice(None) if rows is None else rows
+        digits = _HEX[_window(arr, start[sel], n_digits)]
+        ok[sel] = np.all(digits != 255, axis=1)
+        powers = 16.0 ** np.arange(n_digits - 1, -1, -1)
+        val[sel] = (digits.astype(np.float64) @ powers).astype(np.uint64)
     return val, ok
 
 
@@ -111,6 +121,8 @@ def _parse_time(arr: np.ndarray, start: np.ndarray, end: np.ndarray, dots: np.nd
     """Seconds from 'digits.digits' in [start, end); second result: well formed.
 
     Grouped by (integer digits, fraction digits): usually one group per chunk.
+    All digits are read as one integer and divided once by 10**fraction digits,
+    which is exactly float(text) while the integer is below 2**53.
     """
     dot = _first_after(dots, start, end)
     n_int = dot - start
@@ -118,22 +130,34 @@ def _parse_time(arr: np.ndarray, start: np.ndarray, end: np.ndarray, dots: np.nd
     t = np.zeros(start.size, np.float64)
     ok = np.zeros(start.size, bool)
     keys = n_int * 64 + n_frac
-    for key in np.unique(keys):
-        ni, nf = int(key // 64), int(key % 64)
+    for key, rows in _groups(keys):
+        ni, nf = key // 64, key % 64
         if ni < 1 or ni > 18 or nf > 12:
             continue
-        rows = np.flatnonzero(keys == key)
-        digits = _DIGIT[_window(arr, start[rows], ni + 1 + nf)]
+        sel = slice(None) if rows is None else rows
+        digits = _DIGIT[_window(arr, start[sel], ni + 1 + nf)]
+        if nf and ni + nf <= 15:
+            # one float64 dot product (BLAS), the '.' column weighted 0: exact below 1e15
+            weights = np.zeros(ni + 1 + nf)
+            weights[:ni] = 10.0 ** np.arange(ni + nf - 1, nf - 1, -1)
+            weights[ni + 1 :] = 10.0 ** np.arange(nf - 1, -1, -1)
+            ok[sel] = np.count_nonzero(digits == 255, axis=1) == 1  # only the '.'
+            t[sel] = (digits.astype(np.float64) @ weights) / 10.0**nf
+            continue
         good = np.all(digits[:, :ni] != 255, axis=1)
         sec = digits[:, :ni].astype(np.int64) @ (10 ** np.arange(ni - 1, -1, -1, dtype=np.int64))
         if nf:
             fd = digits[:, ni + 1 :]
             good &= np.all(fd != 255, axis=1)
             frac = fd.astype(np.int64) @ (10 ** np.arange(nf - 1, -1, -1, dtype=np.int64))
-            t[rows] = sec + frac / 10.0**nf
+            if ni + nf <= 18:
+                whole = sec * 10**nf + frac
+                t[sel] = np.where(whole < 2**53, whole / 10.0**nf, sec + frac / 10.0**nf)
+            else:
+                t[sel] = sec + frac / 10.0**nf
         else:
-            t[rows] = sec
-        ok[rows] = good
+            t[sel] = sec
+        ok[sel] = good
     return t, ok
 
 

@@ -13,14 +13,14 @@ from collections.abc import Iterator
 from pathlib import PurePath
 from typing import BinaryIO
 
-from can.io.generic import BinaryIOMessageReader, TextIOMessageReader
-from can.io.player import MESSAGE_READERS
-
 from ..frames import FLAG_BRS, FLAG_ERR, FLAG_ESI, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, FrameBatch
 from ._rows import RowSink
 from .registry import LogFormat, ReadContext, register
 
 EPOCH_2000 = 946684800.0
+# python-can's MESSAGE_READERS less the formats read here (checked by a test), written
+# out so that importing the readers does not import python-can
+PYCAN_ONLY_SUFFIXES = (".db", ".mf4")
 _MAGIC = (b"MDF     ", b"SQLite format 3\x00")
 
 
@@ -42,6 +42,8 @@ def _suffix(ctx: ReadContext, head: bytes) -> str:
 
 
 def _open(cls, stream: BinaryIO, ctx: ReadContext):
+    from can.io.generic import BinaryIOMessageReader, TextIOMessageReader
+
     if issubclass(cls, BinaryIOMessageReader):
         return cls(stream)
     if issubclass(cls, TextIOMessageReader):
@@ -52,6 +54,8 @@ def _open(cls, stream: BinaryIO, ctx: ReadContext):
 
 
 def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
+    from can.io.player import MESSAGE_READERS  # python-can takes ~70 ms to import: only here
+
     head = stream.peek(16)[:16] if hasattr(stream, "peek") else b""
     suffix = _suffix(ctx, head)
     cls = MESSAGE_READERS.get(suffix)
@@ -100,9 +104,7 @@ FORMAT = register(
         description="any other format python-can reads (MF4, SQLite, ...)",
         sniff=sniff,
         read=read,
-        suffixes=tuple(
-            s for s in MESSAGE_READERS if s not in (".asc", ".blf", ".trc", ".csv", ".log")
-        ),
+        suffixes=PYCAN_ONLY_SUFFIXES,
         priority=90,
     )
 )

@@ -5,6 +5,7 @@ Bus load is a lower bound (nominal bits, no stuff bits): see cananalyze.busload.
 
 from __future__ import annotations
 
+from array import array
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -39,7 +40,10 @@ class Summary:
     bits: int = 0
     ids_seen: set = field(default_factory=set)
     skipped: int = 0
-    sdo: list = field(default_factory=list)  # SDO transaction records, for counts and latency
+    # SDO transactions per node: result counts and latencies (8 bytes each, not the
+    # records: a 50M-frame log has millions, and memory must stay flat in log length)
+    sdo_results: dict = field(default_factory=dict)  # node -> {result: count}
+    sdo_latency: dict = field(default_factory=dict)  # node -> array('d') of ms
     # evidence for and against CANopen (canopen_verdict), counted as columns
     ext_frames: int = 0  # 29-bit identifiers
     sdo_frames: int = 0  # data frames in the SDO ranges
@@ -56,7 +60,12 @@ class Summary:
         n = len(batch)
         for _row, rec in batch.records:
             if rec.get("kind") == "sdo":
-                self.sdo.append(rec)
+                node = rec.get("node")
+                results = self.sdo_results.setdefault(node, {})
+                results[rec.get("result")] = results.get(rec.get("result"), 0) + 1
+                lat = self.sdo_latency.setdefault(node, array("d"))
+                if rec.get("latency_ms") is not None:
+                    lat.append(rec["latency_ms"])
         if n == 0:
             return
         fb = batch.frames
@@ -148,16 +157,12 @@ class Summary:
         return " ".join(out) or None
 
     def _bad_sdo_channels(self) -> list[tuple[int, int, int]]:
-        by_node: dict = {}
-        for rec in self.sdo:
-            counts = by_node.setdefault(rec.get("node"), [0, 0])
-            counts[0] += 1
-            counts[1] += rec.get("result") == "protocol_error"
-        return [
-            (node, t, e)
-            for node, (t, e) in sorted(by_node.items(), key=lambda kv: str(kv[0]))
-            if t >= 3 and e > t / 2
-        ]
+        out = []
+        for node, results in sorted(self.sdo_results.items(), key=lambda kv: str(kv[0])):
+            total, errors = sum(results.values()), results.get("protocol_error", 0)
+            if total >= 3 and errors > total / 2:
+                out.append((node, total, errors))
+        return out
 
     def lines(self, bitrate: int | None = None, problems: int = 0) -> list[str]:
         out = [f"frames: {self.frames}", f"duration: {self.duration:.6f} s"]
@@ -185,19 +190,13 @@ class Summary:
                     f"  node {int(n):>3}: {int(self.by_node_service[n].sum()):>8}  "
                     + " ".join(parts)
                 )
-        if self.sdo:
+        if self.sdo_results:
             out.append("SDO transactions per node:")
-            by_node: dict = {}
-            for rec in self.sdo:
-                by_node.setdefault(rec.get("node"), []).append(rec)
-            for node in sorted(by_node, key=lambda x: (x is None, x)):
-                recs = by_node[node]
-                results: dict[str, int] = {}
-                for r in recs:
-                    results[r.get("result")] = results.get(r.get("result"), 0) + 1
-                lat = [r["latency_ms"] for r in recs if r.get("latency_ms") is not None]
+            for node in sorted(self.sdo_results, key=lambda x: (x is None, x)):
+                results = self.sdo_results[node]
+                lat = self.sdo_latency[node]
                 text = (
-                    f"  node {node}: {len(recs)} ("
+                    f"  node {node}: {sum(results.values())} ("
                     + ", ".join(f"{k} {v}" for k, v in sorted(results.items()))
                     + ")"
                 )

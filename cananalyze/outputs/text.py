@@ -2,6 +2,15 @@
 
 Records (SDO transactions, findings) print as indented lines right after the
 frame that completed them.
+
+Logs run to tens of millions of lines, so lines are built column-wise: the
+fixed part (time, channel, id, dlc, data, service, node) as a byte matrix padded
+with NUL, and the annotation of rows whose text depends only on the service,
+PDO number, RTR bit and first byte looked up per distinct key (computed once by
+`annotation` itself, so the text cannot drift). Only rows with stateful notes,
+records or free-form text (SDO, EMCY, TIME, NMT) get a Python line tail.
+`lines_per_row` is the plain per-row writer, kept for odd batches and as the
+reference the fast writer is tested against.
 """
 
 from __future__ import annotations
@@ -12,8 +21,8 @@ import numpy as np
 
 from ..decoded import DecodedBatch
 from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
-from ..protocol.fields import annotation
-from ..protocol.services import SERVICE_NAMES
+from ..protocol.fields import annotation, frame_fields
+from ..protocol.services import SERVICE_NAMES, Service
 
 _HEX3 = [f"{i:02X} " for i in range(256)]
 
@@ -71,6 +80,88 @@ def format_record(rec: dict) -> str:
     return " ".join(f"{k}={v}" for k, v in rec.items())
 
 
+_PAD = 0
+_HEXCHARS = np.frombuffer(b"0123456789ABCDEF", np.uint8)
+_SVC_COL = np.array([list(f"{name:<14} ".encode()) for name in SERVICE_NAMES], np.uint8)
+# Services whose annotation is a function of (service, pdo, rtr, first byte or none).
+_KEYED = np.zeros(256, bool)
+_KEYED[
+    [
+        Service.OTHER,
+        Service.SYNC,
+        Service.TPDO,
+        Service.RPDO,
+        Service.HEARTBEAT,
+        Service.BOOTUP,
+        Service.GUARD_REQUEST,
+        Service.GUARD_RESPONSE,
+        Service.LSS_MASTER,
+        Service.LSS_SLAVE,
+        Service.ERROR_FRAME,
+    ]
+] = True
+_BYTE_MATTERS = np.zeros(256, bool)  # the first data byte changes the text
+_BYTE_MATTERS[
+    [Service.SYNC, Service.HEARTBEAT, Service.GUARD_RESPONSE, Service.LSS_MASTER, Service.LSS_SLAVE]
+] = True
+
+
+def _digits(values: np.ndarray, width: int) -> np.ndarray:
+    """(n, width) ASCII digits of non-negative integers, zero padded."""
+    out = np.empty((values.size, width), np.uint8)
+    v = values.astype(np.int64)
+    for j in range(width - 1, -1, -1):
+        out[:, j] = 48 + v % 10
+        v = v // 10
+    return out
+
+
+def _padded_table(texts: list[bytes]) -> np.ndarray:
+    width = max((len(x) for x in texts), default=0)
+    table = np.zeros((len(texts), width), np.uint8)
+    for i, x in enumerate(texts):
+        table[i, : len(x)] = np.frombuffer(x, np.uint8)
+    return table
+
+
+def _time_column(rel: np.ndarray) -> np.ndarray:
+    """`f"{x:12.6f}"` of each value as a NUL-padded byte matrix.
+
+    Rounded in numpy; rows whose rounding is in doubt (close to a half
+    microsecond), negative or huge are formatted by Python and written in.
+    """
+    n = rel.size
+    v = rel * 1e6
+    odd = ~(v >= 0) | (v >= 1e12)
+    vv = np.where(odd, 0.0, v)
+    k = np.rint(vv)
+    odd |= np.abs(vv - np.floor(vv) - 0.5) < 1e-3
+    k = k.astype(np.int64)
+    sec, frac = np.divmod(k, 1_000_000)
+    w = max(1, len(str(int(sec.max())))) if n else 1
+    fixed = []
+    for i in np.flatnonzero(odd).tolist():
+        fixed.append((i, f"{float(rel[i]):12.6f}".encode()))
+    width = max([12, w + 7] + [len(x) for _, x in fixed])
+    col = np.full((n, width), _PAD, np.uint8)
+    ip = _digits(sec, w)
+    # leading zeros of the integer part: spaces inside the 12-wide field, else nothing
+    sec_len = np.ones(n, np.int64)
+    for d in range(1, w):
+        sec_len += sec >= 10**d
+    pos = np.arange(w)[None, :]
+    lead = pos < (w - sec_len)[:, None]
+    ip = np.where(lead, np.where((width - 7 - w + pos) >= width - 12, 32, _PAD), ip)
+    col[:, max(0, width - 12) : width - 7 - w] = 32
+    col[:, width - 7 - w : width - 7] = ip
+    col[:, width - 7] = ord(".")
+    col[:, width - 6 :] = _digits(frac, 6)
+    for i, x in fixed:
+        col[i] = _PAD
+        col[i, width - len(x) :] = np.frombuffer(x, np.uint8)
+    return col
+
+
 class TextWriter:
     def __init__(
         self, out: TextIO, color: bool = False, t0: float | None = None, only_records: bool = False
@@ -85,45 +176,212 @@ class TextWriter:
         if self.t0 is None and len(fb):
             self.t0 = float(fb.t[0])
         t0 = self.t0 or 0.0
+        if self.only_records or not len(fb) or not self._columnar_ok(batch):
+            lines = lines_per_row(batch, mask, t0, self.color, self.only_records)
+            if lines:
+                self.out.write("\n".join(lines) + "\n")
+            return
+        self._emit(self._render(batch, mask, t0))
+
+    def _emit(self, data: bytes) -> None:
+        buffer = getattr(self.out, "buffer", None)
+        if (
+            buffer is not None
+            and getattr(self.out, "encoding", "").lower().replace("-", "") == "utf8"
+        ):
+            self.out.flush()
+            buffer.write(data)
+        else:
+            self.out.write(data.decode("utf-8"))
+
+    @staticmethod
+    def _columnar_ok(batch: DecodedBatch) -> bool:
+        """Whether every row fits the fixed columns (no long FD payloads, 3-digit nodes)."""
+        fb = batch.frames
+        if fb.long_data or (batch.node > 999).any():
+            return False
+        std = (fb.flags & (FLAG_EXT | FLAG_ERR)) == 0
+        return not (fb.can_id[std] > 0xFFF).any()
+
+    def _render(self, batch: DecodedBatch, mask: np.ndarray | None, t0: float) -> bytes:
+        fb = batch.frames
+        sel = np.arange(len(fb)) if mask is None else np.flatnonzero(mask)
+        n = sel.size
         by_row: dict[int, list[dict]] = {}
         for row, rec in batch.records:
             by_row.setdefault(row, []).append(rec)
-        rows = range(len(fb)) if mask is None else np.flatnonzero(mask).tolist()
-        lines: list[str] = []
-        if not self.only_records:
-            rel = (fb.t - t0).tolist()
-            ids = fb.can_id.tolist()
-            flags = fb.flags.tolist()
-            dlcs = fb.dlc.tolist()
-            nodes = batch.node.tolist()
-            pdos = batch.pdo.tolist()
-            services = batch.service.tolist()
-            for i in rows:
-                fl = flags[i]
-                ident = f"{ids[i]:08X}" if fl & (FLAG_EXT | FLAG_ERR) else f"{ids[i]:03X}"
-                if fl & FLAG_RTR:
-                    data = "remote request"
-                else:
-                    data = "".join(_HEX3[b] for b in fb.payload(i)).rstrip()
-                svc = SERVICE_NAMES[services[i]]
-                node = nodes[i]
-                text = annotation(services[i], node, pdos[i], batch.fields(i), bool(fl & FLAG_RTR))
-                ch = fb.channel_name(i)
-                line = (
-                    f"{rel[i]:12.6f}  {ch:<5} {ident:>8}  [{dlcs[i]}]  {data:<23}  "
-                    f"{svc:<14} {'' if node < 0 else node:>3}  {text}"
-                )
-                if self.color:
-                    line = f"{_COLOURS.get(svc, '')}{line}{_RESET}"
-                lines.append(line)
-                for rec in by_row.get(i, ()):
-                    lines.append("    └─ " + format_record(rec))
-        # records of rows not printed (filtered out, records-only view, end of log) still print
-        shown = (
-            set() if self.only_records else (set(rows) if mask is not None else set(range(len(fb))))
-        )
-        for row, rec in batch.records:
-            if row not in shown:
-                lines.append(format_record(rec))
-        if lines:
-            self.out.write("\n".join(lines) + "\n")
+        shown = np.zeros(len(fb), bool)
+        shown[sel] = True
+        nrows = len(fb)
+        tail_lines = [
+            format_record(rec)
+            for row, rec in batch.records
+            if not (0 <= row < nrows and shown[row])
+        ]
+        if n == 0:
+            return ("\n".join(tail_lines) + "\n").encode() if tail_lines else b""
+        flags = fb.flags[sel]
+        can_id = fb.can_id[sel]
+        dlc = fb.dlc[sel]
+        data = fb.data[sel]
+        svc = batch.service[sel]
+        node = batch.node[sel]
+        pdo = batch.pdo[sel]
+        rtr = (flags & FLAG_RTR) != 0
+        parts: list[np.ndarray] = []
+        colours = None
+        if self.color:
+            colours = [_COLOURS.get(name, "").encode() for name in SERVICE_NAMES]
+            parts.append(_padded_table(colours)[svc])
+        parts.append(_time_column(fb.t[sel] - t0))
+        # channel, padded to 5 and a space
+        names = [
+            (f"  {fb.channels[c] if c < len(fb.channels) else str(c):<5} ").encode()
+            for c in range(int(fb.channel.max()) + 1)
+        ]
+        parts.append(_padded_table(names)[fb.channel[sel]])
+        ident = np.empty((n, 10), np.uint8)
+        for j in range(8):
+            ident[:, j] = _HEXCHARS[(can_id >> (4 * (7 - j))) & 0xF]
+        std = (flags & (FLAG_EXT | FLAG_ERR)) == 0
+        ident[std, :5] = 32
+        ident[:, 8:] = 32
+        parts.append(ident)
+        dlc_col = np.empty((n, 6), np.uint8)
+        dlc_col[:, 0] = ord("[")
+        tens = dlc // 10
+        dlc_col[:, 1] = np.where(tens > 0, 48 + tens, _PAD)
+        dlc_col[:, 2] = 48 + dlc % 10
+        dlc_col[:, 3] = ord("]")
+        dlc_col[:, 4:] = 32
+        parts.append(dlc_col)
+        hx = np.full((n, 8, 3), 32, np.uint8)
+        hx[:, :, 0] = _HEXCHARS[data >> 4]
+        hx[:, :, 1] = _HEXCHARS[data & 0xF]
+        hx[np.arange(8)[None, :] >= np.minimum(dlc, 8)[:, None].astype(np.int64)] = 32
+        hx = hx.reshape(n, 24)[:, :23]
+        hx[rtr] = np.frombuffer(b"remote request".ljust(23), np.uint8)
+        parts.append(hx)
+        parts.append(np.full((n, 2), 32, np.uint8))
+        parts.append(_SVC_COL[svc])
+        node_col = np.full((n, 5), 32, np.uint8)
+        has = node >= 0
+        nd = np.where(has, node, 0).astype(np.int64)
+        node_col[:, 0] = np.where(nd >= 100, 48 + nd // 100, 32)
+        node_col[:, 1] = np.where(nd >= 10, 48 + (nd // 10) % 10, 32)
+        node_col[:, 2] = np.where(has, 48 + nd % 10, 32)
+        parts.append(node_col)
+
+        # annotation: keyed rows from a table, the rest per row in Python
+        noted = np.zeros(n, bool)
+        if batch.notes:
+            noted_rows = np.zeros(len(fb), bool)
+            noted_rows[np.fromiter(batch.notes, np.int64, len(batch.notes))] = True
+            noted = noted_rows[sel]
+        lazy = batch._lazy_index()  # rows with PDO signals or shared notes: annotated per row
+        if lazy is not None:
+            noted = noted | (lazy[0][sel] >= 0) | (lazy[2][sel] >= 0)
+        with_records = np.zeros(n, bool)
+        if by_row:
+            rec_rows = np.zeros(len(fb), bool)
+            rec_rows[[r for r in by_row if 0 <= r < nrows]] = True
+            with_records = rec_rows[sel]
+        keyed = _KEYED[svc] & ~noted & ~with_records
+        first = np.where((dlc > 0) & _BYTE_MATTERS[svc], data[:, 0].astype(np.int64), 256)
+        is_pdo = (svc == Service.TPDO) | (svc == Service.RPDO)
+        key = (
+            (svc.astype(np.int64) * 256 + np.where(is_pdo, pdo, 0)) * 2 + (rtr & is_pdo)
+        ) * 257 + first
+        key = np.where(keyed, key, -1)
+        uniq, first_at, inv = np.unique(key, return_index=True, return_inverse=True)
+        texts: list[bytes] = []
+        end = (_RESET if self.color else "") + "\n"
+        for k, i in zip(uniq.tolist(), first_at.tolist(), strict=True):
+            if k < 0:
+                texts.append(b"")
+                continue
+            f = frame_fields(int(svc[i]), fb.payload(int(sel[i])), bool(rtr[i]))
+            texts.append(
+                (annotation(int(svc[i]), int(node[i]), int(pdo[i]), f, bool(rtr[i])) + end).encode()
+            )
+        parts.append(_padded_table(texts)[inv.reshape(-1)])
+
+        matrix = np.concatenate(parts, axis=1)
+        keep = matrix != _PAD
+        blob = matrix[keep].tobytes()
+        slow = np.flatnonzero(~keyed)
+        if slow.size == 0 and not tail_lines:
+            return blob
+        ends = np.cumsum(keep.sum(axis=1))
+        pieces: list[bytes] = []
+        prev = 0
+        notes = batch.notes
+        is_sdo = ((svc == Service.SDO_REQUEST) | (svc == Service.SDO_RESPONSE))[slow].tolist()
+        for i, e, row, sdo in zip(
+            slow.tolist(), ends[slow].tolist(), sel[slow].tolist(), is_sdo, strict=True
+        ):
+            role = notes[row].get("role") if sdo and row in notes else None
+            if role:  # what `annotation` says for a frame the SDO tracker placed
+                text = "SDO " + role
+            else:
+                rtr_i = bool(flags[i] & FLAG_RTR)
+                text = annotation(int(svc[i]), int(node[i]), int(pdo[i]), batch.fields(row), rtr_i)
+            recs = by_row.get(row)
+            if recs:
+                text += end + "".join("    └─ " + format_record(rec) + "\n" for rec in recs)
+                pieces.append(blob[prev:e])
+                pieces.append(text.encode())
+            else:
+                pieces.append(blob[prev:e])
+                pieces.append((text + end).encode())
+            prev = e
+        pieces.append(blob[prev:])
+        if tail_lines:
+            pieces.append(("\n".join(tail_lines) + "\n").encode())
+        return b"".join(pieces)
+
+
+def lines_per_row(
+    batch: DecodedBatch, mask: np.ndarray | None, t0: float, color: bool, only_records: bool
+) -> list[str]:
+    """The output lines of a batch, built row by row (odd batches; the fast writer's reference)."""
+    fb = batch.frames
+    by_row: dict[int, list[dict]] = {}
+    for row, rec in batch.records:
+        by_row.setdefault(row, []).append(rec)
+    rows = range(len(fb)) if mask is None else np.flatnonzero(mask).tolist()
+    lines: list[str] = []
+    if not only_records:
+        rel = (fb.t - t0).tolist()
+        ids = fb.can_id.tolist()
+        flags = fb.flags.tolist()
+        dlcs = fb.dlc.tolist()
+        nodes = batch.node.tolist()
+        pdos = batch.pdo.tolist()
+        services = batch.service.tolist()
+        for i in rows:
+            fl = flags[i]
+            ident = f"{ids[i]:08X}" if fl & (FLAG_EXT | FLAG_ERR) else f"{ids[i]:03X}"
+            if fl & FLAG_RTR:
+                data = "remote request"
+            else:
+                data = "".join(_HEX3[b] for b in fb.payload(i)).rstrip()
+            svc = SERVICE_NAMES[services[i]]
+            node = nodes[i]
+            text = annotation(services[i], node, pdos[i], batch.fields(i), bool(fl & FLAG_RTR))
+            ch = fb.channel_name(i)
+            line = (
+                f"{rel[i]:12.6f}  {ch:<5} {ident:>8}  [{dlcs[i]}]  {data:<23}  "
+                f"{svc:<14} {'' if node < 0 else node:>3}  {text}"
+            )
+            if color:
+                line = f"{_COLOURS.get(svc, '')}{line}{_RESET}"
+            lines.append(line)
+            for rec in by_row.get(i, ()):
+                lines.append("    └─ " + format_record(rec))
+    # records of rows not printed (filtered out, records-only view, end of log) still print
+    shown = set() if only_records else (set(rows) if mask is not None else set(range(len(fb))))
+    for row, rec in batch.records:
+        if row not in shown:
+            lines.append(format_record(rec))
+    return lines

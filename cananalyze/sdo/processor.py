@@ -3,21 +3,29 @@
 SDO traffic is rare and stateful, so this is one of the places where per-frame
 Python is right. Rows on the default channels are found by the classifier;
 extra channels learnt from 0x1200-0x12FF writes are found by the tracker.
+Expedited request/response pairs on idle channels, the bulk of a polled bus,
+take the columnar shortcut in `fastpath` (same records and notes, ~20x less
+time); `fast=False` sends every frame through the tracker.
 """
 
 from __future__ import annotations
+
+import bisect
 
 import numpy as np
 
 from ..decoded import DecodedBatch
 from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from ..protocol.services import Service
+from . import fastpath
+from .lazynotes import LazyNotes
 from .tracker import SdoTracker
 
 
 class SdoProcessor:
-    def __init__(self, tracker: SdoTracker | None = None) -> None:
+    def __init__(self, tracker: SdoTracker | None = None, fast: bool = True) -> None:
         self.tracker = tracker or SdoTracker()
+        self.fast = fast
         self._offset = 0  # frames before the current batch, so refs are global
 
     def _rows(self, batch: DecodedBatch) -> np.ndarray:
@@ -38,18 +46,151 @@ class SdoProcessor:
     def process(self, batch: DecodedBatch) -> None:
         fb = batch.frames
         n = len(fb)
-        for row in self._rows(batch).tolist():
-            role = self.tracker.feed(float(fb.t[row]), int(fb.can_id[row]), fb.payload(row), self._offset + row)
-            # the tracker knows block segments, which carry no command specifier: its view wins
-            note = {"role": role.text, "command": role.command, "index": role.index, "subindex": role.subindex}
-            if role.problem:
-                note["sdo_problem"] = role.problem
-            batch.notes.setdefault(row, {}).update(note)
-            self._emit(batch)
+        rows = self._rows(batch)
+        if self.fast and len(rows) > 1 and not self._may_learn(batch, rows):
+            self._cur_rows = rows.tolist()
+            self._process_fast(batch, rows)
+            self._fill(batch)
+        else:
+            for row in rows.tolist():
+                self._feed(batch, row)
         if n:
             self.tracker.advance(float(fb.t[-1]))
             self._emit(batch)
         self._offset += n
+
+    def _may_learn(self, batch: DecodedBatch, rows: np.ndarray) -> bool:
+        """Whether a write to an SDO parameter object (0x1200-0x12FF) may end in this batch.
+
+        Such a write can add or move a channel mid-batch, which the plan's fixed
+        channel map cannot follow: then the whole batch goes through the tracker.
+        """
+        d = batch.frames.data[rows]
+        index = d[:, 1].astype(np.uint16) | (d[:, 2].astype(np.uint16) << 8)
+        if ((index >= 0x1200) & (index <= 0x12FF)).any():
+            return True
+        return any(
+            x.index is not None and 0x1200 <= x.index <= 0x12FF
+            for x in self.tracker._pending.values()
+        )
+
+    def _feed(self, batch: DecodedBatch, row: int) -> None:
+        fb = batch.frames
+        role = self.tracker.feed(
+            float(fb.t[row]), int(fb.can_id[row]), fb.payload(row), self._offset + row
+        )
+        # the tracker knows block segments, which carry no command specifier: its view wins
+        note = {
+            "role": role.text,
+            "command": role.command,
+            "index": role.index,
+            "subindex": role.subindex,
+        }
+        if role.problem:
+            note["sdo_problem"] = role.problem
+        batch.notes.setdefault(row, {}).update(note)
+        self._emit(batch)
+
+    def _process_fast(self, batch: DecodedBatch, rows: np.ndarray) -> None:
+        """Walk the SDO rows: idle stretches in bulk, the rest one event at a time.
+
+        Between two frames that must go through the tracker, nothing changes its
+        state but the time; if no transfer is pending there, advancing is a no-op
+        and every candidate pair in the stretch is taken as is.
+        """
+        tracker = self.tracker
+        fb = batch.frames
+        p = fastpath.plan(batch, rows, tracker.timeout, tracker.extra_cob_ids())
+        row_of = self._cur_rows
+        partner = p.partner.tolist()
+        cand = p.cand.tolist()
+        is_partner = p.is_partner.tolist()
+        req_cob = self._req_cob = p.req_cob.tolist()
+        self._aborted = p.aborted.tolist()
+        self._taken: list[tuple[int, int, int]] = []
+        slow_at = np.flatnonzero(p.static_slow).tolist()
+        t = fb.t[rows].tolist()
+        req_of = np.full(len(row_of), -1, np.int64)
+        req_of[p.partner[p.cand]] = np.flatnonzero(p.cand)
+        self._req_of = req_of.tolist()
+        answers = np.flatnonzero(p.is_partner).tolist()
+        rejected: list[int] = []  # answers whose request had to go through the tracker (sorted)
+        rejected_set: set[int] = set()
+        m = len(row_of)
+        pos = 0
+        si = 0
+        while pos < m:
+            if not tracker._pending:
+                while si < len(slow_at) and slow_at[si] < pos:
+                    si += 1
+                stop = slow_at[si] if si < len(slow_at) else m
+                ri = bisect.bisect_left(rejected, pos)
+                if ri < len(rejected) and rejected[ri] < stop:
+                    stop = rejected[ri]
+                # idle stretch: every answer in it closes a pair whose request was taken
+                lo, hi = bisect.bisect_left(answers, pos), bisect.bisect_left(answers, stop)
+                if hi > lo:
+                    self._take_many(batch, answers[lo:hi])
+                pos = stop
+                if pos >= m:
+                    break
+            i = pos
+            pos += 1
+            if cand[i]:
+                if tracker._pending:
+                    tracker.advance(t[i])
+                    self._emit(batch)
+                if req_cob[i] not in tracker._pending:
+                    continue  # taken: its answer closes it
+                bisect.insort(rejected, partner[i])
+                rejected_set.add(partner[i])
+            elif is_partner[i] and i not in rejected_set:
+                if tracker._pending:
+                    tracker.advance(t[i])
+                    self._emit(batch)
+                self._take_many(batch, [i])
+                continue
+            self._feed(batch, row_of[i])
+
+    def _take_many(self, batch: DecodedBatch, answers: list[int]) -> None:
+        """Reserve the record slots of fast pairs closed by these answer positions."""
+        req_of, row_of, aborted, req_cob = (
+            self._req_of,
+            self._cur_rows,
+            self._aborted,
+            self._req_cob,
+        )
+        base = len(batch.records)
+        batch.records.extend([(row_of[j], None) for j in answers])  # filled in by _fill
+        self._taken.extend(
+            zip(
+                [req_of[j] for j in answers], answers, range(base, base + len(answers)), strict=True
+            )
+        )
+        self.tracker._ended.update((req_cob[j], "abort" if aborted[j] else "ok") for j in answers)
+
+    def _fill(self, batch: DecodedBatch) -> None:
+        """Records of every pair taken in this batch, built column-wise; notes when read."""
+        if not self._taken:
+            return
+        rows = np.asarray(self._cur_rows)
+        taken = np.asarray(self._taken)
+        a, b = rows[taken[:, 0]], rows[taken[:, 1]]
+        fb = batch.frames
+        _, _, records = fastpath.build_pairs(fb, a, b, self.tracker.object_info, notes=False)
+        for rb, (_, _, slot), rec in zip(b.tolist(), self._taken, records, strict=True):
+            batch.records[slot] = (rb, rec)
+
+        def write_notes(notes: dict) -> None:
+            req, resp, _ = fastpath.build_pairs(fb, a, b, None, records=False)
+            for ra, rb, na, nb in zip(a.tolist(), b.tolist(), req, resp, strict=True):
+                LazyNotes.write(notes, ra, na)
+                LazyNotes.write(notes, rb, nb)
+
+        if isinstance(batch.notes, LazyNotes):
+            batch.notes.defer(write_notes)
+        else:
+            batch.notes = LazyNotes(batch.notes, write_notes)
 
     def finish(self, batch: DecodedBatch) -> None:
         self.tracker.finish()

@@ -1,0 +1,189 @@
+"""The SDO fast path gives exactly the tracker's records, notes and end-of-log records.
+
+Each input is decoded twice, once with `SdoProcessor(fast=False)` (every frame
+through the tracker) and once with the fast path, in several batch sizes so
+pairs cut by a batch boundary are covered; every note and record must match.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import ROOT, SAMPLES, real_file
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from cananalyze.decoder import Decoder
+from cananalyze.frames import FrameBatch, concat, from_rows
+from cananalyze.io.source import open_log
+from cananalyze.sdo.processor import SdoProcessor
+from cananalyze.sdo.tracker import SdoTracker
+
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+
+def _object_info(node: int, index: int, sub: int):
+    if index == 0x1018:
+        return (f"Identity {sub}", 0x07)
+    if index == 0x6041:
+        return ("Statusword", 0x06)
+    return None
+
+
+def _run(fb: FrameBatch, fast: bool, step: int, object_info=None) -> tuple[list, dict, list]:
+    proc = SdoProcessor(SdoTracker(timeout=0.5, object_info=object_info), fast=fast)
+    dec = Decoder([proc])
+    records: list = []
+    notes: dict = {}
+    for start in range(0, max(len(fb), 1), step):
+        out = dec.decode(fb.take(slice(start, start + step)))
+        records += [(start + row, rec) for row, rec in out.records]
+        notes.update({start + row: note for row, note in out.notes.items()})
+    tail = dec.finish()
+    return records, notes, [rec for _, rec in tail.records]
+
+
+def assert_same(fb: FrameBatch, steps=(1 << 20, 997, 64, 7), object_info=None) -> int:
+    for step in steps:
+        slow = _run(fb, False, step, object_info)
+        fast = _run(fb, True, step, object_info)
+        assert fast[1] == slow[1], f"notes differ (batch size {step})"
+        assert fast[0] == slow[0], f"records differ (batch size {step})"
+        assert fast[2] == slow[2], f"end-of-log records differ (batch size {step})"
+    return len(slow[0]) + len(slow[2])
+
+
+def _read(path: Path) -> FrameBatch:
+    src = open_log(path)
+    return concat(list(src.batches()))
+
+
+@pytest.mark.parametrize(
+    "rel",
+    [
+        "hilch__canopen-message-interpreter/ixxat1.trc",
+        "hilch__canopen-message-interpreter/pcan1.trc",
+        "hilch__canopen-message-interpreter/pcan2.trc",
+        "hilch__canopen-message-interpreter/pcan3.trc",
+        "isPointless__Sevcon/can_180209_154604.txt",
+        "isPointless__Sevcon/can_230309_150427.txt",
+        "isPointless__Sevcon/can_280109_111603.txt",
+        "isPointless__Sevcon/can_310309_094758.txt",
+        "nigel-bruce-khan__ros_canopen-tmcm-1636/candump.txt",
+        "SeonilChoi__CANOPEN-SDK/log.txt",
+        "SeonilChoi__CANOPEN-SDK/log2.txt",
+    ],
+)
+def test_real_logs(rel: str) -> None:
+    fb = _read(real_file(rel))
+    assert len(fb)
+    assert_same(fb, object_info=_object_info)
+
+
+@pytest.mark.parametrize("name", ["demo.log", "demo.asc", "demo.blf"])
+def test_samples(name: str) -> None:
+    assert assert_same(_read(SAMPLES / name)) > 0
+
+
+def test_benchmark_mix_mostly_fast() -> None:
+    from generate import generate
+
+    fb = generate(60_000)
+    n = assert_same(fb, steps=(1 << 20, 4096, 333))
+    assert n > 1000
+    # and the shortcut is really taken: the tracker sees few frames
+    proc = SdoProcessor(SdoTracker())
+    calls = []
+    feed = proc.tracker.feed
+    proc.tracker.feed = lambda *a: calls.append(1) or feed(*a)
+    Decoder([proc]).decode(fb)
+    assert len(calls) < n / 5
+
+
+# -- hypothesis: random SDO traffic -------------------------------------------------
+
+_REQ = [
+    0x40,
+    0x22,
+    0x23,
+    0x27,
+    0x2B,
+    0x2F,
+    0x41,
+    0x21,
+    0x20,
+    0xA4,
+    0xC6,
+    0x60,
+    0x80,
+    0x00,
+    0x10,
+    0x62,
+]
+_RESP = [0x43, 0x4F, 0x42, 0x4B, 0x47, 0x60, 0x80, 0x41, 0x00, 0x10, 0x61, 0xC4, 0xA2, 0x20]
+_MUX = [(0x1018, 1), (0x6041, 0), (0x2000, 3), (0x1017, 0)]
+
+
+@st.composite
+def traffic(draw):
+    nodes = draw(st.lists(st.integers(1, 3), min_size=1, max_size=40))
+    t = 0.0
+    rows = []
+    for node in nodes:
+        mux = draw(st.sampled_from(_MUX))
+        kind = draw(st.integers(0, 9))
+        t += draw(st.sampled_from([0.0001, 0.001, 0.2, 0.6, 1.5]))
+        req = bytes([draw(st.sampled_from(_REQ)), mux[0] & 0xFF, mux[0] >> 8, mux[1]]) + bytes(
+            draw(st.lists(st.integers(0, 255), min_size=4, max_size=4))
+        )
+        if draw(st.integers(0, 9)) == 0:
+            req = req[: draw(st.integers(0, 7))]  # short frame
+        rows.append((t, 0x600 + node, req))
+        if kind == 0:
+            continue  # lost response
+        t += draw(st.sampled_from([0.0001, 0.002, 0.45, 0.7]))
+        rmux = mux if kind != 1 else draw(st.sampled_from(_MUX))
+        resp = bytes([draw(st.sampled_from(_RESP)), rmux[0] & 0xFF, rmux[0] >> 8, rmux[1]]) + bytes(
+            draw(st.lists(st.integers(0, 255), min_size=4, max_size=4))
+        )
+        if kind == 2:  # the answer comes from another node's server
+            node = node % 3 + 1
+        rows.append((t, 0x580 + node, resp))
+        if kind == 3:  # a stray extra frame on the channel
+            rows.append((t + 0.0001, 0x600 + node, bytes([0x80, 0, 0x20, 3, 0, 0, 4, 6])))
+    # occasional reordering of neighbours
+    swaps = draw(st.lists(st.integers(0, max(len(rows) - 2, 0)), max_size=4))
+    for s in swaps:
+        if s + 1 < len(rows):
+            rows[s], rows[s + 1] = rows[s + 1], rows[s]
+    return from_rows(rows)
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(traffic(), st.sampled_from([1000, 5, 3, 2]))
+def test_random_traffic(fb: FrameBatch, step: int) -> None:
+    assert_same(fb, steps=(step,), object_info=_object_info)
+
+
+def test_pair_values_match_known_frames() -> None:
+    """A hand-made pair: upload of 0x1018:1 answered with 4 bytes, a write aborted."""
+    fb = from_rows(
+        [
+            (1.0, 0x605, bytes([0x40, 0x18, 0x10, 1, 0, 0, 0, 0])),
+            (1.0005, 0x585, bytes([0x43, 0x18, 0x10, 1, 0x78, 0x56, 0x34, 0x12])),
+            (2.0, 0x605, bytes([0x2B, 0x17, 0x10, 0, 0xE8, 0x03, 0, 0])),
+            (2.001, 0x585, bytes([0x80, 0x17, 0x10, 0, 0x02, 0x00, 0x01, 0x06])),
+        ]
+    )
+    proc = SdoProcessor(SdoTracker(object_info=_object_info))
+    out = Decoder([proc]).decode(fb)
+    (r1, up), (r2, down) = out.records
+    assert (r1, r2) == (1, 3)
+    assert up["value"] == 0x12345678 and up["data"] == "78563412" and up["latency_ms"] == 0.5
+    assert down["result"] == "abort" and down["abort_code"] == 0x06010002
+    assert down["data"] == "e803" and down["size"] == 2 and down["detail"] == "aborted by server"
+    assert out.notes[1]["role"] == "expedited upload response 0x1018:1 = 78563412"
+    assert np.all(proc.tracker._pending == {})

@@ -1,0 +1,169 @@
+"""The columnar text writer prints exactly what the per-row writer prints.
+
+`lines_per_row` is the original row-by-row implementation; every input is
+written both ways, with and without colour and with several filters.
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import ROOT, SAMPLES, real_file
+
+from cananalyze.cli.pipeline import build_decoder
+from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR, FLAG_TX, FrameBatch, from_rows
+from cananalyze.io.source import open_log
+from cananalyze.outputs.text import TextWriter, lines_per_row
+
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+
+def _masks(batch, t0: float):
+    n = len(batch)
+    yield None
+    yield np.isin(batch.node, [3, 5, 10])
+    yield np.isin(batch.service, [7, 8, 4])
+    yield (batch.frames.t - t0) >= 0.05
+    yield np.zeros(n, bool)
+    yield np.random.default_rng(n).random(n) < 0.3
+
+
+def _check(batches, color: bool) -> int:
+    lines_checked = 0
+    for m_idx in range(6):
+        w = TextWriter(io.StringIO(), color=color)
+        ref: list[str] = []
+        for b in batches:
+            t0 = w.t0 if w.t0 is not None else float(b.frames.t[0]) if len(b) else None
+            mask = list(_masks(b, t0 or 0.0))[m_idx] if len(b) else None
+            w.write(b, mask)
+            ref += lines_per_row(b, mask, w.t0 or 0.0, color, False)
+        got = w.out.getvalue()
+        want = "".join(line + "\n" for line in ref)
+        assert got == want, next(
+            (
+                f"line {k}: {a!r} != {b!r}"
+                for k, (a, b) in enumerate(zip(got.split("\n"), ref, strict=False))
+                if a != b
+            ),
+            "length",
+        )
+        lines_checked += len(ref)
+    return lines_checked
+
+
+def _decode(path: Path, batch_size: int | None = None):
+    dec = build_decoder(argparse.Namespace())
+    src = open_log(path)
+    out = [dec.decode(fb) for fb in src.batches()]
+    out.append(dec.finish())
+    return out
+
+
+@pytest.mark.parametrize("color", [False, True])
+@pytest.mark.parametrize("name", ["demo.log", "demo.asc", "demo.blf"])
+def test_samples(name: str, color: bool) -> None:
+    assert _check(_decode(SAMPLES / name), color) > 100
+
+
+@pytest.mark.parametrize(
+    "rel",
+    [
+        "hilch__canopen-message-interpreter/pcan1.trc",
+        "hilch__canopen-message-interpreter/ixxat1.trc",
+        "isPointless__Sevcon/can_180209_154604.txt",
+        "nigel-bruce-khan__ros_canopen-tmcm-1636/candump.txt",
+        "SeonilChoi__CANOPEN-SDK/log.txt",
+    ],
+)
+def test_real_logs(rel: str) -> None:
+    assert _check(_decode(real_file(rel)), color=False) > 10
+    assert _check(_decode(real_file(rel)), color=True) > 10
+
+
+def test_benchmark_mix() -> None:
+    from generate import generate
+
+    fb = generate(20_000)
+    dec = build_decoder(argparse.Namespace())
+    batches = [dec.decode(fb.take(slice(s, s + 7000))) for s in range(0, len(fb), 7000)]
+    assert _check(batches + [dec.finish()], color=False) > 20_000
+
+
+def _odd_batch() -> FrameBatch:
+    """Times that round on a half microsecond, go backwards, grow large; ext/err/RTR/TX, 2 channels."""
+    rows = [
+        (100.0, 0x181, bytes(8)),
+        (100.0078125, 0x080, b"\x07"),  # rel 0.0078125: an exact half microsecond
+        (99.5, 0x701, b"\x05"),  # earlier than the first frame
+        (100.0000005, 0x000, b"\x01\x00"),
+        (100.0 + 123456.5, 0x18FF50E5, b"\x01\x02\x03", FLAG_EXT),
+        (100.25, 0x701, b"", FLAG_RTR),
+        (100.3, 0x20000004, b"", FLAG_ERR, 1),
+        (100.4, 0x081, b"\x00\x10\x01\x00\x00\x00\x00\x00", FLAG_TX, 1),
+        (100.5, 0x7E5, b"\x04\x01"),
+        (100.6, 0x100, b"\x64\x00\x00\x00\xed\x3b"),
+        (100.7, 0x281, b"", FLAG_RTR),
+        (100.8, 0x080, b""),
+        (100.9, 0x70A, b"\x85"),
+        (101.0, 0x123, b"\xaa" * 5),
+    ]
+    return from_rows(rows, channels=("can0", "vcan10"))
+
+
+@pytest.mark.parametrize("color", [False, True])
+def test_odd_rows(color: bool) -> None:
+    dec = build_decoder(argparse.Namespace())
+    b = dec.decode(_odd_batch())
+    assert _check([b], color) > 10
+
+
+def test_fd_long_payload_falls_back() -> None:
+    fb = from_rows([(1.0, 0x181, bytes(range(12)), 0x08), (1.1, 0x080, b"\x01")])
+    dec = build_decoder(argparse.Namespace())
+    assert _check([dec.decode(fb)], color=False) > 1
+
+
+def test_writes_to_a_real_file(tmp_path: Path) -> None:
+    batches = _decode(SAMPLES / "demo.log")
+    path = tmp_path / "out.txt"
+    with open(path, "w", encoding="utf-8") as out:
+        w = TextWriter(out)
+        for b in batches:
+            w.write(b)
+    ref = []
+    t0 = float(batches[0].frames.t[0])
+    for b in batches:
+        ref += lines_per_row(b, None, t0, False, False)
+    assert path.read_text(encoding="utf-8") == "".join(x + "\n" for x in ref)
+
+
+def _decode_cli(argv: list[str]):
+    from cananalyze.cli.main import build_parser
+
+    args = build_parser().parse_args(["decode", *argv])
+    dec = build_decoder(args)
+    out = [dec.decode(fb) for fb in open_log(args.log).batches()]
+    out.append(dec.finish())
+    return out
+
+
+def test_pdo_signals_from_a_device_profile() -> None:
+    eds = real_file("jclinton830__canopen_test/roboteq_motor_controllers_v80.eds")
+    log = real_file("jclinton830__canopen_test/candump.txt")
+    batches = _decode_cli([str(log), "--eds", f"12={eds}"])
+    assert any(b.signals for b in batches)
+    assert _check(batches, color=False) > 10
+    assert _check(batches, color=True) > 10
+
+
+def test_signals_of_a_builtin_device(tmp_path: Path) -> None:
+    log = tmp_path / "x.log"
+    log.write_text("(1.0) can0 285#E803000000000000\n(1.1) can0 080#\n(1.2) can0 285#E8030000\n")
+    batches = _decode_cli([str(log), "--device", "5=dat7014"])
+    assert _check(batches, color=False) >= 3
