@@ -100,7 +100,7 @@ def test_sdo_channel_of_protocol_errors_is_flagged():
         )  # a download-segment cs
     rows += [(2.5, 0x70A, b"\x05")]
     s = _summary([from_rows(rows)])
-    results = {r["result"] for r in s.sdo}
+    results = set(s.sdo_results[10])
     assert results == {"protocol_error"}, results
     assert (
         "Node 10's SDO channel is probably not SDO: 20 of 20 transactions are protocol errors."
