@@ -137,3 +137,21 @@ def test_non_canopen_log_is_labelled():
     out = cli("decode", str(real_file("hardbyte__python-can/issue_1256.asc")), "--summary")
     assert out.returncode == 0
     assert "not look like CANopen" in out.stdout.decode() or "may not be CANopen" in out.stdout.decode()
+
+
+def test_decode_with_rules_streams_the_same_findings_as_check(tmp_path):
+    samples = ROOT / "samples"
+    common = ["--rules", str(samples / "rules.yaml"), "--network", str(samples / "network.toml")]
+    out = cli("decode", str(samples / "faults.log"), "--format", "jsonl", *common)
+    assert out.returncode == 0, out.stderr
+    recs = [json.loads(x) for x in out.stdout.splitlines()]
+    findings = [(r["rule"], r["node"], round(r["t"], 6)) for r in recs if r["kind"] == "finding"]
+    js = tmp_path / "f.json"
+    assert cli("check", str(samples / "faults.log"), *common, "--json", str(js)).returncode == 1
+    expected = [(r["rule"], r["node"], round(r["t"], 6)) for r in json.loads(js.read_text())]
+    assert sorted(findings, key=str) == sorted(expected, key=str) and len(findings) == 16
+    # a finding follows the frame that raised it in the text output
+    text = cli("decode", str(samples / "faults.log"), "--check", "--no-color",
+               "--network", str(samples / "network.toml")).stdout.decode().splitlines()
+    i = next(i for i, ln in enumerate(text) if "└─ WARNING emcy: EMCY 0x8100" in ln)
+    assert "EMCY 0x8100" in text[i - 1] and " 083 " in text[i - 1]

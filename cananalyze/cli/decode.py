@@ -29,6 +29,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sdo", action="store_true", help="print only the SDO transaction table")
     p.add_argument("--signals", action="store_true",
                    help="print only decoded PDO values, one signal record per value (t, node, pdo, signal, value, unit)")
+    p.add_argument("--check", action="store_true",
+                   help="run the CANopen rules too: findings appear in the output at their frames")
+    p.add_argument("--rules", metavar="FILE", help="rules file for --check (docs/rules-file.md); implies --check")
     p.add_argument("--bitrate", type=int, metavar="BIT/S", help="bus bitrate, for the bus load in --summary")
     p.add_argument("-o", "--output", metavar="FILE", help="write to FILE instead of stdout")
     add_timeline_options(p)
@@ -73,10 +76,19 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise UsageError(f"--service: {exc}") from None
     nodes = _node_set(args.node)
+    checker = None
+    if args.check or args.rules:
+        from ..checks.build import build_checker
+
+        checker = build_checker(args.rules)  # a bad rules file fails before the log is read
     source = open_log(args.log, strict=args.strict, fmt=args.input_format)
     decoder = build_decoder(args)
     timing = None
-    if args.summary:
+    if checker is not None:
+        from ..checks.build import attach_checker
+
+        timing = attach_checker(decoder, checker)  # its timing analysis serves --summary too
+    elif args.summary:
         from ..checks.engine import Checker
 
         timing = Checker(rules=[])  # timing analysis only: columnar, cheap
