@@ -1,0 +1,287 @@
+"""A chunked, indexed MCAP writer that takes messages as numpy columns.
+
+Hand-written because the `mcap` package's `Writer.add_message` builds a Python
+object and a struct per message (~7 us each, 12 s for a million-frame log) and has
+no bulk path. Here every chunk's Message records and MessageIndex records are laid
+out with numpy in one go; the few other records (header, schemas, channels, chunk
+records, statistics, indexes, footer) are still serialised by `mcap.records`, so
+the layout follows the package's own writer: chunks of about `chunk_bytes`, each
+followed by one MessageIndex per channel, then DataEnd and a summary with
+schemas, channels, statistics, chunk/attachment/metadata indexes and summary
+offsets. Schemas and channels are written once in the data section before the
+first chunk (the spec allows them outside chunks) and repeated in the summary.
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from typing import IO
+
+import numpy as np
+from mcap.data_stream import RecordBuilder
+from mcap.opcode import Opcode
+from mcap.records import (
+    Attachment,
+    AttachmentIndex,
+    Channel,
+    Chunk,
+    ChunkIndex,
+    DataEnd,
+    Footer,
+    Header,
+    McapRecord,
+    Metadata,
+    MetadataIndex,
+    Schema,
+    Statistics,
+    SummaryOffset,
+)
+
+from .json_text import Texts
+
+MAGIC = b"\x89MCAP0\r\n"
+# Message record: opcode, record length, channel_id, sequence, log_time, publish_time
+_MESSAGE_HEADER = np.dtype(
+    [("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("seq", "<u4"), ("log", "<u8"), ("pub", "<u8")]
+)
+_INDEX_ENTRY = np.dtype([("t", "<u8"), ("offset", "<u8")])
+_HEADER_SIZE = _MESSAGE_HEADER.itemsize  # 31
+
+
+def _compressor(compression: str):
+    if compression == "zstd":
+        import zstandard
+
+        return "zstd", zstandard.ZstdCompressor(level=3).compress
+    if compression == "lz4":
+        import lz4.frame
+
+        return "lz4", lz4.frame.compress
+    if compression == "none":
+        return "", None
+    raise ValueError(f"unknown MCAP compression {compression!r}")
+
+
+class BulkMcapWriter:
+    """Write an MCAP file to a binary stream: schemas, channels, then message columns."""
+
+    def __init__(
+        self,
+        stream: IO[bytes],
+        library: str,
+        compression: str = "zstd",
+        chunk_bytes: int = 4 * 1024 * 1024,
+        profile: str = "",
+    ) -> None:
+        self._f = stream
+        self._compression, self._compress = _compressor(compression)
+        self._chunk_bytes = chunk_bytes
+        self._schemas: list[Schema] = []
+        self._channels: list[Channel] = []
+        self._chunk_indexes: list[ChunkIndex] = []
+        self._attachment_indexes: list[AttachmentIndex] = []
+        self._metadata_indexes: list[MetadataIndex] = []
+        self._counts: dict[int, int] = {}
+        self._message_count = 0
+        self._start = 0
+        self._end = 0
+        self._f.write(MAGIC)
+        self._record(Header(profile=profile, library=library))
+
+    def _record(self, record: McapRecord) -> tuple[int, int]:
+        """Serialise one record at the current position; returns (offset, length)."""
+        rb = RecordBuilder()
+        record.write(rb)
+        data = rb.end()
+        offset = self._f.tell()
+        self._f.write(data)
+        return offset, len(data)
+
+    def schema(self, name: str, encoding: str, data: bytes) -> int:
+        s = Schema(id=len(self._schemas) + 1, name=name, encoding=encoding, data=data)
+        self._schemas.append(s)
+        self._record(s)
+        return s.id
+
+    def channel(self, topic: str, message_encoding: str, schema_id: int) -> int:
+        c = Channel(
+            id=len(self._channels) + 1,
+            topic=topic,
+            message_encoding=message_encoding,
+            schema_id=schema_id,
+            metadata={},
+        )
+        self._channels.append(c)
+        self._record(c)
+        return c.id
+
+    def messages(
+        self,
+        channel: np.ndarray,
+        log_time: np.ndarray,
+        payload: Texts,
+        rows: np.ndarray | None = None,
+    ) -> None:
+        """Write messages, given in log-time order, as chunks of about chunk_bytes.
+
+        channel and log_time (ns) have one entry per message; the data of message i
+        is payload row rows[i] (row i without rows), so streams merged by time need
+        not be copied into order first. publish_time = log_time, sequence = 0.
+        """
+        rows = np.arange(len(payload)) if rows is None else np.asarray(rows, np.int64)
+        n = len(rows)
+        if n == 0:
+            return
+        channel = np.asarray(channel, np.uint16)
+        log_time = np.asarray(log_time, np.uint64)
+        if len(channel) != n or len(log_time) != n:
+            raise ValueError("channel, log_time and rows differ in length")
+        if n > 1 and np.any(log_time[1:] < log_time[:-1]):
+            raise ValueError("messages must be in log-time order")
+        ends = np.cumsum(_HEADER_SIZE + payload.lengths[rows])
+        size = self._chunk_bytes
+        cuts = np.searchsorted(ends, np.arange(1, int(ends[-1]) // size + 1) * size)
+        edges = np.unique(np.concatenate([[0], cuts + 1, [n]]).clip(max=n))
+        for a, b in zip(edges[:-1].tolist(), edges[1:].tolist(), strict=True):
+            self._chunk(channel[a:b], log_time[a:b], payload, rows[a:b])
+        counts = np.bincount(channel, minlength=len(self._channels) + 1)
+        for ch in np.flatnonzero(counts).tolist():
+            self._counts[ch] = self._counts.get(ch, 0) + int(counts[ch])
+        if self._message_count == 0:
+            self._start = int(log_time[0])
+        self._start = min(self._start, int(log_time[0]))
+        self._end = max(self._end, int(log_time[-1]))
+        self._message_count += n
+
+    def _chunk(self, channel, log_time, payload: Texts, rows: np.ndarray) -> None:
+        m = len(rows)
+        starts = payload.offsets[rows]
+        lengths = payload.offsets[rows + 1] - starts
+        record_ends = np.cumsum(_HEADER_SIZE + lengths)
+        record_starts = record_ends - (_HEADER_SIZE + lengths)
+        out = np.empty(int(record_ends[-1]), np.uint8)
+        head = np.empty(m, _MESSAGE_HEADER)
+        head["op"] = Opcode.MESSAGE
+        head["len"] = _HEADER_SIZE - 9 + lengths
+        head["ch"] = channel
+        head["seq"] = 0
+        head["log"] = log_time
+        head["pub"] = log_time
+        head_at = (record_starts[:, None] + np.arange(_HEADER_SIZE)).reshape(-1)
+        out[head_at] = head.view(np.uint8).reshape(-1)
+        # the payload bytes fill every position not taken by a header, in order; they
+        # are gathered from ragged source ranges with one repeat + arange
+        is_data = np.ones(len(out), bool)
+        is_data[head_at] = False
+        total = int(lengths.sum())
+        idx = np.int32 if len(payload.data) < 2**31 else np.int64
+        data_before = (np.cumsum(lengths) - lengths).astype(idx)
+        src = np.repeat(starts.astype(idx) - data_before, lengths)
+        src += np.arange(total, dtype=idx)
+        out[is_data] = payload.data[src]
+        raw = out.tobytes()
+
+        compressed = self._compress(raw) if self._compress else raw
+        chunk = Chunk(
+            compression=self._compression,
+            data=compressed,
+            message_start_time=int(log_time.min()),
+            message_end_time=int(log_time.max()),
+            uncompressed_crc=zlib.crc32(raw),
+            uncompressed_size=len(raw),
+        )
+        chunk_offset, chunk_length = self._record(chunk)
+
+        index_offsets: dict[int, int] = {}
+        index_start = self._f.tell()
+        order = np.argsort(channel, kind="stable")
+        ids, firsts = np.unique(channel[order], return_index=True)
+        bounds = np.append(firsts, m)
+        for ch, i, j in zip(ids.tolist(), bounds[:-1].tolist(), bounds[1:].tolist(), strict=True):
+            rows = order[i:j]
+            entries = np.empty(j - i, _INDEX_ENTRY)
+            entries["t"] = log_time[rows]
+            entries["offset"] = record_starts[rows]
+            body = entries.tobytes()
+            index_offsets[ch] = self._f.tell()
+            self._f.write(struct.pack("<BQHI", Opcode.MESSAGE_INDEX, 6 + len(body), ch, len(body)))
+            self._f.write(body)
+        self._chunk_indexes.append(
+            ChunkIndex(
+                message_start_time=chunk.message_start_time,
+                message_end_time=chunk.message_end_time,
+                chunk_start_offset=chunk_offset,
+                chunk_length=chunk_length,
+                message_index_offsets=index_offsets,
+                message_index_length=self._f.tell() - index_start,
+                compression=self._compression,
+                compressed_size=len(compressed),
+                uncompressed_size=len(raw),
+            )
+        )
+
+    def metadata(self, name: str, data: dict[str, str]) -> None:
+        offset, length = self._record(Metadata(name=name, metadata=data))
+        self._metadata_indexes.append(MetadataIndex(offset=offset, length=length, name=name))
+
+    def attachment(self, name: str, media_type: str, data: bytes, log_time: int = 0) -> None:
+        a = Attachment(
+            create_time=0, log_time=log_time, name=name, media_type=media_type, data=data
+        )
+        offset, length = self._record(a)
+        self._attachment_indexes.append(
+            AttachmentIndex(
+                offset=offset,
+                length=length,
+                create_time=0,
+                log_time=log_time,
+                data_size=len(data),
+                name=name,
+                media_type=media_type,
+            )
+        )
+
+    def finish(self) -> None:
+        """DataEnd, the summary section with its offsets, the footer and closing magic."""
+        self._record(DataEnd(data_section_crc=0))
+        summary_start = self._f.tell()
+        rb = RecordBuilder()
+        offsets: list[SummaryOffset] = []
+        stats = Statistics(
+            message_count=self._message_count,
+            schema_count=len(self._schemas),
+            channel_count=len(self._channels),
+            attachment_count=len(self._attachment_indexes),
+            metadata_count=len(self._metadata_indexes),
+            chunk_count=len(self._chunk_indexes),
+            message_start_time=self._start,
+            message_end_time=self._end,
+            channel_message_counts=dict(self._counts),
+        )
+        groups = [
+            (Opcode.SCHEMA, self._schemas),
+            (Opcode.CHANNEL, self._channels),
+            (Opcode.STATISTICS, [stats]),
+            (Opcode.CHUNK_INDEX, self._chunk_indexes),
+            (Opcode.ATTACHMENT_INDEX, self._attachment_indexes),
+            (Opcode.METADATA_INDEX, self._metadata_indexes),
+        ]
+        for opcode, records in groups:
+            if not records:
+                continue
+            start = rb.count
+            for r in records:
+                r.write(rb)
+            offsets.append(SummaryOffset(opcode, summary_start + start, rb.count - start))
+        offset_start = summary_start + rb.count
+        for o in offsets:
+            o.write(rb)
+        summary = rb.end()
+        crc = zlib.crc32(summary)
+        crc = zlib.crc32(struct.pack("<BQQQ", Opcode.FOOTER, 20, summary_start, offset_start), crc)
+        self._f.write(summary)
+        self._record(
+            Footer(summary_start=summary_start, summary_offset_start=offset_start, summary_crc=crc)
+        )
+        self._f.write(MAGIC)
