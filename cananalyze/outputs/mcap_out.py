@@ -165,13 +165,17 @@ def frame_payloads(cap: Capture) -> Texts:
     return Texts.concat(parts)
 
 
-def write_mcap(cap: Capture, path: str | Path, compression: str = "zstd") -> dict[str, int]:
+def write_mcap(
+    cap: Capture, path: str | Path, compression: str = "zstd", chunk_bytes: int = 4 << 20
+) -> dict[str, int]:
     """Write the capture as MCAP; returns message counts per topic."""
     if compression not in ("zstd", "lz4", "none"):
         raise ValueError(f"unknown MCAP compression {compression!r}")
     counts: dict[str, int] = {}
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
-        w = BulkMcapWriter(f, library=f"cananalyze {__version__}", compression=compression)
+        w = BulkMcapWriter(
+            f, f"cananalyze {__version__}", compression=compression, chunk_bytes=chunk_bytes
+        )
         streams: list[tuple[int, np.ndarray, Texts]] = []
         for topic, schema, ns, payload in topic_streams(cap):
             sid = w.schema(schema["title"], "jsonschema", json.dumps(schema).encode())

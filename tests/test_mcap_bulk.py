@@ -1,0 +1,316 @@
+"""The bulk MCAP writer against the `mcap` package: same messages as its own Writer, valid
+structure for indexed readers (chunk indexes, message indexes, statistics, summary offsets).
+
+Oracle: a reference file written here with `mcap.writer.Writer.add_message`, payloads
+made with `json.dumps` from the Capture's columns one message at a time.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import struct
+import sys
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zstandard
+from conftest import SAMPLES
+from mcap.data_stream import ReadDataStream
+from mcap.reader import NonSeekingReader, make_reader
+from mcap.records import (
+    AttachmentIndex,
+    Channel,
+    Chunk,
+    ChunkIndex,
+    MessageIndex,
+    MetadataIndex,
+    Schema,
+    Statistics,
+    SummaryOffset,
+)
+from timeline_helpers import demo_capture
+
+from cananalyze.capture import Capture
+from cananalyze.frames import FLAG_RTR
+from cananalyze.outputs.mcap_out import topic_streams, write_mcap
+from cananalyze.protocol.services import SERVICE_NAMES
+
+DEMO = SAMPLES / "demo.log"
+
+
+@pytest.fixture(scope="module")
+def cap():
+    return demo_capture(DEMO)
+
+
+@pytest.fixture(scope="module")
+def generated(tmp_path_factory):
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from generate import generate
+
+    from cananalyze.capture import load
+    from cananalyze.outputs.logfile import write_log
+
+    log = tmp_path_factory.mktemp("gen") / "g.log"
+    write_log(generate(30000), log)
+    return load(log, device=[f"{n}=dat7014" for n in range(1, 17)])
+
+
+def _plain(v):
+    v = v.item() if isinstance(v, np.generic) else v
+    return None if isinstance(v, float) and not math.isfinite(v) else v
+
+
+def _reference_payloads(cap: Capture, topic: str, n: int) -> list[bytes]:
+    """One json.dumps per message, built from the Capture's columns."""
+    if topic == "/can/frames":
+        fb = cap.batch
+        out = []
+        for i in range(len(fb)):
+            if fb.flags[i] & FLAG_RTR:
+                data = ""
+            else:
+                data = fb.long_data.get(i, bytes(fb.data[i, : fb.dlc[i]])).hex()
+            out.append(
+                json.dumps(
+                    {
+                        "channel": fb.channels[fb.channel[i]],
+                        "can_id": int(fb.can_id[i]),
+                        "dlc": int(fb.dlc[i]),
+                        "data": data,
+                        "flags": int(fb.flags[i]),
+                        "service": SERVICE_NAMES[cap.service[i]],
+                        "node": int(cap.node[i]),
+                    }
+                ).encode()
+            )
+        return out
+    for s in cap.series:
+        if topic == f"/node/{s.node}/{s.pdo}":
+            return [
+                json.dumps({k: _plain(v[i]) for k, v in s.columns.items()}).encode()
+                for i in range(n)
+            ]
+    raise KeyError(topic)
+
+
+def _write_reference(cap: Capture, path: Path) -> None:
+    """The same topics through mcap's own Writer, one add_message per message."""
+    from mcap.writer import Writer
+
+    streams = []
+    with open(path, "wb") as f:
+        w = Writer(f, chunk_size=4 * 1024 * 1024)
+        w.start(profile="", library="reference")
+        for topic, schema, ns, payload in topic_streams(cap):
+            sid = w.register_schema(schema["title"], "jsonschema", json.dumps(schema).encode())
+            ch = w.register_channel(topic, "json", sid)
+            if topic.endswith("nmt_state") or topic == "/canopen/events":
+                data = [payload[i] for i in range(len(payload))]  # rare path: json.dumps already
+            else:
+                data = _reference_payloads(cap, topic, len(ns))
+            streams += [
+                (t, k, ch, d) for k, (t, d) in enumerate(zip(ns.tolist(), data, strict=True))
+            ]
+        for t, _k, ch, d in sorted(streams, key=lambda s: s[0]):  # stable, like the exporter
+            w.add_message(channel_id=ch, log_time=t, data=d, publish_time=t)
+        w.finish()
+
+
+def _messages(path: Path):
+    with open(path, "rb") as f:
+        return [
+            (ch.topic, sc.name, m.log_time, m.publish_time, json.loads(m.data))
+            for sc, ch, m in make_reader(f, validate_crcs=True).iter_messages()
+        ]
+
+
+@pytest.mark.parametrize("which", ["cap", "generated"])
+def test_same_messages_as_mcap_writer(which, request, tmp_path):
+    c = request.getfixturevalue(which)
+    write_mcap(c, tmp_path / "bulk.mcap")
+    _write_reference(c, tmp_path / "ref.mcap")
+    bulk, ref = _messages(tmp_path / "bulk.mcap"), _messages(tmp_path / "ref.mcap")
+    assert len(bulk) == len(ref) > len(c)
+    assert bulk == ref
+    with open(tmp_path / "bulk.mcap", "rb") as f1, open(tmp_path / "ref.mcap", "rb") as f2:
+        s1, s2 = make_reader(f1).get_summary(), make_reader(f2).get_summary()
+    topics1 = {k: v.topic for k, v in s1.channels.items()}
+    topics2 = {k: v.topic for k, v in s2.channels.items()}
+    assert topics1 == topics2
+    assert {k: (v.name, v.data) for k, v in s1.schemas.items()} == {
+        k: (v.name, v.data) for k, v in s2.schemas.items()
+    }
+    st1, st2 = s1.statistics, s2.statistics
+    assert st1.message_count == st2.message_count == len(bulk)
+    assert dict(st1.channel_message_counts) == dict(st2.channel_message_counts)
+    assert (st1.message_start_time, st1.message_end_time) == (
+        st2.message_start_time,
+        st2.message_end_time,
+    )
+    assert (st1.schema_count, st1.channel_count) == (st2.schema_count, st2.channel_count)
+    assert st1.chunk_count == len(s1.chunk_indexes)
+
+
+_CLASSES = {
+    0x03: Schema,
+    0x04: Channel,
+    0x06: Chunk,
+    0x07: MessageIndex,
+    0x08: ChunkIndex,
+    0x0A: AttachmentIndex,
+    0x0B: Statistics,
+    0x0D: MetadataIndex,
+    0x0E: SummaryOffset,
+}
+_GROUPS = {
+    0x03: "Schema",
+    0x04: "Channel",
+    0x0B: "Statistics",
+    0x08: "ChunkIndex",
+    0x0A: "AttachmentIndex",
+    0x0D: "MetadataIndex",
+}
+
+
+def _records(data: bytes) -> list:
+    """Parse back-to-back records with the `mcap` package's record classes."""
+    out, pos = [], 0
+    while pos < len(data):
+        op, ln = struct.unpack_from("<BQ", data, pos)
+        body = ReadDataStream(io.BytesIO(data[pos + 9 : pos + 9 + ln]))
+        out.append(_CLASSES[op].read(body))
+        pos += 9 + ln
+    return out
+
+
+@pytest.mark.parametrize("compression", ["zstd", "lz4", "none"])
+def test_chunks_and_indexes_point_at_the_right_records(generated, tmp_path, compression):
+    path = tmp_path / "g.mcap"
+    write_mcap(generated, path, compression, chunk_bytes=64 * 1024)
+    raw = path.read_bytes()
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    chunks = summary.chunk_indexes
+    assert len(chunks) == summary.statistics.chunk_count > 10
+    n_msgs = 0
+    last_end = -1
+    for ci in chunks:
+        assert isinstance(ci, ChunkIndex)
+        assert raw[ci.chunk_start_offset] == 0x06
+        (length,) = struct.unpack_from("<Q", raw, ci.chunk_start_offset + 1)
+        assert ci.chunk_length == 9 + length
+        (chunk,) = _records(raw[ci.chunk_start_offset : ci.chunk_start_offset + ci.chunk_length])
+        assert isinstance(chunk, Chunk)
+        assert chunk.compression == {"zstd": "zstd", "lz4": "lz4", "none": ""}[compression]
+        assert len(chunk.data) == ci.compressed_size
+        if compression == "zstd":
+            body = zstandard.ZstdDecompressor().decompress(chunk.data, ci.uncompressed_size)
+        elif compression == "lz4":
+            import lz4.frame
+
+            body = lz4.frame.decompress(chunk.data)
+        else:
+            body = chunk.data
+        assert len(body) == ci.uncompressed_size == chunk.uncompressed_size
+        assert zlib.crc32(body) == chunk.uncompressed_crc
+        msgs = {}
+        pos = 0
+        while pos < len(body):  # the chunk holds Message records only, back to back
+            op, ln = struct.unpack_from("<BQ", body, pos)
+            assert op == 0x05
+            ch, _seq, lt, pt = struct.unpack_from("<HIQQ", body, pos + 9)
+            assert lt == pt
+            msgs[pos] = (ch, lt)
+            pos += 9 + ln
+        assert pos == len(body)
+        times = [lt for _, lt in msgs.values()]
+        assert (min(times), max(times)) == (ci.message_start_time, ci.message_end_time)
+        assert min(times) >= last_end  # chunks follow each other in time
+        last_end = max(times)
+        # one MessageIndex per channel right after the chunk, every message listed once
+        assert ci.message_index_offsets
+        listed = 0
+        assert min(ci.message_index_offsets.values()) == ci.chunk_start_offset + ci.chunk_length
+        for ch, off in ci.message_index_offsets.items():
+            (mi,) = _records(raw[off : off + 9 + struct.unpack_from("<Q", raw, off + 1)[0]])
+            assert isinstance(mi, MessageIndex) and mi.channel_id == ch
+            for t, rel in mi.records:
+                assert msgs[rel] == (ch, t)
+            assert [t for t, _ in mi.records] == sorted(t for t, _ in mi.records)
+            listed += len(mi.records)
+        assert listed == len(msgs)
+        end = max(ci.message_index_offsets.values())
+        end += 9 + struct.unpack_from("<Q", raw, end + 1)[0]
+        assert end - (ci.chunk_start_offset + ci.chunk_length) == ci.message_index_length
+        n_msgs += len(msgs)
+    assert n_msgs == summary.statistics.message_count
+    # summary offsets name each group's opcode and span
+    footer_at = len(raw) - 8 - 29
+    assert raw[footer_at] == 0x02
+    s_start, so_start, crc = struct.unpack_from("<QQI", raw, footer_at + 9)
+    assert crc == zlib.crc32(raw[s_start : footer_at + 1 + 8 + 16])
+    offsets = _records(raw[so_start:footer_at])
+    assert {o.group_opcode for o in offsets} == {0x03, 0x04, 0x0B, 0x08, 0x0A, 0x0D}
+    for o in offsets:
+        assert raw[o.group_start] == o.group_opcode
+        group = _records(raw[o.group_start : o.group_start + o.group_length])
+        assert group and {type(r).__name__ for r in group} == {_GROUPS[o.group_opcode]}
+    # the streaming reader (no summary, no seeking) sees the same messages
+    with open(path, "rb") as f:
+        streamed = [
+            (c.topic, m.log_time, m.data) for _, c, m in NonSeekingReader(f).iter_messages()
+        ]
+    with open(path, "rb") as f:
+        seeked = [(c.topic, m.log_time, m.data) for _, c, m in make_reader(f).iter_messages()]
+    assert streamed == seeked and len(seeked) == n_msgs
+    assert all(isinstance(json.loads(d), dict) for _, _, d in seeked[:500])
+
+
+def test_time_window_reads_use_chunk_indexes(generated, tmp_path):
+    path = tmp_path / "g.mcap"
+    write_mcap(generated, path, chunk_bytes=32 * 1024)
+    with open(path, "rb") as f:
+        everything = [(c.topic, m.log_time) for _, c, m in make_reader(f).iter_messages()]
+    t0, t1 = everything[len(everything) // 3][1], everything[2 * len(everything) // 3][1]
+    with open(path, "rb") as f:
+        window = [
+            (c.topic, m.log_time)
+            for _, c, m in make_reader(f).iter_messages(
+                topics=["/can/frames"], starting_at=t0, ending_before=t1
+            )
+        ]
+    expected = [e for e in everything if e[0] == "/can/frames" and t0 <= e[1] < t1]
+    assert window == expected and len(expected) > 1000
+
+
+def test_json_columns_fd_payloads_and_non_finite_values(tmp_path):
+    from cananalyze.capture import load
+    from cananalyze.outputs.json_text import join, number_text, object_template
+    from cananalyze.outputs.mcap_out import frame_payloads
+
+    big = np.array([2**63 - 1, -(2**63), 0], np.int64)
+    vals = np.array([0.1, np.nan, -np.inf])
+    flags = np.array([True, False, True])
+    doc = join(
+        object_template(["i", "f", "b"], [number_text(big), number_text(vals), number_text(flags)])
+    )
+    got = [json.loads(doc[i]) for i in range(3)]
+    assert got == [
+        {"i": 2**63 - 1, "f": 0.1, "b": True},
+        {"i": -(2**63), "f": None, "b": False},
+        {"i": 0, "f": None, "b": True},
+    ]
+    log = tmp_path / "fd.log"
+    payload = bytes(range(64))
+    log.write_text(
+        f"(1.000000) can0 181#0102\n(1.001000) can0 123##1{payload.hex()}\n(1.002000) can0 701#R\n"
+    )
+    c = load(log)
+    docs = frame_payloads(c)
+    assert [json.loads(docs[i])["data"] for i in range(3)] == ["0102", payload.hex(), ""]
+    assert json.loads(docs[1])["dlc"] == c.batch.dlc[1]
