@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import struct
 import zlib
+from concurrent.futures import ThreadPoolExecutor
 from typing import IO
 
 import numpy as np
@@ -143,8 +144,18 @@ class BulkMcapWriter:
         size = self._chunk_bytes
         cuts = np.searchsorted(ends, np.arange(1, int(ends[-1]) // size + 1) * size)
         edges = np.unique(np.concatenate([[0], cuts + 1, [n]]).clip(max=n))
-        for a, b in zip(edges[:-1].tolist(), edges[1:].tolist(), strict=True):
-            self._chunk(channel[a:b], log_time[a:b], payload, rows[a:b])
+        # compression (zstandard/lz4 release the GIL) of one chunk overlaps the
+        # numpy layout of the next; chunks are still written in order
+        with ThreadPoolExecutor(max_workers=1) as pool:
+            pending = None
+            for a, b in zip(edges[:-1].tolist(), edges[1:].tolist(), strict=True):
+                raw, record_starts = self._layout(channel[a:b], log_time[a:b], payload, rows[a:b])
+                job = pool.submit(self._compress, raw) if self._compress else None
+                if pending:
+                    self._write_chunk(*pending)
+                pending = (raw, job, channel[a:b], log_time[a:b], record_starts)
+            if pending:
+                self._write_chunk(*pending)
         counts = np.bincount(channel, minlength=len(self._channels) + 1)
         for ch in np.flatnonzero(counts).tolist():
             self._counts[ch] = self._counts.get(ch, 0) + int(counts[ch])
@@ -154,7 +165,8 @@ class BulkMcapWriter:
         self._end = max(self._end, int(log_time[-1]))
         self._message_count += n
 
-    def _chunk(self, channel, log_time, payload: Texts, rows: np.ndarray) -> None:
+    def _layout(self, channel, log_time, payload: Texts, rows: np.ndarray):
+        """One chunk's Message records as bytes, and where each record starts."""
         m = len(rows)
         starts = payload.offsets[rows]
         lengths = payload.offsets[rows + 1] - starts
@@ -180,9 +192,12 @@ class BulkMcapWriter:
         src = np.repeat(starts.astype(idx) - data_before, lengths)
         src += np.arange(total, dtype=idx)
         out[is_data] = payload.data[src]
-        raw = out.tobytes()
+        return out.tobytes(), record_starts
 
-        compressed = self._compress(raw) if self._compress else raw
+    def _write_chunk(self, raw: bytes, job, channel, log_time, record_starts) -> None:
+        """The Chunk record, then one MessageIndex per channel, and its ChunkIndex."""
+        compressed = job.result() if job else raw
+        m = len(channel)
         chunk = Chunk(
             compression=self._compression,
             data=compressed,
