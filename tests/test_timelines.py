@@ -271,6 +271,26 @@ def test_rrd_round_trip(cap, tmp_path):
     assert all(0 <= x < 100 for x in load) and max(load) > 0
 
 
+def test_blueprint_has_a_plot_per_pdo_and_a_lane_per_node(cap):
+    """Checked against a screenshot of the viewer: a node's PDOs on one axis hid
+    the digital input bytes under 10 V analogue values, and a `/node/*/nmt`
+    pattern left the NMT lanes empty, so both are spelled out."""
+    from cananalyze.outputs.rerun_out import blueprint
+
+    plots, states, log = blueprint(cap).root_container.contents
+    columns = {c.name: [(v.origin, v.name) for v in c.contents] for c in plots.contents[:-1]}
+    assert columns == {
+        "node 3": [
+            ("/node/3/tpdo1", "node 3 TPDO1 (0x183)"),
+            ("/node/3/tpdo2", "node 3 TPDO2 (0x283)"),
+        ],
+        "node 5": [("/node/5/tpdo2", "node 5 TPDO2 (0x285)")],
+    }
+    assert plots.contents[-1].origin == "/bus"
+    assert list(states.contents) == ["+ /node/3/nmt", "+ /node/5/nmt", "+ /node/10/nmt"]
+    assert log.origin == "/events"
+
+
 def test_decode_rerun_and_connect_are_exclusive(capsys):
     assert main(["decode", str(DEMO), "--rerun", "--connect", "127.0.0.1:9876"]) == 2
     assert "give one of them" in capsys.readouterr().err

@@ -49,7 +49,7 @@ class RerunLive:
         self.every = every
         self.counts: dict[str, int] = {}
         self._named: set[str] = set()
-        self._nodes: list[int] = []
+        self._layout: tuple[set, set] = (set(), set())  # PDOs and NMT lanes in the blueprint
         self._collector = Collector(name)
         self._pending = 0
         self._last_send = time.monotonic()
@@ -64,7 +64,7 @@ class RerunLive:
         if rrd:
             sinks.append(rr.FileSink(str(rrd)))
         try:
-            self.rec.set_sinks(*sinks, default_blueprint=blueprint_for([]))
+            self.rec.set_sinks(*sinks, default_blueprint=blueprint_for(set(), set()))
         except Exception as exc:  # noqa: BLE001 - rerun raises its own types for sink failures
             raise UsageError(f"rerun: cannot open {rrd or 'the viewer'}: {exc}") from None
         self.rec.send_recording_name(name)
@@ -91,10 +91,11 @@ class RerunLive:
         if self._absolute is None and t.size:
             self._absolute = is_absolute(t)
         absolute = bool(self._absolute)
-        nodes = sorted({s.node for s in cap.series} | set(self._nodes))
-        if nodes != self._nodes:
-            self._nodes = nodes
-            self.rec.send_blueprint(blueprint_for(nodes), make_active=True, make_default=True)
+        pdos = self._layout[0] | {(s.node, s.pdo, s.cob_id) for s in cap.series}
+        lanes = self._layout[1] | {e.node for e in cap.state_changes}
+        if (pdos, lanes) != self._layout:
+            self._layout = (pdos, lanes)
+            self.rec.send_blueprint(blueprint_for(pdos, lanes), make_active=True, make_default=True)
         send_parts(cap, self.rec, absolute, self.counts, self._named)
         self._send_load(cap, absolute, final)
         self.rec.flush()

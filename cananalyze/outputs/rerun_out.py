@@ -33,25 +33,46 @@ def _time(rr, t: np.ndarray, absolute: bool):
 
 
 def blueprint(cap: Capture):
-    """A plot per node, the NMT state lanes and the event log."""
-    return blueprint_for(sorted({s.node for s in cap.series}))
+    """The layout for a whole capture: its PDOs and the nodes with NMT states."""
+    return blueprint_for(
+        {(s.node, s.pdo, s.cob_id) for s in cap.series}, {e.node for e in cap.state_changes}
+    )
 
 
-def blueprint_for(nodes: list[int]):
-    """The layout for these nodes' signal plots (live sessions resend it as nodes appear)."""
+def blueprint_for(pdos, lane_nodes):
+    """A column of plots per node (one plot per PDO), the NMT state lanes, the event log.
+
+    pdos: (node, pdo name, COB-ID) of each PDO with signals; lane_nodes: nodes with
+    NMT states (live sessions resend the layout as either grows). One plot per PDO
+    rather than per node: a node's PDOs often mix units (digital input bytes next to
+    analogue millivolts) and a shared axis flattens the small ones. Lanes are named
+    one by one: a `/node/*/nmt` pattern matched nothing in the viewer.
+    """
     import rerun.blueprint as rrb
 
-    plots = [
-        rrb.TimeSeriesView(
-            origin=f"/node/{n}", contents=[f"+ /node/{n}/**", f"- /node/{n}/nmt"], name=f"node {n}"
+    by_node: dict[int, list[tuple[str, int]]] = {}
+    for node, pdo, cob_id in sorted(pdos):
+        by_node.setdefault(node, []).append((pdo, cob_id))
+    columns = [
+        rrb.Vertical(
+            *[
+                rrb.TimeSeriesView(
+                    origin=f"/node/{n}/{pdo}", name=f"node {n} {pdo.upper()} (0x{cob_id:03X})"
+                )
+                for pdo, cob_id in series
+            ],
+            name=f"node {n}",
         )
-        for n in nodes
+        for n, series in by_node.items()
     ]
-    plots.append(rrb.TimeSeriesView(origin="/bus", name="bus load"))
+    columns.append(rrb.TimeSeriesView(origin="/bus", name="bus load"))
+    lanes = [f"+ /node/{n}/nmt" for n in sorted(lane_nodes)]
     return rrb.Blueprint(
         rrb.Vertical(
-            rrb.Grid(*plots),
-            rrb.StateTimelineView(origin="/node", contents="+ /node/*/nmt", name="NMT states"),
+            rrb.Horizontal(*columns),
+            rrb.StateTimelineView(
+                origin="/node", contents=lanes or "$origin/**", name="NMT states"
+            ),
             rrb.TextLogView(origin="/events", name="events"),
             row_shares=[3, 1, 2],
         ),
