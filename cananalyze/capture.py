@@ -115,7 +115,13 @@ class Capture:
 
     @cached_property
     def signals(self) -> pd.DataFrame:
-        """Long table of PDO values: t, node, pdo, cob_id, signal, value (float64), unit."""
+        """Long table of PDO values: t, node, pdo, cob_id, signal, value, unit.
+
+        `value` is float64 for every signal so that one column can be plotted and
+        aggregated: integers beyond 2**53 (UNSIGNED64/INTEGER64 objects) lose their low
+        bits here. The exact integers are in `series[k].columns` (their own dtype) and
+        in the MCAP payloads. `unit` is "" for signals without a unit.
+        """
         import pandas as pd
 
         parts: dict[str, list[np.ndarray]] = {k: [] for k in ("t", "node", "cob", "code", "value")}

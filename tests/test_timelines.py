@@ -82,6 +82,9 @@ def test_signals_long_and_wide_agree_with_manual_values(cap):
     first = s[(s["node"] == 5) & (s["t"] == ch1["t"].iloc[0])].set_index("signal")["value"]
     assert first.to_dict() == pytest.approx({"ch1": 21.5, "ch2": 22.0, "ch3": -1.5, "ch4": 100.0})
     assert set(ch1["unit"]) == {"°C"}
+    # MCB 560 digital inputs have no unit: "" (documented), values float64 for plotting
+    assert set(s[(s["node"] == 3) & (s["pdo"] == "tpdo1")]["unit"]) == {""}
+    assert s["value"].dtype == np.float64
     wide = cap.signals_wide()
     col = wide["5/tpdo2/ch1"].dropna()
     assert col.index.tolist() == ch1["t"].tolist()
