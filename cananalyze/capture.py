@@ -450,8 +450,11 @@ def _sdo_event(row: int, r: dict) -> Event:
     text = f"SDO {r.get('direction', '?')}{where}"
     if r.get("name"):
         text += f" {r['name']}"
-    if ok and r.get("value") is not None:
-        text += f" = {r['value']}"
+    value = r.get("value")
+    if ok and isinstance(value, int) and not isinstance(value, bool) and abs(value) > 9:
+        text += f" = {value} (0x{value & 0xFFFFFFFFFFFFFFFF:X})"  # as the text output shows it
+    elif ok and value is not None:
+        text += f" = {value}"
     elif ok and r.get("data"):
         text += f" data {r['data']}"
     text += f" {r.get('result', '?')}"

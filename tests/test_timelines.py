@@ -103,6 +103,8 @@ def test_events_cover_boot_nmt_emcy_sdo_and_states(cap):
     assert "0x8100" in emcy["message"].iloc[0]
     abort = e[(e["kind"] == "sdo") & (e["level"] == "warning")]
     assert len(abort) == 1 and "does not exist" in abort["message"].iloc[0]
+    # DAT 7014 device type as its manual gives it, in hex as well (like the text output)
+    assert "SDO upload 0x1000:00 Device type = 262545 (0x40191) ok" in e["message"].tolist()
     states = e[e["kind"] == "nmt_state"]
     # each node: bootup then operational; repeated heartbeats give no new event
     assert states.groupby("node").size().to_dict() == {3: 2, 5: 2, 10: 2}
