@@ -296,6 +296,24 @@ def test_blueprint_has_a_plot_per_pdo_and_a_lane_per_node(cap):
     assert log.origin == "/events"
 
 
+def test_blueprint_puts_many_nodes_in_a_grid(tmp_path):
+    """16 node columns side by side were a few pixels wide each in the viewer."""
+    import rerun.blueprint as rrb
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from generate import generate
+
+    from cananalyze.outputs.logfile import write_log
+    from cananalyze.outputs.rerun_out import blueprint
+
+    write_log(generate(3000), tmp_path / "g.log")
+    c = cananalyze.load(tmp_path / "g.log", device=[f"{n}=dat7014" for n in range(1, 17)])
+    plots, states, _ = blueprint(c).root_container.contents
+    assert isinstance(plots, rrb.Grid)
+    assert [col.name for col in plots.contents[:-1]] == [f"node {n}" for n in range(1, 17)]
+    assert len(states.contents) == 16
+
+
 def test_decode_rerun_and_connect_are_exclusive(capsys):
     assert main(["decode", str(DEMO), "--rerun", "--connect", "127.0.0.1:9876"]) == 2
     assert "give one of them" in capsys.readouterr().err

@@ -22,6 +22,7 @@ from ..capture import Capture
 
 TIMELINE = "time"
 _RR_LEVEL = {1: "DEBUG", 2: "INFO", 3: "WARN", 4: "ERROR", 5: "CRITICAL"}
+SIDE_BY_SIDE = 5  # node columns (+ bus load) in one row; more go in a grid to stay readable
 ABSOLUTE_AFTER = 1e8  # seconds: times beyond ~1973 are taken as Unix epoch
 
 
@@ -69,7 +70,7 @@ def blueprint_for(pdos, lane_nodes):
     lanes = [f"+ /node/{n}/nmt" for n in sorted(lane_nodes)]
     return rrb.Blueprint(
         rrb.Vertical(
-            rrb.Horizontal(*columns),
+            rrb.Horizontal(*columns) if len(columns) <= SIDE_BY_SIDE else rrb.Grid(*columns),
             rrb.StateTimelineView(
                 origin="/node", contents=lanes or "$origin/**", name="NMT states"
             ),
