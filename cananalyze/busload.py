@@ -26,8 +26,11 @@ def load_series(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(window start times, bits/s or percent of bitrate) over fixed windows.
 
-    Windows are aligned to the first frame; the last, partial window is scaled by
-    its own length so a log's tail does not look idle.
+    Windows are aligned to the first frame. The last, partial window is scaled by
+    its own length (up to the last frame) so a log's tail does not look idle; a
+    tail shorter than half a window joins the window before it, because scaling a
+    few milliseconds that end on a burst (SYNC and its PDOs) showed a spike of
+    several times the real load at the end of every plot.
     """
     if t.size == 0:
         return np.zeros(0), np.zeros(0)
@@ -38,6 +41,10 @@ def load_series(
     starts = t0 + np.arange(sums.size) * window
     width = np.full(sums.size, window)
     width[-1] = max(float(t[-1]) - starts[-1], window / 1000)
+    if sums.size > 1 and width[-1] < window / 2:
+        sums[-2] += sums[-1]
+        width[-2] += width[-1]
+        sums, width, starts = sums[:-1], width[:-1], starts[:-1]
     per_s = sums / width
     if bitrate:
         return starts, per_s / bitrate * 100.0

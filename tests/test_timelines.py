@@ -314,6 +314,17 @@ def test_blueprint_puts_many_nodes_in_a_grid(tmp_path):
     assert len(states.contents) == 16
 
 
+def test_bus_load_of_steady_traffic_is_flat_to_the_end():
+    """A frame every 10 ms: every window, the log's short tail included, shows the
+    same load (the tail once showed a spike: a few ms ending on a frame, scaled up)."""
+    from cananalyze.busload import load_series
+
+    t = 100.0 + np.arange(101) * 0.01  # the last frame opens a 0.1 s window on its own
+    starts, load = load_series(t, np.full(t.size, 111), 0.1, 250000)
+    assert starts[0] == t[0] and len(starts) == 10
+    assert load == pytest.approx(np.full(10, 111 / 0.01 / 250000 * 100), rel=0.15)
+
+
 def test_decode_rerun_and_connect_are_exclusive(capsys):
     assert main(["decode", str(DEMO), "--rerun", "--connect", "127.0.0.1:9876"]) == 2
     assert "give one of them" in capsys.readouterr().err

@@ -74,11 +74,34 @@ def blueprint_for(pdos, lane_nodes):
             rrb.StateTimelineView(
                 origin="/node", contents=lanes or "$origin/**", name="NMT states"
             ),
-            rrb.TextLogView(origin="/events", name="events"),
+            rrb.TextLogView(origin="/events", name="events", **_log_columns(rrb)),
             row_shares=[3, 1, 2],
         ),
         collapse_panels=True,
     )
+
+
+def _log_columns(rrb) -> dict:
+    """Time, level and text; the entity path column only ever said "/events".
+
+    The column settings are marked unstable in rerun, so any other version just
+    gets the viewer's default columns.
+    """
+    try:
+        from rerun.blueprint.encodings import TextLogColumn, TimelineColumn
+
+        return {
+            "columns": rrb.TextLogColumns(
+                timeline_columns=[TimelineColumn(TIMELINE)],
+                text_log_columns=[
+                    TextLogColumn("loglevel"),
+                    TextLogColumn("body"),
+                    TextLogColumn("entitypath", visible=False),
+                ],
+            )
+        }
+    except (ImportError, AttributeError, TypeError, ValueError):
+        return {}
 
 
 def is_absolute(t: np.ndarray) -> bool:
