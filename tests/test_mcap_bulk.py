@@ -314,3 +314,14 @@ def test_json_columns_fd_payloads_and_non_finite_values(tmp_path):
     docs = frame_payloads(c)
     assert [json.loads(docs[i])["data"] for i in range(3)] == ["0102", payload.hex(), ""]
     assert json.loads(docs[1])["dlc"] == c.batch.dlc[1]
+
+
+def test_payloads_built_in_slices_are_the_same(cap, tmp_path, monkeypatch):
+    """Big logs are formatted a slice of rows at a time (pyarrow's 32-bit offsets)."""
+    from cananalyze.outputs import mcap_out
+
+    write_mcap(cap, tmp_path / "whole.mcap")
+    monkeypatch.setattr(mcap_out, "SLICE", 7)
+    write_mcap(cap, tmp_path / "sliced.mcap")
+    whole, sliced = _messages(tmp_path / "whole.mcap"), _messages(tmp_path / "sliced.mcap")
+    assert sliced == whole and len(whole) > 3 * 7

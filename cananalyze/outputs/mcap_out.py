@@ -111,13 +111,18 @@ def signal_schema(s: SignalSeries) -> dict:
     }
 
 
+SLICE = 1 << 20  # rows per join: keeps pyarrow's 32-bit string offsets in range
+
+
 def signal_payloads(s: SignalSeries) -> Texts:
     """`{"signal": value, ...}` per PDO, built column-wise (NaN/inf become null)."""
     names = list(s.columns)
-    return join(object_template(names, [number_text(s.columns[n]) for n in names]))
-
-
-FRAME_SLICE = 1 << 20  # rows per join: keeps pyarrow's 32-bit string offsets in range
+    return Texts.concat(
+        [
+            join(object_template(names, [number_text(s.columns[n][a : a + SLICE]) for n in names]))
+            for a in range(0, len(s.t), SLICE)
+        ]
+    )
 
 
 def frame_payloads(cap: Capture) -> Texts:
@@ -125,8 +130,8 @@ def frame_payloads(cap: Capture) -> Texts:
     fb = cap.batch
     channels = list(fb.channels) or ["can0"]
     parts = []
-    for a in range(0, len(fb), FRAME_SLICE):
-        b = min(a + FRAME_SLICE, len(fb))
+    for a in range(0, len(fb), SLICE):
+        b = min(a + SLICE, len(fb))
         flags = fb.flags[a:b]
         shown = np.where((flags & FLAG_RTR) != 0, 0, np.minimum(fb.dlc[a:b], fb.data.shape[1]))
         data = hex_text(fb.data[a:b], shown)
