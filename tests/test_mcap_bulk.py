@@ -325,3 +325,38 @@ def test_payloads_built_in_slices_are_the_same(cap, tmp_path, monkeypatch):
     write_mcap(cap, tmp_path / "sliced.mcap")
     whole, sliced = _messages(tmp_path / "whole.mcap"), _messages(tmp_path / "sliced.mcap")
     assert sliced == whole and len(whole) > 3 * 7
+
+
+def test_writer_on_its_own_empty_payloads_and_several_texts(tmp_path):
+    from cananalyze.outputs.json_text import Texts
+    from cananalyze.outputs.mcap_bulk import BulkMcapWriter
+
+    a = Texts.from_list([b"", b"first", b""])
+    b = Texts.from_list([b"second", b""])
+    path = tmp_path / "w.mcap"
+    with open(path, "wb") as f:
+        w = BulkMcapWriter(f, "test", chunk_bytes=40)  # a chunk every message or two
+        ch1 = w.channel("/a", "json", w.schema("s", "jsonschema", b"{}"))
+        ch2 = w.channel("/b", "json", 0)
+        rows = np.array([3, 0, 1, 4, 2])  # b0, a0, a1, b1, a2
+        chans = np.array([ch2, ch1, ch1, ch2, ch1])
+        w.messages(chans, np.array([5, 6, 6, 9, 10]), [a, b], rows=rows)
+        with pytest.raises(ValueError, match="log-time order"):
+            w.messages(np.array([ch1, ch1]), np.array([12, 11]), a, rows=np.array([0, 1]))
+        w.messages(np.array([ch1]), np.array([12]), a, rows=np.array([1]))
+        w.finish()
+    with open(path, "rb") as f:
+        r = make_reader(f, validate_crcs=True)
+        got = [(c.topic, m.log_time, m.data) for _, c, m in r.iter_messages()]
+        st = r.get_summary().statistics
+    assert got == [
+        ("/b", 5, b"second"),
+        ("/a", 6, b""),
+        ("/a", 6, b"first"),
+        ("/b", 9, b""),
+        ("/a", 10, b""),
+        ("/a", 12, b"first"),
+    ]
+    assert st.message_count == 6 and st.chunk_count > 2
+    assert dict(st.channel_message_counts) == {ch1: 4, ch2: 2}
+    assert (st.message_start_time, st.message_end_time) == (5, 12)

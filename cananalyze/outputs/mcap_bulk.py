@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import struct
 import zlib
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import IO
 
@@ -48,6 +49,18 @@ _MESSAGE_HEADER = np.dtype(
 )
 _INDEX_ENTRY = np.dtype([("t", "<u8"), ("offset", "<u8")])
 _HEADER_SIZE = _MESSAGE_HEADER.itemsize  # 31
+
+
+class _Rows:
+    """Several Texts numbered as one: per global row, its text, start and length."""
+
+    def __init__(self, parts: list[Texts]) -> None:
+        self.parts = parts
+        self.n = sum(len(p) for p in parts)
+        self.part = np.repeat(np.arange(len(parts), dtype=np.int32), [len(p) for p in parts])
+        self.starts = np.concatenate([p.offsets[:-1] for p in parts] or [np.zeros(0, np.int64)])
+        self.lengths = np.concatenate([p.lengths for p in parts] or [np.zeros(0, np.int64)])
+        self.longest = max((len(p.data) for p in parts), default=0)
 
 
 def _compressor(compression: str):
@@ -121,16 +134,19 @@ class BulkMcapWriter:
         self,
         channel: np.ndarray,
         log_time: np.ndarray,
-        payload: Texts,
+        payload: Texts | Sequence[Texts],
         rows: np.ndarray | None = None,
     ) -> None:
         """Write messages, given in log-time order, as chunks of about chunk_bytes.
 
         channel and log_time (ns) have one entry per message; the data of message i
-        is payload row rows[i] (row i without rows), so streams merged by time need
-        not be copied into order first. publish_time = log_time, sequence = 0.
+        is row rows[i] (row i without rows) of the payload texts, several of which
+        count as one (row numbers running on from one to the next). So streams
+        merged by time are neither copied into one buffer nor into order first.
+        publish_time = log_time, sequence = 0.
         """
-        rows = np.arange(len(payload)) if rows is None else np.asarray(rows, np.int64)
+        payload = _Rows([payload] if isinstance(payload, Texts) else list(payload))
+        rows = np.arange(payload.n) if rows is None else np.asarray(rows, np.int64)
         n = len(rows)
         if n == 0:
             return
@@ -165,11 +181,12 @@ class BulkMcapWriter:
         self._end = max(self._end, int(log_time[-1]))
         self._message_count += n
 
-    def _layout(self, channel, log_time, payload: Texts, rows: np.ndarray):
+    def _layout(self, channel, log_time, payload: _Rows, rows: np.ndarray):
         """One chunk's Message records as bytes, and where each record starts."""
         m = len(rows)
-        starts = payload.offsets[rows]
-        lengths = payload.offsets[rows + 1] - starts
+        starts = payload.starts[rows]
+        lengths = payload.lengths[rows]
+        part = payload.part[rows]
         record_ends = np.cumsum(_HEADER_SIZE + lengths)
         record_starts = record_ends - (_HEADER_SIZE + lengths)
         out = np.empty(int(record_ends[-1]), np.uint8)
@@ -182,16 +199,24 @@ class BulkMcapWriter:
         head["pub"] = log_time
         head_at = (record_starts[:, None] + np.arange(_HEADER_SIZE)).reshape(-1)
         out[head_at] = head.view(np.uint8).reshape(-1)
-        # the payload bytes fill every position not taken by a header, in order; they
-        # are gathered from ragged source ranges with one repeat + arange
-        is_data = np.ones(len(out), bool)
-        is_data[head_at] = False
+        # payload bytes: ragged ranges flattened with repeat + arange, message by
+        # message grouped by the texts they come from (one gather per text)
+        perm = np.argsort(part, kind="stable")
+        lp = lengths[perm]
+        before = np.cumsum(lp) - lp
         total = int(lengths.sum())
-        idx = np.int32 if len(payload.data) < 2**31 else np.int64
-        data_before = (np.cumsum(lengths) - lengths).astype(idx)
-        src = np.repeat(starts.astype(idx) - data_before, lengths)
-        src += np.arange(total, dtype=idx)
-        out[is_data] = payload.data[src]
+        idx = np.int32 if max(len(out), payload.longest) < 2**31 else np.int64
+        step = np.arange(total, dtype=idx)
+        dst = np.repeat((record_starts[perm] + _HEADER_SIZE - before).astype(idx), lp)
+        dst += step
+        src = np.repeat((starts[perm] - before).astype(idx), lp)
+        src += step
+        parts, first = np.unique(part[perm], return_index=True)
+        bounds = np.append(before[first], total)
+        for k, lo, hi in zip(
+            parts.tolist(), bounds[:-1].tolist(), bounds[1:].tolist(), strict=True
+        ):
+            out[dst[lo:hi]] = payload.parts[k].data[src[lo:hi]]
         return out.tobytes(), record_starts
 
     def _write_chunk(self, raw: bytes, job, channel, log_time, record_starts) -> None:

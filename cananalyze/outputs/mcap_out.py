@@ -234,7 +234,7 @@ def _write_merged(w: BulkMcapWriter, streams: list[tuple[int, np.ndarray, Texts]
     times = np.concatenate([s[1] for s in streams])
     chans = np.concatenate([np.full(len(s[1]), s[0], np.uint16) for s in streams])
     order = np.argsort(times, kind="stable")
-    w.messages(chans[order], times[order], Texts.concat([s[2] for s in streams]), rows=order)
+    w.messages(chans[order], times[order], [s[2] for s in streams], rows=order)
 
 
 def _metadata(w: BulkMcapWriter, cap: Capture) -> None:
