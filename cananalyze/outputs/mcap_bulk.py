@@ -63,6 +63,23 @@ class _Rows:
         self.longest = max((len(p.data) for p in parts), default=0)
 
 
+def _ranges(first: np.ndarray, lengths: np.ndarray, before: np.ndarray, out: np.ndarray):
+    """first[i], first[i] + 1, ... (lengths[i] values) for every i, end to end, in out.
+
+    before[i] = sum(lengths[:i]). A running sum of ones with a jump at each range
+    start: one pass over a reused array, ~3x faster than np.repeat + np.arange.
+    """
+    out.fill(1)
+    nz = lengths > 0
+    f, n, b = first[nz], lengths[nz], before[nz]
+    if f.size:
+        jump = f.copy()
+        jump[1:] -= f[:-1] + n[:-1] - 1
+        out[b] = jump
+        np.cumsum(out, out=out)
+    return out
+
+
 def _compressor(compression: str):
     if compression == "zstd":
         import zstandard
@@ -97,6 +114,7 @@ class BulkMcapWriter:
         self._attachment_indexes: list[AttachmentIndex] = []
         self._metadata_indexes: list[MetadataIndex] = []
         self._counts: dict[int, int] = {}
+        self._buffers: dict[str, np.ndarray] = {}
         self._message_count = 0
         self._start = 0
         self._end = 0
@@ -199,18 +217,17 @@ class BulkMcapWriter:
         head["pub"] = log_time
         head_at = (record_starts[:, None] + np.arange(_HEADER_SIZE)).reshape(-1)
         out[head_at] = head.view(np.uint8).reshape(-1)
-        # payload bytes: ragged ranges flattened with repeat + arange, message by
-        # message grouped by the texts they come from (one gather per text)
+        # payload bytes, message by message grouped by the texts they come from
+        # (one gather per text), as flattened ragged index ranges
         perm = np.argsort(part, kind="stable")
         lp = lengths[perm]
         before = np.cumsum(lp) - lp
         total = int(lengths.sum())
         idx = np.int32 if max(len(out), payload.longest) < 2**31 else np.int64
-        step = np.arange(total, dtype=idx)
-        dst = np.repeat((record_starts[perm] + _HEADER_SIZE - before).astype(idx), lp)
-        dst += step
-        src = np.repeat((starts[perm] - before).astype(idx), lp)
-        src += step
+        dst = _ranges(
+            record_starts[perm] + _HEADER_SIZE, lp, before, self._scratch("dst", total, idx)
+        )
+        src = _ranges(starts[perm], lp, before, self._scratch("src", total, idx))
         parts, first = np.unique(part[perm], return_index=True)
         bounds = np.append(before[first], total)
         for k, lo, hi in zip(
@@ -218,6 +235,13 @@ class BulkMcapWriter:
         ):
             out[dst[lo:hi]] = payload.parts[k].data[src[lo:hi]]
         return out.tobytes(), record_starts
+
+    def _scratch(self, name: str, n: int, dtype) -> np.ndarray:
+        """A work array reused from chunk to chunk: fresh pages cost more than the work."""
+        buf = self._buffers.get(name)
+        if buf is None or buf.dtype != dtype or len(buf) < n:
+            buf = self._buffers[name] = np.empty(max(n, self._chunk_bytes) * 5 // 4, dtype)
+        return buf[:n]
 
     def _write_chunk(self, raw: bytes, job, channel, log_time, record_starts) -> None:
         """The Chunk record, then one MessageIndex per channel, and its ChunkIndex."""
