@@ -19,6 +19,8 @@ import numpy as np
 import pytest
 import zstandard
 from conftest import SAMPLES
+from hypothesis import given
+from hypothesis import strategies as st
 from mcap.data_stream import ReadDataStream
 from mcap.reader import NonSeekingReader, make_reader
 from mcap.records import (
@@ -348,7 +350,7 @@ def test_writer_on_its_own_empty_payloads_and_several_texts(tmp_path):
     with open(path, "rb") as f:
         r = make_reader(f, validate_crcs=True)
         got = [(c.topic, m.log_time, m.data) for _, c, m in r.iter_messages()]
-        st = r.get_summary().statistics
+        stats = r.get_summary().statistics
     assert got == [
         ("/b", 5, b"second"),
         ("/a", 6, b""),
@@ -357,6 +359,21 @@ def test_writer_on_its_own_empty_payloads_and_several_texts(tmp_path):
         ("/a", 10, b""),
         ("/a", 12, b"first"),
     ]
-    assert st.message_count == 6 and st.chunk_count > 2
-    assert dict(st.channel_message_counts) == {ch1: 4, ch2: 2}
-    assert (st.message_start_time, st.message_end_time) == (5, 12)
+    assert stats.message_count == 6 and stats.chunk_count > 2
+    assert dict(stats.channel_message_counts) == {ch1: 4, ch2: 2}
+    assert (stats.message_start_time, stats.message_end_time) == (5, 12)
+
+
+@given(
+    st.lists(st.tuples(st.integers(0, 10**6), st.integers(0, 40)), min_size=1, max_size=60),
+    st.sampled_from([np.int32, np.int64]),
+)
+def test_ragged_ranges_match_repeat_and_arange(ranges, dtype):
+    from cananalyze.outputs.mcap_bulk import _ranges
+
+    first = np.array([f for f, _ in ranges], np.int64)
+    lengths = np.array([n for _, n in ranges], np.int64)
+    before = np.cumsum(lengths) - lengths
+    expected = np.concatenate([np.arange(f, f + n) for f, n in ranges])
+    got = _ranges(first, lengths, before, np.empty(int(lengths.sum()), dtype))
+    assert got.tolist() == expected.tolist()
