@@ -12,6 +12,7 @@ timeline: a timestamp when the log has absolute (epoch) times, else a duration.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -40,7 +41,7 @@ def blueprint(cap: Capture):
     )
 
 
-def blueprint_for(pdos, lane_nodes):
+def blueprint_for(pdos: Iterable[tuple[int, str, int]], lane_nodes: Iterable[int]):
     """A column of plots per node (one plot per PDO), the NMT state lanes, the event log.
 
     pdos: (node, pdo name, COB-ID) of each PDO with signals; lane_nodes: nodes with
