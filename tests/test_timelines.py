@@ -350,6 +350,30 @@ def test_parquet_round_trip(cap, tmp_path):
     )
 
 
+def test_parquet_and_csv_with_mixed_findings_values(tmp_path):
+    """Findings' measured/expected hold numbers and text (160.3 ms, "0xFFA8", "cleared"):
+    Parquet needs one type per column, so they are written as text."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from generate import generate
+
+    from cananalyze.outputs.logfile import write_log
+    from cananalyze.outputs.parquet_out import write_csv, write_parquet
+
+    write_log(generate(5000), tmp_path / "g.log")
+    c = cananalyze.load(tmp_path / "g.log", device=[f"{n}=dat7014" for n in range(1, 17)])
+    kinds = {type(v) for v in c.findings["measured"] if v is not None}
+    assert str in kinds and kinds & {int, float}  # the case that failed
+    rows = write_parquet(c, tmp_path / "pq")
+    back = pd.read_parquet(tmp_path / "pq" / "findings.parquet")
+    assert rows["findings"] == len(back) == len(c.findings)
+    assert back["measured"].tolist() == [
+        None if v is None else str(v) for v in c.findings["measured"]
+    ]
+    assert back["rule"].tolist() == c.findings["rule"].tolist()
+    write_csv(c, tmp_path / "csv")
+    assert len(pd.read_csv(tmp_path / "csv" / "findings.csv")) == len(c.findings)
+
+
 def test_csv_tables(cap, tmp_path):
     from cananalyze.outputs.parquet_out import write_csv
 

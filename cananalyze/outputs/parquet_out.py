@@ -18,10 +18,23 @@ TABLES = ("frames", "signals", "sdo", "events", "findings", "nodes")
 
 def _tables(cap: Capture):
     for name in TABLES:
-        df = getattr(cap, name)
-        if name == "sdo" and "value" in df:
-            df = df.assign(value=df["value"].map(lambda v: None if v is None else str(v)))
-        yield name, df
+        yield name, _plain_columns(getattr(cap, name))
+
+
+def _plain_columns(df):
+    """Object columns holding mixed types (SDO `value`, findings `measured`/`expected`:
+    numbers, strings, lists) as text, None kept: Parquet needs one type per column."""
+    mixed = {}
+    for col in df.columns:
+        if df[col].dtype == object:
+            types = {type(v) for v in df[col] if not _missing(v)}
+            if len(types) > 1 or (types and not types <= {str}):
+                mixed[col] = df[col].map(lambda v: None if _missing(v) else str(v))
+    return df.assign(**mixed) if mixed else df
+
+
+def _missing(v) -> bool:
+    return v is None or (isinstance(v, float) and v != v)
 
 
 def _outdir(path: str | Path) -> Path:
