@@ -17,6 +17,7 @@ from ..frames import FrameBatch
 from .registry import ReadContext
 
 _ZERO8 = bytes(8)
+EPOCH_2000 = 946684800.0  # a first time stamp later than this is taken as Unix time
 
 
 def _finite(t: float) -> bool:
@@ -34,8 +35,11 @@ def _why(t: float, can_id: int, dlc: int, payload: bytes) -> str:
 class RowSink:
     """Append rows, flush full batches; keeps the channel table stable across batches."""
 
-    def __init__(self, ctx: ReadContext) -> None:
+    def __init__(self, ctx: ReadContext, epoch_times: bool = False) -> None:
+        """epoch_times: the format has no header saying whether its times are absolute,
+        so a first time stamp after the year 2000 is taken as Unix time (CSV, python-can)."""
         self.ctx = ctx
+        self.epoch_times = epoch_times
         self.size = max(1, int(ctx.batch_size))
         self.channels: list[str] = []
         self._chan_index: dict[str, int] = {}
@@ -98,6 +102,9 @@ class RowSink:
         n = len(self.line)
         if n == 0:
             return None
+        if self.epoch_times and self.ctx.frames == 0 and self.t[0] > EPOCH_2000:
+            self.ctx.absolute_time = True
+            self.ctx.start_time = self.t[0]
         batch = FrameBatch(
             t=np.frombuffer(self.t, np.float64).copy(),
             can_id=np.frombuffer(self.can_id, np.uint32).copy(),

@@ -15,8 +15,6 @@ from ..frames import FLAG_EXT, FLAG_FD, FLAG_TX, FrameBatch
 from ._rows import RowSink, text_lines
 from .registry import LogFormat, ReadContext, register
 
-EPOCH_2000 = 946684800.0  # larger time stamps are taken as Unix time
-
 
 class _Bad(Exception):
     pass
@@ -65,7 +63,7 @@ def _row(f: list[str], col: dict[str, int], first_data: int):
 
 def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     ctx.format = "gvret"
-    sink = RowSink(ctx)
+    sink = RowSink(ctx, epoch_times=True)
     col: dict[str, int] = {}
     first_data = 0
     for n, line in text_lines(stream, ctx=ctx):
@@ -86,9 +84,6 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
         except _Bad as e:
             ctx.problems.add(ctx.source, f"line {n}", str(e))
             continue
-        if ctx.frames == 0 and len(sink) == 0 and t > EPOCH_2000:
-            ctx.absolute_time = True
-            ctx.start_time = t
         if sink.add(t, can_id, flags, size, data, sink.channel(bus), n):
             yield sink.flush()
     yield from sink.drain()

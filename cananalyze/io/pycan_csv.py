@@ -17,7 +17,6 @@ from ._rows import RowSink, text_lines
 from .registry import LogFormat, ReadContext, register
 
 HEADER = "timestamp,arbitration_id,extended,remote,error,dlc,data"
-EPOCH_2000 = 946684800.0
 
 
 class _Bad(Exception):
@@ -67,7 +66,7 @@ def _row(line: str):
 
 def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     ctx.format = "pycan_csv"
-    sink = RowSink(ctx)
+    sink = RowSink(ctx, epoch_times=True)
     chan = sink.channel("1")
     header = True
     for n, line in text_lines(stream, ctx=ctx):
@@ -84,9 +83,6 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
         except _Bad as e:
             ctx.problems.add(ctx.source, f"line {n}", str(e))
             continue
-        if ctx.frames == 0 and len(sink) == 0 and t > EPOCH_2000:
-            ctx.absolute_time = True
-            ctx.start_time = t
         if sink.add(t, can_id, flags, size, data, chan, n):
             yield sink.flush()
     yield from sink.drain()

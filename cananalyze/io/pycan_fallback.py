@@ -17,7 +17,6 @@ from ..frames import FLAG_BRS, FLAG_ERR, FLAG_ESI, FLAG_EXT, FLAG_FD, FLAG_RTR, 
 from ._rows import RowSink
 from .registry import LogFormat, ReadContext, register
 
-EPOCH_2000 = 946684800.0
 # python-can's MESSAGE_READERS less the formats read here (checked by a test), written
 # out so that importing the readers does not import python-can
 PYCAN_ONLY_SUFFIXES = (".db", ".mf4")
@@ -68,7 +67,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     except Exception as e:  # python-can raises many kinds (ImportError for asammdf, ...)
         ctx.problems.add(ctx.source, "record 1", f"python-can {cls.__name__} cannot open it: {e}")
         return
-    sink = RowSink(ctx)
+    sink = RowSink(ctx, epoch_times=True)
     k = 0
     try:
         for k, m in enumerate(reader, 1):
@@ -83,9 +82,6 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
                 | (0 if m.is_rx else FLAG_TX)
             )
             size = min(m.dlc, 64) if m.is_remote_frame else len(data)
-            if k == 1 and m.timestamp > EPOCH_2000:
-                ctx.absolute_time = True
-                ctx.start_time = m.timestamp
             chan = sink.channel("1" if m.channel is None else str(m.channel))
             if sink.add(m.timestamp, m.arbitration_id, flags, size, data, chan, k):
                 yield sink.flush()
