@@ -54,8 +54,8 @@ def run(args: argparse.Namespace) -> int:
     for pdo in prof.pdos(args.node):
         state = "" if pdo.valid else "  (not valid)"
         print(
-            f"  {pdo.direction.upper()}PDO{pdo.number} COB-ID 0x{pdo.cob_id:03X} "
-            f"type {pdo.transmission_type} inhibit {pdo.inhibit_time}x100us "
+            f"  {pdo.direction[0].upper()}PDO{pdo.number} COB-ID 0x{pdo.cob_id:03X} "
+            f"type {pdo.transmission_type} inhibit {pdo.inhibit_time / 10:g} ms "
             f"event {pdo.event_timer} ms{state}"
         )
         bit = 0
