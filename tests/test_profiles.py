@@ -277,4 +277,4 @@ def test_devices_cli(capsys):
     args = parser.parse_args(["devices", "mcb560", "--node", "5"])
     assert args.func(args) == 0
     shown = capsys.readouterr().out
-    assert "TXPDO2 COB-ID 0x285" in shown and "analog0 [mV]" in shown and "Notes:" in shown
+    assert "TPDO2 COB-ID 0x285" in shown and "analog0 [mV]" in shown and "Notes:" in shown
