@@ -39,7 +39,7 @@ class PdoLengthRule(Rule):
                     g.t[sl][i],
                     node,
                     cob,
-                    f"{pdo.direction.upper()}PDO{pdo.number} has {int(d[i])} bytes, mapping needs {want}",
+                    f"{pdo.direction[0].upper()}PDO{pdo.number} has {int(d[i])} bytes, mapping needs {want}",
                     int(d[i]),
                     want,
                     row=rows[i],
