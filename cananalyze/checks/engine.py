@@ -23,7 +23,8 @@ class Checker:
         self.rules = rules
         self.config: ConfigSource = config if config is not None else FileConfig()
         self.nmt = NmtStates()
-        self.timing = Timing()
+        # every gap is kept only for the tables a rule reads after the fact (flat memory otherwise)
+        self.timing = Timing(keep={n for r in rules for n in getattr(r, "needs_gaps", ())})
         self.findings: list[Finding] = []
         self._gaps = GapState()
         self.t_last: float | None = None

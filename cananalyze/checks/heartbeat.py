@@ -13,6 +13,7 @@ from .rule import Context, Rule, ms
 
 class HeartbeatRule(Rule):
     name = "heartbeat"
+    needs_gaps = ("heartbeat",)  # finish() infers periods from every gap (Timing.all_gaps)
     why = (
         "A node whose heartbeat is late looks dead to its consumers, which then stop or fault; "
         "check the node's load, its 0x1017 setting and the bus load at that moment."

@@ -85,6 +85,7 @@ class Rule:
     tolerance = 0.1
     why = ""
     max_findings = 20  # per rule and node/COB-ID; the rest are counted in one closing finding
+    needs_gaps: tuple[str, ...] = ()  # gap tables whose every gap Timing must keep (all_gaps)
 
     def __init__(
         self, severity: str | None = None, tolerance: float | None = None, **params

@@ -1,7 +1,10 @@
 """Timing analysis: heartbeat, PDO and SYNC periods, SDO latency, EMCY and boot-up counts.
 
 Fed by the Checker's per-batch gap tables (numpy diffs per node / COB-ID, carried
-across batches); stores the gaps as arrays so medians and percentiles are exact.
+across batches). Each stream's statistics are kept in a `StreamStats` (exact count,
+min, max, mean and jitter; median and p99 exact up to 4096 values, then within
+0.5 %), so memory does not grow with the log. Only gap tables a rule asks for in
+`keep` (the heartbeat rule infers periods after the fact) keep every gap.
 """
 
 from __future__ import annotations
@@ -13,11 +16,16 @@ import numpy as np
 from ..protocol.services import Service
 from .finding import rel_time
 from .rule import Context
+from .streamstats import StreamStats, bins_of
 
 
 def stats(gaps_s: np.ndarray) -> dict:
     """count, min, median, mean, p99, max and jitter (standard deviation), in ms."""
-    g = gaps_s * 1000.0
+    return stats_ms(gaps_s * 1000.0)
+
+
+def stats_ms(g: np.ndarray) -> dict:
+    """`stats` of values already in ms (exact: from every value)."""
     if g.size == 0:
         return {"count": 0}
     return {
@@ -32,7 +40,9 @@ def stats(gaps_s: np.ndarray) -> dict:
 
 
 class Timing:
-    def __init__(self) -> None:
+    def __init__(self, keep: set[str] | frozenset[str] = frozenset()) -> None:
+        self.keep = set(keep)  # gap tables whose every gap is kept (for all_gaps)
+        self.stats: dict[str, dict[int, StreamStats]] = {"heartbeat": {}, "pdo": {}, "sync": {}}
         self.gaps: dict[str, dict[int, list[np.ndarray]]] = {"heartbeat": {}, "pdo": {}, "sync": {}}
         self.gap_t: dict[str, dict[int, list[np.ndarray]]] = {
             "heartbeat": {},
@@ -47,7 +57,7 @@ class Timing:
         self.span: dict[str, dict[int, list[float]]] = {"heartbeat": {}, "pdo": {}, "sync": {}}
         self.emcy: Counter = Counter()
         self.bootups: Counter = Counter()
-        self.sdo_latency: dict[int | None, list[float]] = {}
+        self.sdo_latency: dict[int | None, StreamStats] = {}
         self.sdo_results: Counter = Counter()
         self.error_frames = 0
 
@@ -57,15 +67,9 @@ class Timing:
             return
         for name in ("heartbeat", "pdo", "sync"):
             g = ctx.gaps(name)
-            gap = g.gap
-            for key, sl in g.groups():
-                self.count[name][key] += sl.stop - sl.start
-                sp = self.span[name].setdefault(key, [float(g.t[sl.start]), 0.0])
-                sp[1] = float(g.t[sl.stop - 1])
-                gg = gap[sl]
-                ok = ~np.isnan(gg)
-                self.gaps[name].setdefault(key, []).append(gg[ok])
-                self.gap_t[name].setdefault(key, []).append(g.prev[sl][ok])
+            if g.key.size == 0:
+                continue
+            self._update_table(name, g)
         emcy = b.node[b.service == Service.EMCY]
         if emcy.size:
             self.emcy.update(emcy.tolist())
@@ -73,16 +77,67 @@ class Timing:
         if boot.size:
             self.bootups.update(boot.tolist())
         self.error_frames += int(np.count_nonzero(b.service == Service.ERROR_FRAME))
-        for _row, rec in b.records:
-            if rec.get("kind") == "sdo":
-                self.sdo_results[rec.get("result")] += 1
+        sdo = [rec for _row, rec in b.records if rec.get("kind") == "sdo"]
+        if sdo:
+            self.sdo_results.update([rec.get("result") for rec in sdo])
+            latency: dict = {}
+            for rec in sdo:
                 if rec.get("latency_ms") is not None:
-                    self.sdo_latency.setdefault(rec.get("node"), []).append(
-                        float(rec["latency_ms"])
-                    )
+                    latency.setdefault(rec.get("node"), []).append(rec["latency_ms"])
+            for node, values in latency.items():
+                st = self.sdo_latency.get(node)
+                if st is None:
+                    st = self.sdo_latency[node] = StreamStats()
+                st.add(np.array(values, np.float64))
+
+    def _update_table(self, name: str, g) -> None:
+        """Counts, spans and gap statistics of one gap table: moments per key in one pass."""
+        count, span, streams = self.count[name], self.span[name], self.stats[name]
+        gap = g.gap
+        ok = ~np.isnan(gap)  # a stream's first frame ever has no gap
+        v, key = gap[ok] * 1000.0, g.key[ok]
+        if self.keep and name in self.keep:
+            t_prev, gap_s = g.prev[ok], gap[ok]
+        if v.size:
+            first = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+            k = np.diff(np.r_[first, v.size])
+            mean = np.add.reduceat(v, first) / k
+            dev = v - np.repeat(mean, k)
+            m2 = np.add.reduceat(dev * dev, first)
+            lo, hi = np.minimum.reduceat(v, first), np.maximum.reduceat(v, first)
+            bins = None
+            ends = (first + k).tolist()
+            for j, (a, e, key_j) in enumerate(
+                zip(first.tolist(), ends, key[first].tolist(), strict=True)
+            ):
+                st = streams.get(key_j)
+                if st is None:
+                    st = streams[key_j] = StreamStats()
+                st.add_moments(e - a, float(mean[j]), float(m2[j]), float(lo[j]), float(hi[j]))
+                if st.exact:
+                    st.add_values(v[a:e])
+                else:
+                    if bins is None:
+                        bins = bins_of(v)
+                    st.add_values(v[a:e], bins[a:e])
+                if self.keep and name in self.keep:
+                    self.gaps[name].setdefault(key_j, []).append(gap_s[a:e])
+                    self.gap_t[name].setdefault(key_j, []).append(t_prev[a:e])
+        for key_j, sl in g.groups():
+            count[key_j] += sl.stop - sl.start
+            sp = span.get(key_j)
+            if sp is None:
+                span[key_j] = [float(g.t[sl.start]), float(g.t[sl.stop - 1])]
+            else:
+                sp[1] = float(g.t[sl.stop - 1])
 
     def all_gaps(self, name: str, key: int) -> tuple[np.ndarray, np.ndarray]:
-        """(gap start times, gaps in s) of one node / COB-ID over the whole log."""
+        """(gap start times, gaps in s) of one node / COB-ID over the whole log.
+
+        Only for gap tables in `keep`; the others keep statistics, not gaps.
+        """
+        if name not in self.keep:
+            raise ValueError(f"Timing(keep=...) does not keep the {name} gaps")
         parts = self.gaps[name].get(key)
         if not parts:
             return np.zeros(0), np.zeros(0)
@@ -97,15 +152,15 @@ class Timing:
 
     def report(self, nmt=None) -> dict:
         out: dict = {"heartbeat": {}, "pdo": {}, "sync": None}
-        for node in sorted(self.gaps["heartbeat"]):
-            out["heartbeat"][node] = stats(self.all_gaps("heartbeat", node)[1])
-        for cob in sorted(self.gaps["pdo"]):
-            s = stats(self.all_gaps("pdo", cob)[1])
+        for node in sorted(self.stats["heartbeat"]):
+            out["heartbeat"][node] = self.stats["heartbeat"][node].stats()
+        for cob in sorted(self.stats["pdo"]):
+            s = self.stats["pdo"][cob].stats()
             s["rate_hz"] = self.rate_hz("pdo", cob)
             out["pdo"][cob] = s
-        if self.gaps["sync"]:
-            out["sync"] = stats(self.all_gaps("sync", 0)[1])
-        out["sdo_latency"] = {n: stats(np.asarray(v) / 1000.0) for n, v in self.sdo_latency.items()}
+        if self.stats["sync"]:
+            out["sync"] = self.stats["sync"][0].stats()
+        out["sdo_latency"] = {n: st.stats() for n, st in self.sdo_latency.items()}
         out["sdo_results"] = dict(self.sdo_results)
         out["emcy"] = dict(self.emcy)
         out["bootups"] = dict(self.bootups)

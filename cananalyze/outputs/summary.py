@@ -5,12 +5,12 @@ Bus load is a lower bound (nominal bits, no stuff bits): see cananalyze.busload.
 
 from __future__ import annotations
 
-from array import array
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..busload import frame_bits
+from ..checks.streamstats import StreamStats
 from ..decoded import DecodedBatch
 from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from ..protocol.services import SERVICE_NAMES, Service
@@ -40,10 +40,10 @@ class Summary:
     bits: int = 0
     ids_seen: set = field(default_factory=set)
     skipped: int = 0
-    # SDO transactions per node: result counts and latencies (8 bytes each, not the
-    # records: a 50M-frame log has millions, and memory must stay flat in log length)
+    # SDO transactions per node: result counts and latency statistics (not the records
+    # nor every latency: a 50M-frame log has millions, and memory must stay flat)
     sdo_results: dict = field(default_factory=dict)  # node -> {result: count}
-    sdo_latency: dict = field(default_factory=dict)  # node -> array('d') of ms
+    sdo_latency: dict = field(default_factory=dict)  # node -> StreamStats of ms
     # evidence for and against CANopen (canopen_verdict), counted as columns
     ext_frames: int = 0  # 29-bit identifiers
     sdo_frames: int = 0  # data frames in the SDO ranges
@@ -58,14 +58,8 @@ class Summary:
 
     def add(self, batch: DecodedBatch) -> None:
         n = len(batch)
-        for _row, rec in batch.records:
-            if rec.get("kind") == "sdo":
-                node = rec.get("node")
-                results = self.sdo_results.setdefault(node, {})
-                results[rec.get("result")] = results.get(rec.get("result"), 0) + 1
-                lat = self.sdo_latency.setdefault(node, array("d"))
-                if rec.get("latency_ms") is not None:
-                    lat.append(rec["latency_ms"])
+        if batch.records:
+            self._sdo(batch.records)
         if n == 0:
             return
         fb = batch.frames
@@ -81,6 +75,27 @@ class Summary:
         self._evidence(batch)
         if len(self.ids_seen) < 4096:
             self.ids_seen.update(np.unique(fb.can_id[(fb.flags & FLAG_EXT) == 0]).tolist())
+
+    def _sdo(self, records: list) -> None:
+        """Result counts and latencies per node, one small loop per batch."""
+        latency: dict = {}
+        for _row, rec in records:
+            if rec.get("kind") != "sdo":
+                continue
+            node = rec.get("node")
+            results = self.sdo_results.get(node)
+            if results is None:
+                results = self.sdo_results[node] = {}
+            result = rec.get("result")
+            results[result] = results.get(result, 0) + 1
+            lat = rec.get("latency_ms")
+            if lat is not None:
+                latency.setdefault(node, []).append(lat)
+        for node, values in latency.items():
+            st = self.sdo_latency.get(node)
+            if st is None:
+                st = self.sdo_latency[node] = StreamStats()
+            st.add(np.array(values, np.float64))
 
     def _evidence(self, batch: DecodedBatch) -> None:
         """Count frames whose shape says CANopen or says otherwise (CiA 301 sizes and values)."""
@@ -194,16 +209,16 @@ class Summary:
             out.append("SDO transactions per node:")
             for node in sorted(self.sdo_results, key=lambda x: (x is None, x)):
                 results = self.sdo_results[node]
-                lat = self.sdo_latency[node]
+                lat = self.sdo_latency.get(node)
                 text = (
                     f"  node {node}: {sum(results.values())} ("
                     + ", ".join(f"{k} {v}" for k, v in sorted(results.items()))
                     + ")"
                 )
-                if lat:
+                if lat is not None and lat.n:
                     text += (
-                        f"; latency ms min {min(lat):.2f} median {float(np.median(lat)):.2f} "
-                        f"max {max(lat):.2f}"
+                        f"; latency ms min {lat.min:.2f} median {lat.quantile(0.5):.2f} "
+                        f"max {lat.max:.2f}"
                     )
                 out.append(text)
         verdict = self.canopen_verdict()

@@ -1,0 +1,58 @@
+"""Streaming timing statistics against numpy on every value: exact moments, quantiles within 0.5 %."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cananalyze.checks.streamstats import EXACT, StreamStats
+from cananalyze.checks.timing import stats_ms
+
+
+def _fed(values: np.ndarray, batch: int) -> StreamStats:
+    st = StreamStats()
+    for i in range(0, values.size, batch):
+        st.add(values[i : i + batch])
+    return st
+
+
+@pytest.mark.parametrize(
+    "values",
+    [
+        np.random.default_rng(1).normal(10.0, 0.3, 50_000),  # a jittery 10 ms period
+        np.random.default_rng(2).lognormal(0.0, 2.0, 30_000),  # latencies over decades
+        np.r_[np.full(20_000, 100.0), np.full(50, 1600.0)],  # periodic with dropouts
+        np.r_[np.zeros(9000), np.random.default_rng(3).uniform(0, 5, 9000)],  # zero gaps
+    ],
+)
+def test_histogram_mode_against_numpy(values: np.ndarray) -> None:
+    st = _fed(values, 6553)
+    got, ref = st.stats(), stats_ms(values)
+    assert got["count"] == ref["count"] == values.size
+    assert got["min"] == ref["min"] and got["max"] == ref["max"]
+    assert got["mean"] == pytest.approx(ref["mean"], rel=1e-9, abs=1e-12)
+    assert got["jitter"] == pytest.approx(ref["jitter"], rel=1e-6, abs=1e-9)
+    for q in ("median", "p99"):
+        assert got[q] == pytest.approx(ref[q], rel=0.005, abs=1e-3), q
+
+
+def test_periodic_stream_quantiles_are_exact() -> None:
+    values = np.r_[np.full(10_000, 100.0), np.full(100, 1600.0)]
+    got = _fed(values, 1000).stats()
+    assert got["median"] == 100.0 and got["p99"] == 100.0 and got["max"] == 1600.0
+
+
+def test_small_streams_are_exact_and_batching_does_not_matter() -> None:
+    values = np.random.default_rng(4).exponential(3.0, EXACT)
+    assert _fed(values, 7).stats() == stats_ms(values)
+    big = np.random.default_rng(5).exponential(3.0, 3 * EXACT)
+    a, b = _fed(big, 100).stats(), _fed(big, 5000).stats()
+    assert a["median"] == b["median"] and a["p99"] == b["p99"] and a["count"] == b["count"]
+
+
+def test_memory_does_not_grow_with_the_stream() -> None:
+    st = StreamStats()
+    rng = np.random.default_rng(6)
+    for _ in range(200):
+        st.add(rng.normal(10.0, 0.2, 10_000))
+    assert st._exact is None and st._count.size < 400  # a few hundred 0.5 % bins
