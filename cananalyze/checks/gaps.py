@@ -35,7 +35,9 @@ class Gaps:
 def grouped_gaps(t: np.ndarray, keys: np.ndarray, rows: np.ndarray, last: np.ndarray) -> Gaps:
     """Gaps for rows of a batch, by key; `last` (indexed by key) carries times between batches."""
     keys = keys.astype(np.intp)
-    order = np.argsort(keys, kind="stable")
+    # keys are node-IDs or 11-bit COB-IDs: as uint16, numpy's stable sort is a radix sort
+    small = keys.size and 0 <= keys.min() and keys.max() < 1 << 16
+    order = np.argsort(keys.astype(np.uint16) if small else keys, kind="stable")
     k = keys[order]
     tt = t[rows][order]
     r = rows[order]

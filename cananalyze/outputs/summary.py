@@ -20,6 +20,9 @@ _NMT_STATES = np.array(
     [0x00, 0x04, 0x05, 0x7F], np.uint8
 )  # boot-up, stopped, operational, pre-operational
 _NMT_COMMANDS = np.array([0x01, 0x02, 0x80, 0x81, 0x82], np.uint8)
+# byte -> is an NMT state (toggle bit ignored) / an NMT command: lookups, not np.isin per batch
+_IS_STATE = np.isin(np.arange(256) & 0x7F, _NMT_STATES)
+_IS_COMMAND = np.isin(np.arange(256), _NMT_COMMANDS)
 
 
 def _ids(per_id: np.ndarray, most: int = 6) -> str:
@@ -74,7 +77,12 @@ class Summary:
         self.bits += int(frame_bits(fb.flags, fb.dlc).sum())
         self._evidence(batch)
         if len(self.ids_seen) < 4096:
-            self.ids_seen.update(np.unique(fb.can_id[(fb.flags & FLAG_EXT) == 0]).tolist())
+            ids = fb.can_id[(fb.flags & FLAG_EXT) == 0]
+            if ids.size and ids.max() < 2048:  # 11-bit: a bincount, no sort
+                ids = np.flatnonzero(np.bincount(ids, minlength=2048))
+            else:
+                ids = np.unique(ids)
+            self.ids_seen.update(ids.tolist())
 
     def _sdo(self, records: list) -> None:
         """Result counts and latencies per node, one small loop per batch."""
@@ -110,11 +118,11 @@ class Summary:
         self.sdo_bad += np.bincount(ids[sdo & (fb.dlc != 8)], minlength=2048)
         ec = data_frame & std & ((svc == Service.HEARTBEAT) | (svc == Service.BOOTUP))
         self.ec_frames += int(ec.sum())
-        state_ok = np.isin(fb.data[:, 0] & 0x7F, _NMT_STATES)
+        state_ok = _IS_STATE[fb.data[:, 0]]
         self.ec_bad += np.bincount(ids[ec & ((fb.dlc != 1) | ~state_ok)], minlength=2048)
         nmt = data_frame & (svc == Service.NMT) & (fb.dlc == 2)
         self.nmt_good += int(
-            (nmt & np.isin(fb.data[:, 0], _NMT_COMMANDS) & (fb.data[:, 1] < 128)).sum()
+            (nmt & _IS_COMMAND[fb.data[:, 0]] & (fb.data[:, 1] < 128)).sum()
         )
 
     @property
