@@ -121,9 +121,7 @@ class Summary:
         state_ok = _IS_STATE[fb.data[:, 0]]
         self.ec_bad += np.bincount(ids[ec & ((fb.dlc != 1) | ~state_ok)], minlength=2048)
         nmt = data_frame & (svc == Service.NMT) & (fb.dlc == 2)
-        self.nmt_good += int(
-            (nmt & _IS_COMMAND[fb.data[:, 0]] & (fb.data[:, 1] < 128)).sum()
-        )
+        self.nmt_good += int((nmt & _IS_COMMAND[fb.data[:, 0]] & (fb.data[:, 1] < 128)).sum())
 
     @property
     def duration(self) -> float:
