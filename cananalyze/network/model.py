@@ -182,16 +182,19 @@ class NetworkModel:
         node, index, sub = rec.get("node"), rec.get("index"), rec.get("subindex")
         if not isinstance(node, int) or index is None or sub is None:
             return None
+        upload = rec.get("direction") == "upload"
+        if upload and (index, sub) not in _IDENTITY:
+            # a poll of some other object (most SDO traffic): only the node becomes known
+            if node not in self.nodes and _sdo_value(rec) is not None:
+                self.config_at(node)
+            return None
         value = _sdo_value(rec)
         if value is None:
             return None
         t = float(rec.get("t") or 0.0)
         cfg = self.config_at(node)
-        if rec.get("direction") == "upload":
-            key = _IDENTITY.get((index, sub))
-            if key is None:
-                return None
-            cfg.identity[key] = value
+        if upload:
+            cfg.identity[_IDENTITY[(index, sub)]] = value
             return self._identify(cfg)
         if isinstance(value, str):
             return None
