@@ -161,9 +161,13 @@ def parse(arr: np.ndarray, w: np.ndarray, starts: np.ndarray, ends: np.ndarray, 
     ext = ~std & (arr[np.minimum(p + 8, last)] == 0x23)
     fits &= (std | ext) & (p + 3 < ends)
     id11, ok11 = hex_id(w, p, 3)
-    id29, ok29 = hex_id(w, p, 8)
-    fits &= np.where(std, ok11, ok29)
-    can_id = np.where(std, id11, id29)
+    if ext.any():
+        id29, ok29 = hex_id(w, p, 8)
+        fits &= np.where(std, ok11, ok29)
+        can_id = np.where(std, id11, id29)
+    else:  # 11-bit only (the usual CANopen log): rows without '#' at p+3 already fail
+        fits &= ok11
+        can_id = id11
     d = np.where(std, p + 4, p + 9)  # data
     e = ends
     tail = (e - d >= 2) & (arr[np.maximum(e - 2, 0)] == 0x20)

@@ -118,7 +118,8 @@ def build_pairs(
     upload = da[:, 0] == _UPLOAD_REQ
     aborted = db[:, 0] == _ABORT
     length = np.where(upload, _EXP_LEN[db[:, 0]], _EXP_LEN[da[:, 0]]).astype(np.int64)
-    hexes = np.where(upload[:, None], db[:, 4:8], da[:, 4:8]).tobytes().hex()
+    raws = np.where(upload[:, None], db[:, 4:8], da[:, 4:8]).tobytes()
+    hexes = raws.hex()
     index = (da[:, 1].astype(np.int64) | (da[:, 2].astype(np.int64) << 8)).tolist()
     sub = da[:, 3].tolist()
     node = (fb.can_id[a].astype(np.int64) - 0x600).tolist()
@@ -204,7 +205,7 @@ def build_pairs(
                 vkey = (data, datatype)
                 value = value_cache.get(vkey, value_cache)
                 if value is value_cache:
-                    value = value_cache[vkey] = decode_value(bytes.fromhex(data), datatype)
+                    value = value_cache[vkey] = decode_value(raws[4 * k : 4 * k + n], datatype)
         out.append(
             {
                 "kind": "sdo",
