@@ -187,3 +187,17 @@ def test_pair_values_match_known_frames() -> None:
     assert down["data"] == "e803" and down["size"] == 2 and down["detail"] == "aborted by server"
     assert out.notes[1]["role"] == "expedited upload response 0x1018:1 = 78563412"
     assert np.all(proc.tracker._pending == {})
+
+
+def test_value_decoder_equals_decode_value() -> None:
+    import random
+
+    from cananalyze.protocol.datatypes import DATA_TYPES, decode_value, value_decoder
+
+    rng = random.Random(3)
+    for code in [*DATA_TYPES, 0x99]:
+        dec = value_decoder(code)
+        for n in range(9):
+            for _ in range(30):
+                data = bytes(rng.randrange(256) for _ in range(n))
+                assert repr(dec(data)) == repr(decode_value(data, code)), (code, data)

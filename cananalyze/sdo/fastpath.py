@@ -20,7 +20,7 @@ import numpy as np
 
 from ..decoded import DecodedBatch
 from ..frames import FLAG_TX
-from ..protocol.datatypes import decode_value
+from ..protocol.datatypes import decode_value, value_decoder
 from ..protocol.tables import abort_text
 from .tracker import ObjectInfo
 
@@ -131,6 +131,7 @@ def build_pairs(
     out: list[dict] = []
     info_cache: dict = {}  # a poll loop asks for the same few objects over and over
     value_cache: dict = {}  # ... and often reads the same values
+    decoders: dict = {}  # datatype -> value_decoder
     for k, (up, ab, n, x, y, i, s, nd) in enumerate(
         zip(
             upload.tolist(),
@@ -205,7 +206,10 @@ def build_pairs(
                 vkey = (data, datatype)
                 value = value_cache.get(vkey, value_cache)
                 if value is value_cache:
-                    value = value_cache[vkey] = decode_value(raws[4 * k : 4 * k + n], datatype)
+                    dec = decoders.get(datatype)
+                    if dec is None:
+                        dec = decoders[datatype] = value_decoder(datatype)
+                    value = value_cache[vkey] = dec(raws[4 * k : 4 * k + n])
         out.append(
             {
                 "kind": "sdo",
