@@ -132,6 +132,7 @@ def build_pairs(
     info_cache: dict = {}  # a poll loop asks for the same few objects over and over
     value_cache: dict = {}  # ... and often reads the same values
     decoders: dict = {}  # datatype -> value_decoder
+    latency_cache: dict = {}  # t - t_start -> latency_ms
     for k, (up, ab, n, x, y, i, s, nd) in enumerate(
         zip(
             upload.tolist(),
@@ -210,12 +211,15 @@ def build_pairs(
                     if dec is None:
                         dec = decoders[datatype] = value_decoder(datatype)
                     value = value_cache[vkey] = dec(raws[4 * k : 4 * k + n])
+        latency = latency_cache.get(y - x)  # a poll loop's latencies take few distinct values
+        if latency is None:
+            latency = latency_cache[y - x] = round(round((y - x) * 1000.0, 6), 3)
         out.append(
             {
                 "kind": "sdo",
                 "t_start": x,
                 "t": y,
-                "latency_ms": round(round((y - x) * 1000.0, 6), 3),
+                "latency_ms": latency,
                 "node": nd,
                 "direction": "upload" if up else "download",
                 "protocol": "expedited",
