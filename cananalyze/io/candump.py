@@ -391,24 +391,31 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
                 continue
             block, skipping = block[nl + 1 :], False
             line_base += 1
-        chunk = carry + block
         if not eof:
-            cut = chunk.rfind(b"\n") + 1
-            if cut == 0:
-                carry = chunk
+            last_nl = block.rfind(b"\n")
+            if last_nl < 0:
+                carry += block
                 if len(carry) > 1 << 24:
                     ctx.problems.add(
                         ctx.source, f"line {line_base + 1}", "line longer than 16 MiB, skipped"
                     )
                     carry, skipping = b"", True
                 continue
-            chunk, carry = chunk[:cut], chunk[cut:]
-        elif not chunk:
+            size = len(carry) + last_nl + 1
+            tail = block[last_nl + 1 :]
+        elif not carry:
             break
-        arr = np.frombuffer(chunk + bytes(PAD), np.uint8)[: len(chunk) + PAD]
-        nl = np.flatnonzero(arr[: len(chunk)] == 10)
-        if nl.size == 0 or nl[-1] != len(chunk) - 1:
-            nl = np.append(nl, len(chunk))
+        else:
+            size, tail = len(carry), b""
+        # carry and block go straight into one padded array: a single copy of the bytes
+        arr = np.empty(size + PAD, np.uint8)
+        arr[: len(carry)] = np.frombuffer(carry, np.uint8)
+        arr[len(carry) : size] = np.frombuffer(block, np.uint8, count=size - len(carry))
+        arr[size:] = 0
+        carry = tail
+        nl = np.flatnonzero(arr[:size] == 10)
+        if nl.size == 0 or nl[-1] != size - 1:
+            nl = np.append(nl, size)
         starts = np.empty(nl.size, np.int64)
         starts[0] = 0
         starts[1:] = nl[:-1] + 1
@@ -438,7 +445,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
         if slow.any():
             builder = _Builder()
             for r in np.flatnonzero(slow):
-                raw = chunk[starts[r] : ends[r]]
+                raw = arr[starts[r] : ends[r]].tobytes()
                 parsed = _parse_line(raw)
                 if isinstance(parsed, str):
                     if r == 0 and line_no[r] == 1 and raw.lstrip().startswith(b"candump"):
