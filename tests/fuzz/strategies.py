@@ -8,7 +8,6 @@ bytes, truncation, swapped lines.
 
 from __future__ import annotations
 
-import numpy as np
 from hypothesis import strategies as st
 
 from cananalyze.frames import (
@@ -20,6 +19,7 @@ from cananalyze.frames import (
     FLAG_RTR,
     FLAG_TX,
     FrameBatch,
+    from_rows,
 )
 
 _FLAGS = (FLAG_EXT, FLAG_RTR, FLAG_ERR, FLAG_FD, FLAG_BRS, FLAG_ESI, FLAG_TX)
@@ -95,20 +95,7 @@ def make_batch(rows: list[tuple], sort: bool = False) -> FrameBatch:
     """FrameBatch from hypothesis rows (times may go backwards unless sort)."""
     if sort:
         rows = sorted(rows, key=lambda r: r[0])
-    b = FrameBatch.allocate(len(rows), ("can0", "can1", "vcan2"))
-    for i, (t, can_id, data, flags, chan) in enumerate(rows):
-        if can_id > 0x7FF:
-            flags |= FLAG_EXT
-        b.t[i] = t
-        b.can_id[i] = can_id
-        b.flags[i] = flags
-        b.dlc[i] = len(data)
-        b.data[i, : min(8, len(data))] = np.frombuffer(data[:8], np.uint8)
-        if len(data) > 8:
-            b.long_data[i] = data
-        b.channel[i] = chan
-        b.line[i] = i + 1
-    return b
+    return from_rows(rows, channels=("can0", "can1", "vcan2"))
 
 
 @st.composite
