@@ -29,14 +29,23 @@ class EmcyRule(Rule):
     def process(self, ctx: Context) -> None:
         b = ctx.batch
         rows = np.flatnonzero(b.service == Service.EMCY)
+        if rows.size == 0:
+            return
         fb = b.frames
-        for row in rows.tolist():
-            node = int(b.node[row])
-            t = float(fb.t[row])
+        # columns as Python lists once: element access on numpy arrays costs more than the rule
+        nodes = b.node[rows].tolist()
+        times = fb.t[rows].tolist()
+        dlcs = fb.dlc[rows].tolist()
+        head = fb.data[rows, :3].tolist()
+        inhibits: dict[int, int] = {}  # 0x1015 per node, read once per batch like the other rules
+        for k, row in enumerate(rows.tolist()):
+            node, t, dlc = nodes[k], times[k], dlcs[k]
             self.subjects.add(node)
             prev = self.last_t.get(node)
             self.last_t[node] = t
-            inhibit = ctx.config.emcy_inhibit_100us(node, t)
+            inhibit = inhibits.get(node)
+            if inhibit is None:
+                inhibit = inhibits[node] = ctx.config.emcy_inhibit_100us(node, t) or 0
             if prev is not None and inhibit and t - prev < inhibit * 1e-4 * (1 - self.tolerance):
                 self.emit(
                     t,
@@ -50,22 +59,22 @@ class EmcyRule(Rule):
                     severity="error",
                     why="EMCY faster than its inhibit time can flood the bus in a fault storm; check 0x1015.",
                 )
-            if fb.dlc[row] < 8:
+            if dlc < 8:
                 self.emit(
                     t,
                     node,
                     0x80 + node,
-                    f"EMCY with {int(fb.dlc[row])} data bytes, CiA 301 needs 8",
-                    int(fb.dlc[row]),
+                    f"EMCY with {dlc} data bytes, CiA 301 needs 8",
+                    dlc,
                     8,
                     row=row,
                     severity="error",
                     why="A short EMCY cannot be decoded by a standard master; check the node's firmware.",
                 )
-                if fb.dlc[row] < 3:
+                if dlc < 3:
                     continue
-            code = int(fb.data[row, 0]) | int(fb.data[row, 1]) << 8
-            reg = int(fb.data[row, 2])
+            b0, b1, reg = head[k]
+            code = b0 | b1 << 8
             act = self.active.setdefault(node, {})
             if code == 0:
                 if reg == 0:

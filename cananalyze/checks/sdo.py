@@ -17,12 +17,17 @@ class SdoRule(Rule):
         self.max_latency = max_latency_ms
 
     def process(self, ctx: Context) -> None:
+        subjects = self.subjects
         for row, rec in list(ctx.batch.records):
             if rec.get("kind") != "sdo":
                 continue
             node = rec.get("node")
-            self.subjects.add(node)
+            subjects.add(node)
             result = rec.get("result")
+            lat = rec.get("latency_ms")
+            slow = self.max_latency is not None and lat is not None and lat > self.max_latency
+            if result == "ok" and not slow:
+                continue  # the usual case: nothing to format
             what = f"{rec.get('direction')} {rec.get('index', 0):04X}:{rec.get('subindex', 0):02X}"
             if result and result != "ok":
                 detail = rec.get("abort_text") or rec.get("detail") or ""
@@ -37,8 +42,7 @@ class SdoRule(Rule):
                     "ok",
                     row=row,
                 )
-            lat = rec.get("latency_ms")
-            if self.max_latency is not None and lat is not None and lat > self.max_latency:
+            if slow:
                 self.emit(
                     rec.get("t", 0.0),
                     node,
