@@ -164,3 +164,47 @@ def test_runs_of_one_record_type_broken_by_others(tmp_path):
     assert_same_as_python_can(batch, expected)
     assert batch.line.tolist() == list(range(1, 6001))
     assert ctx.problems.count == 0
+
+
+def test_bytes_past_the_dlc_are_dropped_in_bulk_runs(tmp_path):
+    """A run of equal CAN_MESSAGE records is read through one strided view; data bytes
+    stored past the DLC (and in remote frames) must still come out as nothing."""
+    path = tmp_path / "dirty.blf"
+    msgs = [
+        can.Message(
+            timestamp=1700000000.0 + i * 0.001,
+            arbitration_id=0x180 + i % 5,
+            data=b"\xaa" * 8,
+            dlc=i % 9,
+            is_remote_frame=i % 50 == 7,
+            check=False,
+        )
+        for i in range(3000)
+    ]
+    with can.BLFWriter(str(path), compression_level=0) as w:
+        for m in msgs:
+            w.on_message_received(m)
+    batch, ctx, _ = run(blf.read, path, batch_size=700)
+    assert len(batch) == 3000 and ctx.problems.count == 0
+    assert batch.dlc.tolist() == [i % 9 for i in range(3000)]
+    for i in range(3000):
+        want = (b"\0" if i % 50 == 7 else b"\xaa") * (i % 9)
+        assert batch.payload(i) == want, i
+    assert set(batch.channels) == {batch.channels[0]} and not batch.channel.any()
+
+
+def test_empty_fd_records_at_the_end_of_a_container(tmp_path):
+    """FD records whose 8-byte data slot would run past the end of the buffer."""
+    path = tmp_path / "fd_empty.blf"
+    msgs = [
+        can.Message(timestamp=1.0 + i, arbitration_id=0x100 + i, is_fd=True, data=b"")
+        for i in range(40)
+    ]
+    with can.BLFWriter(str(path), compression_level=0) as w:
+        for m in msgs:
+            w.on_message_received(m)
+    batch, ctx, _ = run(blf.read, path)
+    expected = list(can.BLFReader(str(path)))
+    assert len(batch) == len(expected) == 40 and ctx.problems.count == 0
+    assert_same_as_python_can(batch, expected)
+    assert all(f & FLAG_FD for f in batch.flags) and not batch.dlc.any()

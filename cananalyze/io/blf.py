@@ -3,7 +3,9 @@
 python-can's BLFReader unpacks one struct and builds one Message per frame. Here
 each container is decompressed, a short loop walks the object headers only to
 find where each record starts (records may straddle containers), and the fields
-of all CAN records are then gathered with numpy fancy indexing at those offsets.
+of all CAN records are then read with numpy: through one strided view when the
+records are evenly spaced (a run of one type and size, the usual case), else by
+fancy indexing at those offsets.
 Layouts follow python-can's blf.py (itself from Toby Lorenz' vector_blf).
 
 Containers are read one at a time; a container larger than MAX_CONTAINER, or one
@@ -73,20 +75,71 @@ def _systemtime(fields: tuple[int, ...]) -> float | None:
     return dt.timestamp()
 
 
-def _u(buf: np.ndarray, at: np.ndarray, width: int) -> np.ndarray:
-    """Little-endian unsigned ints of ``width`` bytes at byte offsets ``at``."""
-    dtype = {1: "<u1", 2: "<u2", 4: "<u4", 8: "<u8"}[width]
-    idx = at[:, None] + np.arange(width)
-    return np.ascontiguousarray(buf[idx]).view(dtype)[:, 0]
+# _KEEP8[k] keeps the first k bytes of a little-endian uint64 (an 8-byte data slot)
+_KEEP8 = np.array([(1 << (8 * k)) - 1 for k in range(9)], np.uint64)
+_WIDTH = {1: "<u1", 2: "<u2", 4: "<u4", 8: "<u8"}
 
 
-def _bytes8(buf: np.ndarray, at: np.ndarray, count: np.ndarray) -> np.ndarray:
-    """(n, 8) data slots from offsets ``at``, bytes beyond ``count`` zeroed."""
-    idx = at[:, None] + np.arange(8)
-    idx = np.minimum(idx, len(buf) - 1)
-    out = buf[idx].copy()
-    out[np.arange(8)[None, :] >= count[:, None]] = 0
-    return out
+class _At:
+    """Byte offsets of records in ``buf``: any offsets, or an evenly spaced run.
+
+    An evenly spaced run (every record of one type and size, the usual case) is
+    read through a strided view with no index arrays; other offsets are
+    gathered with fancy indexing.
+    """
+
+    def __init__(self, buf: np.ndarray, base: np.ndarray, stride: int = 0, shift: int = 0) -> None:
+        self.buf = buf
+        self.base = base
+        self.stride = stride
+        self.shift = shift
+
+    @property
+    def at(self) -> np.ndarray:
+        return self.base + self.shift
+
+    def __add__(self, k: int) -> _At:
+        return _At(self.buf, self.base, self.stride, self.shift + k)
+
+    def __getitem__(self, sel) -> _At:
+        if isinstance(sel, slice):
+            return self
+        return _At(self.buf, self.base[sel], 0, self.shift)
+
+    def _view(self, width: int, cols: int) -> np.ndarray | None:
+        n = len(self.base)
+        if not self.stride or not n:
+            return None
+        first = int(self.base[0]) + self.shift
+        if first + (n - 1) * self.stride + width * cols > len(self.buf):
+            return None
+        shape, strides = ((n,), (self.stride,)) if cols == 1 else ((n, cols), (self.stride, 1))
+        dtype = _WIDTH[width] if cols == 1 else np.uint8
+        return np.ndarray(shape, dtype, buffer=self.buf, offset=first, strides=strides)
+
+    def u(self, width: int) -> np.ndarray:
+        """Little-endian unsigned ints of ``width`` bytes at these offsets."""
+        view = self._view(width, 1)
+        if view is not None:
+            return view.copy()
+        idx = self.at[:, None] + np.arange(width)
+        return np.ascontiguousarray(self.buf[idx]).view(_WIDTH[width])[:, 0]
+
+    def bytes8(self, count: np.ndarray) -> np.ndarray:
+        """(n, 8) data slots from these offsets, bytes beyond ``count`` zeroed."""
+        out = self._view(1, 8)
+        if out is not None:
+            out = out.copy()
+        else:
+            idx = np.minimum(self.at[:, None] + np.arange(8), len(self.buf) - 1)
+            out = self.buf[idx]
+        out.view("<u8")[:, 0] &= _KEEP8[np.minimum(count, 8)]
+        return out
+
+
+def _sel(m: np.ndarray) -> np.ndarray | slice:
+    """The mask itself, or a plain slice when it selects every row (no gather/scatter)."""
+    return slice(None) if m.all() else m
 
 
 class _Records:
@@ -179,21 +232,28 @@ class _Records:
         count = (end - pos) // size
         if count < 4:
             return 0
-        rows = np.frombuffer(buf, np.uint8, count * size, pos).reshape(count, size)[:, :16]
-        same = np.all(rows == np.frombuffer(header, np.uint8), axis=1)
+        # the 16 header bytes of each object as two uint64 columns, compared in place
+        rows = np.ndarray((count, 2), "<u8", buffer=buf, offset=pos, strides=(size, 8))
+        h = np.frombuffer(header, "<u8")
+        same = (rows[:, 0] == h[0]) & (rows[:, 1] == h[1])
         bad = np.flatnonzero(~same)
         return int(bad[0]) if bad.size else count
 
     def _columns(self, buf, offs, kinds, nums, sizes) -> FrameBatch:
-        o = np.array(offs, np.int64)
-        kind = np.array(kinds, np.int64)
-        size = np.array(sizes, np.int64)
+        o = np.asarray(offs, np.int64)
+        kind = np.asarray(kinds, np.int64)
+        size = np.asarray(sizes, np.int64)
         n = len(o)
-        hsize = _u(buf, o + 4, 2).astype(np.int64)
-        tflags = _u(buf, o + 16, 4)
-        stamp = _u(buf, o + 24, 8).astype(np.float64)
+        step = int(size[0])
+        even = bool((size == step).all() and (np.diff(o) == step).all())
+        obj = _At(buf, o, step if even else 0)
+        hsize = (obj + 4).u(2).astype(np.int64)
+        tflags = (obj + 16).u(4)
+        stamp = (obj + 24).u(8).astype(np.float64)
         t = np.where(tflags == 1, stamp * 1e-5, stamp * 1e-9) + self.start
-        p = o + hsize  # record body
+        h0 = int(hsize[0])
+        same_h = even and bool((hsize == h0).all())
+        p = _At(buf, o + hsize, step if same_h else 0)  # record bodies
         b = FrameBatch.allocate(n)
         b.t = t
         b.line = np.array(nums, np.int64)
@@ -201,11 +261,12 @@ class _Records:
 
         m = (kind == CAN_MESSAGE) | (kind == CAN_MESSAGE2)
         if m.any():
+            m = _sel(m)
             q = p[m]
-            chan[m] = _u(buf, q, 2)
-            fl = _u(buf, q + 2, 1)
-            dlc = np.minimum(_u(buf, q + 3, 1), 8)
-            raw = _u(buf, q + 4, 4)
+            chan[m] = q.u(2)
+            fl = (q + 2).u(1)
+            dlc = np.minimum((q + 3).u(1), 8)
+            raw = (q + 4).u(4)
             b.can_id[m] = raw & 0x1FFFFFFF
             b.flags[m] = (
                 np.where(raw & 0x80000000, FLAG_EXT, 0)
@@ -213,28 +274,30 @@ class _Records:
                 | np.where(fl & 0x01, FLAG_TX, 0)
             )
             b.dlc[m] = dlc
-            b.data[m] = _bytes8(buf, q + 8, np.where(fl & 0x80, 0, dlc))
+            b.data[m] = (q + 8).bytes8(np.where(fl & 0x80, 0, dlc))
 
         m = kind == CAN_ERROR_EXT
         if m.any():
+            m = _sel(m)
             q = p[m]
-            chan[m] = _u(buf, q, 2)
-            dlc = np.minimum(_u(buf, q + 11, 1), 8)
-            raw = _u(buf, q + 16, 4)
+            chan[m] = q.u(2)
+            dlc = np.minimum((q + 11).u(1), 8)
+            raw = (q + 16).u(4)
             b.can_id[m] = raw & 0x1FFFFFFF
             b.flags[m] = FLAG_ERR | np.where(raw & 0x80000000, FLAG_EXT, 0)
             b.dlc[m] = dlc
-            b.data[m] = _bytes8(buf, q + 24, dlc)
+            b.data[m] = (q + 24).bytes8(dlc)
 
         m = kind == CAN_FD_MESSAGE
         if m.any():
+            m = _sel(m)
             q = p[m]
-            chan[m] = _u(buf, q, 2)
-            fl = _u(buf, q + 2, 1)
-            code = _u(buf, q + 3, 1) & 0x0F
-            raw = _u(buf, q + 4, 4)
-            fd = _u(buf, q + 13, 1)
-            valid = np.minimum(_u(buf, q + 14, 1), 64)
+            chan[m] = q.u(2)
+            fl = (q + 2).u(1)
+            code = (q + 3).u(1) & 0x0F
+            raw = (q + 4).u(4)
+            fd = (q + 13).u(1)
+            valid = np.minimum((q + 14).u(1), 64)
             rtr = (fl & 0x80) != 0
             b.can_id[m] = raw & 0x1FFFFFFF
             b.flags[m] = (
@@ -246,19 +309,20 @@ class _Records:
                 | np.where(fd & 0x4, FLAG_ESI, 0)
             )
             b.dlc[m] = np.where(rtr & (valid == 0), _DLC2LEN[code], valid)
-            b.data[m] = _bytes8(buf, q + 20, valid)
-            self._long(b, buf, np.flatnonzero(m), q + 20, valid, valid)
+            b.data[m] = (q + 20).bytes8(valid)
+            self._long(b, buf, np.arange(n)[m], (q + 20).at, valid, valid)
 
         m = kind == CAN_FD_MESSAGE_64
         if m.any():
+            m = _sel(m)
             q = p[m]
-            chan[m] = _u(buf, q, 1)
-            code = _u(buf, q + 1, 1) & 0x0F
-            valid = np.minimum(_u(buf, q + 2, 1), 64).astype(np.int64)
-            raw = _u(buf, q + 4, 4)
-            fd = _u(buf, q + 12, 4)
-            direction = _u(buf, q + 34, 1)
-            ext_off = _u(buf, q + 35, 1).astype(np.int64)
+            chan[m] = q.u(1)
+            code = (q + 1).u(1) & 0x0F
+            valid = np.minimum((q + 2).u(1), 64).astype(np.int64)
+            raw = (q + 4).u(4)
+            fd = (q + 12).u(4)
+            direction = (q + 34).u(1)
+            ext_off = (q + 35).u(1).astype(np.int64)
             # python-can issue 1905: valid_bytes may exceed the bytes stored; pad with zeros
             room = np.where(ext_off > 0, ext_off, size[m]) - hsize[m] - 40
             stored = np.clip(np.minimum(valid, room), 0, 64)
@@ -273,8 +337,8 @@ class _Records:
                 | np.where(fd & 0x4000, FLAG_ESI, 0)
             )
             b.dlc[m] = np.where(rtr & (valid == 0), _DLC2LEN[code], valid)
-            b.data[m] = _bytes8(buf, q + 40, np.minimum(stored, 8))
-            self._long(b, buf, np.flatnonzero(m), q + 40, stored, valid)
+            b.data[m] = (q + 40).bytes8(np.minimum(stored, 8))
+            self._long(b, buf, np.arange(n)[m], (q + 40).at, stored, valid)
 
         b.channel = self._channel_index(chan)
         b.channels = tuple(self.channels)
@@ -291,6 +355,13 @@ class _Records:
     def _channel_index(self, chan: np.ndarray) -> np.ndarray:
         """Map BLF channel numbers (1-based, as Vector shows them) to stable indices."""
         out = np.zeros(len(chan), np.uint16)
+        if len(chan) and chan.min() == chan.max():  # the usual single-channel log
+            c = int(chan[0])
+            if c not in self._chan:
+                self._chan[c] = len(self.channels)
+                self.channels.append(str(c))
+            out[:] = self._chan[c]
+            return out
         for c in np.unique(chan).tolist():
             idx = self._chan.get(c)
             if idx is None:
