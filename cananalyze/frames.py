@@ -145,13 +145,20 @@ def from_rows(
         chan = row[4] if len(row) > 4 else 0
         if can_id > 0x7FF:
             flags |= FLAG_EXT
-        b.t[i] = t
-        b.can_id[i] = can_id
-        b.flags[i] = flags
-        b.dlc[i] = len(data)
-        b.data[i, : min(8, len(data))] = np.frombuffer(data[:8], np.uint8)
-        if len(data) > 8:
-            b.long_data[i] = data
-        b.channel[i] = chan
-        b.line[i] = i + 1
+        set_row(b, i, t, can_id, flags, data, chan, i + 1)
     return b
+
+
+def set_row(
+    b: FrameBatch, i: int, t: float, can_id: int, flags: int, payload: bytes, chan: int, line: int
+) -> None:
+    """Fill row i of a batch from Python values (rare paths: line parsers, tests, samples)."""
+    b.t[i] = t
+    b.can_id[i] = can_id
+    b.flags[i] = flags
+    b.dlc[i] = len(payload)
+    b.data[i, : min(8, len(payload))] = np.frombuffer(payload[:8], np.uint8)
+    if len(payload) > 8:
+        b.long_data[i] = payload
+    b.channel[i] = chan
+    b.line[i] = line

@@ -68,15 +68,7 @@ class GuardingRule(Rule):
     def _request(self, ctx: Context, node: int, t: float, row: int) -> None:
         sent = self.pending.get(node)
         if sent is not None:
-            self.emit(
-                sent,
-                node,
-                0x700 + node,
-                f"no reply to the guard request at {ctx.rel(sent)}",
-                "no reply",
-                "reply",
-                row=row,
-            )
+            self._no_reply(ctx, node, sent, row)
         prev = self.req_t.get(node)
         cfg = ctx.config.guarding(node, t)
         if prev is not None and cfg:
@@ -109,11 +101,15 @@ class GuardingRule(Rule):
     def finish(self, ctx: Context) -> None:
         for node, sent in self.pending.items():
             if ctx.t_end is not None and ctx.t_end - sent > self.timeout:
-                self.emit(
-                    sent,
-                    node,
-                    0x700 + node,
-                    f"no reply to the guard request at {ctx.rel(sent)}",
-                    "no reply",
-                    "reply",
-                )
+                self._no_reply(ctx, node, sent)
+
+    def _no_reply(self, ctx: Context, node: int, sent: float, row: int = 0) -> None:
+        self.emit(
+            sent,
+            node,
+            0x700 + node,
+            f"no reply to the guard request at {ctx.rel(sent)}",
+            "no reply",
+            "reply",
+            row=row,
+        )

@@ -27,6 +27,7 @@ from ..frames import (
     FLAG_TX,
     FrameBatch,
     concat,
+    set_row,
 )
 from . import candump_fast
 from .registry import LogFormat, ReadContext, register
@@ -357,15 +358,7 @@ class _Builder:
         rows = self.rows
         b = FrameBatch.allocate(len(rows))
         for i, (line_no, t, ch, can_id, flags, payload) in enumerate(rows):
-            b.t[i] = t
-            b.can_id[i] = can_id
-            b.flags[i] = flags
-            b.dlc[i] = len(payload)
-            b.data[i, : min(8, len(payload))] = np.frombuffer(payload[:8], np.uint8)
-            if len(payload) > 8:
-                b.long_data[i] = payload
-            b.channel[i] = chans.get(ch.decode("latin-1"))
-            b.line[i] = line_no
+            set_row(b, i, t, can_id, flags, payload, chans.get(ch.decode("latin-1")), line_no)
         self.rows = []
         return b
 

@@ -75,28 +75,14 @@ class PdoDecoder:
             return
         cols = decode_pdo(fb.data[group], fb.dlc[group], mapping)
         ok = ~cols.short
-        if cols.short.any():
-            have = sorted(set(fb.dlc[group][cols.short].tolist()))
-            batch.row_notes.append(
-                (
-                    group[cols.short],
-                    {
-                        "pdo_problem": f"DLC {','.join(map(str, have))} shorter than the {cols.bytes_needed} bytes "
-                        f"mapped in {binding.kind.upper()}{binding.number}: not decoded"
-                    },
-                )
-            )
-        if cols.extra.any():
-            have = sorted(set(fb.dlc[group][cols.extra].tolist()))
-            batch.row_notes.append(
-                (
-                    group[cols.extra],
-                    {
-                        "pdo_problem": f"DLC {','.join(map(str, have))} longer than the {cols.bytes_needed} bytes "
-                        f"mapped: extra bytes ignored"
-                    },
-                )
-            )
+        for mask, what in (
+            (cols.short, f"shorter than the {cols.bytes_needed} bytes mapped in "
+                         f"{binding.kind.upper()}{binding.number}: not decoded"),
+            (cols.extra, f"longer than the {cols.bytes_needed} bytes mapped: extra bytes ignored"),
+        ):
+            if mask.any():  # one shared note per group of rows, not a dict per row
+                have = ",".join(map(str, sorted(set(fb.dlc[group][mask].tolist()))))
+                batch.row_notes.append((group[mask], {"pdo_problem": f"DLC {have} {what}"}))
         if not ok.any() or not cols.values:
             return
         all_ok = bool(ok.all())
