@@ -46,7 +46,10 @@ def _open(cls, stream: BinaryIO, ctx: ReadContext):
     if issubclass(cls, BinaryIOMessageReader):
         return cls(stream)
     if issubclass(cls, TextIOMessageReader):
-        return cls(io.TextIOWrapper(stream, encoding="latin-1", newline=None))
+        text = io.TextIOWrapper(stream, encoding="latin-1", newline=None)
+        if cls.__name__ == "ASCReader":  # times from the header date, as the ASC reader gives
+            return cls(text, relative_timestamp=False)
+        return cls(text)
     if os.path.isfile(ctx.source):  # SQLite needs a real file
         return cls(ctx.source)
     raise ValueError(f"python-can's {cls.__name__} needs a file on disk")
