@@ -23,6 +23,7 @@ from ..decoded import DecodedBatch
 from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from ..protocol.fields import annotation, frame_fields
 from ..protocol.services import SERVICE_NAMES, Service
+from .numtext import value_text
 
 _HEX3 = [f"{i:02X} " for i in range(256)]
 
@@ -272,15 +273,24 @@ class TextWriter:
         node_col[:, 2] = np.where(has, 48 + nd % 10, 32)
         parts.append(node_col)
 
-        # annotation: keyed rows from a table, the rest per row in Python
+        # annotation: keyed rows from a table, PDO signal rows formatted per
+        # column, other rows' text built in Python and scattered in, rows with
+        # records spliced in after the compaction
+        end = (_RESET if self.color else "") + "\n"
+        endb = end.encode()
         noted = np.zeros(n, bool)
-        if batch.notes:
+        notes = batch.notes
+        if notes:
             noted_rows = np.zeros(len(fb), bool)
-            noted_rows[np.fromiter(batch.notes, np.int64, len(batch.notes))] = True
+            noted_rows[np.fromiter(notes, np.int64, len(notes))] = True
             noted = noted_rows[sel]
-        lazy = batch._lazy_index()  # rows with PDO signals or shared notes: annotated per row
+            notes = dict(notes)  # realised once; plain dict lookups below
+        lazy = batch._lazy_index()  # rows with PDO signals or shared notes
+        in_block = shared = None
         if lazy is not None:
-            noted = noted | (lazy[0][sel] >= 0) | (lazy[2][sel] >= 0)
+            in_block = lazy[0][sel]
+            shared = lazy[2][sel]
+            noted = noted | (in_block >= 0) | (shared >= 0)
         with_records = np.zeros(n, bool)
         if by_row:
             rec_rows = np.zeros(len(fb), bool)
@@ -295,7 +305,6 @@ class TextWriter:
         key = np.where(keyed, key, -1)
         uniq, first_at, inv = np.unique(key, return_index=True, return_inverse=True)
         texts: list[bytes] = []
-        end = (_RESET if self.color else "") + "\n"
         for k, i in zip(uniq.tolist(), first_at.tolist(), strict=True):
             if k < 0:
                 texts.append(b"")
@@ -304,41 +313,158 @@ class TextWriter:
             texts.append(
                 (annotation(int(svc[i]), int(node[i]), int(pdo[i]), f, bool(rtr[i])) + end).encode()
             )
-        parts.append(_padded_table(texts)[inv.reshape(-1)])
+        ann = [(np.arange(n), _padded_table(texts)[inv.reshape(-1)])]
+        done = keyed.copy()
+        if in_block is not None:
+            free = ~with_records & (in_block >= 0)
+            if notes:
+                free &= ~noted_rows[sel]
+            for k, sb in enumerate(batch.signals):
+                placed = _signal_text(batch, k, sb, sel, free & (in_block == k), shared, endb)
+                if placed is not None:
+                    ann.append(placed)
+                    done[placed[0]] = True
+        # every other row without records: its text from Python, scattered in
+        spliced: dict[int, bytes] = {}
+        per_row = np.flatnonzero(~done & ~with_records)
+        if per_row.size:
+            is_sdo = ((svc == Service.SDO_REQUEST) | (svc == Service.SDO_RESPONSE))[
+                per_row
+            ].tolist()
+            chunks = []
+            for i, row, sdo in zip(per_row.tolist(), sel[per_row].tolist(), is_sdo, strict=True):
+                note = notes.get(row) if sdo else None
+                role = note.get("role") if note else None
+                if role:  # what `annotation` says for a frame the SDO tracker placed
+                    chunks.append("SDO " + role + end)
+                else:
+                    rtr_i = bool(flags[i] & FLAG_RTR)
+                    f = batch.fields(row)
+                    chunks.append(
+                        annotation(int(svc[i]), int(node[i]), int(pdo[i]), f, rtr_i) + end
+                    )
+            encoded = [c.encode() for c in chunks]
+            with_nul = [j for j, c in enumerate(encoded) if b"\0" in c]
+            for j in with_nul:  # NULs are the padding: splice these rows in after compaction
+                spliced[int(per_row[j])] = encoded[j]
+                encoded[j] = b""
+            ann.append(_ragged(per_row, encoded))
+        width = max(m.shape[1] for _, m in ann)
+        ann_col = np.zeros((n, width), np.uint8)
+        for rows, m in ann:
+            ann_col[rows, : m.shape[1]] = m
+        parts.append(ann_col)
 
         matrix = np.concatenate(parts, axis=1)
         keep = matrix != _PAD
         blob = matrix[keep].tobytes()
-        slow = np.flatnonzero(~keyed)
+        if spliced:
+            with_records[list(spliced)] = True
+        slow = np.flatnonzero(with_records)
         if slow.size == 0 and not tail_lines:
             return blob
         ends = np.cumsum(keep.sum(axis=1))
         pieces: list[bytes] = []
         prev = 0
-        notes = batch.notes
         is_sdo = ((svc == Service.SDO_REQUEST) | (svc == Service.SDO_RESPONSE))[slow].tolist()
         for i, e, row, sdo in zip(
             slow.tolist(), ends[slow].tolist(), sel[slow].tolist(), is_sdo, strict=True
         ):
-            role = notes[row].get("role") if sdo and row in notes else None
-            if role:  # what `annotation` says for a frame the SDO tracker placed
+            pieces.append(blob[prev:e])
+            prev = e
+            if i in spliced:
+                pieces.append(spliced[i])
+                continue
+            note = notes.get(row) if sdo else None
+            role = note.get("role") if note else None
+            if role:
                 text = "SDO " + role
             else:
                 rtr_i = bool(flags[i] & FLAG_RTR)
                 text = annotation(int(svc[i]), int(node[i]), int(pdo[i]), batch.fields(row), rtr_i)
-            recs = by_row.get(row)
-            if recs:
-                text += end + "".join("    └─ " + format_record(rec) + "\n" for rec in recs)
-                pieces.append(blob[prev:e])
-                pieces.append(text.encode())
-            else:
-                pieces.append(blob[prev:e])
-                pieces.append((text + end).encode())
-            prev = e
+            text += end + "".join("    └─ " + format_record(rec) + "\n" for rec in by_row[row])
+            pieces.append(text.encode())
         pieces.append(blob[prev:])
         if tail_lines:
             pieces.append(("\n".join(tail_lines) + "\n").encode())
         return b"".join(pieces)
+
+
+def _ragged(rows: np.ndarray, texts: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, NUL-padded matrix) holding one bytes string per row, without a loop."""
+    lengths = np.fromiter(map(len, texts), np.int64, len(texts))
+    width = int(lengths.max()) if lengths.size else 0
+    flat = np.frombuffer(b"".join(texts), np.uint8)
+    out = np.zeros((len(texts), width), np.uint8)
+    out[np.arange(width)[None, :] < lengths[:, None]] = flat
+    return rows, out
+
+
+def _signal_text(
+    batch: DecodedBatch,
+    k: int,
+    sb,
+    sel: np.ndarray,
+    take: np.ndarray,
+    shared: np.ndarray,
+    endb: bytes,
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The annotation of the printed rows of signal block k, one column at a time.
+
+    `take` marks positions (in the printed rows) whose text is `annotation` of the
+    block's values alone, plus at most a shared `pdo_problem`; None when the block
+    has no such rows or looks unusual (then the rows go the per-row way).
+    """
+    at = np.flatnonzero(take)
+    if at.size == 0:
+        return None
+    rows = sel[at]
+    fb = batch.frames
+    svc = batch.service[rows]
+    pdo = batch.pdo[rows]
+    if (svc != svc[0]).any() or (pdo != pdo[0]).any() or (fb.flags[rows] & FLAG_RTR).any():
+        return None
+    if int(svc[0]) not in (Service.TPDO, Service.RPDO):
+        return None
+    pos = batch._lazy_index()[1][rows]
+    kind = "TPDO" if int(svc[0]) == Service.TPDO else "RPDO"
+    parts: list[np.ndarray] = []
+    m = rows.size
+
+    def const(text: str) -> None:
+        b = text.encode()
+        if b:
+            parts.append(np.broadcast_to(np.frombuffer(b, np.uint8), (m, len(b))))
+
+    units = {name: u for name, u in sb.units.items() if u}
+    if any("\0" in x for x in (*sb.columns, *units.values())):
+        return None  # NULs are the padding: such text goes the per-row way
+    lead = f"{kind}{int(pdo[0])}  "
+    for j, (name, col) in enumerate(sb.columns.items()):
+        const((lead if j == 0 else " ") + f"{name}=")
+        parts.append(value_text(col[pos]))
+        if units.get(name):
+            const(f" {units[name]}")
+    if not sb.columns:
+        return None
+    # shared notes: only a pdo_problem is known to print as a plain suffix
+    sh = shared[at]
+    problems = np.zeros(m, np.intp)
+    table = [b""]
+    for s in np.unique(sh[sh >= 0]).tolist():
+        note = batch.row_notes[s][1]
+        if set(note) != {"pdo_problem"}:
+            return None
+        text = f"  [{note['pdo_problem']}]" if note["pdo_problem"] else ""
+        if "\0" in text:
+            return None
+        table.append(text.encode())
+        problems[sh == s] = len(table) - 1
+    if len(table) > 1:
+        parts.append(_padded_table(table)[problems])
+    const(endb.decode())
+    block = np.concatenate(parts, axis=1)
+    return at, block
 
 
 def lines_per_row(
