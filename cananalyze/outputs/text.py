@@ -15,6 +15,8 @@ reference the fast writer is tested against.
 
 from __future__ import annotations
 
+import queue
+import threading
 from typing import TextIO
 
 import numpy as np
@@ -83,6 +85,7 @@ def format_record(rec: dict) -> str:
 
 _PAD = 0
 _HEXCHARS = np.frombuffer(b"0123456789ABCDEF", np.uint8)
+_HEXLOWER = np.frombuffer(b"0123456789abcdef", np.uint8)  # bytes.hex()
 _SVC_COL = np.array([list(f"{name:<14} ".encode()) for name in SERVICE_NAMES], np.uint8)
 # Services whose annotation is a function of (service, pdo, rtr, first byte or none).
 _KEYED = np.zeros(256, bool)
@@ -164,19 +167,69 @@ def _time_column(rel: np.ndarray) -> np.ndarray:
 
 
 class TextWriter:
+    """Writes decoded batches as text lines.
+
+    With `background=True` the lines of a batch are built and written by a
+    worker thread while the caller decodes the next batch (numpy and file
+    writes release the GIL); `close()` waits for it and raises what it raised.
+    """
+
     def __init__(
-        self, out: TextIO, color: bool = False, t0: float | None = None, only_records: bool = False
+        self,
+        out: TextIO,
+        color: bool = False,
+        t0: float | None = None,
+        only_records: bool = False,
+        background: bool = False,
     ) -> None:
         self.out = out
         self.color = color
         self.t0 = t0
         self.only_records = only_records
+        self._queue: queue.Queue | None = None
+        self._worker: threading.Thread | None = None
+        self._error: BaseException | None = None
+        if background:
+            self._queue = queue.Queue(maxsize=2)
+            self._worker = threading.Thread(target=self._work, name="text-writer", daemon=True)
+            self._worker.start()
 
     def write(self, batch: DecodedBatch, mask: np.ndarray | None = None) -> None:
         fb = batch.frames
         if self.t0 is None and len(fb):
             self.t0 = float(fb.t[0])
         t0 = self.t0 or 0.0
+        if self._queue is None:
+            self._write(batch, mask, t0)
+            return
+        if self._error is not None:
+            self.close()
+        self._queue.put((batch, mask, t0))
+
+    def close(self) -> None:
+        """Wait for the worker, if any; re-raise its error here."""
+        if self._worker is not None:
+            if self._worker.is_alive():
+                self._queue.put(None)
+                self._worker.join()
+            self._worker = None
+        if self._error is not None:
+            error, self._error = self._error, None
+            raise error
+
+    def _work(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is None:
+                return
+            if self._error is None:  # after an error, drain so the caller never blocks
+                try:
+                    self._write(*item)
+                except BaseException as exc:  # noqa: BLE001 - re-raised by close()
+                    self._error = exc
+
+    def _write(self, batch: DecodedBatch, mask: np.ndarray | None, t0: float) -> None:
+        fb = batch.frames
         if self.only_records or not len(fb) or not self._columnar_ok(batch):
             lines = lines_per_row(batch, mask, t0, self.color, self.only_records)
             if lines:
@@ -280,11 +333,11 @@ class TextWriter:
         endb = end.encode()
         noted = np.zeros(n, bool)
         notes = batch.notes
-        if notes:
+        if len(notes):  # realises lazy notes once
             noted_rows = np.zeros(len(fb), bool)
-            noted_rows[np.fromiter(notes, np.int64, len(notes))] = True
+            noted_rows[np.fromiter(dict.keys(notes), np.int64, len(notes))] = True
             noted = noted_rows[sel]
-            notes = dict(notes)  # realised once; plain dict lookups below
+            notes = dict.copy(notes)  # realised above (len); plain dict lookups below
         lazy = batch._lazy_index()  # rows with PDO signals or shared notes
         in_block = shared = None
         if lazy is not None:
@@ -324,6 +377,10 @@ class TextWriter:
                 if placed is not None:
                     ann.append(placed)
                     done[placed[0]] = True
+        emcy = np.flatnonzero(~done & ~noted & ~with_records & (svc == Service.EMCY) & (dlc >= 3))
+        if emcy.size:
+            ann.append(_emcy_text(data[emcy], dlc[emcy], emcy, endb))
+            done[emcy] = True
         # every other row without records: its text from Python, scattered in
         spliced: dict[int, bytes] = {}
         per_row = np.flatnonzero(~done & ~with_records)
@@ -398,6 +455,40 @@ def _ragged(rows: np.ndarray, texts: list[bytes]) -> tuple[np.ndarray, np.ndarra
     out = np.zeros((len(texts), width), np.uint8)
     out[np.arange(width)[None, :] < lengths[:, None]] = flat
     return rows, out
+
+
+def _emcy_text(
+    data: np.ndarray, dlc: np.ndarray, at: np.ndarray, endb: bytes
+) -> tuple[np.ndarray, np.ndarray]:
+    """The annotation of EMCY rows without notes: `annotation` per (code, register), bytes in hex.
+
+    The text up to "mfr " comes from `annotation` of the first three bytes, once
+    per distinct code and register; the manufacturer bytes follow in hex.
+    """
+    code = data[:, 0].astype(np.int64) | data[:, 1].astype(np.int64) << 8
+    key = code << 8 | data[:, 2]
+    uniq, inv = np.unique(key, return_inverse=True)
+    heads: list[bytes] = []
+    with_mfr = np.zeros(uniq.size, bool)
+    for j, k in enumerate(uniq.tolist()):
+        three = bytes([k >> 8 & 0xFF, k >> 16, k & 0xFF])
+        text = annotation(Service.EMCY, -1, 0, frame_fields(Service.EMCY, three))
+        if text.endswith("; mfr -"):
+            text = text[:-1]
+            with_mfr[j] = True
+        heads.append(text.encode())
+    inv = inv.reshape(-1)
+    m = at.size
+    mfr = np.zeros((m, 10), np.uint8)
+    n_mfr = np.minimum(dlc.astype(np.int64), 8) - 3
+    for j in range(5):
+        there = j < n_mfr
+        mfr[:, 2 * j] = np.where(there, _HEXLOWER[data[:, 3 + j] >> 4], _PAD)
+        mfr[:, 2 * j + 1] = np.where(there, _HEXLOWER[data[:, 3 + j] & 0xF], _PAD)
+    mfr[:, 0] = np.where(n_mfr == 0, ord("-"), mfr[:, 0])
+    mfr[~with_mfr[inv]] = _PAD
+    end = np.broadcast_to(np.frombuffer(endb, np.uint8), (m, len(endb)))
+    return at, np.concatenate([_padded_table(heads)[inv], mfr, end], axis=1)
 
 
 def _signal_text(
