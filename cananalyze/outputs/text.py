@@ -169,9 +169,12 @@ def _time_column(rel: np.ndarray) -> np.ndarray:
 class TextWriter:
     """Writes decoded batches as text lines.
 
-    With `background=True` the lines of a batch are built and written by a
-    worker thread while the caller decodes the next batch (numpy and file
-    writes release the GIL); `close()` waits for it and raises what it raised.
+    With `background=True` and a UTF-8 text file with a binary buffer under it,
+    the finished bytes of each batch are written by a worker thread while the
+    caller decodes the next batch (the write releases the GIL; building lines,
+    which is numpy plus some Python, stays in the caller: a thread that often
+    releases and re-takes the GIL would wait on the decoder every time).
+    `close()` waits for the worker and raises what it raised.
     """
 
     def __init__(
@@ -189,7 +192,8 @@ class TextWriter:
         self._queue: queue.Queue | None = None
         self._worker: threading.Thread | None = None
         self._error: BaseException | None = None
-        if background:
+        if background and self._buffer() is not None:
+            self.out.flush()
             self._queue = queue.Queue(maxsize=2)
             self._worker = threading.Thread(target=self._work, name="text-writer", daemon=True)
             self._worker.start()
@@ -199,12 +203,22 @@ class TextWriter:
         if self.t0 is None and len(fb):
             self.t0 = float(fb.t[0])
         t0 = self.t0 or 0.0
+        if self.only_records or not len(fb) or not self._columnar_ok(batch):
+            lines = lines_per_row(batch, mask, t0, self.color, self.only_records)
+            if not lines:
+                return
+            if self._queue is None:
+                self.out.write("\n".join(lines) + "\n")
+                return
+            data = ("\n".join(lines) + "\n").encode("utf-8")
+        else:
+            data = self._render(batch, mask, t0)
         if self._queue is None:
-            self._write(batch, mask, t0)
+            self._emit(data)
             return
         if self._error is not None:
             self.close()
-        self._queue.put((batch, mask, t0))
+        self._queue.put(data)
 
     def close(self) -> None:
         """Wait for the worker, if any; re-raise its error here."""
@@ -213,36 +227,36 @@ class TextWriter:
                 self._queue.put(None)
                 self._worker.join()
             self._worker = None
+            self._queue = None
         if self._error is not None:
             error, self._error = self._error, None
             raise error
 
     def _work(self) -> None:
+        buffer = self._buffer()
         while True:
-            item = self._queue.get()
-            if item is None:
+            data = self._queue.get()
+            if data is None:
                 return
             if self._error is None:  # after an error, drain so the caller never blocks
                 try:
-                    self._write(*item)
+                    buffer.write(data)
                 except BaseException as exc:  # noqa: BLE001 - re-raised by close()
                     self._error = exc
 
-    def _write(self, batch: DecodedBatch, mask: np.ndarray | None, t0: float) -> None:
-        fb = batch.frames
-        if self.only_records or not len(fb) or not self._columnar_ok(batch):
-            lines = lines_per_row(batch, mask, t0, self.color, self.only_records)
-            if lines:
-                self.out.write("\n".join(lines) + "\n")
-            return
-        self._emit(self._render(batch, mask, t0))
-
-    def _emit(self, data: bytes) -> None:
+    def _buffer(self):
+        """The binary buffer under a UTF-8 text stream, else None."""
         buffer = getattr(self.out, "buffer", None)
         if (
             buffer is not None
             and getattr(self.out, "encoding", "").lower().replace("-", "") == "utf8"
         ):
+            return buffer
+        return None
+
+    def _emit(self, data: bytes) -> None:
+        buffer = self._buffer()
+        if buffer is not None:
             self.out.flush()
             buffer.write(data)
         else:
