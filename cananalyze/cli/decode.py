@@ -127,7 +127,7 @@ def _decode_to(out, args: argparse.Namespace, source, decoder, timing, services,
         from ..outputs.text import TextWriter
 
         color = out.isatty() and not args.no_color
-        # lines are built and written in a thread while the next batch decodes
+        # finished lines are written by a thread while the next batch decodes
         writer = TextWriter(out, color=color, only_records=only_records, background=not args.summary)
     collector = timeline_collector(args)
     t0 = None

@@ -25,7 +25,8 @@ from ..decoded import DecodedBatch
 from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from ..protocol.fields import annotation, frame_fields
 from ..protocol.services import SERVICE_NAMES, Service
-from .numtext import value_text
+from ..protocol.tables import emcy_class, error_register_names
+from .numtext import g6_text, value_text
 
 _HEX3 = [f"{i:02X} " for i in range(256)]
 
@@ -386,11 +387,13 @@ class TextWriter:
             free = ~with_records & (in_block >= 0)
             if notes:
                 free &= ~noted_rows[sel]
+            plans = []
             for k, sb in enumerate(batch.signals):
-                placed = _signal_text(batch, k, sb, sel, free & (in_block == k), shared, endb)
-                if placed is not None:
-                    ann.append(placed)
-                    done[placed[0]] = True
+                plan = _signal_text(batch, k, sb, sel, free & (in_block == k), shared, endb)
+                if plan is not None:
+                    plans.append(plan)
+                    done[plan[0]] = True
+            ann += _format_plans(plans)
         emcy = np.flatnonzero(~done & ~noted & ~with_records & (svc == Service.EMCY) & (dlc >= 3))
         if emcy.size:
             ann.append(_emcy_text(data[emcy], dlc[emcy], emcy, endb))
@@ -474,25 +477,25 @@ def _ragged(rows: np.ndarray, texts: list[bytes]) -> tuple[np.ndarray, np.ndarra
 def _emcy_text(
     data: np.ndarray, dlc: np.ndarray, at: np.ndarray, endb: bytes
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The annotation of EMCY rows without notes: `annotation` per (code, register), bytes in hex.
+    """The annotation of EMCY rows without notes, as `annotation` writes it, per column.
 
-    The text up to "mfr " comes from `annotation` of the first three bytes, once
-    per distinct code and register; the manufacturer bytes follow in hex.
+    The error class is looked up once per distinct code, the register bit names
+    once per distinct register value; an error reset (code 0) is `annotation`'s
+    own text. Vendor bytes are `bytes.hex()`, "-" when there are none.
     """
-    code = data[:, 0].astype(np.int64) | data[:, 1].astype(np.int64) << 8
-    key = code << 8 | data[:, 2]
-    uniq, inv = np.unique(key, return_inverse=True)
-    heads: list[bytes] = []
-    with_mfr = np.zeros(uniq.size, bool)
-    for j, k in enumerate(uniq.tolist()):
-        three = bytes([k >> 8 & 0xFF, k >> 16, k & 0xFF])
-        text = annotation(Service.EMCY, -1, 0, frame_fields(Service.EMCY, three))
-        if text.endswith("; mfr -"):
-            text = text[:-1]
-            with_mfr[j] = True
-        heads.append(text.encode())
-    inv = inv.reshape(-1)
     m = at.size
+    code = data[:, 0].astype(np.int64) | data[:, 1].astype(np.int64) << 8
+    reg = data[:, 2]
+    codes, code_inv = np.unique(code, return_inverse=True)
+    classes = [f" {emcy_class(c)}; register 0x".encode() for c in codes.tolist()]
+    regs, reg_inv = np.unique(reg, return_inverse=True)
+    reg_names = [
+        f"{r:02X} [{','.join(error_register_names(r)) or 'none'}]; mfr ".encode()
+        for r in regs.tolist()
+    ]
+    code_hex = np.empty((m, 4), np.uint8)
+    for j in range(4):
+        code_hex[:, j] = _HEXCHARS[(code >> (4 * (3 - j))) & 0xF]
     mfr = np.zeros((m, 10), np.uint8)
     n_mfr = np.minimum(dlc.astype(np.int64), 8) - 3
     for j in range(5):
@@ -500,9 +503,23 @@ def _emcy_text(
         mfr[:, 2 * j] = np.where(there, _HEXLOWER[data[:, 3 + j] >> 4], _PAD)
         mfr[:, 2 * j + 1] = np.where(there, _HEXLOWER[data[:, 3 + j] & 0xF], _PAD)
     mfr[:, 0] = np.where(n_mfr == 0, ord("-"), mfr[:, 0])
-    mfr[~with_mfr[inv]] = _PAD
-    end = np.broadcast_to(np.frombuffer(endb, np.uint8), (m, len(endb)))
-    return at, np.concatenate([_padded_table(heads)[inv], mfr, end], axis=1)
+    block = np.concatenate(
+        [
+            np.broadcast_to(np.frombuffer(b"EMCY 0x", np.uint8), (m, 7)),
+            code_hex,
+            _padded_table(classes)[code_inv.reshape(-1)],
+            _padded_table(reg_names)[reg_inv.reshape(-1)],
+            mfr,
+            np.broadcast_to(np.frombuffer(endb, np.uint8), (m, len(endb))),
+        ],
+        axis=1,
+    )
+    reset = np.flatnonzero(code == 0)
+    if reset.size:
+        text = annotation(Service.EMCY, -1, 0, frame_fields(Service.EMCY, bytes(3))).encode() + endb
+        block[reset] = _PAD
+        block[reset, : len(text)] = np.frombuffer(text, np.uint8)
+    return at, block
 
 
 def _signal_text(
@@ -513,8 +530,11 @@ def _signal_text(
     take: np.ndarray,
     shared: np.ndarray,
     endb: bytes,
-) -> tuple[np.ndarray, np.ndarray] | None:
-    """The annotation of the printed rows of signal block k, one column at a time.
+) -> tuple[np.ndarray, list] | None:
+    """The annotation of the printed rows of signal block k, as parts to concatenate.
+
+    Parts are byte matrices, or 1-tuples of a value column still to be formatted
+    (`_format_plans`, so that all float columns of a batch are formatted at once).
 
     `take` marks positions (in the printed rows) whose text is `annotation` of the
     block's values alone, plus at most a shared `pdo_problem`; None when the block
@@ -547,7 +567,7 @@ def _signal_text(
     lead = f"{kind}{int(pdo[0])}  "
     for j, (name, col) in enumerate(sb.columns.items()):
         const((lead if j == 0 else " ") + f"{name}=")
-        parts.append(value_text(col[pos]))
+        parts.append((col[pos],))  # formatted with every block's columns at once
         if units.get(name):
             const(f" {units[name]}")
     if not sb.columns:
@@ -568,8 +588,28 @@ def _signal_text(
     if len(table) > 1:
         parts.append(_padded_table(table)[problems])
     const(endb.decode())
-    block = np.concatenate(parts, axis=1)
-    return at, block
+    return at, parts
+
+
+def _format_plans(plans: list) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Fill in the value columns of `_signal_text` plans: all float columns in one call."""
+    floats = [
+        p[0] for _, parts in plans for p in parts if type(p) is tuple and p[0].dtype.kind == "f"
+    ]
+    texts = iter(())
+    if floats:
+        sizes = np.cumsum([f.size for f in floats])[:-1]
+        texts = iter(np.split(g6_text(np.concatenate(floats)), sizes))
+    out = []
+    for at, parts in plans:
+        filled = []
+        for p in parts:
+            if type(p) is tuple:
+                filled.append(next(texts) if p[0].dtype.kind == "f" else value_text(p[0]))
+            else:
+                filled.append(p)
+        out.append((at, np.concatenate(filled, axis=1)))
+    return out
 
 
 def lines_per_row(
