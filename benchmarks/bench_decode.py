@@ -1,23 +1,25 @@
-"""Every performance target of issue 10 in one command, ratios first.
+"""Every performance figure of issue 10 in one command, ratios first.
 
-Each measurement is a fresh `python -m cananalyze` process (whole-process wall
-time and peak RSS), repeated `--repeat` times, best kept: other work on the
-machine only ever makes a run slower. python-can's `LogReader` iterates the same
-file in the same run, so the ratio does not depend on how busy the machine is.
+    python benchmarks/bench_decode.py                 # the issue's 10M-frame logs (~10 min)
+    python benchmarks/bench_decode.py --quick         # 1M frames (~2 min)
+    python benchmarks/bench_decode.py --flat 50e6     # flatness 5M vs 50M (a 2.1 GB candump)
 
-    python benchmarks/bench_decode.py                      # 1M frames, candump/ASC/BLF
-    python benchmarks/bench_decode.py --sizes 1e6,10e6     # + peak RSS at 10M (candump)
-    python benchmarks/bench_decode.py --sizes 1e6,10e6,50e6 --formats .log
-
-Reported: decode --summary frames/s per format and the python-can ratio; text
-output lines/s (`decode -o FILE`); `check` overhead when that sub-command
-exists; peak RSS per size; `cananalyze --help` start-up time.
+Each figure is a fresh `python -m cananalyze ...` process (whole-process wall
+time, CPU time and peak RSS from wait4), the best of `--repeat` runs: other work
+on the machine only ever makes a run slower. python-can's `LogReader` iterates
+the same files in the same run, so the ratio hardly depends on the machine.
+The headline command is the issue's "decoded tables written as Parquet":
+`cananalyze export LOG --parquet DIR --device N=dat7014 (N=1..16) -q`, so PDOs
+are decoded into signals. Logs come from benchmarks/generate.py and are kept
+in --out (default benchmarks/out, git-ignored) for the next run; --clean
+deletes the ones this run generated.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -26,121 +28,280 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-OUT = HERE / "out"
-TARGETS = {".log": 3e6, ".asc": 2e6, ".blf": 3e6}
+FRAMES_TARGET = {".log": 3e6, ".asc": 2e6, ".blf": 3e6}
+DEVICES = [arg for k in range(1, 17) for arg in ("--device", f"{k}=dat7014")]
+CLI = [sys.executable, "-m", "cananalyze"]
+PYCAN = """
+import itertools, sys, time
+t0 = time.perf_counter()
+import can
+reader = can.LogReader(sys.argv[1])
+t1 = time.perf_counter()
+limit = int(sys.argv[2])
+n = 0
+for _ in (itertools.islice(reader, limit) if limit else reader):
+    n += 1
+print(t1 - t0, time.perf_counter() - t1, n)
+"""
 
 
-def run_process(cmd: list[str]) -> tuple[float, float, int]:
-    """Wall seconds, peak RSS (MB) and exit code of a child process."""
-    t = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT)
-    _, status, usage = os.wait4(proc.pid, 0)
-    return time.perf_counter() - t, usage.ru_maxrss / 1024, os.waitstatus_to_exitcode(status)
+class Run:
+    """Best wall and CPU seconds, highest peak RSS (MB) of repeated runs of one command."""
+
+    def __init__(self, cmd: list[str], repeat: int, ok: tuple[int, ...] = (0,)) -> None:
+        self.wall = self.cpu = float("inf")
+        self.mb = 0.0
+        for _ in range(repeat):
+            t = time.perf_counter()
+            proc = subprocess.Popen(
+                cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT
+            )
+            _, status, usage = os.wait4(proc.pid, 0)
+            wall = time.perf_counter() - t
+            if os.waitstatus_to_exitcode(status) not in ok:
+                raise SystemExit(f"failed ({os.waitstatus_to_exitcode(status)}): {' '.join(cmd)}")
+            self.wall = min(self.wall, wall)
+            self.cpu = min(self.cpu, usage.ru_utime + usage.ru_stime)
+            self.mb = max(self.mb, usage.ru_maxrss / 1024)
 
 
-def best(cmd: list[str], repeat: int, ok=(0,)) -> tuple[float, float]:
-    runs = []
-    for _ in range(repeat):
-        wall, mb, code = run_process(cmd)
-        if code not in ok:
-            raise SystemExit(f"failed ({code}): {' '.join(cmd)}")
-        runs.append((wall, mb))
-    return min(r[0] for r in runs), max(r[1] for r in runs)
-
-
-def pycan_iterate(path: Path, repeat: int) -> float:
-    code = "import can,sys\nfor m in can.LogReader(sys.argv[1]): pass\n"
-    return best([sys.executable, "-c", code, str(path)], repeat)[0]
-
-
-def has_check() -> bool:
-    out = subprocess.run(
-        [sys.executable, "-m", "cananalyze", "check", "--help"],
-        capture_output=True,
-        cwd=ROOT,
-        check=False,
-    )
-    return out.returncode == 0
-
-
-def ensure(n: int, suffixes: list[str]) -> Path:
-    stem = OUT / f"bench_{n}"
+def ensure(out: Path, n: int, suffixes: list[str], made: list[Path]) -> Path:
+    """The generator's n-frame logs, generated when missing (the time it took is printed)."""
+    stem = out / f"bench_{n}"
     missing = [s for s in suffixes if not stem.with_suffix(s).exists()]
     if missing:
-        print(f"generating {n} frames: {','.join(missing)} ...", file=sys.stderr)
+        t = time.perf_counter()
+        print(f"generating {n:,} frames as {','.join(missing)} in {out} ...", flush=True)
         subprocess.run(
             [sys.executable, str(HERE / "generate.py"), str(n), str(stem), ",".join(missing)],
             check=True,
+            stdout=subprocess.DEVNULL,
         )
+        made += [stem.with_suffix(s) for s in missing]
+        print(f"  took {time.perf_counter() - t:.1f} s", flush=True)
     return stem
+
+
+def pycan_seconds(path: Path, n: int, prefix: int, repeat: int) -> tuple[float, str]:
+    """python-can LogReader's whole-process time over the file; scaled from a prefix if asked."""
+    limit = prefix if 0 < prefix < n else 0
+    best = float("inf")
+    for _ in range(repeat):
+        t = time.perf_counter()
+        out = subprocess.run(
+            [sys.executable, "-c", PYCAN, str(path), str(limit)],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        wall = time.perf_counter() - t
+        setup, loop, count = out.stdout.split()
+        if limit:  # start-up as measured, the loop scaled to the whole file
+            wall = wall - float(loop) + float(loop) * n / int(count)
+        best = min(best, wall)
+    how = f"first {limit / 1e6:g}M frames, scaled x{n / limit:g}" if limit else "whole file"
+    return best, how
+
+
+def mark(ok: bool) -> str:
+    return "ok" if ok else "BELOW"
 
 
 def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--size", type=float, default=10e6, help="frames per log (default 10e6)")
+    ap.add_argument("--quick", action="store_true", help="1M-frame logs (a few minutes)")
+    ap.add_argument("--formats", default=".log,.asc,.blf", help="log formats (default all three)")
+    ap.add_argument("--repeat", type=int, default=3, help="runs per figure, best kept")
     ap.add_argument(
-        "--sizes", default="1e6", help="frame counts, comma separated (first: formats and text)"
+        "--pycan-prefix",
+        type=float,
+        default=1e6,
+        help="time python-can on the first N frames and scale (0: whole file; default 1e6)",
     )
     ap.add_argument(
-        "--formats", default=".log,.asc,.blf", help="log formats for the throughput runs"
+        "--flat",
+        type=float,
+        default=0,
+        help="also peak RSS at this size (e.g. 50e6, a 2.1 GB candump) vs 5M",
     )
-    ap.add_argument("--repeat", type=int, default=3, help="runs per measurement, best kept")
+    ap.add_argument("--out", type=Path, default=HERE / "out", help="where logs are generated")
+    ap.add_argument("--clean", action="store_true", help="delete the logs this run generated")
     args = ap.parse_args(argv)
-    sizes = [int(float(x)) for x in args.sizes.split(",")]
+    n = int(1e6 if args.quick else args.size)
     formats = args.formats.split(",")
-    n = sizes[0]
-    stem = ensure(n, formats)
-    cli = [sys.executable, "-m", "cananalyze"]
-    results = []
-    for suffix in formats:
-        path = stem.with_suffix(suffix)
-        summ_s, summ_mb = best(cli + ["decode", str(path), "--summary"], args.repeat)
-        pc_s = pycan_iterate(path, max(1, args.repeat - 1))
-        results.append((suffix, summ_s, summ_mb, pc_s))
-    with tempfile.TemporaryDirectory() as tmp:
-        text_path = stem.with_suffix(formats[0])
-        text_s, text_mb = best(
-            cli + ["decode", str(text_path), "-o", str(Path(tmp) / "out.txt")], args.repeat
-        )
-        lines = sum(1 for _ in open(Path(tmp) / "out.txt", "rb"))
-    check = None
-    if has_check():
-        check_s, _ = best(
-            cli + ["check", str(stem.with_suffix(formats[0]))], args.repeat, ok=(0, 1)
-        )
-        check = check_s / results[0][1]
-    rss = []
-    for size in sizes:
-        s = ensure(size, [".log"]).with_suffix(".log")
-        wall, mb = best(cli + ["decode", str(s), "--summary"], 1)
-        rss.append((size, wall, mb))
-    help_s, _ = best(cli + ["--help"], max(5, args.repeat))
-
-    print(f"{n} frames, {os.cpu_count()} cores, best of {args.repeat}")
-    print("ratio python-can LogReader / cananalyze decode --summary (target >= 20x):")
-    for suffix, summ_s, _, pc_s in results:
-        print(f"  {suffix:5} {pc_s / summ_s:6.1f}x")
-    print("decode --summary, whole process:")
-    for suffix, summ_s, summ_mb, pc_s in results:
-        rate = n / summ_s
-        mark = (
-            "ok" if rate >= TARGETS.get(suffix, 0) else f"below {TARGETS.get(suffix, 0) / 1e6:g}M"
-        )
-        print(
-            f"  {suffix:5} {rate / 1e6:6.2f}M frames/s {summ_s:6.2f} s {summ_mb:5.0f} MB"
-            f"   python-can {n / pc_s / 1e3:5.0f}k frames/s {pc_s:6.2f} s   [{mark}]"
-        )
+    args.out.mkdir(parents=True, exist_ok=True)
+    made: list[Path] = []
+    load0 = os.getloadavg()
+    try:
+        rows = measure(args, n, formats, made)
+    finally:
+        if args.clean:
+            for p in made:
+                p.unlink(missing_ok=True)
+    load1 = os.getloadavg()
+    print()
     print(
-        f"text output ({formats[0]} -> file): {lines / text_s / 1e6:.2f}M lines/s, {text_s:.2f} s, {text_mb:.0f} MB"
+        f"machine: {os.cpu_count()} cores, load average {load0[0]:.2f} before, "
+        f"{load1[0]:.2f} after; best of {args.repeat}; {n:,}-frame logs"
     )
-    if check is None:
-        print("check overhead: skipped (no `cananalyze check` in this build)")
-    else:
-        print(f"check overhead: {check:.2f}x the time of decode --summary")
-    print("peak RSS, decode --summary on candump (target <= 600 MB at 10M, flat):")
-    for size, wall, mb in rss:
-        print(f"  {size / 1e6:6g}M frames  {mb:6.0f} MB  {size / wall / 1e6:5.2f}M frames/s")
-    print(f"cananalyze --help: {help_s:.3f} s (target < 0.3 s)")
+    width = max(len(r[0]) for r in rows)
+    for name, value, target, verdict in rows:
+        print(f"{name:<{width}}  {value:<48} {target:<14} {verdict}")
     return 0
+
+
+def measure(args, n: int, formats: list[str], made: list[Path]) -> list[tuple[str, str, str, str]]:
+    stem = ensure(args.out, n, formats, made)
+    rows: list[tuple[str, str, str, str]] = []
+    per_format = {}
+    with tempfile.TemporaryDirectory(dir=args.out) as tmp:
+        pq = Path(tmp) / "pq"
+        for suffix in formats:
+            log = str(stem.with_suffix(suffix))
+            print(f"{suffix}: export --parquet ...", flush=True)
+            export = Run(CLI + ["export", log, "--parquet", str(pq), *DEVICES, "-q"], args.repeat)
+            shutil.rmtree(pq, ignore_errors=True)
+            print(f"{suffix}: decode --summary ...", flush=True)
+            summary = Run(CLI + ["decode", log, "--summary", *DEVICES], args.repeat)
+            print(f"{suffix}: python-can LogReader ...", flush=True)
+            pc, how = pycan_seconds(
+                stem.with_suffix(suffix), n, int(args.pycan_prefix), max(1, args.repeat - 1)
+            )
+            per_format[suffix] = (export, summary, pc, how)
+        log = str(stem.with_suffix(formats[0]))
+        print("check vs decode --summary ...", flush=True)
+        check = Run(CLI + ["check", log, *DEVICES], args.repeat, ok=(0, 1))
+        base = per_format[formats[0]][1]
+        print("text output ...", flush=True)
+        text_runs = []
+        for devices in ([], DEVICES):
+            dest = Path(tmp) / "out.txt"
+            run = Run(CLI + ["decode", log, *devices, "-o", str(dest)], args.repeat)
+            with open(dest, "rb") as f:
+                lines = sum(chunk.count(b"\n") for chunk in iter(lambda: f.read(1 << 24), b""))
+            dest.unlink()
+            text_runs.append((run, lines, "16 devices" if devices else "no devices"))
+        flat = []
+        big = int(args.flat) or (n if n > 5e6 else 0)
+        if big:
+            for size in (int(5e6), big):
+                s = ensure(args.out, size, [".log"], made).with_suffix(".log")
+                print(f"peak RSS at {size / 1e6:g}M ...", flush=True)
+                run = Run(CLI + ["export", str(s), "--parquet", str(pq), *DEVICES, "-q"], 1)
+                shutil.rmtree(pq, ignore_errors=True)
+                flat.append((size, run))
+        help_run = Run(CLI + ["--help"], max(5, args.repeat))
+
+    # 1. ratios first
+    for suffix, (export, _, pc, _) in per_format.items():
+        rows.append(
+            (
+                f"python-can LogReader / export --parquet {suffix}",
+                f"{pc / export.wall:5.1f}x  ({pc:.1f} s / {export.wall:.2f} s)",
+                ">= 20x",
+                mark(pc / export.wall >= 20),
+            )
+        )
+    for suffix, (_, summary, pc, _) in per_format.items():
+        rows.append(
+            (
+                f"python-can LogReader / decode --summary {suffix}",
+                f"{pc / summary.wall:5.1f}x  (reference)",
+                "",
+                "",
+            )
+        )
+    hows = sorted({v[3] for v in per_format.values()})
+    rows.append(("  python-can timed on", "; ".join(hows), "", ""))
+    # 2. frames/s
+    for suffix, (export, summary, _, _) in per_format.items():
+        target = FRAMES_TARGET.get(suffix, 0)
+        rate = n / export.wall
+        rows.append(
+            (
+                f"export --parquet {suffix} frames/s",
+                f"{rate / 1e6:5.2f}M  ({export.wall:.2f} s, cpu {export.cpu:.2f} s, "
+                f"{export.mb:.0f} MB)",
+                f">= {target / 1e6:g}M",
+                mark(rate >= target),
+            )
+        )
+        rows.append(
+            (
+                f"decode --summary {suffix} frames/s",
+                f"{n / summary.wall / 1e6:5.2f}M  ({summary.wall:.2f} s, cpu {summary.cpu:.2f} s)",
+                "(reference)",
+                "",
+            )
+        )
+    # 3. check overhead: both read and decode the same log with the same devices and
+    # both run the timing analysis; check adds the rules (and prints findings)
+    over_cpu = check.cpu / base.cpu - 1
+    over_wall = check.wall / base.wall - 1
+    rows.append(
+        (
+            f"check vs decode --summary ({formats[0]}), cpu",
+            f"{100 * over_cpu:+5.1f} %  ({check.cpu:.2f} s vs {base.cpu:.2f} s)",
+            "<= +25 %",
+            mark(over_cpu <= 0.25),
+        )
+    )
+    rows.append(
+        (
+            f"check vs decode --summary ({formats[0]}), wall",
+            f"{100 * over_wall:+5.1f} %  ({check.wall:.2f} s vs {base.wall:.2f} s)",
+            "<= +25 %",
+            mark(over_wall <= 0.25),
+        )
+    )
+    # 4. text output
+    for run, lines, what in text_runs:
+        rate = lines / run.wall
+        rows.append(
+            (
+                f"decode -o FILE ({formats[0]}, {what}) lines/s",
+                f"{rate / 1e6:5.2f}M  ({lines:,} lines, {run.wall:.2f} s, cpu {run.cpu:.2f} s)",
+                ">= 1M",
+                mark(rate >= 1e6),
+            )
+        )
+    # 5. memory
+    peak = max(v[0].mb for v in per_format.values())
+    rows.append(
+        (
+            f"peak RSS export --parquet at {n / 1e6:g}M",
+            f"{peak:.0f} MB",
+            "<= 600 MB" if n >= 10e6 else "(600 MB at 10M)",
+            mark(peak <= 600) if n >= 10e6 else "",
+        )
+    )
+    if flat:
+        (s5, r5), (sb, rb) = flat
+        ratio = rb.mb / r5.mb - 1
+        more = "" if args.flat else "; 50M: --flat 50e6"
+        rows.append(
+            (
+                f"peak RSS {sb / 1e6:g}M vs {s5 / 1e6:g}M (.log{more})",
+                f"{100 * ratio:+5.1f} %  ({rb.mb:.0f} MB vs {r5.mb:.0f} MB)",
+                "within 10 %",
+                mark(abs(ratio) <= 0.10),
+            )
+        )
+    else:
+        rows.append(
+            ("peak RSS flatness", "not measured: --flat 50e6 (5M vs 50M)", "within 10 %", "")
+        )
+    # 6. start-up
+    rows.append(
+        (
+            "cananalyze --help",
+            f"{help_run.wall:.3f} s",
+            "< 0.3 s",
+            mark(help_run.wall < 0.3),
+        )
+    )
+    return rows
 
 
 if __name__ == "__main__":

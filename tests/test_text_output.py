@@ -167,3 +167,112 @@ def test_signals_of_a_builtin_device(tmp_path: Path) -> None:
     log.write_text("(1.0) can0 285#E803000000000000\n(1.1) can0 080#\n(1.2) can0 285#E8030000\n")
     batches = _decode_cli([str(log), "--device", "5=dat7014"])
     assert _check(batches, color=False) >= 3
+
+
+def test_benchmark_mix_with_devices() -> None:
+    """16 DAT 7014 nodes: TPDO2 rows carry four scaled signals, formatted per column."""
+    from generate import generate
+
+    fb = generate(30_000, seed=3)
+    batches = _decode_cli_batch(fb, [a for k in range(1, 17) for a in ("--device", f"{k}=dat7014")])
+    assert sum(len(sb.rows) for b in batches for sb in b.signals) > 3000
+    assert _check(batches, color=False) > 30_000
+    assert _check(batches, color=True) > 30_000
+
+
+def _decode_cli_batch(fb, argv: list[str], step: int = 9000):
+    from cananalyze.cli.main import build_parser
+
+    args = build_parser().parse_args(["decode", "x.log", *argv])
+    dec = build_decoder(args)
+    out = [dec.decode(fb.take(slice(s, s + step))) for s in range(0, len(fb), step)]
+    out.append(dec.finish())
+    return out
+
+
+def test_emcy_rows() -> None:
+    """EMCY text per (code, register) with the vendor bytes in lower-case hex, any DLC."""
+    rows = [
+        (1.0 + k / 100, 0x081 + k % 5, bytes([code & 0xFF, code >> 8, reg, *extra]))
+        for k, (code, reg, extra) in enumerate(
+            [
+                (0x1000, 0x01, b""),
+                (0x1000, 0x01, b"\xab"),
+                (0x2310, 0x03, b"\x01\x02\x03\x04\x05"),
+                (0x0000, 0x00, b"\x00\x00\x00\x00\x00"),
+                (0x0000, 0x00, b""),
+                (0xFF00, 0xFF, b"\xde\xad"),
+                (0x8130, 0x11, b"\xfe\xdc\xba\x98"),
+                (0x1234, 0x80, b"\x00\x00\x00"),
+            ]
+        )
+    ]
+    rows += [(2.0, 0x082, b"\x10"), (2.1, 0x083, b"")]  # malformed: per row
+    dec = build_decoder(argparse.Namespace())
+    assert _check([dec.decode(from_rows(rows)), dec.finish()], color=False) >= 10
+
+
+def test_signal_values_of_every_kind() -> None:
+    """Signal columns as text: floats (ties, exponents, NaN, -0), integers to 64 bits, booleans."""
+    from cananalyze.outputs.numtext import g6_text, int_text, value_text
+
+    rng = np.random.default_rng(5)
+    floats = np.concatenate(
+        [
+            rng.integers(-32768, 32768, 5000) * 0.1,
+            rng.standard_normal(5000) * 10.0 ** rng.integers(-9, 10, 5000),
+            rng.integers(-1000, 1000, 2000) / 8.0,  # exact halves: ties
+            [0.0, -0.0, np.nan, np.inf, -np.inf, 1e-5, 1e-4, 999999.5, 99999.95, 1e6, 5e-324],
+        ]
+    )
+
+    def text(m: np.ndarray) -> list[str]:
+        return [bytes(r[r != 0]).decode() for r in m]
+
+    assert text(g6_text(floats)) == [f"{v:.6g}" for v in floats.tolist()]
+    ints = np.concatenate(
+        [
+            rng.integers(-(2**63), 2**63 - 1, 500, dtype=np.int64),
+            np.array([0, -1, 9, 10, -10, np.iinfo(np.int64).min], np.int64),
+        ]
+    )
+    assert text(int_text(ints)) == [str(v) for v in ints.tolist()]
+    big = np.array([0, 1, 2**63, 2**64 - 1], np.uint64)
+    assert text(int_text(big)) == [str(v) for v in big.tolist()]
+    assert text(value_text(np.array([True, False]))) == ["True", "False"]
+    assert text(value_text(np.array([1.5, 2], object))) == ["1.5", "2"]
+
+
+def test_background_writer_writes_the_same(tmp_path: Path) -> None:
+    from generate import generate
+
+    batches = _decode_cli_batch(
+        generate(20_000, seed=4), [a for k in (1, 5, 9) for a in ("--device", f"{k}=dat7014")]
+    )
+    paths = []
+    for background in (False, True):
+        path = tmp_path / f"out{background}.txt"
+        with open(path, "w", encoding="utf-8") as out:
+            w = TextWriter(out, background=background)
+            for b in batches:
+                w.write(b)
+            w.close()
+        paths.append(path)
+    assert paths[0].read_bytes() == paths[1].read_bytes()
+
+
+def test_background_writer_raises_in_close() -> None:
+    class Broken(io.RawIOBase):
+        def writable(self) -> bool:
+            return True
+
+        def write(self, b) -> int:
+            raise OSError("disk full")
+
+    batches = _decode(SAMPLES / "demo.log")
+    w = TextWriter(io.TextIOWrapper(Broken(), encoding="utf-8"), background=True)
+    assert w._worker is not None
+    with pytest.raises(OSError, match="disk full"):
+        for b in batches:
+            w.write(b)
+        w.close()

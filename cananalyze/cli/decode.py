@@ -127,7 +127,8 @@ def _decode_to(out, args: argparse.Namespace, source, decoder, timing, services,
         from ..outputs.text import TextWriter
 
         color = out.isatty() and not args.no_color
-        writer = TextWriter(out, color=color, only_records=only_records)
+        # finished lines are written by a thread while the next batch decodes
+        writer = TextWriter(out, color=color, only_records=only_records, background=not args.summary)
     collector = timeline_collector(args)
     t0 = None
     svc_codes = np.array(sorted(services), np.uint8) if services else None
@@ -162,7 +163,14 @@ def _decode_to(out, args: argparse.Namespace, source, decoder, timing, services,
             collector.add(tail)
         if not args.summary:
             writer.write(tail)
+        close = getattr(writer, "close", None)
+        if close is not None:
+            close()  # the text writer's thread: done, its error raised here
     finally:
+        close = getattr(writer, "close", None)
+        if close is not None:
+            with contextlib.suppress(Exception):  # already failing: the first error wins
+                close()
         batches.close()  # stops the reader thread before its problems are reported
         out.flush()
         if not args.strict:  # strict: the InputError already names the first problem, in one line

@@ -15,6 +15,8 @@ reference the fast writer is tested against.
 
 from __future__ import annotations
 
+import queue
+import threading
 from typing import TextIO
 
 import numpy as np
@@ -23,6 +25,8 @@ from ..decoded import DecodedBatch
 from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from ..protocol.fields import annotation, frame_fields
 from ..protocol.services import SERVICE_NAMES, Service
+from ..protocol.tables import emcy_class, error_register_names
+from .numtext import g6_text, value_text
 
 _HEX3 = [f"{i:02X} " for i in range(256)]
 
@@ -82,6 +86,7 @@ def format_record(rec: dict) -> str:
 
 _PAD = 0
 _HEXCHARS = np.frombuffer(b"0123456789ABCDEF", np.uint8)
+_HEXLOWER = np.frombuffer(b"0123456789abcdef", np.uint8)  # bytes.hex()
 _SVC_COL = np.array([list(f"{name:<14} ".encode()) for name in SERVICE_NAMES], np.uint8)
 # Services whose annotation is a function of (service, pdo, rtr, first byte or none).
 _KEYED = np.zeros(256, bool)
@@ -163,13 +168,36 @@ def _time_column(rel: np.ndarray) -> np.ndarray:
 
 
 class TextWriter:
+    """Writes decoded batches as text lines.
+
+    With `background=True` and a UTF-8 text file with a binary buffer under it,
+    the finished bytes of each batch are written by a worker thread while the
+    caller decodes the next batch (the write releases the GIL; building lines,
+    which is numpy plus some Python, stays in the caller: a thread that often
+    releases and re-takes the GIL would wait on the decoder every time).
+    `close()` waits for the worker and raises what it raised.
+    """
+
     def __init__(
-        self, out: TextIO, color: bool = False, t0: float | None = None, only_records: bool = False
+        self,
+        out: TextIO,
+        color: bool = False,
+        t0: float | None = None,
+        only_records: bool = False,
+        background: bool = False,
     ) -> None:
         self.out = out
         self.color = color
         self.t0 = t0
         self.only_records = only_records
+        self._queue: queue.Queue | None = None
+        self._worker: threading.Thread | None = None
+        self._error: BaseException | None = None
+        if background and self._buffer() is not None:
+            self.out.flush()
+            self._queue = queue.Queue(maxsize=2)
+            self._worker = threading.Thread(target=self._work, name="text-writer", daemon=True)
+            self._worker.start()
 
     def write(self, batch: DecodedBatch, mask: np.ndarray | None = None) -> None:
         fb = batch.frames
@@ -178,17 +206,58 @@ class TextWriter:
         t0 = self.t0 or 0.0
         if self.only_records or not len(fb) or not self._columnar_ok(batch):
             lines = lines_per_row(batch, mask, t0, self.color, self.only_records)
-            if lines:
+            if not lines:
+                return
+            if self._queue is None:
                 self.out.write("\n".join(lines) + "\n")
+                return
+            data = ("\n".join(lines) + "\n").encode("utf-8")
+        else:
+            data = self._render(batch, mask, t0)
+        if self._queue is None:
+            self._emit(data)
             return
-        self._emit(self._render(batch, mask, t0))
+        if self._error is not None:
+            self.close()
+        self._queue.put(data)
 
-    def _emit(self, data: bytes) -> None:
+    def close(self) -> None:
+        """Wait for the worker, if any; re-raise its error here."""
+        if self._worker is not None:
+            if self._worker.is_alive():
+                self._queue.put(None)
+                self._worker.join()
+            self._worker = None
+            self._queue = None
+        if self._error is not None:
+            error, self._error = self._error, None
+            raise error
+
+    def _work(self) -> None:
+        buffer = self._buffer()
+        while True:
+            data = self._queue.get()
+            if data is None:
+                return
+            if self._error is None:  # after an error, drain so the caller never blocks
+                try:
+                    buffer.write(data)
+                except BaseException as exc:  # noqa: BLE001 - re-raised by close()
+                    self._error = exc
+
+    def _buffer(self):
+        """The binary buffer under a UTF-8 text stream, else None."""
         buffer = getattr(self.out, "buffer", None)
         if (
             buffer is not None
             and getattr(self.out, "encoding", "").lower().replace("-", "") == "utf8"
         ):
+            return buffer
+        return None
+
+    def _emit(self, data: bytes) -> None:
+        buffer = self._buffer()
+        if buffer is not None:
             self.out.flush()
             buffer.write(data)
         else:
@@ -272,15 +341,24 @@ class TextWriter:
         node_col[:, 2] = np.where(has, 48 + nd % 10, 32)
         parts.append(node_col)
 
-        # annotation: keyed rows from a table, the rest per row in Python
+        # annotation: keyed rows from a table, PDO signal rows formatted per
+        # column, other rows' text built in Python and scattered in, rows with
+        # records spliced in after the compaction
+        end = (_RESET if self.color else "") + "\n"
+        endb = end.encode()
         noted = np.zeros(n, bool)
-        if batch.notes:
+        notes = batch.notes
+        if len(notes):  # realises lazy notes once
             noted_rows = np.zeros(len(fb), bool)
-            noted_rows[np.fromiter(batch.notes, np.int64, len(batch.notes))] = True
+            noted_rows[np.fromiter(dict.keys(notes), np.int64, len(notes))] = True
             noted = noted_rows[sel]
-        lazy = batch._lazy_index()  # rows with PDO signals or shared notes: annotated per row
+            notes = dict.copy(notes)  # realised above (len); plain dict lookups below
+        lazy = batch._lazy_index()  # rows with PDO signals or shared notes
+        in_block = shared = None
         if lazy is not None:
-            noted = noted | (lazy[0][sel] >= 0) | (lazy[2][sel] >= 0)
+            in_block = lazy[0][sel]
+            shared = lazy[2][sel]
+            noted = noted | (in_block >= 0) | (shared >= 0)
         with_records = np.zeros(n, bool)
         if by_row:
             rec_rows = np.zeros(len(fb), bool)
@@ -295,7 +373,6 @@ class TextWriter:
         key = np.where(keyed, key, -1)
         uniq, first_at, inv = np.unique(key, return_index=True, return_inverse=True)
         texts: list[bytes] = []
-        end = (_RESET if self.color else "") + "\n"
         for k, i in zip(uniq.tolist(), first_at.tolist(), strict=True):
             if k < 0:
                 texts.append(b"")
@@ -304,41 +381,235 @@ class TextWriter:
             texts.append(
                 (annotation(int(svc[i]), int(node[i]), int(pdo[i]), f, bool(rtr[i])) + end).encode()
             )
-        parts.append(_padded_table(texts)[inv.reshape(-1)])
+        ann = [(np.arange(n), _padded_table(texts)[inv.reshape(-1)])]
+        done = keyed.copy()
+        if in_block is not None:
+            free = ~with_records & (in_block >= 0)
+            if notes:
+                free &= ~noted_rows[sel]
+            plans = []
+            for k, sb in enumerate(batch.signals):
+                plan = _signal_text(batch, k, sb, sel, free & (in_block == k), shared, endb)
+                if plan is not None:
+                    plans.append(plan)
+                    done[plan[0]] = True
+            ann += _format_plans(plans)
+        emcy = np.flatnonzero(~done & ~noted & ~with_records & (svc == Service.EMCY) & (dlc >= 3))
+        if emcy.size:
+            ann.append(_emcy_text(data[emcy], dlc[emcy], emcy, endb))
+            done[emcy] = True
+        # every other row without records: its text from Python, scattered in
+        spliced: dict[int, bytes] = {}
+        per_row = np.flatnonzero(~done & ~with_records)
+        if per_row.size:
+            is_sdo = ((svc == Service.SDO_REQUEST) | (svc == Service.SDO_RESPONSE))[
+                per_row
+            ].tolist()
+            chunks = []
+            for i, row, sdo in zip(per_row.tolist(), sel[per_row].tolist(), is_sdo, strict=True):
+                note = notes.get(row) if sdo else None
+                role = note.get("role") if note else None
+                if role:  # what `annotation` says for a frame the SDO tracker placed
+                    chunks.append("SDO " + role + end)
+                else:
+                    rtr_i = bool(flags[i] & FLAG_RTR)
+                    f = batch.fields(row)
+                    chunks.append(
+                        annotation(int(svc[i]), int(node[i]), int(pdo[i]), f, rtr_i) + end
+                    )
+            encoded = [c.encode() for c in chunks]
+            with_nul = [j for j, c in enumerate(encoded) if b"\0" in c]
+            for j in with_nul:  # NULs are the padding: splice these rows in after compaction
+                spliced[int(per_row[j])] = encoded[j]
+                encoded[j] = b""
+            ann.append(_ragged(per_row, encoded))
+        width = max(m.shape[1] for _, m in ann)
+        ann_col = np.zeros((n, width), np.uint8)
+        for rows, m in ann:
+            ann_col[rows, : m.shape[1]] = m
+        parts.append(ann_col)
 
         matrix = np.concatenate(parts, axis=1)
         keep = matrix != _PAD
         blob = matrix[keep].tobytes()
-        slow = np.flatnonzero(~keyed)
+        if spliced:
+            with_records[list(spliced)] = True
+        slow = np.flatnonzero(with_records)
         if slow.size == 0 and not tail_lines:
             return blob
         ends = np.cumsum(keep.sum(axis=1))
         pieces: list[bytes] = []
         prev = 0
-        notes = batch.notes
         is_sdo = ((svc == Service.SDO_REQUEST) | (svc == Service.SDO_RESPONSE))[slow].tolist()
         for i, e, row, sdo in zip(
             slow.tolist(), ends[slow].tolist(), sel[slow].tolist(), is_sdo, strict=True
         ):
-            role = notes[row].get("role") if sdo and row in notes else None
-            if role:  # what `annotation` says for a frame the SDO tracker placed
+            pieces.append(blob[prev:e])
+            prev = e
+            if i in spliced:
+                pieces.append(spliced[i])
+                continue
+            note = notes.get(row) if sdo else None
+            role = note.get("role") if note else None
+            if role:
                 text = "SDO " + role
             else:
                 rtr_i = bool(flags[i] & FLAG_RTR)
                 text = annotation(int(svc[i]), int(node[i]), int(pdo[i]), batch.fields(row), rtr_i)
-            recs = by_row.get(row)
-            if recs:
-                text += end + "".join("    └─ " + format_record(rec) + "\n" for rec in recs)
-                pieces.append(blob[prev:e])
-                pieces.append(text.encode())
-            else:
-                pieces.append(blob[prev:e])
-                pieces.append((text + end).encode())
-            prev = e
+            text += end + "".join("    └─ " + format_record(rec) + "\n" for rec in by_row[row])
+            pieces.append(text.encode())
         pieces.append(blob[prev:])
         if tail_lines:
             pieces.append(("\n".join(tail_lines) + "\n").encode())
         return b"".join(pieces)
+
+
+def _ragged(rows: np.ndarray, texts: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, NUL-padded matrix) holding one bytes string per row, without a loop."""
+    lengths = np.fromiter(map(len, texts), np.int64, len(texts))
+    width = int(lengths.max()) if lengths.size else 0
+    flat = np.frombuffer(b"".join(texts), np.uint8)
+    out = np.zeros((len(texts), width), np.uint8)
+    out[np.arange(width)[None, :] < lengths[:, None]] = flat
+    return rows, out
+
+
+def _emcy_text(
+    data: np.ndarray, dlc: np.ndarray, at: np.ndarray, endb: bytes
+) -> tuple[np.ndarray, np.ndarray]:
+    """The annotation of EMCY rows without notes, as `annotation` writes it, per column.
+
+    The error class is looked up once per distinct code, the register bit names
+    once per distinct register value; an error reset (code 0) is `annotation`'s
+    own text. Vendor bytes are `bytes.hex()`, "-" when there are none.
+    """
+    m = at.size
+    code = data[:, 0].astype(np.int64) | data[:, 1].astype(np.int64) << 8
+    reg = data[:, 2]
+    codes, code_inv = np.unique(code, return_inverse=True)
+    classes = [f" {emcy_class(c)}; register 0x".encode() for c in codes.tolist()]
+    regs, reg_inv = np.unique(reg, return_inverse=True)
+    reg_names = [
+        f"{r:02X} [{','.join(error_register_names(r)) or 'none'}]; mfr ".encode()
+        for r in regs.tolist()
+    ]
+    code_hex = np.empty((m, 4), np.uint8)
+    for j in range(4):
+        code_hex[:, j] = _HEXCHARS[(code >> (4 * (3 - j))) & 0xF]
+    mfr = np.zeros((m, 10), np.uint8)
+    n_mfr = np.minimum(dlc.astype(np.int64), 8) - 3
+    for j in range(5):
+        there = j < n_mfr
+        mfr[:, 2 * j] = np.where(there, _HEXLOWER[data[:, 3 + j] >> 4], _PAD)
+        mfr[:, 2 * j + 1] = np.where(there, _HEXLOWER[data[:, 3 + j] & 0xF], _PAD)
+    mfr[:, 0] = np.where(n_mfr == 0, ord("-"), mfr[:, 0])
+    block = np.concatenate(
+        [
+            np.broadcast_to(np.frombuffer(b"EMCY 0x", np.uint8), (m, 7)),
+            code_hex,
+            _padded_table(classes)[code_inv.reshape(-1)],
+            _padded_table(reg_names)[reg_inv.reshape(-1)],
+            mfr,
+            np.broadcast_to(np.frombuffer(endb, np.uint8), (m, len(endb))),
+        ],
+        axis=1,
+    )
+    reset = np.flatnonzero(code == 0)
+    if reset.size:
+        text = annotation(Service.EMCY, -1, 0, frame_fields(Service.EMCY, bytes(3))).encode() + endb
+        block[reset] = _PAD
+        block[reset, : len(text)] = np.frombuffer(text, np.uint8)
+    return at, block
+
+
+def _signal_text(
+    batch: DecodedBatch,
+    k: int,
+    sb,
+    sel: np.ndarray,
+    take: np.ndarray,
+    shared: np.ndarray,
+    endb: bytes,
+) -> tuple[np.ndarray, list] | None:
+    """The annotation of the printed rows of signal block k, as parts to concatenate.
+
+    Parts are byte matrices, or 1-tuples of a value column still to be formatted
+    (`_format_plans`, so that all float columns of a batch are formatted at once).
+
+    `take` marks positions (in the printed rows) whose text is `annotation` of the
+    block's values alone, plus at most a shared `pdo_problem`; None when the block
+    has no such rows or looks unusual (then the rows go the per-row way).
+    """
+    at = np.flatnonzero(take)
+    if at.size == 0:
+        return None
+    rows = sel[at]
+    fb = batch.frames
+    svc = batch.service[rows]
+    pdo = batch.pdo[rows]
+    if (svc != svc[0]).any() or (pdo != pdo[0]).any() or (fb.flags[rows] & FLAG_RTR).any():
+        return None
+    if int(svc[0]) not in (Service.TPDO, Service.RPDO):
+        return None
+    pos = batch._lazy_index()[1][rows]
+    kind = "TPDO" if int(svc[0]) == Service.TPDO else "RPDO"
+    parts: list[np.ndarray] = []
+    m = rows.size
+
+    def const(text: str) -> None:
+        b = text.encode()
+        if b:
+            parts.append(np.broadcast_to(np.frombuffer(b, np.uint8), (m, len(b))))
+
+    units = {name: u for name, u in sb.units.items() if u}
+    if any("\0" in x for x in (*sb.columns, *units.values())):
+        return None  # NULs are the padding: such text goes the per-row way
+    lead = f"{kind}{int(pdo[0])}  "
+    for j, (name, col) in enumerate(sb.columns.items()):
+        const((lead if j == 0 else " ") + f"{name}=")
+        parts.append((col[pos],))  # formatted with every block's columns at once
+        if units.get(name):
+            const(f" {units[name]}")
+    if not sb.columns:
+        return None
+    # shared notes: only a pdo_problem is known to print as a plain suffix
+    sh = shared[at]
+    problems = np.zeros(m, np.intp)
+    table = [b""]
+    for s in np.unique(sh[sh >= 0]).tolist():
+        note = batch.row_notes[s][1]
+        if set(note) != {"pdo_problem"}:
+            return None
+        text = f"  [{note['pdo_problem']}]" if note["pdo_problem"] else ""
+        if "\0" in text:
+            return None
+        table.append(text.encode())
+        problems[sh == s] = len(table) - 1
+    if len(table) > 1:
+        parts.append(_padded_table(table)[problems])
+    const(endb.decode())
+    return at, parts
+
+
+def _format_plans(plans: list) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Fill in the value columns of `_signal_text` plans: all float columns in one call."""
+    floats = [
+        p[0] for _, parts in plans for p in parts if type(p) is tuple and p[0].dtype.kind == "f"
+    ]
+    texts = iter(())
+    if floats:
+        sizes = np.cumsum([f.size for f in floats])[:-1]
+        texts = iter(np.split(g6_text(np.concatenate(floats)), sizes))
+    out = []
+    for at, parts in plans:
+        filled = []
+        for p in parts:
+            if type(p) is tuple:
+                filled.append(next(texts) if p[0].dtype.kind == "f" else value_text(p[0]))
+            else:
+                filled.append(p)
+        out.append((at, np.concatenate(filled, axis=1)))
+    return out
 
 
 def lines_per_row(
