@@ -143,6 +143,25 @@ static PyObject *split_lines(PyObject *self, PyObject *args) {
     return PyLong_FromSsize_t(overflow ? -1 : n);
 }
 
+PyDoc_STRVAR(count_lines_doc, "count_lines(buf) -> n: the number of lines split_lines finds.");
+
+static PyObject *count_lines(PyObject *self, PyObject *args) {
+    Py_buffer b;
+    if (!PyArg_ParseTuple(args, "y*", &b)) return NULL;
+    const char *buf = b.buf;
+    Py_ssize_t size = b.len, n = 0, pos = 0;
+    Py_BEGIN_ALLOW_THREADS;
+    const char *nl;
+    while (pos < size && (nl = memchr(buf + pos, '\n', size - pos)) != NULL) {
+        n++;
+        pos = nl - buf + 1;
+    }
+    if (size == 0 || buf[size - 1] != '\n') n++;
+    Py_END_ALLOW_THREADS;
+    PyBuffer_Release(&b);
+    return PyLong_FromSsize_t(n);
+}
+
 /* ---------------------------------------------------------------- candump */
 
 typedef struct {
@@ -481,6 +500,7 @@ fail:
 }
 
 static PyMethodDef methods[] = {
+    {"count_lines", count_lines, METH_VARARGS, count_lines_doc},
     {"split_lines", split_lines, METH_VARARGS, split_lines_doc},
     {"candump_lines", candump_lines, METH_VARARGS, candump_lines_doc},
     {"asc_lines", asc_lines, METH_VARARGS, asc_lines_doc},
