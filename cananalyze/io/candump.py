@@ -535,6 +535,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
                 builder.rows.append((int(line_no[r]), t, ch, can_id, flags, payload))
             if builder.rows:
                 parts.append(builder.batch(chans))
+        text = body = None  # let the block go: a long line's carry may follow
         if len(parts) == 2:  # keep file order when both paths produced rows
             merged = concat(parts)
             order = np.argsort(merged.line, kind="stable")
