@@ -632,12 +632,13 @@ def run_pipeline(args: argparse.Namespace, progress=None, decoder=None) -> Captu
     one the options describe (`cli.pipeline.build_decoder`).
     """
     from .cli.pipeline import build_decoder
+    from .io.prefetch import prefetch
     from .io.source import open_log
 
     source = open_log(args.log, strict=args.strict, fmt=getattr(args, "input_format", None))
     decoder = decoder or build_decoder(args)
     collector = Collector(str(args.log))
-    for fb in source.batches():
+    for fb in prefetch(source.batches()):  # read ahead on the other core
         collector.add(decoder.decode(fb))
         if progress:
             progress(len(fb))
