@@ -451,6 +451,37 @@ fail:
     return NULL;
 }
 
+PyDoc_STRVAR(asc_base_line_doc,
+             "asc_base_line(buf, starts) -> k\n\n"
+             "1 + the index of the last line matching (?i)^[ \\t]*base[ \\t] (a header line\n"
+             "that sets the number base and time mode), 0 when none does.");
+
+static PyObject *asc_base_line(PyObject *self, PyObject *args) {
+    PyObject *o_buf, *o_s;
+    Bufs bs = {.n = 0};
+    if (!PyArg_ParseTuple(args, "OO", &o_buf, &o_s)) return NULL;
+    if (bufs_get(&bs, o_buf, 0, -1, "buf") < 0 || bufs_get(&bs, o_s, 0, -1, "starts") < 0) {
+        bufs_release(&bs);
+        return NULL;
+    }
+    const unsigned char *buf = bs.b[0].buf;
+    Py_ssize_t size = bs.b[0].len, n = bs.b[1].len / 8, last = 0;
+    const int64_t *starts = bs.b[1].buf;
+    Py_BEGIN_ALLOW_THREADS;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        int64_t q = starts[i];
+        if (q < 0) continue;
+        while (q < size && (buf[q] == ' ' || buf[q] == '\t')) q++;
+        if (size - q >= 5 && (buf[q] | 0x20) == 'b' && (buf[q + 1] | 0x20) == 'a' &&
+            (buf[q + 2] | 0x20) == 's' && (buf[q + 3] | 0x20) == 'e' &&
+            (buf[q + 4] == ' ' || buf[q + 4] == '\t'))
+            last = i + 1;
+    }
+    Py_END_ALLOW_THREADS;
+    bufs_release(&bs);
+    return PyLong_FromSsize_t(last);
+}
+
 /* -------------------------------------------------------------- hex column */
 
 PyDoc_STRVAR(hex_payload_doc,
@@ -504,6 +535,7 @@ static PyMethodDef methods[] = {
     {"split_lines", split_lines, METH_VARARGS, split_lines_doc},
     {"candump_lines", candump_lines, METH_VARARGS, candump_lines_doc},
     {"asc_lines", asc_lines, METH_VARARGS, asc_lines_doc},
+    {"asc_base_line", asc_base_line, METH_VARARGS, asc_base_line_doc},
     {"hex_payload", hex_payload, METH_VARARGS, hex_payload_doc},
     {NULL, NULL, 0, NULL},
 };

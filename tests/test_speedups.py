@@ -190,6 +190,12 @@ def _asc_line(rng: random.Random) -> str:
                 "// comment",
                 "Begin Triggerblock Thu Jan 01 00:00:01.0 2026",
                 "",
+                "base hex  timestamps absolute",
+                " BaSE hex  timestamps absolute",
+                "\tbase dec  timestamps absolute",
+                "base hex timestamps relative",
+                "basehex",
+                "Base",
             ]
         )
     elif r < 0.07:

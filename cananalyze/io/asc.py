@@ -294,7 +294,11 @@ def _chunks(stream: BinaryIO, parser: _LineParser) -> Iterator[FrameBatch]:
         line_base += starts.size
         # header lines that set the base or the time mode come first, line by line
         head_end = 0
-        if b"ase" in chunk or b"ASE" in chunk:  # memchr-fast test before the regex
+        if C is not None:  # the regex's lines, found per line start in C; then the same test
+            head_end = C.asc_base_line(chunk, starts)
+            if head_end and not (b"ase" in chunk or b"ASE" in chunk):
+                head_end = 0
+        elif b"ase" in chunk or b"ASE" in chunk:  # memchr-fast test before the regex
             for m in _BASE_RE.finditer(chunk):
                 head_end = int(np.searchsorted(starts, m.start(), side="right"))
         for i in range(head_end):
@@ -357,20 +361,25 @@ def _bulk_batch(
     """The bulk rows as a batch, each timed from the time base in force at its line."""
     fast, cols = bulk
     rows = np.flatnonzero(fast)
-    where = np.array([s[0] for s in state_at], np.int64)
-    k = np.searchsorted(where, rows, side="left") - 1  # last Begin Triggerblock before the row
-    offset = np.array([s[1] for s in state_at], np.float64)[k]
-    names = {int(num): parser.chan_of[str(num)] for num in np.unique(cols["chan"][rows]).tolist()}
+    take = slice(None) if rows.size == fast.size else rows  # usually every line: no copies
+    if len(state_at) == 1:  # one time base for the chunk (the usual case)
+        offset = np.float64(state_at[0][1])
+    else:
+        where = np.array([s[0] for s in state_at], np.int64)
+        k = np.searchsorted(where, rows, side="left") - 1  # last Begin Triggerblock before the row
+        offset = np.array([s[1] for s in state_at], np.float64)[k]
+    chan = cols["chan"][take]
+    names = {int(num): parser.chan_of[str(num)] for num in np.unique(chan).tolist()}
     lut = np.zeros(max(names) + 1, np.uint16)
     for num, idx in names.items():
         lut[num] = idx
     b = FrameBatch(
-        t=offset + cols["t"][rows],
-        can_id=cols["can_id"][rows],
-        flags=cols["flags"][rows],
-        dlc=cols["dlc"][rows],
-        data=cols["data"][rows],
-        channel=lut[cols["chan"][rows]],
+        t=offset + cols["t"][take],
+        can_id=cols["can_id"][take],
+        flags=cols["flags"][take],
+        dlc=cols["dlc"][take],
+        data=cols["data"][take],
+        channel=lut[chan],
         line=first_line + rows.astype(np.int64),
     )
     parser.ctx.frames += len(b)
