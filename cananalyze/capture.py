@@ -361,17 +361,11 @@ _HEX = np.frombuffer(b"0123456789abcdef", np.uint8)
 
 def _hex_column(fb: FrameBatch, pa):
     """Payloads as an Arrow string column, built from buffers (no Python string per frame)."""
+    from .hexcols import hex_payload_buffers
+
     n = len(fb)
-    chars = np.empty((n, 16), np.uint8)
-    chars[:, 0::2] = _HEX[fb.data >> 4]
-    chars[:, 1::2] = _HEX[fb.data & 0x0F]
-    length = np.where((fb.flags & FLAG_RTR) != 0, 0, np.minimum(fb.dlc, 8).astype(np.int32) * 2)
-    keep = np.arange(16)[None, :] < length[:, None]
-    offsets = np.zeros(n + 1, np.int32)
-    np.cumsum(length, out=offsets[1:])
-    arr = pa.Array.from_buffers(
-        pa.string(), n, [None, pa.py_buffer(offsets), pa.py_buffer(chars[keep])]
-    )
+    chars, offsets = hex_payload_buffers(fb.data, fb.dlc, fb.flags)
+    arr = pa.Array.from_buffers(pa.string(), n, [None, pa.py_buffer(offsets), pa.py_buffer(chars)])
     if fb.long_data:  # CAN FD payloads over 8 bytes: rare, patch them in
         values = arr.to_pylist()
         for row, payload in fb.long_data.items():
@@ -638,12 +632,13 @@ def run_pipeline(args: argparse.Namespace, progress=None, decoder=None) -> Captu
     one the options describe (`cli.pipeline.build_decoder`).
     """
     from .cli.pipeline import build_decoder
+    from .io.prefetch import prefetch
     from .io.source import open_log
 
     source = open_log(args.log, strict=args.strict, fmt=getattr(args, "input_format", None))
     decoder = decoder or build_decoder(args)
     collector = Collector(str(args.log))
-    for fb in source.batches():
+    for fb in prefetch(source.batches()):  # read ahead on the other core
         collector.add(decoder.decode(fb))
         if progress:
             progress(len(fb))

@@ -27,6 +27,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..checks.build import attach_checker, build_checker
+    from ..io.prefetch import prefetch
     from ..io.source import open_log
     from .pipeline import build_decoder
 
@@ -35,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
     decoder = build_decoder(args)
     attach_checker(decoder, checker)
     try:
-        for fb in source.batches():
+        for fb in prefetch(source.batches()):  # read ahead on the other core
             decoder.decode(fb)
         decoder.finish()
     finally:

@@ -21,6 +21,7 @@ from typing import BinaryIO
 
 import numpy as np
 
+from .. import speedups
 from ..frames import (
     FLAG_BRS,
     FLAG_ERR,
@@ -261,38 +262,50 @@ def _chunks(stream: BinaryIO, parser: _LineParser) -> Iterator[FrameBatch]:
                 if len(carry) > MAX_LINE:  # never hold a newline-less file whole
                     line_base += 1
                     parser.ctx.problems.add(
-                        parser.ctx.source, f"line {line_base}", f"line longer than {MAX_LINE} bytes, skipped"
+                        parser.ctx.source,
+                        f"line {line_base}",
+                        f"line longer than {MAX_LINE} bytes, skipped",
                     )
                     carry, skipping = b"", True
                 continue
             chunk, carry = chunk[:cut], chunk[cut:]
         elif not chunk:
             break
-        arr = np.frombuffer(chunk + bytes(PAD), np.uint8)
-        nl = np.flatnonzero(arr[: len(chunk)] == 10)
-        if nl.size == 0 or nl[-1] != len(chunk) - 1:
-            nl = np.append(nl, len(chunk))
-        starts = np.empty(nl.size, np.int64)
-        starts[0] = 0
-        starts[1:] = nl[:-1] + 1
-        ends = nl.astype(np.int64)
-        while True:  # text_lines strips every trailing CR
-            cr = (ends > starts) & (arr[np.maximum(ends - 1, 0)] == 13)
-            if not cr.any():
-                break
-            ends = ends - cr
+        C = speedups.C
+        if C is not None:
+            starts = np.empty(C.count_lines(chunk), np.int64)
+            ends = np.empty(starts.size, np.int64)
+            C.split_lines(chunk, starts, ends, True)  # text_lines strips every trailing CR
+        else:
+            arr = np.frombuffer(chunk + bytes(PAD), np.uint8)
+            nl = np.flatnonzero(arr[: len(chunk)] == 10)
+            if nl.size == 0 or nl[-1] != len(chunk) - 1:
+                nl = np.append(nl, len(chunk))
+            starts = np.empty(nl.size, np.int64)
+            starts[0] = 0
+            starts[1:] = nl[:-1] + 1
+            ends = nl.astype(np.int64)
+            while True:  # text_lines strips every trailing CR
+                cr = (ends > starts) & (arr[np.maximum(ends - 1, 0)] == 13)
+                if not cr.any():
+                    break
+                ends = ends - cr
         first_line = line_base + 1
         line_base += starts.size
         # header lines that set the base or the time mode come first, line by line
         head_end = 0
-        if b"ase" in chunk or b"ASE" in chunk:  # memchr-fast test before the regex
+        if C is not None:  # the regex's lines, found per line start in C; then the same test
+            head_end = C.asc_base_line(chunk, starts)
+            if head_end and not (b"ase" in chunk or b"ASE" in chunk):
+                head_end = 0
+        elif b"ase" in chunk or b"ASE" in chunk:  # memchr-fast test before the regex
             for m in _BASE_RE.finditer(chunk):
                 head_end = int(np.searchsorted(starts, m.start(), side="right"))
         for i in range(head_end):
             parser.line(first_line + i, chunk[starts[i] : ends[i]].decode("latin-1"))
         bulk = None
         if parser.base == 16 and not parser.relative and head_end < starts.size:
-            bulk = _bulk_lines(arr, starts, ends)
+            bulk = _c_bulk_lines(C, chunk, starts, ends) if C else _bulk_lines(arr, starts, ends)
             if bulk[1] is None:
                 bulk = None
             else:
@@ -348,24 +361,45 @@ def _bulk_batch(
     """The bulk rows as a batch, each timed from the time base in force at its line."""
     fast, cols = bulk
     rows = np.flatnonzero(fast)
-    where = np.array([s[0] for s in state_at], np.int64)
-    k = np.searchsorted(where, rows, side="left") - 1  # last Begin Triggerblock before the row
-    offset = np.array([s[1] for s in state_at], np.float64)[k]
-    names = {int(num): parser.chan_of[str(num)] for num in np.unique(cols["chan"][rows]).tolist()}
+    take = slice(None) if rows.size == fast.size else rows  # usually every line: no copies
+    if len(state_at) == 1:  # one time base for the chunk (the usual case)
+        offset = np.float64(state_at[0][1])
+    else:
+        where = np.array([s[0] for s in state_at], np.int64)
+        k = np.searchsorted(where, rows, side="left") - 1  # last Begin Triggerblock before the row
+        offset = np.array([s[1] for s in state_at], np.float64)[k]
+    chan = cols["chan"][take]
+    names = {int(num): parser.chan_of[str(num)] for num in np.unique(chan).tolist()}
     lut = np.zeros(max(names) + 1, np.uint16)
     for num, idx in names.items():
         lut[num] = idx
     b = FrameBatch(
-        t=offset + cols["t"][rows],
-        can_id=cols["can_id"][rows],
-        flags=cols["flags"][rows],
-        dlc=cols["dlc"][rows],
-        data=cols["data"][rows],
-        channel=lut[cols["chan"][rows]],
+        t=offset + cols["t"][take],
+        can_id=cols["can_id"][take],
+        flags=cols["flags"][take],
+        dlc=cols["dlc"][take],
+        data=cols["data"][take],
+        channel=lut[chan],
         line=first_line + rows.astype(np.int64),
     )
     parser.ctx.frames += len(b)
     return b
+
+
+def _c_bulk_lines(C, chunk: bytes, starts: np.ndarray, ends: np.ndarray):
+    """`_bulk_lines` by the compiled helper: the same lines taken, the same columns."""
+    n = starts.size
+    ok = np.zeros(n, bool)
+    cols = {
+        "t": np.empty(n, np.float64),
+        "chan": np.empty(n, np.int64),
+        "can_id": np.empty(n, np.uint32),
+        "flags": np.empty(n, np.uint8),
+        "dlc": np.empty(n, np.uint8),
+        "data": np.empty((n, 8), np.uint8),
+    }
+    C.asc_lines(chunk, starts, ends, *cols.values(), ok)
+    return ok, cols
 
 
 def _bulk_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray):

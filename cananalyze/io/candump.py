@@ -17,6 +17,7 @@ from typing import BinaryIO
 
 import numpy as np
 
+from .. import speedups
 from ..frames import (
     FLAG_BRS,
     FLAG_ERR,
@@ -232,17 +233,27 @@ def _bulk_log_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, chans
     return (t, can_id, flags, dlc, data, channel), ~good
 
 
-def _log_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, chans: _Channels):
+def _layout(text, starts: np.ndarray, ends: np.ndarray) -> candump_fast.Layout | None:
+    """The layout of the first of a chunk's first three lines that has one."""
+    for r in range(min(3, starts.size)):
+        lay = candump_fast.Layout.of(bytes(text[starts[r] : ends[r]]))
+        if lay is not None:
+            return lay
+    return None
+
+
+_FIND = object()
+
+
+def _log_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, chans: _Channels, lay=_FIND):
     """`_bulk_log_lines` for a chunk, the rows of its dominant layout by the fixed-layout shortcut.
 
     Same results as `_bulk_log_lines` on every row: the shortcut takes only rows
     that fit its layout exactly and leaves every other row to the general parser.
+    `lay`: the layout to use (None: none), found from the first lines by default.
     """
-    lay = None
-    for r in range(min(3, starts.size)):
-        lay = candump_fast.Layout.of(arr[starts[r] : ends[r]].tobytes())
-        if lay is not None:
-            break
+    if lay is _FIND:
+        lay = _layout(arr, starts, ends)
     if lay is None:
         return _bulk_log_lines(arr, starts, ends, chans)
     cols, fits = candump_fast.parse(arr, candump_fast.words(arr), starts, ends, lay)
@@ -256,6 +267,70 @@ def _log_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, chans: _Ch
             full[rest] = part
         slow[rest] = rslow
     return (t, can_id, flags, dlc, data, channel), slow
+
+
+def _padded(text, size: int) -> np.ndarray:
+    """The chunk's bytes as a uint8 array with PAD zero bytes after them (the numpy paths read past)."""
+    arr = np.empty(size + PAD, np.uint8)
+    arr[:size] = np.frombuffer(text, np.uint8, count=size)
+    arr[size:] = 0
+    return arr
+
+
+def _c_lines(C, text, chans: _Channels):
+    """`_log_lines` for a chunk by the compiled parser: (starts, ends, columns, slow mask).
+
+    The C loop takes the lines it can vouch for; the others go through
+    `_log_lines` with the chunk's layout, exactly as without the extension. Interface
+    names are then numbered in the order the numpy path meets them: the layout's
+    first, then the rows it does not fit, in row order.
+    """
+    size = len(text)
+    n = C.count_lines(text)
+    starts = np.empty(n, np.int64)
+    ends = np.empty(n, np.int64)
+    C.split_lines(text, starts, ends, False)
+    t = np.empty(n, np.float64)
+    can_id = np.empty(n, np.uint32)
+    flags = np.empty(n, np.uint8)
+    dlc = np.empty(n, np.uint8)
+    data = np.empty((n, 8), np.uint8)
+    channel = np.empty(n, np.uint16)
+    status = np.empty(n, np.uint8)
+    lay = _layout(text, starts, ends)
+    if lay is not None:
+        chans.get(lay.name.decode("latin-1"))
+    names = tuple(name.encode("latin-1") for name in chans.names)
+    C.candump_lines(text, starts, ends, names, t, can_id, flags, dlc, data, channel, status)
+    cols = (t, can_id, flags, dlc, data, channel)
+    slow = np.zeros(n, bool)
+    new = np.flatnonzero(status == 1)
+    other = np.flatnonzero((status == 2) & (ends > starts))
+    if new.size or other.size:
+        firsts: list[tuple[int, str]] = []  # (row, interface) where a name may first appear
+        new_names = []
+        for r in new.tolist():
+            line = bytes(text[starts[r] : ends[r]])
+            at = line.find(b")") + 2
+            new_names.append(line[at : line.find(b" ", at)].decode("latin-1"))
+        firsts += zip(new.tolist(), new_names, strict=True)
+        local = _Channels()
+        if other.size:
+            rcols, rslow = _log_lines(_padded(text, size), starts[other], ends[other], local, lay)
+            for full, part in zip(cols, rcols, strict=True):
+                full[other] = part
+            slow[other] = rslow
+            good = other[~rslow]
+            codes, first = np.unique(channel[good], return_index=True)
+            firsts += [(int(good[i]), local.names[c]) for c, i in zip(codes, first, strict=True)]
+        for _, name in sorted(firsts):
+            chans.get(name)
+        if new.size:
+            channel[new] = [chans.index[name] for name in new_names]
+        if other.size and good.size:
+            lut = np.array([chans.index.get(name, 0) for name in local.names], np.uint16)
+            channel[good] = lut[channel[good]]
+    return starts, ends, cols, slow
 
 
 def _parse_time_text(text: bytes) -> float | None:
@@ -400,26 +475,33 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
             break
         else:
             size, tail = len(carry), b""
-        # carry and block go straight into one padded array: a single copy of the bytes
-        arr = np.empty(size + PAD, np.uint8)
-        arr[: len(carry)] = np.frombuffer(carry, np.uint8)
-        arr[len(carry) : size] = np.frombuffer(block, np.uint8, count=size - len(carry))
-        arr[size:] = 0
-        carry = tail
-        nl = np.flatnonzero(arr[:size] == 10)
-        if nl.size == 0 or nl[-1] != size - 1:
-            nl = np.append(nl, size)
-        starts = np.empty(nl.size, np.int64)
-        starts[0] = 0
-        starts[1:] = nl[:-1] + 1
-        ends = nl.astype(np.int64)
-        # strip '\r' before '\n'
-        cr = (ends > starts) & (arr[np.maximum(ends - 1, 0)] == 13)
-        ends = ends - cr
+        C = speedups.C
+        if C is not None:
+            body = memoryview(block)[: size - len(carry)]
+            text = carry + body if carry else body
+            carry = tail
+            starts, ends, cols, slow = _c_lines(C, text, chans)
+        else:
+            # carry and block go straight into one padded array: a single copy of the bytes
+            text = arr = np.empty(size + PAD, np.uint8)
+            arr[: len(carry)] = np.frombuffer(carry, np.uint8)
+            arr[len(carry) : size] = np.frombuffer(block, np.uint8, count=size - len(carry))
+            arr[size:] = 0
+            carry = tail
+            nl = np.flatnonzero(arr[:size] == 10)
+            if nl.size == 0 or nl[-1] != size - 1:
+                nl = np.append(nl, size)
+            starts = np.empty(nl.size, np.int64)
+            starts[0] = 0
+            starts[1:] = nl[:-1] + 1
+            ends = nl.astype(np.int64)
+            # strip '\r' before '\n'
+            cr = (ends > starts) & (arr[np.maximum(ends - 1, 0)] == 13)
+            ends = ends - cr
+            cols, slow = _log_lines(arr, starts, ends, chans)
         line_no = line_base + 1 + np.arange(starts.size, dtype=np.int64)
         line_base += starts.size
         nonblank = ends > starts
-        cols, slow = _log_lines(arr, starts, ends, chans)
         slow &= nonblank
         good = ~slow & nonblank
         parts: list[FrameBatch] = []
@@ -438,7 +520,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
         if slow.any():
             builder = _Builder()
             for r in np.flatnonzero(slow):
-                raw = arr[starts[r] : ends[r]].tobytes()
+                raw = bytes(text[starts[r] : ends[r]])
                 parsed = _parse_line(raw)
                 if isinstance(parsed, str):
                     if r == 0 and line_no[r] == 1 and raw.lstrip().startswith(b"candump"):
@@ -453,6 +535,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
                 builder.rows.append((int(line_no[r]), t, ch, can_id, flags, payload))
             if builder.rows:
                 parts.append(builder.batch(chans))
+        text = body = None  # let the block go: a long line's carry may follow
         if len(parts) == 2:  # keep file order when both paths produced rows
             merged = concat(parts)
             order = np.argsort(merged.line, kind="stable")

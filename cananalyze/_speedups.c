@@ -1,0 +1,554 @@
+/*
+ * cananalyze._speedups: the text readers' and the frames table's inner loops in C.
+ *
+ * Why hand-written: no library parses candump or Vector ASC text into columns
+ * (python-can makes one Message per frame, about 150k frames/s), and the numpy
+ * paths in io/candump.py and io/asc.py, while columnar, need a dozen passes over
+ * every byte and hold the GIL between their calls, so reading cannot run on the
+ * other core while the decoder works. These loops read each byte once and release
+ * the GIL for the whole chunk.
+ *
+ * Contract: every function is an optional shortcut for a pure-Python/numpy
+ * function, and must give identical results. The parsers accept only lines whose
+ * every field they can vouch for and mark every other line for the Python path
+ * (which also reports problems), so results are identical by construction; the
+ * tests compare both on real logs and fuzzed lines. Buffers come in through the
+ * buffer protocol (numpy arrays, bytes, memoryview): no numpy headers needed.
+ * Every read is bounds-checked against the line end: lines may be cut, and any
+ * byte may appear.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <stdint.h>
+#include <string.h>
+
+#define FLAG_EXT 0x01
+#define FLAG_RTR 0x02
+#define FLAG_ERR 0x04
+#define FLAG_TX 0x40
+#define CAN_ERR_FLAG 0x20000000u
+
+static const double P10[23] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,
+                               1e8,  1e9,  1e10, 1e11, 1e12, 1e13, 1e14, 1e15,
+                               1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
+static const uint64_t P10I[19] = {1ull,
+                                  10ull,
+                                  100ull,
+                                  1000ull,
+                                  10000ull,
+                                  100000ull,
+                                  1000000ull,
+                                  10000000ull,
+                                  100000000ull,
+                                  1000000000ull,
+                                  10000000000ull,
+                                  100000000000ull,
+                                  1000000000000ull,
+                                  10000000000000ull,
+                                  100000000000000ull,
+                                  1000000000000000ull,
+                                  10000000000000000ull,
+                                  100000000000000000ull,
+                                  1000000000000000000ull};
+
+static signed char HEXV[256]; /* hex digit value, -1 otherwise */
+
+static inline int is_digit(unsigned char c) { return c >= '0' && c <= '9'; }
+
+/* Seconds from `sec` (ni digits) and `frac` (nf digits), exactly as the numpy
+ * readers compute them (io/candump.py _parse_time and candump_fast.parse):
+ * one integer divided once by 10**nf while it is below 2**53, else the sum. */
+static inline double seconds(uint64_t sec, int ni, uint64_t frac, int nf) {
+    if (nf == 0) return (double)(int64_t)sec;
+    if (ni + nf <= 18) {
+        uint64_t whole = sec * P10I[nf] + frac;
+        if (whole < (1ull << 53)) return (double)(int64_t)whole / P10[nf];
+    }
+    return (double)(int64_t)sec + (double)(int64_t)frac / P10[nf];
+}
+
+/* Buffers: a small helper that releases whatever it acquired. */
+typedef struct {
+    Py_buffer b[12];
+    int n;
+} Bufs;
+
+static void bufs_release(Bufs *bs) {
+    for (int i = 0; i < bs->n; i++) PyBuffer_Release(&bs->b[i]);
+    bs->n = 0;
+}
+
+static int bufs_get(Bufs *bs, PyObject *obj, int writable, Py_ssize_t need, const char *what) {
+    Py_buffer *b = &bs->b[bs->n];
+    if (PyObject_GetBuffer(obj, b, (writable ? PyBUF_WRITABLE : PyBUF_SIMPLE) | PyBUF_C_CONTIGUOUS) <
+        0)
+        return -1;
+    bs->n++;
+    if (need >= 0 && b->len < need) {
+        PyErr_Format(PyExc_ValueError, "%s: buffer of %zd bytes, need %zd", what, b->len, need);
+        return -1;
+    }
+    return 0;
+}
+
+/* ------------------------------------------------------------------ lines */
+
+PyDoc_STRVAR(split_lines_doc,
+             "split_lines(buf, starts, ends, all_cr) -> n\n\n"
+             "Line starts and ends (int64 buffers) of buf; a last line without '\\n' counts.\n"
+             "Strips one '\\r' before each end, or every trailing '\\r' when all_cr.\n"
+             "Returns the number of lines, or -1 when the buffers are too small.");
+
+static PyObject *split_lines(PyObject *self, PyObject *args) {
+    PyObject *o_buf, *o_s, *o_e;
+    int all_cr;
+    Bufs bs = {.n = 0};
+    if (!PyArg_ParseTuple(args, "OOOp", &o_buf, &o_s, &o_e, &all_cr)) return NULL;
+    if (bufs_get(&bs, o_buf, 0, -1, "buf") < 0 || bufs_get(&bs, o_s, 1, -1, "starts") < 0 ||
+        bufs_get(&bs, o_e, 1, -1, "ends") < 0) {
+        bufs_release(&bs);
+        return NULL;
+    }
+    const unsigned char *buf = bs.b[0].buf;
+    Py_ssize_t size = bs.b[0].len;
+    int64_t *starts = bs.b[1].buf, *ends = bs.b[2].buf;
+    Py_ssize_t cap = bs.b[1].len / 8;
+    if (bs.b[2].len / 8 < cap) cap = bs.b[2].len / 8;
+    Py_ssize_t n = 0;
+    int overflow = 0;
+    Py_BEGIN_ALLOW_THREADS;
+    Py_ssize_t pos = 0;
+    for (;;) {
+        const unsigned char *nl = pos < size ? memchr(buf + pos, '\n', size - pos) : NULL;
+        Py_ssize_t end = nl ? (Py_ssize_t)(nl - buf) : size;
+        if (!nl && pos == size && size > 0 && buf[size - 1] == '\n') break; /* no last line */
+        if (n >= cap) {
+            overflow = 1;
+            break;
+        }
+        Py_ssize_t e = end;
+        if (all_cr) {
+            while (e > pos && buf[e - 1] == '\r') e--;
+        } else if (e > pos && buf[e - 1] == '\r') {
+            e--;
+        }
+        starts[n] = pos;
+        ends[n] = e;
+        n++;
+        if (!nl) break;
+        pos = end + 1;
+    }
+    Py_END_ALLOW_THREADS;
+    bufs_release(&bs);
+    return PyLong_FromSsize_t(overflow ? -1 : n);
+}
+
+PyDoc_STRVAR(count_lines_doc, "count_lines(buf) -> n: the number of lines split_lines finds.");
+
+static PyObject *count_lines(PyObject *self, PyObject *args) {
+    Py_buffer b;
+    if (!PyArg_ParseTuple(args, "y*", &b)) return NULL;
+    const char *buf = b.buf;
+    Py_ssize_t size = b.len, n = 0, pos = 0;
+    Py_BEGIN_ALLOW_THREADS;
+    const char *nl;
+    while (pos < size && (nl = memchr(buf + pos, '\n', size - pos)) != NULL) {
+        n++;
+        pos = nl - buf + 1;
+    }
+    if (size == 0 || buf[size - 1] != '\n') n++;
+    Py_END_ALLOW_THREADS;
+    PyBuffer_Release(&b);
+    return PyLong_FromSsize_t(n);
+}
+
+/* ---------------------------------------------------------------- candump */
+
+typedef struct {
+    const char *p;
+    Py_ssize_t len;
+} Name;
+
+/* One `(sec.frac) iface id#data [R|T]` line in [q, e). Returns 0 parsed, 1 parsed
+ * with an interface not in `names`, 2 for the Python path. Accepts exactly a
+ * subset of what candump._bulk_log_lines accepts, with the same values. */
+static inline int candump_line(const unsigned char *q, const unsigned char *e, const Name *names,
+                               Py_ssize_t n_names, Py_ssize_t *hint, double *t, uint32_t *can_id,
+                               uint8_t *flags, uint8_t *dlc, uint8_t *data, uint16_t *chan) {
+    if (q >= e || *q != '(') return 2;
+    q++;
+    uint64_t sec = 0, frac = 0;
+    int ni = 0, nf = 0;
+    while (q < e && is_digit(*q)) {
+        if (++ni > 18) return 2;
+        sec = sec * 10 + (*q++ - '0');
+    }
+    if (ni < 1 || q >= e || *q != '.') return 2;
+    q++;
+    while (q < e && is_digit(*q)) {
+        if (++nf > 12) return 2;
+        frac = frac * 10 + (*q++ - '0');
+    }
+    if (nf < 1 || e - q < 2 || q[0] != ')' || q[1] != ' ') return 2;
+    q += 2;
+    const unsigned char *name = q;
+    while (q < e && *q != ' ') q++;
+    if (q >= e || q == name) return 2;
+    Py_ssize_t name_len = q - name;
+    q++; /* identifier */
+    uint32_t id = 0;
+    int k = 0;
+    while (q + k < e && k < 9 && HEXV[q[k]] >= 0) {
+        id = (id << 4) | (uint32_t)HEXV[q[k]];
+        k++;
+    }
+    if ((k != 3 && k != 8) || q + k >= e || q[k] != '#') return 2;
+    q += k + 1; /* data */
+    const unsigned char *d_end = q;
+    while (d_end < e && *d_end != ' ') d_end++;
+    Py_ssize_t d_len = d_end - q;
+    uint8_t fl = 0, n_bytes = 0;
+    memset(data, 0, 8);
+    if (q < e && *q == '#') return 2; /* CAN FD: the Python path (payloads over 8 bytes) */
+    if (q < e && *q == 'R') {
+        fl |= FLAG_RTR;
+        if (d_len > 2) return 2;
+        if (d_len == 2) {
+            if (q[1] < '0' || q[1] > '8') return 2;
+            n_bytes = (uint8_t)(q[1] - '0');
+        }
+    } else {
+        if (d_len > 16 || (d_len & 1)) return 2;
+        for (Py_ssize_t i = 0; i < d_len; i += 2) {
+            int hi = HEXV[q[i]], lo = HEXV[q[i + 1]];
+            if ((hi | lo) < 0) return 2;
+            data[i >> 1] = (uint8_t)((hi << 4) | lo);
+        }
+        n_bytes = (uint8_t)(d_len >> 1);
+    }
+    if (d_end < e) { /* direction written by python-can: " R" or " T" */
+        if (e - d_end != 2 || (d_end[1] != 'R' && d_end[1] != 'T')) return 2;
+        if (d_end[1] == 'T') fl |= FLAG_TX;
+    }
+    if (k == 8) fl |= (id & CAN_ERR_FLAG) ? FLAG_ERR : FLAG_EXT;
+    *t = seconds(sec, ni, frac, nf);
+    *can_id = id & 0x1FFFFFFFu;
+    *flags = fl;
+    *dlc = n_bytes;
+    /* interface: usually the one of the previous line */
+    Py_ssize_t h = *hint;
+    if (h < n_names && names[h].len == name_len && memcmp(names[h].p, name, name_len) == 0) {
+        *chan = (uint16_t)h;
+        return 0;
+    }
+    for (Py_ssize_t i = 0; i < n_names; i++) {
+        if (names[i].len == name_len && memcmp(names[i].p, name, name_len) == 0) {
+            *hint = i;
+            *chan = (uint16_t)i;
+            return 0;
+        }
+    }
+    return 1;
+}
+
+PyDoc_STRVAR(candump_lines_doc,
+             "candump_lines(buf, starts, ends, names, t, can_id, flags, dlc, data, channel, status)"
+             "\n\nParse candump log-file lines [starts[i], ends[i]) of buf into the column buffers.\n"
+             "names: tuple of interface names (bytes), channel = index into it.\n"
+             "status[i]: 0 parsed, 1 parsed but interface not in names (channel unset),\n"
+             "2 left to the Python parser (column values unset).");
+
+static PyObject *candump_lines(PyObject *self, PyObject *args) {
+    PyObject *o[11];
+    Bufs bs = {.n = 0};
+    if (!PyArg_ParseTuple(args, "OOOO!OOOOOOO", &o[0], &o[1], &o[2], &PyTuple_Type, &o[3], &o[4],
+                          &o[5], &o[6], &o[7], &o[8], &o[9], &o[10]))
+        return NULL;
+    if (bufs_get(&bs, o[0], 0, -1, "buf") < 0 || bufs_get(&bs, o[1], 0, -1, "starts") < 0)
+        goto fail;
+    Py_ssize_t n = bs.b[1].len / 8;
+    static const int width[11] = {0, 8, 8, 0, 8, 4, 1, 1, 8, 2, 1};
+    static const char *what[11] = {"buf",   "starts", "ends",   "names", "t",     "can_id",
+                                   "flags", "dlc",    "data",   "channel", "status"};
+    if (bufs_get(&bs, o[2], 0, n * 8, what[2]) < 0) goto fail;
+    for (int i = 4; i < 11; i++)
+        if (bufs_get(&bs, o[i], 1, n * width[i], what[i]) < 0) goto fail;
+    Py_ssize_t n_names = PyTuple_GET_SIZE(o[3]);
+    Name *names = PyMem_Malloc(sizeof(Name) * (n_names ? n_names : 1));
+    if (!names) {
+        PyErr_NoMemory();
+        goto fail;
+    }
+    for (Py_ssize_t i = 0; i < n_names; i++) {
+        PyObject *s = PyTuple_GET_ITEM(o[3], i);
+        if (!PyBytes_Check(s)) {
+            PyMem_Free(names);
+            PyErr_SetString(PyExc_TypeError, "names must be bytes");
+            goto fail;
+        }
+        names[i].p = PyBytes_AS_STRING(s);
+        names[i].len = PyBytes_GET_SIZE(s);
+    }
+    const unsigned char *buf = bs.b[0].buf;
+    Py_ssize_t size = bs.b[0].len;
+    const int64_t *starts = bs.b[1].buf, *ends = bs.b[2].buf;
+    double *t = bs.b[3].buf;
+    uint32_t *can_id = bs.b[4].buf;
+    uint8_t *flags = bs.b[5].buf, *dlc = bs.b[6].buf, *data = bs.b[7].buf;
+    uint16_t *chan = bs.b[8].buf;
+    uint8_t *status = bs.b[9].buf;
+    Py_BEGIN_ALLOW_THREADS;
+    Py_ssize_t hint = 0;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        int64_t s = starts[i], e = ends[i];
+        if (s < 0 || e > size || s > e) {
+            status[i] = 2;
+            continue;
+        }
+        status[i] = (uint8_t)candump_line(buf + s, buf + e, names, n_names, &hint, t + i, can_id + i,
+                                          flags + i, dlc + i, data + 8 * i, chan + i);
+    }
+    Py_END_ALLOW_THREADS;
+    PyMem_Free(names);
+    bufs_release(&bs);
+    Py_RETURN_NONE;
+fail:
+    bufs_release(&bs);
+    return NULL;
+}
+
+/* -------------------------------------------------------------------- ASC */
+
+/* Next whitespace-separated token in [*q, e): separators are bytes <= 32. */
+static inline int next_token(const unsigned char **q, const unsigned char *e,
+                             const unsigned char **ts, Py_ssize_t *tl) {
+    const unsigned char *p = *q;
+    while (p < e && *p <= 32) p++;
+    if (p >= e) return 0;
+    const unsigned char *s = p;
+    while (p < e && *p > 32) p++;
+    *ts = s;
+    *tl = p - s;
+    *q = p;
+    return 1;
+}
+
+/* One classic data-frame line `t ch id[x] Rx|Tx d dlc b0 ...` (base hex, absolute
+ * times): 1 when parsed. Accepts a subset of what asc._bulk_lines accepts (in
+ * practice the same set), with the same values. */
+static inline int asc_line(const unsigned char *q, const unsigned char *e, double *t,
+                           int64_t *chan, uint32_t *can_id, uint8_t *flags, uint8_t *dlc,
+                           uint8_t *data) {
+    /* str.split() also splits on other controls and latin-1 NBSP/NEL: such lines go slow */
+    for (const unsigned char *p = q; p < e; p++) {
+        unsigned char c = *p;
+        if ((c < 32 && c != 9 && c != 10 && c != 13) || c >= 127) return 0;
+    }
+    const unsigned char *ts;
+    Py_ssize_t tl;
+    /* time: digits, optionally '.' and digits */
+    if (!next_token(&q, e, &ts, &tl) || tl < 3) return 0;
+    uint64_t sec = 0, frac = 0;
+    int ni = 0, nf = 0;
+    Py_ssize_t i = 0;
+    while (i < tl && is_digit(ts[i])) {
+        if (++ni > 18) return 0;
+        sec = sec * 10 + (ts[i++] - '0');
+    }
+    if (ni < 1) return 0;
+    if (i < tl) {
+        if (ts[i++] != '.') return 0;
+        while (i < tl && is_digit(ts[i])) {
+            if (++nf > 12) return 0;
+            frac = frac * 10 + (ts[i++] - '0');
+        }
+        if (i < tl) return 0;
+    }
+    /* channel: 1-3 decimal digits */
+    if (!next_token(&q, e, &ts, &tl) || tl < 1 || tl > 3) return 0;
+    int64_t ch = 0;
+    for (i = 0; i < tl; i++) {
+        if (!is_digit(ts[i])) return 0;
+        ch = ch * 10 + (ts[i] - '0');
+    }
+    /* identifier: 1-8 hex digits, 'x' for 29-bit */
+    if (!next_token(&q, e, &ts, &tl)) return 0;
+    int ext = ts[tl - 1] == 'x' || ts[tl - 1] == 'X';
+    Py_ssize_t il = tl - ext;
+    if (il < 1 || il > 8) return 0;
+    uint32_t id = 0;
+    for (i = 0; i < il; i++) {
+        int v = HEXV[ts[i]];
+        if (v < 0) return 0;
+        id = (id << 4) | (uint32_t)v;
+    }
+    if (id > (ext ? 0x1FFFFFFFu : 0x7FFu)) return 0;
+    /* direction */
+    if (!next_token(&q, e, &ts, &tl) || tl != 2 || ts[1] != 'x' || (ts[0] != 'R' && ts[0] != 'T'))
+        return 0;
+    uint8_t fl = (uint8_t)((ts[0] == 'T' ? FLAG_TX : 0) | (ext ? FLAG_EXT : 0));
+    /* 'd' and a one-digit DLC code (9..15 still mean 8 bytes) */
+    if (!next_token(&q, e, &ts, &tl) || tl != 1 || ts[0] != 'd') return 0;
+    if (!next_token(&q, e, &ts, &tl) || tl != 1 || HEXV[ts[0]] < 0) return 0;
+    int n_bytes = HEXV[ts[0]] < 8 ? HEXV[ts[0]] : 8;
+    memset(data, 0, 8);
+    for (int j = 0; j < n_bytes; j++) {
+        if (!next_token(&q, e, &ts, &tl) || tl != 2) return 0;
+        int hi = HEXV[ts[0]], lo = HEXV[ts[1]];
+        if ((hi | lo) < 0) return 0;
+        data[j] = (uint8_t)((hi << 4) | lo);
+    }
+    *t = seconds(sec, ni, frac, nf);
+    *chan = ch;
+    *can_id = id;
+    *flags = fl;
+    *dlc = (uint8_t)n_bytes;
+    return 1;
+}
+
+PyDoc_STRVAR(asc_lines_doc,
+             "asc_lines(buf, starts, ends, t, chan, can_id, flags, dlc, data, ok)\n\n"
+             "Classic data-frame ASC lines (hex base, absolute times) into column buffers\n"
+             "(chan int64, the channel number); ok[i] = 1 where parsed, else 0 and the\n"
+             "line is for the Python line parser.");
+
+static PyObject *asc_lines(PyObject *self, PyObject *args) {
+    PyObject *o[10];
+    Bufs bs = {.n = 0};
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOO", &o[0], &o[1], &o[2], &o[3], &o[4], &o[5], &o[6],
+                          &o[7], &o[8], &o[9]))
+        return NULL;
+    if (bufs_get(&bs, o[0], 0, -1, "buf") < 0 || bufs_get(&bs, o[1], 0, -1, "starts") < 0)
+        goto fail;
+    Py_ssize_t n = bs.b[1].len / 8;
+    static const int width[10] = {0, 8, 8, 8, 8, 4, 1, 1, 8, 1};
+    static const char *what[10] = {"buf", "starts", "ends", "t",    "chan",
+                                   "can_id", "flags", "dlc", "data", "ok"};
+    for (int i = 2; i < 10; i++)
+        if (bufs_get(&bs, o[i], i > 2, n * width[i], what[i]) < 0) goto fail;
+    const unsigned char *buf = bs.b[0].buf;
+    Py_ssize_t size = bs.b[0].len;
+    const int64_t *starts = bs.b[1].buf, *ends = bs.b[2].buf;
+    double *t = bs.b[3].buf;
+    int64_t *chan = bs.b[4].buf;
+    uint32_t *can_id = bs.b[5].buf;
+    uint8_t *flags = bs.b[6].buf, *dlc = bs.b[7].buf, *data = bs.b[8].buf, *ok = bs.b[9].buf;
+    Py_BEGIN_ALLOW_THREADS;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        int64_t s = starts[i], e = ends[i];
+        if (s < 0 || e > size || s > e) {
+            ok[i] = 0;
+            continue;
+        }
+        ok[i] = (uint8_t)asc_line(buf + s, buf + e, t + i, chan + i, can_id + i, flags + i,
+                                  dlc + i, data + 8 * i);
+    }
+    Py_END_ALLOW_THREADS;
+    bufs_release(&bs);
+    Py_RETURN_NONE;
+fail:
+    bufs_release(&bs);
+    return NULL;
+}
+
+PyDoc_STRVAR(asc_base_line_doc,
+             "asc_base_line(buf, starts) -> k\n\n"
+             "1 + the index of the last line matching (?i)^[ \\t]*base[ \\t] (a header line\n"
+             "that sets the number base and time mode), 0 when none does.");
+
+static PyObject *asc_base_line(PyObject *self, PyObject *args) {
+    PyObject *o_buf, *o_s;
+    Bufs bs = {.n = 0};
+    if (!PyArg_ParseTuple(args, "OO", &o_buf, &o_s)) return NULL;
+    if (bufs_get(&bs, o_buf, 0, -1, "buf") < 0 || bufs_get(&bs, o_s, 0, -1, "starts") < 0) {
+        bufs_release(&bs);
+        return NULL;
+    }
+    const unsigned char *buf = bs.b[0].buf;
+    Py_ssize_t size = bs.b[0].len, n = bs.b[1].len / 8, last = 0;
+    const int64_t *starts = bs.b[1].buf;
+    Py_BEGIN_ALLOW_THREADS;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        int64_t q = starts[i];
+        if (q < 0) continue;
+        while (q < size && (buf[q] == ' ' || buf[q] == '\t')) q++;
+        if (size - q >= 5 && (buf[q] | 0x20) == 'b' && (buf[q + 1] | 0x20) == 'a' &&
+            (buf[q + 2] | 0x20) == 's' && (buf[q + 3] | 0x20) == 'e' &&
+            (buf[q + 4] == ' ' || buf[q + 4] == '\t'))
+            last = i + 1;
+    }
+    Py_END_ALLOW_THREADS;
+    bufs_release(&bs);
+    return PyLong_FromSsize_t(last);
+}
+
+/* -------------------------------------------------------------- hex column */
+
+PyDoc_STRVAR(hex_payload_doc,
+             "hex_payload(data, dlc, flags, rtr_flag, chars, offsets) -> n_chars\n\n"
+             "Arrow string-column buffers of lowercase hex payloads: data (n, 8) uint8,\n"
+             "dlc/flags uint8; rows with rtr_flag set are empty, others min(dlc, 8) bytes.\n"
+             "chars needs 16 n bytes, offsets (int32) n + 1 entries.");
+
+static PyObject *hex_payload(PyObject *self, PyObject *args) {
+    PyObject *o_data, *o_dlc, *o_flags, *o_chars, *o_off;
+    int rtr;
+    Bufs bs = {.n = 0};
+    if (!PyArg_ParseTuple(args, "OOOiOO", &o_data, &o_dlc, &o_flags, &rtr, &o_chars, &o_off))
+        return NULL;
+    if (bufs_get(&bs, o_dlc, 0, -1, "dlc") < 0) goto fail;
+    Py_ssize_t n = bs.b[0].len;
+    if (bufs_get(&bs, o_data, 0, n * 8, "data") < 0 || bufs_get(&bs, o_flags, 0, n, "flags") < 0 ||
+        bufs_get(&bs, o_chars, 1, n * 16, "chars") < 0 ||
+        bufs_get(&bs, o_off, 1, (n + 1) * 4, "offsets") < 0)
+        goto fail;
+    if (n * 16 > INT32_MAX) {
+        PyErr_SetString(PyExc_OverflowError, "too many rows for int32 offsets");
+        goto fail;
+    }
+    const uint8_t *dlc = bs.b[0].buf, *data = bs.b[1].buf, *flags = bs.b[2].buf;
+    char *chars = bs.b[3].buf;
+    int32_t *off = bs.b[4].buf;
+    static const char hexd[] = "0123456789abcdef";
+    int32_t pos = 0;
+    Py_BEGIN_ALLOW_THREADS;
+    off[0] = 0;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        int len = (flags[i] & rtr) ? 0 : (dlc[i] < 8 ? dlc[i] : 8);
+        const uint8_t *d = data + 8 * i;
+        for (int j = 0; j < len; j++) {
+            chars[pos++] = hexd[d[j] >> 4];
+            chars[pos++] = hexd[d[j] & 15];
+        }
+        off[i + 1] = pos;
+    }
+    Py_END_ALLOW_THREADS;
+    bufs_release(&bs);
+    return PyLong_FromLong(pos);
+fail:
+    bufs_release(&bs);
+    return NULL;
+}
+
+static PyMethodDef methods[] = {
+    {"count_lines", count_lines, METH_VARARGS, count_lines_doc},
+    {"split_lines", split_lines, METH_VARARGS, split_lines_doc},
+    {"candump_lines", candump_lines, METH_VARARGS, candump_lines_doc},
+    {"asc_lines", asc_lines, METH_VARARGS, asc_lines_doc},
+    {"asc_base_line", asc_base_line, METH_VARARGS, asc_base_line_doc},
+    {"hex_payload", hex_payload, METH_VARARGS, hex_payload_doc},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_speedups",
+    "Compiled inner loops of the text readers and the frames table (optional).", -1, methods,
+};
+
+PyMODINIT_FUNC PyInit__speedups(void) {
+    memset(HEXV, -1, sizeof HEXV);
+    for (int c = '0'; c <= '9'; c++) HEXV[c] = (signed char)(c - '0');
+    for (int c = 'a'; c <= 'f'; c++) HEXV[c] = (signed char)(c - 'a' + 10);
+    for (int c = 'A'; c <= 'F'; c++) HEXV[c] = (signed char)(c - 'A' + 10);
+    return PyModule_Create(&module);
+}

@@ -1,0 +1,289 @@
+"""The compiled helper (`_speedups.c`) gives exactly the pure-Python readers' results.
+
+Every log is read twice, with the extension and with `speedups.C = None` (what
+`CANANALYZE_PURE=1` or a machine without a compiler gives), and every batch is
+compared column by column, with the interface names, problems, line numbers and
+strict-mode errors: real candump and ASC logs, the samples, generated traffic,
+seeded random lines around the usual layouts, and hypothesis-fuzzed bytes.
+Skipped when the extension is not built.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import random
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from cananalyze import speedups
+from cananalyze.errors import InputError, ProblemLog
+from cananalyze.frames import FLAG_RTR, FrameBatch
+from cananalyze.io import asc, candump
+from cananalyze.io.source import open_log
+from tests.conftest import real_file
+
+C = speedups.C
+pytestmark = pytest.mark.skipif(C is None, reason="compiled helper not built")
+ROOT = Path(__file__).resolve().parent.parent
+SAMPLES = ROOT / "samples"
+COLUMNS = ("t", "can_id", "flags", "dlc", "data", "channel", "line")
+
+
+def _read(path: Path, pure: bool, strict: bool = False, batch_size: int | None = None):
+    """(batches, problems, context) or the strict-mode error text."""
+    saved = speedups.C
+    speedups.C = None if pure else C
+    try:
+        problems = ProblemLog()
+        kw = {"batch_size": batch_size} if batch_size else {}
+        src = open_log(path, strict=strict, problems=problems, **kw)
+        try:
+            batches = list(src.batches())
+        except InputError as exc:
+            return str(exc)
+        return batches, problems, src.ctx
+    finally:
+        speedups.C = saved
+
+
+def _same(path: Path, batch_size: int | None = None) -> int:
+    """Assert both paths agree on `path`; the number of frames read."""
+    ref = _read(path, pure=True, batch_size=batch_size)
+    got = _read(path, pure=False, batch_size=batch_size)
+    ref_b, ref_p, ref_ctx = ref
+    got_b, got_p, got_ctx = got
+    assert len(got_b) == len(ref_b)
+    for g, r in zip(got_b, ref_b, strict=True):
+        assert isinstance(g, FrameBatch)
+        for name in COLUMNS:
+            a, b = getattr(g, name), getattr(r, name)
+            assert a.dtype == b.dtype, name
+            assert np.array_equal(a, b), (name, path)
+        assert g.channels == r.channels
+        assert g.long_data == r.long_data
+    assert got_p.count == ref_p.count
+    assert [str(p) for p in got_p.shown] == [str(p) for p in ref_p.shown]
+    for attr in ("frames", "absolute_time", "start_time", "format", "extras"):
+        assert getattr(got_ctx, attr) == getattr(ref_ctx, attr), attr
+    rs, gs = _read(path, pure=True, strict=True), _read(path, pure=False, strict=True)
+    if isinstance(rs, str) or isinstance(gs, str):
+        assert gs == rs  # the same first problem stops both
+    else:
+        assert [len(b) for b in gs[0]] == [len(b) for b in rs[0]]
+    return sum(len(b) for b in ref_b)
+
+
+REAL = [
+    "calumroy__CANopen_socketCAN_Test/can_log_070825_brake_sensor_test1.log",
+    "calumroy__CANopen_socketCAN_Test/can_log_070825_brake_sensor_test2.log",
+    "calumroy__CANopen_socketCAN_Test/can_log_070825_brake_sensor_test3.log",
+    "collin80__SavvyCAN/candump.log",
+    "RoboTrainerAID__za_experimental/candump.log",
+    "nigel-bruce-khan__ros_canopen-tmcm-1636/candump.txt",
+    "jclinton830__canopen_test/candump.txt",
+    "SeonilChoi__CANOPEN-SDK/log.txt",
+    "SeonilChoi__CANOPEN-SDK/log2.txt",
+    "hardbyte__python-can/test_CanErrorFrames.asc",
+    "hardbyte__python-can/test_CanFdMessage64.asc",
+    "hardbyte__python-can/test_CanRemoteMessage.asc",
+    "hardbyte__python-can/test_CanFdMessage.asc",
+    "hardbyte__python-can/single_frame.asc",
+    "hardbyte__python-can/issue_1256.asc",
+    "hardbyte__python-can/logfile.asc",
+    "hardbyte__python-can/single_frame_us_locale.asc",
+    "hardbyte__python-can/test_CanMessage.asc",
+    "hardbyte__python-can/issue_1299.asc",
+    "hardbyte__python-can/test_CanFdRemoteMessage.asc",
+    "hardbyte__python-can/logfile_errorframes.asc",
+]
+
+
+@pytest.mark.parametrize("name", REAL)
+def test_real_logs(name: str) -> None:
+    _same(real_file(name))
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["demo.log", "faults.log", "commissioning.log", "demo.asc", "faults.asc", "commissioning.asc"],
+)
+def test_samples(name: str) -> None:
+    assert _same(SAMPLES / name) > 0
+
+
+def _generate():
+    spec = importlib.util.spec_from_file_location("bench_generate", ROOT / "benchmarks/generate.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.mark.parametrize("suffix", [".log", ".asc"])
+def test_generated_traffic_across_chunks(tmp_path: Path, monkeypatch, suffix: str) -> None:
+    from cananalyze.outputs.logfile import write_log
+
+    gen = _generate()
+    path = tmp_path / f"bench{suffix}"
+    write_log(gen.generate(20000, seed=3), path)
+    monkeypatch.setattr(candump, "CHUNK", 1 << 14)  # many chunks: carried partial lines
+    monkeypatch.setattr(asc, "CHUNK", 1 << 14)
+    assert _same(path, batch_size=3000) == 20000
+
+
+_HEX = "0123456789abcdefABCDEF"
+
+
+def _candump_line(rng: random.Random) -> str:
+    from tests.test_candump_fast import _line
+
+    line = _line(rng)
+    r = rng.random()
+    if r < 0.03:  # the screen format and other variants the line parser reads
+        line = f"  can{rng.randrange(3)}  {rng.choice(['181', '18FF00A1', '7E5'])}   [2]  01 02"
+    elif r < 0.05:
+        line = line.replace(".", "", 1)  # no fraction
+    elif r < 0.07:
+        line = line[: rng.randrange(len(line) + 1)]  # cut anywhere
+    elif r < 0.08:
+        line = " " + line
+    elif r < 0.09:
+        line = line.replace("can0", rng.choice(["", "can 0", "vcan\x00", "é"]), 1)
+    elif r < 0.10:
+        line += "\r"
+    elif r < 0.11:
+        line = ""
+    elif r < 0.12:
+        line = line.replace("#", "#r", 1)
+    return line
+
+
+def _asc_line(rng: random.Random) -> str:
+    t = f"{rng.randrange(10 ** rng.choice([1, 3, 5]))}.{rng.randrange(10**6):06d}"
+    if rng.random() < 0.05:
+        t = rng.choice(["12", "12.", "1.5e3", ".5", "1" * 20 + ".0"])
+    ch = rng.choice(["1", "1", "2", "12", "123", "1234", "x"])
+    ident = "".join(rng.choice(_HEX) for _ in range(rng.choice([1, 2, 3, 3, 8])))
+    if rng.random() < 0.2:
+        ident += rng.choice("xX")
+    direction = rng.choice(["Rx", "Tx", "Rx", "rx", "TX"])
+    kind = rng.choice(["d", "d", "d", "d", "r", "D"])
+    n = rng.choice([0, 1, 2, 8, 8, 8, 9, 15])
+    code = format(n, "x") if rng.random() < 0.9 else rng.choice(["10", "g", ""])
+    data = " ".join(
+        "".join(rng.choice(_HEX) for _ in range(rng.choice([2, 2, 2, 2, 2, 1, 3])))
+        for _ in range(min(n, 8) - (rng.random() < 0.05))
+    )
+    tail = rng.choice(["", "", "  Length = 272000 BitCount = 140 ID = 384", "\t", " \r"])
+    line = f" {t} {ch}  {ident}             {direction}   {kind} {code} {data}{tail}"
+    r = rng.random()
+    if r < 0.03:
+        line = line[: rng.randrange(len(line) + 1)]
+    elif r < 0.05:
+        line = rng.choice(
+            [
+                "   0.000000 Start of measurement",
+                "   1.000000 1  ErrorFrame",
+                "   2.000000 CANFD   1 Rx        123  1 0 8  8 01 02 03 04 05 06 07 08",
+                "// comment",
+                "Begin Triggerblock Thu Jan 01 00:00:01.0 2026",
+                "",
+                "base hex  timestamps absolute",
+                " BaSE hex  timestamps absolute",
+                "\tbase dec  timestamps absolute",
+                "base hex timestamps relative",
+                "basehex",
+                "Base",
+            ]
+        )
+    elif r < 0.07:
+        i = rng.randrange(len(line) + 1)
+        line = line[:i] + rng.choice(["\x00", "\x0b", "\xa0", "\x7f", "  ", "."]) + line[i:]
+    return line
+
+
+HEADER = "date Thu Jan 01 00:00:00.0 2026\nbase hex  timestamps absolute\ninternal events logged\n"
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_random_candump_lines(tmp_path: Path, seed: int) -> None:
+    rng = random.Random(seed)
+    lines = [_candump_line(rng) for _ in range(5000)]
+    path = tmp_path / "x.log"
+    path.write_bytes(("\n".join(lines) + ("\n" if seed % 2 else "")).encode("utf-8"))
+    _same(path, batch_size=777)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_random_asc_lines(tmp_path: Path, seed: int) -> None:
+    rng = random.Random(seed)
+    lines = [_asc_line(rng) for _ in range(5000)]
+    path = tmp_path / "x.asc"
+    path.write_bytes((HEADER + "\n".join(lines) + "\n").encode("latin-1"))
+    _same(path, batch_size=777)
+
+
+_ALPHABET = st.sampled_from(
+    list(b"()0123456789.#RTxXrd abcdefABCDEF\t\r\n\x00\xff-can") + [ord(" ")]
+)
+
+
+@settings(
+    max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    head=st.sampled_from([b"(1767225600.000123) can0 181#0102\n", HEADER.encode(), b""]),
+    body=st.lists(st.integers(0, 255) | _ALPHABET, max_size=400).map(bytes),
+    suffix=st.sampled_from([".log", ".asc"]),
+)
+def test_fuzzed_bytes(tmp_path: Path, head: bytes, body: bytes, suffix: str) -> None:
+    path = tmp_path / f"f{suffix}"
+    path.write_bytes(head + body)
+    try:
+        _read(path, pure=True)
+    except InputError:  # not a log at all: both paths fail the same way in open_log
+        return
+    _same(path, batch_size=5)
+
+
+def test_hex_payload_column() -> None:
+    import pyarrow as pa
+
+    from cananalyze import hexcols
+
+    rng = np.random.default_rng(1)
+    n = 5000
+    data = rng.integers(0, 256, (n, 8), dtype=np.uint8)
+    dlc = rng.integers(0, 16, n).astype(np.uint8)
+    flags = rng.integers(0, 256, n).astype(np.uint8)
+    got = hexcols.hex_payload_buffers(data, dlc, flags)
+    saved = speedups.C
+    speedups.C = None
+    try:
+        ref = hexcols.hex_payload_buffers(data, dlc, flags)
+    finally:
+        speedups.C = saved
+    assert bytes(got[0]) == bytes(ref[0]) and np.array_equal(got[1], ref[1])
+    arr = pa.Array.from_buffers(pa.string(), n, [None, pa.py_buffer(got[1]), pa.py_buffer(got[0])])
+    want = [
+        "" if f & FLAG_RTR else bytes(d[: min(k, 8)]).hex()
+        for d, k, f in zip(data, dlc, flags, strict=True)
+    ]
+    assert arr.to_pylist() == want
+
+
+@pytest.mark.parametrize("name", ["demo.log", "demo.asc"])
+def test_cli_pure_and_compiled_agree(name: str) -> None:
+    """The whole program, in a subprocess: the same output with CANANALYZE_PURE=1."""
+    cmd = [sys.executable, "-m", "cananalyze", "decode", str(SAMPLES / name)]
+    env = dict(os.environ, CANANALYZE_PURE="")
+    out = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, check=True).stdout
+    env["CANANALYZE_PURE"] = "1"
+    pure = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, check=True).stdout
+    assert out == pure and len(out) > 1000
