@@ -89,6 +89,8 @@ class NetworkModel:
         self.segments: list[tuple[int, dict[int, PdoBinding]]] = [(0, {})]
         self.classifier: CobClassifier | None = None
         self._assigned: dict[int, tuple[int, int, int]] = {}
+        # (node, index, subindex) -> object_info answer; cleared when a node's profile changes
+        self._info: dict[tuple[int, int, int], tuple[str, int] | None] = {}
         for node, ns in self.spec.nodes.items():
             cfg = NodeConfig.from_profile(node, ns.profile, ns.how)
             for index, sub, value in ns.writes:
@@ -123,8 +125,17 @@ class NetworkModel:
     def object_info(self, node: int, index: int, subindex: int) -> tuple[str, int] | None:
         """(name, data type) of an object on a node: its profile, else CiA 301's common objects.
 
-        The SDO tracker calls this to name and decode transaction values.
+        The SDO tracker calls this to name and decode transaction values: answers are
+        kept until a node's profile changes (a profile lookup costs microseconds).
         """
+        key = (node, index, subindex)
+        found = self._info.get(key, self._info)
+        if found is not self._info:
+            return found  # type: ignore[return-value]
+        found = self._info[key] = self._object_info(node, index, subindex)
+        return found
+
+    def _object_info(self, node: int, index: int, subindex: int) -> tuple[str, int] | None:
         cfg = self.nodes.get(node)
         profile = cfg.profile if cfg is not None else None
         if profile is not None:
@@ -138,6 +149,7 @@ class NetworkModel:
         cfg = self.nodes.get(node)
         if cfg is None:
             cfg = self.nodes[node] = NodeConfig(node)
+            self._info.clear()
         return cfg
 
     def value_at(self, node: int, index: int, subindex: int, t: float) -> int | None:
@@ -231,6 +243,7 @@ class NetworkModel:
             if change.node == cfg.node:
                 fresh.apply(*change.object, change.value)
         self.nodes[cfg.node] = fresh
+        self._info.clear()
         self._rebind()
         return self._sync_classifier()
 

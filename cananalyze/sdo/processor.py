@@ -106,14 +106,23 @@ class SdoProcessor:
         cand = p.cand.tolist()
         is_partner = p.is_partner.tolist()
         req_cob = self._req_cob = p.req_cob.tolist()
-        self._aborted = p.aborted.tolist()
-        self._taken: list[tuple[int, int, int]] = []
         slow_at = np.flatnonzero(p.static_slow).tolist()
         t = fb.t[rows].tolist()
         req_of = np.full(len(row_of), -1, np.int64)
         req_of[p.partner[p.cand]] = np.flatnonzero(p.cand)
-        self._req_of = req_of.tolist()
-        answers = np.flatnonzero(p.is_partner).tolist()
+        self._req_of_arr = req_of
+        answers_arr = np.flatnonzero(p.is_partner)
+        answers = answers_arr.tolist()
+        self._answers = answers_arr
+        # how each answer's transfer ends, for the tracker's `_ended` (a late abort joins it)
+        self._ended_by = list(
+            zip(
+                p.req_cob[answers_arr].tolist(),
+                np.where(p.aborted[answers_arr], "abort", "ok").tolist(),
+                strict=True,
+            )
+        )
+        self._chunks: list[tuple[int, int, int]] = []  # (first record slot, lo, hi) in answers
         rejected: list[int] = []  # answers whose request had to go through the tracker (sorted)
         rejected_set: set[int] = set()
         m = len(row_of)
@@ -130,7 +139,7 @@ class SdoProcessor:
                 # idle stretch: every answer in it closes a pair whose request was taken
                 lo, hi = bisect.bisect_left(answers, pos), bisect.bisect_left(answers, stop)
                 if hi > lo:
-                    self._take_many(batch, answers[lo:hi])
+                    self._take(batch, lo, hi)
                 pos = stop
                 if pos >= m:
                     break
@@ -148,49 +157,43 @@ class SdoProcessor:
                 if tracker._pending:
                     tracker.advance(t[i])
                     self._emit(batch)
-                self._take_many(batch, [i])
+                lo = bisect.bisect_left(answers, i)
+                self._take(batch, lo, lo + 1)
                 continue
             self._feed(batch, row_of[i])
 
-    def _take_many(self, batch: DecodedBatch, answers: list[int]) -> None:
-        """Reserve the record slots of fast pairs closed by these answer positions."""
-        req_of, row_of, aborted, req_cob = (
-            self._req_of,
-            self._cur_rows,
-            self._aborted,
-            self._req_cob,
-        )
-        base = len(batch.records)
-        batch.records.extend([(row_of[j], None) for j in answers])  # filled in by _fill
-        self._taken.extend(
-            zip(
-                [req_of[j] for j in answers], answers, range(base, base + len(answers)), strict=True
-            )
-        )
-        self.tracker._ended.update((req_cob[j], "abort" if aborted[j] else "ok") for j in answers)
+    def _take(self, batch: DecodedBatch, lo: int, hi: int) -> None:
+        """Reserve the record slots of the fast pairs closed by answers[lo:hi] (filled by _fill)."""
+        self._chunks.append((len(batch.records), lo, hi))
+        batch.records.extend([None] * (hi - lo))  # type: ignore[list-item]
+        self.tracker._ended.update(self._ended_by[lo:hi])
 
     def _fill(self, batch: DecodedBatch) -> None:
         """Records of every pair taken in this batch, built column-wise; notes when read."""
-        if not self._taken:
+        if not self._chunks:
             return
         rows = np.asarray(self._cur_rows)
-        taken = np.asarray(self._taken)
-        a, b = rows[taken[:, 0]], rows[taken[:, 1]]
+        pick = np.concatenate([self._answers[lo:hi] for _, lo, hi in self._chunks])
+        a, b = rows[self._req_of_arr[pick]], rows[pick]
         fb = batch.frames
-        _, _, records = fastpath.build_pairs(fb, a, b, self.tracker.object_info, notes=False)
-        for rb, (_, _, slot), rec in zip(b.tolist(), self._taken, records, strict=True):
-            batch.records[slot] = (rb, rec)
+        records = fastpath.pair_records(fb, a, b, self.tracker.object_info)
+        done = list(zip(b.tolist(), records, strict=True))
+        k = 0
+        for slot, lo, hi in self._chunks:
+            batch.records[slot : slot + hi - lo] = done[k : k + hi - lo]
+            k += hi - lo
 
         def write_notes(notes: dict) -> None:
-            req, resp, _ = fastpath.build_pairs(fb, a, b, None, records=False)
+            req, resp = fastpath.pair_notes(fb, a, b)
             for ra, rb, na, nb in zip(a.tolist(), b.tolist(), req, resp, strict=True):
                 LazyNotes.write(notes, ra, na)
                 LazyNotes.write(notes, rb, nb)
 
+        covers = np.concatenate((a, b))
         if isinstance(batch.notes, LazyNotes):
-            batch.notes.defer(write_notes)
+            batch.notes.defer(write_notes, covers)
         else:
-            batch.notes = LazyNotes(batch.notes, write_notes)
+            batch.notes = LazyNotes(batch.notes, write_notes, covers)
 
     def finish(self, batch: DecodedBatch) -> None:
         self.tracker.finish()
