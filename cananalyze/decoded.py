@@ -29,6 +29,42 @@ class SignalBlock:
 
 
 @dataclass
+class SdoColumns:
+    """The SDO fast path's records of a batch as columns (the dicts stay in `records`).
+
+    Summary, timing and the network model aggregate these instead of reading
+    tens of thousands of dicts; `slots` says where each one sits in `records`.
+    """
+
+    slots: np.ndarray  # int64 position in DecodedBatch.records
+    row: np.ndarray  # int64 row the record is attached to (the answer)
+    node: np.ndarray  # int64
+    upload: np.ndarray  # bool (else download)
+    index: np.ndarray  # int64
+    subindex: np.ndarray  # int64
+    ok: np.ndarray  # bool: result "ok" (else "abort")
+    latency: np.ndarray  # float64 latency_ms as in the record
+
+
+@dataclass
+class SdoTable:
+    """Every `sdo` record of a batch in record order, as codes into small key lists."""
+
+    node_keys: list
+    node: np.ndarray  # int64 code into node_keys
+    result_keys: list
+    result: np.ndarray  # int64 code into result_keys
+    latency: np.ndarray  # float64 ms, NaN where the record has none
+
+    def first_seen(self, codes: np.ndarray) -> list[int]:
+        """Distinct codes in the order they first appear (dict insertion order of a loop)."""
+        if codes.size == 0:
+            return []
+        uniq, first = np.unique(codes, return_index=True)
+        return uniq[np.argsort(first)].tolist()
+
+
+@dataclass
 class DecodedBatch:
     frames: FrameBatch
     service: np.ndarray  # uint8 Service
@@ -39,6 +75,7 @@ class DecodedBatch:
     signals: list[SignalBlock] = field(default_factory=list)
     # Notes shared by many rows, kept columnar (e.g. one pdo_problem for every short PDO).
     row_notes: list[tuple[np.ndarray, dict]] = field(default_factory=list)
+    sdo_fast: SdoColumns | None = field(default=None, repr=False, compare=False)
     _lazy: tuple | None = field(default=None, repr=False, compare=False)
 
     def __len__(self) -> int:
@@ -90,3 +127,63 @@ class DecodedBatch:
 
     def add_record(self, row: int, record: dict) -> None:
         self.records.append((row, record))
+
+    def sdo_table(self) -> SdoTable:
+        """The batch's `sdo` records as columns: the fast path's from `sdo_fast`, the rest read."""
+        records = self.records
+        fast = self.sdo_fast
+        if fast is not None and fast.slots.size and len(records) > int(fast.slots[-1]):
+            rest = np.ones(len(records), bool)
+            rest[fast.slots] = False
+            others = np.flatnonzero(rest).tolist()
+        else:
+            fast, others = None, range(len(records))
+        node_keys: list = []
+        node_code: dict = {}
+        result_keys: list = []
+        result_code: dict = {}
+        pos: list[int] = []
+        nodes: list[int] = []
+        results: list[int] = []
+        lats: list[float] = []
+        nan = float("nan")
+        for k in others:
+            rec = records[k][1]
+            if rec.get("kind") != "sdo":
+                continue
+            node, result, lat = rec.get("node"), rec.get("result"), rec.get("latency_ms")
+            c = node_code.get(node)
+            if c is None:
+                c = node_code[node] = len(node_keys)
+                node_keys.append(node)
+            r = result_code.get(result)
+            if r is None:
+                r = result_code[result] = len(result_keys)
+                result_keys.append(result)
+            pos.append(k)
+            nodes.append(c)
+            results.append(r)
+            lats.append(nan if lat is None else lat)
+        node = np.asarray(nodes, np.int64)
+        result = np.asarray(results, np.int64)
+        latency = np.asarray(lats, np.float64)
+        if fast is not None:
+            for key in np.unique(fast.node).tolist():
+                if key not in node_code:
+                    node_code[key] = len(node_keys)
+                    node_keys.append(key)
+            lut = np.full(int(fast.node.max()) + 1, -1, np.int64)
+            for key, c in node_code.items():
+                if type(key) is int and 0 <= key < lut.size:
+                    lut[key] = c
+            for key in ("ok", "abort"):
+                if key not in result_code:
+                    result_code[key] = len(result_keys)
+                    result_keys.append(key)
+            fres = np.where(fast.ok, result_code["ok"], result_code["abort"])
+            at = np.concatenate((np.asarray(pos, np.int64), fast.slots))
+            order = np.argsort(at, kind="stable")
+            node = np.concatenate((node, lut[fast.node]))[order]
+            result = np.concatenate((result, fres))[order]
+            latency = np.concatenate((latency, fast.latency))[order]
+        return SdoTable(node_keys, node, result_keys, result, latency)

@@ -77,18 +77,25 @@ class Timing:
         if boot.size:
             self.bootups.update(boot.tolist())
         self.error_frames += int(np.count_nonzero(b.service == Service.ERROR_FRAME))
-        sdo = [rec for _row, rec in b.records if rec.get("kind") == "sdo"]
-        if sdo:
-            self.sdo_results.update([rec.get("result") for rec in sdo])
-            latency: dict = {}
-            for rec in sdo:
-                if rec.get("latency_ms") is not None:
-                    latency.setdefault(rec.get("node"), []).append(rec["latency_ms"])
-            for node, values in latency.items():
-                st = self.sdo_latency.get(node)
-                if st is None:
-                    st = self.sdo_latency[node] = StreamStats()
-                st.add(np.array(values, np.float64))
+        if b.records:
+            self._sdo(b)
+
+    def _sdo(self, b) -> None:
+        """Result counts and latency per node, from the batch's SDO records as columns."""
+        tab = b.sdo_table()
+        if tab.node.size == 0:
+            return
+        counts = np.bincount(tab.result, minlength=len(tab.result_keys)).tolist()
+        # Counter order as counting the records one by one gives (first seen first)
+        self.sdo_results.update({tab.result_keys[r]: counts[r] for r in tab.first_seen(tab.result)})
+        has = ~np.isnan(tab.latency)
+        nodes, lat = tab.node[has], tab.latency[has]
+        for c in tab.first_seen(nodes):
+            node = tab.node_keys[c]
+            st = self.sdo_latency.get(node)
+            if st is None:
+                st = self.sdo_latency[node] = StreamStats()
+            st.add(lat[nodes == c])
 
     def _update_table(self, name: str, g) -> None:
         """Counts, spans and gap statistics of one gap table: moments per key in one pass."""

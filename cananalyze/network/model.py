@@ -30,6 +30,7 @@ from ..protocol.comm_objects import comm_object
 NOT_VALID = (
     "is not valid (COB-ID bit 31 set)"  # PdoBinding.problem; the pdo_not_valid rule looks for it
 )
+_IDENTITY_INDICES = np.array([0x1018, 0x1000, 0x1008], np.int64)
 USER_SOURCES = ("user --device", "user --eds", "network file")
 _IDENTITY = {
     (0x1018, 1): "vendor_id",
@@ -167,7 +168,7 @@ class NetworkModel:
         self.segments = [(0, self.bindings)]
         events = [
             (row, rec)
-            for row, rec in batch.records
+            for row, rec in self._candidates(batch)
             if rec.get("kind") == "sdo" and rec.get("result") == "ok"
         ]
         events.sort(key=lambda e: e[0])
@@ -186,6 +187,42 @@ class NetworkModel:
 
     def finish(self, batch: DecodedBatch) -> None:
         self.segments = [(0, self.bindings)]
+
+    def _candidates(self, batch: DecodedBatch) -> list:
+        """The records `_on_sdo` may act on, in record order; the fast path's others skipped.
+
+        A fast-path record (expedited, with data) matters only when it writes a
+        communication object (0x1000-0x1FFF) or a unit-changing object, or is the
+        first seen of a node the model does not know yet: `_on_sdo` leaves the state
+        untouched for every other one. A batch with an identity read takes them all.
+        """
+        records = batch.records
+        fast = batch.sdo_fast
+        if fast is None or fast.slots.size == 0 or len(records) <= int(fast.slots[-1]):
+            return records
+        keep = np.ones(len(records), bool)
+        keep[fast.slots] = False
+        others = np.flatnonzero(keep).tolist()
+        # an identification may bring a profile with other unit-changing objects: all then
+        if (fast.upload & np.isin(fast.index, _IDENTITY_INDICES)).any() or any(
+            records[k][1].get("direction") == "upload"
+            and (records[k][1].get("index"), records[k][1].get("subindex")) in _IDENTITY
+            for k in others
+        ):
+            return records
+        want = fast.ok & ~fast.upload & (fast.index >= 0x1000) & (fast.index <= 0x1FFF)
+        context = {o for cfg in self.nodes.values() for o in cfg.context_objects()}
+        if context:
+            key = fast.index * 256 + fast.subindex
+            objs = np.array([i * 256 + s for i, s in context], np.int64)
+            want |= fast.ok & ~fast.upload & np.isin(key, objs)
+        known = np.array(sorted(self.nodes), np.int64)
+        new = fast.ok & ~np.isin(fast.node, known)
+        if new.any():
+            _, first = np.unique(fast.node[new], return_index=True)
+            want[np.flatnonzero(new)[first]] = True
+        keep[fast.slots[want]] = True
+        return [records[k] for k in np.flatnonzero(keep).tolist()]
 
     # --- internals ---------------------------------------------------------------
     def _on_sdo(self, rec: dict) -> set[int] | None:

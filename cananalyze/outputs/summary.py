@@ -62,7 +62,7 @@ class Summary:
     def add(self, batch: DecodedBatch) -> None:
         n = len(batch)
         if batch.records:
-            self._sdo(batch.records)
+            self._sdo(batch)
         if n == 0:
             return
         fb = batch.frames
@@ -84,26 +84,27 @@ class Summary:
                 ids = np.unique(ids)
             self.ids_seen.update(ids.tolist())
 
-    def _sdo(self, records: list) -> None:
-        """Result counts and latencies per node, one small loop per batch."""
-        latency: dict = {}
-        for _row, rec in records:
-            if rec.get("kind") != "sdo":
-                continue
-            node = rec.get("node")
-            results = self.sdo_results.get(node)
+    def _sdo(self, batch: DecodedBatch) -> None:
+        """Result counts and latencies per node, from the batch's SDO records as columns."""
+        tab = batch.sdo_table()
+        if tab.node.size == 0:
+            return
+        nk, rk = tab.node_keys, tab.result_keys
+        for c in tab.first_seen(tab.node):  # dict order as a loop over the records gives
+            res = tab.result[tab.node == c]
+            results = self.sdo_results.get(nk[c])
             if results is None:
-                results = self.sdo_results[node] = {}
-            result = rec.get("result")
-            results[result] = results.get(result, 0) + 1
-            lat = rec.get("latency_ms")
-            if lat is not None:
-                latency.setdefault(node, []).append(lat)
-        for node, values in latency.items():
-            st = self.sdo_latency.get(node)
+                results = self.sdo_results[nk[c]] = {}
+            counts = np.bincount(res, minlength=len(rk)).tolist()
+            for r in tab.first_seen(res):
+                results[rk[r]] = results.get(rk[r], 0) + counts[r]
+        has = ~np.isnan(tab.latency)
+        nodes, lat = tab.node[has], tab.latency[has]
+        for c in tab.first_seen(nodes):
+            st = self.sdo_latency.get(nk[c])
             if st is None:
-                st = self.sdo_latency[node] = StreamStats()
-            st.add(np.array(values, np.float64))
+                st = self.sdo_latency[nk[c]] = StreamStats()
+            st.add(lat[nodes == c])
 
     def _evidence(self, batch: DecodedBatch) -> None:
         """Count frames whose shape says CANopen or says otherwise (CiA 301 sizes and values)."""

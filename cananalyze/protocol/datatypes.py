@@ -132,5 +132,7 @@ def decode_column(raw, length, code: int) -> list:
         return out
     return [
         decode_value(bytes(r[:n]), code)
-        for r, n in zip(np.asarray(raw, np.uint8).tolist(), np.asarray(length).tolist(), strict=True)
+        for r, n in zip(
+            np.asarray(raw, np.uint8).tolist(), np.asarray(length).tolist(), strict=True
+        )
     ]

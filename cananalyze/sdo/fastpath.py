@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..decoded import DecodedBatch
+from ..decoded import DecodedBatch, SdoColumns
 from ..frames import FLAG_TX
 from ..protocol.datatypes import decode_column, decode_value
 from ..protocol.tables import abort_text
@@ -138,7 +138,29 @@ def _rounded_latency(dt: np.ndarray) -> list:
     return done[inv.ravel()].tolist()
 
 
-def pair_records(fb, a: np.ndarray, b: np.ndarray, object_info: ObjectInfo | None) -> list[dict]:
+def pair_columns(fb, a: np.ndarray, b: np.ndarray, slots: np.ndarray) -> SdoColumns:
+    """What summary, timing and the network model read of taken pairs, as columns."""
+    da, db = fb.data[a], fb.data[b]
+    t0, t1 = fb.t[a], fb.t[b]
+    return SdoColumns(
+        slots=np.asarray(slots, np.int64),
+        row=np.asarray(b, np.int64),
+        node=fb.can_id[a].astype(np.int64) - 0x600,
+        upload=da[:, 0] == _UPLOAD_REQ,
+        index=da[:, 1].astype(np.int64) | (da[:, 2].astype(np.int64) << 8),
+        subindex=da[:, 3].astype(np.int64),
+        ok=db[:, 0] != _ABORT,
+        latency=np.asarray(_rounded_latency(t1 - t0), np.float64),
+    )
+
+
+def pair_records(
+    fb,
+    a: np.ndarray,
+    b: np.ndarray,
+    object_info: ObjectInfo | None,
+    latency: list | None = None,
+) -> list[dict]:
     """Records of taken pairs, exactly as the tracker makes them, built from columns.
 
     Names and data types are looked up once per distinct (node, index, subindex),
@@ -175,7 +197,8 @@ def pair_records(fb, a: np.ndarray, b: np.ndarray, object_info: ObjectInfo | Non
                 if code >= 0:
                     sel = np.flatnonzero(dtype_of == code)
                     values[sel] = decode_column(raw[sel], length[sel], code)
-    latency = _rounded_latency(t1 - t0)
+    if latency is None:
+        latency = _rounded_latency(t1 - t0)
     direction = np.where(upload, "upload", "download").tolist()
     out = [
         {

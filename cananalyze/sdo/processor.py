@@ -176,12 +176,17 @@ class SdoProcessor:
         pick = np.concatenate([self._answers[lo:hi] for _, lo, hi in self._chunks])
         a, b = rows[self._req_of_arr[pick]], rows[pick]
         fb = batch.frames
-        records = fastpath.pair_records(fb, a, b, self.tracker.object_info)
+        slots = np.concatenate(
+            [np.arange(slot, slot + hi - lo, dtype=np.int64) for slot, lo, hi in self._chunks]
+        )
+        cols = fastpath.pair_columns(fb, a, b, slots)
+        records = fastpath.pair_records(fb, a, b, self.tracker.object_info, cols.latency.tolist())
         done = list(zip(b.tolist(), records, strict=True))
         k = 0
         for slot, lo, hi in self._chunks:
             batch.records[slot : slot + hi - lo] = done[k : k + hi - lo]
             k += hi - lo
+        batch.sdo_fast = cols
 
         def write_notes(notes: dict) -> None:
             req, resp = fastpath.pair_notes(fb, a, b)
