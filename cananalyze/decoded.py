@@ -75,7 +75,6 @@ class DecodedBatch:
     signals: list[SignalBlock] = field(default_factory=list)
     # Notes shared by many rows, kept columnar (e.g. one pdo_problem for every short PDO).
     row_notes: list[tuple[np.ndarray, dict]] = field(default_factory=list)
-    sdo_fast: SdoColumns | None = field(default=None, repr=False, compare=False)
     _lazy: tuple | None = field(default=None, repr=False, compare=False)
 
     def __len__(self) -> int:
@@ -128,6 +127,15 @@ class DecodedBatch:
     def add_record(self, row: int, record: dict) -> None:
         self.records.append((row, record))
 
+    @property
+    def sdo_fast(self) -> SdoColumns | None:
+        """Columns of the SDO fast path's records, while `records` is still the decoder's list.
+
+        They live on the list itself: a consumer that replaces `records` (a filter)
+        drops them, and readers fall back to the dicts.
+        """
+        return getattr(self.records, "sdo_fast", None)
+
     def sdo_table(self) -> SdoTable:
         """The batch's `sdo` records as columns: the fast path's from `sdo_fast`, the rest read."""
         records = self.records
@@ -147,8 +155,9 @@ class DecodedBatch:
         results: list[int] = []
         lats: list[float] = []
         nan = float("nan")
+        get = list.__getitem__  # the other slots are written: no need to build the fast ones
         for k in others:
-            rec = records[k][1]
+            rec = get(records, k)[1]
             if rec.get("kind") != "sdo":
                 continue
             node, result, lat = rec.get("node"), rec.get("result"), rec.get("latency_ms")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from .rule import Context, Rule
 
 
@@ -16,9 +18,27 @@ class SdoRule(Rule):
         super().__init__(**kw)
         self.max_latency = max_latency_ms
 
+    def _positions(self, batch) -> list[int] | None:
+        """Records that may need a finding; None: all. The fast path's ok, quick ones skipped."""
+        fast = batch.sdo_fast
+        if fast is None or fast.slots.size == 0 or len(batch.records) <= int(fast.slots[-1]):
+            return None
+        tab = batch.sdo_table()
+        for c in tab.first_seen(tab.node):  # the order a loop over the records adds them in
+            self.subjects.add(tab.node_keys[c])
+        flag = ~fast.ok
+        if self.max_latency is not None:
+            flag |= fast.latency > self.max_latency
+        rest = np.ones(len(batch.records), bool)
+        rest[fast.slots[~flag]] = False
+        return np.flatnonzero(rest).tolist()
+
     def process(self, ctx: Context) -> None:
         subjects = self.subjects
-        for row, rec in list(ctx.batch.records):
+        records = ctx.batch.records
+        positions = self._positions(ctx.batch)
+        picked = list(records) if positions is None else [records[k] for k in positions]
+        for row, rec in picked:
             if rec.get("kind") != "sdo":
                 continue
             node = rec.get("node")

@@ -19,6 +19,7 @@ from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from ..protocol.services import Service
 from . import fastpath
 from .lazynotes import LazyNotes
+from .lazyrecords import LazyRecords
 from .tracker import SdoTracker
 
 
@@ -180,13 +181,27 @@ class SdoProcessor:
             [np.arange(slot, slot + hi - lo, dtype=np.int64) for slot, lo, hi in self._chunks]
         )
         cols = fastpath.pair_columns(fb, a, b, slots)
-        records = fastpath.pair_records(fb, a, b, self.tracker.object_info, cols.latency.tolist())
-        done = list(zip(b.tolist(), records, strict=True))
-        k = 0
-        for slot, lo, hi in self._chunks:
-            batch.records[slot : slot + hi - lo] = done[k : k + hi - lo]
-            k += hi - lo
-        batch.sdo_fast = cols
+        latency = cols.latency.tolist()
+        info = lookup = self.tracker.object_info
+        if info is not None:
+            # answers as they are now: the records may be built after the model changed
+            keys = np.unique(
+                (cols.node << 24) | (cols.index << 8) | fb.data[a, 3].astype(np.int64)
+            ).tolist()
+            known = {k: info(k >> 24, (k >> 8) & 0xFFFF, k & 0xFF) for k in keys}
+
+            def lookup(node: int, index: int, sub: int, known=known):
+                return known[(node << 24) | (index << 8) | sub]
+
+        def build(js: np.ndarray | None) -> list[dict]:
+            if js is None:
+                return fastpath.pair_records(fb, a, b, lookup, latency)
+            picked = [latency[j] for j in js.tolist()]
+            return fastpath.pair_records(fb, a[js], b[js], lookup, picked)
+
+        if not isinstance(batch.records, LazyRecords):
+            batch.records = LazyRecords(batch.records)
+        batch.records.defer(slots, b.tolist(), build, cols)
 
         def write_notes(notes: dict) -> None:
             req, resp = fastpath.pair_notes(fb, a, b)
