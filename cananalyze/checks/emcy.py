@@ -46,7 +46,12 @@ class EmcyRule(Rule):
             inhibit = inhibits.get(node)
             if inhibit is None:
                 inhibit = inhibits[node] = ctx.config.emcy_inhibit_100us(node, t) or 0
-            if prev is not None and inhibit and t - prev < inhibit * 1e-4 * (1 - self.tolerance):
+            if (
+                prev is not None
+                and inhibit
+                and t - prev < inhibit * 1e-4 * (1 - self.tolerance)
+                and not self.dropped(t, node, 0x80 + node)
+            ):
                 self.emit(
                     t,
                     node,
@@ -60,17 +65,18 @@ class EmcyRule(Rule):
                     why="EMCY faster than its inhibit time can flood the bus in a fault storm; check 0x1015.",
                 )
             if dlc < 8:
-                self.emit(
-                    t,
-                    node,
-                    0x80 + node,
-                    f"EMCY with {dlc} data bytes, CiA 301 needs 8",
-                    dlc,
-                    8,
-                    row=row,
-                    severity="error",
-                    why="A short EMCY cannot be decoded by a standard master; check the node's firmware.",
-                )
+                if not self.dropped(t, node, 0x80 + node):
+                    self.emit(
+                        t,
+                        node,
+                        0x80 + node,
+                        f"EMCY with {dlc} data bytes, CiA 301 needs 8",
+                        dlc,
+                        8,
+                        row=row,
+                        severity="error",
+                        why="A short EMCY cannot be decoded by a standard master; check the node's firmware.",
+                    )
                 if dlc < 3:
                     continue
             b0, b1, reg = head[k]
@@ -81,7 +87,7 @@ class EmcyRule(Rule):
                     act.clear()
                 continue
             act[code] = t
-            if code in self.allow:
+            if code in self.allow or self.dropped(t, node, 0x80 + node):
                 continue
             self.emit(
                 t,
@@ -98,7 +104,7 @@ class EmcyRule(Rule):
     def finish(self, ctx: Context) -> None:
         for node, act in sorted(self.active.items()):
             for code, t in sorted(act.items()):
-                if code in self.allow:
+                if code in self.allow or self.dropped(t, node, 0x80 + node):
                     continue
                 self.emit(
                     t,
