@@ -34,6 +34,15 @@ class PdoDecoder:
         if rows.size == 0:
             return
         segments = self.model.segments
+        # only COB-IDs bound in some segment are decoded: drop the others before sorting
+        bound = np.zeros(2048, bool)
+        cobs = [c for _, b in segments for c in b if 0 <= c < 2048]
+        if cobs:
+            bound[cobs] = True
+        ids = fb.can_id[rows]
+        rows = rows[bound[np.where(ids < 2048, ids, 0)] & (ids < 2048)]
+        if rows.size == 0:
+            return
         bounds = [start for start, _ in segments[1:]]
         seg_of = (
             np.searchsorted(np.asarray(bounds, np.int64), rows, side="right") if bounds else None
@@ -42,7 +51,9 @@ class PdoDecoder:
         key = fb.can_id[rows].astype(np.int64)
         if seg_of is not None:
             key = key + seg_of.astype(np.int64) * 4096
-        order = np.argsort(key, kind="stable")
+        # as uint16 (the usual case: few segments) numpy's stable sort is a radix sort
+        small = len(segments) <= 16
+        order = np.argsort(key.astype(np.uint16) if small else key, kind="stable")
         key_sorted = key[order]
         cuts = np.flatnonzero(np.diff(key_sorted)) + 1
         starts = np.concatenate(([0], cuts))
@@ -76,8 +87,11 @@ class PdoDecoder:
         cols = decode_pdo(fb.data[group], fb.dlc[group], mapping)
         ok = ~cols.short
         for mask, what in (
-            (cols.short, f"shorter than the {cols.bytes_needed} bytes mapped in "
-                         f"{binding.kind.upper()}{binding.number}: not decoded"),
+            (
+                cols.short,
+                f"shorter than the {cols.bytes_needed} bytes mapped in "
+                f"{binding.kind.upper()}{binding.number}: not decoded",
+            ),
             (cols.extra, f"longer than the {cols.bytes_needed} bytes mapped: extra bytes ignored"),
         ):
             if mask.any():  # one shared note per group of rows, not a dict per row
