@@ -76,8 +76,9 @@ def plan(batch: DecodedBatch, rows: np.ndarray, timeout: float, explicit: list[i
         | (d[:, 2].astype(np.int64) << 8)
         | (d[:, 3].astype(np.int64) << 16)
     )
-    # the next SDO frame on the same channel (stable sort keeps time order inside a node)
-    order = np.argsort(np.where(usable, node, 0), kind="stable")
+    # the next SDO frame on the same channel (stable sort keeps time order inside a node);
+    # frames the fast path cannot take (short, flagged) still count: the tracker sees them
+    order = np.argsort(np.where(is_req | is_resp, node, 0), kind="stable")
     nxt = np.full(m, -1, np.int64)
     if m > 1:
         same = node[order[1:]] == node[order[:-1]]
