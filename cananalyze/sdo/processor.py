@@ -93,11 +93,11 @@ class SdoProcessor:
         self._emit(batch)
 
     def _process_fast(self, batch: DecodedBatch, rows: np.ndarray) -> None:
-        """Walk the SDO rows: idle stretches in bulk, the rest one event at a time.
+        """Walk the SDO rows: quiet stretches in bulk, the rest one event at a time.
 
         Between two frames that must go through the tracker, nothing changes its
-        state but the time; if no transfer is pending there, advancing is a no-op
-        and every candidate pair in the stretch is taken as is.
+        state but the time; until a pending transfer would time out or see a new
+        request, advancing is a no-op and every candidate pair is taken as is.
         """
         tracker = self.tracker
         fb = batch.frames
@@ -127,17 +127,25 @@ class SdoProcessor:
         rejected: list[int] = []  # answers whose request had to go through the tracker (sorted)
         rejected_set: set[int] = set()
         m = len(row_of)
+        # candidate requests and answers: where advance() could end a pending transfer
+        cp = np.flatnonzero(p.cand | p.is_partner)
+        self._cp = cp.tolist()
+        self._cp_max = np.maximum.accumulate(fb.t[rows][cp]).tolist() if cp.size else []
+        self._cand_of: dict[int, list[int]] = {}
+        self._plan = p
         pos = 0
         si = 0
         while pos < m:
-            if not tracker._pending:
-                while si < len(slow_at) and slow_at[si] < pos:
-                    si += 1
-                stop = slow_at[si] if si < len(slow_at) else m
-                ri = bisect.bisect_left(rejected, pos)
-                if ri < len(rejected) and rejected[ri] < stop:
-                    stop = rejected[ri]
-                # idle stretch: every answer in it closes a pair whose request was taken
+            while si < len(slow_at) and slow_at[si] < pos:
+                si += 1
+            stop = slow_at[si] if si < len(slow_at) else m
+            ri = bisect.bisect_left(rejected, pos)
+            if ri < len(rejected) and rejected[ri] < stop:
+                stop = rejected[ri]
+            if tracker._pending:
+                stop = self._quiet_until(pos, stop)
+            if stop > pos:
+                # quiet stretch: every answer in it closes a pair whose request was taken
                 lo, hi = bisect.bisect_left(answers, pos), bisect.bisect_left(answers, stop)
                 if hi > lo:
                     self._take(batch, lo, hi)
@@ -162,6 +170,36 @@ class SdoProcessor:
                 self._take(batch, lo, lo + 1)
                 continue
             self._feed(batch, row_of[i])
+
+    def _quiet_until(self, pos: int, stop: int) -> int:
+        """First position from `pos` (before `stop`) where a pending transfer needs the tracker.
+
+        That is where advance() would time one out (the first candidate frame late
+        enough, found on the running maximum of their times: never later than the
+        exact one) or where a candidate request arrives on a pending channel. Before
+        it, stepping frame by frame would only take the pairs as they are.
+        """
+        cp, cp_max, timeout = self._cp, self._cp_max, self.tracker.timeout
+        j0 = bisect.bisect_left(cp, pos)
+        for cob, xfer in self.tracker._pending.items():
+            t_last = xfer.t_last
+            lo, hi = j0, len(cp)
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if cp_max[mid] - t_last > timeout:
+                    hi = mid
+                else:
+                    lo = mid + 1
+            if lo < len(cp) and cp[lo] < stop:
+                stop = cp[lo]
+            same = self._cand_of.get(cob)
+            if same is None:
+                p = self._plan
+                same = self._cand_of[cob] = np.flatnonzero(p.cand & (p.req_cob == cob)).tolist()
+            k = bisect.bisect_left(same, pos)
+            if k < len(same) and same[k] < stop:
+                stop = same[k]
+        return max(stop, pos)
 
     def _take(self, batch: DecodedBatch, lo: int, hi: int) -> None:
         """Reserve the record slots of the fast pairs closed by answers[lo:hi] (filled by _fill)."""
