@@ -132,11 +132,29 @@ def _hex_column(raw: np.ndarray, length: np.ndarray) -> np.ndarray:
     return out
 
 
+def py_round(v: np.ndarray, ndigits: int) -> np.ndarray:
+    """Python's round(x, ndigits) of each value, as numpy where it provably agrees.
+
+    numpy rounds the float product x * 10**n; Python rounds the exact decimal
+    value of x. They can only choose differently when the product lies within a
+    few ulps of a half, so those (rare) values are rounded by Python itself.
+    """
+    scale = 10.0**ndigits
+    p = v * scale
+    out = np.rint(p) / scale
+    frac = np.abs(p - np.trunc(p))
+    with np.errstate(invalid="ignore"):
+        tol = np.maximum(1e-6, 8.0 * np.abs(np.spacing(p)))
+        risky = ~(np.abs(frac - 0.5) >= tol) | ~(np.abs(p) < 2.0**52)
+    if risky.any():
+        idx = np.flatnonzero(risky)
+        out[idx] = [round(x, ndigits) for x in v[idx].tolist()]
+    return out
+
+
 def _rounded_latency(dt: np.ndarray) -> list:
-    """round(round(dt * 1000, 6), 3) as Python does it, once per distinct gap."""
-    uniq, inv = np.unique(dt, return_inverse=True)
-    done = np.array([round(round(x * 1000.0, 6), 3) for x in uniq.tolist()], np.float64)
-    return done[inv.ravel()].tolist()
+    """round(round(dt * 1000, 6), 3) exactly as Python computes it, column-wise."""
+    return py_round(py_round(np.asarray(dt, np.float64) * 1000.0, 6), 3).tolist()
 
 
 def pair_columns(fb, a: np.ndarray, b: np.ndarray, slots: np.ndarray) -> SdoColumns:
