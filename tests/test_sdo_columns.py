@@ -13,7 +13,6 @@ from __future__ import annotations
 import argparse
 import pickle
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -66,7 +65,9 @@ def _check(fb: FrameBatch, fast: bool, step: int, devices: int = 0, network=None
         "findings": [f.record() for f in checker.findings],
         "subjects": [sorted(map(str, r.subjects)) for r in checker.rules],
         "history": list(model.history),
-        "nodes": {n: (c.identified_by, c.profile and c.profile.key) for n, c in model.nodes.items()},
+        "nodes": {
+            n: (c.identified_by, c.profile and c.profile.key) for n, c in model.nodes.items()
+        },
         "tables": tables,
         "records": records + [rec for _, rec in tail.records],
     }
@@ -164,4 +165,7 @@ def test_lazy_records_every_read_sees_the_records(access) -> None:
     recs, built = _lazy()
     access(recs)
     assert built and None not in list.__iter__(recs) or built == [[2]]
-    assert pickle.loads(pickle.dumps(recs)) == list(recs) and type(pickle.loads(pickle.dumps(recs))) is list
+    assert (
+        pickle.loads(pickle.dumps(recs)) == list(recs)
+        and type(pickle.loads(pickle.dumps(recs))) is list
+    )
