@@ -85,6 +85,9 @@ class NetworkModel:
         self.spec = spec or NetworkSpec()
         self.nodes: dict[int, NodeConfig] = {}
         self.history: list[ConfigChange] = []
+        # the same changes by object: value_at is asked per node and batch by the checks
+        self._changes: dict[tuple[int, int, int], list[ConfigChange]] = {}
+        self._objects: set[tuple[int, int]] = set()
         self.bindings: dict[int, PdoBinding] = {}
         # Bindings in force within the current batch: (first row, bindings), ascending.
         self.segments: list[tuple[int, dict[int, PdoBinding]]] = [(0, {})]
@@ -155,10 +158,14 @@ class NetworkModel:
 
     def value_at(self, node: int, index: int, subindex: int, t: float) -> int | None:
         """Last value written to an object at or before time t (None: never written in the log)."""
-        for change in reversed(self.history):
-            if change.node == node and change.object == (index, subindex) and change.t <= t:
+        for change in reversed(self._changes.get((node, index, subindex), ())):
+            if change.t <= t:
                 return change.value
         return None
+
+    def written(self, node: int, index: int) -> bool:
+        """Whether the log wrote any sub-index of this object on this node (so far)."""
+        return (node, index) in self._objects
 
     def binding(self, cob_id: int) -> PdoBinding | None:
         return self.bindings.get(cob_id)
@@ -250,7 +257,10 @@ class NetworkModel:
         what = cfg.apply(index, sub, value)
         if what is None:
             return None
-        self.history.append(ConfigChange(t, node, (index, sub), value))
+        change = ConfigChange(t, node, (index, sub), value)
+        self.history.append(change)
+        self._changes.setdefault((node, index, sub), []).append(change)
+        self._objects.add((node, index))
         if what not in TOUCHES_COB_IDS:
             return None
         self._rebind()
