@@ -63,6 +63,28 @@ class SdoTable:
         uniq, first = np.unique(codes, return_index=True)
         return uniq[np.argsort(first)].tolist()
 
+    def groups(self, codes: np.ndarray, where: np.ndarray | None = None) -> list:
+        """(code, positions in record order) per distinct code, first seen first.
+
+        One stable sort instead of a mask per code; `where` picks the records taken.
+        """
+        sel = np.arange(codes.size) if where is None else np.flatnonzero(where)
+        if sel.size == 0:
+            return []
+        c = codes[sel]
+        order = np.argsort(c, kind="stable")
+        cs = c[order]
+        cut = np.flatnonzero(cs[1:] != cs[:-1]) + 1
+        starts = np.concatenate(([0], cut))
+        ends = np.concatenate((cut, [cs.size]))
+        pos = sel[order]
+        out = [
+            (code, pos[a:b])
+            for code, a, b in zip(cs[starts].tolist(), starts.tolist(), ends.tolist(), strict=True)
+        ]
+        out.sort(key=lambda g: g[1][0])  # first seen first
+        return out
+
 
 @dataclass
 class DecodedBatch:
@@ -76,6 +98,7 @@ class DecodedBatch:
     # Notes shared by many rows, kept columnar (e.g. one pdo_problem for every short PDO).
     row_notes: list[tuple[np.ndarray, dict]] = field(default_factory=list)
     _lazy: tuple | None = field(default=None, repr=False, compare=False)
+    _sdo_cache: tuple | None = field(default=None, repr=False, compare=False)
 
     def __len__(self) -> int:
         return len(self.frames)
@@ -137,7 +160,23 @@ class DecodedBatch:
         return getattr(self.records, "sdo_fast", None)
 
     def sdo_table(self) -> SdoTable:
-        """The batch's `sdo` records as columns: the fast path's from `sdo_fast`, the rest read."""
+        """The batch's `sdo` records as columns: the fast path's from `sdo_fast`, the rest read.
+
+        Kept while the records list only grows by records of other kinds (findings):
+        timing, the SDO rule and the summary all ask.
+        """
+        records = self.records
+        cached = self._sdo_cache
+        if cached is not None and cached[0] is records and cached[1] <= len(records):
+            get = list.__getitem__
+            if all(get(records, k)[1].get("kind") != "sdo" for k in range(cached[1], len(records))):
+                self._sdo_cache = (records, len(records), cached[2])
+                return cached[2]
+        table = self._sdo_table()
+        self._sdo_cache = (records, len(records), table)
+        return table
+
+    def _sdo_table(self) -> SdoTable:
         records = self.records
         fast = self.sdo_fast
         if fast is not None and fast.slots.size and len(records) > int(fast.slots[-1]):

@@ -88,14 +88,12 @@ class Timing:
         counts = np.bincount(tab.result, minlength=len(tab.result_keys)).tolist()
         # Counter order as counting the records one by one gives (first seen first)
         self.sdo_results.update({tab.result_keys[r]: counts[r] for r in tab.first_seen(tab.result)})
-        has = ~np.isnan(tab.latency)
-        nodes, lat = tab.node[has], tab.latency[has]
-        for c in tab.first_seen(nodes):
+        for c, at in tab.groups(tab.node, ~np.isnan(tab.latency)):
             node = tab.node_keys[c]
             st = self.sdo_latency.get(node)
             if st is None:
                 st = self.sdo_latency[node] = StreamStats()
-            st.add(lat[nodes == c])
+            st.add(tab.latency[at])
 
     def _update_table(self, name: str, g) -> None:
         """Counts, spans and gap statistics of one gap table: moments per key in one pass."""
