@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import pickle
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -28,7 +29,9 @@ from cananalyze.sdo.lazyrecords import LazyRecords
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 
-def _check(fb: FrameBatch, fast: bool, step: int, devices: int = 0, network=None) -> dict:
+def _check(
+    fb: FrameBatch, fast: bool, step: int, devices: int = 0, network=None, rules=None
+) -> dict:
     args = argparse.Namespace(
         sdo_timeout=1.0,
         network=network,
@@ -37,7 +40,7 @@ def _check(fb: FrameBatch, fast: bool, step: int, devices: int = 0, network=None
     )
     decoder = build_decoder(args)
     decoder.processors[0].fast = fast
-    checker = build_checker(None)
+    checker = build_checker(rules)
     attach_checker(decoder, checker)
     summary = Summary()
     tables = []
@@ -91,6 +94,16 @@ def test_benchmark_mix_with_devices() -> None:
     assert_same(generate(120_000), devices=16)
 
 
+def test_benchmark_mix_slow_replies_flagged(tmp_path: Path) -> None:
+    """A latency limit flags fast-path records: the SDO rule builds those (then all)."""
+    from generate import generate
+
+    for limit in (0.39, 0.1):  # a few slow replies per batch / most of them
+        rules = tmp_path / f"rules{limit}.yaml"
+        rules.write_text(f"assert:\n  - sdo: {{max_latency_ms: {limit}}}\n")
+        assert_same(generate(40_000), steps=(1 << 20, 5000), rules=str(rules))
+
+
 def test_benchmark_mix_without_devices() -> None:
     from generate import generate
 
@@ -103,6 +116,7 @@ def test_samples(name: str) -> None:
     if not path.exists():
         pytest.skip(f"no {name}")
     assert_same(read_all(path), network=str(SAMPLES / "network.toml"))
+    assert_same(read_all(path), rules=str(SAMPLES / "rules.yaml"))
 
 
 @pytest.mark.parametrize(

@@ -207,9 +207,9 @@ class NetworkModel:
         fast = batch.sdo_fast
         if fast is None or fast.slots.size == 0 or len(records) <= int(fast.slots[-1]):
             return records
-        keep = np.ones(len(records), bool)
-        keep[fast.slots] = False
-        others = np.flatnonzero(keep).tolist()
+        rest = np.ones(len(records), bool)
+        rest[fast.slots] = False
+        others = np.flatnonzero(rest).tolist()
         # an identification may bring a profile with other unit-changing objects: all then
         if (fast.upload & np.isin(fast.index, _IDENTITY_INDICES)).any() or any(
             records[k][1].get("direction") == "upload"
@@ -228,8 +228,12 @@ class NetworkModel:
         if new.any():
             _, first = np.unique(fast.node[new], return_index=True)
             want[np.flatnonzero(new)[first]] = True
-        keep[fast.slots[want]] = True
-        return [records[k] for k in np.flatnonzero(keep).tolist()]
+        get = list.__getitem__  # the other records are written: no lazy lookup for them
+        picked = [(k, get(records, k)) for k in others]
+        picked += [(k, records[k]) for k in fast.slots[want].tolist()]  # built one by one
+        if len(picked) > len(others):
+            picked.sort(key=lambda x: x[0])
+        return [rec for _, rec in picked]
 
     # --- internals ---------------------------------------------------------------
     def _on_sdo(self, rec: dict) -> set[int] | None:
