@@ -211,10 +211,11 @@ class NetworkModel:
         rest[fast.slots] = False
         others = np.flatnonzero(rest).tolist()
         # an identification may bring a profile with other unit-changing objects: all then
+        get = list.__getitem__  # the other records are written: no lazy lookup for them
         if (fast.upload & np.isin(fast.index, _IDENTITY_INDICES)).any() or any(
-            records[k][1].get("direction") == "upload"
-            and (records[k][1].get("index"), records[k][1].get("subindex")) in _IDENTITY
-            for k in others
+            rec.get("direction") == "upload"
+            and (rec.get("index"), rec.get("subindex")) in _IDENTITY
+            for _, rec in (get(records, k) for k in others)
         ):
             return records
         want = fast.ok & ~fast.upload & (fast.index >= 0x1000) & (fast.index <= 0x1FFF)
@@ -228,7 +229,6 @@ class NetworkModel:
         if new.any():
             _, first = np.unique(fast.node[new], return_index=True)
             want[np.flatnonzero(new)[first]] = True
-        get = list.__getitem__  # the other records are written: no lazy lookup for them
         picked = [(k, get(records, k)) for k in others]
         picked += [(k, records[k]) for k in fast.slots[want].tolist()]  # built one by one
         if len(picked) > len(others):

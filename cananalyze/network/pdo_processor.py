@@ -14,7 +14,7 @@ import numpy as np
 from cananalyze.decoded import DecodedBatch, SignalBlock
 from cananalyze.frames import FLAG_RTR
 from cananalyze.network.model import NetworkModel
-from cananalyze.protocol.pdo_decode import decode_pdo
+from cananalyze.protocol.pdo_decode import decode_pdo, words_of
 from cananalyze.protocol.services import Service
 
 
@@ -23,6 +23,7 @@ class PdoDecoder:
 
     def __init__(self, model: NetworkModel) -> None:
         self.model = model
+        self._words: tuple | None = None  # (FrameBatch, its data as uint64 words)
 
     def process(self, batch: DecodedBatch) -> None:
         if not self.model.bindings and len(self.model.segments) <= 1:
@@ -66,6 +67,7 @@ class PdoDecoder:
                 continue
             group = rows[order[a:b]]
             self._decode_group(batch, group, binding)
+        self._words = None  # not kept past the batch
 
     def _decode_group(self, batch: DecodedBatch, group: np.ndarray, binding) -> None:
         fb = batch.frames
@@ -84,7 +86,10 @@ class PdoDecoder:
                     )
                 )
             return
-        cols = decode_pdo(fb.data[group], fb.dlc[group], mapping)
+        if self._words is None or self._words[0] is not fb:
+            self._words = (fb, words_of(fb.data))  # once per batch
+        dlc = fb.dlc[group]
+        cols = decode_pdo(None, dlc, mapping, words=self._words[1][group])
         ok = ~cols.short
         for mask, what in (
             (
@@ -95,7 +100,7 @@ class PdoDecoder:
             (cols.extra, f"longer than the {cols.bytes_needed} bytes mapped: extra bytes ignored"),
         ):
             if mask.any():  # one shared note per group of rows, not a dict per row
-                have = ",".join(map(str, sorted(set(fb.dlc[group][mask].tolist()))))
+                have = ",".join(map(str, sorted(set(dlc[mask].tolist()))))
                 batch.row_notes.append((group[mask], {"pdo_problem": f"DLC {have} {what}"}))
         if not ok.any() or not cols.values:
             return
