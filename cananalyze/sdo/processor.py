@@ -223,9 +223,7 @@ class SdoProcessor:
         info = lookup = self.tracker.object_info
         if info is not None:
             # answers as they are now: the records may be built after the model changed
-            keys = np.unique(
-                (cols.node << 24) | (cols.index << 8) | fb.data[a, 3].astype(np.int64)
-            ).tolist()
+            keys = set(((cols.node << 24) | (cols.index << 8) | cols.subindex).tolist())
             known = {k: info(k >> 24, (k >> 8) & 0xFFFF, k & 0xFF) for k in keys}
 
             def lookup(node: int, index: int, sub: int, known=known):
