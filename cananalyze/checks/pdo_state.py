@@ -24,7 +24,8 @@ class PdoStateRule(Rule):
         # NMT state of every PDO row, one lookup per node (not per COB-ID)
         node_of = b.node[g.row]
         state = np.full(g.row.size, -1, np.int16)
-        for node in np.unique(node_of).tolist():
+        present = np.bincount(node_of.astype(np.intp) + 1) if node_of.size else np.zeros(0)
+        for node in (np.flatnonzero(present) - 1).tolist():  # nodes -1..127, ascending
             if node >= 0 and node in ctx.nmt.times:
                 at = np.flatnonzero(node_of == node)
                 state[at] = ctx.nmt.state_at(node, g.t[at])

@@ -122,7 +122,7 @@ def _hex_column(raw: np.ndarray, length: np.ndarray) -> np.ndarray:
     """Object array of the hex text of each row's first `length` bytes (1..4), column-wise."""
     out = np.empty(len(raw), object)
     pairs = _HEX2[raw]  # (m, 4) of 2-character byte texts
-    for n in np.unique(length).tolist():
+    for n in sorted(set(length.tolist())):  # (plain np.unique's first call costs ~10 ms)
         sel = np.flatnonzero(length == n)
         if n <= 0:
             out[sel] = ""
@@ -212,7 +212,7 @@ def pair_records(
             names[:] = np.array([i[0] if i else None for i in infos], object)[inv]
             dtype_of = np.array([i[1] if i else -1 for i in infos], np.int64)[inv]
             dtype_of[~known[inv] | aborted] = -1
-            for code in np.unique(dtype_of).tolist():
+            for code in sorted(set(dtype_of.tolist())):
                 if code >= 0:
                     sel = np.flatnonzero(dtype_of == code)
                     values[sel] = decode_column(raw[sel], length[sel], code)
