@@ -210,11 +210,15 @@ def histogram_many(items: list[tuple[StreamStats, int, int]], v: np.ndarray, b: 
     k = np.array([e - a for _, a, e in many], np.int64)
     first = np.zeros(len(many), np.int64)
     first[1:] = np.cumsum(k)[:-1]
-    idx = np.repeat(starts - first, k) + np.arange(int(k.sum()))
-    vv, bb = v[idx], b[idx]
+    if starts[0] == 0 and np.array_equal(starts, first) and int(k.sum()) == v.size:
+        vv, bb = v, b  # the streams tile the table (the steady state): no gather
+    else:
+        idx = np.repeat(starts - first, k) + np.arange(int(k.sum()))
+        vv, bb = v[idx], b[idx]
     low = np.minimum.reduceat(bb, first)
     level = np.array([st._level for st, _, _ in many], np.int64)
-    sb = bb >> np.repeat(level, k)
+    same = bool((level == level[0]).all())
+    sb = bb >> (int(level[0]) if same else np.repeat(level, k))
     lo = np.minimum.reduceat(sb, first).tolist()
     hi = np.maximum.reduceat(sb, first).tolist()
     together = np.ones(len(many), bool)
@@ -241,11 +245,14 @@ def histogram_many(items: list[tuple[StreamStats, int, int]], v: np.ndarray, b: 
     offset[1:] = np.cumsum(sizes)[:-1]
     base = np.zeros(len(many), np.int64)
     base[use] = offset - np.array([many[j][0]._lo for j in use.tolist()], np.int64)
-    keep = np.repeat(together, k)
-    gidx = (sb + np.repeat(base, k))[keep]
+    gidx = sb + np.repeat(base, k)
+    weights = vv
+    if use.size < len(many):
+        keep = np.repeat(together, k)
+        gidx, weights = gidx[keep], vv[keep]
     total = int(sizes.sum())
     counts = np.bincount(gidx, minlength=total)
-    sums = np.bincount(gidx, weights=vv[keep], minlength=total)
+    sums = np.bincount(gidx, weights=weights, minlength=total)
     for j, off, size in zip(use.tolist(), offset.tolist(), sizes.tolist(), strict=True):
         st = many[j][0]
         st._count += counts[off : off + size]
