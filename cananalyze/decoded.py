@@ -29,6 +29,64 @@ class SignalBlock:
 
 
 @dataclass
+class SdoColumns:
+    """The SDO fast path's records of a batch as columns (the dicts stay in `records`).
+
+    Summary, timing and the network model aggregate these instead of reading
+    tens of thousands of dicts; `slots` says where each one sits in `records`.
+    """
+
+    slots: np.ndarray  # int64 position in DecodedBatch.records
+    row: np.ndarray  # int64 row the record is attached to (the answer)
+    node: np.ndarray  # int64
+    upload: np.ndarray  # bool (else download)
+    index: np.ndarray  # int64
+    subindex: np.ndarray  # int64
+    ok: np.ndarray  # bool: result "ok" (else "abort")
+    latency: np.ndarray  # float64 latency_ms as in the record
+
+
+@dataclass
+class SdoTable:
+    """Every `sdo` record of a batch in record order, as codes into small key lists."""
+
+    node_keys: list
+    node: np.ndarray  # int64 code into node_keys
+    result_keys: list
+    result: np.ndarray  # int64 code into result_keys
+    latency: np.ndarray  # float64 ms, NaN where the record has none
+
+    def first_seen(self, codes: np.ndarray) -> list[int]:
+        """Distinct codes in the order they first appear (dict insertion order of a loop)."""
+        if codes.size == 0:
+            return []
+        uniq, first = np.unique(codes, return_index=True)
+        return uniq[np.argsort(first)].tolist()
+
+    def groups(self, codes: np.ndarray, where: np.ndarray | None = None) -> list:
+        """(code, positions in record order) per distinct code, first seen first.
+
+        One stable sort instead of a mask per code; `where` picks the records taken.
+        """
+        sel = np.arange(codes.size) if where is None else np.flatnonzero(where)
+        if sel.size == 0:
+            return []
+        c = codes[sel]
+        order = np.argsort(c, kind="stable")
+        cs = c[order]
+        cut = np.flatnonzero(cs[1:] != cs[:-1]) + 1
+        starts = np.concatenate(([0], cut))
+        ends = np.concatenate((cut, [cs.size]))
+        pos = sel[order]
+        out = [
+            (code, pos[a:b])
+            for code, a, b in zip(cs[starts].tolist(), starts.tolist(), ends.tolist(), strict=True)
+        ]
+        out.sort(key=lambda g: g[1][0])  # first seen first
+        return out
+
+
+@dataclass
 class DecodedBatch:
     frames: FrameBatch
     service: np.ndarray  # uint8 Service
@@ -40,6 +98,7 @@ class DecodedBatch:
     # Notes shared by many rows, kept columnar (e.g. one pdo_problem for every short PDO).
     row_notes: list[tuple[np.ndarray, dict]] = field(default_factory=list)
     _lazy: tuple | None = field(default=None, repr=False, compare=False)
+    _sdo_cache: tuple | None = field(default=None, repr=False, compare=False)
 
     def __len__(self) -> int:
         return len(self.frames)
@@ -90,3 +149,89 @@ class DecodedBatch:
 
     def add_record(self, row: int, record: dict) -> None:
         self.records.append((row, record))
+
+    @property
+    def sdo_fast(self) -> SdoColumns | None:
+        """Columns of the SDO fast path's records, while `records` is still the decoder's list.
+
+        They live on the list itself: a consumer that replaces `records` (a filter)
+        drops them, and readers fall back to the dicts.
+        """
+        return getattr(self.records, "sdo_fast", None)
+
+    def sdo_table(self) -> SdoTable:
+        """The batch's `sdo` records as columns: the fast path's from `sdo_fast`, the rest read.
+
+        Kept while the records list only grows by records of other kinds (findings):
+        timing, the SDO rule and the summary all ask.
+        """
+        records = self.records
+        cached = self._sdo_cache
+        if cached is not None and cached[0] is records and cached[1] <= len(records):
+            get = list.__getitem__
+            if all(get(records, k)[1].get("kind") != "sdo" for k in range(cached[1], len(records))):
+                self._sdo_cache = (records, len(records), cached[2])
+                return cached[2]
+        table = self._sdo_table()
+        self._sdo_cache = (records, len(records), table)
+        return table
+
+    def _sdo_table(self) -> SdoTable:
+        records = self.records
+        fast = self.sdo_fast
+        if fast is not None and fast.slots.size and len(records) > int(fast.slots[-1]):
+            rest = np.ones(len(records), bool)
+            rest[fast.slots] = False
+            others = np.flatnonzero(rest).tolist()
+        else:
+            fast, others = None, range(len(records))
+        node_keys: list = []
+        node_code: dict = {}
+        result_keys: list = []
+        result_code: dict = {}
+        pos: list[int] = []
+        nodes: list[int] = []
+        results: list[int] = []
+        lats: list[float] = []
+        nan = float("nan")
+        get = list.__getitem__  # the other slots are written: no need to build the fast ones
+        for k in others:
+            rec = get(records, k)[1]
+            if rec.get("kind") != "sdo":
+                continue
+            node, result, lat = rec.get("node"), rec.get("result"), rec.get("latency_ms")
+            c = node_code.get(node)
+            if c is None:
+                c = node_code[node] = len(node_keys)
+                node_keys.append(node)
+            r = result_code.get(result)
+            if r is None:
+                r = result_code[result] = len(result_keys)
+                result_keys.append(result)
+            pos.append(k)
+            nodes.append(c)
+            results.append(r)
+            lats.append(nan if lat is None else lat)
+        node = np.asarray(nodes, np.int64)
+        result = np.asarray(results, np.int64)
+        latency = np.asarray(lats, np.float64)
+        if fast is not None:
+            for key in sorted(set(fast.node.tolist())):  # (np.unique's first call: ~10 ms)
+                if key not in node_code:
+                    node_code[key] = len(node_keys)
+                    node_keys.append(key)
+            lut = np.full(int(fast.node.max()) + 1, -1, np.int64)
+            for key, c in node_code.items():
+                if type(key) is int and 0 <= key < lut.size:
+                    lut[key] = c
+            for key in ("ok", "abort"):
+                if key not in result_code:
+                    result_code[key] = len(result_keys)
+                    result_keys.append(key)
+            fres = np.where(fast.ok, result_code["ok"], result_code["abort"])
+            at = np.concatenate((np.asarray(pos, np.int64), fast.slots))
+            order = np.argsort(at, kind="stable")
+            node = np.concatenate((node, lut[fast.node]))[order]
+            result = np.concatenate((result, fres))[order]
+            latency = np.concatenate((latency, fast.latency))[order]
+        return SdoTable(node_keys, node, result_keys, result, latency)

@@ -201,3 +201,18 @@ def test_value_decoder_equals_decode_value() -> None:
             for _ in range(30):
                 data = bytes(rng.randrange(256) for _ in range(n))
                 assert repr(dec(data)) == repr(decode_value(data, code)), (code, data)
+
+
+def test_short_frame_between_request_and_answer_breaks_the_pair() -> None:
+    """A frame the fast path cannot take (0 bytes) still sits on the channel: the tracker
+    fails the transfer there, so the answer is "after a protocol error", not a fast pair."""
+    up = bytes([0x40, 0x18, 0x10, 1, 0, 0, 0, 0])
+    fb = from_rows(
+        [
+            (0.0001, 0x601, b""),
+            (0.0005, 0x601, up),
+            (0.0006, 0x601, b""),
+            (0.0007, 0x581, bytes([0x43, 0x18, 0x10, 1, 0, 0, 0, 0])),
+        ]
+    )
+    assert_same(fb, steps=(1000, 2), object_info=_object_info)

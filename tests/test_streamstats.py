@@ -74,3 +74,36 @@ def test_jitter_of_a_periodic_stream_is_resolved() -> None:
     values = 100.0 + np.random.default_rng(8).normal(0.0, 0.1, 20_000)
     got, ref = _fed(values, 3000).stats(), stats_ms(values)
     assert abs(got["p99"] - ref["p99"]) < 0.1 and got["p99"] > 100.15
+
+
+def test_histogram_many_equals_one_stream_at_a_time() -> None:
+    """Timing bins all streams of a batch with one bincount: bins, sums and levels as before."""
+    from cananalyze.checks.streamstats import EXACT, StreamStats, bins_of, histogram_many
+
+    rng = np.random.default_rng(7)
+    one = [StreamStats() for _ in range(9)]
+    many = [StreamStats() for _ in range(9)]
+    for st in one + many:  # past EXACT: histogram mode
+        st.add(np.full(EXACT + 1, 10.0))
+    for batch in range(12):
+        parts = []
+        for j in range(9):
+            n = int(rng.integers(1, 300))
+            if j == 3:
+                vals = rng.random(n) * 10 ** rng.integers(0, 7)  # wide: coarsens
+            elif j == 5 and batch % 4 == 0:
+                vals = np.r_[rng.random(n) * 5, 0.0, -0.5]  # below 1 us
+            else:
+                vals = 100.0 + rng.normal(0, 0.3 * (j + 1), n)
+            parts.append(vals)
+        v = np.concatenate(parts)
+        b = bins_of(v)
+        ends = np.cumsum([p.size for p in parts])
+        starts = ends - [p.size for p in parts]
+        for st, a, e in zip(one, starts, ends, strict=True):
+            st.add_values(v[a:e], b[a:e])
+        histogram_many(list(zip(many, starts.tolist(), ends.tolist(), strict=True)), v, b)
+        for x, y in zip(one, many, strict=True):
+            assert (x._level, x._lo, x._under) == (y._level, y._lo, y._under)
+            assert np.array_equal(x._count, y._count) and np.array_equal(x._sum, y._sum)
+    assert one[3]._level > 0 and one[5]._under[0] > 0

@@ -18,6 +18,8 @@ _SENT_BY_NODE = np.array(
     ],
     np.uint8,
 )
+_SENT = np.zeros(256, bool)  # service -> sent by the node itself: a lookup, not np.isin
+_SENT[_SENT_BY_NODE] = True
 
 
 class BootupRule(Rule):
@@ -38,14 +40,14 @@ class BootupRule(Rule):
         boots = np.flatnonzero(b.service == Service.BOOTUP)
         nmt = np.flatnonzero(b.service == Service.NMT)
         if boots.size == 0 and nmt.size == 0:
-            sent = b.node[np.isin(b.service, _SENT_BY_NODE) & (b.node >= 0)]
+            sent = b.node[_SENT[b.service] & (b.node >= 0)]
             self.alive[sent] = True
             return
         fb = b.frames
         events = sorted(
             [(int(r), "boot") for r in boots.tolist()] + [(int(r), "nmt") for r in nmt.tolist()]
         )
-        sent_mask = np.isin(b.service, _SENT_BY_NODE) & (b.node >= 0)
+        sent_mask = _SENT[b.service] & (b.node >= 0)
         first_row = np.full(128, len(b), np.int64)
         rows = np.flatnonzero(sent_mask)
         first_row[b.node[rows][::-1]] = rows[::-1]  # last write wins: the first row per node

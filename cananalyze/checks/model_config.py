@@ -63,6 +63,9 @@ class ModelConfig:
 
     def heartbeat_consumers(self, node: int, t: float) -> dict[int, float]:
         out = dict(self.fallback.heartbeat_consumers(node, t))
+        written = getattr(self.model, "written", None)
+        if written is not None and not written(node, 0x1016):
+            return out  # no sub-index of 0x1016 written in the log: nothing to look up
         for sub in range(1, 128):
             v = self._value(node, 0x1016, sub, t)
             if v is None:

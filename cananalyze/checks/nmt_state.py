@@ -39,6 +39,7 @@ class NmtStates:
         self.states: dict[int, list[int]] = {}
         self.sources: dict[int, list[str]] = {}
         self._last = np.full(128, -1, np.int16)
+        self._arrays: dict[int, tuple[int, np.ndarray, np.ndarray]] = {}  # state_at's, per node
 
     def _add(self, node: int, t: float, state: int, source: str) -> None:
         ts = self.times.setdefault(node, [])
@@ -89,8 +90,15 @@ class NmtStates:
         ts = self.times.get(node)
         if not ts:
             return np.full(np.shape(t), -1, np.int16)
-        idx = np.searchsorted(np.asarray(ts), t, side="right") - 1
-        states = np.asarray(self.states[node], np.int16)
+        cached = self._arrays.get(node)
+        if cached is None or cached[0] != len(ts):  # the lists only grow: length says stale
+            cached = self._arrays[node] = (
+                len(ts),
+                np.asarray(ts),
+                np.asarray(self.states[node], np.int16),
+            )
+        _, times, states = cached
+        idx = np.searchsorted(times, t, side="right") - 1
         return np.where(idx >= 0, states[np.maximum(idx, 0)], -1).astype(np.int16)
 
     def timeline(self) -> dict[int, list[tuple[float, str, str]]]:

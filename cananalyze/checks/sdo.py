@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from .rule import Context, Rule
 
 
@@ -16,9 +18,32 @@ class SdoRule(Rule):
         super().__init__(**kw)
         self.max_latency = max_latency_ms
 
+    def _picked(self, batch) -> list:
+        """Records that may need a finding, in order: the fast path's ok, quick ones skipped."""
+        records = batch.records
+        fast = batch.sdo_fast
+        if fast is None or fast.slots.size == 0 or len(records) <= int(fast.slots[-1]):
+            return list(records)
+        tab = batch.sdo_table()
+        for c in tab.first_seen(tab.node):  # the order a loop over the records adds them in
+            self.subjects.add(tab.node_keys[c])
+        flag = ~fast.ok
+        if self.max_latency is not None:
+            flag |= fast.latency > self.max_latency
+        rest = np.ones(len(records), bool)
+        rest[fast.slots] = False
+        get = list.__getitem__  # written records: no lazy lookup
+        picked = [(k, get(records, k)) for k in np.flatnonzero(rest).tolist()]
+        flagged = fast.slots[flag].tolist()
+        if flagged:
+            picked += [(k, records[k]) for k in flagged]  # built one by one (or all)
+            picked.sort(key=lambda x: x[0])
+        return [item for _, item in picked]
+
     def process(self, ctx: Context) -> None:
         subjects = self.subjects
-        for row, rec in list(ctx.batch.records):
+        picked = self._picked(ctx.batch)
+        for row, rec in picked:
             if rec.get("kind") != "sdo":
                 continue
             node = rec.get("node")

@@ -16,7 +16,7 @@ import numpy as np
 from ..protocol.services import Service
 from .finding import rel_time
 from .rule import Context
-from .streamstats import StreamStats, bins_of
+from .streamstats import StreamStats, bins_of, histogram_many
 
 
 def stats(gaps_s: np.ndarray) -> dict:
@@ -77,18 +77,23 @@ class Timing:
         if boot.size:
             self.bootups.update(boot.tolist())
         self.error_frames += int(np.count_nonzero(b.service == Service.ERROR_FRAME))
-        sdo = [rec for _row, rec in b.records if rec.get("kind") == "sdo"]
-        if sdo:
-            self.sdo_results.update([rec.get("result") for rec in sdo])
-            latency: dict = {}
-            for rec in sdo:
-                if rec.get("latency_ms") is not None:
-                    latency.setdefault(rec.get("node"), []).append(rec["latency_ms"])
-            for node, values in latency.items():
-                st = self.sdo_latency.get(node)
-                if st is None:
-                    st = self.sdo_latency[node] = StreamStats()
-                st.add(np.array(values, np.float64))
+        if b.records:
+            self._sdo(b)
+
+    def _sdo(self, b) -> None:
+        """Result counts and latency per node, from the batch's SDO records as columns."""
+        tab = b.sdo_table()
+        if tab.node.size == 0:
+            return
+        counts = np.bincount(tab.result, minlength=len(tab.result_keys)).tolist()
+        # Counter order as counting the records one by one gives (first seen first)
+        self.sdo_results.update({tab.result_keys[r]: counts[r] for r in tab.first_seen(tab.result)})
+        for c, at in tab.groups(tab.node, ~np.isnan(tab.latency)):
+            node = tab.node_keys[c]
+            st = self.sdo_latency.get(node)
+            if st is None:
+                st = self.sdo_latency[node] = StreamStats()
+            st.add(tab.latency[at])
 
     def _update_table(self, name: str, g) -> None:
         """Counts, spans and gap statistics of one gap table: moments per key in one pass."""
@@ -105,24 +110,32 @@ class Timing:
             dev = v - np.repeat(mean, k)
             m2 = np.add.reduceat(dev * dev, first)
             lo, hi = np.minimum.reduceat(v, first), np.maximum.reduceat(v, first)
-            bins = None
             ends = (first + k).tolist()
-            for j, (a, e, key_j) in enumerate(
-                zip(first.tolist(), ends, key[first].tolist(), strict=True)
+            binned: list[tuple[StreamStats, int, int]] = []  # streams past EXACT: one bincount
+            keep = self.keep and name in self.keep
+            for a, e, key_j, mean_j, m2_j, lo_j, hi_j in zip(
+                first.tolist(),
+                ends,
+                key[first].tolist(),
+                mean.tolist(),
+                m2.tolist(),
+                lo.tolist(),
+                hi.tolist(),
+                strict=True,
             ):
                 st = streams.get(key_j)
                 if st is None:
                     st = streams[key_j] = StreamStats()
-                st.add_moments(e - a, float(mean[j]), float(m2[j]), float(lo[j]), float(hi[j]))
+                st.add_moments(e - a, mean_j, m2_j, lo_j, hi_j)
                 if st.exact:
                     st.add_values(v[a:e])
                 else:
-                    if bins is None:
-                        bins = bins_of(v)
-                    st.add_values(v[a:e], bins[a:e])
-                if self.keep and name in self.keep:
+                    binned.append((st, a, e))
+                if keep:
                     self.gaps[name].setdefault(key_j, []).append(gap_s[a:e])
                     self.gap_t[name].setdefault(key_j, []).append(t_prev[a:e])
+            if binned:
+                histogram_many(binned, v, bins_of(v))
         for key_j, sl in g.groups():
             if key_j not in streams:  # one frame so far: listed, with no gaps
                 streams[key_j] = StreamStats()

@@ -90,11 +90,28 @@ def effective_value(var, node_id: int | None) -> int | float | str | bytes | Non
 
 
 def variable(od, index: int, subindex: int):
-    """The canopen ODVariable at (index, subindex), or None."""
+    """The canopen ODVariable at (index, subindex), or None.
+
+    Absent objects are answered from canopen's dicts first: its KeyError path
+    formats a message, and building a node's configuration asks for ~1000 of them.
+    """
+    indices = getattr(od, "indices", None)
+    if type(index) is int and isinstance(indices, dict):
+        if index not in indices and index not in od.names:
+            return None
     try:
         entry = od[index]
     except KeyError:
         return None
+    subs = getattr(entry, "subindices", None)
+    if (
+        type(entry).__name__ == "ODRecord"
+        and type(subindex) is int
+        and isinstance(subs, dict)
+        and subindex not in subs
+        and subindex not in entry.names
+    ):
+        return None  # a record has no template for missing sub-indices (an array has)
     if hasattr(entry, "subindices"):
         try:
             return entry[subindex]

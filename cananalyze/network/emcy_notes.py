@@ -13,15 +13,27 @@ from cananalyze.network.model import NetworkModel
 from cananalyze.protocol.services import Service
 
 
+def _has_emcy_table(profile) -> bool:
+    """Whether `profile.decode_emcy` can answer (a DeviceProfile needs a sidecar table)."""
+    if profile is None:
+        return False
+    if not hasattr(profile, "sidecar"):
+        return True
+    return profile.sidecar is not None and profile.sidecar.emcy is not None
+
+
 class EmcyDecoder:
     def __init__(self, model: NetworkModel) -> None:
         self.model = model
 
     def process(self, batch: DecodedBatch) -> None:
-        if not any(cfg.profile is not None for cfg in self.model.nodes.values()):
+        # only nodes whose profile has a table for the vendor bytes (most have none)
+        nodes = [n for n, cfg in self.model.nodes.items() if _has_emcy_table(cfg.profile)]
+        if not nodes:
             return
         fb = batch.frames
-        for i in np.flatnonzero(batch.service == Service.EMCY).tolist():
+        emcy = (batch.service == Service.EMCY) & np.isin(batch.node, nodes)
+        for i in np.flatnonzero(emcy).tolist():
             cfg = self.model.nodes.get(int(batch.node[i]))
             if cfg is None or cfg.profile is None or fb.dlc[i] < 3:
                 continue

@@ -30,6 +30,7 @@ from ..protocol.comm_objects import comm_object
 NOT_VALID = (
     "is not valid (COB-ID bit 31 set)"  # PdoBinding.problem; the pdo_not_valid rule looks for it
 )
+_IDENTITY_INDICES = np.array([0x1018, 0x1000, 0x1008], np.int64)
 USER_SOURCES = ("user --device", "user --eds", "network file")
 _IDENTITY = {
     (0x1018, 1): "vendor_id",
@@ -84,11 +85,16 @@ class NetworkModel:
         self.spec = spec or NetworkSpec()
         self.nodes: dict[int, NodeConfig] = {}
         self.history: list[ConfigChange] = []
+        # the same changes by object: value_at is asked per node and batch by the checks
+        self._changes: dict[tuple[int, int, int], list[ConfigChange]] = {}
+        self._objects: set[tuple[int, int]] = set()
         self.bindings: dict[int, PdoBinding] = {}
         # Bindings in force within the current batch: (first row, bindings), ascending.
         self.segments: list[tuple[int, dict[int, PdoBinding]]] = [(0, {})]
         self.classifier: CobClassifier | None = None
         self._assigned: dict[int, tuple[int, int, int]] = {}
+        # (node, index, subindex) -> object_info answer; cleared when a node's profile changes
+        self._info: dict[tuple[int, int, int], tuple[str, int] | None] = {}
         for node, ns in self.spec.nodes.items():
             cfg = NodeConfig.from_profile(node, ns.profile, ns.how)
             for index, sub, value in ns.writes:
@@ -123,8 +129,17 @@ class NetworkModel:
     def object_info(self, node: int, index: int, subindex: int) -> tuple[str, int] | None:
         """(name, data type) of an object on a node: its profile, else CiA 301's common objects.
 
-        The SDO tracker calls this to name and decode transaction values.
+        The SDO tracker calls this to name and decode transaction values: answers are
+        kept until a node's profile changes (a profile lookup costs microseconds).
         """
+        key = (node, index, subindex)
+        found = self._info.get(key, self._info)
+        if found is not self._info:
+            return found  # type: ignore[return-value]
+        found = self._info[key] = self._object_info(node, index, subindex)
+        return found
+
+    def _object_info(self, node: int, index: int, subindex: int) -> tuple[str, int] | None:
         cfg = self.nodes.get(node)
         profile = cfg.profile if cfg is not None else None
         if profile is not None:
@@ -138,14 +153,19 @@ class NetworkModel:
         cfg = self.nodes.get(node)
         if cfg is None:
             cfg = self.nodes[node] = NodeConfig(node)
+            self._info.clear()
         return cfg
 
     def value_at(self, node: int, index: int, subindex: int, t: float) -> int | None:
         """Last value written to an object at or before time t (None: never written in the log)."""
-        for change in reversed(self.history):
-            if change.node == node and change.object == (index, subindex) and change.t <= t:
+        for change in reversed(self._changes.get((node, index, subindex), ())):
+            if change.t <= t:
                 return change.value
         return None
+
+    def written(self, node: int, index: int) -> bool:
+        """Whether the log wrote any sub-index of this object on this node (so far)."""
+        return (node, index) in self._objects
 
     def binding(self, cob_id: int) -> PdoBinding | None:
         return self.bindings.get(cob_id)
@@ -155,7 +175,7 @@ class NetworkModel:
         self.segments = [(0, self.bindings)]
         events = [
             (row, rec)
-            for row, rec in batch.records
+            for row, rec in self._candidates(batch)
             if rec.get("kind") == "sdo" and rec.get("result") == "ok"
         ]
         events.sort(key=lambda e: e[0])
@@ -174,6 +194,46 @@ class NetworkModel:
 
     def finish(self, batch: DecodedBatch) -> None:
         self.segments = [(0, self.bindings)]
+
+    def _candidates(self, batch: DecodedBatch) -> list:
+        """The records `_on_sdo` may act on, in record order; the fast path's others skipped.
+
+        A fast-path record (expedited, with data) matters only when it writes a
+        communication object (0x1000-0x1FFF) or a unit-changing object, or is the
+        first seen of a node the model does not know yet: `_on_sdo` leaves the state
+        untouched for every other one. A batch with an identity read takes them all.
+        """
+        records = batch.records
+        fast = batch.sdo_fast
+        if fast is None or fast.slots.size == 0 or len(records) <= int(fast.slots[-1]):
+            return records
+        rest = np.ones(len(records), bool)
+        rest[fast.slots] = False
+        others = np.flatnonzero(rest).tolist()
+        # an identification may bring a profile with other unit-changing objects: all then
+        get = list.__getitem__  # the other records are written: no lazy lookup for them
+        if (fast.upload & np.isin(fast.index, _IDENTITY_INDICES)).any() or any(
+            rec.get("direction") == "upload"
+            and (rec.get("index"), rec.get("subindex")) in _IDENTITY
+            for _, rec in (get(records, k) for k in others)
+        ):
+            return records
+        want = fast.ok & ~fast.upload & (fast.index >= 0x1000) & (fast.index <= 0x1FFF)
+        context = {o for cfg in self.nodes.values() for o in cfg.context_objects()}
+        if context:
+            key = fast.index * 256 + fast.subindex
+            objs = np.array([i * 256 + s for i, s in context], np.int64)
+            want |= fast.ok & ~fast.upload & np.isin(key, objs)
+        known = np.array(sorted(self.nodes), np.int64)
+        new = fast.ok & ~np.isin(fast.node, known)
+        if new.any():
+            _, first = np.unique(fast.node[new], return_index=True)
+            want[np.flatnonzero(new)[first]] = True
+        picked = [(k, get(records, k)) for k in others]
+        picked += [(k, records[k]) for k in fast.slots[want].tolist()]  # built one by one
+        if len(picked) > len(others):
+            picked.sort(key=lambda x: x[0])
+        return [rec for _, rec in picked]
 
     # --- internals ---------------------------------------------------------------
     def _on_sdo(self, rec: dict) -> set[int] | None:
@@ -201,7 +261,10 @@ class NetworkModel:
         what = cfg.apply(index, sub, value)
         if what is None:
             return None
-        self.history.append(ConfigChange(t, node, (index, sub), value))
+        change = ConfigChange(t, node, (index, sub), value)
+        self.history.append(change)
+        self._changes.setdefault((node, index, sub), []).append(change)
+        self._objects.add((node, index))
         if what not in TOUCHES_COB_IDS:
             return None
         self._rebind()
@@ -231,6 +294,7 @@ class NetworkModel:
             if change.node == cfg.node:
                 fresh.apply(*change.object, change.value)
         self.nodes[cfg.node] = fresh
+        self._info.clear()
         self._rebind()
         return self._sync_classifier()
 

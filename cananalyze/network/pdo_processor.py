@@ -14,7 +14,7 @@ import numpy as np
 from cananalyze.decoded import DecodedBatch, SignalBlock
 from cananalyze.frames import FLAG_RTR
 from cananalyze.network.model import NetworkModel
-from cananalyze.protocol.pdo_decode import decode_pdo
+from cananalyze.protocol.pdo_decode import decode_pdo, words_of
 from cananalyze.protocol.services import Service
 
 
@@ -23,6 +23,7 @@ class PdoDecoder:
 
     def __init__(self, model: NetworkModel) -> None:
         self.model = model
+        self._words: tuple | None = None  # (FrameBatch, its data as uint64 words)
 
     def process(self, batch: DecodedBatch) -> None:
         if not self.model.bindings and len(self.model.segments) <= 1:
@@ -34,6 +35,15 @@ class PdoDecoder:
         if rows.size == 0:
             return
         segments = self.model.segments
+        # only COB-IDs bound in some segment are decoded: drop the others before sorting
+        bound = np.zeros(2048, bool)
+        cobs = [c for _, b in segments for c in b if 0 <= c < 2048]
+        if cobs:
+            bound[cobs] = True
+        ids = fb.can_id[rows]
+        rows = rows[bound[np.where(ids < 2048, ids, 0)] & (ids < 2048)]
+        if rows.size == 0:
+            return
         bounds = [start for start, _ in segments[1:]]
         seg_of = (
             np.searchsorted(np.asarray(bounds, np.int64), rows, side="right") if bounds else None
@@ -42,7 +52,9 @@ class PdoDecoder:
         key = fb.can_id[rows].astype(np.int64)
         if seg_of is not None:
             key = key + seg_of.astype(np.int64) * 4096
-        order = np.argsort(key, kind="stable")
+        # as uint16 (the usual case: few segments) numpy's stable sort is a radix sort
+        small = len(segments) <= 16
+        order = np.argsort(key.astype(np.uint16) if small else key, kind="stable")
         key_sorted = key[order]
         cuts = np.flatnonzero(np.diff(key_sorted)) + 1
         starts = np.concatenate(([0], cuts))
@@ -55,6 +67,7 @@ class PdoDecoder:
                 continue
             group = rows[order[a:b]]
             self._decode_group(batch, group, binding)
+        self._words = None  # not kept past the batch
 
     def _decode_group(self, batch: DecodedBatch, group: np.ndarray, binding) -> None:
         fb = batch.frames
@@ -73,15 +86,21 @@ class PdoDecoder:
                     )
                 )
             return
-        cols = decode_pdo(fb.data[group], fb.dlc[group], mapping)
+        if self._words is None or self._words[0] is not fb:
+            self._words = (fb, words_of(fb.data))  # once per batch
+        dlc = fb.dlc[group]
+        cols = decode_pdo(None, dlc, mapping, words=self._words[1][group])
         ok = ~cols.short
         for mask, what in (
-            (cols.short, f"shorter than the {cols.bytes_needed} bytes mapped in "
-                         f"{binding.kind.upper()}{binding.number}: not decoded"),
+            (
+                cols.short,
+                f"shorter than the {cols.bytes_needed} bytes mapped in "
+                f"{binding.kind.upper()}{binding.number}: not decoded",
+            ),
             (cols.extra, f"longer than the {cols.bytes_needed} bytes mapped: extra bytes ignored"),
         ):
             if mask.any():  # one shared note per group of rows, not a dict per row
-                have = ",".join(map(str, sorted(set(fb.dlc[group][mask].tolist()))))
+                have = ",".join(map(str, sorted(set(dlc[mask].tolist()))))
                 batch.row_notes.append((group[mask], {"pdo_problem": f"DLC {have} {what}"}))
         if not ok.any() or not cols.values:
             return

@@ -62,7 +62,7 @@ class Summary:
     def add(self, batch: DecodedBatch) -> None:
         n = len(batch)
         if batch.records:
-            self._sdo(batch.records)
+            self._sdo(batch)
         if n == 0:
             return
         fb = batch.frames
@@ -71,9 +71,14 @@ class Summary:
         self.t_first = float(t[0]) if self.t_first is None else min(self.t_first, float(t[0]))
         self.t_last = float(t[-1]) if self.t_last is None else max(self.t_last, float(t[-1]))
         self.by_service += np.bincount(batch.service, minlength=N_SVC)
-        has = batch.node >= 0
-        key = batch.node[has].astype(np.int64) * N_SVC + batch.service[has]
-        self.by_node_service += np.bincount(key, minlength=128 * N_SVC).reshape(128, N_SVC)
+        # node -1 (none) lands in the first N_SVC bins, dropped: no mask, no gather
+        key = (batch.node.astype(np.intp) + 1) * N_SVC + batch.service
+        per = np.bincount(key, minlength=129 * N_SVC)
+        if per.size != 129 * N_SVC:  # a node outside -1..127: the rows with a node only
+            has = batch.node >= 0
+            key = batch.node[has].astype(np.int64) * N_SVC + batch.service[has]
+            per = np.r_[np.zeros(N_SVC, np.int64), np.bincount(key, minlength=128 * N_SVC)]
+        self.by_node_service += per[N_SVC:].reshape(128, N_SVC)
         self.bits += int(frame_bits(fb.flags, fb.dlc).sum())
         self._evidence(batch)
         if len(self.ids_seen) < 4096:
@@ -84,26 +89,28 @@ class Summary:
                 ids = np.unique(ids)
             self.ids_seen.update(ids.tolist())
 
-    def _sdo(self, records: list) -> None:
-        """Result counts and latencies per node, one small loop per batch."""
-        latency: dict = {}
-        for _row, rec in records:
-            if rec.get("kind") != "sdo":
-                continue
-            node = rec.get("node")
-            results = self.sdo_results.get(node)
+    def _sdo(self, batch: DecodedBatch) -> None:
+        """Result counts and latencies per node, from the batch's SDO records as columns."""
+        tab = batch.sdo_table()
+        if tab.node.size == 0:
+            return
+        nk, rk = tab.node_keys, tab.result_keys
+        for c, at in tab.groups(tab.node):  # dict order as a loop over the records gives
+            res = tab.result[at]
+            results = self.sdo_results.get(nk[c])
             if results is None:
-                results = self.sdo_results[node] = {}
-            result = rec.get("result")
-            results[result] = results.get(result, 0) + 1
-            lat = rec.get("latency_ms")
-            if lat is not None:
-                latency.setdefault(node, []).append(lat)
-        for node, values in latency.items():
-            st = self.sdo_latency.get(node)
+                results = self.sdo_results[nk[c]] = {}
+            if len(rk) == 1:
+                results[rk[0]] = results.get(rk[0], 0) + res.size
+                continue
+            counts = np.bincount(res, minlength=len(rk)).tolist()
+            for r in tab.first_seen(res):
+                results[rk[r]] = results.get(rk[r], 0) + counts[r]
+        for c, at in tab.groups(tab.node, ~np.isnan(tab.latency)):
+            st = self.sdo_latency.get(nk[c])
             if st is None:
-                st = self.sdo_latency[node] = StreamStats()
-            st.add(np.array(values, np.float64))
+                st = self.sdo_latency[nk[c]] = StreamStats()
+            st.add(tab.latency[at])
 
     def _evidence(self, batch: DecodedBatch) -> None:
         """Count frames whose shape says CANopen or says otherwise (CiA 301 sizes and values)."""
@@ -116,12 +123,14 @@ class Summary:
         sdo = data_frame & std & ((svc == Service.SDO_REQUEST) | (svc == Service.SDO_RESPONSE))
         self.sdo_frames += int(sdo.sum())
         self.sdo_bad += np.bincount(ids[sdo & (fb.dlc != 8)], minlength=2048)
-        ec = data_frame & std & ((svc == Service.HEARTBEAT) | (svc == Service.BOOTUP))
-        self.ec_frames += int(ec.sum())
-        state_ok = _IS_STATE[fb.data[:, 0]]
-        self.ec_bad += np.bincount(ids[ec & ((fb.dlc != 1) | ~state_ok)], minlength=2048)
-        nmt = data_frame & (svc == Service.NMT) & (fb.dlc == 2)
-        self.nmt_good += int((nmt & _IS_COMMAND[fb.data[:, 0]] & (fb.data[:, 1] < 128)).sum())
+        ec = np.flatnonzero(
+            data_frame & std & ((svc == Service.HEARTBEAT) | (svc == Service.BOOTUP))
+        )
+        self.ec_frames += int(ec.size)
+        state_ok = _IS_STATE[fb.data[ec, 0]]  # the byte tables only for the rows concerned
+        self.ec_bad += np.bincount(ids[ec[(fb.dlc[ec] != 1) | ~state_ok]], minlength=2048)
+        nmt = np.flatnonzero(data_frame & (svc == Service.NMT) & (fb.dlc == 2))
+        self.nmt_good += int((_IS_COMMAND[fb.data[nmt, 0]] & (fb.data[nmt, 1] < 128)).sum())
 
     @property
     def duration(self) -> float:

@@ -18,9 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..decoded import DecodedBatch
+from ..decoded import DecodedBatch, SdoColumns
 from ..frames import FLAG_TX
-from ..protocol.datatypes import decode_value, value_decoder
+from ..protocol.datatypes import decode_column, decode_value
 from ..protocol.tables import abort_text
 from .tracker import ObjectInfo
 
@@ -36,6 +36,7 @@ for _b in (0x22, 0x42):
     _EXP_LEN[_b] = 4
 for _b in (0x23, 0x43, 0x27, 0x47, 0x2B, 0x4B, 0x2F, 0x4F):
     _EXP_LEN[_b] = 4 - ((_b >> 2) & 3)
+_HEX2 = np.array([f"{i:02x}" for i in range(256)], "S2")  # byte -> its hex text
 
 
 @dataclass
@@ -75,8 +76,9 @@ def plan(batch: DecodedBatch, rows: np.ndarray, timeout: float, explicit: list[i
         | (d[:, 2].astype(np.int64) << 8)
         | (d[:, 3].astype(np.int64) << 16)
     )
-    # the next SDO frame on the same channel (stable sort keeps time order inside a node)
-    order = np.argsort(np.where(usable, node, 0), kind="stable")
+    # the next SDO frame on the same channel (stable sort keeps time order inside a node);
+    # frames the fast path cannot take (short, flagged) still count: the tracker sees them
+    order = np.argsort(np.where(is_req | is_resp, node, 0), kind="stable")
     nxt = np.full(m, -1, np.int64)
     if m > 1:
         same = node[order[1:]] == node[order[:-1]]
@@ -110,55 +112,180 @@ def build_pairs(
 ) -> tuple[list[dict], list[dict], list[dict]]:
     """Request notes, answer notes and records of taken pairs (request rows a, answer rows b).
 
-    Ordinary answers are built column-wise here; aborts go through `pair_outputs`.
     `notes` / `records` False leave that part out (the lists stay empty).
     """
-    want_notes, want_records = notes, records
+    req, resp = pair_notes(fb, a, b) if notes else ([], [])
+    return req, resp, pair_records(fb, a, b, object_info) if records else []
+
+
+def _hex_column(raw: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """Object array of the hex text of each row's first `length` bytes (1..4), column-wise."""
+    out = np.empty(len(raw), object)
+    pairs = _HEX2[raw]  # (m, 4) of 2-character byte texts
+    for n in sorted(set(length.tolist())):  # (plain np.unique's first call costs ~10 ms)
+        sel = np.flatnonzero(length == n)
+        if n <= 0:
+            out[sel] = ""
+            continue
+        text = np.ascontiguousarray(pairs[sel, :n]).view(f"S{2 * n}").ravel()
+        out[sel] = text.astype(f"U{2 * n}")
+    return out
+
+
+def py_round(v: np.ndarray, ndigits: int) -> np.ndarray:
+    """Python's round(x, ndigits) of each value, as numpy where it provably agrees.
+
+    numpy rounds the float product x * 10**n; Python rounds the exact decimal
+    value of x. They can only choose differently when the product lies within a
+    few ulps of a half, so those (rare) values are rounded by Python itself.
+    """
+    scale = 10.0**ndigits
+    p = v * scale
+    out = np.rint(p) / scale
+    frac = np.abs(p - np.trunc(p))
+    with np.errstate(invalid="ignore"):
+        tol = np.maximum(1e-6, 8.0 * np.abs(np.spacing(p)))
+        risky = ~(np.abs(frac - 0.5) >= tol) | ~(np.abs(p) < 2.0**52)
+    if risky.any():
+        idx = np.flatnonzero(risky)
+        out[idx] = [round(x, ndigits) for x in v[idx].tolist()]
+    return out
+
+
+def _rounded_latency(dt: np.ndarray) -> list:
+    """round(round(dt * 1000, 6), 3) exactly as Python computes it, column-wise."""
+    return py_round(py_round(np.asarray(dt, np.float64) * 1000.0, 6), 3).tolist()
+
+
+def pair_columns(fb, a: np.ndarray, b: np.ndarray, slots: np.ndarray) -> SdoColumns:
+    """What summary, timing and the network model read of taken pairs, as columns."""
+    da, db = fb.data[a], fb.data[b]
+    t0, t1 = fb.t[a], fb.t[b]
+    return SdoColumns(
+        slots=np.asarray(slots, np.int64),
+        row=np.asarray(b, np.int64),
+        node=fb.can_id[a].astype(np.int64) - 0x600,
+        upload=da[:, 0] == _UPLOAD_REQ,
+        index=da[:, 1].astype(np.int64) | (da[:, 2].astype(np.int64) << 8),
+        subindex=da[:, 3].astype(np.int64),
+        ok=db[:, 0] != _ABORT,
+        latency=np.asarray(_rounded_latency(t1 - t0), np.float64),
+    )
+
+
+def pair_records(
+    fb,
+    a: np.ndarray,
+    b: np.ndarray,
+    object_info: ObjectInfo | None,
+    latency: list | None = None,
+) -> list[dict]:
+    """Records of taken pairs, exactly as the tracker makes them, built from columns.
+
+    Names and data types are looked up once per distinct (node, index, subindex),
+    values decoded per data type as numpy columns; only the dicts are per record.
+    Aborted pairs (rare) go through `pair_outputs`.
+    """
+    m = len(a)
+    if m == 0:
+        return []
     da, db = fb.data[a], fb.data[b]
     upload = da[:, 0] == _UPLOAD_REQ
     aborted = db[:, 0] == _ABORT
     length = np.where(upload, _EXP_LEN[db[:, 0]], _EXP_LEN[da[:, 0]]).astype(np.int64)
-    raws = np.where(upload[:, None], db[:, 4:8], da[:, 4:8]).tobytes()
-    hexes = raws.hex()
-    index = (da[:, 1].astype(np.int64) | (da[:, 2].astype(np.int64) << 8)).tolist()
-    sub = da[:, 3].tolist()
-    node = (fb.can_id[a].astype(np.int64) - 0x600).tolist()
-    t0 = fb.t[a].tolist()
-    t1 = fb.t[b].tolist()
-    sized = (da[:, 0] & 1).tolist()
-    req_notes: list[dict] = []
-    resp_notes: list[dict] = []
-    out: list[dict] = []
-    info_cache: dict = {}  # a poll loop asks for the same few objects over and over
-    value_cache: dict = {}  # ... and often reads the same values
-    decoders: dict = {}  # datatype -> value_decoder
-    latency_cache: dict = {}  # t - t_start -> latency_ms
-    for k, (up, ab, n, x, y, i, s, nd) in enumerate(
-        zip(
-            upload.tolist(),
-            aborted.tolist(),
+    raw = np.ascontiguousarray(np.where(upload[:, None], db[:, 4:8], da[:, 4:8]))
+    index_a = da[:, 1].astype(np.int64) | (da[:, 2].astype(np.int64) << 8)
+    node_a = fb.can_id[a].astype(np.int64) - 0x600
+    t0, t1 = fb.t[a], fb.t[b]
+    ok = ~aborted
+    any_abort = not bool(ok.all())
+    data = _hex_column(raw, np.where(ok, length, 0))
+    names = np.full(m, None, object)
+    values = np.full(m, None, object)
+    if object_info is not None:
+        key = (node_a << 24) | (index_a << 8) | da[:, 3]
+        uniq, inv = np.unique(key, return_inverse=True)
+        inv = inv.ravel()
+        infos = [object_info(k >> 24, (k >> 8) & 0xFFFF, k & 0xFF) for k in uniq.tolist()]
+        known = np.array([i is not None for i in infos], bool)
+        if known.any():
+            names[:] = np.array([i[0] if i else None for i in infos], object)[inv]
+            dtype_of = np.array([i[1] if i else -1 for i in infos], np.int64)[inv]
+            dtype_of[~known[inv] | aborted] = -1
+            for code in sorted(set(dtype_of.tolist())):
+                if code >= 0:
+                    sel = np.flatnonzero(dtype_of == code)
+                    values[sel] = decode_column(raw[sel], length[sel], code)
+    if latency is None:
+        latency = _rounded_latency(t1 - t0)
+    direction = np.where(upload, "upload", "download").tolist()
+    out = [
+        {
+            "kind": "sdo",
+            "t_start": x,
+            "t": y,
+            "latency_ms": lat,
+            "node": nd,
+            "direction": dr,
+            "protocol": "expedited",
+            "index": i,
+            "subindex": s,
+            "size": n,
+            "data": h,
+            "value": v,
+            "name": nm,
+            "result": "ok",
+            "abort_code": None,
+            "abort_text": None,
+            "detail": None,
+            "frames": 2,
+            "channel": [0x600 + nd, 0x580 + nd],
+        }
+        for x, y, lat, nd, dr, i, s, n, h, v, nm in zip(
+            t0.tolist(),
+            t1.tolist(),
+            latency,
+            node_a.tolist(),
+            direction,
+            index_a.tolist(),
+            da[:, 3].tolist(),
             length.tolist(),
-            t0,
-            t1,
-            index,
-            sub,
-            node,
+            data.tolist(),
+            values.tolist(),
+            names.tolist(),
             strict=True,
         )
+    ]
+    if any_abort:
+        for k in np.flatnonzero(aborted).tolist():
+            out[k] = pair_outputs(fb, int(a[k]), int(b[k]), out[k]["node"], object_info)[2]
+    return out
+
+
+def pair_notes(fb, a: np.ndarray, b: np.ndarray) -> tuple[list[dict], list[dict]]:
+    """Request and answer notes of taken pairs (for the text/JSONL outputs, built when read)."""
+    da, db = fb.data[a], fb.data[b]
+    upload = da[:, 0] == _UPLOAD_REQ
+    aborted = db[:, 0] == _ABORT
+    length = np.where(upload, _EXP_LEN[db[:, 0]], _EXP_LEN[da[:, 0]]).astype(np.int64)
+    raw = np.ascontiguousarray(np.where(upload[:, None], db[:, 4:8], da[:, 4:8]))
+    data = _hex_column(raw, np.where(aborted, 0, length)).tolist()
+    index = (da[:, 1].astype(np.int64) | (da[:, 2].astype(np.int64) << 8)).tolist()
+    sub = da[:, 3].tolist()
+    sized = (da[:, 0] & 1).tolist()
+    node = (fb.can_id[a].astype(np.int64) - 0x600).tolist()
+    req_notes: list[dict] = []
+    resp_notes: list[dict] = []
+    for k, (up, ab, n, i, s) in enumerate(
+        zip(upload.tolist(), aborted.tolist(), length.tolist(), index, sub, strict=True)
     ):
         if ab:
-            rq, rs, rec, _ = pair_outputs(fb, int(a[k]), int(b[k]), nd, object_info)
-            if want_notes:
-                req_notes.append(rq)
-                resp_notes.append(rs)
-            if want_records:
-                out.append(rec)
+            rq, rs, _, _ = pair_outputs(fb, int(a[k]), int(b[k]), node[k], None)
+            req_notes.append(rq)
+            resp_notes.append(rs)
             continue
-        data = hexes[8 * k : 8 * k + 2 * n]
-        if not want_notes:
-            pass
-        elif up:
-            where = f" 0x{i:04X}:{s}"
+        where = f" 0x{i:04X}:{s}"
+        if up:
             req_notes.append(
                 {
                     "role": f"upload request{where}",
@@ -169,14 +296,13 @@ def build_pairs(
             )
             resp_notes.append(
                 {
-                    "role": f"expedited upload response{where} = {data}",
+                    "role": f"expedited upload response{where} = {data[k]}",
                     "command": "initiate_upload_response",
                     "index": i,
                     "subindex": s,
                 }
             )
         else:
-            where = f" 0x{i:04X}:{s}"
             size = f", {n} bytes" if sized[k] else ""
             req_notes.append(
                 {
@@ -194,50 +320,7 @@ def build_pairs(
                     "subindex": s,
                 }
             )
-        if not want_records:
-            continue
-        name = value = None
-        if object_info is not None:
-            key = (nd, i, s)
-            known = info_cache.get(key, info_cache)
-            if known is info_cache:
-                known = info_cache[key] = object_info(nd, i, s)
-            if known is not None:
-                name, datatype = known
-                vkey = (data, datatype)
-                value = value_cache.get(vkey, value_cache)
-                if value is value_cache:
-                    dec = decoders.get(datatype)
-                    if dec is None:
-                        dec = decoders[datatype] = value_decoder(datatype)
-                    value = value_cache[vkey] = dec(raws[4 * k : 4 * k + n])
-        latency = latency_cache.get(y - x)  # a poll loop's latencies take few distinct values
-        if latency is None:
-            latency = latency_cache[y - x] = round(round((y - x) * 1000.0, 6), 3)
-        out.append(
-            {
-                "kind": "sdo",
-                "t_start": x,
-                "t": y,
-                "latency_ms": latency,
-                "node": nd,
-                "direction": "upload" if up else "download",
-                "protocol": "expedited",
-                "index": i,
-                "subindex": s,
-                "size": n,
-                "data": data,
-                "value": value,
-                "name": name,
-                "result": "ok",
-                "abort_code": None,
-                "abort_text": None,
-                "detail": None,
-                "frames": 2,
-                "channel": [0x600 + nd, 0x580 + nd],
-            }
-        )
-    return req_notes, resp_notes, out
+    return req_notes, resp_notes
 
 
 def _mux(index: int, subindex: int) -> str:

@@ -19,6 +19,7 @@ from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from ..protocol.services import Service
 from . import fastpath
 from .lazynotes import LazyNotes
+from .lazyrecords import LazyRecords
 from .tracker import SdoTracker
 
 
@@ -92,11 +93,11 @@ class SdoProcessor:
         self._emit(batch)
 
     def _process_fast(self, batch: DecodedBatch, rows: np.ndarray) -> None:
-        """Walk the SDO rows: idle stretches in bulk, the rest one event at a time.
+        """Walk the SDO rows: quiet stretches in bulk, the rest one event at a time.
 
         Between two frames that must go through the tracker, nothing changes its
-        state but the time; if no transfer is pending there, advancing is a no-op
-        and every candidate pair in the stretch is taken as is.
+        state but the time; until a pending transfer would time out or see a new
+        request, advancing is a no-op and every candidate pair is taken as is.
         """
         tracker = self.tracker
         fb = batch.frames
@@ -106,31 +107,48 @@ class SdoProcessor:
         cand = p.cand.tolist()
         is_partner = p.is_partner.tolist()
         req_cob = self._req_cob = p.req_cob.tolist()
-        self._aborted = p.aborted.tolist()
-        self._taken: list[tuple[int, int, int]] = []
         slow_at = np.flatnonzero(p.static_slow).tolist()
         t = fb.t[rows].tolist()
         req_of = np.full(len(row_of), -1, np.int64)
         req_of[p.partner[p.cand]] = np.flatnonzero(p.cand)
-        self._req_of = req_of.tolist()
-        answers = np.flatnonzero(p.is_partner).tolist()
+        self._req_of_arr = req_of
+        answers_arr = np.flatnonzero(p.is_partner)
+        answers = answers_arr.tolist()
+        self._answers = answers_arr
+        # how each answer's transfer ends, for the tracker's `_ended` (a late abort joins it)
+        self._ended_by = list(
+            zip(
+                p.req_cob[answers_arr].tolist(),
+                np.where(p.aborted[answers_arr], "abort", "ok").tolist(),
+                strict=True,
+            )
+        )
+        self._chunks: list[tuple[int, int, int]] = []  # (first record slot, lo, hi) in answers
         rejected: list[int] = []  # answers whose request had to go through the tracker (sorted)
         rejected_set: set[int] = set()
         m = len(row_of)
+        # candidate requests and answers: where advance() could end a pending transfer
+        cp = np.flatnonzero(p.cand | p.is_partner)
+        self._cp = cp.tolist()
+        self._cp_max = np.maximum.accumulate(fb.t[rows][cp]).tolist() if cp.size else []
+        self._cand_of: dict[int, list[int]] = {}
+        self._plan = p
         pos = 0
         si = 0
         while pos < m:
-            if not tracker._pending:
-                while si < len(slow_at) and slow_at[si] < pos:
-                    si += 1
-                stop = slow_at[si] if si < len(slow_at) else m
-                ri = bisect.bisect_left(rejected, pos)
-                if ri < len(rejected) and rejected[ri] < stop:
-                    stop = rejected[ri]
-                # idle stretch: every answer in it closes a pair whose request was taken
+            while si < len(slow_at) and slow_at[si] < pos:
+                si += 1
+            stop = slow_at[si] if si < len(slow_at) else m
+            ri = bisect.bisect_left(rejected, pos)
+            if ri < len(rejected) and rejected[ri] < stop:
+                stop = rejected[ri]
+            if tracker._pending:
+                stop = self._quiet_until(pos, stop)
+            if stop > pos:
+                # quiet stretch: every answer in it closes a pair whose request was taken
                 lo, hi = bisect.bisect_left(answers, pos), bisect.bisect_left(answers, stop)
                 if hi > lo:
-                    self._take_many(batch, answers[lo:hi])
+                    self._take(batch, lo, hi)
                 pos = stop
                 if pos >= m:
                     break
@@ -148,49 +166,90 @@ class SdoProcessor:
                 if tracker._pending:
                     tracker.advance(t[i])
                     self._emit(batch)
-                self._take_many(batch, [i])
+                lo = bisect.bisect_left(answers, i)
+                self._take(batch, lo, lo + 1)
                 continue
             self._feed(batch, row_of[i])
 
-    def _take_many(self, batch: DecodedBatch, answers: list[int]) -> None:
-        """Reserve the record slots of fast pairs closed by these answer positions."""
-        req_of, row_of, aborted, req_cob = (
-            self._req_of,
-            self._cur_rows,
-            self._aborted,
-            self._req_cob,
-        )
-        base = len(batch.records)
-        batch.records.extend([(row_of[j], None) for j in answers])  # filled in by _fill
-        self._taken.extend(
-            zip(
-                [req_of[j] for j in answers], answers, range(base, base + len(answers)), strict=True
-            )
-        )
-        self.tracker._ended.update((req_cob[j], "abort" if aborted[j] else "ok") for j in answers)
+    def _quiet_until(self, pos: int, stop: int) -> int:
+        """First position from `pos` (before `stop`) where a pending transfer needs the tracker.
+
+        That is where advance() would time one out (the first candidate frame late
+        enough, found on the running maximum of their times: never later than the
+        exact one) or where a candidate request arrives on a pending channel. Before
+        it, stepping frame by frame would only take the pairs as they are.
+        """
+        cp, cp_max, timeout = self._cp, self._cp_max, self.tracker.timeout
+        j0 = bisect.bisect_left(cp, pos)
+        for cob, xfer in self.tracker._pending.items():
+            t_last = xfer.t_last
+            lo, hi = j0, len(cp)
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if cp_max[mid] - t_last > timeout:
+                    hi = mid
+                else:
+                    lo = mid + 1
+            if lo < len(cp) and cp[lo] < stop:
+                stop = cp[lo]
+            same = self._cand_of.get(cob)
+            if same is None:
+                p = self._plan
+                same = self._cand_of[cob] = np.flatnonzero(p.cand & (p.req_cob == cob)).tolist()
+            k = bisect.bisect_left(same, pos)
+            if k < len(same) and same[k] < stop:
+                stop = same[k]
+        return max(stop, pos)
+
+    def _take(self, batch: DecodedBatch, lo: int, hi: int) -> None:
+        """Reserve the record slots of the fast pairs closed by answers[lo:hi] (filled by _fill)."""
+        self._chunks.append((len(batch.records), lo, hi))
+        batch.records.extend([None] * (hi - lo))  # type: ignore[list-item]
+        self.tracker._ended.update(self._ended_by[lo:hi])
 
     def _fill(self, batch: DecodedBatch) -> None:
         """Records of every pair taken in this batch, built column-wise; notes when read."""
-        if not self._taken:
+        if not self._chunks:
             return
         rows = np.asarray(self._cur_rows)
-        taken = np.asarray(self._taken)
-        a, b = rows[taken[:, 0]], rows[taken[:, 1]]
+        pick = np.concatenate([self._answers[lo:hi] for _, lo, hi in self._chunks])
+        a, b = rows[self._req_of_arr[pick]], rows[pick]
         fb = batch.frames
-        _, _, records = fastpath.build_pairs(fb, a, b, self.tracker.object_info, notes=False)
-        for rb, (_, _, slot), rec in zip(b.tolist(), self._taken, records, strict=True):
-            batch.records[slot] = (rb, rec)
+        slots = np.concatenate(
+            [np.arange(slot, slot + hi - lo, dtype=np.int64) for slot, lo, hi in self._chunks]
+        )
+        cols = fastpath.pair_columns(fb, a, b, slots)
+        latency = cols.latency.tolist()
+        info = lookup = self.tracker.object_info
+        if info is not None:
+            # answers as they are now: the records may be built after the model changed
+            keys = set(((cols.node << 24) | (cols.index << 8) | cols.subindex).tolist())
+            known = {k: info(k >> 24, (k >> 8) & 0xFFFF, k & 0xFF) for k in keys}
+
+            def lookup(node: int, index: int, sub: int, known=known):
+                return known[(node << 24) | (index << 8) | sub]
+
+        def build(js: np.ndarray | None) -> list[dict]:
+            if js is None:
+                return fastpath.pair_records(fb, a, b, lookup, latency)
+            picked = [latency[j] for j in js.tolist()]
+            return fastpath.pair_records(fb, a[js], b[js], lookup, picked)
+
+        if not isinstance(batch.records, LazyRecords):
+            batch.records = LazyRecords(batch.records)
+        batch.records.defer(slots, b.tolist(), build, cols)
 
         def write_notes(notes: dict) -> None:
-            req, resp, _ = fastpath.build_pairs(fb, a, b, None, records=False)
+            req, resp = fastpath.pair_notes(fb, a, b)
             for ra, rb, na, nb in zip(a.tolist(), b.tolist(), req, resp, strict=True):
                 LazyNotes.write(notes, ra, na)
                 LazyNotes.write(notes, rb, nb)
 
+        covers = np.concatenate((a, b))
         if isinstance(batch.notes, LazyNotes):
-            batch.notes.defer(write_notes)
+            batch.notes.defer(write_notes, covers)
         else:
-            batch.notes = LazyNotes(batch.notes, write_notes)
+            batch.notes = LazyNotes(batch.notes, write_notes, covers)
 
     def finish(self, batch: DecodedBatch) -> None:
         self.tracker.finish()
