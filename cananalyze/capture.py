@@ -527,6 +527,20 @@ def _pipeline_args(
     )
 
 
+def given_profiles(args: argparse.Namespace) -> dict[int, tuple[str, str]]:
+    """node -> (profile, "given") from --device / --eds (the nodes table's profile column)."""
+    profiles: dict[int, tuple[str, str]] = {}
+    for spec in getattr(args, "device", None) or []:
+        node, _, key = str(spec).partition("=")
+        if node.strip().isdigit():
+            profiles[int(node)] = (key, "given")
+    for spec in getattr(args, "eds", None) or []:
+        node, _, path = str(spec).partition("=")
+        if node.strip().isdigit():
+            profiles[int(node)] = (Path(path).name, "given")
+    return profiles
+
+
 def run_pipeline(args: argparse.Namespace, progress=None, decoder=None) -> Capture:
     """Read and decode the log named by `args` (CLI options) into a Capture.
 
@@ -546,15 +560,7 @@ def run_pipeline(args: argparse.Namespace, progress=None, decoder=None) -> Captu
             progress(len(fb))
     collector.add(decoder.finish())
     network = getattr(args, "network", None) or ""
-    profiles: dict[int, tuple[str, str]] = {}
-    for spec in getattr(args, "device", None) or []:
-        node, _, key = str(spec).partition("=")
-        if node.strip().isdigit():
-            profiles[int(node)] = (key, "given")
-    for spec in getattr(args, "eds", None) or []:
-        node, _, path = str(spec).partition("=")
-        if node.strip().isdigit():
-            profiles[int(node)] = (Path(path).name, "given")
+    profiles = given_profiles(args)
     return collector.capture(source.problems, str(network), profiles)
 
 
