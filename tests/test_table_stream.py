@@ -18,8 +18,8 @@ import pytest
 from conftest import ROOT, SAMPLES, real_file
 
 from cananalyze.capture import Collector, given_profiles
-from cananalyze.errors import ProblemLog
 from cananalyze.cli.pipeline import build_decoder
+from cananalyze.errors import ProblemLog
 from cananalyze.io.source import read_all
 from cananalyze.outputs import table_sink
 from cananalyze.outputs.pandas_like import MISSING, column
