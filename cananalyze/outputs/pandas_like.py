@@ -14,7 +14,10 @@ import json
 import math
 from importlib import metadata
 
+import numpy as np
 import pyarrow as pa
+
+from . import arrow_build as ab
 
 MISSING = object()  # a key the record does not have (pandas fills NaN, not None)
 _I64 = 2**63
@@ -41,7 +44,7 @@ def _missing(v) -> bool:
 
 
 def _text(values: list) -> pa.Array:
-    return pa.array([None if _missing(v) else str(v) for v in values], pa.large_string())
+    return ab.strings([None if _missing(v) else str(v) for v in values], large=True)
 
 
 class ColumnStats:
@@ -117,8 +120,14 @@ def convert(values: list, how: str) -> pa.Array:
     if how == "textfloat":
         return _text([None if _missing(v) else float(v) for v in values])
     if how == "float":
-        return pa.array([None if _missing(v) else float(v) for v in values], pa.float64())
-    return pa.array([None if _missing(v) else v for v in values], _TYPES[how])
+        mask = np.fromiter((_missing(v) for v in values), bool, len(values))
+        floats = np.fromiter((0.0 if _missing(v) else v for v in values), np.float64, len(values))
+        return ab.numeric(floats, mask)
+    if how in ("string", "large"):
+        return ab.strings([None if _missing(v) else v for v in values], large=how == "large")
+    if how == "bool":
+        return ab.numeric(np.array(values, bool))
+    return ab.optional_ints([None if _missing(v) else v for v in values], _TYPES[how])
 
 
 def column(values: list, as_object: bool = False) -> tuple[pa.Array, str, str]:
@@ -131,7 +140,8 @@ def column(values: list, as_object: bool = False) -> tuple[pa.Array, str, str]:
 
 def nullable_int(values: list) -> tuple[pa.Array, str, str]:
     """A column the Capture casts with .astype("Int64") (findings node and cob_id)."""
-    return pa.array([None if _missing(v) else int(v) for v in values], pa.int64()), "int64", "Int64"
+    ints = [None if _missing(v) else int(v) for v in values]
+    return ab.optional_ints(ints, pa.int64()), "int64", "Int64"
 
 
 def field_meta(name: str, pandas_type: str, numpy_type: str, meta: dict | None = None) -> dict:

@@ -26,9 +26,10 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
+from . import arrow_build as ab
 from .pandas_like import code_type
 
-ROW_GROUP = 1 << 20  # pyarrow's default row group size, as DataFrame.to_parquet writes them
+ROW_GROUP = int(__import__("os").environ.get("RG", 1 << 20))  # TEMP
 
 
 @dataclass
@@ -118,12 +119,10 @@ class Sink:
                 pos = self.pos[f.name]
                 remap = np.array([pos[label] for label in value.labels], np.int32)
                 idx = remap[value.codes] if remap.size else np.zeros(0, np.int32)
-                dictionary = pa.array(self.order[f.name], pa.string())
-                value = pa.DictionaryArray.from_arrays(
-                    pa.array(idx.astype(f.type.index_type.to_pandas_dtype())), dictionary
-                )
+                labels = ab.strings(self.order[f.name]) if self.order[f.name] else pa.nulls(0)
+                value = ab.dictionary(idx, labels, f.type.index_type)
             elif not isinstance(value, (pa.Array, pa.ChunkedArray)):
-                value = pa.array(value, f.type)
+                value = ab.numeric(value, typ=f.type)
             arrays.append(value)
         return pa.RecordBatch.from_arrays(arrays, schema=self.schema)
 
@@ -265,15 +264,11 @@ def rewrite(
 
 def _recode(col: pa.ChunkedArray, labels: list[str], typ: pa.DataType) -> pa.ChunkedArray:
     pos = {label: i for i, label in enumerate(labels)}
-    dictionary = pa.array(labels, pa.string())
+    dictionary = ab.strings(labels)
     chunks = []
     for chunk in col.chunks:
         remap = np.array([pos[v] for v in chunk.dictionary.to_pylist()], np.int64)
         idx = chunk.indices.to_numpy(zero_copy_only=False).astype(np.int64)
         new = remap[idx] if remap.size else idx
-        chunks.append(
-            pa.DictionaryArray.from_arrays(
-                pa.array(new.astype(typ.index_type.to_pandas_dtype())), dictionary
-            )
-        )
+        chunks.append(ab.dictionary(new, dictionary, typ.index_type))
     return pa.chunked_array(chunks, typ)

@@ -17,6 +17,7 @@ the end.
 
 from __future__ import annotations
 
+import bisect
 import contextlib
 import pickle
 import tempfile
@@ -31,6 +32,7 @@ from ..decoded import DecodedBatch
 from ..events import LEVEL_NAMES, EventState, Row, batch_events
 from ..frames import FrameBatch
 from ..protocol.services import SERVICE_NAMES
+from . import arrow_build as ab
 from . import pandas_like as pl
 from .atomic import atomic_path
 from .parquet_out import TABLES, _outdir
@@ -65,9 +67,10 @@ SDO_COLUMNS = (
 )
 FINDING_COLUMNS = ("t", "t_rel", "rule", "severity", "node", "cob_id", "message")
 FINDING_COLUMNS += ("measured", "expected", "why")
+HOLD = 10.0  # seconds of events kept back for records that complete late (see _add_events)
 _NAN = float("nan")  # an absent key: pandas fills NaN, as pandas_like.MISSING
-_SERVICES = pa.array(list(SERVICE_NAMES), pa.string())
-_LEVELS = pa.array(list(LEVEL_NAMES.values()), pa.string())
+_SERVICES = ab.strings(list(SERVICE_NAMES))
+_LEVELS = ab.strings(list(LEVEL_NAMES.values()))
 _IDENTITY_KEYS = ("device_type", "vendor_id", "product_code", "revision", "serial", "device_name")
 
 
@@ -164,15 +167,15 @@ def _frames_columns(fb: FrameBatch, service, node, pdo) -> dict:
     channels = list(fb.channels) or ["can0"]
     chan = np.minimum(fb.channel, len(channels) - 1).astype(np.int32)
     return {
-        "t": pa.array(fb.t),
+        "t": ab.numeric(fb.t),
         "channel": Coded(chan, channels),
-        "can_id": pa.array(fb.can_id),
-        "dlc": pa.array(fb.dlc),
+        "can_id": ab.numeric(fb.can_id),
+        "dlc": ab.numeric(fb.dlc),
         "data": _hex_column(fb, pa),
-        "flags": pa.array(fb.flags),
-        "service": pa.DictionaryArray.from_arrays(pa.array(service.view(np.int8)), _SERVICES),
-        "node": pa.array(node, pa.int16(), mask=node < 0),
-        "pdo": pa.array(pdo.view(np.int8), pa.int8(), mask=pdo == 0),
+        "flags": ab.numeric(fb.flags),
+        "service": ab.dictionary(service, _SERVICES, pa.int8()),
+        "node": ab.numeric(node.astype(np.int16, copy=False), node < 0),
+        "pdo": ab.numeric(pdo.view(np.int8), pdo == 0),
     }
 
 
@@ -211,6 +214,7 @@ class StreamTables:
         self._event_state = EventState()
         self._event_last: tuple | None = None
         self._events_unsorted = False
+        self._pending_events: list[Row] = []
         self._channels: tuple[str, ...] = ()
         self._counts = np.zeros((128, len(SERVICE_NAMES)), np.int64)
         self._last_state: dict[int, tuple[float, str]] = {}
@@ -251,8 +255,7 @@ class StreamTables:
             cur = self._last_state.get(ev.node)
             if cur is None or ev.t >= cur[0]:
                 self._last_state[ev.node] = (ev.t, ev.message)
-        if events:
-            self._add_events(events)
+        self._add_events(events, float(fb.t[-1]) - HOLD if n else float("-inf"))
         self.offset += n
 
     def _add_signals(self, batch: DecodedBatch, off: int) -> None:
@@ -316,9 +319,26 @@ class StreamTables:
         sink = self.sinks["signals"]
         self.writer.put(lambda: sink.add(cols))
 
-    def _add_events(self, events: list[Row]) -> None:
+    def _add_events(self, events: list[Row], horizon: float | None) -> None:
+        """Queue events; write those older than `horizon` (None: all) in (t, row) order.
+
+        Records can complete a batch or two after their time (an SDO answer that
+        ends a transfer begun earlier carries the earlier time), so the newest
+        HOLD seconds wait for the next batch rather than force a re-sort at the end.
+        """
+        pending = self._pending_events
+        pending.extend(events)
+        if not pending:
+            return
         big = 1 << 62
-        events = sorted(events, key=lambda e: (e.t, big if e.row is None else e.row))
+        pending.sort(key=lambda e: (e.t, big if e.row is None else e.row))
+        if horizon is None:
+            cut = len(pending)
+        else:
+            cut = bisect.bisect_left([e.t for e in pending], horizon)
+        if cut == 0:
+            return
+        events, self._pending_events = pending[:cut], pending[cut:]
         head = (events[0].t, big if events[0].row is None else events[0].row)
         if self._event_last is not None and head < self._event_last:
             self._events_unsorted = True
@@ -328,12 +348,10 @@ class StreamTables:
         cols = {
             "t": np.array(t, np.float64),
             "kind": Coded(np.array([vocab.code(k) for k in kind], np.int32), vocab.snapshot()),
-            "node": pa.array(node, pa.int16()),
-            "level": pa.DictionaryArray.from_arrays(
-                pa.array(np.array(level, np.int8) - 1), _LEVELS
-            ),
-            "message": pa.array(message, pa.large_string()),
-            "row": pa.array(row, pa.int64()),
+            "node": ab.optional_ints(list(node), pa.int16()),
+            "level": ab.dictionary(np.array(level, np.int8) - 1, _LEVELS, pa.int8()),
+            "message": ab.strings(list(message), large=True),
+            "row": ab.optional_ints(list(row), pa.int64()),
         }
         sink = self.sinks["events"]
         self.writer.put(lambda: sink.add(cols))
@@ -360,6 +378,7 @@ class StreamTables:
     def close(self) -> dict[str, int]:
         """Write the small tables, wait for the writer, fix order/categories, rename all files."""
         try:
+            self._add_events([], None)
             for sink in self.sinks.values():
                 self.writer.put(sink.close)
             self.writer.join()
