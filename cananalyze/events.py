@@ -63,26 +63,37 @@ class EventState:
 
 
 def sdo_event(row: int, r: dict) -> Row:
-    ok = r.get("result") == "ok"
-    index, sub = r.get("index"), r.get("subindex")
-    where = f" 0x{index:04X}:{sub:02X}" if isinstance(index, int) and isinstance(sub, int) else ""
-    text = f"SDO {r.get('direction', '?')}{where}"
-    if r.get("name"):
-        text += f" {r['name']}"
-    value = r.get("value")
-    if ok and isinstance(value, int) and not isinstance(value, bool) and abs(value) > 9:
-        text += f" = {value} (0x{value & 0xFFFFFFFFFFFFFFFF:X})"  # as the text output shows it
-    elif ok and value is not None:
-        text += f" = {value}"
-    elif ok and r.get("data"):
-        text += f" data {r['data']}"
-    text += f" {r.get('result', '?')}"
-    if r.get("abort_text"):
-        text += f": {r['abort_text']}"
-    elif r.get("detail") and not ok:
+    get = r.get
+    result = get("result", "?")
+    ok = result == "ok"
+    index, sub = get("index"), get("subindex")
+    if isinstance(index, int) and isinstance(sub, int):
+        text = f"SDO {get('direction', '?')} 0x{index:04X}:{sub:02X}"
+    else:
+        text = f"SDO {get('direction', '?')}"
+    name = get("name")
+    if name:
+        text += f" {name}"
+    if ok:
+        value = get("value")
+        if isinstance(value, int) and not isinstance(value, bool) and abs(value) > 9:
+            text += (
+                f" = {value} (0x{value & 0xFFFFFFFFFFFFFFFF:X}) ok"  # as the text output shows it
+            )
+        elif value is not None:
+            text += f" = {value} ok"
+        elif get("data"):
+            text += f" data {r['data']} ok"
+        else:
+            text += " ok"
+    else:
+        text += f" {result}"
+    abort = get("abort_text")
+    if abort:
+        text += f": {abort}"
+    elif not ok and get("detail"):
         text += f": {r['detail']}"
-    node = r.get("node")
-    return Row(float(r.get("t", 0.0)), "sdo", node, INFO if ok else WARNING, text, row)
+    return Row(float(get("t", 0.0)), "sdo", get("node"), INFO if ok else WARNING, text, row)
 
 
 def finding_event(row: int, r: dict, t: float) -> Row:

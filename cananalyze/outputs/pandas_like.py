@@ -19,8 +19,16 @@ import pyarrow as pa
 
 from . import arrow_build as ab
 
-MISSING = object()  # a key the record does not have (pandas fills NaN, not None)
+
+class _Missing:
+    """A key the record does not have (pandas fills NaN, not None)."""
+
+
+MISSING = _Missing()
 _I64 = 2**63
+
+
+_KIND_OF_TYPE = {type(None): "none", bool: "bool", int: "int", str: "str"}
 
 
 def _kind(v) -> str:
@@ -56,11 +64,27 @@ class ColumnStats:
         self.hi: int | None = None
         self.rows = 0
 
-    def update(self, values: list) -> None:
+    def update(self, values: list | tuple) -> None:
         self.rows += len(values)
-        self.kinds.update(_kind(v) for v in values)
-        ints = [v for v in values if type(v) is int]
-        if ints:
+        types = set(map(type, values))
+        kinds = self.kinds
+        for typ in types:
+            kind = _KIND_OF_TYPE.get(typ)
+            if kind is not None:
+                kinds.add(kind)
+            elif typ is float:
+                floats = [v for v in values if type(v) is float]
+                nan = sum(v != v for v in floats)
+                if nan:
+                    kinds.add("nan")
+                if nan < len(floats):
+                    kinds.add("float")
+            elif typ is _Missing:
+                kinds.add("nan")
+            else:
+                kinds.add(_kind(values[[type(v) for v in values].index(typ)]))
+        if int in types:
+            ints = [v for v in values if type(v) is int]
             lo, hi = min(ints), max(ints)
             self.lo = lo if self.lo is None else min(self.lo, lo)
             self.hi = hi if self.hi is None else max(self.hi, hi)
@@ -111,7 +135,7 @@ def arrow_type(how: str) -> pa.DataType:
     return pa.null() if how == "null" else _TYPES.get(how, pa.large_string())
 
 
-def convert(values: list, how: str) -> pa.Array:
+def convert(values: list | tuple, how: str) -> pa.Array:
     """One chunk of a column as `ColumnStats.decide` said."""
     if how == "null":
         return pa.nulls(len(values))
@@ -119,14 +143,15 @@ def convert(values: list, how: str) -> pa.Array:
         return _text(values)
     if how == "textfloat":
         return _text([None if _missing(v) else float(v) for v in values])
-    if how == "float":
-        mask = np.fromiter((_missing(v) for v in values), bool, len(values))
-        floats = np.fromiter((0.0 if _missing(v) else v for v in values), np.float64, len(values))
-        return ab.numeric(floats, mask)
+    if how == "float":  # ints, floats, None and NaN only: numpy reads None as NaN
+        floats = np.array([None if v is MISSING else v for v in values], np.float64)
+        return ab.numeric(floats, np.isnan(floats))
     if how in ("string", "large"):
-        return ab.strings([None if _missing(v) else v for v in values], large=how == "large")
+        return ab.strings([v if type(v) is str else None for v in values], large=how == "large")
     if how == "bool":
         return ab.numeric(np.array(values, bool))
+    if how == "int64" and int in set(map(type, values)) and len(set(map(type, values))) == 1:
+        return ab.numeric(np.array(values, np.int64))
     return ab.optional_ints([None if _missing(v) else v for v in values], _TYPES[how])
 
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import bisect
 import contextlib
+import operator
 import pickle
 import tempfile
 from collections.abc import Iterable
@@ -65,6 +66,8 @@ SDO_COLUMNS = (
     "abort_text",
     "detail",
 )
+_SDO_ROW = operator.itemgetter(*SDO_COLUMNS)
+_IDENTITY_INDEX = (0x1000, 0x1008, 0x1018)
 FINDING_COLUMNS = ("t", "t_rel", "rule", "severity", "node", "cob_id", "message")
 FINDING_COLUMNS += ("measured", "expected", "why")
 HOLD = 10.0  # seconds of events kept back for records that complete late (see _add_events)
@@ -115,6 +118,7 @@ FRAMES = TableSpec(
             pl.field_meta("pdo", "int8", "Int8"),
         ]
     ),
+    dictionary=("channel", "can_id", "dlc", "flags", "service", "node", "pdo"),
 )
 SIGNALS = TableSpec(
     [
@@ -138,6 +142,7 @@ SIGNALS = TableSpec(
         ]
     ),
     sorted_labels=("pdo", "signal", "unit"),
+    dictionary=("node", "pdo", "cob_id", "signal", "unit"),
 )
 EVENTS = TableSpec(
     [
@@ -364,13 +369,18 @@ class StreamTables:
             self._findings.append(tuple(r.get(c, _NAN) for c in FINDING_COLUMNS))
         if not sdo:
             return
-        for node, info in _identity([(0, r) for r in sdo]).items():
+        ident = [r for r in sdo if r.get("index") in _IDENTITY_INDEX]
+        for node, info in _identity([(0, r) for r in ident]).items():
             self._identity.setdefault(node, {}).update(info)
-        chunk = []
-        for c in SDO_COLUMNS:
-            values = [r.get(c, _NAN) for r in sdo]
+        rows = []
+        for r in sdo:  # one C call per record that has every column (nearly all)
+            try:
+                rows.append(_SDO_ROW(r))
+            except KeyError:
+                rows.append(tuple(r.get(c, _NAN) for c in SDO_COLUMNS))
+        chunk = list(zip(*rows, strict=True))
+        for c, values in zip(SDO_COLUMNS, chunk, strict=True):
             self._sdo_stats[c].update(values)
-            chunk.append(values)
         pickle.dump(chunk, self._sdo_spool, pickle.HIGHEST_PROTOCOL)
         self._sdo_chunks += 1
 
