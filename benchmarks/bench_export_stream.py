@@ -57,7 +57,7 @@ def frames_in(log: Path) -> int:
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("logs", nargs="+", type=Path)
-    p.add_argument("--compression", default="snappy")
+    p.add_argument("--compression", default="zstd")
     p.add_argument("--stream-only", action="store_true", help="skip the Capture path")
     opts = p.parse_args()
     sys.path.insert(0, str(ROOT))
