@@ -218,3 +218,15 @@ def test_cli_streams_and_matches(tmp_path):
     )
     _reference(log, tmp_path / "ref")
     assert_same_tables(tmp_path / "ref", tmp_path / "new")
+
+
+@pytest.mark.parametrize("fmt", ["parquet", "csv"])
+def test_small_row_groups_late_categories(tmp_path, monkeypatch, fmt):
+    """Row groups of 50 rows: signal names and event kinds first seen after the file's
+    categories were fixed make the sink re-code the file to pandas' sorted categories."""
+    monkeypatch.setattr(table_sink, "ROW_GROUP", 50)
+    _both(
+        tmp_path, SAMPLES / "commissioning.log", fmt, size=11, network=str(SAMPLES / "network.toml")
+    )
+    if fmt == "parquet":
+        assert pq.ParquetFile(tmp_path / "new" / "frames.parquet").num_row_groups > 1
