@@ -440,6 +440,15 @@ class Collector:
         self._event_state = EventState()
         self.offset = 0
 
+    @property
+    def _last_state(self) -> dict[int, str]:
+        """Each node's last NMT state (rerun_live hands it to the next Collector)."""
+        return self._event_state.last_state
+
+    @_last_state.setter
+    def _last_state(self, value: dict[int, str]) -> None:
+        self._event_state.last_state = value
+
     def add(self, batch: DecodedBatch) -> None:
         fb = batch.frames
         off = self.offset
