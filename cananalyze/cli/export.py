@@ -113,6 +113,7 @@ def run(args: argparse.Namespace) -> int:
 def _stream(args: argparse.Namespace, outputs: list[str], bar, task) -> int:
     """Tables only: decode batch by batch straight into the table files (flat memory)."""
     from ..capture import given_profiles
+    from ..io.prefetch import prefetch
     from ..io.source import open_log
     from ..outputs.table_stream import StreamTables
     from .pipeline import build_decoder
@@ -131,7 +132,7 @@ def _stream(args: argparse.Namespace, outputs: list[str], bar, task) -> int:
             )
             for kind in outputs
         ]
-        for fb in source.batches():
+        for fb in prefetch(source.batches()):  # read ahead on the other core
             batch = decoder.decode(fb)
             for sink in sinks:
                 sink.add(batch)
