@@ -20,21 +20,22 @@ import numpy as np
 
 from .decoded import DecodedBatch
 from .errors import ProblemLog
+from .events import (  # noqa: F401  (re-exported: outputs import the levels from here)
+    DEBUG,
+    ERROR,
+    FATAL,
+    INFO,
+    LEVEL_NAMES,
+    WARNING,
+    Event,
+    EventState,
+    batch_events,
+)
 from .frames import FLAG_RTR, FrameBatch, concat
-from .protocol.fields import annotation
 from .protocol.services import SERVICE_NAMES, Service
-from .protocol.tables import NMT_STATES
 
 if TYPE_CHECKING:
     import pandas as pd
-
-# foxglove.Log levels, used for every event (MCAP, rerun, the events table).
-DEBUG, INFO, WARNING, ERROR, FATAL = 1, 2, 3, 4, 5
-LEVEL_NAMES = {DEBUG: "debug", INFO: "info", WARNING: "warning", ERROR: "error", FATAL: "fatal"}
-_LEVEL_BY_NAME = {v: k for k, v in LEVEL_NAMES.items()} | {"critical": FATAL, "warn": WARNING}
-
-_STATE_SERVICES = (Service.HEARTBEAT, Service.BOOTUP, Service.GUARD_RESPONSE)
-_EVENT_SERVICES = np.array([Service.NMT, Service.EMCY, Service.BOOTUP], np.uint8)
 
 
 @dataclass
@@ -52,18 +53,6 @@ class SignalSeries:
     @property
     def key(self) -> str:
         return f"{self.node}/{self.pdo}"
-
-
-@dataclass
-class Event:
-    """One line of the event log: rare traffic or a record, at its time."""
-
-    t: float
-    kind: str  # nmt, emcy, bootup, nmt_state, sdo, finding
-    node: int | None
-    level: int
-    message: str
-    row: int | None = None
 
 
 @dataclass
@@ -437,38 +426,6 @@ def _match_profile(info: dict) -> tuple[str | None, str | None]:
     return (prof.key, "sdo identity") if prof else (None, None)
 
 
-def _sdo_event(row: int, r: dict) -> Event:
-    ok = r.get("result") == "ok"
-    index, sub = r.get("index"), r.get("subindex")
-    where = f" 0x{index:04X}:{sub:02X}" if isinstance(index, int) and isinstance(sub, int) else ""
-    text = f"SDO {r.get('direction', '?')}{where}"
-    if r.get("name"):
-        text += f" {r['name']}"
-    value = r.get("value")
-    if ok and isinstance(value, int) and not isinstance(value, bool) and abs(value) > 9:
-        text += f" = {value} (0x{value & 0xFFFFFFFFFFFFFFFF:X})"  # as the text output shows it
-    elif ok and value is not None:
-        text += f" = {value}"
-    elif ok and r.get("data"):
-        text += f" data {r['data']}"
-    text += f" {r.get('result', '?')}"
-    if r.get("abort_text"):
-        text += f": {r['abort_text']}"
-    elif r.get("detail") and not ok:
-        text += f": {r['detail']}"
-    node = r.get("node")
-    return Event(float(r.get("t", 0.0)), "sdo", node, INFO if ok else WARNING, text, row)
-
-
-def _finding_event(row: int, r: dict, t: float) -> Event:
-    level = r.get("level") or r.get("severity") or "warning"
-    lvl = level if isinstance(level, int) else _LEVEL_BY_NAME.get(str(level).lower(), WARNING)
-    text = r.get("message") or r.get("text") or r.get("rule") or "finding"
-    if r.get("rule") and r.get("message"):
-        text = f"[{r['rule']}] {text}"
-    return Event(float(r.get("t", t)), "finding", r.get("node"), lvl, str(text), row)
-
-
 class Collector:
     """Accumulates DecodedBatches; `capture()` joins them once at the end."""
 
@@ -480,8 +437,17 @@ class Collector:
         self.records: list[tuple[int, dict]] = []
         self.events: list[Event] = []
         self.states: list[Event] = []
-        self._last_state: dict[int, str] = {}
+        self._event_state = EventState()
         self.offset = 0
+
+    @property
+    def _last_state(self) -> dict[int, str]:
+        """Each node's last NMT state (rerun_live hands it to the next Collector)."""
+        return self._event_state.last_state
+
+    @_last_state.setter
+    def _last_state(self, value: dict[int, str]) -> None:
+        self._event_state.last_state = value
 
     def add(self, batch: DecodedBatch) -> None:
         fb = batch.frames
@@ -492,67 +458,12 @@ class Collector:
         for blk in batch.signals:
             key = (blk.node, blk.pdo, blk.cob_id, tuple(blk.columns))
             self._blocks.setdefault(key, []).append((fb.t[blk.rows], blk.rows + off, blk))
-        last_t = float(fb.t[-1]) if len(fb) else (self.events[-1].t if self.events else 0.0)
         for row, rec in batch.records:
             self.records.append((row + off, rec))
-            kind = rec.get("kind")
-            t = float(fb.t[row]) if 0 <= row < len(fb) else last_t
-            if kind == "sdo":
-                self.events.append(_sdo_event(row + off, rec))
-            elif kind == "finding":
-                self.events.append(_finding_event(row + off, rec, t))
-        if len(fb):
-            self._frame_events(batch, off)
+        events, states = batch_events(batch, off, self._event_state)
+        self.events.extend(Event(*e) for e in events)
+        self.states.extend(Event(*e) for e in states)
         self.offset += len(fb)
-
-    def _frame_events(self, batch: DecodedBatch, off: int) -> None:
-        """NMT, EMCY and boot-up lines, and NMT state changes (only changes, per node)."""
-        fb = batch.frames
-        for i in np.flatnonzero(np.isin(batch.service, _EVENT_SERVICES)).tolist():
-            s = int(batch.service[i])
-            node = int(batch.node[i])
-            f = batch.fields(i)
-            text = annotation(s, node, int(batch.pdo[i]), f, bool(fb.flags[i] & FLAG_RTR))
-            if s == Service.EMCY:
-                level = INFO if f.get("reset") else ERROR
-                kind = "emcy"
-            elif s == Service.NMT:
-                level, kind = INFO, "nmt"
-            else:
-                level, kind = INFO, "bootup"
-            if node >= 0 and s != Service.NMT:
-                text = f"node {node}: {text}"
-            self.events.append(
-                Event(float(fb.t[i]), kind, node if node >= 0 else None, level, text, i + off)
-            )
-        is_state = np.isin(batch.service, np.array(_STATE_SERVICES, np.uint8)) & (fb.dlc > 0)
-        rows = np.flatnonzero(is_state)
-        if rows.size == 0:
-            return
-        code = fb.data[rows, 0] & 0x7F
-        nodes = batch.node[rows]
-        for n in np.unique(nodes).tolist():
-            sel = rows[nodes == n]
-            c = code[nodes == n]
-            change = np.ones(c.size, bool)
-            change[1:] = c[1:] != c[:-1]
-            for i, v in zip(sel[change].tolist(), c[change].tolist(), strict=True):
-                state = NMT_STATES.get(v, f"unknown 0x{v:02X}")
-                if self._last_state.get(n) == state:
-                    continue
-                self._last_state[n] = state
-                ev = Event(float(fb.t[i]), "nmt_state", n, INFO, state, i + off)
-                self.states.append(ev)
-                self.events.append(
-                    Event(
-                        ev.t,
-                        "nmt_state",
-                        n,
-                        INFO if state != "stopped" else WARNING,
-                        f"node {n}: NMT state {state}",
-                        i + off,
-                    )
-                )
 
     def capture(
         self,
@@ -625,6 +536,20 @@ def _pipeline_args(
     )
 
 
+def given_profiles(args: argparse.Namespace) -> dict[int, tuple[str, str]]:
+    """node -> (profile, "given") from --device / --eds (the nodes table's profile column)."""
+    profiles: dict[int, tuple[str, str]] = {}
+    for spec in getattr(args, "device", None) or []:
+        node, _, key = str(spec).partition("=")
+        if node.strip().isdigit():
+            profiles[int(node)] = (key, "given")
+    for spec in getattr(args, "eds", None) or []:
+        node, _, path = str(spec).partition("=")
+        if node.strip().isdigit():
+            profiles[int(node)] = (Path(path).name, "given")
+    return profiles
+
+
 def run_pipeline(args: argparse.Namespace, progress=None, decoder=None) -> Capture:
     """Read and decode the log named by `args` (CLI options) into a Capture.
 
@@ -644,15 +569,7 @@ def run_pipeline(args: argparse.Namespace, progress=None, decoder=None) -> Captu
             progress(len(fb))
     collector.add(decoder.finish())
     network = getattr(args, "network", None) or ""
-    profiles: dict[int, tuple[str, str]] = {}
-    for spec in getattr(args, "device", None) or []:
-        node, _, key = str(spec).partition("=")
-        if node.strip().isdigit():
-            profiles[int(node)] = (key, "given")
-    for spec in getattr(args, "eds", None) or []:
-        node, _, path = str(spec).partition("=")
-        if node.strip().isdigit():
-            profiles[int(node)] = (Path(path).name, "given")
+    profiles = given_profiles(args)
     return collector.capture(source.problems, str(network), profiles)
 
 

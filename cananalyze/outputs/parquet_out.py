@@ -45,13 +45,13 @@ def _outdir(path: str | Path) -> Path:
     return d
 
 
-def write_parquet(cap: Capture, path: str | Path) -> dict[str, int]:
+def write_parquet(cap: Capture, path: str | Path, compression: str = "snappy") -> dict[str, int]:
     """<dir>/<table>.parquet for every table; returns rows per table."""
     d = _outdir(path)
     rows = {}
     for name, df in _tables(cap):
         with atomic_path(d / f"{name}.parquet") as tmp:
-            df.to_parquet(tmp, engine="pyarrow", index=name == "nodes")
+            df.to_parquet(tmp, engine="pyarrow", index=name == "nodes", compression=compression)
         rows[name] = len(df)
     return rows
 

@@ -1,0 +1,55 @@
+"""Arrow arrays from numpy buffers and plain lists, without `pa.array`.
+
+`pa.array` asks pyarrow's pandas shim whether its argument is a pandas object,
+which imports pandas (0.5 s, 60 MB) the first time; the streaming table writer
+never needs pandas, so it builds arrays from buffers (zero-copy for numpy
+columns) through these helpers.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyarrow as pa
+
+
+def _validity(mask: np.ndarray | None) -> pa.Buffer | None:
+    """Arrow validity bitmap (1 = valid) from a numpy mask of missing values."""
+    if mask is None or not mask.any():
+        return None
+    return pa.py_buffer(np.packbits(~mask, bitorder="little"))
+
+
+def numeric(values: np.ndarray, mask: np.ndarray | None = None, typ=None) -> pa.Array:
+    """A numeric column over the numpy buffer (copied only when not contiguous)."""
+    values = np.ascontiguousarray(values)
+    if values.dtype == bool:  # Arrow booleans are bits
+        bits = pa.py_buffer(np.packbits(values, bitorder="little"))
+        return pa.Array.from_buffers(pa.bool_(), len(values), [_validity(mask), bits])
+    typ = typ or pa.from_numpy_dtype(values.dtype)
+    return pa.Array.from_buffers(typ, len(values), [_validity(mask), pa.py_buffer(values)])
+
+
+def strings(values: list, large: bool = False) -> pa.Array:
+    """A (large_)string column from str/None values."""
+    n = len(values)
+    mask = np.fromiter((v is None for v in values), bool, n)
+    encoded = [b"" if v is None else v.encode() for v in values]
+    lengths = np.fromiter(map(len, encoded), np.int64, n)
+    offsets = np.zeros(n + 1, np.int64 if large else np.int32)
+    np.cumsum(lengths, out=offsets[1:])
+    typ = pa.large_string() if large else pa.string()
+    data = pa.py_buffer(b"".join(encoded))
+    return pa.Array.from_buffers(typ, n, [_validity(mask), pa.py_buffer(offsets), data])
+
+
+def optional_ints(values: list, typ: pa.DataType) -> pa.Array:
+    """An integer column from int/None values."""
+    mask = np.fromiter((v is None for v in values), bool, len(values))
+    dense = np.fromiter((0 if v is None else v for v in values), typ.to_pandas_dtype(), len(values))
+    return numeric(dense, mask, typ)
+
+
+def dictionary(codes: np.ndarray, labels: pa.Array, index_type: pa.DataType) -> pa.Array:
+    """Dictionary column: codes (any int dtype) into labels."""
+    idx = numeric(codes.astype(index_type.to_pandas_dtype(), copy=False), typ=index_type)
+    return pa.DictionaryArray.from_arrays(idx, labels)

@@ -1,0 +1,585 @@
+"""`export --parquet/--csv` as a stream: each DecodedBatch's rows appended to six table files.
+
+The Capture path keeps every batch, concatenates them and builds pandas
+DataFrames (4 GB for 10M frames); this path keeps nothing per frame: frames and
+signals go batch by batch to a writer thread (`table_sink`), SDO records are
+spooled to a temporary file until their column types are known (pandas infers
+them over the whole column), and the small tables (findings, nodes) are built
+at the end. The files hold the same schemas and values as
+`parquet_out.write_parquet(load(log))`; tests compare them.
+
+Row order follows the Capture: signals by time, then series (node, PDO,
+COB-ID, first appearance), then signal; events by time, then frame row. Each
+batch is sorted on its own; only when a batch starts before the previous one
+ended (timestamps going back, or none at all) is the table re-sorted whole at
+the end.
+"""
+
+from __future__ import annotations
+
+import bisect
+import contextlib
+import operator
+import pickle
+import tempfile
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+
+from ..capture import _hex_column, _identity, _match_profile
+from ..decoded import DecodedBatch
+from ..events import LEVEL_NAMES, EventState, Row, batch_events
+from ..frames import FrameBatch
+from ..protocol.services import SERVICE_NAMES
+from . import arrow_build as ab
+from . import pandas_like as pl
+from .atomic import atomic_path
+from .parquet_out import TABLES, _outdir
+from .table_sink import (
+    ROW_GROUP,
+    Coded,
+    Sink,
+    TableSpec,
+    WriterThread,
+    csv_schema,
+    csv_table,
+    rewrite,
+)
+
+SDO_COLUMNS = (
+    "t_start",
+    "t",
+    "latency_ms",
+    "node",
+    "direction",
+    "protocol",
+    "index",
+    "subindex",
+    "size",
+    "data",
+    "value",
+    "name",
+    "result",
+    "abort_code",
+    "abort_text",
+    "detail",
+)
+_SDO_ROW = operator.itemgetter(*SDO_COLUMNS)
+_IDENTITY_INDEX = (0x1000, 0x1008, 0x1018)
+FINDING_COLUMNS = ("t", "t_rel", "rule", "severity", "node", "cob_id", "message")
+FINDING_COLUMNS += ("measured", "expected", "why")
+HOLD = 10.0  # seconds of events kept back for records that complete late (see _add_events)
+_NAN = float("nan")  # an absent key: pandas fills NaN, as pandas_like.MISSING
+_SERVICES = ab.strings(list(SERVICE_NAMES))
+_LEVELS = ab.strings(list(LEVEL_NAMES.values()))
+_IDENTITY_KEYS = ("device_type", "vendor_id", "product_code", "revision", "serial", "device_name")
+
+
+def _meta(fields: list[dict], index: str | None = None):
+    return lambda counts: pl.schema_metadata(
+        [
+            pl.categorical_meta(f["name"], counts.get(f["name"], f["metadata"]))
+            if f["pandas_type"] == "categorical"
+            else f
+            for f in fields
+        ],
+        index,
+    )
+
+
+def _cat(name: str, n: int = 0) -> dict:
+    return pl.field_meta(name, "categorical", "", n)  # count filled in at open
+
+
+FRAMES = TableSpec(
+    [
+        ("t", pa.float64()),
+        ("channel", None),
+        ("can_id", pa.uint32()),
+        ("dlc", pa.uint8()),
+        ("data", pa.string()),
+        ("flags", pa.uint8()),
+        ("service", pa.dictionary(pl.code_type(len(SERVICE_NAMES)), pa.string())),
+        ("node", pa.int16()),
+        ("pdo", pa.int8()),
+    ],
+    _meta(
+        [
+            pl.field_meta("t", "float64", "float64"),
+            _cat("channel"),
+            pl.field_meta("can_id", "uint32", "uint32"),
+            pl.field_meta("dlc", "uint8", "uint8"),
+            pl.field_meta("data", "unicode", "string[pyarrow]"),
+            pl.field_meta("flags", "uint8", "uint8"),
+            _cat("service", len(SERVICE_NAMES)),
+            pl.field_meta("node", "int16", "Int16"),
+            pl.field_meta("pdo", "int8", "Int8"),
+        ]
+    ),
+    dictionary=("channel", "can_id", "dlc", "flags", "service", "node", "pdo"),
+)
+SIGNALS = TableSpec(
+    [
+        ("t", pa.float64()),
+        ("node", pa.int16()),
+        ("pdo", None),
+        ("cob_id", pa.uint32()),
+        ("signal", None),
+        ("value", pa.float64()),
+        ("unit", None),
+    ],
+    _meta(
+        [
+            pl.field_meta("t", "float64", "float64"),
+            pl.field_meta("node", "int16", "int16"),
+            _cat("pdo"),
+            pl.field_meta("cob_id", "uint32", "uint32"),
+            _cat("signal"),
+            pl.field_meta("value", "float64", "float64"),
+            _cat("unit"),
+        ]
+    ),
+    sorted_labels=("pdo", "signal", "unit"),
+    dictionary=("node", "pdo", "cob_id", "signal", "unit"),
+)
+EVENTS = TableSpec(
+    [
+        ("t", pa.float64()),
+        ("kind", None),
+        ("node", pa.int16()),
+        ("level", pa.dictionary(pl.code_type(len(LEVEL_NAMES)), pa.string())),
+        ("message", pa.large_string()),
+        ("row", pa.int64()),
+    ],
+    _meta(
+        [
+            pl.field_meta("t", "float64", "float64"),
+            _cat("kind"),
+            pl.field_meta("node", "int16", "Int16"),
+            _cat("level", len(LEVEL_NAMES)),
+            pl.field_meta("message", "object", "string"),
+            pl.field_meta("row", "int64", "Int64"),
+        ]
+    ),
+    sorted_labels=("kind",),
+)
+
+
+def _frames_columns(fb: FrameBatch, service, node, pdo) -> dict:
+    """Built on the writer thread (the payload hex column is most of the frames table's cost)."""
+    channels = list(fb.channels) or ["can0"]
+    chan = np.minimum(fb.channel, len(channels) - 1).astype(np.int32)
+    return {
+        "t": ab.numeric(fb.t),
+        "channel": Coded(chan, channels),
+        "can_id": ab.numeric(fb.can_id),
+        "dlc": ab.numeric(fb.dlc),
+        "data": _hex_column(fb, pa),
+        "flags": ab.numeric(fb.flags),
+        "service": ab.dictionary(service, _SERVICES, pa.int8()),
+        "node": ab.numeric(node.astype(np.int16, copy=False), node < 0),
+        "pdo": ab.numeric(pdo.view(np.int8), pdo == 0),
+    }
+
+
+class StreamTables:
+    """Context manager: `add()` each DecodedBatch, `close()` at the end; files appear atomically."""
+
+    def __init__(
+        self,
+        path: str | Path,
+        fmt: str = "parquet",
+        compression: str = "snappy",
+        profiles: dict[int, tuple[str, str]] | None = None,
+        depth: int = 3,
+    ) -> None:
+        self.dir = _outdir(path)
+        self.fmt = fmt
+        self.profiles = profiles or {}
+        self._stack = contextlib.ExitStack()
+        self.paths: dict[str, Path] = {}
+        for name in TABLES:
+            self.paths[name] = self._stack.enter_context(atomic_path(self.dir / f"{name}.{fmt}"))
+        self.sinks = {
+            "frames": Sink(self.paths["frames"], fmt, FRAMES, compression),
+            "signals": Sink(self.paths["signals"], fmt, SIGNALS, compression),
+            "events": Sink(self.paths["events"], fmt, EVENTS, compression),
+        }
+        self.compression = compression
+        self.writer = WriterThread(depth)
+        self.offset = 0
+        self.rows: dict[str, int] = {}
+        # signals: series key -> (insertion index, units of its first block)
+        self._series: dict[tuple, tuple[int, dict]] = {}
+        self._labels = {"pdo": _Vocab(), "signal": _Vocab(), "unit": _Vocab(), "kind": _Vocab()}
+        self._signal_last: tuple | None = None
+        self._signals_unsorted = False
+        self._event_state = EventState()
+        self._event_last: tuple | None = None
+        self._events_unsorted = False
+        self._pending_events: list[Row] = []
+        self._channels: tuple[str, ...] = ()
+        self._counts = np.zeros((128, len(SERVICE_NAMES)), np.int64)
+        self._last_state: dict[int, tuple[float, str]] = {}
+        self._identity: dict[int, dict] = {}
+        self._sdo_stats = {c: pl.ColumnStats() for c in SDO_COLUMNS}
+        self._sdo_spool = tempfile.TemporaryFile(dir=self.dir, prefix=".sdo-spool.")
+        self._sdo_chunks = 0
+        self._findings: list[tuple] = []
+
+    def __enter__(self) -> StreamTables:
+        return self
+
+    def __exit__(self, typ, exc, tb) -> None:
+        if exc is not None:
+            self.abort(typ, exc, tb)
+
+    # --- per batch -----------------------------------------------------------------
+    def add(self, batch: DecodedBatch) -> None:
+        fb = batch.frames
+        n = len(fb)
+        off = self.offset
+        if n:
+            if len(fb.channels) > len(self._channels):
+                self._channels = tuple(fb.channels)
+            frames = self.sinks["frames"]
+            args = (fb, batch.service, batch.node, batch.pdo)
+            self.writer.put(lambda: frames.add(_frames_columns(*args)))
+            has = batch.node >= 0
+            key = batch.node[has].astype(np.int64) * len(SERVICE_NAMES) + batch.service[has]
+            self._counts += np.bincount(key, minlength=self._counts.size).reshape(
+                self._counts.shape
+            )
+        if batch.signals:
+            self._add_signals(batch, off)
+        self._add_records(batch)
+        events, states = batch_events(batch, off, self._event_state)
+        for ev in states:
+            cur = self._last_state.get(ev.node)
+            if cur is None or ev.t >= cur[0]:
+                self._last_state[ev.node] = (ev.t, ev.message)
+        self._add_events(events, float(fb.t[-1]) - HOLD if n else float("-inf"))
+        self.offset += n
+
+    def _add_signals(self, batch: DecodedBatch, off: int) -> None:
+        t_all = batch.frames.t
+        parts: dict[str, list] = {k: [] for k in ("t", "node", "cob", "pdo", "sig", "unit", "v")}
+        keys: list[tuple] = []  # (node, pdo, cob, insertion) per part: the series order
+        col_of: list[int] = []
+        rows_of: list[np.ndarray] = []
+        for blk in batch.signals:
+            skey = (blk.node, blk.pdo, blk.cob_id, tuple(blk.columns))
+            got = self._series.get(skey)
+            if got is None:
+                got = self._series[skey] = (len(self._series), dict(blk.units))
+            ins, units = got
+            t = t_all[blk.rows]
+            m = len(blk.rows)
+            pdo_code = self._labels["pdo"].code(blk.pdo)
+            for j, (name, values) in enumerate(blk.columns.items()):
+                parts["t"].append(t)
+                parts["node"].append(np.full(m, blk.node, np.int16))
+                parts["cob"].append(np.full(m, blk.cob_id, np.uint32))
+                parts["pdo"].append(np.full(m, pdo_code, np.int32))
+                parts["sig"].append(np.full(m, self._labels["signal"].code(name), np.int32))
+                unit = self._labels["unit"].code(units.get(name) or "")
+                parts["unit"].append(np.full(m, unit, np.int32))
+                parts["v"].append(np.asarray(values, np.float64))
+                keys.append((blk.node, blk.pdo, blk.cob_id, ins))
+                col_of.append(j)
+                rows_of.append(blk.rows)
+        if not keys:
+            return
+        rank_of = {k: r for r, k in enumerate(sorted(set(keys)))}
+        sizes = [len(r) for r in rows_of]
+        rank = np.repeat(np.array([rank_of[k] for k in keys], np.int32), sizes)
+        col = np.repeat(np.array(col_of, np.int32), sizes)
+        row = np.concatenate(rows_of)
+        t = np.concatenate(parts["t"])
+        order = np.lexsort((row, col, rank, t))
+        cat = {k: np.concatenate(v)[order] for k, v in parts.items()}
+        first, last = int(order[0]), int(order[-1])
+        part_of = np.repeat(np.arange(len(keys)), sizes)
+        head = (
+            float(t[first]),
+            *keys[part_of[first]],
+            col_of[part_of[first]],
+            int(row[first]) + off,
+        )
+        tail = (float(t[last]), *keys[part_of[last]], col_of[part_of[last]], int(row[last]) + off)
+        if self._signal_last is not None and head < self._signal_last:
+            self._signals_unsorted = True
+        self._signal_last = tail
+        cols = {
+            "t": cat["t"],
+            "node": cat["node"],
+            "pdo": Coded(cat["pdo"], self._labels["pdo"].snapshot()),
+            "cob_id": cat["cob"],
+            "signal": Coded(cat["sig"], self._labels["signal"].snapshot()),
+            "value": cat["v"],
+            "unit": Coded(cat["unit"], self._labels["unit"].snapshot()),
+        }
+        sink = self.sinks["signals"]
+        self.writer.put(lambda: sink.add(cols))
+
+    def _add_events(self, events: list[Row], horizon: float | None) -> None:
+        """Queue events; write those older than `horizon` (None: all) in (t, row) order.
+
+        Records can complete a batch or two after their time (an SDO answer that
+        ends a transfer begun earlier carries the earlier time), so the newest
+        HOLD seconds wait for the next batch rather than force a re-sort at the end.
+        """
+        pending = self._pending_events
+        pending.extend(events)
+        if not pending:
+            return
+        big = 1 << 62
+        pending.sort(key=lambda e: (e.t, big if e.row is None else e.row))
+        if horizon is None:
+            cut = len(pending)
+        else:
+            cut = bisect.bisect_left([e.t for e in pending], horizon)
+        if cut == 0:
+            return
+        events, self._pending_events = pending[:cut], pending[cut:]
+        head = (events[0].t, big if events[0].row is None else events[0].row)
+        if self._event_last is not None and head < self._event_last:
+            self._events_unsorted = True
+        self._event_last = (events[-1].t, big if events[-1].row is None else events[-1].row)
+        t, kind, node, level, message, row = zip(*events, strict=True)
+        vocab = self._labels["kind"]
+        cols = {
+            "t": np.array(t, np.float64),
+            "kind": Coded(np.array([vocab.code(k) for k in kind], np.int32), vocab.snapshot()),
+            "node": ab.optional_ints(list(node), pa.int16()),
+            "level": ab.dictionary(np.array(level, np.int8) - 1, _LEVELS, pa.int8()),
+            "message": ab.strings(list(message), large=True),
+            "row": ab.optional_ints(list(row), pa.int64()),
+        }
+        sink = self.sinks["events"]
+        self.writer.put(lambda: sink.add(cols))
+
+    def _add_records(self, batch: DecodedBatch) -> None:
+        if not batch.records:
+            return
+        sdo = [r for _, r in batch.records if r.get("kind") == "sdo"]
+        for r in (r for _, r in batch.records if r.get("kind") == "finding"):
+            self._findings.append(tuple(r.get(c, _NAN) for c in FINDING_COLUMNS))
+        if not sdo:
+            return
+        ident = [r for r in sdo if r.get("index") in _IDENTITY_INDEX]
+        for node, info in _identity([(0, r) for r in ident]).items():
+            self._identity.setdefault(node, {}).update(info)
+        rows = []
+        for r in sdo:  # one C call per record that has every column (nearly all)
+            try:
+                rows.append(_SDO_ROW(r))
+            except KeyError:
+                rows.append(tuple(r.get(c, _NAN) for c in SDO_COLUMNS))
+        chunk = list(zip(*rows, strict=True))
+        for c, values in zip(SDO_COLUMNS, chunk, strict=True):
+            self._sdo_stats[c].update(values)
+        pickle.dump(chunk, self._sdo_spool, pickle.HIGHEST_PROTOCOL)
+        self._sdo_chunks += 1
+
+    # --- the end -----------------------------------------------------------------------
+    def close(self) -> dict[str, int]:
+        """Write the small tables, wait for the writer, fix order/categories, rename all files."""
+        try:
+            self._add_events([], None)
+            for sink in self.sinks.values():
+                self.writer.put(sink.close)
+            self.writer.join()
+            self._finish_signals()
+            self._finish_events()
+            self._finish_frames()
+            self.rows.update({name: s.rows for name, s in self.sinks.items()})
+            self.rows["sdo"] = self._write_sdo()
+            self.rows["findings"] = self._write_findings()
+            self.rows["nodes"] = self._write_nodes()
+        except BaseException as exc:
+            self.abort(type(exc), exc, exc.__traceback__)
+            raise
+        self._sdo_spool.close()
+        self._stack.close()
+        return {name: self.rows[name] for name in TABLES}
+
+    def abort(self, typ=None, exc=None, tb=None) -> None:
+        """Drop every temporary file (a cut-off export leaves no table behind)."""
+        with contextlib.suppress(BaseException):
+            self.writer.join()
+        self._sdo_spool.close()
+        self._stack.__exit__(typ or RuntimeError, exc or RuntimeError("aborted"), tb)
+
+    def _finish_frames(self) -> None:
+        final = list(self._channels) or ["can0"]
+        sink = self.sinks["frames"]
+        if sink.order.get("channel", final) != final or _type_changed(sink, "channel", final):
+            rewrite(sink, {"channel": final})
+
+    def _finish_signals(self) -> None:
+        sink = self.sinks["signals"]
+        final = {k: sorted(sink.order.get(k, [])) for k in ("pdo", "signal", "unit")}
+        if self._signals_unsorted:
+            rewrite(sink, final, self._signal_order)
+        elif any(sink.order.get(k, []) != v or _type_changed(sink, k, v) for k, v in final.items()):
+            rewrite(sink, final)
+
+    def _signal_order(self, table: pa.Table) -> np.ndarray:
+        """The Capture's order again, for a table whose batches overlap in time."""
+        rank: dict[tuple, tuple[int, int]] = {}
+        for (node, pdo, cob, names), (ins, _) in self._series.items():
+            for j, name in enumerate(names):
+                rank.setdefault((node, pdo, cob, name), (ins, j))
+        node = table.column("node").to_pylist()
+        pdo = table.column("pdo").to_pylist()
+        cob = table.column("cob_id").to_pylist()
+        sig = table.column("signal").to_pylist()
+        keys = sorted({(a, b, c, d) for a, b, c, d in zip(node, pdo, cob, sig, strict=True)})
+        series = sorted(keys, key=lambda k: (k[0], k[1], k[2], *rank.get(k, (0, 0))))
+        code_of = {k: i for i, k in enumerate(series)}
+        code = np.array([code_of[k] for k in zip(node, pdo, cob, sig, strict=True)], np.int64)
+        t = table.column("t").to_numpy()
+        return np.lexsort((np.arange(len(t)), code, t))
+
+    def _finish_events(self) -> None:
+        sink = self.sinks["events"]
+        final = {"kind": sorted(sink.order.get("kind", []))}
+        if self._events_unsorted:
+            rewrite(sink, final, _event_order)
+        elif sink.order.get("kind", []) != final["kind"] or _type_changed(
+            sink, "kind", final["kind"]
+        ):
+            rewrite(sink, final)
+
+    def _small_table(self, name: str, columns: list[tuple[str, pa.Array, str, str]], index=None):
+        meta = pl.schema_metadata([pl.field_meta(c, pt, nt) for c, _, pt, nt in columns], index)
+        table = pa.table({c: a for c, a, _, _ in columns}).replace_schema_metadata(meta)
+        self._write_small(name, [table], table.schema)
+        return table.num_rows
+
+    def _write_small(self, name: str, tables: Iterable[pa.Table], schema: pa.Schema) -> None:
+        """Chunks of a record table, in row groups of up to ROW_GROUP rows (as to_parquet)."""
+        path = self.paths[name]
+        if self.fmt == "parquet":
+            import pyarrow.parquet as pq
+
+            writer = pq.ParquetWriter(path, schema, compression=self.compression)
+            write = lambda t: writer.write_table(t, row_group_size=ROW_GROUP)  # noqa: E731
+        else:
+            import pyarrow.csv as pacsv
+
+            writer = pacsv.CSVWriter(path, csv_schema(schema))
+            write = lambda t: writer.write_table(csv_table(t))  # noqa: E731
+        with writer:
+            buf: list[pa.Table] = []
+            rows = 0
+            for table in tables:
+                buf.append(table)
+                rows += table.num_rows
+                if rows >= ROW_GROUP:
+                    write(pa.concat_tables(buf))
+                    buf, rows = [], 0
+            if buf or not rows:
+                write(pa.concat_tables(buf) if buf else schema.empty_table())
+
+    def _write_sdo(self) -> int:
+        decided = {c: self._sdo_stats[c].decide(as_object=c == "value") for c in SDO_COLUMNS}
+        schema = pa.schema(
+            [pa.field(c, pl.arrow_type(decided[c][0])) for c in SDO_COLUMNS],
+            metadata=pl.schema_metadata(
+                [pl.field_meta(c, decided[c][1], decided[c][2]) for c in SDO_COLUMNS]
+            ),
+        )
+        self._sdo_spool.seek(0)
+
+        def tables():
+            for _ in range(self._sdo_chunks):
+                chunk = pickle.load(self._sdo_spool)
+                arrays = [
+                    pl.convert(v, decided[c][0]) for c, v in zip(SDO_COLUMNS, chunk, strict=True)
+                ]
+                yield pa.Table.from_arrays(arrays, schema=schema)
+
+        self._write_small("sdo", tables(), schema)
+        return sum(s.rows for s in self._sdo_stats.values()) // len(SDO_COLUMNS)
+
+    def _write_findings(self) -> int:
+        cols = list(zip(*self._findings, strict=True)) or [[] for _ in FINDING_COLUMNS]
+        out = []
+        for name, values in zip(FINDING_COLUMNS, cols, strict=True):
+            values = list(values)
+            conv = pl.nullable_int(values) if name in ("node", "cob_id") else pl.column(values)
+            out.append((name, *conv))
+        return self._small_table("findings", out)
+
+    def _write_nodes(self) -> int:
+        counts = self._counts
+        seen = np.flatnonzero(counts.sum(axis=0)).tolist()
+        rows: list[dict] = []
+        for n in np.flatnonzero(counts.sum(axis=1)).tolist():
+            row: dict = {"node": n, "frames": int(counts[n].sum())}
+            for s in seen:
+                row[f"frames_{SERVICE_NAMES[s]}"] = int(counts[n, s])
+            row["last_state"] = self._last_state.get(n, (None, None))[1]
+            row["last_state_t"] = self._last_state.get(n, (None, None))[0]
+            info = self._identity.get(n, {})
+            row.update({k: info.get(k) for k in _IDENTITY_KEYS})
+            prof, how = self.profiles.get(n, (None, None))
+            if prof is None and info:
+                prof, how = _match_profile(info)
+            row["profile"] = prof
+            row["identified_by"] = how
+            rows.append(row)
+        names = list(rows[0]) if rows else ["node"]
+        others = [c for c in names if c != "node"]
+        # Parquet keeps the index last (to_parquet), CSV first (reset_index)
+        names = others + ["node"] if self.fmt == "parquet" else ["node", *others]
+        out = [(c, *pl.column([r[c] for r in rows])) for c in names]
+        return self._small_table("nodes", out, index="node" if self.fmt == "parquet" else None)
+
+
+class _Vocab:
+    """Labels in first-seen order; codes index into it (a snapshot per chunk)."""
+
+    def __init__(self) -> None:
+        self.labels: list[str] = []
+        self.index: dict[str, int] = {}
+        self._snap: list[str] = []
+
+    def code(self, label: str) -> int:
+        i = self.index.get(label)
+        if i is None:
+            i = self.index[label] = len(self.labels)
+            self.labels.append(label)
+        return i
+
+    def snapshot(self) -> list[str]:
+        if len(self._snap) != len(self.labels):
+            self._snap = list(self.labels)
+        return self._snap
+
+
+def _type_changed(sink: Sink, column: str, final: list[str]) -> bool:
+    if sink.schema is None or sink.fmt != "parquet":
+        return False
+    return sink.schema.field(column).type.index_type != pl.code_type(len(final))
+
+
+def _event_order(table: pa.Table) -> np.ndarray:
+    """Events by time, then frame row, ties in file order (the Capture's stable sort)."""
+    t = table.column("t").to_numpy()
+    row = table.column("row").to_numpy(zero_copy_only=False)
+    return np.lexsort((np.arange(len(t)), row, t))
+
+
+def stream_log(
+    batches: Iterable[DecodedBatch], path: str | Path, fmt: str = "parquet", **kw
+) -> dict[str, int]:
+    """Write the six tables of a stream of DecodedBatches to `path`; rows per table."""
+    with StreamTables(path, fmt, **kw) as out:
+        for batch in batches:
+            out.add(batch)
+        return out.close()

@@ -1,0 +1,232 @@
+"""The streaming table writer (`export --parquet/--csv` without MCAP/rrd) writes the same
+tables as the Capture path: same Arrow schemas, same DataFrames read back with pandas,
+whatever the batch size, with a bounded number of chunks waiting for the writer."""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+from conftest import ROOT, SAMPLES, real_file
+
+from cananalyze.capture import Collector, given_profiles
+from cananalyze.cli.pipeline import build_decoder
+from cananalyze.errors import ProblemLog
+from cananalyze.io.source import read_all
+from cananalyze.outputs import table_sink
+from cananalyze.outputs.pandas_like import MISSING, column
+from cananalyze.outputs.parquet_out import TABLES, _plain_columns, write_csv, write_parquet
+from cananalyze.outputs.table_stream import StreamTables
+
+DEVICES = {k: "dat7014" for k in range(1, 17)}
+
+
+def _args(log: Path, **kw) -> argparse.Namespace:
+    return argparse.Namespace(
+        log=str(log),
+        network=kw.get("network"),
+        eds=None,
+        device=[f"{k}={v}" for k, v in (kw.get("device") or {}).items()] or None,
+        strict=False,
+        input_format=None,
+        sdo_timeout=1.0,
+    )
+
+
+def _batches(log: Path, size: int | None, **kw):
+    """Decoded batches of `size` frames (records' rows depend on the cuts: compare like with like)."""
+    args = _args(log, **kw)
+    decoder = build_decoder(args)
+    fb = read_all(log)
+    size = size or max(len(fb), 1)
+    for start in range(0, len(fb), size):
+        yield decoder.decode(fb.take(slice(start, start + size)))
+    yield decoder.finish()
+
+
+def _stream(log: Path, out: Path, fmt: str = "parquet", size: int | None = None, **kw) -> None:
+    with StreamTables(out, fmt, profiles=given_profiles(_args(log, **kw))) as st:
+        for batch in _batches(log, size, **kw):
+            st.add(batch)
+        st.close()
+
+
+def _reference(log: Path, out: Path, fmt: str = "parquet", size: int | None = None, **kw):
+    """The Capture path, as `export` runs it (no rules attached), on the same batches."""
+    collector = Collector(str(log))
+    for batch in _batches(log, size, **kw):
+        collector.add(batch)
+    cap = collector.capture(ProblemLog(), kw.get("network") or "", given_profiles(_args(log, **kw)))
+    (write_parquet if fmt == "parquet" else write_csv)(cap, out)
+
+
+def assert_same_tables(a: Path, b: Path, fmt: str = "parquet") -> None:
+    for name in TABLES:
+        if fmt == "csv":
+            assert (a / f"{name}.csv").read_text() == (b / f"{name}.csv").read_text(), name
+            continue
+        fa, fb = pq.ParquetFile(a / f"{name}.parquet"), pq.ParquetFile(b / f"{name}.parquet")
+        assert fa.schema_arrow.remove_metadata() == fb.schema_arrow.remove_metadata(), name
+        ma = json.loads(fa.schema_arrow.metadata[b"pandas"])
+        mb = json.loads(fb.schema_arrow.metadata[b"pandas"])
+        assert ma == mb, name
+        pd.testing.assert_frame_equal(
+            pd.read_parquet(a / f"{name}.parquet"), pd.read_parquet(b / f"{name}.parquet")
+        )
+
+
+def _both(tmp_path: Path, log: Path, fmt: str = "parquet", size: int | None = None, **kw):
+    _reference(log, tmp_path / "ref", fmt, size, **kw)
+    _stream(log, tmp_path / "new", fmt, size, **kw)
+    assert_same_tables(tmp_path / "ref", tmp_path / "new", fmt)
+
+
+@pytest.mark.parametrize("name", ["demo.log", "faults.log", "commissioning.log", "faults.blf"])
+def test_samples_same_tables(tmp_path, name):
+    _both(tmp_path, SAMPLES / name, network=str(SAMPLES / "network.toml"))
+
+
+@pytest.mark.parametrize("size", [1, 7, 1000])
+def test_batch_size_invariance(tmp_path, size):
+    log = SAMPLES / "faults.log"
+    _both(tmp_path, log, size=size, network=str(SAMPLES / "network.toml"))
+
+
+@pytest.mark.parametrize("fmt", ["parquet", "csv"])
+def test_generated_devices_small_batches(tmp_path, fmt):
+    """Generated 16-node traffic with device profiles (signals, SDO, EMCY), cut in batches
+    that end mid-way through transfers and make categories appear after the first chunk."""
+    subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / "benchmarks" / "generate.py"),
+            "30000",
+            str(tmp_path / "g"),
+            ".log",
+        ],
+        check=True,
+        capture_output=True,
+    )
+    _both(tmp_path, tmp_path / "g.log", fmt, size=997, device=DEVICES)
+
+
+def test_csv_same_as_capture(tmp_path):
+    _both(tmp_path, SAMPLES / "faults.log", "csv", size=5, network=str(SAMPLES / "network.toml"))
+
+
+@pytest.mark.parametrize(
+    "rel",
+    [
+        "collin80__SavvyCAN/candump.log",
+        "RoboTrainerAID__za_experimental/candump.log",
+        "calumroy__CANopen_socketCAN_Test/can_log_070825_brake_sensor_test1.log",
+    ],
+)
+def test_real_logs_same_tables(tmp_path, rel):
+    _both(tmp_path, real_file(rel), size=4096)
+
+
+def test_timestamps_going_back_resorted(tmp_path):
+    """Batches that overlap in time: the stream re-sorts signals and events at the end."""
+    fb = read_all(SAMPLES / "faults.log")
+    fb.t[:] = fb.t[::-1].copy()  # time runs backwards: every batch starts before the last
+    log = tmp_path / "back.log"
+    lines = [
+        f"({t:.6f}) can0 {cid:03X}#{bytes(d[:n]).hex().upper()}"
+        for t, cid, d, n in zip(fb.t, fb.can_id, fb.data, fb.dlc, strict=True)
+    ]
+    log.write_text("\n".join(lines) + "\n")
+    _both(tmp_path, log, size=13, network=str(SAMPLES / "network.toml"))
+
+
+def test_writer_queue_is_bounded(tmp_path, monkeypatch):
+    """At most `depth` chunks wait for the writer thread, however slow it is."""
+    seen = []
+    original = table_sink.WriterThread.put
+
+    def put(self, job):
+        seen.append(self.queue.qsize())
+        original(self, job)
+
+    monkeypatch.setattr(table_sink.WriterThread, "put", put)
+    _stream(SAMPLES / "faults.log", tmp_path / "x", size=3)
+    assert seen and max(seen) <= 3
+
+
+def test_cut_off_export_leaves_no_table(tmp_path):
+    class Boom(Exception):
+        pass
+
+    out = tmp_path / "cut"
+    decoder = build_decoder(
+        argparse.Namespace(network=None, eds=None, device=None, sdo_timeout=1.0)
+    )
+    fb = read_all(SAMPLES / "faults.log")
+    with pytest.raises(Boom), StreamTables(out) as st:
+        st.add(decoder.decode(fb.take(slice(0, 50))))
+        raise Boom
+    assert list(out.iterdir()) == []
+
+
+def test_record_column_types_as_pandas():
+    """pandas_like.column gives pandas' from_records inference for every mix of values."""
+    values = [None, MISSING, 1, -3, 2.5, True, "a", [1], 2**64 - 1, float("nan")]
+    for n in (1, 2, 3):
+        for combo in itertools.product(values, repeat=n):
+            for obj in (False, True):
+                recs = [{} if v is MISSING else {"c": v} for v in combo]
+                df = pd.DataFrame.from_records(recs, columns=["c"])
+                if obj:
+                    df["c"] = df["c"].astype(object)
+                try:
+                    table = pa.Table.from_pandas(_plain_columns(df), preserve_index=False)
+                except (pa.ArrowException, ValueError, TypeError):
+                    continue  # pandas cannot write it either
+                meta = json.loads(table.schema.metadata[b"pandas"])["columns"][0]
+                arr, pandas_type, numpy_type = column(list(combo), obj)
+                assert (arr.type, pandas_type, numpy_type, arr.to_pylist()) == (
+                    table.schema.field("c").type,
+                    meta["pandas_type"],
+                    meta["numpy_type"],
+                    table.column("c").to_pylist(),
+                ), (combo, obj)
+
+
+def test_cli_streams_and_matches(tmp_path):
+    log = SAMPLES / "faults.log"
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "cananalyze",
+            "export",
+            str(log),
+            "--parquet",
+            str(tmp_path / "new"),
+            "-q",
+        ],
+        check=True,
+        cwd=ROOT,
+    )
+    _reference(log, tmp_path / "ref")
+    assert_same_tables(tmp_path / "ref", tmp_path / "new")
+
+
+@pytest.mark.parametrize("fmt", ["parquet", "csv"])
+def test_small_row_groups_late_categories(tmp_path, monkeypatch, fmt):
+    """Row groups of 50 rows: signal names and event kinds first seen after the file's
+    categories were fixed make the sink re-code the file to pandas' sorted categories."""
+    monkeypatch.setattr(table_sink, "ROW_GROUP", 50)
+    _both(
+        tmp_path, SAMPLES / "commissioning.log", fmt, size=11, network=str(SAMPLES / "network.toml")
+    )
+    if fmt == "parquet":
+        assert pq.ParquetFile(tmp_path / "new" / "frames.parquet").num_row_groups > 1
