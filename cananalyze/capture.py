@@ -31,7 +31,8 @@ from .events import (  # noqa: F401  (re-exported: outputs import the levels fro
     EventState,
     batch_events,
 )
-from .frames import FLAG_RTR, FrameBatch, concat
+from .frames import FrameBatch, concat
+from .gcpolicy import fewer_collections
 from .protocol.services import SERVICE_NAMES, Service
 
 if TYPE_CHECKING:
@@ -597,6 +598,7 @@ def load(
     args = _pipeline_args(str(path), network, eds, device, strict, input_format, sdo_timeout)
     decoder = build_decoder(args)
     checker = attach_checker(decoder, rules)
-    cap = run_pipeline(args, decoder=decoder)
+    with fewer_collections():
+        cap = run_pipeline(args, decoder=decoder)
     cap.checker = checker
     return cap

@@ -45,7 +45,15 @@ def test_log_file_format_all_frame_kinds(tmp_path):
     assert b.flags[5] == FLAG_FD | FLAG_BRS
     assert b.payload(5) == bytes.fromhex("AABBCCDDEEFF00112233")
     assert b.payload(0) == b"\x01\x02"
-    assert [b.channel_name(i) for i in range(len(b))] == ["can0", "can0", "can0", "can1", "can0", "can0", "can0"]
+    assert [b.channel_name(i) for i in range(len(b))] == [
+        "can0",
+        "can0",
+        "can0",
+        "can1",
+        "can0",
+        "can0",
+        "can0",
+    ]
     assert b.t[0] == pytest.approx(1700000000.123456, abs=1e-7)
     assert b.line.tolist() == [1, 2, 3, 4, 5, 6, 7]
 
@@ -98,7 +106,11 @@ def test_bulk_and_line_parser_agree_across_chunk_boundaries(tmp_path, monkeypatc
     lines = []
     for i in range(3000):
         n = int(rng.integers(0, 9))
-        ident = f"{int(rng.integers(0, 0x800)):03X}" if i % 7 else f"{int(rng.integers(0, 1 << 29)):08X}"
+        ident = (
+            f"{int(rng.integers(0, 0x800)):03X}"
+            if i % 7
+            else f"{int(rng.integers(0, 1 << 29)):08X}"
+        )
         data = bytes(rng.integers(0, 256, n, dtype=np.uint8)).hex().upper()
         tail = [" R", " T", ""][i % 3]
         lines.append(f"({1600000000 + i * 0.001:.6f}) can{i % 2} {ident}#{data}{tail}")
@@ -119,7 +131,10 @@ def test_bulk_and_line_parser_agree_across_chunk_boundaries(tmp_path, monkeypatc
 
 @pytest.mark.parametrize(
     "relative",
-    ["calumroy__CANopen_socketCAN_Test/can_log_070825_brake_sensor_test1.log", "collin80__SavvyCAN/candump.log"],
+    [
+        "calumroy__CANopen_socketCAN_Test/can_log_070825_brake_sensor_test1.log",
+        "collin80__SavvyCAN/candump.log",
+    ],
 )
 def test_equal_to_python_can_on_real_logs(relative):
     path = real_file(relative)
@@ -159,7 +174,10 @@ def test_gzip_and_stdin(tmp_path):
     assert len(read_all(gz)) == len(read_all(ROOT / "samples" / "demo.log")) == 185
     out = subprocess.run(
         [sys.executable, "-m", "cananalyze", "decode", "-", "--summary"],
-        input=plain, capture_output=True, cwd=ROOT, check=True,
+        input=plain,
+        capture_output=True,
+        cwd=ROOT,
+        check=True,
     )
     assert b"frames: 185" in out.stdout
 

@@ -77,10 +77,15 @@ def test_filters_and_summary():
     assert "bus load:" in text and "node   5:" in text
     assert "node 3: 2 (abort 1, ok 1)" in text
     # how each node was identified
-    assert "node   5: Datexel DAT 7014" in text and "(identified by SDO 0x1018 vendor/product)" in text
+    assert (
+        "node   5: Datexel DAT 7014" in text and "(identified by SDO 0x1018 vendor/product)" in text
+    )
     assert "node  10: unknown device" in text
     out = cli("decode", DEMO, "--summary", "--device", "3=mcb560")
-    assert "node   3: ANDIG MCB-560" in out.stdout.decode() and "(identified by user --device)" in out.stdout.decode()
+    assert (
+        "node   3: ANDIG MCB-560" in out.stdout.decode()
+        and "(identified by user --device)" in out.stdout.decode()
+    )
 
 
 def test_sdo_table_only():
@@ -92,10 +97,14 @@ def test_sdo_table_only():
 def test_sdo_values_named_and_decoded():
     out = cli("decode", DEMO, "--sdo")
     text = out.stdout.decode()
-    assert "node 5 SDO read 0x1018:01 Identity object: Vendor-ID expedited -> ok: 973 (0x3CD)" in text
+    assert (
+        "node 5 SDO read 0x1018:01 Identity object: Vendor-ID expedited -> ok: 973 (0x3CD)" in text
+    )
     assert "0x1008:00 Manufacturer device name segmented -> ok: 'DAT7014'" in text
     assert "0x1017:00 Producer heartbeat time expedited -> ok: 100 (0x64)" in text
-    recs = [json.loads(x) for x in cli("decode", DEMO, "--sdo", "--format", "jsonl").stdout.splitlines()]
+    recs = [
+        json.loads(x) for x in cli("decode", DEMO, "--sdo", "--format", "jsonl").stdout.splitlines()
+    ]
     assert [r["value"] for r in recs[:4]] == [0x3CD, 2, 0x40191, "DAT7014"]
     assert recs[0]["name"] == "Identity object: Vendor-ID"
 
@@ -120,7 +129,9 @@ def test_bad_input_is_one_line_never_a_traceback(tmp_path):
         (("decode", DEMO, "--node", "x"), "--node takes node-IDs"),
     ):
         out = cli(*args)
-        assert out.returncode == 2 and needle in out.stderr.decode() and b"Traceback" not in out.stderr
+        assert (
+            out.returncode == 2 and needle in out.stderr.decode() and b"Traceback" not in out.stderr
+        )
     empty = tmp_path / "empty.log"
     empty.write_bytes(b"")
     out = cli("decode", str(empty))
@@ -136,7 +147,10 @@ def test_eds_given_as_log_is_refused_with_what_it_is():
 def test_non_canopen_log_is_labelled():
     out = cli("decode", str(real_file("hardbyte__python-can/issue_1256.asc")), "--summary")
     assert out.returncode == 0
-    assert "not look like CANopen" in out.stdout.decode() or "may not be CANopen" in out.stdout.decode()
+    assert (
+        "not look like CANopen" in out.stdout.decode()
+        or "may not be CANopen" in out.stdout.decode()
+    )
 
 
 def test_decode_with_rules_streams_the_same_findings_as_check(tmp_path):
@@ -151,7 +165,17 @@ def test_decode_with_rules_streams_the_same_findings_as_check(tmp_path):
     expected = [(r["rule"], r["node"], round(r["t"], 6)) for r in json.loads(js.read_text())]
     assert sorted(findings, key=str) == sorted(expected, key=str) and len(findings) == 16
     # a finding follows the frame that raised it in the text output
-    text = cli("decode", str(samples / "faults.log"), "--check", "--no-color",
-               "--network", str(samples / "network.toml")).stdout.decode().splitlines()
+    text = (
+        cli(
+            "decode",
+            str(samples / "faults.log"),
+            "--check",
+            "--no-color",
+            "--network",
+            str(samples / "network.toml"),
+        )
+        .stdout.decode()
+        .splitlines()
+    )
     i = next(i for i, ln in enumerate(text) if "└─ WARNING emcy: EMCY 0x8100" in ln)
     assert "EMCY 0x8100" in text[i - 1] and " 083 " in text[i - 1]

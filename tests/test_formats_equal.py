@@ -14,8 +14,19 @@ FORMATS = ["demo.log", "demo.asc", "demo.blf"]
 
 def _records(name: str) -> list[dict]:
     out = subprocess.run(
-        [sys.executable, "-m", "cananalyze", "decode", str(ROOT / "samples" / name), "--format", "jsonl"],
-        capture_output=True, text=True, check=True, cwd=ROOT,
+        [
+            sys.executable,
+            "-m",
+            "cananalyze",
+            "decode",
+            str(ROOT / "samples" / name),
+            "--format",
+            "jsonl",
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=ROOT,
     )
     recs = [json.loads(line) for line in out.stdout.splitlines()]
     t0 = recs[0]["t"]
@@ -41,8 +52,19 @@ def test_candump_asc_blf_identical():
 @pytest.mark.parametrize("name", FORMATS)
 def test_absolute_time_kept(name):
     out = subprocess.run(
-        [sys.executable, "-m", "cananalyze", "decode", str(ROOT / "samples" / name), "--format", "jsonl"],
-        capture_output=True, text=True, check=True, cwd=ROOT,
+        [
+            sys.executable,
+            "-m",
+            "cananalyze",
+            "decode",
+            str(ROOT / "samples" / name),
+            "--format",
+            "jsonl",
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=ROOT,
     )
     first = json.loads(out.stdout.splitlines()[0])
     assert first["t"] == pytest.approx(1767225600.0, abs=1e-3)  # 2026-01-01T00:00:00Z

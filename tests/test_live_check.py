@@ -170,7 +170,9 @@ def test_commissioning_passes_live_exit_0(tmp_path):
     assert sent == 1200
     assert rc == 0, "\n".join(lines[-30:]) + err
     assert not [x for x in lines if "└─ ERROR" in x or "└─ WARNING" in x]
-    assert re.match(r"\d+ rules \(", lines[-1]) and lines[-1].endswith(": 0 violation(s), 0 note(s)")
+    assert re.match(r"\d+ rules \(", lines[-1]) and lines[-1].endswith(
+        ": 0 violation(s), 0 note(s)"
+    )
     assert "frames: 1200" in lines
 
 

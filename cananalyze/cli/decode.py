@@ -15,24 +15,50 @@ from .timeline import add_timeline_options, timeline_collector, write_timelines
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("decode", help="annotate every frame of a log",
-                       description="Decode a CANopen log: every frame named for what it is.")
+    p = sub.add_parser(
+        "decode",
+        help="annotate every frame of a log",
+        description="Decode a CANopen log: every frame named for what it is.",
+    )
     add_input_options(p)
     p.add_argument("--format", choices=["text", "jsonl"], default="text", help="output format")
     p.add_argument("--no-color", action="store_true", help="no ANSI colours even on a terminal")
     p.add_argument("--node", metavar="N[,N]", help="only frames of these node-IDs")
-    p.add_argument("--service", metavar="S[,S]",
-                   help="only these services (nmt, sync, time, emcy, tpdo, rpdo, pdo, sdo, heartbeat, ...)")
-    p.add_argument("--from", dest="t_from", type=float, metavar="S", help="start, seconds after the first frame")
-    p.add_argument("--to", dest="t_to", type=float, metavar="S", help="end, seconds after the first frame")
+    p.add_argument(
+        "--service",
+        metavar="S[,S]",
+        help="only these services (nmt, sync, time, emcy, tpdo, rpdo, pdo, sdo, heartbeat, ...)",
+    )
+    p.add_argument(
+        "--from",
+        dest="t_from",
+        type=float,
+        metavar="S",
+        help="start, seconds after the first frame",
+    )
+    p.add_argument(
+        "--to", dest="t_to", type=float, metavar="S", help="end, seconds after the first frame"
+    )
     p.add_argument("--summary", action="store_true", help="print only the summary")
     p.add_argument("--sdo", action="store_true", help="print only the SDO transaction table")
-    p.add_argument("--signals", action="store_true",
-                   help="print only decoded PDO values, one signal record per value (t, node, pdo, signal, value, unit)")
-    p.add_argument("--check", action="store_true",
-                   help="run the CANopen rules too: findings appear in the output at their frames")
-    p.add_argument("--rules", metavar="FILE", help="rules file for --check (docs/rules-file.md); implies --check")
-    p.add_argument("--bitrate", type=int, metavar="BIT/S", help="bus bitrate, for the bus load in --summary")
+    p.add_argument(
+        "--signals",
+        action="store_true",
+        help="print only decoded PDO values, one signal record per value (t, node, pdo, signal, value, unit)",
+    )
+    p.add_argument(
+        "--check",
+        action="store_true",
+        help="run the CANopen rules too: findings appear in the output at their frames",
+    )
+    p.add_argument(
+        "--rules",
+        metavar="FILE",
+        help="rules file for --check (docs/rules-file.md); implies --check",
+    )
+    p.add_argument(
+        "--bitrate", type=int, metavar="BIT/S", help="bus bitrate, for the bus load in --summary"
+    )
     p.add_argument("-o", "--output", metavar="FILE", help="write to FILE instead of stdout")
     add_timeline_options(p)
     p.set_defaults(func=run)
@@ -102,7 +128,9 @@ def run(args: argparse.Namespace) -> int:
             try:
                 out = stack.enter_context(atomic_write(args.output))
             except OSError as exc:
-                raise UsageError(f"-o {args.output}: cannot write there: {exc.strerror or exc}") from None
+                raise UsageError(
+                    f"-o {args.output}: cannot write there: {exc.strerror or exc}"
+                ) from None
         _decode_to(out, args, source, decoder, timing, services, nodes)
     return 0
 
@@ -128,7 +156,9 @@ def _decode_to(out, args: argparse.Namespace, source, decoder, timing, services,
 
         color = out.isatty() and not args.no_color
         # finished lines are written by a thread while the next batch decodes
-        writer = TextWriter(out, color=color, only_records=only_records, background=not args.summary)
+        writer = TextWriter(
+            out, color=color, only_records=only_records, background=not args.summary
+        )
     collector = timeline_collector(args)
     t0 = None
     svc_codes = np.array(sorted(services), np.uint8) if services else None
@@ -144,7 +174,12 @@ def _decode_to(out, args: argparse.Namespace, source, decoder, timing, services,
             if args.summary:
                 continue
             mask = None
-            if nodes is not None or svc_codes is not None or args.t_from is not None or args.t_to is not None:
+            if (
+                nodes is not None
+                or svc_codes is not None
+                or args.t_from is not None
+                or args.t_to is not None
+            ):
                 mask = np.ones(len(fb), bool)
                 if nodes is not None:
                     mask &= np.isin(batch.node, nodes)
@@ -155,7 +190,11 @@ def _decode_to(out, args: argparse.Namespace, source, decoder, timing, services,
                 if args.t_to is not None:
                     mask &= fb.t - t0 <= args.t_to
             if mask is not None:
-                batch.records = [(row, rec) for row, rec in batch.records if _record_passes(rec, args, nodes, services, t0)]
+                batch.records = [
+                    (row, rec)
+                    for row, rec in batch.records
+                    if _record_passes(rec, args, nodes, services, t0)
+                ]
             writer.write(batch, mask)
         tail = decoder.finish()
         summary.add(tail)
@@ -184,4 +223,6 @@ def _decode_to(out, args: argparse.Namespace, source, decoder, timing, services,
         print("\n".join(device_lines(decoder.network, summary)), file=out)
         print("\n".join(timing.timing.lines(timing.nmt, timing.t0)), file=out)
     if collector:
-        write_timelines(args, collector.capture(source.problems, getattr(args, "network", None) or ""))
+        write_timelines(
+            args, collector.capture(source.problems, getattr(args, "network", None) or "")
+        )

@@ -13,6 +13,7 @@ import sys
 
 from .. import __version__
 from ..errors import CananalyzeError
+from ..gcpolicy import fewer_collections
 
 # One module per sub-command, each with add_parser(subparsers) and run(args) -> int.
 SUBCOMMANDS = ["decode", "check", "export", "live", "simulate", "devices"]
@@ -43,7 +44,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
-        return int(args.func(args) or 0)
+        with fewer_collections():
+            return int(args.func(args) or 0)
     except CananalyzeError as exc:
         print(f"cananalyze: error: {exc}", file=sys.stderr)
         return 2

@@ -41,7 +41,10 @@ def network_spec(args: argparse.Namespace) -> NetworkSpec:
 
         for node, name in devices:
             ns = spec.node(node)
-            ns.profile, ns.how = load_builtin(name.lower().replace("-", "").replace(" ", "")), "user --device"
+            ns.profile, ns.how = (
+                load_builtin(name.lower().replace("-", "").replace(" ", "")),
+                "user --device",
+            )
         for node, file in eds:
             ns = spec.node(node)
             ns.profile, ns.how = load_eds(file, node), "user --eds"

@@ -65,7 +65,9 @@ def run(args: argparse.Namespace) -> int:
 
     # checked here, not with argparse choices, so `--help` need not import the simulator
     if args.scenario not in SCENARIOS:
-        raise UsageError(f"--scenario: unknown {args.scenario!r} (known: {', '.join(sorted(SCENARIOS))})")
+        raise UsageError(
+            f"--scenario: unknown {args.scenario!r} (known: {', '.join(sorted(SCENARIOS))})"
+        )
     if args.duration <= 0:
         raise UsageError("--duration must be positive")
     if bool(args.to) == bool(args.interface or args.channel):

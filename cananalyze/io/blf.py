@@ -398,7 +398,9 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
         ctx.start_time = start
     rest = max(0, fields[1] - _FILE_HEADER.size)
     if len(stream.read(rest)) < rest:
-        ctx.problems.add(ctx.source, f"offset {_FILE_HEADER.size}", "file ends inside the BLF file header")
+        ctx.problems.add(
+            ctx.source, f"offset {_FILE_HEADER.size}", "file ends inside the BLF file header"
+        )
         return
     offset = max(fields[1], _FILE_HEADER.size)
     declared_size = fields[10]  # 0 when the logger never closed the file
@@ -408,7 +410,9 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     while True:
         base = stream.read(16)
         if not base:
-            if declared_size > offset:  # ends cleanly between objects, but short of its own header's size
+            if (
+                declared_size > offset
+            ):  # ends cleanly between objects, but short of its own header's size
                 ctx.problems.add(
                     ctx.source,
                     f"offset {offset}",

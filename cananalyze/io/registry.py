@@ -13,7 +13,7 @@ from typing import BinaryIO
 from ..errors import ProblemLog
 from ..frames import FrameBatch
 
-DEFAULT_BATCH = 65536
+DEFAULT_BATCH = 262144
 
 
 @dataclass

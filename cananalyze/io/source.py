@@ -118,10 +118,16 @@ class LogSource:
             for c in self._closers:
                 if isinstance(c, _TolerantGzip) and c.error:
                     self.ctx.problems.add(
-                        self.path, f"after frame {self.ctx.frames}", f"gzip data ends early or is corrupt ({c.error})"
+                        self.path,
+                        f"after frame {self.ctx.frames}",
+                        f"gzip data ends early or is corrupt ({c.error})",
                     )
         except (EOFError, zlib.error, gzip.BadGzipFile) as exc:
-            self.ctx.problems.add(self.path, f"after frame {self.ctx.frames}", f"file ends early or is corrupt ({exc})")
+            self.ctx.problems.add(
+                self.path,
+                f"after frame {self.ctx.frames}",
+                f"file ends early or is corrupt ({exc})",
+            )
         except OSError as exc:
             raise InputError(f"{self.path}: cannot read: {exc.strerror or exc}") from None
         finally:
@@ -139,7 +145,9 @@ def _detect(head: bytes, name: str, forced: str | None) -> LogFormat:
         for f in formats:
             if f.name == forced:
                 return f
-        raise InputError(f"{name}: unknown format {forced!r} (known: {', '.join(f.name for f in formats)})")
+        raise InputError(
+            f"{name}: unknown format {forced!r} (known: {', '.join(f.name for f in formats)})"
+        )
     suffix = Path(name[:-3] if name.endswith(".gz") else name).suffix.lower()
     claims = [f for f in formats if _safe_sniff(f, head)]
     if not claims:

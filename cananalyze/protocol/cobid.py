@@ -82,7 +82,11 @@ class CobClassifier:
         """Give a COB-ID back its predefined meaning."""
         if 0 <= cob_id < 2048:
             svc, node, pdo = default_tables()
-            self.svc[cob_id], self.node[cob_id], self.pdo[cob_id] = svc[cob_id], node[cob_id], pdo[cob_id]
+            self.svc[cob_id], self.node[cob_id], self.pdo[cob_id] = (
+                svc[cob_id],
+                node[cob_id],
+                pdo[cob_id],
+            )
 
     def classify(self, batch: FrameBatch) -> Classified:
         can_id = batch.can_id

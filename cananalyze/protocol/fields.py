@@ -21,6 +21,7 @@ from .tables import (
 
 CANOPEN_EPOCH = datetime(1984, 1, 1, tzinfo=UTC)
 
+
 def sdo_fields(data: bytes, is_request: bool) -> dict:
     """What one SDO frame says without its transfer's context (see protocol.sdo)."""
     fields = describe_sdo(data, is_request)
@@ -52,8 +53,13 @@ def frame_fields(service: int, data: bytes, rtr: bool = False) -> dict:
         return {"time": time_of_day(data)}
     if s is Service.EMCY:
         if len(data) < 3:
-            return {"error_code": None, "error_class": None, "error_register": None,
-                    "manufacturer": data.hex(), "reset": False}
+            return {
+                "error_code": None,
+                "error_class": None,
+                "error_register": None,
+                "manufacturer": data.hex(),
+                "reset": False,
+            }
         code = data[0] | data[1] << 8
         return {
             "error_code": code,
@@ -85,7 +91,11 @@ def annotation(service: int, node: int, pdo: int, fields: dict, rtr: bool = Fals
     if s is Service.NMT:
         target = fields.get("target")
         who = "all nodes" if target == 0 else f"node {target}"
-        return f"NMT {fields.get('command')} {who}" if target is not None else "NMT (malformed: needs 2 bytes)"
+        return (
+            f"NMT {fields.get('command')} {who}"
+            if target is not None
+            else "NMT (malformed: needs 2 bytes)"
+        )
     if s is Service.SYNC:
         c = fields.get("counter")
         return "SYNC" if c is None else f"SYNC counter {c}"
@@ -97,8 +107,10 @@ def annotation(service: int, node: int, pdo: int, fields: dict, rtr: bool = Fals
         if fields["reset"]:
             return "EMCY error reset / no error"
         regs = ",".join(fields.get("error_register_bits") or []) or "none"
-        text = (f"EMCY 0x{fields['error_code']:04X} {fields['error_class']}; "
-                f"register 0x{fields['error_register']:02X} [{regs}]; mfr {fields['manufacturer'] or '-'}")
+        text = (
+            f"EMCY 0x{fields['error_code']:04X} {fields['error_class']}; "
+            f"register 0x{fields['error_register']:02X} [{regs}]; mfr {fields['manufacturer'] or '-'}"
+        )
         decoded = fields.get("manufacturer_decoded")
         if decoded:
             words = decoded.get("meaning") or ", ".join(decoded.get("flags") or []) or str(decoded)

@@ -40,7 +40,15 @@ def demo_rows() -> list[tuple[float, int, bytes, int]]:
             rows.append((START + (t_us + k * step_us) / 1e6, cob, data, fl))
         return t_us + len(frames) * step_us
 
-    us = at(0, [(0x700 + MCB560, b"\x00", 0), (0x700 + DAT7014, b"\x00", 0), (0x700 + GUARDED, b"\x00", 0)], 1300)
+    us = at(
+        0,
+        [
+            (0x700 + MCB560, b"\x00", 0),
+            (0x700 + DAT7014, b"\x00", 0),
+            (0x700 + GUARDED, b"\x00", 0),
+        ],
+        1300,
+    )
     name = b"DAT7014\x00"  # 8 bytes: segmented upload in two segments
     us = at(
         20_000,
@@ -49,7 +57,10 @@ def demo_rows() -> list[tuple[float, int, bytes, int]]:
             [
                 ("4018100100000000", "43181001cd030000"),  # vendor-ID 0x3CD (Datexel)
                 ("4018100200000000", "4318100202000000"),  # product code 2 (DAT 7014)
-                ("4000100000000000", "4300100091010400"),  # device type 0x00040191 (CiA 401 analog input)
+                (
+                    "4000100000000000",
+                    "4300100091010400",
+                ),  # device type 0x00040191 (CiA 401 analog input)
                 ("4008100000000000", "4108100008000000"),  # 0x1008 name: segmented, 8 bytes
                 ("6000000000000000", "00" + name[:7].hex()),
                 ("7000000000000000", "1d" + name[7:].hex() + "000000000000"),
@@ -57,7 +68,9 @@ def demo_rows() -> list[tuple[float, int, bytes, int]]:
             ],
         ),
     )
-    us = at(us + 5000, _sdo_pairs(MCB560, [("2300200101000000", "8000200100000206")]))  # abort 0x06020000
+    us = at(
+        us + 5000, _sdo_pairs(MCB560, [("2300200101000000", "8000200100000206")])
+    )  # abort 0x06020000
     us = at(us + 5000, _sdo_pairs(MCB560, [("2b17100064000000", "6017100000000000")]))
     at(60_000, [(0x000, bytes([0x01, 0x00]), FLAG_TX)])  # NMT start all nodes
     # TIME_OF_DAY: 2026-01-01 00:00:00.100 = 15341 days after 1984-01-01, 100 ms
