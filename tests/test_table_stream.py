@@ -11,6 +11,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -230,3 +231,45 @@ def test_small_row_groups_late_categories(tmp_path, monkeypatch, fmt):
     )
     if fmt == "parquet":
         assert pq.ParquetFile(tmp_path / "new" / "frames.parquet").num_row_groups > 1
+
+
+def _signal_batch(t: list[float]):
+    from cananalyze.decoded import DecodedBatch, SignalBlock
+    from cananalyze.frames import FrameBatch
+
+    n = len(t)
+    fb = FrameBatch.allocate(n, ("can0",))
+    fb.t[:] = t
+    batch = DecodedBatch(fb, np.zeros(n, np.uint8), np.zeros(n, np.int16), np.zeros(n, np.uint8))
+    rows_a, rows_b = np.arange(0, n, 2), np.arange(1, n, 2)
+    batch.signals = [
+        SignalBlock(rows_a, 1, "tpdo1", 0x181, {"x": rows_a * 1.0, "y": rows_a * 2.0}, {}),
+        SignalBlock(rows_b, 2, "tpdo1", 0x182, {"z": rows_b * 3.0}, {}),
+    ]
+    rows_of = [rows_a, rows_a, rows_b]
+    col_of = [0, 1, 0]
+    return batch, rows_of, col_of
+
+
+def test_signal_order_without_sort_equals_the_lexsort():
+    """Strictly increasing times: frame by frame, columns in order, as the 4-key sort gives."""
+    from cananalyze.outputs.table_stream import _row_major_order
+
+    batch, rows_of, col_of = _signal_batch([0.001 * k for k in range(9)])
+    total = sum(len(r) for r in rows_of)
+    order = _row_major_order(batch, rows_of, col_of, total)
+    row = np.concatenate(rows_of)
+    col = np.repeat(col_of, [len(r) for r in rows_of])
+    rank = np.repeat([0, 0, 1], [len(r) for r in rows_of])
+    t = batch.frames.t[row]
+    assert order is not None
+    assert np.array_equal(order, np.lexsort((row, col, rank, t)))
+
+
+def test_signal_order_with_equal_times_is_left_to_the_sort():
+    """Two frames at the same time (millisecond logs): no shortcut, the caller sorts."""
+    from cananalyze.outputs.table_stream import _row_major_order
+
+    batch, rows_of, col_of = _signal_batch([0.0, 0.0, 0.001, 0.002, 0.002, 0.003])
+    total = sum(len(r) for r in rows_of)
+    assert _row_major_order(batch, rows_of, col_of, total) is None

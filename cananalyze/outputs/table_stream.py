@@ -298,7 +298,9 @@ class StreamTables:
         col = np.repeat(np.array(col_of, np.int32), sizes)
         row = np.concatenate(rows_of)
         t = np.concatenate(parts["t"])
-        order = np.lexsort((row, col, rank, t))
+        order = _row_major_order(batch, rows_of, col_of, len(t))
+        if order is None:
+            order = np.lexsort((row, col, rank, t))
         cat = {k: np.concatenate(v)[order] for k, v in parts.items()}
         first, last = int(order[0]), int(order[-1])
         part_of = np.repeat(np.arange(len(keys)), sizes)
@@ -583,3 +585,34 @@ def stream_log(
         for batch in batches:
             out.add(batch)
         return out.close()
+
+
+def _row_major_order(
+    batch: DecodedBatch, rows_of: list[np.ndarray], col_of: list[int], total: int
+) -> np.ndarray | None:
+    """The signals' (t, series, column, row) order without a sort, when times allow it.
+
+    When the frames that carry signals have strictly increasing times and each
+    belongs to one PDO block, that order is simply frame by frame, each frame's
+    values in column order: positions follow from a running count. Otherwise
+    (equal or backward times, e.g. millisecond logs) None, and the caller sorts.
+    A four-key lexsort over every value was a tenth of the export's main thread.
+    """
+    n = len(batch)
+    width = np.zeros(n, np.int64)
+    seen = np.zeros(n, np.int64)
+    for blk in batch.signals:
+        width[blk.rows] = len(blk.columns)
+        seen[blk.rows] += 1
+    carrying = np.flatnonzero(width)
+    if int(seen.sum()) != carrying.size:  # a frame in two blocks
+        return None
+    if carrying.size > 1 and not bool((np.diff(batch.frames.t[carrying]) > 0).all()):
+        return None
+    start = np.cumsum(width) - width
+    pos = np.concatenate([start[rows] + j for rows, j in zip(rows_of, col_of, strict=True)])
+    if pos.size != total:
+        return None
+    order = np.empty(total, np.int64)
+    order[pos] = np.arange(total)
+    return order
