@@ -178,7 +178,9 @@ def batch_events(
         fields, fast, _ = split
         fast_events = sdo_events(fields, (fast.row + offset).tolist())
         if events:
-            order = np.argsort(np.concatenate((np.asarray(at, np.int64), fast.slots)), kind="stable")
+            order = np.argsort(
+                np.concatenate((np.asarray(at, np.int64), fast.slots)), kind="stable"
+            )
             both = events + fast_events
             events = list(map(both.__getitem__, order.tolist()))
         else:
