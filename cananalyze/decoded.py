@@ -159,6 +159,23 @@ class DecodedBatch:
         """
         return getattr(self.records, "sdo_fast", None)
 
+    def sdo_fast_split(self) -> tuple[object, SdoColumns, list[int]] | None:
+        """(fast records' fields, their SdoColumns, the other record slots), or None.
+
+        Lets a reader take the fast path's records as columns (`RecordColumns`)
+        and read only the other slots (`list.__getitem__`: nothing gets built).
+        """
+        records = self.records
+        fast = self.sdo_fast
+        fields = getattr(records, "sdo_fast_fields", None)
+        if fast is None or fields is None or not fast.slots.size:
+            return None
+        if len(records) <= int(fast.slots[-1]):
+            return None
+        rest = np.ones(len(records), bool)
+        rest[fast.slots] = False
+        return fields(), fast, np.flatnonzero(rest).tolist()
+
     def sdo_table(self) -> SdoTable:
         """The batch's `sdo` records as columns: the fast path's from `sdo_fast`, the rest read.
 

@@ -62,38 +62,78 @@ class EventState:
     last_t: float = 0.0  # time of the last event: a frameless batch's findings default to it
 
 
-def sdo_event(row: int, r: dict) -> Row:
-    get = r.get
-    result = get("result", "?")
+def sdo_message(direction, index, sub, name, result, value, data, abort, detail) -> str:
+    """The event text of one SDO record, from its fields (one implementation for dicts and columns)."""
     ok = result == "ok"
-    index, sub = get("index"), get("subindex")
     if isinstance(index, int) and isinstance(sub, int):
-        text = f"SDO {get('direction', '?')} 0x{index:04X}:{sub:02X}"
+        text = f"SDO {direction} 0x{index:04X}:{sub:02X}"
     else:
-        text = f"SDO {get('direction', '?')}"
-    name = get("name")
+        text = f"SDO {direction}"
     if name:
         text += f" {name}"
     if ok:
-        value = get("value")
         if isinstance(value, int) and not isinstance(value, bool) and abs(value) > 9:
             text += (
                 f" = {value} (0x{value & 0xFFFFFFFFFFFFFFFF:X}) ok"  # as the text output shows it
             )
         elif value is not None:
             text += f" = {value} ok"
-        elif get("data"):
-            text += f" data {r['data']} ok"
+        elif data:
+            text += f" data {data} ok"
         else:
             text += " ok"
     else:
         text += f" {result}"
-    abort = get("abort_text")
     if abort:
         text += f": {abort}"
-    elif not ok and get("detail"):
-        text += f": {r['detail']}"
-    return Row(float(get("t", 0.0)), "sdo", get("node"), INFO if ok else WARNING, text, row)
+    elif not ok and detail:
+        text += f": {detail}"
+    return text
+
+
+def sdo_event(row: int, r: dict) -> Row:
+    get = r.get
+    result = get("result", "?")
+    text = sdo_message(
+        get("direction", "?"),
+        get("index"),
+        get("subindex"),
+        get("name"),
+        result,
+        get("value"),
+        get("data"),
+        get("abort_text"),
+        get("detail"),
+    )
+    level = INFO if result == "ok" else WARNING
+    return Row(float(get("t", 0.0)), "sdo", get("node"), level, text, row)
+
+
+def sdo_events(fields, rows: list[int]) -> list[Row]:
+    """`sdo_event` of each fast-path record, from its fields as columns (`RecordColumns`)."""
+    c = fields.columns
+    return [
+        Row(t, "sdo", nd, INFO if res == "ok" else WARNING, sdo_message(*f), row)
+        for t, nd, res, row, f in zip(
+            c["t"],
+            c["node"],
+            c["result"],
+            rows,
+            zip(
+                c["direction"],
+                c["index"],
+                c["subindex"],
+                c["name"],
+                c["result"],
+                c["value"],
+                c["data"],
+                c["abort_text"],
+                c["detail"],
+                strict=True,
+            ),
+            strict=True,
+        )
+    ]
 
 
 def finding_event(row: int, r: dict, t: float) -> Row:
@@ -117,13 +157,34 @@ def batch_events(
     n = len(fb)
     last_t = float(fb.t[-1]) if n else state.last_t
     events: list[Row] = []
-    for row, rec in batch.records:
+    split = batch.sdo_fast_split()
+    records = batch.records
+    if split is None:
+        pairs = enumerate(records)
+    else:  # the fast path's records as columns; the others read without building those
+        get = list.__getitem__
+        pairs = ((k, get(records, k)) for k in split[2])
+    at: list[int] = []
+    for k, (row, rec) in pairs:
         kind = rec.get("kind")
         if kind == "sdo":
             events.append(sdo_event(row + offset, rec))
+            at.append(k)
         elif kind == "finding":
             t = float(fb.t[row]) if 0 <= row < n else last_t
             events.append(finding_event(row + offset, rec, t))
+            at.append(k)
+    if split is not None:
+        fields, fast, _ = split
+        fast_events = sdo_events(fields, (fast.row + offset).tolist())
+        if events:
+            order = np.argsort(
+                np.concatenate((np.asarray(at, np.int64), fast.slots)), kind="stable"
+            )
+            both = events + fast_events
+            events = list(map(both.__getitem__, order.tolist()))
+        else:
+            events = fast_events
     states: list[Row] = []
     if n:
         events.extend(_frame_events(batch, offset))

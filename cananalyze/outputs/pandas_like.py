@@ -73,8 +73,8 @@ class ColumnStats:
             if kind is not None:
                 kinds.add(kind)
             elif typ is float:
-                floats = [v for v in values if type(v) is float]
-                nan = sum(v != v for v in floats)
+                floats = values if len(types) == 1 else [v for v in values if type(v) is float]
+                nan = int(np.isnan(np.array(floats, np.float64)).sum())
                 if nan:
                     kinds.add("nan")
                 if nan < len(floats):
@@ -84,7 +84,7 @@ class ColumnStats:
             else:
                 kinds.add(_kind(values[[type(v) for v in values].index(typ)]))
         if int in types:
-            ints = [v for v in values if type(v) is int]
+            ints = values if len(types) == 1 else [v for v in values if type(v) is int]
             lo, hi = min(ints), max(ints)
             self.lo = lo if self.lo is None else min(self.lo, lo)
             self.hi = hi if self.hi is None else max(self.hi, hi)
@@ -144,7 +144,9 @@ def convert(values: list | tuple, how: str) -> pa.Array:
     if how == "textfloat":
         return _text([None if _missing(v) else float(v) for v in values])
     if how == "float":  # ints, floats, None and NaN only: numpy reads None as NaN
-        floats = np.array([None if v is MISSING else v for v in values], np.float64)
+        if _Missing in set(map(type, values)):
+            values = [None if v is MISSING else v for v in values]
+        floats = np.array(values, np.float64)
         return ab.numeric(floats, np.isnan(floats))
     if how in ("string", "large"):
         return ab.strings([v if type(v) is str else None for v in values], large=how == "large")

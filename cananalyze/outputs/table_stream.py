@@ -364,23 +364,55 @@ class StreamTables:
         self.writer.put(lambda: sink.add(cols))
 
     def _add_records(self, batch: DecodedBatch) -> None:
-        if not batch.records:
+        """SDO rows (spooled per chunk as columns), findings and node identities of a batch.
+
+        The fast path's records are taken as columns (`DecodedBatch.sdo_fast_split`),
+        merged by record slot with the other records, which are read one by one.
+        """
+        records = batch.records
+        if not records:
             return
-        sdo = [r for _, r in batch.records if r.get("kind") == "sdo"]
-        for r in (r for _, r in batch.records if r.get("kind") == "finding"):
-            self._findings.append(tuple(r.get(c, _NAN) for c in FINDING_COLUMNS))
-        if not sdo:
+        split = batch.sdo_fast_split()
+        if split is None:
+            pairs: Iterable = enumerate(records)
+        else:
+            get = list.__getitem__
+            pairs = ((k, get(records, k)) for k in split[2])
+        sdo: list[tuple[int, dict]] = []
+        for k, (_, r) in pairs:
+            kind = r.get("kind")
+            if kind == "sdo":
+                sdo.append((k, r))
+            elif kind == "finding":
+                self._findings.append(tuple(r.get(c, _NAN) for c in FINDING_COLUMNS))
+        if not sdo and split is None:
             return
-        ident = [r for r in sdo if r.get("index") in _IDENTITY_INDEX]
-        for node, info in _identity([(0, r) for r in ident]).items():
-            self._identity.setdefault(node, {}).update(info)
+        ident = [(k, r) for k, r in sdo if r.get("index") in _IDENTITY_INDEX]
         rows = []
-        for r in sdo:  # one C call per record that has every column (nearly all)
+        for _, r in sdo:  # one C call per record that has every column (nearly all)
             try:
                 rows.append(_SDO_ROW(r))
             except KeyError:
                 rows.append(tuple(r.get(c, _NAN) for c in SDO_COLUMNS))
-        chunk = list(zip(*rows, strict=True))
+        chunk: list = list(zip(*rows, strict=True)) or [() for _ in SDO_COLUMNS]
+        if split is not None:
+            fields, fast, _ = split
+            cols = fields.columns
+            for j in np.flatnonzero(np.isin(fast.index, _IDENTITY_INDEX)).tolist():
+                rec = {"kind": "sdo"} | {c: cols[c][j] for c in SDO_COLUMNS}
+                ident.append((int(fast.slots[j]), rec))
+            ident.sort(key=operator.itemgetter(0))
+            if sdo:
+                at = np.concatenate((np.array([k for k, _ in sdo], np.int64), fast.slots))
+                take = np.argsort(at, kind="stable").tolist()
+                chunk = [
+                    list(map((list(mine) + cols[c]).__getitem__, take))
+                    for c, mine in zip(SDO_COLUMNS, chunk, strict=True)
+                ]
+            else:
+                chunk = [cols[c] for c in SDO_COLUMNS]
+        for node, info in _identity(ident).items():
+            self._identity.setdefault(node, {}).update(info)
         for c, values in zip(SDO_COLUMNS, chunk, strict=True):
             self._sdo_stats[c].update(values)
         pickle.dump(chunk, self._sdo_spool, pickle.HIGHEST_PROTOCOL)

@@ -173,6 +173,85 @@ def pair_columns(fb, a: np.ndarray, b: np.ndarray, slots: np.ndarray) -> SdoColu
     )
 
 
+RECORD_COLUMNS = (
+    "t_start",
+    "t",
+    "latency_ms",
+    "node",
+    "direction",
+    "protocol",
+    "index",
+    "subindex",
+    "size",
+    "data",
+    "value",
+    "name",
+    "result",
+    "abort_code",
+    "abort_text",
+    "detail",
+)
+
+
+@dataclass
+class RecordColumns:
+    """Every field of the fast path's records as lists (one per RECORD_COLUMNS key).
+
+    The export writes the SDO table and its events from these without a dict per
+    transaction; `records()` builds the dicts from the same values. Aborted pairs
+    (rare) keep the dict `pair_outputs` made, and their fields are copied in.
+    """
+
+    columns: dict[str, list]
+    aborted: dict[int, dict]  # position -> record
+
+    def __len__(self) -> int:
+        return len(self.columns["t"])
+
+    def records(self) -> list[dict]:
+        c = self.columns
+        out = [
+            {
+                "kind": "sdo",
+                "t_start": x,
+                "t": y,
+                "latency_ms": lat,
+                "node": nd,
+                "direction": dr,
+                "protocol": "expedited",
+                "index": i,
+                "subindex": s,
+                "size": n,
+                "data": h,
+                "value": v,
+                "name": nm,
+                "result": "ok",
+                "abort_code": None,
+                "abort_text": None,
+                "detail": None,
+                "frames": 2,
+                "channel": [0x600 + nd, 0x580 + nd],
+            }
+            for x, y, lat, nd, dr, i, s, n, h, v, nm in zip(
+                c["t_start"],
+                c["t"],
+                c["latency_ms"],
+                c["node"],
+                c["direction"],
+                c["index"],
+                c["subindex"],
+                c["size"],
+                c["data"],
+                c["value"],
+                c["name"],
+                strict=True,
+            )
+        ]
+        for k, rec in self.aborted.items():
+            out[k] = rec
+        return out
+
+
 def pair_records(
     fb,
     a: np.ndarray,
@@ -180,15 +259,26 @@ def pair_records(
     object_info: ObjectInfo | None,
     latency: list | None = None,
 ) -> list[dict]:
-    """Records of taken pairs, exactly as the tracker makes them, built from columns.
+    """Records of taken pairs, exactly as the tracker makes them, built from columns."""
+    return pair_record_columns(fb, a, b, object_info, latency).records()
+
+
+def pair_record_columns(
+    fb,
+    a: np.ndarray,
+    b: np.ndarray,
+    object_info: ObjectInfo | None,
+    latency: list | None = None,
+) -> RecordColumns:
+    """The records' fields of taken pairs as lists, values as the tracker makes them.
 
     Names and data types are looked up once per distinct (node, index, subindex),
-    values decoded per data type as numpy columns; only the dicts are per record.
-    Aborted pairs (rare) go through `pair_outputs`.
+    values decoded per data type as numpy columns. Aborted pairs (rare) go through
+    `pair_outputs`.
     """
     m = len(a)
     if m == 0:
-        return []
+        return RecordColumns({c: [] for c in RECORD_COLUMNS}, {})
     da, db = fb.data[a], fb.data[b]
     upload = da[:, 0] == _UPLOAD_REQ
     aborted = db[:, 0] == _ABORT
@@ -218,48 +308,32 @@ def pair_records(
                     values[sel] = decode_column(raw[sel], length[sel], code)
     if latency is None:
         latency = _rounded_latency(t1 - t0)
-    direction = np.where(upload, "upload", "download").tolist()
-    out = [
-        {
-            "kind": "sdo",
-            "t_start": x,
-            "t": y,
-            "latency_ms": lat,
-            "node": nd,
-            "direction": dr,
-            "protocol": "expedited",
-            "index": i,
-            "subindex": s,
-            "size": n,
-            "data": h,
-            "value": v,
-            "name": nm,
-            "result": "ok",
-            "abort_code": None,
-            "abort_text": None,
-            "detail": None,
-            "frames": 2,
-            "channel": [0x600 + nd, 0x580 + nd],
-        }
-        for x, y, lat, nd, dr, i, s, n, h, v, nm in zip(
-            t0.tolist(),
-            t1.tolist(),
-            latency,
-            node_a.tolist(),
-            direction,
-            index_a.tolist(),
-            da[:, 3].tolist(),
-            length.tolist(),
-            data.tolist(),
-            values.tolist(),
-            names.tolist(),
-            strict=True,
-        )
-    ]
+    nodes = node_a.tolist()
+    columns = {
+        "t_start": t0.tolist(),
+        "t": t1.tolist(),
+        "latency_ms": list(latency) if any_abort else latency,  # (a shared list: patched below)
+        "node": nodes,
+        "direction": np.where(upload, "upload", "download").tolist(),
+        "protocol": ["expedited"] * m,
+        "index": index_a.tolist(),
+        "subindex": da[:, 3].tolist(),
+        "size": length.tolist(),
+        "data": data.tolist(),
+        "value": values.tolist(),
+        "name": names.tolist(),
+        "result": ["ok"] * m,
+        "abort_code": [None] * m,
+        "abort_text": [None] * m,
+        "detail": [None] * m,
+    }
+    done: dict[int, dict] = {}
     if any_abort:
         for k in np.flatnonzero(aborted).tolist():
-            out[k] = pair_outputs(fb, int(a[k]), int(b[k]), out[k]["node"], object_info)[2]
-    return out
+            rec = done[k] = pair_outputs(fb, int(a[k]), int(b[k]), nodes[k], object_info)[2]
+            for c in RECORD_COLUMNS:
+                columns[c][k] = rec[c]
+    return RecordColumns(columns, done)
 
 
 def pair_notes(fb, a: np.ndarray, b: np.ndarray) -> tuple[list[dict], list[dict]]:

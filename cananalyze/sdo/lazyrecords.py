@@ -30,6 +30,7 @@ class LazyRecords(list):
     """list of (row, record); `defer` leaves some slots to a builder until they are read."""
 
     sdo_fast = None  # SdoColumns of the deferred records, while this list is the batch's
+    sdo_fast_fields = None  # () -> fastpath.RecordColumns of the same records
 
     def defer(
         self,
@@ -37,14 +38,20 @@ class LazyRecords(list):
         rows: list[int],
         build: Callable[[np.ndarray | None], list[dict]],
         columns=None,
+        fields: Callable[[], object] | None = None,
     ) -> None:
-        """Slots (ascending) to be filled with (rows[j], build(None)[j]); build(js) builds some."""
+        """Slots (ascending) to be filled with (rows[j], build(None)[j]); build(js) builds some.
+
+        `columns` (SdoColumns) and `fields()` (the records' fields as lists) let
+        readers take the deferred records without building them.
+        """
         self._realise()
         self._slots = np.asarray(slots, np.int64)
         self._rows = rows
         self._build = build
         self._done: dict[int, dict] = {}  # j -> record already written by a single read
         self.sdo_fast = columns
+        self.sdo_fast_fields = fields
 
     def _realise(self) -> None:
         build = getattr(self, "_build", None)

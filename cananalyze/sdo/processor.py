@@ -229,15 +229,23 @@ class SdoProcessor:
             def lookup(node: int, index: int, sub: int, known=known):
                 return known[(node << 24) | (index << 8) | sub]
 
+        memo: list[fastpath.RecordColumns] = []
+
+        def columns() -> fastpath.RecordColumns:
+            """All the records' fields, built once (the export reads them, the dicts too)."""
+            if not memo:
+                memo.append(fastpath.pair_record_columns(fb, a, b, lookup, latency))
+            return memo[0]
+
         def build(js: np.ndarray | None) -> list[dict]:
             if js is None:
-                return fastpath.pair_records(fb, a, b, lookup, latency)
+                return columns().records()
             picked = [latency[j] for j in js.tolist()]
             return fastpath.pair_records(fb, a[js], b[js], lookup, picked)
 
         if not isinstance(batch.records, LazyRecords):
             batch.records = LazyRecords(batch.records)
-        batch.records.defer(slots, b.tolist(), build, cols)
+        batch.records.defer(slots, b.tolist(), build, cols, columns)
 
         def write_notes(notes: dict) -> None:
             req, resp = fastpath.pair_notes(fb, a, b)

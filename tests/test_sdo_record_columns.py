@@ -1,0 +1,97 @@
+"""The fast path's SDO records read as columns (`RecordColumns`, `DecodedBatch.sdo_fast_split`)
+give the same SDO table and events as the dicts: the export and the Capture take the columns,
+a plain records list (what a filter leaves) takes the dicts."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from conftest import ROOT, SAMPLES, real_file
+from test_table_stream import DEVICES, _args, _batches, assert_same_tables
+
+from cananalyze.capture import given_profiles
+from cananalyze.events import EventState, batch_events
+from cananalyze.outputs.table_stream import SDO_COLUMNS, StreamTables
+from cananalyze.sdo.fastpath import RECORD_COLUMNS
+
+
+def _as_dicts(batch):
+    """The same batch with its records as a plain list: readers fall back to the dicts."""
+    batch.records = list(batch.records)
+    return batch
+
+
+def _generated(tmp_path: Path) -> Path:
+    subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "generate.py"), "30000", str(tmp_path / "g")]
+        + [".log"],
+        check=True,
+        capture_output=True,
+    )
+    return tmp_path / "g.log"
+
+
+def _cases(tmp_path: Path, which: str):
+    if which == "generated":
+        return _generated(tmp_path), {"device": DEVICES}
+    if which == "faults":
+        return SAMPLES / "faults.log", {"network": str(SAMPLES / "network.toml")}
+    if which == "commissioning":
+        return SAMPLES / "commissioning.log", {"network": str(SAMPLES / "network.toml")}
+    return real_file(which), {}
+
+
+CASES = ["generated", "faults", "commissioning", "collin80__SavvyCAN/candump.log"]
+
+
+@pytest.mark.parametrize("which", CASES)
+@pytest.mark.parametrize("size", [997, None])
+def test_events_same_from_columns_and_dicts(tmp_path, which, size):
+    log, kw = _cases(tmp_path, which)
+    s1, s2 = EventState(), EventState()
+    off = 0
+    fast = 0
+    for b1, b2 in zip(_batches(log, size, **kw), _batches(log, size, **kw), strict=True):
+        fast += b1.sdo_fast_split() is not None
+        e1 = batch_events(b1, off, s1)
+        e2 = batch_events(_as_dicts(b2), off, s2)
+        assert e1 == e2
+        assert list(b1.records) == b2.records  # reading the columns left the dicts as they were
+        off += len(b1)
+    if which in ("generated", "faults"):
+        assert fast  # the column route was taken
+
+
+@pytest.mark.parametrize("which", CASES)
+def test_sdo_table_same_from_columns_and_dicts(tmp_path, which):
+    log, kw = _cases(tmp_path, which)
+    for name, convert in (("cols", lambda b: b), ("dicts", _as_dicts)):
+        with StreamTables(tmp_path / name, profiles=given_profiles(_args(log, **kw))) as st:
+            for batch in _batches(log, 997, **kw):
+                st.add(convert(batch))
+            st.close()
+    assert_same_tables(tmp_path / "cols", tmp_path / "dicts")
+
+
+def test_aborted_pairs_and_record_columns_agree():
+    """Aborted fast pairs keep `pair_outputs`'s dict; the columns hold every record's fields."""
+    assert SDO_COLUMNS == RECORD_COLUMNS
+    aborted = 0
+    for batch in _batches(SAMPLES / "faults.log", None, network=str(SAMPLES / "network.toml")):
+        split = batch.sdo_fast_split()
+        if split is None:
+            continue
+        fields, fast, _ = split
+        aborted += len(fields.aborted)
+        built = [batch.records[int(k)][1] for k in fast.slots]
+        assert built == fields.records()
+        for j, rec in enumerate(built):
+            assert {c: rec[c] for c in RECORD_COLUMNS} == {
+                c: fields.columns[c][j] for c in RECORD_COLUMNS
+            }
+        for j, rec in fields.aborted.items():
+            assert rec["result"] == "abort" and fields.columns["result"][j] == "abort"
+    assert aborted  # faults.log has server aborts answered on the fast path
