@@ -35,9 +35,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--parquet-compression",
         choices=["snappy", "zstd", "lz4", "none"],
-        default="zstd",
-        help="Parquet page compression (default zstd: 40 %% smaller than snappy, "
-        "encoded on the writer thread at no measurable cost)",
+        default="snappy",
+        help="Parquet page compression (default snappy, as pandas writes; zstd files are "
+        "40 %% smaller but cost 1/3 more time at 10M frames)",
     )
     p.add_argument("--bitrate", type=int, metavar="BIT/S", help="bus bitrate: bus load in percent")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary line")
