@@ -30,16 +30,28 @@ def numeric(values: np.ndarray, mask: np.ndarray | None = None, typ=None) -> pa.
 
 
 def strings(values: list, large: bool = False) -> pa.Array:
-    """A (large_)string column from str/None values."""
+    """A (large_)string column from str/None values.
+
+    Mostly ASCII (event messages, SDO text): then one join and one encode for the
+    column, lengths from `len`, instead of an encode per value (half the time).
+    """
     n = len(values)
-    mask = np.fromiter((v is None for v in values), bool, n)
-    encoded = [b"" if v is None else v.encode() for v in values]
-    lengths = np.fromiter(map(len, encoded), np.int64, n)
+    mask = np.array([v is None for v in values], bool)
+    texts = ["" if v is None else v for v in values] if mask.any() else values
+    joined = "".join(texts)
+    if joined.isascii():
+        data = joined.encode("ascii")
+        lengths = np.fromiter(map(len, texts), np.int64, n)
+    else:
+        encoded = [t.encode() for t in texts]
+        data = b"".join(encoded)
+        lengths = np.fromiter(map(len, encoded), np.int64, n)
     offsets = np.zeros(n + 1, np.int64 if large else np.int32)
     np.cumsum(lengths, out=offsets[1:])
     typ = pa.large_string() if large else pa.string()
-    data = pa.py_buffer(b"".join(encoded))
-    return pa.Array.from_buffers(typ, n, [_validity(mask), pa.py_buffer(offsets), data])
+    return pa.Array.from_buffers(
+        typ, n, [_validity(mask), pa.py_buffer(offsets), pa.py_buffer(data)]
+    )
 
 
 def optional_ints(values: list, typ: pa.DataType) -> pa.Array:

@@ -265,7 +265,10 @@ class StreamTables:
 
     def _add_signals(self, batch: DecodedBatch, off: int) -> None:
         t_all = batch.frames.t
-        parts: dict[str, list] = {k: [] for k in ("t", "node", "cob", "pdo", "sig", "unit", "v")}
+        # per part (one signal column of one block): its times, values and five constants
+        t_parts: list[np.ndarray] = []
+        v_parts: list[np.ndarray] = []
+        consts: dict[str, list[int]] = {k: [] for k in ("node", "cob", "pdo", "sig", "unit")}
         keys: list[tuple] = []  # (node, pdo, cob, insertion) per part: the series order
         col_of: list[int] = []
         rows_of: list[np.ndarray] = []
@@ -276,32 +279,29 @@ class StreamTables:
                 got = self._series[skey] = (len(self._series), dict(blk.units))
             ins, units = got
             t = t_all[blk.rows]
-            m = len(blk.rows)
             pdo_code = self._labels["pdo"].code(blk.pdo)
             for j, (name, values) in enumerate(blk.columns.items()):
-                parts["t"].append(t)
-                parts["node"].append(np.full(m, blk.node, np.int16))
-                parts["cob"].append(np.full(m, blk.cob_id, np.uint32))
-                parts["pdo"].append(np.full(m, pdo_code, np.int32))
-                parts["sig"].append(np.full(m, self._labels["signal"].code(name), np.int32))
-                unit = self._labels["unit"].code(units.get(name) or "")
-                parts["unit"].append(np.full(m, unit, np.int32))
-                parts["v"].append(np.asarray(values, np.float64))
+                t_parts.append(t)
+                v_parts.append(values)
+                consts["node"].append(blk.node)
+                consts["cob"].append(blk.cob_id)
+                consts["pdo"].append(pdo_code)
+                consts["sig"].append(self._labels["signal"].code(name))
+                consts["unit"].append(self._labels["unit"].code(units.get(name) or ""))
                 keys.append((blk.node, blk.pdo, blk.cob_id, ins))
                 col_of.append(j)
                 rows_of.append(blk.rows)
         if not keys:
             return
-        rank_of = {k: r for r, k in enumerate(sorted(set(keys)))}
         sizes = [len(r) for r in rows_of]
-        rank = np.repeat(np.array([rank_of[k] for k in keys], np.int32), sizes)
-        col = np.repeat(np.array(col_of, np.int32), sizes)
         row = np.concatenate(rows_of)
-        t = np.concatenate(parts["t"])
+        t = np.concatenate(t_parts)
         order = _row_major_order(batch, rows_of, col_of, len(t))
         if order is None:
+            rank_of = {k: r for r, k in enumerate(sorted(set(keys)))}
+            rank = np.repeat(np.array([rank_of[k] for k in keys], np.int32), sizes)
+            col = np.repeat(np.array(col_of, np.int32), sizes)
             order = np.lexsort((row, col, rank, t))
-        cat = {k: np.concatenate(v)[order] for k, v in parts.items()}
         first, last = int(order[0]), int(order[-1])
         part_of = np.repeat(np.arange(len(keys)), sizes)
         head = (
@@ -314,17 +314,27 @@ class StreamTables:
         if self._signal_last is not None and head < self._signal_last:
             self._signals_unsorted = True
         self._signal_last = tail
-        cols = {
-            "t": cat["t"],
-            "node": cat["node"],
-            "pdo": Coded(cat["pdo"], self._labels["pdo"].snapshot()),
-            "cob_id": cat["cob"],
-            "signal": Coded(cat["sig"], self._labels["signal"].snapshot()),
-            "value": cat["v"],
-            "unit": Coded(cat["unit"], self._labels["unit"].snapshot()),
-        }
+        labels = {k: self._labels[k].snapshot() for k in ("pdo", "signal", "unit")}
+
+        def columns() -> dict:
+            """Gathered on the writer thread: numpy copies there run outside the GIL."""
+
+            def const(name: str, dtype) -> np.ndarray:
+                return np.repeat(np.array(consts[name], dtype), sizes)[order]
+
+            values = np.concatenate([np.asarray(v, np.float64) for v in v_parts])
+            return {
+                "t": t[order],
+                "node": const("node", np.int16),
+                "pdo": Coded(const("pdo", np.int32), labels["pdo"]),
+                "cob_id": const("cob", np.uint32),
+                "signal": Coded(const("sig", np.int32), labels["signal"]),
+                "value": values[order],
+                "unit": Coded(const("unit", np.int32), labels["unit"]),
+            }
+
         sink = self.sinks["signals"]
-        self.writer.put(lambda: sink.add(cols))
+        self.writer.put(lambda: sink.add(columns()))
 
     def _add_events(self, events: list[Row], horizon: float | None) -> None:
         """Queue events; write those older than `horizon` (None: all) in (t, row) order.
