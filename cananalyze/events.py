@@ -64,26 +64,32 @@ class EventState:
 
 def sdo_message(direction, index, sub, name, result, value, data, abort, detail) -> str:
     """The event text of one SDO record, from its fields (one implementation for dicts and columns)."""
-    ok = result == "ok"
+    return _sdo_head(direction, index, sub, name) + _sdo_tail(result, value, data, abort, detail)
+
+
+def _sdo_head(direction, index, sub, name) -> str:
     if isinstance(index, int) and isinstance(sub, int):
         text = f"SDO {direction} 0x{index:04X}:{sub:02X}"
     else:
         text = f"SDO {direction}"
-    if name:
-        text += f" {name}"
+    return f"{text} {name}" if name else text
+
+
+def _sdo_tail(result, value, data, abort, detail) -> str:
+    ok = result == "ok"
     if ok:
         if isinstance(value, int) and not isinstance(value, bool) and abs(value) > 9:
-            text += (
+            text = (
                 f" = {value} (0x{value & 0xFFFFFFFFFFFFFFFF:X}) ok"  # as the text output shows it
             )
         elif value is not None:
-            text += f" = {value} ok"
+            text = f" = {value} ok"
         elif data:
-            text += f" data {data} ok"
+            text = f" data {data} ok"
         else:
-            text += " ok"
+            text = " ok"
     else:
-        text += f" {result}"
+        text = f" {result}"
     if abort:
         text += f": {abort}"
     elif not ok and detail:
@@ -110,30 +116,37 @@ def sdo_event(row: int, r: dict) -> Row:
 
 
 def sdo_events(fields, rows: list[int]) -> list[Row]:
-    """`sdo_event` of each fast-path record, from its fields as columns (`RecordColumns`)."""
+    """`sdo_event` of each fast-path record, from its fields as columns (`RecordColumns`).
+
+    The head ("SDO upload 0x1018:01 name") is formatted once per object and direction:
+    a polled bus asks the same few objects over and over.
+    """
     c = fields.columns
-    return [
-        Row(t, "sdo", nd, INFO if res == "ok" else WARNING, sdo_message(*f), row)
-        for t, nd, res, row, f in zip(
-            c["t"],
-            c["node"],
-            c["result"],
-            rows,
-            zip(
-                c["direction"],
-                c["index"],
-                c["subindex"],
-                c["name"],
-                c["result"],
-                c["value"],
-                c["data"],
-                c["abort_text"],
-                c["detail"],
-                strict=True,
-            ),
-            strict=True,
-        )
-    ]
+    heads: dict[tuple, str] = {}
+    out: list[Row] = []
+    add = out.append
+    for t, nd, res, row, d, i, s, nm, v, dat, ab, det in zip(
+        c["t"],
+        c["node"],
+        c["result"],
+        rows,
+        c["direction"],
+        c["index"],
+        c["subindex"],
+        c["name"],
+        c["value"],
+        c["data"],
+        c["abort_text"],
+        c["detail"],
+        strict=True,
+    ):
+        key = (d, i, s, nm)
+        head = heads.get(key)
+        if head is None:
+            head = heads[key] = _sdo_head(d, i, s, nm)
+        text = head + _sdo_tail(res, v, dat, ab, det)
+        add(Row(t, "sdo", nd, INFO if res == "ok" else WARNING, text, row))
+    return out
 
 
 def finding_event(row: int, r: dict, t: float) -> Row:
