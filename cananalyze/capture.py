@@ -34,6 +34,7 @@ from .events import (  # noqa: F401  (re-exported: outputs import the levels fro
 from .frames import FrameBatch, concat
 from .gcpolicy import fewer_collections
 from .protocol.services import SERVICE_NAMES, Service
+from .sdo.transaction import SDO_TABLE_COLUMNS
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -178,24 +179,7 @@ class Capture:
         """The SDO transaction records, one row each, in completion order."""
         import pandas as pd
 
-        cols = [
-            "t_start",
-            "t",
-            "latency_ms",
-            "node",
-            "direction",
-            "protocol",
-            "index",
-            "subindex",
-            "size",
-            "data",
-            "value",
-            "name",
-            "result",
-            "abort_code",
-            "abort_text",
-            "detail",
-        ]
+        cols = list(SDO_TABLE_COLUMNS)
         recs = [r for _, r in self.records if r.get("kind") == "sdo"]
         df = pd.DataFrame.from_records(recs, columns=cols) if recs else pd.DataFrame(columns=cols)
         if "value" in df:

@@ -33,6 +33,7 @@ from ..decoded import DecodedBatch
 from ..events import LEVEL_NAMES, EventState, Row, batch_events
 from ..frames import FrameBatch
 from ..protocol.services import SERVICE_NAMES
+from ..sdo.transaction import SDO_TABLE_COLUMNS
 from . import arrow_build as ab
 from . import pandas_like as pl
 from .atomic import atomic_path
@@ -48,24 +49,7 @@ from .table_sink import (
     rewrite,
 )
 
-SDO_COLUMNS = (
-    "t_start",
-    "t",
-    "latency_ms",
-    "node",
-    "direction",
-    "protocol",
-    "index",
-    "subindex",
-    "size",
-    "data",
-    "value",
-    "name",
-    "result",
-    "abort_code",
-    "abort_text",
-    "detail",
-)
+SDO_COLUMNS = SDO_TABLE_COLUMNS
 _SDO_ROW = operator.itemgetter(*SDO_COLUMNS)
 _IDENTITY_INDEX = (0x1000, 0x1008, 0x1018)
 FINDING_COLUMNS = ("t", "t_rel", "rule", "severity", "node", "cob_id", "message")

@@ -23,6 +23,7 @@ from ..frames import FLAG_TX
 from ..protocol.datatypes import decode_column, decode_value
 from ..protocol.tables import abort_text
 from .tracker import ObjectInfo
+from .transaction import SDO_TABLE_COLUMNS
 
 _UPLOAD_REQ = 0x40
 _DOWNLOAD_REQ = (0x22, 0x23, 0x27, 0x2B, 0x2F)  # expedited, with or without size
@@ -173,24 +174,7 @@ def pair_columns(fb, a: np.ndarray, b: np.ndarray, slots: np.ndarray) -> SdoColu
     )
 
 
-RECORD_COLUMNS = (
-    "t_start",
-    "t",
-    "latency_ms",
-    "node",
-    "direction",
-    "protocol",
-    "index",
-    "subindex",
-    "size",
-    "data",
-    "value",
-    "name",
-    "result",
-    "abort_code",
-    "abort_text",
-    "detail",
-)
+RECORD_COLUMNS = SDO_TABLE_COLUMNS
 
 
 @dataclass

@@ -4,6 +4,27 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+# The columns of the `sdo` table (Capture.sdo, sdo.parquet), in order: the record's
+# keys less `kind` and the tracker's extras (frames, channel).
+SDO_TABLE_COLUMNS = (
+    "t_start",
+    "t",
+    "latency_ms",
+    "node",
+    "direction",
+    "protocol",
+    "index",
+    "subindex",
+    "size",
+    "data",
+    "value",
+    "name",
+    "result",
+    "abort_code",
+    "abort_text",
+    "detail",
+)
+
 
 @dataclass
 class FrameRole:
