@@ -12,23 +12,21 @@ from conftest import ROOT
 FORMATS = ["demo.log", "demo.asc", "demo.blf"]
 
 
-def _records(name: str) -> list[dict]:
+def _jsonl(name: str) -> list[dict]:
+    """`decode --format jsonl` of a sample, as the CLI writes it."""
     out = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "cananalyze",
-            "decode",
-            str(ROOT / "samples" / name),
-            "--format",
-            "jsonl",
-        ],
+        [sys.executable, "-m", "cananalyze", "decode", str(ROOT / "samples" / name)]
+        + ["--format", "jsonl"],
         capture_output=True,
         text=True,
         check=True,
         cwd=ROOT,
     )
-    recs = [json.loads(line) for line in out.stdout.splitlines()]
+    return [json.loads(line) for line in out.stdout.splitlines()]
+
+
+def _records(name: str) -> list[dict]:
+    recs = _jsonl(name)
     t0 = recs[0]["t"]
     for r in recs:
         for key in ("t", "t_start"):
@@ -51,20 +49,5 @@ def test_candump_asc_blf_identical():
 
 @pytest.mark.parametrize("name", FORMATS)
 def test_absolute_time_kept(name):
-    out = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "cananalyze",
-            "decode",
-            str(ROOT / "samples" / name),
-            "--format",
-            "jsonl",
-        ],
-        capture_output=True,
-        text=True,
-        check=True,
-        cwd=ROOT,
-    )
-    first = json.loads(out.stdout.splitlines()[0])
+    first = _jsonl(name)[0]
     assert first["t"] == pytest.approx(1767225600.0, abs=1e-3)  # 2026-01-01T00:00:00Z

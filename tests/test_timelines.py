@@ -418,6 +418,7 @@ def test_cli_export_all_outputs(tmp_path, capsys):
         (["export", str(DEMO)], "give at least one of"),
         (["export", str(DEMO), "--mcap", "/nonexistent/dir/x.mcap"], "does not exist"),
         (["export", "missing.log", "--mcap", "x.mcap"], "missing.log: no such file"),
+        (["export", str(DEMO), "--parquet", "/dev/null/pq"], "cannot create the output"),
     ],
 )
 def test_cli_export_errors_are_one_line(argv, message, capsys, tmp_path, monkeypatch):
@@ -426,6 +427,20 @@ def test_cli_export_errors_are_one_line(argv, message, capsys, tmp_path, monkeyp
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]
     assert not (tmp_path / "x.mcap").exists()
+
+
+def test_cli_export_disk_full_on_the_writer_thread_is_one_line(capsys, tmp_path, monkeypatch):
+    """An OSError raised where the streamed tables are written reaches the user as one line."""
+    from cananalyze.outputs import table_sink
+
+    def full(self, table):
+        raise OSError(28, "No space left on device", str(self.path))
+
+    monkeypatch.setattr(table_sink.Sink, "_write", full)
+    assert main(["export", str(DEMO), "--parquet", str(tmp_path / "pq"), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "No space left on device" in err[0] and "pq" in err[0], err
+    assert not list((tmp_path / "pq").glob("*.parquet"))  # nothing half-written is left
 
 
 def test_decode_with_mcap_writes_text_and_timeline(tmp_path, capsys):

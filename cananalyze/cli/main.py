@@ -55,6 +55,12 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     except KeyboardInterrupt:
         return 130
+    except OSError as exc:
+        # an output that cannot be written (disk full, unwritable path, also when a
+        # writer thread hits it): one line naming the file, not a traceback
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"cananalyze: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -226,19 +226,3 @@ class NodeConfig:
         if 0x1200 <= index <= 0x12FF:
             return "sdo"
         return None
-
-    # --- views for checks -----------------------------------------------------
-    def consumer_times(self) -> dict[int, int]:
-        """Consumer heartbeat: producer node -> expected period in ms (0x1016, entries with a time)."""
-        out = {}
-        for raw in self.consumer_heartbeat.values():
-            node, ms = (raw >> 16) & 0xFF, raw & 0xFFFF
-            if node and ms:
-                out[node] = ms
-        return out
-
-    def tpdos(self) -> list[PdoConfig]:
-        return [self.pdo_config(s) for (d, _), s in sorted(self.pdos.items()) if d == "tx"]
-
-    def rpdos(self) -> list[PdoConfig]:
-        return [self.pdo_config(s) for (d, _), s in sorted(self.pdos.items()) if d == "rx"]

@@ -41,7 +41,10 @@ def _outdir(path: str | Path) -> Path:
     d = Path(path)
     if d.exists() and not d.is_dir():
         raise UsageError(f"{d}: exists and is not a directory")
-    d.mkdir(parents=True, exist_ok=True)
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UsageError(f"{d}: cannot create the output directory ({exc.strerror})") from None
     return d
 
 

@@ -603,16 +603,6 @@ def _event_order(table: pa.Table) -> np.ndarray:
     return np.lexsort((np.arange(len(t)), row, t))
 
 
-def stream_log(
-    batches: Iterable[DecodedBatch], path: str | Path, fmt: str = "parquet", **kw
-) -> dict[str, int]:
-    """Write the six tables of a stream of DecodedBatches to `path`; rows per table."""
-    with StreamTables(path, fmt, **kw) as out:
-        for batch in batches:
-            out.add(batch)
-        return out.close()
-
-
 def _row_major_order(
     batch: DecodedBatch, rows_of: list[np.ndarray], col_of: list[int], total: int
 ) -> np.ndarray | None:

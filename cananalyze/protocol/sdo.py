@@ -30,10 +30,6 @@ SCS_INITIATE_DOWNLOAD = 3
 SCS_BLOCK_DOWNLOAD = 5
 SCS_BLOCK_UPLOAD = 6
 
-# Client subcommands of block upload (cs, bits 1..0) and the block download ones (bit 0).
-BLOCK_UPLOAD_CS = {0: "initiate", 1: "end", 2: "ack", 3: "start"}
-BLOCK_DOWNLOAD_SS = {0: "initiate", 1: "end", 2: "ack"}
-
 _REQUEST_NAMES = {
     CCS_DOWNLOAD_SEGMENT: "download_segment_request",
     CCS_INITIATE_DOWNLOAD: "initiate_download_request",
@@ -119,6 +115,32 @@ def _segment_fields(b0: int, data: bytes, out: dict, with_data: bool) -> None:
         out["data"] = bytes(data[1 : 8 - out["n"]]).hex()
 
 
+def _block_ack(data: bytes, out: dict) -> None:
+    """Block ack from either side: the last sequence number received, the next blksize."""
+    if len(data) >= 3:
+        out["ackseq"] = data[1]
+        out["blksize"] = data[2]
+
+
+def _block_initiate_or_end(
+    b0: int, data: bytes, out: dict, what: str, initiate: str | None = None
+) -> dict:
+    """The sender's block frames (download client, upload server): initiate or end."""
+    if b0 & 0x01:
+        out["command"] = f"{what}_end"
+        out["n"] = (b0 >> 2) & 0x07
+        if len(data) >= 3:
+            out["crc"] = struct.unpack_from("<H", data, 1)[0]
+    else:
+        out["command"] = initiate or f"{what}_initiate"
+        _multiplexer(data, out)
+        out["crc_supported"] = bool(b0 & 0x04)
+        out["size_indicated"] = bool(b0 & 0x02)
+        if out["size_indicated"] and len(data) >= 8:
+            out["size"] = struct.unpack_from("<I", data, 4)[0]
+    return out
+
+
 def _describe_request(b0: int, cs: int, data: bytes, out: dict) -> dict:
     if cs in _REQUEST_NAMES:
         out["command"] = _REQUEST_NAMES[cs]
@@ -141,24 +163,11 @@ def _describe_request(b0: int, cs: int, data: bytes, out: dict) -> dict:
             if len(data) >= 6:
                 out["blksize"] = data[4]
                 out["pst"] = data[5]
-        elif sub == 2 and len(data) >= 3:
-            out["ackseq"] = data[1]
-            out["blksize"] = data[2]
+        elif sub == 2:
+            _block_ack(data, out)
         return out
     if cs == CCS_BLOCK_DOWNLOAD:
-        if b0 & 0x01:
-            out["command"] = "block_download_end"
-            out["n"] = (b0 >> 2) & 0x07
-            if len(data) >= 3:
-                out["crc"] = struct.unpack_from("<H", data, 1)[0]
-        else:
-            out["command"] = "block_download_initiate"
-            _multiplexer(data, out)
-            out["crc_supported"] = bool(b0 & 0x04)
-            out["size_indicated"] = bool(b0 & 0x02)
-            if out["size_indicated"] and len(data) >= 8:
-                out["size"] = struct.unpack_from("<I", data, 4)[0]
-        return out
+        return _block_initiate_or_end(b0, data, out, "block_download")
     out["command"] = "invalid"
     return out
 
@@ -184,23 +193,12 @@ def _describe_response(b0: int, cs: int, data: bytes, out: dict) -> dict:
             out["crc_supported"] = bool(b0 & 0x04)
             if len(data) >= 5:
                 out["blksize"] = data[4]
-        elif sub == 2 and len(data) >= 3:
-            out["ackseq"] = data[1]
-            out["blksize"] = data[2]
+        elif sub == 2:
+            _block_ack(data, out)
         return out
     if cs == SCS_BLOCK_UPLOAD:
-        if b0 & 0x01:
-            out["command"] = "block_upload_end"
-            out["n"] = (b0 >> 2) & 0x07
-            if len(data) >= 3:
-                out["crc"] = struct.unpack_from("<H", data, 1)[0]
-        else:
-            out["command"] = "block_upload_initiate_response"
-            _multiplexer(data, out)
-            out["crc_supported"] = bool(b0 & 0x04)
-            out["size_indicated"] = bool(b0 & 0x02)
-            if out["size_indicated"] and len(data) >= 8:
-                out["size"] = struct.unpack_from("<I", data, 4)[0]
-        return out
+        return _block_initiate_or_end(
+            b0, data, out, "block_upload", initiate="block_upload_initiate_response"
+        )
     out["command"] = "invalid"
     return out

@@ -103,22 +103,6 @@ def plan(batch: DecodedBatch, rows: np.ndarray, timeout: float, explicit: list[i
     )
 
 
-def build_pairs(
-    fb,
-    a: np.ndarray,
-    b: np.ndarray,
-    object_info: ObjectInfo | None,
-    notes: bool = True,
-    records: bool = True,
-) -> tuple[list[dict], list[dict], list[dict]]:
-    """Request notes, answer notes and records of taken pairs (request rows a, answer rows b).
-
-    `notes` / `records` False leave that part out (the lists stay empty).
-    """
-    req, resp = pair_notes(fb, a, b) if notes else ([], [])
-    return req, resp, pair_records(fb, a, b, object_info) if records else []
-
-
 def _hex_column(raw: np.ndarray, length: np.ndarray) -> np.ndarray:
     """Object array of the hex text of each row's first `length` bytes (1..4), column-wise."""
     out = np.empty(len(raw), object)

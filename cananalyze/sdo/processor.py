@@ -106,7 +106,7 @@ class SdoProcessor:
         partner = p.partner.tolist()
         cand = p.cand.tolist()
         is_partner = p.is_partner.tolist()
-        req_cob = self._req_cob = p.req_cob.tolist()
+        req_cob = p.req_cob.tolist()
         slow_at = np.flatnonzero(p.static_slow).tolist()
         t = fb.t[rows].tolist()
         req_of = np.full(len(row_of), -1, np.int64)
