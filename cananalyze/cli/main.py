@@ -11,12 +11,14 @@ import importlib
 import signal
 import sys
 
-from .. import __version__
+from .. import __version__, allocator
 from ..errors import CananalyzeError
 from ..gcpolicy import fewer_collections
 
 # One module per sub-command, each with add_parser(subparsers) and run(args) -> int.
 SUBCOMMANDS = ["decode", "check", "export", "live", "simulate", "devices"]
+# Commands that read a whole log batch by batch: they get the allocator settings.
+BATCH_COMMANDS = {"decode", "check", "export"}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -43,6 +45,8 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    if args.command in BATCH_COMMANDS:
+        allocator.tune()
     try:
         with fewer_collections():
             return int(args.func(args) or 0)
