@@ -249,8 +249,7 @@ class StreamTables:
 
     def _add_signals(self, batch: DecodedBatch, off: int) -> None:
         t_all = batch.frames.t
-        # per part (one signal column of one block): its times, values and five constants
-        t_parts: list[np.ndarray] = []
+        # per part (one signal column of one block): its rows, values and five constants
         v_parts: list[np.ndarray] = []
         consts: dict[str, list[int]] = {k: [] for k in ("node", "cob", "pdo", "sig", "unit")}
         keys: list[tuple] = []  # (node, pdo, cob, insertion) per part: the series order
@@ -262,10 +261,8 @@ class StreamTables:
             if got is None:
                 got = self._series[skey] = (len(self._series), dict(blk.units))
             ins, units = got
-            t = t_all[blk.rows]
             pdo_code = self._labels["pdo"].code(blk.pdo)
             for j, (name, values) in enumerate(blk.columns.items()):
-                t_parts.append(t)
                 v_parts.append(values)
                 consts["node"].append(blk.node)
                 consts["cob"].append(blk.cob_id)
@@ -277,31 +274,31 @@ class StreamTables:
                 rows_of.append(blk.rows)
         if not keys:
             return
-        sizes = [len(r) for r in rows_of]
-        row = np.concatenate(rows_of)
-        t = np.concatenate(t_parts)
-        order = _row_major_order(batch, rows_of, col_of, len(t))
-        if order is None:
-            rank_of = {k: r for r, k in enumerate(sorted(set(keys)))}
-            rank = np.repeat(np.array([rank_of[k] for k in keys], np.int32), sizes)
-            col = np.repeat(np.array(col_of, np.int32), sizes)
-            order = np.lexsort((row, col, rank, t))
-        first, last = int(order[0]), int(order[-1])
-        part_of = np.repeat(np.arange(len(keys)), sizes)
-        head = (
-            float(t[first]),
-            *keys[part_of[first]],
-            col_of[part_of[first]],
-            int(row[first]) + off,
-        )
-        tail = (float(t[last]), *keys[part_of[last]], col_of[part_of[last]], int(row[last]) + off)
-        if self._signal_last is not None and head < self._signal_last:
-            self._signals_unsorted = True
-        self._signal_last = tail
         labels = {k: self._labels[k].snapshot() for k in ("pdo", "signal", "unit")}
 
         def columns() -> dict:
-            """Gathered on the writer thread: numpy copies there run outside the GIL."""
+            """Ordered and gathered on the writer thread: the numpy work there runs outside the GIL.
+
+            The writer runs batches in order, so the sortedness check against the
+            previous batch's last value is made there too (close() reads it after join).
+            """
+            sizes = [len(r) for r in rows_of]
+            row = np.concatenate(rows_of)
+            t = t_all[row]
+            order = _row_major_order(batch, rows_of, col_of, len(t))
+            if order is None:
+                rank_of = {k: r for r, k in enumerate(sorted(set(keys)))}
+                rank = np.repeat(np.array([rank_of[k] for k in keys], np.int32), sizes)
+                col = np.repeat(np.array(col_of, np.int32), sizes)
+                order = np.lexsort((row, col, rank, t))
+            first, last = int(order[0]), int(order[-1])
+            part_of = np.repeat(np.arange(len(keys)), sizes)
+            pf, pl_ = int(part_of[first]), int(part_of[last])
+            head = (float(t[first]), *keys[pf], col_of[pf], int(row[first]) + off)
+            tail = (float(t[last]), *keys[pl_], col_of[pl_], int(row[last]) + off)
+            if self._signal_last is not None and head < self._signal_last:
+                self._signals_unsorted = True
+            self._signal_last = tail
 
             def const(name: str, dtype) -> np.ndarray:
                 return np.repeat(np.array(consts[name], dtype), sizes)[order]
