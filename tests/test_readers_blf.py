@@ -208,3 +208,42 @@ def test_empty_fd_records_at_the_end_of_a_container(tmp_path):
     assert len(batch) == len(expected) == 40 and ctx.problems.count == 0
     assert_same_as_python_can(batch, expected)
     assert all(f & FLAG_FD for f in batch.flags) and not batch.dlc.any()
+
+
+def _containers(data: bytes) -> list[int]:
+    """Offsets of the LOG_CONTAINER objects of a BLF file's bytes."""
+    out, pos = [], struct.unpack_from("<L", data, 4)[0]  # file header size
+    while pos + 16 <= len(data):
+        _, _, _, size, kind = struct.unpack_from("<4sHHLL", data, pos)
+        if kind == blf.LOG_CONTAINER:
+            out.append(pos)
+        pos += size + size % 4
+    return out
+
+
+@pytest.mark.parametrize("parse_bytes", [1, 100_000])
+def test_parsing_containers_together_changes_nothing(written, tmp_path, monkeypatch, parse_bytes):
+    """Containers parsed one by one, a few together or all together: same rows, same problems."""
+    data = bytearray(written.read_bytes())
+    starts = _containers(bytes(data))
+    assert len(starts) >= 4
+    # a corrupt container in the middle: its records are lost, the next one starts mid-record
+    mid = starts[len(starts) // 2]
+    data[mid + 32 : mid + 48] = b"\xff" * 16
+    bad = tmp_path / "bad.blf"
+    bad.write_bytes(bytes(data))
+    for path in (written, bad):
+        ref, ref_ctx, ref_batches = run(blf.read, path, batch_size=4000)
+        monkeypatch.setattr(blf, "PARSE_BYTES", parse_bytes)
+        got, ctx, batches = run(blf.read, path, batch_size=4000)
+        monkeypatch.undo()
+        assert [len(b) for b in batches] == [len(b) for b in ref_batches]
+        for col in ("t", "can_id", "flags", "dlc", "data", "channel", "line"):
+            assert (getattr(got, col) == getattr(ref, col)).all(), col
+        assert ctx.problems.shown == ref_ctx.problems.shown
+        assert ctx.problems.count == ref_ctx.problems.count
+    if written.name == "w6.blf":  # the zlib error, then the next container's broken record
+        assert [p.message.split(" (")[0] for p in ref_ctx.problems.shown] == [
+            "corrupt zlib data",
+            "garbage between BLF objects, skipped 16 bytes",
+        ]
