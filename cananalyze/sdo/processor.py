@@ -22,6 +22,8 @@ from .lazynotes import LazyNotes
 from .lazyrecords import LazyRecords
 from .tracker import SdoTracker
 
+_ENDED = ("ok", "abort")  # by "aborted": no numpy string array per batch
+
 
 class SdoProcessor:
     def __init__(self, tracker: SdoTracker | None = None, fast: bool = True) -> None:
@@ -119,7 +121,7 @@ class SdoProcessor:
         self._ended_by = list(
             zip(
                 p.req_cob[answers_arr].tolist(),
-                np.where(p.aborted[answers_arr], "abort", "ok").tolist(),
+                map(_ENDED.__getitem__, p.aborted[answers_arr].tolist()),
                 strict=True,
             )
         )
