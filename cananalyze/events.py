@@ -118,8 +118,8 @@ def sdo_event_columns(fields, rows: np.ndarray) -> EventColumns:
 
     The head ("SDO upload 0x1018:01 name") is formatted once per object and direction
     (a polled bus asks the same few objects over and over); the usual tail, an
-    integer answer " = 305419896 (0x12345678) ok", takes one f-string, every
-    other one `_sdo_tail`.
+    positive integer answer ("... = 305419896 (0x12345678) ok") takes one f-string
+    with the head, every other one `_sdo_tail`.
     """
     c = fields.columns
     n = len(c["t"])
@@ -127,12 +127,18 @@ def sdo_event_columns(fields, rows: np.ndarray) -> EventColumns:
     ok = np.fromiter(map(operator.eq, result, repeat("ok", n)), bool, n)
     keys = list(zip(c["direction"], c["index"], c["subindex"], c["name"], strict=True))
     heads = {k: _sdo_head(*k) for k in dict.fromkeys(keys)}
-    tails = [
-        f" = {v} (0x{v & _U64:X}) ok"
-        if type(v) is int and (v > 9 or v < -9) and r == "ok" and not a
-        else _sdo_tail(r, v, d, a, det)
-        for r, v, d, a, det in zip(
-            result, c["value"], c["data"], c["abort_text"], c["detail"], strict=True
+    messages = [
+        f"{h} = {v} (0x{v:X}) ok"  # = _sdo_tail's text for these (v & 2**64-1 == v)
+        if type(v) is int and 9 < v <= _U64 and r == "ok" and a is None
+        else h + _sdo_tail(r, v, d, a, det)
+        for h, r, v, d, a, det in zip(
+            map(heads.__getitem__, keys),
+            result,
+            c["value"],
+            c["data"],
+            c["abort_text"],
+            c["detail"],
+            strict=True,
         )
     ]
     return EventColumns(
@@ -140,7 +146,7 @@ def sdo_event_columns(fields, rows: np.ndarray) -> EventColumns:
         np.full(n, ec.SDO, np.uint8),
         _int_column(c["node"], np.int16, NO_NODE),
         np.where(ok, INFO, WARNING).astype(np.int8),
-        texts(list(map(operator.add, map(heads.__getitem__, keys), tails))),
+        texts(messages),
         rows,
     )
 
@@ -232,19 +238,29 @@ def batch_event_columns(
     return events, states
 
 
-_EMCY_CLASS: dict[int, str] = {}
-_REGISTER: dict[int, str] = {}
+# EMCY text pieces, formatted once per node, error code (at most 65536) and register
+_NODE_TEXT: dict[int, str] = {}  # 'node 5: '
+_EMCY_CODE_TEXT: dict[int, str] = {}  # 'EMCY 0x8130 Monitoring - ...; register 0x'
+_EMCY_REG_TEXT: dict[int, str] = {}  # '11 [generic,communication]; mfr '
 
 
-def _emcy_head(code: int, reg: int) -> str:
-    """'EMCY 0x8130 ...; register 0x11 [generic,communication]; mfr ' (parts cached)."""
-    cls = _EMCY_CLASS.get(code)
-    if cls is None:
-        cls = _EMCY_CLASS[code] = emcy_class(code)  # at most 65536
-    regs = _REGISTER.get(reg)
-    if regs is None:
-        regs = _REGISTER[reg] = ",".join(error_register_names(reg)) or "none"
-    return f"EMCY 0x{code:04X} {cls}; register 0x{reg:02X} [{regs}]; mfr "
+def _emcy_heads(node: list[int], code: list[int], reg: list[int]) -> list[str]:
+    """'node 5: EMCY 0x8130 ...; register 0x11 [generic,communication]; mfr ' of each EMCY."""
+    for n in set(node).difference(_NODE_TEXT):
+        _NODE_TEXT[n] = f"node {n}: " if n >= 0 else ""
+    for c in set(code).difference(_EMCY_CODE_TEXT):
+        _EMCY_CODE_TEXT[c] = f"EMCY 0x{c:04X} {emcy_class(c)}; register 0x"
+    for r in set(reg).difference(_EMCY_REG_TEXT):
+        regs = ",".join(error_register_names(r)) or "none"
+        _EMCY_REG_TEXT[r] = f"{r:02X} [{regs}]; mfr "
+    add = operator.add
+    return list(
+        map(
+            add,
+            map(add, map(_NODE_TEXT.__getitem__, node), map(_EMCY_CODE_TEXT.__getitem__, code)),
+            map(_EMCY_REG_TEXT.__getitem__, reg),
+        )
+    )
 
 
 _HEX = np.frombuffer(b"0123456789abcdef", np.uint8)
@@ -285,10 +301,13 @@ def _frame_event_columns(batch: DecodedBatch, off: int) -> EventColumns:
     # dict.get: a LazyNotes must not realise its SDO notes (they are on SDO rows only)
     slow = np.zeros(m, bool)
     if len(dict.keys(notes)):
-        slow[[k for k, i in enumerate(rows.tolist()) if dict.get(notes, i)]] = True
+        keys = np.fromiter(dict.keys(notes), np.int64, len(dict.keys(notes)))
+        at = np.flatnonzero(np.isin(rows, keys)).tolist()
+        slow[[k for k, i in zip(at, rows[at].tolist(), strict=True) if dict.get(notes, i)]] = True
     if fb.long_data:
         slow |= np.isin(rows, np.fromiter(fb.long_data, np.int64, len(fb.long_data)))
     emcy = (kind == ec.EMCY) & ~slow
+    prefixed = (node >= 0) & (service != Service.NMT)  # "node 5: " still to prepend
     if emcy.any():
         code = data[:, 0].astype(np.int64) | data[:, 1].astype(np.int64) << 8
         short = emcy & (dlc < 3)
@@ -298,11 +317,16 @@ def _frame_event_columns(batch: DecodedBatch, off: int) -> EventColumns:
         text[reset] = "EMCY error reset / no error"
         err = np.flatnonzero(emcy & (dlc >= 3) & (code != 0))
         if err.size:
-            key = code[err] << 8 | data[err, 2]
+            # one head per (node, code, register): a faulty node repeats its EMCY
+            key = (node[err].astype(np.int64) + 1) << 24 | code[err] << 8 | data[err, 2]
             uniq, inv = np.unique(key, return_inverse=True)
-            heads = texts([_emcy_head(k >> 8, k & 0xFF) for k in uniq.tolist()])[inv.ravel()]
-            text[err] = list(map(operator.add, heads.tolist(), _mfr_hex(data[err], dlc[err])))
+            heads = _emcy_heads(
+                ((uniq >> 24) - 1).tolist(), (uniq >> 8 & 0xFFFF).tolist(), (uniq & 0xFF).tolist()
+            )
+            heads = texts(heads)[inv.ravel()].tolist()
+            text[err] = list(map(operator.add, heads, _mfr_hex(data[err], dlc[err])))
             level[err] = ERROR
+            prefixed[err] = False
     for k in np.flatnonzero((kind == ec.NMT) & ~slow).tolist():
         if dlc[k] < 2:
             text[k] = "NMT (malformed: needs 2 bytes)"
@@ -318,7 +342,7 @@ def _frame_event_columns(batch: DecodedBatch, off: int) -> EventColumns:
         text[k] = annotation(s, int(node[k]), int(batch.pdo[i]), f, rtr)
         if s == Service.EMCY:
             level[k] = INFO if f.get("reset") else ERROR
-    named = np.flatnonzero((node >= 0) & (service != Service.NMT))
+    named = np.flatnonzero(prefixed)
     if named.size:
         text[named] = list(
             map(
