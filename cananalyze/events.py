@@ -281,6 +281,14 @@ def _mfr_hex(data: np.ndarray, dlc: np.ndarray) -> list[str]:
     return out.tolist()
 
 
+def _marked(keys, n: int) -> np.ndarray:
+    """A mask over a batch's n rows, True at the given row numbers (those in range)."""
+    at = np.fromiter(keys, np.int64, len(keys))
+    mask = np.zeros(n, bool)
+    mask[at[(at >= 0) & (at < n)]] = True
+    return mask
+
+
 def _frame_event_columns(batch: DecodedBatch, off: int) -> EventColumns:
     """EMCY, NMT and boot-up lines, from columns; rows with a note go through `annotation`."""
     fb = batch.frames
@@ -301,11 +309,10 @@ def _frame_event_columns(batch: DecodedBatch, off: int) -> EventColumns:
     # dict.get: a LazyNotes must not realise its SDO notes (they are on SDO rows only)
     slow = np.zeros(m, bool)
     if len(dict.keys(notes)):
-        keys = np.fromiter(dict.keys(notes), np.int64, len(dict.keys(notes)))
-        at = np.flatnonzero(np.isin(rows, keys)).tolist()
+        at = np.flatnonzero(_marked(dict.keys(notes), len(fb))[rows]).tolist()
         slow[[k for k, i in zip(at, rows[at].tolist(), strict=True) if dict.get(notes, i)]] = True
     if fb.long_data:
-        slow |= np.isin(rows, np.fromiter(fb.long_data, np.int64, len(fb.long_data)))
+        slow |= _marked(fb.long_data, len(fb))[rows]
     emcy = (kind == ec.EMCY) & ~slow
     prefixed = (node >= 0) & (service != Service.NMT)  # "node 5: " still to prepend
     if emcy.any():
