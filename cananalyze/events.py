@@ -1,7 +1,11 @@
 """The event log: rare traffic and records of a batch as events, built once for every output.
 
-`Collector` (the Capture, MCAP, rerun) and the streaming table writer both call
-`batch_events`, so the events table says the same thing whichever path wrote it.
+The streaming table writer takes them as columns (`batch_event_columns`) and
+`Collector` (the Capture, MCAP, rerun) as tuples (`batch_events`, the same
+columns), so the events table says the same thing whichever path wrote it.
+Texts are built per group, not per event where it can be helped: SDO heads once
+per object, EMCY heads once per node/code/register, manufacturer bytes as hex
+by numpy.
 EMCY, NMT and boot-up texts come from the frame bytes directly, not through
 `DecodedBatch.fields` (which realises every lazy SDO note of the batch and
 builds a dict per row); rows carrying a note (a profile's manufacturer
