@@ -112,11 +112,6 @@ def sdo_event(row: int, r: dict) -> Row:
     return Row(float(get("t", 0.0)), "sdo", get("node"), level, text, row)
 
 
-def sdo_events(fields, rows: list[int]) -> list[Row]:
-    """`sdo_event` of each fast-path record, from its fields as columns (as tuples)."""
-    return sdo_event_columns(fields, np.asarray(rows, np.int64)).rows()
-
-
 def sdo_event_columns(fields, rows: np.ndarray) -> EventColumns:
     """`sdo_event` of each fast-path record as columns, from its fields (`RecordColumns`).
 
