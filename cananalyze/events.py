@@ -27,7 +27,12 @@ from .event_columns import NO_NODE, EventColumns, Row, texts
 from .frames import FLAG_RTR
 from .protocol.fields import annotation, frame_fields
 from .protocol.services import Service
-from .protocol.tables import NMT_COMMANDS, NMT_STATES, emcy_class, error_register_names
+from .protocol.tables import (
+    EMCY_CODES,
+    NMT_COMMANDS,
+    NMT_STATES,
+    error_register_names,
+)
 
 # foxglove.Log levels, used for every event (MCAP, rerun, the events table).
 DEBUG, INFO, WARNING, ERROR, FATAL = 1, 2, 3, 4, 5
@@ -243,12 +248,30 @@ _EMCY_CODE_TEXT: dict[int, str] = {}  # 'EMCY 0x8130 Monitoring - ...; register 
 _EMCY_REG_TEXT: dict[int, str] = {}  # '11 [generic,communication]; mfr '
 
 
+def emcy_classes(codes: np.ndarray) -> list[str]:
+    """`emcy_class` of each code, by a searchsorted per mask instead of dict probes per code.
+
+    Masks from the least to the most specific, each hit overwriting: the most
+    specific name wins, as `emcy_class`'s first hit does.
+    """
+    keys = np.array(sorted(EMCY_CODES), np.int64)
+    names = [EMCY_CODES[k] for k in keys.tolist()] + ["Unknown"]
+    pick = np.full(len(codes), len(keys), np.intp)
+    for mask in (0xF000, 0xFF00, 0xFFF0, 0xFFFF):
+        masked = codes & mask
+        at = np.minimum(np.searchsorted(keys, masked), len(keys) - 1)
+        hit = keys[at] == masked
+        pick[hit] = at[hit]
+    return list(map(names.__getitem__, pick.tolist()))
+
+
 def _emcy_heads(node: list[int], code: list[int], reg: list[int]) -> list[str]:
     """'node 5: EMCY 0x8130 ...; register 0x11 [generic,communication]; mfr ' of each EMCY."""
     for n in set(node).difference(_NODE_TEXT):
         _NODE_TEXT[n] = f"node {n}: " if n >= 0 else ""
-    for c in set(code).difference(_EMCY_CODE_TEXT):
-        _EMCY_CODE_TEXT[c] = f"EMCY 0x{c:04X} {emcy_class(c)}; register 0x"
+    new = sorted(set(code).difference(_EMCY_CODE_TEXT))
+    for c, cls in zip(new, emcy_classes(np.array(new, np.int64)), strict=True):
+        _EMCY_CODE_TEXT[c] = f"EMCY 0x{c:04X} {cls}; register 0x"
     for r in set(reg).difference(_EMCY_REG_TEXT):
         regs = ",".join(error_register_names(r)) or "none"
         _EMCY_REG_TEXT[r] = f"{r:02X} [{regs}]; mfr "

@@ -22,6 +22,7 @@ from cananalyze.events import (
     EventState,
     batch_event_columns,
     batch_events,
+    emcy_classes,
     finding_event,
     sdo_event,
 )
@@ -29,7 +30,7 @@ from cananalyze.frames import FLAG_RTR, FrameBatch
 from cananalyze.outputs.table_stream import HOLD, StreamTables
 from cananalyze.protocol.fields import annotation, frame_fields
 from cananalyze.protocol.services import Service
-from cananalyze.protocol.tables import NMT_STATES
+from cananalyze.protocol.tables import NMT_STATES, emcy_class
 
 
 def _reference(batch, off: int, state: dict) -> tuple[list[Row], list[Row]]:
@@ -271,3 +272,9 @@ def test_batch_event_columns_same_as_rows():
         assert cols.rows() == rows and states == states2
         off += len(batch)
     assert s1.last_state == s2.last_state and s1.last_t == s2.last_t
+
+
+def test_emcy_classes_equal_emcy_class_for_every_code():
+    codes = np.arange(1 << 16, dtype=np.int64)
+    assert emcy_classes(codes) == [emcy_class(c) for c in codes.tolist()]
+    assert emcy_classes(np.zeros(0, np.int64)) == []
