@@ -1,7 +1,11 @@
 """The event log: rare traffic and records of a batch as events, built once for every output.
 
-`Collector` (the Capture, MCAP, rerun) and the streaming table writer both call
-`batch_events`, so the events table says the same thing whichever path wrote it.
+The streaming table writer takes them as columns (`batch_event_columns`) and
+`Collector` (the Capture, MCAP, rerun) as tuples (`batch_events`, the same
+columns), so the events table says the same thing whichever path wrote it.
+Texts are built per group, not per event where it can be helped: SDO heads once
+per object, EMCY heads once per node/code/register, manufacturer bytes as hex
+by numpy.
 EMCY, NMT and boot-up texts come from the frame bytes directly, not through
 `DecodedBatch.fields` (which realises every lazy SDO note of the batch and
 builds a dict per row); rows carrying a note (a profile's manufacturer
@@ -11,16 +15,24 @@ one `decode` prints.
 
 from __future__ import annotations
 
+import operator
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from itertools import repeat
 
 import numpy as np
 
+from . import event_columns as ec
 from .decoded import DecodedBatch
+from .event_columns import NO_NODE, EventColumns, Row, texts
 from .frames import FLAG_RTR
 from .protocol.fields import annotation, frame_fields
 from .protocol.services import Service
-from .protocol.tables import NMT_COMMANDS, NMT_STATES, emcy_class, error_register_names
+from .protocol.tables import (
+    EMCY_CODES,
+    NMT_COMMANDS,
+    NMT_STATES,
+    error_register_names,
+)
 
 # foxglove.Log levels, used for every event (MCAP, rerun, the events table).
 DEBUG, INFO, WARNING, ERROR, FATAL = 1, 2, 3, 4, 5
@@ -28,6 +40,7 @@ LEVEL_NAMES = {DEBUG: "debug", INFO: "info", WARNING: "warning", ERROR: "error",
 _LEVEL_BY_NAME = {v: k for k, v in LEVEL_NAMES.items()} | {"critical": FATAL, "warn": WARNING}
 
 _STATE_SERVICES = np.array((Service.HEARTBEAT, Service.BOOTUP, Service.GUARD_RESPONSE), np.uint8)
+_U64 = 0xFFFFFFFFFFFFFFFF
 _EVENT_SERVICES = np.array([Service.NMT, Service.EMCY, Service.BOOTUP], np.uint8)
 
 
@@ -41,17 +54,6 @@ class Event:
     level: int
     message: str
     row: int | None = None
-
-
-class Row(NamedTuple):
-    """An event as a plain tuple (what `batch_events` returns; `Event(*row)` is the same)."""
-
-    t: float
-    kind: str
-    node: int | None
-    level: int
-    message: str
-    row: int | None
 
 
 @dataclass
@@ -115,38 +117,50 @@ def sdo_event(row: int, r: dict) -> Row:
     return Row(float(get("t", 0.0)), "sdo", get("node"), level, text, row)
 
 
-def sdo_events(fields, rows: list[int]) -> list[Row]:
-    """`sdo_event` of each fast-path record, from its fields as columns (`RecordColumns`).
+def sdo_event_columns(fields, rows: np.ndarray) -> EventColumns:
+    """`sdo_event` of each fast-path record as columns, from its fields (`RecordColumns`).
 
-    The head ("SDO upload 0x1018:01 name") is formatted once per object and direction:
-    a polled bus asks the same few objects over and over.
+    The head ("SDO upload 0x1018:01 name") is formatted once per object and direction
+    (a polled bus asks the same few objects over and over); the usual tail, an
+    positive integer answer ("... = 305419896 (0x12345678) ok") takes one f-string
+    with the head, every other one `_sdo_tail`.
     """
     c = fields.columns
-    heads: dict[tuple, str] = {}
-    out: list[Row] = []
-    add = out.append
-    for t, nd, res, row, d, i, s, nm, v, dat, ab, det in zip(
-        c["t"],
-        c["node"],
-        c["result"],
+    n = len(c["t"])
+    result = c["result"]
+    ok = np.fromiter(map(operator.eq, result, repeat("ok", n)), bool, n)
+    keys = list(zip(c["direction"], c["index"], c["subindex"], c["name"], strict=True))
+    heads = {k: _sdo_head(*k) for k in dict.fromkeys(keys)}
+    messages = [
+        f"{h} = {v} (0x{v:X}) ok"  # = _sdo_tail's text for these (v & 2**64-1 == v)
+        if type(v) is int and 9 < v <= _U64 and r == "ok" and a is None
+        else h + _sdo_tail(r, v, d, a, det)
+        for h, r, v, d, a, det in zip(
+            map(heads.__getitem__, keys),
+            result,
+            c["value"],
+            c["data"],
+            c["abort_text"],
+            c["detail"],
+            strict=True,
+        )
+    ]
+    return EventColumns(
+        np.array(c["t"], np.float64),
+        np.full(n, ec.SDO, np.uint8),
+        _int_column(c["node"], np.int16, NO_NODE),
+        np.where(ok, INFO, WARNING).astype(np.int8),
+        texts(messages),
         rows,
-        c["direction"],
-        c["index"],
-        c["subindex"],
-        c["name"],
-        c["value"],
-        c["data"],
-        c["abort_text"],
-        c["detail"],
-        strict=True,
-    ):
-        key = (d, i, s, nm)
-        head = heads.get(key)
-        if head is None:
-            head = heads[key] = _sdo_head(d, i, s, nm)
-        text = head + _sdo_tail(res, v, dat, ab, det)
-        add(Row(t, "sdo", nd, INFO if res == "ok" else WARNING, text, row))
-    return out
+    )
+
+
+def _int_column(values: list, dtype, none: int) -> np.ndarray:
+    """An integer column of a list of int/None, `none` for None."""
+    try:
+        return np.array(values, dtype)
+    except TypeError:
+        return np.array([none if v is None else v for v in values], dtype)
 
 
 def finding_event(row: int, r: dict, t: float) -> Row:
@@ -161,7 +175,15 @@ def finding_event(row: int, r: dict, t: float) -> Row:
 def batch_events(
     batch: DecodedBatch, offset: int, state: EventState
 ) -> tuple[list[Row], list[Row]]:
-    """(events, NMT state changes) of one batch, in the order the Capture has always kept.
+    """(events, NMT state changes) of one batch as tuples (the Capture, MCAP, rerun)."""
+    events, states = batch_event_columns(batch, offset, state)
+    return events.rows(), states
+
+
+def batch_event_columns(
+    batch: DecodedBatch, offset: int, state: EventState
+) -> tuple[EventColumns, list[Row]]:
+    """(events as columns, NMT state changes) of one batch, in the order the Capture keeps.
 
     Records first (SDO transactions, findings), then EMCY/NMT/boot-up rows, then
     state changes (only changes, per node, across batches through `state`).
@@ -169,7 +191,6 @@ def batch_events(
     fb = batch.frames
     n = len(fb)
     last_t = float(fb.t[-1]) if n else state.last_t
-    events: list[Row] = []
     split = batch.sdo_fast_split()
     records = batch.records
     if split is None:
@@ -177,139 +198,233 @@ def batch_events(
     else:  # the fast path's records as columns; the others read without building those
         get = list.__getitem__
         pairs = ((k, get(records, k)) for k in split[2])
+    slow: list[Row] = []
     at: list[int] = []
     for k, (row, rec) in pairs:
         kind = rec.get("kind")
         if kind == "sdo":
-            events.append(sdo_event(row + offset, rec))
+            slow.append(sdo_event(row + offset, rec))
             at.append(k)
         elif kind == "finding":
             t = float(fb.t[row]) if 0 <= row < n else last_t
-            events.append(finding_event(row + offset, rec, t))
+            slow.append(finding_event(row + offset, rec, t))
             at.append(k)
+    events = EventColumns.from_rows(slow)
     if split is not None:
         fields, fast, _ = split
-        fast_events = sdo_events(fields, (fast.row + offset).tolist())
-        if events:
+        fast_events = sdo_event_columns(fields, fast.row.astype(np.int64) + offset)
+        if slow:
             order = np.argsort(
                 np.concatenate((np.asarray(at, np.int64), fast.slots)), kind="stable"
             )
-            both = events + fast_events
-            events = list(map(both.__getitem__, order.tolist()))
+            events = EventColumns.concat([events, fast_events]).take(order)
         else:
             events = fast_events
     states: list[Row] = []
     if n:
-        events.extend(_frame_events(batch, offset))
+        parts = [events, _frame_event_columns(batch, offset)]
         states = _state_changes(batch, offset, state)
-        for ev in states:
-            level = INFO if ev.message != "stopped" else WARNING
-            message = f"node {ev.node}: NMT state {ev.message}"
-            events.append(ev._replace(level=level, message=message))
-    if events:
-        state.last_t = events[-1].t
+        if states:
+            parts.append(
+                EventColumns.from_rows(
+                    [
+                        ev._replace(
+                            level=INFO if ev.message != "stopped" else WARNING,
+                            message=f"node {ev.node}: NMT state {ev.message}",
+                        )
+                        for ev in states
+                    ]
+                )
+            )
+        events = EventColumns.concat(parts)
+    if len(events):
+        state.last_t = float(events.t[-1])
     return events, states
 
 
-_EMCY_HEAD: dict[tuple[int, int], str] = {}
+# EMCY text pieces, formatted once per node, error code (at most 65536) and register
+_NODE_TEXT: dict[int, str] = {}  # 'node 5: '
+_EMCY_CODE_TEXT: dict[int, str] = {}  # 'EMCY 0x8130 Monitoring - ...; register 0x'
+_EMCY_REG_TEXT: dict[int, str] = {}  # '11 [generic,communication]; mfr '
 
 
-def _emcy_head(code: int, reg: int) -> str:
-    """'EMCY 0x8130 ...; register 0x11 [generic,communication]; mfr ' (cached per code/register)."""
-    key = (code, reg)
-    head = _EMCY_HEAD.get(key)
-    if head is None:
-        regs = ",".join(error_register_names(reg)) or "none"
-        head = f"EMCY 0x{code:04X} {emcy_class(code)}; register 0x{reg:02X} [{regs}]; mfr "
-        if len(_EMCY_HEAD) < 65536:
-            _EMCY_HEAD[key] = head
-    return head
+def emcy_classes(codes: np.ndarray) -> list[str]:
+    """`emcy_class` of each code, by a searchsorted per mask instead of dict probes per code.
+
+    Masks from the least to the most specific, each hit overwriting: the most
+    specific name wins, as `emcy_class`'s first hit does.
+    """
+    keys = np.array(sorted(EMCY_CODES), np.int64)
+    names = [EMCY_CODES[k] for k in keys.tolist()] + ["Unknown"]
+    pick = np.full(len(codes), len(keys), np.intp)
+    for mask in (0xF000, 0xFF00, 0xFFF0, 0xFFFF):
+        masked = codes & mask
+        at = np.minimum(np.searchsorted(keys, masked), len(keys) - 1)
+        hit = keys[at] == masked
+        pick[hit] = at[hit]
+    return list(map(names.__getitem__, pick.tolist()))
 
 
-def _frame_events(batch: DecodedBatch, off: int) -> list[Row]:
-    """EMCY, NMT and boot-up lines, from columns; rows with a note go through `annotation`."""
-    fb = batch.frames
-    rows = np.flatnonzero(np.isin(batch.service, _EVENT_SERVICES))
-    if rows.size == 0:
-        return []
-    notes = batch.notes
-    # dict.get: a LazyNotes must not realise its SDO notes (they are on SDO rows only)
-    noted = {i for i in rows.tolist() if dict.get(notes, i)} if len(dict.keys(notes)) else set()
-    out: list[Row] = []
-    data = fb.data[rows]
-    dlc = fb.dlc[rows].tolist()
-    d = data.tolist()
-    hexes = None
-    for k, (i, s, node, t) in enumerate(
-        zip(
-            rows.tolist(),
-            batch.service[rows].tolist(),
-            batch.node[rows].tolist(),
-            fb.t[rows].tolist(),
-            strict=True,
+def _emcy_heads(node: list[int], code: list[int], reg: list[int]) -> list[str]:
+    """'node 5: EMCY 0x8130 ...; register 0x11 [generic,communication]; mfr ' of each EMCY."""
+    for n in set(node).difference(_NODE_TEXT):
+        _NODE_TEXT[n] = f"node {n}: " if n >= 0 else ""
+    new = sorted(set(code).difference(_EMCY_CODE_TEXT))
+    for c, cls in zip(new, emcy_classes(np.array(new, np.int64)), strict=True):
+        _EMCY_CODE_TEXT[c] = f"EMCY 0x{c:04X} {cls}; register 0x"
+    for r in set(reg).difference(_EMCY_REG_TEXT):
+        regs = ",".join(error_register_names(r)) or "none"
+        _EMCY_REG_TEXT[r] = f"{r:02X} [{regs}]; mfr "
+    add = operator.add
+    return list(
+        map(
+            add,
+            map(add, map(_NODE_TEXT.__getitem__, node), map(_EMCY_CODE_TEXT.__getitem__, code)),
+            map(_EMCY_REG_TEXT.__getitem__, reg),
         )
-    ):
-        who = node if node >= 0 else None
-        if i in noted or i in fb.long_data:
-            f = frame_fields(s, fb.payload(i), bool(fb.flags[i] & FLAG_RTR))
-            f.update(dict.get(notes, i) or {})
-            text = annotation(s, node, int(batch.pdo[i]), f, bool(fb.flags[i] & FLAG_RTR))
-            if s == Service.EMCY:
-                level, kind = (INFO if f.get("reset") else ERROR), "emcy"
-            elif s == Service.NMT:
-                level, kind = INFO, "nmt"
-            else:
-                level, kind = INFO, "bootup"
-        elif s == Service.EMCY:
-            kind = "emcy"
-            b = d[k]
-            if dlc[k] < 3:
-                level, text = ERROR, "EMCY (malformed: fewer than 3 bytes)"
-            else:
-                code = b[0] | b[1] << 8
-                if code == 0:
-                    level, text = INFO, "EMCY error reset / no error"
-                else:
-                    if hexes is None:
-                        hexes = data.tobytes()
-                    mfr = hexes[k * 8 + 3 : k * 8 + min(dlc[k], 8)].hex()
-                    level, text = ERROR, _emcy_head(code, b[2]) + (mfr or "-")
-        elif s == Service.NMT:
-            kind, level = "nmt", INFO
-            if dlc[k] < 2:
-                text = "NMT (malformed: needs 2 bytes)"
-            else:
-                b = d[k]
-                cmd = NMT_COMMANDS.get(b[0]) or f"unknown 0x{b[0]:02X}"
-                text = f"NMT {cmd} all nodes" if b[1] == 0 else f"NMT {cmd} node {b[1]}"
-        else:
-            kind, level, text = "bootup", INFO, "boot-up"
-        if node >= 0 and s != Service.NMT:
-            text = f"node {node}: {text}"
-        out.append(Row(t, kind, who, level, text, i + off))
+    )
+
+
+_HEX = np.frombuffer(b"0123456789abcdef", np.uint8)
+
+
+def _any_of(service: np.ndarray, codes: np.ndarray) -> np.ndarray:
+    """service in codes, by a comparison per code (twice as fast as a lookup table here)."""
+    out = service == codes[0]
+    for c in codes[1:]:
+        out |= service == c
     return out
 
 
-def _state_changes(batch: DecodedBatch, off: int, state: EventState) -> list[Row]:
-    """NMT state changes per node (heartbeat, boot-up, guarding); message = the state name."""
+def _mfr_hex(data: np.ndarray, dlc: np.ndarray) -> list[str]:
+    """EMCY manufacturer bytes (3 up to the DLC) as lowercase hex, '-' when there are none."""
+    m = len(dlc)
+    byte = data[:, 3:8]
+    chars = np.empty((m, 5, 2), np.uint8)
+    chars[:, :, 0] = _HEX[byte >> 4]
+    chars[:, :, 1] = _HEX[byte & 15]
+    chars[np.arange(3, 8) >= np.minimum(dlc, 8)[:, None]] = 0  # trailing NULs: dropped
+    out = chars.reshape(m, 10).view("S10").ravel().astype("U10")
+    out[out == ""] = "-"
+    return out.tolist()
+
+
+def _marked(keys, n: int) -> np.ndarray:
+    """A mask over a batch's n rows, True at the given row numbers (those in range)."""
+    at = np.fromiter(keys, np.int64, len(keys))
+    mask = np.zeros(n, bool)
+    mask[at[(at >= 0) & (at < n)]] = True
+    return mask
+
+
+def _frame_event_columns(batch: DecodedBatch, off: int) -> EventColumns:
+    """EMCY, NMT and boot-up lines, from columns; rows with a note go through `annotation`."""
     fb = batch.frames
-    is_state = np.isin(batch.service, _STATE_SERVICES) & (fb.dlc > 0)
-    rows = np.flatnonzero(is_state)
+    rows = np.flatnonzero(_any_of(batch.service, _EVENT_SERVICES))
+    m = rows.size
+    if m == 0:
+        return EventColumns.empty()
+    notes = batch.notes
+    service = batch.service[rows]
+    node = batch.node[rows]
+    dlc = fb.dlc[rows]
+    data = fb.data[rows]
+    kind = np.full(m, ec.BOOTUP, np.uint8)
+    kind[service == Service.EMCY] = ec.EMCY
+    kind[service == Service.NMT] = ec.NMT
+    level = np.full(m, INFO, np.int8)
+    text = np.full(m, "boot-up", object)
+    # dict.get: a LazyNotes must not realise its SDO notes (they are on SDO rows only)
+    slow = np.zeros(m, bool)
+    if len(dict.keys(notes)):
+        at = np.flatnonzero(_marked(dict.keys(notes), len(fb))[rows]).tolist()
+        slow[[k for k, i in zip(at, rows[at].tolist(), strict=True) if dict.get(notes, i)]] = True
+    if fb.long_data:
+        slow |= _marked(fb.long_data, len(fb))[rows]
+    emcy = (kind == ec.EMCY) & ~slow
+    prefixed = (node >= 0) & (service != Service.NMT)  # "node 5: " still to prepend
+    if emcy.any():
+        code = data[:, 0].astype(np.int64) | data[:, 1].astype(np.int64) << 8
+        short = emcy & (dlc < 3)
+        text[short] = "EMCY (malformed: fewer than 3 bytes)"
+        level[short] = ERROR
+        reset = emcy & (dlc >= 3) & (code == 0)
+        text[reset] = "EMCY error reset / no error"
+        err = np.flatnonzero(emcy & (dlc >= 3) & (code != 0))
+        if err.size:
+            # one head per (node, code, register): a faulty node repeats its EMCY
+            key = (node[err].astype(np.int64) + 1) << 24 | code[err] << 8 | data[err, 2]
+            uniq, inv = np.unique(key, return_inverse=True)
+            heads = _emcy_heads(
+                ((uniq >> 24) - 1).tolist(), (uniq >> 8 & 0xFFFF).tolist(), (uniq & 0xFF).tolist()
+            )
+            heads = texts(heads)[inv.ravel()].tolist()
+            text[err] = list(map(operator.add, heads, _mfr_hex(data[err], dlc[err])))
+            level[err] = ERROR
+            prefixed[err] = False
+    for k in np.flatnonzero((kind == ec.NMT) & ~slow).tolist():
+        if dlc[k] < 2:
+            text[k] = "NMT (malformed: needs 2 bytes)"
+        else:
+            b0, b1 = int(data[k, 0]), int(data[k, 1])
+            cmd = NMT_COMMANDS.get(b0) or f"unknown 0x{b0:02X}"
+            text[k] = f"NMT {cmd} all nodes" if b1 == 0 else f"NMT {cmd} node {b1}"
+    for k in np.flatnonzero(slow).tolist():
+        i, s = int(rows[k]), int(service[k])
+        rtr = bool(fb.flags[i] & FLAG_RTR)
+        f = frame_fields(s, fb.payload(i), rtr)
+        f.update(dict.get(notes, i) or {})
+        text[k] = annotation(s, int(node[k]), int(batch.pdo[i]), f, rtr)
+        if s == Service.EMCY:
+            level[k] = INFO if f.get("reset") else ERROR
+    named = np.flatnonzero(prefixed)
+    if named.size:
+        text[named] = list(
+            map(
+                "node {}: {}".format,
+                node[named].tolist(),
+                text[named].tolist(),
+            )
+        )
+    return EventColumns(
+        fb.t[rows],
+        kind,
+        np.where(node >= 0, node, NO_NODE).astype(np.int16),
+        level,
+        text,
+        rows.astype(np.int64) + off,
+    )
+
+
+def _state_changes(batch: DecodedBatch, off: int, state: EventState) -> list[Row]:
+    """NMT state changes per node (heartbeat, boot-up, guarding); message = the state name.
+
+    Frames grouped by node (a stable sort keeps each node's frames in order), only
+    those whose state differs from the node's previous frame looked at in Python.
+    """
+    fb = batch.frames
+    rows = np.flatnonzero(_any_of(batch.service, _STATE_SERVICES) & (fb.dlc > 0))
     if rows.size == 0:
         return []
-    code = fb.data[rows, 0] & 0x7F
     nodes = batch.node[rows]
+    order = np.argsort(nodes, kind="stable")
+    rows, nodes = rows[order], nodes[order]
+    code = fb.data[rows, 0] & 0x7F
+    change = np.ones(rows.size, bool)
+    change[1:] = (code[1:] != code[:-1]) | (nodes[1:] != nodes[:-1])
     out: list[Row] = []
     last = state.last_state
-    for n in np.unique(nodes).tolist():
-        sel = rows[nodes == n]
-        c = code[nodes == n]
-        change = np.ones(c.size, bool)
-        change[1:] = c[1:] != c[:-1]
-        for i, v in zip(sel[change].tolist(), c[change].tolist(), strict=True):
-            name = NMT_STATES.get(v, f"unknown 0x{v:02X}")
-            if last.get(n) == name:
-                continue
-            last[n] = name
-            out.append(Row(float(fb.t[i]), "nmt_state", n, INFO, name, i + off))
+    sel = rows[change]
+    for i, n, v, t in zip(
+        sel.tolist(),
+        nodes[change].tolist(),
+        code[change].tolist(),
+        fb.t[sel].tolist(),
+        strict=True,
+    ):
+        name = NMT_STATES.get(v, f"unknown 0x{v:02X}")
+        if last.get(n) == name:
+            continue
+        last[n] = name
+        out.append(Row(t, "nmt_state", n, INFO, name, i + off))
     return out

@@ -30,7 +30,8 @@ import pyarrow as pa
 
 from ..capture import _hex_column, _identity, _match_profile
 from ..decoded import DecodedBatch
-from ..events import LEVEL_NAMES, EventState, Row, batch_events
+from ..event_columns import KINDS, NO_NODE, NO_ROW, EventColumns
+from ..events import LEVEL_NAMES, EventState, batch_event_columns
 from ..frames import FrameBatch
 from ..protocol.services import SERVICE_NAMES
 from ..sdo.transaction import SDO_TABLE_COLUMNS
@@ -203,7 +204,7 @@ class StreamTables:
         self._event_state = EventState()
         self._event_last: tuple | None = None
         self._events_unsorted = False
-        self._pending_events: list[Row] = []
+        self._pending_events = EventColumns.empty()
         self._channels: tuple[str, ...] = ()
         self._counts = np.zeros((128, len(SERVICE_NAMES)), np.int64)
         self._last_state: dict[int, tuple[float, str]] = {}
@@ -239,7 +240,7 @@ class StreamTables:
         if batch.signals:
             self._add_signals(batch, off)
         self._add_records(batch)
-        events, states = batch_events(batch, off, self._event_state)
+        events, states = batch_event_columns(batch, off, self._event_state)
         for ev in states:
             cur = self._last_state.get(ev.node)
             if cur is None or ev.t >= cur[0]:
@@ -317,39 +318,49 @@ class StreamTables:
         sink = self.sinks["signals"]
         self.writer.put(lambda: sink.add(columns()))
 
-    def _add_events(self, events: list[Row], horizon: float | None) -> None:
+    def _add_events(self, events: EventColumns, horizon: float | None) -> None:
         """Queue events; write those older than `horizon` (None: all) in (t, row) order.
 
         Records can complete a batch or two after their time (an SDO answer that
         ends a transfer begun earlier carries the earlier time), so the newest
         HOLD seconds wait for the next batch rather than force a re-sort at the end.
+        Pending events stay columns: one lexsort, one searchsorted per batch.
         """
-        pending = self._pending_events
-        pending.extend(events)
-        if not pending:
+        pending = EventColumns.concat([self._pending_events, events])
+        n = len(pending)
+        if not n:
             return
-        big = 1 << 62
-        pending.sort(key=lambda e: (e.t, big if e.row is None else e.row))
-        if horizon is None:
-            cut = len(pending)
+        key = pending.sort_key()
+        t = pending.t
+        if np.isnan(t).any() or (horizon is not None and horizon != horizon):
+            order, cut = _event_sort_py(t.tolist(), key.tolist(), horizon)
         else:
-            cut = bisect.bisect_left([e.t for e in pending], horizon)
+            order = np.lexsort((np.arange(n), key, t))
+            cut = n if horizon is None else int(np.searchsorted(t[order], horizon, "left"))
+        pending = pending.take(order)
+        key = key[order]
         if cut == 0:
+            self._pending_events = pending
             return
-        events, self._pending_events = pending[:cut], pending[cut:]
-        head = (events[0].t, big if events[0].row is None else events[0].row)
+        events, self._pending_events = pending.take(slice(0, cut)), pending.take(slice(cut, n))
+        head = (float(events.t[0]), int(key[0]))
         if self._event_last is not None and head < self._event_last:
             self._events_unsorted = True
-        self._event_last = (events[-1].t, big if events[-1].row is None else events[-1].row)
-        t, kind, node, level, message, row = zip(*events, strict=True)
+        self._event_last = (float(events.t[-1]), int(key[cut - 1]))
         vocab = self._labels["kind"]
+        present, first = np.unique(events.kind, return_index=True)
+        lut = np.zeros(len(KINDS), np.int32)
+        for k in present[np.argsort(first)].tolist():  # new labels in first-seen order
+            lut[k] = vocab.code(KINDS[k])
+        no_node = events.node == NO_NODE
+        no_row = events.row == NO_ROW
         cols = {
-            "t": np.array(t, np.float64),
-            "kind": Coded(np.array([vocab.code(k) for k in kind], np.int32), vocab.snapshot()),
-            "node": ab.optional_ints(list(node), pa.int16()),
-            "level": ab.dictionary(np.array(level, np.int8) - 1, _LEVELS, pa.int8()),
-            "message": ab.strings(list(message), large=True),
-            "row": ab.optional_ints(list(row), pa.int64()),
+            "t": events.t,
+            "kind": Coded(lut[events.kind], vocab.snapshot()),
+            "node": ab.numeric(np.where(no_node, 0, events.node), no_node, pa.int16()),
+            "level": ab.dictionary(events.level - 1, _LEVELS, pa.int8()),
+            "message": ab.strings(events.message.tolist(), large=True),
+            "row": ab.numeric(np.where(no_row, 0, events.row), no_row, pa.int64()),
         }
         sink = self.sinks["events"]
         self.writer.put(lambda: sink.add(cols))
@@ -413,7 +424,7 @@ class StreamTables:
     def close(self) -> dict[str, int]:
         """Write the small tables, wait for the writer, fix order/categories, rename all files."""
         try:
-            self._add_events([], None)
+            self._add_events(EventColumns.empty(), None)
             for sink in self.sinks.values():
                 self.writer.put(sink.close)
             self.writer.join()
@@ -591,6 +602,14 @@ def _type_changed(sink: Sink, column: str, final: list[str]) -> bool:
     if sink.schema is None or sink.fmt != "parquet":
         return False
     return sink.schema.field(column).type.index_type != pl.code_type(len(final))
+
+
+def _event_sort_py(t: list, key: list, horizon: float | None) -> tuple[list[int], int]:
+    """The (t, row) order and cut as Python's sort and bisect give them (times with NaN)."""
+    order = sorted(range(len(t)), key=lambda i: (t[i], key[i]))
+    if horizon is None:
+        return order, len(t)
+    return order, bisect.bisect_left([t[i] for i in order], horizon)
 
 
 def _event_order(table: pa.Table) -> np.ndarray:
