@@ -287,3 +287,12 @@ def test_cli_pure_and_compiled_agree(name: str) -> None:
     env["CANANALYZE_PURE"] = "1"
     pure = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, check=True).stdout
     assert out == pure and len(out) > 1000
+
+
+def test_candump_chunk_of_short_lines(tmp_path: Path) -> None:
+    """Lines shorter than the split's room estimate (blank lines, bare frames): the counted path."""
+    frame = b"(1.0) c 001#\n"  # 13 bytes, below the 24-byte average the split assumes
+    body = (b"\n" * 50 + frame * 200) * 20
+    path = tmp_path / "short.log"
+    path.write_bytes(body)
+    assert _same(path) == 4000

@@ -286,10 +286,18 @@ def _c_lines(C, text, chans: _Channels):
     first, then the rows it does not fit, in row order.
     """
     size = len(text)
-    n = C.count_lines(text)
-    starts = np.empty(n, np.int64)
-    ends = np.empty(n, np.int64)
-    C.split_lines(text, starts, ends, False)
+    # room for lines of 24 bytes on average (candump's are 30-60): one pass over the
+    # chunk instead of counting first; the count is only needed when lines are shorter
+    cap = size // 24 + 64
+    starts = np.empty(cap, np.int64)
+    ends = np.empty(cap, np.int64)
+    n = C.split_lines(text, starts, ends, False)
+    if n < 0:
+        n = C.count_lines(text)
+        starts = np.empty(n, np.int64)
+        ends = np.empty(n, np.int64)
+        C.split_lines(text, starts, ends, False)
+    starts, ends = starts[:n], ends[:n]
     t = np.empty(n, np.float64)
     can_id = np.empty(n, np.uint32)
     flags = np.empty(n, np.uint8)
