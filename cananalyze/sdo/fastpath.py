@@ -15,6 +15,7 @@ processor decides (see `SdoProcessor`).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -137,9 +138,9 @@ def py_round(v: np.ndarray, ndigits: int) -> np.ndarray:
     return out
 
 
-def _rounded_latency(dt: np.ndarray) -> list:
+def _rounded_latency(dt: np.ndarray) -> np.ndarray:
     """round(round(dt * 1000, 6), 3) exactly as Python computes it, column-wise."""
-    return py_round(py_round(np.asarray(dt, np.float64) * 1000.0, 6), 3).tolist()
+    return py_round(py_round(np.asarray(dt, np.float64) * 1000.0, 6), 3)
 
 
 def pair_columns(fb, a: np.ndarray, b: np.ndarray, slots: np.ndarray) -> SdoColumns:
@@ -154,27 +155,56 @@ def pair_columns(fb, a: np.ndarray, b: np.ndarray, slots: np.ndarray) -> SdoColu
         index=da[:, 1].astype(np.int64) | (da[:, 2].astype(np.int64) << 8),
         subindex=da[:, 3].astype(np.int64),
         ok=db[:, 0] != _ABORT,
-        latency=np.asarray(_rounded_latency(t1 - t0), np.float64),
+        latency=_rounded_latency(t1 - t0),
     )
 
 
 RECORD_COLUMNS = SDO_TABLE_COLUMNS
 
 
+# the fields every ok expedited pair has alike, and the arrays that hold the others
+_OK_CONSTANTS = {
+    "protocol": "expedited",
+    "result": "ok",
+    "abort_code": None,
+    "abort_text": None,
+    "detail": None,
+}
+NUMBER_FIELDS = ("t_start", "t", "latency_ms", "node", "index", "subindex", "size")
+OBJECT_FIELDS = ("data", "value", "name")
+
+
 @dataclass
 class RecordColumns:
-    """Every field of the fast path's records as lists (one per RECORD_COLUMNS key).
+    """Every field of the fast path's records as columns, numbers as numpy arrays.
 
-    The export writes the SDO table and its events from these without a dict per
-    transaction; `records()` builds the dicts from the same values. Aborted pairs
-    (rare) keep the dict `pair_outputs` made, and their fields are copied in.
+    `arrays` holds NUMBER_FIELDS (float64 times and latency, int64 others), `upload`
+    (bool: the direction) and OBJECT_FIELDS (object arrays), all as an ok transfer
+    has them; the other fields are `_OK_CONSTANTS`. Aborted pairs (rare) keep the
+    dict `pair_outputs` made (`aborted`, position -> record), which wins. The export
+    takes the arrays as they are; `columns` (lists, aborted fields patched in, for
+    readers that go value by value) and `records()` are built when asked.
     """
 
-    columns: dict[str, list]
+    arrays: dict[str, np.ndarray]
     aborted: dict[int, dict]  # position -> record
 
     def __len__(self) -> int:
-        return len(self.columns["t"])
+        return len(self.arrays["t"])
+
+    @cached_property
+    def columns(self) -> dict[str, list]:
+        """One list per RECORD_COLUMNS key, values as in the records."""
+        a = self.arrays
+        m = len(self)
+        columns: dict[str, list] = {c: a[c].tolist() for c in NUMBER_FIELDS + OBJECT_FIELDS}
+        columns["direction"] = np.where(a["upload"], "upload", "download").tolist()
+        for c, v in _OK_CONSTANTS.items():
+            columns[c] = [v] * m
+        for k, rec in self.aborted.items():
+            for c in RECORD_COLUMNS:
+                columns[c][k] = rec[c]
+        return {c: columns[c] for c in RECORD_COLUMNS}
 
     def records(self) -> list[dict]:
         c = self.columns
@@ -225,7 +255,7 @@ def pair_records(
     a: np.ndarray,
     b: np.ndarray,
     object_info: ObjectInfo | None,
-    latency: list | None = None,
+    latency: np.ndarray | None = None,
 ) -> list[dict]:
     """Records of taken pairs, exactly as the tracker makes them, built from columns."""
     return pair_record_columns(fb, a, b, object_info, latency).records()
@@ -236,9 +266,9 @@ def pair_record_columns(
     a: np.ndarray,
     b: np.ndarray,
     object_info: ObjectInfo | None,
-    latency: list | None = None,
+    latency: np.ndarray | None = None,
 ) -> RecordColumns:
-    """The records' fields of taken pairs as lists, values as the tracker makes them.
+    """The records' fields of taken pairs as columns, values as the tracker makes them.
 
     Names and data types are looked up once per distinct (node, index, subindex),
     values decoded per data type as numpy columns. Aborted pairs (rare) go through
@@ -246,7 +276,10 @@ def pair_record_columns(
     """
     m = len(a)
     if m == 0:
-        return RecordColumns({c: [] for c in RECORD_COLUMNS}, {})
+        floats = {c: np.zeros(0, np.float64) for c in ("t_start", "t", "latency_ms")}
+        ints = {c: np.zeros(0, np.int64) for c in NUMBER_FIELDS if c not in floats}
+        objects = {c: np.empty(0, object) for c in OBJECT_FIELDS}
+        return RecordColumns(floats | ints | objects | {"upload": np.zeros(0, bool)}, {})
     da, db = fb.data[a], fb.data[b]
     upload = da[:, 0] == _UPLOAD_REQ
     aborted = db[:, 0] == _ABORT
@@ -274,34 +307,25 @@ def pair_record_columns(
                 if code >= 0:
                     sel = np.flatnonzero(dtype_of == code)
                     values[sel] = decode_column(raw[sel], length[sel], code)
-    if latency is None:
-        latency = _rounded_latency(t1 - t0)
-    nodes = node_a.tolist()
-    columns = {
-        "t_start": t0.tolist(),
-        "t": t1.tolist(),
-        "latency_ms": list(latency) if any_abort else latency,  # (a shared list: patched below)
-        "node": nodes,
-        "direction": np.where(upload, "upload", "download").tolist(),
-        "protocol": ["expedited"] * m,
-        "index": index_a.tolist(),
-        "subindex": da[:, 3].tolist(),
-        "size": length.tolist(),
-        "data": data.tolist(),
-        "value": values.tolist(),
-        "name": names.tolist(),
-        "result": ["ok"] * m,
-        "abort_code": [None] * m,
-        "abort_text": [None] * m,
-        "detail": [None] * m,
+    latency = _rounded_latency(t1 - t0) if latency is None else np.asarray(latency, np.float64)
+    arrays = {
+        "t_start": t0.astype(np.float64, copy=False),
+        "t": t1.astype(np.float64, copy=False),
+        "latency_ms": latency,
+        "node": node_a,
+        "index": index_a,
+        "subindex": da[:, 3].astype(np.int64),
+        "size": length,
+        "upload": upload,
+        "data": data,
+        "value": values,
+        "name": names,
     }
     done: dict[int, dict] = {}
     if any_abort:
         for k in np.flatnonzero(aborted).tolist():
-            rec = done[k] = pair_outputs(fb, int(a[k]), int(b[k]), nodes[k], object_info)[2]
-            for c in RECORD_COLUMNS:
-                columns[c][k] = rec[c]
-    return RecordColumns(columns, done)
+            done[k] = pair_outputs(fb, int(a[k]), int(b[k]), int(node_a[k]), object_info)[2]
+    return RecordColumns(arrays, done)
 
 
 def pair_notes(fb, a: np.ndarray, b: np.ndarray) -> tuple[list[dict], list[dict]]:
