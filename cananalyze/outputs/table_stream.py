@@ -37,6 +37,7 @@ from ..protocol.services import SERVICE_NAMES
 from ..sdo.transaction import SDO_TABLE_COLUMNS
 from . import arrow_build as ab
 from . import pandas_like as pl
+from . import sdo_chunks
 from .atomic import atomic_path
 from .parquet_out import TABLES, _outdir
 from .table_sink import (
@@ -389,34 +390,39 @@ class StreamTables:
                 self._findings.append(tuple(r.get(c, _NAN) for c in FINDING_COLUMNS))
         if not sdo and split is None:
             return
-        ident = [(k, r) for k, r in sdo if r.get("index") in _IDENTITY_INDEX]
+        pieces: dict = {}
+        order = None
+        fast_ident: list[tuple[int, dict]] = []
+        if split is not None:
+            fields, fast, _ = split
+            keep = None
+            if fields.aborted:  # (rare) read as the dicts they are
+                gone = sorted(fields.aborted)
+                sdo.extend((int(fast.slots[j]), fields.aborted[j]) for j in gone)
+                keep = np.delete(np.arange(len(fast.slots)), gone)
+            for j in np.flatnonzero(np.isin(fast.index, _IDENTITY_INDEX)).tolist():
+                if j not in fields.aborted:
+                    fast_ident.append((int(fast.slots[j]), fields.record(j)))
+            pieces = sdo_chunks.fast_pieces(fields, keep)
+            if sdo:
+                slots = fast.slots if keep is None else fast.slots[keep]
+                at = np.concatenate((np.array([k for k, _ in sdo], np.int64), slots))
+                order = np.argsort(at, kind="stable")
+        ident = [(k, r) for k, r in sdo if r.get("index") in _IDENTITY_INDEX] + fast_ident
+        ident.sort(key=operator.itemgetter(0))
         rows = []
         for _, r in sdo:  # one C call per record that has every column (nearly all)
             try:
                 rows.append(_SDO_ROW(r))
             except KeyError:
                 rows.append(tuple(r.get(c, _NAN) for c in SDO_COLUMNS))
-        chunk: list = list(zip(*rows, strict=True)) or [() for _ in SDO_COLUMNS]
-        if split is not None:
-            fields, fast, _ = split
-            cols = fields.columns
-            for j in np.flatnonzero(np.isin(fast.index, _IDENTITY_INDEX)).tolist():
-                rec = {"kind": "sdo"} | {c: cols[c][j] for c in SDO_COLUMNS}
-                ident.append((int(fast.slots[j]), rec))
-            ident.sort(key=operator.itemgetter(0))
-            if sdo:
-                at = np.concatenate((np.array([k for k, _ in sdo], np.int64), fast.slots))
-                take = np.argsort(at, kind="stable").tolist()
-                chunk = [
-                    list(map((list(mine) + cols[c]).__getitem__, take))
-                    for c, mine in zip(SDO_COLUMNS, chunk, strict=True)
-                ]
-            else:
-                chunk = [cols[c] for c in SDO_COLUMNS]
+        mine = [list(c) for c in zip(*rows, strict=True)] or [[] for _ in SDO_COLUMNS]
+        chunk = [
+            sdo_chunks.merge(values, pieces.get(c), order, self._sdo_stats[c])
+            for c, values in zip(SDO_COLUMNS, mine, strict=True)
+        ]
         for node, info in _identity(ident).items():
             self._identity.setdefault(node, {}).update(info)
-        for c, values in zip(SDO_COLUMNS, chunk, strict=True):
-            self._sdo_stats[c].update(values)
         pickle.dump(chunk, self._sdo_spool, pickle.HIGHEST_PROTOCOL)
         self._sdo_chunks += 1
 
@@ -535,7 +541,8 @@ class StreamTables:
             for _ in range(self._sdo_chunks):
                 chunk = pickle.load(self._sdo_spool)
                 arrays = [
-                    pl.convert(v, decided[c][0]) for c, v in zip(SDO_COLUMNS, chunk, strict=True)
+                    sdo_chunks.to_arrow(v, decided[c][0])
+                    for c, v in zip(SDO_COLUMNS, chunk, strict=True)
                 ]
                 yield pa.Table.from_arrays(arrays, schema=schema)
 

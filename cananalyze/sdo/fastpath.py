@@ -163,7 +163,7 @@ RECORD_COLUMNS = SDO_TABLE_COLUMNS
 
 
 # the fields every ok expedited pair has alike, and the arrays that hold the others
-_OK_CONSTANTS = {
+OK_CONSTANTS = {
     "protocol": "expedited",
     "result": "ok",
     "abort_code": None,
@@ -180,7 +180,7 @@ class RecordColumns:
 
     `arrays` holds NUMBER_FIELDS (float64 times and latency, int64 others), `upload`
     (bool: the direction) and OBJECT_FIELDS (object arrays), all as an ok transfer
-    has them; the other fields are `_OK_CONSTANTS`. Aborted pairs (rare) keep the
+    has them; the other fields are `OK_CONSTANTS`. Aborted pairs (rare) keep the
     dict `pair_outputs` made (`aborted`, position -> record), which wins. The export
     takes the arrays as they are; `columns` (lists, aborted fields patched in, for
     readers that go value by value) and `records()` are built when asked.
@@ -199,12 +199,22 @@ class RecordColumns:
         m = len(self)
         columns: dict[str, list] = {c: a[c].tolist() for c in NUMBER_FIELDS + OBJECT_FIELDS}
         columns["direction"] = np.where(a["upload"], "upload", "download").tolist()
-        for c, v in _OK_CONSTANTS.items():
+        for c, v in OK_CONSTANTS.items():
             columns[c] = [v] * m
         for k, rec in self.aborted.items():
             for c in RECORD_COLUMNS:
                 columns[c][k] = rec[c]
         return {c: columns[c] for c in RECORD_COLUMNS}
+
+    def record(self, j: int) -> dict:
+        """The j-th record's table fields (and kind), without the lists."""
+        if j in self.aborted:
+            return self.aborted[j]
+        a = self.arrays
+        rec = {"kind": "sdo"} | {c: a[c][j].item() for c in NUMBER_FIELDS}
+        rec |= {c: a[c][j] for c in OBJECT_FIELDS} | OK_CONSTANTS
+        rec["direction"] = "upload" if a["upload"][j] else "download"
+        return rec
 
     def records(self) -> list[dict]:
         c = self.columns
