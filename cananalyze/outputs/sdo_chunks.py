@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
-from ..sdo.fastpath import NUMBER_FIELDS, OBJECT_FIELDS, OK_CONSTANTS, RecordColumns
+from ..sdo.fastpath import HEX2, NUMBER_FIELDS, OK_CONSTANTS, RecordColumns
 from . import arrow_build as ab
 from . import pandas_like as pl
 
@@ -47,7 +47,7 @@ class Labels:
 
 
 Column = Numbers | pa.Array | list
-Piece = np.ndarray | Labels
+Piece = np.ndarray | Labels | pa.Array
 
 
 def _missing(v) -> bool:
@@ -62,11 +62,64 @@ def fast_pieces(fields: RecordColumns, keep: np.ndarray | None) -> dict[str, Pie
     def sel(x: np.ndarray) -> np.ndarray:
         return x if keep is None else x[keep]
 
-    out: dict[str, Piece] = {c: sel(a[c]) for c in NUMBER_FIELDS + OBJECT_FIELDS}
+    out: dict[str, Piece] = {c: sel(a[c]) for c in NUMBER_FIELDS}
+    out["value"] = sel(a["value"])
+    out["data"] = hex_strings(sel(a["raw"]), sel(a["data_len"]))
+    out["name"] = Labels(sel(a["name_code"]), fields.name_labels)
     out["direction"] = Labels(sel(a["upload"]).astype(np.int8), ["download", "upload"])
     for c, v in OK_CONSTANTS.items():
         out[c] = Labels(np.zeros(n, np.int8), [v])
     return out
+
+
+def hex_strings(raw: np.ndarray, length: np.ndarray) -> pa.Array:
+    """large_string column of the hex text of each row's first `length` bytes."""
+    pairs = HEX2[raw].view(np.uint8).reshape(len(raw), 2 * raw.shape[1])
+    width = 2 * np.asarray(length, np.int64)
+    data = pairs[np.arange(pairs.shape[1]) < width[:, None]]
+    return _from_buffers(width, data, None)
+
+
+def _from_buffers(lengths: np.ndarray, data: np.ndarray, missing: np.ndarray | None) -> pa.Array:
+    n = len(lengths)
+    offsets = np.zeros(n + 1, np.int64)
+    np.cumsum(lengths, out=offsets[1:])
+    return pa.Array.from_buffers(
+        pa.large_string(),
+        n,
+        [ab._validity(missing), pa.py_buffer(offsets), pa.py_buffer(np.ascontiguousarray(data))],
+    )
+
+
+def _parts(arr: pa.Array) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """(offsets, data bytes, missing mask or None) of a large_string array."""
+    n = len(arr)
+    validity, offsets, data = arr.buffers()
+    off = np.frombuffer(offsets, np.int64, n + 1, arr.offset * 8)
+    raw = np.frombuffer(data, np.uint8) if data is not None else np.zeros(0, np.uint8)
+    missing = None
+    if arr.null_count:
+        bits = np.unpackbits(np.frombuffer(validity, np.uint8), bitorder="little")
+        missing = ~bits[arr.offset : arr.offset + n].astype(bool)
+    return off, raw, missing
+
+
+def take_strings(arr: pa.Array, order: np.ndarray) -> pa.Array:
+    """arr[order] of a large_string array, in numpy (pyarrow.compute costs 30 ms to import)."""
+    off, raw, missing = _parts(arr)
+    start = off[:-1][order]
+    lengths = (off[1:] - off[:-1])[order]
+    new = np.zeros(len(order) + 1, np.int64)
+    np.cumsum(lengths, out=new[1:])
+    pos = np.repeat(start - new[:-1], lengths) + np.arange(new[-1])
+    return _from_buffers(lengths, raw[pos], None if missing is None else missing[order])
+
+
+def _concat(parts: list[pa.Array]) -> pa.Array:
+    parts = [p for p in parts if len(p)]
+    if len(parts) == 1:
+        return parts[0]
+    return pa.concat_arrays(parts) if parts else ab.strings([], large=True)
 
 
 def _as_numbers(values: list, dtype) -> Numbers | None:
@@ -117,8 +170,15 @@ def merge(
         codes = np.concatenate(
             (np.arange(len(labels), len(labels) + len(texts)), fast.codes.astype(np.int64))
         )
-        codes = codes if order is None else codes[order]
-        return ab.strings(labels + texts, large=True).take(ab.numeric(codes))
+        return take_strings(ab.strings(labels + texts, large=True), _ordered(codes, order))
+    if isinstance(fast, pa.Array):
+        n = len(fast)
+        stats.update((["x"] if fast.null_count < n else []) + [None] * (fast.null_count > 0), n)
+        texts = _as_texts(mine)
+        if texts is None:
+            return _take(mine + fast.to_pylist(), order)
+        both = _concat([ab.strings(texts, large=True), fast])
+        return both if order is None else take_strings(both, order)
     if fast.dtype != object:
         stats.update_array(fast)
         got = _as_numbers(mine, fast.dtype)
@@ -132,6 +192,10 @@ def merge(
     values = fast.tolist()
     stats.update(values)
     return _classify(mine + values, order)
+
+
+def _ordered(x: np.ndarray, order: np.ndarray | None) -> np.ndarray:
+    return x if order is None else x[order]
 
 
 def _classify(values: list, order: np.ndarray | None) -> Column:
@@ -156,7 +220,8 @@ def _classify(values: list, order: np.ndarray | None) -> Column:
             mask = nan if nan.any() else None
         return _numbers(arr, mask, order)
     if real == {str}:
-        return ab.strings(_take(values, order), large=True)
+        texts = ab.strings(values, large=True)
+        return texts if order is None else take_strings(texts, order)
     return _take(values, order)
 
 
@@ -171,8 +236,8 @@ def _padded(col: Column, n: int, order: np.ndarray | None) -> Column:
         fill = np.full(n, math.nan if col.values.dtype == np.float64 else 0, col.values.dtype)
         return _numbers(np.concatenate((col.values, fill)), missing, order)
     if isinstance(col, pa.Array):
-        both = pa.concat_arrays([col, pa.nulls(n, col.type)])
-        return both if order is None else both.take(ab.numeric(order))
+        both = _concat([col, pa.nulls(n, col.type)])
+        return both if order is None else take_strings(both, order)
     return _take(col + [None] * n, order)
 
 
@@ -203,7 +268,7 @@ def to_arrow(col: Column, how: str) -> pa.Array:
         if how in ("large", "text"):  # str(v) of a str is itself
             return col
         if how == "string":
-            return col.cast(pa.string())
+            return _small_strings(col)
         return pl.convert(col.to_pylist(), how)
     return pl.convert(col, how)
 
@@ -221,14 +286,47 @@ def _small(v: np.ndarray, miss: np.ndarray | None) -> bool:
     return not w.size or (int(w.min()) > -_EXACT and int(w.max()) < _EXACT)
 
 
-def _int_texts(v: np.ndarray, miss: np.ndarray | None, as_float: bool) -> pa.Array:
-    """str(v), or str(float(v)) (= str(v) + ".0" below 2**53), of each int, null where missing."""
-    import pyarrow.compute as pc
+def _small_strings(col: pa.Array) -> pa.Array:
+    """The large_string column as string (32-bit offsets)."""
+    off, raw, missing = _parts(col)
+    data = raw[int(off[0]) :]
+    off = off - off[0]
+    if off[-1] >= 2**31:
+        return pl.convert(col.to_pylist(), "string")
+    return pa.Array.from_buffers(
+        pa.string(),
+        len(col),
+        [ab._validity(missing), pa.py_buffer(off.astype(np.int32)), pa.py_buffer(data)],
+    )
 
-    texts = pc.cast(ab.numeric(v, miss), pa.large_string())
-    if not as_float:
-        return texts
-    zeros = ab.numeric(np.zeros(len(v), np.int64))
-    suffix = ab.strings([".0"], large=True).take(zeros)
-    empty = ab.strings([""], large=True).take(zeros)
-    return pc.binary_join_element_wise(texts, suffix, empty)
+
+_POW10 = 10 ** np.arange(19, dtype=np.int64)
+
+
+def _int_texts(v: np.ndarray, miss: np.ndarray | None, as_float: bool) -> pa.Array:
+    """str(v), or str(float(v)) (= str(v) + ".0" below 2**53), of each int, null where missing.
+
+    Digits by a division per decimal place into a right-aligned byte matrix (a
+    third of numpy's int-to-bytes cast); |v| < 2**53 here.
+    """
+    n = len(v)
+    neg = v < 0
+    a = np.abs(v)
+    digits = np.maximum(np.searchsorted(_POW10, a, side="right"), 1)
+    length = digits + neg
+    width = int(length.max()) if n else 1
+    tail = 2 if as_float else 0
+    text = np.empty((n, width + tail), np.uint8)
+    for k in range(int(digits.max()) if n else 0):
+        a, d = np.divmod(a, 10)
+        text[:, width - 1 - k] = d + 48
+    rows = np.flatnonzero(neg)
+    text[rows, width - length[rows]] = ord("-")
+    if as_float:
+        text[:, width] = ord(".")
+        text[:, width + 1] = ord("0")
+    length += tail
+    if miss is not None:
+        length[miss] = 0
+    used = np.arange(width + tail) >= (width + tail - length)[:, None]
+    return _from_buffers(length, text[used], miss)

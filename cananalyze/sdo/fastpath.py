@@ -38,7 +38,7 @@ for _b in (0x22, 0x42):
     _EXP_LEN[_b] = 4
 for _b in (0x23, 0x43, 0x27, 0x47, 0x2B, 0x4B, 0x2F, 0x4F):
     _EXP_LEN[_b] = 4 - ((_b >> 2) & 3)
-_HEX2 = np.array([f"{i:02x}" for i in range(256)], "S2")  # byte -> its hex text
+HEX2 = np.array([f"{i:02x}" for i in range(256)], "S2")  # byte -> its hex text
 
 
 @dataclass
@@ -107,7 +107,7 @@ def plan(batch: DecodedBatch, rows: np.ndarray, timeout: float, explicit: list[i
 def _hex_column(raw: np.ndarray, length: np.ndarray) -> np.ndarray:
     """Object array of the hex text of each row's first `length` bytes (1..4), column-wise."""
     out = np.empty(len(raw), object)
-    pairs = _HEX2[raw]  # (m, 4) of 2-character byte texts
+    pairs = HEX2[raw]  # (m, 4) of 2-character byte texts
     for n in sorted(set(length.tolist())):  # (plain np.unique's first call costs ~10 ms)
         sel = np.flatnonzero(length == n)
         if n <= 0:
@@ -179,8 +179,9 @@ class RecordColumns:
     """Every field of the fast path's records as columns, numbers as numpy arrays.
 
     `arrays` holds NUMBER_FIELDS (float64 times and latency, int64 others), `upload`
-    (bool: the direction) and OBJECT_FIELDS (object arrays), all as an ok transfer
-    has them; the other fields are `OK_CONSTANTS`. Aborted pairs (rare) keep the
+    (bool: the direction), OBJECT_FIELDS (object arrays), and what the export builds
+    text columns from (`raw` data bytes and `data_len`, `name_code` into
+    `name_labels`), all as an ok transfer has them; the other fields are `OK_CONSTANTS`. Aborted pairs (rare) keep the
     dict `pair_outputs` made (`aborted`, position -> record), which wins. The export
     takes the arrays as they are; `columns` (lists, aborted fields patched in, for
     readers that go value by value) and `records()` are built when asked.
@@ -188,6 +189,7 @@ class RecordColumns:
 
     arrays: dict[str, np.ndarray]
     aborted: dict[int, dict]  # position -> record
+    name_labels: list  # the distinct names (or None): `name` is name_labels[name_code]
 
     def __len__(self) -> int:
         return len(self.arrays["t"])
@@ -289,7 +291,13 @@ def pair_record_columns(
         floats = {c: np.zeros(0, np.float64) for c in ("t_start", "t", "latency_ms")}
         ints = {c: np.zeros(0, np.int64) for c in NUMBER_FIELDS if c not in floats}
         objects = {c: np.empty(0, object) for c in OBJECT_FIELDS}
-        return RecordColumns(floats | ints | objects | {"upload": np.zeros(0, bool)}, {})
+        extra = {
+            "upload": np.zeros(0, bool),
+            "raw": np.zeros((0, 4), np.uint8),
+            "data_len": np.zeros(0, np.int64),
+            "name_code": np.zeros(0, np.int64),
+        }
+        return RecordColumns(floats | ints | objects | extra, {}, [None])
     da, db = fb.data[a], fb.data[b]
     upload = da[:, 0] == _UPLOAD_REQ
     aborted = db[:, 0] == _ABORT
@@ -300,9 +308,12 @@ def pair_record_columns(
     t0, t1 = fb.t[a], fb.t[b]
     ok = ~aborted
     any_abort = not bool(ok.all())
-    data = _hex_column(raw, np.where(ok, length, 0))
+    data_len = np.where(ok, length, 0)
+    data = _hex_column(raw, data_len)
     names = np.full(m, None, object)
     values = np.full(m, None, object)
+    name_code = np.zeros(m, np.int64)
+    name_labels: list = [None]
     if object_info is not None:
         key = (node_a << 24) | (index_a << 8) | da[:, 3]
         uniq, inv = np.unique(key, return_inverse=True)
@@ -310,7 +321,9 @@ def pair_record_columns(
         infos = [object_info(k >> 24, (k >> 8) & 0xFFFF, k & 0xFF) for k in uniq.tolist()]
         known = np.array([i is not None for i in infos], bool)
         if known.any():
-            names[:] = np.array([i[0] if i else None for i in infos], object)[inv]
+            name_labels = [i[0] if i else None for i in infos]
+            name_code = inv.astype(np.int64)
+            names[:] = np.array(name_labels, object)[inv]
             dtype_of = np.array([i[1] if i else -1 for i in infos], np.int64)[inv]
             dtype_of[~known[inv] | aborted] = -1
             for code in sorted(set(dtype_of.tolist())):
@@ -330,12 +343,15 @@ def pair_record_columns(
         "data": data,
         "value": values,
         "name": names,
+        "raw": raw,
+        "data_len": data_len,
+        "name_code": name_code,
     }
     done: dict[int, dict] = {}
     if any_abort:
         for k in np.flatnonzero(aborted).tolist():
             done[k] = pair_outputs(fb, int(a[k]), int(b[k]), int(node_a[k]), object_info)[2]
-    return RecordColumns(arrays, done)
+    return RecordColumns(arrays, done, name_labels)
 
 
 def pair_notes(fb, a: np.ndarray, b: np.ndarray) -> tuple[list[dict], list[dict]]:
