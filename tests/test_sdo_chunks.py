@@ -26,6 +26,8 @@ def _values(piece) -> list:
         return [piece.labels[c] for c in piece.codes.tolist()]
     if isinstance(piece, pa.Array):
         return piece.to_pylist()
+    if isinstance(piece, sc.Numbers):
+        return sc._values(piece)
     return piece.tolist()
 
 
@@ -102,6 +104,17 @@ INTS = np.array([0, -7, 2**40, 5], np.int64)
         [([], np.array([-(2**53) + 1, 2**53 - 1, 0, -5], object))],  # text of ints, exact
         [([], np.array([2**53, -(2**53), 9], object)), ([None], np.array([1], object))],
         [([], np.array([b"raw", 1], object))],
+        # int values from the fast path with None gaps (the SDO value column)
+        [([], sc.Numbers(np.array([1, 0, -3], np.int64), np.array([False, True, False])))],
+        [
+            (["t"], sc.Numbers(np.array([5, 0]), np.array([False, True]))),
+            ([2**63], sc.Numbers(np.array([1]), None)),
+        ],
+        [([1.5], sc.Numbers(np.array([0, 0]), np.array([True, True])))],
+        [
+            ([None], sc.Numbers(np.array([2**53 + 1, 7]), None)),
+            ([], sc.Numbers(np.array([0]), np.array([True]))),
+        ],
         # labels (direction, constants, names) and prebuilt strings (data)
         [([], sc.Labels(np.array([0, 1, 1], np.int8), ["download", "upload"]))],
         [(["x", None], sc.Labels(np.zeros(3, np.int8), [None]))],
@@ -151,7 +164,10 @@ def test_random_mixes():
     ]
 
     def fast_piece(n: int):
-        kind = rng.randrange(6)
+        kind = rng.randrange(7)
+        if kind == 6:
+            miss = np.array([rng.random() < 0.3 for _ in range(n)], bool)
+            return sc.Numbers(np.array([rng.randint(-9, 9) for _ in range(n)], np.int64), miss)
         if kind == 0:
             return np.array([rng.random() for _ in range(n)])
         if kind == 1:
@@ -203,3 +219,24 @@ def test_take_strings_and_int_texts():
         assert got == want
     hexed = sc.hex_strings(np.array([[0xAB, 1, 2, 3], [9, 9, 9, 9]], np.uint8), np.array([3, 0]))
     assert hexed.to_pylist() == ["ab0102", ""]
+
+
+def test_int_column_decode_matches_decode_column():
+    """`decode_int_column` (the export's numbers) holds what `decode_column` gives, for every type."""
+    from cananalyze.protocol.datatypes import DATA_TYPES, decode_column, decode_int_column
+
+    rng = np.random.default_rng(3)
+    raw = rng.integers(0, 256, (64, 4), dtype=np.uint8)
+    raw[:4] = [[0xFF] * 4, [0x80, 0, 0, 0x80], [0, 0x80, 0, 0], [0x7F, 0xFF, 0xFF, 0xFF]]
+    length = rng.integers(0, 5, 64)
+    ints = 0
+    for code in DATA_TYPES:
+        want = decode_column(raw, length, code)
+        got = decode_int_column(raw, length, code)
+        if got is None:
+            assert not all(type(v) is int for v in want) or not want
+            continue
+        ints += 1
+        values, none = got
+        assert [None if n else v for v, n in zip(values.tolist(), none.tolist(), strict=True)] == want
+    assert ints >= 6

@@ -47,7 +47,7 @@ class Labels:
 
 
 Column = Numbers | pa.Array | list
-Piece = np.ndarray | Labels | pa.Array
+Piece = np.ndarray | Numbers | Labels | pa.Array
 
 
 def _missing(v) -> bool:
@@ -63,7 +63,11 @@ def fast_pieces(fields: RecordColumns, keep: np.ndarray | None) -> dict[str, Pie
         return x if keep is None else x[keep]
 
     out: dict[str, Piece] = {c: sel(a[c]) for c in NUMBER_FIELDS}
-    out["value"] = sel(a["value"])
+    if "value_int" in a:
+        none = sel(a["value_none"])
+        out["value"] = Numbers(sel(a["value_int"]), none if none.any() else None)
+    else:
+        out["value"] = sel(a["value"])
     out["data"] = hex_strings(sel(a["raw"]), sel(a["data_len"]))
     out["name"] = Labels(sel(a["name_code"]), fields.name_labels)
     out["direction"] = Labels(sel(a["upload"]).astype(np.int8), ["download", "upload"])
@@ -125,16 +129,21 @@ def _concat(parts: list[pa.Array]) -> pa.Array:
 def _as_numbers(values: list, dtype) -> Numbers | None:
     """values (floats or ints in int64, and missing ones) as a column of dtype, else None."""
     want = float if dtype == np.float64 else int
-    miss = [_missing(v) for v in values]
-    if not all(m or type(v) is want for v, m in zip(values, miss, strict=True)):
-        return None
-    fill = math.nan if want is float else 0
+    types = set(map(type, values))
+    if types <= {want}:  # the common case: no gaps
+        miss = None
+    else:
+        miss = [_missing(v) for v in values]
+        if not all(m or type(v) is want for v, m in zip(values, miss, strict=True)):
+            return None
+        fill = math.nan if want is float else 0
+        values = [fill if m else v for v, m in zip(values, miss, strict=True)]
     try:
-        arr = np.array([fill if m else v for v, m in zip(values, miss, strict=True)], dtype)
+        arr = np.array(values, dtype) if values else np.zeros(0, dtype)
     except OverflowError:  # an int beyond int64
         return None
-    mask = np.array(miss, bool)
-    return Numbers(arr, mask if mask.any() else None)
+    mask = None if miss is None else np.array(miss, bool)
+    return Numbers(arr, mask if mask is not None and mask.any() else None)
 
 
 def _as_texts(values: list) -> list | None:
@@ -179,15 +188,24 @@ def merge(
             return _take(mine + fast.to_pylist(), order)
         both = _concat([ab.strings(texts, large=True), fast])
         return both if order is None else take_strings(both, order)
-    if fast.dtype != object:
-        stats.update_array(fast)
-        got = _as_numbers(mine, fast.dtype)
+    if isinstance(fast, Numbers) or fast.dtype != object:
+        if not isinstance(fast, Numbers):
+            fast = Numbers(fast, None)
+        gaps = 0 if fast.missing is None else int(fast.missing.sum())
+        stats.update_array(fast.values if not gaps else fast.values[~fast.missing])
+        stats.update([None] if gaps else [], rows=gaps)
+        got = _as_numbers(mine, fast.values.dtype)
         if got is None:
-            return _take(mine + fast.tolist(), order)
-        values = np.concatenate((got.values, fast))
+            return _take(mine + _values(fast), order)
+        values = np.concatenate((got.values, fast.values))
         missing = None
-        if got.missing is not None:
-            missing = np.concatenate((got.missing, np.zeros(len(fast), bool)))
+        if got.missing is not None or fast.missing is not None:
+            missing = np.concatenate(
+                [
+                    np.zeros(len(x.values), bool) if x.missing is None else x.missing
+                    for x in (got, fast)
+                ]
+            )
         return _numbers(values, missing, order)
     values = fast.tolist()
     stats.update(values)

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..decoded import DecodedBatch, SdoColumns
 from ..frames import FLAG_TX
-from ..protocol.datatypes import decode_column, decode_value
+from ..protocol.datatypes import decode_column, decode_int_column, decode_value
 from ..protocol.tables import abort_text
 from .tracker import ObjectInfo
 from .transaction import SDO_TABLE_COLUMNS
@@ -181,7 +181,8 @@ class RecordColumns:
     `arrays` holds NUMBER_FIELDS (float64 times and latency, int64 others), `upload`
     (bool: the direction), OBJECT_FIELDS (object arrays), and what the export builds
     text columns from (`raw` data bytes and `data_len`, `name_code` into
-    `name_labels`), all as an ok transfer has them; the other fields are `OK_CONSTANTS`. Aborted pairs (rare) keep the
+    `name_labels`) and, when every decoded value is an int, `value_int` and
+    `value_none` (where `value` is None); all as an ok transfer has them; the other fields are `OK_CONSTANTS`. Aborted pairs (rare) keep the
     dict `pair_outputs` made (`aborted`, position -> record), which wins. The export
     takes the arrays as they are; `columns` (lists, aborted fields patched in, for
     readers that go value by value) and `records()` are built when asked.
@@ -314,6 +315,9 @@ def pair_record_columns(
     values = np.full(m, None, object)
     name_code = np.zeros(m, np.int64)
     name_labels: list = [None]
+    # the values as int64 while every one decoded is an int (else None): value_none marks None
+    value_int: np.ndarray | None = np.zeros(m, np.int64)
+    value_none = np.ones(m, bool)
     if object_info is not None:
         key = (node_a << 24) | (index_a << 8) | da[:, 3]
         uniq, inv = np.unique(key, return_inverse=True)
@@ -330,6 +334,16 @@ def pair_record_columns(
                 if code >= 0:
                     sel = np.flatnonzero(dtype_of == code)
                     values[sel] = decode_column(raw[sel], length[sel], code)
+                    got = (
+                        None
+                        if value_int is None
+                        else decode_int_column(raw[sel], length[sel], code)
+                    )
+                    if got is None:
+                        value_int = None
+                    else:
+                        value_int[sel] = got[0]
+                        value_none[sel] = got[1]
     latency = _rounded_latency(t1 - t0) if latency is None else np.asarray(latency, np.float64)
     arrays = {
         "t_start": t0.astype(np.float64, copy=False),
@@ -347,6 +361,9 @@ def pair_record_columns(
         "data_len": data_len,
         "name_code": name_code,
     }
+    if value_int is not None:
+        arrays["value_int"] = value_int
+        arrays["value_none"] = value_none | aborted
     done: dict[int, dict] = {}
     if any_abort:
         for k in np.flatnonzero(aborted).tolist():
