@@ -238,5 +238,47 @@ def test_int_column_decode_matches_decode_column():
             continue
         ints += 1
         values, none = got
-        assert [None if n else v for v, n in zip(values.tolist(), none.tolist(), strict=True)] == want
+        assert [
+            None if n else v for v, n in zip(values.tolist(), none.tolist(), strict=True)
+        ] == want
     assert ints >= 6
+
+
+@pytest.mark.parametrize("fmt", ["parquet", "csv"])
+@pytest.mark.parametrize(
+    ("name", "size", "kept"),
+    [("faults.log", 50, False), ("faults.log", 997, True), ("commissioning.log", 7, True)],
+)
+def test_sdo_written_as_chunks_come_is_the_file_written_at_close(
+    tmp_path, monkeypatch, fmt, name, size, kept
+):
+    """The sdo table written chunk by chunk on the writer thread while the column types hold
+    is byte for byte the file written whole at close; when a later chunk changes a type
+    (faults.log in 50-frame batches: an abort code after none) it is dropped and written at close.
+    """
+    from conftest import SAMPLES
+    from test_table_stream import _args, _batches
+
+    from cananalyze.capture import given_profiles
+    from cananalyze.outputs import table_stream
+    from cananalyze.outputs.table_stream import StreamTables
+
+    monkeypatch.setattr(table_stream, "ROW_GROUP", 8)
+    log, kw = SAMPLES / name, {"network": str(SAMPLES / "network.toml")}
+    spec = None
+    for out, speculate in (("spec", True), ("whole", False)):
+        with StreamTables(tmp_path / out, fmt, profiles=given_profiles(_args(log, **kw))) as st:
+            if not speculate:
+                st._sdo_spec = False
+            for batch in _batches(log, size, **kw):
+                st.add(batch)
+            if speculate:
+                spec = st._sdo_spec
+            st.close()
+    assert bool(spec) is kept
+    a = (tmp_path / "spec" / f"sdo.{fmt}").read_bytes()
+    assert a == (tmp_path / "whole" / f"sdo.{fmt}").read_bytes()
+    if fmt == "parquet" and kept:
+        import pyarrow.parquet as pq
+
+        assert pq.ParquetFile(tmp_path / "spec" / "sdo.parquet").num_row_groups > 1

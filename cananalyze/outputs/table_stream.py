@@ -213,6 +213,8 @@ class StreamTables:
         self._sdo_stats = {c: pl.ColumnStats() for c in SDO_COLUMNS}
         self._sdo_spool = tempfile.TemporaryFile(dir=self.dir, prefix=".sdo-spool.")
         self._sdo_chunks = 0
+        # (column decisions, schema, writer) of the sdo file written as chunks come; False: given up
+        self._sdo_spec: tuple | bool | None = None
         self._findings: list[tuple] = []
 
     def __enter__(self) -> StreamTables:
@@ -425,6 +427,7 @@ class StreamTables:
             self._identity.setdefault(node, {}).update(info)
         pickle.dump(chunk, self._sdo_spool, pickle.HIGHEST_PROTOCOL)
         self._sdo_chunks += 1
+        self._speculate_sdo(chunk)
 
     # --- the end -----------------------------------------------------------------------
     def close(self) -> dict[str, int]:
@@ -452,6 +455,10 @@ class StreamTables:
         """Drop every temporary file (a cut-off export leaves no table behind)."""
         with contextlib.suppress(BaseException):
             self.writer.join()
+        if self._sdo_spec:
+            with contextlib.suppress(BaseException):
+                self._sdo_spec[2].discard()
+            self._sdo_spec = False
         self._sdo_spool.close()
         self._stack.__exit__(typ or RuntimeError, exc or RuntimeError("aborted"), tb)
 
@@ -504,50 +511,64 @@ class StreamTables:
 
     def _write_small(self, name: str, tables: Iterable[pa.Table], schema: pa.Schema) -> None:
         """Chunks of a record table, in row groups of up to ROW_GROUP rows (as to_parquet)."""
-        path = self.paths[name]
-        if self.fmt == "parquet":
-            import pyarrow.parquet as pq
-
-            writer = pq.ParquetWriter(path, schema, compression=self.compression)
-            write = lambda t: writer.write_table(t, row_group_size=ROW_GROUP)  # noqa: E731
-        else:
-            import pyarrow.csv as pacsv
-
-            writer = pacsv.CSVWriter(path, csv_schema(schema))
-            write = lambda t: writer.write_table(csv_table(t))  # noqa: E731
-        with writer:
-            buf: list[pa.Table] = []
-            rows = 0
+        out = _RecordWriter(self.paths[name], self.fmt, schema, self.compression)
+        try:
             for table in tables:
-                buf.append(table)
-                rows += table.num_rows
-                if rows >= ROW_GROUP:
-                    write(pa.concat_tables(buf))
-                    buf, rows = [], 0
-            if buf or not rows:
-                write(pa.concat_tables(buf) if buf else schema.empty_table())
+                out.add(table)
+        except BaseException:
+            out.discard()
+            raise
+        out.close()
+
+    def _sdo_decided(self) -> tuple[tuple[str, str, str], ...]:
+        return tuple(self._sdo_stats[c].decide(as_object=c == "value") for c in SDO_COLUMNS)
+
+    def _speculate_sdo(self, chunk: list) -> None:
+        """Write the chunk now, on the writer thread, while the column types so far hold.
+
+        pandas types a column over all of it, so a later chunk can change a type
+        (an abort code after none, a text among numbers): then this file is dropped
+        and close() writes the table from the spool, as it would have anyway. Mostly
+        the first chunk settles the types and close() has only the last row group left.
+        """
+        if self._sdo_spec is False:
+            return
+        decided = self._sdo_decided()
+        spec = self._sdo_spec
+        if spec is not None and spec[0] != decided:
+            self._sdo_spec = False
+            self.writer.put(spec[2].discard)
+            return
+        if spec is None:
+            schema = _sdo_schema(decided)
+            out = _RecordWriter(self.paths["sdo"], self.fmt, schema, self.compression)
+            spec = self._sdo_spec = (decided, schema, out)
+        arrays = [sdo_chunks.to_arrow(v, d[0]) for d, v in zip(decided, chunk, strict=True)]
+        table = pa.Table.from_arrays(arrays, schema=spec[1])
+        out = spec[2]
+        self.writer.put(lambda: out.add(table))
 
     def _write_sdo(self) -> int:
-        decided = {c: self._sdo_stats[c].decide(as_object=c == "value") for c in SDO_COLUMNS}
-        schema = pa.schema(
-            [pa.field(c, pl.arrow_type(decided[c][0])) for c in SDO_COLUMNS],
-            metadata=pl.schema_metadata(
-                [pl.field_meta(c, decided[c][1], decided[c][2]) for c in SDO_COLUMNS]
-            ),
-        )
+        rows = sum(s.rows for s in self._sdo_stats.values()) // len(SDO_COLUMNS)
+        decided = self._sdo_decided()
+        spec = self._sdo_spec
+        if spec:
+            self._sdo_spec = False
+            if spec[0] == decided:  # every chunk is written: only the last row group is left
+                spec[2].close()
+                return rows
+            spec[2].discard()
+        schema = _sdo_schema(decided)
         self._sdo_spool.seek(0)
 
         def tables():
             for _ in range(self._sdo_chunks):
                 chunk = pickle.load(self._sdo_spool)
-                arrays = [
-                    sdo_chunks.to_arrow(v, decided[c][0])
-                    for c, v in zip(SDO_COLUMNS, chunk, strict=True)
-                ]
+                arrays = [sdo_chunks.to_arrow(v, d[0]) for d, v in zip(decided, chunk, strict=True)]
                 yield pa.Table.from_arrays(arrays, schema=schema)
 
         self._write_small("sdo", tables(), schema)
-        return sum(s.rows for s in self._sdo_stats.values()) // len(SDO_COLUMNS)
+        return rows
 
     def _write_findings(self) -> int:
         cols = list(zip(*self._findings, strict=True)) or [[] for _ in FINDING_COLUMNS]
@@ -582,6 +603,52 @@ class StreamTables:
         names = others + ["node"] if self.fmt == "parquet" else ["node", *others]
         out = [(c, *pl.column([r[c] for r in rows])) for c in names]
         return self._small_table("nodes", out, index="node" if self.fmt == "parquet" else None)
+
+
+def _sdo_schema(decided: tuple[tuple[str, str, str], ...]) -> pa.Schema:
+    return pa.schema(
+        [pa.field(c, pl.arrow_type(d[0])) for c, d in zip(SDO_COLUMNS, decided, strict=True)],
+        metadata=pl.schema_metadata(
+            [pl.field_meta(c, d[1], d[2]) for c, d in zip(SDO_COLUMNS, decided, strict=True)]
+        ),
+    )
+
+
+class _RecordWriter:
+    """A record table's file, chunk by chunk, in row groups of up to ROW_GROUP rows (as to_parquet)."""
+
+    def __init__(self, path: Path, fmt: str, schema: pa.Schema, compression: str) -> None:
+        self.schema = schema
+        if fmt == "parquet":
+            import pyarrow.parquet as pq
+
+            self.writer = pq.ParquetWriter(path, schema, compression=compression)
+            self._write = lambda t: self.writer.write_table(t, row_group_size=ROW_GROUP)
+        else:
+            import pyarrow.csv as pacsv
+
+            self.writer = pacsv.CSVWriter(path, csv_schema(schema))
+            self._write = lambda t: self.writer.write_table(csv_table(t))
+        self.buf: list[pa.Table] = []
+        self.rows = 0
+
+    def add(self, table: pa.Table) -> None:
+        self.buf.append(table)
+        self.rows += table.num_rows
+        if self.rows >= ROW_GROUP:
+            self._write(pa.concat_tables(self.buf))
+            self.buf, self.rows = [], 0
+
+    def close(self) -> None:
+        try:
+            self._write(pa.concat_tables(self.buf) if self.buf else self.schema.empty_table())
+        finally:
+            self.writer.close()
+
+    def discard(self) -> None:
+        """Close without the last row group (the file is written again or dropped)."""
+        self.buf = []
+        self.writer.close()
 
 
 class _Vocab:
