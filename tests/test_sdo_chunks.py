@@ -28,6 +28,11 @@ def _values(piece) -> list:
         return piece.to_pylist()
     if isinstance(piece, sc.Numbers):
         return sc._values(piece)
+    if isinstance(piece, sc.Hex):
+        return [
+            bytes(r[:n]).hex()
+            for r, n in zip(piece.raw.tolist(), piece.length.tolist(), strict=True)
+        ]
     return piece.tolist()
 
 
@@ -55,7 +60,8 @@ def _check(chunks: list[tuple[list, object, np.ndarray | None]], as_object: bool
         values = both if order is None else [both[i] for i in order.tolist()]
         lists.append(values)
         ref.update(values)
-        cols.append(sc.merge(list(mine), fast, order, stats))
+        sc.take_in(stats, list(mine), fast)
+        cols.append(sc.merge(list(mine), fast, order))
     assert (stats.kinds, stats.lo, stats.hi, stats.rows) == (ref.kinds, ref.lo, ref.hi, ref.rows)
     how = ref.decide(as_object)
     assert stats.decide(as_object) == how
@@ -139,6 +145,11 @@ INTS = np.array([0, -7, 2**40, 5], np.int64)
             )
         ],
         [(["00ff", None, 3], sc.hex_strings(np.zeros((2, 4), np.uint8), np.array([0, 2])))],
+        [([None], sc.Hex(np.array([[1, 2, 3, 4], [171, 0, 0, 0]], np.uint8), np.array([4, 1])))],
+        [
+            ([5], sc.Hex(np.zeros((1, 4), np.uint8), np.array([2]))),
+            ([], sc.Hex(np.zeros((0, 4), np.uint8), np.zeros(0, np.int64))),
+        ],
         [([], ab.strings(["a", None, "b"], large=True)), (["c"], ab.strings([None], large=True))],
         # chunks with only the tracker's records, and empty ones
         [([1.0, None, NAN], None), ([], None), ([2, 3], None)],
@@ -282,3 +293,16 @@ def test_sdo_written_as_chunks_come_is_the_file_written_at_close(
         import pyarrow.parquet as pq
 
         assert pq.ParquetFile(tmp_path / "spec" / "sdo.parquet").num_row_groups > 1
+
+
+def test_hex_texts_as_bytes_hex():
+    from cananalyze.sdo.fastpath import hex_texts
+
+    rng = np.random.default_rng(1)
+    raw = rng.integers(0, 256, (500, 4), dtype=np.uint8)
+    raw[:5] = 0
+    length = rng.integers(0, 5, 500)
+    want = [bytes(r[:n]).hex() for r, n in zip(raw.tolist(), length.tolist(), strict=True)]
+    assert hex_texts(raw, length) == want
+    assert sc.hex_strings(raw, length).to_pylist() == want
+    assert hex_texts(raw[:0], length[:0]) == []

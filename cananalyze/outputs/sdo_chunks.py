@@ -39,6 +39,14 @@ class Numbers:
 
 
 @dataclass
+class Hex:
+    """The fast path's data column: hex text of each row's first `length` bytes of `raw`."""
+
+    raw: np.ndarray  # (n, 4) uint8
+    length: np.ndarray  # bytes used (0 for none: "")
+
+
+@dataclass
 class Labels:
     """A fast-path column with few distinct values (direction, constants): codes into labels."""
 
@@ -47,7 +55,7 @@ class Labels:
 
 
 Column = Numbers | pa.Array | list
-Piece = np.ndarray | Numbers | Labels | pa.Array
+Piece = np.ndarray | Numbers | Labels | Hex | pa.Array
 
 
 def _missing(v) -> bool:
@@ -68,7 +76,7 @@ def fast_pieces(fields: RecordColumns, keep: np.ndarray | None) -> dict[str, Pie
         out["value"] = Numbers(sel(a["value_int"]), none if none.any() else None)
     else:
         out["value"] = sel(a["value"])
-    out["data"] = hex_strings(sel(a["raw"]), sel(a["data_len"]))
+    out["data"] = Hex(sel(a["raw"]), sel(a["data_len"]))
     out["name"] = Labels(sel(a["name_code"]), fields.name_labels)
     out["direction"] = Labels(sel(a["upload"]).astype(np.int8), ["download", "upload"])
     for c, v in OK_CONSTANTS.items():
@@ -156,21 +164,42 @@ def _take(values: list, order: np.ndarray | None) -> list:
     return values if order is None else list(map(values.__getitem__, order.tolist()))
 
 
-def merge(
-    mine: list, fast: Piece | None, order: np.ndarray | None, stats: pl.ColumnStats
-) -> Column:
-    """One column of a chunk: `mine` (values read from dicts) then `fast`, taken by `order`.
-
-    `order` (None: as they come) puts the rows in record-slot order; `stats` takes
-    every value in.
-    """
+def take_in(stats: pl.ColumnStats, mine: list, fast: Piece | None) -> None:
+    """What `stats.update(mine + values of fast)` takes in, without the values' list."""
     stats.update(mine)
     if fast is None:
+        return
+    if isinstance(fast, Labels):
+        used = np.flatnonzero(np.bincount(fast.codes, minlength=len(fast.labels))).tolist()
+        stats.update([fast.labels[i] for i in used], rows=len(fast.codes))
+    elif isinstance(fast, Hex):
+        stats.update(["x"] if len(fast.length) else [], rows=len(fast.length))
+    elif isinstance(fast, pa.Array):
+        n = len(fast)
+        stats.update((["x"] if fast.null_count < n else []) + [None] * (fast.null_count > 0), n)
+    elif isinstance(fast, Numbers) or fast.dtype != object:
+        if not isinstance(fast, Numbers):
+            fast = Numbers(fast, None)
+        gaps = 0 if fast.missing is None else int(fast.missing.sum())
+        stats.update_array(fast.values if not gaps else fast.values[~fast.missing])
+        stats.update([None] if gaps else [], rows=gaps)
+    else:
+        stats.update(fast.tolist())
+
+
+def merge(mine: list, fast: Piece | None, order: np.ndarray | None) -> Column:
+    """One column of a chunk: `mine` (values read from dicts) then `fast`, taken by `order`.
+
+    `order` (None: as they come) puts the rows in record-slot order. Numpy and
+    Arrow work only (but for mixes of kinds): the export runs it on the writer thread.
+    """
+    if fast is None:
         return _classify(mine, order)
+    if isinstance(fast, Hex):
+        fast = hex_strings(fast.raw, fast.length)
     if isinstance(fast, Labels):
         labels = fast.labels
         used = np.flatnonzero(np.bincount(fast.codes, minlength=len(labels))).tolist()
-        stats.update([labels[i] for i in used], rows=len(fast.codes))
         if all(labels[i] is None for i in used):  # nothing there: mine tell the type
             return _padded(_classify(mine, None), len(fast.codes), order)
         texts = _as_texts(mine)
@@ -181,8 +210,6 @@ def merge(
         )
         return take_strings(ab.strings(labels + texts, large=True), _ordered(codes, order))
     if isinstance(fast, pa.Array):
-        n = len(fast)
-        stats.update((["x"] if fast.null_count < n else []) + [None] * (fast.null_count > 0), n)
         texts = _as_texts(mine)
         if texts is None:
             return _take(mine + fast.to_pylist(), order)
@@ -191,9 +218,6 @@ def merge(
     if isinstance(fast, Numbers) or fast.dtype != object:
         if not isinstance(fast, Numbers):
             fast = Numbers(fast, None)
-        gaps = 0 if fast.missing is None else int(fast.missing.sum())
-        stats.update_array(fast.values if not gaps else fast.values[~fast.missing])
-        stats.update([None] if gaps else [], rows=gaps)
         got = _as_numbers(mine, fast.values.dtype)
         if got is None:
             return _take(mine + _values(fast), order)
@@ -207,9 +231,7 @@ def merge(
                 ]
             )
         return _numbers(values, missing, order)
-    values = fast.tolist()
-    stats.update(values)
-    return _classify(mine + values, order)
+    return _classify(mine + fast.tolist(), order)
 
 
 def _ordered(x: np.ndarray, order: np.ndarray | None) -> np.ndarray:

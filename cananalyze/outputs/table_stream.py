@@ -419,15 +419,27 @@ class StreamTables:
             except KeyError:
                 rows.append(tuple(r.get(c, _NAN) for c in SDO_COLUMNS))
         mine = [list(c) for c in zip(*rows, strict=True)] or [[] for _ in SDO_COLUMNS]
-        chunk = [
-            sdo_chunks.merge(values, pieces.get(c), order, self._sdo_stats[c])
-            for c, values in zip(SDO_COLUMNS, mine, strict=True)
-        ]
+        for c, values in zip(SDO_COLUMNS, mine, strict=True):
+            sdo_chunks.take_in(self._sdo_stats[c], values, pieces.get(c))
         for node, info in _identity(ident).items():
             self._identity.setdefault(node, {}).update(info)
-        pickle.dump(chunk, self._sdo_spool, pickle.HIGHEST_PROTOCOL)
         self._sdo_chunks += 1
-        self._speculate_sdo(chunk)
+        out = self._speculate_sdo()
+        spool = self._sdo_spool
+
+        def chunk() -> None:
+            """Merged, spooled (and written if the types hold) on the writer thread: numpy work."""
+            cols = [
+                sdo_chunks.merge(v, pieces.get(c), order)
+                for c, v in zip(SDO_COLUMNS, mine, strict=True)
+            ]
+            pickle.dump(cols, spool, pickle.HIGHEST_PROTOCOL)
+            if out is not None:
+                decided, schema, writer = out
+                arrays = [sdo_chunks.to_arrow(v, d[0]) for d, v in zip(decided, cols, strict=True)]
+                writer.add(pa.Table.from_arrays(arrays, schema=schema))
+
+        self.writer.put(chunk)
 
     # --- the end -----------------------------------------------------------------------
     def close(self) -> dict[str, int]:
@@ -523,30 +535,29 @@ class StreamTables:
     def _sdo_decided(self) -> tuple[tuple[str, str, str], ...]:
         return tuple(self._sdo_stats[c].decide(as_object=c == "value") for c in SDO_COLUMNS)
 
-    def _speculate_sdo(self, chunk: list) -> None:
-        """Write the chunk now, on the writer thread, while the column types so far hold.
+    def _speculate_sdo(self) -> tuple | None:
+        """(decisions, schema, writer) to write the next chunk with now, or None.
 
         pandas types a column over all of it, so a later chunk can change a type
-        (an abort code after none, a text among numbers): then this file is dropped
-        and close() writes the table from the spool, as it would have anyway. Mostly
-        the first chunk settles the types and close() has only the last row group left.
+        (an abort code after none, a text among numbers): then the file written so
+        far is dropped and close() writes the table from the spool, as it would
+        have anyway. Mostly the first chunk settles the types, the chunks are
+        written on the writer thread as they come and close() has only the last
+        row group left.
         """
         if self._sdo_spec is False:
-            return
+            return None
         decided = self._sdo_decided()
         spec = self._sdo_spec
         if spec is not None and spec[0] != decided:
             self._sdo_spec = False
             self.writer.put(spec[2].discard)
-            return
+            return None
         if spec is None:
             schema = _sdo_schema(decided)
             out = _RecordWriter(self.paths["sdo"], self.fmt, schema, self.compression)
             spec = self._sdo_spec = (decided, schema, out)
-        arrays = [sdo_chunks.to_arrow(v, d[0]) for d, v in zip(decided, chunk, strict=True)]
-        table = pa.Table.from_arrays(arrays, schema=spec[1])
-        out = spec[2]
-        self.writer.put(lambda: out.add(table))
+        return spec
 
     def _write_sdo(self) -> int:
         rows = sum(s.rows for s in self._sdo_stats.values()) // len(SDO_COLUMNS)

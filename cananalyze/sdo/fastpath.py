@@ -104,18 +104,16 @@ def plan(batch: DecodedBatch, rows: np.ndarray, timeout: float, explicit: list[i
     )
 
 
-def _hex_column(raw: np.ndarray, length: np.ndarray) -> np.ndarray:
-    """Object array of the hex text of each row's first `length` bytes (1..4), column-wise."""
-    out = np.empty(len(raw), object)
+def hex_texts(raw: np.ndarray, length: np.ndarray) -> list[str]:
+    """The hex text of each row's first `length` bytes (0..4), as a list, column-wise.
+
+    Byte pairs past the length are emptied, so each row's 8 bytes read as one
+    text whose trailing NULs numpy drops.
+    """
+    m = len(raw)
     pairs = HEX2[raw]  # (m, 4) of 2-character byte texts
-    for n in sorted(set(length.tolist())):  # (plain np.unique's first call costs ~10 ms)
-        sel = np.flatnonzero(length == n)
-        if n <= 0:
-            out[sel] = ""
-            continue
-        text = np.ascontiguousarray(pairs[sel, :n]).view(f"S{2 * n}").ravel()
-        out[sel] = text.astype(f"U{2 * n}")
-    return out
+    pairs[np.arange(raw.shape[1]) >= np.asarray(length)[:, None]] = b""
+    return pairs.view(f"S{2 * raw.shape[1]}").reshape(m).astype(f"U{2 * raw.shape[1]}").tolist()
 
 
 def py_round(v: np.ndarray, ndigits: int) -> np.ndarray:
@@ -171,7 +169,7 @@ OK_CONSTANTS = {
     "detail": None,
 }
 NUMBER_FIELDS = ("t_start", "t", "latency_ms", "node", "index", "subindex", "size")
-OBJECT_FIELDS = ("data", "value", "name")
+OBJECT_FIELDS = ("value", "name")
 
 
 @dataclass
@@ -179,9 +177,9 @@ class RecordColumns:
     """Every field of the fast path's records as columns, numbers as numpy arrays.
 
     `arrays` holds NUMBER_FIELDS (float64 times and latency, int64 others), `upload`
-    (bool: the direction), OBJECT_FIELDS (object arrays), and what the export builds
-    text columns from (`raw` data bytes and `data_len`, `name_code` into
-    `name_labels`) and, when every decoded value is an int, `value_int` and
+    (bool: the direction), OBJECT_FIELDS (object arrays), `raw` and `data_len` (the
+    data bytes and how many are used, for the hex `data`), `name_code` into
+    `name_labels` and, when every decoded value is an int, `value_int` and
     `value_none` (where `value` is None); all as an ok transfer has them; the other fields are `OK_CONSTANTS`. Aborted pairs (rare) keep the
     dict `pair_outputs` made (`aborted`, position -> record), which wins. The export
     takes the arrays as they are; `columns` (lists, aborted fields patched in, for
@@ -201,6 +199,7 @@ class RecordColumns:
         a = self.arrays
         m = len(self)
         columns: dict[str, list] = {c: a[c].tolist() for c in NUMBER_FIELDS + OBJECT_FIELDS}
+        columns["data"] = hex_texts(a["raw"], a["data_len"])
         columns["direction"] = np.where(a["upload"], "upload", "download").tolist()
         for c, v in OK_CONSTANTS.items():
             columns[c] = [v] * m
@@ -216,6 +215,7 @@ class RecordColumns:
         a = self.arrays
         rec = {"kind": "sdo"} | {c: a[c][j].item() for c in NUMBER_FIELDS}
         rec |= {c: a[c][j] for c in OBJECT_FIELDS} | OK_CONSTANTS
+        rec["data"] = a["raw"][j, : a["data_len"][j]].tobytes().hex()
         rec["direction"] = "upload" if a["upload"][j] else "download"
         return rec
 
@@ -310,7 +310,6 @@ def pair_record_columns(
     ok = ~aborted
     any_abort = not bool(ok.all())
     data_len = np.where(ok, length, 0)
-    data = _hex_column(raw, data_len)
     names = np.full(m, None, object)
     values = np.full(m, None, object)
     name_code = np.zeros(m, np.int64)
@@ -354,7 +353,6 @@ def pair_record_columns(
         "subindex": da[:, 3].astype(np.int64),
         "size": length,
         "upload": upload,
-        "data": data,
         "value": values,
         "name": names,
         "raw": raw,
@@ -378,7 +376,7 @@ def pair_notes(fb, a: np.ndarray, b: np.ndarray) -> tuple[list[dict], list[dict]
     aborted = db[:, 0] == _ABORT
     length = np.where(upload, _EXP_LEN[db[:, 0]], _EXP_LEN[da[:, 0]]).astype(np.int64)
     raw = np.ascontiguousarray(np.where(upload[:, None], db[:, 4:8], da[:, 4:8]))
-    data = _hex_column(raw, np.where(aborted, 0, length)).tolist()
+    data = hex_texts(raw, np.where(aborted, 0, length))
     index = (da[:, 1].astype(np.int64) | (da[:, 2].astype(np.int64) << 8)).tolist()
     sub = da[:, 3].tolist()
     sized = (da[:, 0] & 1).tolist()
