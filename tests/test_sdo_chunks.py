@@ -306,3 +306,74 @@ def test_hex_texts_as_bytes_hex():
     assert hex_texts(raw, length) == want
     assert sc.hex_strings(raw, length).to_pylist() == want
     assert hex_texts(raw[:0], length[:0]) == []
+
+
+def _record_batch(t0: float, records: list[dict]):
+    from cananalyze.decoded import DecodedBatch
+    from cananalyze.frames import FrameBatch
+
+    n = 4
+    fb = FrameBatch.allocate(n, ("can0",))
+    fb.t[:] = t0 + np.arange(n) * 0.001
+    fb.can_id[:] = 0x181
+    batch = DecodedBatch(fb, np.zeros(n, np.uint8), np.ones(n, np.int16), np.zeros(n, np.uint8))
+    batch.records = [(k % n, {"kind": "sdo"} | r) for k, r in enumerate(records)]
+    return batch
+
+
+def _sdo(**kw) -> dict:
+    base = {
+        "t_start": 1.0,
+        "t": 1.5,
+        "latency_ms": 0.5,
+        "node": 3,
+        "direction": "upload",
+        "protocol": "segmented",
+        "index": 0x1008,
+        "subindex": 0,
+        "size": 4,
+        "data": "41424344",
+        "value": 7,
+        "name": "x",
+        "result": "ok",
+        "abort_code": None,
+        "abort_text": None,
+        "detail": None,
+    }
+    return base | kw
+
+
+@pytest.mark.parametrize("fmt", ["parquet", "csv"])
+def test_tracker_only_chunks_of_every_kind_as_capture(tmp_path, fmt):
+    """Chunks holding only the tracker's records (no fast path): ints then texts in one
+    column, gaps, an abort after none, values beyond int64, missing keys, empty batches."""
+    from test_table_stream import assert_same_tables
+
+    from cananalyze.capture import Collector
+    from cananalyze.errors import ProblemLog
+    from cananalyze.outputs.parquet_out import write_csv, write_parquet
+    from cananalyze.outputs.table_stream import StreamTables
+
+    gone = _sdo()
+    del gone["detail"], gone["latency_ms"]
+    chunks = [
+        [_sdo(), _sdo(value=None, size=None, data=None)],
+        [],
+        [_sdo(value="text", abort_code=0x06020000, abort_text="no object", result="abort")],
+        [_sdo(value=2**63 + 1, node=None, t_start=NAN), gone],
+        [_sdo(value=1.5, subindex=2**64 - 1, latency_ms=3)],
+    ]
+
+    def batches():
+        return [_record_batch(10.0 + i, recs) for i, recs in enumerate(chunks)]
+
+    collector = Collector("synthetic")
+    for batch in batches():
+        collector.add(batch)
+    cap = collector.capture(ProblemLog(), "", {})
+    (write_parquet if fmt == "parquet" else write_csv)(cap, tmp_path / "ref")
+    with StreamTables(tmp_path / "new", fmt) as st:
+        for batch in batches():
+            st.add(batch)
+        st.close()
+    assert_same_tables(tmp_path / "ref", tmp_path / "new", fmt)
