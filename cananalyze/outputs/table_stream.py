@@ -446,6 +446,10 @@ class StreamTables:
         """Write the small tables, wait for the writer, fix order/categories, rename all files."""
         try:
             self._add_events(EventColumns.empty(), None)
+            sdo_done = self._speculate_sdo() is not None  # the types are final now
+            if sdo_done:  # the last row group, on the writer thread too
+                self.writer.put(self._sdo_spec[2].close)
+                self._sdo_spec = False
             for sink in self.sinks.values():
                 self.writer.put(sink.close)
             self.writer.join()
@@ -453,7 +457,7 @@ class StreamTables:
             self._finish_events()
             self._finish_frames()
             self.rows.update({name: s.rows for name, s in self.sinks.items()})
-            self.rows["sdo"] = self._write_sdo()
+            self.rows["sdo"] = self._write_sdo(sdo_done)
             self.rows["findings"] = self._write_findings()
             self.rows["nodes"] = self._write_nodes()
         except BaseException as exc:
@@ -559,16 +563,12 @@ class StreamTables:
             spec = self._sdo_spec = (decided, schema, out)
         return spec
 
-    def _write_sdo(self) -> int:
+    def _write_sdo(self, written: bool) -> int:
+        """The sdo table from the spool, unless every chunk was `written` as it came."""
         rows = sum(s.rows for s in self._sdo_stats.values()) // len(SDO_COLUMNS)
+        if written:
+            return rows
         decided = self._sdo_decided()
-        spec = self._sdo_spec
-        if spec:
-            self._sdo_spec = False
-            if spec[0] == decided:  # every chunk is written: only the last row group is left
-                spec[2].close()
-                return rows
-            spec[2].discard()
         schema = _sdo_schema(decided)
         self._sdo_spool.seek(0)
 
