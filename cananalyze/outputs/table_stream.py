@@ -3,9 +3,9 @@
 The Capture path keeps every batch, concatenates them and builds pandas
 DataFrames (4 GB for 10M frames); this path keeps nothing per frame: frames and
 signals go batch by batch to a writer thread (`table_sink`), SDO records are
-spooled to a temporary file until their column types are known (pandas infers
-them over the whole column), and the small tables (findings, nodes) are built
-at the end. The files hold the same schemas and values as
+spooled to a temporary file (pandas types their columns over the whole column)
+and written as they come while the types so far hold, and the small tables
+(findings, nodes) are built at the end. The files hold the same schemas and values as
 `parquet_out.write_parquet(load(log))`; tests compare them.
 
 Row order follows the Capture: signals by time, then series (node, PDO,
@@ -369,10 +369,12 @@ class StreamTables:
         self.writer.put(lambda: sink.add(cols))
 
     def _add_records(self, batch: DecodedBatch) -> None:
-        """SDO rows (spooled per chunk as columns), findings and node identities of a batch.
+        """SDO rows, findings and node identities of a batch.
 
         The fast path's records are taken as columns (`DecodedBatch.sdo_fast_split`),
-        merged by record slot with the other records, which are read one by one.
+        the other records read one by one. Here only the column statistics are taken
+        in; merging by record slot, spooling and writing (`sdo_chunks`) are numpy
+        work for the writer thread.
         """
         records = batch.records
         if not records:
