@@ -104,6 +104,11 @@ def plan(batch: DecodedBatch, rows: np.ndarray, timeout: float, explicit: list[i
     )
 
 
+def _rows(data: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """data[at] for (n, 8) payload rows: np.take is ~10x numpy's 2-D fancy indexing here."""
+    return np.take(data, at, axis=0)
+
+
 def hex_texts(raw: np.ndarray, length: np.ndarray) -> list[str]:
     """The hex text of each row's first `length` bytes (0..4), as a list, column-wise.
 
@@ -143,7 +148,7 @@ def _rounded_latency(dt: np.ndarray) -> np.ndarray:
 
 def pair_columns(fb, a: np.ndarray, b: np.ndarray, slots: np.ndarray) -> SdoColumns:
     """What summary, timing and the network model read of taken pairs, as columns."""
-    da, db = fb.data[a], fb.data[b]
+    da, db = _rows(fb.data, a), _rows(fb.data, b)
     t0, t1 = fb.t[a], fb.t[b]
     return SdoColumns(
         slots=np.asarray(slots, np.int64),
@@ -299,7 +304,7 @@ def pair_record_columns(
             "name_code": np.zeros(0, np.int64),
         }
         return RecordColumns(floats | ints | objects | extra, {}, [None])
-    da, db = fb.data[a], fb.data[b]
+    da, db = _rows(fb.data, a), _rows(fb.data, b)
     upload = da[:, 0] == _UPLOAD_REQ
     aborted = db[:, 0] == _ABORT
     length = np.where(upload, _EXP_LEN[db[:, 0]], _EXP_LEN[da[:, 0]]).astype(np.int64)
@@ -371,7 +376,7 @@ def pair_record_columns(
 
 def pair_notes(fb, a: np.ndarray, b: np.ndarray) -> tuple[list[dict], list[dict]]:
     """Request and answer notes of taken pairs (for the text/JSONL outputs, built when read)."""
-    da, db = fb.data[a], fb.data[b]
+    da, db = _rows(fb.data, a), _rows(fb.data, b)
     upload = da[:, 0] == _UPLOAD_REQ
     aborted = db[:, 0] == _ABORT
     length = np.where(upload, _EXP_LEN[db[:, 0]], _EXP_LEN[da[:, 0]]).astype(np.int64)
