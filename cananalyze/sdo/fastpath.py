@@ -71,7 +71,7 @@ def plan(batch: DecodedBatch, rows: np.ndarray, timeout: float, explicit: list[i
     if explicit:
         ex = np.asarray(explicit, np.int64)
         usable &= ~np.isin(0x600 + node, ex) & ~np.isin(0x580 + node, ex)
-    d = fb.data[rows]
+    d = _rows(fb.data, rows)
     b0 = d[:, 0]
     mux = (
         d[:, 1].astype(np.int64)

@@ -68,7 +68,7 @@ class SdoProcessor:
         Such a write can add or move a channel mid-batch, which the plan's fixed
         channel map cannot follow: then the whole batch goes through the tracker.
         """
-        d = batch.frames.data[rows]
+        d = np.take(batch.frames.data, rows, axis=0)  # (~10x 2-D fancy indexing)
         index = d[:, 1].astype(np.uint16) | (d[:, 2].astype(np.uint16) << 8)
         if ((index >= 0x1200) & (index <= 0x12FF)).any():
             return True
