@@ -117,14 +117,10 @@ def _parts(arr: pa.Array) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
 
 
 def take_strings(arr: pa.Array, order: np.ndarray) -> pa.Array:
-    """arr[order] of a large_string array, in numpy (pyarrow.compute costs 30 ms to import)."""
-    off, raw, missing = _parts(arr)
-    start = off[:-1][order]
-    lengths = (off[1:] - off[:-1])[order]
-    new = np.zeros(len(order) + 1, np.int64)
-    np.cumsum(lengths, out=new[1:])
-    pos = np.repeat(start - new[:-1], lengths) + np.arange(new[-1])
-    return _from_buffers(lengths, raw[pos], None if missing is None else missing[order])
+    """arr[order] of a string array (pyarrow's take: ~10x a numpy gather of the bytes)."""
+    import pyarrow.compute as pc  # (30 ms to import: only once SDO rows are merged)
+
+    return pc.take(arr, ab.numeric(np.asarray(order, np.int64)))
 
 
 def _concat(parts: list[pa.Array]) -> pa.Array:

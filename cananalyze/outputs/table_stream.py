@@ -430,16 +430,12 @@ class StreamTables:
         spool = self._sdo_spool
 
         def chunk() -> None:
-            """Merged, spooled (and written if the types hold) on the writer thread: numpy work."""
-            cols = [
-                sdo_chunks.merge(v, pieces.get(c), order)
-                for c, v in zip(SDO_COLUMNS, mine, strict=True)
-            ]
-            pickle.dump(cols, spool, pickle.HIGHEST_PROTOCOL)
+            """Spooled (as the pieces: smaller than the merged columns), merged and written
+            if the types hold, on the writer thread: numpy and Arrow work."""
+            pickle.dump((mine, pieces, order), spool, pickle.HIGHEST_PROTOCOL)
             if out is not None:
                 decided, schema, writer = out
-                arrays = [sdo_chunks.to_arrow(v, d[0]) for d, v in zip(decided, cols, strict=True)]
-                writer.add(pa.Table.from_arrays(arrays, schema=schema))
+                writer.add(_sdo_table(mine, pieces, order, decided, schema))
 
         self.writer.put(chunk)
 
@@ -576,9 +572,8 @@ class StreamTables:
 
         def tables():
             for _ in range(self._sdo_chunks):
-                chunk = pickle.load(self._sdo_spool)
-                arrays = [sdo_chunks.to_arrow(v, d[0]) for d, v in zip(decided, chunk, strict=True)]
-                yield pa.Table.from_arrays(arrays, schema=schema)
+                mine, pieces, order = pickle.load(self._sdo_spool)
+                yield _sdo_table(mine, pieces, order, decided, schema)
 
         self._write_small("sdo", tables(), schema)
         return rows
@@ -616,6 +611,15 @@ class StreamTables:
         names = others + ["node"] if self.fmt == "parquet" else ["node", *others]
         out = [(c, *pl.column([r[c] for r in rows])) for c in names]
         return self._small_table("nodes", out, index="node" if self.fmt == "parquet" else None)
+
+
+def _sdo_table(mine: list, pieces: dict, order, decided: tuple, schema: pa.Schema) -> pa.Table:
+    """One chunk of the sdo table: each column merged by record slot and typed as decided."""
+    arrays = [
+        sdo_chunks.to_arrow(sdo_chunks.merge(v, pieces.get(c), order), d[0])
+        for c, v, d in zip(SDO_COLUMNS, mine, decided, strict=True)
+    ]
+    return pa.Table.from_arrays(arrays, schema=schema)
 
 
 def _sdo_schema(decided: tuple[tuple[str, str, str], ...]) -> pa.Schema:
