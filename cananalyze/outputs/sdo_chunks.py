@@ -1,9 +1,11 @@
-"""The streamed SDO table's chunks as typed columns, until pandas' column types are known.
+"""The streamed SDO table's chunks as typed columns, without a Python list per column.
 
 pandas types a record column over the whole column (`pandas_like.ColumnStats.decide`),
-so the export spools each batch's SDO rows and converts them at the end. As Python
-lists, merging, scanning, pickling and converting them was most of the export's SDO
-cost. Here a chunk's column is what its values allow:
+so the export takes each batch's statistics in (`take_in`), spools the batch's pieces
+(the tracker's values as lists, the fast path's as numpy `fast_pieces`) and converts
+them once the types are known (or as they come while the types so far hold). As
+Python lists, merging, scanning, pickling and converting them was most of the
+export's SDO cost. `merge` makes a chunk's column what its values allow:
 
 - `Numbers`: every value a float (float64) or every value an int within int64, with
   a mask of the missing ones (None, NaN);
