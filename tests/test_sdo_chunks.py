@@ -377,3 +377,22 @@ def test_tracker_only_chunks_of_every_kind_as_capture(tmp_path, fmt):
             st.add(batch)
         st.close()
     assert_same_tables(tmp_path / "ref", tmp_path / "new", fmt)
+
+
+@pytest.mark.parametrize(
+    "values",
+    [
+        np.array([1.5, NAN, -0.0]),
+        np.array([NAN, NAN]),
+        np.zeros(0),
+        np.array([-(2**63), 2**63 - 1, 0], np.int64),
+        np.zeros(0, np.int64),
+    ],
+)
+def test_update_array_as_update_of_the_list(values):
+    a, b = pl.ColumnStats(), pl.ColumnStats()
+    a.update_array(values)
+    b.update(values.tolist())
+    assert (a.kinds, a.lo, a.hi, a.rows) == (b.kinds, b.lo, b.hi, b.rows)
+    with pytest.raises(TypeError):
+        a.update_array(np.array(["x"], object))
