@@ -67,8 +67,9 @@ class ColumnStats:
         self.hi: int | None = None
         self.rows = 0
 
-    def update(self, values: list | tuple) -> None:
-        self.rows += len(values)
+    def update(self, values: list | tuple, rows: int | None = None) -> set[type]:
+        """Take in values (`rows`: how many rows they stand for, if not one each); their types."""
+        self.rows += len(values) if rows is None else rows
         types = set(map(type, values))
         kinds = self.kinds
         for typ in types:
@@ -89,8 +90,30 @@ class ColumnStats:
         if int in types:
             ints = values if len(types) == 1 else [v for v in values if type(v) is int]
             lo, hi = min(ints), max(ints)
-            self.lo = lo if self.lo is None else min(self.lo, lo)
-            self.hi = hi if self.hi is None else max(self.hi, hi)
+            self._range(lo, hi)
+        return types
+
+    def _range(self, lo: int, hi: int) -> None:
+        self.lo = lo if self.lo is None else min(self.lo, lo)
+        self.hi = hi if self.hi is None else max(self.hi, hi)
+
+    def update_array(self, values: np.ndarray) -> None:
+        """Take in a float64 or int64 column: as `update(values.tolist())`, without the list."""
+        n = len(values)
+        self.rows += n
+        if not n:
+            return
+        if values.dtype.kind == "f":
+            nan = int(np.isnan(values).sum())
+            if nan:
+                self.kinds.add("nan")
+            if nan < n:
+                self.kinds.add("float")
+        elif values.dtype.kind in "iu":
+            self.kinds.add("int")
+            self._range(int(values.min()), int(values.max()))
+        else:
+            raise TypeError(f"not a numeric column: {values.dtype}")
 
     def decide(self, as_object: bool = False) -> tuple[str, str, str]:
         """(how to convert, pandas_type, numpy_type) for the whole column.

@@ -3,9 +3,9 @@
 The Capture path keeps every batch, concatenates them and builds pandas
 DataFrames (4 GB for 10M frames); this path keeps nothing per frame: frames and
 signals go batch by batch to a writer thread (`table_sink`), SDO records are
-spooled to a temporary file until their column types are known (pandas infers
-them over the whole column), and the small tables (findings, nodes) are built
-at the end. The files hold the same schemas and values as
+spooled to a temporary file (pandas types their columns over the whole column)
+and written as they come while the types so far hold, and the small tables
+(findings, nodes) are built at the end. The files hold the same schemas and values as
 `parquet_out.write_parquet(load(log))`; tests compare them.
 
 Row order follows the Capture: signals by time, then series (node, PDO,
@@ -37,6 +37,7 @@ from ..protocol.services import SERVICE_NAMES
 from ..sdo.transaction import SDO_TABLE_COLUMNS
 from . import arrow_build as ab
 from . import pandas_like as pl
+from . import sdo_chunks
 from .atomic import atomic_path
 from .parquet_out import TABLES, _outdir
 from .table_sink import (
@@ -212,6 +213,8 @@ class StreamTables:
         self._sdo_stats = {c: pl.ColumnStats() for c in SDO_COLUMNS}
         self._sdo_spool = tempfile.TemporaryFile(dir=self.dir, prefix=".sdo-spool.")
         self._sdo_chunks = 0
+        # (column decisions, schema, writer) of the sdo file written as chunks come; False: given up
+        self._sdo_spec: tuple | bool | None = None
         self._findings: list[tuple] = []
 
     def __enter__(self) -> StreamTables:
@@ -366,10 +369,12 @@ class StreamTables:
         self.writer.put(lambda: sink.add(cols))
 
     def _add_records(self, batch: DecodedBatch) -> None:
-        """SDO rows (spooled per chunk as columns), findings and node identities of a batch.
+        """SDO rows, findings and node identities of a batch.
 
         The fast path's records are taken as columns (`DecodedBatch.sdo_fast_split`),
-        merged by record slot with the other records, which are read one by one.
+        the other records read one by one. Here only the column statistics are taken
+        in; merging by record slot, spooling and writing (`sdo_chunks`) are numpy
+        work for the writer thread.
         """
         records = batch.records
         if not records:
@@ -389,42 +394,60 @@ class StreamTables:
                 self._findings.append(tuple(r.get(c, _NAN) for c in FINDING_COLUMNS))
         if not sdo and split is None:
             return
-        ident = [(k, r) for k, r in sdo if r.get("index") in _IDENTITY_INDEX]
+        pieces: dict = {}
+        order = None
+        fast_ident: list[tuple[int, dict]] = []
+        if split is not None:
+            fields, fast, _ = split
+            keep = None
+            if fields.aborted:  # (rare) read as the dicts they are
+                gone = sorted(fields.aborted)
+                sdo.extend((int(fast.slots[j]), fields.aborted[j]) for j in gone)
+                keep = np.delete(np.arange(len(fast.slots)), gone)
+            for j in np.flatnonzero(np.isin(fast.index, _IDENTITY_INDEX)).tolist():
+                if j not in fields.aborted:
+                    fast_ident.append((int(fast.slots[j]), fields.record(j)))
+            pieces = sdo_chunks.fast_pieces(fields, keep)
+            if sdo:
+                slots = fast.slots if keep is None else fast.slots[keep]
+                at = np.concatenate((np.array([k for k, _ in sdo], np.int64), slots))
+                order = np.argsort(at, kind="stable")
+        ident = [(k, r) for k, r in sdo if r.get("index") in _IDENTITY_INDEX] + fast_ident
+        ident.sort(key=operator.itemgetter(0))
         rows = []
         for _, r in sdo:  # one C call per record that has every column (nearly all)
             try:
                 rows.append(_SDO_ROW(r))
             except KeyError:
                 rows.append(tuple(r.get(c, _NAN) for c in SDO_COLUMNS))
-        chunk: list = list(zip(*rows, strict=True)) or [() for _ in SDO_COLUMNS]
-        if split is not None:
-            fields, fast, _ = split
-            cols = fields.columns
-            for j in np.flatnonzero(np.isin(fast.index, _IDENTITY_INDEX)).tolist():
-                rec = {"kind": "sdo"} | {c: cols[c][j] for c in SDO_COLUMNS}
-                ident.append((int(fast.slots[j]), rec))
-            ident.sort(key=operator.itemgetter(0))
-            if sdo:
-                at = np.concatenate((np.array([k for k, _ in sdo], np.int64), fast.slots))
-                take = np.argsort(at, kind="stable").tolist()
-                chunk = [
-                    list(map((list(mine) + cols[c]).__getitem__, take))
-                    for c, mine in zip(SDO_COLUMNS, chunk, strict=True)
-                ]
-            else:
-                chunk = [cols[c] for c in SDO_COLUMNS]
+        mine = [list(c) for c in zip(*rows, strict=True)] or [[] for _ in SDO_COLUMNS]
+        for c, values in zip(SDO_COLUMNS, mine, strict=True):
+            sdo_chunks.take_in(self._sdo_stats[c], values, pieces.get(c))
         for node, info in _identity(ident).items():
             self._identity.setdefault(node, {}).update(info)
-        for c, values in zip(SDO_COLUMNS, chunk, strict=True):
-            self._sdo_stats[c].update(values)
-        pickle.dump(chunk, self._sdo_spool, pickle.HIGHEST_PROTOCOL)
         self._sdo_chunks += 1
+        out = self._speculate_sdo()
+        spool = self._sdo_spool
+
+        def chunk() -> None:
+            """Spooled (as the pieces: smaller than the merged columns), merged and written
+            if the types hold, on the writer thread: numpy and Arrow work."""
+            pickle.dump((mine, pieces, order), spool, pickle.HIGHEST_PROTOCOL)
+            if out is not None:
+                decided, schema, writer = out
+                writer.add(_sdo_table(mine, pieces, order, decided, schema))
+
+        self.writer.put(chunk)
 
     # --- the end -----------------------------------------------------------------------
     def close(self) -> dict[str, int]:
         """Write the small tables, wait for the writer, fix order/categories, rename all files."""
         try:
             self._add_events(EventColumns.empty(), None)
+            sdo_done = self._speculate_sdo() is not None  # the types are final now
+            if sdo_done:  # the last row group, on the writer thread too
+                self.writer.put(self._sdo_spec[2].close)
+                self._sdo_spec = False
             for sink in self.sinks.values():
                 self.writer.put(sink.close)
             self.writer.join()
@@ -432,7 +455,7 @@ class StreamTables:
             self._finish_events()
             self._finish_frames()
             self.rows.update({name: s.rows for name, s in self.sinks.items()})
-            self.rows["sdo"] = self._write_sdo()
+            self.rows["sdo"] = self._write_sdo(sdo_done)
             self.rows["findings"] = self._write_findings()
             self.rows["nodes"] = self._write_nodes()
         except BaseException as exc:
@@ -446,6 +469,10 @@ class StreamTables:
         """Drop every temporary file (a cut-off export leaves no table behind)."""
         with contextlib.suppress(BaseException):
             self.writer.join()
+        if self._sdo_spec:
+            with contextlib.suppress(BaseException):
+                self._sdo_spec[2].discard()
+            self._sdo_spec = False
         self._sdo_spool.close()
         self._stack.__exit__(typ or RuntimeError, exc or RuntimeError("aborted"), tb)
 
@@ -498,49 +525,58 @@ class StreamTables:
 
     def _write_small(self, name: str, tables: Iterable[pa.Table], schema: pa.Schema) -> None:
         """Chunks of a record table, in row groups of up to ROW_GROUP rows (as to_parquet)."""
-        path = self.paths[name]
-        if self.fmt == "parquet":
-            import pyarrow.parquet as pq
-
-            writer = pq.ParquetWriter(path, schema, compression=self.compression)
-            write = lambda t: writer.write_table(t, row_group_size=ROW_GROUP)  # noqa: E731
-        else:
-            import pyarrow.csv as pacsv
-
-            writer = pacsv.CSVWriter(path, csv_schema(schema))
-            write = lambda t: writer.write_table(csv_table(t))  # noqa: E731
-        with writer:
-            buf: list[pa.Table] = []
-            rows = 0
+        out = _RecordWriter(self.paths[name], self.fmt, schema, self.compression)
+        try:
             for table in tables:
-                buf.append(table)
-                rows += table.num_rows
-                if rows >= ROW_GROUP:
-                    write(pa.concat_tables(buf))
-                    buf, rows = [], 0
-            if buf or not rows:
-                write(pa.concat_tables(buf) if buf else schema.empty_table())
+                out.add(table)
+        except BaseException:
+            out.discard()
+            raise
+        out.close()
 
-    def _write_sdo(self) -> int:
-        decided = {c: self._sdo_stats[c].decide(as_object=c == "value") for c in SDO_COLUMNS}
-        schema = pa.schema(
-            [pa.field(c, pl.arrow_type(decided[c][0])) for c in SDO_COLUMNS],
-            metadata=pl.schema_metadata(
-                [pl.field_meta(c, decided[c][1], decided[c][2]) for c in SDO_COLUMNS]
-            ),
-        )
+    def _sdo_decided(self) -> tuple[tuple[str, str, str], ...]:
+        return tuple(self._sdo_stats[c].decide(as_object=c == "value") for c in SDO_COLUMNS)
+
+    def _speculate_sdo(self) -> tuple | None:
+        """(decisions, schema, writer) to write the next chunk with now, or None.
+
+        pandas types a column over all of it, so a later chunk can change a type
+        (an abort code after none, a text among numbers): then the file written so
+        far is dropped and close() writes the table from the spool, as it would
+        have anyway. Mostly the first chunk settles the types, the chunks are
+        written on the writer thread as they come and close() has only the last
+        row group left.
+        """
+        if self._sdo_spec is False:
+            return None
+        decided = self._sdo_decided()
+        spec = self._sdo_spec
+        if spec is not None and spec[0] != decided:
+            self._sdo_spec = False
+            self.writer.put(spec[2].discard)
+            return None
+        if spec is None:
+            schema = _sdo_schema(decided)
+            out = _RecordWriter(self.paths["sdo"], self.fmt, schema, self.compression)
+            spec = self._sdo_spec = (decided, schema, out)
+        return spec
+
+    def _write_sdo(self, written: bool) -> int:
+        """The sdo table from the spool, unless every chunk was `written` as it came."""
+        rows = sum(s.rows for s in self._sdo_stats.values()) // len(SDO_COLUMNS)
+        if written:
+            return rows
+        decided = self._sdo_decided()
+        schema = _sdo_schema(decided)
         self._sdo_spool.seek(0)
 
         def tables():
             for _ in range(self._sdo_chunks):
-                chunk = pickle.load(self._sdo_spool)
-                arrays = [
-                    pl.convert(v, decided[c][0]) for c, v in zip(SDO_COLUMNS, chunk, strict=True)
-                ]
-                yield pa.Table.from_arrays(arrays, schema=schema)
+                mine, pieces, order = pickle.load(self._sdo_spool)
+                yield _sdo_table(mine, pieces, order, decided, schema)
 
         self._write_small("sdo", tables(), schema)
-        return sum(s.rows for s in self._sdo_stats.values()) // len(SDO_COLUMNS)
+        return rows
 
     def _write_findings(self) -> int:
         cols = list(zip(*self._findings, strict=True)) or [[] for _ in FINDING_COLUMNS]
@@ -575,6 +611,61 @@ class StreamTables:
         names = others + ["node"] if self.fmt == "parquet" else ["node", *others]
         out = [(c, *pl.column([r[c] for r in rows])) for c in names]
         return self._small_table("nodes", out, index="node" if self.fmt == "parquet" else None)
+
+
+def _sdo_table(mine: list, pieces: dict, order, decided: tuple, schema: pa.Schema) -> pa.Table:
+    """One chunk of the sdo table: each column merged by record slot and typed as decided."""
+    arrays = [
+        sdo_chunks.to_arrow(sdo_chunks.merge(v, pieces.get(c), order), d[0])
+        for c, v, d in zip(SDO_COLUMNS, mine, decided, strict=True)
+    ]
+    return pa.Table.from_arrays(arrays, schema=schema)
+
+
+def _sdo_schema(decided: tuple[tuple[str, str, str], ...]) -> pa.Schema:
+    return pa.schema(
+        [pa.field(c, pl.arrow_type(d[0])) for c, d in zip(SDO_COLUMNS, decided, strict=True)],
+        metadata=pl.schema_metadata(
+            [pl.field_meta(c, d[1], d[2]) for c, d in zip(SDO_COLUMNS, decided, strict=True)]
+        ),
+    )
+
+
+class _RecordWriter:
+    """A record table's file, chunk by chunk, in row groups of up to ROW_GROUP rows (as to_parquet)."""
+
+    def __init__(self, path: Path, fmt: str, schema: pa.Schema, compression: str) -> None:
+        self.schema = schema
+        if fmt == "parquet":
+            import pyarrow.parquet as pq
+
+            self.writer = pq.ParquetWriter(path, schema, compression=compression)
+            self._write = lambda t: self.writer.write_table(t, row_group_size=ROW_GROUP)
+        else:
+            import pyarrow.csv as pacsv
+
+            self.writer = pacsv.CSVWriter(path, csv_schema(schema))
+            self._write = lambda t: self.writer.write_table(csv_table(t))
+        self.buf: list[pa.Table] = []
+        self.rows = 0
+
+    def add(self, table: pa.Table) -> None:
+        self.buf.append(table)
+        self.rows += table.num_rows
+        if self.rows >= ROW_GROUP:
+            self._write(pa.concat_tables(self.buf))
+            self.buf, self.rows = [], 0
+
+    def close(self) -> None:
+        try:
+            self._write(pa.concat_tables(self.buf) if self.buf else self.schema.empty_table())
+        finally:
+            self.writer.close()
+
+    def discard(self) -> None:
+        """Close without the last row group (the file is written again or dropped)."""
+        self.buf = []
+        self.writer.close()
 
 
 class _Vocab:

@@ -122,10 +122,7 @@ def decode_column(raw, length, code: int) -> list:
         elif dtype.kind == "bool":
             out = ((word & 1) != 0).tolist()
         else:
-            v = (word & np.uint32((1 << (8 * size)) - 1)).astype(np.int64)
-            if dtype.kind == "int":
-                v = np.where(v >= 1 << (8 * size - 1), v - (1 << (8 * size)), v)
-            out = v.tolist()
+            out = _ints(word, dtype.kind, size).tolist()
         short = np.flatnonzero(np.asarray(length) < size).tolist()
         for i in short:
             out[i] = None
@@ -136,3 +133,30 @@ def decode_column(raw, length, code: int) -> list:
             np.asarray(raw, np.uint8).tolist(), np.asarray(length).tolist(), strict=True
         )
     ]
+
+
+def _ints(word, kind: str, size: int):
+    import numpy as np
+
+    v = (word & np.uint32((1 << (8 * size)) - 1)).astype(np.int64)
+    if kind == "int":
+        v = np.where(v >= 1 << (8 * size - 1), v - (1 << (8 * size)), v)
+    return v
+
+
+def decode_int_column(raw, length, code: int):
+    """`decode_column`'s integers as numpy: (int64 values, bool mask of the None ones).
+
+    None when the type is not an integer that fits in 4 bytes (then decode_column
+    gives bools, floats, texts or None). Lets the table export keep numbers as numbers.
+    """
+    import numpy as np
+
+    dtype = DATA_TYPES.get(code)
+    if dtype is None or dtype.kind not in ("int", "uint"):
+        return None
+    size = max(1, dtype.bits // 8)
+    if size > 4:
+        return None
+    word = np.ascontiguousarray(raw, np.uint8).view("<u4").ravel()
+    return _ints(word, dtype.kind, size), np.asarray(length) < size

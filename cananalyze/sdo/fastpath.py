@@ -15,12 +15,13 @@ processor decides (see `SdoProcessor`).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from ..decoded import DecodedBatch, SdoColumns
 from ..frames import FLAG_TX
-from ..protocol.datatypes import decode_column, decode_value
+from ..protocol.datatypes import decode_column, decode_int_column, decode_value
 from ..protocol.tables import abort_text
 from .tracker import ObjectInfo
 from .transaction import SDO_TABLE_COLUMNS
@@ -37,7 +38,7 @@ for _b in (0x22, 0x42):
     _EXP_LEN[_b] = 4
 for _b in (0x23, 0x43, 0x27, 0x47, 0x2B, 0x4B, 0x2F, 0x4F):
     _EXP_LEN[_b] = 4 - ((_b >> 2) & 3)
-_HEX2 = np.array([f"{i:02x}" for i in range(256)], "S2")  # byte -> its hex text
+HEX2 = np.array([f"{i:02x}" for i in range(256)], "S2")  # byte -> its hex text
 
 
 @dataclass
@@ -70,7 +71,7 @@ def plan(batch: DecodedBatch, rows: np.ndarray, timeout: float, explicit: list[i
     if explicit:
         ex = np.asarray(explicit, np.int64)
         usable &= ~np.isin(0x600 + node, ex) & ~np.isin(0x580 + node, ex)
-    d = fb.data[rows]
+    d = _rows(fb.data, rows)
     b0 = d[:, 0]
     mux = (
         d[:, 1].astype(np.int64)
@@ -103,18 +104,21 @@ def plan(batch: DecodedBatch, rows: np.ndarray, timeout: float, explicit: list[i
     )
 
 
-def _hex_column(raw: np.ndarray, length: np.ndarray) -> np.ndarray:
-    """Object array of the hex text of each row's first `length` bytes (1..4), column-wise."""
-    out = np.empty(len(raw), object)
-    pairs = _HEX2[raw]  # (m, 4) of 2-character byte texts
-    for n in sorted(set(length.tolist())):  # (plain np.unique's first call costs ~10 ms)
-        sel = np.flatnonzero(length == n)
-        if n <= 0:
-            out[sel] = ""
-            continue
-        text = np.ascontiguousarray(pairs[sel, :n]).view(f"S{2 * n}").ravel()
-        out[sel] = text.astype(f"U{2 * n}")
-    return out
+def _rows(data: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """data[at] for (n, 8) payload rows: np.take is ~10x numpy's 2-D fancy indexing here."""
+    return np.take(data, at, axis=0)
+
+
+def hex_texts(raw: np.ndarray, length: np.ndarray) -> list[str]:
+    """The hex text of each row's first `length` bytes (0..4), as a list, column-wise.
+
+    Byte pairs past the length are emptied, so each row's 8 bytes read as one
+    text whose trailing NULs numpy drops.
+    """
+    m = len(raw)
+    pairs = HEX2[raw]  # (m, 4) of 2-character byte texts
+    pairs[np.arange(raw.shape[1]) >= np.asarray(length)[:, None]] = b""
+    return pairs.view(f"S{2 * raw.shape[1]}").reshape(m).astype(f"U{2 * raw.shape[1]}").tolist()
 
 
 def py_round(v: np.ndarray, ndigits: int) -> np.ndarray:
@@ -137,14 +141,14 @@ def py_round(v: np.ndarray, ndigits: int) -> np.ndarray:
     return out
 
 
-def _rounded_latency(dt: np.ndarray) -> list:
+def _rounded_latency(dt: np.ndarray) -> np.ndarray:
     """round(round(dt * 1000, 6), 3) exactly as Python computes it, column-wise."""
-    return py_round(py_round(np.asarray(dt, np.float64) * 1000.0, 6), 3).tolist()
+    return py_round(py_round(np.asarray(dt, np.float64) * 1000.0, 6), 3)
 
 
 def pair_columns(fb, a: np.ndarray, b: np.ndarray, slots: np.ndarray) -> SdoColumns:
     """What summary, timing and the network model read of taken pairs, as columns."""
-    da, db = fb.data[a], fb.data[b]
+    da, db = _rows(fb.data, a), _rows(fb.data, b)
     t0, t1 = fb.t[a], fb.t[b]
     return SdoColumns(
         slots=np.asarray(slots, np.int64),
@@ -154,27 +158,71 @@ def pair_columns(fb, a: np.ndarray, b: np.ndarray, slots: np.ndarray) -> SdoColu
         index=da[:, 1].astype(np.int64) | (da[:, 2].astype(np.int64) << 8),
         subindex=da[:, 3].astype(np.int64),
         ok=db[:, 0] != _ABORT,
-        latency=np.asarray(_rounded_latency(t1 - t0), np.float64),
+        latency=_rounded_latency(t1 - t0),
     )
 
 
 RECORD_COLUMNS = SDO_TABLE_COLUMNS
 
 
+# the fields every ok expedited pair has alike, and the arrays that hold the others
+OK_CONSTANTS = {
+    "protocol": "expedited",
+    "result": "ok",
+    "abort_code": None,
+    "abort_text": None,
+    "detail": None,
+}
+NUMBER_FIELDS = ("t_start", "t", "latency_ms", "node", "index", "subindex", "size")
+OBJECT_FIELDS = ("value", "name")
+
+
 @dataclass
 class RecordColumns:
-    """Every field of the fast path's records as lists (one per RECORD_COLUMNS key).
+    """Every field of the fast path's records as columns, numbers as numpy arrays.
 
-    The export writes the SDO table and its events from these without a dict per
-    transaction; `records()` builds the dicts from the same values. Aborted pairs
-    (rare) keep the dict `pair_outputs` made, and their fields are copied in.
+    `arrays` holds NUMBER_FIELDS (float64 times and latency, int64 others), `upload`
+    (bool: the direction), OBJECT_FIELDS (object arrays), `raw` and `data_len` (the
+    data bytes and how many are used, for the hex `data`), `name_code` into
+    `name_labels` and, when every decoded value is an int, `value_int` and
+    `value_none` (where `value` is None); all as an ok transfer has them; the other fields are `OK_CONSTANTS`. Aborted pairs (rare) keep the
+    dict `pair_outputs` made (`aborted`, position -> record), which wins. The export
+    takes the arrays as they are; `columns` (lists, aborted fields patched in, for
+    readers that go value by value) and `records()` are built when asked.
     """
 
-    columns: dict[str, list]
+    arrays: dict[str, np.ndarray]
     aborted: dict[int, dict]  # position -> record
+    name_labels: list  # the distinct names (or None): `name` is name_labels[name_code]
 
     def __len__(self) -> int:
-        return len(self.columns["t"])
+        return len(self.arrays["t"])
+
+    @cached_property
+    def columns(self) -> dict[str, list]:
+        """One list per RECORD_COLUMNS key, values as in the records."""
+        a = self.arrays
+        m = len(self)
+        columns: dict[str, list] = {c: a[c].tolist() for c in NUMBER_FIELDS + OBJECT_FIELDS}
+        columns["data"] = hex_texts(a["raw"], a["data_len"])
+        columns["direction"] = np.where(a["upload"], "upload", "download").tolist()
+        for c, v in OK_CONSTANTS.items():
+            columns[c] = [v] * m
+        for k, rec in self.aborted.items():
+            for c in RECORD_COLUMNS:
+                columns[c][k] = rec[c]
+        return {c: columns[c] for c in RECORD_COLUMNS}
+
+    def record(self, j: int) -> dict:
+        """The j-th record's table fields (and kind), without the lists."""
+        if j in self.aborted:
+            return self.aborted[j]
+        a = self.arrays
+        rec = {"kind": "sdo"} | {c: a[c][j].item() for c in NUMBER_FIELDS}
+        rec |= {c: a[c][j] for c in OBJECT_FIELDS} | OK_CONSTANTS
+        rec["data"] = a["raw"][j, : a["data_len"][j]].tobytes().hex()
+        rec["direction"] = "upload" if a["upload"][j] else "download"
+        return rec
 
     def records(self) -> list[dict]:
         c = self.columns
@@ -225,7 +273,7 @@ def pair_records(
     a: np.ndarray,
     b: np.ndarray,
     object_info: ObjectInfo | None,
-    latency: list | None = None,
+    latency: np.ndarray | None = None,
 ) -> list[dict]:
     """Records of taken pairs, exactly as the tracker makes them, built from columns."""
     return pair_record_columns(fb, a, b, object_info, latency).records()
@@ -236,9 +284,9 @@ def pair_record_columns(
     a: np.ndarray,
     b: np.ndarray,
     object_info: ObjectInfo | None,
-    latency: list | None = None,
+    latency: np.ndarray | None = None,
 ) -> RecordColumns:
-    """The records' fields of taken pairs as lists, values as the tracker makes them.
+    """The records' fields of taken pairs as columns, values as the tracker makes them.
 
     Names and data types are looked up once per distinct (node, index, subindex),
     values decoded per data type as numpy columns. Aborted pairs (rare) go through
@@ -246,8 +294,17 @@ def pair_record_columns(
     """
     m = len(a)
     if m == 0:
-        return RecordColumns({c: [] for c in RECORD_COLUMNS}, {})
-    da, db = fb.data[a], fb.data[b]
+        floats = {c: np.zeros(0, np.float64) for c in ("t_start", "t", "latency_ms")}
+        ints = {c: np.zeros(0, np.int64) for c in NUMBER_FIELDS if c not in floats}
+        objects = {c: np.empty(0, object) for c in OBJECT_FIELDS}
+        extra = {
+            "upload": np.zeros(0, bool),
+            "raw": np.zeros((0, 4), np.uint8),
+            "data_len": np.zeros(0, np.int64),
+            "name_code": np.zeros(0, np.int64),
+        }
+        return RecordColumns(floats | ints | objects | extra, {}, [None])
+    da, db = _rows(fb.data, a), _rows(fb.data, b)
     upload = da[:, 0] == _UPLOAD_REQ
     aborted = db[:, 0] == _ABORT
     length = np.where(upload, _EXP_LEN[db[:, 0]], _EXP_LEN[da[:, 0]]).astype(np.int64)
@@ -257,9 +314,14 @@ def pair_record_columns(
     t0, t1 = fb.t[a], fb.t[b]
     ok = ~aborted
     any_abort = not bool(ok.all())
-    data = _hex_column(raw, np.where(ok, length, 0))
+    data_len = np.where(ok, length, 0)
     names = np.full(m, None, object)
     values = np.full(m, None, object)
+    name_code = np.zeros(m, np.int64)
+    name_labels: list = [None]
+    # the values as int64 while every one decoded is an int (else None): value_none marks None
+    value_int: np.ndarray | None = np.zeros(m, np.int64)
+    value_none = np.ones(m, bool)
     if object_info is not None:
         key = (node_a << 24) | (index_a << 8) | da[:, 3]
         uniq, inv = np.unique(key, return_inverse=True)
@@ -267,51 +329,59 @@ def pair_record_columns(
         infos = [object_info(k >> 24, (k >> 8) & 0xFFFF, k & 0xFF) for k in uniq.tolist()]
         known = np.array([i is not None for i in infos], bool)
         if known.any():
-            names[:] = np.array([i[0] if i else None for i in infos], object)[inv]
+            name_labels = [i[0] if i else None for i in infos]
+            name_code = inv.astype(np.int64)
+            names[:] = np.array(name_labels, object)[inv]
             dtype_of = np.array([i[1] if i else -1 for i in infos], np.int64)[inv]
             dtype_of[~known[inv] | aborted] = -1
             for code in sorted(set(dtype_of.tolist())):
                 if code >= 0:
                     sel = np.flatnonzero(dtype_of == code)
                     values[sel] = decode_column(raw[sel], length[sel], code)
-    if latency is None:
-        latency = _rounded_latency(t1 - t0)
-    nodes = node_a.tolist()
-    columns = {
-        "t_start": t0.tolist(),
-        "t": t1.tolist(),
-        "latency_ms": list(latency) if any_abort else latency,  # (a shared list: patched below)
-        "node": nodes,
-        "direction": np.where(upload, "upload", "download").tolist(),
-        "protocol": ["expedited"] * m,
-        "index": index_a.tolist(),
-        "subindex": da[:, 3].tolist(),
-        "size": length.tolist(),
-        "data": data.tolist(),
-        "value": values.tolist(),
-        "name": names.tolist(),
-        "result": ["ok"] * m,
-        "abort_code": [None] * m,
-        "abort_text": [None] * m,
-        "detail": [None] * m,
+                    got = (
+                        None
+                        if value_int is None
+                        else decode_int_column(raw[sel], length[sel], code)
+                    )
+                    if got is None:
+                        value_int = None
+                    else:
+                        value_int[sel] = got[0]
+                        value_none[sel] = got[1]
+    latency = _rounded_latency(t1 - t0) if latency is None else np.asarray(latency, np.float64)
+    arrays = {
+        "t_start": t0.astype(np.float64, copy=False),
+        "t": t1.astype(np.float64, copy=False),
+        "latency_ms": latency,
+        "node": node_a,
+        "index": index_a,
+        "subindex": da[:, 3].astype(np.int64),
+        "size": length,
+        "upload": upload,
+        "value": values,
+        "name": names,
+        "raw": raw,
+        "data_len": data_len,
+        "name_code": name_code,
     }
+    if value_int is not None:
+        arrays["value_int"] = value_int
+        arrays["value_none"] = value_none | aborted
     done: dict[int, dict] = {}
     if any_abort:
         for k in np.flatnonzero(aborted).tolist():
-            rec = done[k] = pair_outputs(fb, int(a[k]), int(b[k]), nodes[k], object_info)[2]
-            for c in RECORD_COLUMNS:
-                columns[c][k] = rec[c]
-    return RecordColumns(columns, done)
+            done[k] = pair_outputs(fb, int(a[k]), int(b[k]), int(node_a[k]), object_info)[2]
+    return RecordColumns(arrays, done, name_labels)
 
 
 def pair_notes(fb, a: np.ndarray, b: np.ndarray) -> tuple[list[dict], list[dict]]:
     """Request and answer notes of taken pairs (for the text/JSONL outputs, built when read)."""
-    da, db = fb.data[a], fb.data[b]
+    da, db = _rows(fb.data, a), _rows(fb.data, b)
     upload = da[:, 0] == _UPLOAD_REQ
     aborted = db[:, 0] == _ABORT
     length = np.where(upload, _EXP_LEN[db[:, 0]], _EXP_LEN[da[:, 0]]).astype(np.int64)
     raw = np.ascontiguousarray(np.where(upload[:, None], db[:, 4:8], da[:, 4:8]))
-    data = _hex_column(raw, np.where(aborted, 0, length)).tolist()
+    data = hex_texts(raw, np.where(aborted, 0, length))
     index = (da[:, 1].astype(np.int64) | (da[:, 2].astype(np.int64) << 8)).tolist()
     sub = da[:, 3].tolist()
     sized = (da[:, 0] & 1).tolist()

@@ -68,7 +68,7 @@ class SdoProcessor:
         Such a write can add or move a channel mid-batch, which the plan's fixed
         channel map cannot follow: then the whole batch goes through the tracker.
         """
-        d = batch.frames.data[rows]
+        d = np.take(batch.frames.data, rows, axis=0)  # (~10x 2-D fancy indexing)
         index = d[:, 1].astype(np.uint16) | (d[:, 2].astype(np.uint16) << 8)
         if ((index >= 0x1200) & (index <= 0x12FF)).any():
             return True
@@ -221,7 +221,7 @@ class SdoProcessor:
             [np.arange(slot, slot + hi - lo, dtype=np.int64) for slot, lo, hi in self._chunks]
         )
         cols = fastpath.pair_columns(fb, a, b, slots)
-        latency = cols.latency.tolist()
+        latency = cols.latency
         info = lookup = self.tracker.object_info
         if info is not None:
             # answers as they are now: the records may be built after the model changed
@@ -242,8 +242,7 @@ class SdoProcessor:
         def build(js: np.ndarray | None) -> list[dict]:
             if js is None:
                 return columns().records()
-            picked = [latency[j] for j in js.tolist()]
-            return fastpath.pair_records(fb, a[js], b[js], lookup, picked)
+            return fastpath.pair_records(fb, a[js], b[js], lookup, latency[js])
 
         if not isinstance(batch.records, LazyRecords):
             batch.records = LazyRecords(batch.records)
