@@ -194,6 +194,9 @@ class StreamTables:
             "events": Sink(self.paths["events"], fmt, EVENTS, compression),
         }
         self.compression = compression
+        # two writer threads: the frames table (most of the Parquet encoding, outside
+        # the GIL) runs beside the others, so neither queue holds the decoder back
+        self.frames_writer = WriterThread(depth)
         self.writer = WriterThread(depth)
         self.offset = 0
         self.rows: dict[str, int] = {}
@@ -234,7 +237,7 @@ class StreamTables:
                 self._channels = tuple(fb.channels)
             frames = self.sinks["frames"]
             args = (fb, batch.service, batch.node, batch.pdo)
-            self.writer.put(lambda: frames.add(_frames_columns(*args)))
+            self.frames_writer.put(lambda: frames.add(_frames_columns(*args)))
             has = batch.node >= 0
             key = batch.node[has].astype(np.int64) * len(SERVICE_NAMES) + batch.service[has]
             self._counts += np.bincount(key, minlength=self._counts.size).reshape(
@@ -448,8 +451,9 @@ class StreamTables:
             if sdo_done:  # the last row group, on the writer thread too
                 self.writer.put(self._sdo_spec[2].close)
                 self._sdo_spec = False
-            for sink in self.sinks.values():
-                self.writer.put(sink.close)
+            for name, sink in self.sinks.items():
+                (self.frames_writer if name == "frames" else self.writer).put(sink.close)
+            self.frames_writer.join()
             self.writer.join()
             self._finish_signals()
             self._finish_events()
@@ -467,8 +471,9 @@ class StreamTables:
 
     def abort(self, typ=None, exc=None, tb=None) -> None:
         """Drop every temporary file (a cut-off export leaves no table behind)."""
-        with contextlib.suppress(BaseException):
-            self.writer.join()
+        for writer in (self.frames_writer, self.writer):
+            with contextlib.suppress(BaseException):
+                writer.join()
         if self._sdo_spec:
             with contextlib.suppress(BaseException):
                 self._sdo_spec[2].discard()
