@@ -273,3 +273,20 @@ def test_signal_order_with_equal_times_is_left_to_the_sort():
     batch, rows_of, col_of = _signal_batch([0.0, 0.0, 0.001, 0.002, 0.002, 0.003])
     total = sum(len(r) for r in rows_of)
     assert _row_major_order(batch, rows_of, col_of, total) is None
+
+
+def test_compute_kernels_registered_before_writer_threads():
+    """pyarrow.compute is imported with the sink module, never first on a writer thread.
+
+    Since Arrow 21 that import registers the compute kernels; done on one writer
+    thread while another's Parquet writer looks a kernel up, the export failed at
+    random with "No function registered with name: unique".
+    """
+    probe = (
+        "import sys; import cananalyze.outputs.table_sink; "
+        "print('pyarrow.compute' in sys.modules)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, check=True
+    )
+    assert out.stdout.strip() == "True"

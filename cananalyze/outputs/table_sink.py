@@ -26,6 +26,12 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
+# Imported here, before any writer thread starts: since Arrow 21 importing
+# pyarrow.compute registers the compute kernels in the global registry, and doing
+# that on one writer thread while another's Parquet writer looks a kernel up fails
+# at random ("No function registered with name: unique").
+import pyarrow.compute  # noqa: F401
+
 from . import arrow_build as ab
 from .pandas_like import code_type
 
