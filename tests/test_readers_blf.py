@@ -247,3 +247,29 @@ def test_parsing_containers_together_changes_nothing(written, tmp_path, monkeypa
             "corrupt zlib data",
             "garbage between BLF objects, skipped 16 bytes",
         ]
+
+
+@pytest.mark.skipif(blf._fast_zlib is None, reason="python-isal not installed")
+def test_fast_inflate_same_outcome_as_zlib(written, monkeypatch):
+    """python-isal and the standard zlib give the same bytes and problems, sound or broken."""
+    data = written.read_bytes()
+    payloads = []
+    for pos in _containers(data):
+        size = struct.unpack_from("<L", data, pos + 8)[0]
+        payloads.append(data[pos + 32 : pos + size])
+    good = zlib.compress(b"x" * 5000)
+    cases = payloads + [
+        good,
+        good[:-7],  # cut short: incomplete
+        b"\x78\x9c" + b"\xff" * 40,  # corrupt
+        b"",
+        zlib.compress(bytes(300_000)),  # inflates beyond the limit below
+    ]
+    for payload in cases:
+        fast = blf._inflate(payload, 200_000)
+        monkeypatch.setattr(blf, "_fast_zlib", None)
+        ref = blf._inflate(payload, 200_000)
+        monkeypatch.undo()
+        assert fast == ref
+    if written.name == "w6.blf":  # compressed containers: all sound
+        assert all(blf._inflate(p, blf.MAX_CONTAINER)[1] is None for p in payloads)
