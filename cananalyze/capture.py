@@ -330,9 +330,6 @@ def _categorical(pd, codes: np.ndarray, labels: list[str]):
     return pd.Categorical.from_codes(inverse[codes], categories=list(uniq))
 
 
-_HEX = np.frombuffer(b"0123456789abcdef", np.uint8)
-
-
 def _hex_column(fb: FrameBatch, pa):
     """Payloads as an Arrow string column, built from buffers (no Python string per frame)."""
     from .hexcols import hex_payload_buffers

@@ -26,7 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
-from ..sdo.fastpath import HEX2, NUMBER_FIELDS, OK_CONSTANTS, RecordColumns
+from ..hexcols import hex_payload_buffers
+from ..sdo.fastpath import NUMBER_FIELDS, OK_CONSTANTS, RecordColumns
 from . import arrow_build as ab
 from . import pandas_like as pl
 
@@ -87,11 +88,22 @@ def fast_pieces(fields: RecordColumns, keep: np.ndarray | None) -> dict[str, Pie
 
 
 def hex_strings(raw: np.ndarray, length: np.ndarray) -> pa.Array:
-    """large_string column of the hex text of each row's first `length` bytes."""
-    pairs = HEX2[raw].view(np.uint8).reshape(len(raw), 2 * raw.shape[1])
-    width = 2 * np.asarray(length, np.int64)
-    data = pairs[np.arange(pairs.shape[1]) < width[:, None]]
-    return _from_buffers(width, data, None)
+    """large_string column of the hex text of each row's first `length` bytes.
+
+    The frames table's payload column builder (`hexcols`, compiled when built)
+    does the work; the SDO table's pandas-like type is large_string.
+    """
+    m = len(raw)
+    padded = np.zeros((m, 8), np.uint8)
+    padded[:, : raw.shape[1]] = raw
+    chars, offsets = hex_payload_buffers(
+        padded, np.asarray(length, np.uint8), np.zeros(m, np.uint8)
+    )
+    return pa.Array.from_buffers(
+        pa.large_string(),
+        m,
+        [None, pa.py_buffer(offsets.astype(np.int64)), pa.py_buffer(chars)],
+    )
 
 
 def _from_buffers(lengths: np.ndarray, data: np.ndarray, missing: np.ndarray | None) -> pa.Array:
