@@ -246,6 +246,7 @@ def batch_event_columns(
 _NODE_TEXT: dict[int, str] = {}  # 'node 5: '
 _EMCY_CODE_TEXT: dict[int, str] = {}  # 'EMCY 0x8130 Monitoring - ...; register 0x'
 _EMCY_REG_TEXT: dict[int, str] = {}  # '11 [generic,communication]; mfr '
+_EMCY_CODE_CACHE = 4096  # codes kept in _EMCY_CODE_TEXT at most
 
 
 def emcy_classes(codes: np.ndarray) -> list[str]:
@@ -270,6 +271,9 @@ def _emcy_heads(node: list[int], code: list[int], reg: list[int]) -> list[str]:
     for n in set(node).difference(_NODE_TEXT):
         _NODE_TEXT[n] = f"node {n}: " if n >= 0 else ""
     new = sorted(set(code).difference(_EMCY_CODE_TEXT))
+    if len(_EMCY_CODE_TEXT) + len(new) > _EMCY_CODE_CACHE:  # random codes (a noisy bus, the
+        _EMCY_CODE_TEXT.clear()  # generator) must not fill all 65536 over a long log
+        new = sorted(set(code))
     for c, cls in zip(new, emcy_classes(np.array(new, np.int64)), strict=True):
         _EMCY_CODE_TEXT[c] = f"EMCY 0x{c:04X} {cls}; register 0x"
     for r in set(reg).difference(_EMCY_REG_TEXT):

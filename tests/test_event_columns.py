@@ -164,6 +164,28 @@ def test_generated_emcy_nmt_sdo_events_match_per_row(size):
     assert count > 2000
 
 
+def test_emcy_text_cache_is_bounded(monkeypatch):
+    """Random error codes (a noisy bus) clear the EMCY text cache rather than fill it with
+    all 65536 over a long log; the texts stay those of the per-row route."""
+    from cananalyze import events
+
+    monkeypatch.setattr(events, "_EMCY_CODE_CACHE", 64)
+    monkeypatch.setattr(events, "_EMCY_CODE_TEXT", {})
+    sizes = []
+    real_heads = events._emcy_heads
+
+    def heads(node, code, reg):
+        out = real_heads(node, code, reg)
+        sizes.append((len(events._EMCY_CODE_TEXT), len(set(code))))
+        return out
+
+    monkeypatch.setattr(events, "_emcy_heads", heads)
+    assert _assert_same_events(_decoded(_emcy_bus(), 333, device=DEVICES)) > 2000
+    cleared = [b < a for (a, _), (b, _) in zip(sizes, sizes[1:], strict=False)]
+    assert any(cleared)  # the cache filled and was cleared ...
+    assert all(n <= max(64, new) for n, new in sizes)  # ... never grown past its bound
+
+
 REAL = [
     "hilch__canopen-message-interpreter/ixxat1.trc",
     "hilch__canopen-message-interpreter/pcan3.trc",

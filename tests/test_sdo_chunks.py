@@ -255,13 +255,14 @@ def test_int_column_decode_matches_decode_column():
     assert ints >= 6
 
 
+@pytest.mark.parametrize("cut", ["rows", "bytes"])
 @pytest.mark.parametrize("fmt", ["parquet", "csv"])
 @pytest.mark.parametrize(
     ("name", "size", "kept"),
     [("faults.log", 50, False), ("faults.log", 997, True), ("commissioning.log", 7, True)],
 )
 def test_sdo_written_as_chunks_come_is_the_file_written_at_close(
-    tmp_path, monkeypatch, fmt, name, size, kept
+    tmp_path, monkeypatch, fmt, name, size, kept, cut
 ):
     """The sdo table written chunk by chunk on the writer thread while the column types hold
     is byte for byte the file written whole at close; when a later chunk changes a type
@@ -274,7 +275,10 @@ def test_sdo_written_as_chunks_come_is_the_file_written_at_close(
     from cananalyze.outputs import table_stream
     from cananalyze.outputs.table_stream import StreamTables
 
-    monkeypatch.setattr(table_stream, "ROW_GROUP", 8)
+    if cut == "rows":
+        monkeypatch.setattr(table_stream, "ROW_GROUP", 8)
+    else:  # row groups cut by their size in bytes (wide SDO rows)
+        monkeypatch.setattr(table_stream, "ROW_GROUP_BYTES", 1500)
     log, kw = SAMPLES / name, {"network": str(SAMPLES / "network.toml")}
     spec = None
     for out, speculate in (("spec", True), ("whole", False)):

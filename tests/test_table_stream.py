@@ -233,6 +233,23 @@ def test_small_row_groups_late_categories(tmp_path, monkeypatch, fmt):
         assert pq.ParquetFile(tmp_path / "new" / "frames.parquet").num_row_groups > 1
 
 
+def test_row_groups_cut_by_bytes(tmp_path, monkeypatch):
+    """A row group is cut at ROW_GROUP_BYTES even when far from ROW_GROUP rows (so events
+    and SDO rows do not wait in memory for dozens of batches): same tables. The frames
+    table shows the table sink's cut (events here come all at once: the log is shorter
+    than HOLD), the sdo table the record writer's."""
+    from cananalyze.outputs import table_stream
+
+    monkeypatch.setattr(table_sink, "ROW_GROUP_BYTES", 500)
+    monkeypatch.setattr(table_stream, "ROW_GROUP_BYTES", 500)
+    _both(tmp_path, SAMPLES / "faults.log", size=40, network=str(SAMPLES / "network.toml"))
+    for name in ("frames", "sdo"):
+        meta = pq.ParquetFile(tmp_path / "new" / f"{name}.parquet").metadata
+        sizes = [meta.row_group(i).num_rows for i in range(meta.num_row_groups)]
+        assert len(sizes) > 1, name
+        assert max(sizes) <= 40, name  # a batch or less: cut by the bytes, not the rows
+
+
 def _signal_batch(t: list[float]):
     from cananalyze.decoded import DecodedBatch, SignalBlock
     from cananalyze.frames import FrameBatch
@@ -283,8 +300,7 @@ def test_compute_kernels_registered_before_writer_threads():
     random with "No function registered with name: unique".
     """
     probe = (
-        "import sys; import cananalyze.outputs.table_sink; "
-        "print('pyarrow.compute' in sys.modules)"
+        "import sys; import cananalyze.outputs.table_sink; print('pyarrow.compute' in sys.modules)"
     )
     out = subprocess.run(
         [sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, check=True

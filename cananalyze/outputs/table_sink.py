@@ -38,6 +38,18 @@ from .pandas_like import code_type
 # Rows per row group: 256k (pyarrow's default is 1M) lets the writer start while the
 # decoder is still at the first quarter of a 1M-frame log, and bounds what waits in memory.
 ROW_GROUP = 1 << 18
+# ... and at most this many bytes wait for a row group. Wide, sparse tables (events,
+# SDO rows: 100-180 bytes a row, a few thousand rows a batch) would otherwise hold
+# tens of megabytes over dozens of batches before their first write, so a 10M-frame
+# log peaked 40-70 MB higher than a 5M one, which never filled a row group at all.
+ROW_GROUP_BYTES = 16 << 20
+
+
+def nbytes(value) -> int:
+    """Bytes of one buffered column: a numpy array, an Arrow array or a `Coded`."""
+    if isinstance(value, Coded):
+        return value.codes.nbytes
+    return value.nbytes
 
 
 @dataclass
@@ -70,6 +82,7 @@ class Sink:
         self.compression = compression
         self.buffer: list[dict] = []
         self.buffered = 0
+        self.buffered_bytes = 0
         self.rows = 0
         self.writer = None
         self.schema: pa.Schema | None = None
@@ -82,7 +95,8 @@ class Sink:
             return
         self.buffer.append(columns)
         self.buffered += n
-        if self.buffered >= ROW_GROUP:
+        self.buffered_bytes += sum(nbytes(v) for v in columns.values())
+        if self.buffered >= ROW_GROUP or self.buffered_bytes >= ROW_GROUP_BYTES:
             self.flush()
 
     def _extend_order(self) -> None:
@@ -108,7 +122,7 @@ class Sink:
         if self.schema is None:
             self.schema = self._schema()
         batches = [self._batch(cols) for cols in self.buffer]
-        self.buffer, self.buffered = [], 0
+        self.buffer, self.buffered, self.buffered_bytes = [], 0, 0
         table = pa.Table.from_batches(batches, self.schema)
         self._write(table)
 

@@ -42,6 +42,7 @@ from .atomic import atomic_path
 from .parquet_out import TABLES, _outdir
 from .table_sink import (
     ROW_GROUP,
+    ROW_GROUP_BYTES,
     Coded,
     Sink,
     TableSpec,
@@ -637,7 +638,9 @@ def _sdo_schema(decided: tuple[tuple[str, str, str], ...]) -> pa.Schema:
 
 
 class _RecordWriter:
-    """A record table's file, chunk by chunk, in row groups of up to ROW_GROUP rows (as to_parquet)."""
+    """A record table's file, chunk by chunk, in row groups of up to ROW_GROUP rows (as to_parquet)
+    or ROW_GROUP_BYTES, whichever comes first (the cut depends only on the chunks, so a
+    table written as it comes and one written again from the spool are the same file)."""
 
     def __init__(self, path: Path, fmt: str, schema: pa.Schema, compression: str) -> None:
         self.schema = schema
@@ -653,13 +656,15 @@ class _RecordWriter:
             self._write = lambda t: self.writer.write_table(csv_table(t))
         self.buf: list[pa.Table] = []
         self.rows = 0
+        self.bytes = 0
 
     def add(self, table: pa.Table) -> None:
         self.buf.append(table)
         self.rows += table.num_rows
-        if self.rows >= ROW_GROUP:
+        self.bytes += table.nbytes
+        if self.rows >= ROW_GROUP or self.bytes >= ROW_GROUP_BYTES:
             self._write(pa.concat_tables(self.buf))
-            self.buf, self.rows = [], 0
+            self.buf, self.rows, self.bytes = [], 0, 0
 
     def close(self) -> None:
         try:
