@@ -268,13 +268,17 @@ def _signal_batch(t: list[float]):
     return batch, rows_of, col_of
 
 
+def _blocks(batch) -> list[tuple[np.ndarray, int]]:
+    return [(blk.rows, len(blk.columns)) for blk in batch.signals]
+
+
 def test_signal_order_without_sort_equals_the_lexsort():
     """Strictly increasing times: frame by frame, columns in order, as the 4-key sort gives."""
     from cananalyze.outputs.table_stream import _row_major_order
 
     batch, rows_of, col_of = _signal_batch([0.001 * k for k in range(9)])
     total = sum(len(r) for r in rows_of)
-    order = _row_major_order(batch, rows_of, col_of, total)
+    order = _row_major_order(batch.frames.t, _blocks(batch), rows_of, col_of, total)
     row = np.concatenate(rows_of)
     col = np.repeat(col_of, [len(r) for r in rows_of])
     rank = np.repeat([0, 0, 1], [len(r) for r in rows_of])
@@ -289,7 +293,7 @@ def test_signal_order_with_equal_times_is_left_to_the_sort():
 
     batch, rows_of, col_of = _signal_batch([0.0, 0.0, 0.001, 0.002, 0.002, 0.003])
     total = sum(len(r) for r in rows_of)
-    assert _row_major_order(batch, rows_of, col_of, total) is None
+    assert _row_major_order(batch.frames.t, _blocks(batch), rows_of, col_of, total) is None
 
 
 def test_compute_kernels_registered_before_writer_threads():

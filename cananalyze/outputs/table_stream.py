@@ -283,6 +283,9 @@ class StreamTables:
         if not keys:
             return
         labels = {k: self._labels[k].snapshot() for k in ("pdo", "signal", "unit")}
+        # what the job needs, not the batch: a queued job holding the DecodedBatch kept its
+        # frames and records alive too, ~10 MB a batch while this writer was behind
+        blocks = [(blk.rows, len(blk.columns)) for blk in batch.signals]
 
         def columns() -> dict:
             """Ordered and gathered on the writer thread: the numpy work there runs outside the GIL.
@@ -293,7 +296,7 @@ class StreamTables:
             sizes = [len(r) for r in rows_of]
             row = np.concatenate(rows_of)
             t = t_all[row]
-            order = _row_major_order(batch, rows_of, col_of, len(t))
+            order = _row_major_order(t_all, blocks, rows_of, col_of, len(t))
             if order is None:
                 rank_of = {k: r for r, k in enumerate(sorted(set(keys)))}
                 rank = np.repeat(np.array([rank_of[k] for k in keys], np.int32), sizes)
@@ -721,7 +724,11 @@ def _event_order(table: pa.Table) -> np.ndarray:
 
 
 def _row_major_order(
-    batch: DecodedBatch, rows_of: list[np.ndarray], col_of: list[int], total: int
+    t: np.ndarray,
+    blocks: list[tuple[np.ndarray, int]],
+    rows_of: list[np.ndarray],
+    col_of: list[int],
+    total: int,
 ) -> np.ndarray | None:
     """The signals' (t, series, column, row) order without a sort, when times allow it.
 
@@ -730,17 +737,18 @@ def _row_major_order(
     values in column order: positions follow from a running count. Otherwise
     (equal or backward times, e.g. millisecond logs) None, and the caller sorts.
     A four-key lexsort over every value was a tenth of the export's main thread.
+    `t`: the batch's frame times; `blocks`: (rows, column count) of each signal block.
     """
-    n = len(batch)
+    n = len(t)
     width = np.zeros(n, np.int64)
     seen = np.zeros(n, np.int64)
-    for blk in batch.signals:
-        width[blk.rows] = len(blk.columns)
-        seen[blk.rows] += 1
+    for rows, columns in blocks:
+        width[rows] = columns
+        seen[rows] += 1
     carrying = np.flatnonzero(width)
     if int(seen.sum()) != carrying.size:  # a frame in two blocks
         return None
-    if carrying.size > 1 and not bool((np.diff(batch.frames.t[carrying]) > 0).all()):
+    if carrying.size > 1 and not bool((np.diff(t[carrying]) > 0).all()):
         return None
     start = np.cumsum(width) - width
     pos = np.concatenate([start[rows] + j for rows, j in zip(rows_of, col_of, strict=True)])
