@@ -22,6 +22,7 @@ sys.path.insert(0, str(ROOT))
 
 from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, FrameBatch  # noqa: E402
 from cananalyze.outputs.logfile import write_log  # noqa: E402
+from cananalyze.outputs.text import _digits  # noqa: E402  (the text writer's ASCII digits)
 
 START = 1767225600.0
 
@@ -66,15 +67,6 @@ def generate(n: int, seed: int = 1) -> FrameBatch:
 
 
 _HEX = np.frombuffer(b"0123456789ABCDEF", np.uint8)
-
-
-def _digits(values: np.ndarray, width: int) -> np.ndarray:
-    out = np.empty((values.size, width), np.uint8)
-    v = values.astype(np.int64)
-    for j in range(width - 1, -1, -1):
-        out[:, j] = 48 + v % 10
-        v = v // 10
-    return out
 
 
 def write_asc(batch: FrameBatch, path: Path) -> bool:
