@@ -9,6 +9,7 @@ import itertools
 import json
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -146,6 +147,31 @@ def test_timestamps_going_back_resorted(tmp_path):
     ]
     log.write_text("\n".join(lines) + "\n")
     _both(tmp_path, log, size=13, network=str(SAMPLES / "network.toml"))
+
+
+def test_writer_join_can_be_repeated_after_an_error():
+    """close() joins, raises the writer's error, and abort() joins again (then __exit__
+    once more): every join must return, with a one-deep queue too."""
+
+    def boom():
+        raise OSError(28, "No space left on device")
+
+    done = threading.Event()
+    errors = []
+
+    def run():
+        w = table_sink.WriterThread(1)
+        w.put(boom)
+        for _ in range(3):
+            try:
+                w.join()
+            except OSError as exc:
+                errors.append(exc)
+        done.set()
+
+    threading.Thread(target=run, daemon=True).start()
+    assert done.wait(10), "WriterThread.join blocked"
+    assert len(errors) == 3
 
 
 def test_writer_queue_is_bounded(tmp_path, monkeypatch):

@@ -234,9 +234,12 @@ class WriterThread:
         self.queue.put(job)
 
     def join(self) -> None:
-        """Wait for every job; raise the writer's error if one failed."""
-        self.queue.put(None)
-        self.thread.join()
+        """Wait for every job; raise the writer's error if one failed. Callable again
+        (close, then abort on the error it raised): a second end-of-queue would wait
+        forever for the finished thread to take it."""
+        if self.thread.is_alive():
+            self.queue.put(None)
+            self.thread.join()
         if self.error is not None:
             raise self.error
 
