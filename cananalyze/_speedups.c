@@ -1,12 +1,15 @@
 /*
- * cananalyze._speedups: the text readers', the classifier's and the frames table's inner loops in C.
+ * cananalyze._speedups: the text readers' and writer's, the classifier's and the frames table's
+ * inner loops in C.
  *
  * Why hand-written: no library parses candump or Vector ASC text into columns
  * (python-can makes one Message per frame, about 150k frames/s), and the numpy
  * paths in io/candump.py and io/asc.py, while columnar, need a dozen passes over
  * every byte and hold the GIL between their calls, so reading cannot run on the
  * other core while the decoder works. These loops read each byte once and release
- * the GIL for the whole chunk.
+ * the GIL for the whole chunk. The text writer's lines come out of a matrix of
+ * NUL-padded columns about 100 bytes wide; numpy needs four passes to drop the
+ * padding (concatenate, compare, compress, row sums), `compact_rows` one.
  *
  * Contract: every function is an optional shortcut for a pure-Python/numpy
  * function, and must give identical results. The parsers accept only lines whose
@@ -602,6 +605,100 @@ fail:
     return NULL;
 }
 
+/* ------------------------------------------------------------- text lines */
+
+#define MAX_PARTS 16
+
+PyDoc_STRVAR(compact_rows_doc,
+             "compact_rows(parts, widths, n, pad, ends) -> bytes\n\n"
+             "The text writer's lines from its column matrices: row by row, the bytes of\n"
+             "every part (a C-contiguous uint8 buffer of n rows x widths[i]) in order,\n"
+             "leaving out every byte equal to pad. ends: None, or an int64 buffer of n\n"
+             "that receives each row's end offset in the result. Equals\n"
+             "np.concatenate(parts, axis=1), then m[m != pad].tobytes() and the\n"
+             "cumulative sum of kept bytes per row, in one pass without the GIL.");
+
+static PyObject *compact_rows(PyObject *self, PyObject *args) {
+    PyObject *o_parts, *o_widths, *o_ends;
+    Py_ssize_t n;
+    int pad;
+    if (!PyArg_ParseTuple(args, "OOniO", &o_parts, &o_widths, &n, &pad, &o_ends)) return NULL;
+    PyObject *parts = PySequence_Fast(o_parts, "parts must be a sequence");
+    if (!parts) return NULL;
+    PyObject *widths = PySequence_Fast(o_widths, "widths must be a sequence");
+    if (!widths) {
+        Py_DECREF(parts);
+        return NULL;
+    }
+    Py_ssize_t np_ = PySequence_Fast_GET_SIZE(parts);
+    Py_buffer bufs[MAX_PARTS + 1];
+    Py_ssize_t w[MAX_PARTS];
+    int got = 0;
+    PyObject *out = NULL;
+    Py_ssize_t total = 0;
+    if (np_ > MAX_PARTS || PySequence_Fast_GET_SIZE(widths) != np_ || n < 0 || pad < 0 ||
+        pad > 255) {
+        PyErr_SetString(PyExc_ValueError, "compact_rows: bad parts, widths, n or pad");
+        goto done;
+    }
+    for (Py_ssize_t i = 0; i < np_; i++) {
+        w[i] = PyLong_AsSsize_t(PySequence_Fast_GET_ITEM(widths, i));
+        if (w[i] < 0) {
+            if (!PyErr_Occurred()) PyErr_SetString(PyExc_ValueError, "negative width");
+            goto done;
+        }
+        if (PyObject_GetBuffer(PySequence_Fast_GET_ITEM(parts, i), &bufs[got],
+                               PyBUF_SIMPLE | PyBUF_C_CONTIGUOUS) < 0)
+            goto done;
+        got++;
+        if (w[i] && bufs[i].len / w[i] < n) {
+            PyErr_Format(PyExc_ValueError, "part %zd: %zd bytes, need %zd rows x %zd", i,
+                         bufs[i].len, n, w[i]);
+            goto done;
+        }
+        total += w[i];
+    }
+    int64_t *ends = NULL;
+    if (o_ends != Py_None) {
+        if (PyObject_GetBuffer(o_ends, &bufs[got], PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0)
+            goto done;
+        got++;
+        if (bufs[got - 1].len < n * 8) {
+            PyErr_SetString(PyExc_ValueError, "ends: buffer too small");
+            goto done;
+        }
+        ends = bufs[got - 1].buf;
+    }
+    if (total && n > PY_SSIZE_T_MAX / total) {
+        PyErr_SetString(PyExc_OverflowError, "compact_rows: too large");
+        goto done;
+    }
+    out = PyBytes_FromStringAndSize(NULL, n * total);
+    if (!out) goto done;
+    char *dst = PyBytes_AS_STRING(out);
+    Py_ssize_t pos = 0;
+    const uint8_t p = (uint8_t)pad;
+    Py_BEGIN_ALLOW_THREADS;
+    for (Py_ssize_t r = 0; r < n; r++) {
+        for (Py_ssize_t i = 0; i < np_; i++) {
+            const uint8_t *src = (const uint8_t *)bufs[i].buf + r * w[i];
+            for (Py_ssize_t c = 0; c < w[i]; c++) {
+                uint8_t b = src[c];
+                dst[pos] = (char)b; /* written always, kept only when not padding */
+                pos += b != p;
+            }
+        }
+        if (ends) ends[r] = pos;
+    }
+    Py_END_ALLOW_THREADS;
+    if (_PyBytes_Resize(&out, pos) < 0) out = NULL;
+done:
+    for (int i = 0; i < got; i++) PyBuffer_Release(&bufs[i]);
+    Py_DECREF(parts);
+    Py_DECREF(widths);
+    return out;
+}
+
 static PyMethodDef methods[] = {
     {"count_lines", count_lines, METH_VARARGS, count_lines_doc},
     {"split_lines", split_lines, METH_VARARGS, split_lines_doc},
@@ -610,12 +707,14 @@ static PyMethodDef methods[] = {
     {"asc_base_line", asc_base_line, METH_VARARGS, asc_base_line_doc},
     {"hex_payload", hex_payload, METH_VARARGS, hex_payload_doc},
     {"classify", classify, METH_VARARGS, classify_doc},
+    {"compact_rows", compact_rows, METH_VARARGS, compact_rows_doc},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_speedups",
-    "Compiled inner loops of the text readers, the classifier and the frames table (optional).", -1, methods,
+    "Compiled inner loops of the text readers and writer, the classifier and the frames table "
+    "(optional).", -1, methods,
 };
 
 PyMODINIT_FUNC PyInit__speedups(void) {

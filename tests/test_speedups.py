@@ -296,3 +296,41 @@ def test_candump_chunk_of_short_lines(tmp_path: Path) -> None:
     path = tmp_path / "short.log"
     path.write_bytes(body)
     assert _same(path) == 4000
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_compact_rows_matches_numpy(seed: int) -> None:
+    """The text writer's compaction: the same bytes and row ends as the numpy passes."""
+    from cananalyze.outputs import text
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(0, 3000))
+    parts = []
+    for _ in range(int(rng.integers(1, 12))):
+        w = int(rng.integers(0, 40))
+        m = rng.integers(0, 256, (n, w), dtype=np.uint8)
+        m[rng.random((n, w)) < 0.3] = text._PAD  # padding anywhere, not only at row ends
+        parts.append(m)
+    parts.append(rng.integers(0, 256, (n, 24), dtype=np.uint8)[:, :23])  # a strided view
+    for with_ends in (True, False):
+        got, got_ends = text._compact(parts, n, with_ends)
+        saved = speedups.C
+        speedups.C = None
+        try:
+            ref, ref_ends = text._compact(parts, n, with_ends)
+        finally:
+            speedups.C = saved
+        assert got == ref
+        assert (got_ends is None) == (ref_ends is None) == (not with_ends)
+        if with_ends:
+            assert got_ends.tolist() == ref_ends.tolist()
+
+
+def test_compact_rows_checks_its_buffers() -> None:
+    parts = [np.zeros((10, 4), np.uint8)]
+    with pytest.raises(ValueError, match="part 0"):
+        C.compact_rows(parts, [4], 11, 0, None)  # fewer rows than n
+    with pytest.raises(ValueError, match="ends"):
+        C.compact_rows(parts, [4], 10, 0, np.empty(9, np.int64))
+    with pytest.raises(ValueError):
+        C.compact_rows(parts, [4, 4], 10, 0, None)  # a width per part

@@ -21,6 +21,7 @@ from typing import TextIO
 
 import numpy as np
 
+from .. import speedups
 from ..decoded import DecodedBatch
 from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from ..protocol.fields import annotation, frame_fields
@@ -429,20 +430,21 @@ class TextWriter:
             ann_col[rows, : m.shape[1]] = m
         parts.append(ann_col)
 
-        matrix = np.concatenate(parts, axis=1)
-        keep = matrix != _PAD
-        blob = matrix[keep].tobytes()
         if spliced:
             with_records[list(spliced)] = True
         slow = np.flatnonzero(with_records)
+        blob, ends = _compact(parts, n, with_ends=slow.size > 0)
         if slow.size == 0 and not tail_lines:
             return blob
-        ends = np.cumsum(keep.sum(axis=1))
         pieces: list[bytes] = []
         prev = 0
         is_sdo = ((svc == Service.SDO_REQUEST) | (svc == Service.SDO_RESPONSE))[slow].tolist()
         for i, e, row, sdo in zip(
-            slow.tolist(), ends[slow].tolist(), sel[slow].tolist(), is_sdo, strict=True
+            slow.tolist(),
+            ends[slow].tolist() if slow.size else [],
+            sel[slow].tolist(),
+            is_sdo,
+            strict=True,
         ):
             pieces.append(blob[prev:e])
             prev = e
@@ -462,6 +464,19 @@ class TextWriter:
         if tail_lines:
             pieces.append(("\n".join(tail_lines) + "\n").encode())
         return b"".join(pieces)
+
+
+def _compact(parts: list[np.ndarray], n: int, with_ends: bool) -> tuple[bytes, np.ndarray | None]:
+    """The lines: the column matrices side by side, NUL padding left out; and, if asked,
+    each row's end offset in them (where record lines are spliced in)."""
+    compact_rows = getattr(speedups.C, "compact_rows", None)
+    if compact_rows is not None:  # one pass in C, without the GIL: a third of the writer's time
+        parts = [np.ascontiguousarray(p, np.uint8) for p in parts]
+        ends = np.empty(n, np.int64) if with_ends else None
+        return compact_rows(parts, [p.shape[1] for p in parts], n, _PAD, ends), ends
+    matrix = np.concatenate(parts, axis=1)
+    keep = matrix != _PAD
+    return matrix[keep].tobytes(), np.cumsum(keep.sum(axis=1)) if with_ends else None
 
 
 def _ragged(rows: np.ndarray, texts: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
