@@ -306,8 +306,8 @@ class StreamTables:
                 col = np.repeat(np.array(col_of, np.int32), sizes)
                 order = np.lexsort((row, col, rank, t))
             first, last = int(order[0]), int(order[-1])
-            part_of = np.repeat(np.arange(len(keys)), sizes)
-            pf, pl_ = int(part_of[first]), int(part_of[last])
+            part_of = np.repeat(np.arange(len(keys), dtype=np.int32), sizes)[order]
+            pf, pl_ = int(part_of[0]), int(part_of[-1])
             head = (float(t[first]), *keys[pf], col_of[pf], int(row[first]) + off)
             tail = (float(t[last]), *keys[pl_], col_of[pl_], int(row[last]) + off)
             if self._signal_last is not None and head < self._signal_last:
@@ -315,7 +315,9 @@ class StreamTables:
             self._signal_last = tail
 
             def const(name: str, dtype) -> np.ndarray:
-                return np.repeat(np.array(consts[name], dtype), sizes)[order]
+                # a lookup in the parts' small table: one gather from cache, not a
+                # repeat over every value and a gather from it
+                return np.array(consts[name], dtype)[part_of]
 
             values = np.concatenate([np.asarray(v, np.float64) for v in v_parts])
             return {
@@ -744,12 +746,10 @@ def _row_major_order(
     """
     n = len(t)
     width = np.zeros(n, np.int64)
-    seen = np.zeros(n, np.int64)
     for rows, columns in blocks:
         width[rows] = columns
-        seen[rows] += 1
     carrying = np.flatnonzero(width)
-    if int(seen.sum()) != carrying.size:  # a frame in two blocks
+    if sum(len(rows) for rows, _ in blocks) != carrying.size:  # a frame in two blocks
         return None
     if carrying.size > 1 and not bool((np.diff(t[carrying]) > 0).all()):
         return None
