@@ -301,7 +301,7 @@ def test_candump_chunk_of_short_lines(tmp_path: Path) -> None:
 @pytest.mark.parametrize("seed", range(4))
 def test_compact_rows_matches_numpy(seed: int) -> None:
     """The text writer's compaction: the same bytes and row ends as the numpy passes."""
-    from cananalyze.outputs import text
+    from cananalyze import bytecols
 
     rng = np.random.default_rng(seed)
     n = int(rng.integers(0, 3000))
@@ -309,15 +309,15 @@ def test_compact_rows_matches_numpy(seed: int) -> None:
     for _ in range(int(rng.integers(1, 12))):
         w = int(rng.integers(0, 40))
         m = rng.integers(0, 256, (n, w), dtype=np.uint8)
-        m[rng.random((n, w)) < 0.3] = text._PAD  # padding anywhere, not only at row ends
+        m[rng.random((n, w)) < 0.3] = bytecols.PAD  # padding anywhere, not only at row ends
         parts.append(m)
     parts.append(rng.integers(0, 256, (n, 24), dtype=np.uint8)[:, :23])  # a strided view
     for with_ends in (True, False):
-        got, got_ends = text._compact(parts, n, with_ends)
+        got, got_ends = bytecols.compact(parts, n, with_ends)
         saved = speedups.C
         speedups.C = None
         try:
-            ref, ref_ends = text._compact(parts, n, with_ends)
+            ref, ref_ends = bytecols.compact(parts, n, with_ends)
         finally:
             speedups.C = saved
         assert got == ref

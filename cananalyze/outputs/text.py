@@ -21,7 +21,10 @@ from typing import TextIO
 
 import numpy as np
 
-from .. import speedups
+from ..bytecols import PAD as _PAD
+from ..bytecols import compact as _compact
+from ..bytecols import digits as _digits
+from ..bytecols import padded_table as _padded_table
 from ..decoded import DecodedBatch
 from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from ..protocol.fields import annotation, frame_fields
@@ -85,7 +88,6 @@ def format_record(rec: dict) -> str:
     return " ".join(f"{k}={v}" for k, v in rec.items())
 
 
-_PAD = 0
 _HEXCHARS = np.frombuffer(b"0123456789ABCDEF", np.uint8)
 _HEXLOWER = np.frombuffer(b"0123456789abcdef", np.uint8)  # bytes.hex()
 _SVC_COL = np.array([list(f"{name:<14} ".encode()) for name in SERVICE_NAMES], np.uint8)
@@ -110,24 +112,6 @@ _BYTE_MATTERS = np.zeros(256, bool)  # the first data byte changes the text
 _BYTE_MATTERS[
     [Service.SYNC, Service.HEARTBEAT, Service.GUARD_RESPONSE, Service.LSS_MASTER, Service.LSS_SLAVE]
 ] = True
-
-
-def _digits(values: np.ndarray, width: int) -> np.ndarray:
-    """(n, width) ASCII digits of non-negative integers, zero padded."""
-    out = np.empty((values.size, width), np.uint8)
-    v = values.astype(np.int64)
-    for j in range(width - 1, -1, -1):
-        out[:, j] = 48 + v % 10
-        v = v // 10
-    return out
-
-
-def _padded_table(texts: list[bytes]) -> np.ndarray:
-    width = max((len(x) for x in texts), default=0)
-    table = np.zeros((len(texts), width), np.uint8)
-    for i, x in enumerate(texts):
-        table[i, : len(x)] = np.frombuffer(x, np.uint8)
-    return table
 
 
 def _time_column(rel: np.ndarray) -> np.ndarray:
@@ -464,19 +448,6 @@ class TextWriter:
         if tail_lines:
             pieces.append(("\n".join(tail_lines) + "\n").encode())
         return b"".join(pieces)
-
-
-def _compact(parts: list[np.ndarray], n: int, with_ends: bool) -> tuple[bytes, np.ndarray | None]:
-    """The lines: the column matrices side by side, NUL padding left out; and, if asked,
-    each row's end offset in them (where record lines are spliced in)."""
-    compact_rows = getattr(speedups.C, "compact_rows", None)
-    if compact_rows is not None:  # one pass in C, without the GIL: a third of the writer's time
-        parts = [np.ascontiguousarray(p, np.uint8) for p in parts]
-        ends = np.empty(n, np.int64) if with_ends else None
-        return compact_rows(parts, [p.shape[1] for p in parts], n, _PAD, ends), ends
-    matrix = np.concatenate(parts, axis=1)
-    keep = matrix != _PAD
-    return matrix[keep].tobytes(), np.cumsum(keep.sum(axis=1)) if with_ends else None
 
 
 def _ragged(rows: np.ndarray, texts: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
