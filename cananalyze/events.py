@@ -33,6 +33,7 @@ from .protocol.tables import (
     NMT_STATES,
     error_register_names,
 )
+from .sdo_event_text import sdo_head, sdo_message, sdo_messages, sdo_tail
 
 # foxglove.Log levels, used for every event (MCAP, rerun, the events table).
 DEBUG, INFO, WARNING, ERROR, FATAL = 1, 2, 3, 4, 5
@@ -64,41 +65,6 @@ class EventState:
     last_t: float = 0.0  # time of the last event: a frameless batch's findings default to it
 
 
-def sdo_message(direction, index, sub, name, result, value, data, abort, detail) -> str:
-    """The event text of one SDO record, from its fields (one implementation for dicts and columns)."""
-    return _sdo_head(direction, index, sub, name) + _sdo_tail(result, value, data, abort, detail)
-
-
-def _sdo_head(direction, index, sub, name) -> str:
-    if isinstance(index, int) and isinstance(sub, int):
-        text = f"SDO {direction} 0x{index:04X}:{sub:02X}"
-    else:
-        text = f"SDO {direction}"
-    return f"{text} {name}" if name else text
-
-
-def _sdo_tail(result, value, data, abort, detail) -> str:
-    ok = result == "ok"
-    if ok:
-        if isinstance(value, int) and not isinstance(value, bool) and abs(value) > 9:
-            text = (
-                f" = {value} (0x{value & 0xFFFFFFFFFFFFFFFF:X}) ok"  # as the text output shows it
-            )
-        elif value is not None:
-            text = f" = {value} ok"
-        elif data:
-            text = f" data {data} ok"
-        else:
-            text = " ok"
-    else:
-        text = f" {result}"
-    if abort:
-        text += f": {abort}"
-    elif not ok and detail:
-        text += f": {detail}"
-    return text
-
-
 def sdo_event(row: int, r: dict) -> Row:
     get = r.get
     result = get("result", "?")
@@ -120,21 +86,40 @@ def sdo_event(row: int, r: dict) -> Row:
 def sdo_event_columns(fields, rows: np.ndarray) -> EventColumns:
     """`sdo_event` of each fast-path record as columns, from its fields (`RecordColumns`).
 
-    The head ("SDO upload 0x1018:01 name") is formatted once per object and direction
-    (a polled bus asks the same few objects over and over); the usual tail, an
-    positive integer answer ("... = 305419896 (0x12345678) ok") takes one f-string
-    with the head, every other one `_sdo_tail`.
+    When every value decoded is an integer (the usual case) the texts are built as
+    byte columns (`sdo_messages`). Otherwise the head ("SDO upload 0x1018:01 name")
+    is formatted once per object and direction, an integer answer ("... = 305419896
+    (0x12345678) ok") takes one f-string with the head, every other one `sdo_tail`.
     """
+    messages = sdo_messages(fields)
+    if messages is not None:  # columns: no per-field lists, no f-string per record
+        a = fields.arrays
+        n = len(fields)
+        t = np.array(a["t"], np.float64)
+        node = a["node"].astype(np.int16)
+        ok = np.ones(n, bool)
+        for k, rec in fields.aborted.items():
+            t[k] = rec.get("t", t[k])
+            node[k] = NO_NODE if rec.get("node") is None else rec["node"]
+            ok[k] = rec.get("result") == "ok"
+        return EventColumns(
+            t,
+            np.full(n, ec.SDO, np.uint8),
+            node,
+            np.where(ok, INFO, WARNING).astype(np.int8),
+            texts(messages),
+            rows,
+        )
     c = fields.columns
     n = len(c["t"])
     result = c["result"]
     ok = np.fromiter(map(operator.eq, result, repeat("ok", n)), bool, n)
     keys = list(zip(c["direction"], c["index"], c["subindex"], c["name"], strict=True))
-    heads = {k: _sdo_head(*k) for k in dict.fromkeys(keys)}
+    heads = {k: sdo_head(*k) for k in dict.fromkeys(keys)}
     messages = [
-        f"{h} = {v} (0x{v:X}) ok"  # = _sdo_tail's text for these (v & 2**64-1 == v)
+        f"{h} = {v} (0x{v:X}) ok"  # = sdo_tail's text for these (v & 2**64-1 == v)
         if type(v) is int and 9 < v <= _U64 and r == "ok" and a is None
-        else h + _sdo_tail(r, v, d, a, det)
+        else h + sdo_tail(r, v, d, a, det)
         for h, r, v, d, a, det in zip(
             map(heads.__getitem__, keys),
             result,

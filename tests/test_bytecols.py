@@ -26,3 +26,80 @@ def test_split_rows_keeps_non_ascii_text() -> None:
     texts = ["Gerätename", "", "plain", "Δt ≤ 5 ms"]
     table = bytecols.padded_table([t.encode() for t in texts])
     assert _rows(table) == texts
+
+
+def _pairs(rng: np.random.Generator, m: int):
+    """m expedited SDO pairs (uploads and downloads, 1-4 bytes, some aborted) as frames."""
+    from cananalyze.frames import FrameBatch
+
+    fb = FrameBatch.allocate(2 * m, ("can0",))
+    fb.t[:] = np.arange(2 * m) * 0.001
+    fb.dlc[:] = 8
+    node = rng.integers(1, 5, m)
+    index = rng.choice([0x2000, 0x2001, 0x2002, 0x6000], m)
+    sub = rng.integers(0, 3, m)
+    size = rng.integers(1, 5, m)
+    upload = rng.random(m) < 0.6
+    value = rng.integers(0, 256, (m, 4), dtype=np.uint8)
+    value[rng.random(m) < 0.3] = 0xFF  # negative as signed, large as unsigned
+    value[rng.random(m) < 0.2] = 0  # small values print without hex
+    for k in range(m):
+        req, resp = fb.data[2 * k], fb.data[2 * k + 1]
+        fb.can_id[2 * k], fb.can_id[2 * k + 1] = 0x600 + node[k], 0x580 + node[k]
+        for d in (req, resp):
+            d[1:4] = (index[k] & 0xFF, index[k] >> 8, sub[k])
+        code = 0x43 | ((4 - size[k]) << 2)  # expedited, size given
+        if upload[k]:
+            req[0], resp[0] = 0x40, code
+            resp[4:8] = value[k]
+        else:
+            req[0], resp[0] = code - 0x20, 0x60
+            req[4:8] = value[k]
+        if rng.random() < 0.05:
+            resp[0], resp[4:8] = 0x80, (0x00, 0x00, 0x02, 0x06)  # object does not exist
+    return fb, np.arange(0, 2 * m, 2), np.arange(1, 2 * m, 2)
+
+
+def test_sdo_messages_equal_the_per_record_text() -> None:
+    """Integer values of every sign and size, unknown objects (data only), aborts, names
+    with non-ASCII letters: the columns say what `sdo_message` says of each record."""
+    from cananalyze.sdo import fastpath
+    from cananalyze.sdo_event_text import sdo_message, sdo_messages
+
+    # INTEGER8/16/32 and UNSIGNED32; 0x6000 unknown (no name, no type: data only)
+    types = {0x2000: ("Drehzahl", 0x0002), 0x2001: ("Temp", 0x0003), 0x2002: ("Zähler", 0x0007)}
+
+    def info(node: int, index: int, sub: int):
+        if index not in types:
+            return None
+        name, code = types[index]
+        return (f"{name} {sub}", 0x0004 if sub == 2 else code)
+
+    rng = np.random.default_rng(11)
+    for lookup in (info, None):
+        fb, a, b = _pairs(rng, 600)
+        fields = fastpath.pair_record_columns(fb, a, b, lookup)
+        got = sdo_messages(fields)
+        assert got is not None  # every decoded value is an integer
+        want = []
+        for j in range(len(fields)):
+            r = fields.record(j)
+            want.append(
+                sdo_message(
+                    r["direction"], r["index"], r["subindex"], r["name"], r["result"],
+                    r["value"], r["data"], r["abort_text"], r["detail"],
+                )
+            )  # fmt: skip
+        assert got == want
+        if lookup is not None:  # negative, small and wide integers, and data only
+            assert all(any(p in x for x in want) for p in (" = -", "(0x", " = 0 ok", " data "))
+        else:  # no object known: every value is data
+            assert all(" = " not in x for x in want) and any(" data " in x for x in want)
+        assert fields.aborted
+
+
+def test_joined_rows_with_a_separator_inside_a_text() -> None:
+    texts = ["a\x1fb", "plain", "", "ü\x1f"]
+    table = bytecols.padded_table([t.encode() for t in texts])
+    assert bytecols.joined_rows([table], len(texts)) == texts
+    assert bytecols.joined_rows([table[1:3]], 2) == ["plain", ""]
