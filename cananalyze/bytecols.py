@@ -15,6 +15,7 @@ from . import speedups
 
 PAD = 0
 HEX_UPPER = np.frombuffer(b"0123456789ABCDEF", np.uint8)
+HEX_LOWER = np.frombuffer(b"0123456789abcdef", np.uint8)  # as bytes.hex() writes
 
 
 def padded_table(texts: list[bytes]) -> np.ndarray:
@@ -60,6 +61,14 @@ def hex_upper(values: np.ndarray) -> np.ndarray:
     for j in range(16):
         out[:, j] = HEX_UPPER[((u >> np.uint64(60 - 4 * j)) & np.uint64(15)).astype(np.intp)]
     _blank_leading(out, 0, ord("0"))
+    return out
+
+
+def hex_bytes(raw: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """`bytes(row[:length]).hex()` of each row of a uint8 matrix, NUL-padded (n, 2 * width)."""
+    n, width = raw.shape
+    out = np.stack((HEX_LOWER[raw >> 4], HEX_LOWER[raw & 15]), axis=2).reshape(n, 2 * width)
+    out[np.arange(2 * width)[None, :] >= 2 * np.asarray(length)[:, None]] = PAD
     return out
 
 

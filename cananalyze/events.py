@@ -33,7 +33,7 @@ from .protocol.tables import (
     NMT_STATES,
     error_register_names,
 )
-from .sdo_event_text import sdo_head, sdo_message, sdo_messages, sdo_tail
+from .sdo_event_text import U64, sdo_head, sdo_message, sdo_messages, sdo_tail
 
 # foxglove.Log levels, used for every event (MCAP, rerun, the events table).
 DEBUG, INFO, WARNING, ERROR, FATAL = 1, 2, 3, 4, 5
@@ -41,7 +41,6 @@ LEVEL_NAMES = {DEBUG: "debug", INFO: "info", WARNING: "warning", ERROR: "error",
 _LEVEL_BY_NAME = {v: k for k, v in LEVEL_NAMES.items()} | {"critical": FATAL, "warn": WARNING}
 
 _STATE_SERVICES = np.array((Service.HEARTBEAT, Service.BOOTUP, Service.GUARD_RESPONSE), np.uint8)
-_U64 = 0xFFFFFFFFFFFFFFFF
 _EVENT_SERVICES = np.array([Service.NMT, Service.EMCY, Service.BOOTUP], np.uint8)
 
 
@@ -118,7 +117,7 @@ def sdo_event_columns(fields, rows: np.ndarray) -> EventColumns:
     heads = {k: sdo_head(*k) for k in dict.fromkeys(keys)}
     messages = [
         f"{h} = {v} (0x{v:X}) ok"  # = sdo_tail's text for these (v & 2**64-1 == v)
-        if type(v) is int and 9 < v <= _U64 and r == "ok" and a is None
+        if type(v) is int and 9 < v <= U64 and r == "ok" and a is None
         else h + sdo_tail(r, v, d, a, det)
         for h, r, v, d, a, det in zip(
             map(heads.__getitem__, keys),

@@ -13,7 +13,9 @@ import numpy as np
 
 from . import bytecols
 
-_U64 = 0xFFFFFFFFFFFFFFFF
+U64 = 0xFFFFFFFFFFFFFFFF
+_LABELS = bytecols.padded_table([b"", b" = ", b" data "])  # no value or data, value, data
+_OPEN_HEX = bytecols.padded_table([b"", b" (0x"])
 
 
 def sdo_message(direction, index, sub, name, result, value, data, abort, detail) -> str:
@@ -33,7 +35,7 @@ def sdo_tail(result, value, data, abort, detail) -> str:
     ok = result == "ok"
     if ok:
         if isinstance(value, int) and not isinstance(value, bool) and abs(value) > 9:
-            text = f" = {value} (0x{value & _U64:X}) ok"  # as the text output shows it
+            text = f" = {value} (0x{value & U64:X}) ok"  # as the text output shows it
         elif value is not None:
             text = f" = {value} ok"
         elif data:
@@ -70,29 +72,17 @@ def sdo_messages(fields) -> list[str] | None:
     # the tail: " = v (0xV) ok", " = v ok", " data hex ok" or " ok"
     v, none = a["value_int"], a["value_none"]
     wide = ~none & (np.abs(v) > 9)
-    const = np.zeros((n, 3), np.uint8)
-    const[~none] = np.frombuffer(b" = ", np.uint8)
     has_data = none & (a["data_len"] > 0)
-    data = np.zeros((n, 8), np.uint8)
-    if has_data.any():
-        const[has_data, :] = np.frombuffer(b" da", np.uint8)
-        data_text = np.zeros((n, 11), np.uint8)
-        raw = a["raw"][has_data]
-        hexd = np.frombuffer(b"0123456789abcdef", np.uint8)
-        pairs = np.stack((hexd[raw >> 4], hexd[raw & 15]), axis=2).reshape(len(raw), 8)
-        pairs[np.arange(8)[None, :] >= 2 * a["data_len"][has_data][:, None]] = bytecols.PAD
-        data_text[has_data, :3] = np.frombuffer(b"ta ", np.uint8)
-        data_text[has_data, 3:] = pairs
-        data = data_text
+    label = _LABELS[np.where(none, np.where(has_data, 2, 0), 1)]
+    data = bytecols.hex_bytes(a["raw"], np.where(has_data, a["data_len"], 0))
     dec = bytecols.decimal(v)
     dec[none] = bytecols.PAD
     hx = bytecols.hex_upper(v)
     hx[~wide] = bytecols.PAD
-    open_hex = np.zeros((n, 4), np.uint8)
-    open_hex[wide] = np.frombuffer(b" (0x", np.uint8)
+    open_hex = _OPEN_HEX[wide.astype(np.intp)]
     close_hex = np.where(wide, ord(")"), bytecols.PAD).astype(np.uint8)[:, None]
     ok = np.broadcast_to(np.frombuffer(b" ok", np.uint8), (n, 3))
-    parts = [head, const, data, dec, open_hex, hx, close_hex, ok]
+    parts = [head, label, data, dec, open_hex, hx, close_hex, ok]
     messages = bytecols.joined_rows(parts, n)
     for k, rec in fields.aborted.items():  # aborted pairs keep their own record
         messages[k] = sdo_message(

@@ -103,3 +103,11 @@ def test_joined_rows_with_a_separator_inside_a_text() -> None:
     table = bytecols.padded_table([t.encode() for t in texts])
     assert bytecols.joined_rows([table], len(texts)) == texts
     assert bytecols.joined_rows([table[1:3]], 2) == ["plain", ""]
+
+
+def test_hex_bytes_equal_bytes_hex() -> None:
+    rng = np.random.default_rng(4)
+    raw = rng.integers(0, 256, (500, 4), dtype=np.uint8)
+    length = rng.integers(0, 5, 500)
+    want = [bytes(r[:k]).hex() for r, k in zip(raw, length, strict=True)]
+    assert _rows(bytecols.hex_bytes(raw, length)) == want

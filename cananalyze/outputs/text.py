@@ -21,6 +21,8 @@ from typing import TextIO
 
 import numpy as np
 
+from ..bytecols import HEX_LOWER as _HEXLOWER
+from ..bytecols import HEX_UPPER as _HEXCHARS
 from ..bytecols import PAD as _PAD
 from ..bytecols import compact as _compact
 from ..bytecols import digits as _digits
@@ -88,8 +90,6 @@ def format_record(rec: dict) -> str:
     return " ".join(f"{k}={v}" for k, v in rec.items())
 
 
-_HEXCHARS = np.frombuffer(b"0123456789ABCDEF", np.uint8)
-_HEXLOWER = np.frombuffer(b"0123456789abcdef", np.uint8)  # bytes.hex()
 _SVC_COL = np.array([list(f"{name:<14} ".encode()) for name in SERVICE_NAMES], np.uint8)
 # Services whose annotation is a function of (service, pdo, rtr, first byte or none).
 _KEYED = np.zeros(256, bool)
