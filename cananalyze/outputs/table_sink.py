@@ -74,6 +74,17 @@ class TableSpec:
     # Parquet dictionary encoding only where values repeat: trying it on times and
     # payloads costs 25 % of the write and makes the file larger
     dictionary: tuple[str, ...] | bool = True
+    # BYTE_STREAM_SPLIT for float columns whose bytes vary at the bottom (times): the
+    # frames table's `t` encodes in half the time and is a third smaller than PLAIN
+    split: tuple[str, ...] = ()
+
+    def parquet_options(self) -> dict:
+        """The ParquetWriter keywords of this table's column encodings."""
+        d = self.dictionary
+        return {
+            "use_dictionary": list(d) if d is not True else True,
+            "use_byte_stream_split": list(self.split) if self.split else False,
+        }
 
 
 class Sink:
@@ -168,12 +179,8 @@ class Sink:
         if self.fmt == "parquet":
             import pyarrow.parquet as pq
 
-            dictionary = self.spec.dictionary
             return pq.ParquetWriter(
-                self.path,
-                schema,
-                compression=self.compression,
-                use_dictionary=list(dictionary) if dictionary is not True else True,
+                self.path, schema, compression=self.compression, **self.spec.parquet_options()
             )
         import pyarrow.csv as pacsv
 
@@ -286,10 +293,8 @@ def rewrite(
         parts = whole.to_batches(max_chunksize=ROW_GROUP)
     else:
         parts = (source.read_row_group(i) for i in range(source.num_row_groups))
-    dictionary = sink.spec.dictionary
-    dictionary = list(dictionary) if dictionary is not True else True
     with pq.ParquetWriter(
-        tmp, schema, compression=sink.compression, use_dictionary=dictionary
+        tmp, schema, compression=sink.compression, **sink.spec.parquet_options()
     ) as out:
         for part in parts:
             if isinstance(part, pa.RecordBatch):

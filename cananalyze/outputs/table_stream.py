@@ -106,6 +106,7 @@ FRAMES = TableSpec(
         ]
     ),
     dictionary=("channel", "can_id", "dlc", "flags", "service", "node", "pdo"),
+    split=("t",),
 )
 SIGNALS = TableSpec(
     [
@@ -130,6 +131,7 @@ SIGNALS = TableSpec(
     ),
     sorted_labels=("pdo", "signal", "unit"),
     dictionary=("node", "pdo", "cob_id", "signal", "unit"),
+    split=("t",),
 )
 EVENTS = TableSpec(
     [
