@@ -184,14 +184,10 @@ class SdoProcessor:
         cp, cp_max, timeout = self._cp, self._cp_max, self.tracker.timeout
         j0 = bisect.bisect_left(cp, pos)
         for cob, xfer in self.tracker._pending.items():
+            # the first running maximum x with x - t_last > timeout: the tracker's own test
+            # (not x > t_last + timeout, which rounds differently), searched by bisect in C
             t_last = xfer.t_last
-            lo, hi = j0, len(cp)
-            while lo < hi:
-                mid = (lo + hi) // 2
-                if cp_max[mid] - t_last > timeout:
-                    hi = mid
-                else:
-                    lo = mid + 1
+            lo = bisect.bisect_right(cp_max, timeout, j0, key=lambda x, t0=t_last: x - t0)
             if lo < len(cp) and cp[lo] < stop:
                 stop = cp[lo]
             same = self._cand_of.get(cob)
