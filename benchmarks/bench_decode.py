@@ -6,8 +6,10 @@
 
 Each figure is a fresh `python -m cananalyze ...` process (whole-process wall
 time, CPU time and peak RSS from wait4), the best of `--repeat` runs: other work
-on the machine only ever makes a run slower. python-can's `LogReader` iterates
-the same files in the same run, so the ratio hardly depends on the machine.
+on the machine only ever makes a run slower. Figures that are compared run in
+rounds, one after the other in each round (per format: export, decode --summary
+and python-can's `LogReader` iterating the same file; on the first, check too),
+so the ratios and check's overhead hardly depend on the machine's load.
 The headline command is the issue's "decoded tables written as Parquet":
 `cananalyze export LOG --parquet DIR --device N=dat7014 (N=1..16) -q`, so PDOs
 are decoded into signals. Logs come from benchmarks/generate.py and are kept
@@ -51,21 +53,39 @@ print(t1 - t0, time.perf_counter() - t1, n)
 class Run:
     """Best wall and CPU seconds, highest peak RSS (MB) of repeated runs of one command."""
 
-    def __init__(self, cmd: list[str], repeat: int, ok: tuple[int, ...] = (0,)) -> None:
+    def __init__(self, cmd: list[str], ok: tuple[int, ...] = (0,)) -> None:
+        self.cmd, self.ok = cmd, ok
         self.wall = self.cpu = float("inf")
         self.mb = 0.0
-        for _ in range(repeat):
-            t = time.perf_counter()
-            proc = subprocess.Popen(
-                cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT, env=ENV
-            )
-            _, status, usage = os.wait4(proc.pid, 0)
-            wall = time.perf_counter() - t
-            if os.waitstatus_to_exitcode(status) not in ok:
-                raise SystemExit(f"failed ({os.waitstatus_to_exitcode(status)}): {' '.join(cmd)}")
-            self.wall = min(self.wall, wall)
-            self.cpu = min(self.cpu, usage.ru_utime + usage.ru_stime)
-            self.mb = max(self.mb, usage.ru_maxrss / 1024)
+
+    def once(self) -> None:
+        t = time.perf_counter()
+        proc = subprocess.Popen(
+            self.cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT, env=ENV
+        )
+        _, status, usage = os.wait4(proc.pid, 0)
+        wall = time.perf_counter() - t
+        if os.waitstatus_to_exitcode(status) not in self.ok:
+            code = os.waitstatus_to_exitcode(status)
+            raise SystemExit(f"failed ({code}): {' '.join(self.cmd)}")
+        self.wall = min(self.wall, wall)
+        self.cpu = min(self.cpu, usage.ru_utime + usage.ru_stime)
+        self.mb = max(self.mb, usage.ru_maxrss / 1024)
+
+
+def rounds(runs: list, repeat: int) -> None:
+    """Each run once per round, `repeat` rounds: figures that are compared (a ratio, an
+    overhead) are measured side by side, so a change in the machine's load between
+    them cannot pass for a difference (this machine's speed drifts by a third)."""
+    for _ in range(repeat):
+        for run in runs:
+            run.once()
+
+
+def measured(cmd: list[str], repeat: int, ok: tuple[int, ...] = (0,)) -> Run:
+    run = Run(cmd, ok)
+    rounds([run], repeat)
+    return run
 
 
 def ensure(out: Path, n: int, suffixes: list[str], made: list[Path]) -> Path:
@@ -85,25 +105,29 @@ def ensure(out: Path, n: int, suffixes: list[str], made: list[Path]) -> Path:
     return stem
 
 
-def pycan_seconds(path: Path, n: int, prefix: int, repeat: int) -> tuple[float, str]:
+class PyCanRun:
     """python-can LogReader's whole-process time over the file; scaled from a prefix if asked."""
-    limit = prefix if 0 < prefix < n else 0
-    best = float("inf")
-    for _ in range(repeat):
+
+    def __init__(self, path: Path, n: int, prefix: int) -> None:
+        self.path, self.n = path, n
+        self.limit = prefix if 0 < prefix < n else 0
+        self.wall = float("inf")
+        lim = self.limit
+        self.how = f"first {lim / 1e6:g}M frames, scaled x{n / lim:g}" if lim else "whole file"
+
+    def once(self) -> None:
         t = time.perf_counter()
         out = subprocess.run(
-            [sys.executable, "-c", PYCAN, str(path), str(limit)],
+            [sys.executable, "-c", PYCAN, str(self.path), str(self.limit)],
             capture_output=True,
             text=True,
             check=True,
         )
         wall = time.perf_counter() - t
         setup, loop, count = out.stdout.split()
-        if limit:  # start-up as measured, the loop scaled to the whole file
-            wall = wall - float(loop) + float(loop) * n / int(count)
-        best = min(best, wall)
-    how = f"first {limit / 1e6:g}M frames, scaled x{n / limit:g}" if limit else "whole file"
-    return best, how
+        if self.limit:  # start-up as measured, the loop scaled to the whole file
+            wall = wall - float(loop) + float(loop) * self.n / int(count)
+        self.wall = min(self.wall, wall)
 
 
 def mark(ok: bool) -> str:
@@ -160,27 +184,27 @@ def measure(args, n: int, formats: list[str], made: list[Path]) -> list[tuple[st
     per_format = {}
     with tempfile.TemporaryDirectory(dir=args.out) as tmp:
         pq = Path(tmp) / "pq"
-        for suffix in formats:
+        for k, suffix in enumerate(formats):
             log = str(stem.with_suffix(suffix))
-            print(f"{suffix}: export --parquet ...", flush=True)
-            export = Run(CLI + ["export", log, "--parquet", str(pq), *DEVICES, "-q"], args.repeat)
+            what = "export --parquet, decode --summary, python-can LogReader"
+            export = Run(CLI + ["export", log, "--parquet", str(pq), *DEVICES, "-q"])
+            summary = Run(CLI + ["decode", log, "--summary", *DEVICES])
+            runs = [export, summary, PyCanRun(stem.with_suffix(suffix), n, int(args.pycan_prefix))]
+            if k == 0:  # check's overhead over the same decode, in the same rounds
+                check = Run(CLI + ["check", log, *DEVICES], ok=(0, 1))
+                runs.append(check)
+                what += ", check"
+            print(f"{suffix}: {what}, in {args.repeat} rounds ...", flush=True)
+            rounds(runs, args.repeat)
             shutil.rmtree(pq, ignore_errors=True)
-            print(f"{suffix}: decode --summary ...", flush=True)
-            summary = Run(CLI + ["decode", log, "--summary", *DEVICES], args.repeat)
-            print(f"{suffix}: python-can LogReader ...", flush=True)
-            pc, how = pycan_seconds(
-                stem.with_suffix(suffix), n, int(args.pycan_prefix), max(1, args.repeat - 1)
-            )
-            per_format[suffix] = (export, summary, pc, how)
+            per_format[suffix] = (export, summary, runs[2].wall, runs[2].how)
         log = str(stem.with_suffix(formats[0]))
-        print("check vs decode --summary ...", flush=True)
-        check = Run(CLI + ["check", log, *DEVICES], args.repeat, ok=(0, 1))
         base = per_format[formats[0]][1]
         print("text output ...", flush=True)
         text_runs = []
         for devices in ([], DEVICES):
             dest = Path(tmp) / "out.txt"
-            run = Run(CLI + ["decode", log, *devices, "-o", str(dest)], args.repeat)
+            run = measured(CLI + ["decode", log, *devices, "-o", str(dest)], args.repeat)
             with open(dest, "rb") as f:
                 lines = sum(chunk.count(b"\n") for chunk in iter(lambda: f.read(1 << 24), b""))
             dest.unlink()
@@ -191,10 +215,10 @@ def measure(args, n: int, formats: list[str], made: list[Path]) -> list[tuple[st
             for size in (int(5e6), big):
                 s = ensure(args.out, size, [".log"], made).with_suffix(".log")
                 print(f"peak RSS at {size / 1e6:g}M ...", flush=True)
-                run = Run(CLI + ["export", str(s), "--parquet", str(pq), *DEVICES, "-q"], 1)
+                run = measured(CLI + ["export", str(s), "--parquet", str(pq), *DEVICES, "-q"], 1)
                 shutil.rmtree(pq, ignore_errors=True)
                 flat.append((size, run))
-        help_run = Run(CLI + ["--help"], max(5, args.repeat))
+        help_run = measured(CLI + ["--help"], max(5, args.repeat))
 
     # 1. ratios first
     for suffix, (export, _, pc, _) in per_format.items():
