@@ -33,6 +33,7 @@ from ..protocol.fields import annotation, frame_fields
 from ..protocol.services import SERVICE_NAMES, Service
 from ..protocol.tables import emcy_class, error_register_names
 from .numtext import g6_text, value_text
+from .record_text import format_record
 
 _HEX3 = [f"{i:02X} " for i in range(256)]
 
@@ -56,38 +57,6 @@ _COLOURS = {
     "other": "\033[2m",
 }
 _RESET = "\033[0m"
-
-
-def format_record(rec: dict) -> str:
-    """One line for a record of kind sdo / finding / event."""
-    kind = rec.get("kind")
-    if kind == "sdo":
-        what = "read" if rec.get("direction") == "upload" else "write"
-        obj = f"0x{rec['index']:04X}:{rec['subindex']:02X}" if rec.get("index") is not None else "?"
-        name = f" {rec['name']}" if rec.get("name") else ""
-        proto = f" {rec['protocol']}" if rec.get("protocol") else ""  # unknown when aborted at once
-        line = f"node {rec.get('node')} SDO {what} {obj}{name}{proto} -> {rec.get('result')}"
-        if rec.get("result") == "ok":
-            value = rec.get("value")
-            if value is None:
-                line += f": data {rec.get('data') or '-'}"
-            elif isinstance(value, str):
-                line += f": {value!r}"
-            elif isinstance(value, int) and not isinstance(value, bool) and abs(value) > 9:
-                line += f": {value} (0x{value & 0xFFFFFFFFFFFFFFFF:X})"
-            else:
-                line += f": {value}"
-            line += f" ({rec.get('size')} bytes)"
-        elif rec.get("abort_code") is not None:
-            line += f": 0x{rec['abort_code']:08X} {rec.get('abort_text')}"
-        if rec.get("detail"):
-            line += f" [{rec['detail']}]"
-        if rec.get("latency_ms") is not None:
-            line += f", latency {rec['latency_ms']:.1f} ms"
-        return line
-    if kind == "finding":
-        return f"{rec.get('severity', 'warning').upper()} {rec.get('rule')}: {rec.get('message')}"
-    return " ".join(f"{k}={v}" for k, v in rec.items())
 
 
 _SVC_COL = np.array([list(f"{name:<14} ".encode()) for name in SERVICE_NAMES], np.uint8)

@@ -1,0 +1,36 @@
+"""The one-line text of a record (SDO transfer, finding, other), as the text output and
+the live dashboard show it under the frame that completed it."""
+
+from __future__ import annotations
+
+
+def format_record(rec: dict) -> str:
+    """One line for a record of kind sdo / finding / event."""
+    kind = rec.get("kind")
+    if kind == "sdo":
+        what = "read" if rec.get("direction") == "upload" else "write"
+        obj = f"0x{rec['index']:04X}:{rec['subindex']:02X}" if rec.get("index") is not None else "?"
+        name = f" {rec['name']}" if rec.get("name") else ""
+        proto = f" {rec['protocol']}" if rec.get("protocol") else ""  # unknown when aborted at once
+        line = f"node {rec.get('node')} SDO {what} {obj}{name}{proto} -> {rec.get('result')}"
+        if rec.get("result") == "ok":
+            value = rec.get("value")
+            if value is None:
+                line += f": data {rec.get('data') or '-'}"
+            elif isinstance(value, str):
+                line += f": {value!r}"
+            elif isinstance(value, int) and not isinstance(value, bool) and abs(value) > 9:
+                line += f": {value} (0x{value & 0xFFFFFFFFFFFFFFFF:X})"
+            else:
+                line += f": {value}"
+            line += f" ({rec.get('size')} bytes)"
+        elif rec.get("abort_code") is not None:
+            line += f": 0x{rec['abort_code']:08X} {rec.get('abort_text')}"
+        if rec.get("detail"):
+            line += f" [{rec['detail']}]"
+        if rec.get("latency_ms") is not None:
+            line += f", latency {rec['latency_ms']:.1f} ms"
+        return line
+    if kind == "finding":
+        return f"{rec.get('severity', 'warning').upper()} {rec.get('rule')}: {rec.get('message')}"
+    return " ".join(f"{k}={v}" for k, v in rec.items())
