@@ -38,6 +38,7 @@ class SdoColumns:
 
     slots: np.ndarray  # int64 position in DecodedBatch.records
     row: np.ndarray  # int64 row the record is attached to (the answer)
+    req_row: np.ndarray  # int64 row of the request
     node: np.ndarray  # int64
     upload: np.ndarray  # bool (else download)
     index: np.ndarray  # int64

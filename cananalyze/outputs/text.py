@@ -34,6 +34,7 @@ from ..protocol.services import SERVICE_NAMES, Service
 from ..protocol.tables import emcy_class, error_register_names
 from .numtext import g6_text, value_text
 from .record_text import format_record
+from .sdo_text import fast_pairs, pair_text
 
 _HEX3 = [f"{i:02X} " for i in range(256)]
 
@@ -230,16 +231,25 @@ class TextWriter:
         fb = batch.frames
         sel = np.arange(len(fb)) if mask is None else np.flatnonzero(mask)
         n = sel.size
+        # the SDO fast path's pairs as columns (sdo_text): their notes and records unbuilt
+        pairs = fast_pairs(batch) if mask is None else None
+        if pairs is None:
+            listed = enumerate(batch.records)
+        else:  # the other records only, read without building the pairs' dicts
+            get = list.__getitem__
+            listed = ((k, get(batch.records, k)) for k in pairs[2])
         by_row: dict[int, list[dict]] = {}
-        for row, rec in batch.records:
+        slot_of: dict[int, list[int]] = {}  # each by_row record's slot in batch.records
+        records = []
+        for k, (row, rec) in listed:
             by_row.setdefault(row, []).append(rec)
+            slot_of.setdefault(row, []).append(k)
+            records.append((row, rec))
         shown = np.zeros(len(fb), bool)
         shown[sel] = True
         nrows = len(fb)
         tail_lines = [
-            format_record(rec)
-            for row, rec in batch.records
-            if not (0 <= row < nrows and shown[row])
+            format_record(rec) for row, rec in records if not (0 <= row < nrows and shown[row])
         ]
         if n == 0:
             return ("\n".join(tail_lines) + "\n").encode() if tail_lines else b""
@@ -302,11 +312,17 @@ class TextWriter:
         endb = end.encode()
         noted = np.zeros(n, bool)
         notes = batch.notes
-        if len(notes):  # realises lazy notes once
+        # len() realises lazy notes once; the fast pairs' stay unwritten (texts from columns)
+        written = len(notes) if pairs is None else dict.__len__(notes)
+        if written:
             noted_rows = np.zeros(len(fb), bool)
-            noted_rows[np.fromiter(dict.keys(notes), np.int64, len(notes))] = True
+            noted_rows[np.fromiter(dict.keys(notes), np.int64, written)] = True
             noted = noted_rows[sel]
-            notes = dict.copy(notes)  # realised above (len); plain dict lookups below
+            # plain dict lookups below; copied by the views (dict.copy of a LazyNotes goes
+            # through its keys(), which would write the pending notes)
+            notes = dict(zip(dict.keys(notes), dict.values(notes), strict=True))
+        elif pairs is not None:
+            notes = {}
         lazy = batch._lazy_index()  # rows with PDO signals or shared notes
         in_block = shared = None
         if lazy is not None:
@@ -352,6 +368,9 @@ class TextWriter:
         if emcy.size:
             ann.append(_emcy_text(data[emcy], dlc[emcy], emcy, endb))
             done[emcy] = True
+        extra: dict[int, bytes] = {}  # row -> record lines spliced in after its line
+        if pairs is not None:
+            extra = self._pair_texts(pairs, fb, endb, ann, done, by_row, slot_of, with_records)
         # every other row without records: its text from Python, scattered in
         spliced: dict[int, bytes] = {}
         per_row = np.flatnonzero(~done & ~with_records)
@@ -385,6 +404,8 @@ class TextWriter:
 
         if spliced:
             with_records[list(spliced)] = True
+        if extra:
+            with_records[list(extra)] = True
         slow = np.flatnonzero(with_records)
         blob, ends = _compact(parts, n, with_ends=slow.size > 0)
         if slow.size == 0 and not tail_lines:
@@ -404,6 +425,9 @@ class TextWriter:
             if i in spliced:
                 pieces.append(spliced[i])
                 continue
+            if i in extra:
+                pieces.append(extra[i])
+                continue
             note = notes.get(row) if sdo else None
             role = note.get("role") if note else None
             if role:
@@ -417,6 +441,34 @@ class TextWriter:
         if tail_lines:
             pieces.append(("\n".join(tail_lines) + "\n").encode())
         return b"".join(pieces)
+
+    @staticmethod
+    def _pair_texts(pairs, fb, endb, ann, done, by_row, slot_of, with_records) -> dict[int, bytes]:
+        """The fast pairs' rows: "SDO <role>" into the annotation column (`ann`, marked
+        `done`); returns the record lines to splice in after each answer's line, every
+        record of the row in record order where the row holds others too."""
+        fields, fast, _ = pairs
+        pt = pair_text(fb, fields, fast, endb)
+        ann.append((pt.req, pt.req_role))
+        ann.append((pt.resp, pt.resp_role))
+        done[pt.req] = True
+        done[pt.resp] = True
+        resp = pt.resp.tolist()
+        extra = dict(zip(resp, pt.lines, strict=True))
+        mixed = [r for r in (*pt.req.tolist(), *resp) if r in by_row]
+        if mixed:
+            j_of = {r: j for j, r in enumerate(resp)}
+            slots = fast.slots.tolist()
+            for row in mixed:
+                lines = [
+                    (k, ("    └─ " + format_record(rec) + "\n").encode())
+                    for k, rec in zip(slot_of[row], by_row[row], strict=True)
+                ]
+                if row in j_of:
+                    lines.append((slots[j_of[row]], extra[row]))
+                extra[row] = b"".join(line for _, line in sorted(lines))
+                with_records[row] = False  # its role is in the column already
+        return extra
 
 
 def _ragged(rows: np.ndarray, texts: list[bytes]) -> tuple[np.ndarray, np.ndarray]:

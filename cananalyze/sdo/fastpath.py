@@ -153,6 +153,7 @@ def pair_columns(fb, a: np.ndarray, b: np.ndarray, slots: np.ndarray) -> SdoColu
     return SdoColumns(
         slots=np.asarray(slots, np.int64),
         row=np.asarray(b, np.int64),
+        req_row=np.asarray(a, np.int64),
         node=fb.can_id[a].astype(np.int64) - 0x600,
         upload=da[:, 0] == _UPLOAD_REQ,
         index=da[:, 1].astype(np.int64) | (da[:, 2].astype(np.int64) << 8),

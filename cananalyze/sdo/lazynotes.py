@@ -84,6 +84,14 @@ class LazyNotes(dict):
             self._mask = mask
         return 0 <= row < mask.size and bool(mask[row])
 
+    def pending_rows(self) -> np.ndarray | None:
+        """The rows pending writers will write (sorted, once each); None when there are no
+        pending writers or one did not say. Until then no one has read or written them."""
+        if not self._pending or self._covers is None:
+            return None
+        rows = np.concatenate(self._covers) if self._covers else np.zeros(0, np.int64)
+        return np.unique(rows)
+
     @staticmethod
     def write(notes: dict, row: int, note: dict) -> None:
         """Merge `note` into row's note without re-entering the lazy methods."""
