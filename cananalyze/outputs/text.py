@@ -126,11 +126,13 @@ class TextWriter:
     """Writes decoded batches as text lines.
 
     With `background=True` and a UTF-8 text file with a binary buffer under it,
-    the finished bytes of each batch are written by a worker thread while the
-    caller decodes the next batch (the write releases the GIL; building lines,
-    which is numpy plus some Python, stays in the caller: a thread that often
-    releases and re-takes the GIL would wait on the decoder every time).
-    `close()` waits for the worker and raises what it raised.
+    each batch's lines are finished and written by a worker thread while the
+    caller decodes the next batch: the compaction of the column blocks (C,
+    without the GIL; `Rendered`) and the write. Building the blocks, which is
+    numpy plus some Python, stays in the caller: a thread that often releases
+    and re-takes the GIL would wait on the decoder every time. The queue is one
+    batch deep (a rendered batch's blocks are ~50 MB at 256k rows). `close()`
+    waits for the worker and raises what it raised.
     """
 
     def __init__(
@@ -150,7 +152,7 @@ class TextWriter:
         self._error: BaseException | None = None
         if background and self._buffer() is not None:
             self.out.flush()
-            self._queue = queue.Queue(maxsize=2)
+            self._queue = queue.Queue(maxsize=1)
             self._worker = threading.Thread(target=self._work, name="text-writer", daemon=True)
             self._worker.start()
 
@@ -170,7 +172,7 @@ class TextWriter:
         else:
             data = self._render(batch, mask, t0)
         if self._queue is None:
-            self._emit(data)
+            self._emit(data if isinstance(data, bytes) else data.bytes())
             return
         if self._error is not None:
             self.close()
@@ -196,7 +198,7 @@ class TextWriter:
                 return
             if self._error is None:  # after an error, drain so the caller never blocks
                 try:
-                    buffer.write(data)
+                    buffer.write(data if isinstance(data, bytes) else data.bytes())
                 except BaseException as exc:  # noqa: BLE001 - re-raised by close()
                     self._error = exc
 
@@ -227,7 +229,7 @@ class TextWriter:
         std = (fb.flags & (FLAG_EXT | FLAG_ERR)) == 0
         return not (fb.can_id[std] > 0xFFF).any()
 
-    def _render(self, batch: DecodedBatch, mask: np.ndarray | None, t0: float) -> bytes:
+    def _render(self, batch: DecodedBatch, mask: np.ndarray | None, t0: float) -> bytes | Rendered:
         fb = batch.frames
         sel = np.arange(len(fb)) if mask is None else np.flatnonzero(mask)
         n = sel.size
@@ -407,26 +409,14 @@ class TextWriter:
         if extra:
             with_records[list(extra)] = True
         slow = np.flatnonzero(with_records)
-        blob, ends = _compact(parts, n, with_ends=slow.size > 0)
-        if slow.size == 0 and not tail_lines:
-            return blob
-        pieces: list[bytes] = []
-        prev = 0
+        inserts: list[bytes] = []  # what follows each slow row's line
         is_sdo = ((svc == Service.SDO_REQUEST) | (svc == Service.SDO_RESPONSE))[slow].tolist()
-        for i, e, row, sdo in zip(
-            slow.tolist(),
-            ends[slow].tolist() if slow.size else [],
-            sel[slow].tolist(),
-            is_sdo,
-            strict=True,
-        ):
-            pieces.append(blob[prev:e])
-            prev = e
+        for i, row, sdo in zip(slow.tolist(), sel[slow].tolist(), is_sdo, strict=True):
             if i in spliced:
-                pieces.append(spliced[i])
+                inserts.append(spliced[i])
                 continue
             if i in extra:
-                pieces.append(extra[i])
+                inserts.append(extra[i])
                 continue
             note = notes.get(row) if sdo else None
             role = note.get("role") if note else None
@@ -436,11 +426,9 @@ class TextWriter:
                 rtr_i = bool(flags[i] & FLAG_RTR)
                 text = annotation(int(svc[i]), int(node[i]), int(pdo[i]), batch.fields(row), rtr_i)
             text += end + "".join("    └─ " + format_record(rec) + "\n" for rec in by_row[row])
-            pieces.append(text.encode())
-        pieces.append(blob[prev:])
-        if tail_lines:
-            pieces.append(("\n".join(tail_lines) + "\n").encode())
-        return b"".join(pieces)
+            inserts.append(text.encode())
+        tail = ("\n".join(tail_lines) + "\n").encode() if tail_lines else b""
+        return Rendered(parts, n, slow, inserts, tail)
 
     @staticmethod
     def _pair_texts(pairs, fb, endb, ann, done, by_row, slot_of, with_records) -> dict[int, bytes]:
@@ -469,6 +457,35 @@ class TextWriter:
                 extra[row] = b"".join(line for _, line in sorted(lines))
                 with_records[row] = False  # its role is in the column already
         return extra
+
+
+class Rendered:
+    """A batch's lines before the last step: the column blocks, and what goes in after
+    some rows (record lines, texts with NULs) and after the last.
+
+    `bytes()` compacts and splices: a C pass without the GIL and a join, which the
+    background writer does while the caller renders the next batch.
+    """
+
+    def __init__(
+        self, parts: list[np.ndarray], n: int, after: np.ndarray, inserts: list[bytes], tail: bytes
+    ) -> None:
+        self.parts, self.n, self.after, self.inserts, self.tail = parts, n, after, inserts, tail
+
+    def bytes(self) -> bytes:
+        blob, ends = _compact(self.parts, self.n, with_ends=self.after.size > 0)
+        self.parts = []
+        if not self.inserts:
+            return blob + self.tail if self.tail else blob
+        pieces: list[bytes] = []
+        prev = 0
+        for e, insert in zip(ends[self.after].tolist(), self.inserts, strict=True):
+            pieces.append(blob[prev:e])
+            pieces.append(insert)
+            prev = e
+        pieces.append(blob[prev:])
+        pieces.append(self.tail)
+        return b"".join(pieces)
 
 
 def _ragged(rows: np.ndarray, texts: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
