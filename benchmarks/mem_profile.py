@@ -58,6 +58,14 @@ def _rss() -> tuple[int, int, int]:
     return got.get("VmRSS", 0), got.get("RssAnon", 0), got.get("RssFile", 0)
 
 
+def _arrow_mb() -> int | None:
+    """MB in Arrow's pool, None until pyarrow is imported: never imported here (the CLI
+    picks the pool), and read only once whole (the sampler may run mid-import, when
+    the module exists without its functions)."""
+    allocated = getattr(sys.modules.get("pyarrow"), "total_allocated_bytes", None)
+    return allocated() >> 20 if allocated is not None else None
+
+
 def main(argv: list[str]) -> int:
     every = EVERY
     if argv[:1] == ["--every"]:
@@ -72,9 +80,7 @@ def main(argv: list[str]) -> int:
             if mallinfo is not None:
                 m = mallinfo()
                 inuse = (m.uordblks + m.hblkhd) >> 20
-            pa = sys.modules.get("pyarrow")  # never imported here: the CLI picks the pool
-            arrow = pa.total_allocated_bytes() >> 20 if pa is not None else None
-            samples.append((time.perf_counter() - t0, *_rss(), inuse, arrow))
+            samples.append((time.perf_counter() - t0, *_rss(), inuse, _arrow_mb()))
             time.sleep(every)
 
     threading.Thread(target=sample, daemon=True).start()
