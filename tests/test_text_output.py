@@ -276,3 +276,32 @@ def test_background_writer_raises_in_close() -> None:
         for b in batches:
             w.write(b)
         w.close()
+
+
+@pytest.mark.parametrize("share", [0.0, 0.01, 0.7, 1.0])
+def test_key_groups_partition_rows_as_a_sort_would(share: float) -> None:
+    """_key_groups (counting over a dense key) groups the keyed rows exactly as np.unique
+    of the full key does; unkeyed rows are group 0; first_at is each group's first row."""
+    from cananalyze.outputs.text import _BYTE_MATTERS, _key_groups
+    from cananalyze.protocol.services import Service
+
+    rng = np.random.default_rng(int(share * 100))
+    n = 5000
+    svc = rng.integers(0, 20, n).astype(np.uint8)
+    pdo = rng.integers(0, 5, n).astype(np.uint8)
+    rtr = rng.random(n) < 0.1
+    dlc = rng.integers(0, 9, n).astype(np.uint8)
+    data = rng.integers(0, 4, (n, 8)).astype(np.uint8)
+    keyed = rng.random(n) < share
+    inv, first_at = _key_groups(svc, pdo, rtr, dlc, data, keyed)
+    is_pdo = (svc == Service.TPDO) | (svc == Service.RPDO)
+    first = np.where((dlc > 0) & _BYTE_MATTERS[svc], data[:, 0].astype(np.int64), 256)
+    key = ((svc.astype(np.int64) * 256 + np.where(is_pdo, pdo, 0)) * 2 + (rtr & is_pdo)) * 257
+    key = np.where(keyed, key + first, -1)
+    uniq, first_ref, inv_ref = np.unique(key, return_index=True, return_inverse=True)
+    assert (inv[~keyed] == 0).all()
+    assert len(first_at) == len(uniq) + (0 if (~keyed).any() else 1)
+    pairs = set(zip(inv.tolist(), inv_ref.ravel().tolist(), strict=True))
+    assert len(pairs) == len(uniq) == len(set(inv.tolist()))  # one group for one key, and back
+    for g, i in enumerate(first_at.tolist()[1:], start=1):
+        assert inv[i] == g and not (inv[:i] == g).any()
