@@ -28,12 +28,18 @@ def padded_table(texts: list[bytes]) -> np.ndarray:
 
 
 def digits(values: np.ndarray, width: int) -> np.ndarray:
-    """(n, width) ASCII digits of non-negative integers, zero padded."""
+    """(n, width) ASCII digits of non-negative integers, zero padded.
+
+    Unsigned, 32 bits when the values fit, and the remainder as v - 10 * (v // 10):
+    numpy divides by a constant quickly but takes `%` the slow way (twice as fast).
+    """
     out = np.empty((values.size, width), np.uint8)
-    v = values.astype(np.int64)
+    small = values.size == 0 or int(values.max()) < 1 << 32
+    v = values.astype(np.uint32 if small else np.uint64)
     for j in range(width - 1, -1, -1):
-        out[:, j] = 48 + v % 10
-        v = v // 10
+        q = v // 10
+        out[:, j] = 48 + (v - q * 10)
+        v = q
     return out
 
 

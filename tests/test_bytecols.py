@@ -22,6 +22,16 @@ def test_decimal_and_hex_equal_python() -> None:
     assert _rows(bytecols.hex_upper(values)) == want
 
 
+def test_digits_equal_python_zero_padded() -> None:
+    """Both of digits' word sizes: values that fit in 32 bits, and the 64-bit rest."""
+    rng = np.random.default_rng(5)
+    for top in (10**6, 2**32 - 1, 2**32, 2**63 - 1):
+        values = np.array([0, 9, 10, top, *rng.integers(0, top, 500).tolist()], np.int64)
+        width = len(str(top))
+        want = [f"{v:0{width}d}" for v in values.tolist()]
+        assert _rows(bytecols.digits(values, width)) == want
+
+
 def test_split_rows_keeps_non_ascii_text() -> None:
     texts = ["Gerätename", "", "plain", "Δt ≤ 5 ms"]
     table = bytecols.padded_table([t.encode() for t in texts])

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import bytecols
+
 _PAD = 0
 _ZERO = 48
 
@@ -32,11 +34,7 @@ def int_text(values: np.ndarray) -> np.ndarray:
     a = np.abs(v)
     top = int(a.max()) if n else 0
     width = len(str(top))
-    digits = np.empty((n, width), np.uint8)
-    rest = a.copy()
-    for j in range(width - 1, -1, -1):
-        digits[:, j] = _ZERO + rest % 10
-        rest //= 10
+    digits = bytecols.digits(a, width)
     length = np.ones(n, np.int64)  # digits of each value
     for d in range(1, width):
         length += a >= 10**d
@@ -73,11 +71,7 @@ def g6_text(values: np.ndarray) -> np.ndarray:
     r = np.where(fast, r, 1e5).astype(np.int64)
     neg = np.signbit(x)
     out[:, 0] = np.where(neg, ord("-"), _PAD)
-    digits = np.empty((n, 6), np.uint8)
-    rest = r.copy()
-    for j in range(5, -1, -1):
-        digits[:, j] = _ZERO + rest % 10
-        rest //= 10
+    digits = bytecols.digits(r, 6)
     # trailing zero digits, never counting the integer part
     nz = digits != _ZERO
     last = 5 - np.argmax(nz[:, ::-1], axis=1)  # index of the last non-zero digit
