@@ -607,7 +607,7 @@ fail:
 
 /* ------------------------------------------------------------- text lines */
 
-#define MAX_PARTS 16
+#define MAX_PARTS 64
 
 PyDoc_STRVAR(compact_rows_doc,
              "compact_rows(parts, widths, n, pad, ends) -> bytes\n\n"

@@ -14,6 +14,7 @@ import numpy as np
 from . import speedups
 
 PAD = 0
+MAX_PARTS = 64  # column blocks the C compaction takes at once (_speedups.c)
 HEX_UPPER = np.frombuffer(b"0123456789ABCDEF", np.uint8)
 HEX_LOWER = np.frombuffer(b"0123456789abcdef", np.uint8)  # as bytes.hex() writes
 
@@ -89,7 +90,7 @@ def compact(parts: list[np.ndarray], n: int, with_ends: bool) -> tuple[bytes, np
     """The rows: the matrices side by side, NUL padding left out; and, if asked, each
     row's end offset in the result."""
     compact_rows = getattr(speedups.C, "compact_rows", None)
-    if compact_rows is not None:  # one pass in C, without the GIL
+    if compact_rows is not None and len(parts) <= MAX_PARTS:  # one pass in C, without the GIL
         parts = [np.ascontiguousarray(p, np.uint8) for p in parts]
         ends = np.empty(n, np.int64) if with_ends else None
         return compact_rows(parts, [p.shape[1] for p in parts], n, PAD, ends), ends

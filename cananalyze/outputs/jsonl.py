@@ -65,6 +65,13 @@ class JsonlWriter:
         self.frames = frames
 
     def write(self, batch: DecodedBatch, mask: np.ndarray | None = None) -> None:
+        if self.frames:
+            from .jsonl_columns import render  # imports this module
+
+            rendered = render(batch, mask)
+            if rendered is not None:
+                self._emit(rendered.bytes())
+                return
         by_row: dict[int, list[dict]] = {}
         for row, rec in batch.records:
             by_row.setdefault(row, []).append(rec)
@@ -82,3 +89,12 @@ class JsonlWriter:
                 lines.append(dumps(rec))
         if lines:
             self.out.write("\n".join(lines) + "\n")
+
+    def _emit(self, data: bytes) -> None:
+        buffer = getattr(self.out, "buffer", None)
+        encoding = getattr(self.out, "encoding", "") or ""
+        if buffer is not None and encoding.lower().replace("-", "") == "utf8":
+            self.out.flush()
+            buffer.write(data)
+        else:
+            self.out.write(data.decode("utf-8"))

@@ -464,9 +464,18 @@ class Rendered:
     """
 
     def __init__(
-        self, parts: list[np.ndarray], n: int, after: np.ndarray, inserts: list[bytes], tail: bytes
+        self,
+        parts: list[np.ndarray],
+        n: int,
+        after: np.ndarray,
+        inserts: list[bytes],
+        tail: bytes,
+        replace: np.ndarray | None = None,
     ) -> None:
+        """`after`: rows (ascending) followed by `inserts`; where `replace` (one per
+        `after` row) is set, the insert stands in for that row's own line."""
         self.parts, self.n, self.after, self.inserts, self.tail = parts, n, after, inserts, tail
+        self.replace = replace
 
     def bytes(self) -> bytes:
         blob, ends = _compact(self.parts, self.n, with_ends=self.after.size > 0)
@@ -475,8 +484,12 @@ class Rendered:
             return blob + self.tail if self.tail else blob
         pieces: list[bytes] = []
         prev = 0
-        for e, insert in zip(ends[self.after].tolist(), self.inserts, strict=True):
-            pieces.append(blob[prev:e])
+        cut = self.replace.tolist() if self.replace is not None else [False] * len(self.inserts)
+        starts = [0, *ends[:-1].tolist()]
+        for i, e, insert, own in zip(
+            self.after.tolist(), ends[self.after].tolist(), self.inserts, cut, strict=True
+        ):
+            pieces.append(blob[prev : starts[i] if own else e])
             pieces.append(insert)
             prev = e
         pieces.append(blob[prev:])
@@ -484,7 +497,9 @@ class Rendered:
         return b"".join(pieces)
 
 
-def _key_groups(svc, pdo, rtr, dlc, data, keyed) -> tuple[np.ndarray, np.ndarray]:
+def _key_groups(
+    svc, pdo, rtr, dlc, data, keyed, byte_matters: np.ndarray = _BYTE_MATTERS
+) -> tuple[np.ndarray, np.ndarray]:
     """(group of each row, first row of each group): keyed rows grouped by what their
     text depends on (service, PDO number, RTR, the first byte where it matters);
     group 0 is every other row. Counted over a dense key (the (service, PDO, RTR)
@@ -498,7 +513,7 @@ def _key_groups(svc, pdo, rtr, dlc, data, keyed) -> tuple[np.ndarray, np.ndarray
     combo = (svc.astype(np.int64) * 256 + np.where(is_pdo, pdo, 0)) * 2 + (rtr & is_pdo)
     present = np.bincount(combo[keyed], minlength=1 << 17) > 0
     compact = np.cumsum(present) - 1  # combination -> its number among those present
-    first = np.where((dlc > 0) & _BYTE_MATTERS[svc], data[:, 0].astype(np.int64), 256)
+    first = np.where((dlc > 0) & byte_matters[svc], data[:, 0].astype(np.int64), 256)
     dense = (compact[combo] * 257 + first)[keyed]
     group_of = np.cumsum(np.bincount(dense) > 0)  # dense key -> group (1, 2, ...), in order
     inv[keyed] = group_of[dense]

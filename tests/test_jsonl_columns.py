@@ -1,0 +1,160 @@
+"""The columnar JSONL writer (outputs/jsonl_columns) prints exactly what the per-row
+writer prints: every input is written both ways, whole and through filters."""
+
+from __future__ import annotations
+
+import io
+import json
+import sys
+
+import numpy as np
+import pytest
+from conftest import ROOT, SAMPLES, real_file
+
+from cananalyze.cli.main import build_parser
+from cananalyze.cli.pipeline import build_decoder
+from cananalyze.decoded import SignalBlock
+from cananalyze.io.source import open_log
+from cananalyze.outputs import jsonl_columns
+from cananalyze.outputs.jsonl import JsonlWriter
+
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+
+def _decode(argv: list[str], fb=None, step: int = 7000):
+    args = build_parser().parse_args(["decode", *argv])
+    dec = build_decoder(args)
+    if fb is None:
+        out = [dec.decode(b) for b in open_log(args.log).batches()]
+    else:
+        out = [dec.decode(fb.take(slice(s, s + step))) for s in range(0, len(fb), step)]
+    out.append(dec.finish())
+    return out
+
+
+def _masks(batch):
+    n = len(batch)
+    yield None
+    yield np.isin(batch.node, [3, 5, 10])
+    yield np.isin(batch.service, [4, 5, 7])
+    yield np.random.default_rng(n).random(n) < 0.3
+
+
+def _both(batches, monkeypatch) -> int:
+    """Write each batch with each mask both ways; the texts must be equal."""
+    lines = 0
+    for k in range(4):
+        outs = []
+        for columnar in (True, False):
+            with monkeypatch.context() as m:
+                if not columnar:
+                    m.setattr(jsonl_columns, "render", lambda batch, mask: None)
+                out = io.StringIO()
+                writer = JsonlWriter(out)
+                for b in batches:
+                    writer.write(b, list(_masks(b))[k] if len(b) else None)
+                outs.append(out.getvalue())
+        pairs = enumerate(zip(*map(str.splitlines, outs), strict=False))
+        first = next((f"line {j}: {a} != {b}" for j, (a, b) in pairs if a != b), "length")
+        assert outs[0] == outs[1], first
+        lines += outs[0].count("\n")
+    return lines
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        [str(SAMPLES / "demo.log")],
+        [str(SAMPLES / "faults.blf"), "--network", str(SAMPLES / "network.toml")],
+        [str(SAMPLES / "commissioning.log"), "--network", str(SAMPLES / "network.toml")],
+    ],
+)
+def test_samples(argv, monkeypatch):
+    assert _both(_decode(argv), monkeypatch) > 100
+
+
+@pytest.mark.parametrize(
+    "rel",
+    [
+        "hilch__canopen-message-interpreter/pcan3.trc",
+        "isPointless__Sevcon/can_180209_154604.txt",
+        "nigel-bruce-khan__ros_canopen-tmcm-1636/candump.txt",
+    ],
+)
+def test_real_logs(rel, monkeypatch):
+    assert _both(_decode([str(real_file(rel))]), monkeypatch) > 10
+
+
+def test_pdo_signals_of_an_eds(monkeypatch):
+    eds = real_file("jclinton830__canopen_test/roboteq_motor_controllers_v80.eds")
+    batches = _decode(
+        [str(real_file("jclinton830__canopen_test/candump.txt")), "--eds", f"12={eds}"]
+    )
+    assert any(b.signals for b in batches)
+    assert _both(batches, monkeypatch) > 10
+
+
+def test_benchmark_mix_with_devices(monkeypatch):
+    from generate import generate
+
+    devices = [a for k in range(1, 17) for a in ("--device", f"{k}=dat7014")]
+    batches = _decode(["x.log", *devices], generate(20_000, seed=4))
+    assert any(b.signals for b in batches)
+    assert _both(batches, monkeypatch) > 20_000
+
+
+def test_signal_values_python_words_its_own_way(monkeypatch):
+    """Whole numbers ("2.0"), exponents both ways, NaN and inf (null), ints, bools and
+    a uint64 column beyond int64 (the block's rows then go row by row)."""
+    batches = _decode([str(SAMPLES / "demo.log")])
+    batch = next(b for b in batches if len(b) > 20)
+    rows = np.arange(0, 16, dtype=np.int64)
+    floats = np.array(
+        [2.0, -0.0, 1e-5, 1e16, 1.5e-4, 123456789012345.6, np.nan, np.inf, -np.inf, 0.1]
+        + [1 / 3, 1e15, 5e-324, 9999999999999998.0, -649.0, 1e300]
+    )
+    batch.signals = [
+        SignalBlock(rows, 9, "tpdo1", 0x189, {"f": floats, "i": -rows, "b": rows % 2 == 0}, {}),
+        SignalBlock(
+            rows + 20, 9, "tpdo2", 0x289, {"u": np.full(16, 2**64 - 1, np.uint64)}, {"u": "V"}
+        ),
+    ]
+    batch.service[rows] = 5  # TPDO rows without notes
+    batch.service[rows + 20] = 5
+    for r in (*rows.tolist(), *(rows + 20).tolist()):
+        dict.pop(batch.notes, r, None)
+    batch._lazy = None
+    assert _both([batch], monkeypatch) >= 32
+    line = JsonlWriter(io.StringIO())
+    line.write(batch)
+    first = json.loads(line.out.getvalue().splitlines()[0])
+    assert first["signals"] == {"f": 2.0, "i": 0, "b": True}
+
+
+def test_float_text_equals_repr_or_null():
+    rng = np.random.default_rng(9)
+    v = np.sign(rng.normal(size=20000)) * 10.0 ** rng.uniform(-8, 20, 20000)
+    v = np.concatenate([v, np.round(v), [0.0, -0.0, np.nan, np.inf, 1e-4, 1e16]])
+    matrix, _ = jsonl_columns._floats(v)
+    got = [bytes(row[row != 0]).decode() for row in matrix]
+    want = [repr(x) if np.isfinite(x) else "null" for x in v.tolist()]
+    assert got == want
+
+
+def test_records_of_rows_not_shown_come_last(monkeypatch):
+    batches = _decode([str(SAMPLES / "faults.log"), "--network", str(SAMPLES / "network.toml")])
+    for b in batches:
+        if len(b):
+            b.add_record(-1, {"kind": "finding", "rule": "x", "message": "end of batch"})
+            b.add_record(0, {"kind": "finding", "rule": "y", "message": "first row"})
+    assert _both(batches, monkeypatch) > 100
+
+
+def test_the_cli_writes_it(tmp_path):
+    out = tmp_path / "o.jsonl"
+    args = build_parser().parse_args(
+        ["decode", str(SAMPLES / "faults.log"), "--format", "jsonl", "-o", str(out)]
+    )
+    assert args.func(args) in (0, None, 1)
+    lines = out.read_text().splitlines()
+    assert len(lines) > 100 and all(json.loads(line)["kind"] for line in lines)
