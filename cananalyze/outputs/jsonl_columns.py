@@ -5,8 +5,9 @@ A `json.dumps` of a dict per frame ran at ~120k lines/s: a 10M-frame log took
 service, node, PDO) and the service fields that depend only on a row's service
 and first byte, or on its PDO signals, are NUL-padded byte columns compacted in
 one pass (`bytecols`). `jsonl.frame_record` and `dumps` stay the definition:
-they still write the rows only they know (notes, SDO, EMCY, NMT, shared notes,
-values Python words its own way) and every record.
+the fields of the other rows (notes, SDO, EMCY, NMT, shared notes, values
+Python words its own way) are still the dicts `batch.fields` gives, dumped one
+by one, and so is every record.
 
 Floats: pyarrow's shortest round-trip text is Python's `repr` wherever it has no
 exponent and 1e-4 <= |v| < 1e16, once ".0" is added to whole numbers (checked
@@ -24,8 +25,8 @@ from ..decoded import DecodedBatch
 from ..frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
 from ..protocol.fields import frame_fields
 from ..protocol.services import SERVICE_NAMES, Service
-from .jsonl import _clean, dumps, frame_record
-from .text import _KEYED, Rendered, _key_groups, _padded_table
+from .jsonl import _clean, dumps
+from .text import _KEYED, Rendered, _key_groups, _padded_table, _ragged
 
 # keyed rows whose fields read the first data byte (boot-up's state too, unlike its text)
 _BYTE = np.zeros(256, bool)
@@ -115,28 +116,26 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
             if got is not None:
                 fields_col.append((rows, got))
                 done[rows] = True
+    slow = np.flatnonzero(~done)  # notes, EMCY, NMT, SDO...: their fields by Python
+    if slow.size:
+        tails = [_fields_text(batch.fields(row)) for row in sel[slow].tolist()]
+        fields_col.append(_ragged(slow, tails))
     width = max(m.shape[1] for _, m in fields_col)
     fields_m = np.zeros((n, width), np.uint8)
     for rows, m in fields_col:
         fields_m[rows, : m.shape[1]] = m
     parts += [fields_m, _const(b"}\n", n)]
 
-    # rows Python writes whole, and the records after their frame's line
-    slow = ~done
-    after = np.zeros(n, bool)
-    after[slow] = True
+    # the records after their frame's line
+    after = np.zeros(0, np.int64)
+    inserts = []
     if by_row:
         rec_rows = np.zeros(len(fb), bool)
         rec_rows[[r for r in by_row if 0 <= r < len(fb)]] = True
-        after |= rec_rows[sel]
-    special = np.flatnonzero(after)
-    inserts = []
-    for i, row in zip(special.tolist(), sel[special].tolist(), strict=True):
-        line = dumps(frame_record(batch, row)) + "\n" if slow[i] else ""
-        line += "".join(dumps(rec) + "\n" for rec in by_row.get(row, ()))
-        inserts.append(line.encode())
-    # a Python row's own columns are cut out where its line goes in
-    return Rendered(parts, n, special, inserts, tail, replace=slow[special])
+        after = np.flatnonzero(rec_rows[sel])
+        for row in sel[after].tolist():
+            inserts.append("".join(dumps(rec) + "\n" for rec in by_row[row]).encode())
+    return Rendered(parts, n, after, inserts, tail)
 
 
 def _const(text: bytes, n: int) -> np.ndarray:

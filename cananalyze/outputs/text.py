@@ -464,18 +464,9 @@ class Rendered:
     """
 
     def __init__(
-        self,
-        parts: list[np.ndarray],
-        n: int,
-        after: np.ndarray,
-        inserts: list[bytes],
-        tail: bytes,
-        replace: np.ndarray | None = None,
+        self, parts: list[np.ndarray], n: int, after: np.ndarray, inserts: list[bytes], tail: bytes
     ) -> None:
-        """`after`: rows (ascending) followed by `inserts`; where `replace` (one per
-        `after` row) is set, the insert stands in for that row's own line."""
         self.parts, self.n, self.after, self.inserts, self.tail = parts, n, after, inserts, tail
-        self.replace = replace
 
     def bytes(self) -> bytes:
         blob, ends = _compact(self.parts, self.n, with_ends=self.after.size > 0)
@@ -484,12 +475,8 @@ class Rendered:
             return blob + self.tail if self.tail else blob
         pieces: list[bytes] = []
         prev = 0
-        cut = self.replace.tolist() if self.replace is not None else [False] * len(self.inserts)
-        starts = [0, *ends[:-1].tolist()]
-        for i, e, insert, own in zip(
-            self.after.tolist(), ends[self.after].tolist(), self.inserts, cut, strict=True
-        ):
-            pieces.append(blob[prev : starts[i] if own else e])
+        for e, insert in zip(ends[self.after].tolist(), self.inserts, strict=True):
+            pieces.append(blob[prev:e])
             pieces.append(insert)
             prev = e
         pieces.append(blob[prev:])
