@@ -158,3 +158,24 @@ def test_the_cli_writes_it(tmp_path):
     assert args.func(args) in (0, None, 1)
     lines = out.read_text().splitlines()
     assert len(lines) > 100 and all(json.loads(line)["kind"] for line in lines)
+
+
+def test_sdo_pairs_from_columns(tmp_path, monkeypatch):
+    """The fast pairs' frames (uploads, downloads with and without a size, an abort) get
+    their fields from columns, per command byte, and print as the per-row writer prints."""
+    from test_sdo_text import PAIRS, _log
+
+    from cananalyze.outputs import sdo_jsonl
+
+    taken = []
+    group = sdo_jsonl._group
+
+    def counting(*args):
+        block = group(*args)
+        taken.append(0 if block is None else len(block))
+        return block
+
+    monkeypatch.setattr(sdo_jsonl, "_group", counting)
+    batches = _decode([str(_log(tmp_path, PAIRS)), "--device", "1=dat7014"])
+    assert _both(batches, monkeypatch) >= 2 * len(PAIRS)
+    assert sum(taken) >= 2 * (len(PAIRS) - 1)  # every frame but the abort's pair

@@ -26,6 +26,8 @@ from ..frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
 from ..protocol.fields import frame_fields
 from ..protocol.services import SERVICE_NAMES, Service
 from .jsonl import _clean, dumps
+from .sdo_jsonl import pair_fields
+from .sdo_text import fast_pairs
 from .text import _KEYED, Rendered, _key_groups, _padded_table, _ragged
 
 # keyed rows whose fields read the first data byte (boot-up's state too, unlike its text)
@@ -57,6 +59,7 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
         return None
     sel = np.arange(len(fb)) if mask is None else np.flatnonzero(mask)
     n = sel.size
+    pairs = fast_pairs(batch) if mask is None else None  # before anything reads the notes
     records = list(batch.records)
     by_row: dict[int, list[dict]] = {}
     for row, rec in records:
@@ -93,14 +96,18 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
     # the service fields: by group where a few bytes decide them, per signal block, else Python
     notes = batch.notes
     noted = np.zeros(n, bool)
-    if len(notes):
+    written = len(notes) if pairs is None else dict.__len__(notes)  # the pairs' stay unwritten
+    if written:
         noted_rows = np.zeros(len(fb), bool)
-        noted_rows[np.fromiter(dict.keys(notes), np.int64, len(notes))] = True
+        noted_rows[np.fromiter(dict.keys(notes), np.int64, written)] = True
         noted = noted_rows[sel]
     lazy = batch._lazy_index()
     in_block = np.full(n, -1, np.int32) if lazy is None else lazy[0][sel]
     shared = np.full(n, -1, np.int32) if lazy is None else lazy[2][sel]
-    plain = ~noted & (shared < 0)
+    pending = np.zeros(n, bool)  # the fast pairs' rows: notes still to be written
+    if pairs is not None:
+        pending[np.concatenate((pairs[1].req_row, pairs[1].row))] = True
+    plain = ~noted & ~pending & (shared < 0)
     keyed = _KEYED[svc] & plain & (in_block < 0)
     inv, first_at = _key_groups(svc, pdo, rtr, dlc, data, keyed, byte_matters=_BYTE)
     texts = [b""]
@@ -116,7 +123,14 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
             if got is not None:
                 fields_col.append((rows, got))
                 done[rows] = True
-    slow = np.flatnonzero(~done)  # notes, EMCY, NMT, SDO...: their fields by Python
+    if pairs is not None:  # (mask None: batch rows are positions)
+        sdo = (svc == Service.SDO_REQUEST) | (svc == Service.SDO_RESPONSE)
+        for rows, block in pair_fields(fb, pairs[0], pairs[1], _fields_text):
+            # fields that are the pair's alone: an SDO frame, no other notes or signals
+            free = ~noted[rows] & (shared[rows] < 0) & (in_block[rows] < 0) & sdo[rows]
+            fields_col.append((rows[free], block[free]))
+            done[rows[free]] = True
+    slow = np.flatnonzero(~done)  # notes, EMCY, NMT, other SDO...: their fields by Python
     if slow.size:
         tails = [_fields_text(batch.fields(row)) for row in sel[slow].tolist()]
         fields_col.append(_ragged(slow, tails))
