@@ -179,3 +179,35 @@ def test_sdo_pairs_from_columns(tmp_path, monkeypatch):
     batches = _decode([str(_log(tmp_path, PAIRS)), "--device", "1=dat7014"])
     assert _both(batches, monkeypatch) >= 2 * len(PAIRS)
     assert sum(taken) >= 2 * (len(PAIRS) - 1)  # every frame but the abort's pair
+
+
+def test_background_jsonl_writer_raises_in_close():
+    """Written by a worker thread (as `decode -o` does): a failing disk is raised by
+    close(), not lost in the thread."""
+
+    class Broken(io.RawIOBase):
+        def writable(self) -> bool:
+            return True
+
+        def write(self, b) -> int:
+            raise OSError("disk full")
+
+    writer = JsonlWriter(io.TextIOWrapper(Broken(), encoding="utf-8"), background=True)
+    with pytest.raises(OSError, match="disk full"):
+        for b in _decode([str(SAMPLES / "demo.log")]):
+            writer.write(b)
+        writer.close()
+
+
+def test_background_jsonl_writer_writes_the_same(tmp_path):
+    batches = _decode([str(SAMPLES / "faults.log"), "--network", str(SAMPLES / "network.toml")])
+    texts = []
+    for background in (False, True):
+        path = tmp_path / f"{background}.jsonl"
+        with open(path, "w", encoding="utf-8") as out:
+            writer = JsonlWriter(out, background=background)
+            for b in batches:
+                writer.write(b)
+            writer.close()
+        texts.append(path.read_bytes())
+    assert texts[0] == texts[1] and texts[0].count(b"\n") > 100

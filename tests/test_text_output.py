@@ -271,7 +271,7 @@ def test_background_writer_raises_in_close() -> None:
 
     batches = _decode(SAMPLES / "demo.log")
     w = TextWriter(io.TextIOWrapper(Broken(), encoding="utf-8"), background=True)
-    assert w._worker is not None
+    assert w._sink.background
     with pytest.raises(OSError, match="disk full"):
         for b in batches:
             w.write(b)

@@ -10,6 +10,7 @@ import numpy as np
 from ..decoded import DecodedBatch
 from ..frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
 from ..protocol.services import SERVICE_NAMES
+from .background import ByteSink
 
 
 def _clean(value):
@@ -60,9 +61,14 @@ def dumps(rec: dict) -> str:
 
 
 class JsonlWriter:
-    def __init__(self, out: TextIO, frames: bool = True) -> None:
+    """JSON lines of decoded batches: as columns where it can (`jsonl_columns`), else
+    row by row; with `background`, finished and written by a worker thread
+    (`background.ByteSink`), whose error `close()` raises."""
+
+    def __init__(self, out: TextIO, frames: bool = True, background: bool = False) -> None:
         self.out = out
         self.frames = frames
+        self._sink = ByteSink(out, background, "jsonl-writer")
 
     def write(self, batch: DecodedBatch, mask: np.ndarray | None = None) -> None:
         if self.frames:
@@ -70,7 +76,7 @@ class JsonlWriter:
 
             rendered = render(batch, mask)
             if rendered is not None:
-                self._emit(rendered.bytes())
+                self._sink.put(rendered)
                 return
         by_row: dict[int, list[dict]] = {}
         for row, rec in batch.records:
@@ -88,13 +94,8 @@ class JsonlWriter:
             if row not in shown:
                 lines.append(dumps(rec))
         if lines:
-            self.out.write("\n".join(lines) + "\n")
+            self._sink.put(("\n".join(lines) + "\n").encode("utf-8"))
 
-    def _emit(self, data: bytes) -> None:
-        buffer = getattr(self.out, "buffer", None)
-        encoding = getattr(self.out, "encoding", "") or ""
-        if buffer is not None and encoding.lower().replace("-", "") == "utf8":
-            self.out.flush()
-            buffer.write(data)
-        else:
-            self.out.write(data.decode("utf-8"))
+    def close(self) -> None:
+        """Wait for the worker, if any; re-raise its error here."""
+        self._sink.close()

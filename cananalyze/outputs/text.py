@@ -15,8 +15,6 @@ reference the fast writer is tested against.
 
 from __future__ import annotations
 
-import queue
-import threading
 from typing import TextIO
 
 import numpy as np
@@ -32,6 +30,7 @@ from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from ..protocol.fields import annotation, frame_fields
 from ..protocol.services import SERVICE_NAMES, Service
 from ..protocol.tables import emcy_class, error_register_names
+from .background import ByteSink
 from .numtext import g6_text, value_text
 from .record_text import format_record
 from .sdo_text import fast_pairs, pair_text
@@ -127,12 +126,8 @@ class TextWriter:
     """Writes decoded batches as text lines.
 
     With `background=True` and a UTF-8 text file with a binary buffer under it,
-    each batch's lines are finished and written by a worker thread while the
-    caller decodes the next batch: the compaction of the column blocks (C,
-    without the GIL; `Rendered`) and the write. Building the blocks, which is
-    numpy plus some Python, stays in the caller: a thread that often releases
-    and re-takes the GIL would wait on the decoder every time. The queue is one
-    batch deep (a rendered batch's blocks are ~50 MB at 256k rows). `close()`
+    each batch's lines are finished (compacted) and written by a worker thread
+    while the caller decodes the next batch (`background.ByteSink`). `close()`
     waits for the worker and raises what it raised.
     """
 
@@ -148,14 +143,7 @@ class TextWriter:
         self.color = color
         self.t0 = t0
         self.only_records = only_records
-        self._queue: queue.Queue | None = None
-        self._worker: threading.Thread | None = None
-        self._error: BaseException | None = None
-        if background and self._buffer() is not None:
-            self.out.flush()
-            self._queue = queue.Queue(maxsize=1)
-            self._worker = threading.Thread(target=self._work, name="text-writer", daemon=True)
-            self._worker.start()
+        self._sink = ByteSink(out, background, "text-writer")
 
     def write(self, batch: DecodedBatch, mask: np.ndarray | None = None) -> None:
         fb = batch.frames
@@ -166,60 +154,16 @@ class TextWriter:
             lines = lines_per_row(batch, mask, t0, self.color, self.only_records)
             if not lines:
                 return
-            if self._queue is None:
+            if not self._sink.background:
                 self.out.write("\n".join(lines) + "\n")
                 return
-            data = ("\n".join(lines) + "\n").encode("utf-8")
-        else:
-            data = self._render(batch, mask, t0)
-        if self._queue is None:
-            self._emit(data if isinstance(data, bytes) else data.bytes())
+            self._sink.put(("\n".join(lines) + "\n").encode("utf-8"))
             return
-        if self._error is not None:
-            self.close()
-        self._queue.put(data)
+        self._sink.put(self._render(batch, mask, t0))
 
     def close(self) -> None:
         """Wait for the worker, if any; re-raise its error here."""
-        if self._worker is not None:
-            if self._worker.is_alive():
-                self._queue.put(None)
-                self._worker.join()
-            self._worker = None
-            self._queue = None
-        if self._error is not None:
-            error, self._error = self._error, None
-            raise error
-
-    def _work(self) -> None:
-        buffer = self._buffer()
-        while True:
-            data = self._queue.get()
-            if data is None:
-                return
-            if self._error is None:  # after an error, drain so the caller never blocks
-                try:
-                    buffer.write(data if isinstance(data, bytes) else data.bytes())
-                except BaseException as exc:  # noqa: BLE001 - re-raised by close()
-                    self._error = exc
-
-    def _buffer(self):
-        """The binary buffer under a UTF-8 text stream, else None."""
-        buffer = getattr(self.out, "buffer", None)
-        if (
-            buffer is not None
-            and getattr(self.out, "encoding", "").lower().replace("-", "") == "utf8"
-        ):
-            return buffer
-        return None
-
-    def _emit(self, data: bytes) -> None:
-        buffer = self._buffer()
-        if buffer is not None:
-            self.out.flush()
-            buffer.write(data)
-        else:
-            self.out.write(data.decode("utf-8"))
+        self._sink.close()
 
     @staticmethod
     def _columnar_ok(batch: DecodedBatch) -> bool:
