@@ -28,7 +28,7 @@ from ..protocol.services import SERVICE_NAMES, Service
 from .jsonl import _clean, dumps
 from .sdo_jsonl import pair_fields
 from .sdo_text import fast_pairs
-from .text import _KEYED, Rendered, _key_groups, _padded_table, _ragged
+from .text import _KEYED, Rendered, _key_groups, _padded_table
 
 # keyed rows whose fields read the first data byte (boot-up's state too, unlike its text)
 _BYTE = np.zeros(256, bool)
@@ -123,17 +123,19 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
             if got is not None:
                 fields_col.append((rows, got))
                 done[rows] = True
+    # the longer fields of the few other rows go in before their "}\n" (`spliced`): as
+    # a column they would widen it for every row (the SDO fields are ~200 bytes)
+    spliced: dict[int, bytes] = {}
     if pairs is not None:  # (mask None: batch rows are positions)
         sdo = (svc == Service.SDO_REQUEST) | (svc == Service.SDO_RESPONSE)
         for rows, block in pair_fields(fb, pairs[0], pairs[1], _fields_text):
             # fields that are the pair's alone: an SDO frame, no other notes or signals
             free = ~noted[rows] & (shared[rows] < 0) & (in_block[rows] < 0) & sdo[rows]
-            fields_col.append((rows[free], block[free]))
+            spliced.update(zip(rows[free].tolist(), _row_bytes(block[free]), strict=True))
             done[rows[free]] = True
     slow = np.flatnonzero(~done)  # notes, EMCY, NMT, other SDO...: their fields by Python
-    if slow.size:
-        tails = [_fields_text(batch.fields(row)) for row in sel[slow].tolist()]
-        fields_col.append(_ragged(slow, tails))
+    for i, row in zip(slow.tolist(), sel[slow].tolist(), strict=True):
+        spliced[i] = _fields_text(batch.fields(row))
     width = max(m.shape[1] for _, m in fields_col)
     fields_m = np.zeros((n, width), np.uint8)
     for rows, m in fields_col:
@@ -141,15 +143,27 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
     parts += [fields_m, _const(b"}\n", n)]
 
     # the records after their frame's line
-    after = np.zeros(0, np.int64)
-    inserts = []
+    records_after: dict[int, bytes] = {}
     if by_row:
         rec_rows = np.zeros(len(fb), bool)
         rec_rows[[r for r in by_row if 0 <= r < len(fb)]] = True
-        after = np.flatnonzero(rec_rows[sel])
-        for row in sel[after].tolist():
-            inserts.append("".join(dumps(rec) + "\n" for rec in by_row[row]).encode())
-    return Rendered(parts, n, after, inserts, tail)
+        for i in np.flatnonzero(rec_rows[sel]).tolist():
+            records_after[i] = "".join(dumps(rec) + "\n" for rec in by_row[int(sel[i])]).encode()
+    after, inserts, back = [], [], []
+    for i in sorted(spliced.keys() | records_after.keys()):
+        for text, before in ((spliced.get(i), 2), (records_after.get(i), 0)):
+            if text:
+                after.append(i)
+                inserts.append(text)
+                back.append(before)  # 2: inside the line, before its "}\n"
+    return Rendered(parts, n, np.asarray(after, np.int64), inserts, tail, back)
+
+
+def _row_bytes(block: np.ndarray) -> list[bytes]:
+    """Each row of a left-aligned NUL-padded matrix as bytes, without the padding."""
+    lengths = (block != bytecols.PAD).sum(axis=1).tolist()
+    flat, w = block.tobytes(), block.shape[1]
+    return [flat[k * w : k * w + length] for k, length in enumerate(lengths)]
 
 
 def _const(text: bytes, n: int) -> np.ndarray:

@@ -404,22 +404,33 @@ class Rendered:
     some rows (record lines, texts with NULs) and after the last.
 
     `bytes()` compacts and splices: a C pass without the GIL and a join, which the
-    background writer does while the caller renders the next batch.
+    background writer does while the caller renders the next batch. An insert goes
+    `back` bytes before its row's end (0: after the row), in the order given.
     """
 
     def __init__(
-        self, parts: list[np.ndarray], n: int, after: np.ndarray, inserts: list[bytes], tail: bytes
+        self,
+        parts: list[np.ndarray],
+        n: int,
+        after: np.ndarray,
+        inserts: list[bytes],
+        tail: bytes,
+        back: list[int] | None = None,
     ) -> None:
         self.parts, self.n, self.after, self.inserts, self.tail = parts, n, after, inserts, tail
+        self.back = back
 
     def bytes(self) -> bytes:
         blob, ends = _compact(self.parts, self.n, with_ends=self.after.size > 0)
         self.parts = []
         if not self.inserts:
             return blob + self.tail if self.tail else blob
+        at = ends[self.after]
+        if self.back is not None:
+            at = at - np.asarray(self.back, np.int64)
         pieces: list[bytes] = []
         prev = 0
-        for e, insert in zip(ends[self.after].tolist(), self.inserts, strict=True):
+        for e, insert in zip(at.tolist(), self.inserts, strict=True):
             pieces.append(blob[prev:e])
             pieces.append(insert)
             prev = e
