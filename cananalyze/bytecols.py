@@ -79,6 +79,22 @@ def hex_bytes(raw: np.ndarray, length: np.ndarray) -> np.ndarray:
     return out
 
 
+def repeat(text: bytes | str, n: int) -> np.ndarray:
+    """The same text on each of n rows, as a (n, len) read-only view (no copy)."""
+    raw = text.encode() if isinstance(text, str) else text
+    return np.broadcast_to(np.frombuffer(raw, np.uint8), (n, len(raw)))
+
+
+def left_aligned(blob: bytes, ends: np.ndarray) -> np.ndarray:
+    """Compacted rows (`compact(..., with_ends=True)`) back as a matrix, each row's text
+    at its start and NUL after: a column block for another compaction."""
+    lengths = np.diff(ends, prepend=0)
+    width = int(lengths.max()) if lengths.size else 0
+    out = np.zeros((lengths.size, width), np.uint8)
+    out[np.arange(width)[None, :] < lengths[:, None]] = np.frombuffer(blob, np.uint8)
+    return out
+
+
 def _blank_leading(m: np.ndarray, start: int, zero: int) -> None:
     """NUL for the leading `zero` digits of m[:, start:], keeping at least the last one."""
     body = m[:, start:-1]

@@ -10,6 +10,7 @@ import sys
 import numpy as np
 import pytest
 from conftest import ROOT, SAMPLES, real_file
+from helpers.broken_disk import broken_text_stream
 
 from cananalyze.cli.main import build_parser
 from cananalyze.cli.pipeline import build_decoder
@@ -185,14 +186,7 @@ def test_background_jsonl_writer_raises_in_close():
     """Written by a worker thread (as `decode -o` does): a failing disk is raised by
     close(), not lost in the thread."""
 
-    class Broken(io.RawIOBase):
-        def writable(self) -> bool:
-            return True
-
-        def write(self, b) -> int:
-            raise OSError("disk full")
-
-    writer = JsonlWriter(io.TextIOWrapper(Broken(), encoding="utf-8"), background=True)
+    writer = JsonlWriter(broken_text_stream(), background=True)
     with pytest.raises(OSError, match="disk full"):
         for b in _decode([str(SAMPLES / "demo.log")]):
             writer.write(b)

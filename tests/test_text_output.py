@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import ROOT, SAMPLES, real_file
+from helpers.broken_disk import broken_text_stream
 
 from cananalyze.cli.pipeline import build_decoder
 from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR, FLAG_TX, FrameBatch, from_rows
@@ -262,15 +263,8 @@ def test_background_writer_writes_the_same(tmp_path: Path) -> None:
 
 
 def test_background_writer_raises_in_close() -> None:
-    class Broken(io.RawIOBase):
-        def writable(self) -> bool:
-            return True
-
-        def write(self, b) -> int:
-            raise OSError("disk full")
-
     batches = _decode(SAMPLES / "demo.log")
-    w = TextWriter(io.TextIOWrapper(Broken(), encoding="utf-8"), background=True)
+    w = TextWriter(broken_text_stream(), background=True)
     assert w._sink.background
     with pytest.raises(OSError, match="disk full"):
         for b in batches:

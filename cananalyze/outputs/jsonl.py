@@ -51,9 +51,16 @@ def frame_record(batch: DecodedBatch, i: int) -> dict:
     rec["node"] = None if node < 0 else node
     if batch.pdo[i]:
         rec["pdo"] = int(batch.pdo[i])
-    for k, v in batch.fields(i).items():
-        rec[k] = {kk: _clean(vv) for kk, vv in v.items()} if isinstance(v, dict) else _clean(v)
+    rec.update(clean_fields(batch.fields(i)))
     return rec
+
+
+def clean_fields(fields: dict) -> dict:
+    """A row's fields as the JSON line holds them (nested dicts cleaned one level down)."""
+    return {
+        k: {kk: _clean(vv) for kk, vv in v.items()} if isinstance(v, dict) else _clean(v)
+        for k, v in fields.items()
+    }
 
 
 def dumps(rec: dict) -> str:

@@ -25,7 +25,7 @@ from ..decoded import DecodedBatch
 from ..frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
 from ..protocol.fields import frame_fields
 from ..protocol.services import SERVICE_NAMES, Service
-from .jsonl import _clean, dumps
+from .jsonl import _clean, clean_fields, dumps
 from .sdo_jsonl import pair_fields
 from .sdo_text import fast_pairs
 from .text import _KEYED, Rendered, _key_groups, _padded_table
@@ -76,18 +76,27 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
     flags, svc, dlc, data = fb.flags[sel], batch.service[sel], fb.dlc[sel], fb.data[sel]
     node, pdo = batch.node[sel], batch.pdo[sel]
     rtr = (flags & FLAG_RTR) != 0
-    parts = [_const(b'{"kind":"frame","t":', n), _floats(fb.t[sel])[0]]
+    parts = [bytecols.repeat(b'{"kind":"frame","t":', n), _floats(fb.t[sel])[0]]
     names = fb.channels
     channels = [
         json.dumps(names[c] if c < len(names) else str(c)).encode() for c in range(_channels(fb))
     ]
-    parts += [_const(b',"channel":', n), _padded_table(channels)[fb.channel[sel]]]
-    parts += [_const(b',"can_id":', n), bytecols.decimal(fb.can_id[sel])]
-    parts += [_const(b',"dlc":', n), bytecols.decimal(dlc)]
+    parts += [bytecols.repeat(b',"channel":', n), _padded_table(channels)[fb.channel[sel]]]
+    parts += [bytecols.repeat(b',"can_id":', n), bytecols.decimal(fb.can_id[sel])]
+    parts += [bytecols.repeat(b',"dlc":', n), bytecols.decimal(dlc)]
     shown_bytes = np.where(rtr, 0, np.minimum(dlc, 8))
-    parts += [_const(b',"data":"', n), bytecols.hex_bytes(data, shown_bytes), _const(b'"', n)]
+    parts += [
+        bytecols.repeat(b',"data":"', n),
+        bytecols.hex_bytes(data, shown_bytes),
+        bytecols.repeat(b'"', n),
+    ]
     parts += [table[((flags & flag) != 0).astype(np.intp)] for flag, table in _FLAGS]
-    parts += [_const(b',"service":', n), _SERVICE[svc], _const(b',"node":', n), _node(node)]
+    parts += [
+        bytecols.repeat(b',"service":', n),
+        _SERVICE[svc],
+        bytecols.repeat(b',"node":', n),
+        _node(node),
+    ]
     has_pdo = pdo != 0
     pdo_text = bytecols.decimal(pdo)
     pdo_text[~has_pdo] = bytecols.PAD
@@ -128,10 +137,11 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
     spliced: dict[int, bytes] = {}
     if pairs is not None:  # (mask None: batch rows are positions)
         sdo = (svc == Service.SDO_REQUEST) | (svc == Service.SDO_RESPONSE)
-        for rows, block in pair_fields(fb, pairs[0], pairs[1], _fields_text):
+        for rows, texts in pair_fields(fb, pairs[0], pairs[1], _fields_text):
             # fields that are the pair's alone: an SDO frame, no other notes or signals
             free = ~noted[rows] & (shared[rows] < 0) & (in_block[rows] < 0) & sdo[rows]
-            spliced.update(zip(rows[free].tolist(), _row_bytes(block[free]), strict=True))
+            taken = zip(rows.tolist(), texts, free.tolist(), strict=True)
+            spliced.update((row, text) for row, text, ok in taken if ok)
             done[rows[free]] = True
     slow = np.flatnonzero(~done)  # notes, EMCY, NMT, other SDO...: their fields by Python
     for i, row in zip(slow.tolist(), sel[slow].tolist(), strict=True):
@@ -140,7 +150,7 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
     fields_m = np.zeros((n, width), np.uint8)
     for rows, m in fields_col:
         fields_m[rows, : m.shape[1]] = m
-    parts += [fields_m, _const(b"}\n", n)]
+    parts += [fields_m, bytecols.repeat(b"}\n", n)]
 
     # the records after their frame's line
     records_after: dict[int, bytes] = {}
@@ -157,17 +167,6 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
                 inserts.append(text)
                 back.append(before)  # 2: inside the line, before its "}\n"
     return Rendered(parts, n, np.asarray(after, np.int64), inserts, tail, back)
-
-
-def _row_bytes(block: np.ndarray) -> list[bytes]:
-    """Each row of a left-aligned NUL-padded matrix as bytes, without the padding."""
-    lengths = (block != bytecols.PAD).sum(axis=1).tolist()
-    flat, w = block.tobytes(), block.shape[1]
-    return [flat[k * w : k * w + length] for k, length in enumerate(lengths)]
-
-
-def _const(text: bytes, n: int) -> np.ndarray:
-    return np.broadcast_to(np.frombuffer(text, np.uint8), (n, len(text)))
 
 
 def _channels(fb) -> int:
@@ -187,11 +186,7 @@ def _node(node: np.ndarray) -> np.ndarray:
 
 def _fields_text(fields: dict) -> bytes:
     """',"k":v,...' of a row's fields, as `frame_record` adds them to its dict."""
-    rec = {
-        k: {kk: _clean(vv) for kk, vv in v.items()} if isinstance(v, dict) else _clean(v)
-        for k, v in fields.items()
-    }
-    text = dumps(rec)[1:-1]
+    text = dumps(clean_fields(fields))[1:-1]
     return ("," + text).encode() if text else b""
 
 
@@ -211,14 +206,12 @@ def _signal_text(sb, pos: np.ndarray) -> np.ndarray | None:
         else:
             return None
         head = (',"signals":{' if j == 0 else ",") + json.dumps(name, ensure_ascii=False) + ":"
-        parts += [_const(head.encode(), m), text]
+        parts += [bytecols.repeat(head.encode(), m), text]
     units = dumps({k: _clean(u) for k, u in sb.units.items() if u})
-    parts.append(_const((("}" if parts else ',"signals":{}') + ',"units":' + units).encode(), m))
-    blob, ends = bytecols.compact(parts, m, with_ends=True)
-    lengths = np.diff(ends, prepend=0)
-    out = np.zeros((m, int(lengths.max())), np.uint8)
-    out[np.arange(out.shape[1])[None, :] < lengths[:, None]] = np.frombuffer(blob, np.uint8)
-    return out
+    parts.append(
+        bytecols.repeat((("}" if parts else ',"signals":{}') + ',"units":' + units).encode(), m)
+    )
+    return bytecols.left_aligned(*bytecols.compact(parts, m, with_ends=True))
 
 
 def _floats(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -25,10 +25,10 @@ from .sdo_text import pair_text
 _EXPEDITED = ("expedited", "size_indicated", "n", "size", "sdo_data")
 
 
-def pair_fields(fb, fields, fast, fields_text) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(batch rows, NUL-padded fields text) for the fast pairs' frames, request and
-    answer rows, a block per command byte; `fields_text` is how the writer words a
-    fields dict (the check compares with it)."""
+def pair_fields(fb, fields, fast, fields_text) -> list[tuple[np.ndarray, list[bytes]]]:
+    """(batch rows, their fields text) for the fast pairs' frames, request and answer
+    rows, a group per command byte; `fields_text` is how the writer words a fields
+    dict (the check compares with it)."""
     pt = pair_text(fb, fields, fast, b"")
     a = fields.arrays
     ok = np.ones(len(fields), bool)
@@ -47,7 +47,7 @@ def pair_fields(fb, fields, fast, fields_text) -> list[tuple[np.ndarray, np.ndar
     return out
 
 
-def _group(fb, fast, a, is_req, rows, roles, js, fields_text) -> np.ndarray | None:
+def _group(fb, fast, a, is_req, rows, roles, js, fields_text) -> list[bytes] | None:
     j = int(js[0])
     row = int(rows[j])
     note = pair_outputs(fb, int(fast.req_row[j]), int(fast.row[j]), int(a["node"][j]), None)
@@ -57,8 +57,12 @@ def _group(fb, fast, a, is_req, rows, roles, js, fields_text) -> np.ndarray | No
     if keys != ["cs", "command", "index", "subindex", "role"]:
         return None
     m = len(js)
-    parts = [_text(f',"cs":{json.dumps(f["cs"])},"command":{json.dumps(f["command"])},"index":', m)]
-    parts += [bytecols.decimal(a["index"][js]), _text(',"subindex":', m)]
+    parts = [
+        bytecols.repeat(
+            f',"cs":{json.dumps(f["cs"])},"command":{json.dumps(f["command"])},"index":', m
+        )
+    ]
+    parts += [bytecols.decimal(a["index"][js]), bytecols.repeat(',"subindex":', m)]
     parts += [bytecols.decimal(a["subindex"][js])]
     if "expedited" in f:
         if [k for k in f if k in _EXPEDITED] != [k for k in _EXPEDITED if k in f]:
@@ -66,19 +70,11 @@ def _group(fb, fast, a, is_req, rows, roles, js, fields_text) -> np.ndarray | No
         head = "".join(f",{json.dumps(k)}:{json.dumps(f[k])}" for k in _EXPEDITED[:-1] if k in f)
         size = len(f["sdo_data"]) // 2
         payload = fb.data[rows[js], 4:8]
-        parts += [_text(head + ',"sdo_data":"', m)]
-        parts += [bytecols.hex_bytes(payload, np.full(m, size)), _text('"', m)]
-    parts += [_text(',"role":"', m), roles[js], _text('"', m)]
+        parts += [bytecols.repeat(head + ',"sdo_data":"', m)]
+        parts += [bytecols.hex_bytes(payload, np.full(m, size)), bytecols.repeat('"', m)]
+    parts += [bytecols.repeat(',"role":"', m), roles[js], bytecols.repeat('"', m)]
     blob, ends = bytecols.compact(parts, m, with_ends=True)
-    first = blob[: int(ends[0])]
-    if first != fields_text(f):  # the group's fixed text, checked on its first frame
+    if blob[: int(ends[0])] != fields_text(f):  # the group's fixed text, checked on its first frame
         return None
-    lengths = np.diff(ends, prepend=0)
-    block = np.zeros((m, int(lengths.max())), np.uint8)
-    block[np.arange(block.shape[1])[None, :] < lengths[:, None]] = np.frombuffer(blob, np.uint8)
-    return block
-
-
-def _text(text: str, m: int) -> np.ndarray:
-    raw = text.encode()
-    return np.broadcast_to(np.frombuffer(raw, np.uint8), (m, len(raw)))
+    starts = [0, *ends[:-1].tolist()]
+    return [blob[s:e] for s, e in zip(starts, ends.tolist(), strict=True)]

@@ -144,13 +144,19 @@ def _columnar_lines(fields, tenths: np.ndarray, m: int) -> list[bytes]:
     dash = _DASH[(none & (a["data_len"] == 0)).astype(np.intp)]
     size = bytecols.decimal(a["size"])
     parts = [head, _VALUE[none.astype(np.intp)], data, dash, dec, _OPEN_HEX[wide.astype(np.intp)]]
-    parts += [hx, close_hex, _text(b" (", m), size, _text(b" bytes), latency ", m)]
+    parts += [
+        hx,
+        close_hex,
+        bytecols.repeat(b" (", m),
+        size,
+        bytecols.repeat(b" bytes), latency ", m),
+    ]
     parts += [
         bytecols.decimal(tenths // 10),
-        _text(b".", m),
+        bytecols.repeat(b".", m),
         (48 + tenths % 10).astype(np.uint8)[:, None],
     ]
-    parts += [_text(b" ms\n", m)]
+    parts += [bytecols.repeat(b" ms\n", m)]
     blob, ends = bytecols.compact(parts, m, with_ends=True)
     starts = [0, *ends[:-1].tolist()]
     return [blob[s:e] for s, e in zip(starts, ends.tolist(), strict=True)]
@@ -160,10 +166,6 @@ def _hex4(values: np.ndarray) -> np.ndarray:
     """f"{v:04X}" of each value below 0x10000, as an (n, 4) matrix."""
     v = np.asarray(values, np.int64)
     return np.stack([bytecols.HEX_UPPER[(v >> s) & 15] for s in (12, 8, 4, 0)], axis=1)
-
-
-def _text(text: bytes, m: int) -> np.ndarray:
-    return np.broadcast_to(np.frombuffer(text, np.uint8), (m, len(text)))
 
 
 def _matrix(parts: list[np.ndarray], m: int) -> np.ndarray:
