@@ -47,11 +47,7 @@ IMPORTS = (
 
 def read_cpu(path: Path, repeat: int) -> float:
     """CPU seconds of reading the log into frame batches (no decoding), best of `repeat`."""
-    runs = [
-        float(subprocess.run([sys.executable, "-c", READ, str(path)], **_quiet()).stdout)
-        for _ in range(repeat)
-    ]
-    return min(runs)
+    return min(float(_run([sys.executable, "-c", READ, str(path)])) for _ in range(repeat))
 
 
 def encode_cpu(tables: Path, repeat: int) -> dict[str, float]:
@@ -90,8 +86,12 @@ def startup_cpu(repeat: int) -> float:
     return best
 
 
-def _quiet() -> dict:
-    return {"capture_output": True, "text": True, "check": True, "env": ENV}
+def _run(cmd: list[str]) -> str:
+    """The command's output; its own error message (not a traceback) when it fails."""
+    done = subprocess.run(cmd, capture_output=True, text=True, env=ENV)
+    if done.returncode != 0:
+        raise SystemExit(f"failed ({done.returncode}): {' '.join(cmd)}\n{done.stderr.strip()}")
+    return done.stdout
 
 
 def main(argv: list[str]) -> int:
@@ -103,15 +103,15 @@ def main(argv: list[str]) -> int:
     args = ap.parse_args(argv)
     n = int(args.size)
     formats = args.formats.split(",")
+    if not set(formats) <= {".log", ".blf", ".asc"}:
+        ap.error(f"--formats: .log, .blf or .asc, not {args.formats}")
     args.out.mkdir(parents=True, exist_ok=True)
     stem = ensure(args.out, n, formats, [])
     with tempfile.TemporaryDirectory(dir=args.out) as tmp:
         tables = Path(tmp) / "pq"
         log = str(stem.with_suffix(formats[0]))
         print(f"exporting {log} once for its tables ...", flush=True)
-        subprocess.run(
-            CLI + ["export", log, "--parquet", str(tables), *DEVICES, "-q"], check=True, env=ENV
-        )
+        _run(CLI + ["export", log, "--parquet", str(tables), *DEVICES, "-q"])
         encode = encode_cpu(tables, args.repeat)
         shutil.rmtree(tables)
     start = startup_cpu(max(3, args.repeat))

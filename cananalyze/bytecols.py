@@ -53,9 +53,7 @@ def decimal(values: np.ndarray) -> np.ndarray:
     mag[neg] = np.uint64(0) - mag[neg]  # two's complement: exact for -2**63 too
     width = len(str(int(mag.max()))) if mag.size else 1
     out = np.empty((v.size, 1 + width), np.uint8)
-    for j in range(width, 0, -1):
-        out[:, j] = 48 + (mag % np.uint64(10)).astype(np.uint8)
-        mag //= np.uint64(10)
+    out[:, 1:] = digits(mag, width)
     _blank_leading(out, 1, ord("0"))
     out[:, 0] = np.where(neg, ord("-"), PAD)
     return out
@@ -113,6 +111,12 @@ def compact(parts: list[np.ndarray], n: int, with_ends: bool) -> tuple[bytes, np
     matrix = np.concatenate(parts, axis=1)
     keep = matrix != PAD
     return matrix[keep].tobytes(), np.cumsum(keep.sum(axis=1)) if with_ends else None
+
+
+def row_bytes(blob: bytes, ends: np.ndarray) -> list[bytes]:
+    """The compacted rows as bytes objects, cut at the row ends."""
+    starts = [0, *ends[:-1].tolist()]
+    return [blob[s:e] for s, e in zip(starts, ends.tolist(), strict=True)]
 
 
 def split_rows(blob: bytes, ends: np.ndarray) -> list[str]:

@@ -100,7 +100,10 @@ class FrameBatch:
         )
 
     def channel_name(self, i: int) -> str:
-        c = int(self.channel[i])
+        return self.channel_label(int(self.channel[i]))
+
+    def channel_label(self, c: int) -> str:
+        """The interface name of channel index c (its number when the log named none)."""
         return self.channels[c] if c < len(self.channels) else str(c)
 
 

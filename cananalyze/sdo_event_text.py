@@ -81,7 +81,7 @@ def sdo_messages(fields) -> list[str] | None:
     hx[~wide] = bytecols.PAD
     open_hex = _OPEN_HEX[wide.astype(np.intp)]
     close_hex = np.where(wide, ord(")"), bytecols.PAD).astype(np.uint8)[:, None]
-    ok = np.broadcast_to(np.frombuffer(b" ok", np.uint8), (n, 3))
+    ok = bytecols.repeat(b" ok", n)
     parts = [head, label, data, dec, open_hex, hx, close_hex, ok]
     messages = bytecols.joined_rows(parts, n)
     for k, rec in fields.aborted.items():  # aborted pairs keep their own record

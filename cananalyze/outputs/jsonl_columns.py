@@ -77,10 +77,7 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
     node, pdo = batch.node[sel], batch.pdo[sel]
     rtr = (flags & FLAG_RTR) != 0
     parts = [bytecols.repeat(b'{"kind":"frame","t":', n), _floats(fb.t[sel])[0]]
-    names = fb.channels
-    channels = [
-        json.dumps(names[c] if c < len(names) else str(c)).encode() for c in range(_channels(fb))
-    ]
+    channels = [json.dumps(fb.channel_label(c)).encode() for c in range(_channels(fb))]
     parts += [bytecols.repeat(b',"channel":', n), _padded_table(channels)[fb.channel[sel]]]
     parts += [bytecols.repeat(b',"can_id":', n), bytecols.decimal(fb.can_id[sel])]
     parts += [bytecols.repeat(b',"dlc":', n), bytecols.decimal(dlc)]

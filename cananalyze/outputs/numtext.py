@@ -20,29 +20,9 @@ _ZERO = 48
 
 def int_text(values: np.ndarray) -> np.ndarray:
     """(n, w) NUL-padded decimal text of integers (`str(int(v))`)."""
-    n = values.size
-    v = values
-    if v.dtype.kind == "u":
-        if n and int(v.max()) >= 1 << 63:
-            return _python_text(v, str)
-        v = v.astype(np.int64)
-    else:
-        v = v.astype(np.int64)
-        if n and int(v.min()) == np.iinfo(np.int64).min:
-            return _python_text(v, str)
-    neg = v < 0
-    a = np.abs(v)
-    top = int(a.max()) if n else 0
-    width = len(str(top))
-    digits = bytecols.digits(a, width)
-    length = np.ones(n, np.int64)  # digits of each value
-    for d in range(1, width):
-        length += a >= 10**d
-    digits[np.arange(width)[None, :] < (width - length)[:, None]] = _PAD
-    out = np.empty((n, width + 1), np.uint8)
-    out[:, 0] = np.where(neg, ord("-"), _PAD)
-    out[:, 1:] = digits
-    return out
+    if values.dtype.kind == "u" and values.size and int(values.max()) >= 1 << 63:
+        return _python_text(values, str)  # beyond int64
+    return bytecols.decimal(values.astype(np.int64))
 
 
 def bool_text(values: np.ndarray) -> np.ndarray:

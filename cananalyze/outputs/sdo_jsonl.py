@@ -76,5 +76,4 @@ def _group(fb, fast, a, is_req, rows, roles, js, fields_text) -> list[bytes] | N
     blob, ends = bytecols.compact(parts, m, with_ends=True)
     if blob[: int(ends[0])] != fields_text(f):  # the group's fixed text, checked on its first frame
         return None
-    starts = [0, *ends[:-1].tolist()]
-    return [blob[s:e] for s, e in zip(starts, ends.tolist(), strict=True)]
+    return bytecols.row_bytes(blob, ends)

@@ -69,9 +69,12 @@ def pair_text(fb, fields, fast, end: bytes) -> PairText:
     m = len(fields)
     req, resp = fast.req_row, fast.row
     upload = a["upload"]
-    col = np.full((m, 1), ord(":"), np.uint8)
-    where = [_hex4(a["index"]), col, bytecols.decimal(a["subindex"])]  # " 0x1018:1" after the 0x
-    endm = np.broadcast_to(np.frombuffer(end, np.uint8), (m, len(end)))
+    where = [
+        _hex4(a["index"]),
+        bytecols.repeat(b":", m),
+        bytecols.decimal(a["subindex"]),
+    ]  # " 0x1018:1" after the 0x
+    endm = bytecols.repeat(end, m)
     # request: "upload request 0x..:s" / "expedited download request 0x..:s[, n bytes]"
     sized = ~upload & ((fb.data[req, 0] & 1) == 1)
     size_digit = np.where(sized, 48 + a["size"] % 10, bytecols.PAD).astype(np.uint8)[:, None]
@@ -157,9 +160,7 @@ def _columnar_lines(fields, tenths: np.ndarray, m: int) -> list[bytes]:
         (48 + tenths % 10).astype(np.uint8)[:, None],
     ]
     parts += [bytecols.repeat(b" ms\n", m)]
-    blob, ends = bytecols.compact(parts, m, with_ends=True)
-    starts = [0, *ends[:-1].tolist()]
-    return [blob[s:e] for s, e in zip(starts, ends.tolist(), strict=True)]
+    return bytecols.row_bytes(*bytecols.compact(parts, m, with_ends=True))
 
 
 def _hex4(values: np.ndarray) -> np.ndarray:

@@ -216,8 +216,7 @@ class TextWriter:
         parts.append(_time_column(fb.t[sel] - t0))
         # channel, padded to 5 and a space
         names = [
-            (f"  {fb.channels[c] if c < len(fb.channels) else str(c):<5} ").encode()
-            for c in range(int(fb.channel.max()) + 1)
+            (f"  {fb.channel_label(c):<5} ").encode() for c in range(int(fb.channel.max()) + 1)
         ]
         parts.append(_padded_table(names)[fb.channel[sel]])
         ident = np.empty((n, 10), np.uint8)
@@ -312,7 +311,7 @@ class TextWriter:
             done[emcy] = True
         extra: dict[int, bytes] = {}  # row -> record lines spliced in after its line
         if pairs is not None:
-            extra = self._pair_texts(pairs, fb, endb, ann, done, by_row, slot_of, with_records)
+            extra = self._pair_texts(pairs, fb, endb, ann, done, by_row, slot_of)
         # every other row without records: its text from Python, scattered in
         spliced: dict[int, bytes] = {}
         per_row = np.flatnonzero(~done & ~with_records)
@@ -371,7 +370,7 @@ class TextWriter:
         return Rendered(parts, n, slow, inserts, tail)
 
     @staticmethod
-    def _pair_texts(pairs, fb, endb, ann, done, by_row, slot_of, with_records) -> dict[int, bytes]:
+    def _pair_texts(pairs, fb, endb, ann, done, by_row, slot_of) -> dict[int, bytes]:
         """The fast pairs' rows: "SDO <role>" into the annotation column (`ann`, marked
         `done`); returns the record lines to splice in after each answer's line, every
         record of the row in record order where the row holds others too."""
@@ -395,7 +394,6 @@ class TextWriter:
                 if row in j_of:
                     lines.append((slots[j_of[row]], extra[row]))
                 extra[row] = b"".join(line for _, line in sorted(lines))
-                with_records[row] = False  # its role is in the column already
         return extra
 
 
