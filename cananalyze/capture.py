@@ -33,6 +33,7 @@ from .events import (  # noqa: F401  (re-exported: outputs import the levels fro
 )
 from .frames import FrameBatch, concat
 from .gcpolicy import fewer_collections
+from .node_tally import NodeTally
 from .protocol.services import SERVICE_NAMES, Service
 from .sdo.transaction import SDO_TABLE_COLUMNS
 
@@ -286,42 +287,11 @@ class Capture:
 
     def node_rows(self) -> list[dict]:
         """Plain rows of the nodes table (also used by MCAP metadata, without pandas)."""
-        has = self.node >= 0
-        key = self.node[has].astype(np.int64) * len(SERVICE_NAMES) + self.service[has]
-        counts = np.bincount(key, minlength=128 * len(SERVICE_NAMES)).reshape(128, -1)
-        last: dict[int, tuple[float, str]] = {}
-        for e in self.state_changes:
-            last[e.node] = (e.t, e.message)
-        ident = _identity(self.records)
-        rows = []
-        seen = np.flatnonzero(counts.sum(axis=0)).tolist()
-        for n in np.flatnonzero(counts.sum(axis=1)).tolist():
-            row: dict[str, Any] = {"node": n, "frames": int(counts[n].sum())}
-            for s in seen:
-                row[f"frames_{SERVICE_NAMES[s]}"] = int(counts[n, s])
-            row["last_state"] = last.get(n, (None, None))[1]
-            row["last_state_t"] = last.get(n, (None, None))[0]
-            info = ident.get(n, {})
-            row.update(
-                {
-                    k: info.get(k)
-                    for k in (
-                        "device_type",
-                        "vendor_id",
-                        "product_code",
-                        "revision",
-                        "serial",
-                        "device_name",
-                    )
-                }
-            )
-            prof, how = self.profiles.get(n, (None, None))
-            if prof is None and info:
-                prof, how = _match_profile(info)
-            row["profile"] = prof
-            row["identified_by"] = how
-            rows.append(row)
-        return rows
+        tally = NodeTally()
+        tally.add_frames(self.service, self.node)
+        tally.add_states(self.state_changes)
+        tally.add_identity(self.records)
+        return tally.rows(self.profiles)
 
 
 def _categorical(pd, codes: np.ndarray, labels: list[str]):
@@ -360,52 +330,6 @@ def _event_frame(events: list[Event]):
             "row": pd.array([e.row for e in events], dtype="Int64"),
         }
     )
-
-
-_IDENTITY = {
-    (0x1000, 0): "device_type",
-    (0x1018, 1): "vendor_id",
-    (0x1018, 2): "product_code",
-    (0x1018, 3): "revision",
-    (0x1018, 4): "serial",
-    (0x1008, 0): "device_name",
-}
-
-
-def _identity(records: list[tuple[int, dict]]) -> dict[int, dict]:
-    """Identity objects a node answered to SDO uploads (0x1000, 0x1008, 0x1018)."""
-    out: dict[int, dict] = {}
-    for _, r in records:
-        if r.get("kind") != "sdo" or r.get("result") != "ok" or r.get("direction") != "upload":
-            continue
-        what = _IDENTITY.get((r.get("index"), r.get("subindex")))
-        if what and r.get("node") is not None:
-            value = r.get("value")
-            if value is None and r.get("data"):  # no dictionary known: the CiA 301 types
-                raw = bytes.fromhex(r["data"])
-                if what == "device_name":
-                    value = raw.split(b"\0", 1)[0].decode("latin-1")
-                else:
-                    value = int.from_bytes(raw[:4], "little")
-            out.setdefault(r["node"], {})[what] = value
-    return out
-
-
-def _match_profile(info: dict) -> tuple[str | None, str | None]:
-    try:
-        from .network.profile import identify
-
-        ints = {
-            k: info.get(k) if isinstance(info.get(k), int) else None
-            for k in ("vendor_id", "product_code", "device_type")
-        }
-        name = info.get("device_name")
-        prof = identify(device_name=name if isinstance(name, str) else None, **ints)
-    except (
-        Exception
-    ):  # identification is a nicety; a profile that fails to load must not stop a table
-        return None, None
-    return (prof.key, "sdo identity") if prof else (None, None)
 
 
 class Collector:

@@ -28,11 +28,12 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from ..capture import _hex_column, _identity, _match_profile
+from ..capture import _hex_column
 from ..decoded import DecodedBatch
 from ..event_columns import KINDS, NO_NODE, NO_ROW, EventColumns
 from ..events import LEVEL_NAMES, EventState, batch_event_columns
 from ..frames import FrameBatch
+from ..node_tally import NodeTally
 from ..protocol.services import SERVICE_NAMES
 from ..sdo.transaction import SDO_TABLE_COLUMNS
 from . import arrow_build as ab
@@ -54,14 +55,12 @@ from .table_sink import (
 
 SDO_COLUMNS = SDO_TABLE_COLUMNS
 _SDO_ROW = operator.itemgetter(*SDO_COLUMNS)
-_IDENTITY_INDEX = (0x1000, 0x1008, 0x1018)
 FINDING_COLUMNS = ("t", "t_rel", "rule", "severity", "node", "cob_id", "message")
 FINDING_COLUMNS += ("measured", "expected", "why")
 HOLD = 10.0  # seconds of events kept back for records that complete late (see _add_events)
 _NAN = float("nan")  # an absent key: pandas fills NaN, as pandas_like.MISSING
 _SERVICES = ab.strings(list(SERVICE_NAMES))
 _LEVELS = ab.strings(list(LEVEL_NAMES.values()))
-_IDENTITY_KEYS = ("device_type", "vendor_id", "product_code", "revision", "serial", "device_name")
 
 
 def _meta(fields: list[dict], index: str | None = None):
@@ -216,9 +215,7 @@ class StreamTables:
         self._events_unsorted = False
         self._pending_events = EventColumns.empty()
         self._channels: tuple[str, ...] = ()
-        self._counts = np.zeros((128, len(SERVICE_NAMES)), np.int64)
-        self._last_state: dict[int, tuple[float, str]] = {}
-        self._identity: dict[int, dict] = {}
+        self._nodes = NodeTally()
         self._sdo_stats = {c: pl.ColumnStats() for c in SDO_COLUMNS}
         self._sdo_spool = tempfile.TemporaryFile(dir=self.dir, prefix=".sdo-spool.")
         self._sdo_chunks = 0
@@ -244,19 +241,11 @@ class StreamTables:
             frames = self.sinks["frames"]
             args = (fb, batch.service, batch.node, batch.pdo)
             self.frames_writer.put(lambda: frames.add(_frames_columns(*args)))
-            has = batch.node >= 0
-            key = batch.node[has].astype(np.int64) * len(SERVICE_NAMES) + batch.service[has]
-            self._counts += np.bincount(key, minlength=self._counts.size).reshape(
-                self._counts.shape
-            )
         if batch.signals:
             self._add_signals(batch, off)
         self._add_records(batch)
         events, states = batch_event_columns(batch, off, self._event_state)
-        for ev in states:
-            cur = self._last_state.get(ev.node)
-            if cur is None or ev.t >= cur[0]:
-                self._last_state[ev.node] = (ev.t, ev.message)
+        self._nodes.add(batch, states)
         self._add_events(events, float(fb.t[-1]) - HOLD if n else float("-inf"))
         self.offset += n
 
@@ -383,7 +372,7 @@ class StreamTables:
         self.writer.put(lambda: sink.add(cols))
 
     def _add_records(self, batch: DecodedBatch) -> None:
-        """SDO rows, findings and node identities of a batch.
+        """SDO rows and findings of a batch.
 
         The fast path's records are taken as columns (`DecodedBatch.sdo_fast_split`),
         the other records read one by one. Here only the column statistics are taken
@@ -410,7 +399,6 @@ class StreamTables:
             return
         pieces: dict = {}
         order = None
-        fast_ident: list[tuple[int, dict]] = []
         if split is not None:
             fields, fast, _ = split
             keep = None
@@ -418,16 +406,11 @@ class StreamTables:
                 gone = sorted(fields.aborted)
                 sdo.extend((int(fast.slots[j]), fields.aborted[j]) for j in gone)
                 keep = np.delete(np.arange(len(fast.slots)), gone)
-            for j in np.flatnonzero(np.isin(fast.index, _IDENTITY_INDEX)).tolist():
-                if j not in fields.aborted:
-                    fast_ident.append((int(fast.slots[j]), fields.record(j)))
             pieces = sdo_chunks.fast_pieces(fields, keep)
             if sdo:
                 slots = fast.slots if keep is None else fast.slots[keep]
                 at = np.concatenate((np.array([k for k, _ in sdo], np.int64), slots))
                 order = np.argsort(at, kind="stable")
-        ident = [(k, r) for k, r in sdo if r.get("index") in _IDENTITY_INDEX] + fast_ident
-        ident.sort(key=operator.itemgetter(0))
         rows = []
         for _, r in sdo:  # one C call per record that has every column (nearly all)
             try:
@@ -437,8 +420,6 @@ class StreamTables:
         mine = [list(c) for c in zip(*rows, strict=True)] or [[] for _ in SDO_COLUMNS]
         for c, values in zip(SDO_COLUMNS, mine, strict=True):
             sdo_chunks.take_in(self._sdo_stats[c], values, pieces.get(c))
-        for node, info in _identity(ident).items():
-            self._identity.setdefault(node, {}).update(info)
         self._sdo_chunks += 1
         out = self._speculate_sdo()
         spool = self._sdo_spool
@@ -604,23 +585,7 @@ class StreamTables:
         return self._small_table("findings", out)
 
     def _write_nodes(self) -> int:
-        counts = self._counts
-        seen = np.flatnonzero(counts.sum(axis=0)).tolist()
-        rows: list[dict] = []
-        for n in np.flatnonzero(counts.sum(axis=1)).tolist():
-            row: dict = {"node": n, "frames": int(counts[n].sum())}
-            for s in seen:
-                row[f"frames_{SERVICE_NAMES[s]}"] = int(counts[n, s])
-            row["last_state"] = self._last_state.get(n, (None, None))[1]
-            row["last_state_t"] = self._last_state.get(n, (None, None))[0]
-            info = self._identity.get(n, {})
-            row.update({k: info.get(k) for k in _IDENTITY_KEYS})
-            prof, how = self.profiles.get(n, (None, None))
-            if prof is None and info:
-                prof, how = _match_profile(info)
-            row["profile"] = prof
-            row["identified_by"] = how
-            rows.append(row)
+        rows = self._nodes.rows(self.profiles)
         names = list(rows[0]) if rows else ["node"]
         others = [c for c in names if c != "node"]
         # Parquet keeps the index last (to_parquet), CSV first (reset_index)
