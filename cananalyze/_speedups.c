@@ -699,6 +699,83 @@ done:
     return out;
 }
 
+/* ------------------------------------------------------------- MCAP records */
+
+PyDoc_STRVAR(gather_rows_doc,
+             "gather_rows(heads, width, sources, part, starts, lengths) -> bytes\n\n"
+             "Records end to end: for each i, row i of heads (a C-contiguous buffer of\n"
+             "n rows x width bytes), then lengths[i] bytes of sources[part[i]] from\n"
+             "starts[i]. part: int32, starts and lengths: int64 buffers of n entries.\n"
+             "Every range is checked against its source. The MCAP chunk layout: one\n"
+             "pass of memcpy without the GIL instead of a numpy gather per byte.");
+
+static PyObject *gather_rows(PyObject *self, PyObject *args) {
+    PyObject *o_heads, *o_sources, *o_part, *o_starts, *o_lengths;
+    Py_ssize_t width;
+    if (!PyArg_ParseTuple(args, "OnOOOO", &o_heads, &width, &o_sources, &o_part, &o_starts,
+                          &o_lengths))
+        return NULL;
+    PyObject *sources = PySequence_Fast(o_sources, "sources must be a sequence");
+    if (!sources) return NULL;
+    Py_ssize_t ns = PySequence_Fast_GET_SIZE(sources);
+    Py_buffer *src = PyMem_Calloc(ns ? ns : 1, sizeof(Py_buffer));
+    Py_ssize_t got = 0;
+    Bufs bs = {.n = 0};
+    PyObject *out = NULL;
+    if (!src) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    if (width < 0) {
+        PyErr_SetString(PyExc_ValueError, "gather_rows: negative width");
+        goto done;
+    }
+    for (; got < ns; got++)
+        if (PyObject_GetBuffer(PySequence_Fast_GET_ITEM(sources, got), &src[got],
+                               PyBUF_SIMPLE | PyBUF_C_CONTIGUOUS) < 0)
+            goto done;
+    if (bufs_get(&bs, o_lengths, 0, -1, "lengths") < 0) goto done;
+    Py_ssize_t n = bs.b[0].len / 8;
+    if (bufs_get(&bs, o_starts, 0, n * 8, "starts") < 0 ||
+        bufs_get(&bs, o_part, 0, n * 4, "part") < 0 ||
+        bufs_get(&bs, o_heads, 0, n * width, "heads") < 0)
+        goto done;
+    const int64_t *len = bs.b[0].buf, *start = bs.b[1].buf;
+    const int32_t *part = bs.b[2].buf;
+    const char *heads = bs.b[3].buf;
+    Py_ssize_t total = 0, bad = -1;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        int32_t k = part[i];
+        if (k < 0 || k >= ns || start[i] < 0 || len[i] < 0 || start[i] > src[k].len ||
+            len[i] > src[k].len - start[i] || total > PY_SSIZE_T_MAX - width - len[i]) {
+            bad = i;
+            break;
+        }
+        total += width + len[i];
+    }
+    if (bad >= 0) {
+        PyErr_Format(PyExc_ValueError, "gather_rows: record %zd is outside its source", bad);
+        goto done;
+    }
+    out = PyBytes_FromStringAndSize(NULL, total);
+    if (!out) goto done;
+    char *dst = PyBytes_AS_STRING(out);
+    Py_BEGIN_ALLOW_THREADS;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        memcpy(dst, heads + i * width, (size_t)width);
+        dst += width;
+        memcpy(dst, (const char *)src[part[i]].buf + start[i], (size_t)len[i]);
+        dst += len[i];
+    }
+    Py_END_ALLOW_THREADS;
+done:
+    for (Py_ssize_t i = 0; i < got; i++) PyBuffer_Release(&src[i]);
+    PyMem_Free(src);
+    bufs_release(&bs);
+    Py_DECREF(sources);
+    return out;
+}
+
 static PyMethodDef methods[] = {
     {"count_lines", count_lines, METH_VARARGS, count_lines_doc},
     {"split_lines", split_lines, METH_VARARGS, split_lines_doc},
@@ -708,13 +785,14 @@ static PyMethodDef methods[] = {
     {"hex_payload", hex_payload, METH_VARARGS, hex_payload_doc},
     {"classify", classify, METH_VARARGS, classify_doc},
     {"compact_rows", compact_rows, METH_VARARGS, compact_rows_doc},
+    {"gather_rows", gather_rows, METH_VARARGS, gather_rows_doc},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_speedups",
-    "Compiled inner loops of the text readers and writer, the classifier and the frames table "
-    "(optional).", -1, methods,
+    "Compiled inner loops of the text readers and writer, the classifier, the frames table "
+    "and the MCAP chunks (optional).", -1, methods,
 };
 
 PyMODINIT_FUNC PyInit__speedups(void) {

@@ -137,6 +137,8 @@ def match_profile(info: dict) -> tuple[str | None, str | None]:
         }
         name = info.get("device_name")
         prof = identify(device_name=name if isinstance(name, str) else None, **ints)
-    except Exception:  # identification is a nicety: a profile that fails to load must not stop a table
+    except (
+        Exception
+    ):  # identification is a nicety: a profile that fails to load must not stop a table
         return None, None
     return (prof.key, "sdo identity") if prof else (None, None)

@@ -313,7 +313,7 @@ def test_json_columns_fd_payloads_and_non_finite_values(tmp_path):
         f"(1.000000) can0 181#0102\n(1.001000) can0 123##1{payload.hex()}\n(1.002000) can0 701#R\n"
     )
     c = load(log)
-    docs = frame_payloads(c)
+    docs = frame_payloads(c.batch, c.service, c.node)
     assert [json.loads(docs[i])["data"] for i in range(3)] == ["0102", payload.hex(), ""]
     assert json.loads(docs[1])["dlc"] == c.batch.dlc[1]
 

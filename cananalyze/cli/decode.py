@@ -8,7 +8,7 @@ import sys
 
 from ..errors import UsageError
 from .common import add_input_options, report_problems
-from .timeline import add_timeline_options, timeline_collector, write_timelines
+from .timeline import Timelines, add_timeline_options
 
 # Readers, numpy and the decoder are imported in run(): `cananalyze --help` builds
 # every sub-command's parser and must stay fast.
@@ -131,11 +131,14 @@ def run(args: argparse.Namespace) -> int:
                 raise UsageError(
                     f"-o {args.output}: cannot write there: {exc.strerror or exc}"
                 ) from None
-        _decode_to(out, args, source, decoder, timing, services, nodes)
+        timelines = stack.enter_context(Timelines(args))
+        _decode_to(out, args, source, decoder, timing, services, nodes, timelines)
     return 0
 
 
-def _decode_to(out, args: argparse.Namespace, source, decoder, timing, services, nodes) -> None:
+def _decode_to(
+    out, args: argparse.Namespace, source, decoder, timing, services, nodes, timelines
+) -> None:
     import numpy as np
 
     from ..io.prefetch import prefetch
@@ -161,7 +164,6 @@ def _decode_to(out, args: argparse.Namespace, source, decoder, timing, services,
         writer = TextWriter(
             out, color=color, only_records=only_records, background=not args.summary
         )
-    collector = timeline_collector(args)
     t0 = None
     svc_codes = np.array(sorted(services), np.uint8) if services else None
     batches = prefetch(source.batches())
@@ -171,8 +173,8 @@ def _decode_to(out, args: argparse.Namespace, source, decoder, timing, services,
             if t0 is None and len(fb):
                 t0 = float(fb.t[0])
             summary.add(batch)
-            if collector:
-                collector.add(batch)
+            if timelines:
+                timelines.add(batch)
             if args.summary:
                 continue
             mask = None
@@ -200,8 +202,8 @@ def _decode_to(out, args: argparse.Namespace, source, decoder, timing, services,
             writer.write(batch, mask)
         tail = decoder.finish()
         summary.add(tail)
-        if collector:
-            collector.add(tail)
+        if timelines:
+            timelines.add(tail)
         if not args.summary:
             writer.write(tail)
         close = getattr(writer, "close", None)
@@ -224,7 +226,5 @@ def _decode_to(out, args: argparse.Namespace, source, decoder, timing, services,
 
         print("\n".join(device_lines(decoder.network, summary)), file=out)
         print("\n".join(timing.timing.lines(timing.nmt, timing.t0)), file=out)
-    if collector:
-        write_timelines(
-            args, collector.capture(source.problems, getattr(args, "network", None) or "")
-        )
+    if timelines:
+        timelines.finish(source.problems)

@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
             check_writable(getattr(args, kind))
 
     bar, task = _progress(sys.stderr.isatty() and not args.quiet)
-    if not args.mcap and not args.rrd:
+    if not args.rrd:
         return _stream(args, outputs, bar, task)
     t0 = time.perf_counter()
     if bar:
@@ -111,11 +111,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _stream(args: argparse.Namespace, outputs: list[str], bar, task) -> int:
-    """Tables only: decode batch by batch straight into the table files (flat memory)."""
+    """Decode batch by batch straight into the table files and the MCAP (flat memory)."""
     from ..capture import given_profiles
     from ..io.prefetch import prefetch
     from ..io.source import open_log
-    from ..outputs.table_stream import StreamTables
     from .pipeline import build_decoder
 
     t0 = time.perf_counter()
@@ -126,12 +125,23 @@ def _stream(args: argparse.Namespace, outputs: list[str], bar, task) -> int:
     with contextlib.ExitStack() as stack:
         if bar:
             stack.enter_context(bar)
-        sinks = [
-            stack.enter_context(
-                StreamTables(getattr(args, kind), kind, args.parquet_compression, profiles=profiles)
-            )
-            for kind in outputs
-        ]
+        tables = []
+        for kind in ("parquet", "csv"):
+            if getattr(args, kind):
+                from ..outputs.table_stream import StreamTables
+
+                sink = StreamTables(
+                    getattr(args, kind), kind, args.parquet_compression, profiles=profiles
+                )
+                tables.append(stack.enter_context(sink))
+        mcap = None
+        if args.mcap:
+            from ..outputs.mcap_stream import StreamMcap
+
+            network = getattr(args, "network", None) or ""
+            mcap = StreamMcap(args.mcap, args.mcap_compression, str(args.log), network, profiles)
+            stack.enter_context(mcap)
+        sinks = [*tables, *([mcap] if mcap else [])]
         for fb in prefetch(source.batches()):  # read ahead on the other core
             batch = decoder.decode(fb)
             for sink in sinks:
@@ -142,7 +152,10 @@ def _stream(args: argparse.Namespace, outputs: list[str], bar, task) -> int:
         batch = decoder.finish()
         for sink in sinks:
             sink.add(batch)
-            sink.close()
+        for table in tables:
+            table.close()
+        if mcap:
+            mcap.close(source.problems.count)
     report_problems(source.problems)
     if not args.quiet:
         dests = ", ".join(f"{kind} {getattr(args, kind)}" for kind in outputs)

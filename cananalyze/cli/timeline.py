@@ -19,26 +19,58 @@ def add_timeline_options(p: argparse.ArgumentParser) -> None:
     )
 
 
-def timeline_collector(args: argparse.Namespace):
-    """A Collector when a timeline output is asked for, else None (no memory kept)."""
-    if not (args.mcap or args.rerun or args.connect):
-        return None
-    if args.rerun and args.connect:
-        raise UsageError("--rerun spawns a viewer, --connect uses a running one: give one of them")
-    from ..capture import Collector
-    from ..outputs.atomic import check_writable
+class Timelines:
+    """decode's timeline outputs, fed each decoded batch.
 
-    if args.mcap:
-        check_writable(args.mcap)
-    return Collector(str(args.log))
+    The MCAP file is written batch by batch (`StreamMcap`: memory flat in log
+    length, the file appears only when complete); a Rerun viewer is shown the
+    whole log at the end, so only then is the log kept (a `Collector`).
+    """
 
+    def __init__(self, args: argparse.Namespace) -> None:
+        if args.rerun and args.connect:
+            raise UsageError(
+                "--rerun spawns a viewer, --connect uses a running one: give one of them"
+            )
+        self.args = args
+        self.mcap = None
+        self.collector = None
+        if args.mcap:
+            from ..capture import given_profiles
+            from ..outputs.mcap_stream import StreamMcap
 
-def write_timelines(args: argparse.Namespace, cap) -> None:
-    if args.mcap:
-        from ..outputs.mcap_out import write_mcap
+            network = getattr(args, "network", None) or ""
+            self.mcap = StreamMcap(
+                args.mcap, source=str(args.log), network=network, profiles=given_profiles(args)
+            )
+        if args.rerun or args.connect:
+            from ..capture import Collector
 
-        write_mcap(cap, args.mcap)
-    if args.rerun or args.connect:
-        from ..outputs.rerun_out import show
+            self.collector = Collector(str(args.log))
 
-        show(cap, connect=args.connect, bitrate=getattr(args, "bitrate", None))
+    def __bool__(self) -> bool:
+        return self.mcap is not None or self.collector is not None
+
+    def __enter__(self) -> Timelines:
+        return self
+
+    def __exit__(self, typ, exc, tb) -> None:
+        if exc is not None and self.mcap is not None:
+            self.mcap.abort(typ, exc, tb)
+
+    def add(self, batch) -> None:
+        if self.mcap is not None:
+            self.mcap.add(batch)
+        if self.collector is not None:
+            self.collector.add(batch)
+
+    def finish(self, problems) -> None:
+        """Complete the MCAP file, then show the log in Rerun."""
+        if self.mcap is not None:
+            self.mcap.close(problems.count)
+        if self.collector is not None:
+            from ..outputs.rerun_out import show
+
+            network = getattr(self.args, "network", None) or ""
+            cap = self.collector.capture(problems, network)
+            show(cap, connect=self.args.connect, bitrate=getattr(self.args, "bitrate", None))

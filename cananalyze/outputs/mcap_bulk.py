@@ -40,6 +40,7 @@ from mcap.records import (
     SummaryOffset,
 )
 
+from .. import speedups
 from .json_text import Texts
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -207,7 +208,6 @@ class BulkMcapWriter:
         part = payload.part[rows]
         record_ends = np.cumsum(_HEADER_SIZE + lengths)
         record_starts = record_ends - (_HEADER_SIZE + lengths)
-        out = np.empty(int(record_ends[-1]), np.uint8)
         head = np.empty(m, _MESSAGE_HEADER)
         head["op"] = Opcode.MESSAGE
         head["len"] = _HEADER_SIZE - 9 + lengths
@@ -215,6 +215,12 @@ class BulkMcapWriter:
         head["seq"] = 0
         head["log"] = log_time
         head["pub"] = log_time
+        gather = getattr(speedups.C, "gather_rows", None)
+        if gather is not None:  # one memcpy per header and payload, without the GIL
+            sources = [p.data for p in payload.parts]
+            raw = gather(head.view(np.uint8), _HEADER_SIZE, sources, part, starts, lengths)
+            return raw, record_starts
+        out = np.empty(int(record_ends[-1]), np.uint8)
         head_at = (record_starts[:, None] + np.arange(_HEADER_SIZE)).reshape(-1)
         out[head_at] = head.view(np.uint8).reshape(-1)
         # payload bytes, message by message grouped by the texts they come from

@@ -22,7 +22,8 @@ import numpy as np
 
 from .. import __version__
 from ..capture import Capture, SignalSeries
-from ..frames import FLAG_RTR
+from ..decoded import SignalBlock
+from ..frames import FLAG_RTR, FrameBatch
 from ..protocol.services import SERVICE_NAMES
 from .atomic import atomic_path
 from .json_text import Texts, hex_text, join, label_text, number_text, object_template
@@ -96,7 +97,8 @@ def _json_type(values: np.ndarray) -> str:
     return "number"
 
 
-def signal_schema(s: SignalSeries) -> dict:
+def signal_schema(s: SignalSeries | SignalBlock) -> dict:
+    """JSON schema of one PDO's signal documents (from a whole series or its first block)."""
     props = {}
     for name, values in s.columns.items():
         unit = s.units.get(name)
@@ -111,23 +113,25 @@ def signal_schema(s: SignalSeries) -> dict:
     }
 
 
+EVENTS_TOPIC = "/canopen/events"
+FRAMES_TOPIC = "/can/frames"
 SLICE = 1 << 20  # rows per join: keeps pyarrow's 32-bit string offsets in range
 
 
-def signal_payloads(s: SignalSeries) -> Texts:
+def signal_payloads(columns: dict[str, np.ndarray]) -> Texts:
     """`{"signal": value, ...}` per PDO, built column-wise (NaN/inf become null)."""
-    names = list(s.columns)
+    names = list(columns)
+    n = len(columns[names[0]]) if names else 0
     return Texts.concat(
         [
-            join(object_template(names, [number_text(s.columns[n][a : a + SLICE]) for n in names]))
-            for a in range(0, len(s.t), SLICE)
+            join(object_template(names, [number_text(columns[k][a : a + SLICE]) for k in names]))
+            for a in range(0, n, SLICE)
         ]
     )
 
 
-def frame_payloads(cap: Capture) -> Texts:
+def frame_payloads(fb: FrameBatch, service: np.ndarray, node: np.ndarray) -> Texts:
     """The /can/frames documents, a slice of rows at a time."""
-    fb = cap.batch
     channels = list(fb.channels) or ["can0"]
     parts = []
     for a in range(0, len(fb), SLICE):
@@ -160,14 +164,42 @@ def frame_payloads(cap: Capture) -> Texts:
                     '","flags":',
                     number_text(flags),
                     ',"service":',
-                    label_text(list(SERVICE_NAMES), cap.service[a:b]),
+                    label_text(list(SERVICE_NAMES), service[a:b]),
                     ',"node":',
-                    number_text(cap.node[a:b]),
+                    number_text(node[a:b]),
                     "}",
                 ]
             )
         )
     return Texts.concat(parts)
+
+
+def state_payloads(states: list) -> Texts:
+    """`{"state": ...}` of NMT state changes (rare: one json.dumps each)."""
+    return Texts.from_list([json.dumps({"state": e.message}).encode() for e in states])
+
+
+def event_payloads(
+    ns: np.ndarray,
+    level: list[int],
+    message: list[str],
+    name: list[str],
+    file: str,
+    line: list[int],
+) -> Texts:
+    """foxglove.Log documents of events (a few per SDO transfer or EMCY: json.dumps each)."""
+    data = []
+    for tn, lv, msg, nm, ln in zip(ns.tolist(), level, message, name, line, strict=True):
+        doc = {
+            "timestamp": {"sec": tn // 1_000_000_000, "nsec": tn % 1_000_000_000},
+            "level": lv,
+            "message": msg,
+            "name": nm,
+            "file": file,
+            "line": ln,
+        }
+        data.append(json.dumps(doc).encode())
+    return Texts.from_list(data)
 
 
 def write_mcap(
@@ -186,7 +218,7 @@ def write_mcap(
             sid = w.schema(schema["title"], "jsonschema", json.dumps(schema).encode())
             streams.append((w.channel(topic, "json", sid), ns, payload))
             counts[topic] = len(ns)
-        _write_merged(w, streams)
+        write_merged(w, streams)
         _metadata(w, cap)
         w.finish()
     return counts
@@ -196,38 +228,50 @@ def topic_streams(cap: Capture) -> list[tuple[str, dict, np.ndarray, Texts]]:
     """(topic, JSON schema, log times in ns, payloads) for every topic, in channel order."""
     out = []
     for s in cap.series:
-        out.append((f"/node/{s.node}/{s.pdo}", signal_schema(s), _ns(s.t), signal_payloads(s)))
+        out.append((signal_topic(s), signal_schema(s), _ns(s.t), signal_payloads(s.columns)))
     by_node: dict[int, list] = {}
     for e in cap.state_changes:
         by_node.setdefault(e.node, []).append(e)
     for node, evs in sorted(by_node.items()):
         t = np.array([e.t for e in evs])
-        data = [json.dumps({"state": e.message}).encode() for e in evs]
-        out.append((f"/node/{node}/nmt_state", STATE_SCHEMA, _ns(t), Texts.from_list(data)))
+        out.append((state_topic(node), STATE_SCHEMA, _ns(t), state_payloads(evs)))
     events = cap.sorted_events()
     if events:
         ns = _ns(np.array([e.t for e in events]))
         lines = cap.batch.line
-        file = Path(cap.source).name
-        data = []
-        for e, tn in zip(events, ns.tolist(), strict=True):
-            line = int(lines[e.row]) if e.row is not None and e.row < len(lines) else 0
-            msg = {
-                "timestamp": {"sec": tn // 1_000_000_000, "nsec": tn % 1_000_000_000},
-                "level": e.level,
-                "message": e.message,
-                "name": f"node {e.node}" if e.node is not None else e.kind,
-                "file": file,
-                "line": line,
-            }
-            data.append(json.dumps(msg).encode())
-        out.append(("/canopen/events", LOG_SCHEMA, ns, Texts.from_list(data)))
+        line = [
+            int(lines[e.row]) if e.row is not None and e.row < len(lines) else 0 for e in events
+        ]
+        payload = event_payloads(
+            ns,
+            [e.level for e in events],
+            [e.message for e in events],
+            [f"node {e.node}" if e.node is not None else e.kind for e in events],
+            Path(cap.source).name,
+            line,
+        )
+        out.append((EVENTS_TOPIC, LOG_SCHEMA, ns, payload))
     if len(cap.batch):
-        out.append(("/can/frames", FRAME_SCHEMA, _ns(cap.batch.t), frame_payloads(cap)))
+        out.append(
+            (
+                FRAMES_TOPIC,
+                FRAME_SCHEMA,
+                _ns(cap.batch.t),
+                frame_payloads(cap.batch, cap.service, cap.node),
+            )
+        )
     return out
 
 
-def _write_merged(w: BulkMcapWriter, streams: list[tuple[int, np.ndarray, Texts]]) -> None:
+def signal_topic(s: SignalSeries | SignalBlock) -> str:
+    return f"/node/{s.node}/{s.pdo}"
+
+
+def state_topic(node: int) -> str:
+    return f"/node/{node}/nmt_state"
+
+
+def write_merged(w: BulkMcapWriter, streams: list[tuple[int, np.ndarray, Texts]]) -> None:
     """All streams' messages in log-time order (stable: equal times keep stream order)."""
     if not streams:
         return
@@ -238,20 +282,27 @@ def _write_merged(w: BulkMcapWriter, streams: list[tuple[int, np.ndarray, Texts]
 
 
 def _metadata(w: BulkMcapWriter, cap: Capture) -> None:
+    write_metadata(w, cap.source, cap.network, len(cap.batch), cap.problems.count, cap.node_rows())
+
+
+def write_metadata(
+    w: BulkMcapWriter, source: str, network: str, frames: int, skipped: int, nodes: list[dict]
+) -> None:
+    """The `cananalyze` metadata record, nodes.json and the network file as attachments."""
     w.metadata(
         "cananalyze",
         {
             "version": __version__,
-            "source": str(cap.source),
-            "network": cap.network or "",
-            "frames": str(len(cap.batch)),
-            "skipped_input": str(cap.problems.count),
+            "source": str(source),
+            "network": network or "",
+            "frames": str(frames),
+            "skipped_input": str(skipped),
         },
     )
-    nodes = [{k: _plain(v) for k, v in row.items()} for row in cap.node_rows()]
-    w.attachment("nodes.json", "application/json", json.dumps(nodes, indent=1).encode())
-    if cap.network and Path(cap.network).is_file():
-        p = Path(cap.network)
+    plain = [{k: _plain(v) for k, v in row.items()} for row in nodes]
+    w.attachment("nodes.json", "application/json", json.dumps(plain, indent=1).encode())
+    if network and Path(network).is_file():
+        p = Path(network)
         w.attachment(p.name, "text/plain", p.read_bytes())
 
 
