@@ -14,10 +14,11 @@ first chunk (the spec allows them outside chunks) and repeated in the summary.
 
 from __future__ import annotations
 
+import collections
 import struct
 import zlib
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import IO
 
 import numpy as np
@@ -42,6 +43,11 @@ from mcap.records import (
 
 from .. import speedups
 from .json_text import Texts
+
+try:  # python-isal's CRC-32 is the same checksum, ~9x faster than zlib's (1.2 GB per 10M frames)
+    from isal.isal_zlib import crc32 as _crc32
+except ImportError:
+    _crc32 = zlib.crc32
 
 MAGIC = b"\x89MCAP0\r\n"
 # Message record: opcode, record length, channel_id, sequence, log_time, publish_time
@@ -119,8 +125,34 @@ class BulkMcapWriter:
         self._message_count = 0
         self._start = 0
         self._end = 0
+        # every write after the header happens on this one thread, in submission order:
+        # a chunk's layout, compression and records run there while the caller builds
+        # the next batch's texts (see `messages`)
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="mcap-chunks")
+        self._calls = 0
+        self._pending: collections.deque[tuple[int, Future]] = collections.deque()
         self._f.write(MAGIC)
         self._record(Header(profile=profile, library=library))
+
+    def _later(self, fn, *args) -> None:
+        """Run fn(*args) on the chunk thread, after everything submitted before."""
+        self._pending.append((self._calls, self._pool.submit(fn, *args)))
+
+    def _wait(self, before: int) -> None:
+        """Wait for the jobs of the calls numbered below `before`; their errors raise here."""
+        while self._pending and self._pending[0][0] < before:
+            self._pending.popleft()[1].result()
+
+    def drain(self) -> None:
+        """Wait for every submitted write (the first failure raises)."""
+        self._wait(self._calls + 1)
+
+    def abort(self) -> None:
+        """Stop writing: drop what has not started, wait for what has, raise nothing."""
+        for _, job in self._pending:
+            job.cancel()
+        self._pending.clear()
+        self._pool.shutdown(wait=True)
 
     def _record(self, record: McapRecord) -> tuple[int, int]:
         """Serialise one record at the current position; returns (offset, length)."""
@@ -134,7 +166,7 @@ class BulkMcapWriter:
     def schema(self, name: str, encoding: str, data: bytes) -> int:
         s = Schema(id=len(self._schemas) + 1, name=name, encoding=encoding, data=data)
         self._schemas.append(s)
-        self._record(s)
+        self._later(self._record, s)
         return s.id
 
     def channel(self, topic: str, message_encoding: str, schema_id: int) -> int:
@@ -146,7 +178,7 @@ class BulkMcapWriter:
             metadata={},
         )
         self._channels.append(c)
-        self._record(c)
+        self._later(self._record, c)
         return c.id
 
     def messages(
@@ -179,18 +211,13 @@ class BulkMcapWriter:
         size = self._chunk_bytes
         cuts = np.searchsorted(ends, np.arange(1, int(ends[-1]) // size + 1) * size)
         edges = np.unique(np.concatenate([[0], cuts + 1, [n]]).clip(max=n))
-        # compression (zstandard/lz4 release the GIL) of one chunk overlaps the
-        # numpy layout of the next; chunks are still written in order
-        with ThreadPoolExecutor(max_workers=1) as pool:
-            pending = None
-            for a, b in zip(edges[:-1].tolist(), edges[1:].tolist(), strict=True):
-                raw, record_starts = self._layout(channel[a:b], log_time[a:b], payload, rows[a:b])
-                job = pool.submit(self._compress, raw) if self._compress else None
-                if pending:
-                    self._write_chunk(*pending)
-                pending = (raw, job, channel[a:b], log_time[a:b], record_starts)
-            if pending:
-                self._write_chunk(*pending)
+        # layout, compression (zstandard/lz4 release the GIL) and writing of the chunks
+        # run on the chunk thread while the caller goes on; the call returns once the
+        # previous call's chunks are written, so two calls' texts are alive at most
+        self._calls += 1
+        for a, b in zip(edges[:-1].tolist(), edges[1:].tolist(), strict=True):
+            self._later(self._chunk, channel[a:b], log_time[a:b], payload, rows[a:b])
+        self._wait(self._calls)
         counts = np.bincount(channel, minlength=len(self._channels) + 1)
         for ch in np.flatnonzero(counts).tolist():
             self._counts[ch] = self._counts.get(ch, 0) + int(counts[ch])
@@ -199,6 +226,11 @@ class BulkMcapWriter:
         self._start = min(self._start, int(log_time[0]))
         self._end = max(self._end, int(log_time[-1]))
         self._message_count += n
+
+    def _chunk(self, channel, log_time, payload: _Rows, rows: np.ndarray) -> None:
+        raw, record_starts = self._layout(channel, log_time, payload, rows)
+        compressed = self._compress(raw) if self._compress else raw
+        self._write_chunk(raw, compressed, channel, log_time, record_starts)
 
     def _layout(self, channel, log_time, payload: _Rows, rows: np.ndarray):
         """One chunk's Message records as bytes, and where each record starts."""
@@ -249,16 +281,15 @@ class BulkMcapWriter:
             buf = self._buffers[name] = np.empty(max(n, self._chunk_bytes) * 5 // 4, dtype)
         return buf[:n]
 
-    def _write_chunk(self, raw: bytes, job, channel, log_time, record_starts) -> None:
+    def _write_chunk(self, raw: bytes, compressed: bytes, channel, log_time, record_starts) -> None:
         """The Chunk record, then one MessageIndex per channel, and its ChunkIndex."""
-        compressed = job.result() if job else raw
         m = len(channel)
         chunk = Chunk(
             compression=self._compression,
             data=compressed,
             message_start_time=int(log_time.min()),
             message_end_time=int(log_time.max()),
-            uncompressed_crc=zlib.crc32(raw),
+            uncompressed_crc=_crc32(raw),
             uncompressed_size=len(raw),
         )
         chunk_offset, chunk_length = self._record(chunk)
@@ -292,10 +323,12 @@ class BulkMcapWriter:
         )
 
     def metadata(self, name: str, data: dict[str, str]) -> None:
+        self.drain()
         offset, length = self._record(Metadata(name=name, metadata=data))
         self._metadata_indexes.append(MetadataIndex(offset=offset, length=length, name=name))
 
     def attachment(self, name: str, media_type: str, data: bytes, log_time: int = 0) -> None:
+        self.drain()
         a = Attachment(
             create_time=0, log_time=log_time, name=name, media_type=media_type, data=data
         )
@@ -314,6 +347,8 @@ class BulkMcapWriter:
 
     def finish(self) -> None:
         """DataEnd, the summary section with its offsets, the footer and closing magic."""
+        self.drain()
+        self._pool.shutdown()
         self._record(DataEnd(data_section_crc=0))
         summary_start = self._f.tell()
         rb = RecordBuilder()

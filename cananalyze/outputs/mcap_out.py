@@ -213,14 +213,18 @@ def write_mcap(
         w = BulkMcapWriter(
             f, f"cananalyze {__version__}", compression=compression, chunk_bytes=chunk_bytes
         )
-        streams: list[tuple[int, np.ndarray, Texts]] = []
-        for topic, schema, ns, payload in topic_streams(cap):
-            sid = w.schema(schema["title"], "jsonschema", json.dumps(schema).encode())
-            streams.append((w.channel(topic, "json", sid), ns, payload))
-            counts[topic] = len(ns)
-        write_merged(w, streams)
-        _metadata(w, cap)
-        w.finish()
+        try:
+            streams: list[tuple[int, np.ndarray, Texts]] = []
+            for topic, schema, ns, payload in topic_streams(cap):
+                sid = w.schema(schema["title"], "jsonschema", json.dumps(schema).encode())
+                streams.append((w.channel(topic, "json", sid), ns, payload))
+                counts[topic] = len(ns)
+            write_merged(w, streams)
+            _metadata(w, cap)
+            w.finish()
+        except BaseException:
+            w.abort()  # the chunk thread stops before the file is closed and removed
+            raise
     return counts
 
 

@@ -177,4 +177,5 @@ class StreamMcap:
         """Drop the temporary file (a cut-off export leaves no MCAP behind)."""
         with contextlib.suppress(BaseException):
             self._writer.join()
+        self.w.abort()
         self._stack.__exit__(typ or RuntimeError, exc or RuntimeError("aborted"), tb)
