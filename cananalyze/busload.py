@@ -38,9 +38,17 @@ def load_series(
     idx = np.floor((t - t0) / window).astype(np.int64)
     idx -= idx.min()
     sums = np.bincount(idx, weights=bits, minlength=int(idx.max()) + 1)
+    return load_windows(sums, t0, float(t[-1]), window, bitrate)
+
+
+def load_windows(
+    sums: np.ndarray, t0: float, t_last: float, window: float, bitrate: int | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """`load_series` from bits already summed per window (sums[0] starts at t0); t_last
+    is the last frame's time. The streaming export sums batch by batch."""
     starts = t0 + np.arange(sums.size) * window
     width = np.full(sums.size, window)
-    width[-1] = max(float(t[-1]) - starts[-1], window / 1000)
+    width[-1] = max(t_last - starts[-1], window / 1000)
     if sums.size > 1 and width[-1] < window / 2:
         sums[-2] += sums[-1]
         width[-2] += width[-1]

@@ -67,51 +67,14 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(
             "export: give at least one of --mcap FILE, --rrd FILE, --parquet DIR, --csv DIR"
         )
-    from ..capture import run_pipeline
-    from ..outputs.atomic import check_writable
-
-    for kind in ("mcap", "rrd"):
-        if getattr(args, kind):
-            check_writable(getattr(args, kind))
-
-    bar, task = _progress(sys.stderr.isatty() and not args.quiet)
-    if not args.rrd:
-        return _stream(args, outputs, bar, task)
-    t0 = time.perf_counter()
-    if bar:
-        with bar:
-            cap = run_pipeline(args, progress=lambda n: bar.advance(task, n))
-    else:
-        cap = run_pipeline(args)
-    report_problems(cap.problems)
-    timings = [f"decode {time.perf_counter() - t0:.2f} s"]
-    for kind in outputs:
-        t1 = time.perf_counter()
-        dest = getattr(args, kind)
-        if kind == "mcap":
-            from ..outputs.mcap_out import write_mcap
-
-            write_mcap(cap, dest, args.mcap_compression)
-        elif kind == "rrd":
-            from ..outputs.rerun_out import write_rrd
-
-            write_rrd(cap, dest, args.bitrate)
-        elif kind == "parquet":
-            from ..outputs.parquet_out import write_parquet
-
-            write_parquet(cap, dest, args.parquet_compression)
-        else:
-            from ..outputs.parquet_out import write_csv
-
-            write_csv(cap, dest)
-        timings.append(f"{kind} {dest} {time.perf_counter() - t1:.2f} s")
-    if not args.quiet:
-        print(f"exported {len(cap):,} frames: " + "; ".join(timings), file=sys.stderr)
-    return 0
+    return _stream(args, outputs)
 
 
-def _stream(args: argparse.Namespace, outputs: list[str], bar, task) -> int:
-    """Decode batch by batch straight into the table files and the MCAP (flat memory)."""
+def _stream(args: argparse.Namespace, outputs: list[str]) -> int:
+    """Decode batch by batch straight into every output: memory flat in log length.
+
+    Every output opens (and checks its destination) before the log is read.
+    """
     from ..capture import given_profiles
     from ..io.prefetch import prefetch
     from ..io.source import open_log
@@ -121,6 +84,8 @@ def _stream(args: argparse.Namespace, outputs: list[str], bar, task) -> int:
     source = open_log(args.log, strict=args.strict, fmt=getattr(args, "input_format", None))
     decoder = build_decoder(args)
     profiles = given_profiles(args)
+    network = getattr(args, "network", None) or ""
+    bar, task = _progress(sys.stderr.isatty() and not args.quiet)
     frames = 0
     with contextlib.ExitStack() as stack:
         if bar:
@@ -138,10 +103,14 @@ def _stream(args: argparse.Namespace, outputs: list[str], bar, task) -> int:
         if args.mcap:
             from ..outputs.mcap_stream import StreamMcap
 
-            network = getattr(args, "network", None) or ""
             mcap = StreamMcap(args.mcap, args.mcap_compression, str(args.log), network, profiles)
             stack.enter_context(mcap)
-        sinks = [*tables, *([mcap] if mcap else [])]
+        rrd = None
+        if args.rrd:
+            from ..outputs.rerun_stream import StreamRrd
+
+            rrd = stack.enter_context(StreamRrd(args.rrd, str(args.log), network, args.bitrate))
+        sinks = [*tables, *(s for s in (mcap, rrd) if s is not None)]
         for fb in prefetch(source.batches()):  # read ahead on the other core
             batch = decoder.decode(fb)
             for sink in sinks:
@@ -156,6 +125,8 @@ def _stream(args: argparse.Namespace, outputs: list[str], bar, task) -> int:
             table.close()
         if mcap:
             mcap.close(source.problems.count)
+        if rrd:
+            rrd.close()
     report_problems(source.problems)
     if not args.quiet:
         dests = ", ".join(f"{kind} {getattr(args, kind)}" for kind in outputs)

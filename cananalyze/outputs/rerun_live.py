@@ -20,9 +20,14 @@ from ..busload import frame_bits
 from ..capture import Collector
 from ..decoded import DecodedBatch
 from ..errors import ProblemLog, UsageError
-from .rerun_out import blueprint_for, is_absolute, send_header, send_load, send_parts
-
-LOAD_WINDOW = 0.1  # seconds per bus load value, as in the offline export
+from .rerun_out import (
+    LOAD_WINDOW,
+    blueprint_for,
+    is_absolute,
+    send_header,
+    send_load,
+    send_parts,
+)
 
 
 class RerunLive:
@@ -83,7 +88,9 @@ class RerunLive:
         col = self._collector
         cap = col.capture(ProblemLog())
         fresh = Collector(col.source)
-        fresh._last_state = col._last_state  # NMT lanes show changes only, across flushes
+        # NMT lanes show changes only, across flushes; a frameless batch's findings take
+        # the last event's time (a fresh state gave them t = 0)
+        fresh._event_state = col._event_state
         self._collector = fresh
         self._pending = 0
         self._last_send = time.monotonic()

@@ -24,6 +24,7 @@ from ..capture import Capture
 TIMELINE = "time"
 _RR_LEVEL = {1: "DEBUG", 2: "INFO", 3: "WARN", 4: "ERROR", 5: "CRITICAL"}
 SIDE_BY_SIDE = 5  # node columns (+ bus load) in one row; more go in a grid to stay readable
+LOAD_WINDOW = 0.1  # seconds per bus load value
 ABSOLUTE_AFTER = 1e8  # seconds: times beyond ~1973 are taken as Unix epoch
 
 
@@ -127,7 +128,9 @@ def send(cap: Capture, rec, bitrate: int | None = None) -> dict[str, int]:
     send_header(rec, str(cap.source), cap.network or "")
     send_parts(cap, rec, absolute, counts, set())
     if len(cap.batch):
-        starts, load = load_series(t_all, frame_bits(cap.batch.flags, cap.batch.dlc), 0.1, bitrate)
+        starts, load = load_series(
+            t_all, frame_bits(cap.batch.flags, cap.batch.dlc), LOAD_WINDOW, bitrate
+        )
         send_load(rec, starts, load, absolute, bitrate, counts, set())
     return counts
 
