@@ -213,6 +213,19 @@ def measure(args, n: int, formats: list[str], made: list[Path]) -> list[tuple[st
                 "" if fmt == "text" else ", jsonl"
             )
             text_runs.append((run, lines, what))
+        # the timeline exports stream too: their peak at this size and at 5M
+        timelines = []
+        for kind, dest in (("mcap", Path(tmp) / "t.mcap"), ("rrd", Path(tmp) / "t.rrd")):
+            print(f"export --{kind} ...", flush=True)
+            sizes = [n] + ([int(5e6)] if n > 5e6 else [])
+            got = []
+            for size in sizes:
+                s = ensure(args.out, size, [".log"], made).with_suffix(".log")
+                got.append(
+                    measured(CLI + ["export", str(s), f"--{kind}", str(dest), *DEVICES, "-q"], 1)
+                )
+                dest.unlink(missing_ok=True)
+            timelines.append((kind, got))
         flat = []
         big = int(args.flat) or (n if n > 5e6 else 0)
         if big:
@@ -296,6 +309,18 @@ def measure(args, n: int, formats: list[str], made: list[Path]) -> list[tuple[st
                 f"{rate / 1e6:5.2f}M  ({lines:,} lines, {run.wall:.2f} s, cpu {run.cpu:.2f} s)",
                 ">= 1M" if text else "(reference)",
                 mark(rate >= 1e6) if text else "",
+            )
+        )
+    for kind, got in timelines:  # reference figures: one run each
+        run = got[0]
+        at5 = f"; {got[1].mb:.0f} MB at 5M" if len(got) > 1 else ""
+        rows.append(
+            (
+                f"export --{kind} (.log, 16 devices) frames/s",
+                f"{n / run.wall / 1e6:5.2f}M  ({run.wall:.2f} s, cpu {run.cpu:.2f} s, "
+                f"{run.mb:.0f} MB{at5})",
+                "(reference)",
+                "",
             )
         )
     # 5. memory
