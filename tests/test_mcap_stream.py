@@ -174,3 +174,18 @@ def test_cli_export_and_decode_write_the_same_mcap(tmp_path):
     assert r.returncode == 0, r.stderr
     nodes = json.loads(read(tmp_path / "g.mcap")[3]["nodes.json"])
     assert {n["node"]: n["profile"] for n in nodes}[3] == "dat7014"
+
+
+def test_cli_export_counts_skipped_lines(tmp_path):
+    """Lenient by default: a bad line is skipped, counted in the MCAP metadata and named
+    on stderr; the frames around it are all there."""
+    log = tmp_path / "bad.log"
+    log.write_text("(1.000000) can0 701#05\n(1.100000) can0 70Z#05\n(1.200000) can0 181#0102\n")
+    r = _cli(
+        "export", str(log), "--mcap", str(tmp_path / "b.mcap"), "--rrd", str(tmp_path / "b.rrd")
+    )
+    assert r.returncode == 0, r.stderr
+    assert "bad.log" in r.stderr and "line 2" in r.stderr
+    per, _, meta, _, _ = read(tmp_path / "b.mcap")
+    assert meta["cananalyze"]["skipped_input"] == "1" and meta["cananalyze"]["frames"] == "2"
+    assert len(per["/can/frames"]) == 2 and (tmp_path / "b.rrd").stat().st_size > 0
