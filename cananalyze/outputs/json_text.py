@@ -18,9 +18,6 @@ import numpy as np
 if TYPE_CHECKING:
     import pyarrow as pa
 
-# two ASCII hex digits per byte value, as one little-endian uint16
-_HEX_PAIRS = np.frombuffer(b"".join(b"%02x" % b for b in range(256)), "<u2")
-
 
 @dataclass
 class Texts:
@@ -91,26 +88,6 @@ def number_text(values: np.ndarray) -> pa.Array:
     if not finite.all():
         text = pc.if_else(pa.array(finite), text, pa.scalar("null"))
     return text
-
-
-def label_text(labels: list[str], codes: np.ndarray) -> pa.Array:
-    """JSON strings labels[code] (quoted and escaped once per label, not per row)."""
-    import pyarrow as pa
-
-    quoted = pa.array([json.dumps(s) for s in labels], pa.string())
-    return quoted.take(pa.array(np.asarray(codes, np.int64)))
-
-
-def hex_text(data: np.ndarray, lengths: np.ndarray) -> pa.Array:
-    """Lower-case hex of the first lengths[i] bytes of each row of data (n x width)."""
-    import pyarrow as pa
-
-    n, width = data.shape
-    keep = np.arange(width) < np.asarray(lengths)[:, None]
-    chars = _HEX_PAIRS[data][keep].view(np.uint8)
-    offsets = np.zeros(n + 1, np.int32)
-    np.cumsum(2 * np.asarray(lengths, np.int64), out=offsets[1:])
-    return pa.StringArray.from_buffers(n, pa.py_buffer(offsets), pa.py_buffer(chars))
 
 
 def join(parts: list) -> Texts:
