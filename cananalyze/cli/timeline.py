@@ -20,11 +20,11 @@ def add_timeline_options(p: argparse.ArgumentParser) -> None:
 
 
 class Timelines:
-    """decode's timeline outputs, fed each decoded batch.
+    """decode's timeline outputs, fed each decoded batch as it is decoded.
 
-    The MCAP file is written batch by batch (`StreamMcap`: memory flat in log
-    length, the file appears only when complete); a Rerun viewer is shown the
-    whole log at the end, so only then is the log kept (a `Collector`).
+    The MCAP file (`StreamMcap`) and the Rerun viewer (`StreamRrd`, spawned or
+    connected) get every batch at once, so memory stays flat in log length; the
+    MCAP file appears only when complete.
     """
 
     def __init__(self, args: argparse.Namespace) -> None:
@@ -32,45 +32,44 @@ class Timelines:
             raise UsageError(
                 "--rerun spawns a viewer, --connect uses a running one: give one of them"
             )
-        self.args = args
+        from ..capture import given_profiles
+
+        network = getattr(args, "network", None) or ""
+        self.sinks: list = []
         self.mcap = None
-        self.collector = None
         if args.mcap:
-            from ..capture import given_profiles
             from ..outputs.mcap_stream import StreamMcap
 
-            network = getattr(args, "network", None) or ""
             self.mcap = StreamMcap(
                 args.mcap, source=str(args.log), network=network, profiles=given_profiles(args)
             )
+            self.sinks.append(self.mcap)
+        self.viewer = None
         if args.rerun or args.connect:
-            from ..capture import Collector
+            from ..outputs.rerun_stream import StreamRrd
 
-            self.collector = Collector(str(args.log))
+            bitrate = getattr(args, "bitrate", None)
+            self.viewer = StreamRrd(None, str(args.log), network, bitrate, connect=args.connect)
+            self.sinks.append(self.viewer)
 
     def __bool__(self) -> bool:
-        return self.mcap is not None or self.collector is not None
+        return bool(self.sinks)
 
     def __enter__(self) -> Timelines:
         return self
 
     def __exit__(self, typ, exc, tb) -> None:
-        if exc is not None and self.mcap is not None:
-            self.mcap.abort(typ, exc, tb)
+        if exc is not None:
+            for sink in self.sinks:
+                sink.abort(typ, exc, tb)
 
     def add(self, batch) -> None:
-        if self.mcap is not None:
-            self.mcap.add(batch)
-        if self.collector is not None:
-            self.collector.add(batch)
+        for sink in self.sinks:
+            sink.add(batch)
 
     def finish(self, problems) -> None:
-        """Complete the MCAP file, then show the log in Rerun."""
+        """Complete the MCAP file; the viewer gets the bus load and its layout."""
         if self.mcap is not None:
             self.mcap.close(problems.count)
-        if self.collector is not None:
-            from ..outputs.rerun_out import show
-
-            network = getattr(self.args, "network", None) or ""
-            cap = self.collector.capture(problems, network)
-            show(cap, connect=self.args.connect, bitrate=getattr(self.args, "bitrate", None))
+        if self.viewer is not None:
+            self.viewer.close()

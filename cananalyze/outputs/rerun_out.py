@@ -220,14 +220,6 @@ def write_rrd(cap: Capture, path: str | Path, bitrate: int | None = None) -> dic
     return counts
 
 
-def show(cap: Capture, connect: str | None = None, bitrate: int | None = None) -> dict[str, int]:
-    """Spawn a viewer (connect=None) or stream to a running one (gRPC URL or host:port)."""
-    rec = _stream(cap)
-    if connect:
-        url = connect if "://" in connect else f"rerun+http://{connect}/proxy"
-        rec.connect_grpc(url, default_blueprint=blueprint(cap))
-    else:
-        rec.spawn(default_blueprint=blueprint(cap))
-    counts = send(cap, rec, bitrate)
-    rec.flush()
-    return counts
+def grpc_url(connect: str) -> str:
+    """A running viewer's gRPC URL from `--connect` (a URL, or host:port)."""
+    return connect if "://" in connect else f"rerun+http://{connect}/proxy"

@@ -1,4 +1,6 @@
-"""Rerun .rrd export batch by batch: the entities of `write_rrd`, memory flat in log length.
+"""Rerun export batch by batch: the entities of `write_rrd`, memory flat in log length.
+
+To an .rrd file (`export --rrd`) or a viewer (`decode --rerun / --connect`).
 
 `write_rrd` sends a whole Capture; a 5M-frame log peaked at 1.1 GB that way.
 Here each decoded batch becomes a small Capture of its own (the same Collector,
@@ -23,7 +25,15 @@ from ..decoded import DecodedBatch
 from ..errors import ProblemLog
 from ..events import EventState
 from .atomic import atomic_path
-from .rerun_out import LOAD_WINDOW, blueprint_for, is_absolute, send_header, send_load, send_parts
+from .rerun_out import (
+    LOAD_WINDOW,
+    blueprint_for,
+    grpc_url,
+    is_absolute,
+    send_header,
+    send_load,
+    send_parts,
+)
 
 
 class StreamRrd:
@@ -31,18 +41,30 @@ class StreamRrd:
     (atomically) only then."""
 
     def __init__(
-        self, path: str | Path, source: str = "", network: str = "", bitrate: int | None = None
+        self,
+        path: str | Path | None,
+        source: str = "",
+        network: str = "",
+        bitrate: int | None = None,
+        connect: str | None = None,
     ) -> None:
+        """To the file `path`; or, without one, to the running viewer at `connect` (gRPC
+        URL or host:port) or to a spawned viewer."""
         import rerun as rr
 
         self.source = str(source)
         self.bitrate = bitrate
         self.counts: dict[str, int] = {}
         self._stack = contextlib.ExitStack()
-        tmp = self._stack.enter_context(atomic_path(path))
         self.rec = rr.RecordingStream("cananalyze", send_properties=True)
         self.rec.send_recording_name(Path(self.source).name)
-        self.rec.save(tmp)
+        self._file = path is not None
+        if path is not None:
+            self.rec.save(self._stack.enter_context(atomic_path(path)))
+        elif connect:
+            self.rec.connect_grpc(grpc_url(connect))
+        else:
+            self.rec.spawn()
         send_header(self.rec, self.source, network or "")
         self._named: set[str] = set()
         self._pdos: set[tuple[int, str, int]] = set()
@@ -87,7 +109,8 @@ class StreamRrd:
                 blueprint_for(self._pdos, self._lanes), make_active=True, make_default=True
             )
             self.rec.flush()
-            self.rec.disconnect()
+            if self._file:  # a viewer keeps the recording; the file needs its end
+                self.rec.disconnect()
         except BaseException as exc:
             self.abort(type(exc), exc, exc.__traceback__)
             raise
