@@ -22,6 +22,7 @@ from cananalyze.network.node_config import TOUCHES_COB_IDS, NodeConfig
 from cananalyze.network.pdo_map import PdoConfig, split_cob_id
 from cananalyze.network.profile import identify
 from cananalyze.network.spec import NetworkSpec
+from cananalyze.node_tally import IDENTITY
 from cananalyze.protocol.cobid import NO_NODE, CobClassifier
 from cananalyze.protocol.services import Service
 
@@ -32,14 +33,6 @@ NOT_VALID = (
 )
 _IDENTITY_INDICES = np.array([0x1018, 0x1000, 0x1008], np.int64)
 USER_SOURCES = ("user --device", "user --eds", "network file")
-_IDENTITY = {
-    (0x1018, 1): "vendor_id",
-    (0x1018, 2): "product_code",
-    (0x1018, 3): "revision",
-    (0x1018, 4): "serial",
-    (0x1000, 0): "device_type",
-    (0x1008, 0): "device_name",
-}
 
 
 @dataclass(frozen=True)
@@ -213,8 +206,7 @@ class NetworkModel:
         # an identification may bring a profile with other unit-changing objects: all then
         get = list.__getitem__  # the other records are written: no lazy lookup for them
         if (fast.upload & np.isin(fast.index, _IDENTITY_INDICES)).any() or any(
-            rec.get("direction") == "upload"
-            and (rec.get("index"), rec.get("subindex")) in _IDENTITY
+            rec.get("direction") == "upload" and (rec.get("index"), rec.get("subindex")) in IDENTITY
             for _, rec in (get(records, k) for k in others)
         ):
             return records
@@ -243,7 +235,7 @@ class NetworkModel:
         if not isinstance(node, int) or index is None or sub is None:
             return None
         upload = rec.get("direction") == "upload"
-        if upload and (index, sub) not in _IDENTITY:
+        if upload and (index, sub) not in IDENTITY:
             # a poll of some other object (most SDO traffic): only the node becomes known
             if node not in self.nodes and _sdo_value(rec) is not None:
                 self.config_at(node)
@@ -254,7 +246,7 @@ class NetworkModel:
         t = float(rec.get("t") or 0.0)
         cfg = self.config_at(node)
         if upload:
-            cfg.identity[_IDENTITY[(index, sub)]] = value
+            cfg.identity[IDENTITY[(index, sub)]] = value
             return self._identify(cfg)
         if isinstance(value, str):
             return None
