@@ -113,8 +113,9 @@ class StreamMcap:
         self.offset += len(fb)
 
     def _emit(self, fb, service, node, blocks, states, events, lines) -> None:
-        """One batch's messages, on the writer thread: the JSON columns, the chunk
-        layout (numpy) and the compression run outside the GIL beside the decoder."""
+        """One batch's messages, on the writer thread: its JSON columns (numpy, pyarrow
+        and C work outside the GIL) are built beside the decoder; the writer lays out,
+        compresses and writes the chunks on a thread of its own."""
         streams: list[tuple[int, np.ndarray, Texts]] = []
         # signals: one stream per series, in the Capture's series order
         for n, pdo, cob, rows, columns, units in sorted(blocks, key=lambda b: b[:3]):
