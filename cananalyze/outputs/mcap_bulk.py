@@ -91,7 +91,10 @@ def _compressor(compression: str):
     if compression == "zstd":
         import zstandard
 
-        return "zstd", zstandard.ZstdCompressor(level=3).compress
+        # level 1: on our JSON chunks 1.9x faster than the default 3 for files 1.5 %
+        # larger (10M generated frames: 685 vs 367 MB/s, 475 vs 468 MB; real traces
+        # within 2 % either way); the chunk thread's compression bounded the export
+        return "zstd", zstandard.ZstdCompressor(level=1).compress
     if compression == "lz4":
         import lz4.frame
 
