@@ -377,3 +377,35 @@ def test_ragged_ranges_match_repeat_and_arange(ranges, dtype):
     expected = np.concatenate([np.arange(f, f + n) for f, n in ranges])
     got = _ranges(first, lengths, before, np.empty(int(lengths.sum()), dtype))
     assert got.tolist() == expected.tolist()
+
+
+@pytest.mark.parametrize("slice_rows", [1 << 20, 2])
+def test_event_documents_are_json_dumps_of_the_dict(monkeypatch, slice_rows):
+    """The /canopen/events documents are built as columns: byte for byte what json.dumps
+    gives for the foxglove.Log dict, quotes, backslashes, control and non-ASCII text too."""
+    from cananalyze.outputs import mcap_out
+
+    monkeypatch.setattr(mcap_out, "SLICE", slice_rows)
+    msgs = ["plain", 'q"uote\\back', "ctl\x01\n\t", "ünï€😀", ""]
+    ns = np.array([0, 1, 10**9, 1795000000123456789, 999999999], np.int64)
+    levels, names, lines = (
+        [1, 2, 3, 4, 5],
+        ["node 5", "sdo", "node 127", 'x"y', "n"],
+        [0, 1, 2, 3, 10**9],
+    )
+    got = mcap_out.event_payloads(ns, levels, msgs, names, 'a"b.log', lines)
+    want = [
+        json.dumps(
+            {
+                "timestamp": {"sec": int(t) // 10**9, "nsec": int(t) % 10**9},
+                "level": lv,
+                "message": m,
+                "name": nm,
+                "file": 'a"b.log',
+                "line": ln,
+            }
+        ).encode()
+        for t, lv, m, nm, ln in zip(ns, levels, msgs, names, lines, strict=True)
+    ]
+    assert [got[i] for i in range(len(got))] == want
+    assert len(mcap_out.event_payloads(ns[:0], [], [], [], "f", [])) == 0

@@ -113,6 +113,8 @@ def signal_schema(s: SignalSeries | SignalBlock) -> dict:
     }
 
 
+# json.dumps's own escaping of a str (ensure_ascii, as the documents are dumped)
+_json_string = json.encoder.encode_basestring_ascii
 EVENTS_TOPIC = "/canopen/events"
 FRAMES_TOPIC = "/can/frames"
 SLICE = 1 << 20  # rows per join: keeps pyarrow's 32-bit string offsets in range
@@ -198,19 +200,43 @@ def event_payloads(
     file: str,
     line: list[int],
 ) -> Texts:
-    """foxglove.Log documents of events (a few per SDO transfer or EMCY: json.dumps each)."""
-    data = []
-    for tn, lv, msg, nm, ln in zip(ns.tolist(), level, message, name, line, strict=True):
-        doc = {
-            "timestamp": {"sec": tn // 1_000_000_000, "nsec": tn % 1_000_000_000},
-            "level": lv,
-            "message": msg,
-            "name": nm,
-            "file": file,
-            "line": ln,
-        }
-        data.append(json.dumps(doc).encode())
-    return Texts.from_list(data)
+    """foxglove.Log documents of events, byte for byte `json.dumps` of the dict
+    {"timestamp": {"sec", "nsec"}, "level", "message", "name", "file", "line"}.
+
+    A polled bus has an event per SDO transfer: each string is escaped by the json
+    module's own C escaper, numbers and the fixed text come as columns, and the
+    documents are joined in pyarrow (a dict and a json.dumps each took 3x longer).
+    """
+    import pyarrow as pa
+
+    ns = np.asarray(ns, np.int64)
+    quote = _json_string
+    names = {nm: quote(nm) for nm in set(name)}
+    head = f', "file": {quote(file)}, "line": '
+    parts = []
+    for a in range(0, len(ns), SLICE):  # a slice at a time: pyarrow's 32-bit string offsets
+        b = a + SLICE
+        t = ns[a:b]
+        parts.append(
+            join(
+                [
+                    '{"timestamp": {"sec": ',
+                    number_text(t // 1_000_000_000),
+                    ', "nsec": ',
+                    number_text(t % 1_000_000_000),
+                    '}, "level": ',
+                    number_text(np.asarray(level[a:b], np.int64)),
+                    ', "message": ',
+                    pa.array(list(map(quote, message[a:b])), pa.string()),
+                    ', "name": ',
+                    pa.array([names[nm] for nm in name[a:b]], pa.string()),
+                    head,
+                    number_text(np.asarray(line[a:b], np.int64)),
+                    "}",
+                ]
+            )
+        )
+    return Texts.concat(parts)
 
 
 def write_mcap(
