@@ -612,11 +612,13 @@ fail:
 PyDoc_STRVAR(compact_rows_doc,
              "compact_rows(parts, widths, n, pad, ends) -> bytes\n\n"
              "The text writer's lines from its column matrices: row by row, the bytes of\n"
-             "every part (a C-contiguous uint8 buffer of n rows x widths[i]) in order,\n"
-             "leaving out every byte equal to pad. ends: None, or an int64 buffer of n\n"
-             "that receives each row's end offset in the result. Equals\n"
-             "np.concatenate(parts, axis=1), then m[m != pad].tobytes() and the\n"
-             "cumulative sum of kept bytes per row, in one pass without the GIL.");
+             "every part (a C-contiguous uint8 buffer of n rows x widths[i], or of one\n"
+             "row: the same on every row) in order, leaving out every byte equal to pad.\n"
+             "ends: None, or an int64 buffer of n that receives each row's end offset in\n"
+             "the result. Equals np.concatenate(parts, axis=1) (one-row parts repeated),\n"
+             "then m[m != pad].tobytes() and the cumulative sum of kept bytes per row, in\n"
+             "one pass without the GIL; a one-row part is copied whole, its pad bytes\n"
+             "dropped once.");
 
 static PyObject *compact_rows(PyObject *self, PyObject *args) {
     PyObject *o_parts, *o_widths, *o_ends;
@@ -633,6 +635,9 @@ static PyObject *compact_rows(PyObject *self, PyObject *args) {
     Py_ssize_t np_ = PySequence_Fast_GET_SIZE(parts);
     Py_buffer bufs[MAX_PARTS + 1];
     Py_ssize_t w[MAX_PARTS];
+    /* a one-row part: its bytes without pad, written whole on every row */
+    uint8_t *fixed[MAX_PARTS] = {0};
+    Py_ssize_t fixed_len[MAX_PARTS] = {0};
     int got = 0;
     PyObject *out = NULL;
     Py_ssize_t total = 0;
@@ -651,10 +656,20 @@ static PyObject *compact_rows(PyObject *self, PyObject *args) {
                                PyBUF_SIMPLE | PyBUF_C_CONTIGUOUS) < 0)
             goto done;
         got++;
-        if (w[i] && bufs[i].len / w[i] < n) {
+        if (w[i] && bufs[i].len / w[i] < n && bufs[i].len != w[i]) {
             PyErr_Format(PyExc_ValueError, "part %zd: %zd bytes, need %zd rows x %zd", i,
                          bufs[i].len, n, w[i]);
             goto done;
+        }
+        if (w[i] && n > 1 && bufs[i].len == w[i]) {
+            fixed[i] = PyMem_Malloc((size_t)w[i]);
+            if (!fixed[i]) {
+                PyErr_NoMemory();
+                goto done;
+            }
+            const uint8_t *row = bufs[i].buf;
+            for (Py_ssize_t c = 0; c < w[i]; c++)
+                if (row[c] != (uint8_t)pad) fixed[i][fixed_len[i]++] = row[c];
         }
         total += w[i];
     }
@@ -681,6 +696,11 @@ static PyObject *compact_rows(PyObject *self, PyObject *args) {
     Py_BEGIN_ALLOW_THREADS;
     for (Py_ssize_t r = 0; r < n; r++) {
         for (Py_ssize_t i = 0; i < np_; i++) {
+            if (fixed[i]) {
+                memcpy(dst + pos, fixed[i], (size_t)fixed_len[i]);
+                pos += fixed_len[i];
+                continue;
+            }
             const uint8_t *src = (const uint8_t *)bufs[i].buf + r * w[i];
             for (Py_ssize_t c = 0; c < w[i]; c++) {
                 uint8_t b = src[c];
@@ -694,6 +714,7 @@ static PyObject *compact_rows(PyObject *self, PyObject *args) {
     if (_PyBytes_Resize(&out, pos) < 0) out = NULL;
 done:
     for (int i = 0; i < got; i++) PyBuffer_Release(&bufs[i]);
+    for (Py_ssize_t i = 0; i < MAX_PARTS; i++) PyMem_Free(fixed[i]);
     Py_DECREF(parts);
     Py_DECREF(widths);
     return out;

@@ -105,7 +105,11 @@ def compact(parts: list[np.ndarray], n: int, with_ends: bool) -> tuple[bytes, np
     row's end offset in the result."""
     compact_rows = getattr(speedups.C, "compact_rows", None)
     if compact_rows is not None and len(parts) <= MAX_PARTS:  # one pass in C, without the GIL
-        parts = [np.ascontiguousarray(p, np.uint8) for p in parts]
+        # a part the same on every row (`repeat`) goes as its one row: not copied n times
+        parts = [
+            np.ascontiguousarray(p[:1] if n > 1 and p.strides[0] == 0 else p, np.uint8)
+            for p in parts
+        ]
         ends = np.empty(n, np.int64) if with_ends else None
         return compact_rows(parts, [p.shape[1] for p in parts], n, PAD, ends), ends
     matrix = np.concatenate(parts, axis=1)

@@ -312,6 +312,8 @@ def test_compact_rows_matches_numpy(seed: int) -> None:
         m[rng.random((n, w)) < 0.3] = bytecols.PAD  # padding anywhere, not only at row ends
         parts.append(m)
     parts.append(rng.integers(0, 256, (n, 24), dtype=np.uint8)[:, :23])  # a strided view
+    parts.insert(1, bytecols.repeat(b'{"k":\0x', n))  # the same on every row, a pad inside
+    parts.append(bytecols.repeat(b"}", n))
     for with_ends in (True, False):
         got, got_ends = bytecols.compact(parts, n, with_ends)
         saved = speedups.C
