@@ -189,3 +189,22 @@ def test_cli_export_counts_skipped_lines(tmp_path):
     per, _, meta, _, _ = read(tmp_path / "b.mcap")
     assert meta["cananalyze"]["skipped_input"] == "1" and meta["cananalyze"]["frames"] == "2"
     assert len(per["/can/frames"]) == 2 and (tmp_path / "b.rrd").stat().st_size > 0
+
+
+def test_disk_failing_in_the_chunk_thread(tmp_path, monkeypatch, capsys):
+    """A write that fails on the MCAP writer's own thread (a full disk) stops the export
+    with one line naming the error, and leaves no file behind."""
+    from cananalyze.cli.main import main
+    from cananalyze.outputs import mcap_bulk
+
+    def full(self, *_a):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(mcap_bulk.BulkMcapWriter, "_write_chunk", full)
+    out = tmp_path / "out"
+    out.mkdir()
+    rc = main(["export", str(SAMPLES / "faults.log"), "--mcap", str(out / "x.mcap"), "-q"])
+    err = capsys.readouterr().err
+    assert rc != 0 and "Traceback" not in err
+    assert err.strip() == f"cananalyze: error: {out / 'x.mcap'}: No space left on device"
+    assert list(out.iterdir()) == []

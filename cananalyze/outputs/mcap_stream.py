@@ -62,6 +62,7 @@ class StreamMcap:
         profiles: dict[int, tuple[str, str]] | None = None,
         chunk_bytes: int = 4 << 20,
     ) -> None:
+        self.path = Path(path)
         self.source = str(source)
         self.network = network or ""
         self.profiles = profiles or {}
@@ -109,7 +110,10 @@ class StreamMcap:
         # what the job needs, not the batch (its notes and records would stay alive too)
         blocks = [(b.node, b.pdo, b.cob_id, b.rows, b.columns, b.units) for b in batch.signals]
         service, node = batch.service, batch.node
-        self._writer.put(lambda: self._emit(fb, service, node, blocks, states, events, lines))
+        try:
+            self._writer.put(lambda: self._emit(fb, service, node, blocks, states, events, lines))
+        except OSError as exc:  # the writer thread's: name the file it was writing
+            raise _named(exc, self.path) from exc
         self.offset += len(fb)
 
     def _emit(self, fb, service, node, blocks, states, events, lines) -> None:
@@ -170,6 +174,8 @@ class StreamMcap:
             self.w.finish()
         except BaseException as exc:
             self.abort(type(exc), exc, exc.__traceback__)
+            if isinstance(exc, OSError):
+                raise _named(exc, self.path) from exc
             raise
         self._stack.close()
         return self.counts
@@ -180,3 +186,10 @@ class StreamMcap:
             self._writer.join()
         self.w.abort()
         self._stack.__exit__(typ or RuntimeError, exc or RuntimeError("aborted"), tb)
+
+
+def _named(exc: OSError, path: Path) -> OSError:
+    """The error with the output file's name when it has none (the CLI prints it)."""
+    if exc.filename:
+        return exc
+    return OSError(exc.errno, exc.strerror or str(exc), str(path))
