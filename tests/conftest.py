@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -11,6 +13,18 @@ SHARED = ROOT.parent / "shared"
 REAL = SHARED / "data" / "real"
 SEEDS = SHARED / "seeds"
 SAMPLES = ROOT / "samples"
+
+
+def generated_log(directory: Path, frames: int) -> Path:
+    """A candump log of `frames` frames from the benchmark generator (16 nodes, PDOs,
+    SDO, EMCY), written as the benchmarks write theirs."""
+    stem = directory / "g"
+    subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "generate.py"), str(frames), str(stem), ".log"],
+        check=True,
+        capture_output=True,
+    )
+    return stem.with_suffix(".log")
 
 
 def real_file(relative: str) -> Path:

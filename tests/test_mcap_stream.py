@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from conftest import ROOT, SAMPLES, real_file
+from conftest import ROOT, SAMPLES, generated_log, real_file
 from mcap.reader import make_reader
 from test_table_stream import DEVICES, _args, _batches
 
@@ -99,12 +99,7 @@ def test_batch_size_invariance(tmp_path, size):
 
 def test_generated_devices_small_batches(tmp_path):
     """16 nodes with profiles: signal topics, SDO transfers and EMCY cut across batches."""
-    subprocess.run(
-        [sys.executable, str(ROOT / "benchmarks" / "generate.py"), "30000", str(tmp_path / "g")],
-        check=True,
-        capture_output=True,
-    )
-    counts = _both(tmp_path, tmp_path / "g.log", size=997, device=DEVICES)
+    counts = _both(tmp_path, generated_log(tmp_path, 30000), size=997, device=DEVICES)
     assert sum(1 for t in counts if t.endswith("pdo2")) == 16
     per = read(tmp_path / "new.mcap")[0]
     frames = [t for t, _, _ in per["/can/frames"]]
@@ -166,11 +161,8 @@ def test_cli_export_and_decode_write_the_same_mcap(tmp_path):
     assert_same_mcap(tmp_path / "ref.mcap", tmp_path / "e.mcap")
     assert_same_mcap(tmp_path / "ref.mcap", tmp_path / "d.mcap")
     assert (tmp_path / "frames.parquet").exists() and (tmp_path / "d.txt").stat().st_size > 0
-    gen = tmp_path / "g"
-    subprocess.run(
-        [sys.executable, str(ROOT / "benchmarks" / "generate.py"), "3000", str(gen)], check=True
-    )
-    r = _cli("export", f"{gen}.log", "--mcap", str(tmp_path / "g.mcap"), "--device", "3=dat7014")
+    gen = generated_log(tmp_path, 3000)
+    r = _cli("export", str(gen), "--mcap", str(tmp_path / "g.mcap"), "--device", "3=dat7014")
     assert r.returncode == 0, r.stderr
     nodes = json.loads(read(tmp_path / "g.mcap")[3]["nodes.json"])
     assert {n["node"]: n["profile"] for n in nodes}[3] == "dat7014"

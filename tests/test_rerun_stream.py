@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ROOT, SAMPLES, real_file
+from conftest import ROOT, SAMPLES, generated_log, real_file
 from test_table_stream import DEVICES, _batches
 
 from cananalyze.busload import load_series
@@ -109,12 +109,7 @@ def test_batch_size_invariance(tmp_path, size):
 
 
 def test_generated_devices_small_batches(tmp_path):
-    subprocess.run(
-        [sys.executable, str(ROOT / "benchmarks" / "generate.py"), "30000", str(tmp_path / "g")],
-        check=True,
-        capture_output=True,
-    )
-    counts = _both(tmp_path, tmp_path / "g.log", size=997, device=DEVICES)
+    counts = _both(tmp_path, generated_log(tmp_path, 30000), size=997, device=DEVICES)
     assert sum(1 for p in counts if "/tpdo2/" in p) >= 16
 
 

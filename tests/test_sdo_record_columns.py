@@ -4,12 +4,10 @@ a plain records list (what a filter leaves) takes the dicts."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
-from conftest import ROOT, SAMPLES, real_file
+from conftest import SAMPLES, generated_log, real_file
 from test_table_stream import DEVICES, _args, _batches, assert_same_tables
 
 from cananalyze.capture import given_profiles
@@ -25,13 +23,7 @@ def _as_dicts(batch):
 
 
 def _generated(tmp_path: Path) -> Path:
-    subprocess.run(
-        [sys.executable, str(ROOT / "benchmarks" / "generate.py"), "30000", str(tmp_path / "g")]
-        + [".log"],
-        check=True,
-        capture_output=True,
-    )
-    return tmp_path / "g.log"
+    return generated_log(tmp_path, 30000)
 
 
 def _cases(tmp_path: Path, which: str):

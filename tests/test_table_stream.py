@@ -17,7 +17,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from conftest import ROOT, SAMPLES, real_file
+from conftest import ROOT, SAMPLES, generated_log, real_file
 
 from cananalyze.capture import Collector, given_profiles
 from cananalyze.cli.pipeline import build_decoder
@@ -106,18 +106,7 @@ def test_batch_size_invariance(tmp_path, size):
 def test_generated_devices_small_batches(tmp_path, fmt):
     """Generated 16-node traffic with device profiles (signals, SDO, EMCY), cut in batches
     that end mid-way through transfers and make categories appear after the first chunk."""
-    subprocess.run(
-        [
-            sys.executable,
-            str(ROOT / "benchmarks" / "generate.py"),
-            "30000",
-            str(tmp_path / "g"),
-            ".log",
-        ],
-        check=True,
-        capture_output=True,
-    )
-    _both(tmp_path, tmp_path / "g.log", fmt, size=997, device=DEVICES)
+    _both(tmp_path, generated_log(tmp_path, 30000), fmt, size=997, device=DEVICES)
 
 
 def test_csv_same_as_capture(tmp_path):
