@@ -335,7 +335,10 @@ def _event_frame(events: list[Event]):
 class Collector:
     """Accumulates DecodedBatches; `capture()` joins them once at the end."""
 
-    def __init__(self, source: str = "") -> None:
+    def __init__(self, source: str = "", event_state: EventState | None = None) -> None:
+        """event_state: what event building carried from earlier batches, when this
+        Collector takes over a log part-way (live and streamed Rerun, a batch or a
+        flush at a time: NMT lanes show changes only, late findings keep their time)."""
         self.source = source
         self._frames: list[FrameBatch] = []
         self._cols: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
@@ -343,17 +346,8 @@ class Collector:
         self.records: list[tuple[int, dict]] = []
         self.events: list[Event] = []
         self.states: list[Event] = []
-        self._event_state = EventState()
+        self.event_state = event_state or EventState()
         self.offset = 0
-
-    @property
-    def _last_state(self) -> dict[int, str]:
-        """Each node's last NMT state (rerun_live hands it to the next Collector)."""
-        return self._event_state.last_state
-
-    @_last_state.setter
-    def _last_state(self, value: dict[int, str]) -> None:
-        self._event_state.last_state = value
 
     def add(self, batch: DecodedBatch) -> None:
         fb = batch.frames
@@ -366,7 +360,7 @@ class Collector:
             self._blocks.setdefault(key, []).append((fb.t[blk.rows], blk.rows + off, blk))
         for row, rec in batch.records:
             self.records.append((row + off, rec))
-        events, states = batch_events(batch, off, self._event_state)
+        events, states = batch_events(batch, off, self.event_state)
         self.events.extend(Event(*e) for e in events)
         self.states.extend(Event(*e) for e in states)
         self.offset += len(fb)

@@ -87,11 +87,7 @@ class RerunLive:
         """Send everything kept so far (and, when final, the last partial load window)."""
         col = self._collector
         cap = col.capture(ProblemLog())
-        fresh = Collector(col.source)
-        # NMT lanes show changes only, across flushes; a frameless batch's findings take
-        # the last event's time (a fresh state gave them t = 0)
-        fresh._event_state = col._event_state
-        self._collector = fresh
+        self._collector = Collector(col.source, col.event_state)
         self._pending = 0
         self._last_send = time.monotonic()
         t = cap.batch.t

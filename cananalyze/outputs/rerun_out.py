@@ -199,11 +199,12 @@ def send_load(
     counts["/bus/load"] = counts.get("/bus/load", 0) + int(load.size)
 
 
-def _stream(cap: Capture):
+def recording(name: str):
+    """A RecordingStream named after the log (every cananalyze recording is made here)."""
     import rerun as rr
 
     rec = rr.RecordingStream("cananalyze", send_properties=True)
-    rec.send_recording_name(Path(str(cap.source)).name)
+    rec.send_recording_name(name)
     return rec
 
 
@@ -211,7 +212,7 @@ def write_rrd(cap: Capture, path: str | Path, bitrate: int | None = None) -> dic
     """Write an .rrd file (atomically) with the default blueprint."""
     from .atomic import atomic_path
 
-    rec = _stream(cap)
+    rec = recording(Path(str(cap.source)).name)
     with atomic_path(path) as tmp:
         rec.save(tmp, default_blueprint=blueprint(cap))
         counts = send(cap, rec, bitrate)

@@ -30,6 +30,7 @@ from .rerun_out import (
     blueprint_for,
     grpc_url,
     is_absolute,
+    recording,
     send_header,
     send_load,
     send_parts,
@@ -50,14 +51,12 @@ class StreamRrd:
     ) -> None:
         """To the file `path`; or, without one, to the running viewer at `connect` (gRPC
         URL or host:port) or to a spawned viewer."""
-        import rerun as rr
 
         self.source = str(source)
         self.bitrate = bitrate
         self.counts: dict[str, int] = {}
         self._stack = contextlib.ExitStack()
-        self.rec = rr.RecordingStream("cananalyze", send_properties=True)
-        self.rec.send_recording_name(Path(self.source).name)
+        self.rec = recording(Path(self.source).name)
         self._file = path is not None
         if path is not None:
             self.rec.save(self._stack.enter_context(atomic_path(path)))
@@ -82,10 +81,7 @@ class StreamRrd:
 
     def add(self, batch: DecodedBatch) -> None:
         """Send the batch's signals, NMT states and events; count its bits for the bus load."""
-        col = Collector(self.source)
-        # NMT lanes show changes only, across batches; frameless batches' findings
-        # take the last event's time
-        col._event_state = self._event_state
+        col = Collector(self.source, self._event_state)
         col.add(batch)
         cap = col.capture(ProblemLog())
         fb = batch.frames
