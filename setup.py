@@ -14,8 +14,8 @@ setup(
     package_data={"cananalyze._decoders": ["*.eds", "*.dcf", "*.toml"]},
     ext_modules=[
         Extension(
-            "cananalyze._speedups",
-            sources=["cananalyze/_speedups.c"],
+            "cananalyze.runtime._speedups",
+            sources=["cananalyze/runtime/_speedups.c"],
             extra_compile_args=["-O2", "-ffp-contract=off"],
             optional=True,
         )

@@ -23,7 +23,7 @@ sys.path.insert(0, str(ROOT))
 from generate import generate  # noqa: E402
 
 from cananalyze.capture import load  # noqa: E402
-from cananalyze.outputs.logfile import write_log  # noqa: E402
+from cananalyze.io.logfile import write_log  # noqa: E402
 
 
 def timed(label: str, fn) -> None:
@@ -40,7 +40,7 @@ def reference_mcap(cap, path: Path) -> None:
     import numpy as np
     from mcap.writer import Writer
 
-    from cananalyze.outputs.mcap_out import topic_streams
+    from cananalyze.outputs.mcap.topics import topic_streams
 
     with open(path, "wb") as f:
         w = Writer(f, chunk_size=4 << 20)
@@ -63,9 +63,9 @@ def reference_mcap(cap, path: Path) -> None:
 
 def main(argv: list[str]) -> int:
     n = int(float(argv[0])) if argv else 1_000_000
-    from cananalyze.outputs.mcap_out import write_mcap
-    from cananalyze.outputs.parquet_out import write_parquet
-    from cananalyze.outputs.rerun_out import write_rrd
+    from cananalyze.outputs.mcap.topics import write_mcap
+    from cananalyze.outputs.rerun.send import write_rrd
+    from cananalyze.outputs.tables.whole import write_parquet
 
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)

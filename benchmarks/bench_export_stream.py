@@ -27,7 +27,7 @@ DEVICES = [f"--device={k}=dat7014" for k in range(1, 17)]
 CAPTURE = """
 import sys, argparse
 from cananalyze.capture import run_pipeline
-from cananalyze.outputs.parquet_out import write_parquet
+from cananalyze.outputs.tables.whole import write_parquet
 args = argparse.Namespace(log=sys.argv[1], network=None, eds=None,
     device=[f"{k}=dat7014" for k in range(1, 17)], strict=False, input_format=None,
     sdo_timeout=1.0)

@@ -40,7 +40,7 @@ for _ in open_log(sys.argv[1]).batches():
 print(time.process_time() - c)
 """
 IMPORTS = (
-    "import cananalyze.cli.main, cananalyze.cli.export, cananalyze.outputs.table_stream, "
+    "import cananalyze.cli.main, cananalyze.cli.export, cananalyze.outputs.tables.stream, "
     "pyarrow.parquet"
 )
 
@@ -55,7 +55,7 @@ def encode_cpu(tables: Path, repeat: int) -> dict[str, float]:
     writer's options (row groups as the export cut them)."""
     import pyarrow.parquet as pq
 
-    from cananalyze.outputs.table_stream import EVENTS, FRAMES, SIGNALS
+    from cananalyze.outputs.tables.stream import EVENTS, FRAMES, SIGNALS
 
     specs = {"frames": FRAMES, "signals": SIGNALS, "events": EVENTS, "sdo": None}
     out = {}

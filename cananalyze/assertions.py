@@ -13,8 +13,8 @@ from pathlib import Path
 from .checks.engine import Checker
 from .checks.finding import Finding
 from .checks.rule import Rule
-from .decoded import DecodedBatch
 from .frames import FrameBatch
+from .records import DecodedBatch
 
 Source = str | Path | FrameBatch | Iterable[DecodedBatch]
 
@@ -65,7 +65,7 @@ def _fail(findings: list[Finding], what: str) -> None:
 def assert_heartbeat(
     source: Source, node: int, period_ms: float, tolerance: float = 0.1, config=None
 ) -> None:
-    from .checks.assert_heartbeat import AssertHeartbeat
+    from .checks.rules.assert_heartbeat import AssertHeartbeat
 
     _fail(
         run_rules(
@@ -80,7 +80,7 @@ def assert_heartbeat(
 def assert_no_emcy(
     source: Source, allow: Iterable[int] = (), node: int | None = None, config=None
 ) -> None:
-    from .checks.emcy import EmcyRule
+    from .checks.rules.emcy import EmcyRule
 
     found = [
         f
@@ -91,7 +91,7 @@ def assert_no_emcy(
 
 
 def assert_sdo_ok(source: Source, max_latency_ms: float | None = None, config=None) -> None:
-    from .checks.sdo import SdoRule
+    from .checks.rules.sdo import SdoRule
 
     _fail(
         run_rules(source, [SdoRule(max_latency_ms=max_latency_ms)], config),
@@ -100,7 +100,7 @@ def assert_sdo_ok(source: Source, max_latency_ms: float | None = None, config=No
 
 
 def assert_pdo_rate(source: Source, cob_id: int, min_hz: float, max_hz: float, config=None) -> None:
-    from .checks.assert_pdo_rate import AssertPdoRate
+    from .checks.rules.assert_pdo_rate import AssertPdoRate
 
     _fail(
         run_rules(source, [AssertPdoRate(cob_id=cob_id, min_hz=min_hz, max_hz=max_hz)], config),
@@ -111,7 +111,7 @@ def assert_pdo_rate(source: Source, cob_id: int, min_hz: float, max_hz: float, c
 def assert_signal_range(
     source: Source, node: int, signal: str, lo: float, hi: float, config=None
 ) -> None:
-    from .checks.assert_signal import AssertSignal
+    from .checks.rules.assert_signal import AssertSignal
 
     _fail(
         run_rules(source, [AssertSignal(node=node, signal=signal, min=lo, max=hi)], config),
@@ -120,7 +120,7 @@ def assert_signal_range(
 
 
 def assert_operational_after_boot(source: Source, node: int, within_s: float, config=None) -> None:
-    from .checks.assert_boot import AssertOperational
+    from .checks.rules.assert_boot import AssertOperational
 
     _fail(
         run_rules(source, [AssertOperational(node=node, within_s=within_s)], config),

@@ -18,23 +18,18 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .decoded import DecodedBatch
 from .errors import ProblemLog
-from .events import (  # noqa: F401  (re-exported: outputs import the levels from here)
-    DEBUG,
-    ERROR,
-    FATAL,
-    INFO,
+from .events.build import (
     LEVEL_NAMES,
-    WARNING,
     Event,
     EventState,
     batch_events,
 )
 from .frames import FrameBatch, concat
-from .gcpolicy import fewer_collections
-from .node_tally import NodeTally
+from .network.node_tally import NodeTally
 from .protocol.services import SERVICE_NAMES, Service
+from .records import DecodedBatch
+from .runtime.gcpolicy import fewer_collections
 from .sdo.transaction import SDO_TABLE_COLUMNS
 
 if TYPE_CHECKING:
@@ -226,7 +221,7 @@ class Capture:
 
     def decoded(self) -> list[DecodedBatch]:
         """The whole capture as one DecodedBatch again, for rules run after the fact."""
-        from .decoded import SignalBlock
+        from .records import SignalBlock
 
         blocks = [
             SignalBlock(s.rows, s.node, s.pdo, s.cob_id, s.columns, s.units) for s in self.series
@@ -302,7 +297,7 @@ def _categorical(pd, codes: np.ndarray, labels: list[str]):
 
 def _hex_column(fb: FrameBatch, pa):
     """Payloads as an Arrow string column, built from buffers (no Python string per frame)."""
-    from .hexcols import hex_payload_buffers
+    from .columns.hexcols import hex_payload_buffers
 
     n = len(fb)
     chars, offsets = hex_payload_buffers(fb.data, fb.dlc, fb.flags)

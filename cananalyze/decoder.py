@@ -10,9 +10,9 @@ from __future__ import annotations
 
 from typing import Protocol
 
-from .decoded import DecodedBatch
 from .frames import FrameBatch
 from .protocol.cobid import CobClassifier
+from .records import DecodedBatch
 
 
 class Processor(Protocol):

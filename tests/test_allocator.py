@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from cananalyze import allocator
+from cananalyze.runtime import allocator
 
 ROOT = Path(__file__).resolve().parents[1]
 

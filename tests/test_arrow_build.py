@@ -5,7 +5,7 @@ from __future__ import annotations
 import pyarrow as pa
 import pytest
 
-from cananalyze.outputs.arrow_build import strings
+from cananalyze.columns.arrow_build import strings
 
 CASES = [
     [],

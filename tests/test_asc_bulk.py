@@ -62,7 +62,7 @@ def test_python_can_fixtures(name: str) -> None:
 def test_sample_and_benchmark_mix(tmp_path) -> None:
     from generate import generate
 
-    from cananalyze.outputs.logfile import write_log
+    from cananalyze.io.logfile import write_log
 
     assert assert_same((SAMPLES / "demo.asc").read_bytes()) > 100
     path = tmp_path / "mix.asc"

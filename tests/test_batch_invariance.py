@@ -11,7 +11,7 @@ from conftest import SAMPLES
 from cananalyze.checks.build import attach_checker
 from cananalyze.cli.pipeline import build_decoder
 from cananalyze.io.source import read_all
-from cananalyze.outputs.jsonl import dumps, frame_record
+from cananalyze.outputs.jsonl.rows import dumps, frame_record
 
 
 def _decode(name: str, size: int) -> list[str]:

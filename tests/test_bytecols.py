@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cananalyze import bytecols
+from cananalyze.columns import bytecols
 
 EDGES = [0, 1, 9, 10, -1, -9, -10, 255, 4096, 2**31 - 1, -(2**31), 2**32 - 1, 2**63 - 1, -(2**63)]
 
@@ -73,8 +73,8 @@ def _pairs(rng: np.random.Generator, m: int):
 def test_sdo_messages_equal_the_per_record_text() -> None:
     """Integer values of every sign and size, unknown objects (data only), aborts, names
     with non-ASCII letters: the columns say what `sdo_message` says of each record."""
+    from cananalyze.events.sdo_text import sdo_message, sdo_messages
     from cananalyze.sdo import fastpath
-    from cananalyze.sdo_event_text import sdo_message, sdo_messages
 
     # INTEGER8/16/32 and UNSIGNED32; 0x6000 unknown (no name, no type: data only)
     types = {0x2000: ("Drehzahl", 0x0002), 0x2001: ("Temp", 0x0003), 0x2002: ("Zähler", 0x0007)}

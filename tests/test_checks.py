@@ -16,8 +16,8 @@ from cananalyze.checks.engine import Checker
 from cananalyze.decoder import Decoder
 from cananalyze.errors import InputError
 from cananalyze.frames import FLAG_ERR, FLAG_RTR, from_rows
+from cananalyze.io.logfile import write_log
 from cananalyze.io.source import read_all
-from cananalyze.outputs.logfile import write_log
 
 ROOT = Path(__file__).resolve().parent.parent
 DEMO = ROOT / "samples" / "demo.log"
@@ -247,8 +247,8 @@ def test_sdo_records_and_error_frames():
             "latency_ms": 80.0,
         },
     )
-    from cananalyze.checks.error_frames import ErrorFrameRule
-    from cananalyze.checks.sdo import SdoRule
+    from cananalyze.checks.rules.error_frames import ErrorFrameRule
+    from cananalyze.checks.rules.sdo import SdoRule
 
     found = run_rules([batch], [SdoRule(max_latency_ms=50), ErrorFrameRule(max=1)])
     assert sorted((f.rule, str(f.measured)) for f in found) == [
@@ -259,7 +259,7 @@ def test_sdo_records_and_error_frames():
 
 
 def test_assertions_heartbeat_pdo_rate_signal_and_boot(tmp_path):
-    from cananalyze.decoded import SignalBlock
+    from cananalyze.records import SignalBlock
 
     rules = tmp_path / "rules.yaml"
     rules.write_text(

@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 from conftest import real_file
 
-from cananalyze import speedups
 from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR, FLAG_TX, FrameBatch
 from cananalyze.io.source import read_all
 from cananalyze.protocol.cobid import CobClassifier
 from cananalyze.protocol.services import Service
+from cananalyze.runtime import speedups
 
 pytestmark = pytest.mark.skipif(
     getattr(speedups.C, "classify", None) is None, reason="compiled helper not built"

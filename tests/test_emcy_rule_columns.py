@@ -11,9 +11,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cananalyze.checks.emcy import EmcyRule
 from cananalyze.checks.engine import Checker
 from cananalyze.checks.rule import Context, Rule, ms
+from cananalyze.checks.rules.emcy import EmcyRule
 from cananalyze.decoder import Decoder
 from cananalyze.frames import from_rows
 from cananalyze.protocol.services import Service

@@ -14,8 +14,7 @@ from conftest import SAMPLES, real_file
 from test_table_stream import DEVICES, _args, _batches
 
 from cananalyze.cli.pipeline import build_decoder
-from cananalyze.event_columns import NO_NODE, NO_ROW, EventColumns, Row
-from cananalyze.events import (
+from cananalyze.events.build import (
     ERROR,
     INFO,
     WARNING,
@@ -26,8 +25,9 @@ from cananalyze.events import (
     finding_event,
     sdo_event,
 )
+from cananalyze.events.columns import NO_NODE, NO_ROW, EventColumns, Row
 from cananalyze.frames import FLAG_RTR, FrameBatch
-from cananalyze.outputs.table_stream import HOLD, StreamTables
+from cananalyze.outputs.tables.stream import HOLD, StreamTables
 from cananalyze.protocol.fields import annotation, frame_fields
 from cananalyze.protocol.services import Service
 from cananalyze.protocol.tables import NMT_STATES, emcy_class
@@ -167,7 +167,7 @@ def test_generated_emcy_nmt_sdo_events_match_per_row(size):
 def test_emcy_text_cache_is_bounded(monkeypatch):
     """Random error codes (a noisy bus) clear the EMCY text cache rather than fill it with
     all 65536 over a long log; the texts stay those of the per-row route."""
-    from cananalyze import events
+    from cananalyze.events import build as events
 
     monkeypatch.setattr(events, "_EMCY_CODE_CACHE", 64)
     monkeypatch.setattr(events, "_EMCY_CODE_TEXT", {})

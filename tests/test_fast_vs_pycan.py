@@ -33,7 +33,7 @@ import pytest
 
 import cananalyze
 from cananalyze.frames import FLAG_FD
-from cananalyze.outputs.logfile import write_log
+from cananalyze.io.logfile import write_log
 from tests.conftest import real_file
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,4 +1,4 @@
-"""The columnar JSONL writer (outputs/jsonl_columns) prints exactly what the per-row
+"""The columnar JSONL writer (outputs/jsonl/columns) prints exactly what the per-row
 writer prints: every input is written both ways, whole and through filters."""
 
 from __future__ import annotations
@@ -14,10 +14,10 @@ from helpers.broken_disk import broken_text_stream
 
 from cananalyze.cli.main import build_parser
 from cananalyze.cli.pipeline import build_decoder
-from cananalyze.decoded import SignalBlock
 from cananalyze.io.source import open_log
-from cananalyze.outputs import jsonl_columns
-from cananalyze.outputs.jsonl import JsonlWriter
+from cananalyze.outputs.jsonl import columns as jsonl_columns
+from cananalyze.outputs.jsonl.rows import JsonlWriter
+from cananalyze.records import SignalBlock
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
@@ -166,7 +166,7 @@ def test_sdo_pairs_from_columns(tmp_path, monkeypatch):
     their fields from columns, per command byte, and print as the per-row writer prints."""
     from test_sdo_text import PAIRS, _log
 
-    from cananalyze.outputs import sdo_jsonl
+    from cananalyze.outputs.jsonl import sdo as sdo_jsonl
 
     taken = []
     group = sdo_jsonl._group

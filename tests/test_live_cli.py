@@ -20,7 +20,7 @@ from helpers.live_slcan import start_live
 
 from cananalyze.cli.pipeline import build_decoder
 from cananalyze.io.source import read_all
-from cananalyze.outputs.text import TextWriter
+from cananalyze.outputs.text.writer import TextWriter
 from cananalyze.sim.slcan_replay import SlcanAdapter, replay
 
 DEMO = SAMPLES / "demo.log"

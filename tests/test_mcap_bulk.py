@@ -38,7 +38,7 @@ from timeline_helpers import demo_capture
 
 from cananalyze.capture import Capture
 from cananalyze.frames import FLAG_RTR
-from cananalyze.outputs.mcap_out import topic_streams, write_mcap
+from cananalyze.outputs.mcap.topics import topic_streams, write_mcap
 from cananalyze.protocol.services import SERVICE_NAMES
 
 DEMO = SAMPLES / "demo.log"
@@ -55,7 +55,7 @@ def generated(tmp_path_factory):
     from generate import generate
 
     from cananalyze.capture import load
-    from cananalyze.outputs.logfile import write_log
+    from cananalyze.io.logfile import write_log
 
     log = tmp_path_factory.mktemp("gen") / "g.log"
     write_log(generate(30000), log)
@@ -292,8 +292,8 @@ def test_time_window_reads_use_chunk_indexes(generated, tmp_path):
 
 def test_json_columns_fd_payloads_and_non_finite_values(tmp_path):
     from cananalyze.capture import load
-    from cananalyze.outputs.json_text import join, number_text, object_template
-    from cananalyze.outputs.mcap_out import frame_payloads
+    from cananalyze.columns.json_text import join, number_text, object_template
+    from cananalyze.outputs.mcap.topics import frame_payloads
 
     big = np.array([2**63 - 1, -(2**63), 0], np.int64)
     vals = np.array([0.1, np.nan, -np.inf])
@@ -320,7 +320,7 @@ def test_json_columns_fd_payloads_and_non_finite_values(tmp_path):
 
 def test_payloads_built_in_slices_are_the_same(cap, tmp_path, monkeypatch):
     """Big logs are formatted a slice of rows at a time (pyarrow's 32-bit offsets)."""
-    from cananalyze.outputs import mcap_out
+    from cananalyze.outputs.mcap import topics as mcap_out
 
     write_mcap(cap, tmp_path / "whole.mcap")
     monkeypatch.setattr(mcap_out, "SLICE", 7)
@@ -330,8 +330,8 @@ def test_payloads_built_in_slices_are_the_same(cap, tmp_path, monkeypatch):
 
 
 def test_writer_on_its_own_empty_payloads_and_several_texts(tmp_path):
-    from cananalyze.outputs.json_text import Texts
-    from cananalyze.outputs.mcap_bulk import BulkMcapWriter
+    from cananalyze.columns.json_text import Texts
+    from cananalyze.outputs.mcap.bulk import BulkMcapWriter
 
     a = Texts.from_list([b"", b"first", b""])
     b = Texts.from_list([b"second", b""])
@@ -369,7 +369,7 @@ def test_writer_on_its_own_empty_payloads_and_several_texts(tmp_path):
     st.sampled_from([np.int32, np.int64]),
 )
 def test_ragged_ranges_match_repeat_and_arange(ranges, dtype):
-    from cananalyze.outputs.mcap_bulk import _ranges
+    from cananalyze.outputs.mcap.bulk import _ranges
 
     first = np.array([f for f, _ in ranges], np.int64)
     lengths = np.array([n for _, n in ranges], np.int64)
@@ -383,7 +383,7 @@ def test_ragged_ranges_match_repeat_and_arange(ranges, dtype):
 def test_event_documents_are_json_dumps_of_the_dict(monkeypatch, slice_rows):
     """The /canopen/events documents are built as columns: byte for byte what json.dumps
     gives for the foxglove.Log dict, quotes, backslashes, control and non-ASCII text too."""
-    from cananalyze.outputs import mcap_out
+    from cananalyze.outputs.mcap import topics as mcap_out
 
     monkeypatch.setattr(mcap_out, "SLICE", slice_rows)
     msgs = ["plain", 'q"uote\\back', "ctl\x01\n\t", "ünï€😀", ""]

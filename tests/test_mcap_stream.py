@@ -17,9 +17,9 @@ from test_table_stream import DEVICES, _args, _batches
 
 from cananalyze.capture import Collector, given_profiles
 from cananalyze.errors import ProblemLog
-from cananalyze.outputs import mcap_stream
-from cananalyze.outputs.mcap_out import write_mcap
-from cananalyze.outputs.mcap_stream import StreamMcap
+from cananalyze.outputs.mcap import stream as mcap_stream
+from cananalyze.outputs.mcap.stream import StreamMcap
+from cananalyze.outputs.mcap.topics import write_mcap
 
 NETWORK = str(SAMPLES / "network.toml")
 
@@ -187,7 +187,7 @@ def test_disk_failing_in_the_chunk_thread(tmp_path, monkeypatch, capsys):
     """A write that fails on the MCAP writer's own thread (a full disk) stops the export
     with one line naming the error, and leaves no file behind."""
     from cananalyze.cli.main import main
-    from cananalyze.outputs import mcap_bulk
+    from cananalyze.outputs.mcap import bulk as mcap_bulk
 
     def full(self, *_a):
         raise OSError(28, "No space left on device")

@@ -8,12 +8,7 @@ import pytest
 from conftest import real_file, seed_file
 
 from cananalyze.errors import InputError
-from cananalyze.network.profile import (
-    builtin_profiles,
-    identify,
-    load_builtin,
-    load_eds,
-)
+from cananalyze.network.profile import builtin_profiles, identify, load_builtin, load_eds
 from cananalyze.protocol.pdo_decode import decode_pdo
 
 

@@ -5,17 +5,6 @@ from __future__ import annotations
 import pytest
 from conftest import real_file
 
-from cananalyze.io import (  # noqa: F401  (imports register the formats)
-    asc,
-    blf,
-    canbusanalyzer,
-    gvret,
-    ixxat,
-    pycan_csv,
-    pycan_fallback,
-    sevcon,
-    trc,
-)
 from cananalyze.io.registry import FORMATS
 
 MINE = {"asc", "blf", "trc", "canbusanalyzer", "ixxat", "gvret", "pycan_csv", "sevcon", "pycan"}

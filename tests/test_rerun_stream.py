@@ -14,12 +14,12 @@ import pytest
 from conftest import ROOT, SAMPLES, generated_log, real_file
 from test_table_stream import DEVICES, _batches
 
-from cananalyze.busload import load_series
 from cananalyze.capture import Collector
 from cananalyze.errors import ProblemLog
-from cananalyze.outputs import rerun_stream
-from cananalyze.outputs.rerun_out import write_rrd
-from cananalyze.outputs.rerun_stream import StreamRrd, _LoadWindows
+from cananalyze.outputs.busload import load_series
+from cananalyze.outputs.rerun import stream as rerun_stream
+from cananalyze.outputs.rerun.send import write_rrd
+from cananalyze.outputs.rerun.stream import StreamRrd, _LoadWindows
 
 NETWORK = str(SAMPLES / "network.toml")
 _SKIP = {"rerun.controls.RowId", "RecordingInfo:start_time"}

@@ -9,8 +9,8 @@ import pytest
 
 from cananalyze.cli.main import main
 from cananalyze.frames import from_rows
+from cananalyze.io import logfile
 from cananalyze.io.source import read_all
-from cananalyze.outputs import logfile
 from cananalyze.outputs.atomic import atomic_path, atomic_write
 
 SAMPLE = os.path.join(os.path.dirname(__file__), "..", "samples", "demo.log")

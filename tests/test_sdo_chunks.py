@@ -11,9 +11,9 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from cananalyze.outputs import arrow_build as ab
-from cananalyze.outputs import pandas_like as pl
-from cananalyze.outputs import sdo_chunks as sc
+from cananalyze.columns import arrow_build as ab
+from cananalyze.outputs.tables import pandas_like as pl
+from cananalyze.outputs.tables import sdo_chunks as sc
 
 NAN = float("nan")
 
@@ -272,8 +272,8 @@ def test_sdo_written_as_chunks_come_is_the_file_written_at_close(
     from test_table_stream import _args, _batches
 
     from cananalyze.capture import given_profiles
-    from cananalyze.outputs import table_stream
-    from cananalyze.outputs.table_stream import StreamTables
+    from cananalyze.outputs.tables import stream as table_stream
+    from cananalyze.outputs.tables.stream import StreamTables
 
     if cut == "rows":
         monkeypatch.setattr(table_stream, "ROW_GROUP", 8)
@@ -313,8 +313,8 @@ def test_hex_texts_as_bytes_hex():
 
 
 def _record_batch(t0: float, records: list[dict]):
-    from cananalyze.decoded import DecodedBatch
     from cananalyze.frames import FrameBatch
+    from cananalyze.records import DecodedBatch
 
     n = 4
     fb = FrameBatch.allocate(n, ("can0",))
@@ -355,8 +355,8 @@ def test_tracker_only_chunks_of_every_kind_as_capture(tmp_path, fmt):
 
     from cananalyze.capture import Collector
     from cananalyze.errors import ProblemLog
-    from cananalyze.outputs.parquet_out import write_csv, write_parquet
-    from cananalyze.outputs.table_stream import StreamTables
+    from cananalyze.outputs.tables.stream import StreamTables
+    from cananalyze.outputs.tables.whole import write_csv, write_parquet
 
     gone = _sdo()
     del gone["detail"], gone["latency_ms"]

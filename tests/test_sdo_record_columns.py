@@ -11,8 +11,8 @@ from conftest import SAMPLES, generated_log, real_file
 from test_table_stream import DEVICES, _args, _batches, assert_same_tables
 
 from cananalyze.capture import given_profiles
-from cananalyze.events import EventState, batch_events
-from cananalyze.outputs.table_stream import SDO_COLUMNS, StreamTables
+from cananalyze.events.build import EventState, batch_events
+from cananalyze.outputs.tables.stream import SDO_COLUMNS, StreamTables
 from cananalyze.sdo.fastpath import RECORD_COLUMNS
 
 

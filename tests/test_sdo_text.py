@@ -1,4 +1,4 @@
-"""The SDO fast path's text lines built from columns (outputs/sdo_text) are the ones
+"""The SDO fast path's text lines built from columns (outputs/text/sdo) are the ones
 `pair_notes` and `format_record` write, and a batch renders the same with and without them.
 
 The pairs are crafted to reach every branch: uploads and downloads (with and without
@@ -18,13 +18,13 @@ import numpy as np
 import pytest
 from conftest import SAMPLES, real_file
 
-from cananalyze import bytecols
 from cananalyze.cli.pipeline import build_decoder
+from cananalyze.columns import bytecols
 from cananalyze.io.source import read_all
-from cananalyze.outputs import text as text_module
-from cananalyze.outputs.record_text import format_record
-from cananalyze.outputs.sdo_text import fast_pairs, pair_text
-from cananalyze.outputs.text import TextWriter
+from cananalyze.outputs.text import writer as text_module
+from cananalyze.outputs.text.records import format_record
+from cananalyze.outputs.text.sdo import fast_pairs, pair_text
+from cananalyze.outputs.text.writer import TextWriter
 from cananalyze.sdo.fastpath import pair_notes
 
 # (request, answer) payloads on node 1 (a DAT 7014) unless the id says otherwise

@@ -22,11 +22,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from cananalyze import speedups
 from cananalyze.errors import InputError, ProblemLog
 from cananalyze.frames import FLAG_RTR, FrameBatch
 from cananalyze.io import asc, candump
 from cananalyze.io.source import open_log
+from cananalyze.runtime import speedups
 from tests.conftest import real_file
 
 C = speedups.C
@@ -127,7 +127,7 @@ def _generate():
 
 @pytest.mark.parametrize("suffix", [".log", ".asc"])
 def test_generated_traffic_across_chunks(tmp_path: Path, monkeypatch, suffix: str) -> None:
-    from cananalyze.outputs.logfile import write_log
+    from cananalyze.io.logfile import write_log
 
     gen = _generate()
     path = tmp_path / f"bench{suffix}"
@@ -255,7 +255,7 @@ def test_fuzzed_bytes(tmp_path: Path, head: bytes, body: bytes, suffix: str) -> 
 def test_hex_payload_column() -> None:
     import pyarrow as pa
 
-    from cananalyze import hexcols
+    from cananalyze.columns import hexcols
 
     rng = np.random.default_rng(1)
     n = 5000
@@ -301,7 +301,7 @@ def test_candump_chunk_of_short_lines(tmp_path: Path) -> None:
 @pytest.mark.parametrize("seed", range(4))
 def test_compact_rows_matches_numpy(seed: int) -> None:
     """The text writer's compaction: the same bytes and row ends as the numpy passes."""
-    from cananalyze import bytecols
+    from cananalyze.columns import bytecols
 
     rng = np.random.default_rng(seed)
     n = int(rng.integers(0, 3000))
@@ -342,8 +342,8 @@ def test_compact_rows_checks_its_buffers() -> None:
 def test_gather_rows_matches_numpy_layout(seed: int) -> None:
     """The MCAP chunk layout: records from many texts, merged and in any row order, are
     the same bytes with gather_rows as with the numpy gather."""
-    from cananalyze.outputs.json_text import Texts
-    from cananalyze.outputs.mcap_bulk import BulkMcapWriter, _Rows
+    from cananalyze.columns.json_text import Texts
+    from cananalyze.outputs.mcap.bulk import BulkMcapWriter, _Rows
 
     rng = np.random.default_rng(seed)
     texts = []

@@ -23,10 +23,10 @@ from cananalyze.capture import Collector, given_profiles
 from cananalyze.cli.pipeline import build_decoder
 from cananalyze.errors import ProblemLog
 from cananalyze.io.source import read_all
-from cananalyze.outputs import table_sink
-from cananalyze.outputs.pandas_like import MISSING, column
-from cananalyze.outputs.parquet_out import TABLES, _plain_columns, write_csv, write_parquet
-from cananalyze.outputs.table_stream import StreamTables
+from cananalyze.outputs.tables import writer as table_sink
+from cananalyze.outputs.tables.pandas_like import MISSING, column
+from cananalyze.outputs.tables.stream import StreamTables
+from cananalyze.outputs.tables.whole import TABLES, _plain_columns, write_csv, write_parquet
 
 DEVICES = {k: "dat7014" for k in range(1, 17)}
 
@@ -284,7 +284,7 @@ def test_row_groups_cut_by_bytes(tmp_path, monkeypatch):
     and SDO rows do not wait in memory for dozens of batches): same tables. The frames
     table shows the table sink's cut (events here come all at once: the log is shorter
     than HOLD), the sdo table the record writer's."""
-    from cananalyze.outputs import table_stream
+    from cananalyze.outputs.tables import stream as table_stream
 
     monkeypatch.setattr(table_sink, "ROW_GROUP_BYTES", 500)
     monkeypatch.setattr(table_stream, "ROW_GROUP_BYTES", 500)
@@ -297,8 +297,8 @@ def test_row_groups_cut_by_bytes(tmp_path, monkeypatch):
 
 
 def _signal_batch(t: list[float]):
-    from cananalyze.decoded import DecodedBatch, SignalBlock
     from cananalyze.frames import FrameBatch
+    from cananalyze.records import DecodedBatch, SignalBlock
 
     n = len(t)
     fb = FrameBatch.allocate(n, ("can0",))
@@ -320,7 +320,7 @@ def _blocks(batch) -> list[tuple[np.ndarray, int]]:
 
 def test_signal_order_without_sort_equals_the_lexsort():
     """Strictly increasing times: frame by frame, columns in order, as the 4-key sort gives."""
-    from cananalyze.outputs.table_stream import _row_major_order
+    from cananalyze.outputs.tables.stream import _row_major_order
 
     batch, rows_of, col_of = _signal_batch([0.001 * k for k in range(9)])
     total = sum(len(r) for r in rows_of)
@@ -335,7 +335,7 @@ def test_signal_order_without_sort_equals_the_lexsort():
 
 def test_signal_order_with_equal_times_is_left_to_the_sort():
     """Two frames at the same time (millisecond logs): no shortcut, the caller sorts."""
-    from cananalyze.outputs.table_stream import _row_major_order
+    from cananalyze.outputs.tables.stream import _row_major_order
 
     batch, rows_of, col_of = _signal_batch([0.0, 0.0, 0.001, 0.002, 0.002, 0.003])
     total = sum(len(r) for r in rows_of)
@@ -349,9 +349,7 @@ def test_compute_kernels_registered_before_writer_threads():
     thread while another's Parquet writer looks a kernel up, the export failed at
     random with "No function registered with name: unique".
     """
-    probe = (
-        "import sys; import cananalyze.outputs.table_sink; print('pyarrow.compute' in sys.modules)"
-    )
+    probe = "import sys; import cananalyze.outputs.tables.writer; print('pyarrow.compute' in sys.modules)"
     out = subprocess.run(
         [sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, check=True
     )

@@ -19,7 +19,7 @@ from helpers.broken_disk import broken_text_stream
 from cananalyze.cli.pipeline import build_decoder
 from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR, FLAG_TX, FrameBatch, from_rows
 from cananalyze.io.source import open_log
-from cananalyze.outputs.text import TextWriter, lines_per_row
+from cananalyze.outputs.text.writer import TextWriter, lines_per_row
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
@@ -215,7 +215,7 @@ def test_emcy_rows() -> None:
 
 def test_signal_values_of_every_kind() -> None:
     """Signal columns as text: floats (ties, exponents, NaN, -0), integers to 64 bits, booleans."""
-    from cananalyze.outputs.numtext import g6_text, int_text, value_text
+    from cananalyze.columns.numtext import g6_text, int_text, value_text
 
     rng = np.random.default_rng(5)
     floats = np.concatenate(
@@ -276,7 +276,7 @@ def test_background_writer_raises_in_close() -> None:
 def test_key_groups_partition_rows_as_a_sort_would(share: float) -> None:
     """_key_groups (counting over a dense key) groups the keyed rows exactly as np.unique
     of the full key does; unkeyed rows are group 0; first_at is each group's first row."""
-    from cananalyze.outputs.text import _BYTE_MATTERS, _key_groups
+    from cananalyze.outputs.text.writer import _BYTE_MATTERS, _key_groups
     from cananalyze.protocol.services import Service
 
     rng = np.random.default_rng(int(share * 100))

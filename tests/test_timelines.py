@@ -170,7 +170,7 @@ def _read_mcap(path: Path):
 
 
 def test_mcap_round_trip(cap, tmp_path):
-    from cananalyze.outputs.mcap_out import write_mcap
+    from cananalyze.outputs.mcap.topics import write_mcap
 
     out = tmp_path / "demo.mcap"
     counts = write_mcap(cap, out)
@@ -219,7 +219,7 @@ def test_mcap_round_trip(cap, tmp_path):
 
 
 def test_mcap_failure_leaves_no_file(cap, tmp_path, monkeypatch):
-    from cananalyze.outputs import mcap_out
+    from cananalyze.outputs.mcap import topics as mcap_out
 
     def boom(*_a):
         raise RuntimeError("disk full")
@@ -244,7 +244,7 @@ def _read_rrd(path: Path) -> dict[str, list[dict]]:
 
 
 def test_rrd_round_trip(cap, tmp_path):
-    from cananalyze.outputs.rerun_out import write_rrd
+    from cananalyze.outputs.rerun.send import write_rrd
 
     out = tmp_path / "demo.rrd"
     counts = write_rrd(cap, out, bitrate=250000)
@@ -280,7 +280,7 @@ def test_blueprint_has_a_plot_per_pdo_and_a_lane_per_node(cap):
     """Checked against a screenshot of the viewer: a node's PDOs on one axis hid
     the digital input bytes under 10 V analogue values, and a `/node/*/nmt`
     pattern left the NMT lanes empty, so both are spelled out."""
-    from cananalyze.outputs.rerun_out import blueprint
+    from cananalyze.outputs.rerun.send import blueprint
 
     plots, states, log = blueprint(cap).root_container.contents
     columns = {c.name: [(v.origin, v.name) for v in c.contents] for c in plots.contents[:-1]}
@@ -303,8 +303,8 @@ def test_blueprint_puts_many_nodes_in_a_grid(tmp_path):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
     from generate import generate
 
-    from cananalyze.outputs.logfile import write_log
-    from cananalyze.outputs.rerun_out import blueprint
+    from cananalyze.io.logfile import write_log
+    from cananalyze.outputs.rerun.send import blueprint
 
     write_log(generate(3000), tmp_path / "g.log")
     c = cananalyze.load(tmp_path / "g.log", device=[f"{n}=dat7014" for n in range(1, 17)])
@@ -317,7 +317,7 @@ def test_blueprint_puts_many_nodes_in_a_grid(tmp_path):
 def test_bus_load_of_steady_traffic_is_flat_to_the_end():
     """A frame every 10 ms: every window, the log's short tail included, shows the
     same load (the tail once showed a spike: a few ms ending on a frame, scaled up)."""
-    from cananalyze.busload import load_series
+    from cananalyze.outputs.busload import load_series
 
     t = 100.0 + np.arange(101) * 0.01  # the last frame opens a 0.1 s window on its own
     starts, load = load_series(t, np.full(t.size, 111), 0.1, 250000)
@@ -334,7 +334,7 @@ def test_decode_rerun_and_connect_are_exclusive(capsys):
 
 
 def test_parquet_round_trip(cap, tmp_path):
-    from cananalyze.outputs.parquet_out import TABLES, write_parquet
+    from cananalyze.outputs.tables.whole import TABLES, write_parquet
 
     rows = write_parquet(cap, tmp_path / "pq")
     for name in TABLES:
@@ -356,8 +356,8 @@ def test_parquet_and_csv_with_mixed_findings_values(tmp_path):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
     from generate import generate
 
-    from cananalyze.outputs.logfile import write_log
-    from cananalyze.outputs.parquet_out import write_csv, write_parquet
+    from cananalyze.io.logfile import write_log
+    from cananalyze.outputs.tables.whole import write_csv, write_parquet
 
     write_log(generate(5000), tmp_path / "g.log")
     c = cananalyze.load(tmp_path / "g.log", device=[f"{n}=dat7014" for n in range(1, 17)])
@@ -375,7 +375,7 @@ def test_parquet_and_csv_with_mixed_findings_values(tmp_path):
 
 
 def test_csv_tables(cap, tmp_path):
-    from cananalyze.outputs.parquet_out import write_csv
+    from cananalyze.outputs.tables.whole import write_csv
 
     write_csv(cap, tmp_path / "csv")
     f = pd.read_csv(tmp_path / "csv" / "frames.csv", keep_default_na=False, dtype={"data": str})
@@ -431,7 +431,7 @@ def test_cli_export_errors_are_one_line(argv, message, capsys, tmp_path, monkeyp
 
 def test_cli_export_disk_full_on_the_writer_thread_is_one_line(capsys, tmp_path, monkeypatch):
     """An OSError raised where the streamed tables are written reaches the user as one line."""
-    from cananalyze.outputs import table_sink
+    from cananalyze.outputs.tables import writer as table_sink
 
     def full(self, table):
         raise OSError(28, "No space left on device", str(self.path))
@@ -455,9 +455,9 @@ def test_bulk_export_of_generated_log(tmp_path):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
     from generate import generate
 
-    from cananalyze.outputs.logfile import write_log
-    from cananalyze.outputs.mcap_out import write_mcap
-    from cananalyze.outputs.rerun_out import write_rrd
+    from cananalyze.io.logfile import write_log
+    from cananalyze.outputs.mcap.topics import write_mcap
+    from cananalyze.outputs.rerun.send import write_rrd
 
     batch = generate(20000)
     log = tmp_path / "g.log"

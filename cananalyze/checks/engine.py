@@ -6,7 +6,7 @@ them) and into `self.findings` for the CLI, JUnit and the Python assertions.
 
 from __future__ import annotations
 
-from ..decoded import DecodedBatch
+from ..records import DecodedBatch
 from .config import ConfigSource, FileConfig
 from .finding import Finding
 from .nmt_state import NmtStates

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..decoded import DecodedBatch
 from ..protocol.services import Service
 from ..protocol.tables import NMT_STATES
+from ..records import DecodedBatch
 
 OPERATIONAL = 0x05
 PRE_OPERATIONAL = 0x7F

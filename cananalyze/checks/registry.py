@@ -2,24 +2,24 @@
 
 from __future__ import annotations
 
-from .assert_boot import AssertOperational
-from .assert_heartbeat import AssertHeartbeat
-from .assert_pdo_rate import AssertPdoRate
-from .assert_signal import AssertSignal
-from .bootup import BootupRule
-from .emcy import EmcyRule
-from .error_frames import ErrorFrameRule
-from .guarding import GuardingRule
-from .heartbeat import HeartbeatRule
-from .pdo_async import PdoAsyncRule
-from .pdo_length import PdoLengthRule
-from .pdo_state import PdoStateRule
-from .pdo_sync import PdoSyncRule
-from .pdo_valid import PdoValidRule
 from .rule import Rule
-from .sdo import SdoRule
-from .sync import SyncRule
-from .unknown_cobid import UnknownCobIdRule
+from .rules.assert_boot import AssertOperational
+from .rules.assert_heartbeat import AssertHeartbeat
+from .rules.assert_pdo_rate import AssertPdoRate
+from .rules.assert_signal import AssertSignal
+from .rules.bootup import BootupRule
+from .rules.emcy import EmcyRule
+from .rules.error_frames import ErrorFrameRule
+from .rules.guarding import GuardingRule
+from .rules.heartbeat import HeartbeatRule
+from .rules.pdo_async import PdoAsyncRule
+from .rules.pdo_length import PdoLengthRule
+from .rules.pdo_state import PdoStateRule
+from .rules.pdo_sync import PdoSyncRule
+from .rules.pdo_valid import PdoValidRule
+from .rules.sdo import SdoRule
+from .rules.sync import SyncRule
+from .rules.unknown_cobid import UnknownCobIdRule
 
 # Enabled unless the rules file disables them.
 RULES: dict[str, type[Rule]] = {

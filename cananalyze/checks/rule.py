@@ -11,8 +11,8 @@ from collections import Counter
 
 import numpy as np
 
-from ..decoded import DecodedBatch
 from ..protocol.services import Service
+from ..records import DecodedBatch
 from .config import ConfigSource
 from .finding import Finding, rel_time
 from .gaps import Gaps, grouped_gaps

@@ -147,17 +147,17 @@ def _decode_to(
     summary = Summary()
     only_records = args.sdo
     if args.signals:
-        from ..outputs.signals import SignalWriter
+        from ..outputs.text.signals import SignalWriter
 
         writer = SignalWriter(out, args.format)
     elif args.format == "jsonl":
-        from ..outputs.jsonl import JsonlWriter
+        from ..outputs.jsonl.rows import JsonlWriter
 
         # in the caller's thread: a worker gained ~1 s of 16 at 10M frames for 100-200 MB
         # more peak (JSONL batches are wider than text ones)
         writer = JsonlWriter(out, frames=not only_records)
     else:
-        from ..outputs.text import TextWriter
+        from ..outputs.text.writer import TextWriter
 
         color = out.isatty() and not args.no_color
         # finished lines are written by a thread while the next batch decodes

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from cananalyze.errors import UsageError
+from ..errors import UsageError
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -26,7 +26,7 @@ def _hex(value: int | None, width: int = 8) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from cananalyze.network.profile import BUILTIN_KEYS, builtin_profiles, load_builtin, load_eds
+    from ..network.profile import BUILTIN_KEYS, builtin_profiles, load_builtin, load_eds
 
     if not args.key:
         print(f"{'key':<9} {'vendor ID':<11} {'product':<11} {'device type':<11} name")

@@ -93,7 +93,7 @@ def _stream(args: argparse.Namespace, outputs: list[str]) -> int:
         tables = []
         for kind in ("parquet", "csv"):
             if getattr(args, kind):
-                from ..outputs.table_stream import StreamTables
+                from ..outputs.tables.stream import StreamTables
 
                 sink = StreamTables(
                     getattr(args, kind), kind, args.parquet_compression, profiles=profiles
@@ -101,13 +101,13 @@ def _stream(args: argparse.Namespace, outputs: list[str]) -> int:
                 tables.append(stack.enter_context(sink))
         mcap = None
         if args.mcap:
-            from ..outputs.mcap_stream import StreamMcap
+            from ..outputs.mcap.stream import StreamMcap
 
             mcap = StreamMcap(args.mcap, args.mcap_compression, str(args.log), network, profiles)
             stack.enter_context(mcap)
         rrd = None
         if args.rrd:
-            from ..outputs.rerun_stream import StreamRrd
+            from ..outputs.rerun.stream import StreamRrd
 
             rrd = stack.enter_context(StreamRrd(args.rrd, str(args.log), network, args.bitrate))
         sinks = [*tables, *(s for s in (mcap, rrd) if s is not None)]

@@ -153,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
     source = None
     try:
         if args.rrd or args.rerun:
-            from ..outputs.rerun_live import RerunLive
+            from ..outputs.rerun.live import RerunLive
 
             timeline = RerunLive(
                 rrd=args.rrd,
@@ -213,7 +213,7 @@ def _serve(args, source, decoder, view, recorder, timeline, plain: bool) -> None
         view.status = f"recording to {args.record}"
     try:
         if plain:
-            from ..outputs.text import TextWriter
+            from ..outputs.text.writer import TextWriter
 
             writer = TextWriter(sys.stdout, color=sys.stdout.isatty() and not args.no_color)
             for fb in source.batches():

@@ -11,9 +11,10 @@ import importlib
 import signal
 import sys
 
-from .. import __version__, allocator
+from .. import __version__
 from ..errors import CananalyzeError
-from ..gcpolicy import fewer_collections
+from ..runtime import allocator
+from ..runtime.gcpolicy import fewer_collections
 
 # One module per sub-command, each with add_parser(subparsers) and run(args) -> int.
 SUBCOMMANDS = ["decode", "check", "export", "live", "simulate", "devices"]

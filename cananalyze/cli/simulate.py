@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
         profiles, bitrate, config = default_network(), 500_000, {}
     bitrate = args.bitrate or bitrate
     if args.to:
-        from ..outputs.logfile import write_log
+        from ..io.logfile import write_log
 
         if not args.to.lower().endswith((".log", ".asc", ".blf")):
             raise UsageError(f"{args.to}: --to writes .log (candump), .asc or .blf")

@@ -38,7 +38,7 @@ class Timelines:
         self.sinks: list = []
         self.mcap = None
         if args.mcap:
-            from ..outputs.mcap_stream import StreamMcap
+            from ..outputs.mcap.stream import StreamMcap
 
             self.mcap = StreamMcap(
                 args.mcap, source=str(args.log), network=network, profiles=given_profiles(args)
@@ -46,7 +46,7 @@ class Timelines:
             self.sinks.append(self.mcap)
         self.viewer = None
         if args.rerun or args.connect:
-            from ..outputs.rerun_stream import StreamRrd
+            from ..outputs.rerun.stream import StreamRrd
 
             bitrate = getattr(args, "bitrate", None)
             self.viewer = StreamRrd(None, str(args.log), network, bitrate, connect=args.connect)

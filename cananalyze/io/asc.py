@@ -21,7 +21,6 @@ from typing import BinaryIO
 
 import numpy as np
 
-from .. import speedups
 from ..frames import (
     FLAG_BRS,
     FLAG_ERR,
@@ -33,6 +32,7 @@ from ..frames import (
     FrameBatch,
     concat,
 )
+from ..runtime import speedups
 from ._rows import MAX_LINE, RowSink
 
 # the candump reader's column helpers: strided windows and grouped digit gathers

@@ -17,7 +17,6 @@ from typing import BinaryIO
 
 import numpy as np
 
-from .. import speedups
 from ..frames import (
     FLAG_BRS,
     FLAG_ERR,
@@ -30,6 +29,7 @@ from ..frames import (
     concat,
     set_row,
 )
+from ..runtime import speedups
 from . import candump_fast
 from .registry import LogFormat, ReadContext, register
 

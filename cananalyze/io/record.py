@@ -72,7 +72,7 @@ class FrameRecorder:
         if self._mcap:
             self._write_mcap(batch)
         else:
-            from ..outputs.logfile import to_messages
+            from .logfile import to_messages
 
             for msg in to_messages(batch):
                 self._logger.on_message_received(msg)

@@ -13,7 +13,7 @@ from configparser import Error as ConfigParserError
 from dataclasses import dataclass
 from pathlib import Path
 
-from cananalyze.errors import InputError
+from ..errors import InputError
 
 
 @dataclass(frozen=True)

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from cananalyze.decoded import DecodedBatch
-from cananalyze.network.model import NetworkModel
-from cananalyze.protocol.services import Service
+from ..protocol.services import Service
+from ..records import DecodedBatch
+from .model import NetworkModel
 
 
 def _has_emcy_table(profile) -> bool:

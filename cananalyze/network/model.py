@@ -15,18 +15,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cananalyze.decoded import DecodedBatch
-from cananalyze.decoder import Decoder
-from cananalyze.frames import FLAG_ERR, FLAG_EXT
-from cananalyze.network.node_config import TOUCHES_COB_IDS, NodeConfig
-from cananalyze.network.pdo_map import PdoConfig, split_cob_id
-from cananalyze.network.profile import identify
-from cananalyze.network.spec import NetworkSpec
-from cananalyze.node_tally import IDENTITY
-from cananalyze.protocol.cobid import NO_NODE, CobClassifier
-from cananalyze.protocol.services import Service
-
+from ..decoder import Decoder
+from ..frames import FLAG_ERR, FLAG_EXT
+from ..protocol.cobid import NO_NODE, CobClassifier
 from ..protocol.comm_objects import comm_object
+from ..protocol.services import Service
+from ..records import DecodedBatch
+from .node_config import TOUCHES_COB_IDS, NodeConfig
+from .node_tally import IDENTITY
+from .pdo_map import PdoConfig, split_cob_id
+from .profile import identify
+from .spec import NetworkSpec
 
 NOT_VALID = (
     "is not valid (COB-ID bit 31 set)"  # PdoBinding.problem; the pdo_not_valid rule looks for it

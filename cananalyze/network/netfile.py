@@ -12,10 +12,10 @@ import re
 import tomllib
 from pathlib import Path
 
-from cananalyze.errors import InputError
-from cananalyze.network.pdo_map import COB_ID_INVALID
-from cananalyze.network.profile import BUILTIN_KEYS, load_builtin, load_eds
-from cananalyze.network.spec import NetworkSpec, NodeSpec
+from ..errors import InputError
+from .pdo_map import COB_ID_INVALID
+from .profile import BUILTIN_KEYS, load_builtin, load_eds
+from .spec import NetworkSpec, NodeSpec
 
 NODE_KEYS = {"device", "eds", "heartbeat_ms", "tpdo", "rpdo", "sdo_channels", "name"}
 PDO_KEYS = {"cob_id", "enabled", "transmission_type", "inhibit_time", "event_timer", "mapping"}

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from cananalyze.decoded import DecodedBatch, SignalBlock
-from cananalyze.frames import FLAG_RTR
-from cananalyze.network.model import NetworkModel
-from cananalyze.protocol.pdo_decode import decode_pdo, words_of
-from cananalyze.protocol.services import Service
+from ..frames import FLAG_RTR
+from ..protocol.pdo_decode import decode_pdo, words_of
+from ..protocol.services import Service
+from ..records import DecodedBatch, SignalBlock
+from .model import NetworkModel
 
 
 class PdoDecoder:

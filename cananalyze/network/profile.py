@@ -15,11 +15,12 @@ from functools import cache
 from pathlib import Path
 
 import cananalyze
-from cananalyze.errors import InputError
-from cananalyze.network.eds import ObjectInfo, effective_value, object_info, read_od, variable
-from cananalyze.network.pdo_map import MapEntry, PdoConfig, split_cob_id, split_mapping_word
-from cananalyze.network.sidecar import Sidecar, load_sidecar
-from cananalyze.protocol.datatypes import DATA_TYPES, DUMMY_INDICES
+
+from ..errors import InputError
+from ..protocol.datatypes import DATA_TYPES, DUMMY_INDICES
+from .eds import ObjectInfo, effective_value, object_info, read_od, variable
+from .pdo_map import MapEntry, PdoConfig, split_cob_id, split_mapping_word
+from .sidecar import Sidecar, load_sidecar
 
 BUILTIN_KEYS = ("dat7130", "dat7014", "i7231d", "mcb560")
 BOOLEAN = 0x01

@@ -12,7 +12,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from cananalyze.errors import InputError
+from ..errors import InputError
 
 
 @dataclass(frozen=True)

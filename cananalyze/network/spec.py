@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from cananalyze.network.profile import DeviceProfile
+from .profile import DeviceProfile
 
 
 @dataclass

@@ -17,12 +17,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..decoded import DecodedBatch
 from ..protocol.fields import annotation
 from ..protocol.services import Service
 from ..protocol.tables import NMT_STATES
-from .record_text import format_record
+from ..records import DecodedBatch
 from .summary import Summary
+from .text.records import format_record
 
 _ERRCTL = np.array([Service.HEARTBEAT, Service.BOOTUP, Service.GUARD_RESPONSE], np.uint8)
 _RARE = np.array([Service.NMT, Service.EMCY], np.uint8)

@@ -9,11 +9,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..busload import frame_bits
 from ..checks.streamstats import StreamStats
-from ..decoded import DecodedBatch
 from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from ..protocol.services import SERVICE_NAMES, Service
+from ..records import DecodedBatch
+from .busload import frame_bits
 
 N_SVC = len(SERVICE_NAMES)
 _NMT_STATES = np.array(

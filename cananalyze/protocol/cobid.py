@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import speedups
 from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR, FrameBatch
+from ..runtime import speedups
 from .services import Service
 
 NO_NODE = -1

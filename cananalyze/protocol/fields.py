@@ -11,13 +11,7 @@ from datetime import UTC, datetime, timedelta
 
 from .sdo import describe_sdo
 from .services import Service
-from .tables import (
-    LSS_COMMANDS,
-    NMT_COMMANDS,
-    NMT_STATES,
-    emcy_class,
-    error_register_names,
-)
+from .tables import LSS_COMMANDS, NMT_COMMANDS, NMT_STATES, emcy_class, error_register_names
 
 CANOPEN_EPOCH = datetime(1984, 1, 1, tzinfo=UTC)
 

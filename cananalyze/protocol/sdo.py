@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import struct
 
-from cananalyze.protocol.tables import abort_text
+from .tables import abort_text
 
 # Client command specifiers (ccs, bits 7..5 of byte 0, client -> server).
 CCS_DOWNLOAD_SEGMENT = 0

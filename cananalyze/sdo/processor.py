@@ -14,9 +14,9 @@ import bisect
 
 import numpy as np
 
-from ..decoded import DecodedBatch
 from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from ..protocol.services import Service
+from ..records import DecodedBatch
 from . import fastpath
 from .lazynotes import LazyNotes
 from .lazyrecords import LazyRecords

@@ -17,8 +17,8 @@ from __future__ import annotations
 import binascii
 from collections.abc import Callable
 
-from cananalyze.protocol.datatypes import decode_value
-from cananalyze.protocol.sdo import (
+from ..protocol.datatypes import decode_value
+from ..protocol.sdo import (
     CCS_BLOCK_DOWNLOAD,
     CCS_BLOCK_UPLOAD,
     CCS_DOWNLOAD_SEGMENT,
@@ -33,10 +33,10 @@ from cananalyze.protocol.sdo import (
     SCS_UPLOAD_SEGMENT,
     describe_sdo,
 )
-from cananalyze.protocol.tables import abort_text
-from cananalyze.sdo.channels import ChannelTable, SdoChannel
-from cananalyze.sdo.transaction import FrameRole, SdoTransaction
-from cananalyze.sdo.transfer import PHASE_TEXT, Transfer
+from ..protocol.tables import abort_text
+from .channels import ChannelTable, SdoChannel
+from .transaction import FrameRole, SdoTransaction
+from .transfer import PHASE_TEXT, Transfer
 
 ObjectInfo = Callable[[int, int, int], "tuple[str, int] | None"]
 

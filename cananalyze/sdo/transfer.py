@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from cananalyze.sdo.channels import SdoChannel
+from .channels import SdoChannel
 
 PHASE_TEXT = {
     "init_resp": "the initiate response",

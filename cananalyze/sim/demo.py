@@ -108,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     import os
     import time
 
-    from ..outputs.logfile import write_log
+    from ..io.logfile import write_log
 
     # python-can formats ASC header times in local time: pin it so files are reproducible
     os.environ["TZ"] = "UTC"

@@ -24,7 +24,7 @@ def pin_utc() -> None:
 
 
 def write_samples(out: Path) -> list[Path]:
-    from ..outputs.logfile import write_log
+    from ..io.logfile import write_log
     from .session import simulate
 
     pin_utc()

@@ -92,8 +92,8 @@ def replay(adapter: SlcanAdapter, log_path: str, timed: bool = True) -> int:
     """
     import can
 
+    from ..io.logfile import to_messages
     from ..io.source import read_all
-    from ..outputs.logfile import to_messages
 
     reader = to_messages(read_all(log_path))
     messages = can.MessageSync(reader, timestamps=True, skip=3600) if timed else reader

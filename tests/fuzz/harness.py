@@ -17,9 +17,9 @@ import tempfile
 from cananalyze.cli.pipeline import build_decoder
 from cananalyze.errors import InputError
 from cananalyze.io.source import open_log
-from cananalyze.outputs.jsonl import JsonlWriter
+from cananalyze.outputs.jsonl.rows import JsonlWriter
 from cananalyze.outputs.summary import Summary
-from cananalyze.outputs.text import TextWriter
+from cananalyze.outputs.text.writer import TextWriter
 
 SUFFIXES = (".log", ".asc", ".blf", ".trc", ".csv", ".txt", ".log.gz", "")
 

@@ -1,0 +1,1 @@
+"""The CANopen rules and the rules file's assertions, one rule per module."""

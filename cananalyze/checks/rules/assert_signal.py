@@ -1,0 +1,51 @@
+"""Assertion: a decoded PDO signal of a node stays within [min, max] (from batch.signals)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..rule import Context, Rule
+
+
+class AssertSignal(Rule):
+    name = "assert_signal"
+    why = "A process value left its allowed range; check the sensor, its scaling and the process itself."
+
+    def __init__(
+        self, node: int, signal: str, min: float = -np.inf, max: float = np.inf, **kw
+    ) -> None:  # noqa: A002
+        super().__init__(**kw)
+        self.node, self.signal = int(node), str(signal)
+        self.lo, self.hi = float(min), float(max)
+        self.seen = False
+        self.subjects.add(self.node)
+
+    def process(self, ctx: Context) -> None:
+        for block in ctx.batch.signals:
+            if block.node != self.node or self.signal not in block.columns:
+                continue
+            self.seen = True
+            v = np.asarray(block.columns[self.signal], float)
+            bad = np.flatnonzero((v < self.lo) | (v > self.hi))
+            for i in self.capped(bad, ctx.t[block.rows[bad]], self.node, block.cob_id).tolist():
+                row = int(block.rows[i])
+                self.emit(
+                    ctx.t[row],
+                    self.node,
+                    block.cob_id,
+                    f"{self.signal} = {v[i]:g} outside {self.lo:g}..{self.hi:g}",
+                    float(v[i]),
+                    [self.lo, self.hi],
+                    row=row,
+                )
+
+    def finish(self, ctx: Context) -> None:
+        if not self.seen:
+            self.emit(
+                ctx.t_end or 0.0,
+                self.node,
+                None,
+                f"signal {self.signal} of node {self.node} never seen",
+                None,
+                [self.lo, self.hi],
+            )

@@ -1,0 +1,77 @@
+"""Unexpected boot-ups: a node that was already alive boots again without an NMT reset."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...protocol.services import Service
+from ..rule import Context, Rule
+
+_SENT_BY_NODE = np.array(
+    [
+        Service.HEARTBEAT,
+        Service.TPDO,
+        Service.EMCY,
+        Service.SDO_RESPONSE,
+        Service.GUARD_RESPONSE,
+        Service.BOOTUP,
+    ],
+    np.uint8,
+)
+_SENT = np.zeros(256, bool)  # service -> sent by the node itself: a lookup, not np.isin
+_SENT[_SENT_BY_NODE] = True
+
+
+class BootupRule(Rule):
+    name = "unexpected_bootup"
+    why = (
+        "A node that boots without being told to has reset itself (watchdog, brown-out, crash); "
+        "it lost its configuration and is pre-operational; check its supply and EMCY history."
+    )
+
+    def __init__(self, reset_window_s: float = 10.0, **kw) -> None:
+        super().__init__(**kw)
+        self.window = float(reset_window_s)
+        self.alive = np.zeros(128, bool)
+        self.last_reset: dict[int, float] = {}
+
+    def process(self, ctx: Context) -> None:
+        b = ctx.batch
+        boots = np.flatnonzero(b.service == Service.BOOTUP)
+        nmt = np.flatnonzero(b.service == Service.NMT)
+        if boots.size == 0 and nmt.size == 0:
+            sent = b.node[_SENT[b.service] & (b.node >= 0)]
+            self.alive[sent] = True
+            return
+        fb = b.frames
+        events = sorted(
+            [(int(r), "boot") for r in boots.tolist()] + [(int(r), "nmt") for r in nmt.tolist()]
+        )
+        sent_mask = _SENT[b.service] & (b.node >= 0)
+        first_row = np.full(128, len(b), np.int64)
+        rows = np.flatnonzero(sent_mask)
+        first_row[b.node[rows][::-1]] = rows[::-1]  # last write wins: the first row per node
+        for row, kind in events:
+            if kind == "nmt":
+                if fb.dlc[row] >= 2 and fb.data[row, 0] in (0x81, 0x82):
+                    target = int(fb.data[row, 1])
+                    for n in range(1, 128) if target == 0 else [target]:
+                        self.last_reset[n] = float(fb.t[row])
+                continue
+            node = int(b.node[row])
+            self.subjects.add(node)
+            t = float(fb.t[row])
+            seen_before = self.alive[node] or first_row[node] < row
+            reset = self.last_reset.get(node)
+            if seen_before and (reset is None or t - reset > self.window):
+                self.emit(
+                    t,
+                    node,
+                    0x700 + node,
+                    f"node {node} booted without an NMT reset command",
+                    "boot-up",
+                    "no boot-up while running",
+                    row=row,
+                )
+            self.last_reset.pop(node, None)
+        self.alive[b.node[rows]] = True

@@ -1,0 +1,201 @@
+"""EMCY: each error raised and cleared, inhibit time 0x1015, errors still active at the end.
+
+EMCY frames are rare, so this walks them one by one and keeps the active set per node.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...protocol.services import Service
+from ...protocol.tables import emcy_class
+from ..rule import Context, Rule, ms
+
+
+class EmcyRule(Rule):
+    name = "emcy"
+    severity = "warning"
+    why = (
+        "The node reported an error condition; read the error code and register, and the "
+        "device manual's meaning of the manufacturer bytes."
+    )
+
+    def __init__(self, allow: list[int] | None = None, **kw) -> None:
+        super().__init__(**kw)
+        self.allow = {int(c) for c in allow or []}
+        self.active: dict[int, dict[int, float]] = {}
+        self.last_t: dict[int, float] = {}
+
+    def process(self, ctx: Context) -> None:
+        """Columns per batch; Python only per node and per finding actually listed.
+
+        The findings are the same, in the same order, as walking the EMCY frames one by
+        one: each frame may give an inhibit-time, a length and an error finding (in that
+        order), counted against the node's cap in frame order.
+        """
+        b = ctx.batch
+        rows = np.flatnonzero(b.service == Service.EMCY)
+        if rows.size == 0:
+            return
+        fb = b.frames
+        node = b.node[rows].astype(np.int64)
+        t = fb.t[rows]
+        dlc = fb.dlc[rows].astype(np.int64)
+        head = fb.data[rows, :3].astype(np.int64)
+        code = head[:, 0] | (head[:, 1] << 8)
+        reg = head[:, 2]
+        uniq, first = np.unique(node, return_index=True)
+        seen = np.argsort(first, kind="stable")  # nodes in the order their first EMCY came
+        nodes = uniq[seen].tolist()
+        for n in nodes:
+            self.subjects.add(n)
+        # previous EMCY of the same node (carried across batches) and 0x1015 per node
+        srt = np.argsort(node, kind="stable")
+        ns, ts = node[srt], t[srt]
+        head_of = np.ones(ns.size, bool)
+        head_of[1:] = ns[1:] != ns[:-1]
+        prev_s = np.empty_like(ts)
+        prev_s[1:] = ts[:-1]
+        prev_s[head_of] = [self.last_t.get(n, np.nan) for n in ns[head_of].tolist()]
+        prev = np.empty_like(t)
+        prev[srt] = prev_s
+        first_t = t[first].tolist()
+        inhibit_u = np.zeros(uniq.size, np.float64)
+        for j in seen.tolist():  # read once per batch at the node's first EMCY, in that order
+            inhibit_u[j] = ctx.config.emcy_inhibit_100us(int(uniq[j]), first_t[j]) or 0
+        inhibit = inhibit_u[np.searchsorted(uniq, node)]
+        with np.errstate(invalid="ignore"):
+            fast = (
+                ~np.isnan(prev)
+                & (inhibit != 0)
+                & ((t - prev) < inhibit * 1e-4 * (1 - self.tolerance))
+            )
+        short = dlc < 8
+        raised = (dlc >= 3) & (code != 0)
+        if self.allow:
+            raised &= ~np.isin(code, np.fromiter(self.allow, np.int64))
+        last_row = np.full(uniq.size, -1, np.int64)
+        np.maximum.at(last_row, np.searchsorted(uniq, node), np.arange(node.size))
+        for j in seen.tolist():
+            self.last_t[int(uniq[j])] = float(t[last_row[j]])
+        self._active(node, uniq, seen, t, dlc, code, reg)
+        self._findings(ctx, rows, node, t, dlc, code, reg, prev, inhibit, fast, short, raised)
+
+    def _active(self, node, uniq, seen, t, dlc, code, reg) -> None:
+        """Errors active per node after this batch: those raised since the last reset."""
+        for j in seen.tolist():
+            n = int(uniq[j])
+            at = np.flatnonzero((node == n) & (dlc >= 3))
+            if at.size == 0:
+                continue
+            act = self.active.setdefault(n, {})
+            c, r = code[at], reg[at]
+            reset = np.flatnonzero((c == 0) & (r == 0))
+            if reset.size:
+                act.clear()
+                at = at[reset[-1] + 1 :]
+                c = c[reset[-1] + 1 :]
+            raised = c != 0
+            act.update(zip(c[raised].tolist(), t[at[raised]].tolist(), strict=True))
+
+    def _findings(self, ctx, rows, node, t, dlc, code, reg, prev, inhibit, fast, short, raised):
+        """Emit the findings still under each node's cap, count the others, in frame order."""
+        pos = np.concatenate((np.flatnonzero(fast), np.flatnonzero(short), np.flatnonzero(raised)))
+        if pos.size == 0:
+            return
+        kind = np.repeat([0, 1, 2], [int(fast.sum()), int(short.sum()), int(raised.sum())])
+        seq = np.lexsort((kind, pos))  # frame order, then inhibit / length / error
+        pos, kind = pos[seq], kind[seq]
+        cn = node[pos]
+        by = np.argsort(cn, kind="stable")
+        cs = cn[by]
+        start = np.ones(cs.size, bool)
+        start[1:] = cs[1:] != cs[:-1]
+        group_start = np.maximum.accumulate(np.where(start, np.arange(cs.size), 0))
+        rank = np.empty(cs.size, np.int64)
+        rank[by] = np.arange(cs.size) - group_start
+        firsts = np.unique(cn, return_index=True)[1]
+        left = {}
+        for i in np.sort(firsts).tolist():  # the cap's counters, keyed in first-finding order
+            n = int(cn[i])
+            key = (n, 0x80 + n)
+            self._count[key] += 0
+            left[n] = max(self.max_findings - self._count[key], 0)
+        listed = rank < np.array([left[n] for n in cn.tolist()], np.int64)
+        for i in np.flatnonzero(listed).tolist():
+            self._emit_one(ctx, int(rows[pos[i]]), pos[i], int(kind[i]), node, t, dlc, code, reg,
+                           prev, inhibit)  # fmt: skip
+        dropped = np.flatnonzero(~listed)
+        if dropped.size:
+            dn = cn[dropped]
+            for n, first_i, count in zip(
+                *[x.tolist() for x in np.unique(dn, return_index=True, return_counts=True)],
+                strict=True,
+            ):
+                key = (n, 0x80 + n)
+                self._count[key] += count
+                self._first_dropped.setdefault(key, float(t[pos[dropped[first_i]]]))
+
+    def _emit_one(self, ctx, row, k, kind, node, t, dlc, code, reg, prev, inhibit) -> None:
+        n, tk = int(node[k]), float(t[k])
+        if kind == 0:
+            gap = tk - float(prev[k])
+            inh = float(inhibit[k])  # int or float as configured: the same products
+            self.emit(
+                tk,
+                n,
+                0x80 + n,
+                f"EMCY {ms(gap)} ms after the previous one, inhibit "
+                f"time 0x1015 is {inh * 0.1:g} ms",
+                ms(gap),
+                inh * 0.1,
+                row=row,
+                severity="error",
+                why="EMCY faster than its inhibit time can flood the bus in a fault storm; check 0x1015.",
+            )
+        elif kind == 1:
+            d = int(dlc[k])
+            self.emit(
+                tk,
+                n,
+                0x80 + n,
+                f"EMCY with {d} data bytes, CiA 301 needs 8",
+                d,
+                8,
+                row=row,
+                severity="error",
+                why="A short EMCY cannot be decoded by a standard master; check the node's firmware.",
+            )
+        else:
+            c, r = int(code[k]), int(reg[k])
+            self.emit(
+                tk,
+                n,
+                0x80 + n,
+                f"EMCY 0x{c:04X} ({emcy_class(c)}), error register 0x{r:02X}",
+                f"0x{c:04X}",
+                "no EMCY"
+                if not self.allow
+                else "one of " + ", ".join(f"0x{x:04X}" for x in sorted(self.allow)),
+                row=row,
+            )
+
+    def finish(self, ctx: Context) -> None:
+        for node, act in sorted(self.active.items()):
+            for code, t in sorted(act.items()):
+                if code in self.allow or self.dropped(t, node, 0x80 + node):
+                    continue
+                self.emit(
+                    t,
+                    node,
+                    0x80 + node,
+                    f"EMCY 0x{code:04X} ({emcy_class(code)}) raised at {ctx.rel(t)} "
+                    "still active at the end of the log",
+                    f"0x{code:04X}",
+                    "cleared",
+                    why="No error reset (EMCY 0x0000) followed; the node may still be in its fault "
+                    "reaction; check whether the cause was removed.",
+                )
+
+    def active_errors(self) -> dict[int, list[int]]:
+        return {n: sorted(a) for n, a in self.active.items() if a}

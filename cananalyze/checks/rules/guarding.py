@@ -1,0 +1,115 @@
+"""Node guarding: request period vs 0x100C, life time, missing responses, toggle bit.
+
+Guarding frames are rare (one RTR and one reply per node and guard time), so this
+walks them one by one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...protocol.services import Service
+from ..rule import Context, Rule, ms
+
+
+class GuardingRule(Rule):
+    name = "guarding"
+    why = (
+        "Node guarding is how master and node notice each other's loss; a late request or a "
+        "missing or wrong reply makes one side take its life-guarding fault reaction; check "
+        "0x100C/0x100D and the master's guarding schedule."
+    )
+
+    def __init__(self, response_timeout_ms: float = 100.0, **kw) -> None:
+        super().__init__(**kw)
+        self.timeout = response_timeout_ms / 1000.0
+        self.req_t: dict[int, float] = {}
+        self.pending: dict[int, float] = {}
+        self.toggle: dict[int, int] = {}
+
+    def process(self, ctx: Context) -> None:
+        b = ctx.batch
+        rows = np.flatnonzero(
+            np.isin(
+                b.service,
+                np.array([Service.GUARD_REQUEST, Service.GUARD_RESPONSE, Service.BOOTUP], np.uint8),
+            )
+        )
+        fb = b.frames
+        for row in rows.tolist():
+            node = int(b.node[row])
+            t = float(fb.t[row])
+            svc = b.service[row]
+            if svc == Service.BOOTUP:
+                self.toggle[node] = 1  # toggle restarts: the first reply after boot-up has 0
+                self.req_t.pop(node, None)
+                self.pending.pop(node, None)
+                continue
+            self.subjects.add(node)
+            if svc == Service.GUARD_REQUEST:
+                self._request(ctx, node, t, row)
+            else:
+                self.pending.pop(node, None)
+                tog = int(fb.data[row, 0]) >> 7
+                # a log that starts mid-session gives no reference for the first reply
+                expect = 1 - self.toggle[node] if node in self.toggle else tog
+                if tog != expect:
+                    self.emit(
+                        t,
+                        node,
+                        0x700 + node,
+                        f"guard reply toggle bit {tog}, expected {expect}",
+                        tog,
+                        expect,
+                        row=row,
+                    )
+                self.toggle[node] = tog
+
+    def _request(self, ctx: Context, node: int, t: float, row: int) -> None:
+        sent = self.pending.get(node)
+        if sent is not None:
+            self._no_reply(ctx, node, sent, row)
+        prev = self.req_t.get(node)
+        cfg = ctx.config.guarding(node, t)
+        if prev is not None and cfg:
+            guard_ms, factor = cfg
+            gap = t - prev
+            if factor and gap * 1000 > guard_ms * factor:
+                self.emit(
+                    prev,
+                    node,
+                    0x700 + node,
+                    f"life time exceeded: {ms(gap)} ms between guard requests "
+                    f"> {guard_ms:g} ms x {factor}",
+                    ms(gap),
+                    guard_ms * factor,
+                    row=row,
+                )
+            elif abs(gap * 1000 - guard_ms) > guard_ms * self.tolerance:
+                self.emit(
+                    t,
+                    node,
+                    0x700 + node,
+                    f"guard request period {ms(gap)} ms, guard time 0x100C is {guard_ms:g} ms",
+                    ms(gap),
+                    guard_ms,
+                    row=row,
+                )
+        self.req_t[node] = t
+        self.pending[node] = t
+
+    def finish(self, ctx: Context) -> None:
+        for node, sent in self.pending.items():
+            if ctx.t_end is not None and ctx.t_end - sent > self.timeout:
+                self._no_reply(ctx, node, sent)
+
+    def _no_reply(self, ctx: Context, node: int, sent: float, row: int = 0) -> None:
+        self.emit(
+            sent,
+            node,
+            0x700 + node,
+            f"no reply to the guard request at {ctx.rel(sent)}",
+            "no reply",
+            "reply",
+            row=row,
+        )

@@ -1,0 +1,62 @@
+"""Asynchronous TPDOs (type 254/255): inhibit time (100 us units) and event timer while operational."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..nmt_state import OPERATIONAL
+from ..rule import Context, Rule, ms
+
+
+class PdoAsyncRule(Rule):
+    name = "pdo_async"
+    why = (
+        "An inhibit time violation floods the bus; an event-timer overrun means consumers see stale "
+        "values or time out; check 0x18xx:3 and 0x18xx:5 and the node's cycle time."
+    )
+
+    def process(self, ctx: Context) -> None:
+        g = ctx.gaps("pdo")
+        if g.key.size == 0:
+            return
+        gap = g.gap
+        for cob, sl in g.groups():
+            cfg = ctx.config.pdo_params(cob, ctx.t_first)
+            if cfg is None or cfg[1].direction != "tx" or cfg[1].transmission_type < 254:
+                continue
+            node, pdo = cfg
+            self.subjects.add(node)
+            gg = gap[sl]
+            if pdo.inhibit_time:
+                inhibit = pdo.inhibit_time * 1e-4
+                bad = np.flatnonzero(gg < inhibit * (1 - self.tolerance)) + sl.start
+                for i in self.capped(bad, g.t[bad], node, cob).tolist():
+                    self.emit(
+                        g.t[i],
+                        node,
+                        cob,
+                        f"{ms(gap[i])} ms after the previous one, inhibit time "
+                        f"{pdo.inhibit_time * 0.1:g} ms",
+                        ms(gap[i]),
+                        pdo.inhibit_time * 0.1,
+                        row=g.row[i],
+                    )
+            if pdo.event_timer:
+                limit = pdo.event_timer * (1 + self.tolerance) / 1000.0
+                cand = np.flatnonzero(gg > limit) + sl.start
+                cand = self.capped(cand, g.prev[cand], node, cob)
+                if cand.size:
+                    before = ctx.nmt.state_at(node, g.prev[cand])
+                    after = ctx.nmt.state_at(node, g.t[cand])
+                    for j, i in enumerate(cand.tolist()):
+                        if before[j] == OPERATIONAL and after[j] == OPERATIONAL:
+                            self.emit(
+                                g.prev[i],
+                                node,
+                                cob,
+                                f"no PDO for {ms(gap[i])} ms while operational, "
+                                f"event timer {pdo.event_timer} ms",
+                                ms(gap[i]),
+                                pdo.event_timer,
+                                row=g.row[i],
+                            )

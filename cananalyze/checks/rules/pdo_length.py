@@ -1,0 +1,47 @@
+"""PDO length against its mapping: shorter than mapped is an error, longer a warning."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..config import pdo_length_bytes
+from ..rule import Context, Rule
+
+
+class PdoLengthRule(Rule):
+    name = "pdo_length"
+    why = (
+        "A PDO shorter than its mapping cannot be applied (the receiver should raise EMCY 0x8210); "
+        "one longer than mapped hints at a mapping mismatch between producer and consumer; compare "
+        "both nodes' 0x1600/0x1A00 mappings."
+    )
+
+    def process(self, ctx: Context) -> None:
+        g = ctx.gaps("pdo")
+        if g.key.size == 0:
+            return
+        dlc = ctx.batch.frames.dlc
+        for cob, sl in g.groups():
+            cfg = ctx.config.pdo_params(cob, ctx.t_first)
+            if cfg is None:
+                continue
+            node, pdo = cfg
+            want = pdo_length_bytes(pdo)
+            if want is None:
+                continue
+            self.subjects.add(node)
+            rows = g.row[sl]
+            d = dlc[rows]
+            bad = np.flatnonzero(d != want)
+            for i in self.capped(bad, g.t[sl][bad], node, cob).tolist():
+                short = d[i] < want
+                self.emit(
+                    g.t[sl][i],
+                    node,
+                    cob,
+                    f"{pdo.direction[0].upper()}PDO{pdo.number} has {int(d[i])} bytes, mapping needs {want}",
+                    int(d[i]),
+                    want,
+                    row=rows[i],
+                    severity=None if short else "warning",
+                )

@@ -1,0 +1,62 @@
+"""PDOs from nodes that are not operational (CiA 301: PDOs only in OPERATIONAL)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...protocol.services import Service
+from ..nmt_state import OPERATIONAL, state_name
+from ..rule import Context, Rule
+
+
+class PdoStateRule(Rule):
+    name = "pdo_not_operational"
+    why = (
+        "A node sending PDOs while not operational ignores NMT or reports a wrong state; consumers "
+        "may act on data the master did not enable; check the node's NMT handling."
+    )
+
+    def process(self, ctx: Context) -> None:
+        b = ctx.batch
+        g = ctx.gaps("pdo")
+        if g.key.size == 0:
+            return
+        # NMT state of every PDO row, one lookup per node (not per COB-ID)
+        node_of = b.node[g.row]
+        state = np.full(g.row.size, -1, np.int16)
+        present = np.bincount(node_of.astype(np.intp) + 1) if node_of.size else np.zeros(0)
+        for node in (np.flatnonzero(present) - 1).tolist():  # nodes -1..127, ascending
+            if node >= 0 and node in ctx.nmt.times:
+                at = np.flatnonzero(node_of == node)
+                state[at] = ctx.nmt.state_at(node, g.t[at])
+        bad_all = (state >= 0) & (state != OPERATIONAL)
+        starts = g.starts
+        heads = g.row[starts]
+        any_bad = np.add.reduceat(bad_all, starts) > 0 if starts.size else np.zeros(0, bool)
+        for (cob, sl), svc, node, has_bad in zip(
+            g.groups(),
+            b.service[heads].tolist(),
+            b.node[heads].tolist(),
+            any_bad.tolist(),
+            strict=True,
+        ):
+            if svc != Service.TPDO:
+                continue
+            if node < 0 or node not in ctx.nmt.times:
+                continue
+            self.subjects.add(node)
+            if not has_bad:
+                continue
+            rows = g.row[sl]
+            st = state[sl]
+            bad = np.flatnonzero(bad_all[sl])
+            for i in self.capped(bad, g.t[sl][bad], node, cob).tolist():
+                self.emit(
+                    g.t[sl][i],
+                    node,
+                    cob,
+                    f"PDO while node is {state_name(int(st[i]))}",
+                    state_name(int(st[i])),
+                    "operational",
+                    row=rows[i],
+                )

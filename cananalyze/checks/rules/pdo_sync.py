@@ -1,0 +1,84 @@
+"""Synchronous TPDOs: type n every n-th SYNC, inside the window 0x1007; type 0 only after a SYNC."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...protocol.services import Service
+from ..rule import Context, Rule, ms
+
+
+class PdoSyncRule(Rule):
+    name = "pdo_sync"
+    why = (
+        "A synchronous PDO outside its SYNC slot carries data sampled at the wrong time or arrives "
+        "after the consumers applied their inputs; check the transmission type (0x18xx:2) and the "
+        "node's processing time against 0x1007."
+    )
+
+    def __init__(self, **kw) -> None:
+        super().__init__(**kw)
+        self.sync_count = 0
+        self.last_sync_t = np.nan
+        self.last_sync_no: dict[int, int] = {}
+
+    def process(self, ctx: Context) -> None:
+        b = ctx.batch
+        srows = np.flatnonzero(b.service == Service.SYNC)
+        st = b.frames.t[srows]
+        g = ctx.gaps("pdo")
+        if g.key.size:
+            window = ctx.config.sync_window_us(ctx.t_first)
+            for cob, sl in g.groups():
+                cfg = ctx.config.pdo_params(cob, ctx.t_first)
+                if cfg is None or cfg[1].direction != "tx" or cfg[1].transmission_type > 240:
+                    continue
+                node, pdo = cfg
+                n = pdo.transmission_type
+                self.subjects.add(node)
+                rows = g.row[sl]
+                k = np.searchsorted(srows, rows)  # SYNCs in this batch before each PDO
+                no = self.sync_count + k
+                # the latest SYNC before each PDO: in this batch, else the one carried over
+                # (a live batch often holds PDOs and no SYNC: never index an empty array)
+                last_t = np.full(k.size, self.last_sync_t)
+                if st.size:
+                    last_t = np.where(k > 0, st[np.maximum(k - 1, 0)], last_t)
+                prev = np.empty_like(no)
+                prev[1:] = no[:-1]
+                prev[0] = self.last_sync_no.get(cob, -1)
+                self.last_sync_no[cob] = int(no[-1])
+                t = g.t[sl]
+                if n == 0:
+                    bad = np.flatnonzero((prev >= 0) & (no == prev))
+                    text = "acyclic synchronous PDO (type 0) sent twice without a SYNC between"
+                else:
+                    bad = np.flatnonzero((prev >= 0) & (no - prev != n))
+                    text = f"sent {{}} SYNCs after the previous one, transmission type {n}"
+                for i in self.capped(bad, t[bad], node, cob).tolist():
+                    self.emit(
+                        t[i],
+                        node,
+                        cob,
+                        text.format(int(no[i] - prev[i])),
+                        int(no[i] - prev[i]),
+                        max(n, 1),
+                        row=rows[i],
+                    )
+                if window:
+                    late = t - last_t
+                    bad = np.flatnonzero(late > window / 1e6)
+                    for i in self.capped(bad, t[bad], node, cob).tolist():
+                        self.emit(
+                            t[i],
+                            node,
+                            cob,
+                            f"sent {ms(late[i])} ms after SYNC, window 0x1007 is "
+                            f"{window / 1000:g} ms",
+                            ms(late[i]),
+                            window / 1000,
+                            row=rows[i],
+                        )
+        self.sync_count += srows.size
+        if srows.size:
+            self.last_sync_t = float(st[-1])

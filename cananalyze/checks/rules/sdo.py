@@ -1,0 +1,81 @@
+"""SDO transfers (from the SDO tracker's records): aborts, timeouts, protocol errors, slow replies."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..rule import Context, Rule
+
+
+class SdoRule(Rule):
+    name = "sdo"
+    why = (
+        "A failed SDO transfer means a parameter was not read or written as the master assumed; "
+        "check the abort code against the object dictionary (object exists, access, value range)."
+    )
+
+    def __init__(self, max_latency_ms: float | None = None, **kw) -> None:
+        super().__init__(**kw)
+        self.max_latency = max_latency_ms
+
+    def _picked(self, batch) -> list:
+        """Records that may need a finding, in order: the fast path's ok, quick ones skipped."""
+        records = batch.records
+        fast = batch.sdo_fast
+        if fast is None or fast.slots.size == 0 or len(records) <= int(fast.slots[-1]):
+            return list(records)
+        tab = batch.sdo_table()
+        for c in tab.first_seen(tab.node):  # the order a loop over the records adds them in
+            self.subjects.add(tab.node_keys[c])
+        flag = ~fast.ok
+        if self.max_latency is not None:
+            flag |= fast.latency > self.max_latency
+        rest = np.ones(len(records), bool)
+        rest[fast.slots] = False
+        get = list.__getitem__  # written records: no lazy lookup
+        picked = [(k, get(records, k)) for k in np.flatnonzero(rest).tolist()]
+        flagged = fast.slots[flag].tolist()
+        if flagged:
+            picked += [(k, records[k]) for k in flagged]  # built one by one (or all)
+            picked.sort(key=lambda x: x[0])
+        return [item for _, item in picked]
+
+    def process(self, ctx: Context) -> None:
+        subjects = self.subjects
+        picked = self._picked(ctx.batch)
+        for row, rec in picked:
+            if rec.get("kind") != "sdo":
+                continue
+            node = rec.get("node")
+            subjects.add(node)
+            result = rec.get("result")
+            lat = rec.get("latency_ms")
+            slow = self.max_latency is not None and lat is not None and lat > self.max_latency
+            if result == "ok" and not slow:
+                continue  # the usual case: nothing to format
+            what = f"{rec.get('direction')} {rec.get('index', 0):04X}:{rec.get('subindex', 0):02X}"
+            if result and result != "ok":
+                detail = rec.get("abort_text") or rec.get("detail") or ""
+                code = rec.get("abort_code")
+                measured = f"0x{code:08X}" if isinstance(code, int) else result
+                self.emit(
+                    rec.get("t", 0.0),
+                    node,
+                    None,
+                    f"SDO {what} {result}: {detail}".rstrip(": "),
+                    measured,
+                    "ok",
+                    row=row,
+                )
+            if slow:
+                self.emit(
+                    rec.get("t", 0.0),
+                    node,
+                    None,
+                    f"SDO {what} took {lat:g} ms",
+                    lat,
+                    self.max_latency,
+                    row=row,
+                    why="A slow SDO server stalls configuration and may hit the master's timeout; "
+                    "check the node's load and the bus load.",
+                )

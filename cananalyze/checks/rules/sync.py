@@ -1,0 +1,63 @@
+"""SYNC: period against 0x1006 and counter continuity (columnar over the SYNC rows)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..rule import Context, Rule, ms
+
+
+class SyncRule(Rule):
+    name = "sync"
+    why = (
+        "Synchronous PDOs are sampled and applied on SYNC; a late or irregular SYNC skews every "
+        "synchronous control loop; check the SYNC producer's load and 0x1006."
+    )
+
+    def __init__(self, **kw) -> None:
+        super().__init__(**kw)
+        self.last_counter = -1
+
+    def process(self, ctx: Context) -> None:
+        g = ctx.gaps("sync")
+        if g.key.size == 0:
+            return
+        self.subjects.add(None)
+        period = ctx.config.sync_period_us(ctx.t_first)
+        gap = g.gap
+        if period:
+            p = period / 1e6
+            bad = np.flatnonzero(np.abs(gap - p) > p * self.tolerance)
+            for i in self.capped(bad, g.t[bad], None, 0x080).tolist():
+                self.emit(
+                    g.t[i],
+                    None,
+                    0x080,
+                    f"SYNC period {ms(gap[i])} ms, 0x1006 is {period / 1000:g} ms",
+                    ms(gap[i]),
+                    period / 1000,
+                    row=g.row[i],
+                )
+        fb = ctx.batch.frames
+        has = fb.dlc[g.row] >= 1
+        if not has.any():
+            return
+        rows = g.row[has]
+        c = fb.data[rows, 0].astype(np.int16)
+        prev = np.empty_like(c)
+        prev[0] = self.last_counter
+        prev[1:] = c[:-1]
+        bad = np.flatnonzero((prev >= 0) & (c != prev + 1) & (c != 1))
+        for i in self.capped(bad, fb.t[rows[bad]], None, 0x080).tolist():
+            self.emit(
+                fb.t[rows[i]],
+                None,
+                0x080,
+                f"SYNC counter {int(c[i])} after {int(prev[i])}",
+                int(c[i]),
+                int(prev[i]) + 1,
+                row=rows[i],
+                why="A jump in the SYNC counter means lost SYNC frames or a second SYNC producer; "
+                "check 0x1019 and that only one node produces SYNC.",
+            )
+        self.last_counter = int(c[-1])

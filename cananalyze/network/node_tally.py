@@ -1,0 +1,144 @@
+"""What the nodes table says of each node, gathered batch by batch.
+
+Frames per service, the last NMT state reported and the identity objects the
+node answered to SDO uploads (0x1000, 0x1008, 0x1018), matched to a device
+profile when none was given. The Capture tallies a whole log at once; the
+streaming exports (Parquet/CSV tables, MCAP's nodes.json) one batch at a time,
+so memory does not grow with the log.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+import numpy as np
+
+from ..protocol.services import SERVICE_NAMES
+from ..records import DecodedBatch
+
+IDENTITY = {
+    (0x1000, 0): "device_type",
+    (0x1018, 1): "vendor_id",
+    (0x1018, 2): "product_code",
+    (0x1018, 3): "revision",
+    (0x1018, 4): "serial",
+    (0x1008, 0): "device_name",
+}
+IDENTITY_INDEX = (0x1000, 0x1008, 0x1018)
+IDENTITY_KEYS = ("device_type", "vendor_id", "product_code", "revision", "serial", "device_name")
+
+
+class NodeTally:
+    """Per-node counts, last state and identity; `rows()` gives the nodes table."""
+
+    def __init__(self) -> None:
+        self.counts = np.zeros((128, len(SERVICE_NAMES)), np.int64)
+        self.last_state: dict[int, tuple[float, str]] = {}
+        self.identity: dict[int, dict] = {}
+
+    def add(self, batch: DecodedBatch, states: Iterable) -> None:
+        """One decoded batch and its NMT state changes (`Row`s or `Event`s)."""
+        self.add_frames(batch.service, batch.node)
+        self.add_states(states)
+        self.add_identity(identity_records(batch))
+
+    def add_frames(self, service: np.ndarray, node: np.ndarray) -> None:
+        has = node >= 0
+        key = node[has].astype(np.int64) * len(SERVICE_NAMES) + service[has]
+        self.counts += np.bincount(key, minlength=self.counts.size).reshape(self.counts.shape)
+
+    def add_states(self, states: Iterable) -> None:
+        """The latest state by time wins; of equal times, the later one."""
+        for ev in states:
+            cur = self.last_state.get(ev.node)
+            if cur is None or ev.t >= cur[0]:
+                self.last_state[ev.node] = (ev.t, ev.message)
+
+    def add_identity(self, records: list[tuple[int, dict]]) -> None:
+        for node, info in identity(records).items():
+            self.identity.setdefault(node, {}).update(info)
+
+    def rows(self, profiles: dict[int, tuple[str, str]]) -> list[dict]:
+        """One dict per node seen: frames, frames_<service> for every service seen,
+        last_state(_t), identity, profile and how it was identified."""
+        counts = self.counts
+        seen = np.flatnonzero(counts.sum(axis=0)).tolist()
+        rows: list[dict] = []
+        for n in np.flatnonzero(counts.sum(axis=1)).tolist():
+            row: dict[str, Any] = {"node": n, "frames": int(counts[n].sum())}
+            for s in seen:
+                row[f"frames_{SERVICE_NAMES[s]}"] = int(counts[n, s])
+            row["last_state"] = self.last_state.get(n, (None, None))[1]
+            row["last_state_t"] = self.last_state.get(n, (None, None))[0]
+            info = self.identity.get(n, {})
+            row.update({k: info.get(k) for k in IDENTITY_KEYS})
+            prof, how = profiles.get(n, (None, None))
+            if prof is None and info:
+                prof, how = match_profile(info)
+            row["profile"] = prof
+            row["identified_by"] = how
+            rows.append(row)
+        return rows
+
+
+def identity_records(batch: DecodedBatch) -> list[tuple[int, dict]]:
+    """(record slot, record) of the batch's SDO records on identity objects, in slot order.
+
+    The SDO fast path's records are looked up as columns; only those on an
+    identity index are built as dicts (aborted ones are dicts already).
+    """
+    records = batch.records
+    if not records:
+        return []
+    split = batch.sdo_fast_split()
+    slots: Iterable[int] = range(len(records)) if split is None else split[2]
+    out = [
+        (k, r)
+        for k in slots
+        if (r := records[k][1]).get("kind") == "sdo" and r.get("index") in IDENTITY_INDEX
+    ]
+    if split is not None:
+        fields, fast, _ = split
+        for j in np.flatnonzero(np.isin(fast.index, IDENTITY_INDEX)).tolist():
+            rec = fields.aborted[j] if j in fields.aborted else fields.record(j)
+            out.append((int(fast.slots[j]), rec))
+        out.sort(key=lambda kr: kr[0])
+    return out
+
+
+def identity(records: Iterable[tuple[int, dict]]) -> dict[int, dict]:
+    """Identity objects a node answered to SDO uploads, the last answer winning."""
+    out: dict[int, dict] = {}
+    for _, r in records:
+        if r.get("kind") != "sdo" or r.get("result") != "ok" or r.get("direction") != "upload":
+            continue
+        what = IDENTITY.get((r.get("index"), r.get("subindex")))
+        if what and r.get("node") is not None:
+            value = r.get("value")
+            if value is None and r.get("data"):  # no dictionary known: the CiA 301 types
+                raw = bytes.fromhex(r["data"])
+                if what == "device_name":
+                    value = raw.split(b"\0", 1)[0].decode("latin-1")
+                else:
+                    value = int.from_bytes(raw[:4], "little")
+            out.setdefault(r["node"], {})[what] = value
+    return out
+
+
+def match_profile(info: dict) -> tuple[str | None, str | None]:
+    """The built-in profile the identity names, and "sdo identity"; (None, None) if none."""
+    try:
+        from .profile import identify
+
+        ints = {
+            k: info.get(k) if isinstance(info.get(k), int) else None
+            for k in ("vendor_id", "product_code", "device_type")
+        }
+        name = info.get("device_name")
+        prof = identify(device_name=name if isinstance(name, str) else None, **ints)
+    except (
+        Exception
+    ):  # identification is a nicety: a profile that fails to load must not stop a table
+        return None, None
+    return (prof.key, "sdo identity") if prof else (None, None)

@@ -1,0 +1,1 @@
+"""The JSONL output: one JSON object per frame and record."""

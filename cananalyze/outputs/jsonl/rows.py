@@ -1,0 +1,108 @@
+"""`--format jsonl`: one JSON object per line; field names are a stable API (README)."""
+
+from __future__ import annotations
+
+import json
+from typing import TextIO
+
+import numpy as np
+
+from ...frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
+from ...protocol.services import SERVICE_NAMES
+from ...records import DecodedBatch
+from ..background import ByteSink
+
+
+def _clean(value):
+    if isinstance(value, float) and (value != value or value in (float("inf"), float("-inf"))):
+        return None
+    if isinstance(value, (np.integer,)):
+        return int(value)
+    if isinstance(value, (np.floating,)):
+        return float(value)
+    if isinstance(value, (np.bool_,)):
+        return bool(value)
+    if isinstance(value, bytes):
+        return value.hex()
+    return value
+
+
+def frame_record(batch: DecodedBatch, i: int) -> dict:
+    fb = batch.frames
+    fl = int(fb.flags[i])
+    rec: dict = {
+        "kind": "frame",
+        "t": float(fb.t[i]),
+        "channel": fb.channel_name(i),
+        "can_id": int(fb.can_id[i]),
+        "dlc": int(fb.dlc[i]),
+        "data": fb.payload(i).hex() if not fl & FLAG_RTR else "",
+    }
+    if fl & FLAG_RTR:
+        rec["rtr"] = True
+    if fl & FLAG_EXT:
+        rec["ext"] = True
+    if fl & FLAG_ERR:
+        rec["error"] = True
+    if fl & FLAG_FD:
+        rec["fd"] = True
+    rec["service"] = SERVICE_NAMES[int(batch.service[i])]
+    node = int(batch.node[i])
+    rec["node"] = None if node < 0 else node
+    if batch.pdo[i]:
+        rec["pdo"] = int(batch.pdo[i])
+    rec.update(clean_fields(batch.fields(i)))
+    return rec
+
+
+def clean_fields(fields: dict) -> dict:
+    """A row's fields as the JSON line holds them (nested dicts cleaned one level down)."""
+    return {
+        k: {kk: _clean(vv) for kk, vv in v.items()} if isinstance(v, dict) else _clean(v)
+        for k, v in fields.items()
+    }
+
+
+def dumps(rec: dict) -> str:
+    return json.dumps(rec, separators=(",", ":"), ensure_ascii=False, default=_clean)
+
+
+class JsonlWriter:
+    """JSON lines of decoded batches: as columns where it can (`jsonl_columns`), else
+    row by row; with `background`, finished and written by a worker thread
+    (`background.ByteSink`), whose error `close()` raises."""
+
+    def __init__(self, out: TextIO, frames: bool = True, background: bool = False) -> None:
+        self.out = out
+        self.frames = frames
+        self._sink = ByteSink(out, background, "jsonl-writer")
+
+    def write(self, batch: DecodedBatch, mask: np.ndarray | None = None) -> None:
+        if self.frames:
+            from .columns import render  # imports this module
+
+            rendered = render(batch, mask)
+            if rendered is not None:
+                self._sink.put(rendered)
+                return
+        by_row: dict[int, list[dict]] = {}
+        for row, rec in batch.records:
+            by_row.setdefault(row, []).append(rec)
+        rows = range(len(batch)) if mask is None else np.flatnonzero(mask).tolist()
+        lines = []
+        shown = set()
+        if self.frames:
+            for i in rows:
+                lines.append(dumps(frame_record(batch, i)))
+                shown.add(i)
+                for rec in by_row.get(i, ()):
+                    lines.append(dumps(rec))
+        for row, rec in batch.records:
+            if row not in shown:
+                lines.append(dumps(rec))
+        if lines:
+            self._sink.put(("\n".join(lines) + "\n").encode("utf-8"))
+
+    def close(self) -> None:
+        """Wait for the worker, if any; re-raise its error here."""
+        self._sink.close()

@@ -1,0 +1,1 @@
+"""MCAP for Foxglove: topics, schemas and the chunked writer."""

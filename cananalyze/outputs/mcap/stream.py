@@ -1,0 +1,195 @@
+"""MCAP export batch by batch: the topics of `write_mcap`, in memory flat in log length.
+
+`write_mcap` lays out a whole Capture at once; a 5M-frame log peaked at 2.1 GB
+that way, so a fleet log did not fit. Here each decoded batch's messages (PDO
+signals, NMT state changes, events, raw frames) are merged by time and written
+as chunks straight away. Schemas and channels are declared when their topic
+first appears: MCAP allows Schema and Channel records anywhere in the data
+section before their first message.
+
+Within a batch, messages are in log-time order, ties in the order `write_mcap`
+gives them (signals, states, events, frames). An SDO transfer that ends a batch
+or two after it began is a message in a later chunk than its time; MCAP readers
+merge chunks by the time ranges in their indexes, so players show it in place.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ... import __version__
+from ...columns.json_text import Texts
+from ...events.build import EventState, batch_event_columns
+from ...events.columns import KINDS, NO_NODE, NO_ROW
+from ...network.node_tally import NodeTally
+from ...records import DecodedBatch, SignalBlock
+from ..atomic import atomic_path
+from ..tables.writer import WriterThread
+from .bulk import BulkMcapWriter
+from .topics import (
+    EVENTS_TOPIC,
+    FRAME_SCHEMA,
+    FRAMES_TOPIC,
+    LOG_SCHEMA,
+    STATE_SCHEMA,
+    _ns,
+    event_payloads,
+    frame_payloads,
+    signal_payloads,
+    signal_schema,
+    signal_topic,
+    state_payloads,
+    state_topic,
+    write_merged,
+    write_metadata,
+)
+
+
+class StreamMcap:
+    """Context manager: `add()` each DecodedBatch, `close(skipped)` at the end; the file
+    appears (atomically) only then."""
+
+    def __init__(
+        self,
+        path: str | Path,
+        compression: str = "zstd",
+        source: str = "",
+        network: str = "",
+        profiles: dict[int, tuple[str, str]] | None = None,
+        chunk_bytes: int = 4 << 20,
+    ) -> None:
+        self.path = Path(path)
+        self.source = str(source)
+        self.network = network or ""
+        self.profiles = profiles or {}
+        self._stack = contextlib.ExitStack()
+        tmp = self._stack.enter_context(atomic_path(path))
+        f = self._stack.enter_context(open(tmp, "wb"))
+        self.w = BulkMcapWriter(
+            f, f"cananalyze {__version__}", compression=compression, chunk_bytes=chunk_bytes
+        )
+        self.counts: dict[str, int] = {}
+        self._channels: dict[tuple, int] = {}  # series key / topic -> channel id
+        self._topics: dict[int, str] = {}
+        self._event_state = EventState()
+        self._nodes = NodeTally()
+        self._file = Path(self.source).name
+        self._lines = (0, np.zeros(0, np.int64))  # (first row, line numbers) of the last batch
+        self.offset = 0
+        # one batch waits while one is written (the decoder is rarely the slower side)
+        self._writer = WriterThread(depth=1)
+
+    def __enter__(self) -> StreamMcap:
+        return self
+
+    def __exit__(self, typ, exc, tb) -> None:
+        if exc is not None:
+            self.abort(typ, exc, tb)
+
+    def _channel(self, key: tuple, topic: str, schema: dict) -> int:
+        ch = self._channels.get(key)
+        if ch is None:
+            sid = self.w.schema(schema["title"], "jsonschema", json.dumps(schema).encode())
+            ch = self._channels[key] = self.w.channel(topic, "json", sid)
+            self._topics[ch] = topic
+        return ch
+
+    def add(self, batch: DecodedBatch) -> None:
+        """Queue the batch's messages for the writer thread (merged by time there)."""
+        fb = batch.frames
+        off = self.offset
+        events, states = batch_event_columns(batch, off, self._event_state)
+        self._nodes.add(batch, states)
+        lines = self._line_numbers(events.row, fb.line, off) if len(events) else []
+        if len(fb):
+            self._lines = (off, fb.line)
+        # what the job needs, not the batch (its notes and records would stay alive too)
+        blocks = [(b.node, b.pdo, b.cob_id, b.rows, b.columns, b.units) for b in batch.signals]
+        service, node = batch.service, batch.node
+        try:
+            self._writer.put(lambda: self._emit(fb, service, node, blocks, states, events, lines))
+        except OSError as exc:  # the writer thread's: name the file it was writing
+            raise _named(exc, self.path) from exc
+        self.offset += len(fb)
+
+    def _emit(self, fb, service, node, blocks, states, events, lines) -> None:
+        """One batch's messages, on the writer thread: its JSON columns (numpy, pyarrow
+        and C work outside the GIL) are built beside the decoder; the writer lays out,
+        compresses and writes the chunks on a thread of its own."""
+        streams: list[tuple[int, np.ndarray, Texts]] = []
+        # signals: one stream per series, in the Capture's series order
+        for n, pdo, cob, rows, columns, units in sorted(blocks, key=lambda b: b[:3]):
+            blk = SignalBlock(rows, n, pdo, cob, columns, units)
+            key = ("signals", n, pdo, cob, tuple(columns))
+            ch = self._channel(key, signal_topic(blk), signal_schema(blk))
+            streams.append((ch, _ns(fb.t[rows]), signal_payloads(columns)))
+        by_node: dict[int, list] = {}
+        for e in states:
+            by_node.setdefault(e.node, []).append(e)
+        for n, evs in sorted(by_node.items()):
+            ch = self._channel(("state", n), state_topic(n), STATE_SCHEMA)
+            streams.append((ch, _ns(np.array([e.t for e in evs])), state_payloads(evs)))
+        if len(events):
+            order = np.lexsort((events.sort_key(), events.t))
+            events = events.take(order)
+            ns = _ns(events.t)
+            names = [
+                f"node {n}" if n != NO_NODE else KINDS[k]
+                for n, k in zip(events.node.tolist(), events.kind.tolist(), strict=True)
+            ]
+            line = np.asarray(lines, np.int64)[order].tolist()
+            payload = event_payloads(
+                ns, events.level.tolist(), events.message.tolist(), names, self._file, line
+            )
+            streams.append((self._channel(("events",), EVENTS_TOPIC, LOG_SCHEMA), ns, payload))
+        if len(fb):
+            ch = self._channel(("frames",), FRAMES_TOPIC, FRAME_SCHEMA)
+            streams.append((ch, _ns(fb.t), frame_payloads(fb, service, node)))
+        write_merged(self.w, streams)
+        for ch, ns, _ in streams:
+            topic = self._topics[ch]
+            self.counts[topic] = self.counts.get(topic, 0) + len(ns)
+
+    def _line_numbers(self, rows: np.ndarray, lines: np.ndarray, off: int) -> list[int]:
+        """Input line of each event's frame row; 0 without one. Records the end of the log
+        completes sit on the previous batch's last row."""
+        out = np.zeros(len(rows), np.int64)
+        for first, lns in (self._lines, (off, lines)):
+            local = rows - first
+            ok = (rows != NO_ROW) & (local >= 0) & (local < len(lns))
+            out[ok] = lns[local[ok]]
+        return out.tolist()
+
+    def close(self, skipped: int = 0) -> dict[str, int]:
+        """Metadata, attachments and the summary; the file replaces its target. Returns
+        message counts per topic."""
+        try:
+            self._writer.join()
+            nodes = self._nodes.rows(self.profiles)
+            write_metadata(self.w, self.source, self.network, self.offset, skipped, nodes)
+            self.w.finish()
+        except BaseException as exc:
+            self.abort(type(exc), exc, exc.__traceback__)
+            if isinstance(exc, OSError):
+                raise _named(exc, self.path) from exc
+            raise
+        self._stack.close()
+        return self.counts
+
+    def abort(self, typ=None, exc=None, tb=None) -> None:
+        """Drop the temporary file (a cut-off export leaves no MCAP behind)."""
+        with contextlib.suppress(BaseException):
+            self._writer.join()
+        self.w.abort()
+        self._stack.__exit__(typ or RuntimeError, exc or RuntimeError("aborted"), tb)
+
+
+def _named(exc: OSError, path: Path) -> OSError:
+    """The error with the output file's name when it has none (the CLI prints it)."""
+    if exc.filename:
+        return exc
+    return OSError(exc.errno, exc.strerror or str(exc), str(path))

@@ -1,0 +1,152 @@
+"""Rerun export batch by batch: the entities of `write_rrd`, memory flat in log length.
+
+To an .rrd file (`export --rrd`) or a viewer (`decode --rerun / --connect`).
+
+`write_rrd` sends a whole Capture; a 5M-frame log peaked at 1.1 GB that way.
+Here each decoded batch becomes a small Capture of its own (the same Collector,
+NMT states carried across batches so lanes show changes only) whose signals,
+states and events go out with `send_columns` at once. The bus load is summed
+into its windows as frames come (a float per 0.1 s: 290 KB for an hour) and
+sent at the end with `write_rrd`'s rule for the last window. The layout
+(blueprint) names every PDO and NMT lane, so it is sent when all are known:
+after the data, as the recording's default.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from pathlib import Path
+
+import numpy as np
+
+from ...capture import Collector
+from ...errors import ProblemLog
+from ...events.build import EventState
+from ...records import DecodedBatch
+from ..atomic import atomic_path
+from ..busload import frame_bits, load_windows
+from .send import (
+    LOAD_WINDOW,
+    blueprint_for,
+    grpc_url,
+    is_absolute,
+    recording,
+    send_header,
+    send_load,
+    send_parts,
+)
+
+
+class StreamRrd:
+    """Context manager: `add()` each DecodedBatch, `close()` at the end; the file appears
+    (atomically) only then."""
+
+    def __init__(
+        self,
+        path: str | Path | None,
+        source: str = "",
+        network: str = "",
+        bitrate: int | None = None,
+        connect: str | None = None,
+    ) -> None:
+        """To the file `path`; or, without one, to the running viewer at `connect` (gRPC
+        URL or host:port) or to a spawned viewer."""
+
+        self.source = str(source)
+        self.bitrate = bitrate
+        self.counts: dict[str, int] = {}
+        self._stack = contextlib.ExitStack()
+        self.rec = recording(Path(self.source).name)
+        self._file = path is not None
+        if path is not None:
+            self.rec.save(self._stack.enter_context(atomic_path(path)))
+        elif connect:
+            self.rec.connect_grpc(grpc_url(connect))
+        else:
+            self.rec.spawn()
+        send_header(self.rec, self.source, network or "")
+        self._named: set[str] = set()
+        self._pdos: set[tuple[int, str, int]] = set()
+        self._lanes: set[int] = set()
+        self._absolute: bool | None = None
+        self._event_state = EventState()
+        self._load = _LoadWindows(LOAD_WINDOW)
+
+    def __enter__(self) -> StreamRrd:
+        return self
+
+    def __exit__(self, typ, exc, tb) -> None:
+        if exc is not None:
+            self.abort(typ, exc, tb)
+
+    def add(self, batch: DecodedBatch) -> None:
+        """Send the batch's signals, NMT states and events; count its bits for the bus load."""
+        col = Collector(self.source, self._event_state)
+        col.add(batch)
+        cap = col.capture(ProblemLog())
+        fb = batch.frames
+        if self._absolute is None and len(fb):
+            self._absolute = is_absolute(fb.t)
+        self._pdos |= {(s.node, s.pdo, s.cob_id) for s in cap.series}
+        self._lanes |= {e.node for e in cap.state_changes}
+        send_parts(cap, self.rec, bool(self._absolute), self.counts, self._named)
+        if len(fb):
+            self._load.add(fb.t, frame_bits(fb.flags, fb.dlc))
+
+    def close(self) -> dict[str, int]:
+        """Bus load, the layout and the end of the recording; the file replaces its target.
+        Returns value counts per entity."""
+        try:
+            starts, load = self._load.series(self.bitrate)
+            send_load(
+                self.rec, starts, load, bool(self._absolute), self.bitrate, self.counts, self._named
+            )
+            self.rec.send_blueprint(
+                blueprint_for(self._pdos, self._lanes), make_active=True, make_default=True
+            )
+            self.rec.flush()
+            if self._file:  # a viewer keeps the recording; the file needs its end
+                self.rec.disconnect()
+        except BaseException as exc:
+            self.abort(type(exc), exc, exc.__traceback__)
+            raise
+        self._stack.close()
+        return self.counts
+
+    def abort(self, typ=None, exc=None, tb=None) -> None:
+        """Stop the recording and drop the temporary file."""
+        with contextlib.suppress(Exception):
+            self.rec.disconnect()
+        self._stack.__exit__(typ or RuntimeError, exc or RuntimeError("aborted"), tb)
+
+
+class _LoadWindows:
+    """Bits per window, windows aligned to the first frame, summed batch by batch."""
+
+    def __init__(self, window: float) -> None:
+        self.window = window
+        self.t0: float | None = None
+        self.first = 0  # window index of sums[0] (negative when times went back before t0)
+        self.sums = np.zeros(0)
+        self.t_last = 0.0
+
+    def add(self, t: np.ndarray, bits: np.ndarray) -> None:
+        if self.t0 is None:
+            self.t0 = float(t[0])
+        idx = np.floor((t - self.t0) / self.window).astype(np.int64)
+        lo, hi = int(idx.min()), int(idx.max())
+        if not self.sums.size:
+            self.first = lo
+        if lo < self.first:
+            self.sums = np.concatenate([np.zeros(self.first - lo), self.sums])
+            self.first = lo
+        need = hi - self.first + 1
+        if need > self.sums.size:
+            self.sums = np.concatenate([self.sums, np.zeros(need - self.sums.size)])
+        self.sums += np.bincount(idx - self.first, weights=bits, minlength=self.sums.size)
+        self.t_last = float(t[-1])
+
+    def series(self, bitrate: int | None) -> tuple[np.ndarray, np.ndarray]:
+        if self.t0 is None:
+            return np.zeros(0), np.zeros(0)
+        return load_windows(self.sums.copy(), self.t0, self.t_last, self.window, bitrate)

@@ -1,0 +1,729 @@
+"""`export --parquet/--csv` as a stream: each DecodedBatch's rows appended to six table files.
+
+The Capture path keeps every batch, concatenates them and builds pandas
+DataFrames (4 GB for 10M frames); this path keeps nothing per frame: frames and
+signals go batch by batch to a writer thread (`table_sink`), SDO records are
+spooled to a temporary file (pandas types their columns over the whole column)
+and written as they come while the types so far hold, and the small tables
+(findings, nodes) are built at the end. The files hold the same schemas and values as
+`parquet_out.write_parquet(load(log))`; tests compare them.
+
+Row order follows the Capture: signals by time, then series (node, PDO,
+COB-ID, first appearance), then signal; events by time, then frame row. Each
+batch is sorted on its own; only when a batch starts before the previous one
+ended (timestamps going back, or none at all) is the table re-sorted whole at
+the end.
+"""
+
+from __future__ import annotations
+
+import bisect
+import contextlib
+import operator
+import pickle
+import tempfile
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+
+from ...capture import _hex_column
+from ...columns import arrow_build as ab
+from ...events.build import LEVEL_NAMES, EventState, batch_event_columns
+from ...events.columns import KINDS, NO_NODE, NO_ROW, EventColumns
+from ...frames import FrameBatch
+from ...network.node_tally import NodeTally
+from ...protocol.services import SERVICE_NAMES
+from ...records import DecodedBatch
+from ...sdo.transaction import SDO_TABLE_COLUMNS
+from ..atomic import atomic_path
+from . import pandas_like as pl
+from . import sdo_chunks
+from .whole import TABLES, _outdir
+from .writer import (
+    ROW_GROUP,
+    ROW_GROUP_BYTES,
+    Coded,
+    Sink,
+    TableSpec,
+    WriterThread,
+    csv_schema,
+    csv_table,
+    rewrite,
+)
+
+SDO_COLUMNS = SDO_TABLE_COLUMNS
+_SDO_ROW = operator.itemgetter(*SDO_COLUMNS)
+FINDING_COLUMNS = ("t", "t_rel", "rule", "severity", "node", "cob_id", "message")
+FINDING_COLUMNS += ("measured", "expected", "why")
+HOLD = 10.0  # seconds of events kept back for records that complete late (see _add_events)
+_NAN = float("nan")  # an absent key: pandas fills NaN, as pandas_like.MISSING
+_SERVICES = ab.strings(list(SERVICE_NAMES))
+_LEVELS = ab.strings(list(LEVEL_NAMES.values()))
+
+
+def _meta(fields: list[dict], index: str | None = None):
+    return lambda counts: pl.schema_metadata(
+        [
+            pl.categorical_meta(f["name"], counts.get(f["name"], f["metadata"]))
+            if f["pandas_type"] == "categorical"
+            else f
+            for f in fields
+        ],
+        index,
+    )
+
+
+def _cat(name: str, n: int = 0) -> dict:
+    return pl.field_meta(name, "categorical", "", n)  # count filled in at open
+
+
+FRAMES = TableSpec(
+    [
+        ("t", pa.float64()),
+        ("channel", None),
+        ("can_id", pa.uint32()),
+        ("dlc", pa.uint8()),
+        ("data", pa.string()),
+        ("flags", pa.uint8()),
+        ("service", pa.dictionary(pl.code_type(len(SERVICE_NAMES)), pa.string())),
+        ("node", pa.int16()),
+        ("pdo", pa.int8()),
+    ],
+    _meta(
+        [
+            pl.field_meta("t", "float64", "float64"),
+            _cat("channel"),
+            pl.field_meta("can_id", "uint32", "uint32"),
+            pl.field_meta("dlc", "uint8", "uint8"),
+            pl.field_meta("data", "unicode", "string[pyarrow]"),
+            pl.field_meta("flags", "uint8", "uint8"),
+            _cat("service", len(SERVICE_NAMES)),
+            pl.field_meta("node", "int16", "Int16"),
+            pl.field_meta("pdo", "int8", "Int8"),
+        ]
+    ),
+    dictionary=("channel", "can_id", "dlc", "flags", "service", "node", "pdo"),
+    split=("t",),
+)
+SIGNALS = TableSpec(
+    [
+        ("t", pa.float64()),
+        ("node", pa.int16()),
+        ("pdo", None),
+        ("cob_id", pa.uint32()),
+        ("signal", None),
+        ("value", pa.float64()),
+        ("unit", None),
+    ],
+    _meta(
+        [
+            pl.field_meta("t", "float64", "float64"),
+            pl.field_meta("node", "int16", "int16"),
+            _cat("pdo"),
+            pl.field_meta("cob_id", "uint32", "uint32"),
+            _cat("signal"),
+            pl.field_meta("value", "float64", "float64"),
+            _cat("unit"),
+        ]
+    ),
+    sorted_labels=("pdo", "signal", "unit"),
+    dictionary=("node", "pdo", "cob_id", "signal", "unit"),
+    split=("t",),
+)
+EVENTS = TableSpec(
+    [
+        ("t", pa.float64()),
+        ("kind", None),
+        ("node", pa.int16()),
+        ("level", pa.dictionary(pl.code_type(len(LEVEL_NAMES)), pa.string())),
+        ("message", pa.large_string()),
+        ("row", pa.int64()),
+    ],
+    _meta(
+        [
+            pl.field_meta("t", "float64", "float64"),
+            _cat("kind"),
+            pl.field_meta("node", "int16", "Int16"),
+            _cat("level", len(LEVEL_NAMES)),
+            pl.field_meta("message", "object", "string"),
+            pl.field_meta("row", "int64", "Int64"),
+        ]
+    ),
+    sorted_labels=("kind",),
+)
+
+
+def _frames_columns(fb: FrameBatch, service, node, pdo) -> dict:
+    """Built on the writer thread (the payload hex column is most of the frames table's cost)."""
+    channels = list(fb.channels) or ["can0"]
+    chan = np.minimum(fb.channel, len(channels) - 1).astype(np.int32)
+    return {
+        "t": ab.numeric(fb.t),
+        "channel": Coded(chan, channels),
+        "can_id": ab.numeric(fb.can_id),
+        "dlc": ab.numeric(fb.dlc),
+        "data": _hex_column(fb, pa),
+        "flags": ab.numeric(fb.flags),
+        "service": ab.dictionary(service, _SERVICES, pa.int8()),
+        "node": ab.numeric(node.astype(np.int16, copy=False), node < 0),
+        "pdo": ab.numeric(pdo.view(np.int8), pdo == 0),
+    }
+
+
+class StreamTables:
+    """Context manager: `add()` each DecodedBatch, `close()` at the end; files appear atomically."""
+
+    def __init__(
+        self,
+        path: str | Path,
+        fmt: str = "parquet",
+        compression: str = "snappy",
+        profiles: dict[int, tuple[str, str]] | None = None,
+        depth: int = 1,
+    ) -> None:
+        self.dir = _outdir(path)
+        self.fmt = fmt
+        self.profiles = profiles or {}
+        self._stack = contextlib.ExitStack()
+        self.paths: dict[str, Path] = {}
+        for name in TABLES:
+            self.paths[name] = self._stack.enter_context(atomic_path(self.dir / f"{name}.{fmt}"))
+        self.sinks = {
+            "frames": Sink(self.paths["frames"], fmt, FRAMES, compression),
+            "signals": Sink(self.paths["signals"], fmt, SIGNALS, compression),
+            "events": Sink(self.paths["events"], fmt, EVENTS, compression),
+        }
+        self.compression = compression
+        # two writer threads: the frames table (most of the Parquet encoding, outside
+        # the GIL) runs beside the others, so neither queue holds the decoder back.
+        # One job waits per writer: the frames writer is the slowest stage, so a
+        # deeper queue is always full and only holds more batches (issue 10: depth 3
+        # peaked ~70 MB higher at 10M frames, at the same speed)
+        self.frames_writer = WriterThread(depth)
+        self.writer = WriterThread(depth)
+        self.offset = 0
+        self.rows: dict[str, int] = {}
+        # signals: series key -> (insertion index, units of its first block)
+        self._series: dict[tuple, tuple[int, dict]] = {}
+        self._labels = {"pdo": _Vocab(), "signal": _Vocab(), "unit": _Vocab(), "kind": _Vocab()}
+        self._signal_last: tuple | None = None
+        self._signals_unsorted = False
+        self._event_state = EventState()
+        self._event_last: tuple | None = None
+        self._events_unsorted = False
+        self._pending_events = EventColumns.empty()
+        self._channels: tuple[str, ...] = ()
+        self._nodes = NodeTally()
+        self._sdo_stats = {c: pl.ColumnStats() for c in SDO_COLUMNS}
+        self._sdo_spool = tempfile.TemporaryFile(dir=self.dir, prefix=".sdo-spool.")
+        self._sdo_chunks = 0
+        # (column decisions, schema, writer) of the sdo file written as chunks come; False: given up
+        self._sdo_spec: tuple | bool | None = None
+        self._findings: list[tuple] = []
+
+    def __enter__(self) -> StreamTables:
+        return self
+
+    def __exit__(self, typ, exc, tb) -> None:
+        if exc is not None:
+            self.abort(typ, exc, tb)
+
+    # --- per batch -----------------------------------------------------------------
+    def add(self, batch: DecodedBatch) -> None:
+        fb = batch.frames
+        n = len(fb)
+        off = self.offset
+        if n:
+            if len(fb.channels) > len(self._channels):
+                self._channels = tuple(fb.channels)
+            frames = self.sinks["frames"]
+            args = (fb, batch.service, batch.node, batch.pdo)
+            self.frames_writer.put(lambda: frames.add(_frames_columns(*args)))
+        if batch.signals:
+            self._add_signals(batch, off)
+        self._add_records(batch)
+        events, states = batch_event_columns(batch, off, self._event_state)
+        self._nodes.add(batch, states)
+        self._add_events(events, float(fb.t[-1]) - HOLD if n else float("-inf"))
+        self.offset += n
+
+    def _add_signals(self, batch: DecodedBatch, off: int) -> None:
+        t_all = batch.frames.t
+        # per part (one signal column of one block): its rows, values and five constants
+        v_parts: list[np.ndarray] = []
+        consts: dict[str, list[int]] = {k: [] for k in ("node", "cob", "pdo", "sig", "unit")}
+        keys: list[tuple] = []  # (node, pdo, cob, insertion) per part: the series order
+        col_of: list[int] = []
+        rows_of: list[np.ndarray] = []
+        for blk in batch.signals:
+            skey = (blk.node, blk.pdo, blk.cob_id, tuple(blk.columns))
+            got = self._series.get(skey)
+            if got is None:
+                got = self._series[skey] = (len(self._series), dict(blk.units))
+            ins, units = got
+            pdo_code = self._labels["pdo"].code(blk.pdo)
+            for j, (name, values) in enumerate(blk.columns.items()):
+                v_parts.append(values)
+                consts["node"].append(blk.node)
+                consts["cob"].append(blk.cob_id)
+                consts["pdo"].append(pdo_code)
+                consts["sig"].append(self._labels["signal"].code(name))
+                consts["unit"].append(self._labels["unit"].code(units.get(name) or ""))
+                keys.append((blk.node, blk.pdo, blk.cob_id, ins))
+                col_of.append(j)
+                rows_of.append(blk.rows)
+        if not keys:
+            return
+        labels = {k: self._labels[k].snapshot() for k in ("pdo", "signal", "unit")}
+        # what the job needs, not the batch: a queued job holding the DecodedBatch kept its
+        # frames and records alive too, ~10 MB a batch while this writer was behind
+        blocks = [(blk.rows, len(blk.columns)) for blk in batch.signals]
+
+        def columns() -> dict:
+            """Ordered and gathered on the writer thread: the numpy work there runs outside the GIL.
+
+            The writer runs batches in order, so the sortedness check against the
+            previous batch's last value is made there too (close() reads it after join).
+            """
+            sizes = [len(r) for r in rows_of]
+            row = np.concatenate(rows_of)
+            t = t_all[row]
+            order = _row_major_order(t_all, blocks, rows_of, col_of, len(t))
+            if order is None:
+                rank_of = {k: r for r, k in enumerate(sorted(set(keys)))}
+                rank = np.repeat(np.array([rank_of[k] for k in keys], np.int32), sizes)
+                col = np.repeat(np.array(col_of, np.int32), sizes)
+                order = np.lexsort((row, col, rank, t))
+            first, last = int(order[0]), int(order[-1])
+            part_of = np.repeat(np.arange(len(keys), dtype=np.int32), sizes)[order]
+            pf, pl_ = int(part_of[0]), int(part_of[-1])
+            head = (float(t[first]), *keys[pf], col_of[pf], int(row[first]) + off)
+            tail = (float(t[last]), *keys[pl_], col_of[pl_], int(row[last]) + off)
+            if self._signal_last is not None and head < self._signal_last:
+                self._signals_unsorted = True
+            self._signal_last = tail
+
+            def const(name: str, dtype) -> np.ndarray:
+                # a lookup in the parts' small table: one gather from cache, not a
+                # repeat over every value and a gather from it
+                return np.array(consts[name], dtype)[part_of]
+
+            values = np.concatenate([np.asarray(v, np.float64) for v in v_parts])
+            return {
+                "t": t[order],
+                "node": const("node", np.int16),
+                "pdo": Coded(const("pdo", np.int32), labels["pdo"]),
+                "cob_id": const("cob", np.uint32),
+                "signal": Coded(const("sig", np.int32), labels["signal"]),
+                "value": values[order],
+                "unit": Coded(const("unit", np.int32), labels["unit"]),
+            }
+
+        sink = self.sinks["signals"]
+        self.writer.put(lambda: sink.add(columns()))
+
+    def _add_events(self, events: EventColumns, horizon: float | None) -> None:
+        """Queue events; write those older than `horizon` (None: all) in (t, row) order.
+
+        Records can complete a batch or two after their time (an SDO answer that
+        ends a transfer begun earlier carries the earlier time), so the newest
+        HOLD seconds wait for the next batch rather than force a re-sort at the end.
+        Pending events stay columns: one lexsort, one searchsorted per batch.
+        """
+        pending = EventColumns.concat([self._pending_events, events])
+        n = len(pending)
+        if not n:
+            return
+        key = pending.sort_key()
+        t = pending.t
+        if np.isnan(t).any() or (horizon is not None and horizon != horizon):
+            order, cut = _event_sort_py(t.tolist(), key.tolist(), horizon)
+        else:
+            order = np.lexsort((np.arange(n), key, t))
+            cut = n if horizon is None else int(np.searchsorted(t[order], horizon, "left"))
+        pending = pending.take(order)
+        key = key[order]
+        if cut == 0:
+            self._pending_events = pending
+            return
+        events, self._pending_events = pending.take(slice(0, cut)), pending.take(slice(cut, n))
+        head = (float(events.t[0]), int(key[0]))
+        if self._event_last is not None and head < self._event_last:
+            self._events_unsorted = True
+        self._event_last = (float(events.t[-1]), int(key[cut - 1]))
+        vocab = self._labels["kind"]
+        present, first = np.unique(events.kind, return_index=True)
+        lut = np.zeros(len(KINDS), np.int32)
+        for k in present[np.argsort(first)].tolist():  # new labels in first-seen order
+            lut[k] = vocab.code(KINDS[k])
+        no_node = events.node == NO_NODE
+        no_row = events.row == NO_ROW
+        cols = {
+            "t": events.t,
+            "kind": Coded(lut[events.kind], vocab.snapshot()),
+            "node": ab.numeric(np.where(no_node, 0, events.node), no_node, pa.int16()),
+            "level": ab.dictionary(events.level - 1, _LEVELS, pa.int8()),
+            "message": ab.strings(events.message.tolist(), large=True),
+            "row": ab.numeric(np.where(no_row, 0, events.row), no_row, pa.int64()),
+        }
+        sink = self.sinks["events"]
+        self.writer.put(lambda: sink.add(cols))
+
+    def _add_records(self, batch: DecodedBatch) -> None:
+        """SDO rows and findings of a batch.
+
+        The fast path's records are taken as columns (`DecodedBatch.sdo_fast_split`),
+        the other records read one by one. Here only the column statistics are taken
+        in; merging by record slot, spooling and writing (`sdo_chunks`) are numpy
+        work for the writer thread.
+        """
+        records = batch.records
+        if not records:
+            return
+        split = batch.sdo_fast_split()
+        if split is None:
+            pairs: Iterable = enumerate(records)
+        else:
+            get = list.__getitem__
+            pairs = ((k, get(records, k)) for k in split[2])
+        sdo: list[tuple[int, dict]] = []
+        for k, (_, r) in pairs:
+            kind = r.get("kind")
+            if kind == "sdo":
+                sdo.append((k, r))
+            elif kind == "finding":
+                self._findings.append(tuple(r.get(c, _NAN) for c in FINDING_COLUMNS))
+        if not sdo and split is None:
+            return
+        pieces: dict = {}
+        order = None
+        if split is not None:
+            fields, fast, _ = split
+            keep = None
+            if fields.aborted:  # (rare) read as the dicts they are
+                gone = sorted(fields.aborted)
+                sdo.extend((int(fast.slots[j]), fields.aborted[j]) for j in gone)
+                keep = np.delete(np.arange(len(fast.slots)), gone)
+            pieces = sdo_chunks.fast_pieces(fields, keep)
+            if sdo:
+                slots = fast.slots if keep is None else fast.slots[keep]
+                at = np.concatenate((np.array([k for k, _ in sdo], np.int64), slots))
+                order = np.argsort(at, kind="stable")
+        rows = []
+        for _, r in sdo:  # one C call per record that has every column (nearly all)
+            try:
+                rows.append(_SDO_ROW(r))
+            except KeyError:
+                rows.append(tuple(r.get(c, _NAN) for c in SDO_COLUMNS))
+        mine = [list(c) for c in zip(*rows, strict=True)] or [[] for _ in SDO_COLUMNS]
+        for c, values in zip(SDO_COLUMNS, mine, strict=True):
+            sdo_chunks.take_in(self._sdo_stats[c], values, pieces.get(c))
+        self._sdo_chunks += 1
+        out = self._speculate_sdo()
+        spool = self._sdo_spool
+
+        def chunk() -> None:
+            """Spooled (as the pieces: smaller than the merged columns), merged and written
+            if the types hold, on the writer thread: numpy and Arrow work."""
+            pickle.dump((mine, pieces, order), spool, pickle.HIGHEST_PROTOCOL)
+            if out is not None:
+                decided, schema, writer = out
+                writer.add(_sdo_table(mine, pieces, order, decided, schema))
+
+        self.writer.put(chunk)
+
+    # --- the end -----------------------------------------------------------------------
+    def close(self) -> dict[str, int]:
+        """Write the small tables, wait for the writer, fix order/categories, rename all files."""
+        try:
+            self._add_events(EventColumns.empty(), None)
+            sdo_done = self._speculate_sdo() is not None  # the types are final now
+            if sdo_done:  # the last row group, on the writer thread too
+                self.writer.put(self._sdo_spec[2].close)
+                self._sdo_spec = False
+            for name, sink in self.sinks.items():
+                (self.frames_writer if name == "frames" else self.writer).put(sink.close)
+            self.frames_writer.join()
+            self.writer.join()
+            self._finish_signals()
+            self._finish_events()
+            self._finish_frames()
+            self.rows.update({name: s.rows for name, s in self.sinks.items()})
+            self.rows["sdo"] = self._write_sdo(sdo_done)
+            self.rows["findings"] = self._write_findings()
+            self.rows["nodes"] = self._write_nodes()
+        except BaseException as exc:
+            self.abort(type(exc), exc, exc.__traceback__)
+            raise
+        self._sdo_spool.close()
+        self._stack.close()
+        return {name: self.rows[name] for name in TABLES}
+
+    def abort(self, typ=None, exc=None, tb=None) -> None:
+        """Drop every temporary file (a cut-off export leaves no table behind)."""
+        for writer in (self.frames_writer, self.writer):
+            with contextlib.suppress(BaseException):
+                writer.join()
+        if self._sdo_spec:
+            with contextlib.suppress(BaseException):
+                self._sdo_spec[2].discard()
+            self._sdo_spec = False
+        self._sdo_spool.close()
+        self._stack.__exit__(typ or RuntimeError, exc or RuntimeError("aborted"), tb)
+
+    def _finish_frames(self) -> None:
+        final = list(self._channels) or ["can0"]
+        sink = self.sinks["frames"]
+        if sink.order.get("channel", final) != final or _type_changed(sink, "channel", final):
+            rewrite(sink, {"channel": final})
+
+    def _finish_signals(self) -> None:
+        sink = self.sinks["signals"]
+        final = {k: sorted(sink.order.get(k, [])) for k in ("pdo", "signal", "unit")}
+        if self._signals_unsorted:
+            rewrite(sink, final, self._signal_order)
+        elif any(sink.order.get(k, []) != v or _type_changed(sink, k, v) for k, v in final.items()):
+            rewrite(sink, final)
+
+    def _signal_order(self, table: pa.Table) -> np.ndarray:
+        """The Capture's order again, for a table whose batches overlap in time."""
+        rank: dict[tuple, tuple[int, int]] = {}
+        for (node, pdo, cob, names), (ins, _) in self._series.items():
+            for j, name in enumerate(names):
+                rank.setdefault((node, pdo, cob, name), (ins, j))
+        node = table.column("node").to_pylist()
+        pdo = table.column("pdo").to_pylist()
+        cob = table.column("cob_id").to_pylist()
+        sig = table.column("signal").to_pylist()
+        keys = sorted({(a, b, c, d) for a, b, c, d in zip(node, pdo, cob, sig, strict=True)})
+        series = sorted(keys, key=lambda k: (k[0], k[1], k[2], *rank.get(k, (0, 0))))
+        code_of = {k: i for i, k in enumerate(series)}
+        code = np.array([code_of[k] for k in zip(node, pdo, cob, sig, strict=True)], np.int64)
+        t = table.column("t").to_numpy()
+        return np.lexsort((np.arange(len(t)), code, t))
+
+    def _finish_events(self) -> None:
+        sink = self.sinks["events"]
+        final = {"kind": sorted(sink.order.get("kind", []))}
+        if self._events_unsorted:
+            rewrite(sink, final, _event_order)
+        elif sink.order.get("kind", []) != final["kind"] or _type_changed(
+            sink, "kind", final["kind"]
+        ):
+            rewrite(sink, final)
+
+    def _small_table(self, name: str, columns: list[tuple[str, pa.Array, str, str]], index=None):
+        meta = pl.schema_metadata([pl.field_meta(c, pt, nt) for c, _, pt, nt in columns], index)
+        table = pa.table({c: a for c, a, _, _ in columns}).replace_schema_metadata(meta)
+        self._write_small(name, [table], table.schema)
+        return table.num_rows
+
+    def _write_small(self, name: str, tables: Iterable[pa.Table], schema: pa.Schema) -> None:
+        """Chunks of a record table, in row groups of up to ROW_GROUP rows (as to_parquet)."""
+        out = _RecordWriter(self.paths[name], self.fmt, schema, self.compression)
+        try:
+            for table in tables:
+                out.add(table)
+        except BaseException:
+            out.discard()
+            raise
+        out.close()
+
+    def _sdo_decided(self) -> tuple[tuple[str, str, str], ...]:
+        return tuple(self._sdo_stats[c].decide(as_object=c == "value") for c in SDO_COLUMNS)
+
+    def _speculate_sdo(self) -> tuple | None:
+        """(decisions, schema, writer) to write the next chunk with now, or None.
+
+        pandas types a column over all of it, so a later chunk can change a type
+        (an abort code after none, a text among numbers): then the file written so
+        far is dropped and close() writes the table from the spool, as it would
+        have anyway. Mostly the first chunk settles the types, the chunks are
+        written on the writer thread as they come and close() has only the last
+        row group left.
+        """
+        if self._sdo_spec is False:
+            return None
+        decided = self._sdo_decided()
+        spec = self._sdo_spec
+        if spec is not None and spec[0] != decided:
+            self._sdo_spec = False
+            self.writer.put(spec[2].discard)
+            return None
+        if spec is None:
+            schema = _sdo_schema(decided)
+            out = _RecordWriter(self.paths["sdo"], self.fmt, schema, self.compression)
+            spec = self._sdo_spec = (decided, schema, out)
+        return spec
+
+    def _write_sdo(self, written: bool) -> int:
+        """The sdo table from the spool, unless every chunk was `written` as it came."""
+        rows = sum(s.rows for s in self._sdo_stats.values()) // len(SDO_COLUMNS)
+        if written:
+            return rows
+        decided = self._sdo_decided()
+        schema = _sdo_schema(decided)
+        self._sdo_spool.seek(0)
+
+        def tables():
+            for _ in range(self._sdo_chunks):
+                mine, pieces, order = pickle.load(self._sdo_spool)
+                yield _sdo_table(mine, pieces, order, decided, schema)
+
+        self._write_small("sdo", tables(), schema)
+        return rows
+
+    def _write_findings(self) -> int:
+        cols = list(zip(*self._findings, strict=True)) or [[] for _ in FINDING_COLUMNS]
+        out = []
+        for name, values in zip(FINDING_COLUMNS, cols, strict=True):
+            values = list(values)
+            conv = pl.nullable_int(values) if name in ("node", "cob_id") else pl.column(values)
+            out.append((name, *conv))
+        return self._small_table("findings", out)
+
+    def _write_nodes(self) -> int:
+        rows = self._nodes.rows(self.profiles)
+        names = list(rows[0]) if rows else ["node"]
+        others = [c for c in names if c != "node"]
+        # Parquet keeps the index last (to_parquet), CSV first (reset_index)
+        names = others + ["node"] if self.fmt == "parquet" else ["node", *others]
+        out = [(c, *pl.column([r[c] for r in rows])) for c in names]
+        return self._small_table("nodes", out, index="node" if self.fmt == "parquet" else None)
+
+
+def _sdo_table(mine: list, pieces: dict, order, decided: tuple, schema: pa.Schema) -> pa.Table:
+    """One chunk of the sdo table: each column merged by record slot and typed as decided."""
+    arrays = [
+        sdo_chunks.to_arrow(sdo_chunks.merge(v, pieces.get(c), order), d[0])
+        for c, v, d in zip(SDO_COLUMNS, mine, decided, strict=True)
+    ]
+    return pa.Table.from_arrays(arrays, schema=schema)
+
+
+def _sdo_schema(decided: tuple[tuple[str, str, str], ...]) -> pa.Schema:
+    return pa.schema(
+        [pa.field(c, pl.arrow_type(d[0])) for c, d in zip(SDO_COLUMNS, decided, strict=True)],
+        metadata=pl.schema_metadata(
+            [pl.field_meta(c, d[1], d[2]) for c, d in zip(SDO_COLUMNS, decided, strict=True)]
+        ),
+    )
+
+
+class _RecordWriter:
+    """A record table's file, chunk by chunk, in row groups of up to ROW_GROUP rows (as to_parquet)
+    or ROW_GROUP_BYTES, whichever comes first (the cut depends only on the chunks, so a
+    table written as it comes and one written again from the spool are the same file)."""
+
+    def __init__(self, path: Path, fmt: str, schema: pa.Schema, compression: str) -> None:
+        self.schema = schema
+        if fmt == "parquet":
+            import pyarrow.parquet as pq
+
+            self.writer = pq.ParquetWriter(path, schema, compression=compression)
+            self._write = lambda t: self.writer.write_table(t, row_group_size=ROW_GROUP)
+        else:
+            import pyarrow.csv as pacsv
+
+            self.writer = pacsv.CSVWriter(path, csv_schema(schema))
+            self._write = lambda t: self.writer.write_table(csv_table(t))
+        self.buf: list[pa.Table] = []
+        self.rows = 0
+        self.bytes = 0
+
+    def add(self, table: pa.Table) -> None:
+        self.buf.append(table)
+        self.rows += table.num_rows
+        self.bytes += table.nbytes
+        if self.rows >= ROW_GROUP or self.bytes >= ROW_GROUP_BYTES:
+            self._write(pa.concat_tables(self.buf))
+            self.buf, self.rows, self.bytes = [], 0, 0
+
+    def close(self) -> None:
+        try:
+            self._write(pa.concat_tables(self.buf) if self.buf else self.schema.empty_table())
+        finally:
+            self.writer.close()
+
+    def discard(self) -> None:
+        """Close without the last row group (the file is written again or dropped)."""
+        self.buf = []
+        self.writer.close()
+
+
+class _Vocab:
+    """Labels in first-seen order; codes index into it (a snapshot per chunk)."""
+
+    def __init__(self) -> None:
+        self.labels: list[str] = []
+        self.index: dict[str, int] = {}
+        self._snap: list[str] = []
+
+    def code(self, label: str) -> int:
+        i = self.index.get(label)
+        if i is None:
+            i = self.index[label] = len(self.labels)
+            self.labels.append(label)
+        return i
+
+    def snapshot(self) -> list[str]:
+        if len(self._snap) != len(self.labels):
+            self._snap = list(self.labels)
+        return self._snap
+
+
+def _type_changed(sink: Sink, column: str, final: list[str]) -> bool:
+    if sink.schema is None or sink.fmt != "parquet":
+        return False
+    return sink.schema.field(column).type.index_type != pl.code_type(len(final))
+
+
+def _event_sort_py(t: list, key: list, horizon: float | None) -> tuple[list[int], int]:
+    """The (t, row) order and cut as Python's sort and bisect give them (times with NaN)."""
+    order = sorted(range(len(t)), key=lambda i: (t[i], key[i]))
+    if horizon is None:
+        return order, len(t)
+    return order, bisect.bisect_left([t[i] for i in order], horizon)
+
+
+def _event_order(table: pa.Table) -> np.ndarray:
+    """Events by time, then frame row, ties in file order (the Capture's stable sort)."""
+    t = table.column("t").to_numpy()
+    row = table.column("row").to_numpy(zero_copy_only=False)
+    return np.lexsort((np.arange(len(t)), row, t))
+
+
+def _row_major_order(
+    t: np.ndarray,
+    blocks: list[tuple[np.ndarray, int]],
+    rows_of: list[np.ndarray],
+    col_of: list[int],
+    total: int,
+) -> np.ndarray | None:
+    """The signals' (t, series, column, row) order without a sort, when times allow it.
+
+    When the frames that carry signals have strictly increasing times and each
+    belongs to one PDO block, that order is simply frame by frame, each frame's
+    values in column order: positions follow from a running count. Otherwise
+    (equal or backward times, e.g. millisecond logs) None, and the caller sorts.
+    A four-key lexsort over every value was a tenth of the export's main thread.
+    `t`: the batch's frame times; `blocks`: (rows, column count) of each signal block.
+    """
+    n = len(t)
+    width = np.zeros(n, np.int64)
+    for rows, columns in blocks:
+        width[rows] = columns
+    carrying = np.flatnonzero(width)
+    if sum(len(rows) for rows, _ in blocks) != carrying.size:  # a frame in two blocks
+        return None
+    if carrying.size > 1 and not bool((np.diff(t[carrying]) > 0).all()):
+        return None
+    start = np.cumsum(width) - width
+    pos = np.concatenate([start[rows] + j for rows, j in zip(rows_of, col_of, strict=True)])
+    if pos.size != total:
+        return None
+    order = np.empty(total, np.int64)
+    order[pos] = np.arange(total)
+    return order

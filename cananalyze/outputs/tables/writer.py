@@ -1,0 +1,325 @@
+"""Table files written on the other core: Arrow chunks go through a bounded queue to a writer thread.
+
+pyarrow's Parquet and CSV writers release the GIL, so while the main thread
+decodes batch k+1 the writer thread builds and encodes batch k. The queue is
+bounded (`depth` chunks), so memory does not grow when the disk is slower than
+the decoder. Each table is written to its temporary file (`atomic.atomic_path`)
+in row groups of `ROW_GROUP` rows; `finish` renames them only when everything
+succeeded.
+
+Dictionary columns whose categories are known only at the end (signal names,
+event kinds) arrive as `Coded` (codes into a growing label list). The sink
+fixes the file's category order at its first row group (sorted, as
+`pd.Categorical` sorts them) and appends later labels; when the final order
+differs from what pandas would give, or rows must be re-sorted, `finish`
+rewrites the file from its own row groups.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+
+# Imported here, before any writer thread starts: since Arrow 21 importing
+# pyarrow.compute registers the compute kernels in the global registry, and doing
+# that on one writer thread while another's Parquet writer looks a kernel up fails
+# at random ("No function registered with name: unique").
+import pyarrow.compute  # noqa: F401
+
+from ...columns import arrow_build as ab
+from .pandas_like import code_type
+
+# Rows per row group: 256k (pyarrow's default is 1M) lets the writer start while the
+# decoder is still at the first quarter of a 1M-frame log, and bounds what waits in memory.
+ROW_GROUP = 1 << 18
+# ... and at most this many bytes wait for a row group. Wide, sparse tables (events,
+# SDO rows: 100-180 bytes a row, a few thousand rows a batch) would otherwise hold
+# tens of megabytes over dozens of batches before their first write, so a 10M-frame
+# log peaked 40-70 MB higher than a 5M one, which never filled a row group at all.
+# 4 MiB (25-40k event rows): at 16 MiB, turning a buffer into a row group (Arrow
+# table, then Parquet pages) was a 30-50 MB spike, and a long log met more of them
+# at moments the writer queues were full; at 4 MiB a 50M-frame export peaks ~100 MB
+# lower than at 16 MiB, for the same time.
+ROW_GROUP_BYTES = 4 << 20
+# Rows the Parquet encoders take per call (Arrow's default is 1024): 16k makes the
+# frames and signals tables 5 % quicker to encode, with the same pages and file.
+WRITE_BATCH = 1 << 14
+
+
+def nbytes(value) -> int:
+    """Bytes of one buffered column: a numpy array, an Arrow array or a `Coded`."""
+    if isinstance(value, Coded):
+        return value.codes.nbytes
+    return value.nbytes
+
+
+@dataclass
+class Coded:
+    """A dictionary column: codes into `labels` (a snapshot of a growing label list)."""
+
+    codes: np.ndarray
+    labels: list[str]
+
+
+@dataclass
+class TableSpec:
+    """A table's columns and their Arrow types; Coded columns get their index type at open."""
+
+    fields: list[tuple[str, pa.DataType | None]]  # None: a Coded column (dictionary of strings)
+    metadata: Callable[[dict[str, int]], dict[bytes, bytes]]  # categories per Coded column -> meta
+    sorted_labels: tuple[str, ...] = ()  # Coded columns whose categories pandas sorts
+    # Parquet dictionary encoding only where values repeat: trying it on times and
+    # payloads costs 25 % of the write and makes the file larger
+    dictionary: tuple[str, ...] | bool = True
+    # BYTE_STREAM_SPLIT for float columns whose bytes vary at the bottom (times): the
+    # frames table's `t` encodes in half the time and is a third smaller than PLAIN
+    split: tuple[str, ...] = ()
+
+    def parquet_options(self) -> dict:
+        """The ParquetWriter keywords of this table's column encodings."""
+        d = self.dictionary
+        return {
+            "use_dictionary": list(d) if d is not True else True,
+            "use_byte_stream_split": list(self.split) if self.split else False,
+            "write_batch_size": WRITE_BATCH,
+        }
+
+
+class Sink:
+    """One table file: buffered chunks, written as row groups (Parquet) or CSV lines."""
+
+    def __init__(self, path: Path, fmt: str, spec: TableSpec, compression: str) -> None:
+        self.path = path
+        self.fmt = fmt
+        self.spec = spec
+        self.compression = compression
+        self.buffer: list[dict] = []
+        self.buffered = 0
+        self.buffered_bytes = 0
+        self.rows = 0
+        self.writer = None
+        self.schema: pa.Schema | None = None
+        self.order: dict[str, list[str]] = {}  # Coded column -> categories in file order
+        self.pos: dict[str, dict[str, int]] = {}
+
+    def add(self, columns: dict) -> None:
+        n = len(next(iter(columns.values()))) if columns else 0
+        if n == 0:
+            return
+        self.buffer.append(columns)
+        self.buffered += n
+        self.buffered_bytes += sum(nbytes(v) for v in columns.values())
+        if self.buffered >= ROW_GROUP or self.buffered_bytes >= ROW_GROUP_BYTES:
+            self.flush()
+
+    def _extend_order(self) -> None:
+        for name, typ in self.spec.fields:
+            if typ is not None:
+                continue
+            order = self.order.setdefault(name, [])
+            pos = self.pos.setdefault(name, {})
+            new: dict[str, None] = {}
+            for cols in self.buffer:
+                for label in cols[name].labels:
+                    if label not in pos and label not in new:
+                        new[label] = None
+            labels = sorted(new) if name in self.spec.sorted_labels else list(new)
+            for label in labels:
+                pos[label] = len(order)
+                order.append(label)
+
+    def flush(self) -> None:
+        if not self.buffer and self.writer is not None:
+            return
+        self._extend_order()
+        if self.schema is None:
+            self.schema = self._schema()
+        batches = [self._batch(cols) for cols in self.buffer]
+        self.buffer, self.buffered, self.buffered_bytes = [], 0, 0
+        table = pa.Table.from_batches(batches, self.schema)
+        self._write(table)
+
+    def _schema(self) -> pa.Schema:
+        fields = []
+        for name, typ in self.spec.fields:
+            if typ is None:  # no categories at all: pandas' empty Categorical has null values
+                values = pa.string() if self.order[name] else pa.null()
+                typ = pa.dictionary(code_type(len(self.order[name])), values)
+            fields.append(pa.field(name, typ))
+        counts = {k: len(v) for k, v in self.order.items()}
+        return pa.schema(fields, metadata=self.spec.metadata(counts))
+
+    def _batch(self, cols: dict) -> pa.RecordBatch:
+        arrays = []
+        for f in self.schema:
+            value = cols[f.name]
+            if isinstance(value, Coded):
+                pos = self.pos[f.name]
+                remap = np.array([pos[label] for label in value.labels], np.int32)
+                idx = remap[value.codes] if remap.size else np.zeros(0, np.int32)
+                labels = ab.strings(self.order[f.name]) if self.order[f.name] else pa.nulls(0)
+                value = ab.dictionary(idx, labels, f.type.index_type)
+            elif not isinstance(value, (pa.Array, pa.ChunkedArray)):
+                value = ab.numeric(value, typ=f.type)
+            arrays.append(value)
+        return pa.RecordBatch.from_arrays(arrays, schema=self.schema)
+
+    def _write(self, table: pa.Table) -> None:
+        if self.writer is None:
+            self.writer = self._open(table.schema)
+        if self.fmt == "parquet":
+            self.writer.write_table(table, row_group_size=ROW_GROUP)
+        else:
+            self.writer.write_table(csv_table(table))
+        self.rows += table.num_rows
+
+    def _open(self, schema: pa.Schema):
+        if self.fmt == "parquet":
+            import pyarrow.parquet as pq
+
+            return pq.ParquetWriter(
+                self.path, schema, compression=self.compression, **self.spec.parquet_options()
+            )
+        import pyarrow.csv as pacsv
+
+        return pacsv.CSVWriter(self.path, csv_schema(schema))
+
+    def close(self) -> None:
+        self.flush()
+        if self.writer is None:  # no rows at all: the header / an empty table still
+            self._write(pa.Table.from_batches([], self.schema))
+        self.writer.close()
+
+
+def csv_schema(schema: pa.Schema) -> pa.Schema:
+    """CSV has no categories or null type: both become strings (as the Capture export does)."""
+    return pa.schema(
+        [
+            pa.field(f.name, pa.string())
+            if pa.types.is_dictionary(f.type) or pa.types.is_null(f.type)
+            else f
+            for f in schema
+        ]
+    )
+
+
+def csv_table(table: pa.Table) -> pa.Table:
+    target = csv_schema(table.schema)
+    cols = [
+        c.cast(f.type) if c.type != f.type else c
+        for c, f in zip(table.columns, target, strict=True)
+    ]
+    return pa.table(cols, schema=target)
+
+
+class WriterThread:
+    """Runs callables (chunk builders + sink writes) in order on one thread behind a bounded queue."""
+
+    def __init__(self, depth: int = 3) -> None:
+        self.queue: queue.Queue = queue.Queue(maxsize=depth)
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self._run, name="table-writer", daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        while True:
+            job = self.queue.get()
+            if job is None:
+                return
+            if self.error is not None:
+                continue  # drain: the main thread raises at its next put
+            try:
+                job()
+            except BaseException as exc:  # noqa: BLE001 - handed to the main thread
+                self.error = exc
+
+    def put(self, job: Callable[[], None]) -> None:
+        if self.error is not None:
+            raise self.error
+        self.queue.put(job)
+
+    def join(self) -> None:
+        """Wait for every job; raise the writer's error if one failed. Callable again
+        (close, then abort on the error it raised): a second end-of-queue would wait
+        forever for the finished thread to take it."""
+        if self.thread.is_alive():
+            self.queue.put(None)
+            self.thread.join()
+        if self.error is not None:
+            raise self.error
+
+
+def rewrite(
+    sink: Sink,
+    categories: dict[str, list[str]],
+    order: Callable[[pa.Table], np.ndarray] | None = None,
+) -> None:
+    """Rewrite a finished table file: rows put in `order` (whole table in memory, rare) and/or
+    dictionary columns re-coded to their final `categories` (row group by row group)."""
+    tmp = sink.path.with_name(sink.path.name + ".rw")
+    if sink.fmt == "csv":
+        if order is None:
+            return  # CSV holds labels, not codes: only the row order can be wrong
+        import pyarrow.csv as pacsv
+
+        schema = csv_schema(sink.schema)
+        table = pacsv.read_csv(
+            sink.path,
+            convert_options=pacsv.ConvertOptions(
+                column_types=schema,
+                strings_can_be_null=True,
+                quoted_strings_can_be_null=False,
+            ),
+        )
+        table = table.take(order(table))
+        pacsv.write_csv(csv_table(table), tmp)
+        tmp.replace(sink.path)
+        return
+    import pyarrow.parquet as pq
+
+    fields = []
+    for f in sink.schema:
+        if f.name in categories:
+            f = f.with_type(pa.dictionary(code_type(len(categories[f.name])), pa.string()))
+        fields.append(f)
+    counts = {k: len(v) for k, v in categories.items()}
+    schema = pa.schema(fields, metadata=sink.spec.metadata(counts))
+    source = pq.ParquetFile(sink.path)
+    if order is not None:
+        whole = source.read()
+        whole = whole.take(order(whole))
+        parts = whole.to_batches(max_chunksize=ROW_GROUP)
+    else:
+        parts = (source.read_row_group(i) for i in range(source.num_row_groups))
+    with pq.ParquetWriter(
+        tmp, schema, compression=sink.compression, **sink.spec.parquet_options()
+    ) as out:
+        for part in parts:
+            if isinstance(part, pa.RecordBatch):
+                part = pa.Table.from_batches([part])
+            cols = []
+            for f, col in zip(schema, part.columns, strict=True):
+                if f.name in categories:
+                    col = _recode(col, categories[f.name], f.type)
+                cols.append(col)
+            out.write_table(pa.table(cols, schema=schema), row_group_size=ROW_GROUP)
+    source.close()
+    tmp.replace(sink.path)
+
+
+def _recode(col: pa.ChunkedArray, labels: list[str], typ: pa.DataType) -> pa.ChunkedArray:
+    pos = {label: i for i, label in enumerate(labels)}
+    dictionary = ab.strings(labels)
+    chunks = []
+    for chunk in col.chunks:
+        remap = np.array([pos[v] for v in chunk.dictionary.to_pylist()], np.int64)
+        idx = chunk.indices.to_numpy(zero_copy_only=False).astype(np.int64)
+        new = remap[idx] if remap.size else idx
+        chunks.append(ab.dictionary(new, dictionary, typ.index_type))
+    return pa.chunked_array(chunks, typ)

@@ -1,0 +1,1 @@
+"""The `decode` text output: frame lines, record lines, signal lines."""

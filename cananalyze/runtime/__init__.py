@@ -1,0 +1,1 @@
+"""Run-time support: the optional compiled helper, allocator and GC policy."""
