@@ -24,8 +24,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import can  # noqa: E402
 
 from cananalyze.checks.build import build_checker  # noqa: E402
-from cananalyze.cli.pipeline import attach_checker, build_decoder  # noqa: E402
 from cananalyze.io.live import LiveSource  # noqa: E402
+from cananalyze.pipeline import Options, build_decoder  # noqa: E402
 
 
 def producer(channel: str, rate: float, seconds: float, sent: list[int]) -> None:
@@ -76,8 +76,8 @@ def main() -> int:
 
     rx = can.Bus(interface="virtual", channel="bench-live")
     source = LiveSource(rx, channel_name="vcan0")
-    decoder = build_decoder(argparse.Namespace(network=args.network, sdo_timeout=1.0))
-    checker = attach_checker(decoder, build_checker(args.check)) if args.check else None
+    checker = build_checker(args.check) if args.check else None
+    decoder = build_decoder(Options(network=args.network), checker)
     sent = [0]
     th = threading.Thread(target=producer, args=("bench-live", args.rate, args.seconds, sent))
     lat: list[np.ndarray] = []

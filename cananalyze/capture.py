@@ -9,7 +9,6 @@ import it (`cananalyze --help` stays fast, MCAP/rerun export skip 0.5 s of impor
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -23,10 +22,11 @@ from .events.build import (
     LEVEL_NAMES,
     Event,
     EventState,
-    batch_events,
+    batch_events_of,
 )
 from .frames import FrameBatch, concat
 from .network.node_tally import NodeTally
+from .outputs.sink import Sink
 from .protocol.services import SERVICE_NAMES, Service
 from .records import DecodedBatch
 from .runtime.gcpolicy import fewer_collections
@@ -70,9 +70,23 @@ class Capture:
     network: str = ""
     profiles: dict[int, tuple[str, str]] = field(default_factory=dict)  # node -> (profile, how)
     checker: Any = None  # the Checker that ran in the pipeline (load() attaches one)
+    options: Any = None  # the pipeline Options it was decoded with
 
     def __len__(self) -> int:
         return len(self.batch)
+
+    def __repr__(self) -> str:
+        t = self.batch.t
+        span = float(t[-1] - t[0]) if t.size else 0.0
+        nodes = np.unique(self.node[self.node >= 0]).tolist()
+        sdo = sum(1 for _, r in self.records if r.get("kind") == "sdo")
+        findings = len(self.checker.findings) if self.checker is not None else 0
+        shown = ", ".join(map(str, nodes[:12])) + (" ..." if len(nodes) > 12 else "")
+        return (
+            f"<Capture {Path(str(self.source)).name}: {len(self):,} frames over {span:.3f} s; "
+            f"nodes {shown or '-'}; {len(self.series)} PDO series, {sdo} SDO transfers, "
+            f"{len(self.event_list)} events, {findings} findings>"
+        )
 
     # --- tables -------------------------------------------------------------
     @cached_property
@@ -355,8 +369,8 @@ class Collector:
             self._blocks.setdefault(key, []).append((fb.t[blk.rows], blk.rows + off, blk))
         for row, rec in batch.records:
             self.records.append((row + off, rec))
-        events, states = batch_events(batch, off, self.event_state)
-        self.events.extend(Event(*e) for e in events)
+        cols, states = batch_events_of(batch, off, self.event_state)
+        self.events.extend(Event(*e) for e in cols.rows())
         self.states.extend(Event(*e) for e in states)
         self.offset += len(fb)
 
@@ -406,66 +420,79 @@ class Collector:
         )
 
 
-def _pipeline_args(
-    path: str, network, eds, device, strict: bool, fmt: str | None, sdo_timeout: float
-) -> argparse.Namespace:
-    """The options `build_decoder` reads from the command line, from keyword arguments."""
+class CaptureSink(Sink):
+    """`load()`'s sink: every batch kept as columns, one Capture at the end."""
 
-    def pairs(value) -> list[str] | None:
-        if value is None:
-            return None
-        if isinstance(value, dict):
-            return [f"{k}={v}" for k, v in value.items()]
-        if isinstance(value, (str, Path)):
-            return [str(value)]
-        return [str(v) for v in value]
+    needs_events = True
 
-    return argparse.Namespace(
-        log=path,
-        network=str(network) if network else None,
-        eds=pairs(eds),
-        device=pairs(device),
+    def open(self, run) -> None:
+        super().open(run)
+        self.collector = Collector(run.name)
+        self.capture: Capture | None = None
+
+    def write(self, batch: DecodedBatch) -> None:
+        self.collector.add(batch)
+
+    def close(self) -> None:
+        from .network.node_tally import node_profiles
+
+        run = self.run
+        self.capture = self.collector.capture(
+            run.problems, str(run.options.network or ""), node_profiles(run.network)
+        )
+        self.capture.checker = run.checker
+        self.capture.options = run.options
+
+
+def load_options(
+    network=None,
+    eds=None,
+    device=None,
+    strict: bool = False,
+    input_format: str | None = None,
+    sdo_timeout: float = 1.0,
+    rules=None,
+    **more,
+):
+    """Options from `load()`'s keyword arguments: devices and EDS files as {node: value}
+    or as the command line's ["NODE=VALUE", ...]."""
+    from .pipeline import Options
+
+    return Options(
+        network=network,
+        devices=_by_node(device, "device"),
+        eds=_by_node(eds, "eds"),
+        rules=rules,
+        checks=True,
         strict=strict,
-        input_format=fmt,
+        input_format=input_format,
         sdo_timeout=sdo_timeout,
+        **more,
     )
 
 
-def given_profiles(args: argparse.Namespace) -> dict[int, tuple[str, str]]:
-    """node -> (profile, "given") from --device / --eds (the nodes table's profile column)."""
-    profiles: dict[int, tuple[str, str]] = {}
-    for spec in getattr(args, "device", None) or []:
-        node, _, key = str(spec).partition("=")
-        if node.strip().isdigit():
-            profiles[int(node)] = (key, "given")
-    for spec in getattr(args, "eds", None) or []:
-        node, _, path = str(spec).partition("=")
-        if node.strip().isdigit():
-            profiles[int(node)] = (Path(path).name, "given")
-    return profiles
+def _by_node(value, what: str) -> dict:
+    from .errors import UsageError
 
-
-def run_pipeline(args: argparse.Namespace, progress=None, decoder=None) -> Capture:
-    """Read and decode the log named by `args` (CLI options) into a Capture.
-
-    progress(n) is called after each batch of n frames; decoder defaults to the
-    one the options describe (`cli.pipeline.build_decoder`).
-    """
-    from .cli.pipeline import build_decoder
-    from .io.prefetch import prefetch
-    from .io.source import open_log
-
-    source = open_log(args.log, strict=args.strict, fmt=getattr(args, "input_format", None))
-    decoder = decoder or build_decoder(args)
-    collector = Collector(str(args.log))
-    for fb in prefetch(source.batches()):  # read ahead on the other core
-        collector.add(decoder.decode(fb))
-        if progress:
-            progress(len(fb))
-    collector.add(decoder.finish())
-    network = getattr(args, "network", None) or ""
-    profiles = given_profiles(args)
-    return collector.capture(source.problems, str(network), profiles)
+    if value is None:
+        return {}
+    if isinstance(value, dict):
+        items = list(value.items())
+    else:
+        items = []
+        for entry in [value] if isinstance(value, (str, Path)) else value:
+            node, sep, rest = str(entry).partition("=")
+            if not sep:
+                raise UsageError(f"{what}: give {{node: value}} or 'NODE=VALUE' (got {entry!r})")
+            items.append((node, rest))
+    out = {}
+    for node, v in items:
+        try:
+            n = int(node, 0) if isinstance(node, str) else int(node)
+        except (TypeError, ValueError):
+            raise UsageError(f"{what}: node-IDs are 1..127 (got {node!r})") from None
+        out[n] = v
+    return out
 
 
 def load(
@@ -484,15 +511,15 @@ def load(
 
     eds / device map node-IDs to EDS/DCF files / built-in profile keys
     ({5: "dat7014"}), as `--eds 5=FILE` / `--device 5=KEY` do on the command line;
-    network and rules are the files `--network` and `check --rules` take.
+    network and rules are the files `--network` and `check --rules` take. The same
+    pipeline as `cananalyze check` and `export`: the same findings and tables.
     """
-    from .checks.build import attach_checker
-    from .cli.pipeline import build_decoder
+    from .pipeline import build_checker, build_decoder, open_source, run
 
-    args = _pipeline_args(str(path), network, eds, device, strict, input_format, sdo_timeout)
-    decoder = build_decoder(args)
-    checker = attach_checker(decoder, rules)
+    opts = load_options(network, eds, device, strict, input_format, sdo_timeout, rules)
+    checker = build_checker(opts)  # a bad rules file fails before the log is opened
+    source = open_source(path, opts)
+    sink = CaptureSink()
     with fewer_collections():
-        cap = run_pipeline(args, decoder=decoder)
-    cap.checker = checker
-    return cap
+        run(source, build_decoder(opts, checker), [sink], opts)
+    return sink.capture

@@ -1,8 +1,19 @@
-"""DecodedBatch: a FrameBatch plus what the decoder learned about each row.
+"""The record model: one DecodedBatch per batch, built once and read by every sink.
 
-Columns for what every frame has (service, node, PDO number); sparse dicts and
-lists for what only rare frames have (an SDO frame's role in its transfer, a
-transaction record completed at that frame). Outputs read only this.
+A DecodedBatch is a FrameBatch plus what the decoder learned about each row. Its
+parts, each built in one place:
+
+- frames: the FrameBatch and the classifier's columns (service, node, PDO number),
+  with sparse per-row `notes` (an SDO frame's role in its transfer, a PDO problem);
+- SDO transactions: `records` of kind "sdo", completed at a row (the SDO tracker and
+  its fast path, whose records stay columns until read: `sdo_fast`, `sdo_table()`);
+- signals: `signals`, one SignalBlock of columns per PDO and mapping (PdoDecoder);
+- findings: `findings` (checks.Finding), each also a record of kind "finding" in
+  `records` at its row, so that streamed outputs place it among the frames (Checker);
+- events: `events` and `states` (the event log and the NMT state changes, as
+  columns), built by the pipeline once for every sink that shows them.
+
+Outputs read only this; none decodes again.
 """
 
 from __future__ import annotations
@@ -98,11 +109,74 @@ class DecodedBatch:
     signals: list[SignalBlock] = field(default_factory=list)
     # Notes shared by many rows, kept columnar (e.g. one pdo_problem for every short PDO).
     row_notes: list[tuple[np.ndarray, dict]] = field(default_factory=list)
+    findings: list = field(default_factory=list)  # checks.Finding, found in this batch
+    events: object = None  # events.columns.EventColumns, built once by the pipeline
+    states: list = field(default_factory=list)  # NMT state changes (events.columns.Row)
     _lazy: tuple | None = field(default=None, repr=False, compare=False)
     _sdo_cache: tuple | None = field(default=None, repr=False, compare=False)
 
     def __len__(self) -> int:
         return len(self.frames)
+
+    def __repr__(self) -> str:
+        return (
+            f"DecodedBatch({len(self)} frames, {len(self.records)} records, "
+            f"{len(self.signals)} signal blocks, {len(self.findings)} findings)"
+        )
+
+    def select(self, mask: np.ndarray, keep_record) -> DecodedBatch:
+        """The rows of `mask`, and the records (and findings) `keep_record(rec)` passes.
+
+        What the user filtered (--node, --service, --from/--to) as a batch of its own,
+        so that every sink shows the same selection. A kept record whose row is not
+        kept goes after the batch's frames (row = len), where the text and JSONL
+        outputs always put records of rows they do not show. Events are built after
+        this, from what is kept.
+        """
+        mask = np.asarray(mask, bool)
+        rows = np.flatnonzero(mask)
+        n = rows.size
+        pos = np.full(len(self) + 1, n, np.int64)  # a record of a row not kept: at the end
+        pos[rows] = np.arange(n)
+        frames = self.frames.take(rows)
+        notes = {int(pos[r]): v for r, v in self.notes.items() if 0 <= r < len(self) and mask[r]}
+        records = [
+            (int(pos[row]) if 0 <= row < len(self) else n, rec)
+            for row, rec in self.records
+            if keep_record(rec)
+        ]
+        signals = []
+        for sb in self.signals:
+            keep = mask[sb.rows]
+            if keep.any():
+                signals.append(
+                    SignalBlock(
+                        pos[sb.rows[keep]],
+                        sb.node,
+                        sb.pdo,
+                        sb.cob_id,
+                        {k: v[keep] for k, v in sb.columns.items()},
+                        sb.units,
+                        sb.mapped_bytes,
+                    )
+                )
+        row_notes = []
+        for r, note in self.row_notes:
+            keep = mask[r]
+            if keep.any():
+                row_notes.append((pos[r[keep]], note))
+        findings = [f for f in self.findings if keep_record(f.record())]
+        return DecodedBatch(
+            frames,
+            self.service[rows],
+            self.node[rows],
+            self.pdo[rows],
+            notes,
+            records,
+            signals,
+            row_notes,
+            findings,
+        )
 
     def fields(self, i: int) -> dict:
         """All service fields of row i: stateless decode, then the stateful notes."""

@@ -3,23 +3,16 @@ one frame, offline reading feeds 64k. Same log, same frames, records and finding
 
 from __future__ import annotations
 
-import argparse
-
 import pytest
 from conftest import SAMPLES
 
-from cananalyze.checks.build import attach_checker
-from cananalyze.cli.pipeline import build_decoder
 from cananalyze.io.source import read_all
 from cananalyze.outputs.jsonl.rows import dumps, frame_record
+from cananalyze.pipeline import Options, build_decoder
 
 
 def _decode(name: str, size: int) -> list[str]:
-    args = argparse.Namespace(
-        sdo_timeout=1.0, network=str(SAMPLES / "network.toml"), device=None, eds=None
-    )
-    decoder = build_decoder(args)
-    attach_checker(decoder, SAMPLES / "rules.yaml")
+    decoder = build_decoder(Options(network=SAMPLES / "network.toml", rules=SAMPLES / "rules.yaml"))
     fb = read_all(SAMPLES / name)
     out = []
     for start in range(0, len(fb), size):

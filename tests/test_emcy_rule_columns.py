@@ -14,8 +14,8 @@ import pytest
 from cananalyze.checks.engine import Checker
 from cananalyze.checks.rule import Context, Rule, ms
 from cananalyze.checks.rules.emcy import EmcyRule
-from cananalyze.decoder import Decoder
 from cananalyze.frames import from_rows
+from cananalyze.pipeline import Decoder
 from cananalyze.protocol.services import Service
 from cananalyze.protocol.tables import emcy_class
 

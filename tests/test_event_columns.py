@@ -13,7 +13,6 @@ import pytest
 from conftest import SAMPLES, real_file
 from test_table_stream import DEVICES, _args, _batches
 
-from cananalyze.cli.pipeline import build_decoder
 from cananalyze.events.build import (
     ERROR,
     INFO,
@@ -27,7 +26,9 @@ from cananalyze.events.build import (
 )
 from cananalyze.events.columns import NO_NODE, NO_ROW, EventColumns, Row
 from cananalyze.frames import FLAG_RTR, FrameBatch
-from cananalyze.outputs.tables.stream import HOLD, StreamTables
+from cananalyze.outputs.tables.stream import HOLD
+from cananalyze.outputs.tables.stream import TableSink as StreamTables
+from cananalyze.pipeline import build_decoder
 from cananalyze.protocol.fields import annotation, frame_fields
 from cananalyze.protocol.services import Service
 from cananalyze.protocol.tables import NMT_STATES, emcy_class
@@ -272,6 +273,7 @@ def test_pending_events_sorted_and_cut_as_python_does(tmp_path, nan, back):
     horizons.append(None)
     expect, unsorted = _python_order(batches, horizons)
     st = StreamTables(tmp_path / "pq", "parquet")
+    st.open()
     sink = _Chunks()
     st.sinks["events"] = sink
     st.writer.put = lambda f: f()

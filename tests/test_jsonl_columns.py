@@ -12,11 +12,12 @@ import pytest
 from conftest import ROOT, SAMPLES, real_file
 from helpers.broken_disk import broken_text_stream
 
+from cananalyze.cli.common import options
 from cananalyze.cli.main import build_parser
-from cananalyze.cli.pipeline import build_decoder
 from cananalyze.io.source import open_log
 from cananalyze.outputs.jsonl import columns as jsonl_columns
 from cananalyze.outputs.jsonl.rows import JsonlWriter
+from cananalyze.pipeline import build_decoder
 from cananalyze.records import SignalBlock
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
@@ -24,7 +25,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 def _decode(argv: list[str], fb=None, step: int = 7000):
     args = build_parser().parse_args(["decode", *argv])
-    dec = build_decoder(args)
+    dec = build_decoder(options(args))
     if fb is None:
         out = [dec.decode(b) for b in open_log(args.log).batches()]
     else:

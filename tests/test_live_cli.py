@@ -4,7 +4,6 @@ against what was sent, also when the session is interrupted or the adapter vanis
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import re
@@ -18,9 +17,9 @@ import pytest
 from conftest import ROOT, SAMPLES
 from helpers.live_slcan import start_live
 
-from cananalyze.cli.pipeline import build_decoder
 from cananalyze.io.source import read_all
 from cananalyze.outputs.text.writer import TextWriter
+from cananalyze.pipeline import Options, build_decoder
 from cananalyze.sim.slcan_replay import SlcanAdapter, replay
 
 DEMO = SAMPLES / "demo.log"
@@ -70,7 +69,7 @@ def test_plain_decode_and_candump_record_match_what_was_sent(tmp_path):
     import io
 
     buf = io.StringIO()
-    dec = build_decoder(argparse.Namespace(sdo_timeout=1.0))  # as `cananalyze decode` builds it
+    dec = build_decoder(Options())  # as `cananalyze decode` builds it
     TextWriter(buf).write(dec.decode(read_all(DEMO)))
     TextWriter(buf).write(dec.finish())
     expected = [_frame_part(x) for x in buf.getvalue().splitlines() if "└─" not in x]

@@ -4,17 +4,14 @@ session's real frames, and findings when a Checker runs."""
 
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
 from conftest import SAMPLES
 from rich.console import Console
 
-from cananalyze.checks.build import attach_checker, build_checker
-from cananalyze.cli.pipeline import build_decoder
-from cananalyze.decoder import Decoder
+from cananalyze.checks.build import build_checker
 from cananalyze.io.source import read_all
 from cananalyze.outputs.dashboard import LiveView
+from cananalyze.pipeline import Decoder, Options, build_decoder
 
 
 def _cells(text: str) -> list[list[str]]:
@@ -35,7 +32,7 @@ def _render(view: LiveView, wall: float) -> str:
 def test_dashboard_shows_nodes_signals_and_events():
     frames = read_all(SAMPLES / "demo.log")
     # the pipeline as `live --device 3=mcb560` builds it; node 5 is left to SDO identification
-    dec = build_decoder(argparse.Namespace(sdo_timeout=1.0, device=["3=mcb560"]))
+    dec = build_decoder(Options(devices={3: "mcb560"}))
     view = LiveView(bitrate=500_000, devices={10: "guarded node"}, model=dec.network)
     t0 = float(frames.t[0])
     # feed the session in 50 ms slices, as the live source would, up to 1.25 s (EMCY active)
@@ -89,8 +86,8 @@ def test_findings_and_steady_columns(tmp_path):
     """A Checker on the live decoder: findings land in the event log with their level and
     in the header count; column positions do not move as values change between refreshes."""
     frames = read_all(SAMPLES / "faults.log")
-    dec = build_decoder(argparse.Namespace(sdo_timeout=1.0, network=str(SAMPLES / "network.toml")))
-    checker = attach_checker(dec, build_checker(SAMPLES / "rules.yaml"))
+    checker = build_checker(SAMPLES / "rules.yaml")
+    dec = build_decoder(Options(network=SAMPLES / "network.toml"), checker)
     view = LiveView(bitrate=500_000, model=dec.network, checking=True)
     t0 = float(frames.t[0])
     seps = set()

@@ -5,17 +5,16 @@ the scenario injects must be found live, as `check` finds them in the recorded s
 
 from __future__ import annotations
 
-import argparse
 import threading
 import time
 
 import can
 from conftest import SAMPLES
 
-from cananalyze.checks.build import attach_checker, build_checker
-from cananalyze.cli.pipeline import build_decoder
+from cananalyze.checks.build import build_checker
 from cananalyze.io.live import LiveSource
 from cananalyze.outputs.dashboard import LiveView
+from cananalyze.pipeline import Options, build_decoder
 from cananalyze.sim.network import load_network
 from cananalyze.sim.session import build
 
@@ -28,8 +27,8 @@ def test_simulated_faults_are_found_live():
     channel = f"cananalyze-live-sim-{time.monotonic_ns()}"
     sim_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
     source = LiveSource(can.Bus(interface="virtual", channel=channel), channel_name="vcan0")
-    dec = build_decoder(argparse.Namespace(sdo_timeout=1.0, network=str(NETWORK)))
-    checker = attach_checker(dec, build_checker(SAMPLES / "rules.yaml"))
+    checker = build_checker(SAMPLES / "rules.yaml")
+    dec = build_decoder(Options(network=NETWORK), checker)
     view = LiveView(bitrate=net.bitrate, model=dec.network, checking=True)
 
     def produce():

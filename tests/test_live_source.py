@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from conftest import SAMPLES
 
-from cananalyze.decoder import Decoder
 from cananalyze.frames import FLAG_TX, concat
 from cananalyze.io.live import HwFilter, LiveError, LiveSource, open_bus
 from cananalyze.io.logfile import to_messages
 from cananalyze.io.source import read_all
+from cananalyze.pipeline import Decoder
 from cananalyze.protocol.fields import annotation
 
 

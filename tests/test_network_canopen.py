@@ -8,12 +8,12 @@ import can
 import canopen
 import pytest
 
-from cananalyze.decoder import Decoder
 from cananalyze.frames import from_rows
 from cananalyze.network.model import NetworkModel
 from cananalyze.network.pdo_processor import PdoDecoder
 from cananalyze.network.profile import load_eds
 from cananalyze.network.spec import NetworkSpec, NodeSpec
+from cananalyze.pipeline import Decoder
 from cananalyze.sdo.processor import SdoProcessor
 from tests.conftest import real_file
 

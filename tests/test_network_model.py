@@ -6,7 +6,6 @@ import cantools
 import numpy as np
 import pytest
 
-from cananalyze.decoder import Decoder
 from cananalyze.errors import InputError
 from cananalyze.frames import from_rows
 from cananalyze.io.source import read_all
@@ -15,6 +14,7 @@ from cananalyze.network.netfile import load_network
 from cananalyze.network.pdo_processor import PdoDecoder
 from cananalyze.network.profile import load_builtin, load_eds
 from cananalyze.network.spec import NetworkSpec, NodeSpec
+from cananalyze.pipeline import Decoder
 from cananalyze.protocol.services import Service
 from cananalyze.sdo.processor import SdoProcessor
 from tests.conftest import real_file, seed_file

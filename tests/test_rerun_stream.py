@@ -150,7 +150,16 @@ def test_failed_export_leaves_no_file(tmp_path, monkeypatch):
 def test_cli_export_rrd_streams(tmp_path):
     log = SAMPLES / "faults.log"
     r = subprocess.run(
-        [sys.executable, "-m", "cananalyze", "export", str(log), "--rrd", str(tmp_path / "e.rrd")]
+        [
+            sys.executable,
+            "-m",
+            "cananalyze",
+            "export",
+            str(log),
+            "--no-check",
+            "--rrd",
+            str(tmp_path / "e.rrd"),
+        ]
         + ["--network", NETWORK, "--bitrate", "125000"],
         capture_output=True,
         text=True,

@@ -60,7 +60,7 @@ def test_atomic_path_keeps_compound_suffix_and_devices_are_written_directly(tmp_
 
 def test_decode_output_interrupted_leaves_no_file(tmp_path, monkeypatch, capsys):
     out = tmp_path / "decoded.txt"
-    from cananalyze.decoder import Decoder
+    from cananalyze.pipeline import Decoder
 
     real = Decoder.decode
     calls = []

@@ -2,19 +2,17 @@
 
 from __future__ import annotations
 
-import argparse
-
 import pytest
 from conftest import real_file
 
-from cananalyze.cli.pipeline import build_decoder
 from cananalyze.frames import from_rows
 from cananalyze.io.source import open_log
 from cananalyze.outputs.summary import Summary
+from cananalyze.pipeline import Options, build_decoder
 
 
 def _summary(batches) -> Summary:
-    decoder = build_decoder(argparse.Namespace(sdo_timeout=1.0))
+    decoder = build_decoder(Options())
     s = Summary()
     for fb in batches:
         s.add(decoder.decode(fb))

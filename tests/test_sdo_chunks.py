@@ -269,11 +269,10 @@ def test_sdo_written_as_chunks_come_is_the_file_written_at_close(
     (faults.log in 50-frame batches: an abort code after none) it is dropped and written at close.
     """
     from conftest import SAMPLES
-    from test_table_stream import _args, _batches
+    from test_table_stream import _args, _batches, given_profiles
 
-    from cananalyze.capture import given_profiles
     from cananalyze.outputs.tables import stream as table_stream
-    from cananalyze.outputs.tables.stream import StreamTables
+    from cananalyze.outputs.tables.stream import TableSink as StreamTables
 
     if cut == "rows":
         monkeypatch.setattr(table_stream, "ROW_GROUP", 8)
@@ -286,7 +285,7 @@ def test_sdo_written_as_chunks_come_is_the_file_written_at_close(
             if not speculate:
                 st._sdo_spec = False
             for batch in _batches(log, size, **kw):
-                st.add(batch)
+                st.write(batch)
             if speculate:
                 spec = st._sdo_spec
             st.close()
@@ -355,7 +354,7 @@ def test_tracker_only_chunks_of_every_kind_as_capture(tmp_path, fmt):
 
     from cananalyze.capture import Collector
     from cananalyze.errors import ProblemLog
-    from cananalyze.outputs.tables.stream import StreamTables
+    from cananalyze.outputs.tables.stream import TableSink as StreamTables
     from cananalyze.outputs.tables.whole import write_csv, write_parquet
 
     gone = _sdo()
@@ -378,7 +377,7 @@ def test_tracker_only_chunks_of_every_kind_as_capture(tmp_path, fmt):
     (write_parquet if fmt == "parquet" else write_csv)(cap, tmp_path / "ref")
     with StreamTables(tmp_path / "new", fmt) as st:
         for batch in batches():
-            st.add(batch)
+            st.write(batch)
         st.close()
     assert_same_tables(tmp_path / "ref", tmp_path / "new", fmt)
 

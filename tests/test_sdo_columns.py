@@ -10,7 +10,6 @@ configuration history and every record must be the same.
 
 from __future__ import annotations
 
-import argparse
 import pickle
 import sys
 from pathlib import Path
@@ -19,11 +18,11 @@ import numpy as np
 import pytest
 from conftest import ROOT, SAMPLES, real_file
 
-from cananalyze.checks.build import attach_checker, build_checker
-from cananalyze.cli.pipeline import build_decoder
+from cananalyze.checks.build import build_checker
 from cananalyze.frames import FrameBatch
 from cananalyze.io.source import read_all
 from cananalyze.outputs.summary import Summary, device_lines
+from cananalyze.pipeline import Options, build_decoder
 from cananalyze.sdo.lazyrecords import LazyRecords
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
@@ -32,16 +31,10 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 def _check(
     fb: FrameBatch, fast: bool, step: int, devices: int = 0, network=None, rules=None
 ) -> dict:
-    args = argparse.Namespace(
-        sdo_timeout=1.0,
-        network=network,
-        device=[f"{k}=dat7014" for k in range(1, devices + 1)] or None,
-        eds=None,
-    )
-    decoder = build_decoder(args)
-    decoder.processors[0].fast = fast
     checker = build_checker(rules)
-    attach_checker(decoder, checker)
+    opts = Options(network=network, devices={k: "dat7014" for k in range(1, devices + 1)})
+    decoder = build_decoder(opts, checker)
+    decoder.processors[0].fast = fast
     summary = Summary()
     tables = []
     records = []

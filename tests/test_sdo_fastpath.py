@@ -16,9 +16,9 @@ from conftest import ROOT, SAMPLES, real_file
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from cananalyze.decoder import Decoder
 from cananalyze.frames import FrameBatch, concat, from_rows
 from cananalyze.io.source import open_log
+from cananalyze.pipeline import Decoder
 from cananalyze.sdo.processor import SdoProcessor
 from cananalyze.sdo.tracker import SdoTracker
 

@@ -8,11 +8,11 @@ from pathlib import Path
 
 import pytest
 from conftest import SAMPLES, generated_log, real_file
-from test_table_stream import DEVICES, _args, _batches, assert_same_tables
+from test_table_stream import DEVICES, _args, _batches, assert_same_tables, given_profiles
 
-from cananalyze.capture import given_profiles
 from cananalyze.events.build import EventState, batch_events
-from cananalyze.outputs.tables.stream import SDO_COLUMNS, StreamTables
+from cananalyze.outputs.tables.stream import SDO_COLUMNS
+from cananalyze.outputs.tables.stream import TableSink as StreamTables
 from cananalyze.sdo.fastpath import RECORD_COLUMNS
 
 
@@ -63,7 +63,7 @@ def test_sdo_table_same_from_columns_and_dicts(tmp_path, which):
     for name, convert in (("cols", lambda b: b), ("dicts", _as_dicts)):
         with StreamTables(tmp_path / name, profiles=given_profiles(_args(log, **kw))) as st:
             for batch in _batches(log, 997, **kw):
-                st.add(convert(batch))
+                st.write(convert(batch))
             st.close()
     assert_same_tables(tmp_path / "cols", tmp_path / "dicts")
 

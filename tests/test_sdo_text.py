@@ -10,7 +10,6 @@ hold other records too.
 
 from __future__ import annotations
 
-import argparse
 import io
 from pathlib import Path
 
@@ -18,13 +17,13 @@ import numpy as np
 import pytest
 from conftest import SAMPLES, real_file
 
-from cananalyze.cli.pipeline import build_decoder
 from cananalyze.columns import bytecols
 from cananalyze.io.source import read_all
 from cananalyze.outputs.text import writer as text_module
 from cananalyze.outputs.text.records import format_record
 from cananalyze.outputs.text.sdo import fast_pairs, pair_text
 from cananalyze.outputs.text.writer import TextWriter
+from cananalyze.pipeline import Options, build_decoder
 from cananalyze.sdo.fastpath import pair_notes
 
 # (request, answer) payloads on node 1 (a DAT 7014) unless the id says otherwise
@@ -58,16 +57,8 @@ def _log(tmp_path: Path, pairs, back: bool = False) -> Path:
 
 
 def _batch(log: Path, *devices: str):
-    args = argparse.Namespace(
-        log=str(log),
-        network=None,
-        eds=None,
-        device=list(devices) or None,
-        strict=False,
-        input_format=None,
-        sdo_timeout=1.0,
-    )
-    return build_decoder(args).decode(read_all(log))
+    pairs = (d.split("=") for d in devices)
+    return build_decoder(Options(devices={int(n): k for n, k in pairs})).decode(read_all(log))
 
 
 def _assert_pair_texts(batch) -> int:

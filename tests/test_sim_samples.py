@@ -2,16 +2,14 @@
 
 from __future__ import annotations
 
-import argparse
 import struct
 
 import numpy as np
 import pytest
 from conftest import SAMPLES
 
-from cananalyze.cli.pipeline import build_decoder
-from cananalyze.decoder import Decoder
 from cananalyze.io.source import read_all
+from cananalyze.pipeline import Decoder, Options, build_decoder
 from cananalyze.protocol.services import Service
 from cananalyze.sdo.processor import SdoProcessor
 from cananalyze.sdo.tracker import SdoTracker
@@ -139,8 +137,7 @@ def test_faults_sample(suffix):
 def test_faults_signals_with_the_network_model():
     """Decoded as `decode --network samples/network.toml` does: the model follows the
     DAT 7014 remap, so TPDO2 carries ch1 and ch3 in degC, and ch3 leaves the Pt100 range."""
-    args = argparse.Namespace(network=str(SAMPLES / "network.toml"), sdo_timeout=1.0)
-    dec = build_decoder(args)
+    dec = build_decoder(Options(network=SAMPLES / "network.toml"))
     out = dec.decode(read_all(SAMPLES / "faults.log"))
     blocks = [b for b in out.signals if b.node == 5 and b.pdo == "tpdo2"]
     assert blocks and all(set(b.columns) == {"ch1", "ch3"} for b in blocks)

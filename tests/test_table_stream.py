@@ -4,7 +4,6 @@ whatever the batch size, with a bounded number of chunks waiting for the writer.
 
 from __future__ import annotations
 
-import argparse
 import itertools
 import json
 import subprocess
@@ -19,28 +18,25 @@ import pyarrow.parquet as pq
 import pytest
 from conftest import ROOT, SAMPLES, generated_log, real_file
 
-from cananalyze.capture import Collector, given_profiles
-from cananalyze.cli.pipeline import build_decoder
+from cananalyze.capture import Collector
 from cananalyze.errors import ProblemLog
 from cananalyze.io.source import read_all
 from cananalyze.outputs.tables import writer as table_sink
 from cananalyze.outputs.tables.pandas_like import MISSING, column
-from cananalyze.outputs.tables.stream import StreamTables
+from cananalyze.outputs.tables.stream import TableSink as StreamTables
 from cananalyze.outputs.tables.whole import TABLES, _plain_columns, write_csv, write_parquet
+from cananalyze.pipeline import Options, build_decoder
 
 DEVICES = {k: "dat7014" for k in range(1, 17)}
 
 
-def _args(log: Path, **kw) -> argparse.Namespace:
-    return argparse.Namespace(
-        log=str(log),
-        network=kw.get("network"),
-        eds=None,
-        device=[f"{k}={v}" for k, v in (kw.get("device") or {}).items()] or None,
-        strict=False,
-        input_format=None,
-        sdo_timeout=1.0,
-    )
+def _args(log: Path, **kw) -> Options:
+    return Options(network=kw.get("network"), devices=kw.get("device") or {})
+
+
+def given_profiles(opts: Options) -> dict[int, tuple[str, str]]:
+    """What the nodes table says of the nodes the test declares (no network model here)."""
+    return {n: (k, "user --device") for n, k in opts.devices.items()}
 
 
 def _batches(log: Path, size: int | None, **kw):
@@ -57,7 +53,7 @@ def _batches(log: Path, size: int | None, **kw):
 def _stream(log: Path, out: Path, fmt: str = "parquet", size: int | None = None, **kw) -> None:
     with StreamTables(out, fmt, profiles=given_profiles(_args(log, **kw))) as st:
         for batch in _batches(log, size, **kw):
-            st.add(batch)
+            st.write(batch)
         st.close()
 
 
@@ -213,12 +209,10 @@ def test_cut_off_export_leaves_no_table(tmp_path):
         pass
 
     out = tmp_path / "cut"
-    decoder = build_decoder(
-        argparse.Namespace(network=None, eds=None, device=None, sdo_timeout=1.0)
-    )
+    decoder = build_decoder(Options())
     fb = read_all(SAMPLES / "faults.log")
     with pytest.raises(Boom), StreamTables(out) as st:
-        st.add(decoder.decode(fb.take(slice(0, 50))))
+        st.write(decoder.decode(fb.take(slice(0, 50))))
         raise Boom
     assert list(out.iterdir()) == []
 
@@ -256,6 +250,7 @@ def test_cli_streams_and_matches(tmp_path):
             "cananalyze",
             "export",
             str(log),
+            "--no-check",
             "--parquet",
             str(tmp_path / "new"),
             "-q",

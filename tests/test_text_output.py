@@ -6,7 +6,6 @@ written both ways, with and without colour and with several filters.
 
 from __future__ import annotations
 
-import argparse
 import io
 import sys
 from pathlib import Path
@@ -16,10 +15,10 @@ import pytest
 from conftest import ROOT, SAMPLES, real_file
 from helpers.broken_disk import broken_text_stream
 
-from cananalyze.cli.pipeline import build_decoder
 from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR, FLAG_TX, FrameBatch, from_rows
 from cananalyze.io.source import open_log
 from cananalyze.outputs.text.writer import TextWriter, lines_per_row
+from cananalyze.pipeline import Options, build_decoder
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
@@ -59,7 +58,7 @@ def _check(batches, color: bool) -> int:
 
 
 def _decode(path: Path, batch_size: int | None = None):
-    dec = build_decoder(argparse.Namespace())
+    dec = build_decoder(Options())
     src = open_log(path)
     out = [dec.decode(fb) for fb in src.batches()]
     out.append(dec.finish())
@@ -91,7 +90,7 @@ def test_benchmark_mix() -> None:
     from generate import generate
 
     fb = generate(20_000)
-    dec = build_decoder(argparse.Namespace())
+    dec = build_decoder(Options())
     batches = [dec.decode(fb.take(slice(s, s + 7000))) for s in range(0, len(fb), 7000)]
     assert _check(batches + [dec.finish()], color=False) > 20_000
 
@@ -119,14 +118,14 @@ def _odd_batch() -> FrameBatch:
 
 @pytest.mark.parametrize("color", [False, True])
 def test_odd_rows(color: bool) -> None:
-    dec = build_decoder(argparse.Namespace())
+    dec = build_decoder(Options())
     b = dec.decode(_odd_batch())
     assert _check([b], color) > 10
 
 
 def test_fd_long_payload_falls_back() -> None:
     fb = from_rows([(1.0, 0x181, bytes(range(12)), 0x08), (1.1, 0x080, b"\x01")])
-    dec = build_decoder(argparse.Namespace())
+    dec = build_decoder(Options())
     assert _check([dec.decode(fb)], color=False) > 1
 
 
@@ -145,10 +144,11 @@ def test_writes_to_a_real_file(tmp_path: Path) -> None:
 
 
 def _decode_cli(argv: list[str]):
+    from cananalyze.cli.common import options
     from cananalyze.cli.main import build_parser
 
     args = build_parser().parse_args(["decode", *argv])
-    dec = build_decoder(args)
+    dec = build_decoder(options(args))
     out = [dec.decode(fb) for fb in open_log(args.log).batches()]
     out.append(dec.finish())
     return out
@@ -182,10 +182,11 @@ def test_benchmark_mix_with_devices() -> None:
 
 
 def _decode_cli_batch(fb, argv: list[str], step: int = 9000):
+    from cananalyze.cli.common import options
     from cananalyze.cli.main import build_parser
 
     args = build_parser().parse_args(["decode", "x.log", *argv])
-    dec = build_decoder(args)
+    dec = build_decoder(options(args))
     out = [dec.decode(fb.take(slice(s, s + step))) for s in range(0, len(fb), step)]
     out.append(dec.finish())
     return out
@@ -209,7 +210,7 @@ def test_emcy_rows() -> None:
         )
     ]
     rows += [(2.0, 0x082, b"\x10"), (2.1, 0x083, b"")]  # malformed: per row
-    dec = build_decoder(argparse.Namespace())
+    dec = build_decoder(Options())
     assert _check([dec.decode(from_rows(rows)), dec.finish()], color=False) >= 10
 
 

@@ -392,6 +392,7 @@ def test_cli_export_all_outputs(tmp_path, capsys):
         [
             "export",
             str(DEMO),
+            "--no-check",
             "--mcap",
             str(tmp_path / "a.mcap"),
             "--rrd",

@@ -66,6 +66,7 @@ class Checker:
         for f in new:
             f.t_rel = f.t - (self.t0 if self.t0 is not None else f.t)
             batch.add_record(0 if at_end else f.row, f.record())
+        batch.findings.extend(new)
         self.findings.extend(new)
 
     @property

@@ -7,8 +7,13 @@ import contextlib
 import sys
 
 from ..errors import UsageError
-from .common import add_input_options, report_problems
-from .timeline import Timelines, add_timeline_options
+from .common import (
+    add_filter_options,
+    add_input_options,
+    add_time_option,
+    options,
+    report_problems,
+)
 
 # Readers, numpy and the decoder are imported in run(): `cananalyze --help` builds
 # every sub-command's parser and must stay fast.
@@ -23,22 +28,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_input_options(p)
     p.add_argument("--format", choices=["text", "jsonl"], default="text", help="output format")
     p.add_argument("--no-color", action="store_true", help="no ANSI colours even on a terminal")
-    p.add_argument("--node", metavar="N[,N]", help="only frames of these node-IDs")
-    p.add_argument(
-        "--service",
-        metavar="S[,S]",
-        help="only these services (nmt, sync, time, emcy, tpdo, rpdo, pdo, sdo, heartbeat, ...)",
-    )
-    p.add_argument(
-        "--from",
-        dest="t_from",
-        type=float,
-        metavar="S",
-        help="start, seconds after the first frame",
-    )
-    p.add_argument(
-        "--to", dest="t_to", type=float, metavar="S", help="end, seconds after the first frame"
-    )
+    add_filter_options(p)
+    add_time_option(p)
     p.add_argument("--summary", action="store_true", help="print only the summary")
     p.add_argument("--sdo", action="store_true", help="print only the SDO transaction table")
     p.add_argument(
@@ -60,65 +51,29 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--bitrate", type=int, metavar="BIT/S", help="bus bitrate, for the bus load in --summary"
     )
     p.add_argument("-o", "--output", metavar="FILE", help="write to FILE instead of stdout")
-    add_timeline_options(p)
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--mcap", metavar="FILE", help="also write an MCAP file for Foxglove")
+    p.add_argument(
+        "--rerun", action="store_true", help="also show the log in a spawned Rerun viewer"
+    )
+    p.add_argument(
+        "--connect",
+        metavar="ADDR",
+        help="also stream to a running Rerun viewer (host:port or rerun+http:// URL)",
+    )
     p.set_defaults(func=run)
 
 
-def _node_set(text: str | None):
-    import numpy as np
-
-    if not text:
-        return None
-    try:
-        nodes = [int(x, 0) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise UsageError(f"--node takes node-IDs like 5 or 5,6 (got {text!r})") from None
-    return np.array(nodes, np.int16)
-
-
-_RECORD_SERVICES = {"sdo": {"sdo_request", "sdo_response"}, "signal": {"tpdo", "rpdo"}}
-
-
-def _record_passes(rec: dict, args: argparse.Namespace, nodes, services, t0: float) -> bool:
-    """Records obey the same filters as frames (findings pass the service filter)."""
-    if nodes is not None and rec.get("node") not in set(nodes.tolist()):
-        return False
-    wanted = _RECORD_SERVICES.get(rec.get("kind"))
-    if services is not None and wanted is not None and not wanted & {s.label for s in services}:
-        return False
-    t = rec.get("t")
-    if t is not None and args.t_from is not None and t - t0 < args.t_from:
-        return False
-    return not (t is not None and args.t_to is not None and t - t0 > args.t_to)
-
-
 def run(args: argparse.Namespace) -> int:
-    from ..io.source import open_log
-    from ..protocol.services import parse_services
-    from .pipeline import build_decoder
+    from ..pipeline import build_checker, build_decoder, open_source
+    from .common import run_with_progress
 
-    try:
-        services = parse_services(args.service) if args.service else None
-    except ValueError as exc:
-        raise UsageError(f"--service: {exc}") from None
-    nodes = _node_set(args.node)
-    checker = None
-    if args.check or args.rules:
-        from ..checks.build import build_checker
-
-        checker = build_checker(args.rules)  # a bad rules file fails before the log is read
-    source = open_log(args.log, strict=args.strict, fmt=args.input_format)
-    decoder = build_decoder(args)
-    timing = None
-    if checker is not None:
-        from ..checks.build import attach_checker
-
-        timing = attach_checker(decoder, checker)  # its timing analysis serves --summary too
-    elif args.summary:
-        from ..checks.engine import Checker
-
-        timing = Checker(rules=[])  # timing analysis only: columnar, cheap
-        decoder.processors.append(timing)
+    if args.rerun and args.connect:
+        raise UsageError("--rerun spawns a viewer, --connect uses a running one: give one of them")
+    opts = options(args, checks=bool(args.check), timing=bool(args.summary))
+    checker = build_checker(opts) if opts.checking or opts.timing else None
+    source = open_source(args.log, opts)  # a bad rules file has failed already
+    decoder = build_decoder(opts, checker)
     from ..outputs.atomic import atomic_write
 
     with contextlib.ExitStack() as stack:
@@ -131,100 +86,50 @@ def run(args: argparse.Namespace) -> int:
                 raise UsageError(
                     f"-o {args.output}: cannot write there: {exc.strerror or exc}"
                 ) from None
-        timelines = stack.enter_context(Timelines(args))
-        _decode_to(out, args, source, decoder, timing, services, nodes, timelines)
+        sinks = [_main_sink(args, out), *_timeline_sinks(args)]
+        quiet = args.quiet or not (args.output or not sys.stdout.isatty())
+        try:
+            run_with_progress(source, decoder, sinks, opts, quiet=quiet)
+        finally:
+            out.flush()
+            if not args.strict:  # strict: the InputError names the first problem, in one line
+                report_problems(source.problems)
     return 0
 
 
-def _decode_to(
-    out, args: argparse.Namespace, source, decoder, timing, services, nodes, timelines
-) -> None:
-    import numpy as np
+def _main_sink(args: argparse.Namespace, out):
+    """What decode prints: the summary, the SDO table, the signals, or every frame."""
+    if args.summary:
+        from ..outputs.summary import SummarySink
 
-    from ..io.prefetch import prefetch
-    from ..outputs.summary import Summary
-
-    summary = Summary()
-    only_records = args.sdo
+        return SummarySink(out, args.format)
     if args.signals:
         from ..outputs.text.signals import SignalWriter
 
-        writer = SignalWriter(out, args.format)
-    elif args.format == "jsonl":
+        return SignalWriter(out, args.format)
+    if args.format == "jsonl":
         from ..outputs.jsonl.rows import JsonlWriter
 
         # in the caller's thread: a worker gained ~1 s of 16 at 10M frames for 100-200 MB
         # more peak (JSONL batches are wider than text ones)
-        writer = JsonlWriter(out, frames=not only_records)
-    else:
-        from ..outputs.text.writer import TextWriter
+        return JsonlWriter(out, frames=not args.sdo)
+    from ..outputs.colour import use_colour
+    from ..outputs.text.writer import TextWriter
 
-        color = out.isatty() and not args.no_color
-        # finished lines are written by a thread while the next batch decodes
-        writer = TextWriter(
-            out, color=color, only_records=only_records, background=not args.summary
-        )
-    t0 = None
-    svc_codes = np.array(sorted(services), np.uint8) if services else None
-    batches = prefetch(source.batches())
-    try:
-        for fb in batches:
-            batch = decoder.decode(fb)
-            if t0 is None and len(fb):
-                t0 = float(fb.t[0])
-            summary.add(batch)
-            if timelines:
-                timelines.add(batch)
-            if args.summary:
-                continue
-            mask = None
-            if (
-                nodes is not None
-                or svc_codes is not None
-                or args.t_from is not None
-                or args.t_to is not None
-            ):
-                mask = np.ones(len(fb), bool)
-                if nodes is not None:
-                    mask &= np.isin(batch.node, nodes)
-                if svc_codes is not None:
-                    mask &= np.isin(batch.service, svc_codes)
-                if args.t_from is not None:
-                    mask &= fb.t - t0 >= args.t_from
-                if args.t_to is not None:
-                    mask &= fb.t - t0 <= args.t_to
-            if mask is not None:
-                batch.records = [
-                    (row, rec)
-                    for row, rec in batch.records
-                    if _record_passes(rec, args, nodes, services, t0)
-                ]
-            writer.write(batch, mask)
-        tail = decoder.finish()
-        summary.add(tail)
-        if timelines:
-            timelines.add(tail)
-        if not args.summary:
-            writer.write(tail)
-        close = getattr(writer, "close", None)
-        if close is not None:
-            close()  # the text writer's thread: done, its error raised here
-    finally:
-        close = getattr(writer, "close", None)
-        if close is not None:
-            with contextlib.suppress(Exception):  # already failing: the first error wins
-                close()
-        batches.close()  # stops the reader thread before its problems are reported
-        out.flush()
-        if not args.strict:  # strict: the InputError already names the first problem, in one line
-            report_problems(source.problems)
-    if args.summary:
-        # --bitrate wins; else the network file's `bitrate`
-        bitrate = args.bitrate or decoder.network.spec.bitrate
-        print("\n".join(summary.lines(bitrate, source.problems.count)), file=out)
-        from ..outputs.summary import device_lines
+    # finished lines are written by a thread while the next batch decodes
+    return TextWriter(
+        out, color=use_colour(out, args.no_color), only_records=args.sdo, background=True
+    )
 
-        print("\n".join(device_lines(decoder.network, summary)), file=out)
-        print("\n".join(timing.timing.lines(timing.nmt, timing.t0)), file=out)
-    if timelines:
-        timelines.finish(source.problems)
+
+def _timeline_sinks(args: argparse.Namespace) -> list:
+    sinks = []
+    if args.mcap:
+        from ..outputs.mcap.sink import McapSink
+
+        sinks.append(McapSink(args.mcap))
+    if args.rerun or args.connect:
+        from ..outputs.rerun.sink import RerunSink
+
+        sinks.append(RerunSink(connect=args.connect, spawn=args.rerun, bitrate=args.bitrate))
+    return sinks

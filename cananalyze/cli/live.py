@@ -117,11 +117,11 @@ def _bus_options(items: list[str]) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..checks.build import attach_checker
     from ..io.live import HwFilter, LiveSource, open_bus
-    from ..io.record import FrameRecorder
-    from ..outputs.dashboard import LiveView
-    from .pipeline import build_decoder
+    from ..outputs.findings import FindingsSink
+    from ..pipeline import build_checker, build_decoder
+    from ..pipeline import run as run_pipeline
+    from .common import options
 
     try:
         filters = [HwFilter.parse(f) for f in args.filter]
@@ -131,59 +131,78 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--duration must be positive")
     if (args.junit or args.json) and not args.check:
         raise UsageError("--junit and --json report a check: give --check RULES too")
-    options = _bus_options(args.bus_option)
+    bus_options = _bus_options(args.bus_option)
     # Frames are time-stamped on the reader thread as they are read; with the default 5 ms
     # GIL switch interval a decode on the main thread can hold them back that long, which
     # shows up as SDO latency and heartbeat jitter that the bus never had.
     sys.setswitchinterval(0.0005)
-    checker = None
-    if args.check:
-        from ..checks.build import build_checker
-
-        checker = build_checker(args.check)
-    decoder = build_decoder(args)
-    if checker is not None:
-        attach_checker(decoder, checker)
+    opts = options(args, rules=args.check, checks=bool(args.check))
+    checker = build_checker(opts) if args.check else None  # a bad rules file fails first
+    decoder = build_decoder(opts, checker)
     plain = args.plain or not sys.stdout.isatty()
-    recorder = FrameRecorder(args.record) if args.record else None
-    view = LiveView(
-        bitrate=args.bitrate, model=getattr(decoder, "network", None), checking=checker is not None
-    )
-    timeline = None
-    source = None
-    try:
-        if args.rrd or args.rerun:
-            from ..outputs.rerun.live import RerunLive
+    sinks: list = []
+    if args.record:
+        from ..outputs.recording import RecordSink
 
-            timeline = RerunLive(
+        sinks.append(RecordSink(args.record))
+    if args.rrd or args.rerun:
+        from ..outputs.rerun.sink import RerunLiveSink
+
+        sinks.append(
+            RerunLiveSink(
                 rrd=args.rrd,
                 spawn=args.rerun,
                 bitrate=args.bitrate,
                 name=f"live {args.interface or ''} {args.channel or ''}".strip(),
-                network=args.network or "",
             )
-        bus = open_bus(args.interface, args.channel, args.bitrate, filters, **options)
-        source = LiveSource(bus, channel_name=_label(args.channel, bus))
-        _serve(args, source, decoder, view, recorder, timeline, plain)
-    finally:
-        if source is not None:
-            source.close()
-        if recorder is not None:
-            recorder.close()
-            print(f"recorded {recorder.frames} frames to {args.record}", file=sys.stderr)
-        if timeline is not None:
-            timeline.close()
-            if args.rrd:
-                print(f"wrote {args.rrd}", file=sys.stderr)
-        if source is not None:
-            sys.stdout.flush()
-            print("\n".join(view.summary.lines(args.bitrate)))
-            sys.stdout.flush()
-    if checker is not None:
-        from .check import check_result
+        )
+    from ..outputs.dashboard import DashboardSink
 
-        return check_result(checker, args.junit, args.json)
-    return 0
+    view = DashboardSink(
+        bitrate=args.bitrate,
+        checking=checker is not None,
+        status=f"recording to {args.record}" if args.record else "",
+        show=not plain,
+        summary=sys.stdout,
+    )
+    if plain:
+        from ..outputs.colour import use_colour
+        from ..outputs.text.writer import TextWriter
+
+        sinks.append(
+            TextWriter(sys.stdout, color=use_colour(sys.stdout, args.no_color), flush=True)
+        )
+    sinks.append(view)  # the summary after the last line, before the check's verdict
+    report = None
+    if checker is not None:
+        report = FindingsSink(sys.stdout, args.junit, args.json, no_color=args.no_color)
+        sinks.append(report)
+    bus = open_bus(args.interface, args.channel, args.bitrate, filters, **bus_options)
+    source = LiveSource(bus, channel_name=_label(args.channel, bus))
+    deadline = time.monotonic() + args.duration if args.duration else None
+
+    def stop(signum, frame):
+        source.stop()
+        signal.signal(
+            signum, signal.default_int_handler if signum == signal.SIGINT else signal.SIG_DFL
+        )
+
+    old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        run_pipeline(
+            source,
+            decoder,
+            sinks,
+            opts,
+            stop=(lambda: time.monotonic() >= deadline) if deadline is not None else None,
+            tick=0.25,
+        )
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+        source.close()
+        sys.stdout.flush()
+    return report.exit_code if report is not None else 0
 
 
 def _label(channel: str | None, bus) -> str:
@@ -196,76 +215,3 @@ def _label(channel: str | None, bus) -> str:
         parent, _, base = name.rstrip("/").rpartition("/")
         name = parent.rpartition("/")[2] + base if base.isdigit() else base
     return name[:12] or "can0"
-
-
-def _serve(args, source, decoder, view, recorder, timeline, plain: bool) -> None:
-    """The loop: decode each batch, record it, show it; until stopped, timed out or failed."""
-    deadline = time.monotonic() + args.duration if args.duration else None
-
-    def stop(signum, frame):
-        source.stop()
-        signal.signal(
-            signum, signal.default_int_handler if signum == signal.SIGINT else signal.SIG_DFL
-        )
-
-    old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
-    if recorder is not None:
-        view.status = f"recording to {args.record}"
-    try:
-        if plain:
-            from ..outputs.text.writer import TextWriter
-
-            writer = TextWriter(sys.stdout, color=sys.stdout.isatty() and not args.no_color)
-            for fb in source.batches():
-                batch = decoder.decode(fb)  # empty batches too: they carry time forward
-                view.add(batch)
-                if timeline is not None:
-                    timeline.add(batch)
-                if len(fb):
-                    if recorder is not None:
-                        recorder.write(fb)
-                    writer.write(batch)
-                    sys.stdout.flush()
-                if deadline is not None and time.monotonic() >= deadline:
-                    source.stop()
-            tail = decoder.finish()
-            view.add(tail)
-            if timeline is not None:
-                timeline.add(tail)
-            writer.write(tail)
-            sys.stdout.flush()
-        else:
-            from rich.console import Console
-            from rich.live import Live
-
-            console = Console()
-            shown = 0.0
-            with Live(
-                view.render(height=console.height),
-                console=console,
-                auto_refresh=False,
-                screen=False,
-                transient=False,
-                redirect_stderr=False,
-            ) as live:
-                for fb in source.batches():
-                    batch = decoder.decode(fb)
-                    view.add(batch)
-                    if timeline is not None:
-                        timeline.add(batch)
-                    if recorder is not None:
-                        recorder.write(fb)
-                    now = time.monotonic()
-                    if now - shown >= 0.25 or source.stopping:
-                        live.update(view.render(height=console.height), refresh=True)
-                        shown = now
-                    if deadline is not None and now >= deadline:
-                        source.stop()
-                tail = decoder.finish()
-                view.add(tail)
-                if timeline is not None:
-                    timeline.add(tail)
-                live.update(view.render(height=console.height), refresh=True)
-    finally:
-        for s, h in old.items():
-            signal.signal(s, h)

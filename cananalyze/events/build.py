@@ -59,6 +59,19 @@ class EventState:
     last_t: float = 0.0  # time of the last event: a frameless batch's findings default to it
 
 
+class EventBuilder:
+    """The event log of each batch, built once for every sink (the pipeline's one state).
+
+    Rows count from the start of what the sinks were given (their frames tables).
+    """
+
+    def __init__(self) -> None:
+        self.state = EventState()
+
+    def build(self, batch: DecodedBatch, offset: int) -> tuple[EventColumns, list[Row]]:
+        return batch_event_columns(batch, offset, self.state)
+
+
 def sdo_event(row: int, r: dict) -> Row:
     get = r.get
     result = get("result", "?")
@@ -149,6 +162,16 @@ def finding_event(row: int, r: dict, t: float) -> Row:
     if r.get("rule") and r.get("message"):
         text = f"[{r['rule']}] {text}"
     return Row(float(r.get("t", t)), "finding", r.get("node"), lvl, str(text), row)
+
+
+def batch_events_of(
+    batch: DecodedBatch, offset: int, state: EventState
+) -> tuple[EventColumns, list[Row]]:
+    """The batch's events as the pipeline built them for every sink; built here (with the
+    caller's own state) only for a batch that did not come through the pipeline."""
+    if batch.events is not None:
+        return batch.events, batch.states
+    return batch_event_columns(batch, offset, state)
 
 
 def batch_events(

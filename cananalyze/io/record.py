@@ -41,13 +41,17 @@ MCAP_SCHEMA = {
 class FrameRecorder:
     """Write every FrameBatch it is given to `path`; the format comes from the suffix."""
 
+    @staticmethod
+    def check_suffix(path: str | Path) -> None:
+        suffix = Path(path).suffix.lower()
+        if suffix != ".mcap" and suffix not in LOG_SUFFIXES:
+            raise UsageError(f"--record {path}: use a .log (candump), .asc, .blf or .mcap file")
+
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self.frames = 0
-        suffix = self.path.suffix.lower()
-        self._mcap = suffix == ".mcap"
-        if not self._mcap and suffix not in LOG_SUFFIXES:
-            raise UsageError(f"--record {path}: use a .log (candump), .asc, .blf or .mcap file")
+        self.check_suffix(path)
+        self._mcap = self.path.suffix.lower() == ".mcap"
         try:
             if self._mcap:
                 from mcap.writer import Writer

@@ -9,6 +9,8 @@ from __future__ import annotations
 import gzip
 import importlib
 import io
+import os
+import stat
 import sys
 import zlib
 from collections.abc import Iterator
@@ -88,6 +90,17 @@ class LogSource:
     _stream: BinaryIO
     _closers: list = field(default_factory=list)
     strict: bool = False
+    size: int | None = None  # bytes of the file on disk (None: stdin, a pipe)
+
+    def fraction(self) -> float | None:
+        """How far into the file the reader is (0..1), from the position on disk; None
+        when the size is unknown. A compressed file reports its compressed position."""
+        if not self.size or not self._closers:
+            return None
+        try:
+            return min(1.0, self._closers[0].tell() / self.size)
+        except (OSError, ValueError):
+            return None
 
     @property
     def problems(self) -> ProblemLog:
@@ -206,7 +219,14 @@ def open_log(
             c.close()
         raise
     ctx = ReadContext(source=name, problems=problems or ProblemLog(), batch_size=batch_size)
-    return LogSource(name, chosen, ctx, stream, closers, strict=strict)
+    size = None
+    if name != "-":
+        try:
+            st = os.fstat(raw.fileno())
+            size = st.st_size if stat.S_ISREG(st.st_mode) else None
+        except (OSError, ValueError):
+            size = None
+    return LogSource(name, chosen, ctx, stream, closers, strict=strict, size=size)
 
 
 def _peek(stream: BinaryIO, size: int) -> bytes:

@@ -12,10 +12,10 @@ Per-frame Python here touches only SDO records, which are rare.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..decoder import Decoder
 from ..frames import FLAG_ERR, FLAG_EXT
 from ..protocol.cobid import NO_NODE, CobClassifier
 from ..protocol.comm_objects import comm_object
@@ -26,6 +26,9 @@ from .node_tally import IDENTITY
 from .pdo_map import PdoConfig, split_cob_id
 from .profile import identify
 from .spec import NetworkSpec
+
+if TYPE_CHECKING:
+    from ..pipeline import Decoder
 
 NOT_VALID = (
     "is not valid (COB-ID bit 31 set)"  # PdoBinding.problem; the pdo_not_valid rule looks for it

@@ -82,6 +82,16 @@ class NodeTally:
         return rows
 
 
+def node_profiles(model) -> dict[int, tuple[str, str]]:
+    """node -> (profile, how it was found) of every node the network model has a device for:
+    declared (--device, --eds, the network file) or identified from the log."""
+    out: dict[int, tuple[str, str]] = {}
+    for node, cfg in sorted(getattr(model, "nodes", {}).items()):
+        if cfg.profile is not None:
+            out[node] = (cfg.profile.key, cfg.identified_by)
+    return out
+
+
 def identity_records(batch: DecodedBatch) -> list[tuple[int, dict]]:
     """(record slot, record) of the batch's SDO records on identity objects, in slot order.
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from dataclasses import dataclass, field
+from typing import TextIO
 
 import numpy as np
 
@@ -21,6 +22,7 @@ from ..protocol.fields import annotation
 from ..protocol.services import Service
 from ..protocol.tables import NMT_STATES
 from ..records import DecodedBatch
+from .sink import Sink
 from .summary import Summary
 from .text.records import format_record
 
@@ -410,3 +412,71 @@ class LiveView:
             )
         events = Panel(log, title="Events", title_align="left")
         return Group(head, nodes, sigs, events)
+
+
+class DashboardSink(Sink):
+    """The live dashboard as a sink: its state from every batch, redrawn on a terminal
+    four times a second (`show`); without a terminal only the state (the end summary)."""
+
+    def __init__(
+        self,
+        bitrate: int | None = None,
+        checking: bool = False,
+        status: str = "",
+        show: bool = True,
+        every: float = 0.25,
+        summary: TextIO | None = None,
+    ) -> None:
+        """`summary`: where to print the frame summary when the session ends."""
+        self.summary_out = summary
+        self.bitrate = bitrate
+        self.checking = checking
+        self.status = status
+        self.show = show
+        self.every = every
+        self.view: LiveView | None = None
+        self._live = None
+        self._shown = 0.0
+
+    def open(self, run) -> None:
+        super().open(run)
+        self.view = LiveView(bitrate=self.bitrate, model=run.network, checking=self.checking)
+        self.view.status = self.status
+        if self.show:
+            from rich.console import Console
+            from rich.live import Live
+
+            self._console = Console()
+            self._live = Live(
+                self.view.render(height=self._console.height),
+                console=self._console,
+                auto_refresh=False,
+                screen=False,
+                transient=False,
+                redirect_stderr=False,
+            )
+            self._live.start()
+
+    def write(self, batch) -> None:
+        self.view.add(batch)
+        self.tick(time.monotonic())
+
+    def tick(self, now: float) -> None:
+        if self._live is not None and (now - self._shown >= self.every):
+            self._live.update(self.view.render(height=self._console.height), refresh=True)
+            self._shown = now
+
+    def close(self) -> None:
+        if self._live is not None:
+            self._live.update(self.view.render(height=self._console.height), refresh=True)
+            self._live.stop()
+            self._live = None
+        if self.summary_out is not None:
+            self.summary_out.flush()
+            print("\n".join(self.view.summary.lines(self.bitrate)), file=self.summary_out)
+            self.summary_out.flush()
+
+    def abort(self) -> None:
+        if self._live is not None:
+            self._live.stop()
+            self._live = None

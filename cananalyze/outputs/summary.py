@@ -6,6 +6,7 @@ Bus load is a lower bound (nominal bits, no stuff bits): see cananalyze.busload.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TextIO
 
 import numpy as np
 
@@ -14,6 +15,7 @@ from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from ..protocol.services import SERVICE_NAMES, Service
 from ..records import DecodedBatch
 from .busload import frame_bits
+from .sink import Sink
 
 N_SVC = len(SERVICE_NAMES)
 _NMT_STATES = np.array(
@@ -194,6 +196,45 @@ class Summary:
                 out.append((node, total, errors))
         return out
 
+    def record(self, bitrate: int | None = None, problems: int = 0) -> dict:
+        """The summary as one JSON-ready dict (`decode --summary --format jsonl`)."""
+        load = None
+        if bitrate and self.duration > 0:
+            load = round(self.bits / (bitrate * self.duration) * 100, 3)
+        nodes = {}
+        for n in np.flatnonzero(self.by_node_service.sum(axis=1)).tolist():
+            counts = self.by_node_service[n]
+            nodes[str(n)] = {SERVICE_NAMES[s]: int(c) for s, c in enumerate(counts) if c}
+        sdo = {}
+        for node in sorted(self.sdo_results, key=lambda x: (x is None, x)):
+            entry: dict = {"results": dict(sorted(self.sdo_results[node].items()))}
+            lat = self.sdo_latency.get(node)
+            if lat is not None and lat.n:
+                entry["latency_ms"] = {
+                    "min": lat.min,
+                    "median": lat.quantile(0.5),
+                    "max": lat.max,
+                }
+            sdo[str(node)] = entry
+        return {
+            "kind": "summary",
+            "frames": self.frames,
+            "t_first": self.t_first,
+            "t_last": self.t_last,
+            "duration": round(self.duration, 6),
+            "bitrate": bitrate,
+            "bus_load_percent": load,
+            "skipped_input": problems,
+            "frames_per_service": {
+                name: int(self.by_service[i])
+                for i, name in enumerate(SERVICE_NAMES)
+                if self.by_service[i]
+            },
+            "frames_per_node": nodes,
+            "sdo": sdo,
+            "verdict": self.canopen_verdict(),
+        }
+
     def lines(self, bitrate: int | None = None, problems: int = 0) -> list[str]:
         out = [f"frames: {self.frames}", f"duration: {self.duration:.6f} s"]
         if bitrate and self.duration > 0:
@@ -264,3 +305,72 @@ def device_lines(model, summary: Summary | None = None) -> list[str]:
         line = f"  node {node:>3}: {name} (identified by {cfg.identified_by})"
         out.append(line + (f"; seen {seen}" if seen else ""))
     return ["devices:", *out] if out else []
+
+
+class SummarySink(Sink):
+    """`decode --summary`: counts while the log is read, the report at the end, as text or
+    (with `--format jsonl`) one JSON object of kind "summary"."""
+
+    def __init__(self, out: TextIO, fmt: str = "text") -> None:
+        self.out = out
+        self.fmt = fmt
+        self.summary = Summary()
+
+    def write(self, batch: DecodedBatch) -> None:
+        self.summary.add(batch)
+
+    def close(self) -> None:
+        run = self.run
+        # --bitrate wins; else the network file's `bitrate`
+        model = run.network
+        bitrate = run.options.bitrate or (model.spec.bitrate if model is not None else None)
+        checker = run.checker
+        if self.fmt == "jsonl":
+            import json
+
+            rec = self.summary.record(bitrate, run.problems.count)
+            rec["devices"] = device_records(model, self.summary)
+            if checker is not None:
+                rec["timing"] = _plain(checker.timing.report(checker.nmt))
+            print(json.dumps(rec, separators=(",", ":"), ensure_ascii=False), file=self.out)
+            return
+        lines = self.summary.lines(bitrate, run.problems.count)
+        lines += device_lines(model, self.summary)
+        if checker is not None:
+            lines += checker.timing.lines(checker.nmt, checker.t0)
+        print("\n".join(lines), file=self.out)
+
+
+def _plain(value):
+    """JSON-safe: dict keys as strings, numpy scalars as Python, NaN as null."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and value != value:
+        return None
+    return value
+
+
+def device_records(model, summary: Summary | None = None) -> list[dict]:
+    """`device_lines` as records: node, device, how it was identified, identity seen."""
+    known = dict(getattr(model, "nodes", {}))
+    seen_nodes = set(known)
+    if summary is not None:
+        seen_nodes |= {int(n) for n in np.flatnonzero(summary.by_node_service.sum(axis=1))}
+    out = []
+    for node in sorted(seen_nodes):
+        cfg = known.get(node)
+        prof = cfg.profile if cfg is not None else None
+        out.append(
+            {
+                "node": node,
+                "device": prof.name if prof is not None else None,
+                "profile": prof.key if prof is not None else None,
+                "identified_by": cfg.identified_by if cfg is not None else None,
+                "identity": _plain(dict(cfg.identity)) if cfg is not None else {},
+            }
+        )
+    return out

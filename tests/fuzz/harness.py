@@ -8,25 +8,24 @@ parse. Anything else is a crash the harness re-raises for the fuzzer to report.
 
 from __future__ import annotations
 
-import argparse
 import io
 import json
 import os
 import tempfile
 
-from cananalyze.cli.pipeline import build_decoder
 from cananalyze.errors import InputError
 from cananalyze.io.source import open_log
 from cananalyze.outputs.jsonl.rows import JsonlWriter
 from cananalyze.outputs.summary import Summary
 from cananalyze.outputs.text.writer import TextWriter
+from cananalyze.pipeline import Options, build_decoder
 
 SUFFIXES = (".log", ".asc", ".blf", ".trc", ".csv", ".txt", ".log.gz", "")
 
 
 def decode_all(batches, strict: bool = False) -> tuple[int, str, str]:
     """Decode batches to JSONL and text; returns (frames, jsonl, text). JSONL is validated."""
-    decoder = build_decoder(argparse.Namespace(sdo_timeout=1.0))
+    decoder = build_decoder(Options())
     jout, tout = io.StringIO(), io.StringIO()
     jw, tw = JsonlWriter(jout), TextWriter(tout, color=False)
     summary = Summary()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 from typing import TextIO
 
@@ -11,6 +12,7 @@ from ...frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
 from ...protocol.services import SERVICE_NAMES
 from ...records import DecodedBatch
 from ..background import ByteSink
+from ..sink import Sink
 
 
 def _clean(value):
@@ -67,7 +69,7 @@ def dumps(rec: dict) -> str:
     return json.dumps(rec, separators=(",", ":"), ensure_ascii=False, default=_clean)
 
 
-class JsonlWriter:
+class JsonlWriter(Sink):
     """JSON lines of decoded batches: as columns where it can (`jsonl_columns`), else
     row by row; with `background`, finished and written by a worker thread
     (`background.ByteSink`), whose error `close()` raises."""
@@ -106,3 +108,7 @@ class JsonlWriter:
     def close(self) -> None:
         """Wait for the worker, if any; re-raise its error here."""
         self._sink.close()
+
+    def abort(self) -> None:
+        with contextlib.suppress(Exception):
+            self._sink.close()

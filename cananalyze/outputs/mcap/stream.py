@@ -23,7 +23,7 @@ import numpy as np
 
 from ... import __version__
 from ...columns.json_text import Texts
-from ...events.build import EventState, batch_event_columns
+from ...events.build import EventState, batch_events_of
 from ...events.columns import KINDS, NO_NODE, NO_ROW
 from ...network.node_tally import NodeTally
 from ...records import DecodedBatch, SignalBlock
@@ -102,7 +102,7 @@ class StreamMcap:
         """Queue the batch's messages for the writer thread (merged by time there)."""
         fb = batch.frames
         off = self.offset
-        events, states = batch_event_columns(batch, off, self._event_state)
+        events, states = batch_events_of(batch, off, self._event_state)
         self._nodes.add(batch, states)
         lines = self._line_numbers(events.row, fb.line, off) if len(events) else []
         if len(fb):

@@ -76,6 +76,11 @@ class RerunLive:
         if self._pending and time.monotonic() - self._last_send >= self.every:
             self.send()
 
+    def flush_due(self) -> None:
+        """Send what was kept once `every` seconds have passed (a quiet bus included)."""
+        if self._pending and time.monotonic() - self._last_send >= self.every:
+            self.send()
+
     def send(self, final: bool = False) -> None:
         """Send everything kept so far (and, when final, the last partial load window)."""
         col = self._collector

@@ -30,14 +30,15 @@ import pyarrow as pa
 
 from ...capture import _hex_column
 from ...columns import arrow_build as ab
-from ...events.build import LEVEL_NAMES, EventState, batch_event_columns
+from ...events.build import LEVEL_NAMES, EventState, batch_events_of
 from ...events.columns import KINDS, NO_NODE, NO_ROW, EventColumns
 from ...frames import FrameBatch
-from ...network.node_tally import NodeTally
+from ...network.node_tally import NodeTally, node_profiles
 from ...protocol.services import SERVICE_NAMES
 from ...records import DecodedBatch
 from ...sdo.transaction import SDO_TABLE_COLUMNS
 from ..atomic import atomic_path
+from ..sink import Sink as OutputSink
 from . import pandas_like as pl
 from . import sdo_chunks
 from .whole import TABLES, _outdir
@@ -172,8 +173,14 @@ def _frames_columns(fb: FrameBatch, service, node, pdo) -> dict:
     }
 
 
-class StreamTables:
-    """Context manager: `add()` each DecodedBatch, `close()` at the end; files appear atomically."""
+class TableSink(OutputSink):
+    """The six tables written batch by batch into a folder; the files appear atomically at close.
+
+    `profiles`: node -> (profile, how), for the nodes table when no run says (tests);
+    a run's network model names each declared or identified device.
+    """
+
+    needs_events = True
 
     def __init__(
         self,
@@ -183,9 +190,20 @@ class StreamTables:
         profiles: dict[int, tuple[str, str]] | None = None,
         depth: int = 1,
     ) -> None:
-        self.dir = _outdir(path)
+        self.path = path
         self.fmt = fmt
+        self.compression = compression
         self.profiles = profiles or {}
+        self.depth = depth
+        self.run = None
+        self._stack = None
+
+    def open(self, run=None) -> None:
+        """Create the temporary files (the folder must exist or be creatable)."""
+        self.run = run
+        depth = self.depth
+        fmt, compression = self.fmt, self.compression
+        self.dir = _outdir(self.path)
         self._stack = contextlib.ExitStack()
         self.paths: dict[str, Path] = {}
         for name in TABLES:
@@ -195,7 +213,6 @@ class StreamTables:
             "signals": Sink(self.paths["signals"], fmt, SIGNALS, compression),
             "events": Sink(self.paths["events"], fmt, EVENTS, compression),
         }
-        self.compression = compression
         # two writer threads: the frames table (most of the Parquet encoding, outside
         # the GIL) runs beside the others, so neither queue holds the decoder back.
         # One job waits per writer: the frames writer is the slowest stage, so a
@@ -223,7 +240,9 @@ class StreamTables:
         self._sdo_spec: tuple | bool | None = None
         self._findings: list[tuple] = []
 
-    def __enter__(self) -> StreamTables:
+    def __enter__(self) -> TableSink:
+        if self._stack is None:
+            self.open()
         return self
 
     def __exit__(self, typ, exc, tb) -> None:
@@ -231,7 +250,7 @@ class StreamTables:
             self.abort(typ, exc, tb)
 
     # --- per batch -----------------------------------------------------------------
-    def add(self, batch: DecodedBatch) -> None:
+    def write(self, batch: DecodedBatch) -> None:
         fb = batch.frames
         n = len(fb)
         off = self.offset
@@ -244,7 +263,7 @@ class StreamTables:
         if batch.signals:
             self._add_signals(batch, off)
         self._add_records(batch)
-        events, states = batch_event_columns(batch, off, self._event_state)
+        events, states = batch_events_of(batch, off, self._event_state)
         self._nodes.add(batch, states)
         self._add_events(events, float(fb.t[-1]) - HOLD if n else float("-inf"))
         self.offset += n
@@ -436,7 +455,8 @@ class StreamTables:
 
     # --- the end -----------------------------------------------------------------------
     def close(self) -> dict[str, int]:
-        """Write the small tables, wait for the writer, fix order/categories, rename all files."""
+        """Write the small tables, wait for the writer, fix order/categories, rename all files.
+        Returns the rows per table."""
         try:
             self._add_events(EventColumns.empty(), None)
             sdo_done = self._speculate_sdo() is not None  # the types are final now
@@ -585,7 +605,7 @@ class StreamTables:
         return self._small_table("findings", out)
 
     def _write_nodes(self) -> int:
-        rows = self._nodes.rows(self.profiles)
+        rows = self._nodes.rows(node_profiles(self.run.network) if self.run else self.profiles)
         names = list(rows[0]) if rows else ["node"]
         others = [c for c in names if c != "node"]
         # Parquet keeps the index last (to_parquet), CSV first (reset_index)

@@ -13,6 +13,7 @@ from typing import TextIO
 import numpy as np
 
 from ...records import DecodedBatch
+from ..sink import Sink
 
 
 def signal_records(batch: DecodedBatch, mask: np.ndarray | None = None) -> list[dict]:
@@ -50,10 +51,14 @@ def signal_records(batch: DecodedBatch, mask: np.ndarray | None = None) -> list[
     return [rec for _, _, rec in out]
 
 
-class SignalWriter:
+class SignalWriter(Sink):
+    """`--signals`: JSON lines with Unix times, or text lines timed like the frame lines
+    (seconds from the log's first frame, or as logged with `--time abs`)."""
+
     def __init__(self, out: TextIO, fmt: str = "jsonl") -> None:
         self.out = out
         self.fmt = fmt
+        self.t0: float | None = None
 
     def write(self, batch: DecodedBatch, mask: np.ndarray | None = None) -> None:
         recs = signal_records(batch, mask)
@@ -62,13 +67,21 @@ class SignalWriter:
         if self.fmt == "jsonl":
             lines = [json.dumps(r, separators=(",", ":"), ensure_ascii=False) for r in recs]
         else:
+            if self.t0 is None:
+                run = getattr(self, "run", None)
+                if run is not None and run.options.time == "abs":
+                    self.t0 = 0.0
+                elif run is not None and run.t0 is not None:
+                    self.t0 = run.t0
+                else:
+                    self.t0 = recs[0]["t"]
             lines = []
             for r in recs:
                 v = r["value"]
                 shown = f"{v:.6g}" if isinstance(v, float) else v
                 unit = f" {r['unit']}" if r["unit"] else ""
                 lines.append(
-                    f"{r['t']:.6f} node {r['node']} {r['pdo']} 0x{r['cob_id']:03X} "
+                    f"{r['t'] - self.t0:12.6f}  node {r['node']} {r['pdo']} 0x{r['cob_id']:03X} "
                     f"{r['signal']}={shown}{unit}"
                 )
         self.out.write("\n".join(lines) + "\n")

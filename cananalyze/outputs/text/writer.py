@@ -15,6 +15,7 @@ reference the fast writer is tested against.
 
 from __future__ import annotations
 
+import contextlib
 from typing import TextIO
 
 import numpy as np
@@ -31,32 +32,17 @@ from ...protocol.fields import annotation, frame_fields
 from ...protocol.services import SERVICE_NAMES, Service
 from ...protocol.tables import emcy_class, error_register_names
 from ...records import DecodedBatch
+from .. import colour
 from ..background import ByteSink
+from ..sink import Sink
 from .records import format_record
 from .sdo import fast_pairs, pair_text
 
 _HEX3 = [f"{i:02X} " for i in range(256)]
 
 # ANSI colours per service group, only on a terminal.
-_COLOURS = {
-    "nmt": "\033[1;35m",
-    "sync": "\033[2m",
-    "time": "\033[2m",
-    "emcy": "\033[1;31m",
-    "tpdo": "\033[36m",
-    "rpdo": "\033[34m",
-    "sdo_request": "\033[33m",
-    "sdo_response": "\033[33m",
-    "heartbeat": "\033[32m",
-    "bootup": "\033[1;32m",
-    "guard_request": "\033[32m",
-    "guard_response": "\033[32m",
-    "lss_master": "\033[35m",
-    "lss_slave": "\033[35m",
-    "error_frame": "\033[1;31m",
-    "other": "\033[2m",
-}
-_RESET = "\033[0m"
+_COLOURS = colour.SERVICE
+_RESET = colour.RESET
 
 
 _SHOWN = np.arange(24)[None, :] < 3 * np.arange(9)[:, None]  # DLC -> which of 24 chars show
@@ -122,8 +108,8 @@ def _time_column(rel: np.ndarray) -> np.ndarray:
     return col
 
 
-class TextWriter:
-    """Writes decoded batches as text lines.
+class TextWriter(Sink):
+    """Writes decoded batches as text lines (a pipeline sink, or called directly).
 
     With `background=True` and a UTF-8 text file with a binary buffer under it,
     each batch's lines are finished (compacted) and written by a worker thread
@@ -138,17 +124,30 @@ class TextWriter:
         t0: float | None = None,
         only_records: bool = False,
         background: bool = False,
+        flush: bool = False,
     ) -> None:
+        """`flush`: after every batch (live output, also into a pipe or a file)."""
         self.out = out
+        self.flush = flush
         self.color = color
         self.t0 = t0
         self.only_records = only_records
         self._sink = ByteSink(out, background, "text-writer")
 
+    def open(self, run) -> None:
+        """Times count from the log's first frame, or are shown as logged (`--time abs`)."""
+        super().open(run)
+        if run.options.time == "abs":
+            self.t0 = 0.0
+
     def write(self, batch: DecodedBatch, mask: np.ndarray | None = None) -> None:
         fb = batch.frames
-        if self.t0 is None and len(fb):
-            self.t0 = float(fb.t[0])
+        if self.t0 is None:
+            run = getattr(self, "run", None)
+            if run is not None and run.t0 is not None:
+                self.t0 = run.t0  # the log's first frame, also when filters hide it
+            elif len(fb):
+                self.t0 = float(fb.t[0])
         t0 = self.t0 or 0.0
         if self.only_records or not len(fb) or not self._columnar_ok(batch):
             lines = lines_per_row(batch, mask, t0, self.color, self.only_records)
@@ -156,14 +155,20 @@ class TextWriter:
                 return
             if not self._sink.background:
                 self.out.write("\n".join(lines) + "\n")
-                return
-            self._sink.put(("\n".join(lines) + "\n").encode("utf-8"))
-            return
-        self._sink.put(self._render(batch, mask, t0))
+            else:
+                self._sink.put(("\n".join(lines) + "\n").encode("utf-8"))
+        else:
+            self._sink.put(self._render(batch, mask, t0))
+        if self.flush:
+            self.out.flush()
 
     def close(self) -> None:
         """Wait for the worker, if any; re-raise its error here."""
         self._sink.close()
+
+    def abort(self) -> None:
+        with contextlib.suppress(Exception):
+            self._sink.close()
 
     @staticmethod
     def _columnar_ok(batch: DecodedBatch) -> bool:
@@ -648,9 +653,14 @@ def lines_per_row(
             lines.append(line)
             for rec in by_row.get(i, ()):
                 lines.append("    └─ " + format_record(rec))
-    # records of rows not printed (filtered out, records-only view, end of log) still print
+    # records of rows not printed (filtered out, records-only view, end of log) still print;
+    # alone (--sdo) each carries its time as a frame line does
     shown = set() if only_records else (set(rows) if mask is not None else set(range(len(fb))))
     for row, rec in batch.records:
         if row not in shown:
-            lines.append(format_record(rec))
+            text = format_record(rec)
+            t = rec.get("t")
+            if only_records and isinstance(t, (int, float)):
+                text = f"{t - t0:12.6f}  {text}"
+            lines.append(text)
     return lines

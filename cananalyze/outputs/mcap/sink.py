@@ -1,0 +1,39 @@
+"""`--mcap FILE` as a pipeline sink: the chunked, time-merged MCAP of `StreamMcap`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ...network.node_tally import node_profiles
+from ..sink import Sink
+from .stream import StreamMcap
+
+
+class McapSink(Sink):
+    needs_events = True
+
+    def __init__(self, path: str | Path, compression: str = "zstd") -> None:
+        self.path = path
+        self.compression = compression
+        self.stream: StreamMcap | None = None
+        self.counts: dict[str, int] = {}
+
+    def open(self, run) -> None:
+        super().open(run)
+        self.stream = StreamMcap(
+            self.path,
+            self.compression,
+            source=run.name,
+            network=str(run.options.network or ""),
+        )
+
+    def write(self, batch) -> None:
+        self.stream.add(batch)
+
+    def close(self) -> None:
+        self.stream.profiles = node_profiles(self.run.network)
+        self.counts = self.stream.close(self.run.problems.count)
+
+    def abort(self) -> None:
+        if self.stream is not None:
+            self.stream.abort()

@@ -1,0 +1,445 @@
+"""The one pipeline: options, a source, a decoder and the sinks, joined by one loop.
+
+Every door goes through here: `decode`, `check`, `export`, `live`, `load()` and
+the pytest assertions each turn what they were given into `Options`, open a
+source, build the decoder and call `run` with their sinks. So no two outputs can
+disagree about what a log holds: they read the same decoded batches.
+
+    opts = Options(network="net.toml", rules="rules.yaml")
+    source = open_source("run.blf", opts)
+    run(source, build_decoder(opts), [TableSink("out", "parquet")], opts)
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Protocol
+
+import numpy as np
+
+from .errors import ProblemLog, UsageError
+from .frames import FrameBatch
+from .protocol.cobid import CobClassifier
+from .records import DecodedBatch
+
+if TYPE_CHECKING:
+    from .checks.engine import Checker
+    from .network.model import NetworkModel
+    from .network.spec import NetworkSpec
+    from .outputs.sink import Sink
+
+TIME_MODES = ("rel", "abs")
+
+
+@dataclass
+class Options:
+    """What a run is asked to do, whichever door it came through (CLI, `load()`, fleet).
+
+    Devices: `devices` maps node-IDs to built-in profile keys, `eds` to EDS/DCF files,
+    on top of the `network` file. `rules` adds the rules file's assertions to the
+    CANopen rules, which run when `checks` is set (or a rules file is given).
+    Filters (`nodes`, `services`, `t_from`/`t_to` in seconds after the log's first
+    frame) choose what the sinks see; the decoder and the rules always see everything.
+    `time`: text outputs show seconds from the first frame ("rel") or as logged ("abs").
+    """
+
+    network: str | Path | None = None
+    devices: Mapping[int, str] = field(default_factory=dict)
+    eds: Mapping[int, str | Path] = field(default_factory=dict)
+    rules: str | Path | None = None
+    checks: bool = False
+    timing: bool = False
+    sdo_timeout: float = 1.0
+    strict: bool = False
+    input_format: str | None = None
+    bitrate: int | None = None
+    nodes: frozenset[int] | None = None
+    services: frozenset[int] | None = None
+    t_from: float | None = None
+    t_to: float | None = None
+    time: str = "rel"
+
+    def __post_init__(self) -> None:
+        for what, table in (("--device", self.devices), ("--eds", self.eds)):
+            for node in table:
+                if not isinstance(node, int) or isinstance(node, bool) or not 1 <= node <= 127:
+                    raise UsageError(f"{what} takes NODE=VALUE with NODE 1..127 (got {node!r})")
+        if self.time not in TIME_MODES:
+            raise UsageError(f"--time is rel or abs (got {self.time!r})")
+        if self.sdo_timeout is not None and not self.sdo_timeout > 0:
+            raise UsageError(f"--sdo-timeout must be positive (got {self.sdo_timeout})")
+        if self.bitrate is not None and not 0 < self.bitrate <= 8_000_000:
+            raise UsageError(f"--bitrate must be 1..8000000 bit/s (got {self.bitrate})")
+
+    @property
+    def checking(self) -> bool:
+        return self.checks or self.rules is not None
+
+    @property
+    def filtered(self) -> bool:
+        return (
+            self.nodes is not None
+            or self.services is not None
+            or self.t_from is not None
+            or self.t_to is not None
+        )
+
+
+# --- the decoder ---------------------------------------------------------------------
+
+
+class Processor(Protocol):
+    def process(self, batch: DecodedBatch) -> None:
+        """Add notes, records or signals to the batch; keep state for the next one."""
+
+    def finish(self, batch: DecodedBatch) -> None:
+        """End of log: emit what is still pending into `batch` (an empty batch)."""
+
+
+class Decoder:
+    """FrameBatches in, DecodedBatches out: the columnar classifier, then each processor.
+
+    Live sniffing feeds small batches to the same object, so both give the same records.
+    """
+
+    def __init__(self, processors: list[Processor] | None = None) -> None:
+        self.classifier = CobClassifier()
+        self.processors: list[Processor] = list(processors or [])
+        self.network: NetworkModel | None = None
+        self.checker: Checker | None = None  # rules and timing statistics, when asked
+
+    def decode(self, batch: FrameBatch) -> DecodedBatch:
+        c = self.classifier.classify(batch)
+        out = DecodedBatch(batch, c.service, c.node, c.pdo)
+        for p in self.processors:
+            p.process(out)
+        return out
+
+    def finish(self) -> DecodedBatch:
+        """A zero-row batch carrying the records that only the end of the log completes."""
+        empty = self.decode(FrameBatch.empty())
+        for p in self.processors:
+            p.finish(empty)
+        return empty
+
+
+def network_spec(opts: Options) -> NetworkSpec:
+    """The user's declarations: the network file, the rules file's `network:`, then
+    --device/--eds on top (the command line names a node's device last, so it wins)."""
+    from .network.netfile import load_network
+    from .network.spec import NetworkSpec
+
+    spec = load_network(opts.network) if opts.network else NetworkSpec()
+    if opts.devices or opts.eds:
+        from .network.profile import load_builtin, load_eds
+
+        for node, name in opts.devices.items():
+            ns = spec.node(node)
+            key = str(name).lower().replace("-", "").replace(" ", "")
+            ns.profile, ns.how = load_builtin(key), "user --device"
+        for node, file in opts.eds.items():
+            ns = spec.node(node)
+            ns.profile, ns.how = load_eds(file, node), "user --eds"
+    return spec
+
+
+def build_decoder(opts: Options | None = None, checker: Checker | None = None) -> Decoder:
+    """The decoder the options describe. Processor order matters: SDO transactions first
+    (the network model reads them), the PDO and EMCY decoders after the model, the
+    checks last (they read everything the others found).
+
+    `checker`: one built earlier (so a bad rules file fails before the log is opened);
+    otherwise built here when the options ask for checks or timing statistics.
+    """
+    from .network.emcy_notes import EmcyDecoder
+    from .network.model import NetworkModel
+    from .network.pdo_processor import PdoDecoder
+    from .sdo.processor import SdoProcessor
+    from .sdo.tracker import SdoTracker
+
+    opts = opts or Options()
+    model = NetworkModel(network_spec(opts))
+    tracker = SdoTracker(timeout=opts.sdo_timeout, object_info=model.object_info)
+    for node, request, response in model.sdo_channels:
+        tracker.add_channel(node, request, response)
+    decoder = Decoder([SdoProcessor(tracker), model, PdoDecoder(model), EmcyDecoder(model)])
+    model.attach(decoder)
+    decoder.network = model
+    if checker is None and (opts.checking or opts.timing):
+        checker = build_checker(opts)
+    if checker is not None:
+        from .checks.model_config import ModelConfig
+
+        checker.config = ModelConfig(model, checker.config)
+        decoder.processors.append(checker)
+        decoder.checker = checker
+    return decoder
+
+
+def build_checker(opts: Options) -> Checker:
+    """The rules the options ask for: the CANopen rules and the rules file's assertions
+    when checking, none (timing statistics only) otherwise."""
+    from .checks.build import build_checker as from_files
+    from .checks.engine import Checker
+
+    if opts.checking:
+        return from_files(opts.rules)
+    return Checker(rules=[])
+
+
+# --- sources -------------------------------------------------------------------------
+
+
+class Source(Protocol):
+    """Where frames come from: a log file, stdin or a live bus."""
+
+    path: str
+    problems: ProblemLog
+
+    def batches(self) -> Iterator[FrameBatch]: ...
+
+
+class MemorySource:
+    """Frames already in memory (tests, the simulator, pytest assertions) as a Source."""
+
+    def __init__(self, batches: FrameBatch | Iterable[FrameBatch], path: str = "<frames>") -> None:
+        self._batches = [batches] if isinstance(batches, FrameBatch) else list(batches)
+        self.path = path
+        self.problems = ProblemLog()
+
+    def batches(self) -> Iterator[FrameBatch]:
+        yield from self._batches
+
+
+def open_source(log: str | Path | object, opts: Options | None = None) -> Source:
+    """A log path (or "-" for stdin) opened for batch reading, or a python-can bus.
+
+    Raises InputError with a one-line reason for a file it cannot read.
+    """
+    opts = opts or Options()
+    if isinstance(log, (str, Path)):
+        from .io.source import open_log
+
+        return open_log(log, strict=opts.strict, fmt=opts.input_format)
+    if isinstance(log, FrameBatch):
+        return MemorySource(log)
+    from .io.live import LiveSource
+
+    return LiveSource(log)
+
+
+# --- the loop ------------------------------------------------------------------------
+
+
+@dataclass
+class Run:
+    """What the sinks may ask about the run in progress."""
+
+    options: Options
+    source: Source
+    decoder: Decoder
+    t0: float | None = None  # time of the log's first frame (text times count from it)
+    frames: int = 0  # frames read
+    shown: int = 0  # frames that passed the filters
+    rows: int = 0  # rows written to the sinks so far (row numbers of events)
+    stopped: bool = False  # a live run ended by the user or its duration
+    t_last: float | None = None
+    # frames per node (index node + 1, 0 = no node), counted when filtering: what to
+    # tell a user whose --node matched nothing
+    node_frames: np.ndarray = field(default_factory=lambda: np.zeros(129, np.int64))
+
+    @property
+    def problems(self) -> ProblemLog:
+        return self.source.problems
+
+    @property
+    def network(self) -> NetworkModel | None:
+        return self.decoder.network
+
+    @property
+    def checker(self) -> Checker | None:
+        return self.decoder.checker
+
+    @property
+    def name(self) -> str:
+        return str(self.source.path)
+
+
+class _Filter:
+    """The options' node/service/time filters as a row mask and a record test."""
+
+    def __init__(self, opts: Options) -> None:
+        self.opts = opts
+        self.nodes = None if opts.nodes is None else np.array(sorted(opts.nodes), np.int16)
+        self.services = None if opts.services is None else np.array(sorted(opts.services), np.uint8)
+        from .protocol.services import SERVICE_NAMES
+
+        labels = {SERVICE_NAMES[s] for s in opts.services or ()}
+        # records pass the service filter when their own services are asked for
+        self.record_services = {
+            "sdo": bool(labels & {"sdo_request", "sdo_response"}),
+            "signal": bool(labels & {"tpdo", "rpdo"}),
+        }
+
+    def mask(self, batch: DecodedBatch, t0: float) -> np.ndarray:
+        fb = batch.frames
+        keep = np.ones(len(fb), bool)
+        if self.nodes is not None:
+            keep &= np.isin(batch.node, self.nodes)
+        if self.services is not None:
+            keep &= np.isin(batch.service, self.services)
+        if self.opts.t_from is not None:
+            keep &= fb.t - t0 >= self.opts.t_from
+        if self.opts.t_to is not None:
+            keep &= fb.t - t0 <= self.opts.t_to
+        return keep
+
+    def record(self, rec: dict, t0: float) -> bool:
+        """Records obey the same filters as frames (findings pass the service filter)."""
+        o = self.opts
+        if o.nodes is not None and rec.get("node") not in o.nodes:
+            return False
+        if o.services is not None and not self.record_services.get(rec.get("kind"), True):
+            return False
+        t = rec.get("t")
+        if t is not None and o.t_from is not None and t - t0 < o.t_from:
+            return False
+        return not (t is not None and o.t_to is not None and t - t0 > o.t_to)
+
+
+def run(
+    source: Source,
+    decoder: Decoder,
+    sinks: Iterable[Sink],
+    opts: Options | None = None,
+    *,
+    stop: Callable[[], bool] | None = None,
+    tick: float | None = None,
+) -> Run:
+    """Decode every batch of `source` into every sink; returns the finished Run.
+
+    Sinks are opened before the first frame is read and closed after the last (the
+    decoder's end-of-log batch included); if anything fails or the user interrupts,
+    every sink is aborted instead and the error goes on. `stop()` is asked after each
+    batch (live runs: duration, Ctrl-C); `tick` seconds of wall clock apart, live
+    sinks get `tick(now)`.
+    """
+    from .events.build import EventBuilder
+
+    opts = opts or Options()
+    sinks = list(sinks)
+    state = Run(opts, source, decoder)
+    filt = _Filter(opts) if opts.filtered else None
+    events = EventBuilder() if any(s.needs_events for s in sinks) else None
+    opened: list[Sink] = []
+    ended: list[BaseException] = []  # a live source's failure: outputs kept, then raised
+    try:
+        for sink in sinks:
+            sink.open(state)
+            opened.append(sink)
+        next_tick = time.monotonic() + tick if tick else None
+        batches = _read_ahead(source, ended)
+        try:
+            for fb in batches:
+                _deliver(state, decoder.decode(fb), sinks, filt, events)
+                if next_tick is not None:
+                    now = time.monotonic()
+                    if now >= next_tick:
+                        for sink in sinks:
+                            sink.tick(now)
+                        next_tick = now + tick
+                if stop is not None and stop():
+                    state.stopped = True
+                    _stop(source)
+        finally:
+            close = getattr(batches, "close", None)
+            if close is not None:
+                close()  # the reader thread stops before the problems are reported
+        _deliver(state, decoder.finish(), sinks, filt, events)
+        for sink in sinks:
+            sink.close()
+    except BaseException:
+        for sink in opened:
+            with contextlib.suppress(Exception):  # the first error is the one to report
+                sink.abort()
+        raise
+    if ended:
+        raise ended[0]
+    return state
+
+
+def unmatched_filter(state: Run) -> str | None:
+    """A warning when the filters matched no frame of a log that had some, else None."""
+    opts = state.options
+    if not opts.filtered or state.shown or not state.frames:
+        return None
+    asked = []
+    if opts.nodes is not None:
+        asked.append("--node " + ",".join(map(str, sorted(opts.nodes))))
+    if opts.services is not None:
+        from .protocol.services import SERVICE_NAMES
+
+        asked.append("--service " + ",".join(SERVICE_NAMES[s] for s in sorted(opts.services)))
+    if opts.t_from is not None:
+        asked.append(f"--from {opts.t_from:g}")
+    if opts.t_to is not None:
+        asked.append(f"--to {opts.t_to:g}")
+    seen = [str(n) for n in np.flatnonzero(state.node_frames[1:]).tolist()]
+    nodes = f"nodes {', '.join(seen)}" if seen else "no node-IDs"
+    span = (state.t_last or 0.0) - (state.t0 or 0.0)
+    return (
+        f"{' '.join(asked)} matched none of the {state.frames:,} frames of {state.name} "
+        f"(it has {nodes}, over {span:.3f} s)"
+    )
+
+
+def _read_ahead(source: Source, ended: list) -> Iterator[FrameBatch]:
+    """A file is parsed on the other core while this one decodes; a live bus is not
+    (its reader thread already runs beside the loop). A live interface that fails ends
+    the run like a stop: what was decoded is written, then the error is raised."""
+    from .io.live import LiveSource
+
+    if isinstance(source, LiveSource):
+        return _until_failure(source.batches(), ended)
+    from .io.prefetch import prefetch
+
+    return prefetch(source.batches())
+
+
+def _until_failure(batches: Iterator[FrameBatch], ended: list) -> Iterator[FrameBatch]:
+    from .io.live import LiveError
+
+    try:
+        yield from batches
+    except LiveError as exc:
+        ended.append(exc)
+
+
+def _stop(source: Source) -> None:
+    stop = getattr(source, "stop", None)
+    if stop is not None:
+        stop()
+
+
+def _deliver(state: Run, batch: DecodedBatch, sinks: list[Sink], filt, events) -> None:
+    fb = batch.frames
+    if len(fb):
+        if state.t0 is None:
+            state.t0 = float(fb.t[0])
+        state.t_last = float(fb.t[-1])
+    state.frames += len(fb)
+    if filt is not None:
+        node = batch.node[(batch.node >= -1) & (batch.node < 128)].astype(np.intp) + 1
+        state.node_frames += np.bincount(node, minlength=129)
+        t0 = state.t0 if state.t0 is not None else 0.0
+        batch = batch.select(filt.mask(batch, t0), lambda rec: filt.record(rec, t0))
+    state.shown += len(batch)
+    if events is not None:
+        batch.events, batch.states = events.build(batch, state.rows)
+    for sink in sinks:
+        sink.write(batch)
+    state.rows += len(batch)
