@@ -596,6 +596,9 @@ class TableSink(OutputSink):
         return rows
 
     def _write_findings(self) -> int:
+        # by time, as `check` prints them and `check --json` writes them (stable: rules
+        # report in their order at one time)
+        self._findings.sort(key=lambda row: row[0])
         cols = list(zip(*self._findings, strict=True)) or [[] for _ in FINDING_COLUMNS]
         out = []
         for name, values in zip(FINDING_COLUMNS, cols, strict=True):
