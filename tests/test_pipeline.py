@@ -246,3 +246,13 @@ def test_sinks_are_aborted_when_one_fails(tmp_path):
     r = cli("export", FAULTS, "--parquet", out, "--mcap", tmp_path / "missing" / "x.mcap")
     assert r.returncode == 2 and "does not exist" in r.stderr
     assert not out.exists() or not list(Path(out).iterdir())
+
+
+def test_check_api_gives_the_findings_of_the_check_command(tmp_path):
+    found = cananalyze.check(FAULTS, network=NETWORK, rules=RULES)
+    r = cli("check", FAULTS, "--network", NETWORK, "--rules", RULES, "--json", tmp_path / "f.json")
+    assert r.returncode == 1, r.stderr
+    assert [f.record() for f in found] == json.loads((tmp_path / "f.json").read_text())
+    assert sum(f.fails for f in found) == 16
+    assert cananalyze.check(SAMPLES / "commissioning.log", rules=RULES) == []
+    assert cananalyze.Options is cananalyze.pipeline.Options

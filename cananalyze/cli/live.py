@@ -17,6 +17,7 @@ import sys
 import time
 
 from ..errors import UsageError
+from .common import add_time_option
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -83,6 +84,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--plain", action="store_true", help="decode-style lines instead of the dashboard"
     )
     p.add_argument("--no-color", action="store_true", help="no ANSI colours in --plain output")
+    add_time_option(p)
     p.add_argument(
         "--record", metavar="FILE", help="record the raw frames (.log candump, .asc, .blf, .mcap)"
     )
