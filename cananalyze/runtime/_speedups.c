@@ -59,7 +59,7 @@ static signed char HEXV[256]; /* hex digit value, -1 otherwise */
 static inline int is_digit(unsigned char c) { return c >= '0' && c <= '9'; }
 
 /* Seconds from `sec` (ni digits) and `frac` (nf digits), exactly as the numpy
- * readers compute them (io/candump.py _parse_time and candump_fast.parse):
+ * candump parser computes them (io/candump.py _parse_time), and float(text):
  * one integer divided once by 10**nf while it is below 2**53, else the sum. */
 static inline double seconds(uint64_t sec, int ni, uint64_t frac, int nf) {
     if (nf == 0) return (double)(int64_t)sec;
@@ -173,8 +173,8 @@ typedef struct {
 } Name;
 
 /* One `(sec.frac) iface id#data [R|T]` line in [q, e). Returns 0 parsed, 1 parsed
- * with an interface not in `names`, 2 for the Python path. Accepts exactly a
- * subset of what candump._bulk_log_lines accepts, with the same values. */
+ * with an interface not in `names`, 2 for the Python line parser. Accepts exactly
+ * the lines candump._bulk_log_lines (numpy) accepts, with the same values. */
 static inline int candump_line(const unsigned char *q, const unsigned char *e, const Name *names,
                                Py_ssize_t n_names, Py_ssize_t *hint, double *t, uint32_t *can_id,
                                uint8_t *flags, uint8_t *dlc, uint8_t *data, uint16_t *chan) {
