@@ -337,8 +337,8 @@ static inline int next_token(const unsigned char **q, const unsigned char *e,
 }
 
 /* One classic data-frame line `t ch id[x] Rx|Tx d dlc b0 ...` (base hex, absolute
- * times): 1 when parsed. Accepts a subset of what asc._bulk_lines accepts (in
- * practice the same set), with the same values. */
+ * times): 1 when parsed, with the values asc._LineParser gives the line; 0 leaves
+ * it to that parser (which also reads every line without the helper). */
 static inline int asc_line(const unsigned char *q, const unsigned char *e, double *t,
                            int64_t *chan, uint32_t *can_id, uint8_t *flags, uint8_t *dlc,
                            uint8_t *data) {
