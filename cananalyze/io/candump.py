@@ -184,7 +184,7 @@ def _bulk_log_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, chans
     id_len = hash_pos - id_start
     good &= (hash_pos < ends) & ((id_len == 3) | (id_len == 8))
     can_id, id_ok = _parse_hex(arr, id_start, id_len, 8)
-    good &= id_ok
+    good &= id_ok & ((id_len == 8) | (can_id <= 0x7FF))  # 3 digits above 7FF: see _parse_line
     d_start = hash_pos + 1
     d_end = _first_after(spaces, d_start, ends)
     first = arr[np.minimum(d_start, arr.size - 1)]
@@ -306,6 +306,10 @@ def _parse_time_text(text: bytes) -> float | None:
         return None
 
 
+def _too_wide(ident: bytes) -> str:
+    return f"identifier {ident.decode('latin-1')!r} is above 7FF, the largest 11-bit (3-digit) one"
+
+
 def _parse_line(line: bytes):
     """One candump line of any variant -> (t, channel, can_id, flags, payload) or an error text."""
     m = _LOG_RE.match(line)
@@ -317,6 +321,8 @@ def _parse_line(line: bytes):
         if len(ident) not in (3, 8):
             return f"identifier {ident.decode('latin-1')!r} is neither 3 (11-bit) nor 8 (29-bit) hex digits"
         can_id = int(ident, 16)
+        if len(ident) == 3 and can_id > 0x7FF:
+            return _too_wide(ident)
         flags = FLAG_TX if m["dir"] == b"T" else 0
         if len(ident) == 8:
             if can_id & CAN_ERR_FLAG:
@@ -354,6 +360,8 @@ def _parse_line(line: bytes):
                 return f"bad timestamp {m['t'].decode('latin-1')!r}"
         ident = m["id"]
         can_id = int(ident, 16)
+        if len(ident) == 3 and can_id > 0x7FF:
+            return _too_wide(ident)
         flags = FLAG_EXT if len(ident) == 8 else 0
         if len(ident) == 8 and can_id & CAN_ERR_FLAG:
             flags = FLAG_ERR

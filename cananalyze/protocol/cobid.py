@@ -89,17 +89,21 @@ class CobClassifier:
             )
 
     def classify(self, batch: FrameBatch) -> Classified:
+        """Service, node and PDO number per row.
+
+        Only a standard frame with an identifier that fits 11 bits is looked up: a
+        29-bit frame, an error frame, or a "standard" frame claiming an id above
+        0x7FF (a bus cannot carry one; a corrupt or hand-made log can) is `other`
+        (or `error_frame`), never a CANopen service.
+        """
         can_id = batch.can_id
         flags = batch.flags
-        std = (flags & (FLAG_EXT | FLAG_ERR)) == 0
-        idx = np.where(std & (can_id < 2048), can_id, 0).astype(np.intp)
-        service = self.svc[idx]
-        node = self.node[idx]
-        pdo = self.pdo[idx]
-        service = np.where(std, service, Service.OTHER).astype(np.uint8)
+        std = ((flags & (FLAG_EXT | FLAG_ERR)) == 0) & (can_id <= 0x7FF)
+        idx = np.where(std, can_id, 0).astype(np.intp)
+        service = np.where(std, self.svc[idx], Service.OTHER).astype(np.uint8)
         service[(flags & FLAG_ERR) != 0] = Service.ERROR_FRAME
-        node = np.where(std, node, NO_NODE).astype(np.int16)
-        pdo = np.where(std, pdo, 0).astype(np.uint8)
+        node = np.where(std, self.node[idx], NO_NODE).astype(np.int16)
+        pdo = np.where(std, self.pdo[idx], 0).astype(np.uint8)
         self._refine_error_control(batch, service)
         return Classified(service, node, pdo)
 

@@ -206,6 +206,7 @@ static inline int candump_line(const unsigned char *q, const unsigned char *e, c
         k++;
     }
     if ((k != 3 && k != 8) || q + k >= e || q[k] != '#') return 2;
+    if (k == 3 && id > 0x7FFu) return 2; /* not an 11-bit id: the line parser says so */
     q += k + 1; /* data */
     const unsigned char *d_end = q;
     while (d_end < e && *d_end != ' ') d_end++;
