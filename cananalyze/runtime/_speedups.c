@@ -1,24 +1,25 @@
 /*
- * cananalyze._speedups: the text readers' and writer's, the frames table's and the MCAP
- * chunks' inner loops in C.
+ * cananalyze.runtime._speedups: inner loops of the candump and ASC readers, the text
+ * writer, the frames table's hex column and the MCAP chunks, in C.
  *
  * Why hand-written: no library parses candump or Vector ASC text into columns
- * (python-can makes one Message per frame, about 150k frames/s), and the numpy
- * paths in io/candump.py and io/asc.py, while columnar, need a dozen passes over
- * every byte and hold the GIL between their calls, so reading cannot run on the
- * other core while the decoder works. These loops read each byte once and release
- * the GIL for the whole chunk. The text writer's lines come out of a matrix of
- * NUL-padded columns about 100 bytes wide; numpy needs four passes to drop the
- * padding (concatenate, compare, compress, row sums), `compact_rows` one.
+ * (python-can makes one Message per frame, about 150k frames/s). Without this
+ * helper candump lines go through numpy (a dozen passes over every byte) and ASC
+ * lines through the per-line parser, both holding the GIL, so reading cannot run
+ * on the other core while the decoder works. These loops read each byte once and
+ * release the GIL for the whole chunk. The text writer's lines come out of a
+ * matrix of NUL-padded columns about 100 bytes wide; numpy needs four passes to
+ * drop the padding (concatenate, compare, compress, row sums), `compact_rows` one.
  *
- * Contract: every function is an optional shortcut for a pure-Python/numpy
- * function, and must give identical results. The parsers accept only lines whose
- * every field they can vouch for and mark every other line for the Python path
- * (which also reports problems), so results are identical by construction; the
- * tests compare both on real logs and fuzzed lines. Buffers come in through the
- * buffer protocol (numpy arrays, bytes, memoryview): no numpy headers needed.
- * Every read is bounds-checked against the line end: lines may be cut, and any
- * byte may appear.
+ * Contract: the helper is optional (setup.py builds it when it can, CANANALYZE_PURE=1
+ * ignores it) and every function is a shortcut for a Python/numpy function that
+ * must give identical results. The parsers accept only lines whose every field
+ * they can vouch for and mark every other line for the Python line parser (which
+ * also reports problems), so results are identical by construction; the tests
+ * compare both on real logs and fuzzed lines, and CI runs the suite both ways.
+ * Buffers come in through the buffer protocol (numpy arrays, bytes, memoryview):
+ * no numpy headers needed. Every read is bounds-checked against the line end:
+ * lines may be cut, and any byte may appear.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
