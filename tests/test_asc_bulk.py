@@ -104,6 +104,7 @@ def _random_asc(rng: random.Random) -> bytes:
                     "Begin Triggerblock Thu Jan 01 00:00:05.0 2026",
                     "base dec timestamps relative",
                     "base hex timestamps absolute",
+                    " BaSE dec  timestamps absolute",  # any case, after a blank
                     "// comment",
                     "End TriggerBlock",
                     "garbage here",

@@ -32,6 +32,16 @@ def test_digits_equal_python_zero_padded() -> None:
         assert _rows(bytecols.digits(values, width)) == want
 
 
+def test_no_columns_give_no_bytes() -> None:
+    """A batch with no row shown has no columns (every decode's last, empty batch):
+    empty rows, not a numpy error."""
+    for n in (0, 3):
+        blob, ends = bytecols.compact([], n, True)
+        assert blob == b"" and ends.tolist() == [0] * n
+        assert bytecols.compact([], n, False) == (b"", None)
+    assert bytecols.joined_rows([], 2) == ["", ""]
+
+
 def test_split_rows_keeps_non_ascii_text() -> None:
     texts = ["Gerätename", "", "plain", "Δt ≤ 5 ms"]
     table = bytecols.padded_table([t.encode() for t in texts])

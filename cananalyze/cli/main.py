@@ -13,7 +13,7 @@ import sys
 
 from .. import __version__
 from ..errors import CananalyzeError
-from ..runtime import allocator
+from ..runtime import allocator, speedups
 from ..runtime.gcpolicy import fewer_collections
 
 # One module per sub-command, each with add_parser(subparsers) and run(args) -> int.
@@ -27,7 +27,9 @@ def build_parser() -> argparse.ArgumentParser:
         prog="cananalyze",
         description="CANopen bus traffic analyser and log decoder.",
     )
-    parser.add_argument("--version", action="version", version=f"cananalyze {__version__}")
+    parser.add_argument(
+        "--version", action="version", version=f"cananalyze {__version__} ({speedups.status()})"
+    )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in SUBCOMMANDS:
         try:

@@ -112,6 +112,8 @@ def compact(parts: list[np.ndarray], n: int, with_ends: bool) -> tuple[bytes, np
         ]
         ends = np.empty(n, np.int64) if with_ends else None
         return compact_rows(parts, [p.shape[1] for p in parts], n, PAD, ends), ends
+    if not parts:  # no columns (a batch with no rows shown): the C pass gives b"" too
+        return b"", np.zeros(n, np.int64) if with_ends else None
     matrix = np.concatenate(parts, axis=1)
     keep = matrix != PAD
     return matrix[keep].tobytes(), np.cumsum(keep.sum(axis=1)) if with_ends else None

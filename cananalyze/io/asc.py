@@ -2,7 +2,9 @@
 
 python-can's ASCReader builds one Message per frame and silently drops lines it
 cannot parse; this reader tokenises each line straight into a RowSink (columns),
-and reports malformed frame lines with their line number. It follows python-can
+and reports malformed frame lines with their line number. With the compiled
+helper, classic data-frame lines (the bulk of a log) are parsed in C, in bulk,
+with the same values; the line parser takes the rest. It follows python-can
 for what each field means (channel numbers, DLC codes, FD columns), and reuses
 its locale-tolerant header date parser.
 
@@ -34,14 +36,11 @@ from ..frames import (
 )
 from ..runtime import speedups
 from ._rows import MAX_LINE, RowSink
-
-# the candump reader's column helpers: strided windows and grouped digit gathers
-from .candump import _DIGIT, _HEX, CHUNK, PAD, _parse_hex, _parse_time, _window
+from .candump import CHUNK
 from .registry import LogFormat, ReadContext, register
 
 _DLC2LEN = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
 _HEADER_RE = re.compile(rb"(?im)^\s*(base\s+(hex|dec)\b|begin\s+triggerblock\b)")
-_BASE_RE = re.compile(rb"(?im)^[ \t]*base[ \t]")
 _FRAME_RE = re.compile(rb"(?m)^\s*\d+\.\d+\s+(\d+\s+\S+\s+(Rx|Tx)\s+[dr]\b|CANFD\s+\d+\s+(Rx|Tx))")
 
 
@@ -215,7 +214,7 @@ class _LineParser:
 
 
 def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
-    """Chunks of the file: classic data-frame lines in bulk, the rest line by line."""
+    """Chunks of the file: classic data-frame lines in bulk (C helper), the rest line by line."""
     ctx.format = "asc"
     sink = RowSink(ctx)
     sink.size = 1 << 62  # flushed per chunk here, merged with the bulk rows by line number
@@ -271,75 +270,67 @@ def _chunks(stream: BinaryIO, parser: _LineParser) -> Iterator[FrameBatch]:
             chunk, carry = chunk[:cut], chunk[cut:]
         elif not chunk:
             break
+        first_line = line_base + 1
         C = speedups.C
-        if C is not None:
+        if C is None:  # every line through the line parser, in order
+            lines = chunk.decode("latin-1").split("\n")
+            if chunk.endswith(b"\n"):
+                lines.pop()
+            line_base += len(lines)
+            for i, raw in enumerate(lines):
+                parser.line(first_line + i, raw.rstrip("\r"))
+            merged = sink.flush()
+        else:
             starts = np.empty(C.count_lines(chunk), np.int64)
             ends = np.empty(starts.size, np.int64)
             C.split_lines(chunk, starts, ends, True)  # text_lines strips every trailing CR
-        else:
-            arr = np.frombuffer(chunk + bytes(PAD), np.uint8)
-            nl = np.flatnonzero(arr[: len(chunk)] == 10)
-            if nl.size == 0 or nl[-1] != len(chunk) - 1:
-                nl = np.append(nl, len(chunk))
-            starts = np.empty(nl.size, np.int64)
-            starts[0] = 0
-            starts[1:] = nl[:-1] + 1
-            ends = nl.astype(np.int64)
-            while True:  # text_lines strips every trailing CR
-                cr = (ends > starts) & (arr[np.maximum(ends - 1, 0)] == 13)
-                if not cr.any():
-                    break
-                ends = ends - cr
-        first_line = line_base + 1
-        line_base += starts.size
-        # header lines that set the base or the time mode come first, line by line
-        head_end = 0
-        if C is not None:  # the regex's lines, found per line start in C; then the same test
-            head_end = C.asc_base_line(chunk, starts)
-            if head_end and not (b"ase" in chunk or b"ASE" in chunk):
-                head_end = 0
-        elif b"ase" in chunk or b"ASE" in chunk:  # memchr-fast test before the regex
-            for m in _BASE_RE.finditer(chunk):
-                head_end = int(np.searchsorted(starts, m.start(), side="right"))
-        for i in range(head_end):
-            parser.line(first_line + i, chunk[starts[i] : ends[i]].decode("latin-1"))
-        bulk = None
-        if parser.base == 16 and not parser.relative and head_end < starts.size:
-            bulk = _c_bulk_lines(C, chunk, starts, ends) if C else _bulk_lines(arr, starts, ends)
-            if bulk[1] is None:
-                bulk = None
-            else:
-                bulk[0][:head_end] = False
-        fast = np.zeros(starts.size, bool) if bulk is None else bulk[0]
-        # every other line, in order, through the line parser; note where the time base moves
-        slow_idx = np.flatnonzero(~fast[head_end:]) + head_end
-        state_at: list[tuple[int, float]] = [(-1, parser.start)]
-        new_chans = _first_channels(bulk, parser) if bulk is not None else []
-        nc = 0
-        for i in slow_idx.tolist():
-            while nc < len(new_chans) and new_chans[nc][0] < i:
-                parser.chan_of.setdefault(new_chans[nc][1], sink.channel(new_chans[nc][1]))
-                nc += 1
-            parser.line(first_line + i, chunk[starts[i] : ends[i]].decode("latin-1"))
-            if parser.start != state_at[-1][1]:
-                state_at.append((i, parser.start))
-        for _, name in new_chans[nc:]:
-            parser.chan_of.setdefault(name, sink.channel(name))
-        parts = []
-        slow_batch = sink.flush()
-        if slow_batch is not None:
-            parts.append(slow_batch)
-        if bulk is not None and fast.any():
-            parts.append(_bulk_batch(bulk, state_at, parser, first_line, chunk, starts, ends))
-        if not parts:
-            continue
-        if len(parts) == 2:
-            merged = concat(parts)
-            merged = merged.take(np.argsort(merged.line, kind="stable"))
-        else:
-            merged = parts[0]
-        merged.channels = tuple(sink.channels)
-        yield merged
+            line_base += starts.size
+            merged = _c_chunk(C, parser, chunk, starts, ends, first_line)
+        if merged is not None:
+            merged.channels = tuple(sink.channels)
+            yield merged
+
+
+def _c_chunk(C, parser: _LineParser, chunk: bytes, starts, ends, first_line: int):
+    """One chunk's frames: data-frame lines by the compiled parser, the rest by the line
+    parser in file order; None when the chunk has none."""
+    sink = parser.sink
+    # header lines that set the base or the time mode come first, line by line:
+    # the last `base ...` line is found per line start in C
+    head_end = C.asc_base_line(chunk, starts)
+    for i in range(head_end):
+        parser.line(first_line + i, chunk[starts[i] : ends[i]].decode("latin-1"))
+    bulk = None
+    if parser.base == 16 and not parser.relative and head_end < starts.size:
+        bulk = _c_bulk_lines(C, chunk, starts, ends)
+        bulk[0][:head_end] = False
+    fast = np.zeros(starts.size, bool) if bulk is None else bulk[0]
+    # every other line, in order, through the line parser; note where the time base moves
+    slow_idx = np.flatnonzero(~fast[head_end:]) + head_end
+    state_at: list[tuple[int, float]] = [(-1, parser.start)]
+    new_chans = _first_channels(bulk, parser) if bulk is not None else []
+    nc = 0
+    for i in slow_idx.tolist():
+        while nc < len(new_chans) and new_chans[nc][0] < i:
+            parser.chan_of.setdefault(new_chans[nc][1], sink.channel(new_chans[nc][1]))
+            nc += 1
+        parser.line(first_line + i, chunk[starts[i] : ends[i]].decode("latin-1"))
+        if parser.start != state_at[-1][1]:
+            state_at.append((i, parser.start))
+    for _, name in new_chans[nc:]:
+        parser.chan_of.setdefault(name, sink.channel(name))
+    parts = []
+    slow_batch = sink.flush()
+    if slow_batch is not None:
+        parts.append(slow_batch)
+    if bulk is not None and fast.any():
+        parts.append(_bulk_batch(bulk, state_at, parser, first_line, chunk, starts, ends))
+    if not parts:
+        return None
+    if len(parts) == 1:
+        return parts[0]
+    merged = concat(parts)
+    return merged.take(np.argsort(merged.line, kind="stable"))
 
 
 def _first_channels(bulk, parser: _LineParser) -> list[tuple[int, str]]:
@@ -387,7 +378,8 @@ def _bulk_batch(
 
 
 def _c_bulk_lines(C, chunk: bytes, starts: np.ndarray, ends: np.ndarray):
-    """`_bulk_lines` by the compiled helper: the same lines taken, the same columns."""
+    """Classic data-frame lines (base hex, absolute times) by the compiled helper:
+    (mask of lines taken, columns); every other line is the line parser's."""
     n = starts.size
     ok = np.zeros(n, bool)
     cols = {
@@ -399,96 +391,6 @@ def _c_bulk_lines(C, chunk: bytes, starts: np.ndarray, ends: np.ndarray):
         "data": np.empty((n, 8), np.uint8),
     }
     C.asc_lines(chunk, starts, ends, *cols.values(), ok)
-    return ok, cols
-
-
-def _bulk_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray):
-    """Classic data-frame lines of a chunk as columns (base hex, absolute times).
-
-    `t ch id[x] Rx|Tx d dlc b0 b1 ...`: whitespace tokens are found once for the
-    whole chunk, then each field is a fixed-position gather per line. Returns
-    (mask of lines taken, columns); every other line goes to the line parser.
-    """
-    n = starts.size
-    size = arr.size - PAD
-    body = arr[:size]
-    tokch = np.ones(size + 2, bool)  # token bytes, with a separator either side
-    tokch[0] = tokch[-1] = False
-    inner = tokch[1:-1]
-    inner &= body > 32  # space, tab, CR, LF and other controls separate tokens
-    tok_s = np.flatnonzero(inner & ~tokch[:-2])
-    tok_len = np.flatnonzero(inner & ~tokch[2:]) + 1 - tok_s
-    first = np.searchsorted(tok_s, starts)
-    ntok = np.searchsorted(tok_s, ends) - first
-    ok = ntok >= 6
-    # str.split() also splits on other controls and on latin-1 NBSP/NEL: such lines go slow
-    odd = np.flatnonzero(((body < 32) & (body != 9) & (body != 10) & (body != 13)) | (body >= 127))
-    if odd.size:
-        k = np.searchsorted(odd, starts)
-        ok &= ~((k < odd.size) & (odd[np.minimum(k, odd.size - 1)] < ends))
-    nt = tok_s.size
-    if nt == 0:
-        return np.zeros(n, bool), None
-
-    def tok(k: int):
-        j = np.minimum(first + k, nt - 1)
-        return tok_s[j], tok_len[j]
-
-    t_s, t_len = tok(0)
-    c_s, c_len = tok(1)
-    i_s, i_len = tok(2)
-    d_s, d_len = tok(3)
-    k_s, k_len = tok(4)
-    l_s, l_len = tok(5)
-    # time: digits '.' digits, no exponent
-    dots = np.flatnonzero(body == ord("."))
-    t, t_ok = _parse_time(arr, t_s, t_s + t_len, dots)
-    ok &= t_ok & (t_len >= 3)
-    # channel: 1-3 decimal digits
-    cw = _DIGIT[_window(arr, c_s, 3)].astype(np.int64)
-    c_digit = cw != 255
-    ok &= (c_len >= 1) & (c_len <= 3) & np.all(c_digit | (np.arange(3) >= c_len[:, None]), axis=1)
-    chan = np.zeros(n, np.int64)
-    for w in (1, 2, 3):
-        r = c_len == w
-        chan[r] = cw[r, :w] @ (10 ** np.arange(w - 1, -1, -1))
-    # direction
-    dw = _window(arr, d_s, 2)
-    rx = (dw[:, 0] == ord("R")) & (dw[:, 1] == ord("x"))
-    tx = (dw[:, 0] == ord("T")) & (dw[:, 1] == ord("x"))
-    ok &= (d_len == 2) & (rx | tx)
-    ok &= (k_len == 1) & (arr[k_s] == ord("d"))
-    code = _HEX[arr[l_s]].astype(np.int64)
-    ok &= (l_len == 1) & (code != 255)
-    dlc = np.minimum(np.where(code == 255, 0, code), 8)
-    ok &= ntok >= 6 + dlc
-    # identifier: hex digits, then 'x' for 29-bit
-    last = arr[i_s + np.maximum(i_len - 1, 0)]
-    ext = (last == ord("x")) | (last == ord("X"))
-    id_len = i_len - ext
-    can_id, id_ok = _parse_hex(arr, i_s, np.where(ok, id_len, 0), 8)
-    ok &= id_ok & (id_len >= 1) & (id_len <= 8)
-    ok &= np.where(ext, can_id <= 0x1FFFFFFF, can_id <= 0x7FF)
-    # data bytes: tokens 6.. of exactly two hex digits
-    data = np.zeros((n, 8), np.uint8)
-    for j in range(8):
-        has = ok & (dlc > j)
-        if not has.any():
-            continue
-        s, ln = tok(6 + j)
-        hi, lo = _HEX[arr[s]], _HEX[arr[s + 1]]
-        good = (ln == 2) & (hi != 255) & (lo != 255)
-        ok &= ~has | good
-        data[:, j] = np.where(has, (hi << 4) | (lo & 0x0F), 0)
-    flags = np.where(tx, FLAG_TX, 0).astype(np.uint8) | np.where(ext, FLAG_EXT, 0).astype(np.uint8)
-    cols = {
-        "t": t,
-        "chan": chan,
-        "can_id": can_id.astype(np.uint32),
-        "flags": flags,
-        "dlc": dlc.astype(np.uint8),
-        "data": data,
-    }
     return ok, cols
 
 

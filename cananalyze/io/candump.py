@@ -1,11 +1,13 @@
 """candump logs: `-l`/`-L` log-file lines and the screen format, with or without times.
 
-Log-file lines `(1700000000.123456) can0 181#0102 [R|T]` are parsed in bulk with
-numpy over the raw bytes of a chunk (python-can's CanutilsLogReader makes one
-Message per frame and converts hex byte by byte: about 140k frames/s; this path
-runs in the millions). Lines the bulk path cannot vouch for, and every screen
-format line (`  can0  181   [2]  01 02`, optionally after `(time)`), go through
-the line parser below, which is also where problems are reported.
+Log-file lines `(1700000000.123456) can0 181#0102 [R|T]` are parsed in bulk over
+the raw bytes of a chunk: by the compiled helper's `candump_lines` when it is
+built, else by `_bulk_log_lines` (numpy). Both take exactly the same lines, with
+the same values (python-can's CanutilsLogReader makes one Message per frame and
+converts hex byte by byte: about 140k frames/s; these paths run in the millions).
+Every line they leave, and every screen format line (`  can0  181   [2]  01 02`,
+optionally after `(time)`), goes through the line parser below, which is also
+where problems are reported.
 """
 
 from __future__ import annotations
@@ -30,11 +32,10 @@ from ..frames import (
     set_row,
 )
 from ..runtime import speedups
-from . import candump_fast
 from .registry import LogFormat, ReadContext, register
 
 CHUNK = 1 << 22  # bytes per bulk parse (about 90k log-file lines)
-PAD = 128  # zero bytes after a chunk, so fixed-width windows never run off its end
+PAD = 128  # zero bytes after a chunk, so the numpy parser's windows never run off its end
 CAN_ERR_FLAG = 0x20000000
 
 _HEX = np.full(256, 255, np.uint8)
@@ -123,9 +124,11 @@ def _parse_hex(arr: np.ndarray, start: np.ndarray, length: np.ndarray, width: in
 def _parse_time(arr: np.ndarray, start: np.ndarray, end: np.ndarray, dots: np.ndarray):
     """Seconds from 'digits.digits' in [start, end); second result: well formed.
 
-    Grouped by (integer digits, fraction digits): usually one group per chunk.
-    All digits are read as one integer and divided once by 10**fraction digits,
-    which is exactly float(text) while the integer is below 2**53.
+    1-18 integer and 1-12 fraction digits, as the C parser takes them; other times
+    (candump writes none) are the line parser's. Grouped by (integer digits,
+    fraction digits): usually one group per chunk. All digits are read as one
+    integer and divided once by 10**fraction digits, which is exactly float(text)
+    while the integer is below 2**53.
     """
     dot = _first_after(dots, start, end)
     n_int = dot - start
@@ -135,11 +138,11 @@ def _parse_time(arr: np.ndarray, start: np.ndarray, end: np.ndarray, dots: np.nd
     keys = n_int * 64 + n_frac
     for key, rows in _groups(keys):
         ni, nf = key // 64, key % 64
-        if ni < 1 or ni > 18 or nf > 12:
+        if ni < 1 or ni > 18 or nf < 1 or nf > 12:
             continue
         sel = slice(None) if rows is None else rows
         digits = _DIGIT[_window(arr, start[sel], ni + 1 + nf)]
-        if nf and ni + nf <= 15:
+        if ni + nf <= 15:
             # one float64 dot product (BLAS), the '.' column weighted 0: exact below 1e15
             weights = np.zeros(ni + 1 + nf)
             weights[:ni] = 10.0 ** np.arange(ni + nf - 1, nf - 1, -1)
@@ -147,26 +150,23 @@ def _parse_time(arr: np.ndarray, start: np.ndarray, end: np.ndarray, dots: np.nd
             ok[sel] = np.count_nonzero(digits == 255, axis=1) == 1  # only the '.'
             t[sel] = (digits.astype(np.float64) @ weights) / 10.0**nf
             continue
-        good = np.all(digits[:, :ni] != 255, axis=1)
+        fd = digits[:, ni + 1 :]
+        ok[sel] = np.all(digits[:, :ni] != 255, axis=1) & np.all(fd != 255, axis=1)
         sec = digits[:, :ni].astype(np.int64) @ (10 ** np.arange(ni - 1, -1, -1, dtype=np.int64))
-        if nf:
-            fd = digits[:, ni + 1 :]
-            good &= np.all(fd != 255, axis=1)
-            frac = fd.astype(np.int64) @ (10 ** np.arange(nf - 1, -1, -1, dtype=np.int64))
-            if ni + nf <= 18:
-                whole = sec * 10**nf + frac
-                t[sel] = np.where(whole < 2**53, whole / 10.0**nf, sec + frac / 10.0**nf)
-            else:
-                t[sel] = sec + frac / 10.0**nf
+        frac = fd.astype(np.int64) @ (10 ** np.arange(nf - 1, -1, -1, dtype=np.int64))
+        if ni + nf <= 18:
+            whole = sec * 10**nf + frac
+            t[sel] = np.where(whole < 2**53, whole / 10.0**nf, sec + frac / 10.0**nf)
         else:
-            t[sel] = sec
-        ok[sel] = good
+            t[sel] = sec + frac / 10.0**nf
     return t, ok
 
 
 def _bulk_log_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, chans: _Channels):
-    """Parse `(t) iface id#data [dir]` lines as columns.
+    """Parse `(t) iface id#data [dir]` lines as columns: the path without the C helper.
 
+    Takes exactly the lines `_speedups.candump_lines` takes, with the same values
+    (tests/test_speedups.py), so the line parser sees the same lines either way.
     Returns (batch columns for the good rows, mask of rows the line parser must see).
     """
     n = starts.size
@@ -178,12 +178,13 @@ def _bulk_log_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, chans
     good &= t_ok & (close < ends) & (arr[np.minimum(close + 1, arr.size - 1)] == ord(" "))
     ch_start = close + 2
     ch_end = _first_after(spaces, ch_start, ends)
+    good &= ch_end > ch_start  # an interface name
     id_start = ch_end + 1
     hash_pos = _first_after(hashes, id_start, ends)
     id_len = hash_pos - id_start
     good &= (hash_pos < ends) & ((id_len == 3) | (id_len == 8))
     can_id, id_ok = _parse_hex(arr, id_start, id_len, 8)
-    good &= id_ok
+    good &= id_ok & ((id_len == 8) | (can_id <= 0x7FF))  # 3 digits above 7FF: see _parse_line
     d_start = hash_pos + 1
     d_end = _first_after(spaces, d_start, ends)
     first = arr[np.minimum(d_start, arr.size - 1)]
@@ -233,57 +234,13 @@ def _bulk_log_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, chans
     return (t, can_id, flags, dlc, data, channel), ~good
 
 
-def _layout(text, starts: np.ndarray, ends: np.ndarray) -> candump_fast.Layout | None:
-    """The layout of the first of a chunk's first three lines that has one."""
-    for r in range(min(3, starts.size)):
-        lay = candump_fast.Layout.of(bytes(text[starts[r] : ends[r]]))
-        if lay is not None:
-            return lay
-    return None
-
-
-_FIND = object()
-
-
-def _log_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, chans: _Channels, lay=_FIND):
-    """`_bulk_log_lines` for a chunk, the rows of its dominant layout by the fixed-layout shortcut.
-
-    Same results as `_bulk_log_lines` on every row: the shortcut takes only rows
-    that fit its layout exactly and leaves every other row to the general parser.
-    `lay`: the layout to use (None: none), found from the first lines by default.
-    """
-    if lay is _FIND:
-        lay = _layout(arr, starts, ends)
-    if lay is None:
-        return _bulk_log_lines(arr, starts, ends, chans)
-    cols, fits = candump_fast.parse(arr, candump_fast.words(arr), starts, ends, lay)
-    t, can_id, flags, dlc, data = cols
-    channel = np.full(starts.size, chans.get(lay.name.decode("latin-1")), np.uint16)
-    rest = np.flatnonzero(~fits)
-    slow = np.zeros(starts.size, bool)
-    if rest.size:
-        rcols, rslow = _bulk_log_lines(arr, starts[rest], ends[rest], chans)
-        for full, part in zip((t, can_id, flags, dlc, data, channel), rcols, strict=True):
-            full[rest] = part
-        slow[rest] = rslow
-    return (t, can_id, flags, dlc, data, channel), slow
-
-
-def _padded(text, size: int) -> np.ndarray:
-    """The chunk's bytes as a uint8 array with PAD zero bytes after them (the numpy paths read past)."""
-    arr = np.empty(size + PAD, np.uint8)
-    arr[:size] = np.frombuffer(text, np.uint8, count=size)
-    arr[size:] = 0
-    return arr
-
-
 def _c_lines(C, text, chans: _Channels):
-    """`_log_lines` for a chunk by the compiled parser: (starts, ends, columns, slow mask).
+    """The compiled parser over a chunk: (starts, ends, columns, mask of lines it left).
 
-    The C loop takes the lines it can vouch for; the others go through
-    `_log_lines` with the chunk's layout, exactly as without the extension. Interface
-    names are then numbered in the order the numpy path meets them: the layout's
-    first, then the rows it does not fit, in row order.
+    Interfaces are numbered in the order their first parsed line comes, as
+    `_bulk_log_lines` numbers them: the C loop knows the names seen so far, and a
+    line on a new one (status 1) gets it named here, then the lines still waiting
+    are parsed again with it, a round per new interface.
     """
     size = len(text)
     # room for lines of 24 bytes on average (candump's are 30-60): one pass over the
@@ -298,47 +255,41 @@ def _c_lines(C, text, chans: _Channels):
         ends = np.empty(n, np.int64)
         C.split_lines(text, starts, ends, False)
     starts, ends = starts[:n], ends[:n]
-    t = np.empty(n, np.float64)
-    can_id = np.empty(n, np.uint32)
-    flags = np.empty(n, np.uint8)
-    dlc = np.empty(n, np.uint8)
-    data = np.empty((n, 8), np.uint8)
-    channel = np.empty(n, np.uint16)
+    cols = (
+        np.empty(n, np.float64),  # t
+        np.empty(n, np.uint32),  # can_id
+        np.empty(n, np.uint8),  # flags
+        np.empty(n, np.uint8),  # dlc
+        np.empty((n, 8), np.uint8),  # data
+        np.empty(n, np.uint16),  # channel
+    )
     status = np.empty(n, np.uint8)
-    lay = _layout(text, starts, ends)
-    if lay is not None:
-        chans.get(lay.name.decode("latin-1"))
-    names = tuple(name.encode("latin-1") for name in chans.names)
-    C.candump_lines(text, starts, ends, names, t, can_id, flags, dlc, data, channel, status)
-    cols = (t, can_id, flags, dlc, data, channel)
-    slow = np.zeros(n, bool)
-    new = np.flatnonzero(status == 1)
-    other = np.flatnonzero((status == 2) & (ends > starts))
-    if new.size or other.size:
-        firsts: list[tuple[int, str]] = []  # (row, interface) where a name may first appear
-        new_names = []
-        for r in new.tolist():
-            line = bytes(text[starts[r] : ends[r]])
-            at = line.find(b")") + 2
-            new_names.append(line[at : line.find(b" ", at)].decode("latin-1"))
-        firsts += zip(new.tolist(), new_names, strict=True)
-        local = _Channels()
-        if other.size:
-            rcols, rslow = _log_lines(_padded(text, size), starts[other], ends[other], local, lay)
-            for full, part in zip(cols, rcols, strict=True):
-                full[other] = part
-            slow[other] = rslow
-            good = other[~rslow]
-            codes, first = np.unique(channel[good], return_index=True)
-            firsts += [(int(good[i]), local.names[c]) for c, i in zip(codes, first, strict=True)]
-        for _, name in sorted(firsts):
-            chans.get(name)
-        if new.size:
-            channel[new] = [chans.index[name] for name in new_names]
-        if other.size and good.size:
-            lut = np.array([chans.index.get(name, 0) for name in local.names], np.uint16)
-            channel[good] = lut[channel[good]]
-    return starts, ends, cols, slow
+    C.candump_lines(text, starts, ends, _names(chans), *cols, status)
+    rows = np.flatnonzero(status == 1)
+    for _ in range(8):
+        if rows.size == 0:
+            break
+        chans.get(_name_at(text, starts[rows[0]], ends[rows[0]]))
+        part = tuple(np.empty_like(c[rows]) for c in cols)
+        part_status = np.empty(rows.size, np.uint8)
+        C.candump_lines(text, starts[rows], ends[rows], _names(chans), *part, part_status)
+        for full, got in zip(cols, part, strict=True):
+            full[rows] = got
+        rows = rows[part_status == 1]
+    for r in rows.tolist():  # many interfaces in one chunk: the rest one by one
+        cols[5][r] = chans.get(_name_at(text, starts[r], ends[r]))
+    return starts, ends, cols, status == 2
+
+
+def _names(chans: _Channels) -> tuple[bytes, ...]:
+    return tuple(name.encode("latin-1") for name in chans.names)
+
+
+def _name_at(text, start: int, end: int) -> str:
+    """The interface of a line the C parser took: after `(time) `, up to the next space."""
+    line = bytes(text[start:end])
+    at = line.index(b")") + 2
+    return line[at : line.index(b" ", at)].decode("latin-1")
 
 
 def _parse_time_text(text: bytes) -> float | None:
@@ -355,6 +306,10 @@ def _parse_time_text(text: bytes) -> float | None:
         return None
 
 
+def _too_wide(ident: bytes) -> str:
+    return f"identifier {ident.decode('latin-1')!r} is above 7FF, the largest 11-bit (3-digit) one"
+
+
 def _parse_line(line: bytes):
     """One candump line of any variant -> (t, channel, can_id, flags, payload) or an error text."""
     m = _LOG_RE.match(line)
@@ -366,6 +321,8 @@ def _parse_line(line: bytes):
         if len(ident) not in (3, 8):
             return f"identifier {ident.decode('latin-1')!r} is neither 3 (11-bit) nor 8 (29-bit) hex digits"
         can_id = int(ident, 16)
+        if len(ident) == 3 and can_id > 0x7FF:
+            return _too_wide(ident)
         flags = FLAG_TX if m["dir"] == b"T" else 0
         if len(ident) == 8:
             if can_id & CAN_ERR_FLAG:
@@ -403,6 +360,8 @@ def _parse_line(line: bytes):
                 return f"bad timestamp {m['t'].decode('latin-1')!r}"
         ident = m["id"]
         can_id = int(ident, 16)
+        if len(ident) == 3 and can_id > 0x7FF:
+            return _too_wide(ident)
         flags = FLAG_EXT if len(ident) == 8 else 0
         if len(ident) == 8 and can_id & CAN_ERR_FLAG:
             flags = FLAG_ERR
@@ -506,7 +465,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
             # strip '\r' before '\n'
             cr = (ends > starts) & (arr[np.maximum(ends - 1, 0)] == 13)
             ends = ends - cr
-            cols, slow = _log_lines(arr, starts, ends, chans)
+            cols, slow = _bulk_log_lines(arr, starts, ends, chans)
         line_no = line_base + 1 + np.arange(starts.size, dtype=np.int64)
         line_base += starts.size
         nonblank = ends > starts

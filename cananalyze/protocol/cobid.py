@@ -13,22 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR, FrameBatch
-from ..runtime import speedups
 from .services import Service
 
 NO_NODE = -1
-# the service codes the compiled classifier needs, in its order
-_C_CODES = np.array(
-    [
-        Service.OTHER,
-        Service.ERROR_FRAME,
-        Service.HEARTBEAT,
-        Service.BOOTUP,
-        Service.GUARD_RESPONSE,
-        Service.GUARD_REQUEST,
-    ],
-    np.uint8,
-)
 
 
 @dataclass
@@ -102,46 +89,21 @@ class CobClassifier:
             )
 
     def classify(self, batch: FrameBatch) -> Classified:
-        fast = getattr(speedups.C, "classify", None)
-        if fast is not None and (batch.can_id < 2048).all():
-            return self._classify_c(fast, batch)
-        return self._classify_numpy(batch)
+        """Service, node and PDO number per row.
 
-    def _classify_c(self, fast, batch: FrameBatch) -> Classified:
-        """The same columns from one compiled pass (`_speedups.classify`), GIL released."""
-        n = len(batch)
-        service = np.empty(n, np.uint8)
-        node = np.empty(n, np.int16)
-        pdo = np.empty(n, np.uint8)
-        c = np.ascontiguousarray
-        fast(
-            c(batch.can_id, np.uint32),
-            c(batch.flags, np.uint8),
-            c(batch.dlc, np.uint8),
-            c(batch.data, np.uint8),
-            self.svc,
-            self.node,
-            self.pdo,
-            self._prev_rtr.view(np.uint8),
-            _C_CODES,
-            service,
-            node,
-            pdo,
-        )
-        return Classified(service, node, pdo)
-
-    def _classify_numpy(self, batch: FrameBatch) -> Classified:
+        Only a standard frame with an identifier that fits 11 bits is looked up: a
+        29-bit frame, an error frame, or a "standard" frame claiming an id above
+        0x7FF (a bus cannot carry one; a corrupt or hand-made log can) is `other`
+        (or `error_frame`), never a CANopen service.
+        """
         can_id = batch.can_id
         flags = batch.flags
-        std = (flags & (FLAG_EXT | FLAG_ERR)) == 0
-        idx = np.where(std & (can_id < 2048), can_id, 0).astype(np.intp)
-        service = self.svc[idx]
-        node = self.node[idx]
-        pdo = self.pdo[idx]
-        service = np.where(std, service, Service.OTHER).astype(np.uint8)
+        std = ((flags & (FLAG_EXT | FLAG_ERR)) == 0) & (can_id <= 0x7FF)
+        idx = np.where(std, can_id, 0).astype(np.intp)
+        service = np.where(std, self.svc[idx], Service.OTHER).astype(np.uint8)
         service[(flags & FLAG_ERR) != 0] = Service.ERROR_FRAME
-        node = np.where(std, node, NO_NODE).astype(np.int16)
-        pdo = np.where(std, pdo, 0).astype(np.uint8)
+        node = np.where(std, self.node[idx], NO_NODE).astype(np.int16)
+        pdo = np.where(std, self.pdo[idx], 0).astype(np.uint8)
         self._refine_error_control(batch, service)
         return Classified(service, node, pdo)
 

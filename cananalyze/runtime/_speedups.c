@@ -1,24 +1,25 @@
 /*
- * cananalyze._speedups: the text readers' and writer's, the classifier's and the frames table's
- * inner loops in C.
+ * cananalyze.runtime._speedups: inner loops of the candump and ASC readers, the text
+ * writer, the frames table's hex column and the MCAP chunks, in C.
  *
  * Why hand-written: no library parses candump or Vector ASC text into columns
- * (python-can makes one Message per frame, about 150k frames/s), and the numpy
- * paths in io/candump.py and io/asc.py, while columnar, need a dozen passes over
- * every byte and hold the GIL between their calls, so reading cannot run on the
- * other core while the decoder works. These loops read each byte once and release
- * the GIL for the whole chunk. The text writer's lines come out of a matrix of
- * NUL-padded columns about 100 bytes wide; numpy needs four passes to drop the
- * padding (concatenate, compare, compress, row sums), `compact_rows` one.
+ * (python-can makes one Message per frame, about 150k frames/s). Without this
+ * helper candump lines go through numpy (a dozen passes over every byte) and ASC
+ * lines through the per-line parser, both holding the GIL, so reading cannot run
+ * on the other core while the decoder works. These loops read each byte once and
+ * release the GIL for the whole chunk. The text writer's lines come out of a
+ * matrix of NUL-padded columns about 100 bytes wide; numpy needs four passes to
+ * drop the padding (concatenate, compare, compress, row sums), `compact_rows` one.
  *
- * Contract: every function is an optional shortcut for a pure-Python/numpy
- * function, and must give identical results. The parsers accept only lines whose
- * every field they can vouch for and mark every other line for the Python path
- * (which also reports problems), so results are identical by construction; the
- * tests compare both on real logs and fuzzed lines. Buffers come in through the
- * buffer protocol (numpy arrays, bytes, memoryview): no numpy headers needed.
- * Every read is bounds-checked against the line end: lines may be cut, and any
- * byte may appear.
+ * Contract: the helper is optional (setup.py builds it when it can, CANANALYZE_PURE=1
+ * ignores it) and every function is a shortcut for a Python/numpy function that
+ * must give identical results. The parsers accept only lines whose every field
+ * they can vouch for and mark every other line for the Python line parser (which
+ * also reports problems), so results are identical by construction; the tests
+ * compare both on real logs and fuzzed lines, and CI runs the suite both ways.
+ * Buffers come in through the buffer protocol (numpy arrays, bytes, memoryview):
+ * no numpy headers needed. Every read is bounds-checked against the line end:
+ * lines may be cut, and any byte may appear.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -59,7 +60,7 @@ static signed char HEXV[256]; /* hex digit value, -1 otherwise */
 static inline int is_digit(unsigned char c) { return c >= '0' && c <= '9'; }
 
 /* Seconds from `sec` (ni digits) and `frac` (nf digits), exactly as the numpy
- * readers compute them (io/candump.py _parse_time and candump_fast.parse):
+ * candump parser computes them (io/candump.py _parse_time), and float(text):
  * one integer divided once by 10**nf while it is below 2**53, else the sum. */
 static inline double seconds(uint64_t sec, int ni, uint64_t frac, int nf) {
     if (nf == 0) return (double)(int64_t)sec;
@@ -173,8 +174,8 @@ typedef struct {
 } Name;
 
 /* One `(sec.frac) iface id#data [R|T]` line in [q, e). Returns 0 parsed, 1 parsed
- * with an interface not in `names`, 2 for the Python path. Accepts exactly a
- * subset of what candump._bulk_log_lines accepts, with the same values. */
+ * with an interface not in `names`, 2 for the Python line parser. Accepts exactly
+ * the lines candump._bulk_log_lines (numpy) accepts, with the same values. */
 static inline int candump_line(const unsigned char *q, const unsigned char *e, const Name *names,
                                Py_ssize_t n_names, Py_ssize_t *hint, double *t, uint32_t *can_id,
                                uint8_t *flags, uint8_t *dlc, uint8_t *data, uint16_t *chan) {
@@ -206,6 +207,7 @@ static inline int candump_line(const unsigned char *q, const unsigned char *e, c
         k++;
     }
     if ((k != 3 && k != 8) || q + k >= e || q[k] != '#') return 2;
+    if (k == 3 && id > 0x7FFu) return 2; /* not an 11-bit id: the line parser says so */
     q += k + 1; /* data */
     const unsigned char *d_end = q;
     while (d_end < e && *d_end != ' ') d_end++;
@@ -337,8 +339,8 @@ static inline int next_token(const unsigned char **q, const unsigned char *e,
 }
 
 /* One classic data-frame line `t ch id[x] Rx|Tx d dlc b0 ...` (base hex, absolute
- * times): 1 when parsed. Accepts a subset of what asc._bulk_lines accepts (in
- * practice the same set), with the same values. */
+ * times): 1 when parsed, with the values asc._LineParser gives the line; 0 leaves
+ * it to that parser (which also reads every line without the helper). */
 static inline int asc_line(const unsigned char *q, const unsigned char *e, double *t,
                            int64_t *chan, uint32_t *can_id, uint8_t *flags, uint8_t *dlc,
                            uint8_t *data) {
@@ -528,78 +530,6 @@ static PyObject *hex_payload(PyObject *self, PyObject *args) {
     Py_END_ALLOW_THREADS;
     bufs_release(&bs);
     return PyLong_FromLong(pos);
-fail:
-    bufs_release(&bs);
-    return NULL;
-}
-
-/* ---------------------------------------------------------- classification */
-
-PyDoc_STRVAR(classify_doc,
-             "classify(can_id, flags, dlc, data, svc_tab, node_tab, pdo_tab, prev_rtr, codes,\n"
-             "         service, node, pdo) -> None\n\n"
-             "protocol.cobid.CobClassifier.classify in one pass: 2048-entry tables (uint8,\n"
-             "int16, uint8) looked up for standard frames, error frames marked, and the\n"
-             "error-control COB-IDs split into heartbeat / boot-up / guarding with the\n"
-             "per-COB-ID 'last frame was an RTR' state (prev_rtr, 2048 bytes, updated).\n"
-             "codes: uint8 [OTHER, ERROR_FRAME, HEARTBEAT, BOOTUP, GUARD_RESPONSE,\n"
-             "GUARD_REQUEST]. Outputs: service uint8, node int16, pdo uint8 (n each).");
-
-static PyObject *classify(PyObject *self, PyObject *args) {
-    PyObject *o[12];
-    Bufs bs = {.n = 0};
-    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOO", &o[0], &o[1], &o[2], &o[3], &o[4], &o[5], &o[6],
-                          &o[7], &o[8], &o[9], &o[10], &o[11]))
-        return NULL;
-    if (bufs_get(&bs, o[0], 0, -1, "can_id") < 0) goto fail;
-    Py_ssize_t n = bs.b[0].len / 4;
-    if (bufs_get(&bs, o[1], 0, n, "flags") < 0 || bufs_get(&bs, o[2], 0, n, "dlc") < 0 ||
-        bufs_get(&bs, o[3], 0, n * 8, "data") < 0 || bufs_get(&bs, o[4], 0, 2048, "svc_tab") < 0 ||
-        bufs_get(&bs, o[5], 0, 2048 * 2, "node_tab") < 0 ||
-        bufs_get(&bs, o[6], 0, 2048, "pdo_tab") < 0 ||
-        bufs_get(&bs, o[7], 1, 2048, "prev_rtr") < 0 || bufs_get(&bs, o[8], 0, 6, "codes") < 0 ||
-        bufs_get(&bs, o[9], 1, n, "service") < 0 || bufs_get(&bs, o[10], 1, n * 2, "node") < 0 ||
-        bufs_get(&bs, o[11], 1, n, "pdo") < 0)
-        goto fail;
-    const uint32_t *can_id = bs.b[0].buf;
-    const uint8_t *flags = bs.b[1].buf, *dlc = bs.b[2].buf, *data = bs.b[3].buf;
-    const uint8_t *svc_tab = bs.b[4].buf, *pdo_tab = bs.b[6].buf, *codes = bs.b[8].buf;
-    const int16_t *node_tab = bs.b[5].buf;
-    uint8_t *prev_rtr = bs.b[7].buf, *service = bs.b[9].buf, *pdo = bs.b[11].buf;
-    int16_t *node = bs.b[10].buf;
-    const uint8_t OTHER = codes[0], ERROR_FRAME = codes[1], HEARTBEAT = codes[2];
-    const uint8_t BOOTUP = codes[3], GUARD_RESPONSE = codes[4], GUARD_REQUEST = codes[5];
-    Py_BEGIN_ALLOW_THREADS;
-    for (Py_ssize_t i = 0; i < n; i++) {
-        uint8_t f = flags[i];
-        if (f & (FLAG_EXT | FLAG_ERR)) {
-            service[i] = (f & FLAG_ERR) ? ERROR_FRAME : OTHER;
-            node[i] = -1;
-            pdo[i] = 0;
-            continue;
-        }
-        uint32_t idx = can_id[i] < 2048 ? can_id[i] : 0;
-        uint8_t s = svc_tab[idx];
-        node[i] = node_tab[idx];
-        pdo[i] = pdo_tab[idx];
-        if (s == HEARTBEAT) { /* error control: the previous frame on this COB-ID decides */
-            int rtr = (f & FLAG_RTR) != 0;
-            int after_rtr = prev_rtr[idx] != 0;
-            uint8_t b0 = data[8 * i];
-            int has_byte = dlc[i] >= 1;
-            if (rtr)
-                s = GUARD_REQUEST;
-            else if (has_byte && b0 == 0)
-                s = BOOTUP;
-            else if (after_rtr && has_byte && (b0 & 0x7F) != 0)
-                s = GUARD_RESPONSE;
-            prev_rtr[idx] = (uint8_t)rtr;
-        }
-        service[i] = s;
-    }
-    Py_END_ALLOW_THREADS;
-    bufs_release(&bs);
-    Py_RETURN_NONE;
 fail:
     bufs_release(&bs);
     return NULL;
@@ -804,7 +734,6 @@ static PyMethodDef methods[] = {
     {"asc_lines", asc_lines, METH_VARARGS, asc_lines_doc},
     {"asc_base_line", asc_base_line, METH_VARARGS, asc_base_line_doc},
     {"hex_payload", hex_payload, METH_VARARGS, hex_payload_doc},
-    {"classify", classify, METH_VARARGS, classify_doc},
     {"compact_rows", compact_rows, METH_VARARGS, compact_rows_doc},
     {"gather_rows", gather_rows, METH_VARARGS, gather_rows_doc},
     {NULL, NULL, 0, NULL},
@@ -812,7 +741,7 @@ static PyMethodDef methods[] = {
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_speedups",
-    "Compiled inner loops of the text readers and writer, the classifier, the frames table "
+    "Compiled inner loops of the text readers and writer, the frames table "
     "and the MCAP chunks (optional).", -1, methods,
 };
 
