@@ -596,7 +596,10 @@ class TableSink(OutputSink):
         return rows
 
     def _write_findings(self) -> int:
-        cols = list(zip(*self._findings, strict=True)) or [[] for _ in FINDING_COLUMNS]
+        """By time, as load() and `check --json` give them: a rule that judges a span (a
+        heartbeat dropout) reports after later findings were emitted."""
+        rows = sorted(self._findings, key=operator.itemgetter(0))
+        cols = list(zip(*rows, strict=True)) or [[] for _ in FINDING_COLUMNS]
         out = []
         for name, values in zip(FINDING_COLUMNS, cols, strict=True):
             values = list(values)
