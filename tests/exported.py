@@ -5,8 +5,8 @@ The README promises that the files hold the same tables as `load()` gives: the
 export's sinks (TableSink, McapSink, RerunSink) and load()'s CaptureSink are
 different code fed by the same pipeline, so each file is read with a third-party
 reader (pandas/pyarrow, the `mcap` package, rerun's RrdReader) and checked against
-load()'s DataFrames. Batch sizes are chosen here so that tests can cut a log
-anywhere (records must not depend on where batches end).
+load()'s DataFrames. Tests choose the batch size, to cut a log anywhere: an export
+cut like live's batches is compared with load()'s sink over the same cuts.
 """
 
 from __future__ import annotations
@@ -72,7 +72,6 @@ def export(
     formats: tuple[str, ...] = ("parquet",),
     size: int | None = None,
     bitrate: int | None = None,
-    checks: bool = True,
     **load_kw,
 ) -> dict[str, Path]:
     """The files `cananalyze export LOG --parquet/--csv/--mcap/--rrd` writes, with the options
@@ -82,7 +81,7 @@ def export(
     from cananalyze.outputs.rerun.sink import RerunSink
     from cananalyze.outputs.tables.stream import TableSink
 
-    opts = dataclasses.replace(load_options(**load_kw), checks=checks, bitrate=bitrate)
+    opts = dataclasses.replace(load_options(**load_kw), bitrate=bitrate)
     out.mkdir(parents=True, exist_ok=True)
     paths = {fmt: out / FILES[fmt] for fmt in formats}
     sinks = []
@@ -93,8 +92,7 @@ def export(
             sinks.append(McapSink(path))
         else:
             sinks.append(RerunSink(path, bitrate=bitrate))
-    checker = build_checker(opts) if opts.checking else None
-    run(CutSource(log, opts, size), build_decoder(opts, checker), sinks, opts)
+    run(CutSource(log, opts, size), build_decoder(opts, build_checker(opts)), sinks, opts)
     return paths
 
 
@@ -183,12 +181,11 @@ def assert_parquet_is(df: pd.DataFrame, path: Path, index: bool = False) -> None
     pd.testing.assert_frame_equal(back, df, check_dtype=False, check_categorical=False)
 
 
-def assert_parquet_tables(cap: Capture, folder: Path) -> dict[str, int]:
-    """Every table file is load()'s table; returns rows per table."""
+def assert_parquet_tables(cap: Capture, folder: Path) -> None:
+    """The folder holds the six table files, each load()'s table."""
     assert sorted(p.name for p in folder.iterdir()) == sorted(f"{n}.parquet" for n in TABLES)
     for name in TABLES:
         assert_parquet_is(getattr(cap, name), folder / f"{name}.parquet", index=name == "nodes")
-    return {name: len(getattr(cap, name)) for name in TABLES}
 
 
 def _csv_text(values: pd.Series) -> list:
@@ -270,11 +267,10 @@ def assert_same_table_files(a: Path, b: Path, fmt: str = "parquet") -> None:
 
 @dataclass
 class Mcap:
-    """An MCAP file as the `mcap` package reads it (CRCs validated)."""
+    """An MCAP file as the `mcap` package reads it (CRCs validated). `messages`: per
+    topic, (log time, publish time, data) in file order."""
 
-    messages: dict[
-        str, list[tuple[int, int, bytes]]
-    ]  # topic -> (log, publish time, data), file order
+    messages: dict[str, list[tuple[int, int, bytes]]]
     schemas: dict[str, tuple[str, str, dict]]  # topic -> (schema name, encoding, JSON schema)
     encodings: dict[str, str]  # topic -> message encoding
     metadata: dict[str, dict[str, str]]
@@ -351,6 +347,7 @@ def assert_mcap_is(cap: Capture, path: Path) -> Mcap:
     stats = m.summary.statistics
     assert {topic_of[k]: v for k, v in stats.channel_message_counts.items()} == expected
     assert stats.message_count == sum(expected.values())
+    assert all(lt == pt for msgs in m.messages.values() for lt, pt, _ in msgs)
     assert set(m.encodings.values()) <= {"json"}
     assert {enc for _, enc, _ in m.schemas.values()} <= {"jsonschema"}
     # signals: values and units of load()'s series, log time = frame time in ns
