@@ -4,11 +4,12 @@ Both commands run in fresh processes, interleaved, several times; for each the b
 CPU time (user + system, from wait4) is kept, because on a shared machine wall time
 mostly measures the neighbours. Wall times are printed too.
 
-    python benchmarks/bench_check.py [N_FRAMES] [REPEATS]   # default 1e6 frames, 5 runs
+    python benchmarks/bench_check.py [N_FRAMES] [REPEATS] [--out DIR]   # 1e6 frames, 5 runs
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import subprocess
 import sys
@@ -16,13 +17,13 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-OUT = HERE / "out"
+ROOT = HERE.parent
 
 
 def run(cmd: list[str]) -> tuple[float, float]:
     """(CPU seconds, wall seconds) of one child process; exit 0 or 1 (violations) is fine."""
     t = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL)
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, cwd=ROOT)
     _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t
     if os.waitstatus_to_exitcode(status) not in (0, 1):
@@ -30,15 +31,21 @@ def run(cmd: list[str]) -> tuple[float, float]:
     return usage.ru_utime + usage.ru_stime, wall
 
 
-def main() -> None:
-    n = int(float(sys.argv[1])) if len(sys.argv) > 1 else 1_000_000
-    repeats = int(sys.argv[2]) if len(sys.argv) > 2 else 5
-    OUT.mkdir(exist_ok=True)
-    log = OUT / f"bench_{n}.log"
+def main(argv: list[str]) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("frames", nargs="?", type=float, default=1e6, help="frames (default 1e6)")
+    ap.add_argument("repeats", nargs="?", type=int, default=5, help="runs each (default 5)")
+    ap.add_argument("--out", type=Path, default=HERE / "out", help="where the log is generated")
+    args = ap.parse_args(argv)
+    n, repeats = int(args.frames), args.repeats
+    args.out.mkdir(parents=True, exist_ok=True)
+    log = args.out / f"bench_{n}.log"
     if not log.exists():
+        stem = args.out / f"bench_{n}"
         subprocess.run(
-            [sys.executable, str(HERE / "generate.py"), str(n), str(OUT / f"bench_{n}"), ".log"],
+            [sys.executable, str(HERE / "generate.py"), str(n), str(stem), ".log"],
             check=True,
+            stdout=subprocess.DEVNULL,
         )
     cmds = {
         "decode --summary": [sys.executable, "-m", "cananalyze", "decode", str(log), "--summary"],
@@ -56,4 +63,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1:])

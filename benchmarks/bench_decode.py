@@ -3,6 +3,7 @@
     python benchmarks/bench_decode.py                 # the issue's 10M-frame logs (~10 min)
     python benchmarks/bench_decode.py --quick         # 1M frames (~2 min)
     python benchmarks/bench_decode.py --flat 50e6     # flatness 5M vs 50M (a 2.1 GB candump)
+    python benchmarks/bench_decode.py --quick --against ../baseline   # this tree vs another
 
 Each figure is a fresh `python -m cananalyze ...` process (whole-process wall
 time, CPU time and peak RSS from wait4), the best of `--repeat` runs: other work
@@ -15,6 +16,13 @@ The headline command is the issue's "decoded tables written as Parquet":
 are decoded into signals. Logs come from benchmarks/generate.py and are kept
 in --out (default benchmarks/out, git-ignored) for the next run; --clean
 deletes the ones this run generated.
+
+`--against PATH` (a checkout of another commit, its compiled helper built in
+place) runs every figure's command for both trees, one after the other in the
+same rounds (the other tree's processes with PYTHONPATH=PATH, in PATH), and
+prints both trees' best wall and CPU (user + system) seconds side by side with
+their ratios, this tree over the other. python-can's figures are the same for
+both trees and are left out.
 """
 
 from __future__ import annotations
@@ -51,23 +59,44 @@ print(t1 - t0, time.perf_counter() - t1, n)
 
 
 class Run:
-    """Best wall and CPU seconds, highest peak RSS (MB) of repeated runs of one command."""
+    """Best wall and CPU seconds, highest peak RSS (MB) of repeated runs of one command.
 
-    def __init__(self, cmd: list[str], ok: tuple[int, ...] = (0,)) -> None:
-        self.cmd, self.ok = cmd, ok
+    `tree`: the checkout whose cananalyze the command runs (its processes start in it,
+    with PYTHONPATH set to it); this one by default. `strict`: a failed run ends the
+    benchmark; otherwise it is kept as `failed` (its exit code) and the figure left out.
+    """
+
+    def __init__(
+        self,
+        cmd: list[str],
+        ok: tuple[int, ...] = (0,),
+        tree: Path = ROOT,
+        strict: bool = True,
+        after=None,
+    ) -> None:
+        self.cmd, self.ok, self.tree, self.strict, self.after = cmd, ok, tree, strict, after
         self.wall = self.cpu = float("inf")
         self.mb = 0.0
+        self.failed: int | None = None
 
     def once(self) -> None:
+        if self.failed is not None:
+            return
+        env = dict(ENV, PYTHONPATH=str(self.tree))
         t = time.perf_counter()
         proc = subprocess.Popen(
-            self.cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT, env=ENV
+            self.cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=self.tree, env=env
         )
         _, status, usage = os.wait4(proc.pid, 0)
         wall = time.perf_counter() - t
-        if os.waitstatus_to_exitcode(status) not in self.ok:
-            code = os.waitstatus_to_exitcode(status)
-            raise SystemExit(f"failed ({code}): {' '.join(self.cmd)}")
+        if self.after is not None:
+            self.after()
+        code = os.waitstatus_to_exitcode(status)
+        if code not in self.ok:
+            if self.strict:
+                raise SystemExit(f"failed ({code}): {' '.join(self.cmd)}")
+            self.failed = code
+            return
         self.wall = min(self.wall, wall)
         self.cpu = min(self.cpu, usage.ru_utime + usage.ru_stime)
         self.mb = max(self.mb, usage.ru_maxrss / 1024)
@@ -154,14 +183,29 @@ def main(argv: list[str]) -> int:
     )
     ap.add_argument("--out", type=Path, default=HERE / "out", help="where logs are generated")
     ap.add_argument("--clean", action="store_true", help="delete the logs this run generated")
+    ap.add_argument(
+        "--against",
+        type=Path,
+        metavar="PATH",
+        help="also run every figure for the checkout at PATH (compiled helper built), "
+        "in the same rounds, and print both side by side",
+    )
     args = ap.parse_args(argv)
     n = int(1e6 if args.quick else args.size)
     formats = args.formats.split(",")
+    args.out = args.out.resolve()  # the other tree's processes run in their own folder
     args.out.mkdir(parents=True, exist_ok=True)
+    if args.against is not None:
+        args.against = args.against.resolve()
+        if not (args.against / "cananalyze" / "__init__.py").is_file():
+            ap.error(f"--against {args.against}: no cananalyze package there")
     made: list[Path] = []
     load0 = os.getloadavg()
     try:
-        rows = measure(args, n, formats, made)
+        if args.against is not None:
+            lines = compare(args, n, formats, made)
+        else:
+            rows = measure(args, n, formats, made)
     finally:
         if args.clean:
             for p in made:
@@ -172,10 +216,116 @@ def main(argv: list[str]) -> int:
         f"machine: {os.cpu_count()} cores, load average {load0[0]:.2f} before, "
         f"{load1[0]:.2f} after; best of {args.repeat}; {n:,}-frame logs"
     )
+    if args.against is not None:
+        print("\n".join(lines))
+        return 0
     width = max(len(r[0]) for r in rows)
     for name, value, target, verdict in rows:
         print(f"{name:<{width}}  {value:<48} {target:<14} {verdict}")
     return 0
+
+
+def commands(stem: Path, formats: list[str], tmp: Path, timeline_log: Path) -> list[tuple]:
+    """Every figure's command: (label, `cananalyze` arguments, exit codes that are fine,
+    file or folder the run leaves behind). The headline exports, decode --summary and
+    check per format, the text outputs, the timeline exports, start-up."""
+    out = []
+    pq = tmp / "pq"
+    for k, suffix in enumerate(formats):
+        log = str(stem.with_suffix(suffix))
+        out.append(
+            (f"export --parquet {suffix}", ["export", log, "--parquet", str(pq), *DEVICES, "-q"])
+            + ((0,), pq)
+        )
+        out.append(
+            (f"decode --summary {suffix}", ["decode", log, "--summary", *DEVICES], (0,), None)
+        )
+        if k == 0:  # check's overhead over the same decode
+            out.append((f"check {suffix}", ["check", log, *DEVICES], (0, 1), None))
+    log = str(stem.with_suffix(formats[0]))
+    dest = tmp / "out.txt"
+    for devices, fmt, what in (
+        ([], "text", "no devices"),
+        (DEVICES, "text", "16 devices"),
+        ([], "jsonl", "no devices, jsonl"),
+    ):
+        argv = ["decode", log, *devices, "--format", fmt, "-o", str(dest)]
+        out.append((f"decode -o FILE ({formats[0]}, {what})", argv, (0,), dest))
+    for kind in ("mcap", "rrd"):
+        dest = tmp / f"t.{kind}"
+        argv = ["export", str(timeline_log), f"--{kind}", str(dest), *DEVICES, "-q"]
+        out.append((f"export --{kind} (.log, 16 devices)", argv, (0,), dest))
+    out.append(("cananalyze --help", ["--help"], (0,), None))
+    return out
+
+
+def _remove(path: Path | None):
+    def clean() -> None:
+        if path is None:
+            return
+        if path.is_dir():
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            path.unlink(missing_ok=True)
+
+    return clean
+
+
+def _check_tree(tree: Path) -> None:
+    """The tree's processes import its own cananalyze (not an installed one)."""
+    probe = "import cananalyze; print(cananalyze.__file__)"
+    env = dict(ENV, PYTHONPATH=str(tree))
+    done = subprocess.run(
+        [sys.executable, "-c", probe], cwd=tree, env=env, capture_output=True, text=True
+    )
+    where = Path(done.stdout.strip() or "?").resolve()
+    if done.returncode != 0 or not where.is_relative_to(tree):
+        raise SystemExit(f"{tree}: its processes import cananalyze from {where}, not from it")
+
+
+def compare(args, n: int, formats: list[str], made: list[Path]) -> list[str]:
+    """Every figure for this tree and the other, interleaved in the same rounds (the two
+    commands of a figure back to back, which goes first alternating by round), so a
+    change in the machine's load shows in both columns alike."""
+    other = args.against
+    if not list((other / "cananalyze").rglob("_speedups*.so")):
+        print(f"warning: {other} has no compiled helper (_speedups): its figures are slower")
+    for tree in (ROOT, other):
+        _check_tree(tree)
+    stem = ensure(args.out, n, formats, made)
+    timeline_log = ensure(args.out, n, [".log"], made).with_suffix(".log")
+    pairs = []
+    with tempfile.TemporaryDirectory(dir=args.out) as tmp:
+        for label, argv, ok, leaves in commands(stem, formats, Path(tmp), timeline_log):
+            mine = Run(CLI + argv, ok, ROOT, strict=False, after=_remove(leaves))
+            theirs = Run(CLI + argv, ok, other, strict=False, after=_remove(leaves))
+            pairs.append((label, mine, theirs))
+        print(f"{len(pairs)} figures x 2 trees, {args.repeat} rounds ...", flush=True)
+        for k in range(args.repeat):
+            for _, mine, theirs in pairs:
+                for run in (mine, theirs) if k % 2 == 0 else (theirs, mine):
+                    run.once()
+    width = max(len(label) for label, _, _ in pairs)
+    head = f"{'':<{width}}  {'this tree':>17}  {'other tree':>17}  {'this / other':>14}"
+    out = [
+        f"this tree: {ROOT}",
+        f"other tree (--against): {other}",
+        head,
+        f"{'':<{width}}  {'wall':>8} {'cpu':>8}  {'wall':>8} {'cpu':>8}  {'wall':>6} {'cpu':>7}",
+    ]
+
+    def cell(run: Run) -> str:
+        if run.failed is not None:
+            return f"{'failed (' + str(run.failed) + ')':>17}"
+        return f"{run.wall:7.2f}s {run.cpu:7.2f}s"
+
+    for label, mine, theirs in pairs:
+        if mine.failed is None and theirs.failed is None:
+            ratio = f"{mine.wall / theirs.wall:5.2f}x {mine.cpu / theirs.cpu:6.2f}x"
+        else:
+            ratio = f"{'-':>14}"
+        out.append(f"{label:<{width}}  {cell(mine)}  {cell(theirs)}  {ratio}")
+    return out
 
 
 def measure(args, n: int, formats: list[str], made: list[Path]) -> list[tuple[str, str, str, str]]:
@@ -184,43 +334,41 @@ def measure(args, n: int, formats: list[str], made: list[Path]) -> list[tuple[st
     per_format = {}
     with tempfile.TemporaryDirectory(dir=args.out) as tmp:
         pq = Path(tmp) / "pq"
+        timeline_log = ensure(args.out, n, [".log"], made).with_suffix(".log")
+        # the same commands --against runs, by label
+        cmd = {c[0]: (CLI + c[1], c[2]) for c in commands(stem, formats, Path(tmp), timeline_log)}
         for k, suffix in enumerate(formats):
-            log = str(stem.with_suffix(suffix))
             what = "export --parquet, decode --summary, python-can LogReader"
-            export = Run(CLI + ["export", log, "--parquet", str(pq), *DEVICES, "-q"])
-            summary = Run(CLI + ["decode", log, "--summary", *DEVICES])
+            export = Run(*cmd[f"export --parquet {suffix}"])
+            summary = Run(*cmd[f"decode --summary {suffix}"])
             runs = [export, summary, PyCanRun(stem.with_suffix(suffix), n, int(args.pycan_prefix))]
             if k == 0:  # check's overhead over the same decode, in the same rounds
-                check = Run(CLI + ["check", log, *DEVICES], ok=(0, 1))
+                check = Run(*cmd[f"check {suffix}"])
                 runs.append(check)
                 what += ", check"
             print(f"{suffix}: {what}, in {args.repeat} rounds ...", flush=True)
             rounds(runs, args.repeat)
             shutil.rmtree(pq, ignore_errors=True)
             per_format[suffix] = (export, summary, runs[2].wall, runs[2].how)
-        log = str(stem.with_suffix(formats[0]))
         base = per_format[formats[0]][1]
         print("text output ...", flush=True)
         text_runs = []
-        for devices, fmt in (([], "text"), (DEVICES, "text"), ([], "jsonl")):
+        for what in ("no devices", "16 devices", "no devices, jsonl"):
             dest = Path(tmp) / "out.txt"
-            cmd = CLI + ["decode", log, *devices, "--format", fmt, "-o", str(dest)]
-            run = measured(cmd, args.repeat if fmt == "text" else 1)
+            argv, ok = cmd[f"decode -o FILE ({formats[0]}, {what})"]
+            run = measured(argv, 1 if "jsonl" in what else args.repeat, ok)
             with open(dest, "rb") as f:
                 lines = sum(chunk.count(b"\n") for chunk in iter(lambda: f.read(1 << 24), b""))
             dest.unlink()
-            what = ("16 devices" if devices else "no devices") + (
-                "" if fmt == "text" else ", jsonl"
-            )
             text_runs.append((run, lines, what))
         # the timeline exports stream too: their peak at this size and at 5M
         timelines = []
         for kind, dest in (("mcap", Path(tmp) / "t.mcap"), ("rrd", Path(tmp) / "t.rrd")):
             print(f"export --{kind} ...", flush=True)
-            sizes = [n] + ([int(5e6)] if n > 5e6 else [])
-            got = []
-            for size in sizes:
-                s = ensure(args.out, size, [".log"], made).with_suffix(".log")
+            got = [measured(cmd[f"export --{kind} (.log, 16 devices)"][0], 1)]
+            dest.unlink(missing_ok=True)
+            if n > 5e6:  # and at 5M: flat in log length
+                s = ensure(args.out, int(5e6), [".log"], made).with_suffix(".log")
                 got.append(
                     measured(CLI + ["export", str(s), f"--{kind}", str(dest), *DEVICES, "-q"], 1)
                 )
@@ -235,7 +383,7 @@ def measure(args, n: int, formats: list[str], made: list[Path]) -> list[tuple[st
                 run = measured(CLI + ["export", str(s), "--parquet", str(pq), *DEVICES, "-q"], 1)
                 shutil.rmtree(pq, ignore_errors=True)
                 flat.append((size, run))
-        help_run = measured(CLI + ["--help"], max(5, args.repeat))
+        help_run = measured(cmd["cananalyze --help"][0], max(5, args.repeat))
 
     # 1. ratios first
     for suffix, (export, _, pc, _) in per_format.items():

@@ -1,17 +1,21 @@
-"""Live throughput: four saturated 1 Mbit/s buses (>= 32,000 frames/s) through
-python-can's virtual bus into LiveSource and the full pipeline `live` runs (SDO
-tracker, network model, PDO decoder, EMCY; with --check the Checker too), ~10 s.
+"""Live throughput: saturated 1 Mbit/s buses (>= 32,000 frames/s) through python-can's
+virtual bus into LiveSource and `pipeline.run` with the sinks `cananalyze live` runs when
+stdout is no terminal (the dashboard's state and end summary; --plain adds the decoded
+lines, --check the rules and their report, --record and --rrd the recordings), ~10 s.
 
-Reports frames/s kept, frames dropped (sent minus decoded; should be 0) and the
-latency from a frame's send time to the end of its batch's decode.
+A producer thread sends CANopen-like traffic (PDOs of 32 nodes, SYNC, heartbeats, an
+SDO read now and then) on a local virtual channel. Reports the frames offered and kept
+(decoded and through every sink), frames dropped (offered minus kept; should be 0), and
+the latency from a frame's send time to the end of its batch in the last sink.
 
-    python benchmarks/bench_live.py [--rate 32000] [--seconds 10]
-        [--network samples/network.toml] [--check samples/rules.yaml]
+    python benchmarks/bench_live.py [--rate 32000] [--seconds 10] [--network FILE]
+        [--device N=KEY] [--check RULES] [--plain] [--record FILE] [--rrd FILE]
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import threading
 import time
@@ -23,9 +27,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import can  # noqa: E402
 
-from cananalyze.checks.build import build_checker  # noqa: E402
 from cananalyze.io.live import LiveSource  # noqa: E402
-from cananalyze.pipeline import Options, build_decoder  # noqa: E402
+from cananalyze.outputs.sink import Sink  # noqa: E402
+from cananalyze.pipeline import Options, build_checker, build_decoder, run  # noqa: E402
+
+CHANNEL = "bench-live"
 
 
 def producer(channel: str, rate: float, seconds: float, sent: list[int]) -> None:
@@ -66,60 +72,132 @@ def producer(channel: str, rate: float, seconds: float, sent: list[int]) -> None
         bus.shutdown()
 
 
-def main() -> int:
+class Measure(Sink):
+    """The last sink: frames kept, signal values, and each frame's latency from its send
+    time (the producer stamps Messages with time.time()) to the end of its batch here."""
+
+    def __init__(self, start) -> None:
+        self.start = start
+        self.frames = self.batches = self.signals = 0
+        self.latency: list[np.ndarray] = []
+
+    def open(self, run) -> None:
+        """Opened last: the traffic starts once every sink is ready (rerun takes a second)."""
+        super().open(run)
+        self.start()
+
+    def write(self, batch) -> None:
+        fb = batch.frames
+        if len(fb):
+            self.latency.append(time.time() - fb.t)
+            self.frames += len(fb)
+            self.batches += 1
+        self.signals += sum(len(b.rows) for b in batch.signals)
+
+
+def _devices(items: list[str]) -> dict[int, str]:
+    out = {}
+    for item in items:
+        node, _, key = item.partition("=")
+        out[int(node, 0)] = key
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rate", type=float, default=32_000, help="frames/s to offer (default 32000)")
-    ap.add_argument("--seconds", type=float, default=10.0)
+    ap.add_argument("--seconds", type=float, default=10.0, help="how long to send (default 10)")
     ap.add_argument("--network", help="network file for the decoder (PDO decoding of its nodes)")
-    ap.add_argument("--check", metavar="RULES", help="also run the Checker with this rules file")
-    args = ap.parse_args()
+    ap.add_argument("--device", action="append", default=[], metavar="N=KEY", help="as live's")
+    ap.add_argument("--check", metavar="RULES", help="also run the rules of this rules file")
+    ap.add_argument("--plain", action="store_true", help="also the decoded lines (to /dev/null)")
+    ap.add_argument("--record", metavar="FILE", help="also record the raw frames (as live does)")
+    ap.add_argument("--rrd", metavar="FILE", help="also stream the timelines into an .rrd")
+    ap.add_argument("--bitrate", type=int, default=1_000_000, help="for the bus load figures")
+    args = ap.parse_args(argv)
 
-    rx = can.Bus(interface="virtual", channel="bench-live")
-    source = LiveSource(rx, channel_name="vcan0")
-    checker = build_checker(args.check) if args.check else None
-    decoder = build_decoder(Options(network=args.network), checker)
-    sent = [0]
-    th = threading.Thread(target=producer, args=("bench-live", args.rate, args.seconds, sent))
-    lat: list[np.ndarray] = []
-    decoded = 0
-    signals = 0
-    batches = 0
+    from cananalyze.outputs.dashboard import DashboardSink
+    from cananalyze.outputs.findings import FindingsSink
 
-    def stopper():
-        th.join()
-        time.sleep(0.5)
-        source.stop()
+    sys.setswitchinterval(0.0005)  # as `live` sets it: the reader thread stamps frames on time
+    opts = Options(
+        network=args.network,
+        devices=_devices(args.device),
+        rules=args.check,
+        checks=bool(args.check),
+        bitrate=args.bitrate,
+    )
+    checker = build_checker(opts) if args.check else None
+    decoder = build_decoder(opts, checker)
+    devnull = open(os.devnull, "w")  # noqa: SIM115 - closed at the end of main
+    sinks: list[Sink] = []
+    if args.record:
+        from cananalyze.outputs.recording import RecordSink
 
-    t_start = time.perf_counter()
-    th.start()
-    threading.Thread(target=stopper, daemon=True).start()
-    for fb in source.batches():
-        if not len(fb):
-            continue
-        batch = decoder.decode(fb)
-        signals += sum(len(b.rows) for b in batch.signals)
-        lat.append(time.time() - fb.t)
-        decoded += len(fb)
-        batches += 1
-    elapsed = time.perf_counter() - t_start
-    latency = np.concatenate(lat) * 1e3 if lat else np.zeros(1)
-    print(
-        f"offered  {sent[0]} frames in {args.seconds:.1f} s = {sent[0] / args.seconds:,.0f} frames/s"
-    )
-    print(
-        f"kept     {decoded} frames = {decoded / args.seconds:,.0f} frames/s "
-        f"(wall {elapsed:.1f} s incl. drain), {batches} batches, ring high-water {source.high_water}"
-    )
-    print(f"dropped  {sent[0] - decoded}")
-    print(
-        f"latency  send -> decoded: median {np.median(latency):.1f} ms, p99 {np.percentile(latency, 99):.1f} ms, "
-        f"max {latency.max():.1f} ms"
-    )
-    decoder.finish()
-    print(f"decoded  {signals} PDO frames into signal values")
+        sinks.append(RecordSink(args.record))
+    if args.rrd:
+        from cananalyze.outputs.rerun.sink import RerunLiveSink
+
+        sinks.append(RerunLiveSink(rrd=args.rrd, bitrate=args.bitrate, name="bench live"))
+    if args.plain:
+        from cananalyze.outputs.text.writer import TextWriter
+
+        sinks.append(TextWriter(devnull, flush=True))
+    view = DashboardSink(bitrate=args.bitrate, checking=checker is not None, show=False)
+    sinks.append(view)
+    report = None
     if checker is not None:
-        print(f"check    {len(checker.findings)} findings")
-    return 0 if sent[0] == decoded else 1
+        report = FindingsSink(devnull, quiet=True)
+        sinks.append(report)
+    source = LiveSource(can.Bus(interface="virtual", channel=CHANNEL), channel_name="vcan0")
+    sent = [0]
+    th = threading.Thread(target=producer, args=(CHANNEL, args.rate, args.seconds, sent))
+    started: list[float] = []
+
+    def start() -> None:
+        started.append(time.perf_counter())
+        th.start()
+
+    measure = Measure(start)
+    sinks.append(measure)
+    done: list[float] = []
+
+    def stop() -> bool:
+        """Half a second after the producer's last frame: what is still queued drains."""
+        if not done and started and not th.is_alive():
+            done.append(time.monotonic())
+        return bool(done) and time.monotonic() >= done[0] + 0.5
+
+    try:
+        run(source, decoder, sinks, opts, stop=stop, tick=0.25)
+    finally:
+        if started:
+            th.join()
+        source.close()
+        devnull.close()
+    elapsed = time.perf_counter() - started[0]
+    kept = measure.frames
+    latency = np.concatenate(measure.latency) * 1e3 if measure.latency else np.zeros(1)
+    offered = sent[0]
+    names = ", ".join(type(s).__name__ for s in sinks[:-1])
+    print(f"sinks    {names}")
+    print(
+        f"offered  {offered} frames in {args.seconds:.1f} s = {offered / args.seconds:,.0f} frames/s"
+    )
+    print(
+        f"kept     {kept} frames = {kept / args.seconds:,.0f} frames/s "
+        f"(wall {elapsed:.1f} s incl. drain), {measure.batches} batches, "
+        f"ring high-water {source.high_water}"
+    )
+    print(f"dropped  {offered - kept}")
+    print(
+        f"latency  send -> last sink: median {np.median(latency):.1f} ms, "
+        f"p99 {np.percentile(latency, 99):.1f} ms, max {latency.max():.1f} ms"
+    )
+    print(f"decoded  {measure.signals} PDO frames into signal values")
+    if report is not None:
+        print(f"check    {len(report.findings)} findings")
+    return 0 if offered == kept else 1
 
 
 if __name__ == "__main__":

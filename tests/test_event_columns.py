@@ -11,7 +11,7 @@ import bisect
 import numpy as np
 import pytest
 from conftest import SAMPLES, real_file
-from test_table_stream import DEVICES, _args, _batches
+from exported import DEVICES, decoded_batches
 
 from cananalyze.events.build import (
     ERROR,
@@ -28,7 +28,7 @@ from cananalyze.events.columns import NO_NODE, NO_ROW, EventColumns, Row
 from cananalyze.frames import FLAG_RTR, FrameBatch
 from cananalyze.outputs.tables.stream import HOLD
 from cananalyze.outputs.tables.stream import TableSink as StreamTables
-from cananalyze.pipeline import build_decoder
+from cananalyze.pipeline import Options, build_decoder
 from cananalyze.protocol.fields import annotation, frame_fields
 from cananalyze.protocol.services import Service
 from cananalyze.protocol.tables import NMT_STATES, emcy_class
@@ -153,7 +153,7 @@ def _emcy_bus(n: int = 6000, seed: int = 5) -> FrameBatch:
 
 
 def _decoded(fb: FrameBatch, size: int, **kw):
-    decoder = build_decoder(_args(SAMPLES / "demo.log", **kw))
+    decoder = build_decoder(Options(network=kw.get("network"), devices=kw.get("device") or {}))
     for start in range(0, len(fb), size):
         yield decoder.decode(fb.take(slice(start, start + size)))
     yield decoder.finish()
@@ -197,13 +197,13 @@ REAL = [
 @pytest.mark.parametrize("which", REAL)
 @pytest.mark.parametrize("size", [997, None])
 def test_real_log_events_match_per_row(which, size):
-    assert _assert_same_events(_batches(real_file(which), size))
+    assert _assert_same_events(decoded_batches(real_file(which), size))
 
 
 @pytest.mark.parametrize("log", ["faults.log", "commissioning.log", "demo.log"])
 def test_sample_events_match_per_row(log):
     kw = {"network": str(SAMPLES / "network.toml")}
-    assert _assert_same_events(_batches(SAMPLES / log, 500, **kw))
+    assert _assert_same_events(decoded_batches(SAMPLES / log, 500, **kw))
 
 
 def test_event_columns_round_trip_and_missing_values():

@@ -1,8 +1,9 @@
 """The bulk MCAP writer against the `mcap` package: same messages as its own Writer, valid
 structure for indexed readers (chunk indexes, message indexes, statistics, summary offsets).
 
-Oracle: a reference file written here with `mcap.writer.Writer.add_message`, payloads
-made with `json.dumps` from the Capture's columns one message at a time.
+Oracle: a reference file written here with `mcap.writer.Writer.add_message`, one message at
+a time, its payloads made with `json.dumps` from `load()`'s Capture of the same log; the
+exported file is what `export --mcap` writes.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import numpy as np
 import pytest
 import zstandard
 from conftest import SAMPLES
+from exported import DEMO_DEVICES, DEVICES, decoded_batches, export
 from hypothesis import given
 from hypothesis import strategies as st
 from mcap.data_stream import ReadDataStream
@@ -34,19 +36,20 @@ from mcap.records import (
     Statistics,
     SummaryOffset,
 )
-from timeline_helpers import demo_capture
 
+import cananalyze
 from cananalyze.capture import Capture
 from cananalyze.frames import FLAG_RTR
-from cananalyze.outputs.mcap.topics import topic_streams, write_mcap
+from cananalyze.outputs.mcap.stream import StreamMcap
+from cananalyze.outputs.mcap.topics import FRAME_SCHEMA, LOG_SCHEMA, STATE_SCHEMA, signal_schema
 from cananalyze.protocol.services import SERVICE_NAMES
 
 DEMO = SAMPLES / "demo.log"
 
 
 @pytest.fixture(scope="module")
-def cap():
-    return demo_capture(DEMO)
+def demo():
+    return DEMO, DEMO_DEVICES
 
 
 @pytest.fixture(scope="module")
@@ -54,12 +57,11 @@ def generated(tmp_path_factory):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
     from generate import generate
 
-    from cananalyze.capture import load
     from cananalyze.io.logfile import write_log
 
     log = tmp_path_factory.mktemp("gen") / "g.log"
     write_log(generate(30000), log)
-    return load(log, device=[f"{n}=dat7014" for n in range(1, 17)])
+    return log, DEVICES
 
 
 def _plain(v):
@@ -67,37 +69,56 @@ def _plain(v):
     return None if isinstance(v, float) and not math.isfinite(v) else v
 
 
-def _reference_payloads(cap: Capture, topic: str, n: int) -> list[bytes]:
-    """One json.dumps per message, built from the Capture's columns."""
-    if topic == "/can/frames":
-        fb = cap.batch
-        out = []
-        for i in range(len(fb)):
-            if fb.flags[i] & FLAG_RTR:
-                data = ""
-            else:
-                data = fb.long_data.get(i, bytes(fb.data[i, : fb.dlc[i]])).hex()
-            out.append(
-                json.dumps(
-                    {
-                        "channel": fb.channels[fb.channel[i]],
-                        "can_id": int(fb.can_id[i]),
-                        "dlc": int(fb.dlc[i]),
-                        "data": data,
-                        "flags": int(fb.flags[i]),
-                        "service": SERVICE_NAMES[cap.service[i]],
-                        "node": int(cap.node[i]),
-                    }
-                ).encode()
-            )
-        return out
+def _frame_doc(cap: Capture, i: int) -> dict:
+    fb = cap.batch
+    data = (
+        "" if fb.flags[i] & FLAG_RTR else fb.long_data.get(i, bytes(fb.data[i, : fb.dlc[i]])).hex()
+    )
+    return {
+        "channel": fb.channels[fb.channel[i]],
+        "can_id": int(fb.can_id[i]),
+        "dlc": int(fb.dlc[i]),
+        "data": data,
+        "flags": int(fb.flags[i]),
+        "service": SERVICE_NAMES[cap.service[i]],
+        "node": int(cap.node[i]),
+    }
+
+
+def _event_doc(cap: Capture, e) -> dict:
+    ns = int(round(e.t * 1e9))
+    lines = cap.batch.line
+    return {
+        "timestamp": {"sec": ns // 10**9, "nsec": ns % 10**9},
+        "level": e.level,
+        "message": e.message,
+        "name": f"node {e.node}" if e.node is not None else e.kind,
+        "file": Path(str(cap.source)).name,
+        "line": int(lines[e.row]) if e.row is not None and e.row < len(lines) else 0,
+    }
+
+
+def _reference_topics(cap: Capture) -> list[tuple[str, dict, list[int], list[bytes]]]:
+    """(topic, schema, log times, payloads) of every topic, one json.dumps per message."""
+    ns = lambda t: [int(round(x * 1e9)) for x in np.asarray(t, np.float64).tolist()]  # noqa: E731
+    out = []
     for s in cap.series:
-        if topic == f"/node/{s.node}/{s.pdo}":
-            return [
-                json.dumps({k: _plain(v[i]) for k, v in s.columns.items()}).encode()
-                for i in range(n)
-            ]
-    raise KeyError(topic)
+        docs = [{k: _plain(v[i]) for k, v in s.columns.items()} for i in range(len(s.t))]
+        out.append((f"/node/{s.node}/{s.pdo}", signal_schema(s), ns(s.t), docs))
+    by_node: dict[int, list] = {}
+    for e in cap.state_changes:
+        by_node.setdefault(e.node, []).append(e)
+    for node, evs in sorted(by_node.items()):
+        docs = [{"state": e.message} for e in evs]
+        out.append((f"/node/{node}/nmt_state", STATE_SCHEMA, ns([e.t for e in evs]), docs))
+    events = cap.sorted_events()
+    if events:
+        docs = [_event_doc(cap, e) for e in events]
+        out.append(("/canopen/events", LOG_SCHEMA, ns([e.t for e in events]), docs))
+    if len(cap.batch):
+        docs = [_frame_doc(cap, i) for i in range(len(cap.batch))]
+        out.append(("/can/frames", FRAME_SCHEMA, ns(cap.batch.t), docs))
+    return [(t, sc, times, [json.dumps(d).encode() for d in docs]) for t, sc, times, docs in out]
 
 
 def _write_reference(cap: Capture, path: Path) -> None:
@@ -108,17 +129,11 @@ def _write_reference(cap: Capture, path: Path) -> None:
     with open(path, "wb") as f:
         w = Writer(f, chunk_size=4 * 1024 * 1024)
         w.start(profile="", library="reference")
-        for topic, schema, ns, payload in topic_streams(cap):
+        for topic, schema, times, data in _reference_topics(cap):
             sid = w.register_schema(schema["title"], "jsonschema", json.dumps(schema).encode())
             ch = w.register_channel(topic, "json", sid)
-            if topic.endswith("nmt_state") or topic == "/canopen/events":
-                data = [payload[i] for i in range(len(payload))]  # rare path: json.dumps already
-            else:
-                data = _reference_payloads(cap, topic, len(ns))
-            streams += [
-                (t, k, ch, d) for k, (t, d) in enumerate(zip(ns.tolist(), data, strict=True))
-            ]
-        for t, _k, ch, d in sorted(streams, key=lambda s: s[0]):  # stable, like the exporter
+            streams += [(t, ch, d) for t, d in zip(times, data, strict=True)]
+        for t, ch, d in sorted(streams, key=lambda s: s[0]):  # stable, like the exporter
             w.add_message(channel_id=ch, log_time=t, data=d, publish_time=t)
         w.finish()
 
@@ -131,25 +146,46 @@ def _messages(path: Path):
         ]
 
 
-@pytest.mark.parametrize("which", ["cap", "generated"])
-def test_same_messages_as_mcap_writer(which, request, tmp_path):
-    c = request.getfixturevalue(which)
-    write_mcap(c, tmp_path / "bulk.mcap")
-    _write_reference(c, tmp_path / "ref.mcap")
-    bulk, ref = _messages(tmp_path / "bulk.mcap"), _messages(tmp_path / "ref.mcap")
-    assert len(bulk) == len(ref) > len(c)
-    assert bulk == ref
-    with open(tmp_path / "bulk.mcap", "rb") as f1, open(tmp_path / "ref.mcap", "rb") as f2:
-        s1, s2 = make_reader(f1).get_summary(), make_reader(f2).get_summary()
-    topics1 = {k: v.topic for k, v in s1.channels.items()}
-    topics2 = {k: v.topic for k, v in s2.channels.items()}
-    assert topics1 == topics2
-    assert {k: (v.name, v.data) for k, v in s1.schemas.items()} == {
-        k: (v.name, v.data) for k, v in s2.schemas.items()
+def _stream_file(log: Path, devices, path: Path, compression="zstd", chunk_bytes=4 << 20):
+    """The MCAP writer fed the decoded log directly, with a chunk size of its own."""
+    with StreamMcap(path, compression, source=str(log), chunk_bytes=chunk_bytes) as s:
+        for batch in decoded_batches(log, None, device=devices):
+            s.add(batch)
+        s.close()
+
+
+def _by_topic(summary) -> dict:
+    """Schema name, schema and message count of each topic (channel ids are the writer's)."""
+    counts = summary.statistics.channel_message_counts
+    return {
+        c.topic: (
+            summary.schemas[c.schema_id].name,
+            json.loads(summary.schemas[c.schema_id].data),
+            counts[c.id],
+        )
+        for c in summary.channels.values()
     }
+
+
+@pytest.mark.parametrize("which", ["demo", "generated"])
+def test_same_messages_as_mcap_writer(which, request, tmp_path):
+    log, devices = request.getfixturevalue(which)
+    cap = cananalyze.load(log, device=devices)
+    bulk_path = export(log, tmp_path, ("mcap",), device=devices)["mcap"]
+    _write_reference(cap, tmp_path / "ref.mcap")
+    bulk, ref = _messages(bulk_path), _messages(tmp_path / "ref.mcap")
+    assert len(bulk) == len(ref) > len(cap)
+    # the same messages; a transfer completed a batch later sits in a later chunk, so the
+    # exporter's order is the reference's only per topic and within its time
+    key = lambda m: (m[2], m[0], json.dumps(m[4], sort_keys=True))  # noqa: E731
+    assert sorted(bulk, key=key) == sorted(ref, key=key)
+    frames = [m for m in bulk if m[0] == "/can/frames"]
+    assert frames == [m for m in ref if m[0] == "/can/frames"]
+    with open(bulk_path, "rb") as f1, open(tmp_path / "ref.mcap", "rb") as f2:
+        s1, s2 = make_reader(f1).get_summary(), make_reader(f2).get_summary()
+    assert _by_topic(s1) == _by_topic(s2)
     st1, st2 = s1.statistics, s2.statistics
     assert st1.message_count == st2.message_count == len(bulk)
-    assert dict(st1.channel_message_counts) == dict(st2.channel_message_counts)
     assert (st1.message_start_time, st1.message_end_time) == (
         st2.message_start_time,
         st2.message_end_time,
@@ -193,7 +229,7 @@ def _records(data: bytes) -> list:
 @pytest.mark.parametrize("compression", ["zstd", "lz4", "none"])
 def test_chunks_and_indexes_point_at_the_right_records(generated, tmp_path, compression):
     path = tmp_path / "g.mcap"
-    write_mcap(generated, path, compression, chunk_bytes=64 * 1024)
+    _stream_file(*generated, path, compression, chunk_bytes=64 * 1024)
     raw = path.read_bytes()
     with open(path, "rb") as f:
         summary = make_reader(f).get_summary()
@@ -275,7 +311,7 @@ def test_chunks_and_indexes_point_at_the_right_records(generated, tmp_path, comp
 
 def test_time_window_reads_use_chunk_indexes(generated, tmp_path):
     path = tmp_path / "g.mcap"
-    write_mcap(generated, path, chunk_bytes=32 * 1024)
+    _stream_file(*generated, path, chunk_bytes=32 * 1024)
     with open(path, "rb") as f:
         everything = [(c.topic, m.log_time) for _, c, m in make_reader(f).iter_messages()]
     t0, t1 = everything[len(everything) // 3][1], everything[2 * len(everything) // 3][1]
@@ -318,14 +354,15 @@ def test_json_columns_fd_payloads_and_non_finite_values(tmp_path):
     assert json.loads(docs[1])["dlc"] == c.batch.dlc[1]
 
 
-def test_payloads_built_in_slices_are_the_same(cap, tmp_path, monkeypatch):
+def test_payloads_built_in_slices_are_the_same(demo, tmp_path, monkeypatch):
     """Big logs are formatted a slice of rows at a time (pyarrow's 32-bit offsets)."""
     from cananalyze.outputs.mcap import topics as mcap_out
 
-    write_mcap(cap, tmp_path / "whole.mcap")
+    log, devices = demo
+    whole = export(log, tmp_path / "whole", ("mcap",), device=devices)["mcap"]
     monkeypatch.setattr(mcap_out, "SLICE", 7)
-    write_mcap(cap, tmp_path / "sliced.mcap")
-    whole, sliced = _messages(tmp_path / "whole.mcap"), _messages(tmp_path / "sliced.mcap")
+    sliced = export(log, tmp_path / "sliced", ("mcap",), device=devices)["mcap"]
+    whole, sliced = _messages(whole), _messages(sliced)
     assert sliced == whole and len(whole) > 3 * 7
 
 

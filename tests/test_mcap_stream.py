@@ -1,10 +1,10 @@
-"""The streaming MCAP writer (`export --mcap`, `decode --mcap`) writes the messages,
-schemas, metadata and attachments of the Capture path (`write_mcap`), whatever the
-batch size; a failed export leaves no file."""
+"""`export --mcap` and `decode --mcap` write the log `load()` decodes, read back with the
+`mcap` package's reader: a topic per PDO with its signal values, NMT states, the event log,
+every frame, the metadata and nodes attachment; the same file whatever the batch size; a
+failed export leaves no file."""
 
 from __future__ import annotations
 
-import collections
 import json
 import subprocess
 import sys
@@ -12,98 +12,60 @@ from pathlib import Path
 
 import pytest
 from conftest import ROOT, SAMPLES, generated_log, real_file
-from mcap.reader import make_reader
-from test_table_stream import DEVICES, _args, _batches, given_profiles
+from exported import (
+    DEVICES,
+    NETWORK,
+    assert_mcap_is,
+    assert_same_mcap,
+    decoded_batches,
+    export,
+    load_cut,
+    read_mcap,
+)
 
-from cananalyze.capture import Collector
-from cananalyze.errors import ProblemLog
+import cananalyze
 from cananalyze.outputs.mcap import stream as mcap_stream
 from cananalyze.outputs.mcap.stream import StreamMcap
-from cananalyze.outputs.mcap.topics import write_mcap
-
-NETWORK = str(SAMPLES / "network.toml")
 
 
 def _stream(log: Path, out: Path, size: int | None = None, **kw) -> dict[str, int]:
-    profiles = given_profiles(_args(log, **kw))
-    with StreamMcap(out, source=str(log), network=kw.get("network") or "", profiles=profiles) as s:
-        for batch in _batches(log, size, **kw):
+    """The MCAP writer fed directly (no run, no rules), batches of `size` frames."""
+    with StreamMcap(out, source=str(log), network=kw.get("network") or "") as s:
+        for batch in decoded_batches(log, size, **kw):
             s.add(batch)
         return s.close(0)
 
 
-def _reference(log: Path, out: Path, size: int | None = None, **kw) -> dict[str, int]:
-    collector = Collector(str(log))
-    for batch in _batches(log, size, **kw):
-        collector.add(batch)
-    cap = collector.capture(ProblemLog(), kw.get("network") or "", given_profiles(_args(log, **kw)))
-    return write_mcap(cap, out)
-
-
-def read(path: Path):
-    """(messages per topic in file order, schema per topic, metadata, attachments, summary)."""
-    per: dict[str, list] = collections.defaultdict(list)
-    schemas = {}
-    with open(path, "rb") as f:
-        reader = make_reader(f, validate_crcs=True)
-        for sc, ch, m in reader.iter_messages(log_time_order=False):
-            per[ch.topic].append((m.log_time, m.publish_time, m.data))
-            schemas[ch.topic] = (sc.name, sc.encoding, json.loads(sc.data))
-        summary = reader.get_summary()
-        f.seek(0)
-        meta = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
-        f.seek(0)
-        att = {a.name: a.data for a in make_reader(f).iter_attachments()}
-    return per, schemas, meta, att, summary
-
-
-def assert_same_mcap(ref: Path, new: Path) -> None:
-    a, b = read(ref), read(new)
-    assert set(a[0]) == set(b[0])
-    for topic in a[0]:
-        # an SDO transfer that ends in a later batch is written with that batch: the
-        # topics hold the same messages, each in time order within its chunk
-        assert sorted(a[0][topic]) == sorted(b[0][topic]), topic
-    assert a[1] == b[1]
-    assert a[2] == b[2] and a[3] == b[3]
-    stats_a, stats_b = a[4].statistics, b[4].statistics
-    topic_of = {c.id: c.topic for c in b[4].channels.values()}
-    counts = {topic_of[k]: v for k, v in stats_b.channel_message_counts.items()}
-    assert counts == {t: len(m) for t, m in b[0].items()}
-    assert stats_a.message_count == stats_b.message_count
-    assert (stats_a.message_start_time, stats_a.message_end_time) == (
-        stats_b.message_start_time,
-        stats_b.message_end_time,
-    )
-
-
-def _both(tmp_path: Path, log: Path, size: int | None = None, **kw) -> dict[str, int]:
-    ref = _reference(log, tmp_path / "ref.mcap", size, **kw)
-    new = _stream(log, tmp_path / "new.mcap", size, **kw)
-    assert new == ref
-    assert_same_mcap(tmp_path / "ref.mcap", tmp_path / "new.mcap")
-    return new
+def _as_load(tmp_path: Path, log: Path, size: int | None = None, **kw):
+    """Export the log as MCAP; it must hold load()'s log of the same options."""
+    out = export(log, tmp_path, ("mcap",), size, **kw)["mcap"]
+    return assert_mcap_is(load_cut(log, size, **kw), out)
 
 
 @pytest.mark.parametrize("name", ["demo.log", "faults.log", "commissioning.log", "faults.blf"])
-def test_samples_same_mcap(tmp_path, name):
-    counts = _both(tmp_path, SAMPLES / name, network=NETWORK)
-    assert counts["/can/frames"] > 0 and counts["/canopen/events"] > 0
+def test_samples_mcap_is_load(tmp_path, name):
+    m = _as_load(tmp_path, SAMPLES / name, network=NETWORK)
+    assert m.messages["/can/frames"] and m.messages["/canopen/events"]
+    if name.startswith("faults"):  # samples/README.md: 5 EMCY, node 7's never reset
+        emcy = [d for d in m.docs("/canopen/events") if "EMCY" in d["message"]]
+        assert sum(d["message"].startswith("node 7: EMCY 0xFF00") for d in emcy) == 1
+        assert any(d["message"].startswith("[emcy]") for d in m.docs("/canopen/events"))
 
 
 @pytest.mark.parametrize("size", [1, 7, 1000])
 def test_batch_size_invariance(tmp_path, size):
-    counts = _both(tmp_path, SAMPLES / "faults.log", size=size, network=NETWORK)
-    assert any(t.endswith("nmt_state") for t in counts)
+    """Cut anywhere (a frame at a time, like live), the messages are those of one batch."""
+    log = SAMPLES / "faults.log"
+    whole = export(log, tmp_path / "whole", ("mcap",), network=NETWORK)["mcap"]
+    m = _as_load(tmp_path / "cut", log, size, network=NETWORK)
+    assert any(t.endswith("nmt_state") for t in m.messages)
+    assert_same_mcap(whole, tmp_path / "cut" / "x.mcap")
 
 
 def test_generated_devices_small_batches(tmp_path):
     """16 nodes with profiles: signal topics, SDO transfers and EMCY cut across batches."""
-    counts = _both(tmp_path, generated_log(tmp_path, 30000), size=997, device=DEVICES)
-    assert sum(1 for t in counts if t.endswith("pdo2")) == 16
-    per = read(tmp_path / "new.mcap")[0]
-    frames = [t for t, _, _ in per["/can/frames"]]
-    assert frames == sorted(frames)  # the frames topic is in time order across chunks
+    m = _as_load(tmp_path, generated_log(tmp_path, 30000), 997, device=DEVICES)
+    assert sum(1 for t in m.messages if t.endswith("pdo2")) == 16
 
 
 @pytest.mark.parametrize(
@@ -114,8 +76,8 @@ def test_generated_devices_small_batches(tmp_path):
         "calumroy__CANopen_socketCAN_Test/can_log_070825_brake_sensor_test1.log",
     ],
 )
-def test_real_logs_same_mcap(tmp_path, rel):
-    _both(tmp_path, real_file(rel), size=512)
+def test_real_logs_mcap_is_load(tmp_path, rel):
+    _as_load(tmp_path, real_file(rel), size=512)
 
 
 def test_end_of_log_records_keep_their_line(tmp_path):
@@ -126,10 +88,10 @@ def test_end_of_log_records_keep_their_line(tmp_path):
         "(1.000000) can0 605#4018100100000000\n"  # upload request 0x1018:01, never answered
         "(1.500000) can0 701#05\n"
     )
-    _both(tmp_path, log)
-    events = read(tmp_path / "new.mcap")[0]["/canopen/events"]
-    docs = [json.loads(d) for _, _, d in events]
-    assert docs and docs[-1]["line"] == 2 and docs[-1]["file"] == "t.log"
+    m = _as_load(tmp_path, log)
+    (timeout,) = [d for d in m.docs("/canopen/events") if d["message"].startswith("SDO upload")]
+    assert "timeout" in timeout["message"]
+    assert timeout["line"] == 2 and timeout["file"] == "t.log"
 
 
 def test_failed_export_leaves_no_file(tmp_path, monkeypatch):
@@ -150,29 +112,27 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
 
 
 def test_cli_export_and_decode_write_the_same_mcap(tmp_path):
-    """export --mcap (with --parquet beside it) and decode --mcap stream the same file as
-    the Capture path; the nodes attachment names the given device profiles."""
+    """export --mcap (with --parquet beside it) writes load()'s log, findings included;
+    decode --mcap (no rules) the same messages but the findings; the nodes attachment names
+    the given device profiles."""
     log = SAMPLES / "faults.log"
-    r = _cli(
-        "export",
-        str(log),
-        "--no-check",
-        "--mcap",
-        str(tmp_path / "e.mcap"),
-        "--parquet",
-        str(tmp_path),
-    )
+    r = _cli("export", str(log), "--mcap", str(tmp_path / "e.mcap"), "--parquet", str(tmp_path))
     assert r.returncode == 0, r.stderr
+    m = assert_mcap_is(cananalyze.load(log), tmp_path / "e.mcap")
+    findings = [d for d in m.docs("/canopen/events") if d["message"].startswith("[")]
+    assert findings and len(findings) == len(cananalyze.load(log).findings)
     r = _cli("decode", str(log), "--mcap", str(tmp_path / "d.mcap"), "-o", str(tmp_path / "d.txt"))
     assert r.returncode == 0, r.stderr
-    _reference(log, tmp_path / "ref.mcap")
-    assert_same_mcap(tmp_path / "ref.mcap", tmp_path / "e.mcap")
-    assert_same_mcap(tmp_path / "ref.mcap", tmp_path / "d.mcap")
+    r = _cli("export", str(log), "--no-check", "--mcap", str(tmp_path / "n.mcap"))
+    assert r.returncode == 0, r.stderr
+    assert_same_mcap(tmp_path / "n.mcap", tmp_path / "d.mcap")
+    events = read_mcap(tmp_path / "d.mcap").messages["/canopen/events"]
+    assert len(events) == len(m.messages["/canopen/events"]) - len(findings)
     assert (tmp_path / "frames.parquet").exists() and (tmp_path / "d.txt").stat().st_size > 0
     gen = generated_log(tmp_path, 3000)
     r = _cli("export", str(gen), "--mcap", str(tmp_path / "g.mcap"), "--device", "3=dat7014")
     assert r.returncode == 0, r.stderr
-    nodes = json.loads(read(tmp_path / "g.mcap")[3]["nodes.json"])
+    nodes = json.loads(read_mcap(tmp_path / "g.mcap").attachments["nodes.json"])
     assert {n["node"]: n["profile"] for n in nodes}[3] == "dat7014"
 
 
@@ -186,9 +146,9 @@ def test_cli_export_counts_skipped_lines(tmp_path):
     )
     assert r.returncode == 0, r.stderr
     assert "bad.log" in r.stderr and "line 2" in r.stderr
-    per, _, meta, _, _ = read(tmp_path / "b.mcap")
-    assert meta["cananalyze"]["skipped_input"] == "1" and meta["cananalyze"]["frames"] == "2"
-    assert len(per["/can/frames"]) == 2 and (tmp_path / "b.rrd").stat().st_size > 0
+    m = assert_mcap_is(cananalyze.load(log), tmp_path / "b.mcap")
+    assert m.metadata["cananalyze"]["skipped_input"] == "1"
+    assert len(m.messages["/can/frames"]) == 2 and (tmp_path / "b.rrd").stat().st_size > 0
 
 
 def test_disk_failing_in_the_chunk_thread(tmp_path, monkeypatch, capsys):

@@ -2,7 +2,8 @@
 
 The server is the `rerun` binary of the rerun-sdk wheel in `--save` mode, bound to
 127.0.0.1 on a free port: it accepts SDK connections like a viewer does and writes
-everything it receives to an .rrd, which is compared with `write_rrd`'s file.
+everything it receives to an .rrd, which is compared with `export --rrd`'s file read
+with rerun's own reader.
 """
 
 from __future__ import annotations
@@ -87,7 +88,7 @@ def test_connect_streams_the_same_recording_as_the_rrd_export(tmp_path):
                 [
                     "export",
                     str(DEMO),
-                    "--no-check",
+                    "--no-check",  # decode runs no rules: no findings in either recording
                     *DEVICES,
                     "--rrd",
                     str(tmp_path / "x.rrd"),

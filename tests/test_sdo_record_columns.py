@@ -8,8 +8,10 @@ from pathlib import Path
 
 import pytest
 from conftest import SAMPLES, generated_log, real_file
-from test_table_stream import DEVICES, _args, _batches, assert_same_tables, given_profiles
+from exported import DEVICES, assert_parquet_is, assert_same_table_files, decoded_batches
 
+from cananalyze.capture import Collector
+from cananalyze.errors import ProblemLog
 from cananalyze.events.build import EventState, batch_events
 from cananalyze.outputs.tables.stream import SDO_COLUMNS
 from cananalyze.outputs.tables.stream import TableSink as StreamTables
@@ -46,7 +48,9 @@ def test_events_same_from_columns_and_dicts(tmp_path, which, size):
     s1, s2 = EventState(), EventState()
     off = 0
     fast = 0
-    for b1, b2 in zip(_batches(log, size, **kw), _batches(log, size, **kw), strict=True):
+    for b1, b2 in zip(
+        decoded_batches(log, size, **kw), decoded_batches(log, size, **kw), strict=True
+    ):
         fast += b1.sdo_fast_split() is not None
         e1 = batch_events(b1, off, s1)
         e2 = batch_events(_as_dicts(b2), off, s2)
@@ -59,20 +63,29 @@ def test_events_same_from_columns_and_dicts(tmp_path, which, size):
 
 @pytest.mark.parametrize("which", CASES)
 def test_sdo_table_same_from_columns_and_dicts(tmp_path, which):
+    """Both routes write the SDO table load()'s Capture builds from the same batches."""
     log, kw = _cases(tmp_path, which)
     for name, convert in (("cols", lambda b: b), ("dicts", _as_dicts)):
-        with StreamTables(tmp_path / name, profiles=given_profiles(_args(log, **kw))) as st:
-            for batch in _batches(log, 997, **kw):
+        with StreamTables(tmp_path / name) as st:
+            for batch in decoded_batches(log, 997, **kw):
                 st.write(convert(batch))
             st.close()
-    assert_same_tables(tmp_path / "cols", tmp_path / "dicts")
+    assert_same_table_files(tmp_path / "cols", tmp_path / "dicts")
+    collector = Collector(str(log))
+    for batch in decoded_batches(log, 997, **kw):
+        collector.add(batch)
+    sdo = collector.capture(ProblemLog()).sdo
+    assert_parquet_is(sdo, tmp_path / "cols" / "sdo.parquet")
+    assert len(sdo) > 0 or which.endswith(".log")
 
 
 def test_aborted_pairs_and_record_columns_agree():
     """Aborted fast pairs keep `pair_outputs`'s dict; the columns hold every record's fields."""
     assert SDO_COLUMNS == RECORD_COLUMNS
     aborted = 0
-    for batch in _batches(SAMPLES / "faults.log", None, network=str(SAMPLES / "network.toml")):
+    for batch in decoded_batches(
+        SAMPLES / "faults.log", None, network=str(SAMPLES / "network.toml")
+    ):
         split = batch.sdo_fast_split()
         if split is None:
             continue

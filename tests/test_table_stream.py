@@ -1,6 +1,7 @@
-"""The streaming table writer (`export --parquet/--csv` without MCAP/rrd) writes the same
-tables as the Capture path: same Arrow schemas, same DataFrames read back with pandas,
-whatever the batch size, with a bounded number of chunks waiting for the writer."""
+"""`export --parquet/--csv` writes the tables of `load()`: read back with pandas (Parquet:
+the schema, pandas metadata and DataFrames pandas' own file of load()'s tables gives; CSV:
+every cell), whatever the batch size, with a bounded number of chunks waiting for the
+writer; the findings are `check --json`'s."""
 
 from __future__ import annotations
 
@@ -17,96 +18,102 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 from conftest import ROOT, SAMPLES, generated_log, real_file
+from exported import (
+    DEVICES,
+    NETWORK,
+    assert_csv_tables,
+    assert_parquet_tables,
+    assert_same_table_files,
+    backwards_log,
+    decoded_batches,
+    export,
+    load_cut,
+    plain_columns,
+)
 
-from cananalyze.capture import Collector
-from cananalyze.errors import ProblemLog
+import cananalyze
 from cananalyze.io.source import read_all
 from cananalyze.outputs.tables import writer as table_sink
 from cananalyze.outputs.tables.pandas_like import MISSING, column
 from cananalyze.outputs.tables.stream import TableSink as StreamTables
-from cananalyze.outputs.tables.whole import TABLES, _plain_columns, write_csv, write_parquet
 from cananalyze.pipeline import Options, build_decoder
-
-DEVICES = {k: "dat7014" for k in range(1, 17)}
-
-
-def _args(log: Path, **kw) -> Options:
-    return Options(network=kw.get("network"), devices=kw.get("device") or {})
-
-
-def given_profiles(opts: Options) -> dict[int, tuple[str, str]]:
-    """What the nodes table says of the nodes the test declares (no network model here)."""
-    return {n: (k, "user --device") for n, k in opts.devices.items()}
-
-
-def _batches(log: Path, size: int | None, **kw):
-    """Decoded batches of `size` frames (records' rows depend on the cuts: compare like with like)."""
-    args = _args(log, **kw)
-    decoder = build_decoder(args)
-    fb = read_all(log)
-    size = size or max(len(fb), 1)
-    for start in range(0, len(fb), size):
-        yield decoder.decode(fb.take(slice(start, start + size)))
-    yield decoder.finish()
 
 
 def _stream(log: Path, out: Path, fmt: str = "parquet", size: int | None = None, **kw) -> None:
-    with StreamTables(out, fmt, profiles=given_profiles(_args(log, **kw))) as st:
-        for batch in _batches(log, size, **kw):
+    """The table sink fed directly (no run, no rules), batches of `size` frames."""
+    with StreamTables(out, fmt) as st:
+        for batch in decoded_batches(log, size, **kw):
             st.write(batch)
         st.close()
 
 
-def _reference(log: Path, out: Path, fmt: str = "parquet", size: int | None = None, **kw):
-    """The Capture path, as `export` runs it (no rules attached), on the same batches."""
-    collector = Collector(str(log))
-    for batch in _batches(log, size, **kw):
-        collector.add(batch)
-    cap = collector.capture(ProblemLog(), kw.get("network") or "", given_profiles(_args(log, **kw)))
-    (write_parquet if fmt == "parquet" else write_csv)(cap, out)
-
-
-def assert_same_tables(a: Path, b: Path, fmt: str = "parquet") -> None:
-    for name in TABLES:
-        if fmt == "csv":
-            assert (a / f"{name}.csv").read_text() == (b / f"{name}.csv").read_text(), name
-            continue
-        fa, fb = pq.ParquetFile(a / f"{name}.parquet"), pq.ParquetFile(b / f"{name}.parquet")
-        assert fa.schema_arrow.remove_metadata() == fb.schema_arrow.remove_metadata(), name
-        ma = json.loads(fa.schema_arrow.metadata[b"pandas"])
-        mb = json.loads(fb.schema_arrow.metadata[b"pandas"])
-        assert ma == mb, name
-        pd.testing.assert_frame_equal(
-            pd.read_parquet(a / f"{name}.parquet"), pd.read_parquet(b / f"{name}.parquet")
-        )
-
-
-def _both(tmp_path: Path, log: Path, fmt: str = "parquet", size: int | None = None, **kw):
-    _reference(log, tmp_path / "ref", fmt, size, **kw)
-    _stream(log, tmp_path / "new", fmt, size, **kw)
-    assert_same_tables(tmp_path / "ref", tmp_path / "new", fmt)
+def _as_load(tmp_path: Path, log: Path, fmt: str = "parquet", size=None, **kw) -> Path:
+    """Export the log; its tables must be load()'s of the same log and options."""
+    out = export(log, tmp_path, (fmt,), size, **kw)[fmt]
+    cap = load_cut(log, size, **kw)
+    (assert_parquet_tables if fmt == "parquet" else assert_csv_tables)(cap, out)
+    return out
 
 
 @pytest.mark.parametrize("name", ["demo.log", "faults.log", "commissioning.log", "faults.blf"])
-def test_samples_same_tables(tmp_path, name):
-    _both(tmp_path, SAMPLES / name, network=str(SAMPLES / "network.toml"))
+def test_samples_tables_are_load(tmp_path, name):
+    out = _as_load(tmp_path, SAMPLES / name, network=NETWORK)
+    if name.startswith("faults"):  # samples/README.md: 3 failed SDO transactions, 5 EMCY
+        sdo = pd.read_parquet(out / "sdo.parquet")
+        assert (sdo["result"] != "ok").sum() == 3
+        events = pd.read_parquet(out / "events.parquet")
+        assert (events["kind"] == "emcy").sum() == 5
+        assert len(pd.read_parquet(out / "findings.parquet")) > 0
 
 
+def test_frames_per_service_as_python_can_reads_them(tmp_path):
+    """The frames table holds python-can's frames of the log, counted per COB-ID range."""
+    import can
+
+    log = SAMPLES / "commissioning.log"
+    out = export(log, tmp_path, ("parquet",), network=NETWORK)["parquet"]
+    frames = pd.read_parquet(out / "frames.parquet")
+    msgs = list(can.LogReader(str(log)))
+    assert len(frames) == len(msgs) == 1200  # samples/README.md
+    assert frames["can_id"].tolist() == [m.arbitration_id for m in msgs]
+    assert frames["t"].tolist() == pytest.approx([m.timestamp for m in msgs], abs=1e-6)
+    assert frames["data"].tolist() == [bytes(m.data).hex() for m in msgs]
+    counts = frames["service"].astype(str).value_counts().to_dict()
+    # samples/README.md: 114 SYNC, 345 heartbeats, 114 guard requests and replies,
+    # 376 TPDOs, 20 RPDOs, 56 SDO requests and responses, 4 boot-ups, one NMT start
+    assert counts["sync"] == 114 and counts["heartbeat"] == 345
+    assert counts["guard_request"] == counts["guard_response"] == 114
+    assert counts["tpdo"] == 376 and counts["rpdo"] == 20
+    assert counts["sdo_request"] == counts["sdo_response"] == 56
+    assert counts["bootup"] == 4 and counts["nmt"] == 1
+    sdo = pd.read_parquet(out / "sdo.parquet")
+    assert len(sdo) == 46 and (sdo["result"] == "ok").all()
+    # device names read segmented from every node, and once more by block upload from node 6
+    names = sdo[sdo["index"] == 0x1008].sort_values(["node", "protocol"])
+    assert names[["node", "protocol", "value"]].values.tolist() == [
+        [3, "segmented", "CO4201"],
+        [5, "segmented", "DAT 7014"],
+        [6, "block", "DAT 7130"],
+        [6, "segmented", "DAT 7130"],
+        [7, "segmented", "CPS_DCON"],
+    ]
+
+
+@pytest.mark.parametrize("fmt", ["parquet", "csv"])
 @pytest.mark.parametrize("size", [1, 7, 1000])
-def test_batch_size_invariance(tmp_path, size):
+def test_batch_size_invariance(tmp_path, fmt, size):
+    """Cut anywhere (a frame at a time, like live), the files are those of one batch."""
     log = SAMPLES / "faults.log"
-    _both(tmp_path, log, size=size, network=str(SAMPLES / "network.toml"))
+    whole = export(log, tmp_path / "whole", (fmt,), network=NETWORK)[fmt]
+    cut = _as_load(tmp_path / "cut", log, fmt, size, network=NETWORK)
+    assert_same_table_files(whole, cut, fmt)
 
 
 @pytest.mark.parametrize("fmt", ["parquet", "csv"])
 def test_generated_devices_small_batches(tmp_path, fmt):
     """Generated 16-node traffic with device profiles (signals, SDO, EMCY), cut in batches
     that end mid-way through transfers and make categories appear after the first chunk."""
-    _both(tmp_path, generated_log(tmp_path, 30000), fmt, size=997, device=DEVICES)
-
-
-def test_csv_same_as_capture(tmp_path):
-    _both(tmp_path, SAMPLES / "faults.log", "csv", size=5, network=str(SAMPLES / "network.toml"))
+    _as_load(tmp_path, generated_log(tmp_path, 30000), fmt, 997, device=DEVICES)
 
 
 @pytest.mark.parametrize(
@@ -117,21 +124,14 @@ def test_csv_same_as_capture(tmp_path):
         "calumroy__CANopen_socketCAN_Test/can_log_070825_brake_sensor_test1.log",
     ],
 )
-def test_real_logs_same_tables(tmp_path, rel):
-    _both(tmp_path, real_file(rel), size=4096)
+def test_real_logs_tables_are_load(tmp_path, rel):
+    _as_load(tmp_path, real_file(rel), size=4096)
 
 
 def test_timestamps_going_back_resorted(tmp_path):
     """Batches that overlap in time: the stream re-sorts signals and events at the end."""
-    fb = read_all(SAMPLES / "faults.log")
-    fb.t[:] = fb.t[::-1].copy()  # time runs backwards: every batch starts before the last
-    log = tmp_path / "back.log"
-    lines = [
-        f"({t:.6f}) can0 {cid:03X}#{bytes(d[:n]).hex().upper()}"
-        for t, cid, d, n in zip(fb.t, fb.can_id, fb.data, fb.dlc, strict=True)
-    ]
-    log.write_text("\n".join(lines) + "\n")
-    _both(tmp_path, log, size=13, network=str(SAMPLES / "network.toml"))
+    log = backwards_log(SAMPLES / "faults.log", tmp_path / "back.log")
+    _as_load(tmp_path, log, size=13, network=NETWORK)
 
 
 def _encodings(path: Path, column: str) -> set[str]:
@@ -146,15 +146,8 @@ def test_time_columns_byte_stream_split(tmp_path, reverse):
     when the end of the stream rewrites a table in time order; payloads never as dictionary."""
     log = SAMPLES / "faults.log"
     if reverse:
-        fb = read_all(log)
-        log = tmp_path / "back.log"
-        log.write_text(
-            "".join(
-                f"({t:.6f}) can0 {cid:03X}#{bytes(d[:n]).hex().upper()}\n"
-                for t, cid, d, n in zip(fb.t[::-1], fb.can_id, fb.data, fb.dlc, strict=True)
-            )
-        )
-    _stream(log, tmp_path / "new", size=13, network=str(SAMPLES / "network.toml"))
+        log = backwards_log(log, tmp_path / "back.log")
+    _stream(log, tmp_path / "new", size=13, network=NETWORK)
     for name in ("frames", "signals"):
         path = tmp_path / "new" / f"{name}.parquet"
         assert "BYTE_STREAM_SPLIT" in _encodings(path, "t"), name
@@ -228,7 +221,7 @@ def test_record_column_types_as_pandas():
                 if obj:
                     df["c"] = df["c"].astype(object)
                 try:
-                    table = pa.Table.from_pandas(_plain_columns(df), preserve_index=False)
+                    table = pa.Table.from_pandas(plain_columns(df), preserve_index=False)
                 except (pa.ArrowException, ValueError, TypeError):
                     continue  # pandas cannot write it either
                 meta = json.loads(table.schema.metadata[b"pandas"])["columns"][0]
@@ -241,25 +234,39 @@ def test_record_column_types_as_pandas():
                 ), (combo, obj)
 
 
-def test_cli_streams_and_matches(tmp_path):
-    log = SAMPLES / "faults.log"
-    subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "cananalyze",
-            "export",
-            str(log),
-            "--no-check",
-            "--parquet",
-            str(tmp_path / "new"),
-            "-q",
-        ],
-        check=True,
-        cwd=ROOT,
+def _cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "cananalyze", *args], capture_output=True, text=True, cwd=ROOT
     )
-    _reference(log, tmp_path / "ref")
-    assert_same_tables(tmp_path / "ref", tmp_path / "new")
+
+
+def test_cli_export_tables_are_load_and_findings_are_check_json(tmp_path):
+    """`export` runs the CANopen rules and the rules file's assertions by default: its
+    findings table holds what `check --json` reports of the same log, and every table is
+    load()'s with the same network and rules."""
+    log, rules = SAMPLES / "faults.log", SAMPLES / "rules.yaml"
+    given = ["--network", NETWORK, "--rules", str(rules)]
+    r = _cli("export", str(log), *given, "--parquet", str(tmp_path / "pq"), "-q")
+    assert r.returncode == 0, r.stderr
+    r = _cli("check", str(log), *given, "--json", str(tmp_path / "f.json"), "-q")
+    assert r.returncode == 1, r.stderr  # samples/README.md: rules.yaml fails on faults
+    reported = json.loads((tmp_path / "f.json").read_text())
+    findings = pd.read_parquet(tmp_path / "pq" / "findings.parquet")
+    assert len(findings) == len(reported) > 5
+    assert {"emcy", "heartbeat"} <= set(findings["rule"])
+    want = plain_columns(pd.DataFrame.from_records(reported)).drop(columns="kind")
+    for col in findings.columns:
+        got = [None if pd.isna(v) else v for v in findings[col]]
+        assert got == [None if pd.isna(v) else v for v in want[col]], col
+    assert_parquet_tables(cananalyze.load(log, network=NETWORK, rules=rules), tmp_path / "pq")
+
+
+def test_cli_no_check_leaves_the_findings_table_empty(tmp_path):
+    log = SAMPLES / "faults.log"
+    r = _cli("export", str(log), "--no-check", "--parquet", str(tmp_path), "-q")
+    assert r.returncode == 0, r.stderr
+    assert len(pd.read_parquet(tmp_path / "findings.parquet")) == 0
+    assert len(pd.read_parquet(tmp_path / "frames.parquet")) == 933
 
 
 @pytest.mark.parametrize("fmt", ["parquet", "csv"])
@@ -267,11 +274,9 @@ def test_small_row_groups_late_categories(tmp_path, monkeypatch, fmt):
     """Row groups of 50 rows: signal names and event kinds first seen after the file's
     categories were fixed make the sink re-code the file to pandas' sorted categories."""
     monkeypatch.setattr(table_sink, "ROW_GROUP", 50)
-    _both(
-        tmp_path, SAMPLES / "commissioning.log", fmt, size=11, network=str(SAMPLES / "network.toml")
-    )
+    out = _as_load(tmp_path, SAMPLES / "commissioning.log", fmt, size=11, network=NETWORK)
     if fmt == "parquet":
-        assert pq.ParquetFile(tmp_path / "new" / "frames.parquet").num_row_groups > 1
+        assert pq.ParquetFile(out / "frames.parquet").num_row_groups > 1
 
 
 def test_row_groups_cut_by_bytes(tmp_path, monkeypatch):
@@ -283,9 +288,9 @@ def test_row_groups_cut_by_bytes(tmp_path, monkeypatch):
 
     monkeypatch.setattr(table_sink, "ROW_GROUP_BYTES", 500)
     monkeypatch.setattr(table_stream, "ROW_GROUP_BYTES", 500)
-    _both(tmp_path, SAMPLES / "faults.log", size=40, network=str(SAMPLES / "network.toml"))
+    out = _as_load(tmp_path, SAMPLES / "faults.log", size=40, network=NETWORK)
     for name in ("frames", "sdo"):
-        meta = pq.ParquetFile(tmp_path / "new" / f"{name}.parquet").metadata
+        meta = pq.ParquetFile(out / f"{name}.parquet").metadata
         sizes = [meta.row_group(i).num_rows for i in range(meta.num_row_groups)]
         assert len(sizes) > 1, name
         assert max(sizes) <= 40, name  # a batch or less: cut by the bytes, not the rows

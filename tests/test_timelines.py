@@ -1,7 +1,9 @@
-"""Capture tables and the timeline exporters (MCAP, rerun .rrd, Parquet, CSV), read back.
+"""load()'s tables and the exports (MCAP, rerun .rrd, Parquet, CSV) of the demo, read back.
 
 Oracles: the demo log's text parsed independently here, the DAT 7014 TPDO2 values
-the demo scripts (INTEGER16 in 0.1 degC), and a real ros_canopen TMCM-1636 candump.
+the demo scripts (INTEGER16 in 0.1 degC), a real ros_canopen TMCM-1636 candump, and
+the generator's known EMCY frames; the files are read with pandas, the `mcap` package
+and rerun's RrdReader.
 """
 
 from __future__ import annotations
@@ -15,7 +17,17 @@ import numpy as np
 import pandas as pd
 import pytest
 from conftest import SAMPLES, real_file
-from timeline_helpers import demo_capture
+from exported import (
+    DEMO_DEVICES,
+    assert_csv_tables,
+    assert_mcap_is,
+    assert_parquet_tables,
+    assert_rrd_is,
+    demo_capture,
+    export,
+    read_mcap,
+    read_rrd,
+)
 
 import cananalyze
 from cananalyze.cli.main import main
@@ -153,30 +165,16 @@ def test_import_and_help_stay_light():
 # --- MCAP ------------------------------------------------------------------------
 
 
-def _read_mcap(path: Path):
-    from mcap.reader import make_reader
-
-    with open(path, "rb") as f:
-        r = make_reader(f)
-        summary = r.get_summary()
-        msgs = [
-            (ch.topic, sc.name, m.log_time, json.loads(m.data)) for sc, ch, m in r.iter_messages()
-        ]
-        f.seek(0)
-        meta = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
-        f.seek(0)
-        att = {a.name: a.data for a in make_reader(f).iter_attachments()}
-    return summary, msgs, meta, att
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    """The demo exported in every format, as `export` writes it (rules on)."""
+    out = tmp_path_factory.mktemp("demo")
+    return export(DEMO, out, ("parquet", "csv", "mcap", "rrd"), bitrate=250000, device=DEMO_DEVICES)
 
 
-def test_mcap_round_trip(cap, tmp_path):
-    from cananalyze.outputs.mcap.topics import write_mcap
-
-    out = tmp_path / "demo.mcap"
-    counts = write_mcap(cap, out)
-    summary, msgs, meta, att = _read_mcap(out)
-    topics = {ch.topic: ch for ch in summary.channels.values()}
-    assert set(topics) == {
+def test_mcap_round_trip(cap, files):
+    m = assert_mcap_is(cap, files["mcap"])
+    assert set(m.messages) == {
         "/node/3/tpdo1",
         "/node/3/tpdo2",
         "/node/5/tpdo2",
@@ -186,69 +184,44 @@ def test_mcap_round_trip(cap, tmp_path):
         "/canopen/events",
         "/can/frames",
     }
-    stats = summary.statistics.channel_message_counts
-    for topic, ch in topics.items():
-        assert stats[ch.id] == counts[topic] == sum(1 for m in msgs if m[0] == topic)
-    assert counts["/can/frames"] == len(cap.frames)
-    assert all(c.compression == "zstd" for c in summary.chunk_indexes)
+    assert len(m.messages["/can/frames"]) == len(_demo_lines())
+    assert all(c.compression == "zstd" for c in m.summary.chunk_indexes)
     # schema: numbers as numbers, unit in the description
-    schema = json.loads(summary.schemas[topics["/node/5/tpdo2"].schema_id].data)
-    assert schema["properties"]["ch1"] == {"type": "number", "description": "unit: °C"}
-    # values equal the pandas API, log time = frame time in ns
-    s = cap.signals
-    ch1 = s[(s["node"] == 5) & (s["signal"] == "ch1")]
-    got = [(m[2], m[3]["ch1"]) for m in msgs if m[0] == "/node/5/tpdo2"]
-    assert [v for _, v in got] == ch1["value"].tolist()
-    assert [t for t, _ in got] == np.round(ch1["t"].to_numpy() * 1e9).astype(np.int64).tolist()
-    ints = [m[3] for m in msgs if m[0] == "/node/3/tpdo1"]
-    assert all(isinstance(v, int) for m in ints for v in m.values())
-    logs = [m for m in msgs if m[0] == "/canopen/events"]
-    assert {m[1] for m in logs} == {"foxglove.Log"}
-    assert [m[3]["message"] for m in logs] == cap.events["message"].tolist()
-    assert sorted({m[3]["level"] for m in logs}) == [2, 3, 4]
-    first = logs[0]
-    assert first[3]["timestamp"]["sec"] * 10**9 + first[3]["timestamp"]["nsec"] == first[2]
-    assert first[3]["file"] == "demo.log" and first[3]["line"] == 1
-    frames = [m[3] for m in msgs if m[0] == "/can/frames"]
-    assert [m["data"] for m in frames] == cap.frames["data"].tolist()
-    times = [m[2] for m in msgs]
-    assert times == sorted(times)
-    assert meta["cananalyze"]["version"] == cananalyze.__version__
-    assert meta["cananalyze"]["source"].endswith("demo.log")
-    assert [n["node"] for n in json.loads(att["nodes.json"])] == [3, 5, 10]
+    assert m.schemas["/node/5/tpdo2"][2]["properties"]["ch1"] == {
+        "type": "number",
+        "description": "unit: °C",
+    }
+    # first DAT 7014 TPDO2 in the demo: 285#D700DC00F1FFE803 = 215, 220, -15, 1000 x 0.1 degC
+    assert m.docs("/node/5/tpdo2")[0] == pytest.approx(
+        {"ch1": 21.5, "ch2": 22.0, "ch3": -1.5, "ch4": 100.0}
+    )
+    assert all(type(v) is int for d in m.docs("/node/3/tpdo1") for v in d.values())
+    logs = m.docs("/canopen/events")
+    assert sorted({d["level"] for d in logs}) == [2, 3, 4]
+    assert logs[0]["file"] == "demo.log" and logs[0]["line"] == 1
+    times = [t for _, t, _ in m.in_time_order]
+    assert times == sorted(times) and len(times) == m.summary.statistics.message_count
+    assert [n["node"] for n in json.loads(m.attachments["nodes.json"])] == [3, 5, 10]
 
 
-def test_mcap_failure_leaves_no_file(cap, tmp_path, monkeypatch):
-    from cananalyze.outputs.mcap import topics as mcap_out
+def test_mcap_failure_at_the_end_leaves_no_file(tmp_path, monkeypatch):
+    """The metadata written last fails: the export stops and the file never appears."""
+    from cananalyze.outputs.mcap import stream as mcap_stream
 
     def boom(*_a):
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(mcap_out, "_metadata", boom)
-    with pytest.raises(RuntimeError):
-        mcap_out.write_mcap(cap, tmp_path / "x.mcap")
+    monkeypatch.setattr(mcap_stream, "write_metadata", boom)
+    with pytest.raises(RuntimeError, match="disk full"):
+        export(DEMO, tmp_path, ("mcap",), device=DEMO_DEVICES)
     assert list(tmp_path.iterdir()) == []
 
 
 # --- rerun -----------------------------------------------------------------------
 
 
-def _read_rrd(path: Path) -> dict[str, list[dict]]:
-    from rerun.chunk import RrdReader
-
-    rows: dict[str, list[dict]] = {}
-    for chunk in RrdReader(path).stream():
-        if not chunk.is_static:
-            rows.setdefault(chunk.entity_path, []).extend(chunk.to_record_batch().to_pylist())
-    return rows
-
-
-def test_rrd_round_trip(cap, tmp_path):
-    from cananalyze.outputs.rerun.send import write_rrd
-
-    out = tmp_path / "demo.rrd"
-    counts = write_rrd(cap, out, bitrate=250000)
-    rows = _read_rrd(out)
+def test_rrd_round_trip(cap, files):
+    r = assert_rrd_is(cap, files["rrd"], bitrate=250000)
     signal_paths = {
         f"/node/{n}/{p}/{s}"
         for n, p, s in cap.signals[["node", "pdo", "signal"]]
@@ -261,28 +234,39 @@ def test_rrd_round_trip(cap, tmp_path):
         "/node/10/nmt",
         "/events",
         "/bus/load",
-    } == set(rows)
-    for path, n in counts.items():
-        assert len(rows[path]) == n
-    s = cap.signals
-    ch3 = s[(s["node"] == 5) & (s["signal"] == "ch3")]["value"].tolist()
-    assert [r["Scalars:scalars"][0] for r in rows["/node/5/tpdo2/ch3"]] == ch3
-    states = [r["StateChange:state"][0] for r in rows["/node/5/nmt"]]
-    assert states == ["bootup", "operational"]
-    ev = rows["/events"]
-    assert [r["TextLog:text"][0] for r in ev] == cap.events["message"].tolist()
-    assert {r["TextLog:level"][0] for r in ev} == {"INFO", "WARN", "ERROR"}
-    load = [r["Scalars:scalars"][0] for r in rows["/bus/load"]]
+    } == set(r.rows)
+    assert [v for _, v in r.values("/node/5/tpdo2/ch1", "Scalars:scalars")][:1] == [21.5]
+    assert [v for _, v in r.values("/node/5/nmt", "StateChange:state")] == [
+        "bootup",
+        "operational",
+    ]
+    assert {row["TextLog:level"][0] for row in r.rows["/events"]} == {"INFO", "WARN", "ERROR"}
+    load = [v for _, v in r.values("/bus/load", "Scalars:scalars")]
     assert all(0 <= x < 100 for x in load) and max(load) > 0
 
 
-def test_blueprint_has_a_plot_per_pdo_and_a_lane_per_node(cap):
+def _views(layout) -> list[tuple[str, str]]:
+    """(kind of view or container, display name) of each part of an .rrd's layout."""
+    out = []
+    for row in layout:
+        d = dict(row)
+        name = d.get("ViewBlueprint:display_name") or d.get("ContainerBlueprint:display_name")
+        kind = d.get("ViewBlueprint:class_identifier") or d.get("ContainerBlueprint:container_kind")
+        if name:
+            out.append((kind, name))
+    return out
+
+
+def test_blueprint_has_a_plot_per_pdo_and_a_lane_per_node(cap, files):
     """Checked against a screenshot of the viewer: a node's PDOs on one axis hid
     the digital input bytes under 10 V analogue values, and a `/node/*/nmt`
     pattern left the NMT lanes empty, so both are spelled out."""
-    from cananalyze.outputs.rerun.send import blueprint
+    from cananalyze.outputs.rerun.send import blueprint_for
 
-    plots, states, log = blueprint(cap).root_container.contents
+    bp = blueprint_for(
+        {(s.node, s.pdo, s.cob_id) for s in cap.series}, {e.node for e in cap.state_changes}
+    )
+    plots, states, log = bp.root_container.contents
     columns = {c.name: [(v.origin, v.name) for v in c.contents] for c in plots.contents[:-1]}
     assert columns == {
         "node 3": [
@@ -294,6 +278,11 @@ def test_blueprint_has_a_plot_per_pdo_and_a_lane_per_node(cap):
     assert plots.contents[-1].origin == "/bus"
     assert list(states.contents) == ["+ /node/3/nmt", "+ /node/5/nmt", "+ /node/10/nmt"]
     assert log.origin == "/events"
+    # the exported recording carries that layout as its default blueprint
+    names = [name for _, name in _views(read_rrd(files["rrd"]).layout)]
+    for name in ("node 3 TPDO1 (0x183)", "node 3 TPDO2 (0x283)", "node 5 TPDO2 (0x285)"):
+        assert repr([name]) in names
+    assert repr(["NMT states"]) in names and repr(["events"]) in names
 
 
 def test_blueprint_puts_many_nodes_in_a_grid(tmp_path):
@@ -304,11 +293,14 @@ def test_blueprint_puts_many_nodes_in_a_grid(tmp_path):
     from generate import generate
 
     from cananalyze.io.logfile import write_log
-    from cananalyze.outputs.rerun.send import blueprint
+    from cananalyze.outputs.rerun.send import blueprint_for
 
     write_log(generate(3000), tmp_path / "g.log")
     c = cananalyze.load(tmp_path / "g.log", device=[f"{n}=dat7014" for n in range(1, 17)])
-    plots, states, _ = blueprint(c).root_container.contents
+    bp = blueprint_for(
+        {(s.node, s.pdo, s.cob_id) for s in c.series}, {e.node for e in c.state_changes}
+    )
+    plots, states, _ = bp.root_container.contents
     assert isinstance(plots, rrb.Grid)
     assert [col.name for col in plots.contents[:-1]] == [f"node {n}" for n in range(1, 17)]
     assert len(states.contents) == 16
@@ -333,21 +325,15 @@ def test_decode_rerun_and_connect_are_exclusive(capsys):
 # --- Parquet / CSV ---------------------------------------------------------------
 
 
-def test_parquet_round_trip(cap, tmp_path):
-    from cananalyze.outputs.tables.whole import TABLES, write_parquet
-
-    rows = write_parquet(cap, tmp_path / "pq")
-    for name in TABLES:
-        back = pd.read_parquet(tmp_path / "pq" / f"{name}.parquet")
-        orig = getattr(cap, name)
-        assert rows[name] == len(orig) == len(back)
-        if name in ("frames", "signals", "events"):
-            pd.testing.assert_frame_equal(back, orig, check_dtype=False, check_categorical=False)
-    f = pd.read_parquet(tmp_path / "pq" / "frames.parquet")
-    assert (
-        str(f["node"].dtype) == "Int16"
-        and f["node"].isna().sum() == cap.frames["node"].isna().sum()
-    )
+def test_parquet_round_trip(cap, files):
+    assert_parquet_tables(cap, files["parquet"])
+    f = pd.read_parquet(files["parquet"] / "frames.parquet")
+    assert f["t"].tolist() == [x[0] for x in _demo_lines()]
+    # NMT, SYNC and TIME belong to no node: a nullable Int16 with those rows missing
+    no_node = [cid in (0x000, 0x080, 0x100) for _, cid, _ in _demo_lines()]
+    assert str(f["node"].dtype) == "Int16" and f["node"].isna().tolist() == no_node
+    sdo = pd.read_parquet(files["parquet"] / "sdo.parquet")
+    assert len(sdo) == 7 and sdo["result"].tolist().count("abort") == 1
 
 
 def test_parquet_and_csv_with_mixed_findings_values(tmp_path):
@@ -357,30 +343,28 @@ def test_parquet_and_csv_with_mixed_findings_values(tmp_path):
     from generate import generate
 
     from cananalyze.io.logfile import write_log
-    from cananalyze.outputs.tables.whole import write_csv, write_parquet
 
     write_log(generate(5000), tmp_path / "g.log")
-    c = cananalyze.load(tmp_path / "g.log", device=[f"{n}=dat7014" for n in range(1, 17)])
+    devices = {n: "dat7014" for n in range(1, 17)}
+    c = cananalyze.load(tmp_path / "g.log", device=devices)
     kinds = {type(v) for v in c.findings["measured"] if v is not None}
     assert str in kinds and kinds & {int, float}  # the case that failed
-    rows = write_parquet(c, tmp_path / "pq")
-    back = pd.read_parquet(tmp_path / "pq" / "findings.parquet")
-    assert rows["findings"] == len(back) == len(c.findings)
+    out = export(tmp_path / "g.log", tmp_path, ("parquet", "csv"), device=devices)
+    back = pd.read_parquet(out["parquet"] / "findings.parquet")
+    assert len(back) == len(c.findings)
     assert back["measured"].tolist() == [
         None if v is None else str(v) for v in c.findings["measured"]
     ]
     assert back["rule"].tolist() == c.findings["rule"].tolist()
-    write_csv(c, tmp_path / "csv")
-    assert len(pd.read_csv(tmp_path / "csv" / "findings.csv")) == len(c.findings)
+    assert_parquet_tables(c, out["parquet"])
+    assert_csv_tables(c, out["csv"])
 
 
-def test_csv_tables(cap, tmp_path):
-    from cananalyze.outputs.tables.whole import write_csv
-
-    write_csv(cap, tmp_path / "csv")
-    f = pd.read_csv(tmp_path / "csv" / "frames.csv", keep_default_na=False, dtype={"data": str})
-    assert f["data"].tolist() == cap.frames["data"].tolist()
-    s = pd.read_csv(tmp_path / "csv" / "signals.csv")
+def test_csv_tables(cap, files):
+    assert_csv_tables(cap, files["csv"])
+    f = pd.read_csv(files["csv"] / "frames.csv", keep_default_na=False, dtype={"data": str})
+    assert f["data"].tolist() == [x[2] for x in _demo_lines()]
+    s = pd.read_csv(files["csv"] / "signals.csv")
     assert s["value"].tolist() == pytest.approx(cap.signals["value"].tolist())
 
 
@@ -388,11 +372,12 @@ def test_csv_tables(cap, tmp_path):
 
 
 def test_cli_export_all_outputs(tmp_path, capsys):
+    """Every format from one run of `export` with the rules on (the default): each file holds
+    load()'s log, and the findings are those `check --json` reports."""
     rc = main(
         [
             "export",
             str(DEMO),
-            "--no-check",
             "--mcap",
             str(tmp_path / "a.mcap"),
             "--rrd",
@@ -404,13 +389,21 @@ def test_cli_export_all_outputs(tmp_path, capsys):
         ]
     )
     assert rc == 0
-    summary, msgs, _, _ = _read_mcap(tmp_path / "a.mcap")
-    assert sum(1 for m in msgs if m[0] == "/can/frames") == 185
-    assert len(_read_rrd(tmp_path / "a.rrd")["/events"]) == 19
-    assert len(pd.read_parquet(tmp_path / "pq" / "sdo.parquet")) == 7
-    assert (tmp_path / "csv" / "nodes.csv").exists()
     err = capsys.readouterr().err
     assert "exported 185 frames" in err and "\x1b" not in err  # no progress bar off a terminal
+    c = cananalyze.load(DEMO)
+    m = assert_mcap_is(c, tmp_path / "a.mcap")
+    assert len(m.messages["/can/frames"]) == 185
+    assert len(assert_rrd_is(c, tmp_path / "a.rrd").rows["/events"]) == len(c.events)
+    assert_parquet_tables(c, tmp_path / "pq")
+    assert_csv_tables(c, tmp_path / "csv")
+    assert main(["check", str(DEMO), "--json", str(tmp_path / "f.json"), "-q"]) in (0, 1)
+    capsys.readouterr()
+    reported = json.loads((tmp_path / "f.json").read_text())
+    findings = pd.read_parquet(tmp_path / "pq" / "findings.parquet")
+    assert findings["rule"].tolist() == [f["rule"] for f in reported]
+    assert findings["message"].tolist() == [f["message"] for f in reported]
+    assert findings["t"].tolist() == [f["t"] for f in reported]
 
 
 @pytest.mark.parametrize(
@@ -448,27 +441,27 @@ def test_decode_with_mcap_writes_text_and_timeline(tmp_path, capsys):
     rc = main(["decode", str(DEMO), "--mcap", str(tmp_path / "d.mcap")])
     assert rc == 0
     assert "NMT start all nodes" in capsys.readouterr().out
-    _, msgs, _, _ = _read_mcap(tmp_path / "d.mcap")
-    assert sum(1 for m in msgs if m[0] == "/canopen/events") == 19
+    m = read_mcap(tmp_path / "d.mcap")
+    assert len(m.messages["/canopen/events"]) == 19
 
 
-def test_bulk_export_of_generated_log(tmp_path):
+def test_export_of_generated_log(tmp_path):
+    """A generated log's frames, events and EMCY (the generator's known frames) in every file."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
     from generate import generate
 
     from cananalyze.io.logfile import write_log
-    from cananalyze.outputs.mcap.topics import write_mcap
-    from cananalyze.outputs.rerun.send import write_rrd
 
     batch = generate(20000)
     log = tmp_path / "g.log"
     write_log(batch, log)
     c = cananalyze.load(log)
     assert len(c) == 20000
-    counts = write_mcap(c, tmp_path / "g.mcap")
-    assert counts["/can/frames"] == 20000
-    assert counts["/canopen/events"] == len(c.events)
+    out = export(log, tmp_path, ("mcap", "rrd"))
+    m = assert_mcap_is(c, out["mcap"])
+    assert len(m.messages["/can/frames"]) == 20000
     emcy = int(((batch.can_id & 0x780) == 0x080).sum() - (batch.can_id == 0x080).sum())
     assert (c.events["kind"] == "emcy").sum() == emcy
-    rrd = write_rrd(c, tmp_path / "g.rrd")
-    assert rrd["/events"] == len(c.events)
+    assert sum(" EMCY " in d["message"] for d in m.docs("/canopen/events")) >= emcy
+    r = assert_rrd_is(c, out["rrd"])
+    assert len(r.rows["/events"]) == len(c.events)

@@ -1,14 +1,14 @@
-"""MCAP export batch by batch: the topics of `write_mcap`, in memory flat in log length.
+"""MCAP export batch by batch (`export --mcap`, `decode --mcap`), memory flat in log length.
 
-`write_mcap` lays out a whole Capture at once; a 5M-frame log peaked at 2.1 GB
-that way, so a fleet log did not fit. Here each decoded batch's messages (PDO
-signals, NMT state changes, events, raw frames) are merged by time and written
-as chunks straight away. Schemas and channels are declared when their topic
-first appears: MCAP allows Schema and Channel records anywhere in the data
+Laying out a whole Capture at once peaked at 2.1 GB for a 5M-frame log, so a
+fleet log did not fit. Here each decoded batch's messages (PDO signals, NMT
+state changes, events, raw frames; `topics` builds them) are merged by time and
+written as chunks straight away. Schemas and channels are declared when their
+topic first appears: MCAP allows Schema and Channel records anywhere in the data
 section before their first message.
 
-Within a batch, messages are in log-time order, ties in the order `write_mcap`
-gives them (signals, states, events, frames). An SDO transfer that ends a batch
+Within a batch, messages are in log-time order, ties in topic order (signals,
+states, events, frames). An SDO transfer that ends a batch
 or two after it began is a message in a later chunk than its time; MCAP readers
 merge chunks by the time ranges in their indexes, so players show it in place.
 """

@@ -21,13 +21,12 @@ from pathlib import Path
 import numpy as np
 
 from ... import __version__
-from ...capture import Capture, SignalSeries
+from ...capture import SignalSeries
 from ...columns import bytecols
 from ...columns.json_text import Texts, join, number_text, object_template
 from ...frames import FLAG_RTR, FrameBatch
 from ...protocol.services import SERVICE_NAMES
 from ...records import SignalBlock
-from ..atomic import atomic_path
 from .bulk import BulkMcapWriter
 
 LOG_SCHEMA = {
@@ -240,71 +239,6 @@ def event_payloads(
     return Texts.concat(parts)
 
 
-def write_mcap(
-    cap: Capture, path: str | Path, compression: str = "zstd", chunk_bytes: int = 4 << 20
-) -> dict[str, int]:
-    """Write the capture as MCAP; returns message counts per topic."""
-    if compression not in ("zstd", "lz4", "none"):
-        raise ValueError(f"unknown MCAP compression {compression!r}")
-    counts: dict[str, int] = {}
-    with atomic_path(path) as tmp, open(tmp, "wb") as f:
-        w = BulkMcapWriter(
-            f, f"cananalyze {__version__}", compression=compression, chunk_bytes=chunk_bytes
-        )
-        try:
-            streams: list[tuple[int, np.ndarray, Texts]] = []
-            for topic, schema, ns, payload in topic_streams(cap):
-                sid = w.schema(schema["title"], "jsonschema", json.dumps(schema).encode())
-                streams.append((w.channel(topic, "json", sid), ns, payload))
-                counts[topic] = len(ns)
-            write_merged(w, streams)
-            _metadata(w, cap)
-            w.finish()
-        except BaseException:
-            w.abort()  # the chunk thread stops before the file is closed and removed
-            raise
-    return counts
-
-
-def topic_streams(cap: Capture) -> list[tuple[str, dict, np.ndarray, Texts]]:
-    """(topic, JSON schema, log times in ns, payloads) for every topic, in channel order."""
-    out = []
-    for s in cap.series:
-        out.append((signal_topic(s), signal_schema(s), _ns(s.t), signal_payloads(s.columns)))
-    by_node: dict[int, list] = {}
-    for e in cap.state_changes:
-        by_node.setdefault(e.node, []).append(e)
-    for node, evs in sorted(by_node.items()):
-        t = np.array([e.t for e in evs])
-        out.append((state_topic(node), STATE_SCHEMA, _ns(t), state_payloads(evs)))
-    events = cap.sorted_events()
-    if events:
-        ns = _ns(np.array([e.t for e in events]))
-        lines = cap.batch.line
-        line = [
-            int(lines[e.row]) if e.row is not None and e.row < len(lines) else 0 for e in events
-        ]
-        payload = event_payloads(
-            ns,
-            [e.level for e in events],
-            [e.message for e in events],
-            [f"node {e.node}" if e.node is not None else e.kind for e in events],
-            Path(cap.source).name,
-            line,
-        )
-        out.append((EVENTS_TOPIC, LOG_SCHEMA, ns, payload))
-    if len(cap.batch):
-        out.append(
-            (
-                FRAMES_TOPIC,
-                FRAME_SCHEMA,
-                _ns(cap.batch.t),
-                frame_payloads(cap.batch, cap.service, cap.node),
-            )
-        )
-    return out
-
-
 def signal_topic(s: SignalSeries | SignalBlock) -> str:
     return f"/node/{s.node}/{s.pdo}"
 
@@ -321,10 +255,6 @@ def write_merged(w: BulkMcapWriter, streams: list[tuple[int, np.ndarray, Texts]]
     chans = np.concatenate([np.full(len(s[1]), s[0], np.uint16) for s in streams])
     order = np.argsort(times, kind="stable")
     w.messages(chans[order], times[order], [s[2] for s in streams], rows=order)
-
-
-def _metadata(w: BulkMcapWriter, cap: Capture) -> None:
-    write_metadata(w, cap.source, cap.network, len(cap.batch), cap.problems.count, cap.node_rows())
 
 
 def write_metadata(

@@ -1,4 +1,6 @@
-"""Rerun export: PDO signals as plots, NMT states as lanes, events as a text log.
+"""What a Rerun recording holds: PDO signals as plots, NMT states as lanes, events as a
+text log, and its layout. Sent batch by batch by `stream.StreamRrd` (export, decode)
+and `live.RerunLive` (live sessions).
 
 Entities:
   /node/<N>/<pdo>/<signal>  Scalars (series named "signal [unit]")
@@ -13,13 +15,11 @@ timeline: a timestamp when the log has absolute (epoch) times, else a duration.
 from __future__ import annotations
 
 from collections.abc import Iterable
-from pathlib import Path
 
 import numpy as np
 
 from ... import __version__
 from ...capture import Capture
-from ..busload import frame_bits, load_series
 
 TIMELINE = "time"
 _RR_LEVEL = {1: "DEBUG", 2: "INFO", 3: "WARN", 4: "ERROR", 5: "CRITICAL"}
@@ -33,13 +33,6 @@ def _time(rr, t: np.ndarray, absolute: bool):
     if absolute:
         return rr.TimeColumn(TIMELINE, timestamp=t)
     return rr.TimeColumn(TIMELINE, duration=t)
-
-
-def blueprint(cap: Capture):
-    """The layout for a whole capture: its PDOs and the nodes with NMT states."""
-    return blueprint_for(
-        {(s.node, s.pdo, s.cob_id) for s in cap.series}, {e.node for e in cap.state_changes}
-    )
 
 
 def blueprint_for(pdos: Iterable[tuple[int, str, int]], lane_nodes: Iterable[int]):
@@ -120,21 +113,6 @@ def send_header(rec, source: str, network: str) -> None:
     )
 
 
-def send(cap: Capture, rec, bitrate: int | None = None) -> dict[str, int]:
-    """Send the whole capture to a RecordingStream; returns value counts per entity."""
-    counts: dict[str, int] = {}
-    t_all = cap.batch.t
-    absolute = is_absolute(t_all)
-    send_header(rec, str(cap.source), cap.network or "")
-    send_parts(cap, rec, absolute, counts, set())
-    if len(cap.batch):
-        starts, load = load_series(
-            t_all, frame_bits(cap.batch.flags, cap.batch.dlc), LOAD_WINDOW, bitrate
-        )
-        send_load(rec, starts, load, absolute, bitrate, counts, set())
-    return counts
-
-
 def send_parts(cap: Capture, rec, absolute: bool, counts: dict[str, int], named: set[str]) -> None:
     """Signals, NMT state lanes and events of `cap`; series names only once per path (`named`)."""
     import rerun as rr
@@ -206,19 +184,6 @@ def recording(name: str):
     rec = rr.RecordingStream("cananalyze", send_properties=True)
     rec.send_recording_name(name)
     return rec
-
-
-def write_rrd(cap: Capture, path: str | Path, bitrate: int | None = None) -> dict[str, int]:
-    """Write an .rrd file (atomically) with the default blueprint."""
-    from ..atomic import atomic_path
-
-    rec = recording(Path(str(cap.source)).name)
-    with atomic_path(path) as tmp:
-        rec.save(tmp, default_blueprint=blueprint(cap))
-        counts = send(cap, rec, bitrate)
-        rec.flush()
-        rec.disconnect()
-    return counts
 
 
 def grpc_url(connect: str) -> str:

@@ -1,13 +1,13 @@
-"""Rerun export batch by batch: the entities of `write_rrd`, memory flat in log length.
+"""Rerun export batch by batch (the entities of `send`), memory flat in log length.
 
 To an .rrd file (`export --rrd`) or a viewer (`decode --rerun / --connect`).
 
-`write_rrd` sends a whole Capture; a 5M-frame log peaked at 1.1 GB that way.
-Here each decoded batch becomes a small Capture of its own (the same Collector,
-NMT states carried across batches so lanes show changes only) whose signals,
-states and events go out with `send_columns` at once. The bus load is summed
-into its windows as frames come (a float per 0.1 s: 290 KB for an hour) and
-sent at the end with `write_rrd`'s rule for the last window. The layout
+Sending a whole Capture peaked at 1.1 GB for a 5M-frame log. Here each decoded
+batch becomes a small Capture of its own (the same Collector, NMT states carried
+across batches so lanes show changes only) whose signals, states and events go
+out with `send_columns` at once. The bus load is summed into its windows as
+frames come (a float per 0.1 s: 290 KB for an hour) and sent at the end with
+`busload.load_series`'s rule for the last window. The layout
 (blueprint) names every PDO and NMT lane, so it is sent when all are known:
 after the data, as the recording's default.
 """

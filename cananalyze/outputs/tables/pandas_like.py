@@ -1,10 +1,11 @@
 """The column types pandas would give the record tables, and pandas' Parquet metadata, without pandas.
 
-The Capture builds the SDO, findings and nodes tables with
-`pd.DataFrame.from_records` and writes them after `parquet_out._plain_columns`;
-the streaming writer must give the same Arrow types and the same `pandas`
-schema metadata (which makes `pd.read_parquet` restore nullable integers and
-the nodes index) without importing pandas (0.5 s). `column()` repeats pandas'
+The Capture (`load()`) builds the SDO, findings and nodes tables with
+`pd.DataFrame.from_records`; Parquet needs one type per column, so a column of
+mixed values is written as their text (None kept). The streaming writer must give
+the Arrow types and the `pandas` schema metadata `to_parquet` would give those
+tables (which makes `pd.read_parquet` restore nullable integers and the nodes
+index) without importing pandas (0.5 s). `column()` repeats pandas'
 inference for the value mixes records hold; tests compare it with pandas.
 """
 
@@ -184,7 +185,7 @@ def convert(values: list | tuple, how: str) -> pa.Array:
 
 
 def column(values: list, as_object: bool = False) -> tuple[pa.Array, str, str]:
-    """(Arrow array, pandas_type, numpy_type) of one from_records column after `_plain_columns`."""
+    """(Arrow array, pandas_type, numpy_type) of one from_records column, mixed values as text."""
     stats = ColumnStats()
     stats.update(values)
     how, pandas_type, numpy_type = stats.decide(as_object)

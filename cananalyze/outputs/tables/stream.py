@@ -1,12 +1,13 @@
 """`export --parquet/--csv` as a stream: each DecodedBatch's rows appended to six table files.
 
-The Capture path keeps every batch, concatenates them and builds pandas
+`load()`'s Capture keeps every batch, concatenates them and builds pandas
 DataFrames (4 GB for 10M frames); this path keeps nothing per frame: frames and
-signals go batch by batch to a writer thread (`table_sink`), SDO records are
+signals go batch by batch to a writer thread (`writer`), SDO records are
 spooled to a temporary file (pandas types their columns over the whole column)
 and written as they come while the types so far hold, and the small tables
-(findings, nodes) are built at the end. The files hold the same schemas and values as
-`parquet_out.write_parquet(load(log))`; tests compare them.
+(findings, nodes) are built at the end. The files hold the tables of `load(log)`:
+`pd.read_parquet` gives its DataFrames back, with their dtypes (mixed-type record
+columns as text: Parquet has one type per column); tests read them with pandas.
 
 Row order follows the Capture: signals by time, then series (node, PDO,
 COB-ID, first appearance), then signal; events by time, then frame row. Each
@@ -30,6 +31,7 @@ import pyarrow as pa
 
 from ...capture import _hex_column
 from ...columns import arrow_build as ab
+from ...errors import UsageError
 from ...events.build import LEVEL_NAMES, EventState, batch_events_of
 from ...events.columns import KINDS, NO_NODE, NO_ROW, EventColumns
 from ...frames import FrameBatch
@@ -41,7 +43,6 @@ from ..atomic import atomic_path
 from ..sink import Sink as OutputSink
 from . import pandas_like as pl
 from . import sdo_chunks
-from .whole import TABLES, _outdir
 from .writer import (
     ROW_GROUP,
     ROW_GROUP_BYTES,
@@ -54,6 +55,7 @@ from .writer import (
     rewrite,
 )
 
+TABLES = ("frames", "signals", "sdo", "events", "findings", "nodes")
 SDO_COLUMNS = SDO_TABLE_COLUMNS
 _SDO_ROW = operator.itemgetter(*SDO_COLUMNS)
 FINDING_COLUMNS = ("t", "t_rel", "rule", "severity", "node", "cob_id", "message")
@@ -171,6 +173,18 @@ def _frames_columns(fb: FrameBatch, service, node, pdo) -> dict:
         "node": ab.numeric(node.astype(np.int16, copy=False), node < 0),
         "pdo": ab.numeric(pdo.view(np.int8), pdo == 0),
     }
+
+
+def _outdir(path: str | Path) -> Path:
+    """The output folder, created if needed; a one-line UsageError when it cannot be."""
+    d = Path(path)
+    if d.exists() and not d.is_dir():
+        raise UsageError(f"{d}: exists and is not a directory")
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UsageError(f"{d}: cannot create the output directory ({exc.strerror})") from None
+    return d
 
 
 class TableSink(OutputSink):
@@ -596,10 +610,10 @@ class TableSink(OutputSink):
         return rows
 
     def _write_findings(self) -> int:
-        # by time, as `check` prints them and `check --json` writes them (stable: rules
-        # report in their order at one time)
-        self._findings.sort(key=lambda row: row[0])
-        cols = list(zip(*self._findings, strict=True)) or [[] for _ in FINDING_COLUMNS]
+        """By time, as load() and `check --json` give them: a rule that judges a span (a
+        heartbeat dropout) reports after later findings were emitted."""
+        rows = sorted(self._findings, key=operator.itemgetter(0))
+        cols = list(zip(*rows, strict=True)) or [[] for _ in FINDING_COLUMNS]
         out = []
         for name, values in zip(FINDING_COLUMNS, cols, strict=True):
             values = list(values)

@@ -1,0 +1,207 @@
+"""Every script in benchmarks/ runs on a tiny generated log, exits 0 and prints its figures,
+so none of them rots while the code it measures changes. The numbers are not judged here
+(a few thousand frames measure start-up); their shape is."""
+
+from __future__ import annotations
+
+import ctypes
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+from conftest import ROOT, SAMPLES
+
+BENCH = ROOT / "benchmarks"
+SMOKED = {
+    "generate.py",
+    "bench_check.py",
+    "bench_decode.py",
+    "bench_floor.py",
+    "bench_live.py",
+    "mem_profile.py",
+}
+NUMBER = r"\d+(\.\d+)?"
+
+
+def _run(script: str, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    done = subprocess.run(
+        [sys.executable, str(BENCH / script), *args],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=timeout,
+    )
+    assert done.returncode == 0, f"{script} exited {done.returncode}:\n{done.stderr[-2000:]}"
+    return done
+
+
+def test_every_benchmark_script_has_a_smoke_test():
+    assert {p.name for p in BENCH.glob("*.py")} == SMOKED
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory) -> Path:
+    """3000 generated frames as candump, ASC and BLF: what the scripts name bench_3000.*"""
+    out = tmp_path_factory.mktemp("bench")
+    done = _run("generate.py", "3000", str(out / "bench_3000"))
+    assert done.stdout.split() == [
+        "wrote",
+        str(out / "bench_3000.log"),
+        "wrote",
+        str(out / "bench_3000.asc"),
+        "wrote",
+        str(out / "bench_3000.blf"),
+    ]
+    import can
+
+    for suffix in (".log", ".asc", ".blf"):
+        assert sum(1 for _ in can.LogReader(str(out / f"bench_3000{suffix}"))) == 3000, suffix
+    return out
+
+
+def test_bench_check(logs):
+    lines = _run("bench_check.py", "3000", "1", "--out", str(logs)).stdout.splitlines()
+    assert re.fullmatch(rf"decode --summary +best CPU +{NUMBER} s +best wall +{NUMBER} s", lines[0])
+    assert re.fullmatch(rf"check +best CPU +{NUMBER} s +best wall +{NUMBER} s", lines[1])
+    assert re.fullmatch(rf"check overhead: [+-]{NUMBER} % CPU \(3000 frames, best of 1\)", lines[2])
+
+
+def test_bench_decode_prints_every_figure(logs):
+    out = _run(
+        "bench_decode.py",
+        *("--size", "3000", "--formats", ".log", "--repeat", "1", "--pycan-prefix", "0"),
+        *("--out", str(logs)),
+    ).stdout
+    table = out[out.index("machine:") :].splitlines()[1:]
+    names = [re.split(r"  +", line.strip())[0] for line in table]
+    assert names == [
+        "python-can LogReader / export --parquet .log",
+        "python-can LogReader / decode --summary .log",
+        "python-can timed on",
+        "export --parquet .log frames/s",
+        "decode --summary .log frames/s",
+        "check vs decode --summary (.log), cpu",
+        "check vs decode --summary (.log), wall",
+        "decode -o FILE (.log, no devices) lines/s",
+        "decode -o FILE (.log, 16 devices) lines/s",
+        "decode -o FILE (.log, no devices, jsonl) lines/s",
+        "export --mcap (.log, 16 devices) frames/s",
+        "export --rrd (.log, 16 devices) frames/s",
+        "peak RSS export --parquet at 0.003M",
+        "peak RSS flatness",
+        "cananalyze --help",
+    ]
+    assert "(3,091 lines," in out  # 3000 frames, and the records between them
+    assert not list(logs.glob("tmp*"))  # its temporary outputs are gone
+
+
+def test_bench_decode_against_another_tree(logs):
+    """--against with this same checkout: both columns measured, every figure, ratios."""
+    out = _run(
+        "bench_decode.py",
+        *("--size", "3000", "--formats", ".log", "--repeat", "1"),
+        *("--out", str(logs), "--against", str(ROOT)),
+    ).stdout
+    rows = out[out.index("this / other") :].splitlines()[2:]
+    cell = rf" +{NUMBER}s +{NUMBER}s"
+    labels = []
+    for row in rows:
+        m = re.fullmatch(rf"(.+?){cell}{cell} +{NUMBER}x +{NUMBER}x", row)
+        assert m, row
+        labels.append(m.group(1).strip())
+    assert labels == [
+        "export --parquet .log",
+        "decode --summary .log",
+        "check .log",
+        "decode -o FILE (.log, no devices)",
+        "decode -o FILE (.log, 16 devices)",
+        "decode -o FILE (.log, no devices, jsonl)",
+        "export --mcap (.log, 16 devices)",
+        "export --rrd (.log, 16 devices)",
+        "cananalyze --help",
+    ]
+    assert f"other tree (--against): {ROOT}" in out
+
+
+def test_bench_decode_against_a_folder_without_cananalyze(tmp_path):
+    done = subprocess.run(
+        [sys.executable, str(BENCH / "bench_decode.py"), "--against", str(tmp_path)],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 2 and "no cananalyze package there" in done.stderr
+
+
+def test_bench_floor_table_for_every_format(logs):
+    """The library-only CPU of an export and the floor it sets, per input format."""
+    lines = _run(
+        "bench_floor.py", "--size", "3000", "--repeat", "1", "--out", str(logs)
+    ).stdout.splitlines()
+    assert any(line.startswith("  Parquet encoding of the exported tables:") for line in lines)
+    rows = {line.split()[0]: line.split() for line in lines if line[:1] == "."}
+    assert set(rows) == {".log", ".blf", ".asc"}
+    for cells in rows.values():
+        read, total, floor = float(cells[1]), float(cells[2]), float(cells[3].rstrip("s"))
+        assert 0 <= read < total and abs(floor - total / 2) < 0.01
+    assert not list(logs.glob("tmp*"))  # the exported tables are cleaned up
+
+
+def test_bench_live_keeps_every_frame(tmp_path):
+    """live's sinks, the rules and both recordings on a virtual bus: nothing dropped."""
+    out = _run(
+        "bench_live.py",
+        *("--seconds", "1", "--rate", "2000", "--network", str(SAMPLES / "network.toml")),
+        *("--check", str(SAMPLES / "rules.yaml"), "--plain"),
+        *("--record", str(tmp_path / "r.log"), "--rrd", str(tmp_path / "r.rrd")),
+    ).stdout
+    got = dict(line.split(None, 1) for line in out.splitlines())
+    assert got["sinks"] == "RecordSink, RerunLiveSink, TextWriter, DashboardSink, FindingsSink"
+    offered = int(got["offered"].split()[0])
+    kept = int(got["kept"].split()[0])
+    assert 1500 < offered == kept and got["dropped"] == "0"
+    assert re.fullmatch(
+        rf"send -> last sink: median {NUMBER} ms, p99 {NUMBER} ms, max {NUMBER} ms",
+        got["latency"],
+    )
+    assert int(got["decoded"].split()[0]) > 0  # the network file's PDOs became signals
+    assert int(got["check"].split()[0]) > 0
+    recorded = sum(1 for line in (tmp_path / "r.log").read_text().splitlines() if line)
+    assert recorded == kept and (tmp_path / "r.rrd").stat().st_size > 0
+
+
+def test_mem_profile_runs_the_command_and_reports_peaks(tmp_path):
+    out = tmp_path / "pq"
+    done = _run(
+        "mem_profile.py",
+        *("--every", "0.01", "export", str(SAMPLES / "faults.log"), "--parquet", str(out), "-q"),
+    )
+    assert pq.read_table(out / "frames.parquet").num_rows == 933  # the command itself ran
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith("peak RSS ")
+    peak = int(last.split()[2])
+    assert 20 < peak < 2000
+    if sys.platform.startswith("linux") and hasattr(ctypes.CDLL(None), "mallinfo2"):
+        assert "malloc in use: max" in last  # glibc 2.33+
+
+
+def test_arrow_column_waits_for_a_whole_pyarrow(monkeypatch):
+    """The sampler runs while the CLI imports pyarrow: a module without its functions yet
+    is no figure, not an error that stops the sampling (it did, on a 50M-frame run)."""
+    import types
+
+    sys.path.insert(0, str(BENCH))
+    try:
+        import mem_profile
+    finally:
+        sys.path.remove(str(BENCH))
+    monkeypatch.setitem(sys.modules, "pyarrow", types.ModuleType("pyarrow"))  # mid-import
+    assert mem_profile._arrow_mb() is None
+    monkeypatch.delitem(sys.modules, "pyarrow")
+    assert mem_profile._arrow_mb() is None
+    whole = types.ModuleType("pyarrow")
+    whole.total_allocated_bytes = lambda: 5 << 20
+    monkeypatch.setitem(sys.modules, "pyarrow", whole)
+    assert mem_profile._arrow_mb() == 5
