@@ -354,3 +354,23 @@ def test_compute_kernels_registered_before_writer_threads():
         [sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, check=True
     )
     assert out.stdout.strip() == "True"
+
+
+def test_export_with_findings_never_imports_pandas(tmp_path):
+    """Late findings make the events table re-sorted at the end; that rewrite took pyarrow's
+    to_numpy/take, which import pandas (0.5-0.8 s a run) behind the writer's back."""
+    log = generated_log(tmp_path, 60_000)
+    code = (
+        "import sys; from cananalyze.cli.main import main; "
+        f"rc = main(['export', {str(log)!r}, '--parquet', {str(tmp_path / 'pq')!r}, '-q']); "
+        "print(rc, 'pandas' in sys.modules)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True
+    )
+    assert out.stdout.split() == ["0", "False"], out.stderr
+    events = pq.read_table(tmp_path / "pq" / "events.parquet")
+    kinds = events.column("kind").to_pylist()
+    assert "finding" in kinds  # the case that is re-sorted
+    t = events.column("t").to_pylist()
+    assert t == sorted(t)

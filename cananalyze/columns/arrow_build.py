@@ -65,3 +65,21 @@ def dictionary(codes: np.ndarray, labels: pa.Array, index_type: pa.DataType) -> 
     """Dictionary column: codes (any int dtype) into labels."""
     idx = numeric(codes.astype(index_type.to_pandas_dtype(), copy=False), typ=index_type)
     return pa.DictionaryArray.from_arrays(idx, labels)
+
+
+def to_numpy(column: pa.Array | pa.ChunkedArray, fill=None) -> np.ndarray:
+    """A fixed-width column's values as numpy, nulls set to `fill`, read from the buffers.
+
+    pyarrow's own `to_numpy` imports pandas (pyarrow 26, zero-copy included).
+    """
+    chunks = column.chunks if isinstance(column, pa.ChunkedArray) else [column]
+    dtype = np.dtype(column.type.to_pandas_dtype())
+    parts = []
+    for c in chunks:
+        validity, data = c.buffers()[:2]
+        values = np.frombuffer(data, dtype, len(c), c.offset * dtype.itemsize).copy()
+        if c.null_count and validity is not None:
+            bits = np.unpackbits(np.frombuffer(validity, np.uint8), bitorder="little")
+            values[~bits[c.offset : c.offset + len(c)].astype(bool)] = fill
+        parts.append(values)
+    return np.concatenate(parts) if parts else np.zeros(0, dtype)

@@ -535,7 +535,7 @@ class TableSink(OutputSink):
         series = sorted(keys, key=lambda k: (k[0], k[1], k[2], *rank.get(k, (0, 0))))
         code_of = {k: i for i, k in enumerate(series)}
         code = np.array([code_of[k] for k in zip(node, pdo, cob, sig, strict=True)], np.int64)
-        t = table.column("t").to_numpy()
+        t = ab.to_numpy(table.column("t"))
         return np.lexsort((np.arange(len(t)), code, t))
 
     def _finish_events(self) -> None:
@@ -725,10 +725,13 @@ def _event_sort_py(t: list, key: list, horizon: float | None) -> tuple[list[int]
     return order, bisect.bisect_left([t[i] for i in order], horizon)
 
 
+_LAST_ROW = np.iinfo(np.int64).max  # an event without a frame row sorts after those with one
+
+
 def _event_order(table: pa.Table) -> np.ndarray:
     """Events by time, then frame row, ties in file order (the Capture's stable sort)."""
-    t = table.column("t").to_numpy()
-    row = table.column("row").to_numpy(zero_copy_only=False)
+    t = ab.to_numpy(table.column("t"))
+    row = ab.to_numpy(table.column("row"), fill=_LAST_ROW)
     return np.lexsort((np.arange(len(t)), row, t))
 
 
