@@ -758,3 +758,41 @@ def test_forced_mcap_format_on_a_log_is_one_line(tmp_path):
     assert "not an MCAP file" in out.stderr.decode()
     with pytest.raises(InputError):
         list(open_log(SAMPLES / "demo.log", fmt="mcap").batches())
+
+
+@pytest.mark.parametrize("compression", ["lz4", "none"])
+def test_other_chunk_compressions_read(compression, tmp_path, capsysbinary):
+    out = tmp_path / "x.mcap"
+    proc = run(
+        capsysbinary, "export", str(SAMPLES / "demo.log"), "--mcap", str(out),
+        "--mcap-compression", compression, "-q",
+    )  # fmt: skip
+    assert proc.returncode == 0
+    with open(out, "rb") as f:
+        chunks = make_reader(f).get_summary().chunk_indexes
+    assert {c.compression for c in chunks} == {"" if compression == "none" else compression}
+    _assert_same(read_all(out), read_all(SAMPLES / "demo.log"))
+
+
+def test_messages_outside_chunks_read(tmp_path, monkeypatch):
+    """An unchunked file (mcap's Writer without chunking): Message records at the top
+    level, parsed a few kilobytes at a time."""
+    monkeypatch.setattr(mcap_in, "LOOSE_BYTES", 2000)
+    fb = read_all(SAMPLES / "faults.log")
+    c = CobClassifier().classify(fb)
+    docs = frame_payloads(fb, c.service, c.node)
+    ns = log_time_ns(fb.t).tolist()
+    path = tmp_path / "flat.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f, use_chunking=False)
+        w.start()
+        sid = w.register_schema("cananalyze.Frame", "jsonschema", json.dumps(FRAME_SCHEMA).encode())
+        ch = w.register_channel(FRAMES_TOPIC, "json", sid)
+        for i in range(len(fb)):
+            w.add_message(ch, log_time=ns[i], data=docs[i], publish_time=ns[i])
+        w.finish()
+    src = open_log(path, batch_size=100)
+    batches = list(src.batches())
+    assert len(batches) > 5 and max(len(b) for b in batches) == 100
+    _assert_same(concat(batches), fb)
+    assert src.problems.count == 0

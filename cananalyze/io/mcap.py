@@ -47,6 +47,7 @@ OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_MESSAGE_INDEX = 0x03, 0x04, 0x05
 OP_FOOTER, OP_DATA_END = 0x02, 0x0F
 MESSAGE_HEAD = 31  # opcode, length, channel id, sequence, log time, publish time
 MAX_CHUNK = 1 << 30  # uncompressed bytes one chunk may claim (writers use 1-8 MiB)
+LOOSE_BYTES = 4 << 20  # Message records outside chunks gathered before they are parsed
 FRAME, LEGACY = 1, 2  # schema kinds
 MAX_FLAGS = 0x7F  # the seven FLAG_* bits
 _RECORD = struct.Struct("<BQ")
@@ -65,12 +66,13 @@ _NIBBLE[np.frombuffer(b"ABCDEF", np.uint8)] = np.arange(10, 16)
 
 
 def sniff(head: bytes) -> bool:
+    """MCAP files start with their magic (version 0)."""
     return head[:8] == MAGIC
 
 
 @dataclass
 class _Rows:
-    """Parsed frames of one chunk, in file order; `bad` rows are left out when kept."""
+    """Parsed frames of one chunk, in file order (messages with a problem left out)."""
 
     number: np.ndarray  # message number on the topic (FrameBatch.line)
     log_time: np.ndarray  # int64 ns
@@ -99,6 +101,9 @@ class _Rows:
 
 
 class _Reader:
+    """One pass over the file's records in order; the summary, when there is one, is
+    read first for the channels (and to skip chunks without frames)."""
+
     def __init__(self, stream: BinaryIO, ctx: ReadContext) -> None:
         self.stream = stream
         self.ctx = ctx
@@ -149,6 +154,8 @@ class _Reader:
                     break
                 if not self._record(op, length):
                     break
+                if len(self.loose) >= LOOSE_BYTES:  # an unchunked file: parse as it comes
+                    yield from self._end_chunk()
             self.pos += 9 + length
         yield from self._flush(final=True)
         if not self.kinds:
@@ -288,11 +295,13 @@ class _Reader:
 
     # ------------------------------------------------------------------ chunk level
     def _end_chunk(self) -> Iterator[FrameBatch]:
-        """Parse the chunk read last (its MessageIndex records have followed it)."""
+        """Parse the chunk read last (its MessageIndex records have followed it), and
+        the Message records outside chunks read before it."""
         if self.loose:
             buf, self.loose = bytes(self.loose), bytearray()
             self._messages(buf, None, self.pos)
         if self.chunk is None:
+            yield from self._flush(final=False)
             return
         offset, body = self.chunk
         index, self.chunk, self.index = self.index, None, {}
@@ -922,6 +931,7 @@ def _python_columns(kind, b, starts, lengths, rows, bad):
 
 
 def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
+    """The /can/frames messages as FrameBatches of ctx.batch_size frames."""
     ctx.format = "mcap"
     yield from _Reader(stream, ctx).batches()
 
