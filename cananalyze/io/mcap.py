@@ -587,11 +587,12 @@ def _template(buf: _Buf, starts, ends, rows, out: _Parsed, bad) -> np.ndarray:
     """Documents exactly as `frame_payloads` writes them (FRAME_FIELDS in order, no
     spaces), cut apart 8 bytes at a time (`_swar`): per field one gather of its key
     and value, the key compared as words, the value's end found as the first byte
-    equal to its closing quote or comma. Returns which rows it parsed; the others
-    go to `_generic`."""
+    equal to its closing quote or comma -- or, where it can be foretold, checked
+    there: a channel named as in the first document, data of 2 * dlc hex digits.
+    Returns which rows it parsed; the others go to `_generic`."""
     at = starts
     ok = np.ones(len(starts), bool)
-    values = {}
+    values, numbers = {}, {}
     for k, (name, kind, _) in enumerate(FRAME_FIELDS):
         if values.keys() >= _TEMPLATE_NEEDS:
             break
@@ -602,29 +603,56 @@ def _template(buf: _Buf, starts, ends, rows, out: _Parsed, bad) -> np.ndarray:
         w = buf.rows(at, (len(key) + 8 * count) // 8 + 1)
         ok &= _swar.equals(w, key.encode())
         value = [_word(w, len(key) + 8 * j) for j in range(count)]
-        size = _swar.find(value, ord(stop), room + 1)
+        size = np.full(len(at), -1, np.int64)  # -1: not foretold, look for the end
+        if k == 0:
+            size = _first_value(buf, starts[0], ends[0], key.encode(), w, room)
+        elif name == "data" and "dlc" in numbers:
+            guess = np.where(numbers["dlc"] <= 8, 2 * numbers["dlc"], -1)
+            size = np.where(_swar.byte_at(value, guess) == ord(stop), guess, -1)
+        look = size < 0
+        if look.any():
+            found = _swar.find(value, ord(stop), room + 1)
+            if kind == "string":  # an escape inside would end the value early
+                ok &= ~look | (_swar.find(value, ord("\\"), room) >= found)
+            size = np.where(look, found, size)
         ok &= (size <= room) & (at + len(key) + size < ends)
-        if kind == "string":  # an escape inside would end the value early
-            ok &= _swar.find(value, ord("\\"), room) >= size
-        values[name] = (value, np.minimum(size, room))
+        size = np.minimum(size, room)
+        values[name] = (value, size, look)
+        if name in ("can_id", "dlc", "flags"):
+            numbers[name], good = _swar.decimal(value, size)
+            ok &= good
         at = at + len(key) + size + (kind == "string")
     if not ok.any():
         return ok
     sel = np.flatnonzero(ok)
     r = rows[sel]
-    for name in ("can_id", "dlc", "flags"):
-        value, size = values[name]
-        number, good = _swar.decimal([v[sel] for v in value], size[sel])
-        getattr(out, name)[r] = number
-        ok[sel[~good]] = False
-    value, size = values["channel"]
-    out.channel[r] = _names([v[sel] for v in value], size[sel], out)
-    value, size = values["data"]
+    for name, number in numbers.items():
+        getattr(out, name)[r] = number[sel]
+    value, size, look = values["channel"]
+    if look[sel].any():
+        out.channel[r] = _names([v[sel] for v in value], size[sel], out)
+    else:  # all named as the first document
+        out.channel[r] = _names([v[sel[:1]] for v in value], size[sel[:1]], out)[0]
+    value, size, _ = values["data"]
     data, good = _swar.hex16([v[sel] for v in value], size[sel])
     out.data[r] = data
     ok[sel[~good]] = False
     _check(r[ok[sel]], out, bad)
     return ok
+
+
+def _first_value(buf: _Buf, start: int, end: int, key: bytes, w: np.ndarray, room: int):
+    """The first field's value size for rows whose key and value are the first
+    document's (-1 for the others): one comparison instead of looking for its end."""
+    none = np.full(len(w), -1, np.int64)
+    doc = buf.b[start:end].tobytes()
+    stop = doc.find(b'"', len(key))
+    if not doc.startswith(key) or not 0 <= stop - len(key) <= room or b"\\" in doc[:stop]:
+        return none
+    prefix = doc[: stop + 1]
+    if len(prefix) > 8 * w.shape[1]:
+        return none
+    return np.where(_swar.equals(w, prefix), stop - len(key), -1)
 
 
 class _swar:
@@ -674,6 +702,16 @@ class _swar:
         return ok
 
     @classmethod
+    def byte_at(cls, words: list[np.ndarray], at: np.ndarray) -> np.ndarray:
+        """The byte at offset `at` of each row's words (-1 where `at` is outside them)."""
+        inside = (at >= 0) & (at < 8 * len(words))
+        pos = np.where(inside, at, 0)
+        stack = np.stack(words, axis=1)
+        word = np.take_along_axis(stack, (pos // 8)[:, None], axis=1)[:, 0]
+        byte = (word >> ((pos % 8) * 8).astype(np.uint64)) & np.uint64(0xFF)
+        return np.where(inside, byte.astype(np.int64), -1)
+
+    @classmethod
     def find(cls, words: list[np.ndarray], byte: int, room: int) -> np.ndarray:
         """Offset of the first `byte` in the first `room` bytes of the words (room if none)."""
         size = np.full(len(words[0]), room, np.int64)
@@ -703,6 +741,9 @@ class _swar:
         """Unsigned decimals of 1..16 digits at the start of the words, and which parsed."""
         low_n = np.minimum(size, 8)
         high_n = size - low_n
+        if not high_n.any():  # no number over 8 digits (11-bit identifiers, dlc, flags)
+            low, ok = cls.digits8(words[0], low_n)
+            return low, ok & (size >= 1)
         high, ok_high = cls.digits8(words[0], high_n)
         h = np.clip(high_n, 1, 7).astype(np.uint64) * np.uint64(8)
         second = words[1] if len(words) > 1 else np.zeros_like(words[0])  # short fields
