@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -199,7 +200,8 @@ def test_mcap_round_trip(cap, tmp_path):
     ch1 = s[(s["node"] == 5) & (s["signal"] == "ch1")]
     got = [(m[2], m[3]["ch1"]) for m in msgs if m[0] == "/node/5/tpdo2"]
     assert [v for _, v in got] == ch1["value"].tolist()
-    assert [t for t, _ in got] == np.round(ch1["t"].to_numpy() * 1e9).astype(np.int64).tolist()
+    # each time's exact nearest ns (a Fraction is the float's exact value)
+    assert [t for t, _ in got] == [round(Fraction(t) * 10**9) for t in ch1["t"].tolist()]
     ints = [m[3] for m in msgs if m[0] == "/node/3/tpdo1"]
     assert all(isinstance(v, int) for m in ints for v in m.values())
     logs = [m for m in msgs if m[0] == "/canopen/events"]
