@@ -797,3 +797,15 @@ def test_messages_outside_chunks_read(tmp_path, monkeypatch):
     assert len(batches) > 5 and max(len(b) for b in batches) == 100
     _assert_same(concat(batches), fb)
     assert src.problems.count == 0
+
+
+@pytest.mark.parametrize("batch_size", [1, 7, 499, 1 << 18])
+def test_batches_hold_batch_size_frames_whatever_the_chunks(batch_size, tmp_path):
+    """Batches are cut at the batch size, not at chunk ends (500 frames a chunk here)."""
+    fb = _recording(tmp_path / "r.mcap", frames=1200, per_chunk=500)
+    batches = list(open_log(tmp_path / "r.mcap", batch_size=batch_size).batches())
+    assert [len(b) for b in batches[:-1]] == [batch_size] * (len(batches) - 1)
+    assert 0 < len(batches[-1]) <= batch_size
+    whole = concat(batches)
+    _assert_same(whole, fb)
+    assert whole.line.tolist() == list(range(1, 1201))
