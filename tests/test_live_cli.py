@@ -18,6 +18,7 @@ from conftest import ROOT, SAMPLES
 from helpers.live_slcan import start_live
 
 from cananalyze.io.source import read_all
+from cananalyze.outputs.mcap.frames import log_time_ns
 from cananalyze.outputs.text.writer import TextWriter
 from cananalyze.pipeline import Options, build_decoder
 from cananalyze.sim.slcan_replay import SlcanAdapter, replay
@@ -115,22 +116,31 @@ def test_interrupted_session_leaves_a_valid_recording(tmp_path, suffix, sig):
 
         got = []
         with open(rec, "rb") as f:
-            reader = make_reader(f)
+            reader = make_reader(f, validate_crcs=True)
             summary = reader.get_summary()
             assert summary is not None and summary.statistics.message_count == 120
+            assert summary.chunk_indexes  # chunked and indexed
+            times = []
             for schema, channel, message in reader.iter_messages(topics=["/can/frames"]):
-                assert schema.name == "cananalyze.CanFrame" and channel.message_encoding == "json"
+                assert schema.name == "cananalyze.Frame" and channel.message_encoding == "json"
                 d = json.loads(message.data)
-                assert message.log_time == round(d["timestamp"] * 1e9)
+                assert list(d) == ["channel", "can_id", "dlc", "data", "flags", "service", "node"]
+                assert message.publish_time == message.log_time
+                times.append(message.log_time)
                 got.append(
                     can.Message(
-                        arbitration_id=d["id"],
-                        is_extended_id=d["extended"],
-                        is_remote_frame=d["remote"],
+                        arbitration_id=d["can_id"],
+                        is_extended_id=bool(d["flags"] & 1),
+                        is_remote_frame=bool(d["flags"] & 2),
                         dlc=d["dlc"],
                         data=bytes.fromhex(d["data"]),
                     )
                 )
+            assert times == sorted(times) and abs(times[-1] / 1e9 - time.time()) < 120
+        # and cananalyze reads its own recording back
+        back = read_all(rec)
+        assert back.can_id.tolist() == [m.arbitration_id for m in got]
+        assert log_time_ns(back.t).tolist() == times
     _same_frames(got, sent)
 
 

@@ -356,11 +356,13 @@ def test_json_columns_fd_payloads_and_non_finite_values(tmp_path):
 
 def test_payloads_built_in_slices_are_the_same(demo, tmp_path, monkeypatch):
     """Big logs are formatted a slice of rows at a time (pyarrow's 32-bit offsets)."""
+    from cananalyze.outputs.mcap import frames as mcap_frames
     from cananalyze.outputs.mcap import topics as mcap_out
 
     log, devices = demo
     whole = export(log, tmp_path / "whole", ("mcap",), device=devices)["mcap"]
     monkeypatch.setattr(mcap_out, "SLICE", 7)
+    monkeypatch.setattr(mcap_frames, "SLICE", 7)
     sliced = export(log, tmp_path / "sliced", ("mcap",), device=devices)["mcap"]
     whole, sliced = _messages(whole), _messages(sliced)
     assert sliced == whole and len(whole) > 3 * 7

@@ -1,6 +1,7 @@
 """Format modules the source facade imports so that each registers its LogFormat."""
 
 FORMAT_MODULES = [
+    "mcap",
     "candump",
     "asc",
     "blf",

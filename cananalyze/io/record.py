@@ -1,41 +1,28 @@
 """FrameRecorder: the raw frames of a live session, saved as candump, ASC, BLF or MCAP.
 
 Log formats go through python-can's writers (its `can.Logger` picks one by suffix),
-the reference implementations of those formats. MCAP has no python-can writer: raw
-frames go on a `/can/frames` topic as JSON messages (a jsonschema is registered, so
-Foxglove shows the fields) through the `mcap` package. `close()` finalises the file
-(BLF header counts, MCAP summary), which is what keeps a recording valid when a live
+the reference implementations of those formats. MCAP has no python-can writer: the
+frames go on the `/can/frames` topic in the export's `cananalyze.Frame` schema,
+built column-wise by the export's own payload builder and written as chunked,
+indexed MCAP by its bulk writer (`outputs/mcap/frames.py`, `bulk.py`), so a
+recording and an export read back the same way. `close()` finalises the file (BLF
+header counts, MCAP summary), which is what keeps a recording valid when a live
 session is interrupted.
 """
 
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import UsageError
-from ..frames import FLAG_BRS, FLAG_ERR, FLAG_ESI, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, FrameBatch
+from ..frames import FrameBatch, concat
+from ..records import DecodedBatch
 
 LOG_SUFFIXES = (".log", ".asc", ".blf")
-MCAP_TOPIC = "/can/frames"
-MCAP_SCHEMA = {
-    "type": "object",
-    "title": "cananalyze.CanFrame",
-    "properties": {
-        "timestamp": {"type": "number", "description": "seconds since the Unix epoch"},
-        "channel": {"type": "string"},
-        "id": {"type": "integer"},
-        "extended": {"type": "boolean"},
-        "remote": {"type": "boolean"},
-        "error": {"type": "boolean"},
-        "fd": {"type": "boolean"},
-        "brs": {"type": "boolean"},
-        "esi": {"type": "boolean"},
-        "tx": {"type": "boolean"},
-        "dlc": {"type": "integer", "description": "number of data bytes"},
-        "data": {"type": "string", "description": "payload as hex"},
-    },
-}
 
 
 class FrameRecorder:
@@ -50,19 +37,13 @@ class FrameRecorder:
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self.frames = 0
+        self._logger = None
+        self._mcap: McapRecording | None = None
         self.check_suffix(path)
-        self._mcap = self.path.suffix.lower() == ".mcap"
+        suffix = self.path.suffix.lower()
         try:
-            if self._mcap:
-                from mcap.writer import Writer
-
-                self._file = open(self.path, "wb")  # noqa: SIM115 - closed in close()
-                self._writer = Writer(self._file)
-                self._writer.start(profile="", library="cananalyze")
-                schema = self._writer.register_schema(
-                    "cananalyze.CanFrame", "jsonschema", json.dumps(MCAP_SCHEMA).encode()
-                )
-                self._channel = self._writer.register_channel(MCAP_TOPIC, "json", schema)
+            if suffix == ".mcap":
+                self._mcap = McapRecording(self.path)
             else:
                 import can
 
@@ -70,55 +51,110 @@ class FrameRecorder:
         except OSError as exc:
             raise UsageError(f"--record {path}: cannot write: {exc.strerror or exc}") from None
 
-    def write(self, batch: FrameBatch) -> None:
-        if not len(batch):
+    def write(self, batch: FrameBatch | DecodedBatch) -> None:
+        """Record a batch; a DecodedBatch also gives MCAP its service and node columns."""
+        fb = batch.frames if isinstance(batch, DecodedBatch) else batch
+        if not len(fb):
             return
-        if self._mcap:
-            self._write_mcap(batch)
+        if self._mcap is not None:
+            self._mcap.write(batch)
         else:
             from .logfile import to_messages
 
-            for msg in to_messages(batch):
+            for msg in to_messages(fb):
                 self._logger.on_message_received(msg)
-        self.frames += len(batch)
-
-    def _write_mcap(self, batch: FrameBatch) -> None:
-        ts = batch.t.tolist()
-        ids = batch.can_id.tolist()
-        flags = batch.flags.tolist()
-        chans = batch.channels or ("can0",)
-        for i in range(len(batch)):
-            fl = flags[i]
-            payload = b"" if fl & FLAG_RTR else batch.payload(i)
-            ch = int(batch.channel[i])
-            rec = {
-                "timestamp": ts[i],
-                "channel": chans[ch] if ch < len(chans) else str(ch),
-                "id": ids[i],
-                "extended": bool(fl & FLAG_EXT),
-                "remote": bool(fl & FLAG_RTR),
-                "error": bool(fl & FLAG_ERR),
-                "fd": bool(fl & FLAG_FD),
-                "brs": bool(fl & FLAG_BRS),
-                "esi": bool(fl & FLAG_ESI),
-                "tx": bool(fl & FLAG_TX),
-                "dlc": int(batch.dlc[i]),
-                "data": payload.hex(),
-            }
-            ns = int(round(ts[i] * 1e9))
-            self._writer.add_message(
-                self._channel, log_time=ns, data=json.dumps(rec).encode(), publish_time=ns
-            )
+        self.frames += len(fb)
 
     def close(self) -> None:
         """Finalise the file (idempotent)."""
-        if self._mcap:
-            if self._file.closed:
-                return
-            try:
-                self._writer.finish()
-            finally:
-                self._file.close()
+        if self._mcap is not None:
+            self._mcap.close()
         elif self._logger is not None:
             self._logger.stop()
             self._logger = None
+
+
+class McapRecording:
+    """Live frames on `/can/frames`, gathered for about a second (or FLUSH_FRAMES) and
+    written as one chunk: at 32k frames/s a batch comes every 50 ms, and a chunk per
+    batch would make the summary's chunk index grow by 20 entries a second.
+
+    service and node come from the decoded batch when the caller has one, else from
+    the predefined connection set (`CobClassifier`; a remapped PDO then shows as the
+    service its COB-ID has by default).
+    """
+
+    FLUSH_FRAMES = 32768
+    FLUSH_SECONDS = 1.0
+
+    def __init__(self, path: Path) -> None:
+        from .. import __version__
+        from ..outputs.mcap.bulk import BulkMcapWriter
+        from ..outputs.mcap.frames import FRAME_SCHEMA, FRAME_SCHEMA_NAME, FRAMES_TOPIC
+        from ..protocol.cobid import CobClassifier
+
+        self.path = path
+        self._file = open(path, "wb")  # noqa: SIM115 - closed in close()
+        self._writer = BulkMcapWriter(self._file, f"cananalyze {__version__}")
+        schema = self._writer.schema(
+            FRAME_SCHEMA_NAME, "jsonschema", json.dumps(FRAME_SCHEMA).encode()
+        )
+        self._channel = self._writer.channel(FRAMES_TOPIC, "json", schema)
+        self._classifier = CobClassifier()
+        self._pending: list[tuple[FrameBatch, np.ndarray, np.ndarray]] = []
+        self._waiting = 0
+        self._since = 0.0  # monotonic time the oldest pending batch came
+        self.frames = 0
+
+    def write(self, batch: FrameBatch | DecodedBatch) -> None:
+        if isinstance(batch, DecodedBatch):
+            fb, service, node = batch.frames, batch.service, batch.node
+        else:
+            c = self._classifier.classify(batch)
+            fb, service, node = batch, c.service, c.node
+        if not self._pending:
+            self._since = time.monotonic()
+        self._pending.append((fb, service, node))
+        self._waiting += len(fb)
+        if (
+            self._waiting >= self.FLUSH_FRAMES
+            or time.monotonic() - self._since >= self.FLUSH_SECONDS
+        ):
+            self.flush()
+
+    def flush(self) -> None:
+        """Write the pending frames as a chunk (in time order: the writer needs it)."""
+        from ..outputs.mcap.frames import frame_payloads, log_time_ns
+
+        if not self._pending:
+            return
+        fb = concat([p[0] for p in self._pending])
+        service = np.concatenate([p[1] for p in self._pending])
+        node = np.concatenate([p[2] for p in self._pending])
+        self._pending, self._waiting = [], 0
+        ns = log_time_ns(fb.t)
+        if len(ns) > 1 and (ns[1:] < ns[:-1]).any():  # e.g. two adapters' clocks
+            order = np.argsort(ns, kind="stable")
+            fb, service, node, ns = fb.take(order), service[order], node[order], ns[order]
+        payloads = frame_payloads(fb, service, node)
+        self._writer.messages(np.full(len(fb), self._channel, np.uint16), ns, payloads)
+        self.frames += len(fb)
+
+    def close(self) -> None:
+        """Pending frames, metadata, summary and footer (idempotent)."""
+        from .. import __version__
+
+        if self._file.closed:
+            return
+        try:
+            self.flush()
+            self._writer.metadata(
+                "cananalyze",
+                {"version": __version__, "source": "live recording", "frames": str(self.frames)},
+            )
+            self._writer.finish()
+        except BaseException:
+            self._writer.abort()
+            raise
+        finally:
+            self._file.close()

@@ -36,8 +36,8 @@ def _describe(head: bytes) -> str:
         return "the file is empty"
     if head[:4] == b"LOGG":
         return "it looks like a BLF file but no BLF reader is available"
-    if head[:4] in (b"\x89MCA", b"PK\x03\x04"):
-        return "it looks like an MCAP or ZIP file, not a CAN log"
+    if head[:4] == b"PK\x03\x04":
+        return "it looks like a ZIP file, not a CAN log"
     text = sum(32 <= c < 127 or c in (9, 10, 13) for c in head[:4096]) / max(1, len(head[:4096]))
     if text < 0.9:
         return "it is binary data of no known CAN log format"
@@ -116,7 +116,7 @@ class LogSource:
             if self.strict and self.ctx.problems.count:
                 first = self.ctx.problems.shown[0]
                 kind, _, number = first.location.partition(" ")
-                if kind in ("line", "record") and number.isdecimal():
+                if kind in ("line", "record", "message") and number.isdecimal():
                     batch = batch.take(batch.line < int(number))
                 if len(batch):
                     yield batch

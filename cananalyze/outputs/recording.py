@@ -28,7 +28,9 @@ class RecordSink(Sink):
         self.recorder = self._recorder_type(self.path)
 
     def write(self, batch) -> None:
-        self.recorder.write(batch.frames)
+        """The decoded batch: an .mcap recording keeps the service and node the decoder
+        gave each frame (remaps included), as export writes them."""
+        self.recorder.write(batch)
 
     def close(self) -> None:
         self._finish()

@@ -30,15 +30,13 @@ from ...records import DecodedBatch, SignalBlock
 from ..atomic import atomic_path
 from ..tables.writer import WriterThread
 from .bulk import BulkMcapWriter
+from .frames import FRAME_SCHEMA, FRAMES_TOPIC, frame_payloads
 from .topics import (
     EVENTS_TOPIC,
-    FRAME_SCHEMA,
-    FRAMES_TOPIC,
     LOG_SCHEMA,
     STATE_SCHEMA,
     _ns,
     event_payloads,
-    frame_payloads,
     signal_payloads,
     signal_schema,
     signal_topic,

@@ -5,7 +5,7 @@ Topics (all JSON-encoded with JSON Schema, so Foxglove needs no configuration):
                       schema's description)
   /node/<N>/nmt_state NMT state changes seen in heartbeat, boot-up, guarding
   /canopen/events     foxglove.Log: SDO transactions, EMCY, NMT commands, findings
-  /can/frames         every raw frame
+  /can/frames         every raw frame (schema and builder: `frames.py`)
 Log time = frame time in ns. Messages are written in time order across topics.
 JSON text is built column-wise (`json_text`) and the records in bulk (`mcap_bulk`):
 one json.dumps and one `mcap` Writer.add_message per frame cost ~12 s on a million
@@ -22,12 +22,10 @@ import numpy as np
 
 from ... import __version__
 from ...capture import SignalSeries
-from ...columns import bytecols
 from ...columns.json_text import Texts, join, number_text, object_template
-from ...frames import FLAG_RTR, FrameBatch
-from ...protocol.services import SERVICE_NAMES
 from ...records import SignalBlock
 from .bulk import BulkMcapWriter
+from .frames import log_time_ns
 
 LOG_SCHEMA = {
     "title": "foxglove.Log",
@@ -62,21 +60,6 @@ LOG_SCHEMA = {
     },
 }
 
-FRAME_SCHEMA = {
-    "title": "cananalyze.Frame",
-    "description": "One raw CAN frame with its CANopen service",
-    "type": "object",
-    "properties": {
-        "channel": {"type": "string"},
-        "can_id": {"type": "integer", "description": "identifier without flag bits"},
-        "dlc": {"type": "integer", "description": "number of data bytes"},
-        "data": {"type": "string", "description": "payload, hex"},
-        "flags": {"type": "integer", "description": "1 ext, 2 rtr, 4 error, 8 fd, 64 tx"},
-        "service": {"type": "string"},
-        "node": {"type": "integer", "description": "node-ID, -1 when none"},
-    },
-}
-
 STATE_SCHEMA = {
     "title": "cananalyze.NmtState",
     "description": "NMT state of a node as reported by heartbeat, boot-up or guarding",
@@ -85,8 +68,7 @@ STATE_SCHEMA = {
 }
 
 
-def _ns(t: np.ndarray) -> np.ndarray:
-    return np.round(np.asarray(t, np.float64) * 1e9).astype(np.int64).clip(min=0)
+_ns = log_time_ns  # every topic's log times, as the frames topic keeps them
 
 
 def _json_type(values: np.ndarray) -> str:
@@ -116,7 +98,6 @@ def signal_schema(s: SignalSeries | SignalBlock) -> dict:
 # json.dumps's own escaping of a str (ensure_ascii, as the documents are dumped)
 _json_string = json.encoder.encode_basestring_ascii
 EVENTS_TOPIC = "/canopen/events"
-FRAMES_TOPIC = "/can/frames"
 SLICE = 1 << 20  # rows per join: keeps pyarrow's 32-bit string offsets in range
 
 
@@ -130,61 +111,6 @@ def signal_payloads(columns: dict[str, np.ndarray]) -> Texts:
             for a in range(0, n, SLICE)
         ]
     )
-
-
-def frame_payloads(fb: FrameBatch, service: np.ndarray, node: np.ndarray) -> Texts:
-    """The /can/frames documents, built as byte columns and joined in one compaction
-    (`bytecols`), a slice of rows at a time: pyarrow's number casts and row join
-    took twice as long."""
-    channels = [json.dumps(c).encode() for c in (list(fb.channels) or ["can0"])]
-    chan_text = bytecols.padded_table(channels)
-    service_text = bytecols.padded_table([json.dumps(s).encode() for s in SERVICE_NAMES])
-    parts = []
-    for a in range(0, len(fb), SLICE):
-        b = min(a + SLICE, len(fb))
-        n = b - a
-        flags = fb.flags[a:b]
-        raw, shown = _payload_bytes(fb, a, b)
-        chan = np.minimum(fb.channel[a:b], len(channels) - 1)
-        columns = [
-            bytecols.repeat('{"channel":', n),
-            chan_text[chan],
-            bytecols.repeat(',"can_id":', n),
-            bytecols.decimal(fb.can_id[a:b]),
-            bytecols.repeat(',"dlc":', n),
-            bytecols.decimal(fb.dlc[a:b]),
-            bytecols.repeat(',"data":"', n),
-            bytecols.hex_bytes(raw, np.where((flags & FLAG_RTR) != 0, 0, shown)),
-            bytecols.repeat('","flags":', n),
-            bytecols.decimal(flags),
-            bytecols.repeat(',"service":', n),
-            service_text[service[a:b]],
-            bytecols.repeat(',"node":', n),
-            bytecols.decimal(node[a:b]),
-            bytecols.repeat("}", n),
-        ]
-        blob, ends = bytecols.compact(columns, n, with_ends=True)
-        offsets = np.zeros(n + 1, np.int64)
-        offsets[1:] = ends
-        parts.append(Texts(np.frombuffer(blob, np.uint8), offsets))
-    return Texts.concat(parts)
-
-
-def _payload_bytes(fb: FrameBatch, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
-    """Rows a..b's payload bytes as a matrix and how many of each to show: the 8-byte
-    column, widened to 64 when CAN FD frames carry more (`long_data`, rare)."""
-    data = fb.data[a:b]
-    shown = np.minimum(fb.dlc[a:b], data.shape[1]).astype(np.int64)
-    long_rows = [i for i in fb.long_data if a <= i < b]
-    if not long_rows:
-        return data, shown
-    wide = np.zeros((b - a, 64), np.uint8)
-    wide[:, : data.shape[1]] = data
-    for i in long_rows:
-        raw = fb.long_data[i][:64]
-        wide[i - a, : len(raw)] = np.frombuffer(raw, np.uint8)
-        shown[i - a] = len(raw)
-    return wide, shown
 
 
 def state_payloads(states: list) -> Texts:
