@@ -17,6 +17,7 @@ import io
 import json
 import math
 from dataclasses import dataclass
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -311,7 +312,8 @@ def read_mcap(path: Path) -> Mcap:
 
 
 def _ns(t) -> list[int]:
-    return np.round(np.asarray(t, np.float64) * 1e9).astype(np.int64).clip(min=0).tolist()
+    """Each float's exact nearest ns (a Fraction is the float's exact value), as MCAP keeps them."""
+    return [max(0, round(Fraction(x) * 10**9)) for x in np.asarray(t, np.float64).tolist()]
 
 
 def _json_value(v):

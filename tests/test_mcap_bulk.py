@@ -14,6 +14,7 @@ import math
 import struct
 import sys
 import zlib
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -40,8 +41,9 @@ from mcap.records import (
 import cananalyze
 from cananalyze.capture import Capture
 from cananalyze.frames import FLAG_RTR
+from cananalyze.outputs.mcap.frames import FRAME_SCHEMA
 from cananalyze.outputs.mcap.stream import StreamMcap
-from cananalyze.outputs.mcap.topics import FRAME_SCHEMA, LOG_SCHEMA, STATE_SCHEMA, signal_schema
+from cananalyze.outputs.mcap.topics import LOG_SCHEMA, STATE_SCHEMA, signal_schema
 from cananalyze.protocol.services import SERVICE_NAMES
 
 DEMO = SAMPLES / "demo.log"
@@ -86,7 +88,7 @@ def _frame_doc(cap: Capture, i: int) -> dict:
 
 
 def _event_doc(cap: Capture, e) -> dict:
-    ns = int(round(e.t * 1e9))
+    ns = round(Fraction(e.t) * 10**9)
     lines = cap.batch.line
     return {
         "timestamp": {"sec": ns // 10**9, "nsec": ns % 10**9},
@@ -100,7 +102,7 @@ def _event_doc(cap: Capture, e) -> dict:
 
 def _reference_topics(cap: Capture) -> list[tuple[str, dict, list[int], list[bytes]]]:
     """(topic, schema, log times, payloads) of every topic, one json.dumps per message."""
-    ns = lambda t: [int(round(x * 1e9)) for x in np.asarray(t, np.float64).tolist()]  # noqa: E731
+    ns = lambda t: [round(Fraction(x) * 10**9) for x in np.asarray(t, np.float64).tolist()]  # noqa: E731
     out = []
     for s in cap.series:
         docs = [{k: _plain(v[i]) for k, v in s.columns.items()} for i in range(len(s.t))]
@@ -329,7 +331,7 @@ def test_time_window_reads_use_chunk_indexes(generated, tmp_path):
 def test_json_columns_fd_payloads_and_non_finite_values(tmp_path):
     from cananalyze.capture import load
     from cananalyze.columns.json_text import join, number_text, object_template
-    from cananalyze.outputs.mcap.topics import frame_payloads
+    from cananalyze.outputs.mcap.frames import frame_payloads
 
     big = np.array([2**63 - 1, -(2**63), 0], np.int64)
     vals = np.array([0.1, np.nan, -np.inf])

@@ -21,7 +21,6 @@ from pathlib import Path
 import can
 import numpy as np
 import pytest
-from cananalyze.decoder import Decoder
 from conftest import ROOT, SAMPLES, real_file
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -57,6 +56,7 @@ from cananalyze.outputs.mcap.frames import (
     log_time_ns,
     seconds,
 )
+from cananalyze.pipeline import Decoder
 from cananalyze.protocol.cobid import CobClassifier
 from cananalyze.runtime import speedups
 
