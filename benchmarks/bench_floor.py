@@ -31,7 +31,7 @@ from bench_decode import CLI, DEVICES, ENV, PyCanRun, ensure  # noqa: E402
 
 READ = """
 import sys, time
-from cananalyze import allocator
+from cananalyze.runtime import allocator
 allocator.tune()  # as the CLI runs
 from cananalyze.io.source import open_log
 c = time.process_time()

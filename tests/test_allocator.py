@@ -15,7 +15,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 PROBE = """
 import os, sys
-from cananalyze import allocator
+from cananalyze.runtime import allocator
 ok = allocator.tune()
 import pyarrow as pa
 print(ok, os.environ.get("ARROW_DEFAULT_MEMORY_POOL", "-"), pa.default_memory_pool().backend_name)
