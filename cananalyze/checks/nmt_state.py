@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..protocol.nmt import STATES
 from ..protocol.services import Service
-from ..protocol.tables import NMT_STATES
 from ..records import DecodedBatch
 
 OPERATIONAL = 0x05
@@ -30,7 +30,7 @@ _COMMAND_STATE = {
 def state_name(state: int | None) -> str:
     if state is None:
         return "unknown"
-    return NMT_STATES.get(state, f"0x{state:02X}")
+    return STATES.get(state, f"0x{state:02X}")
 
 
 class NmtStates:

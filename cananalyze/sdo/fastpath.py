@@ -21,7 +21,7 @@ import numpy as np
 
 from ..frames import FLAG_TX
 from ..protocol.datatypes import decode_column, decode_int_column, decode_value
-from ..protocol.tables import abort_text
+from ..protocol.sdo import abort_text
 from ..records import DecodedBatch, SdoColumns
 from .tracker import ObjectInfo
 from .transaction import SDO_TABLE_COLUMNS

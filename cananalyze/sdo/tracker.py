@@ -31,9 +31,9 @@ from ..protocol.sdo import (
     SCS_INITIATE_DOWNLOAD,
     SCS_INITIATE_UPLOAD,
     SCS_UPLOAD_SEGMENT,
+    abort_text,
     describe_sdo,
 )
-from ..protocol.tables import abort_text
 from .channels import ChannelTable, SdoChannel
 from .transaction import FrameRole, SdoTransaction
 from .transfer import PHASE_TEXT, Transfer
