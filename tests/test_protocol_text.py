@@ -24,3 +24,10 @@ def test_error_classes_equal_error_class_for_every_code():
     codes = np.arange(1 << 16, dtype=np.int64)
     assert emcy.error_classes(codes) == [emcy.error_class(c) for c in codes.tolist()]
     assert emcy.error_classes(np.zeros(0, np.int64)) == []
+
+
+def test_register_for_sets_generic_and_the_class_bit():
+    assert emcy.register_for(0) == 0
+    assert emcy.register_names(emcy.register_for(0x8130)) == ["generic", "communication"]
+    assert emcy.register_names(emcy.register_for(0x3210)) == ["generic", "voltage"]
+    assert emcy.register_names(emcy.register_for(0x6100)) == ["generic"]

@@ -102,6 +102,17 @@ def error_classes(codes: np.ndarray) -> list[str]:
     return list(map(names.__getitem__, pick.tolist()))
 
 
+# error code class (high nibble) -> the error register bit it sets besides bit 0 (generic)
+_CLASS_REGISTER_BIT = {0x2: 0x02, 0x3: 0x04, 0x4: 0x08, 0x8: 0x10, 0xF: 0x80}
+
+
+def register_for(code: int) -> int:
+    """The 0x1001 value that goes with an error code (0 for an error reset)."""
+    if code == 0:
+        return 0
+    return 0x01 | _CLASS_REGISTER_BIT.get(code >> 12, 0)
+
+
 def register_names(register: int) -> list[str]:
     return [name for bit, name in ERROR_REGISTER_BITS.items() if register >> bit & 1]
 
