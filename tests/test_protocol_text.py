@@ -1,11 +1,19 @@
-"""One text per fact: the columnar builders say what their scalar twins say."""
+"""One text per fact: the columnar builders say what their scalar twins say, and an
+object is written 0xIIII:SS in every text (frame lines, transaction lines, findings,
+events)."""
 
 from __future__ import annotations
 
+import csv
+import re
+import subprocess
+import sys
+
 import numpy as np
+from conftest import ROOT, real_file
 
 from cananalyze.columns import bytecols
-from cananalyze.protocol import emcy
+from cananalyze.protocol import emcy, sdo
 
 
 def test_emcy_text_columns_equal_the_scalar_text():
@@ -26,8 +34,52 @@ def test_error_classes_equal_error_class_for_every_code():
     assert emcy.error_classes(np.zeros(0, np.int64)) == []
 
 
+def test_object_columns_equal_object_text():
+    rng = np.random.default_rng(4)
+    index = rng.integers(0, 1 << 16, 5000)
+    sub = rng.integers(0, 256, 5000)
+    got = [bytes(row).decode() for row in sdo.object_columns(index, sub)]
+    assert got == [sdo.object_text(i, s) for i, s in zip(index.tolist(), sub.tolist(), strict=True)]
+    assert sdo.object_text(0x2010, 8) == "0x2010:08" and sdo.object_text(0x1018) == "0x1018"
+
+
 def test_register_for_sets_generic_and_the_class_bit():
     assert emcy.register_for(0) == 0
     assert emcy.register_names(emcy.register_for(0x8130)) == ["generic", "communication"]
     assert emcy.register_names(emcy.register_for(0x3210)) == ["generic", "voltage"]
     assert emcy.register_names(emcy.register_for(0x6100)) == ["generic"]
+
+
+def _cli(*args: str) -> str:
+    out = subprocess.run(
+        [sys.executable, "-m", "cananalyze", *args], capture_output=True, cwd=ROOT, check=True
+    )
+    return out.stdout.decode()
+
+
+_OBJECT = re.compile(r"0x[0-9A-F]{4}:(\w+)")
+
+
+def _subindexes(text: str) -> set[str]:
+    return set(_OBJECT.findall(text))
+
+
+def test_objects_written_with_a_two_digit_hex_subindex_everywhere(tmp_path):
+    """pcan3.trc reads 0x2010:08 and 0x205B:01 (aborted): the frame lines, their
+    transaction lines, the findings and the events table all write the sub-index so."""
+    trc = str(real_file("hilch__canopen-message-interpreter/pcan3.trc"))
+    text = _cli("decode", trc, "--no-color", "--check")
+    frame = [ln for ln in text.splitlines() if "sdo_request" in ln and "0x2010:" in ln]
+    record = [ln for ln in text.splitlines() if "└─ node" in ln and "0x2010:" in ln]
+    finding = [ln for ln in text.splitlines() if "ERROR sdo:" in ln]
+    assert frame and record and finding
+    assert "SDO upload request 0x2010:08" in text and "SDO read 0x2010:08" in text
+    assert "SDO upload 0x205B:01 abort" in text
+    jsonl = _cli("decode", trc, "--format", "jsonl")
+    _cli("export", trc, "-q", "--csv", str(tmp_path / "csv"))
+    with open(tmp_path / "csv" / "events.csv", newline="") as f:
+        events = " ".join(row["message"] for row in csv.DictReader(f))
+    assert "SDO upload 0x2010:08" in events
+    for where in (text, jsonl, events):
+        subs = _subindexes(where)
+        assert subs and all(re.fullmatch(r"[0-9A-F]{2}", s) for s in subs), sorted(subs)[:5]

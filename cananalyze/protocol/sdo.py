@@ -14,6 +14,10 @@ from __future__ import annotations
 
 import struct
 
+import numpy as np
+
+from ..columns import bytecols
+
 # Client command specifiers (ccs, bits 7..5 of byte 0, client -> server).
 CCS_DOWNLOAD_SEGMENT = 0
 CCS_INITIATE_DOWNLOAD = 1
@@ -141,6 +145,17 @@ def abort_text(code: int) -> str:
 def object_text(index: int, subindex: int | None = None) -> str:
     """'0x1018:01': an object as every text writes it (sub-index: two hex digits)."""
     return f"0x{index:04X}" if subindex is None else f"0x{index:04X}:{subindex:02X}"
+
+
+def object_columns(index: np.ndarray, subindex: np.ndarray) -> np.ndarray:
+    """`object_text` of each (index, subindex) below (0x10000, 0x100) as an (n, 9) matrix."""
+    i = np.asarray(index, np.int64)
+    s = np.asarray(subindex, np.int64)
+    hexes = [bytecols.HEX_UPPER[(v >> k) & 15] for v, k in ((i, 12), (i, 8), (i, 4), (i, 0))]
+    colon = np.full(i.size, ord(":"), np.uint8)
+    sub = [bytecols.HEX_UPPER[(s >> 4) & 15], bytecols.HEX_UPPER[s & 15]]
+    zero_x = [np.full(i.size, ord("0"), np.uint8), np.full(i.size, ord("x"), np.uint8)]
+    return np.stack([*zero_x, *hexes, colon, *sub], axis=1)
 
 
 _REQUEST_NAMES = {

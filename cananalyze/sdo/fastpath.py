@@ -396,7 +396,7 @@ def pair_notes(fb, a: np.ndarray, b: np.ndarray) -> tuple[list[dict], list[dict]
             req_notes.append(rq)
             resp_notes.append(rs)
             continue
-        where = f" 0x{i:04X}:{s}"
+        where = " " + sdo.object_text(i, s)
         if up:
             req_notes.append(
                 {
@@ -435,10 +435,6 @@ def pair_notes(fb, a: np.ndarray, b: np.ndarray) -> tuple[list[dict], list[dict]
     return req_notes, resp_notes
 
 
-def _mux(index: int, subindex: int) -> str:
-    return f" 0x{index:04X}:{subindex}"
-
-
 def pair_outputs(
     fb, row_req: int, row_resp: int, node: int, object_info: ObjectInfo | None
 ) -> tuple[dict, dict, dict, str]:
@@ -447,7 +443,7 @@ def pair_outputs(
     resp = fb.data[row_resp].tobytes()
     index = req[1] | (req[2] << 8)
     sub = req[3]
-    where = _mux(index, sub)
+    where = " " + sdo.object_text(index, sub)
     t0 = float(fb.t[row_req])
     t1 = float(fb.t[row_resp])
     upload = req[0] == _UPLOAD_REQ

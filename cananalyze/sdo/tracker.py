@@ -37,6 +37,7 @@ from ..protocol.sdo import (
     SEQNO_MASK,
     abort_text,
     describe_sdo,
+    object_text,
 )
 from .channels import ChannelTable, SdoChannel
 from .transaction import FrameRole, SdoTransaction
@@ -51,9 +52,8 @@ def block_crc(data: bytes) -> int:
 
 
 def _mux(index: int | None, subindex: int | None) -> str:
-    if index is None:
-        return ""
-    return f" 0x{index:04X}:{subindex}" if subindex is not None else f" 0x{index:04X}"
+    """' 0x1018:01' after a text, or nothing when the frame named no object."""
+    return "" if index is None else " " + object_text(index, subindex)
 
 
 class SdoTracker:
