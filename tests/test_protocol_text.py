@@ -1,10 +1,11 @@
-"""One text per fact: the columnar builders say what their scalar twins say, and an
-object is written 0xIIII:SS in every text (frame lines, transaction lines, findings,
-events)."""
+"""One text per fact: the columnar builders say what their scalar twins say, a short
+frame's verdict is the same in text and JSONL, and an object is written 0xIIII:SS in
+every text (frame lines, transaction lines, findings, events)."""
 
 from __future__ import annotations
 
 import csv
+import json
 import re
 import subprocess
 import sys
@@ -13,7 +14,9 @@ import numpy as np
 from conftest import ROOT, real_file
 
 from cananalyze.columns import bytecols
-from cananalyze.protocol import emcy, sdo
+from cananalyze.protocol import emcy, nmt, sdo
+from cananalyze.protocol.fields import annotation, frame_fields
+from cananalyze.protocol.services import Service
 
 
 def test_emcy_text_columns_equal_the_scalar_text():
@@ -55,6 +58,35 @@ def _cli(*args: str) -> str:
         [sys.executable, "-m", "cananalyze", *args], capture_output=True, cwd=ROOT, check=True
     )
     return out.stdout.decode()
+
+
+SHORT = {  # short frames and the word their text and JSONL both give
+    "000#01": nmt.MALFORMED,
+    "000#": nmt.MALFORMED,
+    "085#1081": emcy.MALFORMED,
+    "085#": emcy.MALFORMED,
+    "100#0011223344": "malformed",
+}
+
+
+def test_short_frames_say_malformed_in_text_and_jsonl(tmp_path):
+    log = tmp_path / "short.log"
+    frames = [*SHORT, "000#0105", "085#1081010000000000", "100#00112233AABB"]
+    log.write_text("".join(f"({1.0 + k / 10:.6f}) can0 {f}\n" for k, f in enumerate(frames)))
+    text = _cli("decode", str(log), "--no-color").splitlines()
+    lines = [json.loads(x) for x in _cli("decode", str(log), "--format", "jsonl").splitlines()]
+    assert len(text) == len(lines) == len(frames)
+    for k, problem in enumerate(SHORT.values()):
+        assert lines[k]["problem"] == problem
+        assert text[k].endswith(f"({problem})")
+    assert not any("problem" in rec for rec in lines[len(SHORT) :])
+    # the scalar route says the same
+    for raw, problem in SHORT.items():
+        cob, data = raw.split("#")
+        service = {"000": Service.NMT, "085": Service.EMCY, "100": Service.TIME}[cob]
+        fields = frame_fields(service, bytes.fromhex(data))
+        assert fields["problem"] == problem
+        assert annotation(service, 5, 0, fields).endswith(f"({problem})")
 
 
 _OBJECT = re.compile(r"0x[0-9A-F]{4}:(\w+)")

@@ -128,7 +128,7 @@ def register_text(register: int) -> str:
 
 
 def fields(data: bytes) -> dict:
-    """JSONL fields of an EMCY frame (nulls when it is too short)."""
+    """JSONL fields of an EMCY frame; `problem` (and nulls) when it is too short."""
     if len(data) < MIN_BYTES:
         return {
             "error_code": None,
@@ -136,6 +136,7 @@ def fields(data: bytes) -> dict:
             "error_register": None,
             "manufacturer": data.hex(),
             "reset": False,
+            "problem": MALFORMED,
         }
     code = data[0] | data[1] << 8
     return {
@@ -158,7 +159,7 @@ def text(code: int, register: int, manufacturer: str) -> str:
 def annotation(fields: dict) -> str:
     """`text` of a frame's fields, and the profile's reading of the vendor bytes if any."""
     if fields.get("error_code") is None:
-        return f"EMCY ({MALFORMED})"
+        return f"EMCY ({fields.get('problem', MALFORMED)})"
     line = text(fields["error_code"], fields["error_register"], fields["manufacturer"])
     decoded = fields.get("manufacturer_decoded")
     if decoded and not fields["reset"]:
@@ -190,7 +191,7 @@ def text_columns(data: np.ndarray, dlc: np.ndarray) -> list[np.ndarray]:
     mfr[:, 0] = np.where(shown == 0, ord("-"), mfr[:, 0])
     # an error reset or a short frame: its own text, the other blocks blank
     other = np.where(dlc < MIN_BYTES, 2, np.where(code == 0, 1, 0))
-    plain = ["", RESET_TEXT, annotation({})]
+    plain = ["", RESET_TEXT, annotation(fields(b""))]
     special = bytecols.padded_table([t.encode() for t in plain])[other]
     blank = other != 0
     for block in (head, register, mfr):

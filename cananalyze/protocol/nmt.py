@@ -69,16 +69,16 @@ def toggle_of(byte: int) -> int:
 
 
 def command_fields(data: bytes) -> dict:
-    """JSONL fields of a module control frame: `command`, `target` (null when short)."""
+    """JSONL fields of a module control frame: `command`, `target`; `problem` when short."""
     if len(data) < 2:
-        return {"command": None, "target": None}
+        return {"command": None, "target": None, "problem": MALFORMED}
     return {"command": command_name(data[0]), "target": data[1]}
 
 
 def command_text(fields: dict) -> str:
     target = fields.get("target")
     if target is None:
-        return f"NMT ({MALFORMED})"
+        return f"NMT ({fields.get('problem', MALFORMED)})"
     who = "all nodes" if target == ALL_NODES else f"node {target}"
     return f"NMT {fields.get('command')} {who}"
 

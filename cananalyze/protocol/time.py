@@ -21,10 +21,11 @@ def time_of_day(data: bytes) -> str | None:
 
 
 def fields(data: bytes) -> dict:
-    """JSONL fields of a TIME frame: `time` (null when it is too short)."""
-    return {"time": time_of_day(data)}
+    """JSONL fields of a TIME frame: `time`; `problem` when it is too short."""
+    when = time_of_day(data)
+    return {"time": when} if when is not None else {"time": None, "problem": MALFORMED}
 
 
 def text(fields: dict) -> str:
     when = fields.get("time")
-    return f"TIME {when}" if when else f"TIME ({MALFORMED})"
+    return f"TIME {when}" if when else f"TIME ({fields.get('problem', MALFORMED)})"
