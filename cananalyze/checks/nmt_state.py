@@ -9,15 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..protocol.nmt import ALL_NODES, COMMAND_STATE, PRE_OPERATIONAL, STATE_MASK, STATES
+from ..protocol.nmt import ALL_NODES, COMMAND_STATE, PRE_OPERATIONAL, STATE_MASK, state_name
 from ..protocol.services import Service
 from ..records import DecodedBatch
-
-
-def state_name(state: int | None) -> str:
-    if state is None:
-        return "unknown"
-    return STATES.get(state, f"0x{state:02X}")
 
 
 class NmtStates:

@@ -172,8 +172,7 @@ class LiveView:
             if batch.service[last] == Service.BOOTUP:
                 st.state = nmt.BOOTUP_TEXT
             elif fb.dlc[last]:
-                code = int(fb.data[last, 0]) & nmt.STATE_MASK
-                st.state = nmt.STATES.get(code, f"0x{code:02X}")
+                st.state = nmt.state_name(int(fb.data[last, 0]))
             st.last_seen = float(t[-1])
             boots = mine[batch.service[mine] == Service.BOOTUP]
             for r in boots.tolist():

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...protocol.emcy import MIN_BYTES, SIZE, error_class
+from ...protocol.emcy import MIN_BYTES, SIZE, error_text, register_text
 from ...protocol.services import Service
 from ..rule import Context, Rule, ms
 
@@ -172,7 +172,7 @@ class EmcyRule(Rule):
                 tk,
                 n,
                 0x80 + n,
-                f"EMCY 0x{c:04X} ({error_class(c)}), error register 0x{r:02X}",
+                f"EMCY {error_text(c)}; {register_text(r)}",
                 f"0x{c:04X}",
                 "no EMCY"
                 if not self.allow
@@ -189,7 +189,7 @@ class EmcyRule(Rule):
                     t,
                     node,
                     0x80 + node,
-                    f"EMCY 0x{code:04X} ({error_class(code)}) raised at {ctx.rel(t)} "
+                    f"EMCY {error_text(code)} raised at {ctx.rel(t)} "
                     "still active at the end of the log",
                     f"0x{code:04X}",
                     "cleared",

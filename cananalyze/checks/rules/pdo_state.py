@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...protocol.nmt import OPERATIONAL
+from ...protocol.nmt import OPERATIONAL, state_name
 from ...protocol.services import Service
-from ..nmt_state import state_name
 from ..rule import Context, Rule
 
 
