@@ -16,8 +16,8 @@ from cananalyze.checks.rule import Context, Rule, ms
 from cananalyze.checks.rules.emcy import EmcyRule
 from cananalyze.frames import from_rows
 from cananalyze.pipeline import Decoder
+from cananalyze.protocol.emcy import error_text, register_text
 from cananalyze.protocol.services import Service
-from cananalyze.protocol.tables import emcy_class
 
 
 class ReferenceEmcyRule(EmcyRule):
@@ -67,7 +67,7 @@ class ReferenceEmcyRule(EmcyRule):
             if code in self.allow:
                 continue
             self.emit(t, node, 0x80 + node,
-                      f"EMCY 0x{code:04X} ({emcy_class(code)}), error register 0x{reg:02X}",
+                      f"EMCY {error_text(code)}; {register_text(reg)}",
                       f"0x{code:04X}",
                       "no EMCY" if not self.allow
                       else "one of " + ", ".join(f"0x{c:04X}" for c in sorted(self.allow)),

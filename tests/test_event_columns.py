@@ -20,7 +20,6 @@ from cananalyze.events.build import (
     EventState,
     batch_event_columns,
     batch_events,
-    emcy_classes,
     finding_event,
     sdo_event,
 )
@@ -30,8 +29,8 @@ from cananalyze.outputs.tables.stream import HOLD
 from cananalyze.outputs.tables.stream import TableSink as StreamTables
 from cananalyze.pipeline import Options, build_decoder
 from cananalyze.protocol.fields import annotation, frame_fields
+from cananalyze.protocol.nmt import state_name
 from cananalyze.protocol.services import Service
-from cananalyze.protocol.tables import NMT_STATES, emcy_class
 
 
 def _reference(batch, off: int, state: dict) -> tuple[list[Row], list[Row]]:
@@ -66,7 +65,7 @@ def _reference(batch, off: int, state: dict) -> tuple[list[Row], list[Row]]:
     rows = [i for i in range(n) if batch.service[i] in state_services and fb.dlc[i] > 0]
     for node in sorted({int(batch.node[i]) for i in rows}):
         for i in (i for i in rows if batch.node[i] == node):
-            name = NMT_STATES.get(fb.data[i, 0] & 0x7F, f"unknown 0x{fb.data[i, 0] & 0x7F:02X}")
+            name = state_name(int(fb.data[i, 0]))
             if state["last"].get(node) != name:
                 state["last"][node] = name
                 states.append(Row(float(fb.t[i]), "nmt_state", node, INFO, name, i + off))
@@ -163,28 +162,6 @@ def _decoded(fb: FrameBatch, size: int, **kw):
 def test_generated_emcy_nmt_sdo_events_match_per_row(size):
     count = _assert_same_events(_decoded(_emcy_bus(), size, device=DEVICES))
     assert count > 2000
-
-
-def test_emcy_text_cache_is_bounded(monkeypatch):
-    """Random error codes (a noisy bus) clear the EMCY text cache rather than fill it with
-    all 65536 over a long log; the texts stay those of the per-row route."""
-    from cananalyze.events import build as events
-
-    monkeypatch.setattr(events, "_EMCY_CODE_CACHE", 64)
-    monkeypatch.setattr(events, "_EMCY_CODE_TEXT", {})
-    sizes = []
-    real_heads = events._emcy_heads
-
-    def heads(node, code, reg):
-        out = real_heads(node, code, reg)
-        sizes.append((len(events._EMCY_CODE_TEXT), len(set(code))))
-        return out
-
-    monkeypatch.setattr(events, "_emcy_heads", heads)
-    assert _assert_same_events(_decoded(_emcy_bus(), 333, device=DEVICES)) > 2000
-    cleared = [b < a for (a, _), (b, _) in zip(sizes, sizes[1:], strict=False)]
-    assert any(cleared)  # the cache filled and was cleared ...
-    assert all(n <= max(64, new) for n, new in sizes)  # ... never grown past its bound
 
 
 REAL = [
@@ -296,9 +273,3 @@ def test_batch_event_columns_same_as_rows():
         assert cols.rows() == rows and states == states2
         off += len(batch)
     assert s1.last_state == s2.last_state and s1.last_t == s2.last_t
-
-
-def test_emcy_classes_equal_emcy_class_for_every_code():
-    codes = np.arange(1 << 16, dtype=np.int64)
-    assert emcy_classes(codes) == [emcy_class(c) for c in codes.tolist()]
-    assert emcy_classes(np.zeros(0, np.int64)) == []

@@ -14,7 +14,7 @@ def _make():
 
     def fill(d):
         calls.append(1)
-        LazyNotes.write(d, 1, {"role": "upload request 0x1018:1"})
+        LazyNotes.write(d, 1, {"role": "upload request 0x1018:01"})
         LazyNotes.write(d, 2, {"role": "late"})
 
     return LazyNotes({2: {"signals": {"a": 1}}}, fill), calls
@@ -39,7 +39,7 @@ def test_every_access_sees_the_pending_notes_once() -> None:
         access(notes)
         assert calls == [1]
         assert dict(notes) == {
-            1: {"role": "upload request 0x1018:1"},
+            1: {"role": "upload request 0x1018:01"},
             2: {"signals": {"a": 1}, "role": "late"},
         }
         assert calls == [1]

@@ -109,14 +109,16 @@ def test_faults_found_live_with_report_exit_1_and_rrd(tmp_path):
     sdo = {f["message"] for f in findings if f["rule"] == "sdo" and " took " not in f["message"]}
     # the master gives up on 0x1008 after exactly 1 s, the tracker's timeout: which one is
     # seen first depends on microseconds of jitter, both say the read failed
-    assert sdo - {"SDO upload 1008:00 abort: SDO protocol timed out"} == {
-        "SDO download 1018:01 abort: Attempt to write a read only object",
-        "SDO upload 2FFF:00 abort: Object does not exist in the object dictionary",
+    assert sdo - {"SDO upload 0x1008:00 abort: SDO protocol timed out"} == {
+        "SDO download 0x1018:01 abort: Attempt to write a read only object",
+        "SDO upload 0x2FFF:00 abort: Object does not exist in the object dictionary",
     } | (
-        {"SDO upload 1008:00 timeout: no frame within 1 s while waiting for the initiate response"}
+        {
+            "SDO upload 0x1008:00 timeout: no frame within 1 s while waiting for the initiate response"
+        }
         & sdo
     )
-    assert any(m.startswith("SDO upload 1008:00 ") for m in sdo)
+    assert any(m.startswith("SDO upload 0x1008:00 ") for m in sdo)
     assert ("error_frames", None) not in got  # slcan delivered none
     for f in findings:
         assert any(x.startswith(f"{f['t_rel']:+.3f} s ") and f["message"] in x for x in lines)

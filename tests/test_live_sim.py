@@ -64,8 +64,8 @@ def test_simulated_faults_are_found_live():
     # found as the session ran, not only at the end
     assert faults - {("emcy", 7)} <= seen_while_running
     msgs = {f.message for f in checker.findings if f.rule == "sdo"}
-    assert "SDO download 1018:01 abort: Attempt to write a read only object" in msgs
-    assert "SDO upload 2FFF:00 abort: Object does not exist in the object dictionary" in msgs
+    assert "SDO download 0x1018:01 abort: Attempt to write a read only object" in msgs
+    assert "SDO upload 0x2FFF:00 abort: Object does not exist in the object dictionary" in msgs
     # the dashboard saw the same: devices from the network file, the findings counted
     assert view.violations == sum(f.fails for f in checker.findings)
     assert view.device(5).startswith("Datexel DAT 7014")

@@ -8,7 +8,7 @@ import pytest
 from conftest import real_file
 
 from cananalyze.network.pdo_map import MapEntry
-from cananalyze.protocol.pdo_decode import decode_pdo
+from cananalyze.protocol.pdo import decode_pdo
 
 U8, U16, U32, I16, I32, REAL32, REAL64, I24, U64, I64, BOOL = (
     0x05,

@@ -9,7 +9,7 @@ from conftest import real_file, seed_file
 
 from cananalyze.errors import InputError
 from cananalyze.network.profile import builtin_profiles, identify, load_builtin, load_eds
-from cananalyze.protocol.pdo_decode import decode_pdo
+from cananalyze.protocol.pdo import decode_pdo
 
 
 def decode_one(mapping, payload: bytes):

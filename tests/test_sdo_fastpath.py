@@ -169,7 +169,7 @@ def test_random_traffic(fb: FrameBatch, step: int) -> None:
 
 
 def test_pair_values_match_known_frames() -> None:
-    """A hand-made pair: upload of 0x1018:1 answered with 4 bytes, a write aborted."""
+    """A hand-made pair: upload of 0x1018:01 answered with 4 bytes, a write aborted."""
     fb = from_rows(
         [
             (1.0, 0x605, bytes([0x40, 0x18, 0x10, 1, 0, 0, 0, 0])),
@@ -185,7 +185,7 @@ def test_pair_values_match_known_frames() -> None:
     assert up["value"] == 0x12345678 and up["data"] == "78563412" and up["latency_ms"] == 0.5
     assert down["result"] == "abort" and down["abort_code"] == 0x06010002
     assert down["data"] == "e803" and down["size"] == 2 and down["detail"] == "aborted by server"
-    assert out.notes[1]["role"] == "expedited upload response 0x1018:1 = 78563412"
+    assert out.notes[1]["role"] == "expedited upload response 0x1018:01 = 78563412"
     assert np.all(proc.tracker._pending == {})
 
 

@@ -15,13 +15,12 @@ from pathlib import Path
 import can
 import pytest
 
-from cananalyze.protocol.sdo import describe_sdo
-from cananalyze.protocol.tables import SDO_ABORT
+from cananalyze.protocol.sdo import ABORT_CODES, describe_sdo
 from cananalyze.sdo import SdoTracker
 from tests.conftest import real_file
 
 FOLDER = "hilch__canopen-message-interpreter"
-ABORT_BY_TEXT = {text.lower().rstrip("."): code for code, text in SDO_ABORT.items()}
+ABORT_BY_TEXT = {text.lower().rstrip("."): code for code, text in ABORT_CODES.items()}
 
 
 def _peak(path: Path) -> list[tuple[float, int, bytes]]:

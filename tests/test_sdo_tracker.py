@@ -79,7 +79,7 @@ def test_echo_mismatch_and_size_mismatch() -> None:
         (0x581, bytes.fromhex("4300200200000000")),
     ]
     roles, (tx,) = _feed(SdoTracker(), frames)
-    assert tx.result == "protocol_error" and "response names 0x2000:2" in tx.detail
+    assert tx.result == "protocol_error" and "response names 0x2000:02" in tx.detail
     frames = _seg_upload(1, 0x2001, b"abcdefghij")
     frames[1] = (0x581, struct.pack("<BHBI", 0x41, 0x2001, 1, 11))
     _, (tx,) = _feed(SdoTracker(), frames)

@@ -9,28 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..protocol.nmt import ALL_NODES, COMMAND_STATE, PRE_OPERATIONAL, STATE_MASK, state_name
 from ..protocol.services import Service
-from ..protocol.tables import NMT_STATES
 from ..records import DecodedBatch
-
-OPERATIONAL = 0x05
-PRE_OPERATIONAL = 0x7F
-STOPPED = 0x04
-BOOTUP = 0x00
-# NMT command specifier -> state the command puts a node in (reset: boot-up follows)
-_COMMAND_STATE = {
-    0x01: OPERATIONAL,
-    0x02: STOPPED,
-    0x80: PRE_OPERATIONAL,
-    0x81: BOOTUP,
-    0x82: BOOTUP,
-}
-
-
-def state_name(state: int | None) -> str:
-    if state is None:
-        return "unknown"
-    return NMT_STATES.get(state, f"0x{state:02X}")
 
 
 class NmtStates:
@@ -58,7 +39,7 @@ class NmtStates:
         events: list[tuple[float, int, int, str]] = []
         if report.size:
             nodes = batch.node[report].astype(np.intp)
-            state = (fb.data[report, 0] & 0x7F).astype(np.int16)
+            state = (fb.data[report, 0] & STATE_MASK).astype(np.int16)
             order = np.argsort(nodes, kind="stable")
             n, s, r = nodes[order], state[order], report[order]
             prev = np.empty_like(s)
@@ -74,7 +55,7 @@ class NmtStates:
         for i in np.flatnonzero(svc == Service.NMT).tolist():
             if fb.dlc[i] < 2:
                 continue
-            state = _COMMAND_STATE.get(int(fb.data[i, 0]))
+            state = COMMAND_STATE.get(int(fb.data[i, 0]))
             if state is None:
                 continue
             target = int(fb.data[i, 1])
@@ -82,7 +63,7 @@ class NmtStates:
                 events.append((float(fb.t[i]), target, state, "nmt"))
         events.sort(key=lambda e: e[0])
         for t, node, state, source in events:
-            for n in list(self.times) if node == 0 else [node]:  # 0 = all nodes known so far
+            for n in list(self.times) if node == ALL_NODES else [node]:  # all known so far
                 self._add(n, t, state, source)
 
     def state_at(self, node: int, t: np.ndarray) -> np.ndarray:

@@ -20,11 +20,15 @@ HEX_LOWER = np.frombuffer(b"0123456789abcdef", np.uint8)  # as bytes.hex() write
 
 
 def padded_table(texts: list[bytes]) -> np.ndarray:
-    """(len(texts), longest) uint8 matrix of the texts, NUL-padded: index it by row keys."""
-    width = max((len(x) for x in texts), default=0)
+    """(len(texts), longest) uint8 matrix of the texts, NUL-padded: index it by row keys.
+
+    Filled in one masked assignment of the joined texts (row-major, as the mask is
+    read), not a copy per text: tables of thousands (one per distinct EMCY code) are
+    built per batch."""
+    lengths = np.fromiter(map(len, texts), np.int64, len(texts))
+    width = int(lengths.max()) if lengths.size else 0
     table = np.zeros((len(texts), width), np.uint8)
-    for i, x in enumerate(texts):
-        table[i, : len(x)] = np.frombuffer(x, np.uint8)
+    table[np.arange(width)[None, :] < lengths[:, None]] = np.frombuffer(b"".join(texts), np.uint8)
     return table
 
 

@@ -4,8 +4,8 @@ The streaming table writer takes them as columns (`batch_event_columns`) and
 `Collector` (the Capture, MCAP, rerun) as tuples (`batch_events`, the same
 columns), so the events table says the same thing whichever path wrote it.
 Texts are built per group, not per event where it can be helped: SDO heads once
-per object, EMCY heads once per node/code/register, manufacturer bytes as hex
-by numpy.
+per object, EMCY texts as byte columns (`protocol.emcy.text_columns`, the text
+output's too).
 EMCY, NMT and boot-up texts come from the frame bytes directly, not through
 `DecodedBatch.fields` (which realises every lazy SDO note of the batch and
 builds a dict per row); rows carrying a note (a profile's manufacturer
@@ -21,10 +21,11 @@ from itertools import repeat
 
 import numpy as np
 
+from ..columns import bytecols
 from ..frames import FLAG_RTR
+from ..protocol import emcy, nmt
 from ..protocol.fields import annotation, frame_fields
 from ..protocol.services import Service
-from ..protocol.tables import EMCY_CODES, NMT_COMMANDS, NMT_STATES, error_register_names
 from ..records import DecodedBatch
 from . import columns as ec
 from .columns import NO_NODE, EventColumns, Row, texts
@@ -231,7 +232,7 @@ def batch_event_columns(
                 EventColumns.from_rows(
                     [
                         ev._replace(
-                            level=INFO if ev.message != "stopped" else WARNING,
+                            level=WARNING if ev.message == nmt.STATES[nmt.STOPPED] else INFO,
                             message=f"node {ev.node}: NMT state {ev.message}",
                         )
                         for ev in states
@@ -244,75 +245,12 @@ def batch_event_columns(
     return events, states
 
 
-# EMCY text pieces, formatted once per node, error code (at most 65536) and register
-_NODE_TEXT: dict[int, str] = {}  # 'node 5: '
-_EMCY_CODE_TEXT: dict[int, str] = {}  # 'EMCY 0x8130 Monitoring - ...; register 0x'
-_EMCY_REG_TEXT: dict[int, str] = {}  # '11 [generic,communication]; mfr '
-_EMCY_CODE_CACHE = 4096  # codes kept in _EMCY_CODE_TEXT at most
-
-
-def emcy_classes(codes: np.ndarray) -> list[str]:
-    """`emcy_class` of each code, by a searchsorted per mask instead of dict probes per code.
-
-    Masks from the least to the most specific, each hit overwriting: the most
-    specific name wins, as `emcy_class`'s first hit does.
-    """
-    keys = np.array(sorted(EMCY_CODES), np.int64)
-    names = [EMCY_CODES[k] for k in keys.tolist()] + ["Unknown"]
-    pick = np.full(len(codes), len(keys), np.intp)
-    for mask in (0xF000, 0xFF00, 0xFFF0, 0xFFFF):
-        masked = codes & mask
-        at = np.minimum(np.searchsorted(keys, masked), len(keys) - 1)
-        hit = keys[at] == masked
-        pick[hit] = at[hit]
-    return list(map(names.__getitem__, pick.tolist()))
-
-
-def _emcy_heads(node: list[int], code: list[int], reg: list[int]) -> list[str]:
-    """'node 5: EMCY 0x8130 ...; register 0x11 [generic,communication]; mfr ' of each EMCY."""
-    for n in set(node).difference(_NODE_TEXT):
-        _NODE_TEXT[n] = f"node {n}: " if n >= 0 else ""
-    new = sorted(set(code).difference(_EMCY_CODE_TEXT))
-    if len(_EMCY_CODE_TEXT) + len(new) > _EMCY_CODE_CACHE:  # random codes (a noisy bus, the
-        _EMCY_CODE_TEXT.clear()  # generator) must not fill all 65536 over a long log
-        new = sorted(set(code))
-    for c, cls in zip(new, emcy_classes(np.array(new, np.int64)), strict=True):
-        _EMCY_CODE_TEXT[c] = f"EMCY 0x{c:04X} {cls}; register 0x"
-    for r in set(reg).difference(_EMCY_REG_TEXT):
-        regs = ",".join(error_register_names(r)) or "none"
-        _EMCY_REG_TEXT[r] = f"{r:02X} [{regs}]; mfr "
-    add = operator.add
-    return list(
-        map(
-            add,
-            map(add, map(_NODE_TEXT.__getitem__, node), map(_EMCY_CODE_TEXT.__getitem__, code)),
-            map(_EMCY_REG_TEXT.__getitem__, reg),
-        )
-    )
-
-
-_HEX = np.frombuffer(b"0123456789abcdef", np.uint8)
-
-
 def _any_of(service: np.ndarray, codes: np.ndarray) -> np.ndarray:
     """service in codes, by a comparison per code (twice as fast as a lookup table here)."""
     out = service == codes[0]
     for c in codes[1:]:
         out |= service == c
     return out
-
-
-def _mfr_hex(data: np.ndarray, dlc: np.ndarray) -> list[str]:
-    """EMCY manufacturer bytes (3 up to the DLC) as lowercase hex, '-' when there are none."""
-    m = len(dlc)
-    byte = data[:, 3:8]
-    chars = np.empty((m, 5, 2), np.uint8)
-    chars[:, :, 0] = _HEX[byte >> 4]
-    chars[:, :, 1] = _HEX[byte & 15]
-    chars[np.arange(3, 8) >= np.minimum(dlc, 8)[:, None]] = 0  # trailing NULs: dropped
-    out = chars.reshape(m, 10).view("S10").ravel().astype("U10")
-    out[out == ""] = "-"
-    return out.tolist()
 
 
 def _marked(keys, n: int) -> np.ndarray:
@@ -339,7 +277,7 @@ def _frame_event_columns(batch: DecodedBatch, off: int) -> EventColumns:
     kind[service == Service.EMCY] = ec.EMCY
     kind[service == Service.NMT] = ec.NMT
     level = np.full(m, INFO, np.int8)
-    text = np.full(m, "boot-up", object)
+    text = np.full(m, nmt.BOOTUP_TEXT, object)
     # dict.get: a LazyNotes must not realise its SDO notes (they are on SDO rows only)
     slow = np.zeros(m, bool)
     if len(dict.keys(notes)):
@@ -347,34 +285,14 @@ def _frame_event_columns(batch: DecodedBatch, off: int) -> EventColumns:
         slow[[k for k, i in zip(at, rows[at].tolist(), strict=True) if dict.get(notes, i)]] = True
     if fb.long_data:
         slow |= _marked(fb.long_data, len(fb))[rows]
-    emcy = (kind == ec.EMCY) & ~slow
     prefixed = (node >= 0) & (service != Service.NMT)  # "node 5: " still to prepend
-    if emcy.any():
-        code = data[:, 0].astype(np.int64) | data[:, 1].astype(np.int64) << 8
-        short = emcy & (dlc < 3)
-        text[short] = "EMCY (malformed: fewer than 3 bytes)"
-        level[short] = ERROR
-        reset = emcy & (dlc >= 3) & (code == 0)
-        text[reset] = "EMCY error reset / no error"
-        err = np.flatnonzero(emcy & (dlc >= 3) & (code != 0))
-        if err.size:
-            # one head per (node, code, register): a faulty node repeats its EMCY
-            key = (node[err].astype(np.int64) + 1) << 24 | code[err] << 8 | data[err, 2]
-            uniq, inv = np.unique(key, return_inverse=True)
-            heads = _emcy_heads(
-                ((uniq >> 24) - 1).tolist(), (uniq >> 8 & 0xFFFF).tolist(), (uniq & 0xFF).tolist()
-            )
-            heads = texts(heads)[inv.ravel()].tolist()
-            text[err] = list(map(operator.add, heads, _mfr_hex(data[err], dlc[err])))
-            level[err] = ERROR
-            prefixed[err] = False
+    at = np.flatnonzero((kind == ec.EMCY) & ~slow)
+    if at.size:
+        text[at] = bytecols.joined_rows(emcy.text_columns(data[at], dlc[at]), at.size)
+        reset = (dlc[at] >= emcy.MIN_BYTES) & (data[at, 0] == 0) & (data[at, 1] == 0)
+        level[at[~reset]] = ERROR
     for k in np.flatnonzero((kind == ec.NMT) & ~slow).tolist():
-        if dlc[k] < 2:
-            text[k] = "NMT (malformed: needs 2 bytes)"
-        else:
-            b0, b1 = int(data[k, 0]), int(data[k, 1])
-            cmd = NMT_COMMANDS.get(b0) or f"unknown 0x{b0:02X}"
-            text[k] = f"NMT {cmd} all nodes" if b1 == 0 else f"NMT {cmd} node {b1}"
+        text[k] = nmt.command_text(nmt.command_fields(bytes(data[k, : dlc[k]])))
     for k in np.flatnonzero(slow).tolist():
         i, s = int(rows[k]), int(service[k])
         rtr = bool(fb.flags[i] & FLAG_RTR)
@@ -415,7 +333,7 @@ def _state_changes(batch: DecodedBatch, off: int, state: EventState) -> list[Row
     nodes = batch.node[rows]
     order = np.argsort(nodes, kind="stable")
     rows, nodes = rows[order], nodes[order]
-    code = fb.data[rows, 0] & 0x7F
+    code = fb.data[rows, 0] & nmt.STATE_MASK
     change = np.ones(rows.size, bool)
     change[1:] = (code[1:] != code[:-1]) | (nodes[1:] != nodes[:-1])
     out: list[Row] = []
@@ -428,7 +346,7 @@ def _state_changes(batch: DecodedBatch, off: int, state: EventState) -> list[Row
         fb.t[sel].tolist(),
         strict=True,
     ):
-        name = NMT_STATES.get(v, f"unknown 0x{v:02X}")
+        name = nmt.state_name(v)
         if last.get(n) == name:
             continue
         last[n] = name

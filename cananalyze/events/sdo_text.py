@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..columns import bytecols
+from ..protocol.sdo import object_text
 
 U64 = 0xFFFFFFFFFFFFFFFF
 _LABELS = bytecols.padded_table([b"", b" = ", b" data "])  # no value or data, value, data
@@ -25,7 +26,7 @@ def sdo_message(direction, index, sub, name, result, value, data, abort, detail)
 
 def sdo_head(direction, index, sub, name) -> str:
     if isinstance(index, int) and isinstance(sub, int):
-        text = f"SDO {direction} 0x{index:04X}:{sub:02X}"
+        text = f"SDO {direction} {object_text(index, sub)}"
     else:
         text = f"SDO {direction}"
     return f"{text} {name}" if name else text

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..protocol.emcy import MIN_BYTES
 from ..protocol.services import Service
 from ..records import DecodedBatch
 from .model import NetworkModel
@@ -35,7 +36,7 @@ class EmcyDecoder:
         emcy = (batch.service == Service.EMCY) & np.isin(batch.node, nodes)
         for i in np.flatnonzero(emcy).tolist():
             cfg = self.model.nodes.get(int(batch.node[i]))
-            if cfg is None or cfg.profile is None or fb.dlc[i] < 3:
+            if cfg is None or cfg.profile is None or fb.dlc[i] < MIN_BYTES:
                 continue
             data = fb.payload(i)
             got = cfg.profile.decode_emcy(data[0] | data[1] << 8, data[2], data[3:8])

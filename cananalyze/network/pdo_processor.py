@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..frames import FLAG_RTR
-from ..protocol.pdo_decode import decode_pdo, words_of
+from ..protocol.pdo import decode_pdo, words_of
 from ..protocol.services import Service
 from ..records import DecodedBatch, SignalBlock
 from .model import NetworkModel

@@ -18,9 +18,10 @@ from typing import TextIO
 
 import numpy as np
 
+from ..protocol import nmt
+from ..protocol.emcy import error_text
 from ..protocol.fields import annotation
 from ..protocol.services import Service
-from ..protocol.tables import NMT_STATES
 from ..records import DecodedBatch
 from .sink import Sink
 from .summary import Summary
@@ -33,6 +34,12 @@ RATE_WINDOW = 1.0  # seconds of wall time over which frame rate and bus load are
 INFO, WARNING, ERROR = "info", "warning", "error"
 _LEVEL_STYLE = {INFO: "", WARNING: "yellow", ERROR: "bold red"}
 _SEVERITY_LEVEL = {"error": ERROR, "warning": WARNING, "info": INFO}
+_STATE_STYLE = {
+    nmt.STATES[nmt.OPERATIONAL]: "green",
+    nmt.STATES[nmt.PRE_OPERATIONAL]: "yellow",
+    nmt.STATES[nmt.STOPPED]: "red",
+    nmt.BOOTUP_TEXT: "cyan",
+}
 
 
 @dataclass
@@ -165,14 +172,13 @@ class LiveView:
                 st.last_hb = float(th[-1])
             last = int(mine[-1])
             if batch.service[last] == Service.BOOTUP:
-                st.state = "boot-up"
+                st.state = nmt.BOOTUP_TEXT
             elif fb.dlc[last]:
-                code = int(fb.data[last, 0]) & 0x7F
-                st.state = NMT_STATES.get(code, f"0x{code:02X}")
+                st.state = nmt.state_name(int(fb.data[last, 0]))
             st.last_seen = float(t[-1])
             boots = mine[batch.service[mine] == Service.BOOTUP]
             for r in boots.tolist():
-                self._event(float(fb.t[r]), f"node {node} boot-up")
+                self._event(float(fb.t[r]), f"node {node} {nmt.BOOTUP_TEXT}")
                 st.emcy.clear()
 
     def _rare(self, batch: DecodedBatch) -> None:
@@ -187,8 +193,7 @@ class LiveView:
                 if f.get("reset"):
                     st.emcy.clear()
                 elif f.get("error_code") is not None:
-                    short = f"0x{f['error_code']:04X} {f.get('error_class') or ''}".strip()
-                    st.emcy[f["error_code"]] = short
+                    st.emcy[f["error_code"]] = error_text(f["error_code"])
                 text = f"node {node} {text}"
                 level = INFO if f.get("reset") else ERROR
             else:
@@ -343,12 +348,7 @@ class LiveView:
             period = st.period_ms
             if age_s is not None and period and age_s * 1e3 > 2 * period:
                 age.stylize("bold red")  # its heartbeat is overdue: the node may be gone
-            state_style = {
-                "operational": "green",
-                "pre-operational": "yellow",
-                "stopped": "red",
-                "boot-up": "cyan",
-            }.get(st.state or "", "")
+            state_style = _STATE_STYLE.get(st.state or "", "")
             emcy = ", ".join(st.emcy.values()) or "-"
             nodes.add_row(
                 str(n),

@@ -12,19 +12,16 @@ import numpy as np
 
 from ..checks.streamstats import StreamStats
 from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
+from ..protocol import nmt
 from ..protocol.services import SERVICE_NAMES, Service
 from ..records import DecodedBatch
 from .busload import frame_bits
 from .sink import Sink
 
 N_SVC = len(SERVICE_NAMES)
-_NMT_STATES = np.array(
-    [0x00, 0x04, 0x05, 0x7F], np.uint8
-)  # boot-up, stopped, operational, pre-operational
-_NMT_COMMANDS = np.array([0x01, 0x02, 0x80, 0x81, 0x82], np.uint8)
 # byte -> is an NMT state (toggle bit ignored) / an NMT command: lookups, not np.isin per batch
-_IS_STATE = np.isin(np.arange(256) & 0x7F, _NMT_STATES)
-_IS_COMMAND = np.isin(np.arange(256), _NMT_COMMANDS)
+_IS_STATE = np.isin(np.arange(256) & nmt.STATE_MASK, list(nmt.STATES))
+_IS_COMMAND = np.isin(np.arange(256), list(nmt.COMMANDS))
 
 
 def _ids(per_id: np.ndarray, most: int = 6) -> str:

@@ -1,1 +1,2 @@
-"""Device-agnostic CiA 301: COB-ID classification, per-service decoding, tables."""
+"""Device-agnostic CiA 301: one module per service (nmt, sync, time, emcy, pdo, sdo, lss),
+COB-ID classification, data types, communication objects."""

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR, FrameBatch
+from . import nmt
 from .services import Service
 
 NO_NODE = -1
@@ -130,7 +131,8 @@ class CobClassifier:
         byte0 = batch.data[rows, 0]
         has_byte = batch.dlc[rows] >= 1
         out = np.full(rows.size, Service.HEARTBEAT, np.uint8)
-        out[has_byte & (byte0 == 0)] = Service.BOOTUP
-        out[after_rtr & has_byte & ~rtr & ((byte0 & 0x7F) != 0)] = Service.GUARD_RESPONSE
+        out[has_byte & (byte0 == nmt.BOOTUP)] = Service.BOOTUP
+        state = byte0 & nmt.STATE_MASK
+        out[after_rtr & has_byte & ~rtr & (state != nmt.BOOTUP)] = Service.GUARD_RESPONSE
         out[rtr] = Service.GUARD_REQUEST
         service[rows] = out

@@ -20,24 +20,23 @@ from functools import cached_property
 import numpy as np
 
 from ..frames import FLAG_TX
+from ..protocol import sdo
 from ..protocol.datatypes import decode_column, decode_int_column, decode_value
-from ..protocol.tables import abort_text
 from ..records import DecodedBatch, SdoColumns
 from .tracker import ObjectInfo
 from .transaction import SDO_TABLE_COLUMNS
 
-_UPLOAD_REQ = 0x40
-_DOWNLOAD_REQ = (0x22, 0x23, 0x27, 0x2B, 0x2F)  # expedited, with or without size
-_UPLOAD_RESP = (0x42, 0x43, 0x47, 0x4B, 0x4F)
-_DOWNLOAD_RESP = 0x60
-_ABORT = 0x80
+_UPLOAD_REQ = sdo.INITIATE_UPLOAD_REQUEST
+_DOWNLOAD_RESP = sdo.INITIATE_DOWNLOAD_RESPONSE
+_ABORT = sdo.ABORT
+_SIZES = (None, 4, 3, 2, 1)  # expedited, without or with the size (then 4 - n bytes)
+_DOWNLOAD_REQ = tuple(sdo.initiate_byte(sdo.CCS_INITIATE_DOWNLOAD, n, True) for n in _SIZES)
+_UPLOAD_RESP = tuple(sdo.initiate_byte(sdo.SCS_INITIATE_UPLOAD, n, True) for n in _SIZES)
 
-# Expedited data length by command byte: size indicated -> 4 - n, else 4.
+# Expedited data length by command byte (of the expedited initiate frames above)
 _EXP_LEN = np.zeros(256, np.int8)
-for _b in (0x22, 0x42):
-    _EXP_LEN[_b] = 4
-for _b in (0x23, 0x43, 0x27, 0x47, 0x2B, 0x4B, 0x2F, 0x4F):
-    _EXP_LEN[_b] = 4 - ((_b >> 2) & 3)
+for _b in _DOWNLOAD_REQ + _UPLOAD_RESP:
+    _EXP_LEN[_b] = sdo.expedited_size(_b)
 HEX2 = np.array([f"{i:02x}" for i in range(256)], "S2")  # byte -> its hex text
 
 
@@ -385,7 +384,7 @@ def pair_notes(fb, a: np.ndarray, b: np.ndarray) -> tuple[list[dict], list[dict]
     data = hex_texts(raw, np.where(aborted, 0, length))
     index = (da[:, 1].astype(np.int64) | (da[:, 2].astype(np.int64) << 8)).tolist()
     sub = da[:, 3].tolist()
-    sized = (da[:, 0] & 1).tolist()
+    sized = (da[:, 0] & sdo.SIZE_INDICATED).tolist()
     node = (fb.can_id[a].astype(np.int64) - 0x600).tolist()
     req_notes: list[dict] = []
     resp_notes: list[dict] = []
@@ -397,7 +396,7 @@ def pair_notes(fb, a: np.ndarray, b: np.ndarray) -> tuple[list[dict], list[dict]
             req_notes.append(rq)
             resp_notes.append(rs)
             continue
-        where = f" 0x{i:04X}:{s}"
+        where = " " + sdo.object_text(i, s)
         if up:
             req_notes.append(
                 {
@@ -436,10 +435,6 @@ def pair_notes(fb, a: np.ndarray, b: np.ndarray) -> tuple[list[dict], list[dict]
     return req_notes, resp_notes
 
 
-def _mux(index: int, subindex: int) -> str:
-    return f" 0x{index:04X}:{subindex}"
-
-
 def pair_outputs(
     fb, row_req: int, row_resp: int, node: int, object_info: ObjectInfo | None
 ) -> tuple[dict, dict, dict, str]:
@@ -448,7 +443,7 @@ def pair_outputs(
     resp = fb.data[row_resp].tobytes()
     index = req[1] | (req[2] << 8)
     sub = req[3]
-    where = _mux(index, sub)
+    where = " " + sdo.object_text(index, sub)
     t0 = float(fb.t[row_req])
     t1 = float(fb.t[row_resp])
     upload = req[0] == _UPLOAD_REQ
@@ -456,7 +451,7 @@ def pair_outputs(
         req_note = {"role": f"upload request{where}", "command": "initiate_upload_request"}
         data = b""
     else:
-        size = f", {_EXP_LEN[req[0]]} bytes" if req[0] & 1 else ""
+        size = f", {_EXP_LEN[req[0]]} bytes" if req[0] & sdo.SIZE_INDICATED else ""
         req_note = {
             "role": f"expedited download request{where}{size}",
             "command": "initiate_download_request",
@@ -467,7 +462,7 @@ def pair_outputs(
     code = None
     if resp[0] == _ABORT:
         code = int.from_bytes(resp[4:8], "little")
-        text = abort_text(code)
+        text = sdo.abort_text(code)
         resp_note = {"role": f"abort by server{where}: 0x{code:08X} {text}", "command": "abort"}
         result = "abort"
     elif upload:

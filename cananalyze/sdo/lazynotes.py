@@ -1,6 +1,6 @@
 """LazyNotes: a batch's notes dict whose SDO roles are written only when read.
 
-The fast path's frame notes ("SDO upload request 0x1018:1") matter only to the
+The fast path's frame notes ("SDO upload request 0x1018:01") matter only to the
 text/JSONL outputs; `decode --summary`, `check` and exports never read them, and
 building two dicts per transaction was a third of the SDO cost. The pending
 notes are written in on the first access of any kind, and every dict method

@@ -19,21 +19,26 @@ from collections.abc import Callable
 
 from ..protocol.datatypes import decode_value
 from ..protocol.sdo import (
+    ABORT,
     CCS_BLOCK_DOWNLOAD,
     CCS_BLOCK_UPLOAD,
     CCS_DOWNLOAD_SEGMENT,
     CCS_INITIATE_DOWNLOAD,
     CCS_INITIATE_UPLOAD,
     CCS_UPLOAD_SEGMENT,
+    MAX_BLKSIZE,
+    NO_MORE_SEGMENTS,
     SCS_BLOCK_DOWNLOAD,
     SCS_BLOCK_UPLOAD,
     SCS_DOWNLOAD_SEGMENT,
     SCS_INITIATE_DOWNLOAD,
     SCS_INITIATE_UPLOAD,
     SCS_UPLOAD_SEGMENT,
+    SEQNO_MASK,
+    abort_text,
     describe_sdo,
+    object_text,
 )
-from ..protocol.tables import abort_text
 from .channels import ChannelTable, SdoChannel
 from .transaction import FrameRole, SdoTransaction
 from .transfer import PHASE_TEXT, Transfer
@@ -47,9 +52,8 @@ def block_crc(data: bytes) -> int:
 
 
 def _mux(index: int | None, subindex: int | None) -> str:
-    if index is None:
-        return ""
-    return f" 0x{index:04X}:{subindex}" if subindex is not None else f" 0x{index:04X}"
+    """' 0x1018:01' after a text, or nothing when the frame named no object."""
+    return "" if index is None else " " + object_text(index, subindex)
 
 
 class SdoTracker:
@@ -101,7 +105,7 @@ class SdoTracker:
             if not is_request and xfer.t_first_response is None:
                 xfer.t_first_response = t
             if xfer.phase == "segments" and is_request == xfer.sender_is_client:
-                if data and data[0] != 0x80:  # 0x80 = seqno 0 with c: never a segment; abort
+                if data and data[0] != ABORT:  # seqno 0 with c: never a segment; an abort
                     return self._block_segment(xfer, data)
         if len(data) < 8:
             role = FrameRole("invalid", f"SDO frame with {len(data)} data bytes (8 required)")
@@ -536,7 +540,7 @@ class SdoTracker:
         xfer.phase = "segments"
 
     def _block_segment(self, xfer: Transfer, data: bytes) -> FrameRole:
-        seqno, last = data[0] & 0x7F, bool(data[0] & 0x80)
+        seqno, last = data[0] & SEQNO_MASK, bool(data[0] & NO_MORE_SEGMENTS)
         what = "block download" if xfer.direction == "download" else "block upload"
         text = f"{what} segment {seqno}/{xfer.blksize}" + (", last" if last else "")
         role = FrameRole("block_segment", text, xfer.index, xfer.subindex)
@@ -574,7 +578,7 @@ class SdoTracker:
         if done:
             xfer.phase = "end"
             return role
-        if not 1 <= blksize <= 127:
+        if not 1 <= blksize <= MAX_BLKSIZE:
             role.problem = f"invalid blksize {blksize}"
             self._fail(xfer, role.problem)
             return role

@@ -15,6 +15,8 @@ import sys
 from pathlib import Path
 
 from ..frames import FLAG_RTR, FLAG_TX, FrameBatch, from_rows
+from ..protocol import nmt
+from ..protocol.sync import FIRST_COUNTER, MAX_COUNTER, next_counter
 
 START = 1767225600.0  # 2026-01-01T00:00:00Z
 
@@ -43,9 +45,9 @@ def demo_rows() -> list[tuple[float, int, bytes, int]]:
     us = at(
         0,
         [
-            (0x700 + MCB560, b"\x00", 0),
-            (0x700 + DAT7014, b"\x00", 0),
-            (0x700 + GUARDED, b"\x00", 0),
+            (0x700 + MCB560, bytes([nmt.BOOTUP]), 0),
+            (0x700 + DAT7014, bytes([nmt.BOOTUP]), 0),
+            (0x700 + GUARDED, bytes([nmt.BOOTUP]), 0),
         ],
         1300,
     )
@@ -72,25 +74,27 @@ def demo_rows() -> list[tuple[float, int, bytes, int]]:
         us + 5000, _sdo_pairs(MCB560, [("2300200101000000", "8000200100000206")])
     )  # abort 0x06020000
     us = at(us + 5000, _sdo_pairs(MCB560, [("2b17100064000000", "6017100000000000")]))
-    at(60_000, [(0x000, bytes([0x01, 0x00]), FLAG_TX)])  # NMT start all nodes
+    at(60_000, [(0x000, bytes([nmt.START, nmt.ALL_NODES]), FLAG_TX)])
     # TIME_OF_DAY: 2026-01-01 00:00:00.100 = 15341 days after 1984-01-01, 100 ms
     at(70_000, [(0x100, struct.pack("<IH", 100, 15341), FLAG_TX)])
 
     toggle = 0
-    counter = 1
+    counter = FIRST_COUNTER
     for k in range(20):  # two seconds of steady operation
         base = 100_000 + k * 100_000
         at(base, [(0x080, bytes([counter]), FLAG_TX)])
-        counter = counter % 240 + 1
+        counter = next_counter(counter, MAX_COUNTER)
         temps = [215 + k, 220 - k, -15 + 2 * k, 1000]
         at(base + 400, [(0x280 + DAT7014, struct.pack("<4h", *temps), 0)])
         at(base + 900, [(0x180 + MCB560, bytes([k & 0xFF, 0x01, 0x00, 0x80]), 0)])
         at(base + 1300, [(0x280 + MCB560, struct.pack("<4h", 2500 + 10 * k, 0, -120, 10000), 0)])
         at(base + 1800, [(0x200 + GUARDED, bytes([k & 0x0F]), FLAG_TX)])
-        at(base + 20_000, [(0x700 + MCB560, b"\x05", 0), (0x700 + DAT7014, b"\x05", 0)], 300)
+        beat = bytes([nmt.OPERATIONAL])
+        at(base + 20_000, [(0x700 + MCB560, beat, 0), (0x700 + DAT7014, beat, 0)], 300)
         if k % 2 == 0:  # node guarding of node 10 every 200 ms
             at(base + 50_000, [(0x700 + GUARDED, b"", FLAG_RTR | FLAG_TX)])
-            at(base + 50_600, [(0x700 + GUARDED, bytes([0x05 | toggle << 7]), 0)])
+            reply = nmt.OPERATIONAL | (nmt.TOGGLE_BIT if toggle else 0)
+            at(base + 50_600, [(0x700 + GUARDED, bytes([reply]), 0)])
             toggle ^= 1
         if k == 9:  # MCB-560 emergency: CAN error warning (Chip-EC 0x40000000)
             at(base + 60_000, [(0x080 + MCB560, bytes.fromhex("0081010000000040"), 0)])

@@ -8,16 +8,14 @@ exist for the node's own logic (NMT, heartbeat, PDO parameters, signals).
 from __future__ import annotations
 
 from ..network.profile import DeviceProfile
-
-# CiA 301 abort codes the server raises.
-ABORT_NO_OBJECT = 0x06020000
-ABORT_NO_SUBINDEX = 0x06090011
-ABORT_READ_ONLY = 0x06010002
-ABORT_WRITE_ONLY = 0x06010001
-ABORT_LENGTH = 0x06070010
-ABORT_TOO_LONG = 0x06070012
-ABORT_TOO_SHORT = 0x06070013
-ABORT_VALUE_RANGE = 0x06090030
+from ..protocol.sdo import (
+    ABORT_NO_OBJECT,
+    ABORT_NO_SUBINDEX,
+    ABORT_READ_ONLY,
+    ABORT_TOO_LONG,
+    ABORT_TOO_SHORT,
+    ABORT_WRITE_ONLY,
+)
 
 # CiA 301 integer data types: little-endian, fixed size; read without canopen's codec
 # because the node reads PDO parameters on every input scan.

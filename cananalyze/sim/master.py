@@ -14,6 +14,9 @@ from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
 
 from ..frames import FLAG_ERR, FLAG_RTR, FLAG_TX
+from ..protocol import sdo
+from ..protocol.sdo import block_byte, initiate_byte, segment_byte
+from ..protocol.sync import next_counter
 from .crc import crc16
 from .engine import Simulation
 
@@ -30,7 +33,7 @@ class Until:
 
 @dataclass(frozen=True)
 class Nmt:
-    command: int  # 0x01 start, 0x02 stop, 0x80 pre-operational, 0x81 reset node, 0x82 reset comm
+    command: int  # an NMT command specifier (protocol.nmt: START, STOP, ...)
     node: int = 0  # 0 = all nodes
 
 
@@ -76,7 +79,7 @@ class Do:
 
 @dataclass
 class SdoError:
-    """An SDO request that ended in an abort (code) or a timeout (code 0x05040000)."""
+    """An SDO request that ended in an abort (code) or a timeout (code sdo.ABORT_TIMEOUT)."""
 
     code: int
     timeout: bool = False
@@ -95,7 +98,6 @@ def u32(v: int) -> bytes:
 
 
 Script = Generator[object, object, None]
-SDO_TIMEOUT_CODE = 0x05040000
 
 
 @dataclass
@@ -172,7 +174,7 @@ class Master:
         if token != self._sync_token:
             return
         if counter:
-            self._sync_count = self._sync_count % counter + 1
+            self._sync_count = next_counter(self._sync_count, counter)
             self.send(0x080, bytes([self._sync_count]))
         else:
             self.send(0x080)
@@ -191,16 +193,19 @@ class Master:
         if isinstance(cmd, Read):
             self.client = _Client(cmd, "block_init" if cmd.block else "up_init", token=self._token)
             if cmd.block:  # CRC supported, blksize, no protocol switch
-                self._req(bytes([0xA4]) + mux + bytes([self.blksize, 0, 0, 0]))
+                head = block_byte(sdo.CCS_BLOCK_UPLOAD, sdo.BLOCK_INITIATE, crc=True)
+                self._req(bytes([head]) + mux + bytes([self.blksize, 0, 0, 0]))
             else:
-                self._req(b"\x40" + mux + b"\x00" * 4)
+                self._req(bytes([sdo.INITIATE_UPLOAD_REQUEST]) + mux + b"\x00" * 4)
         else:
             data = cmd.data
             self.client = _Client(cmd, "down_init", data=bytearray(data), token=self._token)
-            if len(data) <= 4:
-                self._req(bytes([0x23 | (4 - len(data)) << 2]) + mux + data.ljust(4, b"\x00"))
+            if len(data) <= sdo.EXPEDITED_SIZE:
+                head = initiate_byte(sdo.CCS_INITIATE_DOWNLOAD, len(data), expedited=True)
+                self._req(bytes([head]) + mux + data.ljust(4, b"\x00"))
             else:
-                self._req(b"\x21" + mux + u32(len(data)))
+                head = initiate_byte(sdo.CCS_INITIATE_DOWNLOAD, len(data))
+                self._req(bytes([head]) + mux + u32(len(data)))
         self._arm_timeout()
 
     def _req(self, data: bytes) -> None:
@@ -214,8 +219,8 @@ class Master:
         def expire() -> None:
             if self.client is c and c.token == token:
                 mux = struct.pack("<HB", c.cmd.index, c.cmd.subindex)
-                self._req(b"\x80" + mux + u32(SDO_TIMEOUT_CODE))
-                self._finish(SdoError(SDO_TIMEOUT_CODE, timeout=True))
+                self._req(bytes([sdo.ABORT]) + mux + u32(sdo.ABORT_TIMEOUT))
+                self._finish(SdoError(sdo.ABORT_TIMEOUT, timeout=True))
 
         self.sim.after(self.sdo_timeout, expire)
 
@@ -230,7 +235,7 @@ class Master:
         if c is None or cob != 0x580 + c.cmd.node or flags & FLAG_RTR:
             return
         data = bytes(data).ljust(8, b"\x00")
-        if data[0] == 0x80:
+        if data[0] == sdo.ABORT:
             self._finish(SdoError(struct.unpack_from("<I", data, 4)[0]))
             return
         if c.state == "block_data":
@@ -239,69 +244,73 @@ class Master:
         scs = data[0] >> 5
         mux = struct.pack("<HB", c.cmd.index, c.cmd.subindex)
         self._arm_timeout()
-        if c.state == "up_init" and scs == 2:
-            if data[0] & 0x02:  # expedited
-                n = 4 - ((data[0] >> 2) & 0x03) if data[0] & 0x01 else 4
-                self._finish(data[4 : 4 + n])
+        if c.state == "up_init" and scs == sdo.SCS_INITIATE_UPLOAD:
+            if data[0] & sdo.EXPEDITED:
+                self._finish(data[4 : 4 + sdo.expedited_size(data[0])])
             else:
                 c.state = "up_seg"
-                self._req(b"\x60" + b"\x00" * 7)
-        elif c.state == "up_seg" and scs == 0:
-            n = 7 - ((data[0] >> 1) & 0x07)
+                self._req(bytes([segment_byte(sdo.CCS_UPLOAD_SEGMENT, 0)]) + b"\x00" * 7)
+        elif c.state == "up_seg" and scs == sdo.SCS_UPLOAD_SEGMENT:
+            n = sdo.SEGMENT_SIZE - ((data[0] >> 1) & 0x07)
             c.data += data[1 : 1 + n]
-            if data[0] & 0x01:
+            if data[0] & sdo.LAST_SEGMENT:
                 self._finish(bytes(c.data))
             else:
                 c.toggle ^= 1
-                self._req(bytes([0x60 | c.toggle << 4]) + b"\x00" * 7)
-        elif c.state == "down_init" and scs == 3:
-            if len(c.data) <= 4:
+                self._req(bytes([segment_byte(sdo.CCS_UPLOAD_SEGMENT, c.toggle)]) + b"\x00" * 7)
+        elif c.state == "down_init" and scs == sdo.SCS_INITIATE_DOWNLOAD:
+            if len(c.data) <= sdo.EXPEDITED_SIZE:
                 self._finish(b"")
             else:
                 c.state = "down_seg"
                 self._down_segment()
-        elif c.state == "down_seg" and scs == 1:
+        elif c.state == "down_seg" and scs == sdo.SCS_DOWNLOAD_SEGMENT:
             if c.pos >= len(c.data):
                 self._finish(b"")
             else:
                 c.toggle ^= 1
                 self._down_segment()
-        elif c.state == "block_init" and scs == 6:
+        elif c.state == "block_init" and scs == sdo.SCS_BLOCK_UPLOAD:
             c.size = struct.unpack_from("<I", data, 4)[0]
             c.state = "block_data"
             c.seq = 0
-            self._req(b"\xa3" + b"\x00" * 7)
-        elif c.state == "block_end" and scs == 6 and data[0] & 0x03 == 1:
+            self._req(bytes([block_byte(sdo.CCS_BLOCK_UPLOAD, sdo.BLOCK_START)]) + b"\x00" * 7)
+        elif (
+            c.state == "block_end"
+            and scs == sdo.SCS_BLOCK_UPLOAD
+            and data[0] & 0x03 == sdo.BLOCK_END
+        ):
             unused = (data[0] >> 2) & 0x07
             if unused:
                 del c.data[-unused:]
             crc = struct.unpack_from("<H", data, 1)[0]
-            self._req(b"\xa1" + b"\x00" * 7)
+            self._req(bytes([block_byte(sdo.CCS_BLOCK_UPLOAD, sdo.BLOCK_END)]) + b"\x00" * 7)
             if crc != crc16(bytes(c.data)):
-                self._finish(SdoError(0x05040004))
+                self._finish(SdoError(sdo.ABORT_CRC))
             else:
                 self._finish(bytes(c.data))
         else:
-            self._req(b"\x80" + mux + u32(0x05040001))
-            self._finish(SdoError(0x05040001))
+            self._req(bytes([sdo.ABORT]) + mux + u32(sdo.ABORT_COMMAND))
+            self._finish(SdoError(sdo.ABORT_COMMAND))
 
     def _down_segment(self) -> None:
         c = self.client
-        chunk = bytes(c.data[c.pos : c.pos + 7])
+        chunk = bytes(c.data[c.pos : c.pos + sdo.SEGMENT_SIZE])
         c.pos += len(chunk)
         last = c.pos >= len(c.data)
-        self._req(
-            bytes([c.toggle << 4 | (7 - len(chunk)) << 1 | int(last)]) + chunk.ljust(7, b"\x00")
-        )
+        unused = sdo.SEGMENT_SIZE - len(chunk)
+        head = segment_byte(sdo.CCS_DOWNLOAD_SEGMENT, c.toggle, unused, last)
+        self._req(bytes([head]) + chunk.ljust(sdo.SEGMENT_SIZE, b"\x00"))
 
     def _block_segment(self, data: bytes) -> None:
         c = self.client
-        seq, last = data[0] & 0x7F, bool(data[0] & 0x80)
+        seq, last = data[0] & sdo.SEQNO_MASK, bool(data[0] & sdo.NO_MORE_SEGMENTS)
         if seq == c.seq + 1:
             c.seq = seq
             c.data += data[1:8]
         if last or seq >= self.blksize:
-            self._req(bytes([0xA2, c.seq, self.blksize]) + b"\x00" * 5)
+            ack = block_byte(sdo.CCS_BLOCK_UPLOAD, sdo.BLOCK_ACK)
+            self._req(bytes([ack, c.seq, self.blksize]) + b"\x00" * 5)
             c.seq = 0
             if last:
                 c.state = "block_end"

@@ -14,13 +14,14 @@ from dataclasses import dataclass, field
 
 from ..frames import FLAG_RTR
 from ..network.profile import DeviceProfile
+from ..protocol import nmt
+from ..protocol.emcy import register_for
+from ..protocol.nmt import BOOTUP, OPERATIONAL, PRE_OPERATIONAL, STOPPED
 from .dictionary import Dictionary
 from .engine import Simulation
 from .sdo_server import SdoServer
 from .waveforms import Waveform, default_signals
 
-# NMT states as the heartbeat reports them (CiA 301 7.2.8.3.2)
-BOOTUP, STOPPED, OPERATIONAL, PRE_OPERATIONAL = 0x00, 0x04, 0x05, 0x7F
 SCAN_PERIOD = 0.010  # how often inputs are sampled for change-driven TPDOs
 SDO_DELAY = 0.0004  # server processing time before a response
 
@@ -95,7 +96,7 @@ class SimNode:
         self._toggle = 0
         self._guard_token += 1
         self.state = PRE_OPERATIONAL
-        self.sim.send(self, 0x700 + self.node_id, b"\x00")
+        self.sim.send(self, 0x700 + self.node_id, bytes([BOOTUP]))
         self._restart_heartbeat()
 
     def _restart_heartbeat(self) -> None:
@@ -136,7 +137,7 @@ class SimNode:
     # --- frames in ---------------------------------------------------------------------
     def on_frame(self, cob: int, data: bytes, flags: int) -> None:
         nid = self.node_id
-        if cob == 0x000 and len(data) >= 2 and data[1] in (0, nid):
+        if cob == 0x000 and len(data) >= 2 and data[1] in (nmt.ALL_NODES, nid):
             self._nmt(data[0])
         elif self.state == BOOTUP:
             return
@@ -153,19 +154,18 @@ class SimNode:
             self._pdo_frame(cob, data, flags)
 
     def _nmt(self, cs: int) -> None:
-        if cs == 0x01:
-            self.set_state(OPERATIONAL)
-        elif cs == 0x02:
-            self.set_state(STOPPED)
-        elif cs == 0x80:
-            self.set_state(PRE_OPERATIONAL)
-        elif cs in (0x81, 0x82):
+        state = nmt.COMMAND_STATE.get(cs)
+        if state == BOOTUP:  # a reset: the node boots again
             self.state = BOOTUP
             self._gen += 1
-            self.sim.after(0.02, lambda: self._boot(communication_only=cs == 0x82))
+            only_comm = cs == nmt.RESET_COMMUNICATION
+            self.sim.after(0.02, lambda: self._boot(communication_only=only_comm))
+        elif state is not None:
+            self.set_state(state)
 
     def _guard_reply(self) -> None:
-        self.sim.send(self, 0x700 + self.node_id, bytes([self.state | self._toggle << 7]))
+        toggle = nmt.TOGGLE_BIT if self._toggle else 0
+        self.sim.send(self, 0x700 + self.node_id, bytes([self.state | toggle]))
         self._toggle ^= 1
         self._arm_life_guarding()
 
@@ -387,7 +387,7 @@ class SimNode:
         if self.state not in (PRE_OPERATIONAL, OPERATIONAL):
             return
         if register is None:
-            register = error_register(error_code)
+            register = register_for(error_code)
         self.od.set(0x1001, 0, register)
         if error_code and self.od.has(0x1003, 1):
             count = min(self.od.get(0x1003, 0) + 1, 254)
@@ -402,17 +402,6 @@ class SimNode:
         data = struct.pack("<HB", error_code, register) + bytes(manufacturer).ljust(5, b"\x00")[:5]
         self.emcy_sent.append((self.sim.now, error_code, register, data[3:]))
         self.sim.send(self, cob, data)
-
-
-# CiA 301 Table 48: error code class -> error register bit (besides bit 0, generic)
-_REGISTER_BITS = {0x2: 0x02, 0x3: 0x04, 0x4: 0x08, 0x8: 0x10, 0xF: 0x80}
-
-
-def error_register(error_code: int) -> int:
-    """The 0x1001 value that goes with an error code (0 for an error reset)."""
-    if error_code == 0:
-        return 0
-    return 0x01 | _REGISTER_BITS.get(error_code >> 12, 0)
 
 
 def generic_life_guard_emcy(node: SimNode) -> None:

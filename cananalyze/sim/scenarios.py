@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from ..frames import FLAG_ERR, FLAG_EXT
+from ..protocol import nmt
 from .master import Do, Guard, Nmt, Read, Send, Sync, Until, Wait, Write, u8, u16, u32
 from .node import SimNode, i7231d_emcy, mcb560_emcy
 from .waveforms import Override
@@ -116,7 +117,7 @@ def steady(nodes: Nodes, duration: float):
     """Boot, heartbeat or guarding, start, SYNC and PDOs: plain traffic."""
     yield Wait(0.4)
     yield from _supervision(nodes)
-    yield Nmt(0x01)
+    yield Nmt(nmt.START)
     yield Sync(SYNC_PERIOD)
     yield from _guarding(nodes)
     yield from _run_outputs(nodes, 1.0, duration)
@@ -132,7 +133,7 @@ def commissioning(nodes: Nodes, duration: float):
     yield from _supervision(nodes)
     yield from _configure(nodes)
     yield Wait(0.05)
-    yield Nmt(0x01)
+    yield Nmt(nmt.START)
     yield Sync(SYNC_PERIOD)
     yield from _guarding(nodes)
     yield from _run_outputs(nodes, 2.0, duration)
@@ -143,7 +144,7 @@ def faults(nodes: Nodes, duration: float):
     yield Wait(0.4)
     yield from _supervision(nodes)
     yield from _configure(nodes)
-    yield Nmt(0x01)
+    yield Nmt(nmt.START)
     yield Sync(SYNC_PERIOD)
     yield from _guarding(nodes)
     mcb = _of(nodes, "mcb560")

@@ -12,19 +12,25 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass, field
 
+from ..protocol import sdo
+from ..protocol.sdo import (
+    ABORT_BLOCK_SIZE,
+    ABORT_COMMAND,
+    ABORT_CRC,
+    ABORT_SEQUENCE,
+    ABORT_TOGGLE,
+    block_byte,
+    initiate_byte,
+    segment_byte,
+)
 from .crc import crc16
 from .dictionary import Dictionary, SdoAbort
 
-ABORT_TOGGLE = 0x05030000
-ABORT_COMMAND = 0x05040001
-ABORT_BLOCK_SIZE = 0x05040002
-ABORT_SEQUENCE = 0x05040003
-ABORT_CRC = 0x05040004
-BLOCK_SIZE = 127  # segments per block the server accepts in block downloads
+BLOCK_SIZE = sdo.MAX_BLKSIZE  # segments per block the server accepts in block downloads
 
 
 def abort_frame(index: int, subindex: int, code: int) -> bytes:
-    return struct.pack("<BHBI", 0x80, index, subindex, code)
+    return struct.pack("<BHBI", sdo.ABORT, index, subindex, code)
 
 
 @dataclass
@@ -55,28 +61,30 @@ class SdoServer:
         req = bytes(req).ljust(8, b"\x00")
         t = self.t
         try:
-            if t is not None and t.kind == "block_down" and not t.done and req[0] != 0x80:
+            if t is not None and t.kind == "block_down" and not t.done and req[0] != sdo.ABORT:
                 return self._block_down_segment(req)
             ccs = req[0] >> 5
-            if ccs == 4:  # abort from the client: drop the transfer silently
+            if ccs == sdo.CS_ABORT:  # abort from the client: drop the transfer silently
                 self.t = None
                 return []
-            if ccs == 1:
+            if ccs == sdo.CCS_INITIATE_DOWNLOAD:
                 return self._init_download(req)
-            if ccs == 0 and t is not None and t.kind == "down":
+            if ccs == sdo.CCS_DOWNLOAD_SEGMENT and t is not None and t.kind == "down":
                 return self._download_segment(req)
-            if ccs == 2:
+            if ccs == sdo.CCS_INITIATE_UPLOAD:
                 return self._init_upload(req)
-            if ccs == 3 and t is not None and t.kind == "up":
+            if ccs == sdo.CCS_UPLOAD_SEGMENT and t is not None and t.kind == "up":
                 return self._upload_segment(req)
-            if ccs == 5:
+            if ccs == sdo.CCS_BLOCK_UPLOAD:
                 return self._block_upload(req)
-            if ccs == 6:
+            if ccs == sdo.CCS_BLOCK_DOWNLOAD:
                 return self._block_download(req)
             raise SdoAbort(ABORT_COMMAND)
         except SdoAbort as exc:
             index, sub = (t.index, t.subindex) if t else struct.unpack_from("<HB", req, 1)
-            if ccs in (1, 2, 5, 6) and (req[0] & 0x03 == 0 or ccs in (1, 2)):
+            initiate = (sdo.CCS_INITIATE_DOWNLOAD, sdo.CCS_INITIATE_UPLOAD)
+            block = (sdo.CCS_BLOCK_UPLOAD, sdo.CCS_BLOCK_DOWNLOAD)
+            if ccs in initiate or (ccs in block and req[0] & 0x03 == sdo.BLOCK_INITIATE):
                 index, sub = struct.unpack_from("<HB", req, 1)
             self.t = None
             return [abort_frame(index, sub, exc.code)]
@@ -91,30 +99,29 @@ class SdoServer:
         index, sub = struct.unpack_from("<HB", req, 1)
         self._forced(index, sub)
         mux = req[1:4]
-        e, s = req[0] & 0x02, req[0] & 0x01
-        if e:
-            n = 4 - ((req[0] >> 2) & 0x03) if s else 4
-            self.od.write(index, sub, req[4 : 4 + n])
+        if req[0] & sdo.EXPEDITED:
+            self.od.write(index, sub, req[4 : 4 + sdo.expedited_size(req[0])])
             self.t = None
         else:
             self.od.check_write(index, sub)
+            sized = req[0] & sdo.SIZE_INDICATED
             self.t = _Transfer(
-                "down", index, sub, size=struct.unpack_from("<I", req, 4)[0] if s else None
+                "down", index, sub, size=struct.unpack_from("<I", req, 4)[0] if sized else None
             )
-        return [b"\x60" + mux + b"\x00" * 4]
+        return [bytes([sdo.INITIATE_DOWNLOAD_RESPONSE]) + mux + b"\x00" * 4]
 
     def _download_segment(self, req: bytes) -> list[bytes]:
         t = self.t
-        toggle = (req[0] >> 4) & 1
+        toggle = int(bool(req[0] & sdo.TOGGLE))
         if toggle != t.toggle:
             raise SdoAbort(ABORT_TOGGLE)
-        n = 7 - ((req[0] >> 1) & 0x07)
+        n = sdo.SEGMENT_SIZE - ((req[0] >> 1) & 0x07)
         t.data += req[1 : 1 + n]
         t.toggle ^= 1
-        if req[0] & 0x01:
+        if req[0] & sdo.LAST_SEGMENT:
             self.t = None
             self.od.write(t.index, t.subindex, bytes(t.data))
-        return [bytes([0x20 | toggle << 4]) + b"\x00" * 7]
+        return [bytes([segment_byte(sdo.SCS_DOWNLOAD_SEGMENT, toggle)]) + b"\x00" * 7]
 
     # --- upload (client reads) -------------------------------------------------------
     def _init_upload(self, req: bytes) -> list[bytes]:
@@ -125,54 +132,57 @@ class SdoServer:
 
     def _upload_start(self, index: int, sub: int, data: bytes) -> list[bytes]:
         mux = struct.pack("<HB", index, sub)
-        if 0 < len(data) <= 4:
+        if 0 < len(data) <= sdo.EXPEDITED_SIZE:
             self.t = None
-            return [bytes([0x43 | (4 - len(data)) << 2]) + mux + data.ljust(4, b"\x00")]
+            head = initiate_byte(sdo.SCS_INITIATE_UPLOAD, len(data), expedited=True)
+            return [bytes([head]) + mux + data.ljust(4, b"\x00")]
         self.t = _Transfer("up", index, sub, data=bytearray(data))
-        return [b"\x41" + mux + struct.pack("<I", len(data))]
+        head = initiate_byte(sdo.SCS_INITIATE_UPLOAD, len(data))
+        return [bytes([head]) + mux + struct.pack("<I", len(data))]
 
     def _upload_segment(self, req: bytes) -> list[bytes]:
         t = self.t
-        toggle = (req[0] >> 4) & 1
+        toggle = int(bool(req[0] & sdo.TOGGLE))
         if toggle != t.toggle:
             raise SdoAbort(ABORT_TOGGLE)
-        chunk = bytes(t.data[t.pos : t.pos + 7])
+        chunk = bytes(t.data[t.pos : t.pos + sdo.SEGMENT_SIZE])
         t.pos += len(chunk)
         t.toggle ^= 1
         last = t.pos >= len(t.data)
         if last:
             self.t = None
-        head = toggle << 4 | (7 - len(chunk)) << 1 | int(last)
-        return [bytes([head]) + chunk.ljust(7, b"\x00")]
+        head = segment_byte(sdo.SCS_UPLOAD_SEGMENT, toggle, sdo.SEGMENT_SIZE - len(chunk), last)
+        return [bytes([head]) + chunk.ljust(sdo.SEGMENT_SIZE, b"\x00")]
 
     # --- block upload ------------------------------------------------------------------
     def _block_upload(self, req: bytes) -> list[bytes]:
         cs = req[0] & 0x03
         t = self.t
-        if cs == 0:  # initiate
+        if cs == sdo.BLOCK_INITIATE:
             index, sub = struct.unpack_from("<HB", req, 1)
             self._forced(index, sub)
             data = self.od.read(index, sub)
             blksize, pst = req[4], req[5]
-            if not 0 < blksize < 128:
+            if not 0 < blksize <= sdo.MAX_BLKSIZE:
                 raise SdoAbort(ABORT_BLOCK_SIZE)
             if pst and len(data) <= pst:  # protocol switch: answer as a normal upload
                 return self._upload_start(index, sub, data)
-            crc = bool(req[0] & 0x04)
+            crc = bool(req[0] & sdo.CRC_SUPPORTED)
             self.t = _Transfer(
                 "block_up", index, sub, data=bytearray(data), crc=crc, blksize=blksize
             )
-            return [bytes([0xC6]) + struct.pack("<HBI", index, sub, len(data))]
-        if cs == 1 and t is not None and t.kind == "block_up_end":  # client confirms the end
+            head = block_byte(sdo.SCS_BLOCK_UPLOAD, sdo.BLOCK_INITIATE, crc=True, sized=True)
+            return [bytes([head]) + struct.pack("<HBI", index, sub, len(data))]
+        if cs == sdo.BLOCK_END and t is not None and t.kind == "block_up_end":  # end confirmed
             self.t = None
             return []
         if t is None or t.kind != "block_up":
             raise SdoAbort(ABORT_COMMAND)
-        if cs == 3:  # start
+        if cs == sdo.BLOCK_START:
             return self._next_block()
-        if cs == 2:  # block acknowledged
+        if cs == sdo.BLOCK_ACK:
             ackseq, blksize = req[1], req[2]
-            if not 0 < blksize < 128:
+            if not 0 < blksize <= sdo.MAX_BLKSIZE:
                 raise SdoAbort(ABORT_BLOCK_SIZE)
             if ackseq > len(t.sent):
                 raise SdoAbort(ABORT_SEQUENCE)
@@ -181,10 +191,12 @@ class SdoServer:
             if ackseq < len(t.sent):
                 t.done = False
             if t.done or t.pos >= len(t.data):
-                last = len(t.data) % 7 or (7 if t.data else 0)
+                size = sdo.SEGMENT_SIZE
+                last = len(t.data) % size or (size if t.data else 0)
                 crc = crc16(bytes(t.data)) if t.crc else 0
                 t.kind = "block_up_end"
-                return [bytes([0xC1 | (7 - last) << 2]) + struct.pack("<H", crc) + b"\x00" * 5]
+                head = block_byte(sdo.SCS_BLOCK_UPLOAD, sdo.BLOCK_END, unused=size - last)
+                return [bytes([head]) + struct.pack("<H", crc) + b"\x00" * 5]
             return self._next_block()
         raise SdoAbort(ABORT_COMMAND)
 
@@ -194,11 +206,12 @@ class SdoServer:
         frames = []
         pos = t.pos
         for seq in range(1, t.blksize + 1):
-            chunk = bytes(t.data[pos : pos + 7])
+            chunk = bytes(t.data[pos : pos + sdo.SEGMENT_SIZE])
             pos += len(chunk)
             last = pos >= len(t.data)
             t.sent.append(chunk)
-            frames.append(bytes([seq | (0x80 if last else 0)]) + chunk.ljust(7, b"\x00"))
+            head = seq | (sdo.NO_MORE_SEGMENTS if last else 0)
+            frames.append(bytes([head]) + chunk.ljust(sdo.SEGMENT_SIZE, b"\x00"))
             if last:
                 t.done = True
                 break
@@ -208,15 +221,16 @@ class SdoServer:
     def _block_download(self, req: bytes) -> list[bytes]:
         cs = req[0] & 0x01
         t = self.t
-        if cs == 0:  # initiate
+        if cs == sdo.BLOCK_INITIATE:
             index, sub = struct.unpack_from("<HB", req, 1)
             self._forced(index, sub)
             self.od.check_write(index, sub)
-            size = struct.unpack_from("<I", req, 4)[0] if req[0] & 0x02 else None
-            self.t = _Transfer(
-                "block_down", index, sub, size=size, crc=bool(req[0] & 0x04), blksize=BLOCK_SIZE
-            )
-            return [bytes([0xA4]) + struct.pack("<HBB", index, sub, BLOCK_SIZE) + b"\x00" * 3]
+            sized = req[0] & sdo.BLOCK_SIZE_INDICATED
+            size = struct.unpack_from("<I", req, 4)[0] if sized else None
+            crc = bool(req[0] & sdo.CRC_SUPPORTED)
+            self.t = _Transfer("block_down", index, sub, size=size, crc=crc, blksize=BLOCK_SIZE)
+            head = block_byte(sdo.SCS_BLOCK_DOWNLOAD, sdo.BLOCK_INITIATE, crc=True)
+            return [bytes([head]) + struct.pack("<HBB", index, sub, BLOCK_SIZE) + b"\x00" * 3]
         if t is None or t.kind != "block_down" or not t.done:
             raise SdoAbort(ABORT_COMMAND)
         unused = (req[0] >> 2) & 0x07  # end: bytes of the last segment without data
@@ -226,18 +240,19 @@ class SdoServer:
             raise SdoAbort(ABORT_CRC)
         self.t = None
         self.od.write(t.index, t.subindex, bytes(t.data))
-        return [b"\xa1" + b"\x00" * 7]
+        return [bytes([block_byte(sdo.SCS_BLOCK_DOWNLOAD, sdo.BLOCK_END)]) + b"\x00" * 7]
 
     def _block_down_segment(self, req: bytes) -> list[bytes]:
         t = self.t
-        seq, last = req[0] & 0x7F, bool(req[0] & 0x80)
+        seq, last = req[0] & sdo.SEQNO_MASK, bool(req[0] & sdo.NO_MORE_SEGMENTS)
         if seq == t.seq + 1:
             t.seq = seq
             t.data += req[1:8]
             if last:
                 t.done = True
         if t.done or seq >= t.blksize:
-            ack = bytes([0xA2, t.seq, BLOCK_SIZE]) + b"\x00" * 5
+            ack = bytes([block_byte(sdo.SCS_BLOCK_DOWNLOAD, sdo.BLOCK_ACK), t.seq, BLOCK_SIZE])
+            ack += b"\x00" * 5
             t.seq = 0
             return [ack]
         return []

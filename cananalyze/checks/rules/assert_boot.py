@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..nmt_state import OPERATIONAL
+from ...protocol.nmt import OPERATIONAL
 from ..rule import Context, Rule
 
 

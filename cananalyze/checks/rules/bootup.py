@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...protocol.nmt import ALL_NODES, RESET_COMMUNICATION, RESET_NODE
 from ...protocol.services import Service
 from ..rule import Context, Rule
 
@@ -53,9 +54,9 @@ class BootupRule(Rule):
         first_row[b.node[rows][::-1]] = rows[::-1]  # last write wins: the first row per node
         for row, kind in events:
             if kind == "nmt":
-                if fb.dlc[row] >= 2 and fb.data[row, 0] in (0x81, 0x82):
+                if fb.dlc[row] >= 2 and fb.data[row, 0] in (RESET_NODE, RESET_COMMUNICATION):
                     target = int(fb.data[row, 1])
-                    for n in range(1, 128) if target == 0 else [target]:
+                    for n in range(1, 128) if target == ALL_NODES else [target]:
                         self.last_reset[n] = float(fb.t[row])
                 continue
             node = int(b.node[row])

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...protocol.emcy import MIN_BYTES, SIZE, error_text, register_text
 from ...protocol.services import Service
-from ...protocol.tables import emcy_class
 from ..rule import Context, Rule, ms
 
 
@@ -70,8 +70,8 @@ class EmcyRule(Rule):
                 & (inhibit != 0)
                 & ((t - prev) < inhibit * 1e-4 * (1 - self.tolerance))
             )
-        short = dlc < 8
-        raised = (dlc >= 3) & (code != 0)
+        short = dlc < SIZE
+        raised = (dlc >= MIN_BYTES) & (code != 0)
         if self.allow:
             raised &= ~np.isin(code, np.fromiter(self.allow, np.int64))
         last_row = np.full(uniq.size, -1, np.int64)
@@ -85,7 +85,7 @@ class EmcyRule(Rule):
         """Errors active per node after this batch: those raised since the last reset."""
         for j in seen.tolist():
             n = int(uniq[j])
-            at = np.flatnonzero((node == n) & (dlc >= 3))
+            at = np.flatnonzero((node == n) & (dlc >= MIN_BYTES))
             if at.size == 0:
                 continue
             act = self.active.setdefault(n, {})
@@ -159,9 +159,9 @@ class EmcyRule(Rule):
                 tk,
                 n,
                 0x80 + n,
-                f"EMCY with {d} data bytes, CiA 301 needs 8",
+                f"EMCY with {d} data bytes, CiA 301 needs {SIZE}",
                 d,
-                8,
+                SIZE,
                 row=row,
                 severity="error",
                 why="A short EMCY cannot be decoded by a standard master; check the node's firmware.",
@@ -172,7 +172,7 @@ class EmcyRule(Rule):
                 tk,
                 n,
                 0x80 + n,
-                f"EMCY 0x{c:04X} ({emcy_class(c)}), error register 0x{r:02X}",
+                f"EMCY {error_text(c)}; {register_text(r)}",
                 f"0x{c:04X}",
                 "no EMCY"
                 if not self.allow
@@ -189,7 +189,7 @@ class EmcyRule(Rule):
                     t,
                     node,
                     0x80 + node,
-                    f"EMCY 0x{code:04X} ({emcy_class(code)}) raised at {ctx.rel(t)} "
+                    f"EMCY {error_text(code)} raised at {ctx.rel(t)} "
                     "still active at the end of the log",
                     f"0x{code:04X}",
                     "cleared",

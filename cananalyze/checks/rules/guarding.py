@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...protocol.nmt import toggle_of
 from ...protocol.services import Service
 from ..rule import Context, Rule, ms
 
@@ -50,7 +51,7 @@ class GuardingRule(Rule):
                 self._request(ctx, node, t, row)
             else:
                 self.pending.pop(node, None)
-                tog = int(fb.data[row, 0]) >> 7
+                tog = toggle_of(int(fb.data[row, 0]))
                 # a log that starts mid-session gives no reference for the first reply
                 expect = 1 - self.toggle[node] if node in self.toggle else tog
                 if tog != expect:

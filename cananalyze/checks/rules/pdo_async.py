@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..nmt_state import OPERATIONAL
+from ...protocol.nmt import OPERATIONAL
 from ..rule import Context, Rule, ms
 
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...protocol.nmt import OPERATIONAL, state_name
 from ...protocol.services import Service
-from ..nmt_state import OPERATIONAL, state_name
 from ..rule import Context, Rule
 
 
@@ -57,6 +57,6 @@ class PdoStateRule(Rule):
                     cob,
                     f"PDO while node is {state_name(int(st[i]))}",
                     state_name(int(st[i])),
-                    "operational",
+                    state_name(OPERATIONAL),
                     row=rows[i],
                 )

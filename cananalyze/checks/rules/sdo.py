@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...protocol.sdo import object_text
 from ..rule import Context, Rule
 
 
@@ -53,7 +54,8 @@ class SdoRule(Rule):
             slow = self.max_latency is not None and lat is not None and lat > self.max_latency
             if result == "ok" and not slow:
                 continue  # the usual case: nothing to format
-            what = f"{rec.get('direction')} {rec.get('index', 0):04X}:{rec.get('subindex', 0):02X}"
+            obj = object_text(rec.get("index", 0), rec.get("subindex", 0))
+            what = f"{rec.get('direction')} {obj}"
             if result and result != "ok":
                 detail = rec.get("abort_text") or rec.get("detail") or ""
                 code = rec.get("abort_code")

@@ -18,7 +18,7 @@ import json
 import numpy as np
 
 from ...columns import bytecols
-from ...protocol.fields import sdo_fields
+from ...protocol.sdo import fields as sdo_fields
 from ...sdo.fastpath import pair_outputs
 from ..text.sdo import pair_text
 

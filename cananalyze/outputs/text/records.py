@@ -3,13 +3,15 @@ the live dashboard show it under the frame that completed it."""
 
 from __future__ import annotations
 
+from ...protocol.sdo import object_text
+
 
 def format_record(rec: dict) -> str:
     """One line for a record of kind sdo / finding / event."""
     kind = rec.get("kind")
     if kind == "sdo":
         what = "read" if rec.get("direction") == "upload" else "write"
-        obj = f"0x{rec['index']:04X}:{rec['subindex']:02X}" if rec.get("index") is not None else "?"
+        obj = object_text(rec["index"], rec["subindex"]) if rec.get("index") is not None else "?"
         name = f" {rec['name']}" if rec.get("name") else ""
         proto = f" {rec['protocol']}" if rec.get("protocol") else ""  # unknown when aborted at once
         line = f"node {rec.get('node')} SDO {what} {obj}{name}{proto} -> {rec.get('result')}"

@@ -18,15 +18,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...columns import bytecols
+from ...protocol.sdo import SIZE_INDICATED, object_columns, object_text
 from ...records import DecodedBatch
 from ...sdo.fastpath import pair_outputs, py_round
 from ...sdo.lazynotes import LazyNotes
 from .records import format_record
 
-_REQ_ROLE = bytecols.padded_table([b"SDO upload request 0x", b"SDO expedited download request 0x"])
-_RESP_ROLE = bytecols.padded_table(
-    [b"SDO expedited upload response 0x", b"SDO download response 0x"]
-)
+_REQ_ROLE = bytecols.padded_table([b"SDO upload request ", b"SDO expedited download request "])
+_RESP_ROLE = bytecols.padded_table([b"SDO expedited upload response ", b"SDO download response "])
 _EQUALS = bytecols.padded_table([b"", b" = "])
 _BYTES = bytecols.padded_table([b"", b", ", b" bytes"])
 _VALUE = bytecols.padded_table([b"", b"data "])
@@ -69,18 +68,14 @@ def pair_text(fb, fields, fast, end: bytes) -> PairText:
     m = len(fields)
     req, resp = fast.req_row, fast.row
     upload = a["upload"]
-    where = [
-        _hex4(a["index"]),
-        bytecols.repeat(b":", m),
-        bytecols.decimal(a["subindex"]),
-    ]  # " 0x1018:1" after the 0x
+    where = [object_columns(a["index"], a["subindex"])]  # "0x1018:01"
     endm = bytecols.repeat(end, m)
-    # request: "upload request 0x..:s" / "expedited download request 0x..:s[, n bytes]"
-    sized = ~upload & ((fb.data[req, 0] & 1) == 1)
+    # request: "upload request 0x..:ss" / "expedited download request 0x..:ss[, n bytes]"
+    sized = ~upload & ((fb.data[req, 0] & SIZE_INDICATED) != 0)
     size_digit = np.where(sized, 48 + a["size"] % 10, bytecols.PAD).astype(np.uint8)[:, None]
     req_parts = [_REQ_ROLE[(~upload).astype(np.intp)], *where]
     req_parts += [_BYTES[sized.astype(np.intp)], size_digit, _BYTES[2 * sized], endm]
-    # answer: "expedited upload response 0x..:s = <hex>" / "download response 0x..:s"
+    # answer: "expedited upload response 0x..:ss = <hex>" / "download response 0x..:ss"
     shown = np.where(upload, a["data_len"], 0)
     resp_parts = [_RESP_ROLE[(~upload).astype(np.intp)], *where]
     resp_parts += [_EQUALS[upload.astype(np.intp)], bytecols.hex_bytes(a["raw"], shown), endm]
@@ -130,8 +125,9 @@ def _columnar_lines(fields, tenths: np.ndarray, m: int) -> list[bytes]:
     for i in first.tolist():
         name = labels[int(code[i])]
         what = "read" if upload[i] else "write"
+        obj = object_text(int(index[i]), int(sub[i]))
         heads.append(
-            f"    └─ node {int(node[i])} SDO {what} 0x{int(index[i]):04X}:{int(sub[i]):02X}"
+            f"    └─ node {int(node[i])} SDO {what} {obj}"
             f"{' ' + name if name else ''} expedited -> ok: ".encode()
         )
     head = bytecols.padded_table(heads)[inv.reshape(-1)]
@@ -161,12 +157,6 @@ def _columnar_lines(fields, tenths: np.ndarray, m: int) -> list[bytes]:
     ]
     parts += [bytecols.repeat(b" ms\n", m)]
     return bytecols.row_bytes(*bytecols.compact(parts, m, with_ends=True))
-
-
-def _hex4(values: np.ndarray) -> np.ndarray:
-    """f"{v:04X}" of each value below 0x10000, as an (n, 4) matrix."""
-    v = np.asarray(values, np.int64)
-    return np.stack([bytecols.HEX_UPPER[(v >> s) & 15] for s in (12, 8, 4, 0)], axis=1)
 
 
 def _matrix(parts: list[np.ndarray], m: int) -> np.ndarray:

@@ -20,7 +20,7 @@ from typing import TextIO
 
 import numpy as np
 
-from ...columns.bytecols import HEX_LOWER as _HEXLOWER
+from ...columns import bytecols as _bytecols
 from ...columns.bytecols import HEX_UPPER as _HEXCHARS
 from ...columns.bytecols import PAD as _PAD
 from ...columns.bytecols import compact as _compact
@@ -28,9 +28,9 @@ from ...columns.bytecols import digits as _digits
 from ...columns.bytecols import padded_table as _padded_table
 from ...columns.numtext import g6_text, value_text
 from ...frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
+from ...protocol import emcy as emcy_text
 from ...protocol.fields import annotation, frame_fields
 from ...protocol.services import SERVICE_NAMES, Service
-from ...protocol.tables import emcy_class, error_register_names
 from ...records import DecodedBatch
 from .. import colour
 from ..background import ByteSink
@@ -310,7 +310,7 @@ class TextWriter(Sink):
                     plans.append(plan)
                     done[plan[0]] = True
             ann += _format_plans(plans)
-        emcy = np.flatnonzero(~done & ~noted & ~with_records & (svc == Service.EMCY) & (dlc >= 3))
+        emcy = np.flatnonzero(~done & ~noted & ~with_records & (svc == Service.EMCY))
         if emcy.size:
             ann.append(_emcy_text(data[emcy], dlc[emcy], emcy, endb))
             done[emcy] = True
@@ -480,49 +480,9 @@ def _ragged(rows: np.ndarray, texts: list[bytes]) -> tuple[np.ndarray, np.ndarra
 def _emcy_text(
     data: np.ndarray, dlc: np.ndarray, at: np.ndarray, endb: bytes
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The annotation of EMCY rows without notes, as `annotation` writes it, per column.
-
-    The error class is looked up once per distinct code, the register bit names
-    once per distinct register value; an error reset (code 0) is `annotation`'s
-    own text. Vendor bytes are `bytes.hex()`, "-" when there are none.
-    """
-    m = at.size
-    code = data[:, 0].astype(np.int64) | data[:, 1].astype(np.int64) << 8
-    reg = data[:, 2]
-    codes, code_inv = np.unique(code, return_inverse=True)
-    classes = [f" {emcy_class(c)}; register 0x".encode() for c in codes.tolist()]
-    regs, reg_inv = np.unique(reg, return_inverse=True)
-    reg_names = [
-        f"{r:02X} [{','.join(error_register_names(r)) or 'none'}]; mfr ".encode()
-        for r in regs.tolist()
-    ]
-    code_hex = np.empty((m, 4), np.uint8)
-    for j in range(4):
-        code_hex[:, j] = _HEXCHARS[(code >> (4 * (3 - j))) & 0xF]
-    mfr = np.zeros((m, 10), np.uint8)
-    n_mfr = np.minimum(dlc.astype(np.int64), 8) - 3
-    for j in range(5):
-        there = j < n_mfr
-        mfr[:, 2 * j] = np.where(there, _HEXLOWER[data[:, 3 + j] >> 4], _PAD)
-        mfr[:, 2 * j + 1] = np.where(there, _HEXLOWER[data[:, 3 + j] & 0xF], _PAD)
-    mfr[:, 0] = np.where(n_mfr == 0, ord("-"), mfr[:, 0])
-    block = np.concatenate(
-        [
-            np.broadcast_to(np.frombuffer(b"EMCY 0x", np.uint8), (m, 7)),
-            code_hex,
-            _padded_table(classes)[code_inv.reshape(-1)],
-            _padded_table(reg_names)[reg_inv.reshape(-1)],
-            mfr,
-            np.broadcast_to(np.frombuffer(endb, np.uint8), (m, len(endb))),
-        ],
-        axis=1,
-    )
-    reset = np.flatnonzero(code == 0)
-    if reset.size:
-        text = annotation(Service.EMCY, -1, 0, frame_fields(Service.EMCY, bytes(3))).encode() + endb
-        block[reset] = _PAD
-        block[reset, : len(text)] = np.frombuffer(text, np.uint8)
-    return at, block
+    """The annotation of EMCY rows without notes (`protocol.emcy.text_columns`) and the end."""
+    parts = [*emcy_text.text_columns(data, dlc), _bytecols.repeat(endb, at.size)]
+    return at, np.concatenate([np.broadcast_to(p, (at.size, p.shape[1])) for p in parts], axis=1)
 
 
 def _signal_text(

@@ -1,9 +1,10 @@
-"""Columnar PDO decoding: one numpy column per mapped signal, never a loop over frames.
+"""PDO (CiA 301 7.2.2): columnar decoding, one numpy column per mapped signal, and the text.
 
-All rows given to `decode_pdo` share one COB-ID and one mapping (the caller splits a
-batch where the mapping changes). The first 8 data bytes of each row are read as one
-little-endian 64-bit word; every mapped object is then a shift and a mask of that
-word, which is how CiA 301 packs PDOs (bit-level, LSB first, no alignment).
+Never a loop over frames: all rows given to `decode_pdo` share one COB-ID and one
+mapping (the caller splits a batch where the mapping changes). The first 8 data
+bytes of each row are read as one little-endian 64-bit word; every mapped object
+is then a shift and a mask of that word, which is how CiA 301 packs PDOs
+(bit-level, LSB first, no alignment).
 """
 
 from __future__ import annotations
@@ -120,3 +121,21 @@ def decode_pdo(
             k += 1
         out.values[name] = col
     return out
+
+
+def annotation(tpdo: bool, number: int, rtr: bool, fields: dict) -> str:
+    """'TPDO2  ch1=21.5 degC ch3=20.9 degC': a PDO frame, its decoded signals, its problem."""
+    text = f"{'TPDO' if tpdo else 'RPDO'}{number}" + (" remote request" if rtr else "")
+    signals = fields.get("signals")
+    if signals:
+        units = fields.get("units") or {}
+        text += "  " + " ".join(_signal_text(k, v, units.get(k)) for k, v in signals.items())
+    if fields.get("pdo_problem"):
+        text += f"  [{fields['pdo_problem']}]"
+    return text
+
+
+def _signal_text(name: str, value, unit: str | None) -> str:
+    if isinstance(value, float):
+        value = f"{value:.6g}"
+    return f"{name}={value}" + (f" {unit}" if unit else "")

@@ -1,0 +1,199 @@
+"""EMCY (CiA 301 7.2.7): error-code classes, error-register bits, the frame's fields and text.
+
+The one place an emergency is put in words. `text` (one frame) and
+`text_columns` (many frames as byte columns, for the text output and the event
+log) build the same line from the same pieces (`error_text`, `register_text`);
+the checks' findings and the dashboard use those pieces too.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..columns import bytecols
+
+# CiA 301 table 21: emergency error code classes, matched on the high byte
+# (or high nibble where only the nibble is defined). Longest match wins.
+ERROR_CLASSES: dict[int, str] = {
+    0x0000: "Error reset or no error",
+    0x1000: "Generic error",
+    0x2000: "Current",
+    0x2100: "Current, CANopen device input side",
+    0x2200: "Current inside the CANopen device",
+    0x2300: "Current, CANopen device output side",
+    0x3000: "Voltage",
+    0x3100: "Mains voltage",
+    0x3200: "Voltage inside the CANopen device",
+    0x3300: "Output voltage",
+    0x4000: "Temperature",
+    0x4100: "Ambient temperature",
+    0x4200: "Device temperature",
+    0x5000: "CANopen device hardware",
+    0x6000: "CANopen device software",
+    0x6100: "Internal software",
+    0x6200: "User software",
+    0x6300: "Data set",
+    0x7000: "Additional modules",
+    0x8000: "Monitoring",
+    0x8100: "Communication",
+    0x8110: "CAN overrun (objects lost)",
+    0x8120: "CAN in error passive mode",
+    0x8130: "Life guard error or heartbeat error",
+    0x8140: "Recovered from bus off",
+    0x8150: "CAN-ID collision",
+    0x8200: "Protocol error",
+    0x8210: "PDO not processed due to length error",
+    0x8220: "PDO length exceeded",
+    0x8230: "DAM MPDO not processed, destination object not available",
+    0x8240: "Unexpected SYNC data length",
+    0x8250: "RPDO timeout",
+    0x9000: "External error",
+    0xF000: "Additional functions",
+    0xFF00: "Device specific",
+}
+_MASKS = (0xFFF0, 0xFF00, 0xF000)  # after the exact code, most specific first
+UNKNOWN_CLASS = "Unknown"
+
+# CiA 301 object 0x1001 error register bits.
+ERROR_REGISTER_BITS: dict[int, str] = {
+    0: "generic",
+    1: "current",
+    2: "voltage",
+    3: "temperature",
+    4: "communication",
+    5: "device profile specific",
+    6: "reserved",
+    7: "manufacturer specific",
+}
+
+SIZE = 8  # CiA 301: error code, error register, 5 manufacturer bytes
+MIN_BYTES = 3  # what can be read of a shorter one: the error code and register
+MALFORMED = "malformed: fewer than 3 bytes"
+RESET_TEXT = "EMCY error reset / no error"
+_ERROR = "0x{:04X} {}"  # an error code and its class
+_REGISTER = "register 0x{:02X} [{}]"
+
+
+def error_class(code: int) -> str:
+    """Most specific CiA 301 name for an emergency error code."""
+    if code in ERROR_CLASSES:
+        return ERROR_CLASSES[code]
+    for mask in _MASKS:
+        name = ERROR_CLASSES.get(code & mask)
+        if name is not None:
+            return name
+    return UNKNOWN_CLASS
+
+
+def error_classes(codes: np.ndarray) -> list[str]:
+    """`error_class` of each code, by a searchsorted per mask instead of dict probes per code.
+
+    Masks from the least to the most specific, each hit overwriting: the most
+    specific name wins, as `error_class`'s first hit does.
+    """
+    keys = np.array(sorted(ERROR_CLASSES), np.int64)
+    names = [ERROR_CLASSES[k] for k in keys.tolist()] + [UNKNOWN_CLASS]
+    pick = np.full(len(codes), len(keys), np.intp)
+    for mask in (*reversed(_MASKS), 0xFFFF):
+        masked = codes & mask
+        at = np.minimum(np.searchsorted(keys, masked), len(keys) - 1)
+        hit = keys[at] == masked
+        pick[hit] = at[hit]
+    return list(map(names.__getitem__, pick.tolist()))
+
+
+# error code class (high nibble) -> the error register bit it sets besides bit 0 (generic)
+_CLASS_REGISTER_BIT = {0x2: 0x02, 0x3: 0x04, 0x4: 0x08, 0x8: 0x10, 0xF: 0x80}
+
+
+def register_for(code: int) -> int:
+    """The 0x1001 value that goes with an error code (0 for an error reset)."""
+    if code == 0:
+        return 0
+    return 0x01 | _CLASS_REGISTER_BIT.get(code >> 12, 0)
+
+
+def register_names(register: int) -> list[str]:
+    return [name for bit, name in ERROR_REGISTER_BITS.items() if register >> bit & 1]
+
+
+def error_text(code: int) -> str:
+    """'0x8130 Life guard error or heartbeat error': an error code in words."""
+    return _ERROR.format(code, error_class(code))
+
+
+def register_text(register: int) -> str:
+    """'register 0x11 [generic,communication]'."""
+    return _REGISTER.format(register, ",".join(register_names(register)) or "none")
+
+
+def fields(data: bytes) -> dict:
+    """JSONL fields of an EMCY frame; `problem` (and nulls) when it is too short."""
+    if len(data) < MIN_BYTES:
+        return {
+            "error_code": None,
+            "error_class": None,
+            "error_register": None,
+            "manufacturer": data.hex(),
+            "reset": False,
+            "problem": MALFORMED,
+        }
+    code = data[0] | data[1] << 8
+    return {
+        "error_code": code,
+        "error_class": error_class(code),
+        "error_register": data[2],
+        "error_register_bits": register_names(data[2]),
+        "manufacturer": data[3:8].hex(),
+        "reset": code == 0,
+    }
+
+
+def text(code: int, register: int, manufacturer: str) -> str:
+    """The line of one EMCY (code, register, manufacturer bytes as hex)."""
+    if code == 0:
+        return RESET_TEXT
+    return f"EMCY {error_text(code)}; {register_text(register)}; mfr {manufacturer or '-'}"
+
+
+def annotation(fields: dict) -> str:
+    """`text` of a frame's fields, and the profile's reading of the vendor bytes if any."""
+    if fields.get("error_code") is None:
+        return f"EMCY ({fields.get('problem', MALFORMED)})"
+    line = text(fields["error_code"], fields["error_register"], fields["manufacturer"])
+    decoded = fields.get("manufacturer_decoded")
+    if decoded and not fields["reset"]:
+        words = decoded.get("meaning") or ", ".join(decoded.get("flags") or []) or str(decoded)
+        line += f" ({words})"
+    return line
+
+
+def text_columns(data: np.ndarray, dlc: np.ndarray) -> list[np.ndarray]:
+    """`text` of m EMCY frames as column blocks (NUL-padded uint8 matrices to put side
+    by side and compact); short frames get `annotation`'s malformed text.
+
+    data: (m, 8) uint8, dlc: m byte counts. The class is looked up once per distinct
+    code, the register names once per distinct value, the vendor bytes are hex by numpy.
+    """
+    dlc = np.asarray(dlc).astype(np.int64)
+    code = data[:, 0].astype(np.int64) | data[:, 1].astype(np.int64) << 8
+    codes, code_at = np.unique(code, return_inverse=True)
+    heads = [
+        f"EMCY {_ERROR.format(c, cls)}; ".encode()
+        for c, cls in zip(codes.tolist(), error_classes(codes), strict=True)
+    ]
+    regs, reg_at = np.unique(data[:, 2], return_inverse=True)
+    registers = [f"{register_text(r)}; mfr ".encode() for r in regs.tolist()]
+    head = bytecols.padded_table(heads)[code_at.reshape(-1)]
+    register = bytecols.padded_table(registers)[reg_at.reshape(-1)]
+    shown = np.clip(np.minimum(dlc, 8) - MIN_BYTES, 0, 5)
+    mfr = bytecols.hex_bytes(np.ascontiguousarray(data[:, MIN_BYTES:8]), shown)
+    mfr[:, 0] = np.where(shown == 0, ord("-"), mfr[:, 0])
+    # an error reset or a short frame: its own text, the other blocks blank
+    other = np.where(dlc < MIN_BYTES, 2, np.where(code == 0, 1, 0))
+    plain = ["", RESET_TEXT, annotation(fields(b""))]
+    special = bytecols.padded_table([t.encode() for t in plain])[other]
+    blank = other != 0
+    for block in (head, register, mfr):
+        block[blank] = bytecols.PAD
+    return [head, register, mfr, special]

@@ -1,0 +1,44 @@
+"""LSS (CiA 305): command specifiers (byte 0 on COB-IDs 0x7E5 / 0x7E4) and their names."""
+
+from __future__ import annotations
+
+COMMANDS: dict[int, str] = {
+    0x04: "switch state global",
+    0x11: "configure node-ID",
+    0x13: "configure bit timing",
+    0x15: "activate bit timing",
+    0x17: "store configuration",
+    0x40: "switch state selective: vendor-ID",
+    0x41: "switch state selective: product-code",
+    0x42: "switch state selective: revision-number",
+    0x43: "switch state selective: serial-number",
+    0x44: "switch state selective: response",
+    0x46: "identify remote slave: vendor-ID",
+    0x47: "identify remote slave: product-code",
+    0x48: "identify remote slave: revision-number low",
+    0x49: "identify remote slave: revision-number high",
+    0x4A: "identify remote slave: serial-number low",
+    0x4B: "identify remote slave: serial-number high",
+    0x4C: "identify non-configured remote slave",
+    0x4F: "identify slave",
+    0x50: "identify non-configured slave",
+    0x51: "fastscan",
+    0x5A: "inquire vendor-ID",
+    0x5B: "inquire product-code",
+    0x5C: "inquire revision-number",
+    0x5D: "inquire serial-number",
+    0x5E: "inquire node-ID",
+}
+
+
+def command_name(cs: int) -> str:
+    return COMMANDS.get(cs, f"unknown 0x{cs:02X}")
+
+
+def fields(data: bytes) -> dict:
+    """JSONL fields of an LSS frame: `command` (null when empty)."""
+    return {"command": command_name(data[0]) if data else None}
+
+
+def text(fields: dict, master: bool) -> str:
+    return f"LSS {'master' if master else 'slave'} {fields.get('command')}"
