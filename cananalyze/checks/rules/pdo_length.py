@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import pdo_length_bytes
 from ..rule import Context, Rule
 
 
@@ -26,7 +25,7 @@ class PdoLengthRule(Rule):
             if cfg is None:
                 continue
             node, pdo = cfg
-            want = pdo_length_bytes(pdo)
+            want = pdo.expected_bytes
             if want is None:
                 continue
             self.subjects.add(node)
