@@ -4,11 +4,15 @@ Rules ask a ConfigSource, never a file or a profile directly. Every method takes
 time at which the value is wanted: the answer is the one in force at that moment
 (docs/network-file.md, "Precedence"). None means nothing is known (a rule then skips
 what it cannot judge); 0 where CiA 301 says 0 disables the function means off.
+`changes` says when answers may change, so a rule can ask once per stretch of frames
+under one configuration instead of once per frame.
 """
 
 from __future__ import annotations
 
 from typing import Protocol
+
+import numpy as np
 
 from ..network.pdo_map import PdoConfig
 
@@ -37,3 +41,10 @@ class ConfigSource(Protocol):
 
     def known_cob_ids(self) -> set[int]:
         """Identifiers the network file declares as expected (non-CANopen traffic)."""
+
+    def changes(self, node: int | None, first: int, last: int) -> np.ndarray:
+        """Times (ascending) at which an answer about objects first..last of `node`
+        (None: of any node) may change: a value the log showed, a reset."""
+
+    def pdo_changes(self) -> np.ndarray:
+        """Times (ascending) at which any PDO's parameters or COB-ID changed."""

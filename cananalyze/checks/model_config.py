@@ -14,6 +14,8 @@ many EDS files default 0x1017 to 0 while the device is configured otherwise.
 
 from __future__ import annotations
 
+import numpy as np
+
 from ..network.model import NetworkModel
 from ..network.pdo_map import PdoConfig
 
@@ -21,6 +23,7 @@ from ..network.pdo_map import PdoConfig
 class ModelConfig:
     def __init__(self, model: NetworkModel) -> None:
         self.model = model
+        self._changes: dict[tuple, tuple[int, np.ndarray]] = {}
 
     def _value(self, node: int, index: int, sub: int, t: float) -> int | None:
         k = self.model.known(node, index, sub, t)
@@ -60,7 +63,7 @@ class ModelConfig:
         return self._bus(0x1007, t)
 
     def pdo_params(self, cob_id: int, t: float) -> tuple[int, PdoConfig] | None:
-        b = self.model.binding(cob_id)  # the bindings after the batch (rules ask per batch)
+        b = self.model.binding_at(cob_id, t)
         return None if b is None else (b.node, b.config)
 
     def emcy_inhibit_100us(self, node: int, t: float) -> float | None:
@@ -69,3 +72,19 @@ class ModelConfig:
 
     def known_cob_ids(self) -> set[int]:
         return self.model.spec.known_cob_ids
+
+    def changes(self, node: int | None, first: int, last: int) -> np.ndarray:
+        points = self.model.points
+        key = (node, first, last)
+        cached = self._changes.get(key)
+        if cached is None or cached[0] != len(points):  # points only grow: length says stale
+            times = [
+                t
+                for t, n, index in points
+                if (node is None or n == node) and (index == -1 or first <= index <= last)
+            ]
+            cached = self._changes[key] = (len(points), np.sort(np.asarray(times, np.float64)))
+        return cached[1]
+
+    def pdo_changes(self) -> np.ndarray:
+        return np.asarray(self.model.binding_times[1:], np.float64)
