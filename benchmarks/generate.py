@@ -50,13 +50,15 @@ def generate(n: int, seed: int = 1) -> FrameBatch:
     dlc[kinds == 0x080] = 1
     dlc[kinds == 0x380] = 6
     dlc[kinds == 0x300] = 2
-    # SDO: expedited upload request; the next frame becomes its response
+    # SDO: expedited upload request of a process value (0x6000:01, read input 8-bit: random
+    # data is a plausible answer; a communication object's read-back would configure the
+    # network model); the next frame becomes its response
     sdo = np.flatnonzero(kinds == 0x600)
     sdo = sdo[sdo + 1 < n]
-    b.data[sdo] = [0x40, 0x00, 0x18, 0x01, 0, 0, 0, 0]
+    b.data[sdo] = [0x40, 0x00, 0x60, 0x01, 0, 0, 0, 0]
     resp = sdo + 1
     b.can_id[resp] = (0x580 + nodes[sdo]).astype(np.uint32)
-    b.data[resp, :4] = [0x43, 0x00, 0x18, 0x01]
+    b.data[resp, :4] = [0x43, 0x00, 0x60, 0x01]
     dlc[resp] = 8
     b.data[emcy, 2] = 0x01
     b.dlc[:] = dlc

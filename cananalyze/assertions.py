@@ -24,14 +24,21 @@ Source = str | Path | FrameBatch | Iterable[DecodedBatch]
 def run_rules(source: Source, rules: list[Rule], config=None, **options) -> list[Finding]:
     """Run `rules` over a log path, a FrameBatch, or already decoded batches; return the findings.
 
-    `options`: `load()`'s keyword arguments (network, device, eds, ...) for a path or FrameBatch.
+    `options`: `load()`'s keyword arguments (network, device, eds, rules, ...) for a path
+    or FrameBatch: its rules are judged by the network model the pipeline builds from
+    them. `config` is for decoded batches (a Capture's `config`).
     """
     if isinstance(source, (str, Path, FrameBatch)):
         from .capture import load_options
+        from .errors import UsageError
         from .pipeline import build_decoder, open_source, run
 
+        if config is not None:
+            raise UsageError(
+                "config= is for decoded batches; for a log give network=, device=, eds= or rules="
+            )
         opts = load_options(**options)
-        checker = Checker(rules, config)
+        checker = Checker(rules)
         run(open_source(source, opts), build_decoder(opts, checker), [], opts)
         return checker.findings
     from .pipeline import Decoder
@@ -134,8 +141,13 @@ def assert_operational_after_boot(
 def assert_clean(
     source: Source, rules_file: str | Path | None = None, network_file: str | Path | None = None
 ) -> None:
-    """Every default rule (or the rules file's) passes, decoded with the network file."""
+    """Every default rule (and the rules file's) passes, judged by the network file and
+    the rules file's `network:` section."""
     from .checks.build import build_checker
 
     checker = build_checker(rules_file)
-    _fail(run_rules(source, checker.rules, checker.config, network=network_file), "all rules pass")
+    if isinstance(source, (str, Path, FrameBatch)):
+        found = run_rules(source, checker.rules, network=network_file, rules=rules_file)
+    else:
+        found = run_rules(source, checker.rules, checker.config)
+    _fail(found, "all rules pass")

@@ -128,12 +128,22 @@ class Decoder:
 
 
 def network_spec(opts: Options) -> NetworkSpec:
-    """The user's declarations: the network file, the rules file's `network:`, then
-    --device/--eds on top (the command line names a node's device last, so it wins)."""
-    from .network.netfile import load_network
-    from .network.spec import NetworkSpec
+    """The user's declarations, later sources winning key by key: the network file, then
+    the rules file's `network:` section (the more specific document: one test's
+    expectations of one installation), then --device/--eds (a node's device named last,
+    on the command line). docs/network-file.md, "Combining sources"."""
+    from .network.netfile import combine, read_network_file
 
-    spec = load_network(opts.network) if opts.network else NetworkSpec()
+    sources = []
+    if opts.network:
+        sources.append(read_network_file(opts.network))
+    if opts.rules:
+        from .checks.rulesfile import rules_network
+
+        section = rules_network(opts.rules)
+        if section is not None:
+            sources.append(section)
+    spec = combine(*sources, source=str(opts.network) if opts.network else None)
     if opts.devices or opts.eds:
         from .network.profile import load_builtin, load_eds
 
@@ -174,7 +184,7 @@ def build_decoder(opts: Options | None = None, checker: Checker | None = None) -
     if checker is not None:
         from .checks.model_config import ModelConfig
 
-        checker.config = ModelConfig(model, checker.config)
+        checker.config = ModelConfig(model)  # the model holds every declaration and the log
         decoder.processors.append(checker)
         decoder.checker = checker
     return decoder

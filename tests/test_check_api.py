@@ -137,29 +137,33 @@ def _hb_findings(cap):
     return [(r.measured, r.expected) for r in cap.findings.itertuples() if r.rule == "heartbeat"]
 
 
-def test_user_override_beats_sdo_write_beats_profile(tmp_path):
-    logged = _hb_log(tmp_path, sdo_write_ms=100)
+def test_log_value_beats_user_value_beats_profile(tmp_path):
+    """The precedence of docs/network-file.md: the log's last value for an object, else
+    the user's (network file, rules file `network:` on top), else the profile's."""
+    logged = _hb_log(tmp_path, sdo_write_ms=100)  # 0x1017 := 100 answered at 0.021 s
     net = tmp_path / "net.toml"
     net.write_text('[nodes.5]\ndevice = "dat7014"\nheartbeat_ms = 200\n')
     rules = tmp_path / "rules.yaml"
     rules.write_text("network:\n  nodes:\n    5: {heartbeat_ms: 100}\n")
 
-    # the log's SDO write (100 ms) beats the DAT 7014's profile default (0 = off)
+    # the log's SDO write (100 ms) beats the DAT 7014's profile default (0: unknown)
     cap = cananalyze.load(logged, device={5: "dat7014"})
     assert cap.config.heartbeat_ms(5, 1.0) == 100
     assert _hb_findings(cap) == [(200.0, 100.0)] * 14
-    # the network file's 200 ms beats the SDO write
+    # the network file's 200 ms holds until the log writes 100: from the write on, the log's
     cap = cananalyze.load(logged, network=net)
-    assert cap.config.heartbeat_ms(5, 1.0) == 200 and _hb_findings(cap) == []
-    # ... and the rules file's network section, also given by the user
-    cap = cananalyze.load(logged, network=net, rules=rules)
-    assert cap.config.heartbeat_ms(5, 1.0) == 200 and _hb_findings(cap) == []
-    # the rules file's 100 ms beats the log's write of 200 ms
-    cap = cananalyze.load(_hb_log(tmp_path, sdo_write_ms=200), rules=rules)
+    assert cap.config.heartbeat_ms(5, 0.015) == 200 and cap.config.heartbeat_ms(5, 1.0) == 100
+    assert _hb_findings(cap) == [(200.0, 100.0)] * 14
+    # the rules file's network section lies over the network file (100 beats 200)
+    cap = cananalyze.load(_hb_log(tmp_path, sdo_write_ms=None), network=net, rules=rules)
     assert cap.config.heartbeat_ms(5, 1.0) == 100 and len(_hb_findings(cap)) == 14
-    # nothing written, profile says 0 (disabled): the period is inferred, no violation
+    # the log's write of 200 ms beats the rules file's 100 ms: the node does what it was told
+    cap = cananalyze.load(_hb_log(tmp_path, sdo_write_ms=200), rules=rules)
+    assert cap.config.heartbeat_ms(5, 0.015) == 100 and cap.config.heartbeat_ms(5, 1.0) == 200
+    assert _hb_findings(cap) == []
+    # nothing written, profile says 0 (unknown, not off): the period is inferred, no violation
     cap = cananalyze.load(_hb_log(tmp_path, sdo_write_ms=None), device={5: "dat7014"})
-    assert not cap.config.heartbeat_ms(5, 1.0) and _hb_findings(cap) == []
+    assert cap.config.heartbeat_ms(5, 1.0) is None and _hb_findings(cap) == []
 
 
 def test_network_file_bitrate_feeds_summary_bus_load(capsys):

@@ -5,28 +5,33 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
+import yaml
 
 from cananalyze.assertions import assert_heartbeat, assert_no_emcy, run_rules
 from cananalyze.checks.build import build_checker
-from cananalyze.checks.config import FileConfig
 from cananalyze.checks.engine import Checker
 from cananalyze.errors import InputError
 from cananalyze.frames import FLAG_ERR, FLAG_RTR, from_rows
 from cananalyze.io.logfile import write_log
 from cananalyze.io.source import read_all
-from cananalyze.pipeline import Decoder
+from cananalyze.pipeline import Decoder, Options, build_decoder
 
 ROOT = Path(__file__).resolve().parent.parent
 DEMO = ROOT / "samples" / "demo.log"
 
 
 def run(rows, network=None, rules=None, split=None):
-    """Decode rows (optionally split into several batches) through a Checker."""
-    checker = Checker(rules, FileConfig(network))
-    dec = Decoder([checker])
+    """Decode rows (optionally split into several batches) through the pipeline's decoder
+    and a Checker; `network` is a network file's tree."""
+    checker = Checker(rules)
+    with tempfile.TemporaryDirectory() as tmp:
+        net = Path(tmp) / "net.yaml"
+        net.write_text(yaml.safe_dump(network or {}))
+        dec = build_decoder(Options(network=net), checker)
     fb = from_rows(sorted(rows, key=lambda r: r[0]))
     cuts = [0, *(split or []), len(fb)]
     for a, b in zip(cuts, cuts[1:], strict=False):
@@ -147,9 +152,13 @@ def test_sync_pdo_every_nth_sync_in_window_and_type0(one_frame_batches):
     rows += [(0.1 * 12 + 0.002, 0x285, b"\x00"), (0.1 * 12 + 0.003, 0x285, b"\x00")]  # type 0 twice
     net = {
         "sync": {"period_us": 100000, "window_us": 20000},
-        "pdos": {
-            0x185: {"node": 5, "transmission_type": 2, "length": 2},
-            0x285: {"node": 5, "transmission_type": 0, "length": 1},
+        "nodes": {
+            5: {
+                "tpdo": {
+                    1: {"cob_id": 0x185, "transmission_type": 2, "length": 2},
+                    2: {"cob_id": 0x285, "transmission_type": 0, "length": 1},
+                }
+            }
         },
     }
     c = run(rows, network=net, split=list(range(1, len(rows))) if one_frame_batches else [9])
@@ -166,17 +175,8 @@ def test_async_pdo_inhibit_and_event_timer():
     rows = boot_start([5]) + hb(5, [0.05 * i for i in range(1, 40)])
     pdo_t = [0.1, 0.2, 0.203, 0.3, 0.4, 0.8, 0.9]
     rows += [(t, 0x285, b"\x00\x00") for t in pdo_t]
-    net = {
-        "pdos": {
-            0x285: {
-                "node": 5,
-                "transmission_type": 254,
-                "inhibit_100us": 50,
-                "event_timer_ms": 100,
-                "length": 2,
-            }
-        }
-    }
+    pdo = {"transmission_type": 254, "inhibit_time": 50, "event_timer": 100, "length": 2}
+    net = {"nodes": {5: {"tpdo": {2: pdo}}}}
     c = run(rows, network=net)
     found = by_rule(c, "pdo_async")
     assert [(round(f.t, 3), "inhibit" in f.message) for f in found] == [(0.203, True), (0.4, False)]
@@ -191,7 +191,7 @@ def test_pdo_from_pre_operational_node_and_length():
         (0.3, 0x000, b"\x02\x05"),
         (0.4, 0x185, b"\x01\x02\x03"),
     ]
-    c = run(rows, network={"pdos": {0x185: {"node": 5, "length": 1}}})
+    c = run(rows, network={"nodes": {5: {"tpdo": {1: {"cob_id": 0x185, "length": 1}}}}})
     assert [(round(f.t, 2), f.measured) for f in by_rule(c, "pdo_not_operational")] == [
         (0.05, "pre-operational"),
         (0.4, "stopped"),
@@ -215,7 +215,7 @@ def test_emcy_raised_cleared_inhibit_active_at_end_and_short():
         (0.5, e, bytes.fromhex("3032040000000000")),
         (0.7, e, bytes.fromhex("0081")),
     ]
-    c = run(rows, network={"nodes": {3: {"emcy_inhibit_100us": 100}}})
+    c = run(rows, network={"nodes": {3: {"emcy_inhibit_time": 100}}})
     found = by_rule(c, "emcy")
     assert any("inhibit" in f.message and f.t == pytest.approx(0.101) for f in found)
     end = [f for f in found if "still active" in f.message]
@@ -307,7 +307,10 @@ def test_assertions_heartbeat_pdo_rate_signal_and_boot(tmp_path):
         ("rules:\n  heartbeet: {}\n", ":2: unknown rule 'heartbeet'"),
         ("rules:\n  sync:\n    tolerance: lots\n", ":3: tolerance is a fraction"),
         ("assert:\n  - heartbeat: {node: 5}\n", ":2: assert_heartbeat needs 'period_ms'"),
-        ("network:\n  nodes:\n    5: {heartbeat_ms: -1}\n", ":3: heartbeat_ms must be"),
+        (
+            "network:\n  nodes:\n    5: {heartbeat_ms: -1}\n",
+            ":3: network.nodes.5.heartbeat_ms: -1 is out",
+        ),
         ("rules: [\n", ":2: not valid YAML"),
         ("x: !!python/object:os.system ls\n", ":1: not valid YAML"),
     ],
@@ -386,9 +389,8 @@ def test_real_tmcm_rpdo4_length_matches_its_mapping(tmp_path):
     log = real_file("nigel-bruce-khan__ros_canopen-tmcm-1636/candump.txt")
     dcf = real_file("nigel-bruce-khan__ros_canopen-tmcm-1636/TMCM-1636-CANopen.dcf")
     net = tmp_path / "net.yaml"
-    net.write_text(f"nodes:\n  1: {{profile: {dcf}}}\n")
-    checker = build_checker(network_file=net)
-    found = run_rules(log, checker.rules, checker.config)
+    net.write_text(f"nodes:\n  1: {{eds: {dcf}}}\n")
+    found = run_rules(log, build_checker().rules, network=net)
     # 0x1603 maps one 8-bit object (0x6060): the 1-byte RPDO4 on 0x501 is right
     assert not [f for f in found if f.rule == "pdo_length"]
     assert [f.measured for f in found if f.rule == "emcy"] == ["0x6320"]

@@ -83,6 +83,9 @@ class _Inhibit:
     def emcy_inhibit_100us(self, node, t):
         return {2: 10, 3: 25.0}.get(node)
 
+    def changes(self, node, first, last):
+        return np.zeros(0)  # the same all through the log
+
 
 def _storm(seed: int):
     rng = np.random.default_rng(seed)

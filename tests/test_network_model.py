@@ -61,7 +61,8 @@ def test_log2_mapping_written_by_sdo_inside_the_log():
         (0x6041, 16),
         (0x6064, 32),
     ]
-    assert cfg.sync_period_us == 1000 and cfg.pdos[("rx", 1)].transmission_type == 255
+    assert model.known(11, 0x1006, 0, batch.frames.t[-1]) == (1000, "log")
+    assert cfg.pdos[("rx", 1)].transmission_type == 255
     objects = [c.object for c in model.history]
     assert (0x1800, 1) in objects and (0x1A00, 2) in objects
     # no frame of TPDO1 is flagged: DLC 6 = 2 + 4 mapped bytes

@@ -1,7 +1,7 @@
 """Timing analysis and conformance rules (`cananalyze check`)."""
 
-from .config import ConfigSource, FileConfig
+from .config import ConfigSource
 from .engine import Checker
 from .finding import Finding
 
-__all__ = ["Checker", "ConfigSource", "FileConfig", "Finding"]
+__all__ = ["Checker", "ConfigSource", "Finding"]

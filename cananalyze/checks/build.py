@@ -1,25 +1,27 @@
-"""Build a Checker from a rules file and a network file (shared by the CLI and assertions)."""
+"""Build a Checker from a rules file (shared by the pipeline, the CLI and the assertions)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from .config import FileConfig
 from .engine import Checker
 from .rule import Rule
 
 
-def build_checker(
-    rules_file: str | Path | None = None,
-    network_file: str | Path | None = None,
-    rules: list[Rule] | None = None,
-) -> Checker:
-    from .rulesfile import load_network, load_rules
+def build_checker(rules_file: str | Path | None = None, rules: list[Rule] | None = None) -> Checker:
+    """The default rules plus the rules file's settings and assertions.
 
-    network, base = None, None
+    Until a pipeline binds it to the network model that follows the log, the checker
+    reads what the rules file's `network:` section declares (unknown otherwise).
+    """
+    from ..network.model import NetworkModel
+    from .model_config import ModelConfig
+    from .rulesfile import load_rules
+
+    config = None
     if rules_file:
-        loaded, network, base = load_rules(rules_file)
+        loaded, network = load_rules(rules_file)
         rules = (rules or []) + loaded
-    if network_file:
-        network, base = load_network(network_file)
-    return Checker(rules, FileConfig(network, base))
+        if network is not None:
+            config = ModelConfig(NetworkModel(network))
+    return Checker(rules, config)

@@ -7,7 +7,7 @@ them) and into `self.findings` for the CLI, JUnit and the Python assertions.
 from __future__ import annotations
 
 from ..records import DecodedBatch
-from .config import ConfigSource, FileConfig
+from .config import ConfigSource
 from .finding import Finding
 from .nmt_state import NmtStates
 from .rule import Context, GapState, Rule
@@ -21,7 +21,12 @@ class Checker:
 
             rules = default_rules()
         self.rules = rules
-        self.config: ConfigSource = config if config is not None else FileConfig()
+        if config is None:  # nothing declared and no log followed: every value unknown
+            from ..network.model import NetworkModel
+            from .model_config import ModelConfig
+
+            config = ModelConfig(NetworkModel())
+        self.config: ConfigSource = config
         self.nmt = NmtStates()
         # every gap is kept only for the tables a rule reads after the fact (flat memory otherwise)
         self.timing = Timing(keep={n for r in rules for n in getattr(r, "needs_gaps", ())})

@@ -1,109 +1,90 @@
-"""ConfigSource over the network model: values written by SDO in the log, at their time.
+"""ConfigSource over the network model: what the rules expect, at the time they ask.
 
-Precedence for a node's scalar parameters (heartbeat, guarding, EMCY inhibit), as
-the issue states it: what the user declares wins, then what the log shows, then the
-device profile:
+The model holds the user's declarations (network file, rules file `network:`,
+--device/--eds) as its starting state and follows the log, so one rule answers every
+question (docs/network-file.md, "Precedence"): the last value the log showed for the
+object at or before t (an SDO write or read, since the node's last reset), else the
+user's, else the device profile's.
 
-1. the network file (`--network`, e.g. `heartbeat_ms`),
-2. the rules file's `network:` section,
-3. the last SDO download to the object seen in the log before that time,
-4. the device profile (DCF value, else EDS default) of either file.
-
-A user override is how an engineer says "this is what it must be", so a log that
-wrote something else is judged against the override, not excused by it.
+Where CiA 301 says 0 disables a function (heartbeat 0x1017, guard time 0x100C, SYNC
+0x1006/0x1007, EMCY inhibit 0x1015, a 0x1016 entry, PDO inhibit time and event timer),
+a 0 from the log or the user means off. A 0 that is only the profile's is "unknown":
+many EDS files default 0x1017 to 0 while the device is configured otherwise.
 """
 
 from __future__ import annotations
 
+import numpy as np
+
+from ..network.model import NetworkModel
 from ..network.pdo_map import PdoConfig
-from .config import ConfigSource
 
 
 class ModelConfig:
-    def __init__(self, model, fallback: ConfigSource) -> None:
+    def __init__(self, model: NetworkModel) -> None:
         self.model = model
-        self.fallback = fallback
-        # the network file's node settings, as (node, index, sub) -> value (later ones win)
-        self.user: dict[tuple[int, int, int], int] = {}
-        spec = getattr(model, "spec", None)
-        for node, ns in spec.nodes.items() if spec is not None else ():
-            for index, sub, value in ns.writes:
-                self.user[(node, index, sub)] = value
+        self._changes: dict[tuple, tuple[int, np.ndarray]] = {}
 
     def _value(self, node: int, index: int, sub: int, t: float) -> int | None:
-        v = self.model.value_at(node, index, sub, t)
-        return v if isinstance(v, int) else None
-
-    def _scalar(self, node: int, key: str, index: int, t: float) -> float | None:
-        """One object's value by the precedence in the module docstring."""
-        v = self.user.get((node, index, 0))
-        if v is not None:
-            return float(v)
-        declared = getattr(self.fallback, "declared", None)
-        d = declared(node, key) if declared else None
-        if d is not None:
-            return d
-        w = self._value(node, index, 0, t)
-        if w is not None:
-            return float(w)
-        default = getattr(self.fallback, "default", None)
-        d = default(node, index) if default else None
-        if d is not None:
-            return d
-        cfg = self.model.nodes.get(node)
-        prof = cfg.profile if cfg is not None else None
-        if prof is not None:
-            p = prof.value(index, 0, node)
-            if isinstance(p, int) and not isinstance(p, bool):
-                return float(p)
-        return None
+        k = self.model.known(node, index, sub, t)
+        if k is None or (k.value == 0 and k.source == "profile"):
+            return None
+        return k.value
 
     def heartbeat_ms(self, node: int, t: float) -> float | None:
-        return self._scalar(node, "heartbeat_ms", 0x1017, t)
+        v = self._value(node, 0x1017, 0, t)
+        return None if v is None else float(v)
 
     def heartbeat_consumers(self, node: int, t: float) -> dict[int, float]:
-        out = dict(self.fallback.heartbeat_consumers(node, t))
-        written = getattr(self.model, "written", None)
-        if written is not None and not written(node, 0x1016):
-            return out  # no sub-index of 0x1016 written in the log: nothing to look up
-        for sub in range(1, 128):
+        out: dict[int, float] = {}
+        for sub in self.model.subindices(node, 0x1016):
             v = self._value(node, 0x1016, sub, t)
-            if v is None:
-                if sub > 8:
-                    break
-                continue
-            producer, ms = (v >> 16) & 0xFF, v & 0xFFFF
+            producer, ms = ((v or 0) >> 16) & 0x7F, (v or 0) & 0xFFFF
             if producer and ms:
                 out[producer] = float(ms)
         return out
 
     def guarding(self, node: int, t: float) -> tuple[float, int] | None:
-        guard = self._scalar(node, "guard_time_ms", 0x100C, t)
-        factor = self._scalar(node, "life_time_factor", 0x100D, t)
-        return (guard, int(factor or 0)) if guard else None
+        guard = self._value(node, 0x100C, 0, t)
+        if not guard:
+            return None
+        return float(guard), int(self._value(node, 0x100D, 0, t) or 0)
 
-    def _any_node(self, index: int, t: float) -> int | None:
-        for change in reversed(self.model.history):
-            if change.object == (index, 0) and change.t <= t and isinstance(change.value, int):
-                return change.value
-        return None
+    def _bus(self, index: int, t: float) -> float | None:
+        k = self.model.bus_known(index, t)
+        if k is None or (k.value == 0 and k.source == "profile"):
+            return None
+        return float(k.value)
 
     def sync_period_us(self, t: float) -> float | None:
-        v = self._any_node(0x1006, t)
-        return float(v) if v else self.fallback.sync_period_us(t)
+        return self._bus(0x1006, t)
 
     def sync_window_us(self, t: float) -> float | None:
-        v = self._any_node(0x1007, t)
-        return float(v) if v else self.fallback.sync_window_us(t)
+        return self._bus(0x1007, t)
 
     def pdo_params(self, cob_id: int, t: float) -> tuple[int, PdoConfig] | None:
-        b = self.model.binding(cob_id)
-        if b is not None and b.config.mapping:
-            return b.node, b.config
-        return self.fallback.pdo_params(cob_id, t)
+        b = self.model.binding_at(cob_id, t)
+        return None if b is None else (b.node, b.config)
 
     def emcy_inhibit_100us(self, node: int, t: float) -> float | None:
-        return self._scalar(node, "emcy_inhibit_100us", 0x1015, t)
+        v = self._value(node, 0x1015, 0, t)
+        return None if v is None else float(v)
 
     def known_cob_ids(self) -> set[int]:
-        return self.fallback.known_cob_ids()
+        return self.model.spec.known_cob_ids
+
+    def changes(self, node: int | None, first: int, last: int) -> np.ndarray:
+        points = self.model.points
+        key = (node, first, last)
+        cached = self._changes.get(key)
+        if cached is None or cached[0] != len(points):  # points only grow: length says stale
+            times = [
+                t
+                for t, n, index in points
+                if (node is None or n == node) and (index == -1 or first <= index <= last)
+            ]
+            cached = self._changes[key] = (len(points), np.sort(np.asarray(times, np.float64)))
+        return cached[1]
+
+    def pdo_changes(self) -> np.ndarray:
+        return np.asarray(self.model.binding_times[1:], np.float64)

@@ -1,7 +1,8 @@
-"""Rules and network files (YAML): loading and validation with line-numbered messages.
+"""Rules files (YAML): loading and validation with line-numbered messages.
 
-Only `yaml.safe_load`/`yaml.compose` with the safe loader: user text is data, never code.
-The composed node tree gives each value's line for error messages.
+Read through network.filelines (the safe loader only: user text is data, never
+code). The `network:` section is a network description in the network file's
+schema, read by network.netfile like a `--network` file.
 """
 
 from __future__ import annotations
@@ -9,9 +10,10 @@ from __future__ import annotations
 import inspect
 from pathlib import Path
 
-import yaml
-
 from ..errors import InputError
+from ..network.filelines import read_tree
+from ..network.netfile import combine, read_network
+from ..network.spec import NetworkSpec
 from .finding import SEVERITIES
 from .registry import ASSERTIONS, RULES
 from .rule import Rule
@@ -20,56 +22,18 @@ _COMMON = {"enabled", "severity", "tolerance"}
 
 
 class _Doc:
+    """A rules file's data and lines, for `FILE:LINE: message` errors."""
+
     def __init__(self, path: Path) -> None:
         self.path = path
-        try:
-            text = path.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise InputError(f"{path}: cannot read: {exc.strerror}") from None
-        try:
-            self.root = yaml.compose(text, Loader=yaml.SafeLoader)
-            self.data = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            mark = getattr(exc, "problem_mark", None)
-            where = f":{mark.line + 1}" if mark else ""
-            raise InputError(
-                f"{path}{where}: not valid YAML: {getattr(exc, 'problem', exc)}"
-            ) from None
+        self.data, self.lines = read_tree(path, "rules file")
         if self.data is None:
             self.data = {}
         if not isinstance(self.data, dict):
             self.fail([], "the file must be a mapping (key: value lines)")
 
-    def line(self, keys: list) -> int:
-        node = self.root
-        line = node.start_mark.line + 1 if node else 1
-        for k in keys:
-            if isinstance(node, yaml.MappingNode):
-                nxt = None
-                for kn, vn in node.value:
-                    if str(kn.value) == str(k) or _int(kn.value) == k:
-                        nxt = vn
-                        line = kn.start_mark.line + 1
-                        break
-                node = nxt
-            elif isinstance(node, yaml.SequenceNode) and isinstance(k, int) and k < len(node.value):
-                node = node.value[k]
-                line = node.start_mark.line + 1
-            else:
-                break
-            if node is None:
-                break
-        return line
-
     def fail(self, keys: list, message: str):
-        raise InputError(f"{self.path}:{self.line(keys)}: {message}")
-
-
-def _int(text) -> int | None:
-    try:
-        return int(str(text), 0)
-    except ValueError:
-        return None
+        raise InputError(f"{self.lines.at(tuple(keys))}: {message}")
 
 
 def _check_params(doc: _Doc, keys: list, cls: type[Rule], params: dict) -> dict:
@@ -98,8 +62,9 @@ def _check_params(doc: _Doc, keys: list, cls: type[Rule], params: dict) -> dict:
     return {k: v for k, v in params.items() if k != "enabled"}
 
 
-def load_rules(path: str | Path) -> tuple[list[Rule], dict | None, Path]:
-    """Rules to run (defaults + settings + assertions) and an inline `network:` section, if any."""
+def load_rules(path: str | Path) -> tuple[list[Rule], NetworkSpec | None]:
+    """Rules to run (defaults + settings + assertions) and what the `network:` section
+    declares, if there is one (checked here, so a bad value fails before the log is read)."""
     doc = _Doc(Path(path))
     data = doc.data
     for k in data:
@@ -180,10 +145,8 @@ def load_rules(path: str | Path) -> tuple[list[Rule], dict | None, Path]:
         if default_tol is not None:
             kw.setdefault("tolerance", default_tol)
         rules.append(_make(doc, keys, cls, kw))
-    network = data.get("network")
-    if network is not None:
-        validate_network(doc, network, ["network"])
-    return rules, network, doc.path.parent
+    network = _network(doc)
+    return rules, None if network is None else combine(network, source=str(doc.path))
 
 
 def _make(doc: _Doc, keys: list, cls: type[Rule], kw: dict) -> Rule:
@@ -201,65 +164,15 @@ def _replace(rules: list[Rule], name: str, new: Rule) -> None:
     rules.append(new)
 
 
-_NODE_KEYS = {
-    "profile",
-    "heartbeat_ms",
-    "heartbeat_consumer",
-    "guard_time_ms",
-    "life_time_factor",
-    "emcy_inhibit_100us",
-}
-_PDO_KEYS = {
-    "node",
-    "direction",
-    "number",
-    "transmission_type",
-    "inhibit_100us",
-    "event_timer_ms",
-    "length",
-}
+def _network(doc: _Doc) -> dict | None:
+    if "network" not in doc.data:
+        return None
+    return read_network(
+        doc.data["network"], doc.lines.under("network"), doc.path.parent, "rules file"
+    )
 
 
-def validate_network(doc: _Doc, net, keys: list) -> None:
-    if not isinstance(net, dict):
-        doc.fail(keys, "network must be a mapping with nodes:, sync:, pdos:, known_cob_ids:")
-    for k in net:
-        if k not in ("nodes", "sync", "pdos", "known_cob_ids"):
-            doc.fail(
-                keys + [k], f"unknown network key {k!r} (known: nodes, sync, pdos, known_cob_ids)"
-            )
-    for node, spec in (net.get("nodes") or {}).items():
-        if not isinstance(node, int) or not 1 <= node <= 127:
-            doc.fail(keys + ["nodes", node], f"node-ID {node!r} must be 1..127")
-        for k, v in (spec or {}).items():
-            if k not in _NODE_KEYS:
-                doc.fail(
-                    keys + ["nodes", node, k],
-                    f"unknown node setting {k!r} (known: {', '.join(sorted(_NODE_KEYS))})",
-                )
-            if k not in ("profile", "heartbeat_consumer") and (
-                not isinstance(v, (int, float)) or v < 0
-            ):
-                doc.fail(keys + ["nodes", node, k], f"{k} must be a non-negative number, not {v!r}")
-    for k, v in (net.get("sync") or {}).items():
-        if k not in ("period_us", "window_us") or not isinstance(v, (int, float)):
-            doc.fail(keys + ["sync", k], "sync: takes period_us and window_us (numbers)")
-    for cob, spec in (net.get("pdos") or {}).items():
-        if not isinstance(cob, int) or not 0 < cob < 0x800:
-            doc.fail(
-                keys + ["pdos", cob], f"PDO COB-ID {cob!r} must be an 11-bit identifier like 0x285"
-            )
-        if not isinstance(spec, dict) or "node" not in spec:
-            doc.fail(keys + ["pdos", cob], "each PDO needs at least node:")
-        for k in spec:
-            if k not in _PDO_KEYS:
-                doc.fail(
-                    keys + ["pdos", cob, k],
-                    f"unknown PDO setting {k!r} (known: {', '.join(sorted(_PDO_KEYS))})",
-                )
-
-
-def load_network(path: str | Path) -> tuple[dict, Path]:
-    doc = _Doc(Path(path))
-    validate_network(doc, doc.data, [])
-    return doc.data, doc.path.parent
+def rules_network(path: str | Path) -> dict | None:
+    """The checked settings of a rules file's `network:` section (netfile.combine's input),
+    or None when it has none."""
+    return _network(_Doc(Path(path)))

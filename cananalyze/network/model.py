@@ -1,18 +1,24 @@
 """NetworkModel: the analyser's picture of each node, kept up to date from the log.
 
-It starts from what the user declared (profiles, network file) and then follows
-completed SDO transfers in time order: downloads change PDO, heartbeat, guarding,
-SYNC and EMCY parameters and unit-changing device objects; uploads of the identity
-objects (0x1018, 0x1000, 0x1008) pick a built-in profile. It keeps the COB-ID
-classifier's tables in step, so a PDO moved to another COB-ID is attributed to the
-right node from the frame after the write on, re-classifying the rest of the batch.
-Per-frame Python here touches only SDO records, which are rare.
+It starts from what the user declared (profiles, network file, the rules file's
+`network:`) and then follows the log in time order: completed SDO transfers (writes
+and read-backs alike) of communication objects and unit-changing device objects, and
+resets (boot-ups, NMT reset commands), which return a node to its declared values.
+Uploads of the identity objects (0x1018, 0x1000, 0x1008) pick a built-in profile.
+
+Two views of the same facts: the current configuration that decoding needs (PDO
+bindings, kept in step with the COB-ID classifier, so a PDO moved to another COB-ID is
+attributed to the right node from the frame after the write on), and `known()`, the
+value of any object at any time the checks ask about (the log's values are kept in
+timeline.py; the rule is docs/network-file.md, "Precedence"). Per-frame Python here
+touches only SDO records and resets, which are rare.
 """
 
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -26,6 +32,7 @@ from .node_tally import IDENTITY
 from .pdo_map import PdoConfig, split_cob_id
 from .profile import identify
 from .spec import NetworkSpec
+from .timeline import ConfigChange, Timeline
 
 if TYPE_CHECKING:
     from ..pipeline import Decoder
@@ -34,7 +41,7 @@ NOT_VALID = (
     "is not valid (COB-ID bit 31 set)"  # PdoBinding.problem; the pdo_not_valid rule looks for it
 )
 _IDENTITY_INDICES = np.array([0x1018, 0x1000, 0x1008], np.int64)
-USER_SOURCES = ("user --device", "user --eds", "network file")
+USER_SOURCES = ("user --device", "user --eds", "network file", "rules file")
 
 
 @dataclass(frozen=True)
@@ -48,12 +55,13 @@ class PdoBinding:
     problem: str | None = None  # set when frames arrive on a PDO that is not valid
 
 
-@dataclass(frozen=True)
-class ConfigChange:
-    t: float
-    node: int
-    object: tuple[int, int]  # (index, subindex)
+class Known(NamedTuple):
+    """An object's expected value and where it comes from: "log" (an SDO write or read at
+    or before the time asked, since the node's last reset), "file" (the user's
+    declarations) or "profile" (DCF value, else EDS default)."""
+
     value: int
+    source: str
 
 
 def _sdo_value(rec: dict) -> int | str | None:
@@ -79,11 +87,16 @@ class NetworkModel:
     ) -> None:
         self.spec = spec or NetworkSpec()
         self.nodes: dict[int, NodeConfig] = {}
-        self.history: list[ConfigChange] = []
-        # the same changes by object: value_at is asked per node and batch by the checks
-        self._changes: dict[tuple[int, int, int], list[ConfigChange]] = {}
-        self._objects: set[tuple[int, int]] = set()
+        self.timeline = Timeline()  # the values the log showed, and the resets
+        self._file = {
+            (node, index, sub): value
+            for node, ns in self.spec.nodes.items()
+            for index, sub, value in ns.writes
+        }
+        self._bus_file = {(index, sub): value for index, sub, value in self.spec.bus_writes}
         self.bindings: dict[int, PdoBinding] = {}
+        self.binding_times: list[float] = []  # when the bindings changed, and to what
+        self.binding_log: list[dict[int, PdoBinding]] = []
         # Bindings in force within the current batch: (first row, bindings), ascending.
         self.segments: list[tuple[int, dict[int, PdoBinding]]] = [(0, {})]
         self.classifier: CobClassifier | None = None
@@ -91,14 +104,22 @@ class NetworkModel:
         # (node, index, subindex) -> object_info answer; cleared when a node's profile changes
         self._info: dict[tuple[int, int, int], tuple[str, int] | None] = {}
         for node, ns in self.spec.nodes.items():
-            cfg = NodeConfig.from_profile(node, ns.profile, ns.how)
-            for index, sub, value in ns.writes:
-                cfg.apply(index, sub, value)
-            cfg.sdo_channels = list(ns.sdo_channels)
-            self.nodes[node] = cfg
-        self._rebind()
+            self.nodes[node] = self._declared_config(node, ns.profile, ns.how)
+        self._rebind(float("-inf"))
         if classifier is not None:
             self.bind(classifier)
+
+    def _declared_config(self, node: int, profile, how: str) -> NodeConfig:
+        """A node as declared: its profile's defaults with the user's values on top."""
+        cfg = NodeConfig.from_profile(node, profile, how)
+        ns = self.spec.nodes.get(node)
+        if ns is not None:
+            for index, sub, value in ns.writes:
+                cfg.apply(index, sub, value)
+            for (direction, number), length in ns.pdo_lengths.items():
+                cfg.pdo(direction, number).length = length  # type: ignore[arg-type]
+            cfg.sdo_channels = list(ns.sdo_channels)
+        return cfg
 
     # --- wiring ------------------------------------------------------------------
     def bind(self, classifier: CobClassifier) -> None:
@@ -151,16 +172,66 @@ class NetworkModel:
             self._info.clear()
         return cfg
 
-    def value_at(self, node: int, index: int, subindex: int, t: float) -> int | None:
-        """Last value written to an object at or before time t (None: never written in the log)."""
-        for change in reversed(self._changes.get((node, index, subindex), ())):
-            if change.t <= t:
-                return change.value
+    @property
+    def history(self) -> list[ConfigChange]:
+        """Every value the log showed (SDO writes and reads), in order."""
+        return self.timeline.history
+
+    @property
+    def points(self) -> list[tuple[float, int, int]]:
+        """(t, node, index) where an expected value may have changed (index -1: all)."""
+        return self.timeline.points
+
+    def known(self, node: int, index: int, subindex: int, t: float) -> Known | None:
+        """The value an object is expected to hold at time t: the last one the log showed
+        at or before t (a write or a read, unless the node was reset since), else the
+        user's declaration, else the profile's (None: nothing says)."""
+        entry = self.timeline.last(node, index, subindex, t)
+        if entry is not None:
+            return Known(entry[2].value, "log")
+        return self.declared(node, index, subindex)
+
+    def declared(self, node: int, index: int, subindex: int) -> Known | None:
+        """The value before the log says anything (and after each reset of the node)."""
+        value = self._file.get((node, index, subindex))
+        if value is not None:
+            return Known(value, "file")
+        cfg = self.nodes.get(node)
+        if cfg is not None and cfg.profile is not None:
+            p = cfg.profile.value(index, subindex, node)
+            if isinstance(p, int) and not isinstance(p, bool):
+                return Known(p, "profile")
         return None
 
-    def written(self, node: int, index: int) -> bool:
-        """Whether the log wrote any sub-index of this object on this node (so far)."""
-        return (node, index) in self._objects
+    def bus_known(self, index: int, t: float) -> Known | None:
+        """A bus-wide object (SYNC 0x1006/0x1007): the latest value the log showed on any
+        node, else the network's declaration ([sync]), else the SYNC producer's profile."""
+        latest = self.timeline.latest(index, t)
+        if latest is not None:
+            return Known(latest.value, "log")
+        value = self._bus_file.get((index, 0))
+        if value is not None:
+            return Known(value, "file")
+        for node, cfg in sorted(self.nodes.items()):
+            if cfg.sync_cob_raw is not None and cfg.sync_cob_raw & 0x40000000:
+                return self.declared(node, index, 0)
+        return None
+
+    def subindices(self, node: int, index: int) -> list[int]:
+        """Sub-indices 1.. of an array object (0x1016) that the user, the log or the
+        node's profile gives a value for."""
+        subs = {s for (n, i, s) in self._file if n == node and i == index and s}
+        subs |= {s for s in self.timeline.subindices(node, index) if s}
+        cfg = self.nodes.get(node)
+        count = cfg.profile.value(index, 0, node) if cfg and cfg.profile else None
+        if isinstance(count, int):
+            subs |= set(range(1, min(count, 127) + 1))
+        return sorted(subs)
+
+    def binding_at(self, cob_id: int, t: float) -> PdoBinding | None:
+        """The PDO a COB-ID carried at time t (the bindings after every change up to t)."""
+        k = bisect.bisect_right(self.binding_times, t) - 1
+        return self.binding_log[max(k, 0)].get(cob_id) if self.binding_log else None
 
     def binding(self, cob_id: int) -> PdoBinding | None:
         return self.bindings.get(cob_id)
@@ -173,10 +244,11 @@ class NetworkModel:
             for row, rec in self._candidates(batch)
             if rec.get("kind") == "sdo" and rec.get("result") == "ok"
         ]
+        events += self._resets_in(batch)
         events.sort(key=lambda e: e[0])
         n = len(batch)
         for row, rec in events:
-            changed = self._on_sdo(rec)
+            changed = self._on_reset(*rec) if isinstance(rec, tuple) else self._on_sdo(rec)
             if changed is None:
                 continue
             start = max(0, min(row + 1, n))
@@ -193,8 +265,8 @@ class NetworkModel:
     def _candidates(self, batch: DecodedBatch) -> list:
         """The records `_on_sdo` may act on, in record order; the fast path's others skipped.
 
-        A fast-path record (expedited, with data) matters only when it writes a
-        communication object (0x1000-0x1FFF) or a unit-changing object, or is the
+        A fast-path record (expedited, with data) matters only when it writes or reads
+        a communication object (0x1000-0x1FFF) or a unit-changing object, or is the
         first seen of a node the model does not know yet: `_on_sdo` leaves the state
         untouched for every other one. A batch with an identity read takes them all.
         """
@@ -212,12 +284,12 @@ class NetworkModel:
             for _, rec in (get(records, k) for k in others)
         ):
             return records
-        want = fast.ok & ~fast.upload & (fast.index >= 0x1000) & (fast.index <= 0x1FFF)
+        want = fast.ok & (fast.index >= 0x1000) & (fast.index <= 0x1FFF)
         context = {o for cfg in self.nodes.values() for o in cfg.context_objects()}
         if context:
             key = fast.index * 256 + fast.subindex
             objs = np.array([i * 256 + s for i, s in context], np.int64)
-            want |= fast.ok & ~fast.upload & np.isin(key, objs)
+            want |= fast.ok & np.isin(key, objs)
         known = np.array(sorted(self.nodes), np.int64)
         new = fast.ok & ~np.isin(fast.node, known)
         if new.any():
@@ -237,34 +309,69 @@ class NetworkModel:
         if not isinstance(node, int) or index is None or sub is None:
             return None
         upload = rec.get("direction") == "upload"
-        if upload and (index, sub) not in IDENTITY:
-            # a poll of some other object (most SDO traffic): only the node becomes known
-            if node not in self.nodes and _sdo_value(rec) is not None:
-                self.config_at(node)
-            return None
         value = _sdo_value(rec)
         if value is None:
             return None
         t = float(rec.get("t") or 0.0)
-        cfg = self.config_at(node)
-        if upload:
+        if upload and (index, sub) in IDENTITY:
+            cfg = self.config_at(node)
             cfg.identity[IDENTITY[(index, sub)]] = value
-            return self._identify(cfg)
-        if isinstance(value, str):
+            return self._identify(cfg, t)
+        known = self.nodes.get(node)
+        tracked = 0x1000 <= index <= 0x1FFF or (
+            known is not None and (index, sub) in known.context_objects()
+        )
+        cfg = self.config_at(node)  # a node that answers SDO exists
+        if not tracked or isinstance(value, str):
+            return None  # most SDO traffic: process data, names
+        before = self.known(node, index, sub, t)
+        change = ConfigChange(t, node, (index, sub), value, "read" if upload else "write")
+        same = before is not None and before.value == value
+        self.timeline.add(change, changed=not same)
+        if same:
+            return None  # a read-back (or write) of the value in force: nothing changes
+        if cfg.apply(index, sub, value) not in TOUCHES_COB_IDS:
             return None
-        what = cfg.apply(index, sub, value)
-        if what is None:
-            return None
-        change = ConfigChange(t, node, (index, sub), value)
-        self.history.append(change)
-        self._changes.setdefault((node, index, sub), []).append(change)
-        self._objects.add((node, index))
-        if what not in TOUCHES_COB_IDS:
-            return None
-        self._rebind()
+        self._rebind(t)
         return self._sync_classifier()
 
-    def _identify(self, cfg: NodeConfig) -> set[int] | None:
+    def _resets_in(self, batch: DecodedBatch) -> list[tuple[int, tuple[float, int, str]]]:
+        """Boot-ups and NMT reset commands of a batch: (row, (t, node, kind))."""
+        svc = batch.service
+        rows = np.flatnonzero((svc == Service.BOOTUP) | (svc == Service.NMT))
+        if rows.size == 0:
+            return []
+        fb = batch.frames
+        out = []
+        for row in rows.tolist():
+            t = float(fb.t[row])
+            if svc[row] == Service.BOOTUP:
+                out.append((row, (t, int(batch.node[row]), "boot-up")))
+            elif fb.dlc[row] >= 2 and fb.data[row, 0] in (0x81, 0x82):
+                kind = "reset node" if fb.data[row, 0] == 0x81 else "reset communication"
+                out.append((row, (t, int(fb.data[row, 1]), kind)))
+        return out
+
+    def _on_reset(self, t: float, node: int, kind: str) -> set[int] | None:
+        """A node (0: every node) back to its declared values."""
+        targets = [node] if node else sorted(set(self.nodes) | self.timeline.nodes())
+        rebuilt = False
+        for n in targets:
+            cfg = self.nodes.get(n)
+            if not self.timeline.reset(t, n, kind) or cfg is None:
+                continue
+            fresh = self._declared_config(n, cfg.profile, cfg.identified_by)
+            fresh.identity = cfg.identity
+            for c in self.timeline.since_reset(n):  # a reset communication keeps these
+                fresh.apply(*c.object, c.value)
+            self.nodes[n] = fresh
+            rebuilt = True
+        if not rebuilt:
+            return None
+        self._rebind(t)
+        return self._sync_classifier()
+
+    def _identify(self, cfg: NodeConfig, t: float) -> set[int] | None:
         if cfg.identified_by in USER_SOURCES:
             return None
         ident = cfg.identity
@@ -281,18 +388,18 @@ class NetworkModel:
             if "vendor_id" in ident or "product_code" in ident
             else "SDO 0x1008 name"
         )
-        fresh = NodeConfig.from_profile(cfg.node, prof, how)
+        fresh = self._declared_config(cfg.node, prof, how)
         fresh.identity = dict(cfg.identity)
         fresh.sdo_channels = cfg.sdo_channels
-        for change in self.history:  # what the log already changed still holds
-            if change.node == cfg.node:
-                fresh.apply(*change.object, change.value)
+        for change in self.timeline.since_reset(cfg.node):  # what the log changed still holds
+            fresh.apply(*change.object, change.value)
         self.nodes[cfg.node] = fresh
+        self.timeline.mark(t, cfg.node)
         self._info.clear()
-        self._rebind()
+        self._rebind(t)
         return self._sync_classifier()
 
-    def _rebind(self) -> None:
+    def _rebind(self, t: float) -> None:
         valid: dict[int, PdoBinding] = {}
         fallback: dict[int, PdoBinding] = {}
         for node, cfg in sorted(self.nodes.items()):
@@ -316,7 +423,10 @@ class NetworkModel:
                     )
         for cob, b in fallback.items():
             valid.setdefault(cob, b)
-        self.bindings = valid
+        if valid != self.bindings or not self.binding_log:
+            self.bindings = valid
+            self.binding_times.append(t)
+            self.binding_log.append(valid)
 
     def _wanted(self) -> dict[int, tuple[int, int, int]]:
         out: dict[int, tuple[int, int, int]] = {}

@@ -28,6 +28,11 @@ _UINT_BY_BITS = {
     64: 0x1B,
 }
 
+# Transmission type of a PDO nobody described: 255 (event-driven, manufacturer-specific)
+# asks nothing of the SYNC rules, and with no inhibit time or event timer nothing of the
+# asynchronous ones, so an unknown PDO is never judged against a guess.
+UNKNOWN_TYPE = 255
+
 # Which part of the model a write touched: the model re-binds COB-IDs for these.
 TOUCHES_COB_IDS = {"pdo", "emcy", "sync", "context"}
 
@@ -39,11 +44,12 @@ class PdoState:
     direction: Direction
     number: int
     cob_raw: int = COB_ID_INVALID
-    transmission_type: int = 0
+    transmission_type: int = 255  # UNKNOWN_TYPE until a profile, the file or the log says
     inhibit_time: int = 0
     event_timer: int = 0
     count: int = 0
     words: dict[int, int] = field(default_factory=dict)  # mapping sub-index -> 0xIIIISSLL
+    length: int | None = None  # expected bytes while the mapping is unknown (network file)
 
     @property
     def cob_id(self) -> int:
@@ -82,17 +88,9 @@ class NodeConfig:
     identified_by: str = "unknown"
     identity: dict[str, int | str] = field(default_factory=dict)
     pdos: dict[tuple[Direction, int], PdoState] = field(default_factory=dict)
-    heartbeat_ms: int | None = None  # 0x1017
-    consumer_heartbeat: dict[int, int] = field(
-        default_factory=dict
-    )  # 0x1016 sub -> raw (node<<16 | ms)
-    guard_time_ms: int | None = None  # 0x100C
-    life_time_factor: int | None = None  # 0x100D
+    # what decoding needs of the rest (timing values live in NetworkModel.known)
     sync_cob_raw: int | None = None  # 0x1005
-    sync_period_us: int | None = None  # 0x1006
-    sync_window_us: int | None = None  # 0x1007
     emcy_cob_raw: int | None = None  # 0x1014
-    emcy_inhibit: int | None = None  # 0x1015, multiples of 100 us
     context: dict[tuple[int, int], int] = field(default_factory=dict)  # unit-changing objects
     sdo_channels: list[tuple[int, int]] = field(default_factory=list)  # (request, response) COB-IDs
 
@@ -114,7 +112,8 @@ class NodeConfig:
                 state = PdoState(
                     direction, n + 1, int(cob) if isinstance(cob, int) else COB_ID_INVALID
                 )
-                state.transmission_type = int(profile.value(comm + n, 2, node) or 0)
+                ttype = profile.value(comm + n, 2, node)
+                state.transmission_type = ttype if isinstance(ttype, int) else UNKNOWN_TYPE
                 state.inhibit_time = int(profile.value(comm + n, 3, node) or 0)
                 state.event_timer = int(profile.value(comm + n, 5, node) or 0)
                 state.count = int(profile.value(mapping + n, 0, node) or 0)
@@ -123,16 +122,7 @@ class NodeConfig:
                     if isinstance(word, int):
                         state.words[sub] = word
                 cfg.pdos[(direction, n + 1)] = state
-        for attr, index in (
-            ("heartbeat_ms", 0x1017),
-            ("guard_time_ms", 0x100C),
-            ("life_time_factor", 0x100D),
-            ("sync_cob_raw", 0x1005),
-            ("sync_period_us", 0x1006),
-            ("sync_window_us", 0x1007),
-            ("emcy_cob_raw", 0x1014),
-            ("emcy_inhibit", 0x1015),
-        ):
+        for attr, index in (("sync_cob_raw", 0x1005), ("emcy_cob_raw", 0x1014)):
             value = profile.value(index, 0, node)
             if isinstance(value, int):
                 setattr(cfg, attr, value)
@@ -154,10 +144,16 @@ class NodeConfig:
         return state
 
     def pdo_config(self, state: PdoState) -> PdoConfig:
-        """The decoder's view of one PDO: mapping entries with names and units in force."""
+        """The decoder's view of one PDO: mapping entries with names and units in force.
+
+        A mapping with an entry not known yet (a master reads 0x1A0x:0, then each entry,
+        while the PDO runs) is not known at all: a part of it would be a wrong length."""
         mapping: list[MapEntry] = []
         for sub in range(1, state.count + 1):
             word = state.words.get(sub)
+            if word is None:
+                mapping = []
+                break
             if word:
                 mapping.extend(entries_for(self.profile, word, self.context))
         return PdoConfig(
@@ -169,10 +165,12 @@ class NodeConfig:
             state.inhibit_time,
             state.event_timer,
             mapping,
+            state.length,
         )
 
     def apply(self, index: int, sub: int, value: int) -> str | None:
-        """Follow one written (or read back) object value; say which part changed, if any."""
+        """Follow one written (or read back) object value; say which part of what decoding
+        needs changed, if any (timing values are kept by the model, not here)."""
         if 0x1400 <= index <= 0x1BFF and (index & 0x1FF) < 0x200:
             direction: Direction = "rx" if index < 0x1800 else "tx"
             base = index & ~0x1FF
@@ -197,20 +195,6 @@ class NodeConfig:
         if (index, sub) in self.context_objects():
             self.context[(index, sub)] = value
             return "context"
-        simple = {
-            0x1017: "heartbeat_ms",
-            0x100C: "guard_time_ms",
-            0x100D: "life_time_factor",
-            0x1006: "sync_period_us",
-            0x1007: "sync_window_us",
-            0x1015: "emcy_inhibit",
-        }
-        if index in simple and sub == 0:
-            setattr(self, simple[index], value)
-            return "timing"
-        if index == 0x1016 and sub >= 1:
-            self.consumer_heartbeat[sub] = value
-            return "timing"
         if index == 0x1005 and sub == 0:
             self.sync_cob_raw = value
             return "sync"

@@ -40,10 +40,19 @@ class PdoConfig:
     inhibit_time: int  # multiples of 100 us
     event_timer: int  # ms
     mapping: list[MapEntry] = field(default_factory=list)
+    length: int | None = None  # expected bytes when the mapping is unknown (network file)
 
     @property
     def bits(self) -> int:
         return sum(e.bits for e in self.mapping)
+
+    @property
+    def expected_bytes(self) -> int | None:
+        """The frame length this PDO should have: its mapping's, else the declared length,
+        else None (not known: nothing to check)."""
+        if self.mapping:
+            return (self.bits + 7) // 8
+        return self.length
 
 
 def split_mapping_word(word: int) -> tuple[int, int, int]:

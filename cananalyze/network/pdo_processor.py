@@ -81,7 +81,8 @@ class PdoDecoder:
                         group,
                         {
                             "pdo_problem": f"{binding.kind.upper()}{binding.number} "
-                            f"of node {binding.node} has no mapped objects"
+                            f"of node {binding.node}: mapping not known (none mapped, or "
+                            "not every entry seen yet)"
                         },
                     )
                 )

@@ -140,7 +140,7 @@ class DeviceProfile:
                         number=n + 1,
                         cob_id=cob_id,
                         valid=valid,
-                        transmission_type=int(self.value(comm_base + n, 2, node) or 0),
+                        transmission_type=_int_or(self.value(comm_base + n, 2, node), 255),
                         inhibit_time=int(self.value(comm_base + n, 3, node) or 0),
                         event_timer=int(self.value(comm_base + n, 5, node) or 0),
                         mapping=mapping,
@@ -154,6 +154,12 @@ class DeviceProfile:
         if self.sidecar is None or self.sidecar.emcy is None:
             return None
         return self.sidecar.emcy.decode(error_code, register, bytes(manufacturer))
+
+
+def _int_or(value, default: int) -> int:
+    """An object's integer value, or `default` when the dictionary gives none (255 for a
+    missing transmission type: see node_config.UNKNOWN_TYPE)."""
+    return value if isinstance(value, int) and not isinstance(value, bool) else default
 
 
 def _build(path: Path, sidecar: Sidecar | None, node_id: int | None) -> DeviceProfile:

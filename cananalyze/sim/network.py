@@ -1,9 +1,10 @@
 """Which nodes the simulator emulates: the project's network file, or the four seed devices.
 
 The network file is the analyser's own (docs/network-file.md, read by
-`cananalyze.network.netfile`), so one file describes the bus to both. Its
-configuration (heartbeat_ms, PDO settings) becomes the node's stored parameters:
-applied over the profile defaults at every reset, as a configured device keeps them.
+`cananalyze.network.netfile`), so one file describes the bus to both. Its node
+settings (heartbeat, consumer heartbeat, guarding, EMCY inhibit, PDO settings) become
+the node's stored parameters: applied over the profile defaults at every reset, as a
+configured device keeps them. The bus-wide [sync] and known_cob_ids are the analyser's.
 """
 
 from __future__ import annotations

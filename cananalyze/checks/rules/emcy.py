@@ -10,6 +10,7 @@ import numpy as np
 from ...protocol.emcy import MIN_BYTES, SIZE, error_text, register_text
 from ...protocol.services import Service
 from ..rule import Context, Rule, ms
+from ..spans import crossing, per_frame
 
 
 class EmcyRule(Rule):
@@ -59,14 +60,20 @@ class EmcyRule(Rule):
         prev_s[head_of] = [self.last_t.get(n, np.nan) for n in ns[head_of].tolist()]
         prev = np.empty_like(t)
         prev[srt] = prev_s
-        first_t = t[first].tolist()
-        inhibit_u = np.zeros(uniq.size, np.float64)
-        for j in seen.tolist():  # read once per batch at the node's first EMCY, in that order
-            inhibit_u[j] = ctx.config.emcy_inhibit_100us(int(uniq[j]), first_t[j]) or 0
-        inhibit = inhibit_u[np.searchsorted(uniq, node)]
+        inhibit = np.zeros(node.size, np.float64)
+        across = np.zeros(node.size, bool)
+        for j in seen.tolist():  # 0x1015 in force at each EMCY: one lookup per stretch
+            n = int(uniq[j])
+            at = np.flatnonzero(node == n)
+            changes = ctx.config.changes(n, 0x1015, 0x1015)
+            inhibit[at] = per_frame(
+                changes, t[at], lambda x, n=n: ctx.config.emcy_inhibit_100us(n, x) or 0
+            )
+            across[at] = crossing(changes, prev[at], t[at])
         with np.errstate(invalid="ignore"):
             fast = (
                 ~np.isnan(prev)
+                & ~across
                 & (inhibit != 0)
                 & ((t - prev) < inhibit * 1e-4 * (1 - self.tolerance))
             )

@@ -1,7 +1,7 @@
 """Node guarding: request period vs 0x100C, life time, missing responses, toggle bit.
 
 Guarding frames are rare (one RTR and one reply per node and guard time), so this
-walks them one by one.
+walks them one by one, each judged by the 0x100C/0x100D in force at its time.
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ import numpy as np
 from ...protocol.nmt import toggle_of
 from ...protocol.services import Service
 from ..rule import Context, Rule, ms
+from ..spans import crossing
 
 
 class GuardingRule(Rule):
@@ -75,7 +76,10 @@ class GuardingRule(Rule):
         if prev is not None and cfg:
             guard_ms, factor = cfg
             gap = t - prev
-            if factor and gap * 1000 > guard_ms * factor:
+            # a gap across a new 0x100C (or 0x100D) is not judged against either value
+            guard_moved = self._moved(ctx, node, 0x100C, prev, t)
+            life_moved = guard_moved or self._moved(ctx, node, 0x100D, prev, t)
+            if factor and not life_moved and gap * 1000 > guard_ms * factor:
                 self.emit(
                     prev,
                     node,
@@ -86,7 +90,7 @@ class GuardingRule(Rule):
                     guard_ms * factor,
                     row=row,
                 )
-            elif abs(gap * 1000 - guard_ms) > guard_ms * self.tolerance:
+            elif not guard_moved and abs(gap * 1000 - guard_ms) > guard_ms * self.tolerance:
                 self.emit(
                     t,
                     node,
@@ -98,6 +102,11 @@ class GuardingRule(Rule):
                 )
         self.req_t[node] = t
         self.pending[node] = t
+
+    @staticmethod
+    def _moved(ctx: Context, node: int, index: int, prev: float, t: float) -> bool:
+        changes = ctx.config.changes(node, index, index)
+        return bool(changes.size) and bool(crossing(changes, np.array([prev]), np.array([t]))[0])
 
     def finish(self, ctx: Context) -> None:
         for node, sent in self.pending.items():

@@ -1,11 +1,13 @@
-"""Asynchronous TPDOs (type 254/255): inhibit time (100 us units) and event timer while operational."""
+"""Asynchronous TPDOs (type 254/255): inhibit time (100 us units) and event timer while operational.
+
+Each gap is judged by the PDO parameters in force at its frame (one lookup per stretch).
+"""
 
 from __future__ import annotations
 
-import numpy as np
-
 from ...protocol.nmt import OPERATIONAL
 from ..rule import Context, Rule, ms
+from ..spans import pdo_stretches
 
 
 class PdoAsyncRule(Rule):
@@ -20,16 +22,15 @@ class PdoAsyncRule(Rule):
         if g.key.size == 0:
             return
         gap = g.gap
-        for cob, sl in g.groups():
-            cfg = ctx.config.pdo_params(cob, ctx.t_first)
-            if cfg is None or cfg[1].direction != "tx" or cfg[1].transmission_type < 254:
+        for cob, (node, pdo), idx, judged in pdo_stretches(ctx, g):
+            if pdo.direction != "tx" or pdo.transmission_type < 254:
                 continue
-            node, pdo = cfg
             self.subjects.add(node)
-            gg = gap[sl]
+            idx = idx[judged]
+            gg = gap[idx]
             if pdo.inhibit_time:
                 inhibit = pdo.inhibit_time * 1e-4
-                bad = np.flatnonzero(gg < inhibit * (1 - self.tolerance)) + sl.start
+                bad = idx[gg < inhibit * (1 - self.tolerance)]
                 for i in self.capped(bad, g.t[bad], node, cob).tolist():
                     self.emit(
                         g.t[i],
@@ -43,8 +44,7 @@ class PdoAsyncRule(Rule):
                     )
             if pdo.event_timer:
                 limit = pdo.event_timer * (1 + self.tolerance) / 1000.0
-                cand = np.flatnonzero(gg > limit) + sl.start
-                cand = self.capped(cand, g.prev[cand], node, cob)
+                cand = self.capped(idx[gg > limit], g.prev[idx[gg > limit]], node, cob)
                 if cand.size:
                     before = ctx.nmt.state_at(node, g.prev[cand])
                     after = ctx.nmt.state_at(node, g.t[cand])

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import pdo_length_bytes
 from ..rule import Context, Rule
+from ..spans import pdo_stretches
 
 
 class PdoLengthRule(Rule):
@@ -21,22 +21,18 @@ class PdoLengthRule(Rule):
         if g.key.size == 0:
             return
         dlc = ctx.batch.frames.dlc
-        for cob, sl in g.groups():
-            cfg = ctx.config.pdo_params(cob, ctx.t_first)
-            if cfg is None:
-                continue
-            node, pdo = cfg
-            want = pdo_length_bytes(pdo)
+        for cob, (node, pdo), idx, _ in pdo_stretches(ctx, g):
+            want = pdo.expected_bytes
             if want is None:
                 continue
             self.subjects.add(node)
-            rows = g.row[sl]
+            rows = g.row[idx]
             d = dlc[rows]
             bad = np.flatnonzero(d != want)
-            for i in self.capped(bad, g.t[sl][bad], node, cob).tolist():
+            for i in self.capped(bad, g.t[idx][bad], node, cob).tolist():
                 short = d[i] < want
                 self.emit(
-                    g.t[sl][i],
+                    g.t[idx[i]],
                     node,
                     cob,
                     f"{pdo.direction[0].upper()}PDO{pdo.number} has {int(d[i])} bytes, mapping needs {want}",

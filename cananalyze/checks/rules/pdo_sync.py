@@ -1,4 +1,7 @@
-"""Synchronous TPDOs: type n every n-th SYNC, inside the window 0x1007; type 0 only after a SYNC."""
+"""Synchronous TPDOs: type n every n-th SYNC, inside the window 0x1007; type 0 only after a SYNC.
+
+Each PDO is judged by its parameters and the window in force at its time.
+"""
 
 from __future__ import annotations
 
@@ -6,6 +9,7 @@ import numpy as np
 
 from ...protocol.services import Service
 from ..rule import Context, Rule, ms
+from ..spans import pdo_stretches, runs
 
 
 class PdoSyncRule(Rule):
@@ -28,15 +32,13 @@ class PdoSyncRule(Rule):
         st = b.frames.t[srows]
         g = ctx.gaps("pdo")
         if g.key.size:
-            window = ctx.config.sync_window_us(ctx.t_first)
-            for cob, sl in g.groups():
-                cfg = ctx.config.pdo_params(cob, ctx.t_first)
-                if cfg is None or cfg[1].direction != "tx" or cfg[1].transmission_type > 240:
+            windows = ctx.config.changes(None, 0x1007, 0x1007)
+            for cob, (node, pdo), idx, judged in pdo_stretches(ctx, g):
+                if pdo.direction != "tx" or pdo.transmission_type > 240:
                     continue
-                node, pdo = cfg
                 n = pdo.transmission_type
                 self.subjects.add(node)
-                rows = g.row[sl]
+                rows = g.row[idx]
                 k = np.searchsorted(srows, rows)  # SYNCs in this batch before each PDO
                 no = self.sync_count + k
                 # the latest SYNC before each PDO: in this batch, else the one carried over
@@ -47,8 +49,9 @@ class PdoSyncRule(Rule):
                 prev = np.empty_like(no)
                 prev[1:] = no[:-1]
                 prev[0] = self.last_sync_no.get(cob, -1)
+                prev[~judged] = -1  # the PDO's parameters changed since the previous one
                 self.last_sync_no[cob] = int(no[-1])
-                t = g.t[sl]
+                t = g.t[idx]
                 if n == 0:
                     bad = np.flatnonzero((prev >= 0) & (no == prev))
                     text = "acyclic synchronous PDO (type 0) sent twice without a SYNC between"
@@ -65,17 +68,20 @@ class PdoSyncRule(Rule):
                         max(n, 1),
                         row=rows[i],
                     )
-                if window:
-                    late = t - last_t
-                    bad = np.flatnonzero(late > window / 1e6)
+                for run, at in runs(windows, t):
+                    window = ctx.config.sync_window_us(at)
+                    if not window:
+                        continue
+                    late = t[run] - last_t[run]
+                    bad = np.flatnonzero(late > window / 1e6) + run.start
                     for i in self.capped(bad, t[bad], node, cob).tolist():
                         self.emit(
                             t[i],
                             node,
                             cob,
-                            f"sent {ms(late[i])} ms after SYNC, window 0x1007 is "
+                            f"sent {ms(t[i] - last_t[i])} ms after SYNC, window 0x1007 is "
                             f"{window / 1000:g} ms",
-                            ms(late[i]),
+                            ms(t[i] - last_t[i]),
                             window / 1000,
                             row=rows[i],
                         )

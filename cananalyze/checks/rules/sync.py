@@ -1,10 +1,11 @@
-"""SYNC: period against 0x1006 and counter continuity (columnar over the SYNC rows)."""
+"""SYNC: period against the 0x1006 in force at each SYNC, and counter continuity (columnar)."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from ..rule import Context, Rule, ms
+from ..spans import crossing, runs
 
 
 class SyncRule(Rule):
@@ -23,11 +24,16 @@ class SyncRule(Rule):
         if g.key.size == 0:
             return
         self.subjects.add(None)
-        period = ctx.config.sync_period_us(ctx.t_first)
         gap = g.gap
-        if period:
+        changes = ctx.config.changes(None, 0x1006, 0x1006)
+        across = crossing(changes, g.prev, g.t)
+        for run, at in runs(changes, g.t):
+            period = ctx.config.sync_period_us(at)
+            if not period:
+                continue
             p = period / 1e6
-            bad = np.flatnonzero(np.abs(gap - p) > p * self.tolerance)
+            idx = np.arange(run.start, run.stop)[~across[run]]
+            bad = idx[np.abs(gap[idx] - p) > p * self.tolerance]
             for i in self.capped(bad, g.t[bad], None, 0x080).tolist():
                 self.emit(
                     g.t[i],

@@ -1,0 +1,52 @@
+"""Stretches of frames under one configuration.
+
+A rule judges each frame by the value in force at its time. Values change rarely (an
+SDO write, a reset), so a rule asks its ConfigSource once per stretch between two
+changes (usually once per batch), and leaves unjudged the one gap that spans a change:
+which value the device followed across it is not known, and a guess could be a false
+alarm.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def runs(changes: np.ndarray, t: np.ndarray) -> list[tuple[slice, float]]:
+    """(slice, time to ask at) per run of consecutive frames with no change between them."""
+    if t.size == 0:
+        return []
+    if changes.size == 0:
+        return [(slice(0, t.size), float(t[0]))]
+    k = np.searchsorted(changes, t, side="right")
+    cuts = (np.flatnonzero(k[1:] != k[:-1]) + 1).tolist()
+    bounds = [0, *cuts, t.size]
+    return [(slice(a, b), float(t[a])) for a, b in zip(bounds, bounds[1:], strict=False)]
+
+
+def crossing(changes: np.ndarray, prev: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Whether a change lies in each gap (prev, t]."""
+    if changes.size == 0:
+        return np.zeros(t.shape, bool)
+    return np.searchsorted(changes, prev, side="right") != np.searchsorted(changes, t, side="right")
+
+
+def per_frame(changes: np.ndarray, t: np.ndarray, lookup) -> list:
+    """lookup(time) for every frame, asked once per run."""
+    out: list = [None] * t.size
+    for sl, at in runs(changes, t):
+        out[sl] = [lookup(at)] * (sl.stop - sl.start)
+    return out
+
+
+def pdo_stretches(ctx, g):
+    """Per COB-ID of a PDO gap table and stretch of its frames under one PDO configuration:
+    (COB-ID, (node, PdoConfig), indices into the table, whether each gap is judged)."""
+    changes = ctx.config.pdo_changes()
+    for cob, sl in g.groups():
+        t = g.t[sl]
+        across = crossing(changes, g.prev[sl], t)
+        for run, at in runs(changes, t):
+            cfg = ctx.config.pdo_params(cob, at)
+            if cfg is not None:
+                yield cob, cfg, np.arange(run.start, run.stop) + sl.start, ~across[run]
