@@ -256,3 +256,16 @@ def test_check_api_gives_the_findings_of_the_check_command(tmp_path):
     assert sum(f.fails for f in found) == 16
     assert cananalyze.check(SAMPLES / "commissioning.log", rules=RULES) == []
     assert cananalyze.Options is cananalyze.pipeline.Options
+
+
+def test_sdo_records_name_their_cob_ids_and_frames_their_interface():
+    """The sdo record's `channel` held a COB-ID pair where frame records hold the interface."""
+    lines = [
+        json.loads(x)
+        for x in cli("decode", SAMPLES / "demo.log", "--format", "jsonl").stdout.splitlines()
+    ]
+    frames = [r for r in lines if r["kind"] == "frame"]
+    sdo = [r for r in lines if r["kind"] == "sdo"]
+    assert frames and {r["channel"] for r in frames} == {"can0"}
+    assert sdo and all("channel" not in r for r in sdo)
+    assert {tuple(r["cob_ids"]) for r in sdo if r["node"] == 5} == {(0x605, 0x585)}

@@ -154,4 +154,4 @@ def test_expedited(request_, response, direction, index, subindex, data, manual_
     assert (tx.direction, tx.protocol, tx.result) == (direction, "expedited", "ok")
     assert (tx.index, tx.subindex, tx.data, tx.size) == (index, subindex, data, len(data) // 2)
     record = tx.to_record()
-    assert record["kind"] == "sdo" and record["channel"] == [REQ, RESP]
+    assert record["kind"] == "sdo" and record["cob_ids"] == [REQ, RESP]

@@ -246,7 +246,7 @@ class RecordColumns:
                 "abort_text": None,
                 "detail": None,
                 "frames": 2,
-                "channel": [0x600 + nd, 0x580 + nd],
+                "cob_ids": [0x600 + nd, 0x580 + nd],
             }
             for x, y, lat, nd, dr, i, s, n, h, v, nm in zip(
                 c["t_start"],
@@ -505,6 +505,6 @@ def pair_outputs(
         "abort_text": None if code is None else text,
         "detail": "aborted by server" if code is not None else None,
         "frames": 2,
-        "channel": [0x600 + node, 0x580 + node],
+        "cob_ids": [0x600 + node, 0x580 + node],
     }
     return req_note, resp_note, record, result

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 # The columns of the `sdo` table (Capture.sdo, sdo.parquet), in order: the record's
-# keys less `kind` and the tracker's extras (frames, channel).
+# keys less `kind` and the tracker's extras (frames, cob_ids).
 SDO_TABLE_COLUMNS = (
     "t_start",
     "t",
@@ -88,5 +88,5 @@ class SdoTransaction:
             "abort_text": self.abort_text,
             "detail": self.detail,
             "frames": self.frames,
-            "channel": list(self.channel),
+            "cob_ids": list(self.channel),
         }
