@@ -196,9 +196,10 @@ def build_checker(opts: Options) -> Checker:
     from .checks.build import build_checker as from_files
     from .checks.engine import Checker
 
-    if opts.checking:
-        return from_files(opts.rules)
-    return Checker(rules=[])
+    checker = from_files(opts.rules) if opts.checking else Checker(rules=[])
+    # the gap statistics only for a report that prints them (--timing, --summary)
+    checker.timing.with_stats = opts.timing
+    return checker
 
 
 # --- sources -------------------------------------------------------------------------

@@ -40,8 +40,12 @@ def stats_ms(g: np.ndarray) -> dict:
 
 
 class Timing:
-    def __init__(self, keep: set[str] | frozenset[str] = frozenset()) -> None:
+    def __init__(self, keep: set[str] | frozenset[str] = frozenset(), stats: bool = True) -> None:
+        """`stats`: keep each stream's gap statistics (the `--timing` and summary report);
+        without, only counts, spans and the kept gaps the rules read (half the checks'
+        cost in an export, where nobody prints the report)."""
         self.keep = set(keep)  # gap tables whose every gap is kept (for all_gaps)
+        self.with_stats = stats
         self.stats: dict[str, dict[int, StreamStats]] = {"heartbeat": {}, "pdo": {}, "sync": {}}
         self.gaps: dict[str, dict[int, list[np.ndarray]]] = {"heartbeat": {}, "pdo": {}, "sync": {}}
         self.gap_t: dict[str, dict[int, list[np.ndarray]]] = {
@@ -101,9 +105,17 @@ class Timing:
         gap = g.gap
         ok = ~np.isnan(gap)  # a stream's first frame ever has no gap
         v, key = gap[ok] * 1000.0, g.key[ok]
-        if self.keep and name in self.keep:
+        keep = bool(self.keep) and name in self.keep
+        if keep:
             t_prev, gap_s = g.prev[ok], gap[ok]
-        if v.size:
+        if v.size and not self.with_stats:
+            if keep:
+                first = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+                ends = np.r_[first[1:], v.size].tolist()
+                for a, e, key_j in zip(first.tolist(), ends, key[first].tolist(), strict=True):
+                    self.gaps[name].setdefault(key_j, []).append(gap_s[a:e])
+                    self.gap_t[name].setdefault(key_j, []).append(t_prev[a:e])
+        elif v.size:
             first = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
             k = np.diff(np.r_[first, v.size])
             mean = np.add.reduceat(v, first) / k
@@ -112,7 +124,6 @@ class Timing:
             lo, hi = np.minimum.reduceat(v, first), np.maximum.reduceat(v, first)
             ends = (first + k).tolist()
             binned: list[tuple[StreamStats, int, int]] = []  # streams past EXACT: one bincount
-            keep = self.keep and name in self.keep
             for a, e, key_j, mean_j, m2_j, lo_j, hi_j in zip(
                 first.tolist(),
                 ends,

@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
     from ..pipeline import build_checker, build_decoder, open_source
     from .common import run_with_progress
 
-    opts = options(args, checks=True)
+    opts = options(args, checks=True, timing=bool(args.timing))
     checker = build_checker(opts)  # a bad rules file fails before the log is read
     source = open_source(args.log, opts)
     decoder = build_decoder(opts, checker)

@@ -13,10 +13,23 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR, FrameBatch
+from ..runtime import speedups
 from . import nmt
 from .services import Service
 
 NO_NODE = -1
+# the service codes the compiled classifier needs, in its order
+_C_CODES = np.array(
+    [
+        Service.OTHER,
+        Service.ERROR_FRAME,
+        Service.HEARTBEAT,
+        Service.BOOTUP,
+        Service.GUARD_RESPONSE,
+        Service.GUARD_REQUEST,
+    ],
+    np.uint8,
+)
 
 
 @dataclass
@@ -97,6 +110,12 @@ class CobClassifier:
         0x7FF (a bus cannot carry one; a corrupt or hand-made log can) is `other`
         (or `error_frame`), never a CANopen service.
         """
+        fast = getattr(speedups.C, "classify", None)
+        if fast is not None:
+            return self._classify_c(fast, batch)
+        return self._classify_numpy(batch)
+
+    def _classify_numpy(self, batch: FrameBatch) -> Classified:
         can_id = batch.can_id
         flags = batch.flags
         std = ((flags & (FLAG_EXT | FLAG_ERR)) == 0) & (can_id <= 0x7FF)
@@ -106,6 +125,30 @@ class CobClassifier:
         node = np.where(std, self.node[idx], NO_NODE).astype(np.int16)
         pdo = np.where(std, self.pdo[idx], 0).astype(np.uint8)
         self._refine_error_control(batch, service)
+        return Classified(service, node, pdo)
+
+    def _classify_c(self, fast, batch: FrameBatch) -> Classified:
+        """The same columns in one compiled pass, GIL released: 0.04 s per 10M frames
+        against numpy's 0.19 s, a twentieth of `check`'s main thread (measured)."""
+        n = len(batch)
+        service = np.empty(n, np.uint8)
+        node = np.empty(n, np.int16)
+        pdo = np.empty(n, np.uint8)
+        c = np.ascontiguousarray
+        fast(
+            c(batch.can_id, np.uint32),
+            c(batch.flags, np.uint8),
+            c(batch.dlc, np.uint8),
+            c(batch.data, np.uint8),
+            self.svc,
+            self.node,
+            self.pdo,
+            self._prev_rtr.view(np.uint8),
+            _C_CODES,
+            service,
+            node,
+            pdo,
+        )
         return Classified(service, node, pdo)
 
     def _refine_error_control(self, batch: FrameBatch, service: np.ndarray) -> None:

@@ -535,6 +535,85 @@ fail:
     return NULL;
 }
 
+/* ---------------------------------------------------------- classification */
+
+PyDoc_STRVAR(classify_doc,
+             "classify(can_id, flags, dlc, data, svc_tab, node_tab, pdo_tab, prev_rtr, codes,\n"
+             "         service, node, pdo) -> None\n\n"
+             "protocol.cobid.CobClassifier.classify in one pass: 2048-entry tables (uint8,\n"
+             "int16, uint8) looked up for standard frames with an 11-bit id (others and\n"
+             "29-bit frames are OTHER), error frames marked, and the\n"
+             "error-control COB-IDs split into heartbeat / boot-up / guarding with the\n"
+             "per-COB-ID 'last frame was an RTR' state (prev_rtr, 2048 bytes, updated).\n"
+             "codes: uint8 [OTHER, ERROR_FRAME, HEARTBEAT, BOOTUP, GUARD_RESPONSE,\n"
+             "GUARD_REQUEST]. Outputs: service uint8, node int16, pdo uint8 (n each).");
+
+static PyObject *classify(PyObject *self, PyObject *args) {
+    PyObject *o[12];
+    Bufs bs = {.n = 0};
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOO", &o[0], &o[1], &o[2], &o[3], &o[4], &o[5], &o[6],
+                          &o[7], &o[8], &o[9], &o[10], &o[11]))
+        return NULL;
+    if (bufs_get(&bs, o[0], 0, -1, "can_id") < 0) goto fail;
+    Py_ssize_t n = bs.b[0].len / 4;
+    if (bufs_get(&bs, o[1], 0, n, "flags") < 0 || bufs_get(&bs, o[2], 0, n, "dlc") < 0 ||
+        bufs_get(&bs, o[3], 0, n * 8, "data") < 0 || bufs_get(&bs, o[4], 0, 2048, "svc_tab") < 0 ||
+        bufs_get(&bs, o[5], 0, 2048 * 2, "node_tab") < 0 ||
+        bufs_get(&bs, o[6], 0, 2048, "pdo_tab") < 0 ||
+        bufs_get(&bs, o[7], 1, 2048, "prev_rtr") < 0 || bufs_get(&bs, o[8], 0, 6, "codes") < 0 ||
+        bufs_get(&bs, o[9], 1, n, "service") < 0 || bufs_get(&bs, o[10], 1, n * 2, "node") < 0 ||
+        bufs_get(&bs, o[11], 1, n, "pdo") < 0)
+        goto fail;
+    const uint32_t *can_id = bs.b[0].buf;
+    const uint8_t *flags = bs.b[1].buf, *dlc = bs.b[2].buf, *data = bs.b[3].buf;
+    const uint8_t *svc_tab = bs.b[4].buf, *pdo_tab = bs.b[6].buf, *codes = bs.b[8].buf;
+    const int16_t *node_tab = bs.b[5].buf;
+    uint8_t *prev_rtr = bs.b[7].buf, *service = bs.b[9].buf, *pdo = bs.b[11].buf;
+    int16_t *node = bs.b[10].buf;
+    const uint8_t OTHER = codes[0], ERROR_FRAME = codes[1], HEARTBEAT = codes[2];
+    const uint8_t BOOTUP = codes[3], GUARD_RESPONSE = codes[4], GUARD_REQUEST = codes[5];
+    Py_BEGIN_ALLOW_THREADS;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        uint8_t f = flags[i];
+        if (f & (FLAG_EXT | FLAG_ERR)) {
+            service[i] = (f & FLAG_ERR) ? ERROR_FRAME : OTHER;
+            node[i] = -1;
+            pdo[i] = 0;
+            continue;
+        }
+        if (can_id[i] > 0x7FF) { /* a "standard" id a bus cannot carry: never CANopen */
+            service[i] = OTHER;
+            node[i] = -1;
+            pdo[i] = 0;
+            continue;
+        }
+        uint32_t idx = can_id[i];
+        uint8_t s = svc_tab[idx];
+        node[i] = node_tab[idx];
+        pdo[i] = pdo_tab[idx];
+        if (s == HEARTBEAT) { /* error control: the previous frame on this COB-ID decides */
+            int rtr = (f & FLAG_RTR) != 0;
+            int after_rtr = prev_rtr[idx] != 0;
+            uint8_t b0 = data[8 * i];
+            int has_byte = dlc[i] >= 1;
+            if (rtr)
+                s = GUARD_REQUEST;
+            else if (has_byte && b0 == 0)
+                s = BOOTUP;
+            else if (after_rtr && has_byte && (b0 & 0x7F) != 0)
+                s = GUARD_RESPONSE;
+            prev_rtr[idx] = (uint8_t)rtr;
+        }
+        service[i] = s;
+    }
+    Py_END_ALLOW_THREADS;
+    bufs_release(&bs);
+    Py_RETURN_NONE;
+fail:
+    bufs_release(&bs);
+    return NULL;
+}
+
 /* ------------------------------------------------------------- text lines */
 
 #define MAX_PARTS 64
@@ -734,6 +813,7 @@ static PyMethodDef methods[] = {
     {"asc_lines", asc_lines, METH_VARARGS, asc_lines_doc},
     {"asc_base_line", asc_base_line, METH_VARARGS, asc_base_line_doc},
     {"hex_payload", hex_payload, METH_VARARGS, hex_payload_doc},
+    {"classify", classify, METH_VARARGS, classify_doc},
     {"compact_rows", compact_rows, METH_VARARGS, compact_rows_doc},
     {"gather_rows", gather_rows, METH_VARARGS, gather_rows_doc},
     {NULL, NULL, 0, NULL},
@@ -741,7 +821,7 @@ static PyMethodDef methods[] = {
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_speedups",
-    "Compiled inner loops of the text readers and writer, the frames table "
+    "Compiled inner loops of the text readers and writer, the classifier, the frames table "
     "and the MCAP chunks (optional).", -1, methods,
 };
 
