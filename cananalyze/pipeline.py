@@ -422,10 +422,12 @@ def _read_ahead(source: Source, ended: list) -> Iterator[FrameBatch]:
 
 
 def _until_failure(batches: Iterator[FrameBatch], ended: list) -> Iterator[FrameBatch]:
-    from .io.live import LiveError
+    from .io.live import LiveError, LiveOpenError
 
     try:
         yield from batches
+    except LiveOpenError:
+        raise  # nothing was read: the outputs are dropped
     except LiveError as exc:
         ended.append(exc)
 

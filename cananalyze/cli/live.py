@@ -179,8 +179,11 @@ def run(args: argparse.Namespace) -> int:
     if checker is not None:
         report = FindingsSink(sys.stdout, args.junit, args.json, no_color=args.no_color)
         sinks.append(report)
-    bus = open_bus(args.interface, args.channel, args.bitrate, filters, **bus_options)
-    source = LiveSource(bus, channel_name=_label(args.channel, bus))
+    # the bus opens once every output is open (see LiveSource)
+    source = LiveSource(
+        lambda: open_bus(args.interface, args.channel, args.bitrate, filters, **bus_options),
+        name_of=lambda bus: _label(args.channel, bus),
+    )
     deadline = time.monotonic() + args.duration if args.duration else None
 
     def stop(signum, frame):

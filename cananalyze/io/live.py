@@ -12,7 +12,7 @@ the consumer instead of overwriting: frames then queue in the interface's own bu
 from __future__ import annotations
 
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,6 +23,10 @@ from ..frames import FLAG_BRS, FLAG_ERR, FLAG_ESI, FLAG_EXT, FLAG_FD, FLAG_RTR, 
 
 class LiveError(CananalyzeError):
     """The interface could not be opened or failed while sniffing (one line, exit 2)."""
+
+
+class LiveOpenError(LiveError):
+    """The interface could not be opened: nothing was read, so no output is kept."""
 
 
 @dataclass(frozen=True)
@@ -97,7 +101,17 @@ class LiveSource:
         batch_max: int = 4096,
         ring_size: int = 1 << 20,
         owns_bus: bool = True,
+        name_of: Callable[[object], str] | None = None,
     ) -> None:
+        """`bus`: a python-can bus, or a callable that opens one when reading starts (so
+        that the outputs are open first: frames the adapter buffers while a viewer starts
+        would get their receive times late, bunched together). `name_of(bus)`: the
+        channel name, asked once the bus is open."""
+        self._open_bus = bus if callable(bus) and not hasattr(bus, "recv") else None
+        self._name_of = name_of
+        bus = None if self._open_bus is not None else bus
+        if bus is not None and name_of is not None:
+            channel_name = name_of(bus)
         self.bus = bus
         self.interval = interval
         self.batch_max = batch_max
@@ -220,6 +234,16 @@ class LiveSource:
     # --- consumer ---------------------------------------------------------
     def start(self) -> LiveSource:
         if not self._started:
+            if self.bus is None and self._open_bus is not None:
+                try:
+                    self.bus = self._open_bus()
+                except LiveError as exc:
+                    raise LiveOpenError(str(exc)) from None
+                if self._name_of is not None:
+                    name = self._name_of(self.bus)
+                    self._default_channel = name
+                    self._channels = [name]
+                    self._channel_index = {None: 0, name: 0}
             self._long = {}
             self._started = True
             self._thread.start()
