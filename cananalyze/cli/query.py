@@ -1,0 +1,71 @@
+"""`cananalyze query DATASET "SQL"`: DuckDB over a fleet dataset's tables, as a table, CSV or JSON."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import datetime as dt
+import json
+import sys
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "query",
+        help="SQL (DuckDB) over a fleet dataset: frames, signals, sdo, events, findings, nodes, logs",
+        description="Run one SQL statement over a dataset written by `cananalyze fleet`. "
+        "Each table is a view of its Parquet parts, with the partition column `date`.",
+    )
+    p.add_argument("dataset", help="the dataset folder (fleet --out)")
+    p.add_argument("sql", help='the statement, e.g. "SELECT status, count(*) FROM logs GROUP BY 1"')
+    fmt = p.add_mutually_exclusive_group()
+    fmt.add_argument("--csv", action="store_true", help="CSV with a header line")
+    fmt.add_argument("--json", action="store_true", help="one JSON object per row")
+    p.set_defaults(func=run)
+
+
+def _plain(v):
+    if isinstance(v, (dt.date, dt.datetime, dt.time)):
+        return v.isoformat()
+    if isinstance(v, bytes):
+        return v.hex()
+    if isinstance(v, float) and v != v:
+        return None
+    return v
+
+
+def _cell(v) -> str:
+    v = _plain(v)
+    if v is None:
+        return ""
+    if isinstance(v, float):
+        return f"{v:.6f}".rstrip("0").rstrip(".") if abs(v) < 1e15 else repr(v)
+    return str(v)
+
+
+def print_table(names: list[str], rows: list[tuple], out=None) -> None:
+    out = out or sys.stdout
+    cells = [[_cell(v) for v in r] for r in rows]
+    widths = [max([len(n)] + [len(c[i]) for c in cells]) for i, n in enumerate(names)]
+    print("  ".join(n.ljust(w) for n, w in zip(names, widths, strict=True)).rstrip(), file=out)
+    print("  ".join("-" * w for w in widths), file=out)
+    for c in cells:
+        print("  ".join(v.ljust(w) for v, w in zip(c, widths, strict=True)).rstrip(), file=out)
+    print(f"({len(rows)} row{'s' if len(rows) != 1 else ''})", file=out)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..fleet.query import query
+
+    names, rows = query(args.dataset, args.sql)
+    if args.csv:
+        w = csv.writer(sys.stdout, lineterminator="\n")
+        w.writerow(names)
+        w.writerows([[_plain(v) for v in r] for r in rows])
+    elif args.json:
+        for r in rows:
+            rec = {n: _plain(v) for n, v in zip(names, r, strict=True)}
+            print(json.dumps(rec, default=str))
+    else:
+        print_table(names, rows)
+    return 0

@@ -1,0 +1,247 @@
+"""The fleet run: inputs expanded, one Dask task per log, progress, the verdict and the JUnit report.
+
+By default a local `dask.distributed` cluster of worker processes (one thread
+each: a log's pipeline already keeps two cores busy with its reader and writer
+threads) bound to 127.0.0.1, dashboard included; `scheduler` joins an existing
+cluster instead (its workers must see the same paths). The driver holds one
+small dict per log; the workers write the tables.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TextIO
+
+from ..errors import UsageError
+from ..pipeline import Options
+from . import layout
+from .inputs import expand, options_for
+from .task import LogTask, process, record_failure
+
+
+@dataclass
+class FleetResult:
+    """Every log's result row (input order), and what the run says about them."""
+
+    results: list[dict]
+    seconds: float = 0.0
+    dashboard: str | None = None
+    recovered: tuple[int, int] = (0, 0)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def failed(self) -> list[dict]:
+        return [r for r in self.results if r.get("status") == "failed"]
+
+    @property
+    def violated(self) -> list[dict]:
+        return [r for r in self.results if r.get("status") == "ok" and r.get("violations")]
+
+    @property
+    def skipped(self) -> list[dict]:
+        return [r for r in self.results if r.get("skipped")]
+
+    @property
+    def frames(self) -> int:
+        return sum(int(r.get("frames") or 0) for r in self.results if not r.get("skipped"))
+
+    @property
+    def exit_code(self) -> int:
+        """0: every log decoded, no rule violated; 1: a log failed or had violations."""
+        return 1 if self.failed or self.violated else 0
+
+
+def _client(workers: int | None, scheduler: str | None):
+    """A distributed Client: the existing scheduler's, or a local cluster's on 127.0.0.1."""
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        return Client(scheduler), None
+    cluster = LocalCluster(
+        n_workers=workers or os.cpu_count() or 1,
+        threads_per_worker=1,
+        processes=True,
+        host="127.0.0.1",
+        dashboard_address="127.0.0.1:0",
+        silence_logs=logging.ERROR,
+    )
+    return Client(cluster), cluster
+
+
+def _dashboard(client) -> str | None:
+    try:
+        if "dashboard" not in client.scheduler_info().get("services", {}):
+            return None
+        return client.dashboard_link
+    except Exception:  # noqa: BLE001 - a report line, not the run
+        return None
+
+
+class _Progress:
+    """Logs done of all, frames decoded, failures: a rich bar on a terminal, else nothing."""
+
+    def __init__(self, stream: TextIO | None, total: int) -> None:
+        self.bar = None
+        if stream is None or not stream.isatty():
+            return
+        from rich.console import Console
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeRemainingColumn,
+        )
+
+        self.bar = Progress(
+            TextColumn("logs"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("{task.fields[frames]:,} frames, {task.fields[failed]} failed"),
+            TimeRemainingColumn(),
+            console=Console(file=stream),
+            transient=True,
+        )
+        self.task = self.bar.add_task("logs", total=total, frames=0, failed=0)
+        self.bar.start()
+        self.frames = self.failed = 0
+
+    def done(self, result: dict) -> None:
+        if self.bar is None:
+            return
+        if not result.get("skipped"):
+            self.frames += int(result.get("frames") or 0)
+        self.failed += result.get("status") == "failed"
+        self.bar.update(self.task, advance=1, frames=self.frames, failed=self.failed)
+
+    def stop(self) -> None:
+        if self.bar is not None:
+            self.bar.stop()
+
+
+def run_fleet(
+    inputs: list[str],
+    dataset: str | Path,
+    opts: Options | None = None,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    force: bool = False,
+    junit: str | None = None,
+    compression: str = "snappy",
+    stream: TextIO | None = None,
+) -> FleetResult:
+    """Decode every log the inputs name into `dataset`; the results (nothing raised for a
+    bad log). `stream`: where the dashboard line and the progress bar go."""
+    t0 = time.perf_counter()
+    opts = opts or Options(checks=True)
+    if not opts.checking:
+        opts = Options(**{**opts.__dict__, "checks": True})  # the findings table is a promise
+    dataset = Path(dataset)
+    if dataset.exists() and not dataset.is_dir():
+        raise UsageError(f"{dataset}: exists and is not a directory")
+    logs = expand(inputs, dataset)
+    if not logs:
+        raise UsageError(f"no log files in {' '.join(inputs)}")
+    if workers is not None and workers < 1:
+        raise UsageError(f"--workers must be 1 or more (got {workers})")
+    try:
+        dataset.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UsageError(f"{dataset}: cannot create the dataset folder ({exc.strerror})") from None
+    if junit:
+        from ..outputs.atomic import check_writable
+
+        check_writable(junit)
+    recovered = layout.recover(dataset)
+    tasks = [
+        LogTask(
+            str(p), str(dataset.resolve()), options_for(p, opts), force, bool(junit), compression
+        )
+        for p in logs
+    ]
+    client, cluster = _client(workers, scheduler)
+    out = FleetResult([], recovered=recovered)
+    by_path: dict[str, dict] = {}
+    progress = None
+    try:
+        out.dashboard = _dashboard(client)
+        if stream is not None:
+            where = out.dashboard or "not running (needs bokeh)"
+            print(f"fleet: {len(tasks)} logs, dashboard {where}", file=stream)
+        from distributed import as_completed
+
+        futures = client.map(process, tasks, pure=False)
+        path_of = {f.key: t.path for f, t in zip(futures, tasks, strict=True)}
+        progress = _Progress(stream, len(tasks))
+        for fut in as_completed(futures):
+            try:
+                result = fut.result()
+            except Exception as exc:  # noqa: BLE001 - a worker lost (memory, crash): that log fails
+                path = path_of[fut.key]
+                result = record_failure(dataset, path, f"{path}: worker failed: {exc}")
+            by_path[result["source"]] = result
+            progress.done(result)
+            fut.release()
+    finally:
+        if progress is not None:
+            progress.stop()
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    out.results = [by_path[t.path] for t in tasks if t.path in by_path]
+    out.seconds = time.perf_counter() - t0
+    if junit:
+        _write_junit(junit, out.results)
+    return out
+
+
+def _write_junit(dest: str, results: list[dict]) -> None:
+    """One testsuite per log (a skipped log's: its recorded verdict, no cases)."""
+    import xml.etree.ElementTree as ET
+
+    from ..outputs.atomic import write_text_atomic
+
+    root = ET.Element("testsuites", name="cananalyze fleet")
+    for r in results:
+        if r.get("junit"):
+            root.append(ET.fromstring(r["junit"]))
+        else:
+            failed = r.get("status") == "failed"
+            suite = ET.SubElement(root, "testsuite", name=r["source"], tests="1")
+            suite.set("failures", "0")
+            suite.set("errors", "1" if failed else "0")
+            case = ET.SubElement(suite, "testcase", classname="cananalyze.fleet", name="recorded")
+            if failed:
+                ET.SubElement(case, "error", message=r.get("error") or "failed")
+            elif r.get("violations"):
+                suite.set("failures", "1")
+                ET.SubElement(case, "failure", message=f"{r['violations']} violation(s) recorded")
+            else:
+                ET.SubElement(case, "skipped", message="already in the dataset")
+    ET.indent(root)
+    write_text_atomic(dest, ET.tostring(root, encoding="unicode", xml_declaration=True) + "\n")
+
+
+def summary_lines(out: FleetResult) -> list[str]:
+    """The end of a run: counts, then every failed log and every log with violations."""
+    done = len(out.results) - len(out.skipped)
+    lines = [
+        f"fleet: {len(out.results)} logs ({done} decoded, {len(out.skipped)} already in the "
+        f"dataset), {out.frames:,} frames, {len(out.failed)} failed, "
+        f"{len(out.violated)} with violations, {out.seconds:.1f} s"
+    ]
+    if any(out.recovered):
+        lines.append(
+            f"fleet: finished {out.recovered[0]} and undid {out.recovered[1]} interrupted commits"
+        )
+    for r in out.failed:
+        lines.append(f"failed: {r.get('error') or r['source']}")
+    for r in out.violated:
+        rules = ", ".join(sorted(r.get("first") or {})) or "see the findings table"
+        lines.append(f"violations: {r['source']}: {r['violations']} ({rules})")
+    return lines

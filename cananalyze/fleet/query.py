@@ -1,0 +1,56 @@
+"""DuckDB over a fleet dataset: each table a view of its hive-partitioned Parquet parts."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..errors import UsageError
+from .schema import TABLES
+
+
+def _sql_text(value: str) -> str:
+    return "'" + value.replace("'", "''") + "'"
+
+
+def connect(dataset: str | Path):
+    """An in-memory DuckDB connection with a view per table the dataset holds.
+
+    `hive_partitioning` turns the `date=YYYY-MM-DD` folders into a DATE column `date`;
+    `union_by_name` lets a dataset written by an older cananalyze (columns added since)
+    still be read whole.
+    """
+    import duckdb
+
+    root = Path(dataset)
+    if not root.is_dir():
+        raise UsageError(f"{root}: no such dataset folder")
+    con = duckdb.connect()
+    made = []
+    for table in TABLES:
+        if not any((root / table).glob("date=*/part-*.parquet")):
+            continue
+        pattern = _sql_text(str(root / table / "date=*" / "part-*.parquet"))
+        con.execute(
+            f"CREATE VIEW {table} AS SELECT * FROM read_parquet({pattern}, "
+            "hive_partitioning = true, union_by_name = true)"
+        )
+        made.append(table)
+    if not made:
+        raise UsageError(f"{root}: not a fleet dataset (no {'/'.join(TABLES)} parts in it)")
+    return con
+
+
+def query(dataset: str | Path, sql: str) -> tuple[list[str], list[tuple]]:
+    """(column names, rows) of `sql` over the dataset's views; UsageError for bad SQL."""
+    import duckdb
+
+    con = connect(dataset)
+    try:
+        rel = con.execute(sql)
+        names = [d[0] for d in rel.description or []]
+        return names, rel.fetchall()
+    except duckdb.Error as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise UsageError(f"query: {first}") from None
+    finally:
+        con.close()

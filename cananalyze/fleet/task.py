@@ -1,0 +1,258 @@
+"""One log, on a Dask worker: the same pipeline as `export --parquet`, committed into the dataset.
+
+The task hashes the file, skips it when the dataset already holds that content
+decoded by this cananalyze (unless forced), runs `pipeline.run` into a
+`TableSink` in its staging folder (the export's flat memory: nothing per frame
+kept), conforms each table file to the fleet schema row group by row group with
+the lineage columns appended (no second decode), and commits. It returns one
+small dict (the `logs` row, the violations to list, the JUnit testsuite when
+asked): the tables themselves never pass through the scheduler.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+import resource
+import time
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+
+from .. import __version__
+from ..errors import CananalyzeError
+from ..outputs.sink import Sink
+from ..pipeline import Options
+from . import layout, schema
+
+# times at or after 2000-01-01 and before 2100 are wall-clock times; smaller ones count
+# from the logger's start (candump without -t a, relative ASC): the file's mtime dates those
+_EPOCH_FROM, _EPOCH_TO = 946_684_800.0, 4_102_444_800.0
+EXPORT = "export"  # the TableSink's folder inside the stage
+
+
+@dataclass
+class LogTask:
+    """What a worker needs for one log (pickled to the worker: keep it small)."""
+
+    path: str
+    dataset: str
+    opts: Options
+    force: bool = False
+    junit: bool = False
+    compression: str = "snappy"
+    extra: dict = field(default_factory=dict)  # room for later per-log settings
+
+
+class _Findings(Sink):
+    """Counts the run's findings; keeps the Finding objects only for a JUnit report."""
+
+    def __init__(self, keep: bool) -> None:
+        self.keep = keep
+        self.findings: list = []
+        self.total = 0
+        self.failing = 0
+        self.first: dict[str, str] = {}  # rule -> its first failing message
+
+    def write(self, batch) -> None:
+        for f in batch.findings:
+            self.total += 1
+            if f.fails:
+                self.failing += 1
+                self.first.setdefault(f.rule, f.message)
+            if self.keep:
+                self.findings.append(f)
+
+
+def content_hash(path: str | Path) -> str:
+    """sha256 of the file's bytes (as stored: a .gz is hashed compressed)."""
+    with open(path, "rb") as f:
+        return hashlib.file_digest(f, "sha256").hexdigest()
+
+
+def recorded(dataset: Path, digest: str) -> dict | None:
+    """The dataset's `logs` row for this content, or None."""
+    import pyarrow.parquet as pq
+
+    for part in layout.existing_parts(dataset, "logs", digest):
+        with contextlib.suppress(OSError, ValueError):
+            rows = pq.read_table(part).to_pylist()
+            if rows:
+                return rows[0]
+    return None
+
+
+def _one_line(exc: BaseException, path: str) -> str:
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    if not isinstance(exc, CananalyzeError):
+        text = f"{type(exc).__name__}: {text}"  # not an input error we foresaw: say what
+    return text if path in text else f"{path}: {text}"
+
+
+def _date(t_first: float | None, path: str) -> tuple[str, str]:
+    if t_first is not None and _EPOCH_FROM <= t_first < _EPOCH_TO:
+        return datetime.fromtimestamp(t_first, UTC).strftime("%Y-%m-%d"), "log"
+    try:
+        mtime = os.stat(path).st_mtime
+    except OSError:
+        mtime = time.time()
+    return datetime.fromtimestamp(mtime, UTC).strftime("%Y-%m-%d"), "mtime"
+
+
+def _conform_file(src: Path, dest: Path, table: str, lineage: dict, compression: str) -> int:
+    """A table file of the export rewritten in the fleet schema, one row group at a time."""
+    import pyarrow.parquet as pq
+
+    rows = 0
+    target = schema.schema(table)
+    with (
+        pq.ParquetFile(src) as pf,
+        pq.ParquetWriter(
+            dest, target, compression=compression, **schema.parquet_options(table)
+        ) as out,
+    ):
+        for i in range(pf.num_row_groups):
+            part = schema.conform(pf.read_row_group(i), table, lineage)
+            out.write_table(part, row_group_size=part.num_rows or None)
+            rows += part.num_rows
+    return rows
+
+
+def _logs_part(dest: Path, row: dict, lineage: dict) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    cols = {c: pa.array([row.get(c)], t) for c, t in schema.COLUMNS["logs"]}
+    table = schema.conform(pa.table(cols), "logs", lineage)
+    pq.write_table(table, dest)
+
+
+def _suite(path: str, rules, findings, error: str | None) -> str:
+    """One JUnit testsuite for this log (check's report, or one failing `decode` case)."""
+    if error is None:
+        from ..outputs.junit import junit_xml
+
+        suite = ET.fromstring(junit_xml(rules, findings, name=path).split("?>", 1)[-1])[0]
+    else:
+        suite = ET.Element("testsuite", name=path, tests="1", failures="0", errors="1")
+        case = ET.SubElement(suite, "testcase", classname="cananalyze.decode", name="decode")
+        ET.SubElement(case, "error", message=error, type="input").text = error
+    return ET.tostring(suite, encoding="unicode")
+
+
+def process(task: LogTask) -> dict:
+    """Decode one log into the dataset; the result row (never raises for a bad log)."""
+    from ..outputs.tables.stream import TABLES, TableSink
+    from ..pipeline import build_decoder, open_source, run
+    from ..runtime import allocator
+    from ..runtime.gcpolicy import fewer_collections
+
+    allocator.tune()
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    path, dataset = task.path, Path(task.dataset)
+    lineage = {"source": path, "version": __version__}
+    row: dict = {"status": "ok", "error": None, "frames": 0, "findings": 0, "violations": 0}
+    try:
+        row["size"] = os.path.getsize(path)
+        digest = content_hash(path)
+    except OSError as exc:
+        digest = hashlib.sha256(f"unreadable:{path}".encode()).hexdigest()
+        row.update(status="failed", error=f"{path}: cannot read ({exc.strerror or exc})")
+    lineage["hash"] = digest
+    result = {"source": path, "hash": digest, "skipped": False, "first": {}, "junit": None}
+    if row["status"] == "ok" and not task.force:
+        old = recorded(dataset, digest)
+        if old is not None and old.get("version") == __version__:
+            result.update(old, skipped=True)
+            result["source"], result["recorded_source"] = path, old.get("source")
+            return result
+    stage = layout.Stage(dataset, digest)
+    try:
+        sink = _Findings(keep=task.junit)
+        state = None
+        rules = []
+        if row["status"] == "ok":
+            try:
+                source = open_source(path, task.opts)
+                row["format"] = getattr(getattr(source, "fmt", None), "name", None)
+                decoder = build_decoder(task.opts)
+                tables = TableSink(stage.dir / EXPORT, "parquet", task.compression)
+                with fewer_collections():
+                    state = run(source, decoder, [tables, sink], task.opts)
+                rules = decoder.checker.rules if decoder.checker is not None else []
+                row["skipped_lines"] = source.problems.count
+            except (KeyboardInterrupt, SystemExit):
+                raise
+            except BaseException as exc:  # noqa: BLE001 - one log's failure is a row, not the fleet's
+                row.update(status="failed", error=_one_line(exc, path))
+                state = None
+        t_first = state.t0 if state is not None else None
+        date, row["date_from"] = _date(t_first, path)
+        renames: list[tuple[Path, Path]] = []
+        if state is not None:
+            row.update(frames=state.frames, t_first=t_first, t_last=state.t_last)
+            row.update(findings=sink.total, violations=sink.failing)
+            try:
+                for table in TABLES:
+                    staged = stage.dir / f"{table}.parquet"
+                    export = stage.dir / EXPORT / f"{table}.parquet"
+                    _conform_file(export, staged, table, lineage, task.compression)
+                    renames.append((staged, layout.part_path(dataset, table, date, digest)))
+            except (KeyboardInterrupt, SystemExit):
+                raise
+            except BaseException as exc:  # noqa: BLE001 - as a decode failure: no parts
+                row.update(status="failed", error=_one_line(exc, path))
+                renames = []
+        row["seconds"] = time.perf_counter() - wall0
+        row["cpu_seconds"] = time.process_time() - cpu0
+        staged = stage.dir / "logs.parquet"
+        _logs_part(staged, row, lineage)
+        renames.append((staged, layout.part_path(dataset, "logs", date, digest)))  # last: the mark
+        final = {d for _, d in renames}
+        removals = [
+            p
+            for table in schema.TABLES
+            for p in layout.existing_parts(dataset, table, digest)
+            if p not in final
+        ]
+        stage.commit(renames, removals)
+    except BaseException:
+        stage.close()
+        raise
+    result.update(row)
+    result.update(lineage)
+    result["first"] = sink.first
+    result["date"] = date
+    result["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    result["worker_pid"] = os.getpid()
+    if task.junit:
+        result["junit"] = _suite(path, rules, sink.findings, row["error"])
+    return result
+
+
+def record_failure(dataset: str | Path, path: str, error: str) -> dict:
+    """A `logs` row of status failed written by the driver, for a log whose worker was lost
+    (killed for memory, crashed): the rest of the fleet goes on."""
+    dataset = Path(dataset)
+    try:
+        digest = content_hash(path)
+    except OSError:
+        digest = hashlib.sha256(f"unreadable:{path}".encode()).hexdigest()
+    lineage = {"source": path, "hash": digest, "version": __version__}
+    date, date_from = _date(None, path)
+    row = {"status": "failed", "error": error, "frames": 0, "date_from": date_from}
+    stage = layout.Stage(dataset, digest)
+    try:
+        staged = stage.dir / "logs.parquet"
+        _logs_part(staged, row, lineage)
+        dest = layout.part_path(dataset, "logs", date, digest)
+        removals = [
+            p for t in schema.TABLES for p in layout.existing_parts(dataset, t, digest) if p != dest
+        ]
+        stage.commit([(staged, dest)], removals)
+    except BaseException:
+        stage.close()
+        raise
+    return {**row, **lineage, "skipped": False, "first": {}, "junit": None, "date": date}
