@@ -54,7 +54,7 @@ def _in_folder(folder: Path, skip: Path | None) -> list[Path]:
 def expand(inputs: list[str], dataset: str | Path | None = None) -> list[Path]:
     """Every log file the inputs name, once each, sorted; UsageError for one that is not there."""
     skip = Path(dataset).resolve() if dataset is not None else None
-    found: dict[Path, None] = {}
+    found: dict[Path, Path] = {}  # the file itself -> the path it was found by (a link's folder counts)
     for item in inputs:
         if any(c in item for c in "*?["):
             matches = [Path(m) for m in sorted(glob.glob(item, recursive=True))]
@@ -70,8 +70,8 @@ def expand(inputs: list[str], dataset: str | Path | None = None) -> list[Path]:
             else:
                 raise UsageError(f"{m}: no such file or folder")
             for f in files:
-                found.setdefault(f.resolve(), None)
-    return sorted(found)
+                found.setdefault(f.resolve(), f.absolute())
+    return sorted(found.values())
 
 
 def options_for(log: Path, opts: Options) -> Options:

@@ -30,6 +30,7 @@ class FleetResult:
     results: list[dict]
     seconds: float = 0.0
     dashboard: str | None = None
+    scheduler: str | None = None  # the scheduler's address (tcp://127.0.0.1:PORT when local)
     recovered: tuple[int, int] = (0, 0)
     notes: list[str] = field(default_factory=list)
 
@@ -170,6 +171,7 @@ def run_fleet(
     progress = None
     try:
         out.dashboard = _dashboard(client)
+        out.scheduler = client.scheduler.address
         if stream is not None:
             where = out.dashboard or "not running (needs bokeh)"
             print(f"fleet: {len(tasks)} logs, dashboard {where}", file=stream)

@@ -1,0 +1,343 @@
+"""`cananalyze fleet` and `query`: real logs and broken files on a real local Dask cluster
+(127.0.0.1 only), read back with pyarrow.dataset, DuckDB and junitparser."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+import threading
+from pathlib import Path
+
+import duckdb
+import pyarrow as pa
+import pyarrow.dataset as ds
+import pyarrow.parquet as pq
+import pytest
+from conftest import real_file
+
+from cananalyze import __version__
+from cananalyze.cli.main import main
+from cananalyze.fleet import layout
+from cananalyze.fleet.orchestrate import run_fleet
+from cananalyze.fleet.schema import LINEAGE, TABLES
+from cananalyze.fleet.task import LogTask, process
+from cananalyze.outputs.tables.stream import TableSink
+from cananalyze.pipeline import Options, build_decoder, open_source, run
+
+REAL_LOGS = [
+    "hilch__canopen-message-interpreter/pcan1.trc",  # PEAK trace, 2023-02-07
+    "hilch__canopen-message-interpreter/ixxat1.trc",
+    "calumroy__CANopen_socketCAN_Test/can_log_070825_brake_sensor_test2.log",  # candump -l
+    "jclinton830__canopen_test/candump.txt",  # no timestamps: dated by the file
+    "hardbyte__python-can/test_CanMessage.blf",
+    "hardbyte__python-can/test_CanMessage.asc.gz",
+    "isPointless__Sevcon/can_180209_154604.txt",
+]
+NET_LOG = "calumroy__CANopen_socketCAN_Test/can_log_070825_brake_sensor_test1.log"
+# the I/O module sends TPDO1 every 100 ms: declared as 20 ms, every one is late
+NETWORK = "[nodes.127.tpdo.1]\ncob_id = 0x1FF\nevent_timer = 20\n"
+
+
+def _sha(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory):
+    """One fleet run over real logs, a folder with its own network.toml, and broken files."""
+    root = tmp_path_factory.mktemp("fleet")
+    logs = [real_file(r) for r in REAL_LOGS]
+    folder = root / "bench_rig"
+    folder.mkdir()
+    (folder / "network.toml").write_text(NETWORK)
+    (folder / "rig.log").symlink_to(real_file(NET_LOG))
+    broken = root / "broken"
+    broken.mkdir()
+    (broken / "garbage.blf").write_bytes(b"LOGG" + bytes(range(256)) * 4)  # a BLF head, no body
+    (broken / "notes.txt").write_text("these are not CAN frames\njust words\n")
+    blf = real_file("hardbyte__python-can/issue_1905.blf").read_bytes()
+    (broken / "truncated.blf").write_bytes(blf[: len(blf) // 2])
+    (broken / "empty.log").write_bytes(b"")
+    inputs = [str(p) for p in logs] + [str(folder), str(broken / "*")]
+    dataset = root / "ds"
+    junit = root / "fleet.xml"
+    result = run_fleet(inputs, dataset, Options(checks=True), workers=2, junit=str(junit))
+    return {
+        "root": root,
+        "dataset": dataset,
+        "result": result,
+        "logs": logs,
+        "rig": folder / "rig.log",
+        "broken": broken,
+        "junit": junit,
+    }
+
+
+def _table(dataset: Path, name: str) -> pa.Table:
+    return ds.dataset(dataset / name, format="parquet", partitioning="hive").to_table()
+
+
+def test_cluster_is_local_only(fleet):
+    r = fleet["result"]
+    assert r.scheduler.startswith("tcp://127.0.0.1:")
+    assert r.dashboard is None or r.dashboard.startswith("http://127.0.0.1:")
+
+
+def test_every_input_has_one_logs_row_and_failures_are_isolated(fleet):
+    logs = _table(fleet["dataset"], "logs").to_pylist()
+    by_source = {r["source"]: r for r in logs}
+    broken = fleet["broken"]
+    expected = {str(p) for p in fleet["logs"]} | {str(fleet["rig"])}
+    expected |= {
+        str(broken / n) for n in ("garbage.blf", "notes.txt", "truncated.blf", "empty.log")
+    }
+    assert set(by_source) == expected
+    assert len(logs) == len(expected)
+    for p in fleet["logs"]:
+        row = by_source[str(p)]
+        assert row["status"] == "ok", row
+        assert row["hash"] == _sha(p) and row["version"] == __version__
+        assert row["frames"] > 0 and row["seconds"] > 0
+    for name in ("garbage.blf", "notes.txt"):
+        row = by_source[str(broken / name)]
+        assert row["status"] == "failed"
+        assert row["error"].startswith(str(broken / name)) and "\n" not in row["error"]
+        assert row["frames"] == 0
+    # a failed log has a logs row and no data parts; the rest of the fleet completed
+    failed = {r["hash"] for r in logs if r["status"] == "failed"}
+    frames = _table(fleet["dataset"], "frames")
+    assert failed.isdisjoint(set(frames.column("hash").to_pylist()))
+    assert fleet["result"].exit_code == 1
+    assert {r["source"] for r in fleet["result"].failed} == {
+        r["source"] for r in logs if r["status"] == "failed"
+    }
+
+
+def test_date_partition_is_the_logs_own_time(fleet):
+    logs = {r["source"]: r for r in _table(fleet["dataset"], "logs").to_pylist()}
+    pcan1 = logs[str(real_file(REAL_LOGS[0]))]
+    assert str(pcan1["date"]) == "2023-02-07" and pcan1["date_from"] == "log"
+    brake = logs[str(real_file(REAL_LOGS[2]))]
+    assert str(brake["date"]) == "2025-08-07"
+    undated = logs[str(real_file(REAL_LOGS[3]))]  # candump without timestamps
+    assert undated["date_from"] == "mtime"
+    part = layout.part_path(fleet["dataset"], "frames", "2023-02-07", pcan1["hash"])
+    assert part.is_file()
+
+
+def _single_export(path: Path, out: Path, opts: Options) -> Path:
+    source = open_source(path, opts)
+    run(source, build_decoder(opts), [TableSink(out, "parquet")], opts)
+    return out
+
+
+def test_fleet_frames_equal_the_single_log_exports(fleet, tmp_path):
+    """Every row of every table: the fleet's part is the one-log export plus lineage."""
+    frames = _table(fleet["dataset"], "frames")
+    total = 0
+    for i, log in enumerate(fleet["logs"]):
+        single = _single_export(log, tmp_path / str(i), Options(checks=True))
+        digest = _sha(log)
+        for name in ("frames", "signals", "events", "findings"):
+            mine = pq.read_table(single / f"{name}.parquet").to_pylist()
+            part = [
+                p
+                for p in (fleet["dataset"] / name).glob(f"date=*/part-{digest}.parquet")
+                if p.is_file()
+            ]
+            assert len(part) == 1, (name, log)
+            theirs = pq.read_table(part[0]).to_pylist()
+            assert len(theirs) == len(mine), (name, log)
+            for row in theirs:
+                assert row.pop("source") == str(log) and row.pop("hash") == digest
+                assert row.pop("version") == __version__
+            norm = [{k: v for k, v in r.items() if k in theirs[0]} for r in mine] if theirs else []
+            assert json.dumps(theirs, default=str) == json.dumps(norm, default=str), (name, log)
+        total += pq.ParquetFile(single / "frames.parquet").metadata.num_rows
+    ok = {str(p) for p in fleet["logs"]}
+    in_fleet = sum(1 for s in frames.column("source").to_pylist() if s in ok)
+    assert in_fleet == total > 20_000
+
+
+def test_duckdb_reads_the_dataset_with_hive_partitioning(fleet):
+    dataset = fleet["dataset"]
+    con = duckdb.connect()
+    for name in TABLES:
+        glob = str(dataset / name / "*" / "*.parquet")
+        n, dates = con.execute(
+            f"SELECT count(*), count(DISTINCT date) FROM read_parquet('{glob}', "
+            "hive_partitioning = true)"
+        ).fetchone()
+        assert n == _table(dataset, name).num_rows, name
+        assert dates >= 2 or name in ("sdo",), name
+    typ = con.execute(
+        f"SELECT typeof(date) FROM read_parquet('{dataset}/logs/*/*.parquet', "
+        "hive_partitioning = true) LIMIT 1"
+    ).fetchone()[0]
+    assert typ == "DATE"
+    # every table carries the lineage columns in every row
+    for name in TABLES:
+        schema = pq.read_schema(next((dataset / name).glob("date=*/*.parquet")))
+        assert [f.name for f in schema][-3:] == [c for c, _ in LINEAGE]
+
+
+def test_findings_are_checks_findings_and_the_folder_network_file_applies(fleet, tmp_path):
+    """A log's findings in the fleet are `check`'s for it; the rig folder's network.toml
+    (TPDO1 event timer 20 ms) gives the findings `check --network` gives."""
+    from cananalyze.outputs.findings import FindingsSink
+
+    def check(path, **kw):
+        opts = Options(checks=True, **kw)
+        sink = FindingsSink(quiet=True)
+        run(open_source(path, opts), build_decoder(opts), [sink], opts)
+        return sorted((f.rule, f.node, round(f.t, 6)) for f in sink.findings)
+
+    findings = _table(fleet["dataset"], "findings").to_pylist()
+
+    def fleet_findings(source):
+        return sorted(
+            (f["rule"], f["node"], round(f["t"], 6)) for f in findings if f["source"] == source
+        )
+
+    pcan1 = real_file(REAL_LOGS[0])
+    assert fleet_findings(str(pcan1)) == check(pcan1) != []
+    rig = fleet["rig"]
+    net = tmp_path / "net.toml"
+    net.write_text(NETWORK)
+    with_network = check(rig, network=net)
+    assert fleet_findings(str(rig)) == with_network
+    assert with_network != check(rig)  # the network file made a difference
+    assert any(r == "pdo_async" and n == 127 for r, n, _ in with_network)
+
+
+def test_junit_has_one_testsuite_per_log(fleet):
+    from junitparser import JUnitXml
+
+    xml = JUnitXml.fromfile(str(fleet["junit"]))
+    suites = {s.name: s for s in xml}
+    assert len(suites) == len(fleet["result"].results)
+    garbage = suites[str(fleet["broken"] / "garbage.blf")]
+    assert garbage.errors == 1
+    pcan1 = suites[str(real_file(REAL_LOGS[0]))]
+    assert pcan1.failures >= 1 and pcan1.tests > 1
+
+
+def test_second_run_skips_and_force_redoes(fleet, tmp_path):
+    dataset = tmp_path / "ds"
+    logs = [str(real_file(r)) for r in REAL_LOGS[:2]]
+    first = run_fleet(logs, dataset, workers=1)
+    assert not first.skipped and first.exit_code == 1  # pcan1 has violations
+    parts = sorted(dataset.glob("*/date=*/*.parquet"))
+    stamps = [p.stat().st_mtime_ns for p in parts]
+    again = run_fleet(logs, dataset, workers=1)
+    assert len(again.skipped) == 2 and again.frames == 0
+    assert again.exit_code == 1  # the recorded violations still count
+    assert [p.stat().st_mtime_ns for p in sorted(dataset.glob("*/date=*/*.parquet"))] == stamps
+    forced = run_fleet(logs, dataset, workers=1, force=True)
+    assert not forced.skipped and forced.frames == first.frames
+    assert sorted(dataset.glob("*/date=*/*.parquet")) == parts  # replaced, not doubled
+    assert _table(dataset, "logs").num_rows == 2
+    assert not any((dataset / layout.STAGING).iterdir())
+
+
+def test_interrupted_commits_are_finished_or_undone(tmp_path):
+    dataset = tmp_path / "ds"
+    # a stage cut off before its manifest: rolled back
+    cut = layout.Stage(dataset, "a" * 64)
+    (cut.dir / "frames.parquet").write_bytes(b"half")
+    cut._lock.close()  # its process died: the lock is gone
+    # a stage cut off after its manifest, one rename done: rolled forward
+    done = layout.Stage(dataset, "b" * 64)
+    srcs = []
+    for name in ("frames", "logs"):
+        src = done.dir / f"{name}.parquet"
+        pq.write_table(pa.table({"x": [1]}), src)
+        srcs.append((src, layout.part_path(dataset, name, "2024-01-02", "b" * 64)))
+    manifest = {"renames": [[str(s), str(d)] for s, d in srcs], "removals": []}
+    (done.dir / layout.MANIFEST).write_text(json.dumps(manifest))
+    srcs[0][1].parent.mkdir(parents=True)
+    srcs[0][0].replace(srcs[0][1])
+    done._lock.close()
+    # a stage whose run is alive: left alone
+    live = layout.Stage(dataset, "c" * 64)
+    assert layout.recover(dataset) == (1, 1)
+    assert all(d.is_file() for _, d in srcs)
+    assert not cut.dir.exists() and not done.dir.exists() and live.dir.exists()
+    live.close()
+    assert not live.dir.exists()
+
+
+def test_ctrl_c_in_a_task_leaves_no_part(tmp_path, monkeypatch):
+    from cananalyze.fleet import task
+
+    log = real_file(REAL_LOGS[0])
+    dataset = tmp_path / "ds"
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(task, "_conform_file", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        process(LogTask(str(log), str(dataset), Options(checks=True)))
+    assert not list(dataset.glob("*/date=*/*.parquet"))
+    assert not any((dataset / layout.STAGING).iterdir())
+
+
+def test_two_runs_into_one_dataset_do_not_corrupt_it(tmp_path):
+    """Two writers committing the same logs at once: one whole part per table and log."""
+    dataset = tmp_path / "ds"
+    logs = [real_file(r) for r in REAL_LOGS[:3]]
+    results: list = []
+
+    def one_run():
+        for log in logs:
+            results.append(process(LogTask(str(log), str(dataset), Options(checks=True), True)))
+
+    threads = [threading.Thread(target=one_run) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(results) == 6 and all(r["status"] == "ok" for r in results)
+    for name in TABLES:
+        parts = list((dataset / name).glob("date=*/*.parquet"))
+        assert len(parts) == 3, name
+        assert ds.dataset(parts, format="parquet").count_rows() >= 0
+    logs_rows = _table(dataset, "logs").to_pylist()
+    assert sorted(r["source"] for r in logs_rows) == sorted(str(p) for p in logs)
+
+
+def test_query_cli_table_csv_json_and_errors(fleet, capsys):
+    dataset = str(fleet["dataset"])
+    sql = "SELECT status, count(*) AS n FROM logs GROUP BY status ORDER BY status"
+    assert main(["query", dataset, sql, "--csv"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == "status,n"
+    counts = dict(line.split(",") for line in lines[1:])
+    logs = _table(fleet["dataset"], "logs").to_pylist()
+    assert int(counts["failed"]) == sum(r["status"] == "failed" for r in logs)
+    assert main(["query", dataset, "SELECT max(date) AS d FROM frames", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["d"].count("-") == 2
+    assert main(["query", dataset, "SELECT count(*) AS n FROM signals"]) == 0
+    out = capsys.readouterr().out
+    assert out.splitlines()[0].strip() == "n" and "(1 row)" in out
+    assert main(["query", dataset, "SELECT nope FROM logs"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("cananalyze: error: query:") and len(err.strip().splitlines()) == 1
+    assert main(["query", str(fleet["root"] / "none"), "SELECT 1"]) == 2
+
+
+def test_fleet_cli_exit_codes(tmp_path, capsys):
+    ok = real_file(REAL_LOGS[2])  # brake sensor: decodes, no violations
+    out = tmp_path / "ds"
+    assert main(["fleet", str(ok), "--out", str(out), "--workers", "1", "-q"]) == 0
+    assert main(["fleet", str(tmp_path / "missing.log"), "--out", str(out)]) == 2
+    assert "missing.log" in capsys.readouterr().err
+    assert main(["fleet", str(ok), "--out", str(out), "--workers", "0"]) == 2
+    bad = tmp_path / "bad.log"
+    bad.write_text("not a log\n")
+    assert main(["fleet", str(ok), str(bad), "--out", str(out), "--workers", "1"]) == 1
+    err = capsys.readouterr().err
+    assert f"failed: {bad}" in err and "1 already in the dataset" in err
+    shutil.rmtree(out)
