@@ -320,6 +320,9 @@ def _recode(col: pa.ChunkedArray, labels: list[str], typ: pa.DataType) -> pa.Chu
     dictionary = ab.strings(labels)
     chunks = []
     for chunk in col.chunks:
+        if not pa.types.is_dictionary(chunk.type):  # a null column: a log with no frames
+            chunks.append(pa.nulls(len(chunk), typ))
+            continue
         remap = np.array([pos[v] for v in chunk.dictionary.to_pylist()], np.int64)
         idx = ab.to_numpy(chunk.indices, fill=0).astype(np.int64)
         new = remap[idx] if remap.size else idx
