@@ -54,7 +54,9 @@ def fleet(tmp_path_factory):
     (folder / "rig.log").symlink_to(real_file(NET_LOG))
     broken = root / "broken"
     broken.mkdir()
-    (broken / "garbage.blf").write_bytes(b"LOGG" + bytes(range(256)) * 4)  # a BLF head, no body
+    (broken / "garbage.blf").write_bytes(bytes(range(256))[::-1] * 8)  # binary, not a log
+    # a BLF file signature and nothing readable after it (a log with no frames)
+    (broken / "headonly.blf").write_bytes(b"LOGG" + bytes(range(256)) * 4)
     (broken / "notes.txt").write_text("these are not CAN frames\njust words\n")
     blf = real_file("hardbyte__python-can/issue_1905.blf").read_bytes()
     (broken / "truncated.blf").write_bytes(blf[: len(blf) // 2])
@@ -89,9 +91,8 @@ def test_every_input_has_one_logs_row_and_failures_are_isolated(fleet):
     by_source = {r["source"]: r for r in logs}
     broken = fleet["broken"]
     expected = {str(p) for p in fleet["logs"]} | {str(fleet["rig"])}
-    expected |= {
-        str(broken / n) for n in ("garbage.blf", "notes.txt", "truncated.blf", "empty.log")
-    }
+    names = ("garbage.blf", "headonly.blf", "notes.txt", "truncated.blf", "empty.log")
+    expected |= {str(broken / n) for n in names}
     assert set(by_source) == expected
     assert len(logs) == len(expected)
     for p in fleet["logs"]:
@@ -99,11 +100,17 @@ def test_every_input_has_one_logs_row_and_failures_are_isolated(fleet):
         assert row["status"] == "ok", row
         assert row["hash"] == _sha(p) and row["version"] == __version__
         assert row["frames"] > 0 and row["seconds"] > 0
-    for name in ("garbage.blf", "notes.txt"):
+    for name in ("garbage.blf", "notes.txt", "empty.log"):
         row = by_source[str(broken / name)]
         assert row["status"] == "failed"
         assert row["error"].startswith(str(broken / name)) and "\n" not in row["error"]
         assert row["frames"] == 0
+    # what a truncated BLF held before the cut is kept, the rest counted as skipped
+    cut = by_source[str(broken / "truncated.blf")]
+    assert cut["status"] == "ok" and cut["frames"] > 0 and cut["skipped_lines"] > 0
+    # a log with no frames is decoded (empty parts), not a failure
+    empty = by_source[str(broken / "headonly.blf")]
+    assert empty["status"] == "ok" and empty["frames"] == 0 and empty["skipped_lines"] == 1
     # a failed log has a logs row and no data parts; the rest of the fleet completed
     failed = {r["hash"] for r in logs if r["status"] == "failed"}
     frames = _table(fleet["dataset"], "frames")
@@ -341,3 +348,13 @@ def test_fleet_cli_exit_codes(tmp_path, capsys):
     err = capsys.readouterr().err
     assert f"failed: {bad}" in err and "1 already in the dataset" in err
     shutil.rmtree(out)
+
+
+def test_export_of_a_log_without_frames_writes_empty_tables(tmp_path):
+    """A BLF whose header is cut off holds no frame: six empty tables, not a traceback
+    (the channel column's rewrite met a null column)."""
+    log = tmp_path / "headonly.blf"
+    log.write_bytes(b"LOGG" + bytes(range(256)) * 4)
+    assert main(["export", str(log), "--parquet", str(tmp_path / "out"), "-q"]) == 0
+    for name in ("frames", "signals", "sdo", "events", "findings", "nodes"):
+        assert pq.read_table(tmp_path / "out" / f"{name}.parquet").num_rows == 0, name

@@ -73,7 +73,9 @@ COLUMNS: dict[str, list[tuple[str, pa.DataType]]] = {
         ("status", pa.string()),  # ok | failed
         ("error", pa.string()),
         ("seconds", pa.float64()),
-        ("cpu_seconds", pa.float64()),
+        ("cpu_seconds", pa.float64()),  # the worker process's, threads included
+        ("conform_seconds", pa.float64()),  # of `seconds`: the export's tables to the fleet's
+        ("peak_rss_mb", pa.float64()),  # the worker's peak resident memory so far
         ("skipped_lines", pa.int64()),
         ("findings", pa.int64()),
         ("violations", pa.int64()),

@@ -194,6 +194,7 @@ def process(task: LogTask) -> dict:
         if state is not None:
             row.update(frames=state.frames, t_first=t_first, t_last=state.t_last)
             row.update(findings=sink.total, violations=sink.failing)
+            conform0 = time.perf_counter()
             try:
                 for table in TABLES:
                     staged = stage.dir / f"{table}.parquet"
@@ -205,8 +206,10 @@ def process(task: LogTask) -> dict:
             except BaseException as exc:  # noqa: BLE001 - as a decode failure: no parts
                 row.update(status="failed", error=_one_line(exc, path))
                 renames = []
+            row["conform_seconds"] = time.perf_counter() - conform0
         row["seconds"] = time.perf_counter() - wall0
         row["cpu_seconds"] = time.process_time() - cpu0
+        row["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         staged = stage.dir / "logs.parquet"
         _logs_part(staged, row, lineage)
         renames.append((staged, layout.part_path(dataset, "logs", date, digest)))  # last: the mark
@@ -225,7 +228,6 @@ def process(task: LogTask) -> dict:
     result.update(lineage)
     result["first"] = sink.first
     result["date"] = date
-    result["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     result["worker_pid"] = os.getpid()
     if task.junit:
         result["junit"] = _suite(path, rules, sink.findings, row["error"])
