@@ -54,7 +54,8 @@ def _in_folder(folder: Path, skip: Path | None) -> list[Path]:
 def expand(inputs: list[str], dataset: str | Path | None = None) -> list[Path]:
     """Every log file the inputs name, once each, sorted; UsageError for one that is not there."""
     skip = Path(dataset).resolve() if dataset is not None else None
-    found: dict[Path, Path] = {}  # the file itself -> the path it was found by (a link's folder counts)
+    # the file itself -> the path it was found by (a link's folder is the one that counts)
+    found: dict[Path, Path] = {}
     for item in inputs:
         if any(c in item for c in "*?["):
             matches = [Path(m) for m in sorted(glob.glob(item, recursive=True))]
