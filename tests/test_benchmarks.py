@@ -19,6 +19,7 @@ SMOKED = {
     "generate.py",
     "bench_check.py",
     "bench_decode.py",
+    "bench_fleet.py",
     "bench_floor.py",
     "bench_live.py",
     "mem_profile.py",
@@ -67,6 +68,20 @@ def test_bench_check(logs):
     assert re.fullmatch(rf"decode --summary +best CPU +{NUMBER} s +best wall +{NUMBER} s", lines[0])
     assert re.fullmatch(rf"check +best CPU +{NUMBER} s +best wall +{NUMBER} s", lines[1])
     assert re.fullmatch(rf"check overhead: [+-]{NUMBER} % CPU \(3000 frames, best of 1\)", lines[2])
+
+
+def test_bench_fleet(tmp_path):
+    """Four logs on 1 and 2 real local workers: every run complete, every figure printed."""
+    out = _run("bench_fleet.py", "5", "1500", "--repeats", "1", "--out", str(tmp_path), timeout=300)
+    lines = out.stdout.splitlines()
+    assert lines[0].startswith(
+        "fleet: 5 logs x 1,500 frames = 7,500 frames (3 candump, 1 ASC, 1 BLF)"
+    )
+    for w in (1, 2):
+        run = next(line for line in lines if line.startswith(f"run 1 workers={w}:"))
+        assert re.search(rf"wall {NUMBER} s, CPU {NUMBER} s \(user\+sys", run), run
+        assert re.search(rf"peak worker RSS {NUMBER} MB, dataset {NUMBER} MB in 5 date", run), run
+    assert re.fullmatch(rf"speed-up 2 vs 1 workers: {NUMBER}x wall", lines[-1])
 
 
 def test_bench_decode_prints_every_figure(logs):

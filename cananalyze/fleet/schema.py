@@ -18,22 +18,16 @@ import pyarrow.compute as pc
 
 from ..network.node_tally import IDENTITY_KEYS
 from ..outputs.tables.stream import EVENTS, FINDING_COLUMNS, FRAMES, SDO_COLUMNS, SIGNALS
+from ..outputs.tables.writer import LABEL  # categories: one type for every part
 from ..protocol.services import SERVICE_NAMES
 
-LABEL = pa.dictionary(pa.int32(), pa.string())  # categories: one type for every part
 # every row's lineage: which file (as given, absolute), its content, which cananalyze
 LINEAGE = (("source", LABEL), ("hash", LABEL), ("version", LABEL))
 
 
 def _from_spec(spec) -> list[tuple[str, pa.DataType]]:
-    out = []
-    for name, typ in spec.fields:
-        if typ is None or pa.types.is_dictionary(typ):
-            typ = LABEL
-        elif pa.types.is_large_string(typ):
-            typ = pa.string()
-        out.append((name, typ))
-    return out
+    """The columns the export's writer gives a dataset part (`writer.Sink` with constants)."""
+    return [(name, LABEL if typ is None else typ) for name, typ in spec.fields]
 
 
 _SDO_TYPES = {
@@ -82,9 +76,9 @@ COLUMNS: dict[str, list[tuple[str, pa.DataType]]] = {
     ],
 }
 TABLES = ("frames", "signals", "sdo", "events", "findings", "nodes", "logs")
-# the export's table columns Parquet dictionary-encodes (values repeat); the rest plain
-DICTIONARY = {"frames": FRAMES.dictionary, "signals": SIGNALS.dictionary}
-SPLIT = {"frames": FRAMES.split, "signals": SIGNALS.split}
+# written by the export's TableSink in the fleet's schema, lineage included, as the log
+# is decoded; the others are small (records, nodes, one row) and conformed at commit
+STREAMED = ("frames", "signals", "events")
 
 
 def schema(table: str) -> pa.Schema:
@@ -92,18 +86,6 @@ def schema(table: str) -> pa.Schema:
     return pa.schema(
         [pa.field(n, t) for n, t in COLUMNS[table]] + [pa.field(n, t) for n, t in LINEAGE]
     )
-
-
-def parquet_options(table: str) -> dict:
-    """ParquetWriter keywords: the export's encodings, plus dictionary pages for the labels."""
-    labels = [n for n, t in COLUMNS[table] if t == LABEL] + [n for n, _ in LINEAGE]
-    base = DICTIONARY.get(table)
-    if base is None or base is True:
-        use = True
-    else:
-        use = sorted(set(base) | set(labels))
-    split = SPLIT.get(table)
-    return {"use_dictionary": use, "use_byte_stream_split": list(split) if split else False}
 
 
 def _cast(col: pa.ChunkedArray | pa.Array, typ: pa.DataType, n: int) -> pa.Array:

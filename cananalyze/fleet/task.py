@@ -101,23 +101,29 @@ def _date(t_first: float | None, path: str) -> tuple[str, str]:
     return datetime.fromtimestamp(mtime, UTC).strftime("%Y-%m-%d"), "mtime"
 
 
-def _conform_file(src: Path, dest: Path, table: str, lineage: dict, compression: str) -> int:
-    """A table file of the export rewritten in the fleet schema, one row group at a time."""
+def _conform_file(src: Path, table: str, lineage: dict, compression: str) -> Path:
+    """A record table of the export rewritten in the fleet schema, one row group at a time
+    (these are small: SDO transfers, findings, one row per node)."""
     import pyarrow.parquet as pq
 
-    rows = 0
-    target = schema.schema(table)
+    dest = src.with_name(f"fleet-{src.name}")
     with (
         pq.ParquetFile(src) as pf,
-        pq.ParquetWriter(
-            dest, target, compression=compression, **schema.parquet_options(table)
-        ) as out,
+        pq.ParquetWriter(dest, schema.schema(table), compression=compression) as out,
     ):
         for i in range(pf.num_row_groups):
             part = schema.conform(pf.read_row_group(i), table, lineage)
             out.write_table(part, row_group_size=part.num_rows or None)
-            rows += part.num_rows
-    return rows
+    return dest
+
+
+def _check_schema(path: Path, table: str) -> None:
+    """A streamed table as the export wrote it must be the dataset's (one schema per table)."""
+    import pyarrow.parquet as pq
+
+    got = pq.read_schema(path).remove_metadata()
+    if not got.equals(schema.schema(table)):
+        raise ValueError(f"{table} table: written as {got}, the dataset has {schema.schema(table)}")
 
 
 def _logs_part(dest: Path, row: dict, lineage: dict) -> None:
@@ -152,7 +158,6 @@ def process(task: LogTask) -> dict:
     allocator.tune()
     wall0, cpu0 = time.perf_counter(), time.process_time()
     path, dataset = task.path, Path(task.dataset)
-    lineage = {"source": path, "version": __version__}
     row: dict = {"status": "ok", "error": None, "frames": 0, "findings": 0, "violations": 0}
     try:
         row["size"] = os.path.getsize(path)
@@ -160,7 +165,7 @@ def process(task: LogTask) -> dict:
     except OSError as exc:
         digest = hashlib.sha256(f"unreadable:{path}".encode()).hexdigest()
         row.update(status="failed", error=f"{path}: cannot read ({exc.strerror or exc})")
-    lineage["hash"] = digest
+    lineage = {"source": path, "hash": digest, "version": __version__}  # schema.LINEAGE's order
     result = {"source": path, "hash": digest, "skipped": False, "first": {}, "junit": None}
     if row["status"] == "ok" and not task.force:
         old = recorded(dataset, digest)
@@ -178,7 +183,9 @@ def process(task: LogTask) -> dict:
                 source = open_source(path, task.opts)
                 row["format"] = getattr(getattr(source, "fmt", None), "name", None)
                 decoder = build_decoder(task.opts)
-                tables = TableSink(stage.dir / EXPORT, "parquet", task.compression)
+                tables = TableSink(
+                    stage.dir / EXPORT, "parquet", task.compression, constants=lineage
+                )
                 with fewer_collections():
                     state = run(source, decoder, [tables, sink], task.opts)
                 rules = decoder.checker.rules if decoder.checker is not None else []
@@ -197,9 +204,11 @@ def process(task: LogTask) -> dict:
             conform0 = time.perf_counter()
             try:
                 for table in TABLES:
-                    staged = stage.dir / f"{table}.parquet"
-                    export = stage.dir / EXPORT / f"{table}.parquet"
-                    _conform_file(export, staged, table, lineage, task.compression)
+                    staged = stage.dir / EXPORT / f"{table}.parquet"
+                    if table in schema.STREAMED:
+                        _check_schema(staged, table)
+                    else:
+                        staged = _conform_file(staged, table, lineage, task.compression)
                     renames.append((staged, layout.part_path(dataset, table, date, digest)))
             except (KeyboardInterrupt, SystemExit):
                 raise

@@ -191,7 +191,9 @@ class TableSink(OutputSink):
     """The six tables written batch by batch into a folder; the files appear atomically at close.
 
     `profiles`: node -> (profile, how), for the nodes table when no run says (tests);
-    a run's network model names each declared or identified device.
+    a run's network model names each declared or identified device. `constants`: columns
+    of one value appended to every row of frames, signals and events (a fleet's lineage,
+    `writer.Sink`); the record tables are the fleet's to conform (`fleet/schema`).
     """
 
     needs_events = True
@@ -203,8 +205,10 @@ class TableSink(OutputSink):
         compression: str = "snappy",
         profiles: dict[int, tuple[str, str]] | None = None,
         depth: int = 1,
+        constants: dict[str, str] | None = None,
     ) -> None:
         self.path = path
+        self.constants = constants
         self.fmt = fmt
         self.compression = compression
         self.profiles = profiles or {}
@@ -223,9 +227,8 @@ class TableSink(OutputSink):
         for name in TABLES:
             self.paths[name] = self._stack.enter_context(atomic_path(self.dir / f"{name}.{fmt}"))
         self.sinks = {
-            "frames": Sink(self.paths["frames"], fmt, FRAMES, compression),
-            "signals": Sink(self.paths["signals"], fmt, SIGNALS, compression),
-            "events": Sink(self.paths["events"], fmt, EVENTS, compression),
+            name: Sink(self.paths[name], fmt, spec, compression, self.constants)
+            for name, spec in (("frames", FRAMES), ("signals", SIGNALS), ("events", EVENTS))
         }
         # two writer threads: the frames table (most of the Parquet encoding, outside
         # the GIL) runs beside the others, so neither queue holds the decoder back.

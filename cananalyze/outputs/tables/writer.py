@@ -91,14 +91,33 @@ class TableSpec:
         }
 
 
-class Sink:
-    """One table file: buffered chunks, written as row groups (Parquet) or CSV lines."""
+# The one label type of a dataset's parts (`constants` given): every file of a table must
+# agree, whatever number of categories one log has (pandas' width: `code_type`)
+LABEL = pa.dictionary(pa.int32(), pa.string())
 
-    def __init__(self, path: Path, fmt: str, spec: TableSpec, compression: str) -> None:
+
+class Sink:
+    """One table file: buffered chunks, written as row groups (Parquet) or CSV lines.
+
+    `constants`: columns of one value each, appended to every row (a fleet's lineage:
+    source, hash, version); with them, dictionary columns are `LABEL` in every file and
+    the file carries no pandas metadata (it is a dataset part, not `load()`'s table).
+    """
+
+    def __init__(
+        self,
+        path: Path,
+        fmt: str,
+        spec: TableSpec,
+        compression: str,
+        constants: dict[str, str] | None = None,
+    ) -> None:
         self.path = path
         self.fmt = fmt
         self.spec = spec
         self.compression = compression
+        self.constants = dict(constants or {})
+        self.fields = list(spec.fields) + [(c, None) for c in self.constants]
         self.buffer: list[dict] = []
         self.buffered = 0
         self.buffered_bytes = 0
@@ -112,6 +131,9 @@ class Sink:
         n = len(next(iter(columns.values()))) if columns else 0
         if n == 0:
             return
+        if self.constants:
+            zeros = np.zeros(n, np.int32)
+            columns = {**columns, **{c: Coded(zeros, [v]) for c, v in self.constants.items()}}
         self.buffer.append(columns)
         self.buffered += n
         self.buffered_bytes += sum(nbytes(v) for v in columns.values())
@@ -119,7 +141,7 @@ class Sink:
             self.flush()
 
     def _extend_order(self) -> None:
-        for name, typ in self.spec.fields:
+        for name, typ in self.fields:
             if typ is not None:
                 continue
             order = self.order.setdefault(name, [])
@@ -147,13 +169,23 @@ class Sink:
 
     def _schema(self) -> pa.Schema:
         fields = []
-        for name, typ in self.spec.fields:
-            if typ is None:  # no categories at all: pandas' empty Categorical has null values
+        for name, typ in self.fields:
+            if typ is None and self.constants:
+                typ = LABEL
+            elif typ is None:  # no categories at all: pandas' empty Categorical has null values
                 values = pa.string() if self.order[name] else pa.null()
                 typ = pa.dictionary(code_type(len(self.order[name])), values)
             fields.append(pa.field(name, typ))
-        counts = {k: len(v) for k, v in self.order.items()}
-        return pa.schema(fields, metadata=self.spec.metadata(counts))
+        return pa.schema(fields, metadata=self.metadata({k: len(v) for k, v in self.order.items()}))
+
+    def metadata(self, counts: dict[str, int]) -> dict | None:
+        return None if self.constants else self.spec.metadata(counts)
+
+    def parquet_options(self) -> dict:
+        opts = self.spec.parquet_options()
+        if self.constants and opts["use_dictionary"] is not True:
+            opts["use_dictionary"] = [*opts["use_dictionary"], *self.constants]
+        return opts
 
     def _batch(self, cols: dict) -> pa.RecordBatch:
         arrays = []
@@ -163,7 +195,8 @@ class Sink:
                 pos = self.pos[f.name]
                 remap = np.array([pos[label] for label in value.labels], np.int32)
                 idx = remap[value.codes] if remap.size else np.zeros(0, np.int32)
-                labels = ab.strings(self.order[f.name]) if self.order[f.name] else pa.nulls(0)
+                labels = self.order[f.name]
+                labels = ab.strings(labels) if labels or self.constants else pa.nulls(0)
                 value = ab.dictionary(idx, labels, f.type.index_type)
             elif not isinstance(value, (pa.Array, pa.ChunkedArray)):
                 value = ab.numeric(value, typ=f.type)
@@ -184,7 +217,7 @@ class Sink:
             import pyarrow.parquet as pq
 
             return pq.ParquetWriter(
-                self.path, schema, compression=self.compression, **self.spec.parquet_options()
+                self.path, schema, compression=self.compression, **self.parquet_options()
             )
         import pyarrow.csv as pacsv
 
@@ -261,7 +294,13 @@ def rewrite(
     order: Callable[[pa.Table], np.ndarray] | None = None,
 ) -> None:
     """Rewrite a finished table file: rows put in `order` (whole table in memory, rare) and/or
-    dictionary columns re-coded to their final `categories` (row group by row group)."""
+    dictionary columns re-coded to their final `categories` (row group by row group).
+    A dataset part (`constants`) holds labels, not pandas' category codes: only its row
+    order can be wrong."""
+    if sink.constants:
+        if order is None:
+            return
+        categories = {}
     tmp = sink.path.with_name(sink.path.name + ".rw")
     if sink.fmt == "csv":
         if order is None:
@@ -288,8 +327,7 @@ def rewrite(
         if f.name in categories:
             f = f.with_type(pa.dictionary(code_type(len(categories[f.name])), pa.string()))
         fields.append(f)
-    counts = {k: len(v) for k, v in categories.items()}
-    schema = pa.schema(fields, metadata=sink.spec.metadata(counts))
+    schema = pa.schema(fields, metadata=sink.metadata({k: len(v) for k, v in categories.items()}))
     source = pq.ParquetFile(sink.path)
     if order is not None:
         whole = source.read()
@@ -300,7 +338,7 @@ def rewrite(
     else:
         parts = (source.read_row_group(i) for i in range(source.num_row_groups))
     with pq.ParquetWriter(
-        tmp, schema, compression=sink.compression, **sink.spec.parquet_options()
+        tmp, schema, compression=sink.compression, **sink.parquet_options()
     ) as out:
         for part in parts:
             if isinstance(part, pa.RecordBatch):
