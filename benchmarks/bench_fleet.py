@@ -77,12 +77,12 @@ def dataset_figures(dataset: Path) -> dict:
     con = duckdb.connect()
     logs = str(dataset / "logs" / "*" / "*.parquet")
     row = con.execute(
-        "SELECT count(*), sum(frames), sum(cpu_seconds), sum(seconds), sum(conform_seconds), "
+        "SELECT count(*), sum(frames), sum(cpu_seconds), sum(seconds), "
         "max(peak_rss_mb), count(*) FILTER (WHERE status <> 'ok'), count(DISTINCT date) "
         f"FROM read_parquet('{logs}', hive_partitioning = true)"
     ).fetchone()
     size = sum(p.stat().st_size for p in dataset.rglob("*.parquet"))
-    keys = ("logs", "frames", "task_cpu", "task_wall", "conform", "peak_mb", "failed", "dates")
+    keys = ("logs", "frames", "task_cpu", "task_wall", "peak_mb", "failed", "dates")
     return {**dict(zip(keys, row, strict=True)), "bytes": size}
 
 
@@ -116,8 +116,7 @@ def main(argv: list[str]) -> None:
             print(
                 f"run {r + 1} workers={w}: wall {wall:.2f} s, CPU {cpu:.2f} s (user+sys, all "
                 f"processes), {fig['frames'] / wall:,.0f} frames/s, tasks CPU "
-                f"{fig['task_cpu']:.2f} s, conform {100 * fig['conform'] / fig['task_wall']:.0f} % "
-                f"of task time, peak worker RSS {fig['peak_mb']:.0f} MB, dataset "
+                f"{fig['task_cpu']:.2f} s, peak worker RSS {fig['peak_mb']:.0f} MB, dataset "
                 f"{fig['bytes'] / 1e6:.1f} MB in {fig['dates']} date partitions"
             )
             if w not in best or wall < best[w][1]:

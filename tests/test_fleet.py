@@ -284,7 +284,7 @@ def test_ctrl_c_in_a_task_leaves_no_part(tmp_path, monkeypatch):
     def interrupted(*a, **k):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(task, "_conform_file", interrupted)
+    monkeypatch.setattr(task, "_check_schema", interrupted)
     with pytest.raises(KeyboardInterrupt):
         process(LogTask(str(log), str(dataset), Options(checks=True)))
     assert not list(dataset.glob("*/date=*/*.parquet"))

@@ -68,7 +68,6 @@ COLUMNS: dict[str, list[tuple[str, pa.DataType]]] = {
         ("error", pa.string()),
         ("seconds", pa.float64()),
         ("cpu_seconds", pa.float64()),  # the worker process's, threads included
-        ("conform_seconds", pa.float64()),  # of `seconds`: the export's tables to the fleet's
         ("peak_rss_mb", pa.float64()),  # the worker's peak resident memory so far
         ("skipped_lines", pa.int64()),
         ("findings", pa.int64()),
@@ -76,9 +75,6 @@ COLUMNS: dict[str, list[tuple[str, pa.DataType]]] = {
     ],
 }
 TABLES = ("frames", "signals", "sdo", "events", "findings", "nodes", "logs")
-# written by the export's TableSink in the fleet's schema, lineage included, as the log
-# is decoded; the others are small (records, nodes, one row) and conformed at commit
-STREAMED = ("frames", "signals", "events")
 
 
 def schema(table: str) -> pa.Schema:
@@ -130,3 +126,16 @@ def conform(table: pa.Table, name: str, lineage: dict[str, str]) -> pa.Table:
             arrays.append(pa.nulls(n, typ))
     arrays += [constant(lineage[c], n) for c, _ in LINEAGE]
     return pa.Table.from_arrays(arrays, schema=schema(name))
+
+
+class Conform:
+    """What TableSink asks of a record table written as a dataset part (its `conform`)."""
+
+    def __init__(self, lineage: dict[str, str]) -> None:
+        self.lineage = lineage
+
+    def schema(self, name: str) -> pa.Schema:
+        return schema(name)
+
+    def table(self, name: str, table: pa.Table) -> pa.Table:
+        return conform(table, name, self.lineage)

@@ -101,24 +101,8 @@ def _date(t_first: float | None, path: str) -> tuple[str, str]:
     return datetime.fromtimestamp(mtime, UTC).strftime("%Y-%m-%d"), "mtime"
 
 
-def _conform_file(src: Path, table: str, lineage: dict, compression: str) -> Path:
-    """A record table of the export rewritten in the fleet schema, one row group at a time
-    (these are small: SDO transfers, findings, one row per node)."""
-    import pyarrow.parquet as pq
-
-    dest = src.with_name(f"fleet-{src.name}")
-    with (
-        pq.ParquetFile(src) as pf,
-        pq.ParquetWriter(dest, schema.schema(table), compression=compression) as out,
-    ):
-        for i in range(pf.num_row_groups):
-            part = schema.conform(pf.read_row_group(i), table, lineage)
-            out.write_table(part, row_group_size=part.num_rows or None)
-    return dest
-
-
 def _check_schema(path: Path, table: str) -> None:
-    """A streamed table as the export wrote it must be the dataset's (one schema per table)."""
+    """A table as the export wrote it must be the dataset's (one schema per table)."""
     import pyarrow.parquet as pq
 
     got = pq.read_schema(path).remove_metadata()
@@ -184,7 +168,11 @@ def process(task: LogTask) -> dict:
                 row["format"] = getattr(getattr(source, "fmt", None), "name", None)
                 decoder = build_decoder(task.opts)
                 tables = TableSink(
-                    stage.dir / EXPORT, "parquet", task.compression, constants=lineage
+                    stage.dir / EXPORT,
+                    "parquet",
+                    task.compression,
+                    constants=lineage,
+                    conform=schema.Conform(lineage),
                 )
                 with fewer_collections():
                     state = run(source, decoder, [tables, sink], task.opts)
@@ -201,21 +189,16 @@ def process(task: LogTask) -> dict:
         if state is not None:
             row.update(frames=state.frames, t_first=t_first, t_last=state.t_last)
             row.update(findings=sink.total, violations=sink.failing)
-            conform0 = time.perf_counter()
             try:
                 for table in TABLES:
                     staged = stage.dir / EXPORT / f"{table}.parquet"
-                    if table in schema.STREAMED:
-                        _check_schema(staged, table)
-                    else:
-                        staged = _conform_file(staged, table, lineage, task.compression)
+                    _check_schema(staged, table)
                     renames.append((staged, layout.part_path(dataset, table, date, digest)))
             except (KeyboardInterrupt, SystemExit):
                 raise
             except BaseException as exc:  # noqa: BLE001 - as a decode failure: no parts
                 row.update(status="failed", error=_one_line(exc, path))
                 renames = []
-            row["conform_seconds"] = time.perf_counter() - conform0
         row["seconds"] = time.perf_counter() - wall0
         row["cpu_seconds"] = time.process_time() - cpu0
         row["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024

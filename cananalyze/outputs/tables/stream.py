@@ -193,7 +193,9 @@ class TableSink(OutputSink):
     `profiles`: node -> (profile, how), for the nodes table when no run says (tests);
     a run's network model names each declared or identified device. `constants`: columns
     of one value appended to every row of frames, signals and events (a fleet's lineage,
-    `writer.Sink`); the record tables are the fleet's to conform (`fleet/schema`).
+    `writer.Sink`). `conform`: for the record tables (types decided per log, as pandas
+    would), an object whose `schema(name)` and `table(name, table)` give every chunk the
+    dataset's fixed schema as it is written (`fleet/schema`).
     """
 
     needs_events = True
@@ -206,9 +208,11 @@ class TableSink(OutputSink):
         profiles: dict[int, tuple[str, str]] | None = None,
         depth: int = 1,
         constants: dict[str, str] | None = None,
+        conform=None,
     ) -> None:
         self.path = path
         self.constants = constants
+        self.conform = conform
         self.fmt = fmt
         self.compression = compression
         self.profiles = profiles or {}
@@ -559,7 +563,7 @@ class TableSink(OutputSink):
 
     def _write_small(self, name: str, tables: Iterable[pa.Table], schema: pa.Schema) -> None:
         """Chunks of a record table, in row groups of up to ROW_GROUP rows (as to_parquet)."""
-        out = _RecordWriter(self.paths[name], self.fmt, schema, self.compression)
+        out = _RecordWriter(self.paths[name], self.fmt, schema, self.compression, self._adapt(name))
         try:
             for table in tables:
                 out.add(table)
@@ -567,6 +571,11 @@ class TableSink(OutputSink):
             out.discard()
             raise
         out.close()
+
+    def _adapt(self, name: str):
+        """(schema, conform) of a record table written as a dataset part, else None."""
+        c = self.conform
+        return None if c is None else (c.schema(name), lambda t: c.table(name, t))
 
     def _sdo_decided(self) -> tuple[tuple[str, str, str], ...]:
         return tuple(self._sdo_stats[c].decide(as_object=c == "value") for c in SDO_COLUMNS)
@@ -591,7 +600,9 @@ class TableSink(OutputSink):
             return None
         if spec is None:
             schema = _sdo_schema(decided)
-            out = _RecordWriter(self.paths["sdo"], self.fmt, schema, self.compression)
+            out = _RecordWriter(
+                self.paths["sdo"], self.fmt, schema, self.compression, self._adapt("sdo")
+            )
             spec = self._sdo_spec = (decided, schema, out)
         return spec
 
@@ -657,7 +668,14 @@ class _RecordWriter:
     or ROW_GROUP_BYTES, whichever comes first (the cut depends only on the chunks, so a
     table written as it comes and one written again from the spool are the same file)."""
 
-    def __init__(self, path: Path, fmt: str, schema: pa.Schema, compression: str) -> None:
+    def __init__(
+        self, path: Path, fmt: str, schema: pa.Schema, compression: str, adapt=None
+    ) -> None:
+        """`adapt`: (schema, function) that every chunk goes through before it is written."""
+        if adapt is not None:
+            schema, self._adapt = adapt
+        else:
+            self._adapt = None
         self.schema = schema
         if fmt == "parquet":
             import pyarrow.parquet as pq
@@ -674,6 +692,8 @@ class _RecordWriter:
         self.bytes = 0
 
     def add(self, table: pa.Table) -> None:
+        if self._adapt is not None:
+            table = self._adapt(table)
         self.buf.append(table)
         self.rows += table.num_rows
         self.bytes += table.nbytes
