@@ -21,6 +21,7 @@ from cananalyze.cli.main import main
 from cananalyze.fleet import layout
 from cananalyze.fleet.orchestrate import run_fleet
 from cananalyze.fleet.schema import LINEAGE, TABLES
+from cananalyze.fleet.schema import schema as fleet_schema
 from cananalyze.fleet.task import LogTask, process
 from cananalyze.outputs.tables.stream import TableSink
 from cananalyze.pipeline import Options, build_decoder, open_source, run
@@ -183,9 +184,15 @@ def test_duckdb_reads_the_dataset_with_hive_partitioning(fleet):
         "hive_partitioning = true) LIMIT 1"
     ).fetchone()[0]
     assert typ == "DATE"
-    # every table carries the lineage columns in every row
+    # one schema per table in every part (Spark and pyarrow.dataset need it), no null
+    # type, and the lineage columns last
     for name in TABLES:
-        schema = pq.read_schema(next((dataset / name).glob("date=*/*.parquet")))
+        parts = list((dataset / name).glob("date=*/*.parquet"))
+        schemas = {str(pq.read_schema(p).remove_metadata()) for p in parts}
+        assert len(parts) >= 5 and len(schemas) == 1, name
+        schema = pq.read_schema(parts[0])
+        assert schema.equals(fleet_schema(name)), name
+        assert not any(pa.types.is_null(f.type) for f in schema), name
         assert [f.name for f in schema][-3:] == [c for c, _ in LINEAGE]
 
 
