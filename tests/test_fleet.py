@@ -255,6 +255,28 @@ def test_second_run_skips_and_force_redoes(fleet, tmp_path):
     assert not any((dataset / layout.STAGING).iterdir())
 
 
+def test_failed_logs_are_tried_again_and_an_existing_scheduler_is_used(tmp_path):
+    from distributed import LocalCluster
+
+    dataset = tmp_path / "ds"
+    bad = tmp_path / "late.log"
+    bad.write_text("not yet a log\n")
+    ok = str(real_file(REAL_LOGS[2]))
+    with LocalCluster(
+        n_workers=1, threads_per_worker=1, host="127.0.0.1", dashboard_address=None
+    ) as cluster:
+        first = run_fleet([ok, str(bad)], dataset, scheduler=cluster.scheduler_address)
+        assert first.scheduler == cluster.scheduler_address
+        status = {r["source"]: r["status"] for r in first.results}
+        assert status == {ok: "ok", str(bad): "failed"}
+        # the file is complete now (a logger still writing it when the fleet first ran)
+        shutil.copy(real_file(REAL_LOGS[3]), bad)
+        again = run_fleet([ok, str(bad)], dataset, scheduler=cluster.scheduler_address)
+    assert {r["source"]: r["skipped"] for r in again.results} == {ok: True, str(bad): False}
+    logs = {r["source"]: r for r in _table(dataset, "logs").to_pylist()}
+    assert len(logs) == 2 and logs[str(bad)]["status"] == "ok"  # the failed row replaced
+
+
 def test_interrupted_commits_are_finished_or_undone(tmp_path):
     dataset = tmp_path / "ds"
     # a stage cut off before its manifest: rolled back

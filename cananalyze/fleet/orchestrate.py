@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TextIO
 
@@ -141,7 +141,7 @@ def run_fleet(
     t0 = time.perf_counter()
     opts = opts or Options(checks=True)
     if not opts.checking:
-        opts = Options(**{**opts.__dict__, "checks": True})  # the findings table is a promise
+        opts = replace(opts, checks=True)  # the findings table is a promise
     dataset = Path(dataset)
     if dataset.exists() and not dataset.is_dir():
         raise UsageError(f"{dataset}: exists and is not a directory")

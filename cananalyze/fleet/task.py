@@ -1,7 +1,7 @@
 """One log, on a Dask worker: the same pipeline as `export --parquet`, committed into the dataset.
 
 The task hashes the file, skips it when the dataset already holds that content
-decoded by this cananalyze (unless forced), runs `pipeline.run` into a
+decoded by this cananalyze without failure (unless forced), runs `pipeline.run` into a
 `TableSink` in its staging folder (the export's flat memory: nothing per frame
 kept), conforms each table file to the fleet schema row group by row group with
 the lineage columns appended (no second decode), and commits. It returns one
@@ -153,7 +153,8 @@ def process(task: LogTask) -> dict:
     result = {"source": path, "hash": digest, "skipped": False, "first": {}, "junit": None}
     if row["status"] == "ok" and not task.force:
         old = recorded(dataset, digest)
-        if old is not None and old.get("version") == __version__:
+        # a failure is tried again: it may have been the machine's (a worker lost)
+        if old is not None and old.get("version") == __version__ and old.get("status") == "ok":
             result.update(old, skipped=True)
             result["source"], result["recorded_source"] = path, old.get("source")
             return result
