@@ -109,6 +109,7 @@ def main(argv: list[str]) -> None:
     best: dict[int, tuple[float, float, dict]] = {}
     for r in range(args.repeats):
         for w in counts:
+            load = os.getloadavg()[0]
             cpu, wall = run_fleet(folder, dataset, w)
             fig = dataset_figures(dataset)
             if fig["logs"] != args.logs or fig["frames"] != args.logs * frames or fig["failed"]:
@@ -117,7 +118,8 @@ def main(argv: list[str]) -> None:
                 f"run {r + 1} workers={w}: wall {wall:.2f} s, CPU {cpu:.2f} s (user+sys, all "
                 f"processes), {fig['frames'] / wall:,.0f} frames/s, tasks CPU "
                 f"{fig['task_cpu']:.2f} s, peak worker RSS {fig['peak_mb']:.0f} MB, dataset "
-                f"{fig['bytes'] / 1e6:.1f} MB in {fig['dates']} date partitions"
+                f"{fig['bytes'] / 1e6:.1f} MB in {fig['dates']} date partitions, load average "
+                f"{load:.1f} before, {os.getloadavg()[0]:.1f} after"
             )
             if w not in best or wall < best[w][1]:
                 best[w] = (cpu, wall, fig)

@@ -84,6 +84,7 @@ def _table(dataset: Path, name: str) -> pa.Table:
 def test_cluster_is_local_only(fleet):
     r = fleet["result"]
     assert r.scheduler.startswith("tcp://127.0.0.1:")
+    assert len(r.workers) == 2 and all(w.startswith("tcp://127.0.0.1:") for w in r.workers)
     assert r.dashboard is None or r.dashboard.startswith("http://127.0.0.1:")
 
 

@@ -31,6 +31,7 @@ class FleetResult:
     seconds: float = 0.0
     dashboard: str | None = None
     scheduler: str | None = None  # the scheduler's address (tcp://127.0.0.1:PORT when local)
+    workers: list[str] = field(default_factory=list)  # the workers' addresses at the start
     recovered: tuple[int, int] = (0, 0)
     notes: list[str] = field(default_factory=list)
 
@@ -172,6 +173,9 @@ def run_fleet(
     try:
         out.dashboard = _dashboard(client)
         out.scheduler = client.scheduler.address
+        if cluster is not None:
+            client.wait_for_workers(len(cluster.workers))
+        out.workers = sorted(client.scheduler_info().get("workers", {}))
         if stream is not None:
             where = out.dashboard or "not running (needs bokeh)"
             print(f"fleet: {len(tasks)} logs, dashboard {where}", file=stream)
