@@ -326,6 +326,22 @@ def test_ctrl_c_in_a_task_leaves_no_part(tmp_path, monkeypatch):
     assert not any((dataset / layout.STAGING).iterdir())
 
 
+def test_a_lost_worker_makes_its_log_failed_and_drops_its_old_parts(tmp_path):
+    from cananalyze.fleet.task import record_failure
+
+    log = str(real_file(REAL_LOGS[2]))
+    dataset = tmp_path / "ds"
+    assert process(LogTask(log, str(dataset), Options(checks=True)))["status"] == "ok"
+    assert len(list(dataset.glob("*/date=*/*.parquet"))) == 7
+    row = record_failure(dataset, log, f"{log}: worker failed: KilledWorker")
+    assert row["status"] == "failed"
+    logs = _table(dataset, "logs").to_pylist()
+    assert [(r["source"], r["status"], r["error"]) for r in logs] == [
+        (log, "failed", f"{log}: worker failed: KilledWorker")
+    ]
+    assert [p.parent.parent.name for p in dataset.glob("*/date=*/*.parquet")] == ["logs"]
+
+
 def test_two_runs_into_one_dataset_do_not_corrupt_it(tmp_path):
     """Two writers committing the same logs at once: one whole part per table and log."""
     dataset = tmp_path / "ds"

@@ -134,10 +134,7 @@ def _suite(path: str, rules, findings, error: str | None) -> str:
 
 def process(task: LogTask) -> dict:
     """Decode one log into the dataset; the result row (never raises for a bad log)."""
-    from ..outputs.tables.stream import TABLES, TableSink
-    from ..pipeline import build_decoder, open_source, run
     from ..runtime import allocator
-    from ..runtime.gcpolicy import fewer_collections
 
     allocator.tune()
     wall0, cpu0 = time.perf_counter(), time.process_time()
@@ -161,70 +158,85 @@ def process(task: LogTask) -> dict:
     stage = layout.Stage(dataset, digest)
     try:
         sink = _Findings(keep=task.junit)
-        state = None
-        rules = []
-        if row["status"] == "ok":
-            try:
-                source = open_source(path, task.opts)
-                row["format"] = getattr(getattr(source, "fmt", None), "name", None)
-                decoder = build_decoder(task.opts)
-                tables = TableSink(
-                    stage.dir / EXPORT,
-                    "parquet",
-                    task.compression,
-                    constants=lineage,
-                    conform=schema.Conform(lineage),
-                )
-                with fewer_collections():
-                    state = run(source, decoder, [tables, sink], task.opts)
-                rules = decoder.checker.rules if decoder.checker is not None else []
-                row["skipped_lines"] = source.problems.count
-            except (KeyboardInterrupt, SystemExit):
-                raise
-            except BaseException as exc:  # noqa: BLE001 - one log's failure is a row, not the fleet's
-                row.update(status="failed", error=_one_line(exc, path))
-                state = None
-        t_first = state.t0 if state is not None else None
-        date, row["date_from"] = _date(t_first, path)
-        renames: list[tuple[Path, Path]] = []
-        if state is not None:
-            row.update(frames=state.frames, t_first=t_first, t_last=state.t_last)
-            row.update(findings=sink.total, violations=sink.failing)
-            try:
-                for table in TABLES:
-                    staged = stage.dir / EXPORT / f"{table}.parquet"
-                    _check_schema(staged, table)
-                    renames.append((staged, layout.part_path(dataset, table, date, digest)))
-            except (KeyboardInterrupt, SystemExit):
-                raise
-            except BaseException as exc:  # noqa: BLE001 - as a decode failure: no parts
-                row.update(status="failed", error=_one_line(exc, path))
-                renames = []
+        state, rules = (
+            _decode(task, stage, lineage, sink, row) if row["status"] == "ok" else (None, [])
+        )
+        date, row["date_from"] = _date(state.t0 if state is not None else None, path)
+        parts = _parts(stage, dataset, date, digest, row, path) if state is not None else []
         row["seconds"] = time.perf_counter() - wall0
         row["cpu_seconds"] = time.process_time() - cpu0
         row["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-        staged = stage.dir / "logs.parquet"
-        _logs_part(staged, row, lineage)
-        renames.append((staged, layout.part_path(dataset, "logs", date, digest)))  # last: the mark
-        final = {d for _, d in renames}
-        removals = [
-            p
-            for table in schema.TABLES
-            for p in layout.existing_parts(dataset, table, digest)
-            if p not in final
-        ]
-        stage.commit(renames, removals)
+        _commit(stage, dataset, date, digest, parts, row, lineage)
     except BaseException:
         stage.close()
         raise
     result.update(row)
-    result.update(lineage)
-    result["first"] = sink.first
-    result["date"] = date
-    result["worker_pid"] = os.getpid()
+    result.update(lineage, first=sink.first, date=date, worker_pid=os.getpid())
     if task.junit:
         result["junit"] = _suite(path, rules, sink.findings, row["error"])
     return result
+
+
+def _decode(task: LogTask, stage: layout.Stage, lineage: dict, findings: _Findings, row: dict):
+    """`pipeline.run` into the export's TableSink in the stage, writing the dataset's schema;
+    (the Run, the rules) or (None, []) with the row marked failed."""
+    from ..outputs.tables.stream import TableSink
+    from ..pipeline import build_decoder, open_source, run
+    from ..runtime.gcpolicy import fewer_collections
+
+    try:
+        source = open_source(task.path, task.opts)
+        row["format"] = getattr(getattr(source, "fmt", None), "name", None)
+        decoder = build_decoder(task.opts)
+        conform = schema.Conform(lineage)
+        tables = TableSink(
+            stage.dir / EXPORT, "parquet", task.compression, constants=lineage, conform=conform
+        )
+        with fewer_collections():
+            state = run(source, decoder, [tables, findings], task.opts)
+    except (KeyboardInterrupt, SystemExit):
+        raise
+    except BaseException as exc:  # noqa: BLE001 - one log's failure is a row, not the fleet's
+        row.update(status="failed", error=_one_line(exc, task.path))
+        return None, []
+    row["skipped_lines"] = source.problems.count
+    row.update(frames=state.frames, t_first=state.t0, t_last=state.t_last)
+    row.update(findings=findings.total, violations=findings.failing)
+    return state, decoder.checker.rules if decoder.checker is not None else []
+
+
+def _parts(stage: layout.Stage, dataset: Path, date: str, digest: str, row: dict, path: str):
+    """(staged file, final part path) of every table; none, with the row failed, when a
+    table is not in the dataset's schema."""
+    from ..outputs.tables.stream import TABLES
+
+    parts = []
+    try:
+        for table in TABLES:
+            staged = stage.dir / EXPORT / f"{table}.parquet"
+            _check_schema(staged, table)
+            parts.append((staged, layout.part_path(dataset, table, date, digest)))
+    except (KeyboardInterrupt, SystemExit):
+        raise
+    except BaseException as exc:  # noqa: BLE001 - as a decode failure: no parts
+        row.update(status="failed", error=_one_line(exc, path))
+        return []
+    return parts
+
+
+def _commit(stage, dataset: Path, date: str, digest: str, parts: list, row: dict, lineage: dict):
+    """The logs row written last, the log's parts at other dates (an earlier run's) removed."""
+    staged = stage.dir / "logs.parquet"
+    _logs_part(staged, row, lineage)
+    renames = [*parts, (staged, layout.part_path(dataset, "logs", date, digest))]
+    final = {d for _, d in renames}
+    removals = [
+        p
+        for table in schema.TABLES
+        for p in layout.existing_parts(dataset, table, digest)
+        if p not in final
+    ]
+    stage.commit(renames, removals)
 
 
 def record_failure(dataset: str | Path, path: str, error: str) -> dict:
@@ -240,13 +252,7 @@ def record_failure(dataset: str | Path, path: str, error: str) -> dict:
     row = {"status": "failed", "error": error, "frames": 0, "date_from": date_from}
     stage = layout.Stage(dataset, digest)
     try:
-        staged = stage.dir / "logs.parquet"
-        _logs_part(staged, row, lineage)
-        dest = layout.part_path(dataset, "logs", date, digest)
-        removals = [
-            p for t in schema.TABLES for p in layout.existing_parts(dataset, t, digest) if p != dest
-        ]
-        stage.commit([(staged, dest)], removals)
+        _commit(stage, dataset, date, digest, [], row, lineage)
     except BaseException:
         stage.close()
         raise
