@@ -409,3 +409,48 @@ def test_export_of_a_log_without_frames_writes_empty_tables(tmp_path):
     assert main(["export", str(log), "--parquet", str(tmp_path / "out"), "-q"]) == 0
     for name in ("frames", "signals", "sdo", "events", "findings", "nodes"):
         assert pq.read_table(tmp_path / "out" / f"{name}.parquet").num_rows == 0, name
+
+
+def test_ctrl_c_then_a_rerun_finishes_the_fleet(tmp_path):
+    """SIGINT to a running `cananalyze fleet`: exit 130, no part without its log's row once
+    the next run has started, and the rerun completes every log exactly once."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    try:
+        from generate import generate
+    finally:
+        sys.path.pop(0)
+    from cananalyze.io.logfile import write_log
+
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    for i in range(24):
+        write_log(generate(20_000, seed=i + 1), logs / f"run{i:02d}.log")
+    dataset = tmp_path / "ds"
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    cmd = [sys.executable, "-m", "cananalyze", "fleet", str(logs), "--out", str(dataset)]
+    cmd += ["--workers", "2", "-q"]
+    proc = subprocess.Popen(cmd, env=env, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not list(dataset.glob("logs/date=*/*.parquet")) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    first = len(list(dataset.glob("logs/date=*/*.parquet")))
+    assert 0 < first < 24
+    rerun = subprocess.run(cmd[:-1], env=env, capture_output=True, text=True, timeout=300)
+    assert rerun.returncode == 1, rerun.stderr  # generated traffic breaks rules: exit 1
+    assert f"({24 - first} decoded, {first} already in the dataset)" in rerun.stderr
+    assert not any((dataset / layout.STAGING).iterdir())
+    rows = _table(dataset, "logs").to_pylist()
+    assert sorted(r["source"] for r in rows) == sorted(str(p) for p in logs.iterdir())
+    for name in TABLES:
+        assert len(list((dataset / name).glob("date=*/*.parquet"))) == 24, name
+    assert _table(dataset, "frames").num_rows == 24 * 20_000
