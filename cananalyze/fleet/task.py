@@ -105,6 +105,8 @@ def _check_schema(path: Path, table: str) -> None:
     """A table as the export wrote it must be the dataset's (one schema per table)."""
     import pyarrow.parquet as pq
 
+    if table not in schema.COLUMNS:
+        raise ValueError(f"{table} table: not in the dataset's schema (cananalyze/fleet/schema.py)")
     got = pq.read_schema(path).remove_metadata()
     if not got.equals(schema.schema(table)):
         raise ValueError(f"{table} table: written as {got}, the dataset has {schema.schema(table)}")
