@@ -52,8 +52,11 @@ class PageView:
     ready: bool = False
 
 
-def view(path: str | Path, questions: dict[str, str], timeout: float = 60.0) -> PageView:
-    """Load `path`, wait for document.body.dataset.ready, screenshot the first screen."""
+def view(
+    path: str | Path, questions: dict[str, str], timeout: float = 60.0, full_page: bool = False
+) -> PageView:
+    """Load `path`, wait for document.body.dataset.ready, screenshot the first screen
+    (or the whole page)."""
     from websockets.sync.client import connect
 
     exe = chromium()
@@ -134,6 +137,19 @@ def view(path: str | Path, questions: dict[str, str], timeout: float = 60.0) -> 
             for name, expr in questions.items():
                 r = call("Runtime.evaluate", expression=expr, returnByValue=True)
                 out.answers[name] = r.get("result", {}).get("value")
+            if full_page:
+                r = call(
+                    "Runtime.evaluate", expression="document.body.scrollHeight", returnByValue=True
+                )
+                h = int(r["result"]["value"])
+                call(
+                    "Emulation.setDeviceMetricsOverride",
+                    width=1280,
+                    height=h,
+                    deviceScaleFactor=1,
+                    mobile=False,
+                )
+                time.sleep(1.0)
             shot = call("Page.captureScreenshot", format="png")
             out.screenshot = base64.b64decode(shot["data"])
             # events that arrived after the last call

@@ -28,8 +28,7 @@ h3{font-size:15px;margin:16px 0 4px}
 .verdict.fail{background:#fde4e1;border:1px solid #d62728}
 .small{font-size:12px;color:#666}.warn{color:#a15c00}
 table{border-collapse:collapse;font-size:13px;margin:6px 0}
-td,th{border:1px solid #ddd;padding:3px 7px;text-align:right}th{background:#f5f5f5}
-td:nth-child(1){text-align:left}
+td,th{border:1px solid #ddd;padding:3px 7px;text-align:left}th{background:#f5f5f5}
 details.finding{margin:4px 0;padding:4px 8px;border-left:4px solid #999;font-size:13px}
 details.finding.error{border-color:#d62728}details.finding.warning{border-color:#ff7f0e}
 details.finding.info{border-color:#1f77b4}.why{color:#555}

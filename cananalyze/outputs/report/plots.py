@@ -41,7 +41,7 @@ def envelope_trace(env: Envelope, t0: float, name: str, scale: float = 1.0):
     import plotly.graph_objects as go
 
     t, v = env.points()
-    return go.Scattergl(x=t - t0, y=v * scale, name=name, mode="lines", line={"width": 1})
+    return go.Scatter(x=t - t0, y=v * scale, name=name, mode="lines", line={"width": 1})
 
 
 def bus_load(buses: dict, t0: float, bitrate: int | None) -> str:
@@ -84,7 +84,8 @@ def histogram(hist: LogHistogram, title: str, x: str, marks: list[float] | None 
         }
         for m in marks or []
     ]
-    return _fig([bars], title, x, "count", shapes=shapes, bargap=0)
+    # a log axis: 0.2 % bins are equally wide, and a dropout shows beside the jitter
+    return _fig([bars], title, x, "count", shapes=shapes, bargap=0, xaxis_type="log")
 
 
 def state_timeline(
