@@ -81,6 +81,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--rrd", metavar="FILE", help="stream the timelines into a Rerun .rrd file")
     p.add_argument(
+        "--foxglove",
+        nargs="?",
+        const="127.0.0.1:8765",
+        metavar="HOST:PORT",
+        help="serve the decode to Foxglove over WebSocket (default 127.0.0.1:8765; "
+        "the topics of export --mcap)",
+    )
+    p.add_argument(
         "--plain", action="store_true", help="decode-style lines instead of the dashboard"
     )
     p.add_argument("--no-color", action="store_true", help="no ANSI colours in --plain output")
@@ -158,6 +166,10 @@ def run(args: argparse.Namespace) -> int:
                 name=f"live {args.interface or ''} {args.channel or ''}".strip(),
             )
         )
+    if args.foxglove:
+        from ..outputs.foxglove.sink import FoxgloveSink, parse_address
+
+        sinks.append(FoxgloveSink(*parse_address(args.foxglove)))
     from ..outputs.dashboard import DashboardSink
 
     view = DashboardSink(
