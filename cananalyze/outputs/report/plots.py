@@ -1,11 +1,17 @@
-"""The report's plots, built with plotly (the page embeds plotly.js once, `page.py`).
+"""The report's plots as plotly figures (the page embeds plotly.js once, `page.py`).
 
-Each function returns a figure as plotly's JSON text; numpy arrays travel as plotly's
-typed arrays (base64), so a thousand-point envelope costs a few kB. Times are seconds
-from the log's first frame.
+Figures are written as plotly's JSON figure documents ({"data": traces, "layout": ...})
+directly: building them through `plotly.graph_objects` validated and deep-copied every
+property, 2.5 s for fifty plots, more than the statistics of a million frames. Arrays
+travel as plotly.js typed arrays ({"dtype": "f4", "bdata": base64}): float32 is finer
+than a pixel, and a thousand-point envelope costs 11 kB. Times are seconds from the
+log's first frame.
 """
 
 from __future__ import annotations
+
+import base64
+import json
 
 import numpy as np
 
@@ -20,28 +26,36 @@ NMT_COLOURS = {
 }
 
 
-def _fig(traces: list, title: str, x: str, y: str, **layout):
-    import plotly.graph_objects as go
-
-    fig = go.Figure(traces)
-    fig.update_layout(
-        title={"text": title, "font": {"size": 14}},
-        height=layout.pop("height", HEIGHT),
-        margin={"l": 60, "r": 20, "t": 36, "b": 40},
-        template="plotly_white",
-        xaxis_title=x,
-        yaxis_title=y,
-        showlegend=layout.pop("showlegend", len(traces) > 1),
-        **layout,
-    )
-    return fig.to_json()
+def typed(values) -> dict:
+    """A plotly.js typed array of float32."""
+    a = np.ascontiguousarray(values, dtype="<f4")
+    return {"dtype": "f4", "bdata": base64.b64encode(a.tobytes()).decode("ascii")}
 
 
-def envelope_trace(env: Envelope, t0: float, name: str, scale: float = 1.0):
-    import plotly.graph_objects as go
+def _fig(traces: list[dict], title: str, x: str, y: str, **layout) -> str:
+    base = {
+        "title": {"text": title, "font": {"size": 14}},
+        "height": layout.pop("height", HEIGHT),
+        "margin": {"l": 60, "r": 20, "t": 36, "b": 40},
+        "template": {"layout": {"plot_bgcolor": "white", "paper_bgcolor": "white"}},
+        "xaxis": {"title": {"text": x}, "gridcolor": "#eee", **layout.pop("xaxis", {})},
+        "yaxis": {"title": {"text": y}, "gridcolor": "#eee"},
+        "showlegend": layout.pop("showlegend", len(traces) > 1),
+    }
+    base.update(layout)
+    return json.dumps({"data": traces, "layout": base}, separators=(",", ":"))
 
+
+def envelope_trace(env: Envelope, t0: float, name: str, scale: float = 1.0) -> dict:
     t, v = env.points()
-    return go.Scatter(x=t - t0, y=v * scale, name=name, mode="lines", line={"width": 1})
+    return {
+        "type": "scatter",
+        "mode": "lines",
+        "name": name,
+        "x": typed(t - t0),
+        "y": typed(v * scale),
+        "line": {"width": 1},
+    }
 
 
 def bus_load(buses: dict, t0: float, bitrate: int | None) -> str:
@@ -53,25 +67,33 @@ def bus_load(buses: dict, t0: float, bitrate: int | None) -> str:
 
 def period(gaps, t0: float, kind: str, node: int, configured: list[tuple[float, float]]) -> str:
     """The heartbeat (or guarding) period over time, against the configured value."""
-    import plotly.graph_objects as go
-
     traces = [envelope_trace(gaps.over_time, t0, "measured")]
     if configured:
         xs = [t - t0 for t, _ in configured] + [(gaps.last_t or t0) - t0]
         ys = [v for _, v in configured] + [configured[-1][1]]
         traces.append(
-            go.Scatter(
-                x=xs, y=ys, name="configured", mode="lines", line={"shape": "hv", "dash": "dash"}
-            )
+            {
+                "type": "scatter",
+                "mode": "lines",
+                "name": "configured",
+                "x": xs,
+                "y": ys,
+                "line": {"shape": "hv", "dash": "dash"},
+            }
         )
     return _fig(traces, f"Node {node} {kind} period", "time (s)", "period (ms)")
 
 
 def histogram(hist: LogHistogram, title: str, x: str, marks: list[float] | None = None) -> str:
-    import plotly.graph_objects as go
-
     left, width, count = hist.bars()
-    bars = go.Bar(x=left + width / 2, y=count, width=width, name="count", marker_line_width=0)
+    bars = {
+        "type": "bar",
+        "name": "count",
+        "x": (left + width / 2).tolist(),
+        "y": count.tolist(),
+        "width": width.tolist(),
+        "marker": {"line": {"width": 0}},
+    }
     shapes = [
         {
             "type": "line",
@@ -85,15 +107,13 @@ def histogram(hist: LogHistogram, title: str, x: str, marks: list[float] | None 
         for m in marks or []
     ]
     # a log axis: 0.2 % bins are equally wide, and a dropout shows beside the jitter
-    return _fig([bars], title, x, "count", shapes=shapes, bargap=0, xaxis_type="log")
+    return _fig([bars], title, x, "count", shapes=shapes, bargap=0, xaxis={"type": "log"})
 
 
 def state_timeline(
     states: list[tuple[float, int, str]], t0: float, t_end: float, title: str = "NMT state per node"
 ) -> str:
     """One lane per node: each state (NMT, CiA 402 drive) from its change to the next."""
-    import plotly.graph_objects as go
-
     by_node: dict[int, list] = {}
     for t, node, state in sorted(states):
         by_node.setdefault(node, []).append((t, state))
@@ -103,15 +123,16 @@ def state_timeline(
             end = seq[k + 1][0] if k + 1 < len(seq) else t_end
             segs.setdefault(state, []).append((f"node {node}", t - t0, max(end - t, 1e-6)))
     traces = [
-        go.Bar(
-            y=[s[0] for s in rows],
-            base=[s[1] for s in rows],
-            x=[s[2] for s in rows],
-            orientation="h",
-            name=state,
-            marker_color=NMT_COLOURS.get(state.split()[0], None),
-            hovertemplate="%{y}: " + state + " from %{base:.3f} s for %{x:.3f} s<extra></extra>",
-        )
+        {
+            "type": "bar",
+            "orientation": "h",
+            "name": state,
+            "y": [s[0] for s in rows],
+            "base": [s[1] for s in rows],
+            "x": [s[2] for s in rows],
+            "marker": {"color": NMT_COLOURS.get(state.split()[0])},
+            "hovertemplate": "%{y}: " + state + " from %{base:.3f} s for %{x:.3f} s<extra></extra>",
+        }
         for state, rows in segs.items()
     ]
     h = max(HEIGHT, 60 + 28 * len(by_node))
@@ -125,8 +146,3 @@ def signals(series: list, t0: float, title: str) -> str:
         envelope_trace(s.env, t0, f"{s.name} ({s.unit})" if s.unit else s.name) for s in series
     ]
     return _fig(traces, title, "time (s)", y)
-
-
-def finite(values) -> np.ndarray:
-    a = np.asarray(values, np.float64)
-    return a[np.isfinite(a)]
