@@ -329,6 +329,10 @@ class LiveView:
                 head.append(f", {self.notes} note(s)")
         if self.status:
             head.append(f"  {self.status}", style="dim")
+        if len(self.summary.by_channel) > 1:  # several buses: each one's frames and load
+            head.append(
+                "\n" + "  ".join(x.strip() for x in self.summary.channel_lines(self.bitrate))
+            )
 
         nodes = Table(title="Nodes", title_justify="left", expand=True, pad_edge=False)
         for col, kw in (
