@@ -222,3 +222,24 @@ def test_bench_report_prints_cpu_wall_and_page_size(logs):
     assert 0.5 < size < 4 and (logs / "bench_3000.html").stat().st_size == pytest.approx(
         size * 1e6, abs=1e4
     )
+
+
+def test_bench_live_serves_foxglove_without_drops():
+    """--foxglove: the server's client (another process) gets every frame the sinks kept."""
+    pytest.importorskip("foxglove")
+    pytest.importorskip("websockets")
+    out = _run(
+        "bench_live.py",
+        *("--seconds", "1", "--rate", "2000", "--network", str(SAMPLES / "network.toml")),
+        "--foxglove",
+    ).stdout
+    got = dict(line.split(None, 1) for line in out.splitlines())
+    assert got["sinks"] == "FoxgloveSink, DashboardSink"
+    kept = int(got["kept"].split()[0])
+    assert got["dropped"] == "0" and kept > 1500
+    m = re.fullmatch(
+        r"(\d+) frames and (\d+) messages on (\d+) topics received by the client \((\d+) sent\)",
+        got["foxglove"],
+    )
+    assert m and int(m.group(1)) == kept and m.group(2) == m.group(4)
+    assert re.fullmatch(rf"{NUMBER} s user\+system beside {NUMBER} s wall", got["cpu"])

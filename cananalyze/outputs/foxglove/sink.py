@@ -27,6 +27,9 @@ from ..sink import Sink
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8765
+# messages queued per client before the server drops the oldest (the SDK's default, 1024,
+# is 30 ms of a saturated bus: a client that pauses a moment would lose frames); ~10 MB
+BACKLOG = 1 << 16
 
 
 def parse_address(text: str | None) -> tuple[str, int]:
@@ -73,7 +76,11 @@ class FoxgloveSink(Sink):
         self.context = foxglove.Context()
         try:
             self.server = foxglove.start_server(
-                name="cananalyze", host=self.host, port=self.port, context=self.context
+                name="cananalyze",
+                host=self.host,
+                port=self.port,
+                context=self.context,
+                message_backlog_size=BACKLOG,
             )
         except Exception as exc:  # noqa: BLE001 - the SDK raises its own error types
             raise UsageError(f"--foxglove {self.host}:{self.port}: cannot listen: {exc}") from None
