@@ -342,3 +342,19 @@ def test_real_log_report_in_chromium(tmp_path):
     _, tables, figs = parse(out)
     assert len([f for f in figs.values() if "heartbeat period" in f["layout"]["title"]["text"]])
     _browser_check(out, "pcan3.png")
+
+
+def test_a_clock_that_jumps_by_years_costs_nothing(tmp_path):
+    """A corrupt time (1e11 s, year 5138) among good frames: the page is written at once,
+    every frame counted, the plots keep their fixed number of points."""
+    lines = [f"({1000.0 + k * 0.01:.6f}) can0 701#05" for k in range(100)]
+    lines.insert(50, "(99999999999.000000) can0 701#05")
+    log = tmp_path / "jump.log"
+    log.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "jump.html"
+    r = cli("report", str(log), "-o", str(out), "-q")
+    assert r.returncode in (0, 1), r.stderr
+    _, tables, figs = parse(out)
+    assert table_with(tables, "channel", "frames")[1][1] == "101"
+    load = next(f for f in figs.values() if f["layout"]["title"]["text"].startswith("Bus load"))
+    assert len(_values(load["data"][0]["y"])) <= 2000

@@ -154,25 +154,28 @@ class WindowSums:
         self.t_last: float | None = None
 
     def add(self, t: np.ndarray, bits: np.ndarray) -> None:
+        ok = np.isfinite(t)
+        if not ok.all():
+            t, bits = t[ok], bits[ok]
         if t.size == 0:
             return
         if self.t0 is None:
             self.t0 = float(t[0])
         self.bits += float(bits.sum())
         self.t_last = float(t.max()) if self.t_last is None else max(self.t_last, float(t.max()))
-        idx = np.maximum(np.floor((t - self.t0) / self.window).astype(np.int64), 0)
-        base = int(idx.min())
-        sums = np.bincount(idx - base, weights=bits).astype(np.float64)
+        idx = np.maximum(np.floor((t - self.t0) / self.window), 0).astype(np.int64)
+        # windows that have frames only: a log whose clock jumps by years costs nothing
+        windows, inverse = np.unique(idx, return_inverse=True)
+        sums = np.bincount(inverse, weights=bits).astype(np.float64)
         if self.pending is not None:
             k, s = self.pending
-            if base <= k < base + sums.size:
-                sums[k - base] += s
+            at = int(np.searchsorted(windows, k))
+            if at < windows.size and windows[at] == k:
+                sums[at] += s
             else:
                 self._emit(np.array([k]), np.array([s]))
-        last = sums.size - 1
-        done = np.flatnonzero(sums[:last] > 0)
-        self._emit(done + base, sums[done])
-        self.pending = (base + last, float(sums[last]))
+        self._emit(windows[:-1], sums[:-1])
+        self.pending = (int(windows[-1]), float(sums[-1]))
 
     def _emit(self, k: np.ndarray, s: np.ndarray) -> None:
         if k.size == 0:
