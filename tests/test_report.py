@@ -358,3 +358,35 @@ def test_a_clock_that_jumps_by_years_costs_nothing(tmp_path):
     assert table_with(tables, "channel", "frames")[1][1] == "101"
     load = next(f for f in figs.values() if f["layout"]["title"]["text"].startswith("Bus load"))
     assert len(_values(load["data"][0]["y"])) <= 2000
+
+
+def test_drive_state_section_reads_the_event_log(tmp_path):
+    """The place left for CiA 402: `drive_state` events in the event log become one lane
+    per drive (here put there by a sink ahead of the report, as the decoder will)."""
+    from cananalyze.events.columns import EventColumns, Row
+    from cananalyze.io.source import read_all
+    from cananalyze.outputs.report.sink import ReportSink
+    from cananalyze.outputs.sink import Sink
+    from cananalyze.pipeline import MemorySource, Options, build_decoder, run
+
+    class DriveStates(Sink):
+        needs_events = True
+
+        def write(self, batch):
+            if len(batch.frames):
+                t = float(batch.frames.t[0])
+                rows = [
+                    Row(t + 1.0, "drive_state", 3, 2, "Switched on", None),
+                    Row(t + 2.0, "drive_state", 3, 2, "Operation enabled", None),
+                ]
+                batch.events = EventColumns.concat([batch.events, EventColumns.from_rows(rows)])
+
+    out = tmp_path / "drive.html"
+    opts = Options(checks=True)
+    fb = read_all(SAMPLES / "faults.log")
+    run(MemorySource(fb), build_decoder(opts), [DriveStates(), ReportSink(out)], opts)
+    text, _, figs = parse(out)
+    assert '<section id="drive">' in text
+    fig = next(f for f in figs.values() if f["layout"]["title"]["text"] == "Drive state per node")
+    assert {d["name"] for d in fig["data"]} == {"Switched on", "Operation enabled"}
+    assert all(d["y"] == ["node 3"] for d in fig["data"])

@@ -93,6 +93,7 @@ def render(sink) -> str:
             ("emcy", "EMCY"),
             ("pdo", "PDO"),
             ("signals", "Signals"),
+            ("drive", "Drive states"),
         )
         if f'id="{a}"' in body
     )
