@@ -104,6 +104,14 @@ class LogHistogram:
         self.min = min(self.min, float(v.min()))
         self.max = max(self.max, float(v.max()))
 
+    def merge(self, other: LogHistogram) -> None:
+        self.bins += other.bins
+        self.count += other.count
+        self.sum += other.sum
+        self.sumsq += other.sumsq
+        self.min = min(self.min, other.min)
+        self.max = max(self.max, other.max)
+
     @property
     def mean(self) -> float:
         return self.sum / self.count if self.count else float("nan")

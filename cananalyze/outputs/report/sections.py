@@ -185,12 +185,10 @@ def sdo(s, figs: Figures) -> str:
     if not s.sdo_count:
         return ""
     rows = []
-    total = None
     for n in sorted(s.sdo_count):
         ok, bad = s.sdo_count[n]
         h = s.sdo_latency.get(n)
         if h is not None and h.count:
-            total = h if total is None else total
             rows.append(
                 [
                     n,
@@ -212,9 +210,7 @@ def sdo(s, figs: Figures) -> str:
 
     allh = LogHistogram()
     for h in s.sdo_latency.values():
-        allh.bins += h.bins
-        allh.count += h.count
-        allh.min, allh.max = min(allh.min, h.min), max(allh.max, h.max)
+        allh.merge(h)
     if allh.count:
         parts.append(figs.add(plots.histogram(allh, "SDO latency", "latency (ms)")))
     if s.aborts:
