@@ -8,6 +8,7 @@ import time
 
 import can
 import can.interfaces.virtual as virtual
+import numpy as np
 import pytest
 from helpers.virtual_bus import unique_channel
 
@@ -143,3 +144,26 @@ def test_live_cli_two_buses_record_and_summary(tmp_path, monkeypatch, capsys):
     assert per == {a: 120, b: 80}
     assert "frames per channel:" in out
     assert f"{a[:15]}" in out
+
+
+def test_dashboard_shows_each_bus():
+    """Two channels in the batches: the dashboard's head names each with its frames and load
+    (frames counted here from the batch independently, load from nominal bits)."""
+    from rich.console import Console
+
+    from cananalyze.frames import from_rows
+    from cananalyze.outputs.dashboard import LiveView
+    from cananalyze.pipeline import Decoder
+
+    rows = [(1.0 + k * 0.01, 0x701, b"\x05", 0, k % 3 == 0) for k in range(90)]
+    fb = from_rows(rows, channels=("can0", "can1"))
+    view = LiveView(bitrate=125_000)
+    view.add(Decoder().decode(fb), wall=10.0)
+    console = Console(record=True, width=160, color_system=None)
+    console.print(view.render(wall=10.0, height=30))
+    text = console.export_text()
+    per = np.bincount(fb.channel)
+    # 47 + 8 bits per frame over the log's 0.89 s at 125 kbit/s
+    load = [f"{n * 55 / (125_000 * 0.89) * 100:.1f} %" for n in per]
+    assert f"can0: {per[0]} frames, {load[0]} load" in text
+    assert f"can1: {per[1]} frames, {load[1]} load" in text

@@ -201,14 +201,19 @@ class Summary:
                 out.append((node, total, errors))
         return out
 
+    def channel_load(self, name: str, bitrate: int | None) -> float | None:
+        """Mean bus load of one channel in percent (nominal bits), None without a bitrate."""
+        if not bitrate or self.duration <= 0 or name not in self.by_channel:
+            return None
+        return self.by_channel[name][1] / (bitrate * self.duration) * 100
+
     def channel_lines(self, bitrate: int | None = None) -> list[str]:
         """Frames and mean bus load of each channel (several buses in one log or session)."""
         out = []
-        for name, (frames, bits) in self.by_channel.items():
-            load = ""
-            if bitrate and self.duration > 0:
-                load = f"  bus load {bits / (bitrate * self.duration) * 100:.1f} %"
-            out.append(f"  {name:<15} {frames:>10}{load}")
+        for name, (frames, _) in self.by_channel.items():
+            load = self.channel_load(name, bitrate)
+            shown = "" if load is None else f"  bus load {load:.1f} %"
+            out.append(f"  {name:<15} {frames:>10}{shown}")
         return out
 
     def record(self, bitrate: int | None = None, problems: int = 0) -> dict:
