@@ -390,3 +390,19 @@ def test_drive_state_section_reads_the_event_log(tmp_path):
     fig = next(f for f in figs.values() if f["layout"]["title"]["text"] == "Drive state per node")
     assert {d["name"] for d in fig["data"]} == {"Switched on", "Operation enabled"}
     assert all(d["y"] == ["node 3"] for d in fig["data"])
+
+
+def test_pdo_rates_beside_their_configuration(faults_report):
+    """samples/README.md: TPDO2 0x283 inhibit 100 ms and event timer 200 ms, written by the
+    master's SDO downloads in the log; TPDO1 0x187 inhibit 20 ms. A 0 only the EDS gives
+    is not shown as "off"."""
+    _, tables, _ = parse(faults_report)
+    pdo = {r[0]: r for r in table_with(tables, "COB-ID", "event timer")[1:]}
+    assert pdo["0x283"][9:11] == ["200 ms (log)", "100 ms (log)"]
+    assert pdo["0x187"][10] == "20 ms (log)"
+    assert not any(v.startswith("off (profile") for r in pdo.values() for v in r[9:11])
+    # rates and gaps from every frame (python-can reads them)
+    with can.LogReader(str(SAMPLES / "faults.log")) as reader:
+        t = np.array([m.timestamp for m in reader if m.arbitration_id == 0x283])
+    assert int(pdo["0x283"][3]) == t.size
+    assert float(pdo["0x283"][7]) == pytest.approx(np.diff(t).max() * 1000, abs=0.01)

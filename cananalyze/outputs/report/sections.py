@@ -290,9 +290,13 @@ def pdos(s, figs: Figures) -> str:
         params = cfg.pdo_params(cob, g.last_t or 0.0) if cfg is not None else None
         et = inh = tt = "-"
         if params is not None:
-            pc = params[1]
-            et = f"{pc.event_timer} ms" if pc.event_timer else "off"
-            inh = f"{pc.inhibit_time / 10:g} ms" if pc.inhibit_time else "off"
+            pnode, pc = params
+            comm = (0x1800 if pc.direction == "tx" else 0x1400) + pc.number - 1
+            t_end = g.last_t or 0.0
+            et = _pdo_param(model, pnode, comm, 5, t_end, pc.event_timer, lambda v: f"{v} ms")
+            inh = _pdo_param(
+                model, pnode, comm, 3, t_end, pc.inhibit_time, lambda v: f"{v / 10:g} ms"
+            )
             tt = str(pc.transmission_type)
         rows.append(
             [
@@ -315,9 +319,20 @@ def pdos(s, figs: Figures) -> str:
     return (
         '<section id="pdo"><h2>PDO rates</h2>'
         + _table(head, rows)
-        + "<p class=small>Configured values as known at the end of the log (network file, "
-        "profile, SDO writes in the log).</p></section>"
+        + "<p class=small>Configured values as known at the end of the log, with where each "
+        "comes from: log (an SDO write or read), file (network or rules file, --device/--eds) "
+        "or profile (EDS/DCF).</p></section>"
     )
+
+
+def _pdo_param(model, node: int, index: int, sub: int, t: float, value: int, text) -> str:
+    """A PDO timing parameter and where it comes from; 0 means off (CiA 301) unless only
+    the profile says 0, which is unknown (docs/network-file.md, as the checks read it)."""
+    k = model.known(node, index, sub, t)
+    source = k.source if k is not None else "network file"
+    if not value:
+        return "unknown (profile says 0)" if source == "profile" else f"off ({source})"
+    return f"{text(value)} ({source})"
 
 
 def signals(s, figs: Figures) -> str:
