@@ -50,7 +50,10 @@ def _rel(s, t: float | None) -> str:
 def verdict(s, figs: Figures) -> str:
     failing = [f for f in s.findings if f.fails]
     rules = s.rules
-    names = ", ".join(r.name for r in rules)
+    counts: dict[str, int] = {}
+    for r in rules:  # a rules file's assertions share a name: one entry each, counted
+        counts[r.name] = counts.get(r.name, 0) + 1
+    names = ", ".join(f"{n} ×{k}" if k > 1 else n for n, k in counts.items())
     ok = not failing
     word = "PASS" if ok else "FAIL"
     dur = (s.t_last - s.t_first) if s.t_first is not None else 0.0
