@@ -9,13 +9,20 @@ SDO read now and then) on a local virtual channel. Reports the frames offered an
 the latency from a frame's send time to the end of its batch in the last sink.
 
     python benchmarks/bench_live.py [--rate 32000] [--seconds 10] [--network FILE]
-        [--device N=KEY] [--check RULES] [--plain] [--record FILE] [--rrd FILE]
+        [--device N=KEY] [--check RULES] [--plain] [--record FILE] [--rrd FILE] [--foxglove]
+
+--foxglove serves the decode on 127.0.0.1 (an ephemeral port) to a Foxglove WebSocket
+client in another process, subscribed to every topic, which counts what it receives.
+CPU seconds (user + system of this process) are printed beside the wall time.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import resource
+import subprocess
 import sys
 import threading
 import time
@@ -95,6 +102,38 @@ class Measure(Sink):
         self.signals += sum(len(b.rows) for b in batch.signals)
 
 
+# A Foxglove WebSocket client (its own process: it must not share this one's GIL) that
+# subscribes to every advertised channel and, when the server goes away, prints the
+# messages it got per topic.
+CLIENT = r"""
+import json, struct, sys
+from websockets.sync.client import connect
+from websockets.exceptions import ConnectionClosed
+chan, subs, counts = {}, {}, {}
+with connect(sys.argv[1], subprotocols=["foxglove.sdk.v1", "foxglove.websocket.v1"],
+             max_queue=None) as ws:
+    print("connected", flush=True)
+    try:
+        while True:
+            m = ws.recv()
+            if isinstance(m, str):
+                m = json.loads(m)
+                if m.get("op") == "advertise":
+                    new = []
+                    for c in m["channels"]:
+                        chan[c["id"]] = c["topic"]
+                        subs[len(subs) + 1] = c["id"]
+                        new.append({"id": len(subs), "channelId": c["id"]})
+                    ws.send(json.dumps({"op": "subscribe", "subscriptions": new}))
+            elif m[0] == 1:
+                topic = chan[subs[struct.unpack_from("<I", m, 1)[0]]]
+                counts[topic] = counts.get(topic, 0) + 1
+    except ConnectionClosed:
+        pass
+print(json.dumps(counts), flush=True)
+"""
+
+
 def _devices(items: list[str]) -> dict[int, str]:
     out = {}
     for item in items:
@@ -114,6 +153,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--record", metavar="FILE", help="also record the raw frames (as live does)")
     ap.add_argument("--rrd", metavar="FILE", help="also stream the timelines into an .rrd")
     ap.add_argument("--bitrate", type=int, default=1_000_000, help="for the bus load figures")
+    ap.add_argument(
+        "--foxglove", action="store_true", help="also serve the decode to a Foxglove client"
+    )
     args = ap.parse_args(argv)
 
     from cananalyze.outputs.dashboard import DashboardSink
@@ -143,6 +185,12 @@ def main(argv: list[str] | None = None) -> int:
         from cananalyze.outputs.text.writer import TextWriter
 
         sinks.append(TextWriter(devnull, flush=True))
+    client = fox = None
+    if args.foxglove:
+        from cananalyze.outputs.foxglove.sink import FoxgloveSink
+
+        fox = FoxgloveSink(port=0, announce=False)
+        sinks.append(fox)
     view = DashboardSink(bitrate=args.bitrate, checking=checker is not None, show=False)
     sinks.append(view)
     report = None
@@ -153,9 +201,22 @@ def main(argv: list[str] | None = None) -> int:
     sent = [0]
     th = threading.Thread(target=producer, args=(CHANNEL, args.rate, args.seconds, sent))
     started: list[float] = []
+    cpu0: list[float] = []
 
     def start() -> None:
+        nonlocal client
+        if fox is not None:  # the client subscribes before the traffic starts
+            client = subprocess.Popen(
+                [sys.executable, "-c", CLIENT, fox.url], stdout=subprocess.PIPE, text=True
+            )
+            assert client.stdout.readline().strip() == "connected"
+            deadline = time.monotonic() + 10
+            while time.monotonic() < deadline and not all(
+                ch.has_sinks() for ch in fox._channels.values()
+            ):
+                time.sleep(0.01)
         started.append(time.perf_counter())
+        cpu0.append(_cpu())
         th.start()
 
     measure = Measure(start)
@@ -176,6 +237,8 @@ def main(argv: list[str] | None = None) -> int:
         source.close()
         devnull.close()
     elapsed = time.perf_counter() - started[0]
+    cpu = _cpu() - cpu0[0]
+    received = json.loads(client.communicate(timeout=60)[0]) if client is not None else None
     kept = measure.frames
     latency = np.concatenate(measure.latency) * 1e3 if measure.latency else np.zeros(1)
     offered = sent[0]
@@ -190,6 +253,13 @@ def main(argv: list[str] | None = None) -> int:
         f"ring high-water {source.high_water}"
     )
     print(f"dropped  {offered - kept}")
+    print(f"cpu      {cpu:.1f} s user+system beside {elapsed:.1f} s wall")
+    if received is not None:
+        frames = received.get("/can/frames", 0)
+        print(
+            f"foxglove {frames} frames and {sum(received.values())} messages on "
+            f"{len(received)} topics received by the client ({fox.sent} sent)"
+        )
     print(
         f"latency  send -> last sink: median {np.median(latency):.1f} ms, "
         f"p99 {np.percentile(latency, 99):.1f} ms, max {latency.max():.1f} ms"
@@ -198,6 +268,11 @@ def main(argv: list[str] | None = None) -> int:
     if report is not None:
         print(f"check    {len(report.findings)} findings")
     return 0 if offered == kept else 1
+
+
+def _cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
 
 
 if __name__ == "__main__":

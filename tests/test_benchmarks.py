@@ -22,6 +22,7 @@ SMOKED = {
     "bench_fleet.py",
     "bench_floor.py",
     "bench_live.py",
+    "bench_report.py",
     "mem_profile.py",
 }
 NUMBER = r"\d+(\.\d+)?"
@@ -220,3 +221,40 @@ def test_arrow_column_waits_for_a_whole_pyarrow(monkeypatch):
     whole.total_allocated_bytes = lambda: 5 << 20
     monkeypatch.setitem(sys.modules, "pyarrow", whole)
     assert mem_profile._arrow_mb() == 5
+
+
+def test_bench_report_prints_cpu_wall_and_page_size(logs):
+    out = _run("bench_report.py", "3000", "1", "--out", str(logs)).stdout.splitlines()
+    for line, name in zip(out, ("check", "report"), strict=False):
+        assert re.fullmatch(
+            rf"{name} +best CPU +{NUMBER} s +best wall +{NUMBER} s +peak RSS +{NUMBER} MB", line
+        )
+    assert re.fullmatch(
+        rf"report overhead: [+-]{NUMBER} % CPU \(3000 frames, {NUMBER} s of log, best of 1\)",
+        out[2],
+    )
+    size = float(re.fullmatch(rf"page: ({NUMBER}) MB", out[3]).group(1))
+    assert 0.5 < size < 4 and (logs / "bench_3000.html").stat().st_size == pytest.approx(
+        size * 1e6, abs=1e4
+    )
+
+
+def test_bench_live_serves_foxglove_without_drops():
+    """--foxglove: the server's client (another process) gets every frame the sinks kept."""
+    pytest.importorskip("foxglove")
+    pytest.importorskip("websockets")
+    out = _run(
+        "bench_live.py",
+        *("--seconds", "1", "--rate", "2000", "--network", str(SAMPLES / "network.toml")),
+        "--foxglove",
+    ).stdout
+    got = dict(line.split(None, 1) for line in out.splitlines())
+    assert got["sinks"] == "FoxgloveSink, DashboardSink"
+    kept = int(got["kept"].split()[0])
+    assert got["dropped"] == "0" and kept > 1500
+    m = re.fullmatch(
+        r"(\d+) frames and (\d+) messages on (\d+) topics received by the client \((\d+) sent\)",
+        got["foxglove"],
+    )
+    assert m and int(m.group(1)) == kept and m.group(2) == m.group(4)
+    assert re.fullmatch(rf"{NUMBER} s user\+system beside {NUMBER} s wall", got["cpu"])

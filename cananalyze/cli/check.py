@@ -21,9 +21,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rules", metavar="FILE", help="rules file (YAML, see docs/rules-file.md)")
     p.add_argument("--junit", metavar="FILE", help="write a JUnit XML report")
     p.add_argument("--json", metavar="FILE", help="write the findings as a JSON list")
+    p.add_argument("--html", metavar="FILE", help="also write the HTML report (as `report`)")
     p.add_argument("--timing", action="store_true", help="also print the timing analysis")
     p.add_argument("--no-color", action="store_true", help="no ANSI colours even on a terminal")
     add_filter_options(p)
+    from .report import add_html_options
+
+    add_html_options(p)
     add_progress_option(p)
     p.set_defaults(func=run)
 
@@ -42,10 +46,21 @@ def run(args: argparse.Namespace) -> int:
     source = open_source(args.log, opts)
     decoder = build_decoder(opts, checker)
     report = FindingsSink(
-        sys.stdout, args.junit, args.json, timing=args.timing, no_color=args.no_color
+        sys.stdout,
+        args.junit,
+        args.json,
+        timing=args.timing,
+        no_color=args.no_color,
+        html=args.html,
     )
+    sinks: list = [report]
+    if args.html:
+        from ..outputs.report.sink import ReportSink
+
+        # before the findings: the page exists when the JUnit file names it
+        sinks.insert(0, ReportSink(args.html, bitrate=args.bitrate, title=args.title))
     try:
-        run_with_progress(source, decoder, [report], opts, quiet=args.quiet)
+        run_with_progress(source, decoder, sinks, opts, quiet=args.quiet)
     finally:
         report_problems(source.problems)
     return report.exit_code

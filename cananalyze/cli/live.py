@@ -28,9 +28,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "configuration (~/.canrc, CAN_INTERFACE/CAN_CHANNEL/CAN_BITRATE) applies.",
     )
     p.add_argument(
-        "-i", "--interface", help="python-can interface (socketcan, pcan, slcan, virtual, ...)"
+        "-i",
+        "--interface",
+        action="append",
+        help="python-can interface (socketcan, pcan, slcan, virtual, ...); repeat with -c "
+        "for several buses",
     )
-    p.add_argument("-c", "--channel", help="channel (can0, PCAN_USBBUS1, /dev/ttyACM0, ...)")
+    p.add_argument(
+        "-c",
+        "--channel",
+        action="append",
+        help="channel (can0, PCAN_USBBUS1, /dev/ttyACM0, ...); several buses: can0,can1 or "
+        "repeated -i/-c pairs",
+    )
     p.add_argument(
         "-b", "--bitrate", type=int, metavar="BIT/S", help="bus bitrate (also for the bus load)"
     )
@@ -81,6 +91,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--rrd", metavar="FILE", help="stream the timelines into a Rerun .rrd file")
     p.add_argument(
+        "--foxglove",
+        nargs="?",
+        const="127.0.0.1:8765",
+        metavar="HOST:PORT",
+        help="serve the decode to Foxglove over WebSocket (default 127.0.0.1:8765; "
+        "the topics of export --mcap)",
+    )
+    p.add_argument(
         "--plain", action="store_true", help="decode-style lines instead of the dashboard"
     )
     p.add_argument("--no-color", action="store_true", help="no ANSI colours in --plain output")
@@ -118,6 +136,22 @@ def _bus_options(items: list[str]) -> dict:
     return out
 
 
+def buses(interfaces: list[str] | None, channels: list[str] | None) -> list[tuple]:
+    """(interface, channel) per bus: `-c can0,can1` or repeated -c, with one -i for all
+    or one -i per -c. No -c: one bus from python-can's configuration."""
+    names = [c for item in channels or [] for c in item.split(",") if c.strip()]
+    kinds = list(interfaces or [])
+    if not names:
+        if len(kinds) > 1:
+            raise UsageError("several -i need one -c each")
+        return [(kinds[0] if kinds else None, None)]
+    if len(kinds) <= 1:
+        return [(kinds[0] if kinds else None, c.strip()) for c in names]
+    if len(kinds) != len(names):
+        raise UsageError(f"{len(kinds)} -i for {len(names)} channels: give one -i, or one per -c")
+    return [(i, c.strip()) for i, c in zip(kinds, names, strict=True)]
+
+
 def run(args: argparse.Namespace) -> int:
     from ..io.live import HwFilter, LiveSource, open_bus
     from ..outputs.findings import FindingsSink
@@ -134,6 +168,8 @@ def run(args: argparse.Namespace) -> int:
     if (args.junit or args.json) and not args.check:
         raise UsageError("--junit and --json report a check: give --check RULES too")
     bus_options = _bus_options(args.bus_option)
+    pairs = buses(args.interface, args.channel)
+    where = " ".join(f"{i or ''} {c or ''}".strip() for i, c in pairs)
     # Frames are time-stamped on the reader thread as they are read; with the default 5 ms
     # GIL switch interval a decode on the main thread can hold them back that long, which
     # shows up as SDO latency and heartbeat jitter that the bus never had.
@@ -155,9 +191,13 @@ def run(args: argparse.Namespace) -> int:
                 rrd=args.rrd,
                 spawn=args.rerun,
                 bitrate=args.bitrate,
-                name=f"live {args.interface or ''} {args.channel or ''}".strip(),
+                name=f"live {where}".strip(),
             )
         )
+    if args.foxglove:
+        from ..outputs.foxglove.sink import FoxgloveSink, parse_address
+
+        sinks.append(FoxgloveSink(*parse_address(args.foxglove)))
     from ..outputs.dashboard import DashboardSink
 
     view = DashboardSink(
@@ -179,11 +219,20 @@ def run(args: argparse.Namespace) -> int:
     if checker is not None:
         report = FindingsSink(sys.stdout, args.junit, args.json, no_color=args.no_color)
         sinks.append(report)
-    # the bus opens once every output is open (see LiveSource)
-    source = LiveSource(
-        lambda: open_bus(args.interface, args.channel, args.bitrate, filters, **bus_options),
-        name_of=lambda bus: _label(args.channel, bus),
-    )
+    # the bus opens once every output is open (see LiveSource); one reader per bus
+    parts = [
+        LiveSource(
+            lambda i=i, c=c: open_bus(i, c, args.bitrate, filters, **bus_options),
+            name_of=lambda bus, c=c: _label(c, bus),
+        )
+        for i, c in pairs
+    ]
+    if len(parts) == 1:
+        source = parts[0]
+    else:
+        from ..io.live_buses import LiveBuses
+
+        source = LiveBuses(parts)
     deadline = time.monotonic() + args.duration if args.duration else None
 
     def stop(signum, frame):

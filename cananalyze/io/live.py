@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import CananalyzeError
+from ..errors import CananalyzeError, ProblemLog
 from ..frames import FLAG_BRS, FLAG_ERR, FLAG_ESI, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, FrameBatch
 
 
@@ -126,6 +126,9 @@ class LiveSource:
         self.high_water = 0  # most frames ever waiting in the ring
         self.stalls = 0  # times the reader found the ring full and waited
         self.error: str | None = None
+        # what pipeline.Source asks of every source (a live bus has no unreadable lines)
+        self.path = "live"
+        self.problems = ProblemLog()
         self._stop = threading.Event()
         self._wake = threading.Event()  # batch_max frames waiting
         self._space = threading.Condition()

@@ -329,6 +329,11 @@ class LiveView:
                 head.append(f", {self.notes} note(s)")
         if self.status:
             head.append(f"  {self.status}", style="dim")
+        if len(self.summary.by_channel) > 1:  # several buses: each one's frames and load
+            for name, (frames, _) in self.summary.by_channel.items():
+                load = self.summary.channel_load(name, self.bitrate)
+                head.append(f"\n  {name}: {frames} frames")
+                head.append(f", {load:.1f} % load" if load is not None else "")
 
         nodes = Table(title="Nodes", title_justify="left", expand=True, pad_edge=False)
         for col, kw in (

@@ -27,6 +27,7 @@ class FindingsSink(Sink):
         timing: bool = False,
         no_color: bool = False,
         quiet: bool = False,
+        html: str | None = None,
     ) -> None:
         self.out = out
         self.junit = junit
@@ -34,6 +35,7 @@ class FindingsSink(Sink):
         self.timing = timing
         self.no_color = no_color
         self.quiet = quiet
+        self.html = html  # the HTML report's path, named in the JUnit properties
         self.findings: list[Finding] = []
 
     def open(self, run) -> None:
@@ -80,6 +82,7 @@ class FindingsSink(Sink):
             )
             print(colour.paint(verdict, colour.SEVERITY["error"] if failing else "", on), file=out)
         if self.junit:
-            write_junit(self.junit, rules, findings)
+            props = {"cananalyze.report": str(self.html)} if self.html else None
+            write_junit(self.junit, rules, findings, props)
         if self.json_file:
             write_findings_json(self.json_file, findings)

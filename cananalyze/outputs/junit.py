@@ -23,7 +23,13 @@ def _subject(rule: Rule, s) -> str:
     return f"{rule.name} node {s}"
 
 
-def junit_xml(rules: list[Rule], findings: list[Finding], name: str = "cananalyze check") -> str:
+def junit_xml(
+    rules: list[Rule],
+    findings: list[Finding],
+    name: str = "cananalyze check",
+    properties: dict[str, str] | None = None,
+) -> str:
+    """The report; `properties` (e.g. the HTML report's path) go in the suite's <properties>."""
     cases: dict[str, list[Finding]] = {}
     for rule in rules:
         subjects = rule.subjects or {None}
@@ -38,6 +44,10 @@ def junit_xml(rules: list[Rule], findings: list[Finding], name: str = "cananalyz
     suite = ET.Element(
         "testsuite", name=name, tests=str(len(cases)), failures=str(failing), errors="0"
     )
+    if properties:
+        props = ET.SubElement(suite, "properties")
+        for key, value in properties.items():
+            ET.SubElement(props, "property", name=key, value=value)
     for case, fs in cases.items():
         tc = ET.SubElement(suite, "testcase", classname=f"cananalyze.{case.split()[0]}", name=case)
         bad = [f for f in fs if f.fails]
@@ -69,8 +79,13 @@ def format_finding(f: Finding) -> str:
     )
 
 
-def write_junit(path: str | Path, rules: list[Rule], findings: list[Finding]) -> None:
-    write_text_atomic(path, junit_xml(rules, findings))
+def write_junit(
+    path: str | Path,
+    rules: list[Rule],
+    findings: list[Finding],
+    properties: dict[str, str] | None = None,
+) -> None:
+    write_text_atomic(path, junit_xml(rules, findings, properties=properties))
 
 
 def write_findings_json(path: str | Path, findings: list[Finding]) -> None:

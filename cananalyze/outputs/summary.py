@@ -57,6 +57,7 @@ class Summary:
         default_factory=lambda: np.zeros(2048, np.int64)
     )  # not 1 byte NMT state
     nmt_good: int = 0  # well-formed NMT commands
+    by_channel: dict = field(default_factory=dict)  # channel name -> [frames, bits]
 
     def add(self, batch: DecodedBatch) -> None:
         n = len(batch)
@@ -78,7 +79,14 @@ class Summary:
             key = batch.node[has].astype(np.int64) * N_SVC + batch.service[has]
             per = np.r_[np.zeros(N_SVC, np.int64), np.bincount(key, minlength=128 * N_SVC)]
         self.by_node_service += per[N_SVC:].reshape(128, N_SVC)
-        self.bits += int(frame_bits(fb.flags, fb.dlc).sum())
+        bits = frame_bits(fb.flags, fb.dlc)
+        self.bits += int(bits.sum())
+        per_frames = np.bincount(fb.channel)
+        per_bits = np.bincount(fb.channel, weights=bits)
+        for c in np.flatnonzero(per_frames).tolist():
+            entry = self.by_channel.setdefault(fb.channel_label(c), [0, 0])
+            entry[0] += int(per_frames[c])
+            entry[1] += int(per_bits[c])
         self._evidence(batch)
         if len(self.ids_seen) < 4096:
             ids = fb.can_id[(fb.flags & FLAG_EXT) == 0]
@@ -193,6 +201,21 @@ class Summary:
                 out.append((node, total, errors))
         return out
 
+    def channel_load(self, name: str, bitrate: int | None) -> float | None:
+        """Mean bus load of one channel in percent (nominal bits), None without a bitrate."""
+        if not bitrate or self.duration <= 0 or name not in self.by_channel:
+            return None
+        return self.by_channel[name][1] / (bitrate * self.duration) * 100
+
+    def channel_lines(self, bitrate: int | None = None) -> list[str]:
+        """Frames and mean bus load of each channel (several buses in one log or session)."""
+        out = []
+        for name, (frames, _) in self.by_channel.items():
+            load = self.channel_load(name, bitrate)
+            shown = "" if load is None else f"  bus load {load:.1f} %"
+            out.append(f"  {name:<15} {frames:>10}{shown}")
+        return out
+
     def record(self, bitrate: int | None = None, problems: int = 0) -> dict:
         """The summary as one JSON-ready dict (`decode --summary --format jsonl`)."""
         load = None
@@ -241,6 +264,9 @@ class Summary:
             out.append("bus load: n/a (no duration)")
         if problems:
             out.append(f"skipped input lines/records: {problems}")
+        if len(self.by_channel) > 1:
+            out.append("frames per channel:")
+            out.extend(self.channel_lines(bitrate))
         out.append("frames per service:")
         for i, name in enumerate(SERVICE_NAMES):
             if self.by_service[i]:

@@ -47,6 +47,44 @@ from .topics import (
 )
 
 
+def batch_messages(fb, service, node, blocks, states, events, lines, file: str) -> list[tuple]:
+    """(channel key, topic, schema, log times ns, payloads) of one batch, per stream:
+    signals (one stream per series, in the Capture's series order), NMT states per node,
+    events as foxglove.Log, raw frames. The one place that says which topic carries
+    what: `export --mcap` writes these and `live --foxglove` serves them."""
+    out: list[tuple] = []
+    for n, pdo, cob, rows, columns, units in sorted(blocks, key=lambda b: b[:3]):
+        blk = SignalBlock(rows, n, pdo, cob, columns, units)
+        key = ("signals", n, pdo, cob, tuple(columns))
+        out.append(
+            (key, signal_topic(blk), signal_schema(blk), _ns(fb.t[rows]), signal_payloads(columns))
+        )
+    by_node: dict[int, list] = {}
+    for e in states:
+        by_node.setdefault(e.node, []).append(e)
+    for n, evs in sorted(by_node.items()):
+        ns = _ns(np.array([e.t for e in evs]))
+        out.append((("state", n), state_topic(n), STATE_SCHEMA, ns, state_payloads(evs)))
+    if len(events):
+        order = np.lexsort((events.sort_key(), events.t))
+        events = events.take(order)
+        ns = _ns(events.t)
+        names = [
+            f"node {n}" if n != NO_NODE else KINDS[k]
+            for n, k in zip(events.node.tolist(), events.kind.tolist(), strict=True)
+        ]
+        line = np.asarray(lines, np.int64)[order].tolist()
+        payload = event_payloads(
+            ns, events.level.tolist(), events.message.tolist(), names, file, line
+        )
+        out.append((("events",), EVENTS_TOPIC, LOG_SCHEMA, ns, payload))
+    if len(fb):
+        out.append(
+            (("frames",), FRAMES_TOPIC, FRAME_SCHEMA, _ns(fb.t), frame_payloads(fb, service, node))
+        )
+    return out
+
+
 class StreamMcap:
     """Context manager: `add()` each DecodedBatch, `close(skipped)` at the end; the file
     appears (atomically) only then."""
@@ -119,34 +157,10 @@ class StreamMcap:
         and C work outside the GIL) are built beside the decoder; the writer lays out,
         compresses and writes the chunks on a thread of its own."""
         streams: list[tuple[int, np.ndarray, Texts]] = []
-        # signals: one stream per series, in the Capture's series order
-        for n, pdo, cob, rows, columns, units in sorted(blocks, key=lambda b: b[:3]):
-            blk = SignalBlock(rows, n, pdo, cob, columns, units)
-            key = ("signals", n, pdo, cob, tuple(columns))
-            ch = self._channel(key, signal_topic(blk), signal_schema(blk))
-            streams.append((ch, _ns(fb.t[rows]), signal_payloads(columns)))
-        by_node: dict[int, list] = {}
-        for e in states:
-            by_node.setdefault(e.node, []).append(e)
-        for n, evs in sorted(by_node.items()):
-            ch = self._channel(("state", n), state_topic(n), STATE_SCHEMA)
-            streams.append((ch, _ns(np.array([e.t for e in evs])), state_payloads(evs)))
-        if len(events):
-            order = np.lexsort((events.sort_key(), events.t))
-            events = events.take(order)
-            ns = _ns(events.t)
-            names = [
-                f"node {n}" if n != NO_NODE else KINDS[k]
-                for n, k in zip(events.node.tolist(), events.kind.tolist(), strict=True)
-            ]
-            line = np.asarray(lines, np.int64)[order].tolist()
-            payload = event_payloads(
-                ns, events.level.tolist(), events.message.tolist(), names, self._file, line
-            )
-            streams.append((self._channel(("events",), EVENTS_TOPIC, LOG_SCHEMA), ns, payload))
-        if len(fb):
-            ch = self._channel(("frames",), FRAMES_TOPIC, FRAME_SCHEMA)
-            streams.append((ch, _ns(fb.t), frame_payloads(fb, service, node)))
+        for key, topic, schema, ns, payload in batch_messages(
+            fb, service, node, blocks, states, events, lines, self._file
+        ):
+            streams.append((self._channel(key, topic, schema), ns, payload))
         write_merged(self.w, streams)
         for ch, ns, _ in streams:
             topic = self._topics[ch]

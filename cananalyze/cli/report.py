@@ -1,0 +1,56 @@
+"""`cananalyze report LOG -o report.html`: the check's findings and the log's statistics
+as one self-contained HTML page (exit codes as `check`: 0 pass, 1 violations, 2 bad input)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .check import add_progress_option
+from .common import add_filter_options, add_input_options, options, report_problems
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "report",
+        help="write an HTML report of a log: verdict, findings, nodes, plots",
+        description="Check a log and write one self-contained HTML page (plots embedded, no "
+        "network needed to open it); exit 0 when every rule passes, 1 on violations, 2 on "
+        "bad input.",
+    )
+    add_input_options(p)
+    p.add_argument("-o", "--output", metavar="FILE", required=True, help="the HTML file to write")
+    p.add_argument("--rules", metavar="FILE", help="rules file (YAML, see docs/rules-file.md)")
+    add_html_options(p)
+    add_filter_options(p)
+    add_progress_option(p)
+    p.set_defaults(func=run)
+
+
+def add_html_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--bitrate", type=int, metavar="BIT/S", help="bus bitrate: bus load in percent")
+    p.add_argument("--title", help="the page's title (default: the log's name)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..outputs.findings import FindingsSink
+    from ..outputs.report.sink import ReportSink
+    from ..pipeline import build_checker, build_decoder, open_source
+    from .common import run_with_progress
+
+    opts = options(args, checks=True)
+    checker = build_checker(opts)  # a bad rules file fails before the log is read
+    source = open_source(args.log, opts)
+    decoder = build_decoder(opts, checker)
+    verdict = FindingsSink(quiet=True)
+    page = ReportSink(args.output, bitrate=args.bitrate, title=args.title)
+    try:
+        run_with_progress(source, decoder, [verdict, page], opts, quiet=args.quiet)
+    finally:
+        report_problems(source.problems)
+    failing = len(verdict.failing)
+    print(
+        f"{args.output}: {failing} violation(s), {len(verdict.findings) - failing} note(s)",
+        file=sys.stderr,
+    )
+    return verdict.exit_code

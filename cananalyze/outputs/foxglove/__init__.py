@@ -1,0 +1,1 @@
+"""Live decode served to Foxglove over its WebSocket protocol (foxglove-sdk)."""

@@ -1,0 +1,153 @@
+"""`live --foxglove [HOST:PORT]`: the live decode served by foxglove-sdk's WebSocket server.
+
+The topics, schemas and JSON documents are `export --mcap`'s (`mcap.stream.batch_messages`:
+raw frames, per-PDO signals, NMT states, events and findings as foxglove.Log), so a
+layout made on a recording works on the live bus and back. A channel is advertised
+when its topic first appears; messages are sent only on channels a client subscribed
+to (`has_sinks`), so a server nobody watches costs the JSON building alone.
+Binds to loopback unless the user names another address.
+
+One `Channel.log` per message: foxglove-sdk takes one message per call, and a live
+bus is bounded by its bitrate (a 1 Mbit/s bus carries at most ~16k frames/s).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ...errors import UsageError
+from ...events.build import EventState, batch_events_of
+from ...events.columns import NO_ROW
+from ..mcap.stream import batch_messages
+from ..sink import Sink
+
+DEFAULT_HOST = "127.0.0.1"
+DEFAULT_PORT = 8765
+# messages queued per client before the server drops the oldest (the SDK's default, 1024,
+# is 30 ms of a saturated bus: a client that pauses a moment would lose frames); ~10 MB
+BACKLOG = 1 << 16
+
+
+def parse_address(text: str | None) -> tuple[str, int]:
+    """'HOST:PORT', 'HOST', ':PORT' or 'PORT' -> (host, port); loopback and 8765 by default."""
+    if not text:
+        return DEFAULT_HOST, DEFAULT_PORT
+    host, sep, port = text.rpartition(":")
+    if not sep:
+        host, port = (text, "") if not text.isdigit() else ("", text)
+    host = host.strip("[]") or DEFAULT_HOST
+    try:
+        number = int(port) if port else DEFAULT_PORT
+    except ValueError:
+        raise UsageError(f"--foxglove takes HOST:PORT (got {text!r})") from None
+    if not 0 <= number <= 65535:
+        raise UsageError(f"--foxglove port must be 0..65535 (got {number})")
+    return host, number
+
+
+class FoxgloveSink(Sink):
+    """Serves each decoded batch's messages to the connected Foxglove clients."""
+
+    needs_events = True
+
+    def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, announce=None):
+        self.host = host
+        self.port = port
+        self.announce = announce if announce is not None else sys.stderr
+        self.server = None
+        self.context = None
+        self._channels: dict[str, object] = {}  # topic -> foxglove.Channel
+        self._event_state = EventState()
+        self._offset = 0
+        self._file = ""
+        self.sent = 0  # messages handed to the server (for subscribed channels)
+        self.served = 0  # batches served
+
+    def open(self, run) -> None:
+        super().open(run)
+        import foxglove
+
+        # foxglove.Log's file, as export --mcap names it (a live source has no file)
+        self._file = Path(str(getattr(run.source, "path", "") or "")).name
+        self.context = foxglove.Context()
+        try:
+            self.server = foxglove.start_server(
+                name="cananalyze",
+                host=self.host,
+                port=self.port,
+                context=self.context,
+                message_backlog_size=BACKLOG,
+            )
+        except Exception as exc:  # noqa: BLE001 - the SDK raises its own error types
+            raise UsageError(f"--foxglove {self.host}:{self.port}: cannot listen: {exc}") from None
+        self.port = self.server.port
+        # the topics every bus has, advertised before the first frame: a client can
+        # subscribe and miss nothing
+        from ..mcap.frames import FRAME_SCHEMA, FRAMES_TOPIC
+        from ..mcap.topics import EVENTS_TOPIC, LOG_SCHEMA
+
+        self._channel(("frames",), FRAMES_TOPIC, FRAME_SCHEMA)
+        self._channel(("events",), EVENTS_TOPIC, LOG_SCHEMA)
+        if self.announce:
+            print(f"foxglove: serving ws://{self.host}:{self.port}", file=self.announce, flush=True)
+
+    @property
+    def url(self) -> str:
+        return f"ws://{self.host}:{self.port}"
+
+    def _channel(self, key: tuple, topic: str, schema: dict):
+        """One channel per topic (foxglove-sdk keeps one per topic; a PDO remapped during
+        the log keeps its first schema, its documents carry their own field names)."""
+        ch = self._channels.get(topic)
+        if ch is None:
+            import foxglove
+
+            sch = foxglove.Schema(
+                name=schema["title"], encoding="jsonschema", data=json.dumps(schema).encode()
+            )
+            ch = self._channels[topic] = foxglove.Channel(
+                topic, schema=sch, message_encoding="json", context=self.context
+            )
+        return ch
+
+    def write(self, batch) -> None:
+        fb = batch.frames
+        off = self._offset
+        events, states = batch_events_of(batch, off, self._event_state)
+        lines = np.zeros(len(events), np.int64)
+        if len(events) and len(fb):
+            local = events.row - off
+            ok = (events.row != NO_ROW) & (local >= 0) & (local < len(fb))
+            lines[ok] = fb.line[local[ok]]
+        self._offset += len(fb)
+        blocks = [(b.node, b.pdo, b.cob_id, b.rows, b.columns, b.units) for b in batch.signals]
+        for key, topic, schema, ns, payload in batch_messages(
+            fb, batch.service, batch.node, blocks, states, events, lines, self._file
+        ):
+            ch = self._channel(key, topic, schema)
+            if not ch.has_sinks():
+                continue
+            blob = payload.data.tobytes()
+            cuts = payload.offsets.tolist()
+            log = ch.log
+            for i, t in enumerate(ns.tolist()):
+                log(blob[cuts[i] : cuts[i + 1]], log_time=t)
+            self.sent += len(ns)
+        self.served += 1
+
+    def close(self) -> None:
+        self._stop()
+
+    def abort(self) -> None:
+        self._stop()
+
+    def _stop(self) -> None:
+        if self.server is not None:
+            for ch in self._channels.values():
+                ch.close()
+            self.server.stop()
+            self.server = None

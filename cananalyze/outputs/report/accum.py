@@ -1,0 +1,207 @@
+"""Bounded accumulators for the report: plotted series decimated, statistics exact.
+
+An hour-long log has tens of millions of frames; the page may hold a few thousand
+points per plot. `Envelope` keeps min and max per time bucket (a pixel column of
+the plot), doubling the bucket width and merging neighbours when the log outgrows
+its buckets, so memory is fixed and no peak is lost. `LogHistogram` counts values
+in logarithmic bins (0.2 % wide) and keeps exact count, sum, sum of squares, min and
+max: every frame is counted, none is stored.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+BUCKETS = 1000  # points across a plot: about one per pixel column
+
+
+class Envelope:
+    """Min/max of a value per time bucket, over the whole log, in fixed memory."""
+
+    def __init__(self, buckets: int = BUCKETS, width: float = 0.001) -> None:
+        self.n = buckets
+        self.width = width
+        self.t0: float | None = None
+        self.lo = np.full(buckets, np.inf)
+        self.hi = np.full(buckets, -np.inf)
+        self.count = 0
+
+    def add(self, t: np.ndarray, v: np.ndarray) -> None:
+        t = np.asarray(t, np.float64)
+        v = np.asarray(v, np.float64)
+        ok = np.isfinite(v) & np.isfinite(t)
+        if not ok.all():
+            t, v = t[ok], v[ok]
+        if t.size == 0:
+            return
+        if self.t0 is None:
+            self.t0 = float(t.min())
+        early = t < self.t0
+        if early.any():  # out of order before the first bucket: clamp into it
+            t = np.where(early, self.t0, t)
+        idx = ((t - self.t0) / self.width).astype(np.int64)
+        top = int(idx.max())
+        while top >= self.n:
+            self._coarsen()
+            idx >>= 1
+            top >>= 1
+        np.minimum.at(self.lo, idx, v)
+        np.maximum.at(self.hi, idx, v)
+        self.count += t.size
+
+    def _coarsen(self) -> None:
+        """Twice the bucket width: neighbouring buckets merge."""
+        self.width *= 2
+        for arr, f in ((self.lo, np.minimum), (self.hi, np.maximum)):
+            merged = f(arr[0::2], arr[1::2])
+            arr[: merged.size] = merged
+            arr[merged.size :] = np.inf if f is np.minimum else -np.inf
+
+    def points(self) -> tuple[np.ndarray, np.ndarray]:
+        """(t, value) through each bucket's min and max, in time order: the envelope a
+        plot of every value would draw at this width."""
+        used = np.flatnonzero(self.hi >= self.lo)
+        if used.size == 0 or self.t0 is None:
+            return np.zeros(0), np.zeros(0)
+        t = self.t0 + (used + 0.5) * self.width
+        same = self.lo[used] == self.hi[used]
+        tt = np.repeat(t, 2)
+        vv = np.column_stack((self.lo[used], self.hi[used])).ravel()
+        keep = np.ones(tt.size, bool)
+        keep[1::2] = ~same  # a bucket with one value: one point
+        return tt[keep], vv[keep]
+
+
+class LogHistogram:
+    """Positive values (periods, latencies in ms) in bins 0.2 % wide, with exact moments.
+
+    0.2 % of a 100 ms heartbeat is 0.2 ms: finer than the jitter a scheduler adds.
+    """
+
+    PER_DECADE = 1150  # 10 ** (1 / 1150) - 1 = 0.2 %
+    LOW = 1e-4  # ms: below this, the first bin
+    DECADES = 10
+
+    def __init__(self) -> None:
+        self.bins = np.zeros(self.PER_DECADE * self.DECADES + 1, np.int64)
+        self.count = 0
+        self.sum = 0.0
+        self.sumsq = 0.0
+        self.min = np.inf
+        self.max = -np.inf
+
+    def add(self, v: np.ndarray) -> None:
+        v = np.asarray(v, np.float64)
+        v = v[np.isfinite(v)]
+        if v.size == 0:
+            return
+        k = np.floor(np.log10(np.maximum(v, self.LOW) / self.LOW) * self.PER_DECADE)
+        k = np.clip(k, 0, self.bins.size - 1).astype(np.int64)
+        self.bins += np.bincount(k, minlength=self.bins.size)
+        self.count += v.size
+        self.sum += float(v.sum())
+        self.sumsq += float(np.square(v).sum())
+        self.min = min(self.min, float(v.min()))
+        self.max = max(self.max, float(v.max()))
+
+    def merge(self, other: LogHistogram) -> None:
+        self.bins += other.bins
+        self.count += other.count
+        self.sum += other.sum
+        self.sumsq += other.sumsq
+        self.min = min(self.min, other.min)
+        self.max = max(self.max, other.max)
+
+    @property
+    def mean(self) -> float:
+        return self.sum / self.count if self.count else float("nan")
+
+    @property
+    def std(self) -> float:
+        if self.count < 2:
+            return 0.0
+        var = max(self.sumsq / self.count - self.mean**2, 0.0)
+        return float(np.sqrt(var))
+
+    def quantile(self, q: float) -> float:
+        """The value at quantile q, to the bin's 0.2 % (the bin's geometric centre)."""
+        if not self.count:
+            return float("nan")
+        k = int(np.searchsorted(np.cumsum(self.bins), q * self.count, side="left"))
+        lo = self.LOW * 10 ** (k / self.PER_DECADE)
+        mid = lo * 10 ** (0.5 / self.PER_DECADE)
+        return float(min(max(mid, self.min), self.max))
+
+    def bars(self, most: int = 150) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(left edge, width, count) of the non-empty bars, neighbouring bins merged so
+        that the range seen has at most `most` bars (each stays visible)."""
+        nz = np.flatnonzero(self.bins)
+        if nz.size == 0:
+            return np.zeros(0), np.zeros(0), np.zeros(0, np.int64)
+        g = max(1, -(-(int(nz[-1]) - int(nz[0]) + 1) // most))
+        group = (nz - nz[0]) // g
+        counts = np.bincount(group, weights=self.bins[nz]).astype(np.int64)
+        k = np.flatnonzero(counts)
+        first = nz[0] + k * g
+        left = self.LOW * 10 ** (first / self.PER_DECADE)
+        right = self.LOW * 10 ** ((first + g) / self.PER_DECADE)
+        return left, right - left, counts[k]
+
+
+class WindowSums:
+    """Bits per fixed window (bus load), streamed: each finished window's load goes to
+    an Envelope (so peaks survive decimation), and the exact peak is kept."""
+
+    def __init__(self, window: float = 0.1) -> None:
+        self.window = window
+        self.t0: float | None = None
+        self.pending: tuple[int, float] | None = None  # (window index, bits so far)
+        self.load = Envelope()
+        self.peak = 0.0
+        self.bits = 0.0
+        self.t_last: float | None = None
+
+    def add(self, t: np.ndarray, bits: np.ndarray) -> None:
+        ok = np.isfinite(t)
+        if not ok.all():
+            t, bits = t[ok], bits[ok]
+        if t.size == 0:
+            return
+        if self.t0 is None:
+            self.t0 = float(t[0])
+        self.bits += float(bits.sum())
+        self.t_last = float(t.max()) if self.t_last is None else max(self.t_last, float(t.max()))
+        idx = np.maximum(np.floor((t - self.t0) / self.window), 0).astype(np.int64)
+        # windows that have frames only: a log whose clock jumps by years costs nothing
+        windows, inverse = np.unique(idx, return_inverse=True)
+        sums = np.bincount(inverse, weights=bits).astype(np.float64)
+        if self.pending is not None:
+            k, s = self.pending
+            at = int(np.searchsorted(windows, k))
+            if at < windows.size and windows[at] == k:
+                sums[at] += s
+            else:
+                self._emit(np.array([k]), np.array([s]))
+        self._emit(windows[:-1], sums[:-1])
+        self.pending = (int(windows[-1]), float(sums[-1]))
+
+    def _emit(self, k: np.ndarray, s: np.ndarray) -> None:
+        if k.size == 0:
+            return
+        per_s = s / self.window
+        self.peak = max(self.peak, float(per_s.max()))
+        self.load.add(self.t0 + (k + 0.5) * self.window, per_s)
+
+    def finish(self) -> None:
+        if self.pending is not None:
+            k, s = self.pending
+            start = self.t0 + k * self.window
+            width = max(min((self.t_last or start) - start, self.window), self.window / 2)
+            self.load.add(np.array([start + width / 2]), np.array([s / width]))
+            self.pending = None
+
+    @property
+    def mean(self) -> float:
+        if self.t0 is None or self.t_last is None or self.t_last <= self.t0:
+            return 0.0
+        return self.bits / (self.t_last - self.t0)

@@ -1,0 +1,366 @@
+"""The report's sections, in reading order, as HTML fragments.
+
+Each takes the ReportSink's summaries and a `Figures` that collects the plots.
+Texts are escaped with `html.escape`; nothing here judges the log: the verdict
+and every alarm are the Checker's findings, the tables show what was measured
+beside what was configured.
+"""
+
+from __future__ import annotations
+
+import html
+from collections import defaultdict
+
+from ...checks.finding import show
+from ...checks.model_config import ModelConfig
+from ..junit import format_finding
+from . import plots
+
+esc = html.escape
+
+
+class Figures:
+    """Plot placeholders and their JSON, drawn by the page's loader."""
+
+    def __init__(self) -> None:
+        self.items: list[tuple[str, str]] = []
+
+    def add(self, fig_json: str, cls: str = "plot") -> str:
+        pid = f"fig{len(self.items)}"
+        self.items.append((pid, fig_json))
+        return f'<div class="{cls}" id="{pid}"></div>'
+
+
+def _table(head: list[str], rows: list[list], cls: str = "") -> str:
+    th = "".join(f"<th>{esc(h)}</th>" for h in head)
+    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>" for r in rows)
+    return f'<table class="{cls}"><thead><tr>{th}</tr></thead><tbody>{body}</tbody></table>'
+
+
+def _ms(v: float | None, nd: int = 2) -> str:
+    if v is None or v != v or v in (float("inf"), float("-inf")):
+        return "-"
+    return f"{v:.{nd}f}"
+
+
+def _rel(s, t: float | None) -> str:
+    return "-" if t is None else f"{t - s.t0:+.3f} s"
+
+
+def verdict(s, figs: Figures) -> str:
+    failing = [f for f in s.findings if f.fails]
+    rules = s.rules
+    counts: dict[str, int] = {}
+    for r in rules:  # a rules file's assertions share a name: one entry each, counted
+        counts[r.name] = counts.get(r.name, 0) + 1
+    names = ", ".join(f"{n} ×{k}" if k > 1 else n for n, k in counts.items())
+    ok = not failing
+    word = "PASS" if ok else "FAIL"
+    dur = (s.t_last - s.t_first) if s.t_first is not None else 0.0
+    text = (
+        f"{len(rules)} rules: {len(failing)} violation(s), {len(s.findings) - len(failing)} "
+        f"note(s) in {s.frames:,} frames over {dur:.1f} s"
+    )
+    skipped = s.run.problems.count
+    skip = f"<p class=warn>{skipped} unreadable lines/records skipped</p>" if skipped else ""
+    load = figs.add(plots.bus_load(s.buses, s.t0, s.bitrate)) if s.buses else ""
+    return (
+        f'<section id="verdict"><div class="verdict {"pass" if ok else "fail"}" id="verdict-banner">'
+        f"<b>{word}</b> {esc(text)}</div><p class=small>Rules: {esc(names) or 'none'}</p>"
+        f"{skip}{load}</section>"
+    )
+
+
+def buses(s, figs: Figures) -> str:
+    rows = []
+    for ch, b in s.buses.items():
+        unit = 100.0 / s.bitrate if s.bitrate else 1e-3
+        u = "%" if s.bitrate else " kbit/s"
+        rows.append(
+            [
+                esc(ch),
+                f"{b.frames:,}",
+                f"{b.errors:,}",
+                f"{b.load.mean * unit:.2f}{u}",
+                f"{b.load.peak * unit:.2f}{u}",
+            ]
+        )
+    note = "" if s.bitrate else "<p class=small>Give --bitrate for the load in percent.</p>"
+    return (
+        '<section id="buses"><h2>Buses</h2>'
+        + _table(["channel", "frames", "error frames", "mean load", "peak load (100 ms)"], rows)
+        + note
+        + "<p class=small>Nominal bits without stuff bits: a lower bound.</p></section>"
+    )
+
+
+def findings(s, figs: Figures) -> str:
+    if not s.findings:
+        return '<section id="findings"><h2>Findings</h2><p>No findings.</p></section>'
+    groups: dict[tuple, list] = defaultdict(list)
+    for f in s.findings:
+        groups[(f.node is None, f.node or 0, f.rule)].append(f)
+    parts = ['<section id="findings"><h2>Findings by node and rule</h2>']
+    for (_, node, rule), fs in sorted(groups.items()):
+        who = "bus" if fs[0].node is None else f"node {node}"
+        sev = "error" if any(f.fails for f in fs) else fs[0].severity
+        first = fs[0]
+        items = "".join(f"<li>{esc(format_finding(f))}</li>" for f in fs[:200])
+        more = f"<li>... and {len(fs) - 200} more</li>" if len(fs) > 200 else ""
+        parts.append(
+            f'<details class="finding {esc(sev)}"><summary><b>{esc(who)}</b> · {esc(rule)} · '
+            f"{len(fs)} finding(s), first at {_rel(s, first.t)}: {esc(first.message)} "
+            f"(measured {esc(show(first.measured))}, expected {esc(show(first.expected))})"
+            f"</summary><p class=why>{esc(first.why)}</p><ul>{items}{more}</ul></details>"
+        )
+    parts.append("</section>")
+    return "".join(parts)
+
+
+def nodes(s, figs: Figures) -> str:
+    from ...network.node_tally import node_profiles
+
+    model = s.run.network
+    cfg = ModelConfig(model) if model is not None else None
+    rows = s.tally.rows(node_profiles(model) if model is not None else {})
+    parts = ['<section id="nodes"><h2>Nodes</h2>']
+    if s.states:
+        parts.append(figs.add(plots.state_timeline(s.states, s.t0, s.t_last or s.t0)))
+    if s.states_dropped:
+        parts.append(f"<p class=warn>{s.states_dropped} more NMT state changes not drawn</p>")
+    for row in rows:
+        n = row["node"]
+        dev = row.get("profile") or "unknown device"
+        how = row.get("identified_by") or "not identified"
+        ident = ", ".join(
+            f"{k} {v:#x}" if isinstance(v, int) else f"{k} {v}"
+            for k in ("vendor_id", "product_code", "revision", "serial", "device_name")
+            if (v := row.get(k)) is not None
+        )
+        parts.append(
+            f'<div class="node" id="node-{n}"><h3>Node {n}: {esc(str(dev))}</h3>'
+            f"<p>Identified by: {esc(str(how))}{'; ' + esc(ident) if ident else ''}. "
+            f"{row['frames']:,} frames; last NMT state {esc(str(row.get('last_state') or '-'))}.</p>"
+        )
+        for kind in ("heartbeat", "guarding"):
+            g = s.errctl.get((kind, n))
+            if g is None or g.hist.count == 0:
+                continue
+            conf = _configured(cfg, kind, n, g) if cfg is not None else []
+            h = g.hist
+            expect = ", ".join(sorted({_ms(v, 0) for _, v in conf})) or "not configured"
+            parts.append(
+                f"<p>{kind} period: n={h.count:,} min {_ms(h.min)} median {_ms(h.quantile(0.5))} "
+                f"mean {_ms(h.mean)} p99 {_ms(h.quantile(0.99))} max {_ms(h.max)} "
+                f"jitter (std) {_ms(h.std)} ms; configured {expect} ms</p><div class=pair>"
+            )
+            parts.append(figs.add(plots.period(g, s.t0, kind, n, conf), "plot half"))
+            marks = sorted({v for _, v in conf})
+            parts.append(
+                figs.add(
+                    plots.histogram(h, f"Node {n} {kind} period histogram", "period (ms)", marks),
+                    "plot half",
+                )
+            )
+            parts.append("</div>")
+        parts.append("</div>")
+    parts.append("</section>")
+    return "".join(parts)
+
+
+def _configured(cfg: ModelConfig, kind: str, node: int, g) -> list[tuple[float, float]]:
+    """(time, configured period ms) where it changes, sampled along the log."""
+    out: list[tuple[float, float]] = []
+    a, b = g.first_t or 0.0, g.last_t or 0.0
+    for k in range(65):
+        t = a + (b - a) * k / 64
+        if kind == "heartbeat":
+            v = cfg.heartbeat_ms(node, t)
+        else:
+            gv = cfg.guarding(node, t)
+            v = None if gv is None else gv[0]
+        if v and (not out or out[-1][1] != v):
+            out.append((t, v))
+    return out
+
+
+def sdo(s, figs: Figures) -> str:
+    if not s.sdo_count:
+        return ""
+    rows = []
+    for n in sorted(s.sdo_count):
+        ok, bad = s.sdo_count[n]
+        h = s.sdo_latency.get(n)
+        if h is not None and h.count:
+            rows.append(
+                [
+                    n,
+                    ok + bad,
+                    bad,
+                    _ms(h.min),
+                    _ms(h.quantile(0.5)),
+                    _ms(h.quantile(0.99)),
+                    _ms(h.max),
+                ]
+            )
+        else:
+            rows.append([n, ok + bad, bad, "-", "-", "-", "-"])
+    parts = ['<section id="sdo"><h2>SDO transfers</h2>']
+    parts.append(
+        _table(["node", "transfers", "aborts", "min ms", "median ms", "p99 ms", "max ms"], rows)
+    )
+    from .accum import LogHistogram
+
+    allh = LogHistogram()
+    for h in s.sdo_latency.values():
+        allh.merge(h)
+    if allh.count:
+        parts.append(figs.add(plots.histogram(allh, "SDO latency", "latency (ms)")))
+    if s.aborts:
+        arows = [
+            [
+                _rel(s, r.get("t")),
+                r.get("node"),
+                esc(str(r.get("direction") or "")),
+                f"0x{r.get('index', 0):04X}:{r.get('subindex', 0):02X}",
+                esc(str(r.get("name") or "")),
+                esc(f"0x{r['abort_code']:08X}" if isinstance(r.get("abort_code"), int) else "-"),
+                esc(str(r.get("abort_text") or r.get("result") or "")),
+            ]
+            for r in s.aborts
+        ]
+        parts.append("<h3>Aborts and timeouts</h3>")
+        parts.append(_table(["time", "node", "direction", "object", "name", "code", "text"], arows))
+    parts.append("</section>")
+    return "".join(parts)
+
+
+def emcy(s, figs: Figures) -> str:
+    if not s.emcys:
+        return ""
+    active: dict[int, list] = {}
+    rows = []
+    resets = sorted(s.bootups)
+    for t, node, code, reg, text in sorted(s.emcys):
+        if code == 0:
+            for item in active.pop(node, []):
+                item[2] = f"{t - item[0]:.3f} s"
+            continue
+        item = [t, node, "still active at the end of the log", code, reg, text]
+        active.setdefault(node, []).append(item)
+        rows.append(item)
+    for t, node in resets:  # a boot-up clears the node's errors
+        for item in list(active.get(node, [])):
+            if item[0] < t:
+                item[2] = f"{t - item[0]:.3f} s (until boot-up)"
+                active[node].remove(item)
+    out = [
+        [
+            _rel(s, t),
+            node,
+            f"0x{code:04X}" if code >= 0 else "-",
+            f"0x{reg:02X}" if reg >= 0 else "-",
+            esc(text),
+            esc(dur),
+        ]
+        for t, node, dur, code, reg, text in rows
+    ]
+    more = len(s.emcys) < s.emcy_count
+    return (
+        '<section id="emcy"><h2>EMCY</h2>'
+        + _table(["time", "node", "code", "register", "meaning", "active for"], out)
+        + (f"<p class=warn>{s.emcy_count - len(s.emcys)} more EMCYs not listed</p>" if more else "")
+        + "</section>"
+    )
+
+
+def pdos(s, figs: Figures) -> str:
+    if not s.pdos:
+        return ""
+    model = s.run.network
+    cfg = ModelConfig(model) if model is not None else None
+    per_cob: dict[int, int] = defaultdict(int)
+    for f in s.findings:
+        if f.cob_id is not None and f.rule.startswith("pdo"):
+            per_cob[f.cob_id] += 1
+    rows = []
+    for cob in sorted(s.pdos):
+        g = s.pdos[cob]
+        node, name = s.pdo_node.get(cob, (-1, "pdo"))
+        h = g.hist
+        span = (g.last_t or 0) - (g.first_t or 0)
+        rate = (g.count - 1) / span if span > 0 else float("nan")
+        params = cfg.pdo_params(cob, g.last_t or 0.0) if cfg is not None else None
+        et = inh = tt = "-"
+        if params is not None:
+            pnode, pc = params
+            comm = (0x1800 if pc.direction == "tx" else 0x1400) + pc.number - 1
+            t_end = g.last_t or 0.0
+            et = _pdo_param(model, pnode, comm, 5, t_end, pc.event_timer, lambda v: f"{v} ms")
+            inh = _pdo_param(
+                model, pnode, comm, 3, t_end, pc.inhibit_time, lambda v: f"{v / 10:g} ms"
+            )
+            tt = str(pc.transmission_type)
+        rows.append(
+            [
+                f"0x{cob:03X}",
+                node,
+                name,
+                f"{g.count:,}",
+                _ms(rate),
+                _ms(h.min),
+                _ms(h.quantile(0.5)),
+                _ms(h.max),
+                tt,
+                et,
+                inh,
+                per_cob.get(cob, 0),
+            ]
+        )
+    head = ["COB-ID", "node", "PDO", "frames", "rate Hz", "min gap ms", "median gap ms"]
+    head += ["max gap ms", "transmission type", "event timer", "inhibit time", "findings"]
+    return (
+        '<section id="pdo"><h2>PDO rates</h2>'
+        + _table(head, rows)
+        + "<p class=small>Configured values as known at the end of the log, with where each "
+        "comes from: log (an SDO write or read), file (network or rules file, --device/--eds) "
+        "or profile (EDS/DCF).</p></section>"
+    )
+
+
+def _pdo_param(model, node: int, index: int, sub: int, t: float, value: int, text) -> str:
+    """A PDO timing parameter and where it comes from; 0 means off (CiA 301) unless only
+    the profile says 0, which is unknown (docs/network-file.md, as the checks read it)."""
+    k = model.known(node, index, sub, t)
+    source = k.source if k is not None else "network file"
+    if not value:
+        return "unknown (profile says 0)" if source == "profile" else f"off ({source})"
+    return f"{text(value)} ({source})"
+
+
+def signals(s, figs: Figures) -> str:
+    if not s.series:
+        return ""
+    by_pdo: dict[tuple, list] = defaultdict(list)
+    for key, ser in s.series.items():
+        by_pdo[key[:3]].append(ser)
+    parts = ['<section id="signals"><h2>Signals per PDO</h2>']
+    for (node, pdo, cob), series in sorted(by_pdo.items()):
+        title = f"Node {node} {pdo.upper()} (0x{cob:03X})"
+        parts.append(figs.add(plots.signals(series, s.t0, title)))
+    if s.series_dropped:
+        parts.append(f"<p class=warn>{s.series_dropped} more signals not plotted</p>")
+    parts.append("</section>")
+    return "".join(parts)
+
+
+def drive_states(s, figs: Figures) -> str:
+    """CiA 402 drive states, one lane per drive, from the event log's `drive_state`
+    events (`ReportSink._drive_states`); no section while the log has none."""
+    if not s.drive_states:
+        return ""
+    fig = plots.state_timeline(s.drive_states, s.t0, s.t_last or s.t0, "Drive state per node")
+    return '<section id="drive"><h2>Drive states (CiA 402)</h2>' + figs.add(fig) + "</section>"
+
+
+SECTIONS = [verdict, buses, findings, nodes, sdo, emcy, pdos, signals, drive_states]

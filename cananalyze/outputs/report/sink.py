@@ -1,0 +1,260 @@
+"""`report` / `check --html`: one self-contained HTML page built from the decoded batches.
+
+The sink reads the same columns as every other output (frames, SDO records,
+signals, findings, events and NMT states) and keeps only bounded summaries
+(`accum`): statistics over every frame, plotted series decimated to a pixel's
+min and max. At close it lays the page out (`page.render`) and writes it atomically.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ...checks.finding import Finding
+from ...events.columns import EMCY, KINDS, NO_NODE
+from ...network.node_tally import NodeTally
+from ...protocol.services import Service
+from ..atomic import check_writable, write_text_atomic
+from ..busload import frame_bits
+from ..sink import Sink
+from .accum import Envelope, LogHistogram, WindowSums
+
+DRIVE_STATE = "drive_state"  # the event kind of CiA 402 state changes (see sections.drive_states)
+MAX_STATES = 20_000  # NMT state changes kept for the timelines (a reset loop makes many)
+MAX_LISTED = 500  # SDO aborts and EMCYs listed one by one; counted beyond
+MAX_SERIES = 256  # signals plotted (one envelope each)
+
+
+@dataclass
+class Gaps:
+    """Intervals between one key's frames (a node's heartbeats, a COB-ID's PDOs)."""
+
+    last: float | None = None
+    count: int = 0
+    first_t: float | None = None
+    last_t: float | None = None
+    hist: LogHistogram = field(default_factory=LogHistogram)
+    over_time: Envelope = field(default_factory=Envelope)
+
+    def add(self, t: np.ndarray) -> None:
+        if t.size == 0:
+            return
+        if self.first_t is None:
+            self.first_t = float(t[0])
+        prev = np.concatenate(([self.last], t[:-1])) if self.last is not None else t[:-1]
+        at = t if self.last is not None else t[1:]
+        gaps = (at - prev) * 1000.0
+        self.hist.add(gaps)
+        self.over_time.add(at, gaps)
+        self.last = self.last_t = float(t[-1])
+        self.count += t.size
+
+
+@dataclass
+class Bus:
+    """One channel's frames, error frames and load."""
+
+    frames: int = 0
+    errors: int = 0
+    load: WindowSums = field(default_factory=WindowSums)
+
+
+@dataclass
+class Series:
+    node: int
+    pdo: str
+    cob_id: int
+    name: str
+    unit: str | None
+    env: Envelope = field(default_factory=Envelope)
+
+
+def _groups(keys: np.ndarray):
+    """(key, positions in original order) per distinct key (one stable sort)."""
+    if keys.size == 0:
+        return
+    order = np.argsort(keys, kind="stable")
+    ks = keys[order]
+    cut = np.flatnonzero(ks[1:] != ks[:-1]) + 1
+    for a, b in zip(np.r_[0, cut].tolist(), np.r_[cut, ks.size].tolist(), strict=True):
+        yield int(ks[a]), order[a:b]
+
+
+class ReportSink(Sink):
+    """Collects bounded summaries of the run; writes the page at close."""
+
+    needs_events = True
+
+    def __init__(self, path: str | Path, bitrate: int | None = None, title: str | None = None):
+        self.path = Path(path)
+        self.bitrate = bitrate
+        self.title = title
+        self.findings: list[Finding] = []
+        self.tally = NodeTally()
+        self.states: list[tuple[float, int, str]] = []
+        self.states_dropped = 0
+        self.drive_states: list[tuple[float, int, str]] = []
+        self.errctl: dict[tuple[str, int], Gaps] = {}  # ("heartbeat"|"guarding", node)
+        self.pdos: dict[int, Gaps] = {}  # COB-ID -> gaps
+        self.pdo_node: dict[int, tuple[int, str]] = {}
+        self.sdo_latency: dict[int, LogHistogram] = {}
+        self.sdo_count: dict[int, list[int]] = {}  # node -> [ok, abort]
+        self.aborts: list[dict] = []
+        self.emcys: list[tuple[float, int, int, int, str]] = []  # t, node, code, register, text
+        self.emcy_count = 0
+        self.bootups: list[tuple[float, int]] = []
+        self.buses: dict[str, Bus] = {}
+        self.series: dict[tuple, Series] = {}
+        self.series_dropped = 0
+        self.frames = 0
+        self.t_first: float | None = None
+        self.t_last: float | None = None
+        self.events_by_row: dict = {}
+
+    def open(self, run) -> None:
+        super().open(run)
+        check_writable(self.path)
+
+    # --- per batch ------------------------------------------------------------------
+    def write(self, batch) -> None:
+        fb = batch.frames
+        self.findings.extend(batch.findings)
+        self.tally.add(batch, batch.states)
+        for s in batch.states:
+            if len(self.states) < MAX_STATES:
+                self.states.append((s.t, s.node, s.message))
+            else:
+                self.states_dropped += 1
+        self._sdo(batch)
+        self._drive_states(batch)
+        n = len(fb)
+        if not n:
+            return
+        self.frames += n
+        t = fb.t
+        lo, hi = float(t.min()), float(t.max())
+        self.t_first = lo if self.t_first is None else min(self.t_first, lo)
+        self.t_last = hi if self.t_last is None else max(self.t_last, hi)
+        self._buses(fb)
+        service, node = batch.service, batch.node
+        for kind, svc in (("heartbeat", Service.HEARTBEAT), ("guarding", Service.GUARD_RESPONSE)):
+            rows = np.flatnonzero(service == svc)
+            for nd, pos in _groups(node[rows]):
+                self.errctl.setdefault((kind, nd), Gaps()).add(t[rows[pos]])
+        boot = np.flatnonzero(service == Service.BOOTUP)
+        self.bootups.extend(zip(t[boot].tolist(), node[boot].tolist(), strict=True))
+        pdo_rows = np.flatnonzero(batch.pdo > 0)
+        for cob, pos in _groups(fb.can_id[pdo_rows].astype(np.int64)):
+            r = pdo_rows[pos]
+            self.pdos.setdefault(cob, Gaps()).add(t[r])
+            if cob not in self.pdo_node:
+                tx = service[r[0]] == Service.TPDO
+                self.pdo_node[cob] = (
+                    int(node[r[0]]),
+                    f"{'t' if tx else 'r'}pdo{int(batch.pdo[r[0]])}",
+                )
+        self._emcy(batch)
+        for sb in batch.signals:
+            ts = t[sb.rows]
+            for name, values in sb.columns.items():
+                key = (sb.node, sb.pdo, sb.cob_id, name)
+                s = self.series.get(key)
+                if s is None:
+                    if len(self.series) >= MAX_SERIES or values.dtype == object:
+                        self.series_dropped += key not in self.series
+                        continue
+                    s = self.series[key] = Series(
+                        sb.node, sb.pdo, sb.cob_id, name, sb.units.get(name)
+                    )
+                s.env.add(ts, values.astype(np.float64))
+
+    def _buses(self, fb) -> None:
+        bits = frame_bits(fb.flags, fb.dlc).astype(np.float64)
+        err = (fb.flags & 4) != 0  # FLAG_ERR
+        for ch, pos in _groups(fb.channel.astype(np.int64)):
+            bus = self.buses.setdefault(fb.channel_label(ch), Bus())
+            bus.frames += pos.size
+            bus.errors += int(err[pos].sum())
+            bus.load.add(fb.t[pos], bits[pos])
+
+    def _sdo(self, batch) -> None:
+        if not batch.records:
+            return
+        table = batch.sdo_table()
+        for code, pos in table.groups(table.node):
+            nd = table.node_keys[code]
+            if nd is None:
+                continue
+            self.sdo_latency.setdefault(nd, LogHistogram()).add(table.latency[pos])
+            res = table.result[pos]
+            ok_code = table.result_keys.index("ok") if "ok" in table.result_keys else -1
+            ok = int((res == ok_code).sum())
+            c = self.sdo_count.setdefault(nd, [0, 0])
+            c[0] += ok
+            c[1] += pos.size - ok
+        if len(self.aborts) >= MAX_LISTED:
+            return
+        split = batch.sdo_fast_split()
+        records = batch.records
+        slots = range(len(records)) if split is None else split[2]
+        found = [
+            r
+            for k in slots
+            if (r := records[k][1]).get("kind") == "sdo" and r.get("result") != "ok"
+        ]
+        if split is not None:
+            found.extend(split[0].aborted.values())
+        found.sort(key=lambda r: r.get("t") or 0.0)
+        self.aborts.extend(found[: MAX_LISTED - len(self.aborts)])
+
+    def _drive_states(self, batch) -> None:
+        """CiA 402 drive states, once the decoder puts them in the event log as kind
+        DRIVE_STATE (the drive-state lane): the report draws them as the NMT lanes."""
+        ev = batch.events
+        if ev is None or not len(ev) or DRIVE_STATE not in KINDS:
+            return
+        at = np.flatnonzero(ev.kind == KINDS.index(DRIVE_STATE))
+        room = MAX_STATES - len(self.drive_states)
+        for tt, nd, msg in zip(
+            ev.t[at[:room]].tolist(),
+            ev.node[at[:room]].tolist(),
+            ev.message[at[:room]],
+            strict=True,
+        ):
+            self.drive_states.append((tt, nd, msg))
+
+    def _emcy(self, batch) -> None:
+        fb = batch.frames
+        rows = np.flatnonzero(batch.service == Service.EMCY)
+        if rows.size == 0:
+            return
+        self.emcy_count += rows.size
+        texts: dict[tuple, str] = {}
+        ev = batch.events
+        if ev is not None and len(ev):
+            at = np.flatnonzero(ev.kind == EMCY)
+            for tt, nd, msg in zip(
+                ev.t[at].tolist(), ev.node[at].tolist(), ev.message[at], strict=True
+            ):
+                texts[(tt, nd if nd != NO_NODE else None)] = msg
+        for r in rows[: max(MAX_LISTED * 4 - len(self.emcys), 0)].tolist():
+            d = fb.data[r]
+            code = int(d[0]) | int(d[1]) << 8 if fb.dlc[r] >= 2 else -1
+            reg = int(d[2]) if fb.dlc[r] >= 3 else -1
+            tt, nd = float(fb.t[r]), int(batch.node[r])
+            self.emcys.append((tt, nd, code, reg, texts.get((tt, nd), "")))
+
+    # --- the end --------------------------------------------------------------------
+    def close(self) -> None:
+        from .page import render
+
+        for bus in self.buses.values():
+            bus.load.finish()
+        self.findings.sort(key=lambda f: f.t)
+        write_text_atomic(self.path, render(self))
+
+    def abort(self) -> None:
+        pass  # nothing is written before close

@@ -1,0 +1,408 @@
+"""`cananalyze report` and `check --html`: the page's content, read back independently
+(the HTML parsed, plotly's figure JSON loaded, frames counted by python-can), its
+accumulators against numpy on every value, and the page in a real browser."""
+
+from __future__ import annotations
+
+import io
+import json
+import re
+import subprocess
+import sys
+from html.parser import HTMLParser
+from pathlib import Path
+
+import can
+import numpy as np
+import pytest
+from conftest import SAMPLES, real_file
+
+from cananalyze.outputs.report.accum import Envelope, LogHistogram, WindowSums
+
+FIG = re.compile(r'<script type="application/json" id="(fig\d+)-data">(.*?)</script>', re.S)
+
+
+def cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "cananalyze", *args], capture_output=True, text=True, timeout=300
+    )
+
+
+class Tables(HTMLParser):
+    """Every <table> as rows of cell texts, and the text of each element with an id."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.tables: list[list[list[str]]] = []
+        self._row: list[str] | None = None
+        self._cell: list[str] | None = None
+        self.summaries: list[str] = []
+        self._summary: list[str] | None = None
+
+    def handle_starttag(self, tag, attrs):
+        if tag == "table":
+            self.tables.append([])
+        elif tag == "tr":
+            self._row = []
+        elif tag in ("td", "th"):
+            self._cell = []
+        elif tag == "summary":
+            self._summary = []
+
+    def handle_endtag(self, tag):
+        if tag in ("td", "th") and self._cell is not None:
+            self._row.append("".join(self._cell).strip())
+            self._cell = None
+        elif tag == "tr" and self._row is not None:
+            self.tables[-1].append(self._row)
+            self._row = None
+        elif tag == "summary":
+            self.summaries.append("".join(self._summary))
+            self._summary = None
+
+    def handle_data(self, data):
+        if self._cell is not None:
+            self._cell.append(data)
+        if self._summary is not None:
+            self._summary.append(data)
+
+
+def parse(path: Path) -> tuple[str, Tables, dict]:
+    text = path.read_text()
+    t = Tables()
+    t.feed(text)
+    figs = {pid: json.loads(j) for pid, j in FIG.findall(text)}
+    return text, t, figs
+
+
+def table_with(tables: Tables, first_header: str, header: str) -> list[list[str]]:
+    for tb in tables.tables:
+        if tb and tb[0][0] == first_header and header in tb[0]:
+            return tb
+    raise AssertionError(f"no table with {header}")
+
+
+@pytest.fixture(scope="module")
+def faults_report(tmp_path_factory):
+    out = tmp_path_factory.mktemp("report") / "faults.html"
+    r = cli(
+        "report",
+        str(SAMPLES / "faults.log"),
+        "--network",
+        str(SAMPLES / "network.toml"),
+        "--rules",
+        str(SAMPLES / "rules.yaml"),
+        "-o",
+        str(out),
+        "-q",
+    )
+    assert r.returncode == 1, r.stderr  # violations, as `check`
+    return out
+
+
+def test_report_holds_the_checks_findings_grouped(faults_report, tmp_path):
+    found = tmp_path / "f.json"
+    r = cli(
+        "check",
+        str(SAMPLES / "faults.log"),
+        "--network",
+        str(SAMPLES / "network.toml"),
+        "--rules",
+        str(SAMPLES / "rules.yaml"),
+        "--json",
+        str(found),
+        "-q",
+    )
+    assert r.returncode == 1
+    findings = json.loads(found.read_text())
+    text, tables, _ = parse(faults_report)
+    assert 'class="verdict fail"' in text
+    assert f"{len(findings)} violation(s)" in text
+    groups = {(f["node"], f["rule"]) for f in findings}
+    assert len(tables.summaries) == len(groups)
+    for node, rule in groups:
+        who = "bus" if node is None else f"node {node}"
+        n = sum(1 for f in findings if (f["node"], f["rule"]) == (node, rule))
+        assert any(s.startswith(f"{who} · {rule} · {n} finding(s)") for s in tables.summaries)
+
+
+def test_report_counts_every_frame_per_channel(faults_report):
+    _, tables, _ = parse(faults_report)
+    with can.LogReader(str(SAMPLES / "faults.log")) as reader:
+        msgs = list(reader)
+    buses = table_with(tables, "channel", "frames")
+    assert buses[1][0] == "can0"
+    assert int(buses[1][1].replace(",", "")) == len(msgs)
+    # error frames: SocketCAN's CAN_ERR_FLAG (0x20000000) in the candump identifier
+    ids = [ln.split()[2].split("#")[0] for ln in (SAMPLES / "faults.log").read_text().splitlines()]
+    errors = sum(1 for i in ids if len(i) == 8 and int(i, 16) & 0x20000000)
+    assert errors == 3 and int(buses[1][2]) == errors
+
+
+def test_report_sdo_aborts_and_emcys_from_the_log(faults_report):
+    _, tables, _ = parse(faults_report)
+    aborts = table_with(tables, "time", "code")
+    codes = {row[5] for row in aborts[1:]}
+    assert {"0x06010002", "0x06020000", "0x05040000"} <= codes
+    emcy = table_with(tables, "time", "active for")
+    with can.LogReader(str(SAMPLES / "faults.log")) as reader:
+        raised = [
+            m for m in reader if 0x81 <= m.arbitration_id <= 0xFF and bytes(m.data[:2]) != b"\0\0"
+        ]
+    assert len(emcy) - 1 == len(raised)
+    # node 3's 0x8100 at +1.391 s is reset at +2.891 s (samples/README.md); node 7's never
+    by_code = {row[2]: row[5] for row in emcy[1:]}
+    assert by_code["0x8100"] == "1.500 s"
+    assert by_code["0xFF00"] == "still active at the end of the log"
+
+
+def test_report_plots_signals_with_units_and_heartbeats_against_config(faults_report):
+    _, _, figs = parse(faults_report)
+    titles = {f["layout"]["title"]["text"]: f for f in figs.values()}
+    tpdo = titles["Node 5 TPDO2 (0x285)"]
+    assert tpdo["layout"]["yaxis"]["title"]["text"] == "°C"
+    assert [d["name"] for d in tpdo["data"]] == ["ch1 (°C)", "ch3 (°C)"]
+    hb = titles["Node 6 heartbeat period"]
+    measured, configured = hb["data"]
+    assert configured["name"] == "configured"
+    ys = configured["y"]
+    assert set(ys if isinstance(ys, list) else []) == {100} or ys  # typed array or list
+    # the dropout (samples/README.md: 1.6 s without heartbeat) is in the envelope's max
+    y = _values(measured["y"])
+    assert 1550 < max(y) < 1650
+    assert "Bus load per channel (100 ms windows)" in titles
+    assert "NMT state per node" in titles
+
+
+def _values(y) -> np.ndarray:
+    """A plotly array: a list, or a typed array {"dtype", "bdata"} (base64)."""
+    if isinstance(y, dict):
+        import base64
+
+        return np.frombuffer(base64.b64decode(y["bdata"]), np.dtype(y["dtype"]))
+    return np.asarray(y, float)
+
+
+def test_report_is_self_contained(faults_report):
+    text = faults_report.read_text()
+    assert not re.search(r"""(src|href)\s*=\s*["']?(https?:)?//""", text)
+    assert "<link" not in text
+    assert faults_report.stat().st_size < 4_000_000
+
+
+def test_check_html_and_junit_property(tmp_path):
+    import junitparser
+
+    page, junit = tmp_path / "r.html", tmp_path / "j.xml"
+    r = cli("check", str(SAMPLES / "faults.log"), "--html", str(page), "--junit", str(junit))
+    assert r.returncode == 1
+    assert page.stat().st_size > 100_000
+    xml = junitparser.JUnitXml.fromfile(str(junit))
+    suite = next(iter(xml))
+    props = {p.name: p.value for p in suite.properties()}
+    assert props == {"cananalyze.report": str(page)}
+
+
+def test_report_bad_input_one_line(tmp_path):
+    r = cli("report", str(tmp_path / "missing.log"), "-o", str(tmp_path / "r.html"))
+    assert r.returncode == 2
+    assert r.stderr.count("\n") == 1 and "missing.log" in r.stderr
+    assert "Traceback" not in r.stderr
+    r = cli("report", str(SAMPLES / "faults.log"), "-o", str(tmp_path / "no" / "dir" / "r.html"))
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert not (tmp_path / "no").exists()
+
+
+def test_report_separates_channels(tmp_path):
+    """A log of two buses: one row and one load trace per channel, counts as python-can reads."""
+    lines = []
+    for k in range(200):
+        t = 1000.0 + k * 0.01
+        lines.append(f"({t:.6f}) can0 701#05")
+        if k % 2:
+            lines.append(f"({t + 0.001:.6f}) can1 705#7F")
+    log = tmp_path / "two.log"
+    log.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "two.html"
+    assert cli("report", str(log), "-o", str(out), "--bitrate", "250000").returncode == 0
+    _, tables, figs = parse(out)
+    with can.LogReader(str(log)) as reader:
+        per = {}
+        for m in reader:
+            per[m.channel] = per.get(m.channel, 0) + 1
+    rows = {r[0]: int(r[1]) for r in table_with(tables, "channel", "frames")[1:]}
+    assert rows == per == {"can0": 200, "can1": 100}
+    load = next(f for f in figs.values() if f["layout"]["title"]["text"].startswith("Bus load"))
+    assert [d["name"] for d in load["data"]] == ["can0", "can1"]
+    assert load["layout"]["yaxis"]["title"]["text"] == "% of bitrate"
+
+
+# --- the accumulators against numpy, every value --------------------------------
+
+
+def test_envelope_keeps_every_extreme_in_fixed_memory():
+    rng = np.random.default_rng(7)
+    t = np.sort(rng.uniform(0, 3600, 1_000_000))
+    v = rng.normal(size=t.size)
+    v[123_456] = 50.0  # one spike
+    env = Envelope(buckets=500)
+    for a in range(0, t.size, 65_536):
+        env.add(t[a : a + 65_536], v[a : a + 65_536])
+    pt, pv = env.points()
+    assert env.lo.size == 500 and pt.size <= 1000
+    assert pv.max() == 50.0 and pv.min() == v.min()
+    # each bucket's min and max are those of the values in it
+    k = ((t - env.t0) / env.width).astype(int)
+    for b in (0, 77, int(k[123_456]), int(k.max())):
+        sel = v[k == b]
+        assert env.lo[b] == sel.min() and env.hi[b] == sel.max()
+
+
+def test_log_histogram_statistics_match_numpy():
+    rng = np.random.default_rng(3)
+    v = rng.normal(100.0, 0.5, 200_000)
+    v[:10] = 1600.0
+    h = LogHistogram()
+    for part in np.array_split(v, 7):
+        h.add(part)
+    assert h.count == v.size and h.min == v.min() and h.max == v.max()
+    assert h.mean == pytest.approx(v.mean(), rel=1e-12)
+    assert h.std == pytest.approx(v.std(), rel=1e-6)
+    for q in (0.01, 0.5, 0.99):
+        assert h.quantile(q) == pytest.approx(np.quantile(v, q), rel=0.002)
+    left, width, count = h.bars()
+    assert count.sum() == v.size and count.size <= 150
+    assert left[-1] <= 1600.0 < left[-1] + width[-1]
+
+
+def test_window_sums_peak_and_mean():
+    t = np.arange(0, 10, 0.001)  # 1 kHz of 100-bit frames, a burst at 5 s
+    bits = np.full(t.size, 100.0)
+    bits[(t >= 5.0) & (t < 5.1)] = 500.0
+    w = WindowSums(0.1)
+    for a in range(0, t.size, 777):
+        w.add(t[a : a + 777], bits[a : a + 777])
+    w.finish()
+    assert w.peak == pytest.approx(500 * 100 / 0.1 * 1.0, rel=0.02)
+    assert w.mean == pytest.approx(bits.sum() / (t[-1] - t[0]), rel=1e-9)
+
+
+# --- in a browser -----------------------------------------------------------------
+
+
+def _browser_check(page: Path, shot_name: str) -> None:
+    from helpers import browser
+
+    if browser.chromium() is None:
+        pytest.skip("no chromium (Debian's package chromium; .ci/run installs it)")
+    pytest.importorskip("websockets")
+    from PIL import Image
+
+    v = browser.view(
+        page,
+        {
+            "verdict": "(() => { const e = document.getElementById('verdict-banner');"
+            " const r = e.getBoundingClientRect();"
+            " return [e.innerText, r.top, r.bottom]; })()",
+            "plots": "Array.from(document.querySelectorAll('div.plot')).filter("
+            "d => d.querySelector('.main-svg') && d.getBoundingClientRect().top < 900"
+            " && d.querySelectorAll('path.js-line, path.point, g.trace').length > 0"
+            ").map(d => { const r = d.getBoundingClientRect();"
+            " return [r.left, r.top, r.right, Math.min(r.bottom, 900)]; })",
+        },
+    )
+    browser.save_shot(v.screenshot, shot_name)
+    assert v.ready, "the plots were not drawn"
+    assert v.errors == []
+    text, top, bottom = v.answers["verdict"]
+    assert text.split()[0] in ("PASS", "FAIL") and 0 <= top and bottom <= 900
+    assert v.answers["plots"], "no plot drawn on the first screen"
+    img = Image.open(io.BytesIO(v.screenshot)).convert("RGB")
+    assert img.size == (1280, 900)
+    # the verdict's banner colour is on the screen, and the plot has drawn lines in it
+    px = np.asarray(img)
+    banner = px[int(top) + 3 : int(bottom) - 3, 40:1200].reshape(-1, 3)
+    colours = {(253, 228, 225), (227, 245, 225)}  # fail / pass backgrounds
+    assert any((banner == c).all(axis=1).mean() > 0.5 for c in colours)
+    left, ptop, right, pbottom = (int(x) for x in v.answers["plots"][0])
+    region = px[ptop:pbottom, left:right].reshape(-1, 3).astype(int)
+    coloured = (region.max(axis=1) - region.min(axis=1)) > 60  # not white or grey
+    assert coloured.sum() > 200
+
+
+def test_report_in_chromium(faults_report):
+    _browser_check(faults_report, "faults.png")
+
+
+def test_real_log_report_in_chromium(tmp_path):
+    log = real_file("hilch__canopen-message-interpreter/pcan3.trc")
+    out = tmp_path / "pcan3.html"
+    r = cli("report", str(log), "-o", str(out), "-q")
+    assert r.returncode == 1, r.stderr  # the log has SDO aborts and a heartbeat dropout
+    _, tables, figs = parse(out)
+    assert len([f for f in figs.values() if "heartbeat period" in f["layout"]["title"]["text"]])
+    _browser_check(out, "pcan3.png")
+
+
+def test_a_clock_that_jumps_by_years_costs_nothing(tmp_path):
+    """A corrupt time (1e11 s, year 5138) among good frames: the page is written at once,
+    every frame counted, the plots keep their fixed number of points."""
+    lines = [f"({1000.0 + k * 0.01:.6f}) can0 701#05" for k in range(100)]
+    lines.insert(50, "(99999999999.000000) can0 701#05")
+    log = tmp_path / "jump.log"
+    log.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "jump.html"
+    r = cli("report", str(log), "-o", str(out), "-q")
+    assert r.returncode in (0, 1), r.stderr
+    _, tables, figs = parse(out)
+    assert table_with(tables, "channel", "frames")[1][1] == "101"
+    load = next(f for f in figs.values() if f["layout"]["title"]["text"].startswith("Bus load"))
+    assert len(_values(load["data"][0]["y"])) <= 2000
+
+
+def test_drive_state_section_reads_the_event_log(tmp_path):
+    """The place left for CiA 402: `drive_state` events in the event log become one lane
+    per drive (here put there by a sink ahead of the report, as the decoder will)."""
+    from cananalyze.events.columns import EventColumns, Row
+    from cananalyze.io.source import read_all
+    from cananalyze.outputs.report.sink import ReportSink
+    from cananalyze.outputs.sink import Sink
+    from cananalyze.pipeline import MemorySource, Options, build_decoder, run
+
+    class DriveStates(Sink):
+        needs_events = True
+
+        def write(self, batch):
+            if len(batch.frames):
+                t = float(batch.frames.t[0])
+                rows = [
+                    Row(t + 1.0, "drive_state", 3, 2, "Switched on", None),
+                    Row(t + 2.0, "drive_state", 3, 2, "Operation enabled", None),
+                ]
+                batch.events = EventColumns.concat([batch.events, EventColumns.from_rows(rows)])
+
+    out = tmp_path / "drive.html"
+    opts = Options(checks=True)
+    fb = read_all(SAMPLES / "faults.log")
+    run(MemorySource(fb), build_decoder(opts), [DriveStates(), ReportSink(out)], opts)
+    text, _, figs = parse(out)
+    assert '<section id="drive">' in text
+    fig = next(f for f in figs.values() if f["layout"]["title"]["text"] == "Drive state per node")
+    assert {d["name"] for d in fig["data"]} == {"Switched on", "Operation enabled"}
+    assert all(d["y"] == ["node 3"] for d in fig["data"])
+
+
+def test_pdo_rates_beside_their_configuration(faults_report):
+    """samples/README.md: TPDO2 0x283 inhibit 100 ms and event timer 200 ms, written by the
+    master's SDO downloads in the log; TPDO1 0x187 inhibit 20 ms. A 0 only the EDS gives
+    is not shown as "off"."""
+    _, tables, _ = parse(faults_report)
+    pdo = {r[0]: r for r in table_with(tables, "COB-ID", "event timer")[1:]}
+    assert pdo["0x283"][9:11] == ["200 ms (log)", "100 ms (log)"]
+    assert pdo["0x187"][10] == "20 ms (log)"
+    assert not any(v.startswith("off (profile") for r in pdo.values() for v in r[9:11])
+    # rates and gaps from every frame (python-can reads them)
+    with can.LogReader(str(SAMPLES / "faults.log")) as reader:
+        t = np.array([m.timestamp for m in reader if m.arbitration_id == 0x283])
+    assert int(pdo["0x283"][3]) == t.size
+    assert float(pdo["0x283"][7]) == pytest.approx(np.diff(t).max() * 1000, abs=0.01)
