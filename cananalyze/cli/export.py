@@ -17,7 +17,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Decode a log once and write it in one or more timeline/table formats. "
         "The CANopen rules run as for `check`: their findings are in every output.",
     )
-    add_input_options(p)
+    add_input_options(p, dbc_flag="--dbc-in")
     p.add_argument(
         "--mcap", metavar="FILE", help="MCAP file for Foxglove (PDO signal topics, events)"
     )

@@ -62,4 +62,6 @@ def annotation(service: int, node: int, pdo_number: int, fields: dict, rtr: bool
         return lss.text(fields, master=s is Service.LSS_MASTER)
     if s is Service.ERROR_FRAME:
         return "CAN error frame"
+    if fields.get("message"):  # a DBC message on an identifier CANopen does not use
+        return f"{fields['message']}  {pdo.signals_text(fields)}"
     return fields.get("label", "not CANopen (predefined connection set)")
