@@ -183,7 +183,10 @@ class DecodedBatch:
     def fields(self, i: int) -> dict:
         """All service fields of row i: stateless decode, then the stateful notes."""
         f = frame_fields(
-            int(self.service[i]), self.frames.payload(i), bool(self.frames.flags[i] & FLAG_RTR)
+            int(self.service[i]),
+            self.frames.payload(i),
+            bool(self.frames.flags[i] & FLAG_RTR),
+            int(self.frames.can_id[i]),
         )
         lazy = self._lazy_index()
         if lazy is not None:

@@ -15,7 +15,7 @@ if TYPE_CHECKING:
 
 def add_input_options(parser: argparse.ArgumentParser, dbc_flag: str = "--dbc") -> None:
     parser.add_argument(
-        "log", help="log file (candump, ASC, BLF, TRC, CSV; .gz too), or - for stdin"
+        "log", help="log file (candump, ASC, BLF, TRC, CSV, pcap/pcapng; .gz too), or - for stdin"
     )
     parser.add_argument(
         "--strict",

@@ -60,8 +60,7 @@ _KEYED[
         Service.GUARD_REQUEST,
         Service.GUARD_RESPONSE,
         Service.LSS_MASTER,
-        Service.LSS_SLAVE,
-        Service.ERROR_FRAME,
+        Service.LSS_SLAVE,  # (not ERROR_FRAME: its classes are in the identifier)
     ]
 ] = True
 _BYTE_MATTERS = np.zeros(256, bool)  # the first data byte changes the text
