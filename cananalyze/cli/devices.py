@@ -13,10 +13,16 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "devices",
         help="list built-in device profiles, or show one (PDOs, notes)",
         description="Without KEY: list the built-in device profiles. With KEY (or an "
-        "EDS/DCF path): show its default PDOs for --node and the notes on manual quirks.",
+        "EDS/DCF path): show its default PDOs for --node and the notes on manual quirks; "
+        "--dbc OUT.dbc writes those PDOs as a DBC file (cantools) with their scaling, units "
+        "and signedness. A user's EDS picks up a TOML sidecar of the same name beside it "
+        "(units and scales per object, docs/device-sidecar.md).",
     )
     parser.add_argument("key", nargs="?", help="profile key (e.g. dat7130) or an EDS/DCF file")
     parser.add_argument("--node", type=int, default=1, help="node ID for $NODEID defaults (1)")
+    parser.add_argument(
+        "--dbc", metavar="OUT.dbc", help="write the device's PDOs at --node as a DBC file"
+    )
     parser.set_defaults(func=run)
     return parser
 
@@ -70,4 +76,12 @@ def run(args: argparse.Namespace) -> int:
         print("Notes:")
         for note in prof.notes:
             print(f"  - {note}")
+    if args.dbc:
+        from ..outputs.atomic import check_writable
+        from ..outputs.dbc import pdo_database, write_dbc
+
+        check_writable(args.dbc)
+        db = pdo_database((args.node, pdo) for pdo in prof.pdos(args.node))
+        write_dbc(args.dbc, db)
+        print(f"wrote {len(db.messages)} PDOs of node {args.node} to {args.dbc}")
     return 0
