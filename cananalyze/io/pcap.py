@@ -32,6 +32,7 @@ from ..frames import (
     FLAG_RTR,
     FLAG_TX,
     FrameBatch,
+    concat,
 )
 from .blf import _Cutter
 from .registry import LogFormat, ReadContext, register
@@ -87,83 +88,97 @@ class _Frames:
 
     def batch(
         self,
-        buf: np.ndarray,
-        at: np.ndarray,  # offset of each packet's data
+        rows: np.ndarray,  # (n, width) uint8: each packet's bytes from its first, zero padded
         caplen: np.ndarray,
         t: np.ndarray,
         link: int,
-        channel: np.ndarray,
+        channel: int,
+        index: np.ndarray | None = None,  # the rows' places in the run (default: in order)
     ) -> FrameBatch | None:
-        n = at.size
-        first = self.record
-        self.record += n
+        """Record numbers (`line`) count from `self.record`, which the caller advances."""
+        n = rows.shape[0]
         if n == 0:
             return None
-        at = at.astype(np.int64)
         caplen = caplen.astype(np.int64)
-        tx = np.zeros(n, bool)
-        big = link == LINKTYPE_CAN_SOCKETCAN
+        keep = None
+        tx = None
         if link in (LINKTYPE_LINUX_SLL, LINKTYPE_LINUX_SLL2):
             hdr = 16 if link == LINKTYPE_LINUX_SLL else 20
-            ok = caplen >= hdr
-            pos = np.where(ok, at, 0)
-            p_at = pos + (14 if link == LINKTYPE_LINUX_SLL else 0)
-            proto = (buf[p_at].astype(np.int64) << 8) | buf[p_at + 1]
-            kind_at = pos + (1 if link == LINKTYPE_LINUX_SLL else 10)
-            tx = buf[kind_at] == PACKET_OUTGOING
-            ok &= (proto == ETH_P_CAN) | (proto == ETH_P_CANFD)
-            self.not_can += int(np.count_nonzero(~ok))
-            at, caplen, tx = at + hdr, caplen - hdr, tx
-            keep = np.flatnonzero(ok)
+            p = 14 if link == LINKTYPE_LINUX_SLL else 0
+            proto = (rows[:, p].astype(np.int64) << 8) | rows[:, p + 1]
+            ok = (caplen >= hdr) & ((proto == ETH_P_CAN) | (proto == ETH_P_CANFD))
+            tx = rows[:, 1 if link == LINKTYPE_LINUX_SLL else 10] == PACKET_OUTGOING
+            self.not_can += int(n - np.count_nonzero(ok))
+            rows, caplen = rows[:, hdr:], caplen - hdr
+            keep = None if ok.all() else np.flatnonzero(ok)
+        whole = caplen >= 8
+        if not whole.all():
+            self.cut += int(
+                np.count_nonzero(~whole & (keep is None or np.isin(np.arange(n), keep)))
+            )
+            keep = np.flatnonzero(whole) if keep is None else keep[whole[keep]]
+        if keep is not None:
+            rows, caplen = rows[keep], caplen[keep]
+            t, tx = t[keep], (tx[keep] if tx is not None else None)
+        m = rows.shape[0]
+        if rows.shape[1] < 16:  # records cut after their data: pad to the 8 data bytes
+            rows = np.pad(rows, ((0, 0), (0, 16 - rows.shape[1])))
+        word = _col(rows, 0, ">u4" if link == LINKTYPE_CAN_SOCKETCAN else "<u4")
+        length = rows[:, 4]
+        fdflags = rows[:, 5]
+        fd = ((fdflags & 0x04) != 0) | (caplen >= 72) | (length > 8)
+        any_fd = bool(fd.any())
+        if any_fd:
+            length = np.minimum(length, np.where(fd, 64, 8)).astype(np.uint8)
         else:
-            keep = np.arange(n)
-        whole = caplen[keep] >= 8
-        self.cut += int(np.count_nonzero(~whole))
-        keep = keep[whole]
-        h = at[keep]
-        cl = caplen[keep]
-        m = keep.size
-        word = np.zeros(m, np.uint32)
-        for k in range(4):  # the identifier word, network or host byte order
-            shift = 8 * (3 - k) if big else 8 * k
-            word |= buf[h + k].astype(np.uint32) << np.uint32(shift)
-        length = buf[h + 4].astype(np.int64)
-        fdflags = buf[h + 5]
-        fd = (fdflags & 0x04).astype(bool) | (cl >= 72) | (length > 8)
-        length = np.minimum(length, np.where(fd, 64, 8))
-        short = cl < 8 + length
-        self.cut += int(np.count_nonzero(short))
-        length = np.minimum(length, cl - 8)
+            length = np.minimum(length, 8)
+        have = np.minimum(caplen - 8, 255).astype(np.uint8)  # bytes captured after the header
+        short = have < length
+        if short.any():
+            self.cut += int(np.count_nonzero(short))
+            length = np.minimum(length, have)
         fb = FrameBatch.allocate(m)
-        fb.t[:] = t[keep]
-        ext = (word & 0x80000000) != 0
-        err = (word & 0x20000000) != 0
-        rtr = (word & 0x40000000) != 0
-        flags = np.zeros(m, np.uint8)
-        flags[ext & ~err] |= FLAG_EXT
-        flags[err] |= FLAG_ERR
-        flags[rtr & ~err] |= FLAG_RTR
-        flags[fd] |= FLAG_FD
-        flags[fd & ((fdflags & 0x01) != 0)] |= FLAG_BRS
-        flags[fd & ((fdflags & 0x02) != 0)] |= FLAG_ESI
-        flags[tx[keep]] |= FLAG_TX
-        fb.flags[:] = flags
-        fb.can_id[:] = np.where(ext | err, word & 0x1FFFFFFF, word & 0x7FF)
-        remote = rtr & ~err
-        stored = np.where(remote, 0, length)
+        fb.t[:] = t
+        top = (word >> np.uint32(29)).astype(np.uint8)  # EFF, RTR, ERR bits
+        ext, remote, err = (top & 4) != 0, (top & 2) != 0, (top & 1) != 0
+        remote &= ~err
+        flags = fb.flags
+        flags |= (ext & ~err).view(np.uint8) * np.uint8(FLAG_EXT)
+        flags |= err.view(np.uint8) * np.uint8(FLAG_ERR)
+        flags |= remote.view(np.uint8) * np.uint8(FLAG_RTR)
+        if any_fd:
+            flags |= fd.view(np.uint8) * np.uint8(FLAG_FD)
+            flags |= (fd & ((fdflags & 0x01) != 0)).view(np.uint8) * np.uint8(FLAG_BRS)
+            flags |= (fd & ((fdflags & 0x02) != 0)).view(np.uint8) * np.uint8(FLAG_ESI)
+        if tx is not None:
+            flags |= tx.view(np.uint8) * np.uint8(FLAG_TX)
+        fb.can_id[:] = word & np.where(ext | err, np.uint32(0x1FFFFFFF), np.uint32(0x7FF))
+        stored = np.where(remote, 0, length).astype(np.uint8)
         # a remote request's len field is the DLC it asks for (candump shows it so)
-        fb.dlc[:] = np.where(remote, np.minimum(buf[h + 4], 8), length).astype(np.uint8)
-        cols = np.arange(8)
-        inside = cols[None, :] < np.minimum(stored, 8)[:, None]
-        gather = np.where(inside, h[:, None] + 8 + cols[None, :], 0)
-        fb.data[:] = np.where(inside, buf[gather], 0)
+        fb.dlc[:] = np.where(remote, np.minimum(rows[:, 4], 8), length)
+        # the 8 data bytes as one little-endian word, the bytes past the length cleared
+        words = rows[:, 8:16].view("<u8")[:, 0]
+        fb.data[:] = (words & _KEEP8[np.minimum(stored, 8)]).view(np.uint8).reshape(m, 8)
         for r in np.flatnonzero(stored > 8).tolist():
-            a = int(h[r]) + 8
-            fb.long_data[r] = buf[a : a + int(stored[r])].tobytes()
-        fb.channel[:] = channel[keep]
-        fb.line[:] = first + 1 + keep
+            fb.long_data[r] = rows[r, 8 : 8 + int(stored[r])].tobytes()
+        fb.channel[:] = channel
+        at = np.arange(n) if index is None else index
+        fb.line[:] = self.record + 1 + (at if keep is None else at[keep])
         fb.channels = tuple(self.channels)
         return fb
+
+
+_KEEP8 = np.array([(1 << (8 * k)) - 1 for k in range(9)], np.uint64)  # first k bytes
+
+
+def _col(rows: np.ndarray, at: int, dtype: str) -> np.ndarray:
+    """A 4-byte field of every row (a column of the record matrix): a strided view."""
+    return rows[:, at : at + 4].view(dtype)[:, 0]
+
+
+def _run(buf: np.ndarray, pos: int, count: int, size: int) -> np.ndarray:
+    """`count` records of `size` bytes from `pos` as a (count, size) matrix (a view)."""
+    return buf[pos : pos + count * size].reshape(count, size)
 
 
 def _uniform(
@@ -171,23 +186,19 @@ def _uniform(
 ) -> int:
     """How many records of `size` bytes follow each other from `pos` (at least 1): each
     one's length field (u32 at `length_at`, plus `add`) says `size`, and for pcapng its
-    block type is `kind`."""
-    n = (len(buf) - pos) // size
-    if n <= 1:
-        return 1
-    offs = pos + np.arange(n, dtype=np.int64) * size
-    same = _u32(buf, offs + length_at, order).astype(np.int64) + add == size
-    if kind is not None:
-        same &= _u32(buf, offs, order) == kind
-    bad = np.flatnonzero(~same)
-    return int(bad[0]) if bad.size else n
-
-
-def _u32(buf: np.ndarray, offs: np.ndarray, order: str) -> np.ndarray:
-    b = [buf[offs + k].astype(np.uint32) for k in range(4)]
-    if order == "<":
-        return b[0] | (b[1] << 8) | (b[2] << 16) | (b[3] << 24)
-    return (b[0] << 24) | (b[1] << 16) | (b[2] << 8) | b[3]
+    block type is `kind`. A short window first, so a file of mixed sizes costs little."""
+    avail = (len(buf) - pos) // size
+    for n in (min(avail, 256), avail):
+        if n <= 1:
+            return 1
+        rec = _run(buf, pos, n, size)
+        same = _col(rec, length_at, order + "u4").astype(np.int64) + add == size
+        if kind is not None:
+            same &= _col(rec, 0, order + "u4") == kind
+        bad = np.flatnonzero(~same)
+        if bad.size:
+            return max(int(bad[0]), 1)
+    return max(avail, 1)
 
 
 def _read_pcap(stream: BinaryIO, ctx: ReadContext, head: bytes) -> Iterator[FrameBatch]:
@@ -215,7 +226,6 @@ def _read_pcap(stream: BinaryIO, ctx: ReadContext, head: bytes) -> Iterator[Fram
         raw = rest + data
         buf = np.frombuffer(raw, np.uint8)
         pos = 0
-        starts: list[np.ndarray] = []
         while pos + 16 <= len(raw):
             (incl,) = struct.unpack_from(order + "I", raw, pos + 8)
             if incl > limit:
@@ -231,19 +241,16 @@ def _read_pcap(stream: BinaryIO, ctx: ReadContext, head: bytes) -> Iterator[Fram
             if pos + size > len(raw):
                 break
             count = _uniform(buf, pos, size, order, 8, 16, None)
-            starts.append(pos + np.arange(count, dtype=np.int64) * size)
-            pos += count * size
-        if starts:
-            rec = np.concatenate(starts)
-            sec = _u32(buf, rec, order).astype(np.float64)
-            frac = _u32(buf, rec + 4, order).astype(np.float64)
-            caplen = _u32(buf, rec + 8, order).astype(np.int64)
-            chan = np.full(rec.size, chan0, np.uint16)
-            fb = frames.batch(buf, rec + 16, caplen, sec + frac * unit, link, chan)
+            rec = _run(buf, pos, count, size)
+            dt = order + "u4"
+            t = _col(rec, 0, dt).astype(np.float64) + _col(rec, 4, dt) * unit
+            fb = frames.batch(rec[:, 16:], np.full(count, incl), t, link, chan0)
+            frames.record += count
             if fb is not None:
                 cutter.add(fb)
                 ctx.frames += len(fb)
-            yield from cutter.full()
+            pos += count * size
+        yield from cutter.full()
         offset += pos
         rest = raw[pos:]
     if rest:
@@ -319,7 +326,6 @@ def _read_pcapng(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
         raw = rest + data
         buf = np.frombuffer(raw, np.uint8)
         pos = 0
-        epbs: list[np.ndarray] = []
         while pos + 12 <= len(raw):
             kind = struct.unpack_from(order + "I", raw, pos)[0]
             if kind == _SHB:
@@ -344,14 +350,11 @@ def _read_pcapng(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
                 break
             if kind == _EPB:
                 count = _uniform(buf, pos, size, order, 4, 0, _EPB)
-                epbs.append(pos + np.arange(count, dtype=np.int64) * size)
+                _epb_run(
+                    _run(buf, pos, count, size), order, ifaces, frames, cutter, ctx, warned_link
+                )
                 pos += count * size
                 continue
-            if epbs:  # blocks of other kinds: the packets before them first (interface order)
-                _epb_batch(
-                    buf, np.concatenate(epbs), order, ifaces, frames, cutter, ctx, warned_link
-                )
-                epbs = []
             body = raw[pos + 8 : pos + size - 4]
             if kind == _SHB:
                 ifaces = []  # a new section starts its own interface numbering
@@ -366,8 +369,6 @@ def _read_pcapng(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
                     "pcapng simple/obsolete packet block skipped (no timestamp or interface)",
                 )
             pos += size
-        if epbs:
-            _epb_batch(buf, np.concatenate(epbs), order, ifaces, frames, cutter, ctx, warned_link)
         yield from cutter.full()
         offset += pos
         rest = raw[pos:]
@@ -381,32 +382,37 @@ def _read_pcapng(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     yield from cutter.rest()
 
 
-def _epb_batch(buf, blocks, order, ifaces, frames: _Frames, cutter, ctx, warned) -> None:
-    iface = _u32(buf, blocks + 8, order).astype(np.int64)
-    hi = _u32(buf, blocks + 12, order).astype(np.float64)
-    lo = _u32(buf, blocks + 16, order).astype(np.float64)
-    caplen = _u32(buf, blocks + 20, order).astype(np.int64)
-    size = _u32(buf, blocks + 4, order).astype(np.int64)
-    caplen = np.minimum(caplen, np.maximum(size - 32, 0))  # never past the block
-    ticks = hi * 4294967296.0 + lo
-    for k in np.unique(iface).tolist():
-        sel = np.flatnonzero(iface == k)
+def _epb_run(rec: np.ndarray, order, ifaces, frames: _Frames, cutter, ctx, warned) -> None:
+    """A run of enhanced packet blocks of one size, as a (count, size) matrix."""
+    dt = order + "u4"
+    iface = _col(rec, 8, dt).astype(np.int64)
+    ticks = _col(rec, 12, dt).astype(np.float64) * 4294967296.0 + _col(rec, 16, dt)
+    caplen = np.minimum(_col(rec, 20, dt).astype(np.int64), rec.shape[1] - 32)  # in the block
+    rows = rec[:, 28:]
+    parts = []
+    kinds = np.unique(iface).tolist()
+    for k in kinds:
+        sel = slice(None) if len(kinds) == 1 else np.flatnonzero(iface == k)
         if not 0 <= k < len(ifaces):
-            ctx.problems.add(
-                ctx.source, "packets", f"{sel.size} packets of undeclared interface {k}"
-            )
+            count = rec.shape[0] if len(kinds) == 1 else len(sel)
+            ctx.problems.add(ctx.source, "packets", f"{count} packets of undeclared interface {k}")
             continue
         i = ifaces[k]
         if i.link not in (LINKTYPE_CAN_SOCKETCAN, LINKTYPE_LINUX_SLL, LINKTYPE_LINUX_SLL2):
             warned.add(i.link)  # another interface of the capture (an error if it has no CAN)
             continue
-        chan = np.full(sel.size, frames.channel(i.name), np.uint16)
-        fb = frames.batch(buf, blocks[sel] + 28, caplen[sel], ticks[sel] * i.tsres, i.link, chan)
+        chan = frames.channel(i.name)
+        index = None if len(kinds) == 1 else sel
+        fb = frames.batch(rows[sel], caplen[sel], ticks[sel] * i.tsres, i.link, chan, index)
         if fb is not None:
-            if len(np.unique(iface)) > 1:
-                fb = fb.take(np.argsort(fb.t, kind="stable"))
-            cutter.add(fb)
-            ctx.frames += len(fb)
+            parts.append(fb)
+    if len(parts) > 1:  # several interfaces in one run: back in file order
+        joined = concat(parts)
+        parts = [joined.take(np.argsort(joined.line, kind="stable"))]
+    frames.record += rec.shape[0]
+    for fb in parts:
+        cutter.add(fb)
+        ctx.frames += len(fb)
 
 
 def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
