@@ -16,7 +16,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "EDS/DCF path): show its default PDOs for --node and the notes on manual quirks; "
         "--dbc OUT.dbc writes those PDOs as a DBC file (cantools) with their scaling, units "
         "and signedness. A user's EDS picks up a TOML sidecar of the same name beside it "
-        "(units and scales per object, docs/device-sidecar.md).",
+        "(units and scales per object: README, Your own units).",
     )
     parser.add_argument("key", nargs="?", help="profile key (e.g. dat7130) or an EDS/DCF file")
     parser.add_argument("--node", type=int, default=1, help="node ID for $NODEID defaults (1)")
