@@ -26,6 +26,12 @@ from .frames import FLAG_RTR, FrameBatch
 from .protocol.fields import frame_fields
 
 
+def signal_path(node: int, pdo: str) -> str:
+    """Where a series lives in MCAP and rerun: '/node/5/tpdo1', or '/dbc/Engine' for a DBC
+    message on an identifier of no node (node -1)."""
+    return f"/node/{node}/{pdo}" if node >= 0 else f"/dbc/{pdo}"
+
+
 @dataclass
 class SignalBlock:
     """Decoded values of one PDO (one COB-ID and mapping) for some rows of a batch."""

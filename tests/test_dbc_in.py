@@ -256,3 +256,28 @@ def test_export_tables_carry_dbc_signals(tmp_path):
     speed = t[t.signal == "speed"]
     assert speed.value.tolist() == pytest.approx([1.0] * 5)
     assert set(speed.node) == {0x25}
+
+
+def test_mcap_and_rerun_carry_dbc_messages(tmp_path):
+    from tests.exported import read_mcap, read_rrd
+
+    path = tmp_path / "mixed.dbc"
+    path.write_text(MIXED_DBC)
+    log = tmp_path / "bus.log"
+    log.write_text(
+        "".join(
+            f"({i}.0) can0 10A#{(i * 4):04X}{i:02X}0300100000\n({i}.5) can0 1A5#0100E8030000\n"
+            for i in range(6)
+        )
+    )
+    mcap, rrd = tmp_path / "x.mcap", tmp_path / "x.rrd"
+    cmd = ["export", str(log), "--dbc-in", str(path), "--mcap", str(mcap), "--rrd", str(rrd)]
+    subprocess.run([sys.executable, "-m", "cananalyze", *cmd, "-q"], check=True)
+    m = read_mcap(mcap)
+    docs = m.docs("/dbc/Engine")  # a message on no node's identifier
+    assert [d["rpm"] for d in docs] == [i * 4 * 0.25 for i in range(6)]  # big-endian 0x00XX
+    assert [d["temp"] for d in docs] == [i - 40 for i in range(6)]
+    assert len(m.docs("/node/37/tpdo1")) == 6  # the PDO the DBC describes keeps its topic
+    r = read_rrd(rrd)
+    assert len(r.rows["/dbc/Engine/rpm"]) == 6
+    assert len(r.rows["/node/37/tpdo1/speed"]) == 6
