@@ -13,7 +13,7 @@ import pytest
 
 import cananalyze
 from cananalyze.frames import FLAG_EXT, FrameBatch
-from cananalyze.pipeline import Options, build_decoder
+from cananalyze.pipeline import Options, build_decoder, run
 from tests.conftest import real_file
 
 AXIO = "calumroy__CANopen_socketCAN_Test/"
@@ -281,3 +281,49 @@ def test_mcap_and_rerun_carry_dbc_messages(tmp_path):
     r = read_rrd(rrd)
     assert len(r.rows["/dbc/Engine/rpm"]) == 6
     assert len(r.rows["/node/37/tpdo1/speed"]) == 6
+
+
+def test_live_bus_decodes_by_the_dbc(tmp_path):
+    """`live --dbc`: the option reaches Options, and frames from python-can's virtual bus
+    decode by the DBC as they do offline."""
+    import io
+    import threading
+    import time
+
+    import can
+
+    from cananalyze.cli.common import options
+    from cananalyze.cli.main import build_parser
+    from cananalyze.io.live import LiveSource
+    from cananalyze.outputs.text.writer import TextWriter
+
+    path = tmp_path / "mixed.dbc"
+    path.write_text(MIXED_DBC)
+    args = build_parser().parse_args(["live", "-i", "virtual", "-c", "x", "--dbc", str(path)])
+    opts = options(args)
+    assert opts.dbc == (str(path),)
+    channel = f"dbc-live-{time.monotonic_ns()}"
+    rx = can.Bus(interface="virtual", channel=channel)
+    source = LiveSource(rx, interval=0.01, batch_max=4)
+
+    def pump():
+        tx = can.Bus(interface="virtual", channel=channel)
+        try:
+            for k in range(10):
+                data = bytes([0x00, 4 * k, 40 + k, 3, 0, 0x10, 0, 0])
+                tx.send(can.Message(arbitration_id=0x10A, data=data, is_extended_id=False))
+                time.sleep(0.002)
+            time.sleep(0.2)
+        finally:
+            tx.shutdown()
+            source.stop()
+
+    th = threading.Thread(target=pump)
+    th.start()
+    out = io.StringIO()
+    run(source, build_decoder(opts), [TextWriter(out)], opts)
+    th.join()
+    lines = out.getvalue().splitlines()
+    assert len(lines) == 10
+    for k, line in enumerate(lines):
+        assert f"Engine  rpm={k:g} rpm temp={k} degC gear=3 (drive)" in line, line
