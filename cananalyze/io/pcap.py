@@ -72,7 +72,8 @@ def sniff(head: bytes) -> bool:
 
 
 class _Frames:
-    """The CAN frames of packets whose bytes are in `buf`, as FrameBatch columns."""
+    """The CAN frames of runs of packets (one matrix row each) as FrameBatch columns, and
+    what was skipped: packets of another protocol, packets cut short."""
 
     def __init__(self, ctx: ReadContext) -> None:
         self.ctx = ctx
@@ -100,7 +101,7 @@ class _Frames:
         if n == 0:
             return None
         caplen = caplen.astype(np.int64)
-        keep = None
+        ok = np.ones(n, bool)
         tx = None
         if link in (LINKTYPE_LINUX_SLL, LINKTYPE_LINUX_SLL2):
             hdr = 16 if link == LINKTYPE_LINUX_SLL else 20
@@ -110,16 +111,13 @@ class _Frames:
             tx = rows[:, 1 if link == LINKTYPE_LINUX_SLL else 10] == PACKET_OUTGOING
             self.not_can += int(n - np.count_nonzero(ok))
             rows, caplen = rows[:, hdr:], caplen - hdr
-            keep = None if ok.all() else np.flatnonzero(ok)
-        whole = caplen >= 8
-        if not whole.all():
-            self.cut += int(
-                np.count_nonzero(~whole & (keep is None or np.isin(np.arange(n), keep)))
-            )
-            keep = np.flatnonzero(whole) if keep is None else keep[whole[keep]]
+        whole = caplen >= 8  # the identifier word, length and flags at least
+        self.cut += int(np.count_nonzero(ok & ~whole))
+        ok &= whole
+        keep = None if ok.all() else np.flatnonzero(ok)
         if keep is not None:
-            rows, caplen = rows[keep], caplen[keep]
-            t, tx = t[keep], (tx[keep] if tx is not None else None)
+            rows, caplen, t = rows[keep], caplen[keep], t[keep]
+            tx = tx[keep] if tx is not None else None
         m = rows.shape[0]
         if rows.shape[1] < 16:  # records cut after their data: pad to the 8 data bytes
             rows = np.pad(rows, ((0, 0), (0, 16 - rows.shape[1])))
