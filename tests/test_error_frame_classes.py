@@ -50,3 +50,9 @@ def test_candump_log_error_frames_in_text_and_jsonl(tmp_path):
     }
     assert recs[3]["lost_arbitration_bit"] == 5
     assert (recs[4]["tx_errors"], recs[4]["rx_errors"]) == (10, 15)
+
+
+def test_error_frames_without_socketcan_layout_name_no_class():
+    """An ASC or BLF error frame (no 8-byte SocketCAN layout) is not read for classes."""
+    assert error_frame.fields(0x181, b"") == {}
+    assert error_frame.text({}) == "CAN error frame"

@@ -56,8 +56,17 @@ def _bits(value: int, names: tuple[str, ...]) -> list[str]:
     return [name for k, name in enumerate(names) if value & (1 << k)]
 
 
+CAN_ERR_DLC = 8  # every SocketCAN error frame has 8 data bytes
+
+
 def fields(can_id: int, data: bytes) -> dict:
-    """JSONL fields of an error frame: its classes and the details each class carries."""
+    """JSONL fields of an error frame: its classes and the details each class carries.
+
+    Only a SocketCAN error frame (8 bytes, as candump and pcap hold them) has classes in
+    its identifier; others (ASC, and BLF's, whose identifier is the frame that failed)
+    have none to show."""
+    if len(data) != CAN_ERR_DLC:
+        return {}
     cls = can_id & 0x1FFFFFFF
     d = bytes(data) + bytes(max(0, 8 - len(data)))
     out: dict = {"error_classes": _bits(cls, CLASSES)}
