@@ -505,18 +505,21 @@ def load(
     input_format: str | None = None,
     sdo_timeout: float = 1.0,
     rules: str | Path | None = None,
+    dbc: str | Path | list[str | Path] | None = None,
 ) -> Capture:
     """Decode and check a log into a Capture (DataFrames `frames`, `signals`, `sdo`,
     `events`, `findings`; `heartbeat(node)`; `assert_*` methods for pytest).
 
     eds / device map node-IDs to EDS/DCF files / built-in profile keys
     ({5: "dat7014"}), as `--eds 5=FILE` / `--device 5=KEY` do on the command line;
-    network and rules are the files `--network` and `check --rules` take. The same
+    network and rules are the files `--network` and `check --rules` take; dbc one or more
+    DBC files (`--dbc`), whose messages join `signals`. The same
     pipeline as `cananalyze check` and `export`: the same findings and tables.
     """
     from .pipeline import build_checker, build_decoder, open_source, run
 
-    opts = load_options(network, eds, device, strict, input_format, sdo_timeout, rules)
+    dbc = () if dbc is None else (dbc,) if isinstance(dbc, (str, Path)) else tuple(dbc)
+    opts = load_options(network, eds, device, strict, input_format, sdo_timeout, rules, dbc=dbc)
     checker = build_checker(opts)  # a bad rules file fails before the log is opened
     source = open_source(path, opts)
     sink = CaptureSink()

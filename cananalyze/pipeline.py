@@ -62,8 +62,12 @@ class Options:
     t_from: float | None = None
     t_to: float | None = None
     time: str = "rel"
+    dbc: tuple[str | Path, ...] = ()  # DBC files: their messages decoded as signals (--dbc)
 
     def __post_init__(self) -> None:
+        if isinstance(self.dbc, (str, Path)):
+            self.dbc = (self.dbc,)
+        self.dbc = tuple(self.dbc or ())
         for what, table in (("--device", self.devices), ("--eds", self.eds)):
             for node in table:
                 if not isinstance(node, int) or isinstance(node, bool) or not 1 <= node <= 127:
@@ -172,11 +176,25 @@ def build_decoder(opts: Options | None = None, checker: Checker | None = None) -
     from .sdo.tracker import SdoTracker
 
     opts = opts or Options()
-    model = NetworkModel(network_spec(opts))
+    dbc = None
+    if opts.dbc:
+        from .network.dbc import load_dbc
+
+        dbc = load_dbc(opts.dbc)  # a bad DBC fails before the log is opened
+    spec = network_spec(opts)
+    if dbc:  # the DBC's identifiers belong on the bus (the unknown-identifier rule)
+        spec.known_cob_ids |= {i for i, _ in dbc.messages}
+    model = NetworkModel(spec)
     tracker = SdoTracker(timeout=opts.sdo_timeout, object_info=model.object_info)
     for node, request, response in model.sdo_channels:
         tracker.add_channel(node, request, response)
-    decoder = Decoder([SdoProcessor(tracker), model, PdoDecoder(model), EmcyDecoder(model)])
+    skip = dbc.standard_ids if dbc else set()  # the DBC's layout wins over the profile's
+    processors = [SdoProcessor(tracker), model, PdoDecoder(model, skip), EmcyDecoder(model)]
+    if dbc:
+        from .network.dbc_processor import DbcDecoder
+
+        processors.insert(3, DbcDecoder(dbc))
+    decoder = Decoder(processors)
     model.attach(decoder)
     decoder.network = model
     if checker is None and (opts.checking or opts.timing):

@@ -26,6 +26,12 @@ from .frames import FLAG_RTR, FrameBatch
 from .protocol.fields import frame_fields
 
 
+def signal_path(node: int, pdo: str) -> str:
+    """Where a series lives in MCAP and rerun: '/node/5/tpdo1', or '/dbc/Engine' for a DBC
+    message on an identifier of no node (node -1)."""
+    return f"/node/{node}/{pdo}" if node >= 0 else f"/dbc/{pdo}"
+
+
 @dataclass
 class SignalBlock:
     """Decoded values of one PDO (one COB-ID and mapping) for some rows of a batch."""
@@ -37,6 +43,7 @@ class SignalBlock:
     columns: dict[str, np.ndarray]  # signal name -> values, one per row
     units: dict[str, str | None]
     mapped_bytes: int = 0  # bytes the mapping needs; rows with a longer DLC carry extra bytes
+    choices: dict[str, dict[int, str]] = field(default_factory=dict)  # a DBC's value tables
 
 
 @dataclass
@@ -158,6 +165,7 @@ class DecodedBatch:
                         {k: v[keep] for k, v in sb.columns.items()},
                         sb.units,
                         sb.mapped_bytes,
+                        sb.choices,
                     )
                 )
         row_notes = []
@@ -181,7 +189,10 @@ class DecodedBatch:
     def fields(self, i: int) -> dict:
         """All service fields of row i: stateless decode, then the stateful notes."""
         f = frame_fields(
-            int(self.service[i]), self.frames.payload(i), bool(self.frames.flags[i] & FLAG_RTR)
+            int(self.service[i]),
+            self.frames.payload(i),
+            bool(self.frames.flags[i] & FLAG_RTR),
+            int(self.frames.can_id[i]),
         )
         lazy = self._lazy_index()
         if lazy is not None:
@@ -192,6 +203,10 @@ class DecodedBatch:
                 p = int(pos[i])
                 f["signals"] = {k: v[p].item() for k, v in sb.columns.items()}
                 f["units"] = {k: u for k, u in sb.units.items() if u}
+                if sb.choices:
+                    f["labels"] = _labels(f["signals"], sb.choices)
+                if sb.pdo[:4] not in ("tpdo", "rpdo"):
+                    f["message"] = sb.pdo  # a DBC message on a non-PDO identifier
             s = int(shared[i])
             if s >= 0:
                 f.update(self.row_notes[s][1])
@@ -327,3 +342,15 @@ class DecodedBatch:
             result = np.concatenate((result, fres))[order]
             latency = np.concatenate((latency, fast.latency))[order]
         return SdoTable(node_keys, node, result_keys, result, latency)
+
+
+def _labels(values: dict, choices: dict[str, dict[int, str]]) -> dict[str, str]:
+    """The value-table names of a row's signals that have one (a DBC's VAL_)."""
+    out = {}
+    for name, table in choices.items():
+        v = values.get(name)
+        if isinstance(v, float) and v.is_integer():
+            v = int(v)
+        if isinstance(v, int) and v in table:
+            out[name] = table[v]
+    return out

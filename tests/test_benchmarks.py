@@ -18,11 +18,13 @@ BENCH = ROOT / "benchmarks"
 SMOKED = {
     "generate.py",
     "bench_check.py",
+    "bench_dbc.py",
     "bench_decode.py",
     "bench_fleet.py",
     "bench_floor.py",
     "bench_live.py",
     "bench_report.py",
+    "bench_pcap.py",
     "mem_profile.py",
 }
 NUMBER = r"\d+(\.\d+)?"
@@ -258,3 +260,19 @@ def test_bench_live_serves_foxglove_without_drops():
     )
     assert m and int(m.group(1)) == kept and m.group(2) == m.group(4)
     assert re.fullmatch(rf"{NUMBER} s user\+system beside {NUMBER} s wall", got["cpu"])
+
+
+def test_bench_dbc_compares_with_cantools():
+    out = _run("bench_dbc.py", "--frames", "3000", "--repeat", "1").stdout
+    for side in ("cananalyze", "cantools"):
+        assert re.search(rf"  {side} +wall +{NUMBER} s  cpu +{NUMBER} s +[\d,]+ frames/s", out)
+    assert re.search(
+        rf"cantools / cananalyze: wall {NUMBER}x  cpu {NUMBER}x  \(values equal\)", out
+    )
+
+
+def test_bench_pcap_reads_every_frame():
+    out = _run("bench_pcap.py", "--frames", "3000", "--repeat", "1", "--scapy-frames", "500").stdout
+    assert "read 3,000 frames (scapy: the first 500)" in out
+    for side, count in (("pcap", "3,000"), ("candump", "3,000"), ("scapy rdpcap", "500")):
+        assert re.search(rf"  {side} +wall +{NUMBER} s  cpu +{NUMBER} s .*\({count} frames\)", out)

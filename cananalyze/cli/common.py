@@ -13,9 +13,9 @@ if TYPE_CHECKING:
     from ..pipeline import Options
 
 
-def add_input_options(parser: argparse.ArgumentParser) -> None:
+def add_input_options(parser: argparse.ArgumentParser, dbc_flag: str = "--dbc") -> None:
     parser.add_argument(
-        "log", help="log file (candump, ASC, BLF, TRC, CSV; .gz too), or - for stdin"
+        "log", help="log file (candump, ASC, BLF, TRC, CSV, pcap/pcapng; .gz too), or - for stdin"
     )
     parser.add_argument(
         "--strict",
@@ -32,7 +32,7 @@ def add_input_options(parser: argparse.ArgumentParser) -> None:
         metavar="S",
         help="an SDO request unanswered this long is a timeout (default 1 s)",
     )
-    add_device_options(parser)
+    add_device_options(parser, dbc_flag)
 
 
 def report_problems(problems: ProblemLog, stream=None) -> None:
@@ -46,8 +46,11 @@ def report_problems(problems: ProblemLog, stream=None) -> None:
         print(f"warning: {problems.count} unreadable lines/records skipped", file=stream)
 
 
-def add_device_options(parser: argparse.ArgumentParser) -> None:
-    """--device, --eds, --network: what the user knows about the nodes (decode and live)."""
+def add_device_options(parser: argparse.ArgumentParser, dbc_flag: str = "--dbc") -> None:
+    """--device, --eds, --network, --dbc: what the user knows about the nodes and the bus.
+
+    `dbc_flag`: export's `--dbc` names the DBC it writes, so it reads one as `--dbc-in`
+    (every command takes `--dbc-in`, so scripts can pass one name to all)."""
     parser.add_argument(
         "--device",
         action="append",
@@ -66,6 +69,16 @@ def add_device_options(parser: argparse.ArgumentParser) -> None:
         "--network",
         metavar="FILE",
         help="network file (TOML/YAML): nodes, profiles, PDO/heartbeat overrides, SDO channels",
+    )
+    flags = [dbc_flag] if dbc_flag == "--dbc-in" else [dbc_flag, "--dbc-in"]
+    parser.add_argument(
+        *flags,
+        dest="dbc_in",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="DBC file (read with cantools): its messages decoded as signals, its layouts, "
+        "scaling, units and value tables winning over the profile's PDOs; repeatable",
     )
 
 
@@ -152,6 +165,7 @@ def options(args: argparse.Namespace, **overrides) -> Options:
         t_from=get("t_from"),
         t_to=get("t_to"),
         time=get("time") or "rel",
+        dbc=tuple(get("dbc_in") or ()),
     )
     values.update(overrides)
     return Options(**values)

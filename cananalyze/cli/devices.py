@@ -13,12 +13,35 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "devices",
         help="list built-in device profiles, or show one (PDOs, notes)",
         description="Without KEY: list the built-in device profiles. With KEY (or an "
-        "EDS/DCF path): show its default PDOs for --node and the notes on manual quirks.",
+        "EDS/DCF path): show its default PDOs for --node and the notes on manual quirks; "
+        "--dbc OUT.dbc writes those PDOs as a DBC file (cantools) with their scaling, units "
+        "and signedness. A user's EDS picks up a TOML sidecar of the same name beside it "
+        "(units and scales per object: README, Your own units).",
     )
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
+    parser.epilog = EPILOG
     parser.add_argument("key", nargs="?", help="profile key (e.g. dat7130) or an EDS/DCF file")
     parser.add_argument("--node", type=int, default=1, help="node ID for $NODEID defaults (1)")
+    parser.add_argument(
+        "--dbc", metavar="OUT.dbc", help="write the device's PDOs at --node as a DBC file"
+    )
     parser.set_defaults(func=run)
     return parser
+
+
+EPILOG = """\
+your own devices and layouts:
+  drive.eds + drive.toml     a TOML sidecar beside your EDS/DCF (format of decoders/*.toml:
+                             [[signal]] index, subindex, name, unit, scale, offset, split)
+                             is loaded with it: --eds 5=drive.eds, the network file, here
+  network file signals       [nodes.5.signals] "6401:01" = {unit = "degC", scale = 0.1}
+  devices KEY --dbc OUT.dbc  this device's PDOs at --node as a DBC (cantools)
+  export LOG --dbc OUT.dbc   the network's PDOs as configured at the end of a log
+  decode LOG --dbc MINE.dbc  frames a DBC names decoded by it (export: --dbc-in), over the
+                             profile's PDO layout; non-CANopen identifiers on a mixed bus
+  decode CAPTURE.pcapng      Wireshark/tcpdump captures of SocketCAN (link type 227,
+                             Linux cooked SLL/SLL2) read like any log
+"""
 
 
 def _hex(value: int | None, width: int = 8) -> str:
@@ -70,4 +93,12 @@ def run(args: argparse.Namespace) -> int:
         print("Notes:")
         for note in prof.notes:
             print(f"  - {note}")
+    if args.dbc:
+        from ..outputs.atomic import check_writable
+        from ..outputs.dbc import pdo_database, write_dbc
+
+        check_writable(args.dbc)
+        db = pdo_database((args.node, pdo) for pdo in prof.pdos(args.node))
+        write_dbc(args.dbc, db)
+        print(f"wrote {len(db.messages)} PDOs of node {args.node} to {args.dbc}")
     return 0

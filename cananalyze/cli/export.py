@@ -1,4 +1,5 @@
-"""`cananalyze export LOG --mcap F --rrd F --parquet DIR --csv DIR`: timelines and tables."""
+"""`cananalyze export LOG --mcap F --rrd F --parquet DIR --csv DIR --dbc F`: timelines,
+tables, and the network's PDOs as a DBC."""
 
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Decode a log once and write it in one or more timeline/table formats. "
         "The CANopen rules run as for `check`: their findings are in every output.",
     )
-    add_input_options(p)
+    add_input_options(p, dbc_flag="--dbc-in")
     p.add_argument(
         "--mcap", metavar="FILE", help="MCAP file for Foxglove (PDO signal topics, events)"
     )
@@ -32,6 +33,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--parquet", metavar="DIR", help="directory for frames/signals/sdo/events/... .parquet"
     )
     p.add_argument("--csv", metavar="DIR", help="directory for the same tables as CSV")
+    p.add_argument(
+        "--dbc",
+        metavar="FILE",
+        help="DBC file (written with cantools) of the network's PDOs as configured at the "
+        "end of the log, SDO remaps included (to read a DBC, use --dbc-in)",
+    )
     p.add_argument(
         "--parquet-compression",
         choices=["snappy", "zstd", "lz4", "none"],
@@ -52,10 +59,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    outputs = [o for o in ("mcap", "rrd", "parquet", "csv") if getattr(args, o)]
+    outputs = [o for o in ("mcap", "rrd", "parquet", "csv", "dbc") if getattr(args, o)]
     if not outputs:
         raise UsageError(
-            "export: give at least one of --mcap FILE, --rrd FILE, --parquet DIR, --csv DIR"
+            "export: give at least one of --mcap FILE, --rrd FILE, --parquet DIR, --csv DIR, "
+            "--dbc FILE"
         )
     if args.no_check and args.rules:
         raise UsageError("export: --rules needs the checks; leave out --no-check")
@@ -81,6 +89,10 @@ def run(args: argparse.Namespace) -> int:
         from ..outputs.rerun.sink import RerunSink
 
         sinks.append(RerunSink(args.rrd, bitrate=args.bitrate))
+    if args.dbc:
+        from ..outputs.dbc import DbcSink
+
+        sinks.append(DbcSink(args.dbc))
     state = run_with_progress(source, decoder, sinks, opts, quiet=args.quiet)
     report_problems(source.problems)
     if not args.quiet:

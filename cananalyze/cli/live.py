@@ -78,6 +78,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="EDS/DCF of a node; repeatable",
     )
     p.add_argument(
+        "--dbc",
+        "--dbc-in",
+        dest="dbc_in",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="DBC file (cantools): its messages decoded as signals; repeatable",
+    )
+    p.add_argument(
         "--check",
         metavar="RULES",
         help="check the rules of this rules file live; exit 1 on violations, as `check` does",

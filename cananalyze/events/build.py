@@ -296,7 +296,7 @@ def _frame_event_columns(batch: DecodedBatch, off: int) -> EventColumns:
     for k in np.flatnonzero(slow).tolist():
         i, s = int(rows[k]), int(service[k])
         rtr = bool(fb.flags[i] & FLAG_RTR)
-        f = frame_fields(s, fb.payload(i), rtr)
+        f = frame_fields(s, fb.payload(i), rtr, int(fb.can_id[i]))
         f.update(dict.get(notes, i) or {})
         text[k] = annotation(s, int(node[k]), int(batch.pdo[i]), f, rtr)
         if s == Service.EMCY:

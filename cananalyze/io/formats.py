@@ -5,6 +5,7 @@ FORMAT_MODULES = [
     "candump",
     "asc",
     "blf",
+    "pcap",
     "trc",
     "canbusanalyzer",
     "ixxat",

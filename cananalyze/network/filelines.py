@@ -88,6 +88,8 @@ class Lines:
                 if all(p in header.split(".") for p in parents[-1:]):
                     return i
                 first = first or i
+        if first is None and len(where) > 1:  # a key of an inline table: its parent's line
+            return self._toml_line(where[:-1])
         return first
 
     def at(self, where: tuple) -> str:

@@ -119,6 +119,7 @@ class NetworkModel:
             for (direction, number), length in ns.pdo_lengths.items():
                 cfg.pdo(direction, number).length = length  # type: ignore[arg-type]
             cfg.sdo_channels = list(ns.sdo_channels)
+            cfg.signals = ns.signals
         return cfg
 
     # --- wiring ------------------------------------------------------------------

@@ -33,7 +33,9 @@ NODE_KEYS = {
     "tpdo",
     "rpdo",
     "sdo_channels",
+    "signals",
 }
+SIGNAL_KEYS = {"name", "unit", "scale", "offset"}
 PDO_KEYS = {
     "cob_id",
     "enabled",
@@ -56,6 +58,7 @@ PDO_OBJECTS = {
     "event_timer": (5, 0xFFFF),
 }
 SYNC_OBJECTS = {"period_us": 0x1006, "window_us": 0x1007}
+_OBJECT_TEXT = re.compile(r"^\s*(?:0x)?([0-9a-fA-F]{1,4})\s*:\s*(?:0x)?([0-9a-fA-F]{1,2})\s*$")
 _MAP_TEXT = re.compile(
     r"^\s*(?:0x)?([0-9a-fA-F]{1,4})\s*:\s*(?:0x)?([0-9a-fA-F]{1,2})\s*/\s*(\d{1,2})\s*$"
 )
@@ -126,6 +129,37 @@ def _pdo(raw, lines: Lines, where: tuple) -> dict:
     return out
 
 
+def _number(value, lines: Lines, where: tuple) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise lines.error(where, f"expected a number, got {value!r}")
+    return float(value)
+
+
+def _signals(raw, lines: Lines, where: tuple) -> dict:
+    """`signals = {"6401:01" = {name, unit, scale, offset}}`: how to show a mapped object,
+    over the profile's (and its sidecar's) name, unit and scaling."""
+    table = _table(raw, lines, where, 'keyed by object ("INDEX:SUB")')
+    out: dict = {}
+    for key, spec in table.items():
+        at = (*where, str(key))
+        m = _OBJECT_TEXT.match(str(key))
+        if not m:
+            raise lines.error(at, f"signal key {key!r} is not an object 'INDEX:SUB' (hex)")
+        spec = _table(spec, lines, at, "with name, unit, scale, offset")
+        _known(spec, SIGNAL_KEYS, lines, at, "signal setting")
+        one: dict = {}
+        for k in ("name", "unit"):
+            if k in spec:
+                if not isinstance(spec[k], str) or (k == "name" and not spec[k].strip()):
+                    raise lines.error((*at, k), f"expected text, got {spec[k]!r}")
+                one[k] = spec[k]
+        for k in ("scale", "offset"):
+            if k in spec:
+                one[k] = _number(spec[k], lines, (*at, k))
+        out[f"{int(m.group(1), 16):04X}:{int(m.group(2), 16):02X}"] = one
+    return out
+
+
 def _profile(raw: dict, node: int, base: Path, lines: Lines, where: tuple, how: str):
     if "device" in raw and "eds" in raw:
         raise lines.error(where, "give either device or eds, not both")
@@ -174,6 +208,8 @@ def _node(raw, node: int, base: Path, lines: Lines, where: tuple, how: str) -> d
             w = (*where, direction)
             table = _table(raw[direction], lines, w, "keyed by PDO number")
             out[direction] = _keyed(table, lines, w, 1, 512, lambda v, at, _: _pdo(v, lines, at))
+    if "signals" in raw:
+        out["signals"] = _signals(raw["signals"], lines, (*where, "signals"))
     if "sdo_channels" in raw:
         channels = raw["sdo_channels"]
         w = (*where, "sdo_channels")
@@ -283,6 +319,9 @@ def _node_spec(node: int, raw: dict) -> NodeSpec:
             if "length" in params:
                 spec.pdo_lengths[("tx" if direction == "tpdo" else "rx", number)] = params["length"]
     spec.sdo_channels = list(raw.get("sdo_channels", ()))
+    for key, one in raw.get("signals", {}).items():
+        index, sub = (int(x, 16) for x in key.split(":"))
+        spec.signals[(index, sub)] = one
     return spec
 
 

@@ -8,7 +8,7 @@ that changes signal units (the profile's context objects) is written.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 from ..protocol.datatypes import DUMMY_INDICES
@@ -79,6 +79,19 @@ def entries_for(
     return [MapEntry(index, sub, bits, f"obj_{index:04x}_{sub:02x}", _UINT_BY_BITS.get(bits, 0x1B))]
 
 
+def _shown_as(entry: MapEntry, spec: dict | None) -> MapEntry:
+    """A mapped object with the network file's name, unit and scaling over the profile's."""
+    if not spec:
+        return entry
+    return replace(
+        entry,
+        name=spec.get("name", entry.name),
+        unit=spec.get("unit", entry.unit),
+        scale=spec.get("scale", entry.scale),
+        offset=spec.get("offset", entry.offset),
+    )
+
+
 @dataclass
 class NodeConfig:
     """One node: its profile, how we know it, and its current communication parameters."""
@@ -93,6 +106,8 @@ class NodeConfig:
     emcy_cob_raw: int | None = None  # 0x1014
     context: dict[tuple[int, int], int] = field(default_factory=dict)  # unit-changing objects
     sdo_channels: list[tuple[int, int]] = field(default_factory=list)  # (request, response) COB-IDs
+    # the network file's `signals`: (index, subindex) -> name, unit, scale, offset
+    signals: dict[tuple[int, int], dict] = field(default_factory=dict)
 
     @classmethod
     def from_profile(cls, node: int, profile: DeviceProfile | None, how: str) -> NodeConfig:
@@ -156,6 +171,8 @@ class NodeConfig:
                 break
             if word:
                 mapping.extend(entries_for(self.profile, word, self.context))
+        if self.signals:
+            mapping = [_shown_as(e, self.signals.get((e.index, e.subindex))) for e in mapping]
         return PdoConfig(
             state.direction,
             state.number,

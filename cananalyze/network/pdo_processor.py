@@ -21,8 +21,9 @@ from .model import NetworkModel
 class PdoDecoder:
     """Processor after the network model: decodes PDOs with the mapping in force."""
 
-    def __init__(self, model: NetworkModel) -> None:
+    def __init__(self, model: NetworkModel, skip: set[int] | frozenset[int] = frozenset()) -> None:
         self.model = model
+        self.skip = np.array(sorted(c for c in skip if 0 <= c < 2048), np.intp)  # a DBC's ids
         self._words: tuple | None = None  # (FrameBatch, its data as uint64 words)
 
     def process(self, batch: DecodedBatch) -> None:
@@ -40,6 +41,7 @@ class PdoDecoder:
         cobs = [c for _, b in segments for c in b if 0 <= c < 2048]
         if cobs:
             bound[cobs] = True
+        bound[self.skip] = False
         ids = fb.can_id[rows]
         rows = rows[bound[np.where(ids < 2048, ids, 0)] & (ids < 2048)]
         if rows.size == 0:

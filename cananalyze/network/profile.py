@@ -180,7 +180,7 @@ def _build(path: Path, sidecar: Sidecar | None, node_id: int | None) -> DevicePr
     product = od_int(0x1018, 2) if od_int(0x1018, 2) else info.product_number
     return DeviceProfile(
         key=sidecar.key if sidecar else path.stem,
-        name=sidecar.name if sidecar else (info.product_name or path.stem),
+        name=(sidecar.name if sidecar else "") or info.product_name or path.stem,
         vendor_id=vendor,
         product_code=product,
         device_type=od_int(0x1000, 0),
@@ -208,8 +208,13 @@ def builtin_profiles() -> list[DeviceProfile]:
 
 
 def load_eds(path: str | Path, node_id: int | None = None) -> DeviceProfile:
-    """Profile from any EDS/DCF; a DCF's ParameterValues take precedence over defaults."""
-    return _build(Path(path), None, node_id)
+    """Profile from any EDS/DCF; a DCF's ParameterValues take precedence over defaults.
+
+    A TOML sidecar of the same name beside it (`drive.eds` + `drive.toml`, the format of
+    `decoders/*.toml`) is the user's own units, scales, bit names and EMCY meanings."""
+    path = Path(path)
+    side = path.with_suffix(".toml")
+    return _build(path, load_sidecar(side) if side.is_file() else None, node_id)
 
 
 def _norm(name: str | None) -> str:

@@ -146,8 +146,8 @@ def load_sidecar(path: Path) -> Sidecar:
             for name, table in raw.get("unit_tables", {}).items()
         }
         return Sidecar(
-            key=raw["key"],
-            name=raw["name"],
+            key=raw.get("key", path.stem),  # a user's sidecar may leave them out
+            name=raw.get("name", ""),
             notes=list(raw.get("notes", [])),
             identity=dict(raw.get("identity", {})),
             signals=_signals(raw.get("signal", [])),

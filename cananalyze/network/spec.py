@@ -22,6 +22,8 @@ class NodeSpec:
     # expected length in bytes of a PDO ("tx"/"rx", number) while its mapping is unknown
     pdo_lengths: dict[tuple[str, int], int] = field(default_factory=dict)
     name: str | None = None  # the file's label for the node (not used by the analysis)
+    # (index, subindex) -> {name, unit, scale, offset}: how to show a mapped object
+    signals: dict[tuple[int, int], dict] = field(default_factory=dict)
 
 
 @dataclass

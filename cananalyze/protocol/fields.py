@@ -10,14 +10,18 @@ row, for the rows it prints.
 
 from __future__ import annotations
 
-from . import emcy, lss, nmt, pdo, sdo, sync
+from . import emcy, error_frame, lss, nmt, pdo, sdo, sync
 from . import time as time_of_day
 from .services import Service
 
 
-def frame_fields(service: int, data: bytes, rtr: bool = False) -> dict:
-    """Service-specific JSONL fields of one frame (names are a stable API, see README)."""
+def frame_fields(service: int, data: bytes, rtr: bool = False, can_id: int = 0) -> dict:
+    """Service-specific JSONL fields of one frame (names are a stable API, see README).
+
+    `can_id`: an error frame's classes are in its identifier."""
     s = Service(service)
+    if s is Service.ERROR_FRAME:
+        return error_frame.fields(can_id, data)
     if s is Service.NMT:
         return nmt.command_fields(data)
     if s is Service.SYNC:
@@ -61,5 +65,7 @@ def annotation(service: int, node: int, pdo_number: int, fields: dict, rtr: bool
     if s in (Service.LSS_MASTER, Service.LSS_SLAVE):
         return lss.text(fields, master=s is Service.LSS_MASTER)
     if s is Service.ERROR_FRAME:
-        return "CAN error frame"
+        return error_frame.text(fields)
+    if fields.get("message"):  # a DBC message on an identifier CANopen does not use
+        return f"{fields['message']}  {pdo.signals_text(fields)}"
     return fields.get("label", "not CANopen (predefined connection set)")

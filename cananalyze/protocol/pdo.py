@@ -128,14 +128,22 @@ def annotation(tpdo: bool, number: int, rtr: bool, fields: dict) -> str:
     text = f"{'TPDO' if tpdo else 'RPDO'}{number}" + (" remote request" if rtr else "")
     signals = fields.get("signals")
     if signals:
-        units = fields.get("units") or {}
-        text += "  " + " ".join(_signal_text(k, v, units.get(k)) for k, v in signals.items())
+        text += "  " + signals_text(fields)
     if fields.get("pdo_problem"):
         text += f"  [{fields['pdo_problem']}]"
     return text
 
 
-def _signal_text(name: str, value, unit: str | None) -> str:
+def signals_text(fields: dict) -> str:
+    """'ch1=21.5 degC mode=3 (running)': a row's signals, units and value-table names."""
+    units = fields.get("units") or {}
+    labels = fields.get("labels") or {}
+    return " ".join(
+        _signal_text(k, v, units.get(k), labels.get(k)) for k, v in fields["signals"].items()
+    )
+
+
+def _signal_text(name: str, value, unit: str | None, label: str | None = None) -> str:
     if isinstance(value, float):
         value = f"{value:.6g}"
-    return f"{name}={value}" + (f" {unit}" if unit else "")
+    return f"{name}={value}" + (f" {unit}" if unit else "") + (f" ({label})" if label else "")

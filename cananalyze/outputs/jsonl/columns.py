@@ -191,7 +191,11 @@ def _signal_text(sb, pos: np.ndarray) -> np.ndarray | None:
     """',"signals":{...},"units":{...}' of a block's rows (`pos`: positions in the
     block), or None when a column is of a type only Python words."""
     m = len(pos)
+    if sb.choices:
+        return None  # value-table names ("labels"): the per-row way
     parts = []
+    if sb.pdo[:4] not in ("tpdo", "rpdo"):  # a DBC message on a non-PDO identifier
+        parts.append(bytecols.repeat((',"message":' + json.dumps(sb.pdo)).encode(), m))
     for j, (name, values) in enumerate(sb.columns.items()):
         v = np.asarray(values)[pos]
         if v.dtype.kind == "f":
@@ -206,7 +210,9 @@ def _signal_text(sb, pos: np.ndarray) -> np.ndarray | None:
         parts += [bytecols.repeat(head.encode(), m), text]
     units = dumps({k: _clean(u) for k, u in sb.units.items() if u})
     parts.append(
-        bytecols.repeat((("}" if parts else ',"signals":{}') + ',"units":' + units).encode(), m)
+        bytecols.repeat(
+            (("}" if sb.columns else ',"signals":{}') + ',"units":' + units).encode(), m
+        )
     )
     return bytecols.left_aligned(*bytecols.compact(parts, m, with_ends=True))
 

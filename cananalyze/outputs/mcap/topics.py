@@ -1,7 +1,7 @@
 """MCAP export for Foxglove: every PDO as a plottable topic, events as a log panel.
 
 Topics (all JSON-encoded with JSON Schema, so Foxglove needs no configuration):
-  /node/<N>/<pdo>     decoded signals of one PDO (numbers as numbers; unit in the
+  /node/<N>/<pdo>     decoded signals of one PDO (/dbc/<message>: a DBC's, on no node) (numbers as numbers; unit in the
                       schema's description)
   /node/<N>/nmt_state NMT state changes seen in heartbeat, boot-up, guarding
   /canopen/events     foxglove.Log: SDO transactions, EMCY, NMT commands, findings
@@ -23,7 +23,7 @@ import numpy as np
 from ... import __version__
 from ...capture import SignalSeries
 from ...columns.json_text import Texts, join, number_text, object_template
-from ...records import SignalBlock
+from ...records import SignalBlock, signal_path
 from .bulk import BulkMcapWriter
 from .frames import log_time_ns
 
@@ -166,7 +166,7 @@ def event_payloads(
 
 
 def signal_topic(s: SignalSeries | SignalBlock) -> str:
-    return f"/node/{s.node}/{s.pdo}"
+    return signal_path(s.node, s.pdo)
 
 
 def state_topic(node: int) -> str:

@@ -20,6 +20,7 @@ import numpy as np
 
 from ... import __version__
 from ...capture import Capture
+from ...records import signal_path
 
 TIMELINE = "time"
 _RR_LEVEL = {1: "DEBUG", 2: "INFO", 3: "WARN", 4: "ERROR", 5: "CRITICAL"}
@@ -53,11 +54,12 @@ def blueprint_for(pdos: Iterable[tuple[int, str, int]], lane_nodes: Iterable[int
         rrb.Vertical(
             *[
                 rrb.TimeSeriesView(
-                    origin=f"/node/{n}/{pdo}", name=f"node {n} {pdo.upper()} (0x{cob_id:03X})"
+                    origin=signal_path(n, pdo),
+                    name=f"node {n} {pdo.upper()} (0x{cob_id:03X})" if n >= 0 else pdo,
                 )
                 for pdo, cob_id in series
             ],
-            name=f"node {n}",
+            name=f"node {n}" if n >= 0 else "DBC",
         )
         for n, series in by_node.items()
     ]
@@ -119,7 +121,7 @@ def send_parts(cap: Capture, rec, absolute: bool, counts: dict[str, int], named:
 
     for s in cap.series:
         for name, values in s.columns.items():
-            path = f"/node/{s.node}/{s.pdo}/{name}"
+            path = f"{signal_path(s.node, s.pdo)}/{name}"
             if path not in named:
                 unit = s.units.get(name)
                 rec.log(

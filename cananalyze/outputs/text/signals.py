@@ -80,8 +80,9 @@ class SignalWriter(Sink):
                 v = r["value"]
                 shown = f"{v:.6g}" if isinstance(v, float) else v
                 unit = f" {r['unit']}" if r["unit"] else ""
+                who = f"node {r['node']} " if r["node"] >= 0 else ""  # a DBC message: no node
                 lines.append(
-                    f"{r['t'] - self.t0:12.6f}  node {r['node']} {r['pdo']} 0x{r['cob_id']:03X} "
+                    f"{r['t'] - self.t0:12.6f}  {who}{r['pdo']} 0x{r['cob_id']:03X} "
                     f"{r['signal']}={shown}{unit}"
                 )
         self.out.write("\n".join(lines) + "\n")

@@ -60,8 +60,7 @@ _KEYED[
         Service.GUARD_REQUEST,
         Service.GUARD_RESPONSE,
         Service.LSS_MASTER,
-        Service.LSS_SLAVE,
-        Service.ERROR_FRAME,
+        Service.LSS_SLAVE,  # (not ERROR_FRAME: its classes are in the identifier)
     ]
 ] = True
 _BYTE_MATTERS = np.zeros(256, bool)  # the first data byte changes the text
@@ -512,10 +511,9 @@ def _signal_text(
     pdo = batch.pdo[rows]
     if (svc != svc[0]).any() or (pdo != pdo[0]).any() or (fb.flags[rows] & FLAG_RTR).any():
         return None
-    if int(svc[0]) not in (Service.TPDO, Service.RPDO):
-        return None
+    if sb.choices:
+        return None  # value-table names: the per-row way
     pos = batch._lazy_index()[1][rows]
-    kind = "TPDO" if int(svc[0]) == Service.TPDO else "RPDO"
     parts: list[np.ndarray] = []
     m = rows.size
 
@@ -527,7 +525,10 @@ def _signal_text(
     units = {name: u for name, u in sb.units.items() if u}
     if any("\0" in x for x in (*sb.columns, *units.values())):
         return None  # NULs are the padding: such text goes the per-row way
-    lead = f"{kind}{int(pdo[0])}  "
+    if int(svc[0]) in (Service.TPDO, Service.RPDO):
+        lead = f"{'TPDO' if int(svc[0]) == Service.TPDO else 'RPDO'}{int(pdo[0])}  "
+    else:
+        lead = f"{sb.pdo}  "  # a DBC message on an identifier CANopen does not use
     for j, (name, col) in enumerate(sb.columns.items()):
         const((lead if j == 0 else " ") + f"{name}=")
         parts.append((col[pos],))  # formatted with every block's columns at once

@@ -1,0 +1,122 @@
+"""DBC out: `devices KEY --node N --dbc OUT` and `export LOG --dbc OUT` write PDOs that
+cantools loads and decodes to the values cananalyze gives for the same frames."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import cantools
+import numpy as np
+import pytest
+
+import cananalyze
+from cananalyze.network.profile import BUILTIN_KEYS
+from tests.conftest import real_file
+
+TMCM = "nigel-bruce-khan__ros_canopen-tmcm-1636/"
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "cananalyze", *args], capture_output=True, text=True, check=True
+    )
+
+
+def _random_frames(db, rng, per: int = 60) -> list[tuple[int, bytes]]:
+    out = []
+    for _ in range(per):
+        for msg in db.messages:
+            out.append((msg.frame_id, rng.integers(0, 256, msg.length, dtype=np.uint8).tobytes()))
+    return out
+
+
+def _compare(cap, db, frames) -> int:
+    """Every signal of the frames at the end of the log: cananalyze's value == cantools'."""
+    sig = cap.signals
+    checked = 0
+    for msg in db.messages:
+        want = [msg.decode(d, decode_choices=False) for i, d in frames if i == msg.frame_id]
+        ours = sig[sig.cob_id == msg.frame_id]
+        for s in msg.signals:
+            got = ours[ours.signal == s.name].value.to_numpy(np.float64)
+            expect = np.array([w[s.name] for w in want], np.float64)
+            assert got.size >= expect.size, (msg.name, s.name)
+            got = got[got.size - expect.size :]
+            assert np.allclose(got, expect, rtol=1e-9, equal_nan=True), (msg.name, s.name)
+            checked += got.size
+    return checked
+
+
+@pytest.mark.parametrize("key", BUILTIN_KEYS)
+def test_devices_dbc_decodes_as_cananalyze(tmp_path, key):
+    out = tmp_path / f"{key}.dbc"
+    text = _cli("devices", key, "--node", "5", "--dbc", str(out)).stdout
+    db = cantools.database.load_file(str(out))
+    assert f"wrote {len(db.messages)} PDOs of node 5 to {out}" in text
+    assert db.messages and all(m.senders in ([], ["node5"]) for m in db.messages)
+    frames = _random_frames(db, np.random.default_rng(len(key)))
+    log = tmp_path / "bus.log"
+    log.write_text(
+        "".join(
+            f"({k * 0.001:.6f}) can0 {i:03X}#{d.hex().upper()}\n" for k, (i, d) in enumerate(frames)
+        )
+    )
+    cap = cananalyze.load(log, device={5: key})
+    assert _compare(cap, db, frames) > 0
+
+
+def test_devices_dbc_carries_scaling_units_and_sign(tmp_path):
+    out = tmp_path / "d.dbc"
+    _cli("devices", "dat7014", "--node", "5", "--dbc", str(out))
+    db = cantools.database.load_file(str(out))
+    msg = db.get_message_by_frame_id(0x285)  # TPDO2 of node 5
+    ch1 = msg.get_signal_by_name("ch1")
+    assert (ch1.scale, ch1.unit, ch1.is_signed, ch1.start, ch1.length) == (0.1, "°C", True, 0, 16)
+
+
+def test_export_dbc_follows_the_logs_remaps(tmp_path):
+    log = real_file(TMCM + "candump.txt")
+    dcf = real_file(TMCM + "TMCM-1636-CANopen.dcf")
+    before = tmp_path / "dcf.dbc"
+    _cli("devices", str(dcf), "--node", "1", "--dbc", str(before))
+    after = tmp_path / "log.dbc"
+    _cli("export", str(log), "--eds", f"1={dcf}", "--dbc", str(after), "-q")
+    db = cantools.database.load_file(str(after))
+    # the log maps RPDO4 (0x501) to 0x6060 modes of operation alone (0x1603:01 = 0x60600008)
+    rpdo4 = db.get_message_by_frame_id(0x501)
+    assert [(s.name, s.start, s.length) for s in rpdo4.signals] == [("modes_of_operation", 0, 8)]
+    assert rpdo4.length == 1
+    dcf_db = cantools.database.load_file(str(before))
+    assert {m.frame_id: [s.name for s in m.signals] for m in dcf_db.messages} != {
+        m.frame_id: [s.name for s in m.signals] for m in db.messages
+    }
+    # frames sent after the configuration: cananalyze and cantools (with the DBC) agree
+    frames = _random_frames(db, np.random.default_rng(3))
+    text = log.read_text().rstrip("\n") + "\n"  # (the file ends without a newline)
+    text += "".join(
+        f"  can0  {i:03X}   [{len(d)}]  {' '.join(f'{b:02X}' for b in d)}\n" for i, d in frames
+    )
+    copy = tmp_path / "tmcm.log"
+    copy.write_text(text)
+    cap = cananalyze.load(copy, eds={1: dcf})
+    assert _compare(cap, db, frames) >= len(frames)
+
+
+def test_export_dbc_of_a_bad_destination_fails_first(tmp_path):
+    log = tmp_path / "bus.log"
+    log.write_text("(0.0) can0 181#00\n")
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "cananalyze",
+            "export",
+            str(log),
+            "--dbc",
+            str(tmp_path / "no/x.dbc"),
+        ],
+        capture_output=True,
+        text=True,
+    )
+    assert r.returncode == 2 and "does not exist" in r.stderr and "Traceback" not in r.stderr
