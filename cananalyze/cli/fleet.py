@@ -24,7 +24,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, metavar="DATASET", help="the dataset folder")
     add_device_options(p)
     p.add_argument("--rules", metavar="FILE", help="rules file: its assertions join the findings")
-    # --dbc (DBC signals for non-CANopen traffic) joins here when it reaches Options
     p.add_argument(
         "--sdo-timeout",
         type=float,
