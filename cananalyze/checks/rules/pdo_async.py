@@ -17,6 +17,13 @@ class PdoAsyncRule(Rule):
         "values or time out; check 0x18xx:3 and 0x18xx:5 and the node's cycle time."
     )
 
+    @staticmethod
+    def _origin(ctx: Context, node: int, cob: int, t: float, sub: int) -> str:
+        """Where a TPDO's inhibit time (sub 3) or event timer (sub 5) came from."""
+        cfg = ctx.config.pdo_params(cob, t)
+        number = cfg[1].number if cfg is not None else 1
+        return ctx.config.origin(node, 0x1800 + number - 1, sub, t, ctx.t0)
+
     def process(self, ctx: Context) -> None:
         g = ctx.gaps("pdo")
         if g.key.size == 0:
@@ -41,9 +48,10 @@ class PdoAsyncRule(Rule):
                         ms(gap[i]),
                         pdo.inhibit_time * 0.1,
                         row=g.row[i],
+                        basis=self._origin(ctx, node, cob, float(g.t[i]), 3),
                     )
             if pdo.event_timer:
-                limit = pdo.event_timer * (1 + self.tolerance) / 1000.0
+                limit = self.late(pdo.event_timer) / 1000.0
                 cand = self.capped(idx[gg > limit], g.prev[idx[gg > limit]], node, cob)
                 if cand.size:
                     before = ctx.nmt.state_at(node, g.prev[cand])
@@ -59,4 +67,5 @@ class PdoAsyncRule(Rule):
                                 ms(gap[i]),
                                 pdo.event_timer,
                                 row=g.row[i],
+                                basis=self._origin(ctx, node, cob, float(g.prev[i]), 5),
                             )

@@ -10,6 +10,7 @@ from ..spans import crossing, runs
 
 class SyncRule(Rule):
     name = "sync"
+    timing = False  # judged by frame order: kept on logs without timestamps
     why = (
         "Synchronous PDOs are sampled and applied on SYNC; a late or irregular SYNC skews every "
         "synchronous control loop; check the SYNC producer's load and 0x1006."
@@ -27,13 +28,13 @@ class SyncRule(Rule):
         gap = g.gap
         changes = ctx.config.changes(None, 0x1006, 0x1006)
         across = crossing(changes, g.prev, g.t)
-        for run, at in runs(changes, g.t):
+        for run, at in runs(changes, g.t) if ctx.timed else ():
             period = ctx.config.sync_period_us(at)
             if not period:
                 continue
             p = period / 1e6
             idx = np.arange(run.start, run.stop)[~across[run]]
-            bad = idx[np.abs(gap[idx] - p) > p * self.tolerance]
+            bad = idx[np.abs(gap[idx] - p) > self.slack(period / 1000) / 1000]
             for i in self.capped(bad, g.t[bad], None, 0x080).tolist():
                 self.emit(
                     g.t[i],
@@ -43,6 +44,7 @@ class SyncRule(Rule):
                     ms(gap[i]),
                     period / 1000,
                     row=g.row[i],
+                    basis=ctx.config.origin(None, 0x1006, 0, float(g.t[i]), ctx.t0),
                 )
         fb = ctx.batch.frames
         has = fb.dlc[g.row] >= 1
