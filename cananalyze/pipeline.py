@@ -119,6 +119,15 @@ class Decoder:
             p.process(out)
         return out
 
+    def tick(self, now: float) -> DecodedBatch | None:
+        """Live, between frames: a zero-row batch with the findings the deadline rules
+        report as overdue at `now` (the log's clock), or None when there are none."""
+        if self.checker is None:
+            return None
+        empty = self.decode(FrameBatch.empty())
+        self.checker.tick(empty, now)
+        return empty if empty.findings else None
+
     def finish(self) -> DecodedBatch:
         """A zero-row batch carrying the records that only the end of the log completes."""
         empty = self.decode(FrameBatch.empty())
@@ -337,7 +346,9 @@ def run(
     decoder's end-of-log batch included); if anything fails or the user interrupts,
     every sink is aborted instead and the error goes on. `stop()` is asked after each
     batch (live runs: duration, Ctrl-C); `tick` seconds of wall clock apart, live
-    sinks get `tick(now)`.
+    sinks get `tick(now)`. Live (`tick` set), the decoder's deadline rules are asked
+    after every batch (a live source yields empty ones while the bus is quiet) what is
+    overdue at the log's clock: the last frame's time plus the wall time since it came.
     """
     from .events.build import EventBuilder
 
@@ -353,12 +364,19 @@ def run(
             sink.open(state)
             opened.append(sink)
         next_tick = time.monotonic() + tick if tick else None
+        arrived = time.monotonic()  # when the latest frame came (the log's clock runs on)
         batches = _read_ahead(source, ended)
         try:
             for fb in batches:
                 _deliver(state, decoder.decode(fb), sinks, filt, events)
                 if next_tick is not None:
                     now = time.monotonic()
+                    if len(fb):
+                        arrived = now
+                    if state.t_last is not None:  # deadlines that passed, quiet bus or not
+                        late = decoder.tick(state.t_last + (now - arrived))
+                        if late is not None:
+                            _deliver(state, late, sinks, filt, events)
                     if now >= next_tick:
                         for sink in sinks:
                             sink.tick(now)

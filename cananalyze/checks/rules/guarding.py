@@ -29,6 +29,7 @@ class GuardingRule(Rule):
         self.req_t: dict[int, float] = {}
         self.pending: dict[int, float] = {}
         self.toggle: dict[int, int] = {}
+        self.reported: set[tuple[int, float]] = set()  # (node, request t) tick() saw expire
 
     def process(self, ctx: Context) -> None:
         b = ctx.batch
@@ -81,19 +82,8 @@ class GuardingRule(Rule):
             guard_moved = self._moved(ctx, node, 0x100C, prev, t)
             life_moved = guard_moved or self._moved(ctx, node, 0x100D, prev, t)
             if factor and not life_moved and gap * 1000 > guard_ms * factor + self.jitter_ms:
-                self.emit(
-                    prev,
-                    node,
-                    0x700 + node,
-                    f"life time exceeded: {ms(gap)} ms between guard requests "
-                    f"> {guard_ms:g} ms x {factor}",
-                    ms(gap),
-                    guard_ms * factor,
-                    row=row,
-                    basis=ctx.config.origin(node, 0x100C, 0, prev, ctx.t0)
-                    + ", "
-                    + ctx.config.origin(node, 0x100D, 0, prev, ctx.t0),
-                )
+                if (node, prev) not in self.reported:  # tick() may have seen it while it lasted
+                    self._life(ctx, node, prev, gap, guard_ms, factor, row)
             elif not guard_moved and abs(gap * 1000 - guard_ms) > self.slack(guard_ms):
                 # the master's schedule, not the node's fault; faster only costs bus load
                 faster = gap * 1000 < guard_ms
@@ -111,6 +101,39 @@ class GuardingRule(Rule):
                 )
         self.req_t[node] = t
         self.pending[node] = t
+
+    def _life(self, ctx, node, prev, gap, guard_ms, factor, row=0, now=None) -> None:
+        """Life time exceeded: no guard request for longer than 0x100C x 0x100D."""
+        text = (
+            f"life time exceeded: {ms(gap)} ms between guard requests"
+            if now is None
+            else f"life time exceeded: no guard request since {ctx.rel(prev)} ({ms(gap)} ms so far)"
+        )
+        self.emit(
+            prev if now is None else now,
+            node,
+            0x700 + node,
+            f"{text} > {guard_ms:g} ms x {factor}",
+            ms(gap),
+            guard_ms * factor,
+            row=row,
+            basis=ctx.config.origin(node, 0x100C, 0, prev, ctx.t0)
+            + ", "
+            + ctx.config.origin(node, 0x100D, 0, prev, ctx.t0),
+        )
+
+    def tick(self, ctx: Context, now: float) -> None:
+        """Live: a node whose guard requests stopped past its life time, reported once."""
+        for node, prev in sorted(self.req_t.items()):
+            if (node, prev) in self.reported:
+                continue
+            cfg = ctx.config.guarding(node, prev)
+            if not cfg or not cfg[1] or self._moved(ctx, node, 0x100C, prev, now):
+                continue
+            guard_ms, factor = cfg
+            if (now - prev) * 1000 > guard_ms * factor + self.jitter_ms:
+                self.reported.add((node, prev))
+                self._life(ctx, node, prev, now - prev, guard_ms, factor, now=now)
 
     @staticmethod
     def _moved(ctx: Context, node: int, index: int, prev: float, t: float) -> bool:

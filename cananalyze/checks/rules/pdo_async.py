@@ -5,6 +5,8 @@ Each gap is judged by the PDO parameters in force at its frame (one lookup per s
 
 from __future__ import annotations
 
+import numpy as np
+
 from ...protocol.nmt import OPERATIONAL
 from ..rule import Context, Rule, ms
 from ..spans import pdo_stretches
@@ -16,6 +18,11 @@ class PdoAsyncRule(Rule):
         "An inhibit time violation floods the bus; an event-timer overrun means consumers see stale "
         "values or time out; check 0x18xx:3 and 0x18xx:5 and the node's cycle time."
     )
+
+    def __init__(self, **kw) -> None:
+        super().__init__(**kw)
+        self.last: dict[int, tuple[float, int, int]] = {}  # COB-ID -> (t, node, event timer)
+        self.reported: set[tuple[int, float]] = set()  # (COB-ID, t) silences tick() saw
 
     @staticmethod
     def _origin(ctx: Context, node: int, cob: int, t: float, sub: int) -> str:
@@ -33,6 +40,8 @@ class PdoAsyncRule(Rule):
             if pdo.direction != "tx" or pdo.transmission_type < 254:
                 continue
             self.subjects.add(node)
+            if idx.size:
+                self.last[cob] = (float(g.t[idx[-1]]), node, int(pdo.event_timer))
             idx = idx[judged]
             gg = gap[idx]
             if pdo.inhibit_time:
@@ -57,6 +66,8 @@ class PdoAsyncRule(Rule):
                     before = ctx.nmt.state_at(node, g.prev[cand])
                     after = ctx.nmt.state_at(node, g.t[cand])
                     for j, i in enumerate(cand.tolist()):
+                        if (cob, float(g.prev[i])) in self.reported:
+                            continue
                         if before[j] == OPERATIONAL and after[j] == OPERATIONAL:
                             self.emit(
                                 g.prev[i],
@@ -69,3 +80,25 @@ class PdoAsyncRule(Rule):
                                 row=g.row[i],
                                 basis=self._origin(ctx, node, cob, float(g.prev[i]), 5),
                             )
+
+    def tick(self, ctx: Context, now: float) -> None:
+        """Live: an event-timer PDO overdue while its node is operational, reported once."""
+        for cob, (last, node, timer) in sorted(self.last.items()):
+            if not timer or (cob, last) in self.reported:
+                continue
+            if (now - last) * 1000 <= self.late(timer):
+                continue
+            state = ctx.nmt.state_at(node, np.array([last, now]))
+            if not (state == OPERATIONAL).all():
+                continue
+            self.reported.add((cob, last))
+            self.emit(
+                now,
+                node,
+                cob,
+                f"no PDO since {ctx.rel(last)} ({ms(now - last)} ms so far) while operational, "
+                f"event timer {timer} ms",
+                ms(now - last),
+                timer,
+                basis=self._origin(ctx, node, cob, last, 5),
+            )
