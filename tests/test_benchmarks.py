@@ -21,6 +21,7 @@ SMOKED = {
     "bench_decode.py",
     "bench_floor.py",
     "bench_live.py",
+    "bench_precision.py",
     "mem_profile.py",
 }
 NUMBER = r"\d+(\.\d+)?"
@@ -205,3 +206,22 @@ def test_arrow_column_waits_for_a_whole_pyarrow(monkeypatch):
     whole.total_allocated_bytes = lambda: 5 << 20
     monkeypatch.setitem(sys.modules, "pyarrow", whole)
     assert mem_profile._arrow_mb() == 5
+
+
+def test_bench_precision_table_per_rule_and_per_1000_frames():
+    """The samples as the "real" folder, this checkout against itself: every log listed
+    with its findings in both columns, per rule counts and rates, CPU beside wall."""
+    lines = _run(
+        "bench_precision.py", "--data", str(SAMPLES), "--no-stack", "--against", str(ROOT)
+    ).stdout.splitlines()
+    assert lines[0].split() == ["log", "frames", "this", "other", "(findings)"]
+    faults = next(line for line in lines if line.startswith("faults.log"))
+    _, frames, this, other = faults.split()
+    assert int(frames) > 100 and int(this) == int(other) > 0
+    rate = rf" +\d+ \( *{NUMBER}\)"
+    per_rule = [line for line in lines if re.fullmatch(rf"  \w+{rate}{rate}", line)]
+    assert any(line.split()[0] == "all" for line in per_rule) and len(per_rule) >= 3
+    for name in ("this", "other"):
+        assert any(
+            re.fullmatch(rf"{name}: CPU {NUMBER} s, wall {NUMBER} s \(.+\)", x) for x in lines
+        )
