@@ -140,7 +140,7 @@ def test_machine_outputs_carry_every_finding_terminal_counts_right(tmp_path):
     assert len(shown) == 21  # the first 20, and the end-of-log one never hidden
     assert any("still active at the end of the log" in line for line in shown)
     (more,) = [line for line in lines if "more like this" in line]
-    assert "18 more like this not shown (39 in all;" in more
+    assert "18 more like this not shown (38 in all;" in more  # one per frame
     assert cananalyze.load(log).findings.rule.eq("emcy").sum() == 39
 
 
@@ -201,3 +201,17 @@ def test_emcy_finding_carries_the_manufacturer_meaning(tmp_path):
         text=True,
     ).stdout
     assert str(meaning) in decoded
+
+
+def test_real_pcan1_one_finding_per_gap_and_none_while_a_node_reboots():
+    """hilch pcan1.trc: node 40's 19.2 s silence is one finding (before: an error and a
+    warning), judged against the period learned before it; node 15's silences each begin
+    with an NMT reset of node 15 (it is rebooting: no heartbeat is due until its boot-up),
+    where the whole-log median used to give three false dropouts."""
+    log = real_file("hilch__canopen-message-interpreter/pcan1.trc")
+    hb = [f for f in cananalyze.check(log) if f.rule == "heartbeat"]
+    (f,) = [f for f in hb if f.node == 40]
+    assert f.t_rel == pytest.approx(91.823, abs=1e-3) and f.severity == "warning"
+    assert f.basis.startswith("learned from the log's median over +0.000 s..")
+    assert f.expected == pytest.approx(1009, abs=5)
+    assert [f for f in hb if f.node == 15] == []

@@ -21,17 +21,17 @@ TERMINAL_CAP = 20  # findings printed per rule and node/COB-ID; the files hold e
 
 def terminal_cap(findings: list[Finding], cap: int) -> tuple[list[Finding], dict]:
     """The findings a terminal shows: the first `cap` per rule and node/COB-ID, and every
-    end-of-log one (errors still active, a node that stopped); for the rest, per key,
-    (first hidden, how many hidden, how many in all)."""
+    end-of-log one (errors still active, a node that stopped: counted apart, never
+    hidden); for the rest, per key, (first hidden, how many hidden, how many in all)."""
     count: dict[tuple, int] = {}
     for f in findings:
-        key = (f.rule, f.node, f.cob_id)
+        key = (f.rule, f.node, f.cob_id, f.at_end)
         count[key] = count.get(key, 0) + 1
     seen: dict[tuple, int] = {}
     shown: list[Finding] = []
     hidden: dict[tuple, list] = {}
     for f in findings:
-        key = (f.rule, f.node, f.cob_id)
+        key = (f.rule, f.node, f.cob_id, f.at_end)
         seen[key] = seen.get(key, 0) + 1
         if seen[key] <= cap or f.at_end:
             shown.append(f)
@@ -99,7 +99,7 @@ class FindingsSink(Sink):
                     colour.paint(format_finding(f), colour.SEVERITY.get(f.severity, ""), on),
                     file=out,
                 )
-            for (rule, node, cob), (first, n, total) in hidden.items():
+            for (rule, node, cob, _), (first, n, total) in hidden.items():
                 where = ("node -" if node is None else f"node {node}") + (
                     "" if cob is None else f" 0x{cob:03X}"
                 )

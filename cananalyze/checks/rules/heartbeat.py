@@ -34,6 +34,7 @@ class HeartbeatRule(Rule):
         self.unjudged: dict[int, list[np.ndarray]] = {}
         self.reported: dict[int, set[float]] = {}  # node -> gap starts already reported
         self.silent: dict[int, float] = {}  # node -> the silence tick() reported, from t
+        self._limits: dict[tuple[int, int], dict] = {}  # _consumer_limits per stretch
 
     def process(self, ctx: Context) -> None:
         g = ctx.gaps("heartbeat")
@@ -114,11 +115,20 @@ class HeartbeatRule(Rule):
         return due, p, start
 
     def _consumer_limits(self, ctx: Context, at: float) -> dict[int, list[tuple[int, float]]]:
-        """producer -> [(consumer, consumer time ms)] of the 0x1016 entries in force at `at`."""
+        """producer -> [(consumer, consumer time ms)] of the 0x1016 entries in force at `at`
+        (asked once per stretch between 0x1016 changes)."""
+        changes = ctx.config.changes(None, 0x1016, 0x1016)
+        key = (changes.size, int(np.searchsorted(changes, at, side="right")))
+        cached = self._limits.get(key)
+        if cached is not None:
+            return cached
         consumers: dict[int, list[tuple[int, float]]] = {}
         for consumer in range(1, 128):
             for producer, limit in ctx.config.heartbeat_consumers(consumer, at).items():
                 consumers.setdefault(producer, []).append((consumer, limit))
+        if len(self._limits) > 64:
+            self._limits.clear()
+        self._limits[key] = consumers
         return consumers
 
     def _consumer_note(self, ctx: Context, node: int, start: float, gap_s: float) -> str:
