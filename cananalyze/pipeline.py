@@ -347,8 +347,10 @@ def run(
     every sink is aborted instead and the error goes on. `stop()` is asked after each
     batch (live runs: duration, Ctrl-C); `tick` seconds of wall clock apart, live
     sinks get `tick(now)`. Live (`tick` set), the decoder's deadline rules are asked
-    after every batch (a live source yields empty ones while the bus is quiet) what is
-    overdue at the log's clock: the last frame's time plus the wall time since it came.
+    after every batch what the bus has gone past: a node silent while others talk is
+    reported as soon as a frame shows its deadline passed, not when its own next frame
+    (or the end) comes. A wholly silent bus is not blamed on each node: the adapter or
+    the logger may be what stopped (the end of the log judges it, as for a file).
     """
     from .events.build import EventBuilder
 
@@ -364,19 +366,16 @@ def run(
             sink.open(state)
             opened.append(sink)
         next_tick = time.monotonic() + tick if tick else None
-        arrived = time.monotonic()  # when the latest frame came (the log's clock runs on)
         batches = _read_ahead(source, ended)
         try:
             for fb in batches:
                 _deliver(state, decoder.decode(fb), sinks, filt, events)
                 if next_tick is not None:
-                    now = time.monotonic()
-                    if len(fb):
-                        arrived = now
-                    if state.t_last is not None:  # deadlines that passed, quiet bus or not
-                        late = decoder.tick(state.t_last + (now - arrived))
+                    if len(fb) and state.t_last is not None:  # deadlines the bus went past
+                        late = decoder.tick(state.t_last)
                         if late is not None:
                             _deliver(state, late, sinks, filt, events)
+                    now = time.monotonic()
                     if now >= next_tick:
                         for sink in sinks:
                             sink.tick(now)

@@ -125,8 +125,9 @@ class Checker:
         self._collect(batch)
 
     def tick(self, batch: DecodedBatch, now: float) -> None:
-        """Live, between frames: the deadline rules report what is overdue at `now` (the
-        log's clock) into `batch` (an empty one the pipeline delivers to the sinks)."""
+        """Live, after a batch: the deadline rules report what is overdue at `now` (the
+        log's clock: the latest frame's time) into `batch` (an empty one the pipeline
+        delivers to the sinks), before the frame that ends the silence comes."""
         if self.timed is False or self.t_last is None:
             return
         ctx = self._context(batch)

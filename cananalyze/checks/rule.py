@@ -137,9 +137,9 @@ class Rule:
         """Check one batch; append to self.out."""
 
     def tick(self, ctx: Context, now: float) -> None:
-        """Live: the wall clock reached `now` (log time) with no frame since the last
-        batch; deadline rules report what is already overdue (once: the frame that ends
-        the silence, or the end of the log, does not report it again)."""
+        """Live: the bus reached `now` (the latest frame's time); deadline rules report
+        what is already overdue (once: the frame that ends the silence, or the end of
+        the log, does not report it again)."""
 
     def finish(self, ctx: Context) -> None:
         """End of log checks (ctx.t_end set, zero rows)."""

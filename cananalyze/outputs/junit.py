@@ -66,7 +66,7 @@ def format_finding(f: Finding) -> str:
         when = f"line {f.line}"
     else:
         when = f"{f.t_rel:+.3f} s" if f.t_rel is not None else f"{f.t:.6f}"
-    basis = f" ({f.basis})" if f.basis else ""
+    basis = f"; {f.basis}" if f.basis else ""
     return (
         f"{when} node {node}{cob} [{f.severity}] {f.rule}: {f.message} "
         f"(measured {show(f.measured)}, expected {show(f.expected)}{basis}). {f.why}"

@@ -8,8 +8,10 @@ nothing in the traffic is a fault, so `check` must find nothing. Used by the tes
 (tests/test_findings_trust.py) and by benchmarks/bench_precision.py.
 
 The virtual bus runs on Python threads: periods jitter by a few ms on a busy machine,
-tens of ms on a loaded one, so the rules text widens the absolute jitter floor
-(`jitter_ms`), never the relative tolerance.
+over a hundred ms on a loaded one, so the rules text widens the absolute jitter floor
+(`jitter_ms`), never the relative tolerance: what these scenarios tell apart (a gap of
+250 ms against 100, of 200 ms against an event timer of 50, a 1 s silence with the
+heartbeat off) stays well beyond it.
 """
 
 from __future__ import annotations
@@ -27,7 +29,8 @@ from cananalyze.frames import FLAG_RTR
 from tests.helpers.virtual_bus import drain, unique_channel, variable
 
 NODE = 5
-RULES_HEAD = "jitter_ms: 40  # python-canopen on a virtual bus: thread scheduling\n"
+# seen on a loaded 2-core machine (load 9): a first heartbeat 155 ms late
+RULES_HEAD = "jitter_ms: 100  # python-canopen on a virtual bus: thread scheduling\n"
 Rows = list[tuple[float, int, bytes, int]]
 
 

@@ -35,6 +35,9 @@ class HeartbeatRule(Rule):
         self.reported: dict[int, set[float]] = {}  # node -> gap starts already reported
         self.silent: dict[int, float] = {}  # node -> the silence tick() reported, from t
         self._limits: dict[tuple[int, int], dict] = {}  # _consumer_limits per stretch
+        # node -> (last heartbeat, the finding tick() made while the silence lasted):
+        # completed when the silence ends, so every output at exit has the whole gap
+        self._open: dict[int, tuple[float, object]] = {}
 
     def process(self, ctx: Context) -> None:
         g = ctx.gaps("heartbeat")
@@ -52,20 +55,34 @@ class HeartbeatRule(Rule):
             bad = np.flatnonzero(t > deadline) + sl.start
             for i in self.capped(bad, g.prev[bad], node, 0x700 + node).tolist():
                 start = float(g.prev[i])
-                if self._seen(node, start):
-                    continue  # tick() reported this silence while it lasted
+                text = (
+                    f"heartbeat dropout: no heartbeat for {ms(gap[i])} ms from {ctx.rel(start)}"
+                    + self._consumer_note(ctx, node, start, float(gap[i]))
+                )
+                if self._seen(node, start):  # tick() reported it while it lasted
+                    self._complete(node, start, start, text, ms(gap[i]), ctx.t0)
+                    continue
                 self.emit(
                     start,
                     node,
                     0x700 + node,
-                    f"heartbeat dropout: no heartbeat for {ms(gap[i])} ms from {ctx.rel(start)}"
-                    + self._consumer_note(ctx, node, start, float(gap[i])),
+                    text,
                     ms(gap[i]),
                     float(period[i - sl.start]),
                     row=g.row[i],
                     basis=ctx.config.origin(node, 0x1017, 0, start, ctx.t0),
                 )
         self._consumers(ctx, g)
+
+    def _complete(self, node: int, last: float, t: float, text: str, measured, t0) -> None:
+        """Complete the finding tick() made for the silence after `last`, now that it
+        ended (the next heartbeat, or the end): its time, text and measured gap."""
+        opened = self._open.get(node)
+        if opened is not None and opened[0] == last:
+            del self._open[node]
+            f = opened[1]
+            f.t, f.message, f.measured = t, text, measured
+            f.t_rel = t - (t0 if t0 is not None else t)
 
     def _seen(self, node: int, start: float) -> bool:
         """Whether a silence from `start` was reported (marks it reported if not)."""
@@ -239,14 +256,19 @@ class HeartbeatRule(Rule):
                     due = last + self._learned_limit(period) / 1000.0
                     basis = f"learned from the log's median over {ctx.rel(lo)}..{ctx.rel(hi)}"
             if period and ctx.t_end is not None and ctx.t_end > due:
-                if node in self.silent and self.silent[node] == last:
-                    continue  # live: reported while it lasted
+                text = (
+                    f"heartbeat stopped: last one at {ctx.rel(last)}, log goes on for "
+                    f"{ms(ctx.t_end - last)} ms"
+                )
+                if node in self.silent and self.silent[node] == last:  # live: seen already
+                    at = start + period / 1000.0
+                    self._complete(node, last, at, text, ms(ctx.t_end - last), ctx.t0)
+                    continue
                 self.emit(
                     start + period / 1000.0,
                     node,
                     0x700 + node,
-                    f"heartbeat stopped: last one at {ctx.rel(last)}, log goes on for "
-                    f"{ms(ctx.t_end - last)} ms",
+                    text,
                     ms(ctx.t_end - last),
                     round(period, 3),
                     why="The node fell silent (power, reset loop, bus-off or crash); check its supply "
@@ -265,6 +287,7 @@ class HeartbeatRule(Rule):
                 continue
             self.silent[node] = last
             self.reported.setdefault(node, set()).add(last)
+            n = len(self.out)
             self.emit(
                 now,
                 node,
@@ -276,3 +299,5 @@ class HeartbeatRule(Rule):
                 "and whether it went bus-off (error frames just before).",
                 basis=ctx.config.origin(node, 0x1017, 0, start, ctx.t0),
             )
+            if len(self.out) > n:
+                self._open[node] = (last, self.out[-1])
