@@ -5,8 +5,8 @@ Runs `check --json` in fresh processes over every log under the real-data folder
 the configuration changes while the bus runs (tests/helpers/config_traffic: nothing in
 it is a fault, so every finding there is a false alarm). With `--against TREE` the same
 logs are checked by another checkout too, interleaved, for a before/after table.
-Findings are counted from the JSON, including the ones an older tree folded into a
-"N more like this not listed (M in all)" row. CPU (user + system) beside wall time.
+Findings are counted from the JSON; where an older tree folded them into a "N more
+like this not listed (M in all)" row, M counts (its JSON could lose listed rows). CPU (user + system) beside wall time.
 
     python benchmarks/bench_precision.py [--data DIR] [--against TREE] [--limit N]
 """
@@ -99,10 +99,18 @@ def check(tree: Path, log: Path, rules: Path | None) -> tuple[Counter | None, fl
                 got, c2, w2 = check(tree, log, plain)
                 return got, cpu + c2, wall + w2
             return None, cpu, wall
-        counts: Counter = Counter()
+        rows: Counter = Counter()  # per (rule, node, COB-ID): rows listed
+        total: dict[tuple, int] = {}  # ... and the "(M in all)" of an older tree's tally
         for rec in json.loads(dest.read_text()):
+            key = (rec["rule"], rec.get("node"), rec.get("cob_id"))
             more = MORE.search(rec.get("message", ""))
-            counts[rec["rule"]] += int(more.group(1)) if more else 1
+            if more:  # an older tree's JSON sometimes lost listed rows: M is the count
+                total[key] = int(more.group(2))
+            else:
+                rows[key] += 1
+        counts: Counter = Counter()
+        for key in set(rows) | set(total):
+            counts[key[0]] += total.get(key, rows[key])
         return counts, cpu, wall
 
 
