@@ -162,6 +162,7 @@ class EmcyRule(Rule):
                 inh * 0.1,
                 row=row,
                 severity="error",
+                basis=ctx.config.origin(n, 0x1015, 0, tk, ctx.t0),
                 why="EMCY faster than its inhibit time can flood the bus in a fault storm; check 0x1015.",
             )
         elif kind == 1:

@@ -85,6 +85,7 @@ class PdoSyncRule(Rule):
                             ms(t[i] - last_t[i]),
                             window / 1000,
                             row=rows[i],
+                            basis=ctx.config.origin(None, 0x1007, 0, float(t[i]), ctx.t0),
                         )
         self.sync_count += srows.size
         if srows.size:

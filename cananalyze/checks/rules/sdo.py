@@ -84,6 +84,7 @@ class SdoRule(Rule):
                     lat,
                     self.max_latency,
                     row=row,
+                    basis="max_latency_ms in the rules file",
                     why="A slow SDO server stalls configuration and may hit the master's timeout; "
                     "check the node's load and the bus load.",
                 )
