@@ -7,7 +7,7 @@ from dataclasses import dataclass
 SEVERITIES = ("error", "warning", "info")
 
 
-@dataclass
+@dataclass(slots=True)  # a misconfigured log can hold many: no per-object dict
 class Finding:
     t: float
     rule: str
