@@ -79,6 +79,7 @@ class Checker:
             return
         self.timed = bool(t.max() > t.min())
         if not self.timed:
+            self.timing.with_stats = False  # gaps between lines are no periods
             skipped = ", ".join(r.name for r in self.rules if r.timing)
             self.findings_untimed = Finding(
                 float(t[0]),

@@ -114,7 +114,11 @@ class FindingsSink(Sink):
                 )
                 print(colour.paint(line, colour.SEVERITY.get(first.severity, ""), on), file=out)
             if self.timing and checker is not None:
-                print("\n".join(checker.timing.lines(checker.nmt, checker.t0)), file=out)
+                if checker.timed is False:
+                    print("no timestamps: the times below are line numbers, no rates", file=out)
+                    print("\n".join(checker.timing.lines(checker.nmt, 0.0)), file=out)
+                else:
+                    print("\n".join(checker.timing.lines(checker.nmt, checker.t0)), file=out)
             failing = len(self.failing)
             names = ", ".join(r.name for r in rules)
             verdict = (
