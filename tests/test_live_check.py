@@ -116,8 +116,11 @@ def test_faults_found_live_with_report_exit_1_and_rrd(tmp_path):
         ("sdo", 5),
     } <= got
     # ... and once, completed with the whole gap when node 6 came back
+    # (a loaded machine may add jitter findings of its own, never a second one for this gap)
     hb6 = [
-        f for f in findings if f["rule"] == "heartbeat" and f["node"] == 6 and 4.2 < f["t_rel"] < 6
+        f
+        for f in findings
+        if f["rule"] == "heartbeat" and f["node"] == 6 and abs(f["t_rel"] - 4.3) < 0.1
     ]
     assert len(hb6) == 1 and hb6[0]["measured"] > 1500
     assert hb6[0]["message"].startswith("heartbeat dropout: no heartbeat for ")
