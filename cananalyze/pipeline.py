@@ -123,6 +123,15 @@ class Decoder:
             p.process(out)
         return out
 
+    def tick(self, now: float) -> DecodedBatch | None:
+        """Live, between frames: a zero-row batch with the findings the deadline rules
+        report as overdue at `now` (the log's clock), or None when there are none."""
+        if self.checker is None:
+            return None
+        empty = self.decode(FrameBatch.empty())
+        self.checker.tick(empty, now)
+        return empty if empty.findings else None
+
     def finish(self) -> DecodedBatch:
         """A zero-row batch carrying the records that only the end of the log completes."""
         empty = self.decode(FrameBatch.empty())
@@ -355,7 +364,11 @@ def run(
     decoder's end-of-log batch included); if anything fails or the user interrupts,
     every sink is aborted instead and the error goes on. `stop()` is asked after each
     batch (live runs: duration, Ctrl-C); `tick` seconds of wall clock apart, live
-    sinks get `tick(now)`.
+    sinks get `tick(now)`. Live (`tick` set), the decoder's deadline rules are asked
+    after every batch what the bus has gone past: a node silent while others talk is
+    reported as soon as a frame shows its deadline passed, not when its own next frame
+    (or the end) comes. A wholly silent bus is not blamed on each node: the adapter or
+    the logger may be what stopped (the end of the log judges it, as for a file).
     """
     from .events.build import EventBuilder
 
@@ -376,6 +389,10 @@ def run(
             for fb in batches:
                 _deliver(state, decoder.decode(fb), sinks, filt, events)
                 if next_tick is not None:
+                    if len(fb) and state.t_last is not None:  # deadlines the bus went past
+                        late = decoder.tick(state.t_last)
+                        if late is not None:
+                            _deliver(state, late, sinks, filt, events)
                     now = time.monotonic()
                     if now >= next_tick:
                         for sink in sinks:

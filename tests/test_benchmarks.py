@@ -25,6 +25,7 @@ SMOKED = {
     "bench_live.py",
     "bench_report.py",
     "bench_pcap.py",
+    "bench_precision.py",
     "mem_profile.py",
 }
 NUMBER = r"\d+(\.\d+)?"
@@ -276,3 +277,22 @@ def test_bench_pcap_reads_every_frame():
     assert "read 3,000 frames (scapy: the first 500)" in out
     for side, count in (("pcap", "3,000"), ("candump", "3,000"), ("scapy rdpcap", "500")):
         assert re.search(rf"  {side} +wall +{NUMBER} s  cpu +{NUMBER} s .*\({count} frames\)", out)
+
+
+def test_bench_precision_table_per_rule_and_per_1000_frames():
+    """The samples as the "real" folder, this checkout against itself: every log listed
+    with its findings in both columns, per rule counts and rates, CPU beside wall."""
+    lines = _run(
+        "bench_precision.py", "--data", str(SAMPLES), "--no-stack", "--against", str(ROOT)
+    ).stdout.splitlines()
+    assert lines[0].split() == ["log", "frames", "this", "other", "(findings)"]
+    faults = next(line for line in lines if line.startswith("faults.log"))
+    _, frames, this, other = faults.split()
+    assert int(frames) > 100 and int(this) == int(other) > 0
+    rate = rf" +\d+ \( *{NUMBER}\)"
+    per_rule = [line for line in lines if re.fullmatch(rf"  \w+{rate}{rate}", line)]
+    assert any(line.split()[0] == "all" for line in per_rule) and len(per_rule) >= 3
+    for name in ("this", "other"):
+        assert any(
+            re.fullmatch(rf"{name}: CPU {NUMBER} s, wall {NUMBER} s \(.+\)", x) for x in lines
+        )

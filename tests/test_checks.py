@@ -91,10 +91,24 @@ def test_heartbeat_consumer_expiry():
     times = [0.1, 0.2, 0.3, 0.65, 0.75]
     c = run(
         boot_start([5]) + hb(5, times),
-        network={"nodes": {5: {"heartbeat_ms": 100}, 1: {"heartbeat_consumer": {5: 250}}}},
+        network={"nodes": {1: {"heartbeat_consumer": {5: 250}}}},  # 0x1017 not known
     )
     consumer = [f for f in by_rule(c, "heartbeat") if "consumer" in f.message]
     assert len(consumer) == 1 and consumer[0].t == pytest.approx(0.55)
+
+
+def test_one_gap_is_one_finding_dropout_and_consumer_expiry():
+    """A gap late for 0x1017 that also expires a consumer's 0x1016 is one fault: one
+    finding naming both, and where each expectation came from."""
+    times = [0.1, 0.2, 0.3, 0.65, 0.75]
+    c = run(
+        boot_start([5]) + hb(5, times),
+        network={"nodes": {5: {"heartbeat_ms": 100}, 1: {"heartbeat_consumer": {5: 300}}}},
+    )
+    (f,) = by_rule(c, "heartbeat")
+    assert f.t == pytest.approx(0.3) and f.measured == pytest.approx(350.0)
+    assert "expired node 1's consumer time 300 ms" in f.message
+    assert f.basis == "0x1017 in the network file"
 
 
 def test_unexpected_bootup_but_not_after_reset():

@@ -48,7 +48,8 @@ class ReferenceEmcyRule(EmcyRule):
                           f"time 0x1015 is {inhibit * 0.1:g} ms",
                           ms(t - prev), inhibit * 0.1, row=row, severity="error",
                           why="EMCY faster than its inhibit time can flood the bus in a fault "
-                          "storm; check 0x1015.")  # fmt: skip
+                          "storm; check 0x1015.",
+                          basis=ctx.config.origin(node, 0x1015, 0, t, ctx.t0))  # fmt: skip
             if dlc < 8:
                 self.emit(t, node, 0x80 + node, f"EMCY with {dlc} data bytes, CiA 301 needs 8",
                           dlc, 8, row=row, severity="error",

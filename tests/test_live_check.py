@@ -84,13 +84,24 @@ def test_faults_found_live_with_report_exit_1_and_rrd(tmp_path):
     live = [(t, x) for t, x in timed if x.startswith("    └─ ERROR ") or "└─ WARNING" in x]
     signal_hit = [t for t, x in live if "assert_signal: ch3 = 3276.7 outside -200..850" in x]
     assert signal_hit and signal_hit[0] < t_end - 3  # ch3 breaks 4 s into a 10 s log
-    assert any("heartbeat: heartbeat dropout: no heartbeat for 1" in x for _, x in live)
+    # node 6's 1.6 s silence, seen while it lasted (the rest of the bus talks on)
+    assert any(
+        re.search(
+            r"heartbeat: heartbeat (stopped: none since \+4\.\d{3} s|dropout: no heartbeat for 1)",
+            x,
+        )
+        for _, x in live
+    )
 
     # at the end: check's report (findings, verdict line), JUnit and JSON
     verdict = [x for x in lines if re.match(r"\d+ rules \(", x)]
-    assert len(verdict) == 1 and " 0 note(s)" in verdict[0]
+    assert len(verdict) == 1
     findings = json.loads(js.read_text())
-    assert len(findings) == int(verdict[0].split(": ")[1].split()[0])
+    # notes: only guard requests the replay's jitter brought early (info, not a fault)
+    notes = [f for f in findings if f["severity"] == "info"]
+    assert verdict[0].endswith(f" {len(notes)} note(s)")
+    assert all(f["rule"] == "guarding" and "faster" in f["message"] for f in notes)
+    assert len(findings) - len(notes) == int(verdict[0].split(": ")[1].split()[0])
     got = {(f["rule"], f["node"]) for f in findings}
     # the faults the scenario injects (samples/README.md); timing jitter on a busy machine
     # may add more, so these must be there, not only these
@@ -104,6 +115,15 @@ def test_faults_found_live_with_report_exit_1_and_rrd(tmp_path):
         ("sdo", 3),
         ("sdo", 5),
     } <= got
+    # ... and once, completed with the whole gap when node 6 came back
+    # (a loaded machine may add jitter findings of its own, never a second one for this gap)
+    hb6 = [
+        f
+        for f in findings
+        if f["rule"] == "heartbeat" and f["node"] == 6 and abs(f["t_rel"] - 4.3) < 0.1
+    ]
+    assert len(hb6) == 1 and hb6[0]["measured"] > 1500
+    assert hb6[0]["message"].startswith("heartbeat dropout: no heartbeat for ")
     emcy = sorted(f["measured"] for f in findings if f["rule"] == "emcy" and f["node"] == 3)
     assert emcy == ["0x8100", "0x8130", "0x8140"]
     sdo = {f["message"] for f in findings if f["rule"] == "sdo" and " took " not in f["message"]}

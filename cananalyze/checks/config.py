@@ -39,6 +39,12 @@ class ConfigSource(Protocol):
     def emcy_inhibit_100us(self, node: int, t: float) -> float | None:
         """EMCY inhibit time 0x1015, in 100 us (0 = none)."""
 
+    def origin(self, node: int | None, index: int, sub: int, t: float, t0: float = 0.0) -> str:
+        """Where the value in force at t comes from ("0x1017 written at +1.000 s")."""
+
+    def consumer_origin(self, consumer: int, producer: int, t: float, t0: float = 0.0) -> str:
+        """Where the consumer's 0x1016 entry for `producer` in force at t comes from."""
+
     def known_cob_ids(self) -> set[int]:
         """Identifiers the network file declares as expected (non-CANopen traffic)."""
 

@@ -2,16 +2,29 @@
 
 Findings go into `batch.records` at their row (so `decode --format jsonl` streams
 them) and into `self.findings` for the CLI, JUnit and the Python assertions.
+
+A log without timestamps (candump screen output: every frame at one time) is told
+once, its timing rules are skipped, and the order-based rules (PDO before start,
+unexpected boot-up, SDO protocol, SYNC counter) judge it by line order: the rules see
+each frame's line as its time. Live, `tick(now)` lets the deadline rules report a
+silence while it lasts, not when the next frame (or Ctrl-C) ends it.
 """
 
 from __future__ import annotations
 
+import dataclasses
+
+import numpy as np
+
+from ..frames import FrameBatch
 from ..records import DecodedBatch
 from .config import ConfigSource
 from .finding import Finding
 from .nmt_state import NmtStates
 from .rule import Context, GapState, Rule
 from .timing import Timing
+
+UNTIMED = "timestamps"  # the rule name of the one "no timestamps" finding
 
 
 class Checker:
@@ -34,30 +47,99 @@ class Checker:
         self._gaps = GapState()
         self.t_last: float | None = None
         self.t0: float | None = None  # first frame of the log: findings read time from here
+        # None until a batch of two frames or more says: False for a log without timestamps
+        self.timed: bool | None = None
+        self._view_t = np.zeros(0)  # the lines of the last batch the rules saw
+        self.findings_untimed: Finding | None = None
+        self._order = 0  # frames seen (the line of an untimed frame without a line number)
+        self._last_line = 0
+
+    @property
+    def active(self) -> list[Rule]:
+        """The rules that judge this log: not the timing rules on a log without times."""
+        if self.timed is False:
+            return [r for r in self.rules if not r.timing]
+        return self.rules
 
     def _context(self, batch: DecodedBatch, t_end: float | None = None) -> Context:
         if self.t0 is None and len(batch):
             self.t0 = float(batch.frames.t[0])
-        ctx = Context(batch, self.config, self.nmt, self._gaps, t_end, self.t0)
+        t0 = self.t0
+        if self.timed is False:
+            batch = self._by_order(batch)
+            t0 = 0.0
+        ctx = Context(batch, self.config, self.nmt, self._gaps, t_end, t0, self.timed is not False)
         ctx.timing = self.timing
         return ctx
+
+    def _decide(self, batch: DecodedBatch) -> None:
+        """Whether the log has timestamps, from its first batch of two frames or more."""
+        t = batch.frames.t
+        if self.timed is not None or t.size < 2:
+            return
+        self.timed = bool(t.max() > t.min())
+        if not self.timed:
+            self.timing.with_stats = False  # gaps between lines are no periods
+            skipped = ", ".join(r.name for r in self.rules if r.timing)
+            self.findings_untimed = Finding(
+                float(t[0]),
+                UNTIMED,
+                "info",
+                None,
+                None,
+                f"no timestamps: timing rules skipped ({skipped}); the others judged by line order",
+                "no timestamps",
+                "timestamps",
+                "Every frame of the log has the same time (screen output of candump without "
+                "-t, or a logger without a clock): periods, timeouts and deadlines cannot be "
+                "judged. Record with timestamps (candump -l or -t a) to check them.",
+                line=int(batch.frames.line[0]) or 1,
+            )
+
+    def _by_order(self, batch: DecodedBatch) -> DecodedBatch:
+        """The batch as the rules see it in a log without times: each frame's time is its
+        line (file order), or its position when the reader gives no line numbers."""
+        fb = batch.frames
+        n = len(fb)
+        if n == 0:
+            return batch
+        line = fb.line.astype(np.float64)
+        if not (line[0] > self._last_line and (n < 2 or bool(np.all(np.diff(line) > 0)))):
+            line = np.arange(self._order + 1, self._order + n + 1, dtype=np.float64)
+        self._order += n
+        self._last_line = int(line[-1])
+        frames: FrameBatch = dataclasses.replace(fb, t=line)
+        self._view_t = line
+        return dataclasses.replace(batch, frames=frames)
 
     def process(self, batch: DecodedBatch) -> None:
         if len(batch) == 0 and not batch.records:
             return
+        self._decide(batch)
         ctx = self._context(batch)
         if len(batch):
-            self.nmt.update(batch)
-            self.t_last = float(batch.frames.t[-1])
+            self.nmt.update(ctx.batch)
+            self.t_last = float(ctx.batch.frames.t[-1])
         self.timing.update(ctx)
-        for rule in self.rules:
+        for rule in self.active:
             rule.process(ctx)
+        self._collect(batch)
+
+    def tick(self, batch: DecodedBatch, now: float) -> None:
+        """Live, after a batch: the deadline rules report what is overdue at `now` (the
+        log's clock: the latest frame's time) into `batch` (an empty one the pipeline
+        delivers to the sinks), before the frame that ends the silence comes."""
+        if self.timed is False or self.t_last is None:
+            return
+        ctx = self._context(batch)
+        for rule in self.active:
+            rule.tick(ctx, now)
         self._collect(batch)
 
     def finish(self, batch: DecodedBatch) -> None:
         ctx = self._context(batch, t_end=self.t_last)
         self.timing.update(ctx)
-        for rule in self.rules:
+        for rule in self.active:
             rule.process(ctx)  # records that only the end completes (pending SDO timeouts)
             rule.finish(ctx)
             rule.close(self.t_last or 0.0)
@@ -65,11 +147,24 @@ class Checker:
 
     def _collect(self, batch: DecodedBatch, at_end: bool = False) -> None:
         new: list[Finding] = []
+        if self.findings_untimed is not None:
+            new.append(self.findings_untimed)
+            self.findings_untimed = None
         for rule in self.rules:
             new.extend(rule.take())
-        new.sort(key=lambda f: f.t)
+        if self.timed is False:  # the rules' times are lines: back to the log's time
+            t_log = self.t0 if self.t0 is not None else 0.0
+            lines = self._view_t
+            for f in new:
+                if f.rule == UNTIMED:
+                    continue
+                if f.t < 1 and not at_end and 0 <= f.row < lines.size:
+                    f.t = lines[f.row]  # an SDO record's own time: the log's, not a line
+                f.line, f.t = (int(f.t) if f.t >= 1 else None), t_log
+        new.sort(key=lambda f: (f.t, f.line or 0))
         for f in new:
             f.t_rel = f.t - (self.t0 if self.t0 is not None else f.t)
+            f.at_end = at_end
             batch.add_record(0 if at_end else f.row, f.record())
         batch.findings.extend(new)
         self.findings.extend(new)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 SEVERITIES = ("error", "warning", "info")
 
 
-@dataclass
+@dataclass(slots=True)  # a misconfigured log can hold many: no per-object dict
 class Finding:
     t: float
     rule: str
@@ -20,6 +20,11 @@ class Finding:
     why: str = ""
     row: int = 0  # row of the batch the finding belongs to (for JSONL placement)
     t_rel: float | None = None  # seconds since the first frame of the log (set by the Checker)
+    # where the expected value came from ("0x1017 written at +12.300 s", "network file",
+    # "EDS default", "learned from the log's median over +0.000..+12.300 s")
+    basis: str = ""
+    line: int | None = None  # the frame's line, in a log without timestamps
+    at_end: bool = False  # found at the end of the log (errors still active, silence)
 
     def __post_init__(self) -> None:
         self.measured = tidy(self.measured)
@@ -44,6 +49,8 @@ class Finding:
             "measured": self.measured,
             "expected": self.expected,
             "why": self.why,
+            "basis": self.basis,
+            "line": self.line,
         }
 
 

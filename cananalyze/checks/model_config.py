@@ -18,6 +18,7 @@ import numpy as np
 
 from ..network.model import NetworkModel
 from ..network.pdo_map import PdoConfig
+from .finding import rel_time
 
 
 class ModelConfig:
@@ -30,6 +31,39 @@ class ModelConfig:
         if k is None or (k.value == 0 and k.source == "profile"):
             return None
         return k.value
+
+    def origin(self, node: int | None, index: int, sub: int, t: float, t0: float = 0.0) -> str:
+        """Where the value of an object in force at t comes from, in a finding's words:
+        "0x1017 written at +12.300 s", "network file", "profile default" (node None:
+        a bus-wide object, 0x1006/0x1007)."""
+        tl = self.model.timeline
+        if node is None:
+            change = tl.latest(index, t)
+            entry = None if change is None else (change.t, 0, change)
+            declared = (index, 0) in self.model._bus_file
+        else:
+            entry = tl.last(node, index, sub, t)
+            declared = (node, index, sub) in self.model._file
+        obj = f"0x{index:04X}" if sub == 0 else f"0x{index:04X}:{sub}"
+        if entry is not None:
+            c = entry[2]
+            how = "read back" if c.how == "read" else "written"
+            where = "" if node is None or c.node == node else f" on node {c.node}"
+            return f"{obj} {how}{where} at {rel_time(c.t, t0)}"
+        if declared:
+            return (
+                f"{obj} in the network file"
+                if self.model.spec.source
+                else (f"{obj} in the rules file's network:")
+            )
+        return f"{obj} profile default"
+
+    def consumer_origin(self, consumer: int, producer: int, t: float, t0: float = 0.0) -> str:
+        """Where `consumer`'s 0x1016 entry for `producer` in force at t comes from."""
+        for sub in self.model.subindices(consumer, 0x1016):
+            if ((self._value(consumer, 0x1016, sub, t) or 0) >> 16) & 0x7F == producer:
+                return self.origin(consumer, 0x1016, sub, t, t0)
+        return "0x1016"
 
     def heartbeat_ms(self, node: int, t: float) -> float | None:
         v = self._value(node, 0x1017, 0, t)

@@ -42,8 +42,11 @@ class Context:
         state: GapState,
         t_end: float | None = None,
         t0: float | None = None,
+        timed: bool = True,
     ) -> None:
         self.batch = batch
+        # False: the log has no timestamps; `t` is then each frame's line (its order)
+        self.timed = timed
         self.config = config
         self.nmt = nmt
         self.t = batch.frames.t
@@ -54,8 +57,9 @@ class Context:
         self._gaps: dict[str, Gaps] = {}
 
     def rel(self, t: float) -> str:
-        """A time in a finding's message, from the start of the log ('+4.407 s')."""
-        return rel_time(t, self.t0)
+        """A time in a finding's message, from the start of the log ('+4.407 s'), or
+        the line of a log without timestamps."""
+        return rel_time(t, self.t0) if self.timed else f"line {int(t)}"
 
     def rows(self, *services: Service) -> np.ndarray:
         svc = self.batch.service
@@ -83,29 +87,59 @@ class Context:
         return g
 
 
+# The absolute floor of every timing tolerance, in ms: a stack's scheduler (an RTOS tick,
+# a Linux thread) adds a few ms whatever the period, so 11.8 ms against a 10 ms event
+# timer is jitter, not a fault. Overridable per rule and file-wide (`jitter_ms:`).
+JITTER_MS = 2.0
+
+
 class Rule:
     name = ""
     severity = "error"
     tolerance = 0.1
+    jitter_ms = JITTER_MS
     why = ""
-    max_findings = 20  # per rule and node/COB-ID; the rest are counted in one closing finding
+    # per rule and node/COB-ID: a bound on memory for a badly misconfigured log (the rest
+    # are counted in one closing finding); the terminal shows fewer (FindingsSink)
+    max_findings = 100_000
+    timing = True  # False: judged by frame order alone (kept on logs without timestamps)
     needs_gaps: tuple[str, ...] = ()  # gap tables whose every gap Timing must keep (all_gaps)
 
     def __init__(
-        self, severity: str | None = None, tolerance: float | None = None, **params
+        self,
+        severity: str | None = None,
+        tolerance: float | None = None,
+        jitter_ms: float | None = None,
+        **params,
     ) -> None:
         if severity:
             self.severity = severity
         if tolerance is not None:
             self.tolerance = float(tolerance)
+        if jitter_ms is not None:
+            self.jitter_ms = float(jitter_ms)
         self.params = params
         self.subjects: set[int | None] = set()
         self.out: list[Finding] = []
         self._count: Counter = Counter()
         self._first_dropped: dict = {}
 
+    def slack(self, period_ms: float) -> float:
+        """How far past `period_ms` (ms) a frame may come: the relative tolerance, at least
+        the absolute jitter floor."""
+        return max(period_ms * self.tolerance, self.jitter_ms)
+
+    def late(self, period_ms: float) -> float:
+        """The longest gap (ms) still on time for a period."""
+        return period_ms + self.slack(period_ms)
+
     def process(self, ctx: Context) -> None:
         """Check one batch; append to self.out."""
+
+    def tick(self, ctx: Context, now: float) -> None:
+        """Live: the bus reached `now` (the latest frame's time); deadline rules report
+        what is already overdue (once: the frame that ends the silence, or the end of
+        the log, does not report it again)."""
 
     def finish(self, ctx: Context) -> None:
         """End of log checks (ctx.t_end set, zero rows)."""
@@ -148,6 +182,7 @@ class Rule:
         row: int = 0,
         why: str | None = None,
         severity: str | None = None,
+        basis: str = "",
     ) -> None:
         key = (node, cob_id)
         self._count[key] += 1
@@ -166,6 +201,7 @@ class Rule:
                 expected,
                 why if why is not None else self.why,
                 int(row),
+                basis=basis,
             )
         )
 

@@ -18,7 +18,7 @@ from .finding import SEVERITIES
 from .registry import ASSERTIONS, RULES
 from .rule import Rule
 
-_COMMON = {"enabled", "severity", "tolerance"}
+_COMMON = {"enabled", "severity", "tolerance", "jitter_ms"}
 
 
 class _Doc:
@@ -51,6 +51,10 @@ def _check_params(doc: _Doc, keys: list, cls: type[Rule], params: dict) -> dict:
             not isinstance(v, (int, float)) or isinstance(v, bool) or not 0 <= v < 10
         ):
             doc.fail(keys + [k], f"tolerance is a fraction like 0.1 (10 %), not {v!r}")
+        if k == "jitter_ms" and (
+            not isinstance(v, (int, float)) or isinstance(v, bool) or not 0 <= v <= 60_000
+        ):
+            doc.fail(keys + [k], f"jitter_ms is a time in ms like 2 (0..60000), not {v!r}")
     for name, p in sig.parameters.items():
         if (
             name not in ("self", "kw")
@@ -68,9 +72,20 @@ def load_rules(path: str | Path) -> tuple[list[Rule], NetworkSpec | None]:
     doc = _Doc(Path(path))
     data = doc.data
     for k in data:
-        if k not in ("tolerance", "rules", "assert", "network"):
-            doc.fail([k], f"unknown top-level key {k!r} (known: tolerance, rules, assert, network)")
+        if k not in ("tolerance", "jitter_ms", "rules", "assert", "network"):
+            doc.fail(
+                [k],
+                f"unknown top-level key {k!r} (known: tolerance, jitter_ms, rules, assert, network)",
+            )
     default_tol = data.get("tolerance")
+    default_jitter = data.get("jitter_ms")
+    if default_tol is not None or default_jitter is not None:
+        _check_params(
+            doc,
+            [],
+            RULES["heartbeat"],
+            {k: data[k] for k in ("tolerance", "jitter_ms") if k in data},
+        )
     settings = data.get("rules") or {}
     if not isinstance(settings, dict):
         doc.fail(["rules"], "rules: must map rule names to settings")
@@ -91,6 +106,8 @@ def load_rules(path: str | Path) -> tuple[list[Rule], NetworkSpec | None]:
         kw = _check_params(doc, ["rules", name], cls, params)
         if default_tol is not None:
             kw.setdefault("tolerance", default_tol)
+        if default_jitter is not None:
+            kw.setdefault("jitter_ms", default_jitter)
         rules.append(_make(doc, ["rules", name], cls, kw))
     asserts = data.get("assert") or []
     if not isinstance(asserts, list):
@@ -144,6 +161,8 @@ def load_rules(path: str | Path) -> tuple[list[Rule], NetworkSpec | None]:
         kw = _check_params(doc, keys, cls, params)
         if default_tol is not None:
             kw.setdefault("tolerance", default_tol)
+        if default_jitter is not None:
+            kw.setdefault("jitter_ms", default_jitter)
         rules.append(_make(doc, keys, cls, kw))
     network = _network(doc)
     return rules, None if network is None else combine(network, source=str(doc.path))

@@ -182,7 +182,7 @@ class Timing:
             out["heartbeat"][node] = self.stats["heartbeat"][node].stats()
         for cob in sorted(self.stats["pdo"]):
             s = self.stats["pdo"][cob].stats()
-            s["rate_hz"] = self.rate_hz("pdo", cob)
+            s["rate_hz"] = self.rate_hz("pdo", cob) if self.with_stats else None
             out["pdo"][cob] = s
         if self.stats["sync"]:
             out["sync"] = self.stats["sync"][0].stats()

@@ -72,10 +72,14 @@ def format_finding(f: Finding) -> str:
     """One line per finding, time from the start of the log (absolute `t` stays in JSON)."""
     node = "-" if f.node is None else str(f.node)
     cob = "" if f.cob_id is None else f" 0x{f.cob_id:03X}"
-    when = f"{f.t_rel:+.3f} s" if f.t_rel is not None else f"{f.t:.6f}"
+    if f.line is not None:
+        when = f"line {f.line}"
+    else:
+        when = f"{f.t_rel:+.3f} s" if f.t_rel is not None else f"{f.t:.6f}"
+    basis = f"; {f.basis}" if f.basis else ""
     return (
         f"{when} node {node}{cob} [{f.severity}] {f.rule}: {f.message} "
-        f"(measured {show(f.measured)}, expected {show(f.expected)}). {f.why}"
+        f"(measured {show(f.measured)}, expected {show(f.expected)}{basis}). {f.why}"
     )
 
 

@@ -163,9 +163,13 @@ def annotation(fields: dict) -> str:
     line = text(fields["error_code"], fields["error_register"], fields["manufacturer"])
     decoded = fields.get("manufacturer_decoded")
     if decoded and not fields["reset"]:
-        words = decoded.get("meaning") or ", ".join(decoded.get("flags") or []) or str(decoded)
-        line += f" ({words})"
+        line += f" ({decoded_words(decoded)})"
     return line
+
+
+def decoded_words(decoded: dict) -> str:
+    """A profile's reading of the vendor bytes in words (decode's line, check's finding)."""
+    return decoded.get("meaning") or ", ".join(decoded.get("flags") or []) or str(decoded)
 
 
 def text_columns(data: np.ndarray, dlc: np.ndarray) -> list[np.ndarray]:

@@ -37,6 +37,7 @@ class AssertHeartbeat(Rule):
                     ms(g.gap[i]),
                     self.period,
                     row=g.row[i],
+                    basis="the rules file's assert",
                 )
 
     def finish(self, ctx: Context) -> None:

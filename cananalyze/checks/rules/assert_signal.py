@@ -9,6 +9,7 @@ from ..rule import Context, Rule
 
 class AssertSignal(Rule):
     name = "assert_signal"
+    timing = False  # judged by frame order: kept on logs without timestamps
     why = "A process value left its allowed range; check the sensor, its scaling and the process itself."
 
     def __init__(

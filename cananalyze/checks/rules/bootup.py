@@ -25,6 +25,7 @@ _SENT[_SENT_BY_NODE] = True
 
 class BootupRule(Rule):
     name = "unexpected_bootup"
+    timing = False  # judged by frame order: kept on logs without timestamps
     why = (
         "A node that boots without being told to has reset itself (watchdog, brown-out, crash); "
         "it lost its configuration and is pre-operational; check its supply and EMCY history."
@@ -64,7 +65,8 @@ class BootupRule(Rule):
             t = float(fb.t[row])
             seen_before = self.alive[node] or first_row[node] < row
             reset = self.last_reset.get(node)
-            if seen_before and (reset is None or t - reset > self.window):
+            late = reset is None or (ctx.timed and t - reset > self.window)
+            if seen_before and late:
                 self.emit(
                     t,
                     node,

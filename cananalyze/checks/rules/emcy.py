@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...protocol.emcy import MIN_BYTES, SIZE, error_text, register_text
+from ...protocol.emcy import MIN_BYTES, SIZE, decoded_words, error_text, register_text
 from ...protocol.services import Service
 from ..rule import Context, Rule, ms
 from ..spans import crossing, per_frame
@@ -15,10 +15,12 @@ from ..spans import crossing, per_frame
 
 class EmcyRule(Rule):
     name = "emcy"
+    timing = False  # judged by frame order: kept on logs without timestamps
     severity = "warning"
     why = (
         "The node reported an error condition; read the error code and register, and the "
-        "device manual's meaning of the manufacturer bytes."
+        "manufacturer bytes' meaning (in brackets when the node's profile knows it, else "
+        "in the device manual)."
     )
 
     def __init__(self, allow: list[int] | None = None, **kw) -> None:
@@ -26,6 +28,7 @@ class EmcyRule(Rule):
         self.allow = {int(c) for c in allow or []}
         self.active: dict[int, dict[int, float]] = {}
         self.last_t: dict[int, float] = {}
+        self.words: dict[tuple[int, int], str] = {}  # (node, code) -> the device's meaning
 
     def process(self, ctx: Context) -> None:
         """Columns per batch; Python only per node and per finding actually listed.
@@ -72,7 +75,8 @@ class EmcyRule(Rule):
             across[at] = crossing(changes, prev[at], t[at])
         with np.errstate(invalid="ignore"):
             fast = (
-                ~np.isnan(prev)
+                ctx.timed
+                & ~np.isnan(prev)
                 & ~across
                 & (inhibit != 0)
                 & ((t - prev) < inhibit * 1e-4 * (1 - self.tolerance))
@@ -158,6 +162,7 @@ class EmcyRule(Rule):
                 inh * 0.1,
                 row=row,
                 severity="error",
+                basis=ctx.config.origin(n, 0x1015, 0, tk, ctx.t0),
                 why="EMCY faster than its inhibit time can flood the bus in a fault storm; check 0x1015.",
             )
         elif kind == 1:
@@ -175,11 +180,17 @@ class EmcyRule(Rule):
             )
         else:
             c, r = int(code[k]), int(reg[k])
+            decoded = ctx.batch.notes.get(row, {}).get("manufacturer_decoded")
+            words = f" ({decoded_words(decoded)})" if decoded else ""
+            if words:
+                self.words[(n, c)] = words
+            else:
+                self.words.pop((n, c), None)
             self.emit(
                 tk,
                 n,
                 0x80 + n,
-                f"EMCY {error_text(c)}; {register_text(r)}",
+                f"EMCY {error_text(c)}; {register_text(r)}{words}",
                 f"0x{c:04X}",
                 "no EMCY"
                 if not self.allow
@@ -196,8 +207,8 @@ class EmcyRule(Rule):
                     t,
                     node,
                     0x80 + node,
-                    f"EMCY {error_text(code)} raised at {ctx.rel(t)} "
-                    "still active at the end of the log",
+                    f"EMCY {error_text(code)}{self.words.get((node, code), '')} raised at "
+                    f"{ctx.rel(t)} still active at the end of the log",
                     f"0x{code:04X}",
                     "cleared",
                     why="No error reset (EMCY 0x0000) followed; the node may still be in its fault "

@@ -10,6 +10,7 @@ from ..rule import Context, Rule
 
 class ErrorFrameRule(Rule):
     name = "error_frames"
+    timing = False  # judged by frame order: kept on logs without timestamps
     why = (
         "Error frames come from wiring, termination, bit-timing or a failing transceiver; each one "
         "destroys a frame and repeated ones drive nodes bus-off; check termination and bitrate."

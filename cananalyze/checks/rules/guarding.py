@@ -16,6 +16,7 @@ from ..spans import crossing
 
 class GuardingRule(Rule):
     name = "guarding"
+    timing = False  # judged by frame order: kept on logs without timestamps
     why = (
         "Node guarding is how master and node notice each other's loss; a late request or a "
         "missing or wrong reply makes one side take its life-guarding fault reaction; check "
@@ -28,6 +29,7 @@ class GuardingRule(Rule):
         self.req_t: dict[int, float] = {}
         self.pending: dict[int, float] = {}
         self.toggle: dict[int, int] = {}
+        self.reported: set[tuple[int, float]] = set()  # (node, request t) tick() saw expire
 
     def process(self, ctx: Context) -> None:
         b = ctx.batch
@@ -72,36 +74,66 @@ class GuardingRule(Rule):
         if sent is not None:
             self._no_reply(ctx, node, sent, row)
         prev = self.req_t.get(node)
-        cfg = ctx.config.guarding(node, t)
+        cfg = ctx.config.guarding(node, t) if ctx.timed else None
         if prev is not None and cfg:
             guard_ms, factor = cfg
             gap = t - prev
             # a gap across a new 0x100C (or 0x100D) is not judged against either value
             guard_moved = self._moved(ctx, node, 0x100C, prev, t)
             life_moved = guard_moved or self._moved(ctx, node, 0x100D, prev, t)
-            if factor and not life_moved and gap * 1000 > guard_ms * factor:
-                self.emit(
-                    prev,
-                    node,
-                    0x700 + node,
-                    f"life time exceeded: {ms(gap)} ms between guard requests "
-                    f"> {guard_ms:g} ms x {factor}",
-                    ms(gap),
-                    guard_ms * factor,
-                    row=row,
-                )
-            elif not guard_moved and abs(gap * 1000 - guard_ms) > guard_ms * self.tolerance:
+            if factor and not life_moved and gap * 1000 > guard_ms * factor + self.jitter_ms:
+                if (node, prev) not in self.reported:  # tick() may have seen it while it lasted
+                    self._life(ctx, node, prev, gap, guard_ms, factor, row)
+            elif not guard_moved and abs(gap * 1000 - guard_ms) > self.slack(guard_ms):
+                # the master's schedule, not the node's fault; faster only costs bus load
+                faster = gap * 1000 < guard_ms
                 self.emit(
                     t,
                     node,
                     0x700 + node,
-                    f"guard request period {ms(gap)} ms, guard time 0x100C is {guard_ms:g} ms",
+                    f"guard request period {ms(gap)} ms, guard time is {guard_ms:g} ms"
+                    + (" (faster: more bus load, no risk)" if faster else ""),
                     ms(gap),
                     guard_ms,
                     row=row,
+                    severity="info" if faster else None,
+                    basis=ctx.config.origin(node, 0x100C, 0, t, ctx.t0),
                 )
         self.req_t[node] = t
         self.pending[node] = t
+
+    def _life(self, ctx, node, prev, gap, guard_ms, factor, row=0, now=None) -> None:
+        """Life time exceeded: no guard request for longer than 0x100C x 0x100D."""
+        text = (
+            f"life time exceeded: {ms(gap)} ms between guard requests"
+            if now is None
+            else f"life time exceeded: no guard request since {ctx.rel(prev)} ({ms(gap)} ms so far)"
+        )
+        self.emit(
+            prev if now is None else now,
+            node,
+            0x700 + node,
+            f"{text} > {guard_ms:g} ms x {factor}",
+            ms(gap),
+            guard_ms * factor,
+            row=row,
+            basis=ctx.config.origin(node, 0x100C, 0, prev, ctx.t0)
+            + ", "
+            + ctx.config.origin(node, 0x100D, 0, prev, ctx.t0),
+        )
+
+    def tick(self, ctx: Context, now: float) -> None:
+        """Live: a node whose guard requests stopped past its life time, reported once."""
+        for node, prev in sorted(self.req_t.items()):
+            if (node, prev) in self.reported:
+                continue
+            cfg = ctx.config.guarding(node, prev)
+            if not cfg or not cfg[1] or self._moved(ctx, node, 0x100C, prev, now):
+                continue
+            guard_ms, factor = cfg
+            if (now - prev) * 1000 > guard_ms * factor + self.jitter_ms:
+                self.reported.add((node, prev))
+                self._life(ctx, node, prev, now - prev, guard_ms, factor, now=now)
 
     @staticmethod
     def _moved(ctx: Context, node: int, index: int, prev: float, t: float) -> bool:
@@ -109,7 +141,7 @@ class GuardingRule(Rule):
         return bool(changes.size) and bool(crossing(changes, np.array([prev]), np.array([t]))[0])
 
     def finish(self, ctx: Context) -> None:
-        for node, sent in self.pending.items():
+        for node, sent in self.pending.items() if ctx.timed else ():
             if ctx.t_end is not None and ctx.t_end - sent > self.timeout:
                 self._no_reply(ctx, node, sent)
 

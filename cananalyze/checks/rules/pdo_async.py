@@ -5,6 +5,8 @@ Each gap is judged by the PDO parameters in force at its frame (one lookup per s
 
 from __future__ import annotations
 
+import numpy as np
+
 from ...protocol.nmt import OPERATIONAL
 from ..rule import Context, Rule, ms
 from ..spans import pdo_stretches
@@ -17,6 +19,18 @@ class PdoAsyncRule(Rule):
         "values or time out; check 0x18xx:3 and 0x18xx:5 and the node's cycle time."
     )
 
+    def __init__(self, **kw) -> None:
+        super().__init__(**kw)
+        self.last: dict[int, tuple[float, int, int]] = {}  # COB-ID -> (t, node, event timer)
+        self.reported: set[tuple[int, float]] = set()  # (COB-ID, t) silences tick() saw
+
+    @staticmethod
+    def _origin(ctx: Context, node: int, cob: int, t: float, sub: int) -> str:
+        """Where a TPDO's inhibit time (sub 3) or event timer (sub 5) came from."""
+        cfg = ctx.config.pdo_params(cob, t)
+        number = cfg[1].number if cfg is not None else 1
+        return ctx.config.origin(node, 0x1800 + number - 1, sub, t, ctx.t0)
+
     def process(self, ctx: Context) -> None:
         g = ctx.gaps("pdo")
         if g.key.size == 0:
@@ -26,6 +40,8 @@ class PdoAsyncRule(Rule):
             if pdo.direction != "tx" or pdo.transmission_type < 254:
                 continue
             self.subjects.add(node)
+            if idx.size:
+                self.last[cob] = (float(g.t[idx[-1]]), node, int(pdo.event_timer))
             idx = idx[judged]
             gg = gap[idx]
             if pdo.inhibit_time:
@@ -41,14 +57,17 @@ class PdoAsyncRule(Rule):
                         ms(gap[i]),
                         pdo.inhibit_time * 0.1,
                         row=g.row[i],
+                        basis=self._origin(ctx, node, cob, float(g.t[i]), 3),
                     )
             if pdo.event_timer:
-                limit = pdo.event_timer * (1 + self.tolerance) / 1000.0
+                limit = self.late(pdo.event_timer) / 1000.0
                 cand = self.capped(idx[gg > limit], g.prev[idx[gg > limit]], node, cob)
                 if cand.size:
                     before = ctx.nmt.state_at(node, g.prev[cand])
                     after = ctx.nmt.state_at(node, g.t[cand])
                     for j, i in enumerate(cand.tolist()):
+                        if (cob, float(g.prev[i])) in self.reported:
+                            continue
                         if before[j] == OPERATIONAL and after[j] == OPERATIONAL:
                             self.emit(
                                 g.prev[i],
@@ -59,4 +78,27 @@ class PdoAsyncRule(Rule):
                                 ms(gap[i]),
                                 pdo.event_timer,
                                 row=g.row[i],
+                                basis=self._origin(ctx, node, cob, float(g.prev[i]), 5),
                             )
+
+    def tick(self, ctx: Context, now: float) -> None:
+        """Live: an event-timer PDO overdue while its node is operational, reported once."""
+        for cob, (last, node, timer) in sorted(self.last.items()):
+            if not timer or (cob, last) in self.reported:
+                continue
+            if (now - last) * 1000 <= self.late(timer):
+                continue
+            state = ctx.nmt.state_at(node, np.array([last, now]))
+            if not (state == OPERATIONAL).all():
+                continue
+            self.reported.add((cob, last))
+            self.emit(
+                now,
+                node,
+                cob,
+                f"no PDO since {ctx.rel(last)} ({ms(now - last)} ms so far) while operational, "
+                f"event timer {timer} ms",
+                ms(now - last),
+                timer,
+                basis=self._origin(ctx, node, cob, last, 5),
+            )

@@ -10,6 +10,7 @@ from ..spans import pdo_stretches
 
 class PdoLengthRule(Rule):
     name = "pdo_length"
+    timing = False  # judged by frame order: kept on logs without timestamps
     why = (
         "A PDO shorter than its mapping cannot be applied (the receiver should raise EMCY 0x8210); "
         "one longer than mapped hints at a mapping mismatch between producer and consumer; compare "

@@ -11,6 +11,7 @@ from ..rule import Context, Rule
 
 class PdoStateRule(Rule):
     name = "pdo_not_operational"
+    timing = False  # judged by frame order: kept on logs without timestamps
     why = (
         "A node sending PDOs while not operational ignores NMT or reports a wrong state; consumers "
         "may act on data the master did not enable; check the node's NMT handling."

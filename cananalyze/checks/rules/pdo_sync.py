@@ -14,6 +14,7 @@ from ..spans import pdo_stretches, runs
 
 class PdoSyncRule(Rule):
     name = "pdo_sync"
+    timing = False  # judged by frame order: kept on logs without timestamps
     why = (
         "A synchronous PDO outside its SYNC slot carries data sampled at the wrong time or arrives "
         "after the consumers applied their inputs; check the transmission type (0x18xx:2) and the "
@@ -68,7 +69,7 @@ class PdoSyncRule(Rule):
                         max(n, 1),
                         row=rows[i],
                     )
-                for run, at in runs(windows, t):
+                for run, at in runs(windows, t) if ctx.timed else ():
                     window = ctx.config.sync_window_us(at)
                     if not window:
                         continue
@@ -84,6 +85,7 @@ class PdoSyncRule(Rule):
                             ms(t[i] - last_t[i]),
                             window / 1000,
                             row=rows[i],
+                            basis=ctx.config.origin(None, 0x1007, 0, float(t[i]), ctx.t0),
                         )
         self.sync_count += srows.size
         if srows.size:

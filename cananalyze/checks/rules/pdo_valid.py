@@ -13,6 +13,7 @@ from ..rule import Context, Rule
 
 class PdoValidRule(Rule):
     name = "pdo_not_valid"
+    timing = False  # judged by frame order: kept on logs without timestamps
     why = (
         "A node ignores a PDO whose COB-ID is marked not valid: an RPDO sent there never "
         "reaches the application, a TPDO there contradicts the configuration; enable the PDO "

@@ -10,6 +10,7 @@ from ..rule import Context, Rule
 
 class SdoRule(Rule):
     name = "sdo"
+    timing = False  # judged by frame order: kept on logs without timestamps
     why = (
         "A failed SDO transfer means a parameter was not read or written as the master assumed; "
         "check the abort code against the object dictionary (object exists, access, value range)."
@@ -51,7 +52,12 @@ class SdoRule(Rule):
             subjects.add(node)
             result = rec.get("result")
             lat = rec.get("latency_ms")
-            slow = self.max_latency is not None and lat is not None and lat > self.max_latency
+            slow = (
+                ctx.timed
+                and self.max_latency is not None
+                and lat is not None
+                and lat > self.max_latency
+            )
             if result == "ok" and not slow:
                 continue  # the usual case: nothing to format
             obj = object_text(rec.get("index", 0), rec.get("subindex", 0))
@@ -78,6 +84,7 @@ class SdoRule(Rule):
                     lat,
                     self.max_latency,
                     row=row,
+                    basis="max_latency_ms in the rules file",
                     why="A slow SDO server stalls configuration and may hit the master's timeout; "
                     "check the node's load and the bus load.",
                 )

@@ -10,6 +10,7 @@ from ..spans import crossing, runs
 
 class SyncRule(Rule):
     name = "sync"
+    timing = False  # judged by frame order: kept on logs without timestamps
     why = (
         "Synchronous PDOs are sampled and applied on SYNC; a late or irregular SYNC skews every "
         "synchronous control loop; check the SYNC producer's load and 0x1006."
@@ -18,6 +19,8 @@ class SyncRule(Rule):
     def __init__(self, **kw) -> None:
         super().__init__(**kw)
         self.last_counter = -1
+        self.last_t: float | None = None
+        self.reported: set[float] = set()  # SYNC times after which tick() saw a silence
 
     def process(self, ctx: Context) -> None:
         g = ctx.gaps("sync")
@@ -27,13 +30,15 @@ class SyncRule(Rule):
         gap = g.gap
         changes = ctx.config.changes(None, 0x1006, 0x1006)
         across = crossing(changes, g.prev, g.t)
-        for run, at in runs(changes, g.t):
+        for run, at in runs(changes, g.t) if ctx.timed else ():
             period = ctx.config.sync_period_us(at)
             if not period:
                 continue
             p = period / 1e6
             idx = np.arange(run.start, run.stop)[~across[run]]
-            bad = idx[np.abs(gap[idx] - p) > p * self.tolerance]
+            bad = idx[np.abs(gap[idx] - p) > self.slack(period / 1000) / 1000]
+            if self.reported:
+                bad = bad[~np.isin(g.prev[bad], list(self.reported))]
             for i in self.capped(bad, g.t[bad], None, 0x080).tolist():
                 self.emit(
                     g.t[i],
@@ -43,7 +48,9 @@ class SyncRule(Rule):
                     ms(gap[i]),
                     period / 1000,
                     row=g.row[i],
+                    basis=ctx.config.origin(None, 0x1006, 0, float(g.t[i]), ctx.t0),
                 )
+        self.last_t = float(g.t[-1])
         fb = ctx.batch.frames
         has = fb.dlc[g.row] >= 1
         if not has.any():
@@ -67,3 +74,27 @@ class SyncRule(Rule):
                 "check 0x1019 and that only one node produces SYNC.",
             )
         self.last_counter = int(c[-1])
+
+    def tick(self, ctx: Context, now: float) -> None:
+        """Live: no SYNC for longer than 0x1006 allows, reported once while it lasts."""
+        last = self.last_t
+        if last is None or last in self.reported:
+            return
+        period = ctx.config.sync_period_us(last)
+        if not period or ctx.config.changes(None, 0x1006, 0x1006).searchsorted(last) != (
+            ctx.config.changes(None, 0x1006, 0x1006).searchsorted(now)
+        ):
+            return
+        p_ms = period / 1000
+        if (now - last) * 1000 <= p_ms + self.slack(p_ms):
+            return
+        self.reported.add(last)
+        self.emit(
+            now,
+            None,
+            0x080,
+            f"no SYNC since {ctx.rel(last)} ({ms(now - last)} ms so far), 0x1006 is {p_ms:g} ms",
+            ms(now - last),
+            p_ms,
+            basis=ctx.config.origin(None, 0x1006, 0, last, ctx.t0),
+        )

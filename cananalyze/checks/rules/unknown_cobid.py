@@ -11,6 +11,7 @@ from ..rule import Context, Rule
 
 class UnknownCobIdRule(Rule):
     name = "unknown_cob_id"
+    timing = False  # judged by frame order: kept on logs without timestamps
     severity = "warning"
     why = (
         "Traffic no node is configured to send: a misconfigured COB-ID, a foreign device, or a "

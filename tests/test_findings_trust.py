@@ -1,0 +1,218 @@
+"""Findings you can trust (issue 20): the configuration followed while the bus runs,
+logs without timestamps, one finding per fault, the terminal cap, real-stack tolerances,
+EMCY findings in the device's words."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+from conftest import real_file
+
+import cananalyze
+from cananalyze.frames import FLAG_RTR, from_rows
+from cananalyze.io.logfile import write_log
+from tests.helpers import config_traffic
+
+
+def _check_rows(tmp_path, rows, rules_text: str):
+    log = tmp_path / "traffic.log"
+    write_log(from_rows(sorted(rows, key=lambda r: r[0])), log)
+    rules = tmp_path / "rules.yaml"
+    rules.write_text(rules_text)
+    return log, rules, cananalyze.check(log, rules=rules)
+
+
+# --- python-canopen traffic whose configuration changes while the bus runs -----------
+@pytest.mark.parametrize("name", sorted(config_traffic.SCENARIOS))
+def test_configuration_changes_give_no_false_finding(name, tmp_path):
+    rows, rules_text = config_traffic.SCENARIOS[name]()
+    log, rules, found = _check_rows(tmp_path, rows, rules_text)
+    assert [f.message for f in found] == []
+    cap = cananalyze.load(log, rules=rules)
+    assert len(cap.frames) == len(rows) > 20
+
+
+def test_period_changed_by_sdo_a_late_heartbeat_is_still_found(tmp_path):
+    """The same traffic with two heartbeats held back after the change to 100 ms: the one
+    late gap (300 ms, past 100 ms and the scenario's 100 ms jitter floor) is found,
+    judged by the written value, and says where that came from."""
+    rows, rules_text = config_traffic.heartbeat_period_changed()
+    hb = [r for r in rows if r[1] == 0x705 and r[2] != b"\x00"]
+    write = next(r[0] for r in rows if r[1] == 0x605 and r[2][:3] == b"\x2b\x17\x10")
+    after = [r for r in hb if r[0] > write + 0.5]
+    dropped = after[2:4]
+    log, _, found = _check_rows(tmp_path, [r for r in rows if r not in dropped], rules_text)
+    (f,) = found
+    assert f.rule == "heartbeat" and f.severity == "error"
+    assert f.expected == 100 and 250 < f.measured < 400
+    assert f.basis.startswith("0x1017 written at +")
+
+
+def test_learned_period_is_per_segment_and_says_so(tmp_path):
+    """Nothing configured: 100 ms learned before a reset, 1000 ms after; a 900 ms gap is
+    a dropout in the first segment only, and the finding names its segment."""
+    rows = [(0.0, 0x705, b"\x7f")]
+    rows += [(0.1 * k, 0x705, b"\x05") for k in range(1, 20)]
+    rows += [(2.8, 0x705, b"\x05")]  # 900 ms after the previous: a dropout at 100 ms
+    rows += [(2.9, 0x705, b"\x05"), (3.0, 0x000, b"\x81\x05"), (3.05, 0x705, b"\x00")]
+    rows += [(3.05 + k, 0x705, b"\x7f") for k in range(1, 9)]  # 1 s after the reset
+    log = tmp_path / "learn.log"
+    write_log(from_rows(rows), log)
+    (f,) = cananalyze.check(log)
+    assert f.rule == "heartbeat" and f.severity == "warning" and f.t == pytest.approx(1.9)
+    assert f.expected == pytest.approx(100.0)
+    assert f.basis == "learned from the log's median over +0.000 s..+2.900 s"
+
+
+# --- logs without timestamps ----------------------------------------------------------
+def test_untimed_real_log_says_so_once_and_skips_timing():
+    log = real_file("SeonilChoi__CANOPEN-SDK/log2.txt")
+    found = cananalyze.check(log)
+    (note,) = found
+    assert note.severity == "info" and note.rule == "timestamps"
+    assert note.message.startswith("no timestamps: timing rules skipped (heartbeat, pdo_async)")
+
+
+def test_untimed_log_keeps_order_based_rules_in_line_order(tmp_path):
+    """All at t = 0: a PDO before the node is started, a boot-up with no reset, an SDO
+    abort are still found, at their lines; the final "stop all" judges nothing before it."""
+    rows = [(0.0, 0x705, b"\x7f"), (0.0, 0x185, b"\x01\x02")]  # PDO while pre-operational
+    rows += [(0.0, 0x000, b"\x01\x00")]  # start all
+    rows += [(0.0, 0x185, b"\x01\x02")] * 5 + [(0.0, 0x080, b"")] * 5
+    rows += [
+        (0.0, 0x605, b"\x40\x00\x10\x00\0\0\0\0"),
+        (0.0, 0x585, b"\x80\x00\x10\x00\0\0\x02\x06"),
+    ]
+    rows += [(0.0, 0x705, b"\x00")]  # boot-up, no reset: unexpected
+    rows += [(0.0, 0x000, b"\x02\x00")]  # stop all, at the end
+    lines = [
+        f"  can0  {cid:03X}   [{len(d)}]  {' '.join(f'{b:02X}' for b in d)}" for _, cid, d in rows
+    ]
+    log = tmp_path / "screen.txt"
+    log.write_text("\n".join(lines) + "\n")
+    found = cananalyze.check(log)
+    got = [(f.rule, f.line) for f in found]
+    assert got[0] == ("timestamps", 1)
+    assert ("pdo_not_operational", 2) in got
+    assert ("sdo", 15) in got
+    assert ("unexpected_bootup", 16) in got
+    assert len(got) == 4  # no PDO is judged by the "stop all" on line 17
+    out = subprocess.run(
+        [sys.executable, "-m", "cananalyze", "check", str(log), "-q"],
+        capture_output=True,
+        text=True,
+    ).stdout
+    assert "line 16 node 5 0x705 [error] unexpected_bootup" in out
+
+
+# --- one finding per fault, the cap on the terminal only -------------------------------
+def _emcy_storm(tmp_path, n: int = 38):
+    rows = [(0.0, 0x705, b"\x7f"), (0.05, 0x000, b"\x01\x05")]
+    rows += [(0.1 + 0.1 * k, 0x085, bytes([0x10, 0x32, 0x05, 0, 0, 0, 0, 0])) for k in range(n)]
+    log = tmp_path / "storm.log"
+    write_log(from_rows(rows), log)
+    return log
+
+
+def test_machine_outputs_carry_every_finding_terminal_counts_right(tmp_path):
+    log = _emcy_storm(tmp_path, 38)
+    out = tmp_path / "f.json"
+    junit = tmp_path / "f.xml"
+    done = subprocess.run(
+        [sys.executable, "-m", "cananalyze", "check", str(log), "-q", "--json", str(out)]
+        + ["--junit", str(junit)],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 1
+    rows = json.loads(out.read_text())
+    emcy = [r for r in rows if r["rule"] == "emcy"]
+    assert len(emcy) == 39  # 38 frames, and the error still active at the end
+    assert not any("more like this" in r["message"] for r in rows)
+    from junitparser import JUnitXml
+
+    (case,) = [c for s in JUnitXml.fromfile(str(junit)) for c in s if c.name == "emcy node 5"]
+    assert case.result[0].message.startswith("39 finding(s)")
+    lines = done.stdout.splitlines()
+    shown = [line for line in lines if "[warning] emcy: EMCY" in line]
+    assert len(shown) == 21  # the first 20, and the end-of-log one never hidden
+    assert any("still active at the end of the log" in line for line in shown)
+    (more,) = [line for line in lines if "more like this" in line]
+    assert "18 more like this not shown (38 in all;" in more  # one per frame
+    assert cananalyze.load(log).findings.rule.eq("emcy").sum() == 39
+
+
+# --- defaults that match real stacks ----------------------------------------------------
+def test_event_timer_jitter_under_the_floor_is_not_a_violation(tmp_path):
+    rows = [(0.0, 0x705, b"\x7f"), (0.01, 0x000, b"\x01\x05")]
+    t = 0.02
+    for k in range(50):
+        t += 0.0118 if k % 3 == 0 else 0.0101  # 11.8 ms now and then against 10 ms
+        rows.append((t, 0x185, b"\x01\x02"))
+    rows.append((t + 0.013, 0x185, b"\x01\x02"))  # 13 ms: past the 2 ms floor
+    net = "nodes:\n  5:\n    tpdo:\n      1: {transmission_type: 255, event_timer: 10, length: 2}\n"
+    netfile = tmp_path / "net.yaml"
+    netfile.write_text(net)
+    log = tmp_path / "et.log"
+    write_log(from_rows(rows), log)
+    found = cananalyze.check(log, network=netfile)
+    assert [(f.rule, f.measured) for f in found] == [("pdo_async", 13.0)]
+    assert found[0].basis == "0x1800:5 in the network file"
+    rules = tmp_path / "rules.yaml"
+    rules.write_text("rules:\n  pdo_async: {jitter_ms: 5}\n")
+    assert cananalyze.check(log, network=netfile, rules=rules) == []
+
+
+def test_guard_requests_faster_than_the_guard_time_are_information(tmp_path):
+    rows = []
+    t, toggle = 0.1, 0
+    for _ in range(10):
+        rows += [(t, 0x70A, b"", FLAG_RTR), (t + 0.001, 0x70A, bytes([0x7F | toggle]))]
+        toggle ^= 0x80
+        t += 0.05  # every 50 ms against a 100 ms guard time
+    netfile = tmp_path / "net.yaml"
+    netfile.write_text("nodes:\n  10: {guard_time_ms: 100, life_time_factor: 3}\n")
+    log = tmp_path / "guard.log"
+    write_log(from_rows(rows), log)
+    found = cananalyze.check(log, network=netfile)
+    assert found and {f.severity for f in found} == {"info"}
+    assert "faster" in found[0].message and found[0].basis == "0x100C in the network file"
+
+
+# --- EMCY findings in the device's words -----------------------------------------------
+def test_emcy_finding_carries_the_manufacturer_meaning(tmp_path):
+    from cananalyze.network.profile import load_builtin
+
+    profile = load_builtin("mcb560")
+    data = bytes([0x00, 0xFF, 0x81, 0x00, 0x01, 0x00, 0x00, 0x80])  # Chip-EC 0x80000001
+    assert profile.decode_emcy(0xFF00, 0x81, data[3:8])["flags"] == ["bus off", "output overload"]
+    meaning = "(bus off, output overload)"
+    rows = [(0.0, 0x701, b"\x7f"), (0.1, 0x081, data)]
+    log = tmp_path / "emcy.log"
+    write_log(from_rows(rows), log)
+    found = cananalyze.check(log, device={1: "mcb560"})
+    emcy = [f for f in found if f.rule == "emcy"]
+    assert emcy and all(str(meaning) in f.message for f in emcy)
+    decoded = subprocess.run(
+        [sys.executable, "-m", "cananalyze", "decode", str(log), "--device", "1=mcb560"],
+        capture_output=True,
+        text=True,
+    ).stdout
+    assert str(meaning) in decoded
+
+
+def test_real_pcan1_one_finding_per_gap_and_none_while_a_node_reboots():
+    """hilch pcan1.trc: node 40's 19.2 s silence is one finding (before: an error and a
+    warning), judged against the period learned before it; node 15's silences each begin
+    with an NMT reset of node 15 (it is rebooting: no heartbeat is due until its boot-up),
+    where the whole-log median used to give three false dropouts."""
+    log = real_file("hilch__canopen-message-interpreter/pcan1.trc")
+    hb = [f for f in cananalyze.check(log) if f.rule == "heartbeat"]
+    (f,) = [f for f in hb if f.node == 40]
+    assert f.t_rel == pytest.approx(91.823, abs=1e-3) and f.severity == "warning"
+    assert f.basis.startswith("learned from the log's median over +0.000 s..")
+    assert f.expected == pytest.approx(1009, abs=5)
+    assert [f for f in hb if f.node == 15] == []

@@ -1,0 +1,71 @@
+"""Live findings as they happen: a node falls silent during `live --check` over slcan on a
+pty, and the finding is printed within its period plus tolerance plus half a second,
+while the session runs (not at Ctrl-C), once (also in --json and --junit at exit)."""
+
+from __future__ import annotations
+
+import json
+import signal
+import time
+
+from helpers.live_slcan import start_live
+from junitparser import JUnitXml
+from test_live_check import _Lines
+
+from cananalyze.frames import from_rows
+from cananalyze.io.logfile import write_log
+from cananalyze.sim.slcan_replay import replay
+
+PERIOD_S = 0.1
+JITTER_MS = 150  # slcan frames are time-stamped when the host reads the pty: loaded-machine slack
+STOP_S = 2.0  # node 5's last heartbeat; node 6 goes on to END_S
+END_S = 5.0
+
+
+def test_silent_node_reported_while_the_session_runs(tmp_path):
+    rows = [(0.0, 0x705, b"\x05"), (0.0, 0x706, b"\x05")]
+    k = 1
+    while k * PERIOD_S <= END_S + 1e-9:
+        t = round(k * PERIOD_S, 3)
+        if t <= STOP_S:
+            rows.append((t, 0x705, b"\x05"))
+        rows.append((t, 0x706, b"\x05"))
+        k += 1
+    log = tmp_path / "silent.log"
+    write_log(from_rows(rows), log)
+    rules = tmp_path / "rules.yaml"
+    rules.write_text(
+        f"jitter_ms: {JITTER_MS}\n"
+        "network:\n  nodes:\n    5: {heartbeat_ms: 100}\n    6: {heartbeat_ms: 100}\n"
+    )
+    report, junit = tmp_path / "f.json", tmp_path / "f.xml"
+    args = ["--check", str(rules), "--json", str(report), "--junit", str(junit)]
+    proc, adapter, _ = start_live(["--plain", *args], cwd=tmp_path)
+    out = _Lines(proc.stdout)
+    t_start = time.monotonic()
+    sent = replay(adapter, str(log), timed=True)
+    t_end = time.monotonic()
+    time.sleep(0.3)
+    assert proc.poll() is None, proc.stderr.read()[-2000:]
+    proc.send_signal(signal.SIGINT)
+    proc.wait(timeout=30)
+    out.join()
+    assert sent == len(rows)
+    stopped = [(at, line) for at, line in out.lines if "heartbeat stopped" in line]
+    assert stopped, "\n".join(line for _, line in out.lines[-20:])
+    at, line = stopped[0]
+    assert "node 5" in line or "none since" in line
+    bound = PERIOD_S + max(PERIOD_S * 0.1, JITTER_MS / 1000) + 0.5
+    # replay paces from its first frame (t = 0 of the log); allow the replay's own start-up
+    assert at < t_end, "reported only after the session's traffic ended"
+    assert at - (t_start + STOP_S) <= bound + 0.2, (at - t_start, line)
+    assert proc.returncode == 1
+    found = json.loads(report.read_text())
+    hb = [f for f in found if f["rule"] == "heartbeat" and f["node"] == 5]
+    assert [f["basis"] for f in hb] == ["0x1017 in the rules file's network:"]  # once
+    # node 6 falls silent too, when the replay ends (before Ctrl-C): nothing earlier
+    late6 = [f for f in found if f["rule"] == "heartbeat" and f["node"] == 6]
+    assert all(f["t_rel"] > END_S for f in late6)
+    assert {f["rule"] for f in found} == {"heartbeat"}
+    (case,) = [c for s in JUnitXml.fromfile(str(junit)) for c in s if c.name == "heartbeat node 5"]
+    assert case.result and "heartbeat stopped" in case.result[0].message
