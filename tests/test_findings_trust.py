@@ -216,3 +216,24 @@ def test_real_pcan1_one_finding_per_gap_and_none_while_a_node_reboots():
     assert f.basis.startswith("learned from the log's median over +0.000 s..")
     assert f.expected == pytest.approx(1009, abs=5)
     assert [f for f in hb if f.node == 15] == []
+
+
+def test_event_timer_judged_on_a_node_whose_nmt_state_the_log_never_shows(tmp_path):
+    """The Axiomatic I/O module's log has no boot-up, heartbeat or NMT command: its TPDOs
+    show it operational (CiA 301 sends PDOs only then). Declared at 20 ms, its 100 ms TPDO1
+    is late every time; an NMT stop of the node in the log ends the judging."""
+    log = real_file("calumroy__CANopen_socketCAN_Test/can_log_070825_brake_sensor_test1.log")
+    net = tmp_path / "net.toml"
+    net.write_text("[nodes.127.tpdo.1]\ncob_id = 0x1FF\nevent_timer = 20\n")
+    late = [f for f in cananalyze.check(log, network=net) if f.rule == "pdo_async"]
+    assert len(late) > 5000 and {f.cob_id for f in late} == {0x1FF}
+    assert all(95 <= f.measured <= 102 and f.expected == 20 for f in late)
+    # the same log with the node stopped after its first second: nothing after the stop
+    lines = log.read_text().splitlines()
+    t0 = float(lines[0].split(")")[0][1:])
+    stop = f"({t0 + 1.0:.6f}) can0 000#027F"
+    cut = next(i for i, x in enumerate(lines) if float(x.split(")")[0][1:]) > t0 + 1.0)
+    stopped = tmp_path / "stopped.log"
+    stopped.write_text("\n".join([*lines[:cut], stop, *lines[cut:]]) + "\n")
+    late = [f for f in cananalyze.check(stopped, network=net) if f.rule == "pdo_async"]
+    assert late and max(f.t for f in late) < t0 + 1.0

@@ -11,6 +11,11 @@ from ...protocol.nmt import OPERATIONAL
 from ..rule import Context, Rule, ms
 from ..spans import pdo_stretches
 
+# CiA 301 lets a node send PDOs only while operational: a node whose NMT state the log
+# never showed (no boot-up, heartbeat or NMT command seen) but whose PDOs bound a gap was
+# operational at both ends; a stop or reset in between would have made its state known.
+_SENDING = (OPERATIONAL, -1)
+
 
 class PdoAsyncRule(Rule):
     name = "pdo_async"
@@ -68,7 +73,7 @@ class PdoAsyncRule(Rule):
                     for j, i in enumerate(cand.tolist()):
                         if (cob, float(g.prev[i])) in self.reported:
                             continue
-                        if before[j] == OPERATIONAL and after[j] == OPERATIONAL:
+                        if before[j] in _SENDING and after[j] in _SENDING:
                             self.emit(
                                 g.prev[i],
                                 node,
@@ -89,7 +94,7 @@ class PdoAsyncRule(Rule):
             if (now - last) * 1000 <= self.late(timer):
                 continue
             state = ctx.nmt.state_at(node, np.array([last, now]))
-            if not (state == OPERATIONAL).all():
+            if not np.isin(state, _SENDING).all():
                 continue
             self.reported.add((cob, last))
             self.emit(
