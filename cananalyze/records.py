@@ -37,6 +37,8 @@ class SignalBlock:
     columns: dict[str, np.ndarray]  # signal name -> values, one per row
     units: dict[str, str | None]
     mapped_bytes: int = 0  # bytes the mapping needs; rows with a longer DLC carry extra bytes
+    objects: dict[str, tuple[int, int]] = field(default_factory=dict)  # name -> (index, sub)
+    words: dict[str, int] = field(default_factory=dict)  # signals shown in words -> object index
 
 
 @dataclass
@@ -158,6 +160,8 @@ class DecodedBatch:
                         {k: v[keep] for k, v in sb.columns.items()},
                         sb.units,
                         sb.mapped_bytes,
+                        sb.objects,
+                        sb.words,
                     )
                 )
         row_notes = []
@@ -192,6 +196,12 @@ class DecodedBatch:
                 p = int(pos[i])
                 f["signals"] = {k: v[p].item() for k, v in sb.columns.items()}
                 f["units"] = {k: u for k, u in sb.units.items() if u}
+                if sb.words:
+                    from .profiles.words import word
+
+                    f["signal_words"] = {
+                        k: word(i, int(sb.columns[k][p])) for k, i in sb.words.items()
+                    }
             s = int(shared[i])
             if s >= 0:
                 f.update(self.row_notes[s][1])

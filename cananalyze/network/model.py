@@ -31,6 +31,14 @@ from .node_config import TOUCHES_COB_IDS, NodeConfig
 from .node_tally import IDENTITY
 from .pdo_map import PdoConfig, split_cob_id
 from .profile import identify
+
+
+def generic_for(device_type) -> object:
+    """The CiA 402/401 defaults for a device type naming them, else None."""
+    from ..profiles.generic import family, generic_profile
+
+    fam = family(device_type)
+    return generic_profile(fam) if fam else None
 from .spec import NetworkSpec
 from .timeline import ConfigChange, Timeline
 
@@ -163,6 +171,18 @@ class NetworkModel:
             if info is not None:
                 return info.name, info.datatype
         return comm_object(index, subindex)
+
+    def family(self, node: int) -> int | None:
+        """402 or 401 when the node's profile, or its device type read in the log, names
+        CiA 402 (drives) or CiA 401 (I/O)."""
+        from ..profiles.generic import family
+
+        cfg = self.nodes.get(node)
+        if cfg is None:
+            return None
+        if cfg.profile is not None and cfg.profile.family:
+            return cfg.profile.family
+        return family(cfg.identity.get("device_type"))
 
     def config_at(self, node: int) -> NodeConfig:
         """Current configuration of a node (an empty 'unknown' one if never seen)."""
@@ -381,10 +401,15 @@ class NetworkModel:
             ident.get("device_type"),
             ident.get("device_name"),
         )
+        if prof is None and cfg.profile is None:
+            # no device of ours, but a device type naming CiA 402/401: the profile's defaults
+            prof = generic_for(ident.get("device_type"))
         if prof is None or (cfg.profile is not None and cfg.profile.key == prof.key):
             return None
         how = (
-            "SDO 0x1018 vendor/product"
+            "SDO 0x1000 device type"
+            if prof.generic
+            else "SDO 0x1018 vendor/product"
             if "vendor_id" in ident or "product_code" in ident
             else "SDO 0x1008 name"
         )

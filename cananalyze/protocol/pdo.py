@@ -129,13 +129,16 @@ def annotation(tpdo: bool, number: int, rtr: bool, fields: dict) -> str:
     signals = fields.get("signals")
     if signals:
         units = fields.get("units") or {}
-        text += "  " + " ".join(_signal_text(k, v, units.get(k)) for k, v in signals.items())
+        words = fields.get("signal_words") or {}
+        text += "  " + " ".join(
+            _signal_text(k, v, units.get(k), words.get(k)) for k, v in signals.items()
+        )
     if fields.get("pdo_problem"):
         text += f"  [{fields['pdo_problem']}]"
     return text
 
 
-def _signal_text(name: str, value, unit: str | None) -> str:
+def _signal_text(name: str, value, unit: str | None, words: str | None = None) -> str:
     if isinstance(value, float):
         value = f"{value:.6g}"
-    return f"{name}={value}" + (f" {unit}" if unit else "")
+    return f"{name}={value}" + (f" {unit}" if unit else "") + (f" ({words})" if words else "")
