@@ -31,14 +31,6 @@ from .node_config import TOUCHES_COB_IDS, NodeConfig
 from .node_tally import IDENTITY
 from .pdo_map import PdoConfig, split_cob_id
 from .profile import identify
-
-
-def generic_for(device_type) -> object:
-    """The CiA 402/401 defaults for a device type naming them, else None."""
-    from ..profiles.generic import family, generic_profile
-
-    fam = family(device_type)
-    return generic_profile(fam) if fam else None
 from .spec import NetworkSpec
 from .timeline import ConfigChange, Timeline
 
@@ -50,6 +42,14 @@ NOT_VALID = (
 )
 _IDENTITY_INDICES = np.array([0x1018, 0x1000, 0x1008], np.int64)
 USER_SOURCES = ("user --device", "user --eds", "network file", "rules file")
+
+
+def generic_for(device_type) -> object:
+    """The CiA 402/401 defaults for a device type naming them, else None."""
+    from ..profiles.generic import family, generic_profile
+
+    fam = family(device_type)
+    return generic_profile(fam) if fam else None
 
 
 @dataclass(frozen=True)

@@ -156,7 +156,15 @@ COMMANDS = (
     "enable operation",
     "fault reset",
 )
-SHUTDOWN, SWITCH_ON, DISABLE_VOLTAGE, QUICK_STOP_CMD, DISABLE_OPERATION, ENABLE_OPERATION, FAULT_RESET = range(7)
+(
+    SHUTDOWN,
+    SWITCH_ON,
+    DISABLE_VOLTAGE,
+    QUICK_STOP_CMD,
+    DISABLE_OPERATION,
+    ENABLE_OPERATION,
+    FAULT_RESET,
+) = range(7)
 NO_COMMAND = 7
 COMMAND_NAMES = (*COMMANDS, "no command")
 COMMAND_MASKS: tuple[tuple[int, int, int], ...] = (
@@ -268,7 +276,7 @@ def _flags(word: int, table: tuple[tuple[int, str], ...]) -> list[str]:
 
 
 def statusword_text(word: int) -> str:
-    """"operation enabled; voltage enabled, remote, target reached" for 0x0637."""
+    """ "operation enabled; voltage enabled, remote, target reached" for 0x0637."""
     word = int(word)
     state = STATE_NAMES[int(STATE_OF[word & 0x7F])]
     flags = _flags(word, STATUS_FLAGS)
@@ -284,7 +292,7 @@ def command_name(word: int, state: int | None = None) -> str:
 
 
 def controlword_text(word: int) -> str:
-    """"enable operation; switch on, enable voltage, quick stop off, enable operation"."""
+    """ "enable operation; switch on, enable voltage, quick stop off, enable operation"."""
     word = int(word)
     flags = _flags(word, CONTROL_FLAGS)
     name = command_name(word)

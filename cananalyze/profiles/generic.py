@@ -109,9 +109,7 @@ def generic_profile(profile: int) -> DeviceProfile:
     sidecar = Sidecar(
         key=key,
         name=NAMES[profile],
-        signals={
-            obj: SignalSpec(name, unit) for obj, (name, _, unit) in table.OBJECTS.items()
-        },
+        signals={obj: SignalSpec(name, unit) for obj, (name, _, unit) in table.OBJECTS.items()},
     )
     return DeviceProfile(
         key=key,

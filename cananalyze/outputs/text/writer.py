@@ -27,8 +27,8 @@ from ...columns.bytecols import compact as _compact
 from ...columns.bytecols import digits as _digits
 from ...columns.bytecols import padded_table as _padded_table
 from ...columns.numtext import g6_text, value_text
-from ...profiles.words import word_column
 from ...frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
+from ...profiles.words import word_column
 from ...protocol import emcy as emcy_text
 from ...protocol.fields import annotation, frame_fields
 from ...protocol.services import SERVICE_NAMES, Service
