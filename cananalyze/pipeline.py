@@ -165,6 +165,7 @@ def build_decoder(opts: Options | None = None, checker: Checker | None = None) -
     `checker`: one built earlier (so a bad rules file fails before the log is opened);
     otherwise built here when the options ask for checks or timing statistics.
     """
+    from .network.drive_tracker import DriveTracker
     from .network.emcy_notes import EmcyDecoder
     from .network.model import NetworkModel
     from .network.pdo_processor import PdoDecoder
@@ -176,7 +177,8 @@ def build_decoder(opts: Options | None = None, checker: Checker | None = None) -
     tracker = SdoTracker(timeout=opts.sdo_timeout, object_info=model.object_info)
     for node, request, response in model.sdo_channels:
         tracker.add_channel(node, request, response)
-    decoder = Decoder([SdoProcessor(tracker), model, PdoDecoder(model), EmcyDecoder(model)])
+    processors = [SdoProcessor(tracker), model, PdoDecoder(model), EmcyDecoder(model)]
+    decoder = Decoder([*processors, DriveTracker(model)])
     model.attach(decoder)
     decoder.network = model
     if checker is None and (opts.checking or opts.timing):

@@ -114,6 +114,7 @@ class DecodedBatch:
     findings: list = field(default_factory=list)  # checks.Finding, found in this batch
     events: object = None  # events.columns.EventColumns, built once by the pipeline
     states: list = field(default_factory=list)  # NMT state changes (events.columns.Row)
+    drive: list = field(default_factory=list)  # CiA 402 changes (network.drive_tracker)
     _lazy: tuple | None = field(default=None, repr=False, compare=False)
     _sdo_cache: tuple | None = field(default=None, repr=False, compare=False)
 
@@ -170,6 +171,11 @@ class DecodedBatch:
             if keep.any():
                 row_notes.append((pos[r[keep]], note))
         findings = [f for f in self.findings if keep_record(f.record())]
+        drive = [
+            c._replace(row=int(pos[c.row]) if 0 <= c.row < len(self) else n)
+            for c in self.drive
+            if keep_record({"kind": "drive", "node": c.node, "t": c.t})
+        ]
         return DecodedBatch(
             frames,
             self.service[rows],
@@ -180,6 +186,7 @@ class DecodedBatch:
             signals,
             row_notes,
             findings,
+            drive=drive,
         )
 
     def fields(self, i: int) -> dict:

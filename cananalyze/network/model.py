@@ -72,7 +72,7 @@ class Known(NamedTuple):
     source: str
 
 
-def _sdo_value(rec: dict) -> int | str | None:
+def sdo_value(rec: dict) -> int | str | None:
     data = rec.get("data")
     if isinstance(data, str) and data:
         try:
@@ -264,7 +264,7 @@ class NetworkModel:
             for row, rec in self._candidates(batch)
             if rec.get("kind") == "sdo" and rec.get("result") == "ok"
         ]
-        events += self._resets_in(batch)
+        events += self.resets_in(batch)
         events.sort(key=lambda e: e[0])
         n = len(batch)
         for row, rec in events:
@@ -329,7 +329,7 @@ class NetworkModel:
         if not isinstance(node, int) or index is None or sub is None:
             return None
         upload = rec.get("direction") == "upload"
-        value = _sdo_value(rec)
+        value = sdo_value(rec)
         if value is None:
             return None
         t = float(rec.get("t") or 0.0)
@@ -355,7 +355,7 @@ class NetworkModel:
         self._rebind(t)
         return self._sync_classifier()
 
-    def _resets_in(self, batch: DecodedBatch) -> list[tuple[int, tuple[float, int, str]]]:
+    def resets_in(self, batch: DecodedBatch) -> list[tuple[int, tuple[float, int, str]]]:
         """Boot-ups and NMT reset commands of a batch: (row, (t, node, kind))."""
         svc = batch.service
         rows = np.flatnonzero((svc == Service.BOOTUP) | (svc == Service.NMT))
