@@ -263,7 +263,7 @@ def drive_event_columns(changes: list, offset: int) -> EventColumns:
             c.row + offset,
         )
         for c in changes
-        if c.kind != "reset"
+        if c.kind in ("state", "command")
     ]
     return EventColumns.from_rows(rows)
 

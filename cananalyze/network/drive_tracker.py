@@ -19,13 +19,14 @@ from ..protocol.services import Service
 from ..records import DecodedBatch
 from .model import NetworkModel, sdo_value
 
-STATE, COMMAND, RESET = "state", "command", "reset"
+STATE, COMMAND, RESET, SEEN = "state", "command", "reset", "seen"
 _OBJECTS = np.array([cia402.STATUSWORD, cia402.CONTROLWORD], np.int64)
 
 
 class DriveChange(NamedTuple):
-    """A drive entering a state (kind "state"), receiving a new command ("command"), or
-    being reset (boot-up, NMT reset: its state machine starts again)."""
+    """A drive entering a state (kind "state"), receiving a new command ("command"),
+    being reset (boot-up, NMT reset: its state machine starts again), or its last
+    statusword of a batch ("seen": the state still held then, for the command rule)."""
 
     t: float
     node: int
@@ -34,6 +35,7 @@ class DriveChange(NamedTuple):
     code: int  # cia402 state or command code (-1 for a reset)
     word: int  # the statusword or controlword
     source: str  # "tpdo1", "rpdo1", "sdo"
+    cob_id: int = 0  # the PDO's COB-ID (0: SDO or reset)
 
     @property
     def name(self) -> str:
@@ -70,7 +72,11 @@ class DriveTracker:
             return
         obs.sort(key=lambda o: (o[0], o[1]))  # (row, order within the row)
         out = batch.drive
-        for row, _, node, kind, word, source, t in obs:
+        for row, _, node, kind, word, source, t, cob in obs:
+            if kind == SEEN:
+                if node in self.state:
+                    out.append(DriveChange(t, node, row, SEEN, self.state[node], word, source, cob))
+                continue
             if kind == RESET:
                 self.state.pop(node, None)
                 self.command.pop(node, None)
@@ -80,14 +86,14 @@ class DriveTracker:
                 code = int(cia402.STATE_OF[word & 0x7F])
                 if self.state.get(node) != code:
                     self.state[node] = code
-                    out.append(DriveChange(t, node, row, STATE, code, word, source))
+                    out.append(DriveChange(t, node, row, STATE, code, word, source, cob))
                 continue
             code = int(cia402.COMMAND_OF[word & 0xFF])
             if code == cia402.SWITCH_ON and self.state.get(node) == cia402.OPERATION_ENABLED:
                 code = cia402.DISABLE_OPERATION
             if self.command.get(node) != code:
                 self.command[node] = code
-                out.append(DriveChange(t, node, row, COMMAND, code, word, source))
+                out.append(DriveChange(t, node, row, COMMAND, code, word, source, cob))
 
     def finish(self, batch: DecodedBatch) -> None:
         pass
@@ -118,11 +124,14 @@ class DriveTracker:
                 at = np.flatnonzero(keep)
                 rows = sb.rows[at]
                 obs += [
-                    (r, 1, sb.node, kind, w, sb.pdo, t)
+                    (r, 1, sb.node, kind, w, sb.pdo, t, sb.cob_id)
                     for r, w, t in zip(
                         rows.tolist(), words[at].tolist(), fb.t[rows].tolist(), strict=True
                     )
                 ]
+                if kind == STATE:  # the block's last statusword: the state still held
+                    r = int(sb.rows[-1])
+                    obs.append((r, 2, sb.node, SEEN, int(words[-1]), sb.pdo, float(fb.t[r]), 0))
         obs += self._sdo_observations(batch)
         if obs:
             obs += self._resets(batch)
@@ -157,7 +166,7 @@ class DriveTracker:
             if not isinstance(value, int):
                 continue
             kind = STATE if upload else COMMAND
-            obs = (row, 0, node, kind, value & 0xFFFF, "sdo", float(rec.get("t") or 0.0))
+            obs = (row, 0, node, kind, value & 0xFFFF, "sdo", float(rec.get("t") or 0.0), 0)
             out.append(obs)
         return out
 
@@ -168,5 +177,5 @@ class DriveTracker:
         out = []
         for row, (t, node, kind) in self.model.resets_in(batch):
             for n in [node] if node else sorted(self.state):
-                out.append((row, -1, n, RESET, 0, kind, t))
+                out.append((row, -1, n, RESET, 0, kind, t, 0))
         return out
