@@ -81,6 +81,7 @@ def fast_pieces(fields: RecordColumns, keep: np.ndarray | None) -> dict[str, Pie
         out["value"] = sel(a["value"])
     out["data"] = Hex(sel(a["raw"]), sel(a["data_len"]))
     out["name"] = Labels(sel(a["name_code"]), fields.name_labels)
+    out["words"] = sel(a["words"])
     out["direction"] = Labels(sel(a["upload"]).astype(np.int8), ["download", "upload"])
     for c, v in OK_CONSTANTS.items():
         out[c] = Labels(np.zeros(n, np.int8), [v])
