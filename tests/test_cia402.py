@@ -163,8 +163,8 @@ def test_python_canopen_drive_states_and_a_fault(tmp_path):
         text=True,
         check=True,
     ).stdout
-    assert "Statusword expedited -> ok: 551 (0x227) (operation enabled; remote)" in text
-    assert "Controlword expedited -> ok: 15 (0xF) (enable operation; " in text
+    assert "Status word expedited -> ok: 551 (0x227) (operation enabled; remote)" in text
+    assert "Control word expedited -> ok: 15 (0xF) (enable operation; " in text
 
 
 def test_a_command_the_drive_does_not_follow(tmp_path):
