@@ -237,3 +237,62 @@ def test_bad_device_is_one_line(tmp_path, arg):
     )
     assert r.returncode != 0 and "Traceback" not in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
+
+
+def test_drive_state_lanes_in_mcap_rerun_and_the_event_tables(tmp_path):
+    """Read back by the mcap package, rerun's reader and pyarrow, not by our code."""
+    import json
+
+    import pyarrow.parquet as pq
+    from mcap.reader import make_reader
+
+    from tests.exported import read_rrd
+
+    log = str(real_file(ZEROERR + "log2.txt"))
+    out = tmp_path / "out"
+    subprocess.run(
+        [sys.executable, "-m", "cananalyze", "export", log, "--device", "11=cia402", "-q",
+         "--mcap", str(tmp_path / "x.mcap"), "--rrd", str(tmp_path / "x.rrd"),
+         "--parquet", str(out)],
+        check=True,
+    )  # fmt: skip
+    expected = ["switch on disabled", "ready to switch on", "switched on", "operation enabled"]
+    with open(tmp_path / "x.mcap", "rb") as f:
+        msgs = [
+            json.loads(m.data)
+            for _, _, m in make_reader(f).iter_messages(topics=["/node/11/drive_state"])
+        ]
+    assert [m["state"] for m in msgs] == expected and msgs[-1]["statusword"] == 567
+    rrd = read_rrd(tmp_path / "x.rrd")
+    lane = rrd.rows["/node/11/drive_state"]  # this log has no times: in sent order
+    assert [r["StateChange:state"][0] for r in lane] == expected
+    assert any("/node/11/drive_state" in repr(view) for view in rrd.layout)
+    events = pq.read_table(out / "events.parquet").to_pandas()
+    drive = events[events.kind == "drive_state"]
+    assert drive.message.iloc[-1].startswith("node 11: drive state operation enabled")
+    sdo = pq.read_table(out / "sdo.parquet").to_pandas()
+    words = dict(zip(zip(sdo["index"], sdo["subindex"]), sdo["words"], strict=False))
+    assert words[(0x1A00, 1)] == "6041:00, 16 bit, statusword"
+    assert words[(0x1A00, 2)] == "6064:00, 32 bit, position_actual_value"
+    assert words[(0x1800, 1)].startswith("COB-ID 0x18B, ")
+    assert words[(0x6060, 0)].endswith("position")
+
+
+def test_config_words_in_jsonl_are_an_added_field(tmp_path):
+    import json
+
+    log = real_file(TMCM + "candump.txt")
+    out = subprocess.run(
+        [sys.executable, "-m", "cananalyze", "decode", str(log), "--sdo", "--format", "jsonl"],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    recs = [json.loads(line) for line in out.splitlines()]
+    sdo = [r for r in recs if r.get("kind") == "sdo"]
+    by = {(r["index"], r["subindex"], r["direction"], r["data"]): r for r in sdo}
+    r = by[(0x1800, 1, "download", "810100c0")]
+    assert r["words"] == "COB-ID 0x181, not valid, no RTR, 11-bit"
+    assert r["value"] == 0xC0000181 and r["name"]  # the other fields as they were
+    assert by[(0x1A00, 1, "download", "10004160")]["words"] == "6041:00, 16 bit"
+    assert by[(0x1017, 0, "download", "0000")]["words"] == "off"

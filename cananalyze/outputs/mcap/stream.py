@@ -32,10 +32,13 @@ from ..tables.writer import WriterThread
 from .bulk import BulkMcapWriter
 from .frames import FRAME_SCHEMA, FRAMES_TOPIC, frame_payloads
 from .topics import (
+    DRIVE_SCHEMA,
     EVENTS_TOPIC,
     LOG_SCHEMA,
     STATE_SCHEMA,
     _ns,
+    drive_payloads,
+    drive_topic,
     event_payloads,
     signal_payloads,
     signal_schema,
@@ -108,13 +111,16 @@ class StreamMcap:
         # what the job needs, not the batch (its notes and records would stay alive too)
         blocks = [(b.node, b.pdo, b.cob_id, b.rows, b.columns, b.units) for b in batch.signals]
         service, node = batch.service, batch.node
+        drive = [c for c in batch.drive if c.kind == "state"]
         try:
-            self._writer.put(lambda: self._emit(fb, service, node, blocks, states, events, lines))
+            self._writer.put(
+                lambda: self._emit(fb, service, node, blocks, states, events, lines, drive)
+            )
         except OSError as exc:  # the writer thread's: name the file it was writing
             raise _named(exc, self.path) from exc
         self.offset += len(fb)
 
-    def _emit(self, fb, service, node, blocks, states, events, lines) -> None:
+    def _emit(self, fb, service, node, blocks, states, events, lines, drive=()) -> None:
         """One batch's messages, on the writer thread: its JSON columns (numpy, pyarrow
         and C work outside the GIL) are built beside the decoder; the writer lays out,
         compresses and writes the chunks on a thread of its own."""
@@ -131,6 +137,12 @@ class StreamMcap:
         for n, evs in sorted(by_node.items()):
             ch = self._channel(("state", n), state_topic(n), STATE_SCHEMA)
             streams.append((ch, _ns(np.array([e.t for e in evs])), state_payloads(evs)))
+        by_drive: dict[int, list] = {}
+        for c in drive:
+            by_drive.setdefault(c.node, []).append(c)
+        for n, cs in sorted(by_drive.items()):
+            ch = self._channel(("drive", n), drive_topic(n), DRIVE_SCHEMA)
+            streams.append((ch, _ns(np.array([c.t for c in cs])), drive_payloads(cs)))
         if len(events):
             order = np.lexsort((events.sort_key(), events.t))
             events = events.take(order)
