@@ -271,7 +271,8 @@ def test_drive_state_lanes_in_mcap_rerun_and_the_event_tables(tmp_path):
     drive = events[events.kind == "drive_state"]
     assert drive.message.iloc[-1].startswith("node 11: drive state operation enabled")
     sdo = pq.read_table(out / "sdo.parquet").to_pandas()
-    words = dict(zip(zip(sdo["index"], sdo["subindex"]), sdo["words"], strict=False))
+    keys = zip(sdo["index"], sdo["subindex"], strict=True)
+    words = dict(zip(keys, sdo["words"], strict=True))
     assert words[(0x1A00, 1)] == "6041:00, 16 bit, statusword"
     assert words[(0x1A00, 2)] == "6064:00, 32 bit, position_actual_value"
     assert words[(0x1800, 1)].startswith("COB-ID 0x18B, ")
