@@ -140,8 +140,8 @@ class DriveTracker:
     def _sdo_observations(self, batch: DecodedBatch) -> list[tuple]:
         """Statusword reads and controlword writes by SDO on CiA 402 nodes."""
         records = batch.records
-        if not records:
-            return []
+        if not records or not any(self.model.family(n) == 402 for n in self.model.nodes):
+            return []  # no drive on the bus: not a record read
         fast = batch.sdo_fast
         get = list.__getitem__  # the other records are written: no lazy building for them
         if fast is not None and fast.slots.size and len(records) > int(fast.slots[-1]):
