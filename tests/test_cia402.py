@@ -297,3 +297,29 @@ def test_config_words_in_jsonl_are_an_added_field(tmp_path):
     assert r["value"] == 0xC0000181 and r["name"]  # the other fields as they were
     assert by[(0x1A00, 1, "download", "10004160")]["words"] == "6041:00, 16 bit"
     assert by[(0x1017, 0, "download", "0000")]["words"] == "off"
+
+
+@pytest.mark.parametrize("ttype, judged", [(0xFF, True), (0xFE, True), (0x01, False)])
+def test_a_jump_the_state_machine_does_not_have(tmp_path, ttype, judged):
+    """Switch on disabled straight to operation enabled: a finding only when the TPDO
+    (transmission type written by SDO in the log) sends every change."""
+    frames = [
+        (0.00, 0x601, bytes([0x2F, 0x00, 0x18, 0x02, ttype, 0, 0, 0])),  # 0x1800:02 = ttype
+        (0.01, 0x581, bytes([0x60, 0x00, 0x18, 0x02, 0, 0, 0, 0])),
+        (0.10, 0x181, bytes([0x40, 0x02])),  # switch on disabled
+        (0.20, 0x201, bytes([0x0F, 0x00])),  # enable operation, no shutdown / switch on
+        (0.30, 0x181, bytes([0x27, 0x02])),  # operation enabled
+        (0.40, 0x181, bytes([0x27, 0x02])),
+    ]
+    log = _log(frames, tmp_path / "jump.log")
+    f = cananalyze.load(log, device={1: "cia402"}).findings
+    jump = f[f.rule == "drive_transition"]
+    if judged:
+        (msg,) = jump.message
+        assert "from switch on disabled to operation enabled" in msg and "TPDO1" in msg
+    else:  # a synchronous TPDO samples the state: two transitions may fall between
+        assert jump.empty
+    # the same steps one at a time are no finding
+    steps = [(0.1 * k, 0x181, bytes([w, 0x02])) for k, w in enumerate((0x40, 0x21, 0x23, 0x27))]
+    ok = cananalyze.load(_log(frames[:2] + steps, tmp_path / "ok.log"), device={1: "cia402"})
+    assert not (ok.findings.rule == "drive_transition").any()
