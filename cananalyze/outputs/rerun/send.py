@@ -69,12 +69,15 @@ def blueprint_for(
     ]
     columns.append(rrb.TimeSeriesView(origin="/bus", name="bus load"))
     lanes = [f"+ /node/{n}/nmt" for n in sorted(lane_nodes)]
-    lanes += [f"+ /node/{n}/drive_state" for n in sorted(drive_nodes)]
+    drive_nodes = sorted(drive_nodes)
+    lanes += [f"+ /node/{n}/drive_state" for n in drive_nodes]
     return rrb.Blueprint(
         rrb.Vertical(
             rrb.Horizontal(*columns) if len(columns) <= SIDE_BY_SIDE else rrb.Grid(*columns),
             rrb.StateTimelineView(
-                origin="/node", contents=lanes or "$origin/**", name="NMT and drive states"
+                origin="/node",
+                contents=lanes or "$origin/**",
+                name="NMT and drive states" if drive_nodes else "NMT states",
             ),
             rrb.TextLogView(origin="/events", name="events", **_log_columns(rrb)),
             row_shares=[3, 1, 2],
