@@ -323,3 +323,13 @@ def test_a_jump_the_state_machine_does_not_have(tmp_path, ttype, judged):
     steps = [(0.1 * k, 0x181, bytes([w, 0x02])) for k, w in enumerate((0x40, 0x21, 0x23, 0x27))]
     ok = cananalyze.load(_log(frames[:2] + steps, tmp_path / "ok.log"), device={1: "cia402"})
     assert not (ok.findings.rule == "drive_transition").any()
+
+
+def test_network_file_device_cia402(tmp_path):
+    net = tmp_path / "net.toml"
+    net.write_text('[nodes.11]\ndevice = "cia402"\n')
+    cap = cananalyze.load(real_file(ZEROERR + "log2.txt"), network=str(net))
+    assert cap.drive_states.state.tolist()[-1] == "operation enabled"
+    net.write_text('[nodes.11]\ndevice = "cia403"\n')
+    with pytest.raises(cananalyze.InputError, match=r"net.toml:2: .*unknown device 'cia403'"):
+        cananalyze.load(real_file(ZEROERR + "log2.txt"), network=str(net))
