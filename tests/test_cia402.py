@@ -333,3 +333,22 @@ def test_network_file_device_cia402(tmp_path):
     net.write_text('[nodes.11]\ndevice = "cia403"\n')
     with pytest.raises(cananalyze.InputError, match=r"net.toml:2: .*unknown device 'cia403'"):
         cananalyze.load(real_file(ZEROERR + "log2.txt"), network=str(net))
+
+
+def test_text_candidates_by_columns_are_those_visible_string_takes():
+    """The fast path words data of an unknown type only where it may be text: the column
+    test must miss none of the records `visible_string` would word."""
+    from cananalyze.protocol.object_words import visible_string
+    from cananalyze.sdo.fastpath import _looks_like_text
+
+    rng = np.random.default_rng(1)
+    raw = rng.integers(0, 256, (20000, 4), dtype=np.uint8)
+    raw[:5000] = rng.integers(0x20, 0x7F, (5000, 4), dtype=np.uint8)
+    raw[5000:6000, 2:] = 0
+    raw[6000:6500, 1] = 0
+    length = rng.integers(0, 5, 20000)
+    got = _looks_like_text(raw, length)
+    want = np.array(
+        [visible_string(raw[i, : length[i]].tobytes()) is not None for i in range(20000)]
+    )
+    assert want.sum() > 1000 and np.array_equal(got, want)
