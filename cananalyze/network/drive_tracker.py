@@ -153,6 +153,7 @@ class DriveTracker:
         else:
             picked = list(records)
         out = []
+        last: dict[int, tuple] = {}
         for row, rec in picked:
             if rec.get("kind") != "sdo" or rec.get("result") != "ok":
                 continue
@@ -168,6 +169,10 @@ class DriveTracker:
             kind = STATE if upload else COMMAND
             obs = (row, 0, node, kind, value & 0xFFFF, "sdo", float(rec.get("t") or 0.0), 0)
             out.append(obs)
+            if upload:
+                last[node] = obs
+        # each node's last statusword read: the state still held then (for the command rule)
+        out += [(o[0], 2, o[2], SEEN, *o[4:]) for o in last.values()]
         return out
 
     def _resets(self, batch: DecodedBatch) -> list[tuple]:
