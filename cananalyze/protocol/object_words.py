@@ -145,8 +145,10 @@ _PRINTABLE = re.compile(rb"[\x20-\x7e]+\x00*")
 
 
 def visible_string(data: bytes) -> str | None:
-    """Data of an unknown type that reads as text (2+ printable ASCII bytes, then NULs)."""
-    if len(data) >= 2 and _PRINTABLE.fullmatch(data):
+    """Data of an unknown type that reads as text: more than 4 bytes (a segmented or
+    block transfer: one in 50 random 4-byte values is printable, so expedited process
+    data is never guessed to be text), printable ASCII with a letter, then only NULs."""
+    if len(data) > 4 and _PRINTABLE.fullmatch(data):
         text = data.rstrip(b"\0").decode("ascii")
         if len(text) >= 2 and any(c.isalpha() for c in text):
             return f'text "{text}"'

@@ -384,14 +384,13 @@ def pair_record_columns(
 
 def _words_column(node, index, sub, values, names, raw, data_len, object_info) -> np.ndarray:
     """The `words` of each record: worded per distinct object and data, only for the
-    objects that have words (communication objects, named CiA 402 words, data of an
-    unknown type); None elsewhere."""
+    objects that have words (communication objects, named CiA 402 words); None elsewhere."""
     m = len(node)
     out = np.full(m, None, object)
     if m == 0:
         return out
+    # expedited data (4 bytes at most) is never guessed to be text (visible_string)
     maybe = ((index >= 0x1000) & (index <= 0x1FFF)) | np.isin(index, _WORDED)
-    maybe |= (values == None) & _looks_like_text(raw, data_len)  # noqa: E711 (elementwise)
     at = np.flatnonzero(maybe & (data_len > 0))
     if at.size == 0:
         return out
@@ -412,21 +411,6 @@ def _words_column(node, index, sub, values, names, raw, data_len, object_info) -
     ]
     out[at] = np.array(texts + [None], object)[:-1][inv.reshape(-1)]
     return out
-
-
-def _looks_like_text(raw: np.ndarray, data_len: np.ndarray) -> np.ndarray:
-    """Rows whose used bytes are 2+ printable ASCII with a letter, then only NULs: the
-    candidates `object_words.visible_string` looks at (a test of the whole column, so
-    that process data of an unknown type is not worded one record at a time)."""
-    used = np.arange(raw.shape[1])[None, :] < data_len[:, None]
-    printable = (raw >= 0x20) & (raw <= 0x7E) & used
-    nul = (raw == 0) & used
-    count = printable.sum(axis=1)
-    # printable bytes first, then NULs: no printable byte after the first NUL
-    first_nul = np.where(nul.any(axis=1), nul.argmax(axis=1), raw.shape[1])
-    after = printable & (np.arange(raw.shape[1])[None, :] > first_nul[:, None])
-    letter = (((raw | 0x20) >= ord("a")) & ((raw | 0x20) <= ord("z")) & printable).any(axis=1)
-    return (count >= 2) & (count + nul.sum(axis=1) == data_len) & ~after.any(axis=1) & letter
 
 
 def pair_notes(fb, a: np.ndarray, b: np.ndarray) -> tuple[list[dict], list[dict]]:
