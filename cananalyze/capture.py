@@ -71,6 +71,7 @@ class Capture:
     profiles: dict[int, tuple[str, str]] = field(default_factory=dict)  # node -> (profile, how)
     checker: Any = None  # the Checker that ran in the pipeline (load() attaches one)
     options: Any = None  # the pipeline Options it was decoded with
+    drive_changes: list = field(default_factory=list)  # CiA 402 (network.drive_tracker)
 
     def __len__(self) -> int:
         return len(self.batch)
@@ -111,6 +112,32 @@ class Capture:
                 ),
                 "node": pd.arrays.IntegerArray(self.node.astype(np.int16), self.node < 0),
                 "pdo": pd.arrays.IntegerArray(self.pdo.astype(np.int8), self.pdo == 0),
+            }
+        )
+
+    @cached_property
+    def drive_states(self) -> pd.DataFrame:
+        """Each CiA 402 axis's state timeline: t, node, state, statusword, source, row
+        (one row per state entered; source "tpdo1", "sdo", ...)."""
+        return self._drive_table("state", "statusword")
+
+    @cached_property
+    def drive_commands(self) -> pd.DataFrame:
+        """Each CiA 402 axis's commands: t, node, command, controlword, source, row."""
+        return self._drive_table("command", "controlword")
+
+    def _drive_table(self, kind: str, word: str) -> pd.DataFrame:
+        import pandas as pd
+
+        rows = [c for c in self.drive_changes if c.kind == kind]
+        return pd.DataFrame(
+            {
+                "t": np.array([c.t for c in rows], np.float64),
+                "node": np.array([c.node for c in rows], np.int16),
+                kind: pd.Series([c.name for c in rows], dtype=object),
+                word: np.array([c.word for c in rows], np.uint16),
+                "source": pd.Series([c.source for c in rows], dtype=object),
+                "row": np.array([c.row for c in rows], np.int64),
             }
         )
 
@@ -355,6 +382,7 @@ class Collector:
         self.records: list[tuple[int, dict]] = []
         self.events: list[Event] = []
         self.states: list[Event] = []
+        self.drive: list = []
         self.event_state = event_state or EventState()
         self.offset = 0
 
@@ -372,6 +400,7 @@ class Collector:
         cols, states = batch_events_of(batch, off, self.event_state)
         self.events.extend(Event(*e) for e in cols.rows())
         self.states.extend(Event(*e) for e in states)
+        self.drive.extend(c._replace(row=c.row + off) for c in batch.drive)
         self.offset += len(fb)
 
     def capture(
@@ -417,6 +446,7 @@ class Collector:
             problems,
             network,
             profiles or {},
+            drive_changes=self.drive,
         )
 
 

@@ -178,6 +178,7 @@ def build_decoder(opts: Options | None = None, checker: Checker | None = None) -
     `checker`: one built earlier (so a bad rules file fails before the log is opened);
     otherwise built here when the options ask for checks or timing statistics.
     """
+    from .network.drive_tracker import DriveTracker
     from .network.emcy_notes import EmcyDecoder
     from .network.model import NetworkModel
     from .network.pdo_processor import PdoDecoder
@@ -203,7 +204,7 @@ def build_decoder(opts: Options | None = None, checker: Checker | None = None) -
         from .network.dbc_processor import DbcDecoder
 
         processors.insert(3, DbcDecoder(dbc))
-    decoder = Decoder(processors)
+    decoder = Decoder([*processors, DriveTracker(model)])
     model.attach(decoder)
     decoder.network = model
     if checker is None and (opts.checking or opts.timing):

@@ -44,6 +44,8 @@ class SignalBlock:
     units: dict[str, str | None]
     mapped_bytes: int = 0  # bytes the mapping needs; rows with a longer DLC carry extra bytes
     choices: dict[str, dict[int, str]] = field(default_factory=dict)  # a DBC's value tables
+    objects: dict[str, tuple[int, int]] = field(default_factory=dict)  # name -> (index, sub)
+    words: dict[str, int] = field(default_factory=dict)  # signals shown in words -> object index
 
 
 @dataclass
@@ -119,6 +121,7 @@ class DecodedBatch:
     findings: list = field(default_factory=list)  # checks.Finding, found in this batch
     events: object = None  # events.columns.EventColumns, built once by the pipeline
     states: list = field(default_factory=list)  # NMT state changes (events.columns.Row)
+    drive: list = field(default_factory=list)  # CiA 402 changes (network.drive_tracker)
     _lazy: tuple | None = field(default=None, repr=False, compare=False)
     _sdo_cache: tuple | None = field(default=None, repr=False, compare=False)
 
@@ -166,6 +169,8 @@ class DecodedBatch:
                         sb.units,
                         sb.mapped_bytes,
                         sb.choices,
+                        sb.objects,
+                        sb.words,
                     )
                 )
         row_notes = []
@@ -174,6 +179,11 @@ class DecodedBatch:
             if keep.any():
                 row_notes.append((pos[r[keep]], note))
         findings = [f for f in self.findings if keep_record(f.record())]
+        drive = [
+            c._replace(row=int(pos[c.row]) if 0 <= c.row < len(self) else n)
+            for c in self.drive
+            if keep_record({"kind": "drive", "node": c.node, "t": c.t})
+        ]
         return DecodedBatch(
             frames,
             self.service[rows],
@@ -184,6 +194,7 @@ class DecodedBatch:
             signals,
             row_notes,
             findings,
+            drive=drive,
         )
 
     def fields(self, i: int) -> dict:
@@ -207,6 +218,12 @@ class DecodedBatch:
                     f["labels"] = _labels(f["signals"], sb.choices)
                 if sb.pdo[:4] not in ("tpdo", "rpdo"):
                     f["message"] = sb.pdo  # a DBC message on a non-PDO identifier
+                if sb.words:
+                    from .profiles.words import word
+
+                    f["signal_words"] = {
+                        k: word(i, int(sb.columns[k][p])) for k, i in sb.words.items()
+                    }
             s = int(shared[i])
             if s >= 0:
                 f.update(self.row_notes[s][1])

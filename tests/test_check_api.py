@@ -218,8 +218,10 @@ def test_real_tmcm_emcy_then_reset_and_rpdo3_not_valid():
     dcf = real_file(f"{TMCM}/TMCM-1636-CANopen.dcf")
     cap = cananalyze.load(real_file(f"{TMCM}/candump.txt"), eds={1: dcf})
     f = cap.findings
-    # candump screen output: no timestamps, said once (info); the order rules still judge it
-    assert sorted(f.rule) == ["emcy", "pdo_not_valid", "timestamps"]
+    # candump screen output: no timestamps, said once (info); the order rules still judge it;
+    # the drive's statusword, read by SDO, says fault (0x0618): a CiA 402 finding with its EMCY
+    assert sorted(f.rule) == ["drive_fault", "emcy", "pdo_not_valid", "timestamps"]
+    assert "EMCY 0x6320" in f[f.rule == "drive_fault"].message.iloc[0]
     emcy = f[f.rule == "emcy"].iloc[0]
     # EMCY 0x6320 (parameter/data set error) is cleared later by an error reset: not "still active"
     assert emcy.measured == "0x6320" and "still active" not in emcy.message

@@ -206,3 +206,11 @@ def test_background_jsonl_writer_writes_the_same(tmp_path):
             writer.close()
         texts.append(path.read_bytes())
     assert texts[0] == texts[1] and texts[0].count(b"\n") > 100
+
+
+def test_cia402_signal_words_from_columns(monkeypatch):
+    """The ZeroErr drive's statuswords and controlwords in words: columns = per row."""
+    log = real_file("SeonilChoi__CANOPEN-SDK/log2.txt")
+    batches = _decode([str(log), "--device", "11=cia402"], step=300)
+    assert any(sb.words for b in batches for sb in b.signals)
+    assert _both(batches, monkeypatch) > 1000

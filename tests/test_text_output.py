@@ -300,3 +300,17 @@ def test_key_groups_partition_rows_as_a_sort_would(share: float) -> None:
     assert len(pairs) == len(uniq) == len(set(inv.tolist()))  # one group for one key, and back
     for g, i in enumerate(first_at.tolist()[1:], start=1):
         assert inv[i] == g and not (inv[:i] == g).any()
+
+
+def test_cia402_signal_words_as_per_row() -> None:
+    """Statusword/controlword words of the columnar writer equal the per-row texts."""
+    from cananalyze.cli.common import options
+    from cananalyze.cli.main import build_parser
+
+    log = real_file("SeonilChoi__CANOPEN-SDK/log2.txt")
+    dec = build_decoder(
+        options(build_parser().parse_args(["decode", str(log), "--device", "11=cia402"]))
+    )
+    batches = [dec.decode(fb) for fb in open_log(log).batches()] + [dec.finish()]
+    assert any(sb.words for b in batches for sb in b.signals)
+    assert _check(batches, False) > 1000

@@ -104,6 +104,16 @@ class ModelConfig:
         v = self._value(node, 0x1015, 0, t)
         return None if v is None else float(v)
 
+    def tpdo_shows_every_change(self, node: int, number: int, t: float) -> bool:
+        """Whether TPDO `number` of a node sends each change of what it maps at t: event
+        driven (transmission type 254/255 known, not assumed) and no inhibit time."""
+        comm = 0x1800 + number - 1
+        ttype = self.model.known(node, comm, 2, t)
+        if ttype is None or ttype.value not in (254, 255):
+            return False
+        inhibit = self.model.known(node, comm, 3, t)
+        return inhibit is None or inhibit.value == 0
+
     def known_cob_ids(self) -> set[int]:
         return self.model.spec.known_cob_ids
 

@@ -8,6 +8,9 @@ from .rules.assert_heartbeat import AssertHeartbeat
 from .rules.assert_pdo_rate import AssertPdoRate
 from .rules.assert_signal import AssertSignal
 from .rules.bootup import BootupRule
+from .rules.drive_command import DriveCommandRule
+from .rules.drive_fault import DriveFaultRule
+from .rules.drive_transition import DriveTransitionRule
 from .rules.emcy import EmcyRule
 from .rules.error_frames import ErrorFrameRule
 from .rules.guarding import GuardingRule
@@ -38,6 +41,9 @@ RULES: dict[str, type[Rule]] = {
         EmcyRule,
         SdoRule,
         ErrorFrameRule,
+        DriveTransitionRule,
+        DriveFaultRule,
+        DriveCommandRule,
     )
 }
 

@@ -56,7 +56,7 @@ def add_device_options(parser: argparse.ArgumentParser, dbc_flag: str = "--dbc")
         action="append",
         default=[],
         metavar="NODE=NAME",
-        help="node NODE is this built-in device (dat7130, dat7014, i7231d, mcb560); repeatable",
+        help="node NODE is this built-in device (dat7130, dat7014, i7231d, mcb560) or a CiA profile's defaults (cia402 drive, cia401 I/O); repeatable",
     )
     parser.add_argument(
         "--eds",

@@ -1,4 +1,7 @@
-"""`cananalyze devices [KEY|FILE]`: list built-in device profiles, or show one's PDOs and notes."""
+"""`cananalyze devices [KEY|FILE]`: list built-in device profiles, or show one's PDOs and notes.
+
+`cia402` and `cia401` are the CiA profiles' defaults (cananalyze/profiles/); a drive's own
+EDS/DCF that names CiA 402 is shown with the same state machine summary."""
 
 from __future__ import annotations
 
@@ -12,11 +15,13 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "devices",
         help="list built-in device profiles, or show one (PDOs, notes)",
-        description="Without KEY: list the built-in device profiles. With KEY (or an "
-        "EDS/DCF path): show its default PDOs for --node and the notes on manual quirks; "
-        "--dbc OUT.dbc writes those PDOs as a DBC file (cantools) with their scaling, units "
-        "and signedness. A user's EDS picks up a TOML sidecar of the same name beside it "
-        "(units and scales per object: README, Your own units).",
+        description="Without KEY: list the built-in device profiles and the CiA profiles "
+        "(cia402 drives, cia401 I/O). With KEY (or an EDS/DCF path): show its default PDOs "
+        "for --node and the notes on manual quirks; for a CiA 402 drive also its states, "
+        "commands and modes as cananalyze names them. --dbc OUT.dbc writes those PDOs as a "
+        "DBC file (cantools) with their scaling, units and signedness. A user's EDS picks up "
+        "a TOML sidecar of the same name beside it (units and scales per object: README, "
+        "Your own units).",
     )
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.epilog = EPILOG
@@ -49,7 +54,13 @@ def _hex(value: int | None, width: int = 8) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..network.profile import BUILTIN_KEYS, builtin_profiles, load_builtin, load_eds
+    from ..network.profile import (
+        DEVICE_KEYS,
+        PROFILE_KEYS,
+        builtin_profiles,
+        load_builtin,
+        load_eds,
+    )
 
     if not args.key:
         print(f"{'key':<9} {'vendor ID':<11} {'product':<11} {'device type':<11} name")
@@ -58,15 +69,22 @@ def run(args: argparse.Namespace) -> int:
                 f"{p.key:<9} {_hex(p.vendor_id):<11} {_hex(p.product_code):<11} "
                 f"{_hex(p.device_type):<11} {p.name}"
             )
+        for key in PROFILE_KEYS:
+            p = load_builtin(key)
+            print(f"{p.key:<9} {'-':<11} {'-':<11} {_hex(p.device_type):<11} {p.name}")
+        print(
+            "A node whose device type (0x1000: read in the log, or in its EDS) names CiA 402 "
+            "or 401 gets that profile's defaults when no device of ours matches."
+        )
         return 0
     if not 1 <= args.node <= 127:
         raise UsageError(f"--node {args.node}: node ID must be 1..127")
-    if args.key in BUILTIN_KEYS:
+    if args.key in DEVICE_KEYS:
         prof = load_builtin(args.key)
     elif Path(args.key).suffix.lower() in (".eds", ".dcf"):
         prof = load_eds(args.key)
     else:
-        raise UsageError(f"unknown device {args.key!r}: use one of {', '.join(BUILTIN_KEYS)}")
+        raise UsageError(f"unknown device {args.key!r}: use one of {', '.join(DEVICE_KEYS)}")
     print(f"{prof.key}: {prof.name}")
     print(
         f"  vendor ID {_hex(prof.vendor_id)}  product {_hex(prof.product_code)}  "
@@ -89,6 +107,8 @@ def run(args: argparse.Namespace) -> int:
                 f"    bit {bit:2d}+{e.bits:<2d} {e.index:04X}:{e.subindex:02X} {e.name}{unit}{scale}"
             )
             bit += e.bits
+    if prof.family == 402:
+        _cia402_summary()
     if prof.notes:
         print("Notes:")
         for note in prof.notes:
@@ -102,3 +122,25 @@ def run(args: argparse.Namespace) -> int:
         write_dbc(args.dbc, db)
         print(f"wrote {len(db.messages)} PDOs of node {args.node} to {args.dbc}")
     return 0
+
+
+def _cia402_summary() -> None:
+    """The CiA 402 words cananalyze uses, from the profile's tables."""
+    from ..profiles import cia402
+
+    print("CiA 402 (statusword 0x6041, controlword 0x6040, modes 0x6060/0x6061):")
+    print("  states (statusword & mask == value):")
+    for code, mask, value in cia402.STATE_MASKS:
+        print(f"    {cia402.STATE_NAMES[code]:<24} mask 0x{mask:02X} value 0x{value:02X}")
+    flags = ", ".join(f"{name} (bit {bit})" for bit, name in cia402.STATUS_FLAGS)
+    print(f"  statusword flags: {flags}")
+    print("  commands (controlword & mask == value):")
+    for code, mask, value in cia402.COMMAND_MASKS:
+        print(f"    {cia402.COMMAND_NAMES[code]:<24} mask 0x{mask:02X} value 0x{value:02X}")
+    print("    (0x07 from operation enabled is disable operation)")
+    modes = ", ".join(f"{k} {v}" for k, v in cia402.MODES_OF_OPERATION.items())
+    print(f"  modes of operation: {modes}")
+    print(
+        "  checks: drive_transition, drive_fault, drive_command (timeout_ms); "
+        "timeline: cap.drive_states, events kind drive_state, /node/N/drive_state"
+    )

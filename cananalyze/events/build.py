@@ -23,6 +23,7 @@ import numpy as np
 
 from ..columns import bytecols
 from ..frames import FLAG_RTR
+from ..profiles import cia402
 from ..protocol import emcy, nmt
 from ..protocol.fields import annotation, frame_fields
 from ..protocol.services import Service
@@ -240,9 +241,31 @@ def batch_event_columns(
                 )
             )
         events = EventColumns.concat(parts)
+    if batch.drive:
+        events = EventColumns.concat([events, drive_event_columns(batch.drive, offset)])
     if len(events):
         state.last_t = float(events.t[-1])
     return events, states
+
+
+_DRIVE_LEVEL = {cia402.FAULT: ERROR, cia402.FAULT_REACTION: ERROR, cia402.QUICK_STOP: WARNING}
+
+
+def drive_event_columns(changes: list, offset: int) -> EventColumns:
+    """CiA 402 state changes and new commands (`network.drive_tracker`) as events."""
+    rows = [
+        Row(
+            c.t,
+            "drive_state" if c.kind == "state" else "drive_command",
+            c.node,
+            _DRIVE_LEVEL.get(c.code, INFO) if c.kind == "state" else INFO,
+            c.text(),
+            c.row + offset,
+        )
+        for c in changes
+        if c.kind in ("state", "command")
+    ]
+    return EventColumns.from_rows(rows)
 
 
 def _any_of(service: np.ndarray, codes: np.ndarray) -> np.ndarray:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from .filelines import Lines, integer
-from .profile import BUILTIN_KEYS, load_builtin, load_eds
+from .profile import DEVICE_KEYS, load_builtin, load_eds
 
 NODE_RENAMES = {"emcy_inhibit_100us": "emcy_inhibit_time"}
 PDO_RENAMES = {"inhibit_100us": "inhibit_time", "event_timer_ms": "event_timer"}
@@ -50,7 +50,7 @@ def _node(raw, lines: Lines, where: tuple):
             raise lines.error((*where, "profile"), "give device or eds, not profile as well")
         value = raw.pop("profile")
         key = str(value).lower().replace("-", "").replace(" ", "")
-        new = "device" if key in BUILTIN_KEYS else "eds"
+        new = "device" if key in DEVICE_KEYS else "eds"
         lines.deprecated((*where, "profile"), "profile", "'device' (built-in) or 'eds' (file)")
         raw[new] = value
         lines.alias((*where, new), (*where, "profile"))
@@ -143,7 +143,7 @@ def _profile_of(table: dict, node: int, base: Path):
         return None
     key = str(name).lower().replace("-", "").replace(" ", "")
     try:
-        if key in BUILTIN_KEYS:
+        if key in DEVICE_KEYS:
             return load_builtin(key)
         path = Path(str(name))
         return load_eds(path if path.is_absolute() else base / path, node)

@@ -44,6 +44,14 @@ _IDENTITY_INDICES = np.array([0x1018, 0x1000, 0x1008], np.int64)
 USER_SOURCES = ("user --device", "user --eds", "network file", "rules file")
 
 
+def generic_for(device_type) -> object:
+    """The CiA 402/401 defaults for a device type naming them, else None."""
+    from ..profiles.generic import family, generic_profile
+
+    fam = family(device_type)
+    return generic_profile(fam) if fam else None
+
+
 @dataclass(frozen=True)
 class PdoBinding:
     """Which node's PDO a COB-ID carries, with the mapping in force."""
@@ -64,7 +72,7 @@ class Known(NamedTuple):
     source: str
 
 
-def _sdo_value(rec: dict) -> int | str | None:
+def sdo_value(rec: dict) -> int | str | None:
     data = rec.get("data")
     if isinstance(data, str) and data:
         try:
@@ -165,6 +173,18 @@ class NetworkModel:
                 return info.name, info.datatype
         return comm_object(index, subindex)
 
+    def family(self, node: int) -> int | None:
+        """402 or 401 when the node's profile, or its device type read in the log, names
+        CiA 402 (drives) or CiA 401 (I/O)."""
+        from ..profiles.generic import family
+
+        cfg = self.nodes.get(node)
+        if cfg is None:
+            return None
+        if cfg.profile is not None and cfg.profile.family:
+            return cfg.profile.family
+        return family(cfg.identity.get("device_type"))
+
     def config_at(self, node: int) -> NodeConfig:
         """Current configuration of a node (an empty 'unknown' one if never seen)."""
         cfg = self.nodes.get(node)
@@ -245,7 +265,7 @@ class NetworkModel:
             for row, rec in self._candidates(batch)
             if rec.get("kind") == "sdo" and rec.get("result") == "ok"
         ]
-        events += self._resets_in(batch)
+        events += self.resets_in(batch)
         events.sort(key=lambda e: e[0])
         n = len(batch)
         for row, rec in events:
@@ -310,7 +330,7 @@ class NetworkModel:
         if not isinstance(node, int) or index is None or sub is None:
             return None
         upload = rec.get("direction") == "upload"
-        value = _sdo_value(rec)
+        value = sdo_value(rec)
         if value is None:
             return None
         t = float(rec.get("t") or 0.0)
@@ -336,7 +356,7 @@ class NetworkModel:
         self._rebind(t)
         return self._sync_classifier()
 
-    def _resets_in(self, batch: DecodedBatch) -> list[tuple[int, tuple[float, int, str]]]:
+    def resets_in(self, batch: DecodedBatch) -> list[tuple[int, tuple[float, int, str]]]:
         """Boot-ups and NMT reset commands of a batch: (row, (t, node, kind))."""
         svc = batch.service
         rows = np.flatnonzero((svc == Service.BOOTUP) | (svc == Service.NMT))
@@ -382,10 +402,15 @@ class NetworkModel:
             ident.get("device_type"),
             ident.get("device_name"),
         )
+        if prof is None and cfg.profile is None:
+            # no device of ours, but a device type naming CiA 402/401: the profile's defaults
+            prof = generic_for(ident.get("device_type"))
         if prof is None or (cfg.profile is not None and cfg.profile.key == prof.key):
             return None
         how = (
-            "SDO 0x1018 vendor/product"
+            "SDO 0x1000 device type"
+            if prof.generic
+            else "SDO 0x1018 vendor/product"
             if "vendor_id" in ident or "product_code" in ident
             else "SDO 0x1008 name"
         )

@@ -17,7 +17,7 @@ from ..errors import InputError
 from .filelines import Lines, integer, read_tree
 from .legacy_keys import translate
 from .pdo_map import COB_ID_INVALID
-from .profile import BUILTIN_KEYS, load_builtin, load_eds
+from .profile import DEVICE_KEYS, load_builtin, load_eds
 from .spec import NetworkSpec, NodeSpec
 
 TOP_KEYS = {"bitrate", "nodes", "sync", "known_cob_ids"}
@@ -165,10 +165,10 @@ def _profile(raw: dict, node: int, base: Path, lines: Lines, where: tuple, how: 
         raise lines.error(where, "give either device or eds, not both")
     if "device" in raw:
         key = str(raw["device"]).lower().replace("-", "").replace(" ", "")
-        if key not in BUILTIN_KEYS:
+        if key not in DEVICE_KEYS:
             raise lines.error(
                 (*where, "device"),
-                f"unknown device {raw['device']!r} (known: {', '.join(BUILTIN_KEYS)})",
+                f"unknown device {raw['device']!r} (known: {', '.join(DEVICE_KEYS)})",
             )
         return load_builtin(key), how
     path = Path(str(raw["eds"]))

@@ -50,6 +50,7 @@ class PdoState:
     count: int = 0
     words: dict[int, int] = field(default_factory=dict)  # mapping sub-index -> 0xIIIISSLL
     length: int | None = None  # expected bytes while the mapping is unknown (network file)
+    assumed: bool = False  # mapping from a CiA 4xx profile's defaults, until the log maps it
 
     @property
     def cob_id(self) -> int:
@@ -132,6 +133,7 @@ class NodeConfig:
                 state.inhibit_time = int(profile.value(comm + n, 3, node) or 0)
                 state.event_timer = int(profile.value(comm + n, 5, node) or 0)
                 state.count = int(profile.value(mapping + n, 0, node) or 0)
+                state.assumed = profile.generic
                 for sub in range(1, 65):
                     word = profile.value(mapping + n, sub, node)
                     if isinstance(word, int):
@@ -183,6 +185,7 @@ class NodeConfig:
             state.event_timer,
             mapping,
             state.length,
+            assumed=state.assumed,
         )
 
     def apply(self, index: int, sub: int, value: int) -> str | None:
@@ -206,8 +209,10 @@ class NodeConfig:
                     return None
             elif sub == 0:
                 state.count = value
+                state.assumed = False
             else:
                 state.words[sub] = value
+                state.assumed = False
             return "pdo"
         if (index, sub) in self.context_objects():
             self.context[(index, sub)] = value

@@ -41,6 +41,9 @@ class PdoConfig:
     event_timer: int  # ms
     mapping: list[MapEntry] = field(default_factory=list)
     length: int | None = None  # expected bytes when the mapping is unknown (network file)
+    # the mapping is a CiA 4xx profile's default, not the device's (profiles/generic.py):
+    # decoded as far as a frame reaches, its length not judged
+    assumed: bool = False
 
     @property
     def bits(self) -> int:
@@ -50,6 +53,8 @@ class PdoConfig:
     def expected_bytes(self) -> int | None:
         """The frame length this PDO should have: its mapping's, else the declared length,
         else None (not known: nothing to check)."""
+        if self.assumed:
+            return None
         if self.mapping:
             return (self.bits + 7) // 8
         return self.length

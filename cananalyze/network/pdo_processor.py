@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..frames import FLAG_RTR
+from ..profiles.words import WORDED
 from ..protocol.pdo import decode_pdo, words_of
 from ..protocol.services import Service
 from ..records import DecodedBatch, SignalBlock
@@ -68,12 +69,37 @@ class PdoDecoder:
             if binding is None:
                 continue
             group = rows[order[a:b]]
-            self._decode_group(batch, group, binding)
+            if binding.config.assumed and binding.config.mapping:
+                self._decode_assumed(batch, group, binding)
+            else:
+                self._decode_group(batch, group, binding)
         self._words = None  # not kept past the batch
 
-    def _decode_group(self, batch: DecodedBatch, group: np.ndarray, binding) -> None:
+    def _decode_assumed(self, batch: DecodedBatch, group: np.ndarray, binding) -> None:
+        """A profile's default mapping: each frame decoded by the entries its length holds
+        (a CiA 401 module with fewer channels sends a shorter PDO), one group per length."""
+        dlc = batch.frames.dlc[group]
+        for d in np.unique(dlc).tolist():
+            mapping, bits = [], 0
+            for e in binding.config.mapping:
+                if bits + e.bits > 8 * d:
+                    break
+                mapping.append(e)
+                bits += e.bits
+            if mapping:
+                partial = len(mapping) < len(binding.config.mapping)
+                self._decode_group(batch, group[dlc == d], binding, mapping, partial)
+
+    def _decode_group(
+        self,
+        batch: DecodedBatch,
+        group: np.ndarray,
+        binding,
+        mapping: list | None = None,
+        partial: bool = False,
+    ) -> None:
         fb = batch.frames
-        mapping = binding.config.mapping
+        mapping = binding.config.mapping if mapping is None else mapping
         if binding.problem:
             batch.row_notes.append((group, {"pdo_problem": binding.problem}))
         if not mapping:
@@ -100,7 +126,10 @@ class PdoDecoder:
                 f"shorter than the {cols.bytes_needed} bytes mapped in "
                 f"{binding.kind.upper()}{binding.number}: not decoded",
             ),
-            (cols.extra, f"longer than the {cols.bytes_needed} bytes mapped: extra bytes ignored"),
+            (
+                cols.extra & (not partial),  # a default mapping's entries the frame holds
+                f"longer than the {cols.bytes_needed} bytes mapped: extra bytes ignored",
+            ),
         ):
             if mask.any():  # one shared note per group of rows, not a dict per row
                 have = ",".join(map(str, sorted(set(dlc[mask].tolist()))))
@@ -120,8 +149,20 @@ class PdoDecoder:
                 columns={name: (v if all_ok else v[ok]) for name, v in cols.values.items()},
                 units={name: units.get(name) for name in cols.values},
                 mapped_bytes=cols.bytes_needed,
+                objects={e.name: (e.index, e.subindex) for e in mapping if e.name in cols.values},
+                words=self._words_of(binding.node, mapping, cols.values),
             )
         )
+
+    def _words_of(self, node: int, mapping: list, values: dict) -> dict[str, int]:
+        """Signals shown in words too (a CiA 402 node's statusword, controlword, modes)."""
+        if self.model.family(node) != 402:
+            return {}
+        return {
+            e.name: e.index
+            for e in mapping
+            if e.index in WORDED and e.subindex == 0 and e.name in values
+        }
 
     def finish(self, batch: DecodedBatch) -> None:
         pass

@@ -23,6 +23,8 @@ from .pdo_map import MapEntry, PdoConfig, split_cob_id, split_mapping_word
 from .sidecar import Sidecar, load_sidecar
 
 BUILTIN_KEYS = ("dat7130", "dat7014", "i7231d", "mcb560")
+PROFILE_KEYS = ("cia402", "cia401")  # CiA 4xx defaults without an EDS (cananalyze/profiles/)
+DEVICE_KEYS = BUILTIN_KEYS + PROFILE_KEYS  # what --device and the network file's device take
 BOOLEAN = 0x01
 _UINT_BY_BITS = {8: 0x05, 16: 0x06, 24: 0x16, 32: 0x07, 40: 0x18, 48: 0x19, 56: 0x1A, 64: 0x1B}
 
@@ -52,6 +54,14 @@ class DeviceProfile:
     od: object = field(repr=False)
     sidecar: Sidecar | None = field(default=None, repr=False)
     node_id: int | None = None  # from a DCF's [DeviceComissioning], if any
+    generic: bool = False  # a CiA 4xx profile's defaults, not a device's own dictionary
+
+    @property
+    def family(self) -> int | None:
+        """402 or 401 when the device type names CiA 402 (drives) or CiA 401 (I/O)."""
+        from ..profiles.generic import family
+
+        return family(self.device_type)
 
     # --- object dictionary -------------------------------------------------
     def object(self, index: int, subindex: int = 0) -> ObjectInfo | None:
@@ -77,7 +87,7 @@ class DeviceProfile:
         if spec is None:
             info = self.object(index, subindex)
             name = _signal_name(info.name) if info else f"obj_{index:04x}_{subindex:02x}"
-            return name, None, None, 0.0
+            return name, self._profile_unit(index, subindex), None, 0.0
         if spec.unit_table and spec.context and self.sidecar:
             ctx = (context or {}).get(spec.context)
             if ctx is None:
@@ -87,6 +97,14 @@ class DeviceProfile:
                 return spec.name, choice.unit, choice.scale, choice.offset
             return spec.name, None, None, 0.0
         return spec.name, spec.unit, spec.scale, spec.offset
+
+    def _profile_unit(self, index: int, subindex: int) -> str | None:
+        """A CiA 402 object's unit when the EDS names the profile but says no unit."""
+        if self.family != 402:
+            return None
+        from ..profiles.generic import object_unit
+
+        return object_unit(402, index, subindex)
 
     def map_entries(
         self,
@@ -195,9 +213,13 @@ def _build(path: Path, sidecar: Sidecar | None, node_id: int | None) -> DevicePr
 
 @cache
 def load_builtin(key: str) -> DeviceProfile:
-    """A built-in profile by key (dat7130, dat7014, i7231d, mcb560)."""
+    """A built-in profile by key (dat7130, dat7014, i7231d, mcb560; cia402, cia401)."""
+    if key in PROFILE_KEYS:
+        from ..profiles.generic import KEYS, generic_profile
+
+        return generic_profile(KEYS[key])
     if key not in BUILTIN_KEYS:
-        raise InputError(f"unknown device profile {key!r} (known: {', '.join(BUILTIN_KEYS)})")
+        raise InputError(f"unknown device profile {key!r} (known: {', '.join(DEVICE_KEYS)})")
     base = decoders_dir()
     sidecar = load_sidecar(base / f"{key}.toml")
     return _build(base / f"{key}.eds", sidecar, None)

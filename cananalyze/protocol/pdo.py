@@ -135,11 +135,14 @@ def annotation(tpdo: bool, number: int, rtr: bool, fields: dict) -> str:
 
 
 def signals_text(fields: dict) -> str:
-    """'ch1=21.5 degC mode=3 (running)': a row's signals, units and value-table names."""
+    """'ch1=21.5 degC mode=3 (running)': a row's signals, units, and the words of a value
+    (a DBC's value table, or a CiA 402 statusword/controlword/mode)."""
     units = fields.get("units") or {}
     labels = fields.get("labels") or {}
+    words = fields.get("signal_words") or {}
     return " ".join(
-        _signal_text(k, v, units.get(k), labels.get(k)) for k, v in fields["signals"].items()
+        _signal_text(k, v, units.get(k), labels.get(k) or words.get(k))
+        for k, v in fields["signals"].items()
     )
 
 

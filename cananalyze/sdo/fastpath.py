@@ -20,11 +20,15 @@ from functools import cached_property
 import numpy as np
 
 from ..frames import FLAG_TX
+from ..profiles.words import WORDED
 from ..protocol import sdo
 from ..protocol.datatypes import decode_column, decode_int_column, decode_value
 from ..records import DecodedBatch, SdoColumns
 from .tracker import ObjectInfo
 from .transaction import SDO_TABLE_COLUMNS
+from .words import sdo_words
+
+_WORDED = np.array(sorted(WORDED), np.int64)
 
 _UPLOAD_REQ = sdo.INITIATE_UPLOAD_REQUEST
 _DOWNLOAD_RESP = sdo.INITIATE_DOWNLOAD_RESPONSE
@@ -174,7 +178,7 @@ OK_CONSTANTS = {
     "detail": None,
 }
 NUMBER_FIELDS = ("t_start", "t", "latency_ms", "node", "index", "subindex", "size")
-OBJECT_FIELDS = ("value", "name")
+OBJECT_FIELDS = ("value", "name", "words")
 
 
 @dataclass
@@ -245,10 +249,11 @@ class RecordColumns:
                 "abort_code": None,
                 "abort_text": None,
                 "detail": None,
+                "words": w,
                 "frames": 2,
                 "cob_ids": [0x600 + nd, 0x580 + nd],
             }
-            for x, y, lat, nd, dr, i, s, n, h, v, nm in zip(
+            for x, y, lat, nd, dr, i, s, n, h, v, nm, w in zip(
                 c["t_start"],
                 c["t"],
                 c["latency_ms"],
@@ -260,6 +265,7 @@ class RecordColumns:
                 c["data"],
                 c["value"],
                 c["name"],
+                c["words"],
                 strict=True,
             )
         ]
@@ -348,6 +354,7 @@ def pair_record_columns(
                     else:
                         value_int[sel] = got[0]
                         value_none[sel] = got[1]
+    words = _words_column(node_a, index_a, da[:, 3], values, names, raw, data_len, object_info)
     latency = _rounded_latency(t1 - t0) if latency is None else np.asarray(latency, np.float64)
     arrays = {
         "t_start": t0.astype(np.float64, copy=False),
@@ -360,6 +367,7 @@ def pair_record_columns(
         "upload": upload,
         "value": values,
         "name": names,
+        "words": words,
         "raw": raw,
         "data_len": data_len,
         "name_code": name_code,
@@ -372,6 +380,37 @@ def pair_record_columns(
         for k in np.flatnonzero(aborted).tolist():
             done[k] = pair_outputs(fb, int(a[k]), int(b[k]), int(node_a[k]), object_info)[2]
     return RecordColumns(arrays, done, name_labels)
+
+
+def _words_column(node, index, sub, values, names, raw, data_len, object_info) -> np.ndarray:
+    """The `words` of each record: worded per distinct object and data, only for the
+    objects that have words (communication objects, named CiA 402 words); None elsewhere."""
+    m = len(node)
+    out = np.full(m, None, object)
+    if m == 0:
+        return out
+    # expedited data (4 bytes at most) is never guessed to be text (visible_string)
+    maybe = ((index >= 0x1000) & (index <= 0x1FFF)) | np.isin(index, _WORDED)
+    at = np.flatnonzero(maybe & (data_len > 0))
+    if at.size == 0:
+        return out
+    word = raw[at].astype(np.int64) @ np.array([1, 1 << 8, 1 << 16, 1 << 24], np.int64)
+    key = np.stack([node[at], index[at], sub[at], word, data_len[at]], axis=1)
+    _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    texts = [
+        sdo_words(
+            int(node[k]),
+            int(index[k]),
+            int(sub[k]),
+            values[k],
+            raw[k, : data_len[k]].tobytes(),
+            names[k],
+            object_info,
+        )
+        for k in at[first].tolist()
+    ]
+    out[at] = np.array(texts + [None], object)[:-1][inv.reshape(-1)]
+    return out
 
 
 def pair_notes(fb, a: np.ndarray, b: np.ndarray) -> tuple[list[dict], list[dict]]:
@@ -504,6 +543,9 @@ def pair_outputs(
         "abort_code": code,
         "abort_text": None if code is None else text,
         "detail": "aborted by server" if code is not None else None,
+        "words": sdo_words(node, index, sub, value, bytes(data), name, object_info)
+        if result == "ok"
+        else None,
         "frames": 2,
         "cob_ids": [0x600 + node, 0x580 + node],
     }

@@ -225,7 +225,10 @@ class SdoProcessor:
             known = {k: info(k >> 24, (k >> 8) & 0xFFFF, k & 0xFF) for k in keys}
 
             def lookup(node: int, index: int, sub: int, known=known):
-                return known[(node << 24) | (index << 8) | sub]
+                key = (node << 24) | (index << 8) | sub
+                if key not in known:  # a mapping entry's object, named in its words
+                    known[key] = info(node, index, sub)
+                return known[key]
 
         memo: list[fastpath.RecordColumns] = []
 

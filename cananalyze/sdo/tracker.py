@@ -42,6 +42,7 @@ from ..protocol.sdo import (
 from .channels import ChannelTable, SdoChannel
 from .transaction import FrameRole, SdoTransaction
 from .transfer import PHASE_TEXT, Transfer
+from .words import sdo_words
 
 ObjectInfo = Callable[[int, int, int], "tuple[str, int] | None"]
 
@@ -199,14 +200,16 @@ class SdoTracker:
         return tx
 
     def _describe_object(self, tx: SdoTransaction, data: bytes | None) -> None:
-        if self.object_info is None or tx.index is None:
+        if tx.index is None:
             return
-        known = self.object_info(tx.node, tx.index, tx.subindex or 0)
-        if known is None:
-            return
-        tx.name, datatype = known
+        known = self.object_info(tx.node, tx.index, tx.subindex or 0) if self.object_info else None
+        if known is not None:
+            tx.name, datatype = known
+            if data is not None:
+                tx.value = decode_value(data, datatype)
         if data is not None:
-            tx.value = decode_value(data, datatype)
+            tx.words = sdo_words(tx.node, tx.index, tx.subindex, tx.value, data, tx.name,
+                                 self.object_info)  # fmt: skip
 
     def _fail(self, xfer: Transfer, problem: str) -> None:
         """Protocol error: wait for the abort the peer should send, else end as protocol_error."""

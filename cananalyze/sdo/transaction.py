@@ -23,6 +23,7 @@ SDO_TABLE_COLUMNS = (
     "abort_code",
     "abort_text",
     "detail",
+    "words",
 )
 
 
@@ -62,6 +63,7 @@ class SdoTransaction:
     abort_text: str | None = None
     detail: str | None = None
     latency_ms: float | None = None
+    words: str | None = None  # the value in words (sdo/words.py), when there are any
     frames: int = 0
     ref: int | None = None
     problems: list[str] = field(default_factory=list)
@@ -87,6 +89,7 @@ class SdoTransaction:
             "abort_code": self.abort_code,
             "abort_text": self.abort_text,
             "detail": self.detail,
+            "words": self.words,
             "frames": self.frames,
             "cob_ids": list(self.channel),
         }

@@ -22,6 +22,7 @@ import numpy as np
 
 from ...columns import bytecols
 from ...frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
+from ...profiles.words import word_column
 from ...protocol.fields import frame_fields
 from ...protocol.services import SERVICE_NAMES, Service
 from ...records import DecodedBatch
@@ -214,6 +215,13 @@ def _signal_text(sb, pos: np.ndarray) -> np.ndarray | None:
             (("}" if sb.columns else ',"signals":{}') + ',"units":' + units).encode(), m
         )
     )
+    for j, (name, index) in enumerate(sb.words.items()):  # one text per distinct value
+        texts, inv = word_column(index, np.asarray(sb.columns[name])[pos])
+        head = (',"signal_words":{' if j == 0 else ",") + json.dumps(name) + ":"
+        parts += [bytecols.repeat(head.encode(), m)]
+        parts += [_padded_table([json.dumps(w).encode() for w in texts])[inv]]
+    if sb.words:
+        parts.append(bytecols.repeat(b"}", m))
     return bytecols.left_aligned(*bytecols.compact(parts, m, with_ends=True))
 
 

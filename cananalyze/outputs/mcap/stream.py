@@ -32,10 +32,13 @@ from ..tables.writer import WriterThread
 from .bulk import BulkMcapWriter
 from .frames import FRAME_SCHEMA, FRAMES_TOPIC, frame_payloads
 from .topics import (
+    DRIVE_SCHEMA,
     EVENTS_TOPIC,
     LOG_SCHEMA,
     STATE_SCHEMA,
     _ns,
+    drive_payloads,
+    drive_topic,
     event_payloads,
     signal_payloads,
     signal_schema,
@@ -47,10 +50,12 @@ from .topics import (
 )
 
 
-def batch_messages(fb, service, node, blocks, states, events, lines, file: str) -> list[tuple]:
+def batch_messages(
+    fb, service, node, blocks, states, events, lines, file: str, drive=()
+) -> list[tuple]:
     """(channel key, topic, schema, log times ns, payloads) of one batch, per stream:
     signals (one stream per series, in the Capture's series order), NMT states per node,
-    events as foxglove.Log, raw frames. The one place that says which topic carries
+    CiA 402 drive states per axis, events as foxglove.Log, raw frames. The one place that says which topic carries
     what: `export --mcap` writes these and `live --foxglove` serves them."""
     out: list[tuple] = []
     for n, pdo, cob, rows, columns, units in sorted(blocks, key=lambda b: b[:3]):
@@ -65,6 +70,12 @@ def batch_messages(fb, service, node, blocks, states, events, lines, file: str) 
     for n, evs in sorted(by_node.items()):
         ns = _ns(np.array([e.t for e in evs]))
         out.append((("state", n), state_topic(n), STATE_SCHEMA, ns, state_payloads(evs)))
+    by_drive: dict[int, list] = {}
+    for c in drive:
+        by_drive.setdefault(c.node, []).append(c)
+    for n, cs in sorted(by_drive.items()):
+        ns = _ns(np.array([c.t for c in cs]))
+        out.append((("drive", n), drive_topic(n), DRIVE_SCHEMA, ns, drive_payloads(cs)))
     if len(events):
         order = np.lexsort((events.sort_key(), events.t))
         events = events.take(order)
@@ -146,19 +157,22 @@ class StreamMcap:
         # what the job needs, not the batch (its notes and records would stay alive too)
         blocks = [(b.node, b.pdo, b.cob_id, b.rows, b.columns, b.units) for b in batch.signals]
         service, node = batch.service, batch.node
+        drive = [c for c in batch.drive if c.kind == "state"]
         try:
-            self._writer.put(lambda: self._emit(fb, service, node, blocks, states, events, lines))
+            self._writer.put(
+                lambda: self._emit(fb, service, node, blocks, states, events, lines, drive)
+            )
         except OSError as exc:  # the writer thread's: name the file it was writing
             raise _named(exc, self.path) from exc
         self.offset += len(fb)
 
-    def _emit(self, fb, service, node, blocks, states, events, lines) -> None:
+    def _emit(self, fb, service, node, blocks, states, events, lines, drive=()) -> None:
         """One batch's messages, on the writer thread: its JSON columns (numpy, pyarrow
         and C work outside the GIL) are built beside the decoder; the writer lays out,
         compresses and writes the chunks on a thread of its own."""
         streams: list[tuple[int, np.ndarray, Texts]] = []
         for key, topic, schema, ns, payload in batch_messages(
-            fb, service, node, blocks, states, events, lines, self._file
+            fb, service, node, blocks, states, events, lines, self._file, drive
         ):
             streams.append((self._channel(key, topic, schema), ns, payload))
         write_merged(self.w, streams)

@@ -4,6 +4,7 @@ Topics (all JSON-encoded with JSON Schema, so Foxglove needs no configuration):
   /node/<N>/<pdo>     decoded signals of one PDO (/dbc/<message>: a DBC's, on no node) (numbers as numbers; unit in the
                       schema's description)
   /node/<N>/nmt_state NMT state changes seen in heartbeat, boot-up, guarding
+  /node/<N>/drive_state CiA 402 state changes of a drive (statusword by PDO or SDO)
   /canopen/events     foxglove.Log: SDO transactions, EMCY, NMT commands, findings
   /can/frames         every raw frame (schema and builder: `frames.py`)
 Log time = frame time in ns. Messages are written in time order across topics.
@@ -67,6 +68,13 @@ STATE_SCHEMA = {
     "properties": {"state": {"type": "string"}},
 }
 
+DRIVE_SCHEMA = {
+    "title": "cananalyze.DriveState",
+    "description": "CiA 402 state of a drive, from its statusword (PDO or SDO)",
+    "type": "object",
+    "properties": {"state": {"type": "string"}, "statusword": {"type": "integer"}},
+}
+
 
 _ns = log_time_ns  # every topic's log times, as the frames topic keeps them
 
@@ -116,6 +124,13 @@ def signal_payloads(columns: dict[str, np.ndarray]) -> Texts:
 def state_payloads(states: list) -> Texts:
     """`{"state": ...}` of NMT state changes (rare: one json.dumps each)."""
     return Texts.from_list([json.dumps({"state": e.message}).encode() for e in states])
+
+
+def drive_payloads(changes: list) -> Texts:
+    """`{"state": ..., "statusword": ...}` of CiA 402 state changes (rare)."""
+    return Texts.from_list(
+        [json.dumps({"state": c.name, "statusword": c.word}).encode() for c in changes]
+    )
 
 
 def event_payloads(
@@ -171,6 +186,10 @@ def signal_topic(s: SignalSeries | SignalBlock) -> str:
 
 def state_topic(node: int) -> str:
     return f"/node/{node}/nmt_state"
+
+
+def drive_topic(node: int) -> str:
+    return f"/node/{node}/drive_state"
 
 
 def write_merged(w: BulkMcapWriter, streams: list[tuple[int, np.ndarray, Texts]]) -> None:

@@ -5,6 +5,7 @@ and `live.RerunLive` (live sessions).
 Entities:
   /node/<N>/<pdo>/<signal>  Scalars (series named "signal [unit]")
   /node/<N>/nmt             StateChange lane (heartbeat, boot-up, guarding)
+  /node/<N>/drive_state     StateChange lane of a CiA 402 drive (its statusword)
   /events                   TextLog with levels (SDO, EMCY, NMT, findings)
   /bus/load                 Scalars: bits/s, or percent with a bitrate
 Everything is sent with `send_columns`, one call per series, never one `log` per
@@ -36,11 +37,16 @@ def _time(rr, t: np.ndarray, absolute: bool):
     return rr.TimeColumn(TIMELINE, duration=t)
 
 
-def blueprint_for(pdos: Iterable[tuple[int, str, int]], lane_nodes: Iterable[int]):
+def blueprint_for(
+    pdos: Iterable[tuple[int, str, int]],
+    lane_nodes: Iterable[int],
+    drive_nodes: Iterable[int] = (),
+):
     """A column of plots per node (one plot per PDO), the NMT state lanes, the event log.
 
     pdos: (node, pdo name, COB-ID) of each PDO with signals; lane_nodes: nodes with
-    NMT states (live sessions resend the layout as either grows). One plot per PDO
+    NMT states (live sessions resend the layout as either grows); drive_nodes: CiA 402
+    drives with a state lane. One plot per PDO
     rather than per node: a node's PDOs often mix units (digital input bytes next to
     analogue millivolts) and a shared axis flattens the small ones. Lanes are named
     one by one: a `/node/*/nmt` pattern matched nothing in the viewer.
@@ -65,11 +71,15 @@ def blueprint_for(pdos: Iterable[tuple[int, str, int]], lane_nodes: Iterable[int
     ]
     columns.append(rrb.TimeSeriesView(origin="/bus", name="bus load"))
     lanes = [f"+ /node/{n}/nmt" for n in sorted(lane_nodes)]
+    drive_nodes = sorted(drive_nodes)
+    lanes += [f"+ /node/{n}/drive_state" for n in drive_nodes]
     return rrb.Blueprint(
         rrb.Vertical(
             rrb.Horizontal(*columns) if len(columns) <= SIDE_BY_SIDE else rrb.Grid(*columns),
             rrb.StateTimelineView(
-                origin="/node", contents=lanes or "$origin/**", name="NMT states"
+                origin="/node",
+                contents=lanes or "$origin/**",
+                name="NMT and drive states" if drive_nodes else "NMT states",
             ),
             rrb.TextLogView(origin="/events", name="events", **_log_columns(rrb)),
             row_shares=[3, 1, 2],
@@ -144,6 +154,18 @@ def send_parts(cap: Capture, rec, absolute: bool, counts: dict[str, int], named:
             columns=rr.StateChange.columns(state=[e.message for e in evs]),
         )
         counts[path] = counts.get(path, 0) + len(evs)
+    drives: dict[int, list] = {}
+    for c in cap.drive_changes:
+        if c.kind == "state":
+            drives.setdefault(c.node, []).append(c)
+    for node, cs in sorted(drives.items()):
+        path = f"/node/{node}/drive_state"
+        rec.send_columns(
+            path,
+            indexes=[_time(rr, np.array([c.t for c in cs]), absolute)],
+            columns=rr.StateChange.columns(state=[c.name for c in cs]),
+        )
+        counts[path] = counts.get(path, 0) + len(cs)
     events = cap.sorted_events()
     if events:
         rec.send_columns(

@@ -68,6 +68,7 @@ class StreamRrd:
         self._named: set[str] = set()
         self._pdos: set[tuple[int, str, int]] = set()
         self._lanes: set[int] = set()
+        self._drives: set[int] = set()
         self._absolute: bool | None = None
         self._event_state = EventState()
         self._load = _LoadWindows(LOAD_WINDOW)
@@ -89,6 +90,7 @@ class StreamRrd:
             self._absolute = is_absolute(fb.t)
         self._pdos |= {(s.node, s.pdo, s.cob_id) for s in cap.series}
         self._lanes |= {e.node for e in cap.state_changes}
+        self._drives |= {c.node for c in cap.drive_changes if c.kind == "state"}
         send_parts(cap, self.rec, bool(self._absolute), self.counts, self._named)
         if len(fb):
             self._load.add(fb.t, frame_bits(fb.flags, fb.dlc))
@@ -102,7 +104,9 @@ class StreamRrd:
                 self.rec, starts, load, bool(self._absolute), self.bitrate, self.counts, self._named
             )
             self.rec.send_blueprint(
-                blueprint_for(self._pdos, self._lanes), make_active=True, make_default=True
+                blueprint_for(self._pdos, self._lanes, self._drives),
+                make_active=True,
+                make_default=True,
             )
             self.rec.flush()
             if self._file:  # a viewer keeps the recording; the file needs its end

@@ -81,6 +81,9 @@ def fast_pieces(fields: RecordColumns, keep: np.ndarray | None) -> dict[str, Pie
         out["value"] = sel(a["value"])
     out["data"] = Hex(sel(a["raw"]), sel(a["data_len"]))
     out["name"] = Labels(sel(a["name_code"]), fields.name_labels)
+    words = sel(a["words"])  # mostly None: then one label, as a constant column is written
+    none = not (words != None).any()  # noqa: E711 (elementwise)
+    out["words"] = Labels(np.zeros(n, np.int8), [None]) if none else words
     out["direction"] = Labels(sel(a["upload"]).astype(np.int8), ["download", "upload"])
     for c, v in OK_CONSTANTS.items():
         out[c] = Labels(np.zeros(n, np.int8), [v])

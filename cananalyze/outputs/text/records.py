@@ -25,6 +25,8 @@ def format_record(rec: dict) -> str:
                 line += f": {value} (0x{value & 0xFFFFFFFFFFFFFFFF:X})"
             else:
                 line += f": {value}"
+            if rec.get("words"):
+                line += f" ({rec['words']})"
             line += f" ({rec.get('size')} bytes)"
         elif rec.get("abort_code") is not None:
             line += f": 0x{rec['abort_code']:08X} {rec.get('abort_text')}"

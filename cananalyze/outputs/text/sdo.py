@@ -95,6 +95,7 @@ def _record_lines(fields, m: int) -> list[bytes]:
     by_python[list(fields.aborted)] = True
     if "value_int" not in a:  # some value is a float, bool or text: record by record
         by_python[:] = True
+    by_python |= a["words"] != None  # noqa: E711 (elementwise): worded values are rare
     lat = a["latency_ms"]
     with np.errstate(invalid="ignore"):
         tenths = np.rint(py_round(np.where(lat >= 0, lat, 0.0), 1) * 10.0)

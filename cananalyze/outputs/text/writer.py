@@ -28,6 +28,7 @@ from ...columns.bytecols import digits as _digits
 from ...columns.bytecols import padded_table as _padded_table
 from ...columns.numtext import g6_text, value_text
 from ...frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
+from ...profiles.words import word_column
 from ...protocol import emcy as emcy_text
 from ...protocol.fields import annotation, frame_fields
 from ...protocol.services import SERVICE_NAMES, Service
@@ -534,6 +535,9 @@ def _signal_text(
         parts.append((col[pos],))  # formatted with every block's columns at once
         if units.get(name):
             const(f" {units[name]}")
+        if name in sb.words:  # a statusword's state, a mode's name: one text per value
+            texts, inv = word_column(sb.words[name], col[pos])
+            parts.append(_padded_table([f" ({w})".encode() if w else b"" for w in texts])[inv])
     if not sb.columns:
         return None
     # shared notes: only a pdo_problem is known to print as a plain suffix

@@ -1,0 +1,87 @@
+"""CiA 402: a drive entering fault (fault reaction active or fault), with the EMCY it sent.
+
+The EMCY a drive sends with its fault is looked for from `emcy_window_ms` before the
+statusword shows the fault to as long after it within the same batch (the EMCY usually
+comes first, since the statusword waits for the next TPDO or poll).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...network.drive_tracker import RESET, STATE
+from ...profiles import cia402
+from ...protocol.emcy import MIN_BYTES, error_text
+from ...protocol.services import Service
+from ..rule import Context, Rule
+
+_FAULTS = (cia402.FAULT_REACTION, cia402.FAULT)
+
+
+class DriveFaultRule(Rule):
+    name = "drive_fault"
+    severity = "error"
+    why = (
+        "The drive stopped on a fault: read its EMCY code and 0x603F (error code), fix the "
+        "cause, then a fault reset (controlword bit 7) returns it to switch on disabled."
+    )
+
+    def __init__(self, emcy_window_ms: float = 1000.0, **kw) -> None:
+        super().__init__(**kw)
+        self.window = float(emcy_window_ms) / 1000.0
+        self.last: dict[int, int] = {}
+        self.emcy: dict[int, tuple[float, int]] = {}  # node -> last EMCY raised (t, code)
+
+    def process(self, ctx: Context) -> None:
+        b = ctx.batch
+        rows = np.flatnonzero(b.service == Service.EMCY)
+        fb = b.frames
+        rows = rows[fb.dlc[rows] >= MIN_BYTES]
+        codes = fb.data[rows, 0].astype(np.int64) | (fb.data[rows, 1].astype(np.int64) << 8)
+        emcy = list(zip(rows.tolist(), b.node[rows].tolist(), codes.tolist(), strict=True))
+        k = 0
+        for c in b.drive:
+            while k < len(emcy) and emcy[k][0] <= c.row:  # the EMCYs before this change
+                self._saw(fb, *emcy[k])
+                k += 1
+            if c.kind == RESET:
+                self.last.pop(c.node, None)
+                continue
+            if c.kind != STATE:
+                continue
+            before = self.last.get(c.node)
+            self.last[c.node] = c.code
+            self.subjects.add(c.node)
+            if c.code not in _FAULTS or before in _FAULTS:
+                continue
+            sent = self.emcy.get(c.node)
+            if sent is None or c.t - sent[0] > self.window:
+                sent = next(
+                    (
+                        (float(fb.t[r]), code)
+                        for r, n, code in emcy[k:]
+                        if n == c.node and code and float(fb.t[r]) - c.t <= self.window
+                    ),
+                    None,
+                )
+            with_emcy = (
+                f" with EMCY {error_text(sent[1])} at {ctx.rel(sent[0])}"
+                if sent
+                else " (no EMCY from the node around it)"
+            )
+            self.emit(
+                c.t,
+                c.node,
+                c.cob_id or None,
+                f"drive entered {cia402.STATE_NAMES[c.code]} (statusword 0x{c.word:04X})"
+                + with_emcy,
+                f"0x{sent[1]:04X}" if sent else cia402.STATE_NAMES[c.code],
+                "no fault",
+                row=c.row,
+            )
+        for e in emcy[k:]:
+            self._saw(fb, *e)
+
+    def _saw(self, fb, row: int, node: int, code: int) -> None:
+        if code:
+            self.emcy[node] = (float(fb.t[row]), code)
