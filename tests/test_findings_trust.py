@@ -73,7 +73,9 @@ def test_untimed_real_log_says_so_once_and_skips_timing():
     found = cananalyze.check(log)
     (note,) = found
     assert note.severity == "info" and note.rule == "timestamps"
-    assert note.message.startswith("no timestamps: timing rules skipped (heartbeat, pdo_async)")
+    assert note.message.startswith(
+        "no timestamps: timing rules skipped (heartbeat, pdo_async, drive_command)"
+    )
 
 
 def test_untimed_log_keeps_order_based_rules_in_line_order(tmp_path):

@@ -110,7 +110,9 @@ class Checker:
         self._last_line = int(line[-1])
         frames: FrameBatch = dataclasses.replace(fb, t=line)
         self._view_t = line
-        return dataclasses.replace(batch, frames=frames)
+        # the drive's changes carry their frame's time: the line too (row len(fb): the end)
+        drive = [c._replace(t=float(line[min(c.row, n - 1)])) for c in batch.drive]
+        return dataclasses.replace(batch, frames=frames, drive=drive)
 
     def process(self, batch: DecodedBatch) -> None:
         if len(batch) == 0 and not batch.records:

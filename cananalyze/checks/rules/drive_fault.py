@@ -2,7 +2,8 @@
 
 The EMCY a drive sends with its fault is looked for from `emcy_window_ms` before the
 statusword shows the fault to as long after it within the same batch (the EMCY usually
-comes first, since the statusword waits for the next TPDO or poll).
+comes first, since the statusword waits for the next TPDO or poll). In a log without
+times the window has no length: the node's last EMCY before, or its next one in the batch.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ _FAULTS = (cia402.FAULT_REACTION, cia402.FAULT)
 class DriveFaultRule(Rule):
     name = "drive_fault"
     severity = "error"
+    timing = False  # judged by the order of the statuswords: kept on logs without times
     why = (
         "The drive stopped on a fault: read its EMCY code and 0x603F (error code), fix the "
         "cause, then a fault reset (controlword bit 7) returns it to switch on disabled."
@@ -54,13 +56,14 @@ class DriveFaultRule(Rule):
             self.subjects.add(c.node)
             if c.code not in _FAULTS or before in _FAULTS:
                 continue
+            window = self.window if ctx.timed else float("inf")
             sent = self.emcy.get(c.node)
-            if sent is None or c.t - sent[0] > self.window:
+            if sent is None or c.t - sent[0] > window:
                 sent = next(
                     (
                         (float(fb.t[r]), code)
                         for r, n, code in emcy[k:]
-                        if n == c.node and code and float(fb.t[r]) - c.t <= self.window
+                        if n == c.node and code and float(fb.t[r]) - c.t <= window
                     ),
                     None,
                 )

@@ -18,6 +18,7 @@ from ..rule import Context, Rule
 class DriveTransitionRule(Rule):
     name = "drive_transition"
     severity = "error"
+    timing = False  # judged by the order of the statuswords: kept on logs without times
     why = (
         "CiA 402 allows only the transitions of its state machine; a drive that jumps "
         "elsewhere has a firmware or master problem. Compare with the controlwords sent "
