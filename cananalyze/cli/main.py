@@ -17,7 +17,17 @@ from ..runtime import allocator, speedups
 from ..runtime.gcpolicy import fewer_collections
 
 # One module per sub-command, each with add_parser(subparsers) and run(args) -> int.
-SUBCOMMANDS = ["decode", "check", "report", "export", "live", "simulate", "devices", "fleet", "query"]
+SUBCOMMANDS = [
+    "decode",
+    "check",
+    "report",
+    "export",
+    "live",
+    "simulate",
+    "devices",
+    "fleet",
+    "query",
+]
 # Commands that read a whole log batch by batch: they get the allocator settings.
 BATCH_COMMANDS = {"decode", "check", "report", "export", "fleet"}
 
