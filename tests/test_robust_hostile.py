@@ -1,0 +1,139 @@
+"""Hostile input, round two (issue 24): each defect the second campaign found, on a file
+the test makes. Each test fails on the code before its fix."""
+
+from __future__ import annotations
+
+import gzip
+import subprocess
+import sys
+import time
+
+from conftest import ROOT
+
+from cananalyze.io.source import open_log, read_all
+
+CANDUMP = [
+    f"({1.0 + i * 0.01:.6f}) can0 {0x181 + i % 3:03X}#{i % 256:02X}11223344" for i in range(185)
+]
+ASC = """date Mon Jan 6 12:00:00.000 pm 2025
+base hex  timestamps absolute
+no internal events logged
+Begin Triggerblock Mon Jan 6 12:00:00.000 pm 2025
+   0.010000 1  181             Rx   d 2 01 02
+   0.020000 1  182             Rx   d 2 03 04
+   0.030000 1  183             Rx   d 2 05 06
+End TriggerBlock
+"""
+
+
+def cli(*args: str, stdin=None, **kw) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "cananalyze", *args],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        stdin=stdin,
+        timeout=120,
+        **kw,
+    )
+
+
+def _frames(path) -> list[tuple]:
+    b = read_all(path)
+    return [(round(float(t), 6), int(i)) for t, i in zip(b.t, b.can_id, strict=True)]
+
+
+# item 10: line endings and byte-order marks
+def test_cr_only_line_ends_keep_every_frame(tmp_path):
+    plain, mac = tmp_path / "lf.log", tmp_path / "cr.log"
+    plain.write_text("\n".join(CANDUMP) + "\n")
+    mac.write_bytes(("\r".join(CANDUMP) + "\r").encode())
+    assert len(_frames(mac)) == 185
+    assert _frames(mac) == _frames(plain)
+
+
+def test_utf8_bom_keeps_the_first_candump_frame(tmp_path):
+    p = tmp_path / "bom.log"
+    p.write_bytes(b"\xef\xbb\xbf" + ("\n".join(CANDUMP) + "\n").encode())
+    src = open_log(p)
+    got = [fb for fb in src.batches()]
+    assert sum(len(fb) for fb in got) == 185
+    assert src.problems.count == 0
+
+
+def test_utf8_bom_keeps_the_asc_date_header(tmp_path):
+    plain, bom = tmp_path / "a.asc", tmp_path / "b.asc"
+    plain.write_text(ASC)
+    bom.write_bytes(b"\xef\xbb\xbf" + ASC.encode())
+    t = read_all(bom).t
+    assert t[0] > 1.7e9  # absolute: the date header was read
+    assert _frames(bom) == _frames(plain)
+
+
+# item 9: the ASC sniffer was quadratic on blank lines
+def test_blank_lines_sniff_in_linear_time(tmp_path):
+    p = tmp_path / "blank.log.gz"
+    p.write_bytes(gzip.compress(b"\n" * 65536))
+    t0 = time.process_time()
+    done = cli("decode", str(p))
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert "not a log" in done.stderr
+    assert time.process_time() - t0 < 5
+    from cananalyze.io import asc, trc
+
+    head = b"\n" * 65536
+    t0 = time.process_time()
+    assert not asc.sniff(head) and not trc.sniff(head)
+    assert time.process_time() - t0 < 1.0  # was 16-50 s
+
+
+def test_log_then_many_blank_lines(tmp_path):
+    p = tmp_path / "tail.log.gz"
+    p.write_bytes(gzip.compress(("\n".join(CANDUMP) + "\n").encode() + b"\n" * 2_000_000))
+    t0 = time.process_time()
+    assert len(read_all(p)) == 185
+    assert time.process_time() - t0 < 10
+
+
+# item 11: detection reads 64 KiB, not one 8 KB buffer
+def test_trc_v1_whose_frames_start_past_8k(tmp_path):
+    comment = "".join(f";   comment line {i:05d} of a long PEAK header block\n" for i in range(400))
+    assert len(comment) > 16384
+    rows = "".join(
+        f"{i + 1:6d}) {1000 + i * 10:9d}  {0x181:08X}  2  {i % 256:02X} 01\n" for i in range(50)
+    )
+    p = tmp_path / "long.trc"
+    p.write_text(comment + rows)
+    got = read_all(p)
+    assert len(got) == 50
+    gz = tmp_path / "long.trc.gz"
+    gz.write_bytes(gzip.compress(p.read_bytes()))
+    assert _frames(gz) == _frames(p)
+
+
+def test_stdin_sniffs_past_one_pipe_read(tmp_path):
+    comment = "".join(f";   comment line {i:05d} of a long PEAK header block\n" for i in range(400))
+    rows = "".join(
+        f"{i + 1:6d}) {1000 + i * 10:9d}  {0x181:08X}  2  {i % 256:02X} 01\n" for i in range(50)
+    )
+    done = cli("decode", "--summary", "-", input=comment + rows)
+    assert done.returncode == 0, done.stderr
+    assert "frames: 50" in done.stdout
+
+
+# item 8: closed stdin, /dev/null as the MCAP output
+def test_closed_stdin_is_one_line(tmp_path):
+    done = cli("decode", "-", stdin=subprocess.DEVNULL, pass_fds=())
+    assert "Traceback" not in done.stderr
+    closed = subprocess.run(
+        [sys.executable, "-m", "cananalyze", "decode", "-"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=60,
+        preexec_fn=lambda: __import__("os").close(0),
+    )
+    assert closed.returncode == 2, closed.stderr
+    assert closed.stderr.strip().splitlines() == [
+        "cananalyze: error: -: standard input is closed, nothing to read"
+    ]
