@@ -8,6 +8,7 @@ import subprocess
 import sys
 import time
 
+import pytest
 from conftest import ROOT
 
 from cananalyze.io.source import open_log, read_all
@@ -137,3 +138,90 @@ def test_closed_stdin_is_one_line(tmp_path):
     assert closed.stderr.strip().splitlines() == [
         "cananalyze: error: -: standard input is closed, nothing to read"
     ]
+
+
+# items 5 and 6: hostile configuration files, the one reader (network/filelines.py)
+def _laughs(levels: int = 9) -> str:
+    text = "a0: &a0 [x, x, x, x, x, x, x, x, x]\n"
+    for i in range(1, levels + 1):
+        text += f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 9) + "]\n"
+    return text
+
+
+CONFIG_CASES = {
+    "laughs.yaml": (_laughs().encode(), "expands to more than 1,000,000 values"),
+    "self.yaml": (b"nodes: &a {3: *a}\n", "alias *a refers to itself"),
+    "deep.yaml": (b"[" * 100_000 + b"]" * 100_000, "nests deeper than 64 levels"),
+    "deepmap.yaml": (b"{a: " * 5000 + b"1" + b"}" * 5000, "nests deeper than 64 levels"),
+    "deep.toml": (b"a = " + b"[" * 100_000 + b"]" * 100_000, "nests deeper than 64 levels"),
+    "deeptable.toml": (b"a = " + b"{b = " * 3000 + b"1" + b"}" * 3000, "nests deeper"),
+    "latin1.yaml": (b"nodes:\n  5: {name: caf\xe9}\n", ":2: network file is not UTF-8"),
+    "huge.yaml": (b"# " + b"x" * (5 << 20) + b"\n", "is larger than 4 MiB"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(CONFIG_CASES))
+def test_hostile_network_file_is_one_line(tmp_path, name):
+    import resource
+
+    data, said = CONFIG_CASES[name]
+    p = tmp_path / name
+    p.write_bytes(data)
+    log = tmp_path / "x.log"
+    log.write_text("\n".join(CANDUMP) + "\n")
+    limit = lambda: resource.setrlimit(resource.RLIMIT_AS, (1 << 30, 1 << 30))  # noqa: E731
+    for args in (["decode", "--summary", "--network", str(p)], ["check", "--rules", str(p)]):
+        done = cli(*args, str(log), preexec_fn=limit)
+        assert done.returncode == 2, done.stderr[-500:]
+        (line,) = done.stderr.strip().splitlines()
+        said_here = said.replace("network file", "rules file") if "check" in args else said
+        assert said_here in line and str(p.name) in line
+
+
+def test_dev_zero_as_a_configuration_file(tmp_path):
+    log = tmp_path / "x.log"
+    log.write_text("\n".join(CANDUMP) + "\n")
+    for args in (["decode", "--network", "/dev/zero"], ["check", "--rules", "/dev/zero"]):
+        done = cli(*args, str(log))
+        assert done.returncode == 2
+        assert done.stderr.strip().endswith(
+            "/dev/zero: "
+            + args[0].replace("decode", "network").replace("check", "rules")
+            + " file is larger than 4 MiB"
+        )
+
+
+@pytest.mark.parametrize(
+    "text, said",
+    [
+        ("assert:\n  - sdo: {max_latency_ms: 1e999}\n", ":2: max_latency_ms: inf is not a finite"),
+        ("assert:\n  - heartbeat: {node: 3, period_ms: 1e999}\n", ":2: period_ms: inf is not"),
+        ("assert:\n  - heartbeat: {node: 3, period_ms: soon}\n", "expected a number, got 'soon'"),
+        ("assert:\n  - heartbeat: {node: 3.5, period_ms: 100}\n", "node: expected an integer"),
+        ("tolerance: 1e999\n", ":1: tolerance is a fraction"),
+        ("network: {nodes: [1, 2]}\n", "network.nodes: expected a table keyed by node-ID"),
+    ],
+)
+def test_rules_file_values(tmp_path, text, said):
+    p = tmp_path / "r.yaml"
+    p.write_text(text)
+    log = tmp_path / "x.log"
+    log.write_text("\n".join(CANDUMP) + "\n")
+    done = cli("check", "--rules", str(p), str(log))
+    assert done.returncode == 2, done.stderr[-800:]
+    (line,) = done.stderr.strip().splitlines()
+    assert said in line
+
+
+def test_rules_numbers_yaml_reads_as_text_still_work(tmp_path):
+    """`1e2` (no dot) is text to YAML; it was taken as 100 before and still is."""
+    from cananalyze.checks.rulesfile import load_rules
+
+    p = tmp_path / "r.yaml"
+    p.write_text(
+        "assert:\n  - heartbeat: {node: 3, period_ms: 1e2}\n"
+        "  - pdo_rate: {cob_id: '0x285', min_hz: 1, max_hz: .inf}\n"
+    )
+    rules, _ = load_rules(p)
+    hb = [r for r in rules if r.name == "assert_heartbeat"][0]
+    assert hb.period == 100.0
