@@ -350,7 +350,8 @@ def run(
     ended: list[BaseException] = []  # a live source's failure: outputs kept, then raised
     try:
         for sink in sinks:
-            sink.open(state)
+            with named_errors(sink):
+                sink.open(state)
             opened.append(sink)
         next_tick = time.monotonic() + tick if tick else None
         batches = _read_ahead(source, ended)
@@ -361,7 +362,8 @@ def run(
                     now = time.monotonic()
                     if now >= next_tick:
                         for sink in sinks:
-                            sink.tick(now)
+                            with named_errors(sink):
+                                sink.tick(now)
                         next_tick = now + tick
                 if stop is not None and stop():
                     state.stopped = True
@@ -372,7 +374,11 @@ def run(
                 close()  # the reader thread stops before the problems are reported
         _deliver(state, decoder.finish(), sinks, filt, events)
         for sink in sinks:
-            sink.close()
+            with named_errors(sink):
+                sink.finish()
+        for sink in sinks:  # only when every output is complete: all or nothing
+            with named_errors(sink):
+                sink.commit()
     except BaseException:
         for sink in opened:
             with contextlib.suppress(Exception):  # the first error is the one to report
@@ -454,5 +460,18 @@ def _deliver(state: Run, batch: DecodedBatch, sinks: list[Sink], filt, events) -
     if events is not None:
         batch.events, batch.states = events.build(batch, state.rows)
     for sink in sinks:
-        sink.write(batch)
+        with named_errors(sink):
+            sink.write(batch)
     state.rows += len(batch)
+
+
+@contextlib.contextmanager
+def named_errors(sink: Sink) -> Iterator[None]:
+    """An OSError from a sink names its output (a writer thread's "No space left on
+    device" would otherwise reach the user without saying which file)."""
+    try:
+        yield
+    except OSError as exc:
+        if exc.filename or not sink.dest:
+            raise
+        raise OSError(exc.errno, exc.strerror or str(exc), sink.dest) from exc

@@ -225,3 +225,190 @@ def test_rules_numbers_yaml_reads_as_text_still_work(tmp_path):
     rules, _ = load_rules(p)
     hb = [r for r in rules if r.name == "assert_heartbeat"][0]
     assert hb.period == 100.0
+
+
+def _blf(path, frames: int = 200, t0: float = 1.0) -> None:
+    import can
+
+    with can.BLFWriter(str(path)) as w:
+        for i in range(frames):
+            w.on_message_received(
+                can.Message(
+                    timestamp=t0 + i * 0.01,
+                    arbitration_id=0x181 + i % 3,
+                    data=bytes([i % 256, 1, 2, 3]),
+                    is_extended_id=False,
+                )
+            )
+
+
+def _hidden(folder) -> list[str]:
+    return sorted(p.name for p in folder.rglob(".*"))
+
+
+# item 1: a log that yields no frame, exported to Parquet
+def test_parquet_of_a_header_only_blf(tmp_path):
+    import pyarrow.parquet as pq
+
+    log = tmp_path / "empty.blf"
+    _blf(log, 0)
+    done = cli("export", str(log), "--parquet", str(tmp_path / "pq"), "--csv", str(tmp_path / "c"))
+    assert done.returncode == 0, done.stderr[-800:]
+    frames = pq.read_table(tmp_path / "pq" / "frames.parquet")
+    assert frames.num_rows == 0 and "channel" in frames.column_names
+    assert _hidden(tmp_path) == []
+
+
+def test_failed_rewrite_leaves_no_rw_file(tmp_path, monkeypatch):
+    from cananalyze.outputs.tables import writer
+    from cananalyze.outputs.tables.stream import TableSink
+    from cananalyze.pipeline import Options, build_decoder, open_source, run
+
+    log = tmp_path / "x.log"
+    log.write_text("\n".join(CANDUMP) + "\n")
+
+    def boom(*a, **k):
+        raise RuntimeError("rewrite failed")
+
+    monkeypatch.setattr(writer, "_recode", boom)
+    out = tmp_path / "pq"
+    monkeypatch.setattr(  # the channel column re-coded, as when channels came out of order
+        TableSink,
+        "_finish_frames",
+        lambda self: writer.rewrite(self.sinks["frames"], {"channel": ["zz", "can0"]}),
+    )
+    sink = TableSink(out, "parquet")
+    opts = Options()
+    with pytest.raises(RuntimeError, match="rewrite failed"):
+        run(open_source(str(log), opts), build_decoder(opts), [sink], opts)
+    assert _hidden(tmp_path) == [] and not list(out.glob("*"))
+
+
+# item 8: MCAP offsets from a device that cannot tell(); item 16: error messages name the file
+def test_mcap_to_dev_null(tmp_path):
+    log = tmp_path / "x.log"
+    log.write_text("\n".join(CANDUMP) + "\n")
+    done = cli("decode", str(log), "--mcap", "/dev/null")
+    assert done.returncode == 0, done.stderr[-800:]
+
+
+def _full_disk(limit: int):
+    def apply():
+        import resource
+        import signal
+
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # write() fails with EFBIG instead
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    return apply
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["export", "--parquet", "OUT"],
+        ["export", "--csv", "OUT"],
+        ["export", "--mcap", "OUT"],
+        ["export", "--rrd", "OUT"],
+        ["decode", "-o", "OUT"],
+        ["decode", "--format", "jsonl", "-o", "OUT"],
+    ],
+)
+def test_full_disk_names_the_output(tmp_path, args):
+    import os
+
+    log = tmp_path / "in" / "x.log"
+    log.parent.mkdir()
+    log.write_text("\n".join(CANDUMP * 20) + "\n")
+    out = tmp_path / "o" / "result"
+    out.parent.mkdir()
+    argv = [a.replace("OUT", str(out)) for a in args]
+    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1")  # a cut .pyc would break later runs
+    done = cli(argv[0], str(log), *argv[1:], preexec_fn=_full_disk(3000), env=env)
+    assert done.returncode == 2, done.stderr[-800:]
+    # rerun's own logger adds its lines (coloured, no traceback); ours is the one to read
+    (ours,) = [ln for ln in done.stderr.splitlines() if ln.startswith("cananalyze: error:")]
+    assert ours.startswith(f"cananalyze: error: {out}: "), ours
+    assert "Traceback" not in done.stderr
+    assert _hidden(out.parent) == [] and not out.exists()
+
+
+def test_rrd_on_dev_full(tmp_path):
+    log = tmp_path / "x.log"
+    log.write_text("\n".join(CANDUMP) + "\n")
+    done = cli("export", str(log), "--rrd", "/dev/full")
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert "/dev/full: cannot write the Rerun recording" in done.stderr.strip().splitlines()[-1]
+
+
+# item 14: an export is all or nothing; SIGTERM is Ctrl-C
+def test_one_failing_output_commits_none(tmp_path):
+    log = tmp_path / "x.log"
+    log.write_text("\n".join(CANDUMP) + "\n")
+    out = tmp_path / "o"
+    out.mkdir()
+    done = cli(
+        "export", str(log), "--parquet", str(out / "pq"), "--rrd", str(out / "x.rrd"),
+        "--mcap", "/dev/full",
+    )  # fmt: skip
+    assert done.returncode == 2, done.stderr[-500:]
+    assert "/dev/full" in done.stderr
+    assert sorted(p.name for p in out.rglob("*")) in ([], ["pq"])
+
+
+def test_pipeline_finishes_every_sink_before_committing_any(tmp_path):
+    from cananalyze.outputs.sink import Sink
+    from cananalyze.pipeline import Options, build_decoder, open_source, run
+
+    calls = []
+
+    class Probe(Sink):
+        def __init__(self, name, fail=False):
+            self.name, self.fail = name, fail
+
+        def finish(self):
+            calls.append(("finish", self.name))
+            if self.fail:
+                raise OSError(28, "No space left on device")
+
+        def commit(self):
+            calls.append(("commit", self.name))
+
+        def abort(self):
+            calls.append(("abort", self.name))
+
+    log = tmp_path / "x.log"
+    log.write_text("\n".join(CANDUMP) + "\n")
+    opts = Options()
+    sinks = [Probe("a"), Probe("b", fail=True), Probe("c")]
+    sinks[1].dest = str(tmp_path / "b.out")
+    with pytest.raises(OSError) as err:
+        run(open_source(str(log), opts), build_decoder(opts), sinks, opts)
+    assert err.value.filename == str(tmp_path / "b.out")  # item 16: named
+    assert calls == [("finish", "a"), ("finish", "b"), ("abort", "a"), ("abort", "b"),
+                     ("abort", "c")]  # fmt: skip
+
+
+@pytest.mark.parametrize("after", [0.05, 0.6, 1.5])
+def test_sigterm_during_export_leaves_no_temporary_file(tmp_path, after):
+    import signal
+
+    from conftest import generated_log
+
+    log = generated_log(tmp_path, 60000)
+    out = tmp_path / "out"
+    out.mkdir()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cananalyze", "export", str(log), "-q",
+         "--parquet", str(out / "pq"), "--csv", str(out / "csv"),
+         "--mcap", str(out / "x.mcap"), "--rrd", str(out / "x.rrd")],
+        cwd=ROOT, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    time.sleep(after)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert "Traceback" not in err
+    assert proc.returncode in (-signal.SIGTERM, 128 + signal.SIGTERM, 0), err
+    if proc.returncode != 0:
+        assert [p for p in out.rglob("*") if p.is_file()] == []
+    assert _hidden(out) == []

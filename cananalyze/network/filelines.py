@@ -239,6 +239,4 @@ def _check_yaml_shape(text: str, path: Path, what: str) -> None:
             if ev.anchor:
                 sizes[ev.anchor] = 1
         if nodes > MAX_NODES:
-            raise InputError(
-                f"{where}: {what} expands to more than {MAX_NODES:,} values (aliases)"
-            )
+            raise InputError(f"{where}: {what} expands to more than {MAX_NODES:,} values (aliases)")

@@ -17,6 +17,7 @@ rewrites the file from its own row groups.
 
 from __future__ import annotations
 
+import contextlib
 import queue
 import threading
 from collections.abc import Callable
@@ -261,8 +262,18 @@ def rewrite(
     order: Callable[[pa.Table], np.ndarray] | None = None,
 ) -> None:
     """Rewrite a finished table file: rows put in `order` (whole table in memory, rare) and/or
-    dictionary columns re-coded to their final `categories` (row group by row group)."""
+    dictionary columns re-coded to their final `categories` (row group by row group).
+    The `.rw` file is removed however this ends (it once outlived a failed rewrite)."""
     tmp = sink.path.with_name(sink.path.name + ".rw")
+    try:
+        _rewrite(sink, categories, order, tmp)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+
+
+def _rewrite(sink: Sink, categories: dict, order, tmp: Path) -> None:
     if sink.fmt == "csv":
         if order is None:
             return  # CSV holds labels, not codes: only the row order can be wrong
@@ -320,6 +331,9 @@ def _recode(col: pa.ChunkedArray, labels: list[str], typ: pa.DataType) -> pa.Chu
     dictionary = ab.strings(labels)
     chunks = []
     for chunk in col.chunks:
+        if pa.types.is_null(chunk.type):  # a table with no rows (a log of only junk)
+            chunks.append(pa.nulls(len(chunk), typ))
+            continue
         remap = np.array([pos[v] for v in chunk.dictionary.to_pylist()], np.int64)
         idx = ab.to_numpy(chunk.indices, fill=0).astype(np.int64)
         new = remap[idx] if remap.size else idx
