@@ -412,3 +412,89 @@ def test_sigterm_during_export_leaves_no_temporary_file(tmp_path, after):
     if proc.returncode != 0:
         assert [p for p in out.rglob("*") if p.is_file()] == []
     assert _hidden(out) == []
+
+
+# items 3 and 12: BLF lengths read from the file, and resynchronising on LOBJ
+def _blf_parts(path) -> tuple[bytes, list[bytes]]:
+    """A BLF's file header and its top-level objects (padding included)."""
+    import struct
+
+    data = path.read_bytes()
+    hs = struct.unpack_from("<I", data, 4)[0]
+    objs, pos = [], hs
+    while pos + 16 <= len(data):
+        size = struct.unpack_from("<I", data, pos + 8)[0]
+        objs.append(data[pos : pos + size + size % 4])
+        pos += size + size % 4
+    return data[:hs], objs
+
+
+def _blf_read(path):
+    src = open_log(path)
+    n = sum(len(b) for b in src.batches())
+    return n, [str(p) for p in src.problems.shown]
+
+
+def test_blf_header_claiming_a_huge_size(tmp_path):
+    import struct
+
+    p = tmp_path / "a.blf"
+    _blf(p, 200)
+    d = bytearray(p.read_bytes())
+    d[4:8] = struct.pack("<I", 0x7FFFFFFF)
+    p.write_bytes(bytes(d))
+    n, problems = _blf_read(p)
+    assert n == 200
+    assert "claims 2147483647 bytes" in problems[0]
+
+
+def test_blf_garbage_between_containers(tmp_path):
+    a, b = tmp_path / "a.blf", tmp_path / "b.blf"
+    _blf(a, 200)
+    _blf(b, 200, t0=10.0)
+    head, first = _blf_parts(a)
+    _, second = _blf_parts(b)
+    p = tmp_path / "g.blf"
+    p.write_bytes(head + b"".join(first) + b"\x13\x37" * 501 + b"".join(second))
+    n, problems = _blf_read(p)
+    assert n == 400
+    assert problems == [f"{p}:offset {len(head) + sum(map(len, first))}: no BLF object (LOBJ): "
+                        "skipped 1002 bytes to the next object"]  # fmt: skip
+    import can
+
+    got = []
+    with pytest.raises(can.io.blf.BLFParseError):  # python-can stops at the garbage
+        got.extend(can.BLFReader(str(p)))
+    assert len(got) == 200
+
+
+def test_blf_inner_object_claiming_60_mib(tmp_path):
+    """An object inside a container claiming 60 MiB swallowed every container after it."""
+    import struct
+    import zlib
+
+    a = tmp_path / "a.blf"
+    _blf(a, 200)
+    head, objs = _blf_parts(a)
+    inner = bytearray()
+    for o in objs:
+        method = struct.unpack_from("<H", o, 16)[0]
+        body = o[32 : struct.unpack_from("<I", o, 8)[0]]
+        inner += zlib.decompress(body) if method == 2 else body
+    first = bytes(inner[:48])
+    bad = first[:8] + struct.pack("<I", 60 << 20) + first[12:]
+    half = len(inner) // 2
+
+    def container(data: bytes) -> bytes:
+        size = 32 + len(data)
+        return (
+            b"LOBJ" + struct.pack("<HHLL", 16, 1, size, 10) + struct.pack("<H6xL4x", 0, len(data))
+            + data + b"\0" * (size % 4)
+        )  # fmt: skip
+
+    p = tmp_path / "inner.blf"
+    rest = bytes(inner[48:half])
+    p.write_bytes(head + container(bad + rest) + container(bytes(inner[half:])))
+    n, problems = _blf_read(p)
+    assert n == 199, problems  # only the damaged record is lost
+    assert "bad size 62914560" in problems[0]
