@@ -515,7 +515,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
         if sig != b"LOBJ" or size < 16 or size > MAX_CONTAINER:
             # resynchronise on the next signature (python-can stops here: half a log lost)
             skipped = stream.skip_to(b"LOBJ", base, 1)
-            what = "no BLF object (LOBJ)" if sig != b"LOBJ" else f"BLF object size {size}"
+            what = "no BLF object (LOBJ)" if sig != b"LOBJ" else f"BLF object size {size} is absurd"
             problem(where, f"{what}: skipped {skipped} bytes to the next object")
             offset += skipped
             continue
