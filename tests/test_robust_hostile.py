@@ -498,3 +498,23 @@ def test_blf_inner_object_claiming_60_mib(tmp_path):
     n, problems = _blf_read(p)
     assert n == 199, problems  # only the damaged record is lost
     assert "bad size 62914560" in problems[0]
+
+
+# item 4: more channel names than a uint16 index holds
+@pytest.mark.parametrize("pure", ["", "1"])
+def test_seventy_thousand_channel_names(tmp_path, pure):
+    import os
+
+    p = tmp_path / "chans.log"
+    p.write_text("".join(f"({1.0 + i * 0.001:.6f}) c{i} 181#{i % 256:02X}\n" for i in range(70000)))
+    env = dict(os.environ, CANANALYZE_PURE=pure)
+    done = cli("decode", "--format", "jsonl", str(p), env=env)
+    assert done.returncode == 0, done.stderr[-600:]
+    import json
+
+    rows = [json.loads(line) for line in done.stdout.splitlines()]
+    assert len(rows) == 70000
+    assert [r["channel"] for r in rows[:3]] == ["c0", "c1", "c2"]
+    assert rows[65534]["channel"] == "c65534"
+    assert {r["channel"] for r in rows[65535:]} == {"(other channels)"}
+    assert [r["data"] for r in rows] == [f"{i % 256:02x}" for i in range(70000)]

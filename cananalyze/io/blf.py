@@ -32,6 +32,7 @@ from ..frames import (
     FLAG_RTR,
     FLAG_TX,
     FrameBatch,
+    channel_index,
     concat,
 )
 from .registry import LogFormat, ReadContext, register
@@ -159,7 +160,7 @@ class _Records:
         self.tail = b""
         self.record = 0  # 1-based number of the last object seen inside containers
         self.channels: list[str] = []
-        self._chan: dict[int, int] = {}
+        self._chan: dict[str, int] = {}
 
     def parse(self, data: bytes) -> FrameBatch | None:
         buf = self.tail + data if self.tail else data
@@ -364,18 +365,10 @@ class _Records:
         """Map BLF channel numbers (1-based, as Vector shows them) to stable indices."""
         out = np.zeros(len(chan), np.uint16)
         if len(chan) and chan.min() == chan.max():  # the usual single-channel log
-            c = int(chan[0])
-            if c not in self._chan:
-                self._chan[c] = len(self.channels)
-                self.channels.append(str(c))
-            out[:] = self._chan[c]
+            out[:] = channel_index(self.channels, self._chan, str(int(chan[0])))
             return out
         for c in np.unique(chan).tolist():
-            idx = self._chan.get(c)
-            if idx is None:
-                idx = self._chan[c] = len(self.channels)
-                self.channels.append(str(c))
-            out[chan == c] = idx
+            out[chan == c] = channel_index(self.channels, self._chan, str(c))
         return out
 
 
