@@ -22,6 +22,7 @@ SMOKED = {
     "bench_floor.py",
     "bench_live.py",
     "mem_profile.py",
+    "fuzz_campaign.py",
 }
 NUMBER = r"\d+(\.\d+)?"
 
@@ -205,3 +206,13 @@ def test_arrow_column_waits_for_a_whole_pyarrow(monkeypatch):
     whole.total_allocated_bytes = lambda: 5 << 20
     monkeypatch.setitem(sys.modules, "pyarrow", whole)
     assert mem_profile._arrow_mb() == 5
+
+
+def test_fuzz_campaign_counts_every_category(tmp_path):
+    done = _run("fuzz_campaign.py", "--seconds", "6", "--seed", "5", "--out", str(tmp_path))
+    lines = done.stdout.splitlines()
+    assert re.match(rf"fuzz campaign: seed 5, {NUMBER} s wall, {NUMBER} s CPU", lines[0])
+    assert lines[1].split() == ["kind", "cases", "crash", "hang", "memory", "lost", "leftover"]
+    total = next(line.split() for line in lines if line.startswith("total"))
+    assert int(total[1]) > 0 and all(x.isdigit() for x in total[1:])
+    assert any(line.startswith("distinct failures:") for line in lines)

@@ -189,7 +189,8 @@ def read_tree(path: str | Path, what: str) -> tuple[object, Lines]:
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         at = f"{path}:{mark.line + 1}" if mark else str(path)
-        raise InputError(f"{at}: not valid YAML: {getattr(exc, 'problem', None) or exc}") from None
+        why = (getattr(exc, "problem", None) or str(exc)).splitlines()[0]  # one line
+        raise InputError(f"{at}: not valid YAML: {why}") from None
     return data, Lines(path, "", composed)
 
 
