@@ -518,3 +518,43 @@ def test_seventy_thousand_channel_names(tmp_path, pure):
     assert rows[65534]["channel"] == "c65534"
     assert {r["channel"] for r in rows[65535:]} == {"(other channels)"}
     assert [r["data"] for r in rows] == [f"{i % 256:02x}" for i in range(70000)]
+
+
+# item 13: a live MCAP recording killed with SIGKILL
+KILLED_RECORDER = """
+import os, signal, sys
+from cananalyze.frames import from_rows
+from cananalyze.io.record import FrameRecorder
+rec = FrameRecorder(sys.argv[1])
+rec._mcap.FLUSH_SECONDS = 0.0  # a chunk per batch: as a live bus gives one per second
+for k in range(0, int(sys.argv[2]), 500):
+    rows = [(1.0 + (k + i) * 0.001, 0x181, bytes([i % 256]) * 8, 0, 0) for i in range(500)]
+    rec.write(from_rows(rows, channels=("can0",)))
+os.kill(os.getpid(), signal.SIGKILL)
+"""
+
+
+@pytest.mark.parametrize("frames", [3000, 20000])
+def test_killed_mcap_recording_keeps_its_chunks(tmp_path, frames):
+    import os
+    import signal
+
+    from mcap.reader import make_reader
+
+    path = tmp_path / "rec.mcap"
+    done = subprocess.run(
+        [sys.executable, "-c", KILLED_RECORDER, str(path), str(frames)],
+        cwd=ROOT, capture_output=True, timeout=120, env=dict(os.environ, PYTHONPATH=str(ROOT)),
+    )  # fmt: skip
+    assert done.returncode == -signal.SIGKILL
+    src = open_log(path)
+    assert sum(len(b) for b in src.batches()) == frames  # was 0 after 3,000 frames
+    assert src.problems.count == 1  # the cut end, said once
+    fixed = tmp_path / "fixed.mcap"
+    out = cli("export", str(path), "--mcap", str(fixed), "--no-check", "-q")
+    assert out.returncode == 0, out.stderr[-500:]
+    with open(fixed, "rb") as f:  # recovered: the mcap library's standard reader opens it
+        summary = make_reader(f).get_summary()
+    topics = {c.id: c.topic for c in summary.channels.values()}
+    counts = {topics[k]: v for k, v in summary.statistics.channel_message_counts.items()}
+    assert counts["/can/frames"] == frames
