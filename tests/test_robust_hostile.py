@@ -157,6 +157,9 @@ CONFIG_CASES = {
     "deeptable.toml": (b"a = " + b"{b = " * 3000 + b"1" + b"}" * 3000, "nests deeper"),
     "latin1.yaml": (b"nodes:\n  5: {name: caf\xe9}\n", ":2: network file is not UTF-8"),
     "huge.yaml": (b"# " + b"x" * (5 << 20) + b"\n", "is larger than 4 MiB"),
+    "digits.yaml": (b"bitrate: " + b"9" * 100_000 + b"\n", "Exceeds the limit (4300 digits)"),
+    "digits.toml": (b"bitrate = " + b"9" * 100_000 + b"\n", "Exceeds the limit (4300 digits)"),
+    "vtab.yaml": (b"\x0b", "not valid YAML: unacceptable character"),  # was two lines
 }
 
 

@@ -177,6 +177,8 @@ def read_tree(path: str | Path, what: str) -> tuple[object, Lines]:
             raise InputError(f"{path}: not valid TOML: {exc}") from None
         except RecursionError:
             raise InputError(f"{path}: {what} nests deeper than {MAX_DEPTH} levels") from None
+        except ValueError as exc:  # an integer of over 4300 digits (Python's own limit)
+            raise InputError(f"{path}: {what}: {_first_line(exc)}") from None
         if _depth(data) > MAX_DEPTH:
             raise InputError(f"{path}: {what} nests deeper than {MAX_DEPTH} levels")
         return data, Lines(path, text)
@@ -191,7 +193,13 @@ def read_tree(path: str | Path, what: str) -> tuple[object, Lines]:
         at = f"{path}:{mark.line + 1}" if mark else str(path)
         why = (getattr(exc, "problem", None) or str(exc)).splitlines()[0]  # one line
         raise InputError(f"{at}: not valid YAML: {why}") from None
+    except ValueError as exc:  # an integer of over 4300 digits (Python's own limit)
+        raise InputError(f"{path}: {what}: {_first_line(exc)}") from None
     return data, Lines(path, "", composed)
+
+
+def _first_line(exc: Exception) -> str:
+    return (str(exc).splitlines() or [type(exc).__name__])[0].partition("; use sys.")[0]
 
 
 def _depth(data) -> int:
