@@ -373,12 +373,12 @@ def run(
             if close is not None:
                 close()  # the reader thread stops before the problems are reported
         _deliver(state, decoder.finish(), sinks, filt, events)
-        for sink in sinks:
+        for sink in sinks:  # a sink of its own making without finish/commit: close()
             with named_errors(sink):
-                sink.finish()
+                (getattr(sink, "finish", None) or sink.close)()
         for sink in sinks:  # only when every output is complete: all or nothing
             with named_errors(sink):
-                sink.commit()
+                getattr(sink, "commit", lambda: None)()
     except BaseException:
         for sink in opened:
             with contextlib.suppress(Exception):  # the first error is the one to report
@@ -472,6 +472,7 @@ def named_errors(sink: Sink) -> Iterator[None]:
     try:
         yield
     except OSError as exc:
-        if exc.filename or not sink.dest:
+        dest = getattr(sink, "dest", None)
+        if exc.filename or not dest:
             raise
-        raise OSError(exc.errno, exc.strerror or str(exc), sink.dest) from exc
+        raise OSError(exc.errno, exc.strerror or str(exc), dest) from exc
