@@ -3,7 +3,8 @@
     nice -n 10 python benchmarks/fuzz_campaign.py --seconds 1200 --seed 1
 
 Each case runs in a forked child under a memory limit (RLIMIT_AS, --memory MB) and a
-time limit (--timeout s), so a blow-up or a hang is counted, not suffered. Kinds of case:
+CPU-time limit (RLIMIT_CPU, --timeout s; ten times that in wall time for a sleeping
+child), so a blow-up or a hang is counted, not suffered, whatever the machine's load. Kinds of case:
 
 - log: a real log (../shared/data/real, samples/) mutated byte- or token-wise, read by
   tests.fuzz.harness.run_log (reader, decoder, text/JSONL writers, summary);
@@ -117,6 +118,9 @@ def _fork(what: str, blob: bytes, suffix: str, memory_mb: int, timeout: float) -
             # on top of what the process already maps (numpy, pyarrow and canopen loaded)
             limit = (memory_mb << 20) + _mapped()
             resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+            # CPU seconds, not wall: a loaded shared machine must not turn slow into "hang"
+            cpu = int(timeout) + int(_cpu_self())
+            resource.setrlimit(resource.RLIMIT_CPU, (cpu, cpu + 5))
             bad = _run(what, blob, suffix)
             msg = (("lost" if bad.startswith("lost") else "leftover") + "\t" + bad) if bad else ""
         except MemoryError:
@@ -129,17 +133,19 @@ def _fork(what: str, blob: bytes, suffix: str, memory_mb: int, timeout: float) -
         os.close(w)
         os._exit(code)
     os.close(w)
-    ready = select.select([r], [], [], timeout)[0]
+    ready = select.select([r], [], [], timeout * 10)[0]  # wall: a last resort (sleeps)
     if not ready:
         os.kill(pid, signal.SIGKILL)
         os.waitpid(pid, 0)
         os.close(r)
-        return "hang", f"over {timeout:g} s"
+        return "hang", f"over {timeout * 10:g} s wall"
     out = b""
     while chunk := os.read(r, 4096):
         out += chunk
     os.close(r)
     _, status = os.waitpid(pid, 0)
+    if not out and os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGXCPU:
+        return "hang", f"over {timeout:g} s CPU"
     if not out and os.WIFSIGNALED(status):
         return "memory" if os.WTERMSIG(status) in (signal.SIGKILL, signal.SIGSEGV) else "crash", (
             f"killed by signal {os.WTERMSIG(status)}"
@@ -153,7 +159,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seconds", type=float, default=300)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--memory", type=int, default=1024, help="MB per case (RLIMIT_AS)")
-    ap.add_argument("--timeout", type=float, default=20, help="seconds per case")
+    ap.add_argument("--timeout", type=float, default=20, help="CPU seconds per case")
     ap.add_argument("--out", default=str(Path(tempfile.gettempdir()) / "cananalyze-fuzz"))
     a = ap.parse_args(argv)
     rng = random.Random(a.seed)
@@ -210,6 +216,11 @@ def _warm() -> None:
     import cananalyze.outputs.mcap.sink  # noqa: F401
     import cananalyze.outputs.tables.stream  # noqa: F401
     import cananalyze.pipeline  # noqa: F401
+
+
+def _cpu_self() -> float:
+    me = resource.getrusage(resource.RUSAGE_SELF)
+    return me.ru_utime + me.ru_stime
 
 
 def _mapped() -> int:
