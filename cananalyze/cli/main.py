@@ -48,6 +48,12 @@ class Terminated(KeyboardInterrupt):
 
 
 def _terminate(signum, frame) -> None:
+    if frame is not None and frame.f_code.co_name == "__del__":
+        # Python would print the exception as "ignored" and go on: raise it again once
+        # out of the finaliser (a pyarrow writer's __del__ was seen here)
+        signal.signal(signal.SIGALRM, _terminate)
+        signal.setitimer(signal.ITIMER_REAL, 0.05)
+        return
     raise Terminated
 
 
