@@ -21,6 +21,27 @@ FLAG_BRS = 0x10  # CAN FD bit-rate switch
 FLAG_ESI = 0x20  # CAN FD error state indicator
 FLAG_TX = 0x40  # sent by the logging node (direction flag of the log), else received
 
+# FrameBatch.channel is a uint16 index into the channel names: a log naming more channels
+# than that (hostile, or a tool writing one name per frame) keeps every frame, the ones
+# beyond the limit under one shared name
+MAX_CHANNELS = 1 << 16
+OTHER_CHANNELS = "(other channels)"
+
+
+def channel_index(names: list[str], index: dict[str, int], name: str) -> int:
+    """Index of `name` in a reader's channel table, adding it on first sight (bounded)."""
+    i = index.get(name)
+    if i is None:
+        if len(names) < MAX_CHANNELS - 1:
+            i = index[name] = len(names)
+            names.append(name)
+        else:
+            if len(names) < MAX_CHANNELS:
+                names.append(OTHER_CHANNELS)
+            i = MAX_CHANNELS - 1
+    return i
+
+
 EMPTY_CHANNELS: tuple[str, ...] = ()
 
 

@@ -382,7 +382,8 @@ def run(
     ended: list[BaseException] = []  # a live source's failure: outputs kept, then raised
     try:
         for sink in sinks:
-            sink.open(state)
+            with named_errors(sink):
+                sink.open(state)
             opened.append(sink)
         next_tick = time.monotonic() + tick if tick else None
         batches = _read_ahead(source, ended)
@@ -397,7 +398,8 @@ def run(
                     now = time.monotonic()
                     if now >= next_tick:
                         for sink in sinks:
-                            sink.tick(now)
+                            with named_errors(sink):
+                                sink.tick(now)
                         next_tick = now + tick
                 if stop is not None and stop():
                     state.stopped = True
@@ -407,8 +409,12 @@ def run(
             if close is not None:
                 close()  # the reader thread stops before the problems are reported
         _deliver(state, decoder.finish(), sinks, filt, events)
-        for sink in sinks:
-            sink.close()
+        for sink in sinks:  # a sink of its own making without finish/commit: close()
+            with named_errors(sink):
+                (getattr(sink, "finish", None) or sink.close)()
+        for sink in sinks:  # only when every output is complete: all or nothing
+            with named_errors(sink):
+                getattr(sink, "commit", lambda: None)()
     except BaseException:
         for sink in opened:
             with contextlib.suppress(Exception):  # the first error is the one to report
@@ -490,5 +496,19 @@ def _deliver(state: Run, batch: DecodedBatch, sinks: list[Sink], filt, events) -
     if events is not None:
         batch.events, batch.states = events.build(batch, state.rows)
     for sink in sinks:
-        sink.write(batch)
+        with named_errors(sink):
+            sink.write(batch)
     state.rows += len(batch)
+
+
+@contextlib.contextmanager
+def named_errors(sink: Sink) -> Iterator[None]:
+    """An OSError from a sink names its output (a writer thread's "No space left on
+    device" would otherwise reach the user without saying which file)."""
+    try:
+        yield
+    except OSError as exc:
+        dest = getattr(sink, "dest", None)
+        if exc.filename or not dest:
+            raise
+        raise OSError(exc.errno, exc.strerror or str(exc), dest) from exc

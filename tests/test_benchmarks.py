@@ -27,6 +27,7 @@ SMOKED = {
     "bench_pcap.py",
     "bench_precision.py",
     "mem_profile.py",
+    "fuzz_campaign.py",
 }
 NUMBER = r"\d+(\.\d+)?"
 
@@ -296,3 +297,13 @@ def test_bench_precision_table_per_rule_and_per_1000_frames():
         assert any(
             re.fullmatch(rf"{name}: CPU {NUMBER} s, wall {NUMBER} s \(.+\)", x) for x in lines
         )
+
+
+def test_fuzz_campaign_counts_every_category(tmp_path):
+    done = _run("fuzz_campaign.py", "--seconds", "6", "--seed", "5", "--out", str(tmp_path))
+    lines = done.stdout.splitlines()
+    assert re.match(rf"fuzz campaign: seed 5, {NUMBER} s wall, {NUMBER} s CPU", lines[0])
+    assert lines[1].split() == ["kind", "cases", "crash", "hang", "memory", "lost", "leftover"]
+    total = next(line.split() for line in lines if line.startswith("total"))
+    assert int(total[1]) > 0 and all(x.isdigit() for x in total[1:])
+    assert any(line.startswith("distinct failures:") for line in lines)

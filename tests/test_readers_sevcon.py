@@ -21,12 +21,18 @@ DUMPS = [
 
 
 @pytest.mark.parametrize("name,listed,emcy", DUMPS)
-def test_frames_with_bytes_read_and_emcy_text_counted(name, listed, emcy):
+def test_every_line_read_emcy_text_rebuilt(name, listed, emcy):
     path = real_file(f"isPointless__Sevcon/{name}")
     batch, ctx, _ = run(sevcon.read, path, batch_size=500)
-    assert len(batch) == listed - emcy
-    assert ctx.problems.count == emcy
-    assert all("EMCY" in p.message for p in ctx.problems.shown)
+    assert len(batch) == listed  # issue 24: the EMCY lines are frames too
+    assert ctx.problems.count == 0
+    emcys = [line for line in path.read_text(encoding="latin-1").splitlines() if " EMCY " in line]
+    assert len(emcys) == emcy
+    rows = np.flatnonzero(batch.can_id == 0x81)
+    assert len(rows) == emcy
+    for r, line in zip(rows, emcys, strict=True):  # the Sevcon code in bytes 3-4
+        code = int(line.rsplit("0x", 1)[1], 16)
+        assert batch.payload(int(r))[3:5] == code.to_bytes(2, "little")
     assert np.all(np.diff(batch.t) >= 0)  # Tx frames logged at time 0 are put in order
     assert sevcon.sniff(path.read_bytes())
 
@@ -38,7 +44,11 @@ def test_known_rows():
     assert batch.dlc[0] == 0 and batch.t[0] == pytest.approx(54.7216)
     assert batch.payload(1) == bytes.fromhex("D604DA04FEFC30FD")
     assert batch.line[:2].tolist() == [1, 2]
-    assert [p.location for p in ctx.problems.shown] == ["line 270", "line 302"]
+    assert ctx.problems.count == 0
+    emcy = batch.take(batch.can_id == 0x81)  # line 270: "EMCY Error Reset or No Error. Sevcon
+    assert emcy.line.tolist() == [270, 302]  # code: 0x45C4", then 0x45C5
+    assert emcy.payload(0) == bytes.fromhex("000000C445000000")
+    assert emcy.payload(1) == bytes.fromhex("000000C545000000")
     tx = batch.flags & FLAG_TX != 0
     assert tx.sum() == 9 and set(batch.can_id[tx].tolist()) <= {0x601, 0x000}
 
@@ -49,6 +59,23 @@ hello
 0x0183   547230  - d14.0 0 Unknown { 0xD6 0x01
 0x0183   547240  - d14.0 0 Unknown { 0x01 0x02 }
 """
+
+
+def test_emcy_text_becomes_the_frame_it_describes():
+    text = (
+        b"0x0081   100 - d1.0 0 EMCY Mains Voltage. Sevcon code: 0x45C5\n"
+        b"0x0081   200 - d1.0 0 EMCY Device specific. Sevcon code: 0x4883\n"
+        b"0x0081   300 - d1.0 0 EMCY Error Reset or No Error. Sevcon code: 0x4883\n"
+        b"0x0081   400 - d1.0 0 EMCY Flux capacitor. Sevcon code: 0x4883\n"
+        b"0x0081   500 - d1.0 0 EMCY Mains Voltage. no code\n"
+    )
+    batch, ctx, _ = run(sevcon.read, text, source="e.txt")
+    assert [batch.payload(i).hex() for i in range(len(batch))] == [
+        "003101c545000000",  # 0x3100 mains voltage, register: generic error
+        "00ff018348000000",
+        "0000008348000000",  # error reset: register clear
+    ]
+    assert [p.location for p in ctx.problems.shown] == ["line 4", "line 5"]
 
 
 def test_bad_lines():

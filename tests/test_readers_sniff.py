@@ -40,7 +40,7 @@ FACADE = [
     ("hilch__canopen-message-interpreter/ixxat1.trc", "ixxat", 781),
     ("collin80__SavvyCAN/CarBusAnalyzer.trc", "canbusanalyzer", 55),
     ("collin80__SavvyCAN/GVRET_Log.csv", "gvret", 12974),
-    ("isPointless__Sevcon/can_230309_150427.txt", "sevcon", 1649),
+    ("isPointless__Sevcon/can_230309_150427.txt", "sevcon", 1651),  # its 2 EMCY lines too
 ]
 
 

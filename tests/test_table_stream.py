@@ -207,6 +207,11 @@ def test_cut_off_export_leaves_no_table(tmp_path):
     with pytest.raises(Boom), StreamTables(out) as st:
         st.write(decoder.decode(fb.take(slice(0, 50))))
         raise Boom
+    assert not out.exists()  # the folder it made is removed too (issue 24)
+    out.mkdir()  # a folder the user had stays, empty
+    with pytest.raises(Boom), StreamTables(out) as st:
+        st.write(decoder.decode(fb.take(slice(0, 50))))
+        raise Boom
     assert list(out.iterdir()) == []
 
 

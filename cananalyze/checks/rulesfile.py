@@ -47,14 +47,15 @@ def _check_params(doc: _Doc, keys: list, cls: type[Rule], params: dict) -> dict:
             )
         if k == "severity" and v not in SEVERITIES:
             doc.fail(keys + [k], f"severity must be one of {', '.join(SEVERITIES)}, not {v!r}")
-        if k == "tolerance" and (
-            not isinstance(v, (int, float)) or isinstance(v, bool) or not 0 <= v < 10
-        ):
-            doc.fail(keys + [k], f"tolerance is a fraction like 0.1 (10 %), not {v!r}")
+        if k == "tolerance":
+            _tolerance(doc, keys + [k], v)
         if k == "jitter_ms" and (
             not isinstance(v, (int, float)) or isinstance(v, bool) or not 0 <= v <= 60_000
         ):
             doc.fail(keys + [k], f"jitter_ms is a time in ms like 2 (0..60000), not {v!r}")
+        hint = str(getattr(sig.parameters.get(k), "annotation", ""))
+        if k not in ("tolerance", "jitter_ms") and ("float" in hint or hint == "int"):
+            params[k] = _number(doc, keys + [k], v, sig.parameters[k].default, hint == "int")
     for name, p in sig.parameters.items():
         if (
             name not in ("self", "kw")
@@ -64,6 +65,32 @@ def _check_params(doc: _Doc, keys: list, cls: type[Rule], params: dict) -> dict:
         ):
             doc.fail(keys, f"{cls.name} needs {name!r}")
     return {k: v for k, v in params.items() if k != "enabled"}
+
+
+def _tolerance(doc: _Doc, keys: list, v) -> None:
+    if not isinstance(v, (int, float)) or isinstance(v, bool) or not 0 <= v < 10:
+        doc.fail(keys, f"tolerance is a fraction like 0.1 (10 %), not {v!r}")
+
+
+def _number(doc: _Doc, keys: list, value, default, integral: bool) -> float | int:
+    """A numeric setting as a number. YAML reads `1e3` (no dot) as text; such text is taken
+    as the number it spells, but a value that is not finite (`1e999`) or not a number is an
+    error with its line, not a string or infinity reaching the checks' arithmetic."""
+    import math
+
+    if isinstance(value, str):
+        try:
+            value = int(value, 0) if integral else float(value)
+        except ValueError:
+            doc.fail(keys, f"{keys[-1]}: expected a number, got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        doc.fail(keys, f"{keys[-1]}: expected a number, got {value!r}")
+    if integral and not float(value).is_integer():
+        doc.fail(keys, f"{keys[-1]}: expected an integer, got {value!r}")
+    unbounded = isinstance(default, float) and math.isinf(default) and value == default
+    if not math.isfinite(value) and not unbounded:
+        doc.fail(keys, f"{keys[-1]}: {value!r} is not a finite number")
+    return int(value) if integral else value
 
 
 def load_rules(path: str | Path) -> tuple[list[Rule], NetworkSpec | None]:

@@ -1,1 +1,18 @@
-"""Command-line interface: one thin module per subcommand."""
+"""Command-line interface: one thin module per subcommand.
+
+Ctrl-C (or SIGTERM) before `main` runs, while Python imports the program, ends it
+without a traceback: this package is imported first by `python -m cananalyze` and
+by the `cananalyze` script, so its hook is in place for every later import.
+"""
+
+import sys
+
+
+def _quiet_interrupt(typ, value, tb) -> None:
+    if issubclass(typ, KeyboardInterrupt):
+        return  # the interpreter still exits as interrupted (status 130)
+    sys.__excepthook__(typ, value, tb)
+
+
+if sys.excepthook is sys.__excepthook__:
+    sys.excepthook = _quiet_interrupt

@@ -66,7 +66,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..pipeline import build_checker, build_decoder, open_source
-    from .common import run_with_progress
 
     if args.rerun and args.connect:
         raise UsageError("--rerun spawns a viewer, --connect uses a running one: give one of them")
@@ -74,7 +73,18 @@ def run(args: argparse.Namespace) -> int:
     checker = build_checker(opts) if opts.checking or opts.timing else None
     source = open_source(args.log, opts)  # a bad rules file has failed already
     decoder = build_decoder(opts, checker)
+    try:
+        _decode(args, source, decoder, opts)
+    except OSError as exc:
+        if exc.filename or not args.output:
+            raise
+        raise OSError(exc.errno, exc.strerror or str(exc), args.output) from exc  # -o's file
+    return 0
+
+
+def _decode(args: argparse.Namespace, source, decoder, opts) -> None:
     from ..outputs.atomic import atomic_write
+    from .common import run_with_progress
 
     with contextlib.ExitStack() as stack:
         # -o FILE appears only when complete: an interrupted or failed run leaves none
@@ -87,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
                     f"-o {args.output}: cannot write there: {exc.strerror or exc}"
                 ) from None
         sinks = [_main_sink(args, out), *_timeline_sinks(args)]
+        sinks[0].dest = args.output
         quiet = args.quiet or not (args.output or not sys.stdout.isatty())
         try:
             run_with_progress(source, decoder, sinks, opts, quiet=quiet)
@@ -94,7 +105,6 @@ def run(args: argparse.Namespace) -> int:
             out.flush()
             if not args.strict:  # strict: the InputError names the first problem, in one line
                 report_problems(source.problems)
-    return 0
 
 
 def _main_sink(args: argparse.Namespace, out):

@@ -52,15 +52,42 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where Ctrl-C would be: every output is aborted the same way (no
+    temporary file survives `kill`), and the exit status says which signal it was."""
+
+
+def _terminate(signum, frame) -> None:
+    if frame is not None and frame.f_code.co_name == "__del__":
+        # Python would print the exception as "ignored" and go on: raise it again once
+        # out of the finaliser (a pyarrow writer's __del__ was seen here)
+        signal.signal(signal.SIGALRM, _terminate)
+        signal.setitimer(signal.ITIMER_REAL, 0.05)
+        return
+    raise Terminated
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if not getattr(args, "func", None):
-        parser.print_help()
-        return 2
-    if args.command in BATCH_COMMANDS:
-        allocator.tune()
     try:
+        old = signal.signal(signal.SIGTERM, _terminate)
+    except ValueError:
+        old = None  # not the main thread (an embedding program): its own handling stays
+    try:
+        return _main(argv)
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGTERM, old)
+
+
+def _main(argv: list[str] | None) -> int:
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if not getattr(args, "func", None):
+            parser.print_help()
+            return 2
+        if args.command in BATCH_COMMANDS:
+            allocator.tune()
         with fewer_collections():
             return int(args.func(args) or 0)
     except CananalyzeError as exc:
@@ -70,6 +97,8 @@ def main(argv: list[str] | None = None) -> int:
         # output piped into `head` and closed: not an error worth a traceback
         signal.signal(signal.SIGPIPE, signal.SIG_DFL)
         return 0
+    except Terminated:
+        return 128 + signal.SIGTERM
     except KeyboardInterrupt:
         return 130
     except OSError as exc:

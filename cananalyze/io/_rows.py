@@ -13,7 +13,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from ..frames import FrameBatch
+from ..frames import FrameBatch, channel_index
 from .registry import ReadContext
 
 _ZERO8 = bytes(8)
@@ -57,12 +57,7 @@ class RowSink:
 
     def channel(self, name: str) -> int:
         """Index of a channel name, adding it to the table on first sight."""
-        idx = self._chan_index.get(name)
-        if idx is None:
-            idx = len(self.channels)
-            self._chan_index[name] = idx
-            self.channels.append(name)
-        return idx
+        return channel_index(self.channels, self._chan_index, name)
 
     def add(
         self, t: float, can_id: int, flags: int, dlc: int, payload: bytes, chan: int, line: int

@@ -40,8 +40,12 @@ from .candump import CHUNK
 from .registry import LogFormat, ReadContext, register
 
 _DLC2LEN = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
-_HEADER_RE = re.compile(rb"(?im)^\s*(base\s+(hex|dec)\b|begin\s+triggerblock\b)")
-_FRAME_RE = re.compile(rb"(?m)^\s*\d+\.\d+\s+(\d+\s+\S+\s+(Rx|Tx)\s+[dr]\b|CANFD\s+\d+\s+(Rx|Tx))")
+# `[ \t]*`, not `\s*`: under (?m) `^\s*` runs over newlines from every line start,
+# quadratic on a run of blank lines (64k blank lines took 16-50 s to sniff)
+_HEADER_RE = re.compile(rb"(?im)^[ \t]*(base\s+(hex|dec)\b|begin\s+triggerblock\b)")
+_FRAME_RE = re.compile(
+    rb"(?m)^[ \t]*\d+\.\d+\s+(\d+\s+\S+\s+(Rx|Tx)\s+[dr]\b|CANFD\s+\d+\s+(Rx|Tx))"
+)
 
 
 class _Bad(Exception):

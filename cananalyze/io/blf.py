@@ -32,6 +32,7 @@ from ..frames import (
     FLAG_RTR,
     FLAG_TX,
     FrameBatch,
+    channel_index,
     concat,
 )
 from .registry import LogFormat, ReadContext, register
@@ -42,6 +43,8 @@ except ImportError:  # not installed (no wheel for this machine): the standard l
     _fast_zlib = None
 
 MAX_CONTAINER = 64 << 20  # real containers are ~128 KiB uncompressed
+MAX_FILE_HEADER = 1 << 16  # real file headers are 144 bytes
+MAX_INNER = 1 << 20  # an object inside a container (CAN records are < 200 bytes)
 PARSE_BYTES = 2 << 20  # decompressed bytes parsed in one go (see _Inflated)
 
 _FILE_HEADER = struct.Struct("<4sLBBBBBBBBQQLL8H8H")
@@ -157,7 +160,7 @@ class _Records:
         self.tail = b""
         self.record = 0  # 1-based number of the last object seen inside containers
         self.channels: list[str] = []
-        self._chan: dict[int, int] = {}
+        self._chan: dict[str, int] = {}
 
     def parse(self, data: bytes) -> FrameBatch | None:
         buf = self.tail + data if self.tail else data
@@ -186,7 +189,7 @@ class _Records:
                 if pos + 16 > end:
                     break
             _, hsize, hver, size, kind = unpack(buf, pos)
-            if size < 16 or size > MAX_CONTAINER:
+            if size < 16 or size > MAX_INNER:  # a claimed 60 MiB swallowed the containers after it
                 self.record += 1
                 self.ctx.problems.add(
                     self.ctx.source, f"record {self.record}", f"BLF object with bad size {size}"
@@ -362,18 +365,10 @@ class _Records:
         """Map BLF channel numbers (1-based, as Vector shows them) to stable indices."""
         out = np.zeros(len(chan), np.uint16)
         if len(chan) and chan.min() == chan.max():  # the usual single-channel log
-            c = int(chan[0])
-            if c not in self._chan:
-                self._chan[c] = len(self.channels)
-                self.channels.append(str(c))
-            out[:] = self._chan[c]
+            out[:] = channel_index(self.channels, self._chan, str(int(chan[0])))
             return out
         for c in np.unique(chan).tolist():
-            idx = self._chan.get(c)
-            if idx is None:
-                idx = self._chan[c] = len(self.channels)
-                self.channels.append(str(c))
-            out[chan == c] = idx
+            out[chan == c] = channel_index(self.channels, self._chan, str(c))
         return out
 
 
@@ -470,13 +465,21 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     if start is not None:
         ctx.absolute_time = True
         ctx.start_time = start
+    stream = _Pushback(stream)
     rest = max(0, fields[1] - _FILE_HEADER.size)
+    if rest > MAX_FILE_HEADER:  # one read of a claimed 2 GB header was a MemoryError
+        ctx.problems.add(
+            ctx.source,
+            "offset 4",
+            f"BLF file header claims {fields[1]} bytes (refused); objects are looked for after it",
+        )
+        rest = 0
     if len(stream.read(rest)) < rest:
         ctx.problems.add(
             ctx.source, f"offset {_FILE_HEADER.size}", "file ends inside the BLF file header"
         )
         return
-    offset = max(fields[1], _FILE_HEADER.size)
+    offset = _FILE_HEADER.size + rest
     declared_size = fields[10]  # 0 when the logger never closed the file
     records = _Records(ctx, start or 0.0)
     inflated = _Inflated(records)
@@ -502,12 +505,13 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
             problem(where, f"file ends inside an object header ({len(base)} bytes)")
             break
         sig, _, _, size, kind = _OBJ_BASE.unpack(base)
-        if sig != b"LOBJ":
-            problem(where, "expected a BLF object (LOBJ), file is corrupt here")
-            break
-        if size < 16 or size > MAX_CONTAINER:
-            problem(where, f"BLF object size {size} is absurd (refused)")
-            break
+        if sig != b"LOBJ" or size < 16 or size > MAX_CONTAINER:
+            # resynchronise on the next signature (python-can stops here: half a log lost)
+            skipped = stream.skip_to(b"LOBJ", base, 1)
+            what = "no BLF object (LOBJ)" if sig != b"LOBJ" else f"BLF object size {size} is absurd"
+            problem(where, f"{what}: skipped {skipped} bytes to the next object")
+            offset += skipped
+            continue
         body = stream.read(size - 16)
         stream.read(size % 4)  # padding
         offset += size + size % 4
@@ -548,6 +552,37 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
             f"incomplete BLF object at end of data ({len(records.tail)} bytes) skipped",
         )
     yield from batches.rest()
+
+
+class _Pushback:
+    """The file stream with bytes put back, for resynchronising on a signature."""
+
+    def __init__(self, stream: BinaryIO) -> None:
+        self._stream = stream
+        self._back = b""
+
+    def read(self, n: int) -> bytes:
+        if not self._back:
+            return self._stream.read(n)
+        head, self._back = self._back[:n], self._back[n:]
+        return head + self._stream.read(n - len(head)) if len(head) < n else head
+
+    def skip_to(self, sig: bytes, consumed: bytes, start: int) -> int:
+        """Drop bytes up to the next `sig` at or after `start` in `consumed` (bytes read
+        already) and put the rest back, so the next read starts at the signature; reads
+        in 64 KiB steps. Returns how many bytes were dropped."""
+        buf, base, pos = consumed, 0, start
+        while True:
+            at = buf.find(sig, pos)
+            if at >= 0:
+                self._back = buf[at:] + self._back
+                return base + at
+            cut = max(0, len(buf) - (len(sig) - 1))
+            base, buf, pos = base + cut, buf[cut:], 0
+            more = self.read(1 << 16)
+            if not more:
+                return base + len(buf)
+            buf += more
 
 
 FORMAT = register(

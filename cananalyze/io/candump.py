@@ -28,6 +28,7 @@ from ..frames import (
     FLAG_RTR,
     FLAG_TX,
     FrameBatch,
+    channel_index,
     concat,
     set_row,
 )
@@ -65,11 +66,7 @@ class _Channels:
         self.index: dict[str, int] = {}
 
     def get(self, name: str) -> int:
-        i = self.index.get(name)
-        if i is None:
-            i = self.index[name] = len(self.names)
-            self.names.append(name)
-        return i
+        return channel_index(self.names, self.index, name)
 
     def tuple(self) -> tuple[str, ...]:
         return tuple(self.names)

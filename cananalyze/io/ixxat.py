@@ -6,9 +6,12 @@ Std/Ext, flags such as ``Rtr``, data bytes or ``Remote request  DLC = n``).
 
 Time: the first column counts from when MiniMon started, not from the header's
 ``Start time`` (in the real trace the rows run from 00:02:20 to 00:03:34 while
-the header's start and stop times are 2:28 apart), so frame times stay relative
-seconds; the header's Date + Start time (local time) is kept as ``ctx.start_time``
-for reference only.
+the header's start and stop times are 2:28 apart: counted from the start, the
+last rows would come after the stop). The trace begins at ``Date`` + ``Start
+time`` (local time), so the first row is placed there and the others keep their
+distance from it: absolute times, exact to the gap between starting the trace and
+its first frame (a bus with heartbeats: milliseconds). Without the header the
+times stay relative seconds.
 """
 
 from __future__ import annotations
@@ -79,6 +82,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     chan = sink.channel("1")
     date = clock = None
     in_header = True
+    shift: float | None = None  # start epoch - the first row's clock, once known
     for n, line in text_lines(stream, ctx=ctx):
         if not line.strip():
             continue
@@ -89,6 +93,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
                     try:
                         start = datetime.datetime.strptime(f"{date} {clock}", "%d.%m.%Y %H:%M:%S")
                         ctx.start_time = start.timestamp()
+                        ctx.absolute_time = True
                     except ValueError:
                         ctx.problems.add(
                             ctx.source, f"line {n}", f"unreadable header date {date} {clock}"
@@ -103,6 +108,10 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
         except _Bad as e:
             ctx.problems.add(ctx.source, f"line {n}", str(e))
             continue
+        if ctx.absolute_time:
+            if shift is None:
+                shift = ctx.start_time - t
+            t += shift
         if sink.add(t, can_id, flags, dlc, data, chan, n):
             yield sink.flush()
     if in_header:

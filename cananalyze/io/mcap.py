@@ -31,7 +31,17 @@ from typing import BinaryIO
 import numpy as np
 
 from ..errors import InputError
-from ..frames import FLAG_BRS, FLAG_ERR, FLAG_ESI, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, FrameBatch
+from ..frames import (
+    FLAG_BRS,
+    FLAG_ERR,
+    FLAG_ESI,
+    FLAG_EXT,
+    FLAG_FD,
+    FLAG_RTR,
+    FLAG_TX,
+    FrameBatch,
+    channel_index,
+)
 from ..outputs.mcap.frames import (
     FRAME_FIELDS,
     FRAME_SCHEMA_NAME,
@@ -411,13 +421,7 @@ class _Reader:
             self.waiting += len(out)
 
     def _channel_table(self, names: list[str], codes: np.ndarray) -> np.ndarray:
-        table = []
-        for name in names:
-            idx = self._name_index.get(name)
-            if idx is None:
-                idx = self._name_index[name] = len(self.names)
-                self.names.append(name)
-            table.append(idx)
+        table = [channel_index(self.names, self._name_index, name) for name in names]
         return np.asarray(table, np.uint16)[codes] if table else np.zeros(len(codes), np.uint16)
 
     def _flush(self, final: bool) -> Iterator[FrameBatch]:
@@ -550,11 +554,13 @@ class _Parsed:
 
     def name_codes(self, names: list[str]) -> np.ndarray:
         """Codes (into self.names) of a parser's own list of channel names."""
+        index = {n: i for i, n in enumerate(self.names)}  # a batch's own list: no limit yet
         codes = []
         for name in names:
-            if name not in self.names:
+            if name not in index:
+                index[name] = len(self.names)
                 self.names.append(name)
-            codes.append(self.names.index(name))
+            codes.append(index[name])
         return np.asarray(codes, np.int64)
 
 

@@ -100,6 +100,7 @@ class McapRecording:
             FRAME_SCHEMA_NAME, "jsonschema", json.dumps(FRAME_SCHEMA).encode()
         )
         self._channel = self._writer.channel(FRAMES_TOPIC, "json", schema)
+        self._file.flush()  # header, schema and channel: a killed recording still says what it is
         self._classifier = CobClassifier()
         self._pending: list[tuple[FrameBatch, np.ndarray, np.ndarray]] = []
         self._waiting = 0
@@ -138,6 +139,10 @@ class McapRecording:
             fb, service, node, ns = fb.take(order), service[order], node[order], ns[order]
         payloads = frame_payloads(fb, service, node)
         self._writer.messages(np.full(len(fb), self._channel, np.uint16), ns, payloads)
+        # the chunk on disk now, not in the writer thread or the file buffer: a recording
+        # killed (SIGKILL, power loss of the process) keeps every chunk written before
+        self._writer.drain()
+        self._file.flush()
         self.frames += len(fb)
 
     def close(self) -> None:

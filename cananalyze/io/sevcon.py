@@ -1,9 +1,13 @@
 """Sevcon DVT ``can_cli_dump`` text: ``0xID  time  -  d<delta>  0  name  { 0xB0 0xB1 ... }``.
 
 Written by Sevcon's DVT tool; no library reads it. Time is in units of 0.1 ms.
-Frames without braces carry no data bytes (SYNC). EMCY lines hold only DVT's
-decoded text, not the bytes, so they cannot become frames: each is skipped with
-a counted problem.
+Frames without braces carry no data bytes (SYNC). EMCY lines hold DVT's decoded
+text, not the bytes (``0x0081 ... EMCY Mains Voltage. Sevcon code: 0x45C5``): the
+frame is rebuilt from what the line says, the CiA 301 error class as the error code
+(its class base: 0x3100 for "Mains Voltage"), the error register's generic bit set
+for every error (CiA 301 says it is) and clear for "Error Reset", and the Sevcon
+code in manufacturer bytes 3-4 (little-endian; the other bytes are not in the dump,
+so zero). A line whose class or code cannot be read stays a counted problem.
 
 Frames DVT sent itself are logged with time 0 (and a meaningless negative
 delta); they are marked FLAG_TX and given the time of the frame before them so
@@ -22,6 +26,29 @@ from .registry import LogFormat, ReadContext, register
 
 _LINE = re.compile(rb"(?m)^0x[0-9A-Fa-f]{1,8}\s+\d+\s+-\s+d\s*-?[\d.]+\s+\d+\s+\S+")
 _ROW = re.compile(r"^0x([0-9A-Fa-f]{1,8})\s+(\d+)\s+\S*\s+d\s*(-?[\d.]+)\s+(\d+)\s+(\S+)(.*)$")
+
+
+_EMCY = re.compile(r"^(.+?)\.\s+Sevcon code:\s*0x([0-9A-Fa-f]{1,4})$")
+
+
+def _emcy(text: str) -> bytes | None:
+    """The 8 EMCY bytes a DVT line stands for (see the module docstring), or None."""
+    from ..protocol.emcy import ERROR_CLASSES
+
+    m = _EMCY.match(text)
+    if m is None:
+        return None
+    wanted = m.group(1).strip().lower()
+    code = next((c for c, name in ERROR_CLASSES.items() if name.lower() == wanted), None)
+    if code is None:
+        return None
+    register = 0x00 if code == 0 else 0x01
+    return (
+        code.to_bytes(2, "little")
+        + bytes([register])
+        + int(m.group(2), 16).to_bytes(2, "little")
+        + bytes(3)
+    )
 
 
 def sniff(head: bytes) -> bool:
@@ -63,6 +90,8 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
             if len(data) > 8 or not all(c.lower().startswith("0x") for c in cells):
                 ctx.problems.add(ctx.source, f"line {n}", f"invalid data bytes {rest!r}")
                 continue
+        elif m.group(5) == "EMCY" and (emcy := _emcy(rest)) is not None:
+            data = emcy
         elif rest:
             ctx.problems.add(
                 ctx.source, f"line {n}", f"{m.group(5)} shown as decoded text only, no raw bytes"

@@ -190,6 +190,8 @@ def open_log(
     closers: list = []
     try:
         if name == "-":
+            if sys.stdin is None:  # `decode - <&-`: no file descriptor 0 at all
+                raise InputError("-: standard input is closed, nothing to read")
             raw: BinaryIO = sys.stdin.buffer
         else:
             raw = open(name, "rb")  # noqa: SIM115 - closed by LogSource
@@ -207,11 +209,20 @@ def open_log(
         closers.append(gz)
         stream = io.BufferedReader(gz, buffer_size=SNIFF_BYTES)  # type: ignore[assignment]
     try:
-        head = _peek(stream, SNIFF_BYTES)
+        head = _read_head(stream, pipe=stream is raw and not _regular(raw))
     except (EOFError, gzip.BadGzipFile, zlib.error, OSError) as exc:
         for c in closers:
             c.close()
         raise InputError(f"{name}: cannot read: {exc}") from None
+    bom = len(_BOM) if head.startswith(_BOM) else 0  # no part of the first line or 'date'
+    head = head[bom:]
+    cr_only = b"\r" in head and b"\n" not in head  # classic Mac line ends
+    if cr_only:
+        head = head.replace(b"\r", b"\n")
+    if stream.seekable() and not cr_only:
+        stream.seek(bom)  # a file: read again from the start (the MCAP reader seeks)
+    else:
+        stream = io.BufferedReader(_Replay(head, stream, cr_only), buffer_size=SNIFF_BYTES)  # type: ignore[assignment]
     try:
         chosen = _detect(head, name, fmt)
     except InputError:
@@ -229,13 +240,62 @@ def open_log(
     return LogSource(name, chosen, ctx, stream, closers, strict=strict, size=size)
 
 
-def _peek(stream: BinaryIO, size: int) -> bytes:
-    """First `size` bytes without consuming them (BufferedReader.peek may return fewer)."""
-    head = stream.peek(size)  # type: ignore[attr-defined]
-    if len(head) >= size or not head:
-        return head[:size]
-    # peek returns at most one buffer: grow the buffer by wrapping once more
-    return head[:size]
+_BOM = b"\xef\xbb\xbf"
+
+
+def _regular(raw) -> bool:
+    try:
+        return stat.S_ISREG(os.fstat(raw.fileno()).st_mode)
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def _read_head(stream: BinaryIO, pipe: bool) -> bytes:
+    """The first SNIFF_BYTES bytes the format is told from (one peek gives only one buffer,
+    8 KB: a TRC whose frames start later was refused). A pipe stops early when its writer
+    pauses for half a second, so `candump can0 | cananalyze decode -` starts at once."""
+    import select
+
+    parts: list[bytes] = []
+    got = 0
+    while got < SNIFF_BYTES:
+        part = stream.read1(SNIFF_BYTES - got)  # type: ignore[attr-defined]
+        if not part:
+            break
+        parts.append(part)
+        got += len(part)
+        if pipe:
+            try:  # read1 took the whole buffer: the descriptor tells if more is waiting
+                if not select.select([stream], [], [], 0.5)[0]:
+                    break
+            except (OSError, ValueError, TypeError):
+                pipe = False
+    return b"".join(parts)
+
+
+class _Replay(io.RawIOBase):
+    """The head read for detection, then the rest of the stream: readers see the whole file.
+    `cr_only` turns classic Mac line ends into newlines (else such a log is one long line)."""
+
+    def __init__(self, head: bytes, rest: BinaryIO, cr_only: bool = False) -> None:
+        self._head = memoryview(head)
+        self._rest = rest
+        self._cr_only = cr_only
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, buf) -> int:  # type: ignore[override]
+        if self._head:
+            n = min(len(buf), len(self._head))
+            buf[:n] = self._head[:n]
+            self._head = self._head[n:]
+            return n
+        data = self._rest.read1(len(buf))  # type: ignore[attr-defined]
+        if self._cr_only:
+            data = data.replace(b"\r", b"\n")
+        buf[: len(data)] = data
+        return len(data)
 
 
 def read_all(path: str | Path, strict: bool = False, fmt: str | None = None) -> FrameBatch:

@@ -26,7 +26,7 @@ from .registry import LogFormat, ReadContext, register
 
 _DLC2LEN = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
 _EPOCH_1899 = datetime.datetime(1899, 12, 30, tzinfo=datetime.UTC)
-_V1_LINE = re.compile(rb"(?m)^\s*\d+\)\s+\d+(\.\d+)?\s+")
+_V1_LINE = re.compile(rb"(?m)^[ \t]*\d+\)\s+\d+(\.\d+)?\s+")
 _FD_TYPES = {"FD": 0, "FB": FLAG_BRS, "FE": FLAG_BRS | FLAG_ESI, "BI": FLAG_ESI}
 _SKIP_TYPES = {"ST", "EC", "ER", "EV", "Warng", "Error", "Event"}
 
@@ -41,7 +41,7 @@ def sniff(head: bytes) -> bool:
     if not head.startswith(b";"):
         return False
     # version 1.0 has no $FILEVERSION: a ';' comment block then "   1)  17535  ..." rows
-    return len(_V1_LINE.findall(head[:16384])) >= 1 and b"@ TEXT @" not in head[:64]
+    return _V1_LINE.search(head) is not None and b"@ TEXT @" not in head[:64]
 
 
 def _hex_bytes(toks: list[str], n: int) -> bytes:

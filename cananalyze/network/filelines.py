@@ -145,26 +145,109 @@ def _spellings(key) -> list[str]:
     return out
 
 
+# Limits on a configuration file (the network file, the rules file): the largest real one
+# is a few KB, so these only stop a hostile or mistaken file before it costs memory or the
+# stack. Readers of binary logs follow the same rule for every length they read.
+MAX_BYTES = 4 << 20  # --network /dev/zero: stop at 4 MiB, not at MemoryError
+MAX_DEPTH = 64  # nesting of tables and lists (deeper overflows the parsers' recursion)
+MAX_NODES = 1_000_000  # values after alias expansion ("billion laughs": 10^9)
+
+
 def read_tree(path: str | Path, what: str) -> tuple[object, Lines]:
     """A TOML (`.toml`) or YAML file's data and its lines; InputError with the line if it
-    does not parse. `what` names the file in messages ("network file", "rules file")."""
+    does not parse, is not UTF-8, or passes a limit above. `what` names the file in
+    messages ("network file", "rules file")."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        with open(path, "rb") as f:
+            raw = f.read(MAX_BYTES + 1)
     except OSError as exc:
         raise InputError(f"{path}: cannot read {what}: {exc.strerror or exc}") from None
+    if len(raw) > MAX_BYTES:
+        raise InputError(f"{path}: {what} is larger than {MAX_BYTES >> 20} MiB")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        raise InputError(
+            f"{path}:{line}: {what} is not UTF-8 text (byte 0x{raw[exc.start]:02X})"
+        ) from None
     if path.suffix.lower() == ".toml":
         try:
-            return tomllib.loads(text), Lines(path, text)
+            data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise InputError(f"{path}: not valid TOML: {exc}") from None
+        except RecursionError:
+            raise InputError(f"{path}: {what} nests deeper than {MAX_DEPTH} levels") from None
+        except ValueError as exc:  # an integer of over 4300 digits (Python's own limit)
+            raise InputError(f"{path}: {what}: {_first_line(exc)}") from None
+        if _depth(data) > MAX_DEPTH:
+            raise InputError(f"{path}: {what} nests deeper than {MAX_DEPTH} levels")
+        return data, Lines(path, text)
     import yaml
 
     try:
+        _check_yaml_shape(text, path, what)
         composed = yaml.compose(text, Loader=yaml.SafeLoader)
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         at = f"{path}:{mark.line + 1}" if mark else str(path)
-        raise InputError(f"{at}: not valid YAML: {getattr(exc, 'problem', None) or exc}") from None
+        why = (getattr(exc, "problem", None) or str(exc)).splitlines()[0]  # one line
+        raise InputError(f"{at}: not valid YAML: {why}") from None
+    except ValueError as exc:  # an integer of over 4300 digits (Python's own limit)
+        raise InputError(f"{path}: {what}: {_first_line(exc)}") from None
     return data, Lines(path, "", composed)
+
+
+def _first_line(exc: Exception) -> str:
+    return (str(exc).splitlines() or [type(exc).__name__])[0].partition("; use sys.")[0]
+
+
+def _depth(data) -> int:
+    """Nesting depth of parsed data, without recursion."""
+    deepest, todo = 0, [(data, 1)]
+    while todo:
+        value, depth = todo.pop()
+        if isinstance(value, dict):
+            value = list(value.values())
+        if isinstance(value, list):
+            deepest = max(deepest, depth)
+            if depth <= MAX_DEPTH:
+                todo.extend((v, depth + 1) for v in value)
+    return deepest
+
+
+def _check_yaml_shape(text: str, path: Path, what: str) -> None:
+    """Depth, self-reference and alias expansion from YAML's event stream (the parser keeps
+    its own stack, so this cannot overflow), before anything builds nested objects: PyYAML
+    expands aliases into shared objects, but every reader after it walks them in full."""
+    import yaml
+
+    depth = 0
+    open_: list[tuple[str | None, int]] = []  # (anchor, nodes before it) per open collection
+    sizes: dict[str, int] = {}  # anchor -> nodes it stands for, expanded
+    nodes = 0
+    for ev in yaml.parse(text, Loader=yaml.SafeLoader):
+        where = f"{path}:{ev.start_mark.line + 1}"
+        if isinstance(ev, yaml.AliasEvent):
+            if any(a == ev.anchor for a, _ in open_):
+                raise InputError(f"{where}: {what}: alias *{ev.anchor} refers to itself")
+            nodes += sizes.get(ev.anchor, 1)
+        elif isinstance(ev, yaml.CollectionStartEvent):
+            depth += 1
+            if depth > MAX_DEPTH:
+                raise InputError(f"{where}: {what} nests deeper than {MAX_DEPTH} levels")
+            open_.append((ev.anchor, nodes))
+            nodes += 1
+        elif isinstance(ev, yaml.CollectionEndEvent):
+            depth -= 1
+            anchor, before = open_.pop()
+            if anchor:
+                sizes[anchor] = nodes - before
+        elif isinstance(ev, yaml.ScalarEvent):
+            nodes += 1
+            if ev.anchor:
+                sizes[ev.anchor] = 1
+        if nodes > MAX_NODES:
+            raise InputError(f"{where}: {what} expands to more than {MAX_NODES:,} values (aliases)")

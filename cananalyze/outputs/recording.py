@@ -19,6 +19,7 @@ class RecordSink(Sink):
         from ..io.record import FrameRecorder
 
         self.path = path
+        self.dest = str(path) if path is not None else None
         self._recorder_type = FrameRecorder
         self.recorder = None
         FrameRecorder.check_suffix(path)  # a wrong suffix fails before the bus opens

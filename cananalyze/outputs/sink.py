@@ -3,8 +3,9 @@
 `pipeline.run` opens every sink before the first frame is read (so a bad
 destination fails before the work), writes each decoded batch to each of them in
 the same order, ticks them on a wall clock when the source is live, and then
-closes them all (a file appears only complete) or, when anything failed or the
-user stopped it, aborts them all (nothing half-written is left behind).
+finishes them all, then commits them all (a file appears only complete, and only
+when every output could be finished) or, when anything failed or the user stopped it,
+aborts them all (nothing half-written is left behind).
 A sink reads only what the decoder put on the batch; it never decodes again.
 """
 
@@ -22,6 +23,9 @@ class Sink:
 
     #: the sink reads `batch.events` / `batch.states`: the pipeline builds them once for all
     needs_events: bool = False
+    #: the file or folder it writes: an OSError without a file name (a full disk seen by a
+    #: writer thread or a library) is given this one, so the message names the output
+    dest: str | None = None
 
     def open(self, run: Run) -> None:
         """Before the first batch: check the destination, keep what the run says."""
@@ -35,6 +39,15 @@ class Sink:
 
     def close(self) -> None:
         """After the last batch: finish and commit (atomically, for files)."""
+
+    def finish(self) -> None:
+        """The pipeline's first half of close: everything but making files appear. A run
+        with several outputs finishes them all, then commits them all, so an output that
+        fails leaves none of the others committed (an export is all or nothing)."""
+        self.close()
+
+    def commit(self) -> None:
+        """The second half: rename the finished temporary files over their targets."""
 
     def abort(self) -> None:
         """The run failed or was stopped: drop everything not yet committed."""

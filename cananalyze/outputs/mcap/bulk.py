@@ -104,6 +104,26 @@ def _compressor(compression: str):
     raise ValueError(f"unknown MCAP compression {compression!r}")
 
 
+class _Counted:
+    """The output stream with its own byte count: MCAP's offsets must not come from
+    `tell()`, which a device (`--mcap /dev/null`) or a pipe answers with 0 or an error."""
+
+    def __init__(self, stream: IO[bytes]) -> None:
+        self._stream = stream
+        self._pos = 0
+
+    def write(self, data) -> int:
+        self._stream.write(data)
+        self._pos += len(data)
+        return len(data)
+
+    def tell(self) -> int:
+        return self._pos
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
+
+
 class BulkMcapWriter:
     """Write an MCAP file to a binary stream: schemas, channels, then message columns."""
 
@@ -115,7 +135,7 @@ class BulkMcapWriter:
         chunk_bytes: int = 4 * 1024 * 1024,
         profile: str = "",
     ) -> None:
-        self._f = stream
+        self._f = _Counted(stream)
         self._compression, self._compress = _compressor(compression)
         self._chunk_bytes = chunk_bytes
         self._schemas: list[Schema] = []

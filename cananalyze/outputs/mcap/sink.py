@@ -14,6 +14,7 @@ class McapSink(Sink):
 
     def __init__(self, path: str | Path, compression: str = "zstd") -> None:
         self.path = path
+        self.dest = str(path) if path is not None else None
         self.compression = compression
         self.stream: StreamMcap | None = None
         self.counts: dict[str, int] = {}
@@ -31,8 +32,15 @@ class McapSink(Sink):
         self.stream.add(batch)
 
     def close(self) -> None:
+        self.finish()
+        self.commit()
+
+    def finish(self) -> None:
         self.stream.profiles = node_profiles(self.run.network)
-        self.counts = self.stream.close(self.run.problems.count)
+        self.counts = self.stream.finish(self.run.problems.count)
+
+    def commit(self) -> None:
+        self.stream.commit()
 
     def abort(self) -> None:
         if self.stream is not None:

@@ -193,6 +193,16 @@ class StreamMcap:
     def close(self, skipped: int = 0) -> dict[str, int]:
         """Metadata, attachments and the summary; the file replaces its target. Returns
         message counts per topic."""
+        counts = self.finish(skipped)
+        self.commit()
+        return counts
+
+    def commit(self) -> None:
+        """The finished file replaces its target."""
+        self._stack.close()
+
+    def finish(self, skipped: int = 0) -> dict[str, int]:
+        """close() but the rename."""
         try:
             self._writer.join()
             nodes = self._nodes.rows(self.profiles)
@@ -203,7 +213,6 @@ class StreamMcap:
             if isinstance(exc, OSError):
                 raise _named(exc, self.path) from exc
             raise
-        self._stack.close()
         return self.counts
 
     def abort(self, typ=None, exc=None, tb=None) -> None:

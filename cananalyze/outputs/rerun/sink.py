@@ -26,6 +26,7 @@ class RerunSink(Sink):
         if path is None and not connect and not spawn:
             raise ValueError("RerunSink needs an .rrd file, a viewer to connect to, or spawn")
         self.path = path
+        self.dest = str(path) if path is not None else None
         self.connect = connect
         self.bitrate = bitrate
         self.stream = None
@@ -49,7 +50,14 @@ class RerunSink(Sink):
         self.stream.add(batch)
 
     def close(self) -> None:
-        self.counts = self.stream.close()
+        self.finish()
+        self.commit()
+
+    def finish(self) -> None:
+        self.counts = self.stream.finish()
+
+    def commit(self) -> None:
+        self.stream.commit()
 
     def abort(self) -> None:
         if self.stream is not None:

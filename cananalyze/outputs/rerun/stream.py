@@ -15,6 +15,7 @@ after the data, as the recording's default.
 from __future__ import annotations
 
 import contextlib
+import errno
 from pathlib import Path
 
 import numpy as np
@@ -58,8 +59,13 @@ class StreamRrd:
         self._stack = contextlib.ExitStack()
         self.rec = recording(Path(self.source).name)
         self._file = path is not None
+        self.path = Path(path) if path is not None else None
+        self._tmp: Path | None = None
+        self._dead = False  # rerun's file writer failed: nothing more reaches the file
         if path is not None:
-            self.rec.save(self._stack.enter_context(atomic_path(path)))
+            self._tmp = self._stack.enter_context(atomic_path(path))
+            with self._named_errors():
+                self.rec.save(self._tmp)
         elif connect:
             self.rec.connect_grpc(grpc_url(connect))
         else:
@@ -91,13 +97,24 @@ class StreamRrd:
         self._pdos |= {(s.node, s.pdo, s.cob_id) for s in cap.series}
         self._lanes |= {e.node for e in cap.state_changes}
         self._drives |= {c.node for c in cap.drive_changes if c.kind == "state"}
-        send_parts(cap, self.rec, bool(self._absolute), self.counts, self._named)
+        with self._named_errors():
+            send_parts(cap, self.rec, bool(self._absolute), self.counts, self._named)
         if len(fb):
             self._load.add(fb.t, frame_bits(fb.flags, fb.dlc))
 
     def close(self) -> dict[str, int]:
         """Bus load, the layout and the end of the recording; the file replaces its target.
         Returns value counts per entity."""
+        counts = self.finish()
+        self.commit()
+        return counts
+
+    def commit(self) -> None:
+        """The finished file replaces its target."""
+        self._stack.close()
+
+    def finish(self) -> dict[str, int]:
+        """close() but the rename."""
         try:
             starts, load = self._load.series(self.bitrate)
             send_load(
@@ -108,20 +125,70 @@ class StreamRrd:
                 make_active=True,
                 make_default=True,
             )
-            self.rec.flush()
-            if self._file:  # a viewer keeps the recording; the file needs its end
-                self.rec.disconnect()
+            with self._named_errors():
+                self._flush()
+                if self._file:  # a viewer keeps the recording; the file needs its end
+                    self.rec.disconnect()
         except BaseException as exc:
             self.abort(type(exc), exc, exc.__traceback__)
             raise
-        self._stack.close()
         return self.counts
+
+    @contextlib.contextmanager
+    def _named_errors(self):
+        """Rerun reports a failed write (a full disk) as RuntimeError from its writer
+        thread, naming its temporary file: an OSError naming the output instead."""
+        try:
+            yield
+        except RuntimeError as exc:
+            if self.path is None or "write" not in str(exc).lower():
+                raise
+            raise OSError(
+                errno.ENOSPC if "space" in str(exc) else errno.EIO,
+                f"cannot write the Rerun recording ({_cause(exc)})",
+                str(self.path),
+            ) from None
+
+    def _flush(self) -> None:
+        """rec.flush(), which waits forever once rerun's file writer has failed (its error
+        only goes to the log): wait in steps while the file still grows."""
+        if self._tmp is None or not self._tmp.exists():
+            self.rec.flush()
+            return
+        size = -1
+        while True:
+            try:
+                self.rec.flush(timeout_sec=FLUSH_STEP)
+                return
+            except Exception:  # noqa: BLE001 - rerun raises a plain error on its timeout
+                now = self._tmp.stat().st_size
+                if now == size:
+                    # disconnect() and the stream's __del__ would wait for it forever too:
+                    # the dead stream is kept, never dropped
+                    self._dead = True
+                    _DEAD.append(self.rec)
+                    raise OSError(
+                        errno.EIO,
+                        "Rerun stopped writing the recording (disk full or file too large?)",
+                        str(self.path),
+                    ) from None
+                size = now
 
     def abort(self, typ=None, exc=None, tb=None) -> None:
         """Stop the recording and drop the temporary file."""
-        with contextlib.suppress(Exception):
-            self.rec.disconnect()
+        if not self._dead:
+            with contextlib.suppress(Exception):
+                self.rec.disconnect()
         self._stack.__exit__(typ or RuntimeError, exc or RuntimeError("aborted"), tb)
+
+
+FLUSH_STEP = 5.0  # s: a flush that writes nothing for two steps has failed
+_DEAD: list = []  # recordings whose file writer failed (see StreamRrd._flush)
+
+
+def _cause(exc: BaseException) -> str:
+    text = str(exc)
+    return text.rpartition("Failed to write: ")[2] or text
 
 
 class _LoadWindows:

@@ -213,6 +213,7 @@ class TableSink(OutputSink):
         self.path = path
         self.constants = constants
         self.conform = conform
+        self.dest = str(path)
         self.fmt = fmt
         self.compression = compression
         self.profiles = profiles or {}
@@ -225,6 +226,7 @@ class TableSink(OutputSink):
         self.run = run
         depth = self.depth
         fmt, compression = self.fmt, self.compression
+        self._made_dir = not Path(self.path).exists()  # removed again by abort, if empty
         self.dir = _outdir(self.path)
         self._stack = contextlib.ExitStack()
         self.paths: dict[str, Path] = {}
@@ -478,6 +480,17 @@ class TableSink(OutputSink):
     def close(self) -> dict[str, int]:
         """Write the small tables, wait for the writer, fix order/categories, rename all files.
         Returns the rows per table."""
+        rows = self.finish()
+        self.commit()
+        return rows
+
+    def commit(self) -> None:
+        """The finished files replace their targets (pipeline.run: after every sink finished)."""
+        self._sdo_spool.close()
+        self._stack.close()
+
+    def finish(self) -> dict[str, int]:
+        """close() but the rename: every table complete in its temporary file."""
         try:
             self._add_events(EventColumns.empty(), None)
             sdo_done = self._speculate_sdo() is not None  # the types are final now
@@ -498,8 +511,6 @@ class TableSink(OutputSink):
         except BaseException as exc:
             self.abort(type(exc), exc, exc.__traceback__)
             raise
-        self._sdo_spool.close()
-        self._stack.close()
         return {name: self.rows[name] for name in TABLES}
 
     def abort(self, typ=None, exc=None, tb=None) -> None:
@@ -513,6 +524,9 @@ class TableSink(OutputSink):
             self._sdo_spec = False
         self._sdo_spool.close()
         self._stack.__exit__(typ or RuntimeError, exc or RuntimeError("aborted"), tb)
+        if self._made_dir:
+            with contextlib.suppress(OSError):
+                self.dir.rmdir()  # only if empty: nothing of the user's is touched
 
     def _finish_frames(self) -> None:
         final = list(self._channels) or ["can0"]

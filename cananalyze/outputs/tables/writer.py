@@ -17,6 +17,7 @@ rewrites the file from its own row groups.
 
 from __future__ import annotations
 
+import contextlib
 import queue
 import threading
 from collections.abc import Callable
@@ -296,12 +297,22 @@ def rewrite(
     """Rewrite a finished table file: rows put in `order` (whole table in memory, rare) and/or
     dictionary columns re-coded to their final `categories` (row group by row group).
     A dataset part (`constants`) holds labels, not pandas' category codes: only its row
-    order can be wrong."""
+    order can be wrong. The `.rw` file is removed however this ends (it once outlived a
+    failed rewrite)."""
     if sink.constants:
         if order is None:
             return
         categories = {}
     tmp = sink.path.with_name(sink.path.name + ".rw")
+    try:
+        _rewrite(sink, categories, order, tmp)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+
+
+def _rewrite(sink: Sink, categories: dict, order, tmp: Path) -> None:
     if sink.fmt == "csv":
         if order is None:
             return  # CSV holds labels, not codes: only the row order can be wrong
@@ -358,7 +369,7 @@ def _recode(col: pa.ChunkedArray, labels: list[str], typ: pa.DataType) -> pa.Chu
     dictionary = ab.strings(labels)
     chunks = []
     for chunk in col.chunks:
-        if not pa.types.is_dictionary(chunk.type):  # a null column: a log with no frames
+        if not pa.types.is_dictionary(chunk.type):  # a null column: a table with no rows
             chunks.append(pa.nulls(len(chunk), typ))
             continue
         remap = np.array([pos[v] for v in chunk.dictionary.to_pylist()], np.int64)
