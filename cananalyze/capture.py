@@ -236,17 +236,19 @@ class Capture:
     @cached_property
     def findings(self) -> pd.DataFrame:
         """Rule violations, one row each by time: the same Checker and records as
-        `cananalyze check` (t absolute, t_rel from the first frame, measured, expected, why)."""
+        `cananalyze check` (t absolute, t_rel from the first frame, measured, expected, why, basis: where
+        the expected value came from, line: in a log without times)."""
         import pandas as pd
 
-        cols = ["t", "t_rel", "rule", "severity", "node", "cob_id", "message"]
-        cols += ["measured", "expected", "why"]
+        from .checks.finding import TABLE_COLUMNS
+
+        cols = list(TABLE_COLUMNS)
         if self.checker is not None:
             recs = [f.record() for f in sorted(self.checker.findings, key=lambda f: f.t)]
         else:
             recs = [r for _, r in self.records if r.get("kind") == "finding"]
         df = pd.DataFrame.from_records(recs, columns=cols) if recs else pd.DataFrame(columns=cols)
-        for c in ("node", "cob_id"):
+        for c in ("node", "cob_id", "line"):
             df[c] = df[c].astype("Int64")
         return df
 

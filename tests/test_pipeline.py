@@ -38,6 +38,7 @@ def cli(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
 
 def _finding_rows(records: list[dict]) -> list[tuple]:
     keys = ("t", "rule", "severity", "node", "cob_id", "message", "measured", "expected")
+    keys += ("basis", "line")  # where the expectation came from, and a line when untimed
     out = []
     for r in records:
         row = []

@@ -54,6 +54,12 @@ class Finding:
         }
 
 
+# the findings table's columns (export, load().findings, a fleet's part): the record's
+# fields after "kind", in its order
+TABLE_COLUMNS = ("t", "t_rel", "rule", "severity", "node", "cob_id", "message")
+TABLE_COLUMNS += ("measured", "expected", "why", "basis", "line")
+
+
 def tidy(value: object) -> object:
     """Floats rounded to 12 significant digits: 3276.7, not 3276.7000000000003 (float noise
     from scaling), in the printed line and in JSON alike. Lists are tidied item by item."""

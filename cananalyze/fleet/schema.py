@@ -41,7 +41,7 @@ _SDO_TYPES = {
     "abort_code": pa.int64(),
 }
 _FINDING_TYPES = {"t": pa.float64(), "t_rel": pa.float64(), "node": pa.int16()}
-_FINDING_TYPES["cob_id"] = pa.int64()
+_FINDING_TYPES["cob_id"] = _FINDING_TYPES["line"] = pa.int64()
 _NODE_NUMBERS = ("device_type", "vendor_id", "product_code", "revision", "serial")
 
 COLUMNS: dict[str, list[tuple[str, pa.DataType]]] = {

@@ -30,6 +30,7 @@ import numpy as np
 import pyarrow as pa
 
 from ...capture import _hex_column
+from ...checks.finding import TABLE_COLUMNS
 from ...columns import arrow_build as ab
 from ...errors import UsageError
 from ...events.build import LEVEL_NAMES, EventState, batch_events_of
@@ -58,8 +59,7 @@ from .writer import (
 TABLES = ("frames", "signals", "sdo", "events", "findings", "nodes")
 SDO_COLUMNS = SDO_TABLE_COLUMNS
 _SDO_ROW = operator.itemgetter(*SDO_COLUMNS)
-FINDING_COLUMNS = ("t", "t_rel", "rule", "severity", "node", "cob_id", "message")
-FINDING_COLUMNS += ("measured", "expected", "why")
+FINDING_COLUMNS = TABLE_COLUMNS  # as check --json
 HOLD = 10.0  # seconds of events kept back for records that complete late (see _add_events)
 _NAN = float("nan")  # an absent key: pandas fills NaN, as pandas_like.MISSING
 _SERVICES = ab.strings(list(SERVICE_NAMES))
@@ -645,7 +645,8 @@ class TableSink(OutputSink):
         out = []
         for name, values in zip(FINDING_COLUMNS, cols, strict=True):
             values = list(values)
-            conv = pl.nullable_int(values) if name in ("node", "cob_id") else pl.column(values)
+            nullable = name in ("node", "cob_id", "line")  # line: only in a log without times
+            conv = pl.nullable_int(values) if nullable else pl.column(values)
             out.append((name, *conv))
         return self._small_table("findings", out)
 
