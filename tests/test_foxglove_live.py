@@ -168,3 +168,30 @@ def read_source():
     from cananalyze.pipeline import MemorySource
 
     return MemorySource(read_all(SAMPLES / "demo.log"))
+
+
+def test_client_receives_the_drive_state_lane(tmp_path):
+    """A CiA 402 drive's states reach the client on `/node/N/drive_state`, as in MCAP."""
+    words = [0x0250, 0x0231, 0x0233, 0x0237, 0x0218, 0x0250, 0x0231, 0x0233, 0x0237]
+    log = tmp_path / "drive.log"
+    log.write_text(
+        "".join(
+            f"({1.0 + k * 0.01:.6f}) can0 18B#{w & 0xFF:02X}{w >> 8:02X}\n"
+            for k, w in enumerate(words * 4)
+        )
+    )
+    opts = Options(devices={11: "cia402"})
+    fb = read_all(log)
+    fox = FoxgloveSink(port=0, announce=False)
+    box: list = []
+    source = Halves(fb, fox, box)
+    mcap = tmp_path / "x.mcap"
+    run(source, build_decoder(opts), [fox, McapSink(mcap)], opts)
+    client = box[0]
+    client.stop()
+    assert client.error is None
+    written = _mcap_messages(mcap)["/node/11/drive_state"]
+    t_split = int(round(fb.t[source.split] * 1e9))
+    got = client.messages["/node/11/drive_state"]
+    assert got == [m for m in written if m[0] >= t_split] != []
+    assert {m["state"] for _, m in got} >= {"operation enabled", "fault"}

@@ -55,8 +55,9 @@ def batch_messages(
 ) -> list[tuple]:
     """(channel key, topic, schema, log times ns, payloads) of one batch, per stream:
     signals (one stream per series, in the Capture's series order), NMT states per node,
-    CiA 402 drive states per axis, events as foxglove.Log, raw frames. The one place that says which topic carries
-    what: `export --mcap` writes these and `live --foxglove` serves them."""
+    CiA 402 drive states per axis, events as foxglove.Log, raw frames. The one place that
+    says which topic carries what: `export --mcap` writes these and `live --foxglove`
+    serves them."""
     out: list[tuple] = []
     for n, pdo, cob, rows, columns, units in sorted(blocks, key=lambda b: b[:3]):
         blk = SignalBlock(rows, n, pdo, cob, columns, units)
