@@ -125,9 +125,8 @@ class FoxgloveSink(Sink):
             lines[ok] = fb.line[local[ok]]
         self._offset += len(fb)
         blocks = [(b.node, b.pdo, b.cob_id, b.rows, b.columns, b.units) for b in batch.signals]
-        drive = [c for c in batch.drive if c.kind == "state"]  # the CiA 402 state lanes
         for key, topic, schema, ns, payload in batch_messages(
-            fb, batch.service, batch.node, blocks, states, events, lines, self._file, drive
+            fb, batch.service, batch.node, blocks, states, events, lines, self._file, batch.drive
         ):
             ch = self._channel(key, topic, schema)
             if not ch.has_sinks():

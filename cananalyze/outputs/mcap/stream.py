@@ -25,6 +25,7 @@ from ... import __version__
 from ...columns.json_text import Texts
 from ...events.build import EventState, batch_events_of
 from ...events.columns import KINDS, NO_NODE, NO_ROW
+from ...network.drive_tracker import STATE
 from ...network.node_tally import NodeTally
 from ...records import DecodedBatch, SignalBlock
 from ..atomic import atomic_path
@@ -72,8 +73,9 @@ def batch_messages(
         ns = _ns(np.array([e.t for e in evs]))
         out.append((("state", n), state_topic(n), STATE_SCHEMA, ns, state_payloads(evs)))
     by_drive: dict[int, list] = {}
-    for c in drive:
-        by_drive.setdefault(c.node, []).append(c)
+    for c in drive:  # a batch's drive changes: the lane shows the states
+        if c.kind == STATE:
+            by_drive.setdefault(c.node, []).append(c)
     for n, cs in sorted(by_drive.items()):
         ns = _ns(np.array([c.t for c in cs]))
         out.append((("drive", n), drive_topic(n), DRIVE_SCHEMA, ns, drive_payloads(cs)))
@@ -158,7 +160,7 @@ class StreamMcap:
         # what the job needs, not the batch (its notes and records would stay alive too)
         blocks = [(b.node, b.pdo, b.cob_id, b.rows, b.columns, b.units) for b in batch.signals]
         service, node = batch.service, batch.node
-        drive = [c for c in batch.drive if c.kind == "state"]
+        drive = batch.drive
         try:
             self._writer.put(
                 lambda: self._emit(fb, service, node, blocks, states, events, lines, drive)
