@@ -25,6 +25,7 @@ from .errors import ProblemLog, UsageError
 from .frames import FrameBatch
 from .protocol.cobid import CobClassifier
 from .records import DecodedBatch
+from .runtime import signals
 
 if TYPE_CHECKING:
     from .checks.engine import Checker
@@ -412,9 +413,10 @@ def run(
         for sink in sinks:  # a sink of its own making without finish/commit: close()
             with named_errors(sink):
                 (getattr(sink, "finish", None) or sink.close)()
-        for sink in sinks:  # only when every output is complete: all or nothing
-            with named_errors(sink):
-                getattr(sink, "commit", lambda: None)()
+        with signals.held():  # only when every output is complete: all or nothing
+            for sink in sinks:
+                with named_errors(sink):
+                    getattr(sink, "commit", lambda: None)()
     except BaseException:
         for sink in opened:
             with contextlib.suppress(Exception):  # the first error is the one to report
