@@ -120,3 +120,64 @@ def test_export_dbc_of_a_bad_destination_fails_first(tmp_path):
         text=True,
     )
     assert r.returncode == 2 and "does not exist" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_drive_dbc_names_modes_and_commands_as_cananalyze_does(tmp_path):
+    """A CiA 402 drive's DBC: cantools, decoding with its value tables, names the modes
+    and the controlword's commands as cananalyze's decode does for the same frames."""
+    import json
+
+    out = tmp_path / "drive.dbc"
+    _cli("devices", "cia402", "--node", "3", "--dbc", str(out))
+    db = cantools.database.load_file(str(out))
+    rpdo2 = db.get_message_by_frame_id(0x303)  # controlword + modes of operation
+    words = {0x00: "disable voltage", 0x02: "quick stop", 0x06: "shutdown", 0x0F: "enable operation", 0x80: "fault reset"}  # fmt: skip
+    frames = [(0x303, bytes([cw, 0, mode])) for cw in words for mode in (1, 3, 6, 8)]
+    log = tmp_path / "drive.log"
+    log.write_text(
+        "".join(f"({k * 0.001:.6f}) can0 303#{d.hex()}\n" for k, (_, d) in enumerate(frames))
+    )
+    rows = _cli("decode", str(log), "--device", "3=cia402", "--format", "jsonl").stdout
+    ours = [json.loads(r)["signal_words"] for r in rows.splitlines() if '"signal_words"' in r]
+    assert len(ours) == len(frames)
+    for (_, data), mine in zip(frames, ours, strict=True):
+        theirs = rpdo2.decode(data)  # value tables applied
+        assert str(theirs["modes_of_operation"]) == mine["modes_of_operation"]
+        # cananalyze adds the controlword's bits after the command: "shutdown; enable voltage"
+        assert mine["controlword"].split(";")[0] == str(theirs["controlword"])
+    statusword = db.get_message_by_frame_id(0x183).get_signal_by_name("statusword")
+    assert not statusword.choices  # states are bit patterns: no exact-value table
+    # a node that is not a drive gets no drive tables on the same objects
+    plain = tmp_path / "io.dbc"
+    _cli("devices", "cia401", "--node", "3", "--dbc", str(plain))
+    assert "disable voltage" not in plain.read_text(encoding="cp1252")
+
+
+def test_export_dbc_carries_the_dbc_the_log_was_decoded_with(tmp_path):
+    """`export --dbc-in MINE --dbc OUT`: OUT holds the user's messages as they were
+    (non-CANopen identifiers, and a PDO the user's DBC redefines) beside the PDOs."""
+    from tests.test_dbc_in import MIXED_DBC
+
+    mine = tmp_path / "mine.dbc"
+    mine.write_text(MIXED_DBC)
+    log = tmp_path / "bus.log"
+    log.write_text(
+        "(0.000) can0 000#0100\n(0.010) can0 185#0100020003000400\n"
+        "(0.020) can0 10A#0102030405060708\n(0.030) can0 1A5#0100020003000400\n"
+    )
+    out = tmp_path / "out.dbc"
+    _cli(
+        "export", str(log), "--device", "5=dat7014", "--dbc-in", str(mine), "--dbc", str(out), "-q"
+    )
+    db = cantools.database.load_file(str(out))
+    user = cantools.database.load_file(str(mine))
+    for msg in user.messages:  # every message of the user's DBC, unchanged
+        got = db.get_message_by_frame_id(msg.frame_id)
+        assert got.name == msg.name
+        assert sorted(
+            (s.name, s.start, s.length, s.scale, s.is_signed) for s in got.signals
+        ) == sorted((s.name, s.start, s.length, s.scale, s.is_signed) for s in msg.signals)
+    # 0x1A5 is node 37's TPDO2 by the predefined set, but the user's "Drive" wins, as in decoding
+    assert db.get_message_by_frame_id(0x1A5).name == "Drive"
+    # node 5's own PDOs are there too
+    assert db.get_message_by_frame_id(0x285).name == "node5_TPDO2"

@@ -118,7 +118,8 @@ def run(args: argparse.Namespace) -> int:
         from ..outputs.dbc import pdo_database, write_dbc
 
         check_writable(args.dbc)
-        db = pdo_database((args.node, pdo) for pdo in prof.pdos(args.node))
+        drives = {args.node} if prof.family == 402 else set()
+        db = pdo_database(((args.node, pdo) for pdo in prof.pdos(args.node)), drives)
         write_dbc(args.dbc, db)
         print(f"wrote {len(db.messages)} PDOs of node {args.node} to {args.dbc}")
     return 0

@@ -4,13 +4,17 @@ Each valid PDO with a known mapping becomes one message at its COB-ID, each mapp
 object one Intel (little-endian) signal at its bit offset, as CiA 301 packs them,
 with the profile's (or the sidecar's, or the network file's) scaling and unit, the
 object's signedness and REAL32/REAL64 as floats. Dummy entries are left as gaps.
+Value tables: booleans as false/true, and on a CiA 402 drive the modes of operation
+and the controlword's commands (`profiles.cia402.value_tables`). The messages of the
+DBC files the log was decoded with (`--dbc-in`) are carried over as they are, and
+win over a PDO at the same identifier, as they did when decoding.
 cantools builds and formats the file, so any tool that reads DBC reads it.
 """
 
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable
+from collections.abc import Collection, Iterable
 from pathlib import Path
 
 from ..network.pdo_map import PdoConfig
@@ -25,7 +29,7 @@ def _identifier(name: str) -> str:
     return name if not name[0].isdigit() else "s_" + name
 
 
-def _signal(entry, start: int):
+def _signal(entry, start: int, tables: dict[int, dict[int, str]]):
     from cantools.database.can import Signal
     from cantools.database.conversion import BaseConversion
 
@@ -36,6 +40,9 @@ def _signal(entry, start: int):
     choices = None
     if kind == "bool" and entry.bits == 1:
         choices = {0: "false", 1: "true"}  # the JSONL's booleans, as a value table
+    elif entry.subindex == 0 and entry.index in tables:
+        limit = 1 << entry.bits
+        choices = {v: t for v, t in tables[entry.index].items() if 0 <= v < limit} or None
     return Signal(
         name=_identifier(entry.name),
         start=start,
@@ -50,9 +57,12 @@ def _signal(entry, start: int):
     )
 
 
-def pdo_message(node: int, pdo: PdoConfig):
-    """One PDO as a cantools Message, or None when it has nothing to describe."""
+def pdo_message(node: int, pdo: PdoConfig, drive: bool = False):
+    """One PDO as a cantools Message, or None when it has nothing to describe; `drive`:
+    the node is a CiA 402 drive (its modes and commands get value tables)."""
     from cantools.database.can import Message
+
+    from ..profiles import cia402
 
     if not pdo.valid or not pdo.mapping or pdo.bits > 64:
         return None
@@ -61,7 +71,7 @@ def pdo_message(node: int, pdo: PdoConfig):
         if entry.index in DUMMY_INDICES or entry.bits == 0:
             bit += entry.bits
             continue
-        sig = _signal(entry, bit)
+        sig = _signal(entry, bit, cia402.value_tables() if drive else {})
         base, k = sig.name, 2
         while sig.name in names:  # the same object mapped twice: as decode_pdo names it
             sig.name = f"{base}_{k}"
@@ -84,21 +94,32 @@ def pdo_message(node: int, pdo: PdoConfig):
     )
 
 
-def pdo_database(pdos: Iterable[tuple[int, PdoConfig]]):
-    """A cantools Database of (node, PDO) pairs; a COB-ID given twice keeps the first."""
+def pdo_database(
+    pdos: Iterable[tuple[int, PdoConfig]],
+    drives: Collection[int] = (),
+    carried: Iterable = (),
+):
+    """A cantools Database of (node, PDO) pairs; a COB-ID given twice keeps the first.
+    `drives`: the CiA 402 nodes; `carried`: cantools Messages (a DBC read with the log)
+    that go in as they are and replace a PDO at their identifier."""
     import cantools
     from cantools.database.can import Node
 
-    messages, seen, nodes = [], set(), set()
+    carried = list(carried)
+    taken = {(m.frame_id, bool(m.is_extended_frame)) for m in carried}
+    messages, nodes = [], set()
     for node, pdo in pdos:
-        msg = pdo_message(node, pdo)
-        if msg is None or msg.frame_id in seen:
+        msg = pdo_message(node, pdo, drive=node in drives)
+        if msg is None or (msg.frame_id, msg.is_extended_frame) in taken:
             continue
-        seen.add(msg.frame_id)
+        taken.add((msg.frame_id, msg.is_extended_frame))
         messages.append(msg)
         nodes.add(node)
+    names = {f"node{n}" for n in nodes}
+    senders = {s for m in carried for s in m.senders} - names
     return cantools.database.Database(
-        messages=messages, nodes=[Node(f"node{n}") for n in sorted(nodes)]
+        messages=sorted(messages + carried, key=lambda m: (m.is_extended_frame, m.frame_id)),
+        nodes=[Node(n) for n in sorted(names | senders)],
     )
 
 
@@ -135,6 +156,15 @@ class DbcSink(Sink):
             for _, b in sorted(bindings.items())
             if b.problem is None  # a PDO not valid at the end is not on the bus
         ]
-        db = pdo_database(pdos)
+        from ..network.dbc_processor import DbcDecoder
+
+        drives = {node for node, _ in pdos if model.family(node) == 402}
+        carried = [
+            m.source
+            for p in self.run.decoder.processors
+            if isinstance(p, DbcDecoder)
+            for m in p.dbc.messages.values()
+        ]
+        db = pdo_database(pdos, drives, carried)
         self.messages = len(db.messages)
         write_dbc(self.path, db)

@@ -308,6 +308,17 @@ def mode_text(value: int) -> str:
     return MODES_OF_OPERATION.get(value, f"reserved mode {value}")
 
 
+def value_tables() -> dict[int, dict[int, str]]:
+    """Value tables a DBC can carry (`export --dbc`, `devices --dbc`): the modes by name,
+    and each controlword command at the word it is sent as (its mask's value: a DBC
+    table names exact values). The statusword has none: its states are bit patterns
+    with free flag bits beside them, which an exact-value table cannot express."""
+    commands = {value: command_name(value) for _, _, value in COMMAND_MASKS}
+    commands[0x07] = "switch on / disable operation"  # which one depends on the state
+    return {MODES: dict(MODES_OF_OPERATION), MODES_DISPLAY: dict(MODES_OF_OPERATION),
+            CONTROLWORD: dict(sorted(commands.items()))}  # fmt: skip
+
+
 # words for single object values (SDO reads and writes, signal text)
 WORDS = {
     STATUSWORD: statusword_text,
