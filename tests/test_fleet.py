@@ -257,6 +257,30 @@ def test_second_run_skips_and_force_redoes(fleet, tmp_path):
     assert not any((dataset / layout.STAGING).iterdir())
 
 
+def test_a_rerun_with_another_configuration_decodes_again(tmp_path):
+    """The skip key holds the options and the content of the files they name: tables
+    made under one network file are not kept when the next run gives another."""
+    import pyarrow.dataset as ds
+
+    from cananalyze.pipeline import Options
+
+    log = str(real_file(REAL_LOGS[0]))
+    net = tmp_path / "network.toml"
+    net.write_text("[nodes.40]\ndevice = 'cia402'\n")
+    dataset = tmp_path / "ds"
+    first = run_fleet([log], dataset, Options(network=net), workers=1)
+    assert not first.skipped
+    same = run_fleet([log], dataset, Options(network=net), workers=1)
+    assert len(same.skipped) == 1  # same bytes, same configuration: nothing to do
+    net.write_text("[nodes.40]\ndevice = 'cia401'\n")  # same path, other content
+    other = run_fleet([log], dataset, Options(network=net), workers=1)
+    assert not other.skipped and other.frames == first.frames
+    profiles = ds.dataset(dataset / "nodes", partitioning="hive").to_table().to_pylist()
+    assert {r["profile"] for r in profiles if r["node"] == 40} == {"cia401"}
+    logs = ds.dataset(dataset / "logs", partitioning="hive").to_table().to_pylist()
+    assert len(logs) == 1 and len(logs[0]["config"]) == 64
+
+
 def test_failed_logs_are_tried_again_and_an_existing_scheduler_is_used(tmp_path):
     from distributed import LocalCluster
 

@@ -72,6 +72,7 @@ COLUMNS: dict[str, list[tuple[str, pa.DataType]]] = {
         ("skipped_lines", pa.int64()),
         ("findings", pa.int64()),
         ("violations", pa.int64()),
+        ("config", pa.string()),  # sha256 of the options and the files they name
     ],
 }
 TABLES = ("frames", "signals", "sdo", "events", "findings", "nodes", "logs")

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import json
 import os
 import resource
 import time
@@ -70,6 +71,46 @@ def content_hash(path: str | Path) -> str:
     """sha256 of the file's bytes (as stored: a .gz is hashed compressed)."""
     with open(path, "rb") as f:
         return hashlib.file_digest(f, "sha256").hexdigest()
+
+
+def options_digest(opts: Options) -> str:
+    """sha256 of what decides a log's tables besides its bytes: the options and the
+    content of every file they name (network, EDS, DBC, rules). It is part of the skip
+    key, so a rerun with another network or rules file decodes the log again instead of
+    keeping tables made under the old configuration."""
+
+    def content(path) -> str | None:
+        if path is None:
+            return None
+        try:
+            return content_hash(path)
+        except OSError:
+            return f"unreadable:{path}"  # the decode itself will say what is wrong
+
+    key = {
+        "network": content(opts.network),
+        "devices": sorted(opts.devices.items()),
+        "eds": sorted((n, content(p)) for n, p in opts.eds.items()),
+        "rules": content(opts.rules),
+        "dbc": [content(p) for p in opts.dbc],
+        **{k: getattr(opts, k) for k in _DECIDING},
+        "nodes": sorted(opts.nodes) if opts.nodes is not None else None,
+        "services": sorted(opts.services) if opts.services is not None else None,
+    }
+    return hashlib.sha256(json.dumps(key, sort_keys=True, default=str).encode()).hexdigest()
+
+
+# the plain options that change what is decoded or found (not how text is shown)
+_DECIDING = (
+    "checks",
+    "timing",
+    "sdo_timeout",
+    "strict",
+    "input_format",
+    "bitrate",
+    "t_from",
+    "t_to",
+)
 
 
 def recorded(dataset: Path, digest: str) -> dict | None:
@@ -150,10 +191,16 @@ def process(task: LogTask) -> dict:
         row.update(status="failed", error=f"{path}: cannot read ({exc.strerror or exc})")
     lineage = {"source": path, "hash": digest, "version": __version__}  # schema.LINEAGE's order
     result = {"source": path, "hash": digest, "skipped": False, "first": {}, "junit": None}
+    row["config"] = options_digest(task.opts)
     if row["status"] == "ok" and not task.force:
         old = recorded(dataset, digest)
         # a failure is tried again: it may have been the machine's (a worker lost)
-        if old is not None and old.get("version") == __version__ and old.get("status") == "ok":
+        if (
+            old is not None
+            and old.get("version") == __version__
+            and old.get("status") == "ok"
+            and old.get("config") == row["config"]
+        ):
             result.update(old, skipped=True)
             result["source"], result["recorded_source"] = path, old.get("source")
             return result
