@@ -292,7 +292,8 @@ class HeartbeatRule(Rule):
                 now,
                 node,
                 0x700 + node,
-                f"heartbeat stopped: none since {ctx.rel(last)} ({ms(now - last)} ms so far)",
+                f"heartbeat stopped: none since {ctx.rel(last)} ({ms(now - last)} ms so far)"
+                + self.quiet(ctx, due),
                 ms(now - last),
                 float(period),
                 why="The node fell silent (power, reset loop, bus-off or crash); check its supply "
