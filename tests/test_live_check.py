@@ -82,13 +82,13 @@ def test_faults_found_live_with_report_exit_1_and_rrd(tmp_path):
 
     # the findings stream with the frames while the session runs
     # (under the frame that showed them, or on a line of their own: a deadline the tick saw)
-    live = [(t, x) for t, x in timed if re.match(r"(    └─ )?(ERROR|WARNING) ", x)]
+    live = [(t, x) for t, x in timed if re.match(r"(    └─ |\s*\d+\.\d{6}  )?(ERROR|WARNING) ", x)]
     signal_hit = [t for t, x in live if "assert_signal: ch3 = 3276.7 outside -200..850" in x]
     assert signal_hit and signal_hit[0] < t_end - 3  # ch3 breaks 4 s into a 10 s log
     # node 6's 1.6 s silence, seen while it lasted (the rest of the bus talks on)
     assert any(
         re.search(
-            r"heartbeat: heartbeat (stopped: none since \+4\.\d{3} s|dropout: no heartbeat for 1)",
+            r"heartbeat: (node 6 )?heartbeat (stopped: none since \+4\.\d{3} s|dropout: no heartbeat for 1)",
             x,
         )
         for _, x in live
