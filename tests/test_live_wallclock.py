@@ -12,6 +12,7 @@ load adds.
 
 from __future__ import annotations
 
+import io
 import threading
 import time
 
@@ -19,9 +20,11 @@ import can
 import canopen
 from canopen.objectdictionary import UNSIGNED16
 from canopen.sdo.exceptions import SdoError
+from rich.console import Console
 
 from cananalyze.frames import from_rows
 from cananalyze.io.live import LiveSource
+from cananalyze.outputs.dashboard import DashboardSink
 from cananalyze.outputs.sink import Sink
 from cananalyze.pipeline import MemorySource, Options, build_checker, build_decoder, run
 from tests.helpers.virtual_bus import unique_channel, variable
@@ -55,10 +58,11 @@ def _rules(tmp_path, text: str = ""):
 class _Session:
     """`live --check` in-process: pipeline.run over a LiveSource on its own thread."""
 
-    def __init__(self, channel: str, rules, sdo_timeout: float = 1.0) -> None:
+    def __init__(self, channel: str, rules, sdo_timeout: float = 1.0, sinks=()) -> None:
         self.opts = Options(rules=rules, checks=True, sdo_timeout=sdo_timeout)
         self.decoder = build_decoder(self.opts, build_checker(self.opts))
         self.sink = _Findings()
+        self.sinks = [self.sink, *sinks]
         self.source = LiveSource(can.Bus(interface="virtual", channel=channel))
         self._stop = threading.Event()
         self.error: BaseException | None = None
@@ -67,9 +71,7 @@ class _Session:
 
     def _run(self) -> None:
         try:
-            run(
-                self.source, self.decoder, [self.sink], self.opts, stop=self._stop.is_set, tick=0.25
-            )
+            run(self.source, self.decoder, self.sinks, self.opts, stop=self._stop.is_set, tick=0.25)
         except BaseException as exc:  # noqa: BLE001 - re-raised in the test's thread
             self.error = exc
 
@@ -127,6 +129,52 @@ def test_only_node_silent_reported_on_the_wall_clock(tmp_path):
     assert PERIOD_MS / 1000 < f.measured / 1000 <= BOUND_S + PERIOD_MS / 1000
     others = [f.rule for _, f in session.sink.got if f.rule != "heartbeat"]
     assert others == []
+
+
+class _Screen(DashboardSink):
+    """The live dashboard rendered headless (Rich's recording console) as the terminal
+    would be redrawn: the first wall time its findings panel showed `wanted`."""
+
+    def __init__(self, wanted: str) -> None:
+        super().__init__(checking=True, show=False, every=0.05)
+        self.wanted = wanted
+        self.seen: tuple[float, str] | None = None
+        self._drawn = 0.0
+
+    def tick(self, now: float) -> None:
+        if self.seen is not None or now - self._drawn < self.every:
+            return
+        self._drawn = now
+        console = Console(record=True, width=160, color_system=None, file=io.StringIO())
+        console.print(self.view.render(height=50))
+        text = console.export_text()
+        panel = text.split("Findings (latest)", 1)[-1].split("Events", 1)[0]
+        line = next((x for x in panel.splitlines() if self.wanted in x), None)
+        if line is not None:
+            self.seen = (now, line)
+
+
+def test_dashboard_findings_panel_shows_the_silent_node(tmp_path):
+    channel = unique_channel("wallclock-dash")
+    screen = _Screen(f"heartbeat: node {NODE} heartbeat stopped")
+    session = _Session(channel, _rules(tmp_path), sinks=[screen])
+    net, local = _node(channel)
+    try:
+        time.sleep(0.3)
+        local.nmt.start_heartbeat(PERIOD_MS)
+        time.sleep(0.8)
+        local.nmt.stop_heartbeat()
+        t_silent = time.monotonic()
+        time.sleep(BOUND_S + 1.0)
+    finally:
+        local.nmt.stop_heartbeat()
+        t_stop = session.stop()
+        net.disconnect()
+    assert screen.seen is not None, list(screen.view.findings)
+    at, line = screen.seen
+    assert at - t_silent <= BOUND_S and at < t_stop, (at - t_silent, line)
+    assert "no frame from any node since" in line
+    assert screen.view.violations == 1
 
 
 def test_node_back_late_is_one_finding(tmp_path):
