@@ -180,6 +180,40 @@ def test_dashboard_findings_panel_shows_the_silent_node(tmp_path):
     assert screen.view.violations == 1
 
 
+def test_every_producer_stopping_each_reported(tmp_path):
+    """A heartbeat and python-canopen's SYNC producer stop together: the bus goes quiet.
+    Each deadline is reported on the wall clock, once, each saying no frame came at all."""
+    channel = unique_channel("wallclock-all")
+    session = _Session(channel, _rules(tmp_path, "  sync: {period_us: 100000}\n"))
+    net, local = _node(channel)
+    try:
+        time.sleep(0.3)
+        local.nmt.start_heartbeat(PERIOD_MS)
+        net.sync.start(PERIOD_MS / 1000)
+        time.sleep(1.0)
+        net.sync.stop()
+        local.nmt.stop_heartbeat()
+        t_silent = time.monotonic()
+        time.sleep(BOUND_S + 1.0)
+    finally:
+        net.sync.stop()
+        local.nmt.stop_heartbeat()
+        t_stop = session.stop()
+        net.disconnect()
+    got = {}
+    for at, f in session.sink.got:
+        got.setdefault(f.rule, []).append((at, f))
+    assert sorted(got) == ["heartbeat", "sync"], {
+        r: [f.message for _, f in v] for r, v in got.items()
+    }
+    for rule, hits in got.items():
+        assert len(hits) == 1, [f.message for _, f in hits]
+        at, f = hits[0]
+        assert at - t_silent <= BOUND_S and at < t_stop, (rule, at - t_silent)
+        assert "; no frame from any node since +" in f.message
+    assert got["sync"][0][1].message.startswith("no SYNC since +")
+
+
 def test_node_back_late_is_one_finding(tmp_path):
     """The silence seen on the wall clock, then the node's next heartbeat: one finding,
     completed with the whole gap (a dropout), not a second one."""
