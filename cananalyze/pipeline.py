@@ -125,13 +125,23 @@ class Decoder:
         return out
 
     def tick(self, now: float) -> DecodedBatch | None:
-        """Live, between frames: a zero-row batch with the findings the deadline rules
-        report as overdue at `now` (the log's clock), or None when there are none."""
-        if self.checker is None:
-            return None
-        empty = self.decode(FrameBatch.empty())
-        self.checker.tick(empty, now)
-        return empty if empty.findings else None
+        """Live, between frames: a zero-row batch with what time alone completes at `now`
+        (the log's clock): SDO requests unanswered past the timeout, the findings the
+        deadline rules report as overdue. None when there is nothing.
+
+        A processor with `tick(batch, now)` is asked that (the SDO tracker, the checks);
+        the others see the zero-row batch as a batch (the network model reads the SDO
+        records the tick completed)."""
+        fb = FrameBatch.empty()
+        c = self.classifier.classify(fb)
+        out = DecodedBatch(fb, c.service, c.node, c.pdo)
+        for p in self.processors:
+            tick = getattr(p, "tick", None)
+            if tick is not None:
+                tick(out, now)
+            else:
+                p.process(out)
+        return out if out.records or out.findings else None
 
     def finish(self) -> DecodedBatch:
         """A zero-row batch carrying the records that only the end of the log completes."""
@@ -366,11 +376,13 @@ def run(
     decoder's end-of-log batch included); if anything fails or the user interrupts,
     every sink is aborted instead and the error goes on. `stop()` is asked after each
     batch (live runs: duration, Ctrl-C); `tick` seconds of wall clock apart, live
-    sinks get `tick(now)`. Live (`tick` set), the decoder's deadline rules are asked
-    after every batch what the bus has gone past: a node silent while others talk is
-    reported as soon as a frame shows its deadline passed, not when its own next frame
-    (or the end) comes. A wholly silent bus is not blamed on each node: the adapter or
-    the logger may be what stopped (the end of the log judges it, as for a file).
+    sinks get `tick(now)`. Live (`tick` set), the decoder is asked after every batch
+    (a live source also yields empty ones while the bus is quiet) what time alone has
+    completed at the bus's clock now: the latest frame's time plus the wall time since
+    its batch arrived. A node silent while others talk is reported as soon as it is
+    overdue, and so is one on a bus where no frame comes at all (its finding says so:
+    the adapter or the logger may be what stopped), as are SDO requests left
+    unanswered. A file is judged by its frames alone: its end is no silence.
     """
     from .events.build import EventBuilder
 
@@ -387,13 +399,19 @@ def run(
                 sink.open(state)
             opened.append(sink)
         next_tick = time.monotonic() + tick if tick else None
+        arrived_last: float | None = None  # wall clock when the latest frame's batch came
         batches = _read_ahead(source, ended)
         try:
             for fb in batches:
+                arrived = time.monotonic()
                 _deliver(state, decoder.decode(fb), sinks, filt, events)
                 if next_tick is not None:
-                    if len(fb) and state.t_last is not None:  # deadlines the bus went past
-                        late = decoder.tick(state.t_last)
+                    if len(fb):
+                        arrived_last = arrived
+                    if state.t_last is not None and arrived_last is not None:
+                        # the bus's clock now; a batch that came empty had no frame waiting,
+                        # so no frame still to come is older than this
+                        late = decoder.tick(state.t_last + (arrived - arrived_last))
                         if late is not None:
                             _deliver(state, late, sinks, filt, events)
                     now = time.monotonic()

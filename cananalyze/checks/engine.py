@@ -129,11 +129,17 @@ class Checker:
 
     def tick(self, batch: DecodedBatch, now: float) -> None:
         """Live, after a batch: the deadline rules report what is overdue at `now` (the
-        log's clock: the latest frame's time) into `batch` (an empty one the pipeline
-        delivers to the sinks), before the frame that ends the silence comes."""
+        bus's clock: the latest frame's time, or past it on the wall clock when no frame
+        comes) into `batch` (an empty one the pipeline delivers to the sinks), before the
+        frame that ends the silence comes; the records time completed (SDO timeouts) are
+        judged as a batch's."""
         if self.timed is False or self.t_last is None:
             return
         ctx = self._context(batch)
+        ctx.t_bus = self.t_last
+        if batch.records:
+            for rule in self.active:
+                rule.process(ctx)
         for rule in self.active:
             rule.tick(ctx, now)
         self._collect(batch)

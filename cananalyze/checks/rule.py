@@ -55,6 +55,8 @@ class Context:
         self.t0 = t0 if t0 is not None else self.t_first  # first frame of the log
         self._state = state
         self._gaps: dict[str, Gaps] = {}
+        # live tick: the bus's latest frame (a deadline past it is seen on the wall clock)
+        self.t_bus: float | None = None
 
     def rel(self, t: float) -> str:
         """A time in a finding's message, from the start of the log ('+4.407 s'), or
@@ -140,6 +142,17 @@ class Rule:
         """Live: the bus reached `now` (the latest frame's time); deadline rules report
         what is already overdue (once: the frame that ends the silence, or the end of
         the log, does not report it again)."""
+
+    @staticmethod
+    def quiet(ctx: Context, due: float) -> str:
+        """Live: said in a tick's finding whose deadline `due` passed after the bus's latest
+        frame, so on the wall clock alone: then the silence may be the adapter's."""
+        if ctx.t_bus is None or due <= ctx.t_bus:
+            return ""
+        return (
+            f"; no frame from any node since {ctx.rel(ctx.t_bus)} "
+            "(the adapter or the logger may have stopped)"
+        )
 
     def finish(self, ctx: Context) -> None:
         """End of log checks (ctx.t_end set, zero rows)."""

@@ -31,6 +31,7 @@ _ERRCTL = np.array([Service.HEARTBEAT, Service.BOOTUP, Service.GUARD_RESPONSE], 
 _RARE = np.array([Service.NMT, Service.EMCY], np.uint8)
 _SDO = np.array([Service.SDO_REQUEST, Service.SDO_RESPONSE], np.uint8)
 RATE_WINDOW = 1.0  # seconds of wall time over which frame rate and bus load are measured
+FINDINGS_SHOWN = 5  # rows of the findings panel (live --check): the latest ones
 INFO, WARNING, ERROR = "info", "warning", "error"
 _LEVEL_STYLE = {INFO: "", WARNING: "yellow", ERROR: "bold red"}
 _SEVERITY_LEVEL = {"error": ERROR, "warning": WARNING, "info": INFO}
@@ -97,6 +98,9 @@ class LiveView:
         self.nodes: dict[int, NodeState] = {}
         self.signals: dict[tuple[int, str, str], SignalValue] = {}
         self.events: deque[tuple[float, str, str]] = deque(maxlen=events)  # (t, level, text)
+        # the latest findings, newest last: a panel of their own, so the event log's
+        # traffic cannot scroll a silent node's finding away
+        self.findings: deque[tuple[float, str, str]] = deque(maxlen=FINDINGS_SHOWN)
         self.t0: float | None = None
         self.t_last: float | None = None  # newest frame time
         self.clock_offset = 0.0  # frame time minus wall time at the newest frame
@@ -237,6 +241,7 @@ class LiveView:
             node = rec.get("node")
             where = f"node {node} " if isinstance(node, int) else ""
             text = f"{rec.get('rule')}: {where}{rec.get('message')}"
+            self.findings.append((t, level, text))
         self._event(t, text, level)
 
     def _identity(self, st: NodeState, rec: dict) -> None:
@@ -406,17 +411,33 @@ class LiveView:
             )
 
         sigs_h = 5 + max(1, len(shown) + (len(shown) < len(rows)))
-        room = max(4, height - 1 - nodes_h - sigs_h - 2 - 1)
         t0 = self.t0 or 0.0
-        log = Text(no_wrap=True, overflow="ellipsis")
-        events = list(self.events)[-room:]
-        for k, (t, level, text) in enumerate(events):
-            log.append(f"{t - t0:10.3f}  ", style="dim")
-            log.append(
-                text + ("\n" if k < len(events) - 1 else ""), style=_LEVEL_STYLE.get(level, "")
+        parts = [head, nodes, sigs]
+        room = max(4, height - 1 - nodes_h - sigs_h - 2 - 1)
+        if self.checking:
+            found = list(self.findings) or [(None, INFO, "none so far")]
+            parts.append(
+                Panel(
+                    _log(found, t0),
+                    title="Findings (latest)",
+                    title_align="left",
+                    height=2 + FINDINGS_SHOWN,
+                )
             )
-        events = Panel(log, title="Events", title_align="left")
-        return Group(head, nodes, sigs, events)
+            room = max(4, room - 2 - FINDINGS_SHOWN)
+        parts.append(Panel(_log(list(self.events)[-room:], t0), title="Events", title_align="left"))
+        return Group(*parts)
+
+
+def _log(rows: list[tuple[float | None, str, str]], t0: float):
+    """Lines of (time, level, text), styled by level, for a log panel."""
+    from rich.text import Text
+
+    log = Text(no_wrap=True, overflow="ellipsis")
+    for k, (t, level, text) in enumerate(rows):
+        log.append(f"{t - t0:10.3f}  " if t is not None else " " * 12, style="dim")
+        log.append(text + ("\n" if k < len(rows) - 1 else ""), style=_LEVEL_STYLE.get(level, ""))
+    return log
 
 
 class DashboardSink(Sink):

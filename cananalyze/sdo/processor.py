@@ -259,6 +259,12 @@ class SdoProcessor:
         else:
             batch.notes = LazyNotes(batch.notes, write_notes, covers)
 
+    def tick(self, batch: DecodedBatch, now: float) -> None:
+        """Live, between frames: requests unanswered for longer than the timeout at `now`
+        (the bus's clock) end as timeouts into `batch` (a zero-row one) while the bus is quiet."""
+        self.tracker.advance(now)
+        self._emit(batch)
+
     def finish(self, batch: DecodedBatch) -> None:
         self.tracker.finish()
         self._emit(batch)

@@ -102,7 +102,7 @@ class GuardingRule(Rule):
         self.req_t[node] = t
         self.pending[node] = t
 
-    def _life(self, ctx, node, prev, gap, guard_ms, factor, row=0, now=None) -> None:
+    def _life(self, ctx, node, prev, gap, guard_ms, factor, row=0, now=None, due=0.0) -> None:
         """Life time exceeded: no guard request for longer than 0x100C x 0x100D."""
         text = (
             f"life time exceeded: {ms(gap)} ms between guard requests"
@@ -113,7 +113,7 @@ class GuardingRule(Rule):
             prev if now is None else now,
             node,
             0x700 + node,
-            f"{text} > {guard_ms:g} ms x {factor}",
+            f"{text} > {guard_ms:g} ms x {factor}" + ("" if now is None else self.quiet(ctx, due)),
             ms(gap),
             guard_ms * factor,
             row=row,
@@ -133,7 +133,8 @@ class GuardingRule(Rule):
             guard_ms, factor = cfg
             if (now - prev) * 1000 > guard_ms * factor + self.jitter_ms:
                 self.reported.add((node, prev))
-                self._life(ctx, node, prev, now - prev, guard_ms, factor, now=now)
+                due = prev + (guard_ms * factor + self.jitter_ms) / 1000.0
+                self._life(ctx, node, prev, now - prev, guard_ms, factor, now=now, due=due)
 
     @staticmethod
     def _moved(ctx: Context, node: int, index: int, prev: float, t: float) -> bool:

@@ -37,7 +37,8 @@ class HeartbeatRule(Rule):
         self._limits: dict[tuple[int, int], dict] = {}  # _consumer_limits per stretch
         # node -> (last heartbeat, the finding tick() made while the silence lasted):
         # completed when the silence ends, so every output at exit has the whole gap
-        self._open: dict[int, tuple[float, object]] = {}
+        self._open: dict[int, tuple] = {}  # + the tick's note that no frame came at all
+        self._now: float | None = None  # live: the bus's clock at the latest tick
 
     def process(self, ctx: Context) -> None:
         g = ctx.gaps("heartbeat")
@@ -275,9 +276,19 @@ class HeartbeatRule(Rule):
                     "and whether it went bus-off (error frames just before).",
                     basis=basis,
                 )
+            opened = self._open.pop(node, None)
+            if opened is not None and opened[0] == last and self._now is not None:
+                # live, never back, no frame after it: silent until the session ended
+                f = opened[1]
+                f.measured = ms(self._now - last)
+                f.message = (
+                    f"heartbeat stopped: none since {ctx.rel(last)} ({f.measured} ms until "
+                    f"the session ended){opened[2]}"
+                )
 
     def tick(self, ctx: Context, now: float) -> None:
         """Live: a node whose configured heartbeat is overdue at `now`, reported once."""
+        self._now = now
         for node, last in sorted(self.last_seen.items()):
             if self.silent.get(node) == last:
                 continue
@@ -288,11 +299,13 @@ class HeartbeatRule(Rule):
             self.silent[node] = last
             self.reported.setdefault(node, set()).add(last)
             n = len(self.out)
+            quiet = self.quiet(ctx, due)
             self.emit(
                 now,
                 node,
                 0x700 + node,
-                f"heartbeat stopped: none since {ctx.rel(last)} ({ms(now - last)} ms so far)",
+                f"heartbeat stopped: none since {ctx.rel(last)} ({ms(now - last)} ms so far)"
+                + quiet,
                 ms(now - last),
                 float(period),
                 why="The node fell silent (power, reset loop, bus-off or crash); check its supply "
@@ -300,4 +313,4 @@ class HeartbeatRule(Rule):
                 basis=ctx.config.origin(node, 0x1017, 0, start, ctx.t0),
             )
             if len(self.out) > n:
-                self._open[node] = (last, self.out[-1])
+                self._open[node] = (last, self.out[-1], quiet)

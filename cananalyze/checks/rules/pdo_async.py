@@ -102,7 +102,7 @@ class PdoAsyncRule(Rule):
                 node,
                 cob,
                 f"no PDO since {ctx.rel(last)} ({ms(now - last)} ms so far) while operational, "
-                f"event timer {timer} ms",
+                f"event timer {timer} ms" + self.quiet(ctx, last + self.late(timer) / 1000.0),
                 ms(now - last),
                 timer,
                 basis=self._origin(ctx, node, cob, last, 5),

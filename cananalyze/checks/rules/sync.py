@@ -93,7 +93,8 @@ class SyncRule(Rule):
             now,
             None,
             0x080,
-            f"no SYNC since {ctx.rel(last)} ({ms(now - last)} ms so far), 0x1006 is {p_ms:g} ms",
+            f"no SYNC since {ctx.rel(last)} ({ms(now - last)} ms so far), 0x1006 is {p_ms:g} ms"
+            + self.quiet(ctx, last + (p_ms + self.slack(p_ms)) / 1000.0),
             ms(now - last),
             p_ms,
             basis=ctx.config.origin(None, 0x1006, 0, last, ctx.t0),

@@ -38,3 +38,14 @@ def format_record(rec: dict) -> str:
     if kind == "finding":
         return f"{rec.get('severity', 'warning').upper()} {rec.get('rule')}: {rec.get('message')}"
     return " ".join(f"{k}={v}" for k, v in rec.items())
+
+
+def format_alone(rec: dict, t0: float) -> str:
+    """A record on a line of its own (no frame line above it: a live tick's finding, the
+    end of the log): a finding then carries its time and node, as a frame line would."""
+    if rec.get("kind") != "finding" or not isinstance(rec.get("t"), (int, float)):
+        return format_record(rec)
+    node = rec.get("node")
+    where = f"node {node} " if isinstance(node, int) else ""
+    severity = str(rec.get("severity", "warning")).upper()
+    return f"{rec['t'] - t0:12.6f}  {severity} {rec.get('rule')}: {where}{rec.get('message')}"

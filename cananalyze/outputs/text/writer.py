@@ -36,7 +36,7 @@ from ...records import DecodedBatch
 from .. import colour
 from ..background import ByteSink
 from ..sink import Sink
-from .records import format_record
+from .records import format_alone, format_record
 from .sdo import fast_pairs, pair_text
 
 _HEX3 = [f"{i:02X} " for i in range(256)]
@@ -201,7 +201,7 @@ class TextWriter(Sink):
         shown[sel] = True
         nrows = len(fb)
         tail_lines = [
-            format_record(rec) for row, rec in records if not (0 <= row < nrows and shown[row])
+            format_alone(rec, t0) for row, rec in records if not (0 <= row < nrows and shown[row])
         ]
         if n == 0:
             return ("\n".join(tail_lines) + "\n").encode() if tail_lines else b""
@@ -623,7 +623,7 @@ def lines_per_row(
     shown = set() if only_records else (set(rows) if mask is not None else set(range(len(fb))))
     for row, rec in batch.records:
         if row not in shown:
-            text = format_record(rec)
+            text = format_record(rec) if only_records else format_alone(rec, t0)
             t = rec.get("t")
             if only_records and isinstance(t, (int, float)):
                 text = f"{t - t0:12.6f}  {text}"
