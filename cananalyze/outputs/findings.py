@@ -11,6 +11,9 @@ from __future__ import annotations
 import sys
 from typing import TextIO
 
+import numpy as np
+
+from ..checks.columns import FindingColumns
 from ..checks.finding import Finding
 from . import colour
 from .junit import format_finding, write_findings_json, write_junit
@@ -19,27 +22,43 @@ from .sink import Sink
 TERMINAL_CAP = 20  # findings printed per rule and node/COB-ID; the files hold every one
 
 
-def terminal_cap(findings: list[Finding], cap: int) -> tuple[list[Finding], dict]:
+def terminal_cap(findings: FindingColumns, cap: int) -> tuple[list[Finding], dict]:
     """The findings a terminal shows: the first `cap` per rule and node/COB-ID, and every
     end-of-log one (errors still active, a node that stopped: counted apart, never
-    hidden); for the rest, per key, (first hidden, how many hidden, how many in all)."""
-    count: dict[tuple, int] = {}
-    for f in findings:
-        key = (f.rule, f.node, f.cob_id, f.at_end)
-        count[key] = count.get(key, 0) + 1
-    seen: dict[tuple, int] = {}
-    shown: list[Finding] = []
-    hidden: dict[tuple, list] = {}
-    for f in findings:
-        key = (f.rule, f.node, f.cob_id, f.at_end)
-        seen[key] = seen.get(key, 0) + 1
-        if seen[key] <= cap or f.at_end:
-            shown.append(f)
-        elif key in hidden:
-            hidden[key][1] += 1
-        else:
-            hidden[key] = [f, 1, count[key]]
-    return shown, {k: tuple(v) for k, v in hidden.items()}
+    hidden); for the rest, per key, (first hidden, how many hidden, how many in all).
+
+    Counted as columns: only the findings shown (and each key's first hidden) become
+    Finding objects."""
+    n = len(findings)
+    if n == 0:
+        return [], {}
+    names = findings.rule.tolist()
+    code = {r: k for k, r in enumerate(dict.fromkeys(names))}
+    rule_code = np.array([code[r] for r in names], np.int64)
+    # one integer per (rule, node, COB-ID, at end): node < 256, COB-ID < 2^30 (29-bit ids)
+    keys = (rule_code << 40) | ((findings.node + 1) << 31) | ((findings.cob_id + 1) << 1)
+    keys |= findings.at_end
+    _, key_of, total = np.unique(keys, return_inverse=True, return_counts=True)
+    key_of = key_of.reshape(-1)
+    order = np.argsort(key_of, kind="stable")
+    rank = np.empty(n, np.int64)
+    starts = np.concatenate(([0], np.cumsum(total)[:-1]))
+    rank[order] = np.arange(n) - np.repeat(starts, total)
+    shown = (rank < cap) | findings.at_end
+    hidden_first = np.flatnonzero(~shown & (rank == cap))  # each capped key's first hidden
+    built = dict(
+        zip(
+            np.concatenate((np.flatnonzero(shown), hidden_first)).tolist(),
+            findings.findings(np.concatenate((np.flatnonzero(shown), hidden_first))),
+            strict=True,
+        )
+    )
+    hidden: dict[tuple, tuple] = {}
+    for i in hidden_first.tolist():  # in the order each key's first hidden one comes
+        k = key_of[i]
+        f = built[i]
+        hidden[(f.rule, f.node, f.cob_id, f.at_end)] = (f, int(total[k]) - cap, int(total[k]))
+    return [built[i] for i in np.flatnonzero(shown).tolist()], hidden
 
 
 class FindingsSink(Sink):
@@ -64,7 +83,8 @@ class FindingsSink(Sink):
         self.no_color = no_color
         self.quiet = quiet
         self.html = html  # the HTML report's path, named in the JUnit properties
-        self.findings: list[Finding] = []
+        self._parts: list[FindingColumns] = []
+        self.findings = FindingColumns()  # every finding, by time (at close)
 
     def open(self, run) -> None:
         super().open(run)
@@ -76,20 +96,34 @@ class FindingsSink(Sink):
                     check_writable(dest)
 
     def write(self, batch) -> None:
-        self.findings.extend(batch.findings)
+        if len(batch.findings):
+            self._parts.append(batch.findings)
+
+    def _gather(self) -> FindingColumns:
+        """Every finding so far, by time (stable); the rows emitted alone read again from
+        their Finding (live, a silence's finding is completed when it ends)."""
+        found = FindingColumns.concat([self.findings, *self._parts])
+        self._parts = []
+        live = np.flatnonzero(np.not_equal(found.obj, None))
+        if live.size:
+            found.refresh(live)
+        if found.t.size > 1:
+            found = found.take(np.argsort(found.t, kind="stable"))
+        self.findings = found
+        return found
 
     @property
     def failing(self) -> list[Finding]:
-        return [f for f in self.findings if f.fails]
+        found = self._gather()
+        return found.findings(np.flatnonzero(found.fails))
 
     @property
     def exit_code(self) -> int:
         """0: every enabled rule passed, 1: violations (info findings do not fail)."""
-        return 1 if self.failing else 0
+        return 1 if self._gather().fails.any() else 0
 
     def close(self) -> None:
-        findings = sorted(self.findings, key=lambda f: f.t)
-        self.findings = findings
+        findings = self._gather()
         checker = self.run.checker
         rules = checker.rules if checker is not None else []
         if not self.quiet:
@@ -121,7 +155,7 @@ class FindingsSink(Sink):
                     print("\n".join(checker.timing.lines(checker.nmt, 0.0)), file=out)
                 else:
                     print("\n".join(checker.timing.lines(checker.nmt, checker.t0)), file=out)
-            failing = len(self.failing)
+            failing = int(findings.fails.sum())
             names = ", ".join(r.name for r in rules)
             verdict = (
                 f"{len(rules)} rules ({names}): {failing} violation(s), "

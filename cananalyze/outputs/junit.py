@@ -10,6 +10,7 @@ import json
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+from ..checks.columns import FindingColumns
 from ..checks.finding import Finding, show
 from ..checks.rule import Rule
 from .atomic import write_text_atomic
@@ -92,5 +93,9 @@ def write_junit(
     write_text_atomic(path, junit_xml(rules, findings, properties=properties))
 
 
-def write_findings_json(path: str | Path, findings: list[Finding]) -> None:
-    write_text_atomic(path, json.dumps([f.record() for f in findings], indent=1) + "\n")
+def write_findings_json(path: str | Path, findings: list[Finding] | FindingColumns) -> None:
+    if isinstance(findings, FindingColumns):
+        records = findings.records()  # from the columns, no Finding objects
+    else:
+        records = [f.record() for f in findings]
+    write_text_atomic(path, json.dumps(records, indent=1) + "\n")
