@@ -197,7 +197,9 @@ class HeartbeatRule(Rule):
 
     def _learned(self, ctx: Context, node: int, changes: np.ndarray):
         """Per segment between changes and resets: (start, end, median ms) of the gaps
-        wholly inside it, for segments with MIN_LEARN gaps or more."""
+        wholly inside it, for segments with MIN_LEARN gaps or more. Gaps of zero (frames
+        that share a time stamp: a logger's coarse clock, or frames that only share the
+        identifier) are no period: a median of them would call every real gap late."""
         t, gaps = ctx.timing.all_gaps("heartbeat", node)
         if gaps.size == 0:
             return t, gaps, np.zeros(0, np.intp), {}
@@ -205,7 +207,7 @@ class HeartbeatRule(Rule):
         inside = seg == np.searchsorted(changes, t + gaps, side="right")
         out: dict[int, tuple[float, float, float]] = {}
         for k in np.unique(seg[inside]).tolist():
-            mine = inside & (seg == k)
+            mine = inside & (seg == k) & (gaps > 0)
             if np.count_nonzero(mine) >= MIN_LEARN:
                 tk = t[mine]
                 end = float(tk[-1] + gaps[mine][-1])
