@@ -221,7 +221,8 @@ class FindingColumns:
         elif name == "t_rel":
             values = [None if v != v else round(v, 6) for v in self.t_rel.tolist()]
         elif name in ("measured", "expected"):
-            values = [tidy(v) for v in getattr(self, name).tolist()]
+            values = getattr(self, name).tolist()  # tidy changes only floats and lists
+            values = [v if type(v) is int or type(v) is str else tidy(v) for v in values]
         else:
             values = getattr(self, name).tolist()
         for i in self._live().tolist():
@@ -232,10 +233,9 @@ class FindingColumns:
     def records(self) -> list[dict]:
         """The JSON records (`Finding.record()`), every row."""
         cols = [self.column(c) for c in TABLE_COLUMNS]
-        return [
-            {"kind": "finding", **dict(zip(TABLE_COLUMNS, r, strict=True))}
-            for r in zip(*cols, strict=True)
-        ]
+        keys = ("kind", *TABLE_COLUMNS)
+        kind = ["finding"] * len(self)
+        return [dict(zip(keys, r, strict=True)) for r in zip(kind, *cols, strict=True)]
 
     def finding(self, i: int) -> Finding:
         """Row i as a Finding (the object itself for a row emitted alone)."""
