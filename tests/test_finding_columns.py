@@ -157,7 +157,7 @@ def test_terminal_caps_the_learned_heartbeat_dropouts(outputs) -> None:
 
 def test_terminal_builds_only_the_texts_it_shows() -> None:
     """A rule's block of 5,000 findings: the terminal asks its text builder for the 20
-    shown and the first hidden one, not for all."""
+    it shows and the first hidden one, not for all."""
     from cananalyze.outputs.findings import terminal_cap
 
     asked: list[int] = []
@@ -170,7 +170,9 @@ def test_terminal_builds_only_the_texts_it_shows() -> None:
         "sync", "error", np.arange(5000, dtype=float), None, 0x80, text, np.arange(5000), 0, ""
     )
     shown, hidden = terminal_cap(block, 20)
-    assert [f.message for f in shown] == [f"finding {i}" for i in range(20)]
+    assert shown.tolist() == list(range(20))
+    assert sorted(asked) == [20]  # the first hidden one, for its count line
+    assert block.messages(shown) == [f"finding {i}" for i in range(20)]
     assert sorted(asked) == list(range(21))
     ((first, n, total),) = hidden.values()
     assert (first.message, n, total) == ("finding 20", 4980, 5000)

@@ -171,8 +171,10 @@ class FindingColumns:
         """By time, then line (a log without timestamps), stable: emission order on ties."""
         if self.t.size < 2:
             return self
+        if not (np.diff(self.t) <= 0).any():  # strictly increasing: nothing to do
+            return self
         order = np.lexsort((np.where(self.line == NONE, 0, self.line), self.t))
-        if np.array_equal(order, np.arange(order.size)):
+        if not (np.diff(order) < 0).any():
             return self
         return self.take(order)
 
@@ -180,14 +182,12 @@ class FindingColumns:
     @property
     def fails(self) -> np.ndarray:
         """Rows that fail a check run (info findings do not)."""
-        if self.obj.size and any(f is not None for f in self.obj.tolist()):
-            sev = [
-                f.severity if f is not None else s
-                for f, s in zip(self.obj, self.severity, strict=True)
-            ]
-        else:
-            sev = self.severity
-        return np.asarray(sev, object) != "info"
+        sev = self.severity
+        live = self._live()
+        if live.size:
+            sev = sev.copy()
+            sev[live] = [self.obj[i].severity for i in live.tolist()]
+        return ~np.asarray(sev == "info", bool)
 
     def _live(self) -> np.ndarray:
         """Rows read from their Finding object (emitted alone; it may have changed since)."""
@@ -237,11 +237,13 @@ class FindingColumns:
         kind = ["finding"] * len(self)
         return [dict(zip(keys, r, strict=True)) for r in zip(kind, *cols, strict=True)]
 
-    def finding(self, i: int) -> Finding:
+    def finding(self, i: int, message: str | None = None) -> Finding:
         """Row i as a Finding (the object itself for a row emitted alone)."""
         f = self.obj[i]
         if f is not None:
             return f
+        if message is None:
+            message = self.messages(np.array([i]))[0]
         node, cob, line = int(self.node[i]), int(self.cob_id[i]), int(self.line[i])
         tr = float(self.t_rel[i])
         return Finding(
@@ -250,7 +252,7 @@ class FindingColumns:
             self.severity[i],
             None if node == NONE else node,
             None if cob == NONE else cob,
-            self.messages(np.array([i]))[0],
+            message,
             self.measured[i],
             self.expected[i],
             self.why[i],
@@ -264,9 +266,8 @@ class FindingColumns:
     def findings(self, idx: np.ndarray | None = None) -> list[Finding]:
         """Rows `idx` (all by default) as Finding objects, messages built in one go."""
         idx = np.arange(len(self)) if idx is None else np.asarray(idx, np.int64)
-        if idx.size:
-            self.messages(idx)
-        return [self.finding(i) for i in idx.tolist()]
+        texts = self.messages(idx)
+        return [self.finding(i, m) for i, m in zip(idx.tolist(), texts, strict=True)]
 
     def __iter__(self) -> Iterator[Finding]:
         return iter(self.findings())

@@ -16,22 +16,22 @@ import numpy as np
 from ..checks.columns import FindingColumns
 from ..checks.finding import Finding
 from . import colour
-from .junit import format_finding, write_findings_json, write_junit
+from .junit import format_rows, write_findings_json, write_junit
 from .sink import Sink
 
 TERMINAL_CAP = 20  # findings printed per rule and node/COB-ID; the files hold every one
 
 
-def terminal_cap(findings: FindingColumns, cap: int) -> tuple[list[Finding], dict]:
-    """The findings a terminal shows: the first `cap` per rule and node/COB-ID, and every
+def terminal_cap(findings: FindingColumns, cap: int) -> tuple[np.ndarray, dict]:
+    """The rows a terminal shows: the first `cap` per rule and node/COB-ID, and every
     end-of-log one (errors still active, a node that stopped: counted apart, never
     hidden); for the rest, per key, (first hidden, how many hidden, how many in all).
 
-    Counted as columns: only the findings shown (and each key's first hidden) become
-    Finding objects."""
+    Counted as columns: only each key's first hidden finding becomes a Finding object;
+    the rows shown are printed from the columns (`junit.format_rows`)."""
     n = len(findings)
     if n == 0:
-        return [], {}
+        return np.zeros(0, np.int64), {}
     names = findings.rule.tolist()
     code = {r: k for k, r in enumerate(dict.fromkeys(names))}
     rule_code = np.array([code[r] for r in names], np.int64)
@@ -46,19 +46,11 @@ def terminal_cap(findings: FindingColumns, cap: int) -> tuple[list[Finding], dic
     rank[order] = np.arange(n) - np.repeat(starts, total)
     shown = (rank < cap) | findings.at_end
     hidden_first = np.flatnonzero(~shown & (rank == cap))  # each capped key's first hidden
-    built = dict(
-        zip(
-            np.concatenate((np.flatnonzero(shown), hidden_first)).tolist(),
-            findings.findings(np.concatenate((np.flatnonzero(shown), hidden_first))),
-            strict=True,
-        )
-    )
     hidden: dict[tuple, tuple] = {}
-    for i in hidden_first.tolist():  # in the order each key's first hidden one comes
-        k = key_of[i]
-        f = built[i]
+    for i, f in zip(hidden_first.tolist(), findings.findings(hidden_first), strict=True):
+        k = key_of[i]  # in the order each key's first hidden one comes
         hidden[(f.rule, f.node, f.cob_id, f.at_end)] = (f, int(total[k]) - cap, int(total[k]))
-    return [built[i] for i in np.flatnonzero(shown).tolist()], hidden
+    return np.flatnonzero(shown), hidden
 
 
 class FindingsSink(Sink):
@@ -85,6 +77,7 @@ class FindingsSink(Sink):
         self.html = html  # the HTML report's path, named in the JUnit properties
         self._parts: list[FindingColumns] = []
         self.findings = FindingColumns()  # every finding, by time (at close)
+        self._sorted = False  # findings is every part, sorted, its live rows read again
 
     def open(self, run) -> None:
         super().open(run)
@@ -98,18 +91,22 @@ class FindingsSink(Sink):
     def write(self, batch) -> None:
         if len(batch.findings):
             self._parts.append(batch.findings)
+            self._sorted = False
 
     def _gather(self) -> FindingColumns:
         """Every finding so far, by time (stable); the rows emitted alone read again from
         their Finding (live, a silence's finding is completed when it ends)."""
+        if not self._parts and self._sorted:
+            return self.findings
         found = FindingColumns.concat([self.findings, *self._parts])
         self._parts = []
         live = np.flatnonzero(np.not_equal(found.obj, None))
         if live.size:
             found.refresh(live)
-        if found.t.size > 1:
+        if found.t.size > 1 and (np.diff(found.t) < 0).any():
             found = found.take(np.argsort(found.t, kind="stable"))
         self.findings = found
+        self._sorted = True
         return found
 
     @property
@@ -130,11 +127,9 @@ class FindingsSink(Sink):
             out = self.out or sys.stdout
             on = colour.use_colour(out, self.no_color)
             shown, hidden = terminal_cap(findings, self.cap)
-            for f in shown:
-                print(
-                    colour.paint(format_finding(f), colour.SEVERITY.get(f.severity, ""), on),
-                    file=out,
-                )
+            severity = findings.column("severity")
+            for i, line in zip(shown.tolist(), format_rows(findings, shown), strict=True):
+                print(colour.paint(line, colour.SEVERITY.get(severity[i], ""), on), file=out)
             for (rule, node, cob, _), (first, n, total) in hidden.items():
                 where = ("node -" if node is None else f"node {node}") + (
                     "" if cob is None else f" 0x{cob:03X}"
