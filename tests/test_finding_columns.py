@@ -207,3 +207,24 @@ def test_findings_sink_output_matches_the_finding_objects() -> None:
     sink.write(type("B", (), {"findings": found})())
     assert [f.message for f in sink.failing] == ["a", "b"]  # by time; info does not fail
     assert sink.exit_code == 1
+
+
+def test_round6_is_pythons_round() -> None:
+    """The table's t_rel, rounded as columns, is `round(v, 6)` value for value: random
+    times, exact halves of a microsecond and their neighbours, NaN."""
+    from cananalyze.checks.columns import round6
+
+    rng = np.random.default_rng(7)
+    halves = (np.arange(1, 2000) + 0.5) / 1e6
+    x = np.concatenate(
+        (
+            rng.uniform(0, 1e5, 20000),
+            rng.uniform(0, 1, 20000),
+            halves,
+            np.nextafter(halves, 0),
+            np.nextafter(halves, 1),
+            [0.0, -0.0, 1e-7, 5e-7, 2.5e-6, np.nan],
+        )
+    )
+    want = [None if v != v else round(v, 6) for v in x.tolist()]
+    assert round6(x) == want

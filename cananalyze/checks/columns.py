@@ -40,6 +40,22 @@ def objects(values, n: int) -> np.ndarray:
     return out
 
 
+def round6(x: np.ndarray) -> list:
+    """`round(v, 6)` of each value (None for NaN), as columns: numpy's rint(x * 1e6) / 1e6
+    is Python's correctly rounded result except where x * 1e6 is within rounding error
+    of a half; those few are rounded by Python."""
+    r = x * 1e6
+    out = np.rint(r) / 1e6
+    near = np.abs(np.abs(r - np.floor(r)) - 0.5) < 1e-6 * np.maximum(1.0, np.abs(r) * 1e-9)
+    near |= np.abs(r) > 2.0**52  # beyond exact integers: Python decides
+    values = out.tolist()
+    for i in np.flatnonzero(near).tolist():
+        values[i] = round(float(x[i]), 6)
+    for i in np.flatnonzero(np.isnan(x)).tolist():
+        values[i] = None
+    return values
+
+
 class FindingColumns:
     """Findings as columns: t, t_rel (NaN: none), rule, severity, node/cob_id/line (-1:
     none), message (built lazily), measured, expected, why, basis, row, at_end.
@@ -219,7 +235,7 @@ class FindingColumns:
             if (col == NONE).any():
                 values = [None if v == NONE else v for v in values]
         elif name == "t_rel":
-            values = [None if v != v else round(v, 6) for v in self.t_rel.tolist()]
+            values = round6(self.t_rel)
         elif name in ("measured", "expected"):
             values = getattr(self, name).tolist()  # tidy changes only floats and lists
             values = [v if type(v) is int or type(v) is str else tidy(v) for v in values]
@@ -229,6 +245,14 @@ class FindingColumns:
             v = getattr(self.obj[i], name)
             values[i] = round(v, 6) if name == "t_rel" and v is not None else v
         return values
+
+    def ints(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """(values, missing) of node, cob_id or line, as `column` gives them."""
+        values = getattr(self, name).copy()
+        for i in self._live().tolist():
+            v = getattr(self.obj[i], name)
+            values[i] = NONE if v is None else v
+        return values, values == NONE
 
     def records(self) -> list[dict]:
         """The JSON records (`Finding.record()`), every row."""

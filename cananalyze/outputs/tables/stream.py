@@ -645,9 +645,12 @@ class TableSink(OutputSink):
         found = found.take(np.argsort(np.asarray(found.column("t"), np.float64), kind="stable"))
         out = []
         for name in FINDING_COLUMNS:
-            values = found.column(name)
-            nullable = name in ("node", "cob_id", "line")  # line: only in a log without times
-            conv = pl.nullable_int(values) if nullable else pl.column(values)
+            if name in ("node", "cob_id", "line"):  # nullable (line: a log without times)
+                values, missing = found.ints(name)  # as pl.nullable_int, from the columns
+                conv = (ab.numeric(np.where(missing, 0, values), missing, pa.int64()), "int64")
+                conv += ("Int64",)
+            else:
+                conv = pl.column(found.column(name))
             out.append((name, *conv))
         return self._small_table("findings", out)
 
