@@ -53,7 +53,7 @@ def check(path, **options) -> list[Finding]:
     checker = build_checker(opts)
     report = FindingsSink(quiet=True)
     run(open_source(path, opts), build_decoder(opts, checker), [report], opts)
-    return report.findings
+    return report.findings.findings()  # Finding objects: what a Python caller reads
 
 
 def __getattr__(name: str):

@@ -243,8 +243,10 @@ class Capture:
         from .checks.finding import TABLE_COLUMNS
 
         cols = list(TABLE_COLUMNS)
-        if self.checker is not None:
-            recs = [f.record() for f in sorted(self.checker.findings, key=lambda f: f.t)]
+        if self.checker is not None:  # read as columns: no Finding object per row
+            found = self.checker.findings
+            found = found.take(np.argsort(np.asarray(found.column("t")), kind="stable"))
+            recs: list = list(zip(*(found.column(c) for c in cols), strict=True))
         else:
             recs = [r for _, r in self.records if r.get("kind") == "finding"]
         df = pd.DataFrame.from_records(recs, columns=cols) if recs else pd.DataFrame(columns=cols)

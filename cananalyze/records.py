@@ -8,8 +8,8 @@ parts, each built in one place:
 - SDO transactions: `records` of kind "sdo", completed at a row (the SDO tracker and
   its fast path, whose records stay columns until read: `sdo_fast`, `sdo_table()`);
 - signals: `signals`, one SignalBlock of columns per PDO and mapping (PdoDecoder);
-- findings: `findings` (checks.Finding), each also a record of kind "finding" in
-  `records` at its row, so that streamed outputs place it among the frames (Checker);
+- findings: `findings` (checks.columns.FindingColumns, each at its row, so that
+  streamed outputs place it among the frames: `records_and_findings`) (Checker);
 - events: `events` and `states` (the event log and the NMT state changes, as
   columns), built by the pipeline once for every sink that shows them.
 
@@ -19,11 +19,15 @@ Outputs read only this; none decodes again.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .frames import FLAG_RTR, FrameBatch
 from .protocol.fields import frame_fields
+
+if TYPE_CHECKING:
+    from .checks.columns import FindingColumns
 
 
 def signal_path(node: int, pdo: str) -> str:
@@ -118,7 +122,7 @@ class DecodedBatch:
     signals: list[SignalBlock] = field(default_factory=list)
     # Notes shared by many rows, kept columnar (e.g. one pdo_problem for every short PDO).
     row_notes: list[tuple[np.ndarray, dict]] = field(default_factory=list)
-    findings: list = field(default_factory=list)  # checks.Finding, found in this batch
+    findings: FindingColumns = field(default_factory=lambda: _no_findings())  # this batch's
     events: object = None  # events.columns.EventColumns, built once by the pipeline
     states: list = field(default_factory=list)  # NMT state changes (events.columns.Row)
     drive: list = field(default_factory=list)  # CiA 402 changes (network.drive_tracker)
@@ -178,7 +182,12 @@ class DecodedBatch:
             keep = mask[r]
             if keep.any():
                 row_notes.append((pos[r[keep]], note))
-        findings = [f for f in self.findings if keep_record(f.record())]
+        findings = self.findings
+        if len(findings):
+            keep = np.flatnonzero([keep_record(r) for r in findings.records()])
+            findings = findings.take(keep)
+            at = findings.row
+            findings.row = np.where((at >= 0) & (at < len(self)), pos[np.clip(at, 0, len(self))], n)
         drive = [
             c._replace(row=int(pos[c.row]) if 0 <= c.row < len(self) else n)
             for c in self.drive
@@ -256,6 +265,13 @@ class DecodedBatch:
 
     def add_record(self, row: int, record: dict) -> None:
         self.records.append((row, record))
+
+    def records_and_findings(self) -> list[tuple[int, dict]]:
+        """The records, then the findings' records: (row, record) in the order the
+        streamed outputs (text, JSONL, dashboard) place them at their rows."""
+        if not len(self.findings):
+            return self.records
+        return [*self.records, *self.findings.pairs()]
 
     @property
     def sdo_fast(self) -> SdoColumns | None:
@@ -359,6 +375,12 @@ class DecodedBatch:
             result = np.concatenate((result, fres))[order]
             latency = np.concatenate((latency, fast.latency))[order]
         return SdoTable(node_keys, node, result_keys, result, latency)
+
+
+def _no_findings() -> FindingColumns:
+    from .checks.columns import FindingColumns  # (checks imports this module)
+
+    return FindingColumns()
 
 
 def _labels(values: dict, choices: dict[str, dict[int, str]]) -> dict[str, str]:

@@ -18,12 +18,12 @@ def _decode(name: str, size: int) -> list[str]:
     for start in range(0, len(fb), size):
         batch = decoder.decode(fb.take(slice(start, start + size)))
         by_row: dict[int, list[dict]] = {}
-        for row, rec in batch.records:
+        for row, rec in batch.records_and_findings():  # findings: columns, placed at rows
             by_row.setdefault(row, []).append(rec)
         for i in range(len(batch)):
             out.append(dumps(frame_record(batch, i)))
             out.extend(dumps(r) for r in by_row.get(i, ()))
-    out.extend(dumps(r) for _, r in decoder.finish().records)
+    out.extend(dumps(r) for _, r in decoder.finish().records_and_findings())
     return out
 
 

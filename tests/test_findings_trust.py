@@ -67,6 +67,29 @@ def test_learned_period_is_per_segment_and_says_so(tmp_path):
     assert f.basis == "learned from the log's median over +0.000 s..+2.900 s"
 
 
+def test_frames_sharing_a_time_stamp_teach_no_period(tmp_path):
+    """Heartbeats three to a time stamp (a coarse logger clock): the zero gaps are no period.
+    Their median (0 ms) made every real gap of the 100 ms producer a "dropout"; the
+    positive gaps teach 100 ms, and only the one 900 ms gap is late."""
+    rows = [(0.0, 0x705, b"\x7f")]
+    for k in range(1, 30):
+        t = 0.1 * k + (0.8 if k > 20 else 0.0)
+        rows += [(t, 0x705, b"\x05")] * 3
+    log = tmp_path / "pairs.log"
+    write_log(from_rows(rows), log)
+    (f,) = [f for f in cananalyze.check(log) if f.rule == "heartbeat"]
+    assert f.expected == pytest.approx(100.0) and f.measured == pytest.approx(900.0)
+
+
+def test_real_vehicle_log_no_dropout_against_a_zero_period():
+    """SavvyCAN's GVRET log (vehicle traffic, not CANopen): 0x754 comes in bursts of
+    frames at one time; it gave 164 "heartbeat dropouts" judged against a learned 0 ms."""
+    found = cananalyze.check(real_file("collin80__SavvyCAN/GVRET_Log.csv"))
+    hb = [f for f in found if f.rule == "heartbeat"]
+    assert hb and all(f.expected > 0 for f in hb)
+    assert all(f.measured >= 2 * f.expected for f in hb if "period learned" in f.message)
+
+
 # --- logs without timestamps ----------------------------------------------------------
 def test_untimed_real_log_says_so_once_and_skips_timing():
     log = real_file("SeonilChoi__CANOPEN-SDK/log2.txt")

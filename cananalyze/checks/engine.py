@@ -1,7 +1,8 @@
 """Checker: the processor that runs the timing analysis and every enabled rule on each batch.
 
-Findings go into `batch.records` at their row (so `decode --format jsonl` streams
-them) and into `self.findings` for the CLI, JUnit and the Python assertions.
+Findings go into `batch.findings` as columns (`FindingColumns`, each at its row, so
+`decode --format jsonl` streams them among the frames) and into `self.findings` for the
+CLI, JUnit and the Python assertions.
 
 A log without timestamps (candump screen output: every frame at one time) is told
 once, its timing rules are skipped, and the order-based rules (PDO before start,
@@ -18,6 +19,7 @@ import numpy as np
 
 from ..frames import FrameBatch
 from ..records import DecodedBatch
+from .columns import NONE, FindingColumns
 from .config import ConfigSource
 from .finding import Finding
 from .nmt_state import NmtStates
@@ -43,7 +45,7 @@ class Checker:
         self.nmt = NmtStates()
         # every gap is kept only for the tables a rule reads after the fact (flat memory otherwise)
         self.timing = Timing(keep={n for r in rules for n in getattr(r, "needs_gaps", ())})
-        self.findings: list[Finding] = []
+        self._found: list[FindingColumns] = []  # per batch (self.findings: all)
         self._gaps = GapState()
         self.t_last: float | None = None
         self.t0: float | None = None  # first frame of the log: findings read time from here
@@ -115,7 +117,7 @@ class Checker:
         return dataclasses.replace(batch, frames=frames, drive=drive)
 
     def process(self, batch: DecodedBatch) -> None:
-        if len(batch) == 0 and not batch.records:
+        if len(batch) == 0 and not batch.records:  # (findings: the Checker's own)
             return
         self._decide(batch)
         ctx = self._context(batch)
@@ -147,6 +149,8 @@ class Checker:
     def finish(self, batch: DecodedBatch) -> None:
         ctx = self._context(batch, t_end=self.t_last)
         self.timing.update(ctx)
+        for rule in self.rules:
+            rule.ending = True
         for rule in self.active:
             rule.process(ctx)  # records that only the end completes (pending SDO timeouts)
             rule.finish(ctx)
@@ -154,32 +158,51 @@ class Checker:
         self._collect(batch, at_end=True)
 
     def _collect(self, batch: DecodedBatch, at_end: bool = False) -> None:
-        new: list[Finding] = []
+        parts: list[FindingColumns] = []
         if self.findings_untimed is not None:
-            new.append(self.findings_untimed)
+            parts.append(FindingColumns.of([self.findings_untimed]))
             self.findings_untimed = None
         for rule in self.rules:
-            new.extend(rule.take())
+            parts.extend(rule.take())
+        new = FindingColumns.concat(parts)
+        if not len(new):
+            return
         if self.timed is False:  # the rules' times are lines: back to the log's time
             t_log = self.t0 if self.t0 is not None else 0.0
             lines = self._view_t
-            for f in new:
-                if f.rule == UNTIMED:
-                    continue
-                if f.t < 1 and not at_end and 0 <= f.row < lines.size:
-                    f.t = lines[f.row]  # an SDO record's own time: the log's, not a line
-                f.line, f.t = (int(f.t) if f.t >= 1 else None), t_log
-        new.sort(key=lambda f: (f.t, f.line or 0))
-        for f in new:
-            f.t_rel = f.t - (self.t0 if self.t0 is not None else f.t)
-            f.at_end = at_end
-            batch.add_record(0 if at_end else f.row, f.record())
-        batch.findings.extend(new)
-        self.findings.extend(new)
+            mine = new.rule != UNTIMED
+            fix = mine & (new.t < 1) & (new.row >= 0) & (new.row < lines.size) & (not at_end)
+            new.t[fix] = lines[new.row[fix]]  # an SDO record's own time: the log's, not a line
+            new.line[mine] = np.where(new.t[mine] >= 1, new.t[mine].astype(np.int64), NONE)
+            new.t[mine] = t_log
+        t0 = self.t0
+        new.t_rel = new.t - (t0 if t0 is not None else new.t)
+        if at_end:
+            new.row[:] = 0  # the end batch has no rows: after every frame
+        self._sync_objects(new)
+        new = new.sort()
+        batch.findings = FindingColumns.concat([batch.findings, new])
+        self._found.append(new)
+
+    @staticmethod
+    def _sync_objects(new: FindingColumns) -> None:
+        """The rows emitted alone keep their Finding: give it the columns' values."""
+        for i in np.flatnonzero(np.not_equal(new.obj, None)).tolist():
+            f = new.obj[i]
+            line = int(new.line[i])
+            f.t, f.line, f.row = float(new.t[i]), (None if line == NONE else line), int(new.row[i])
+            f.t_rel, f.at_end = float(new.t_rel[i]), bool(new.at_end[i])
+
+    @property
+    def findings(self) -> FindingColumns:
+        """Every finding so far, batch by batch (each batch's by time)."""
+        if len(self._found) > 1:
+            self._found = [FindingColumns.concat(self._found)]
+        return self._found[0] if self._found else FindingColumns()
 
     @property
     def failed(self) -> bool:
-        return any(f.fails for f in self.findings)
+        return bool(self.findings.fails.any())
 
     def report(self) -> dict:
         return self.timing.report(self.nmt)

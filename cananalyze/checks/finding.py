@@ -24,7 +24,10 @@ class Finding:
     # "EDS default", "learned from the log's median over +0.000..+12.300 s")
     basis: str = ""
     line: int | None = None  # the frame's line, in a log without timestamps
-    at_end: bool = False  # found at the end of the log (errors still active, silence)
+    # an end-of-log result (errors still active, a node that stopped): the terminal never
+    # hides it. Not every finding `finish` makes: a gap judged there against a learned
+    # period is an ordinary finding, capped like the others.
+    at_end: bool = False
 
     def __post_init__(self) -> None:
         self.measured = tidy(self.measured)

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..protocol.services import Service
 from ..records import DecodedBatch
+from .columns import FindingColumns, Texts
 from .config import ConfigSource
 from .finding import Finding, rel_time
 from .gaps import Gaps, grouped_gaps
@@ -122,7 +123,11 @@ class Rule:
             self.jitter_ms = float(jitter_ms)
         self.params = params
         self.subjects: set[int | None] = set()
-        self.out: list[Finding] = []
+        self.out: list[Finding] = []  # emitted one by one since the last block
+        self._parts: list[FindingColumns] = []  # in emission order
+        # set by the Checker at the end of the log: what is found then is an end-of-log
+        # result (errors still active, silence) unless the rule says otherwise
+        self.ending = False
         self._count: Counter = Counter()
         self._first_dropped: dict = {}
 
@@ -196,7 +201,10 @@ class Rule:
         why: str | None = None,
         severity: str | None = None,
         basis: str = "",
+        at_end: bool | None = None,
     ) -> None:
+        """One finding (rare, stateful rules); `at_end`: whether it is an end-of-log result
+        the terminal never hides (default: found by `finish`)."""
         key = (node, cob_id)
         self._count[key] += 1
         if self._count[key] > self.max_findings:
@@ -215,8 +223,67 @@ class Rule:
                 why if why is not None else self.why,
                 int(row),
                 basis=basis,
+                at_end=self.ending if at_end is None else at_end,
             )
         )
+
+    def emit_many(
+        self,
+        t: np.ndarray,
+        node: int | None,
+        cob_id: int | None,
+        text: Texts,
+        measured,
+        expected,
+        row=0,
+        why: str | None = None,
+        severity: str | None = None,
+        basis="",
+        at_end: bool | None = None,
+    ) -> None:
+        """Findings of one node/COB-ID as columns (per-frame violations): `text(idx)`
+        builds the messages of rows `idx` only when an output reads them. The cap
+        applies as for `emit`, in order."""
+        n = int(np.size(t))
+        if n == 0:
+            return
+        key = (node, cob_id)
+        left = max(self.max_findings - self._count[key], 0)
+        self._count[key] += n
+        keep = None
+        if n > left:
+            self._first_dropped.setdefault(key, float(np.asarray(t)[left]))
+            keep = np.arange(left)
+            if left == 0:
+                return
+        block = FindingColumns.block(
+            self.name,
+            severity or self.severity,
+            t,
+            node,
+            cob_id,
+            text,
+            measured,
+            expected,
+            why if why is not None else self.why,
+            row,
+            basis,
+        )
+        block.at_end[:] = self.ending if at_end is None else at_end
+        self._flush()
+        self._parts.append(block if keep is None else block.take(keep))
+
+    def emit_rows(self, block: FindingColumns) -> None:
+        """Findings built as columns by the rule itself (`FindingColumns.block`), which
+        has counted them against the cap (`_count`)."""
+        block.at_end[:] = self.ending
+        self._flush()
+        self._parts.append(block)
+
+    def _flush(self) -> None:
+        if self.out:
+            self._parts.append(FindingColumns.of(self.out))
+            self.out = []
 
     def close(self, t_end: float) -> None:
         """One finding per node/COB-ID that had more than max_findings."""
@@ -235,11 +302,14 @@ class Rule:
                         0,
                         self.why,
                         0,
+                        at_end=True,
                     )
                 )
 
-    def take(self) -> list[Finding]:
-        out, self.out = self.out, []
+    def take(self) -> list[FindingColumns]:
+        """What was found since the last take, in emission order."""
+        self._flush()
+        out, self._parts = self._parts, []
         return out
 
 

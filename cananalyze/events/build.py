@@ -166,6 +166,28 @@ def finding_event(row: int, r: dict, t: float) -> Row:
     return Row(float(r.get("t", t)), "finding", r.get("node"), lvl, str(text), row)
 
 
+def finding_event_columns(found, offset: int) -> EventColumns:
+    """A batch's findings (`FindingColumns`) as events: "[rule] message" at the finding's
+    time, its level from the severity."""
+    n = len(found)
+    if n == 0:
+        return EventColumns.empty()
+    rules, sev = found.column("rule"), found.column("severity")
+    levels = {s: _LEVEL_BY_NAME.get(str(s).lower(), WARNING) for s in set(sev)}
+    text = [
+        f"[{r}] {m}" if r and m else str(m or r or "finding")
+        for r, m in zip(rules, found.messages(), strict=True)
+    ]
+    return EventColumns(
+        np.asarray(found.column("t"), np.float64),
+        np.full(n, ec.FINDING, np.uint8),
+        found.node.astype(np.int16),  # -1: no node, as NO_NODE
+        np.array([levels[s] for s in sev], np.int8),
+        texts(text),
+        found.row + offset,
+    )
+
+
 def batch_events_of(
     batch: DecodedBatch, offset: int, state: EventState
 ) -> tuple[EventColumns, list[Row]]:
@@ -209,7 +231,7 @@ def batch_event_columns(
         if kind == "sdo":
             slow.append(sdo_event(row + offset, rec))
             at.append(k)
-        elif kind == "finding":
+        elif kind == "finding":  # (a record made by hand; the Checker's are columns)
             t = float(fb.t[row]) if 0 <= row < n else last_t
             slow.append(finding_event(row + offset, rec, t))
             at.append(k)
@@ -224,6 +246,8 @@ def batch_event_columns(
             events = EventColumns.concat([events, fast_events]).take(order)
         else:
             events = fast_events
+    if len(batch.findings):  # after every record, as the Checker adds them last
+        events = EventColumns.concat([events, finding_event_columns(batch.findings, offset)])
     states: list[Row] = []
     if n:
         parts = [events, _frame_event_columns(batch, offset)]

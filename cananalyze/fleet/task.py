@@ -22,6 +22,8 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
+import numpy as np
+
 from .. import __version__
 from ..errors import CananalyzeError
 from ..outputs.sink import Sink
@@ -58,13 +60,18 @@ class _Findings(Sink):
         self.first: dict[str, str] = {}  # rule -> its first failing message
 
     def write(self, batch) -> None:
-        for f in batch.findings:
-            self.total += 1
-            if f.fails:
-                self.failing += 1
-                self.first.setdefault(f.rule, f.message)
-            if self.keep:
-                self.findings.append(f)
+        found = batch.findings  # columns: a message is built only for each rule's first
+        if not len(found):
+            return
+        self.total += len(found)
+        bad = np.flatnonzero(found.fails)
+        self.failing += int(bad.size)
+        rules = found.rule[bad].tolist()
+        for rule, i in zip(rules, bad.tolist(), strict=True):
+            if rule not in self.first:
+                self.first[rule] = found.messages(np.array([i]))[0]
+        if self.keep:
+            self.findings.extend(found.findings())
 
 
 def content_hash(path: str | Path) -> str:

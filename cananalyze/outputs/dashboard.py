@@ -143,7 +143,7 @@ class LiveView:
             self._error_control(batch)
             self._rare(batch)
             self._sdo_frames(batch)
-        for row, rec in batch.records:
+        for row, rec in batch.records_and_findings():
             self._record(batch, row, rec)
         for block in batch.signals:
             if not len(block.rows):

@@ -11,35 +11,46 @@ from __future__ import annotations
 import sys
 from typing import TextIO
 
+import numpy as np
+
+from ..checks.columns import FindingColumns
 from ..checks.finding import Finding
 from . import colour
-from .junit import format_finding, write_findings_json, write_junit
+from .junit import format_rows, write_findings_json, write_junit
 from .sink import Sink
 
 TERMINAL_CAP = 20  # findings printed per rule and node/COB-ID; the files hold every one
 
 
-def terminal_cap(findings: list[Finding], cap: int) -> tuple[list[Finding], dict]:
-    """The findings a terminal shows: the first `cap` per rule and node/COB-ID, and every
+def terminal_cap(findings: FindingColumns, cap: int) -> tuple[np.ndarray, dict]:
+    """The rows a terminal shows: the first `cap` per rule and node/COB-ID, and every
     end-of-log one (errors still active, a node that stopped: counted apart, never
-    hidden); for the rest, per key, (first hidden, how many hidden, how many in all)."""
-    count: dict[tuple, int] = {}
-    for f in findings:
-        key = (f.rule, f.node, f.cob_id, f.at_end)
-        count[key] = count.get(key, 0) + 1
-    seen: dict[tuple, int] = {}
-    shown: list[Finding] = []
-    hidden: dict[tuple, list] = {}
-    for f in findings:
-        key = (f.rule, f.node, f.cob_id, f.at_end)
-        seen[key] = seen.get(key, 0) + 1
-        if seen[key] <= cap or f.at_end:
-            shown.append(f)
-        elif key in hidden:
-            hidden[key][1] += 1
-        else:
-            hidden[key] = [f, 1, count[key]]
-    return shown, {k: tuple(v) for k, v in hidden.items()}
+    hidden); for the rest, per key, (first hidden, how many hidden, how many in all).
+
+    Counted as columns: only each key's first hidden finding becomes a Finding object;
+    the rows shown are printed from the columns (`junit.format_rows`)."""
+    n = len(findings)
+    if n == 0:
+        return np.zeros(0, np.int64), {}
+    names = findings.rule.tolist()
+    code = {r: k for k, r in enumerate(dict.fromkeys(names))}
+    rule_code = np.array([code[r] for r in names], np.int64)
+    # one integer per (rule, node, COB-ID, at end): node < 256, COB-ID < 2^30 (29-bit ids)
+    keys = (rule_code << 40) | ((findings.node + 1) << 31) | ((findings.cob_id + 1) << 1)
+    keys |= findings.at_end
+    _, key_of, total = np.unique(keys, return_inverse=True, return_counts=True)
+    key_of = key_of.reshape(-1)
+    order = np.argsort(key_of, kind="stable")
+    rank = np.empty(n, np.int64)
+    starts = np.concatenate(([0], np.cumsum(total)[:-1]))
+    rank[order] = np.arange(n) - np.repeat(starts, total)
+    shown = (rank < cap) | findings.at_end
+    hidden_first = np.flatnonzero(~shown & (rank == cap))  # each capped key's first hidden
+    hidden: dict[tuple, tuple] = {}
+    for i, f in zip(hidden_first.tolist(), findings.findings(hidden_first), strict=True):
+        k = key_of[i]  # in the order each key's first hidden one comes
+        hidden[(f.rule, f.node, f.cob_id, f.at_end)] = (f, int(total[k]) - cap, int(total[k]))
+    return np.flatnonzero(shown), hidden
 
 
 class FindingsSink(Sink):
@@ -64,7 +75,9 @@ class FindingsSink(Sink):
         self.no_color = no_color
         self.quiet = quiet
         self.html = html  # the HTML report's path, named in the JUnit properties
-        self.findings: list[Finding] = []
+        self._parts: list[FindingColumns] = []
+        self.findings = FindingColumns()  # every finding, by time (at close)
+        self._sorted = False  # findings is every part, sorted, its live rows read again
 
     def open(self, run) -> None:
         super().open(run)
@@ -76,31 +89,47 @@ class FindingsSink(Sink):
                     check_writable(dest)
 
     def write(self, batch) -> None:
-        self.findings.extend(batch.findings)
+        if len(batch.findings):
+            self._parts.append(batch.findings)
+            self._sorted = False
+
+    def _gather(self) -> FindingColumns:
+        """Every finding so far, by time (stable); the rows emitted alone read again from
+        their Finding (live, a silence's finding is completed when it ends)."""
+        if not self._parts and self._sorted:
+            return self.findings
+        found = FindingColumns.concat([self.findings, *self._parts])
+        self._parts = []
+        live = np.flatnonzero(np.not_equal(found.obj, None))
+        if live.size:
+            found.refresh(live)
+        if found.t.size > 1 and (np.diff(found.t) < 0).any():
+            found = found.take(np.argsort(found.t, kind="stable"))
+        self.findings = found
+        self._sorted = True
+        return found
 
     @property
     def failing(self) -> list[Finding]:
-        return [f for f in self.findings if f.fails]
+        found = self._gather()
+        return found.findings(np.flatnonzero(found.fails))
 
     @property
     def exit_code(self) -> int:
         """0: every enabled rule passed, 1: violations (info findings do not fail)."""
-        return 1 if self.failing else 0
+        return 1 if self._gather().fails.any() else 0
 
     def close(self) -> None:
-        findings = sorted(self.findings, key=lambda f: f.t)
-        self.findings = findings
+        findings = self._gather()
         checker = self.run.checker
         rules = checker.rules if checker is not None else []
         if not self.quiet:
             out = self.out or sys.stdout
             on = colour.use_colour(out, self.no_color)
             shown, hidden = terminal_cap(findings, self.cap)
-            for f in shown:
-                print(
-                    colour.paint(format_finding(f), colour.SEVERITY.get(f.severity, ""), on),
-                    file=out,
-                )
+            severity = findings.column("severity")
+            for i, line in zip(shown.tolist(), format_rows(findings, shown), strict=True):
+                print(colour.paint(line, colour.SEVERITY.get(severity[i], ""), on), file=out)
             for (rule, node, cob, _), (first, n, total) in hidden.items():
                 where = ("node -" if node is None else f"node {node}") + (
                     "" if cob is None else f" 0x{cob:03X}"
@@ -121,7 +150,7 @@ class FindingsSink(Sink):
                     print("\n".join(checker.timing.lines(checker.nmt, 0.0)), file=out)
                 else:
                     print("\n".join(checker.timing.lines(checker.nmt, checker.t0)), file=out)
-            failing = len(self.failing)
+            failing = int(findings.fails.sum())
             names = ", ".join(r.name for r in rules)
             verdict = (
                 f"{len(rules)} rules ({names}): {failing} violation(s), "

@@ -10,7 +10,10 @@ import json
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from ..checks.finding import Finding, show
+import numpy as np
+
+from ..checks.columns import FindingColumns
+from ..checks.finding import TABLE_COLUMNS, Finding, show
 from ..checks.rule import Rule
 from .atomic import write_text_atomic
 
@@ -70,16 +73,42 @@ def junit_xml(
 
 def format_finding(f: Finding) -> str:
     """One line per finding, time from the start of the log (absolute `t` stays in JSON)."""
-    node = "-" if f.node is None else str(f.node)
-    cob = "" if f.cob_id is None else f" 0x{f.cob_id:03X}"
-    if f.line is not None:
-        when = f"line {f.line}"
+    return _line(
+        f.t, f.t_rel, f.line, f.node, f.cob_id, f.severity, f.rule, f.message, f.measured,
+        f.expected, f.basis, f.why,
+    )  # fmt: skip
+
+
+def format_rows(found: FindingColumns, idx) -> list[str]:
+    """`format_finding` of rows `idx` of the columns, without a Finding per row (the
+    terminal prints thousands of end-of-log results on a long log)."""
+    sub = found.take(np.asarray(idx, np.int64))
+    cols = {c: sub.column(c) for c in TABLE_COLUMNS if c != "t_rel"}
+    # the time as Finding holds it (the record's is rounded to the microsecond)
+    cols["t_rel"] = [None if v != v else v for v in sub.t_rel.tolist()]
+    for i in np.flatnonzero(np.not_equal(sub.obj, None)).tolist():
+        cols["t_rel"][i] = sub.obj[i].t_rel
+    return [
+        _line(*r)
+        for r in zip(
+            *(cols[c] for c in ("t", "t_rel", "line", "node", "cob_id", "severity", "rule")),
+            *(cols[c] for c in ("message", "measured", "expected", "basis", "why")),
+            strict=True,
+        )
+    ]
+
+
+def _line(t, t_rel, line, node, cob_id, severity, rule, message, measured, expected, basis, why):
+    who = "-" if node is None else str(node)
+    cob = "" if cob_id is None else f" 0x{cob_id:03X}"
+    if line is not None:
+        when = f"line {line}"
     else:
-        when = f"{f.t_rel:+.3f} s" if f.t_rel is not None else f"{f.t:.6f}"
-    basis = f"; {f.basis}" if f.basis else ""
+        when = f"{t_rel:+.3f} s" if t_rel is not None else f"{t:.6f}"
+    basis = f"; {basis}" if basis else ""
     return (
-        f"{when} node {node}{cob} [{f.severity}] {f.rule}: {f.message} "
-        f"(measured {show(f.measured)}, expected {show(f.expected)}{basis}). {f.why}"
+        f"{when} node {who}{cob} [{severity}] {rule}: {message} "
+        f"(measured {show(measured)}, expected {show(expected)}{basis}). {why}"
     )
 
 
@@ -92,5 +121,9 @@ def write_junit(
     write_text_atomic(path, junit_xml(rules, findings, properties=properties))
 
 
-def write_findings_json(path: str | Path, findings: list[Finding]) -> None:
-    write_text_atomic(path, json.dumps([f.record() for f in findings], indent=1) + "\n")
+def write_findings_json(path: str | Path, findings: list[Finding] | FindingColumns) -> None:
+    if isinstance(findings, FindingColumns):
+        records = findings.records()  # from the columns, no Finding objects
+    else:
+        records = [f.record() for f in findings]
+    write_text_atomic(path, json.dumps(records, indent=1) + "\n")

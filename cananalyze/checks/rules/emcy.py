@@ -9,6 +9,7 @@ import numpy as np
 
 from ...protocol.emcy import MIN_BYTES, SIZE, decoded_words, error_text, register_text
 from ...protocol.services import Service
+from ..columns import FindingColumns
 from ..rule import Context, Rule, ms
 from ..spans import crossing, per_frame
 
@@ -133,9 +134,8 @@ class EmcyRule(Rule):
             self._count[key] += 0
             left[n] = max(self.max_findings - self._count[key], 0)
         listed = rank < np.array([left[n] for n in cn.tolist()], np.int64)
-        for i in np.flatnonzero(listed).tolist():
-            self._emit_one(ctx, int(rows[pos[i]]), pos[i], int(kind[i]), node, t, dlc, code, reg,
-                           prev, inhibit)  # fmt: skip
+        self._emit_listed(ctx, rows, pos[listed], kind[listed], node, t, dlc, code, reg, prev,
+                          inhibit)  # fmt: skip
         dropped = np.flatnonzero(~listed)
         if dropped.size:
             dn = cn[dropped]
@@ -147,73 +147,116 @@ class EmcyRule(Rule):
                 self._count[key] += count
                 self._first_dropped.setdefault(key, float(t[pos[dropped[first_i]]]))
 
-    def _emit_one(self, ctx, row, k, kind, node, t, dlc, code, reg, prev, inhibit) -> None:
-        n, tk = int(node[k]), float(t[k])
-        if kind == 0:
-            gap = tk - float(prev[k])
-            inh = float(inhibit[k])  # int or float as configured: the same products
-            self.emit(
-                tk,
-                n,
-                0x80 + n,
-                f"EMCY {ms(gap)} ms after the previous one, inhibit "
-                f"time 0x1015 is {inh * 0.1:g} ms",
-                ms(gap),
-                inh * 0.1,
-                row=row,
-                severity="error",
-                basis=ctx.config.origin(n, 0x1015, 0, tk, ctx.t0),
-                why="EMCY faster than its inhibit time can flood the bus in a fault storm; check 0x1015.",
-            )
-        elif kind == 1:
-            d = int(dlc[k])
-            self.emit(
-                tk,
-                n,
-                0x80 + n,
-                f"EMCY with {d} data bytes, CiA 301 needs {SIZE}",
-                d,
-                SIZE,
-                row=row,
-                severity="error",
-                why="A short EMCY cannot be decoded by a standard master; check the node's firmware.",
-            )
-        else:
-            c, r = int(code[k]), int(reg[k])
-            decoded = ctx.batch.notes.get(row, {}).get("manufacturer_decoded")
-            words = f" ({decoded_words(decoded)})" if decoded else ""
-            if words:
-                self.words[(n, c)] = words
+    def _emit_listed(self, ctx, rows, ks, kinds, node, t, dlc, code, reg, prev, inhibit) -> None:
+        """The findings listed, in frame order, as one block of columns: an inhibit-time
+        (kind 0), a length (1) or an error (2) finding per entry; the errors' texts are
+        built when read."""
+        m = ks.size
+        if m == 0:
+            return
+        nodes = node[ks]
+        for n, c in zip(*np.unique(nodes, return_counts=True), strict=True):
+            self._count[(int(n), 0x80 + int(n))] += int(c)
+        kl, nl, tl = kinds.tolist(), nodes.tolist(), t[ks].tolist()
+        frame_rows = rows[ks]
+        cl, rl = code[ks].tolist(), reg[ks].tolist()
+        measured: list = [None] * m
+        expected: list = [None] * m
+        severity: list = [self.severity] * m
+        why: list = [self.why] * m
+        basis: list = [""] * m
+        fixed: dict[int, str] = {}  # texts of the rare inhibit and length findings
+        words = [""] * m
+        allowed = (
+            "no EMCY"
+            if not self.allow
+            else "one of " + ", ".join(f"0x{x:04X}" for x in sorted(self.allow))
+        )
+        notes = ctx.batch.notes
+        for j, kind in enumerate(kl):
+            n, tk = nl[j], tl[j]
+            if kind == 0:
+                k = int(ks[j])
+                gap = tk - float(prev[k])
+                inh = float(inhibit[k])  # int or float as configured: the same products
+                fixed[j] = (
+                    f"EMCY {ms(gap)} ms after the previous one, inhibit "
+                    f"time 0x1015 is {inh * 0.1:g} ms"
+                )
+                measured[j], expected[j], severity[j] = ms(gap), inh * 0.1, "error"
+                basis[j] = ctx.config.origin(n, 0x1015, 0, tk, ctx.t0)
+                why[j] = (
+                    "EMCY faster than its inhibit time can flood the bus in a fault storm; check 0x1015."
+                )
+            elif kind == 1:
+                d = int(dlc[ks[j]])
+                fixed[j] = f"EMCY with {d} data bytes, CiA 301 needs {SIZE}"
+                measured[j], expected[j], severity[j] = d, SIZE, "error"
+                why[j] = (
+                    "A short EMCY cannot be decoded by a standard master; check the node's firmware."
+                )
             else:
-                self.words.pop((n, c), None)
-            self.emit(
-                tk,
-                n,
-                0x80 + n,
-                f"EMCY {error_text(c)}; {register_text(r)}{words}",
-                f"0x{c:04X}",
-                "no EMCY"
-                if not self.allow
-                else "one of " + ", ".join(f"0x{x:04X}" for x in sorted(self.allow)),
-                row=row,
-            )
+                c = cl[j]
+                decoded = notes.get(int(frame_rows[j]), {}).get("manufacturer_decoded")
+                w = f" ({decoded_words(decoded)})" if decoded else ""
+                if w:
+                    self.words[(n, c)] = words[j] = w
+                else:
+                    self.words.pop((n, c), None)
+                measured[j], expected[j] = f"0x{c:04X}", allowed
+
+        def text(idx: np.ndarray) -> list[str]:
+            return [
+                fixed[j]
+                if j in fixed
+                else f"EMCY {error_text(cl[j])}; {register_text(rl[j])}{words[j]}"
+                for j in idx.tolist()
+            ]
+
+        self.emit_rows(
+            FindingColumns.block(
+                self.name,
+                severity,
+                tl,
+                nodes,
+                nodes + 0x80,
+                text,
+                measured,
+                expected,
+                why,
+                frame_rows,
+                basis,
+            )  # fmt: skip
+        )
 
     def finish(self, ctx: Context) -> None:
+        """Errors still active, per node by code, as columns (a node raising one EMCY
+        after another without a reset leaves hundreds)."""
+        rel = ctx.rel
         for node, act in sorted(self.active.items()):
-            for code, t in sorted(act.items()):
-                if code in self.allow or self.dropped(t, node, 0x80 + node):
-                    continue
-                self.emit(
-                    t,
-                    node,
-                    0x80 + node,
-                    f"EMCY {error_text(code)}{self.words.get((node, code), '')} raised at "
-                    f"{ctx.rel(t)} still active at the end of the log",
-                    f"0x{code:04X}",
-                    "cleared",
-                    why="No error reset (EMCY 0x0000) followed; the node may still be in its fault "
-                    "reaction; check whether the cause was removed.",
-                )
+            codes = [c for c in sorted(act) if c not in self.allow]
+            if not codes:
+                continue
+            times = [act[c] for c in codes]
+            words = [self.words.get((node, c), "") for c in codes]
+
+            def text(idx: np.ndarray, codes=codes, times=times, words=words) -> list[str]:
+                return [
+                    f"EMCY {error_text(codes[j])}{words[j]} raised at {rel(times[j])} "
+                    "still active at the end of the log"
+                    for j in idx.tolist()
+                ]
+
+            self.emit_many(
+                np.array(times, np.float64),
+                node,
+                0x80 + node,
+                text,
+                [f"0x{c:04X}" for c in codes],
+                "cleared",
+                why="No error reset (EMCY 0x0000) followed; the node may still be in its fault "
+                "reaction; check whether the cause was removed.",
+            )
 
     def active_errors(self) -> dict[int, list[int]]:
         return {n: sorted(a) for n, a in self.active.items() if a}

@@ -198,7 +198,9 @@ class HeartbeatRule(Rule):
 
     def _learned(self, ctx: Context, node: int, changes: np.ndarray):
         """Per segment between changes and resets: (start, end, median ms) of the gaps
-        wholly inside it, for segments with MIN_LEARN gaps or more."""
+        wholly inside it, for segments with MIN_LEARN gaps or more. Gaps of zero (frames
+        that share a time stamp: a logger's coarse clock, or frames that only share the
+        identifier) are no period: a median of them would call every real gap late."""
         t, gaps = ctx.timing.all_gaps("heartbeat", node)
         if gaps.size == 0:
             return t, gaps, np.zeros(0, np.intp), {}
@@ -206,7 +208,7 @@ class HeartbeatRule(Rule):
         inside = seg == np.searchsorted(changes, t + gaps, side="right")
         out: dict[int, tuple[float, float, float]] = {}
         for k in np.unique(seg[inside]).tolist():
-            mine = inside & (seg == k)
+            mine = inside & (seg == k) & (gaps > 0)
             if np.count_nonzero(mine) >= MIN_LEARN:
                 tk = t[mine]
                 end = float(tk[-1] + gaps[mine][-1])
@@ -217,6 +219,56 @@ class HeartbeatRule(Rule):
         """A learned period is a guess: late at twice the median (or the tolerance, if wider)."""
         return max(2.0 * median_ms, self.late(median_ms))
 
+    def _learned_dropouts(self, ctx: Context, node: int, changes, t, gaps, seg, learned) -> None:
+        """The gaps judged without a known 0x1017, against their segment's median, as
+        columns: a jittery node on a long log has thousands. Not end-of-log results:
+        the terminal caps them like the others."""
+        cand = np.flatnonzero(np.isin(t, np.concatenate(self.unjudged[node])))
+        segs = seg[cand]
+        known = np.isin(segs, np.fromiter(learned, np.int64, len(learned)))
+        cand, segs = cand[known], segs[known]
+        if cand.size == 0:
+            return
+        limit = {k: self._learned_limit(m) / 1000.0 for k, (_, _, m) in learned.items()}
+        seg_list = segs.tolist()
+        # a gap across a change is judged only up to the change
+        upto = np.full(cand.size, np.inf)
+        inside = segs < changes.size
+        upto[inside] = changes[segs[inside]]
+        over = np.minimum(gaps[cand], upto - t[cand]) > np.array([limit[k] for k in seg_list])
+        cand = cand[over]
+        seg_list = [k for k, o in zip(seg_list, over.tolist(), strict=True) if o]
+        fresh = [not self._seen(node, v) for v in t[cand].tolist()]
+        if not any(fresh):
+            return
+        cand = cand[fresh]
+        seg_list = [k for k, f in zip(seg_list, fresh, strict=True) if f]
+        rel = ctx.rel
+        basis = {
+            k: f"learned from the log's median over {rel(lo)}..{rel(hi)}"
+            for k, (lo, hi, _) in learned.items()
+        }
+        tc, gc = t[cand], gaps[cand]
+
+        def text(k: np.ndarray) -> list[str]:
+            return [
+                f"heartbeat dropout: no heartbeat for {ms(g)} ms from {rel(s)} "
+                "(0x1017 not known: period learned)"
+                for g, s in zip(gc[k].tolist(), tc[k].tolist(), strict=True)
+            ]
+
+        self.emit_many(
+            tc,
+            node,
+            0x700 + node,
+            text,
+            [ms(g) for g in gc.tolist()],
+            [round(learned[k][2], 3) for k in seg_list],
+            severity="warning",
+            basis=[basis[k] for k in seg_list],
+            at_end=False,
+        )
+
     def finish(self, ctx: Context) -> None:
         for node, last in sorted(self.last_seen.items()):
             changes = ctx.config.changes(node, 0x1017, 0x1017)
@@ -225,31 +277,7 @@ class HeartbeatRule(Rule):
             basis = ctx.config.origin(node, 0x1017, 0, start, ctx.t0) if period else ""
             t, gaps, seg, learned = self._learned(ctx, node, changes)
             if node in self.unjudged and learned:
-                unjudged = np.isin(t, np.concatenate(self.unjudged[node]))
-                for i in np.flatnonzero(unjudged).tolist():
-                    got = learned.get(int(seg[i]))
-                    if got is None:
-                        continue
-                    lo, hi, median = got
-                    limit = self._learned_limit(median) / 1000.0
-                    # a gap across a change is judged only up to the change
-                    k = int(seg[i])
-                    upto = float(changes[k]) if k < changes.size else np.inf
-                    if min(float(gaps[i]), upto - float(t[i])) <= limit:
-                        continue
-                    if self._seen(node, float(t[i])) or self.dropped(t[i], node, 0x700 + node):
-                        continue
-                    self.emit(
-                        t[i],
-                        node,
-                        0x700 + node,
-                        f"heartbeat dropout: no heartbeat for {ms(gaps[i])} ms from "
-                        f"{ctx.rel(t[i])} (0x1017 not known: period learned)",
-                        ms(gaps[i]),
-                        round(median, 3),
-                        severity="warning",
-                        basis=f"learned from the log's median over {ctx.rel(lo)}..{ctx.rel(hi)}",
-                    )
+                self._learned_dropouts(ctx, node, changes, t, gaps, seg, learned)
             if period is None:  # not known at the end: the last segment's median says when
                 got = learned.get(int(np.searchsorted(changes, last, "right")))
                 if got is not None and start == last:

@@ -52,17 +52,21 @@ class PdoAsyncRule(Rule):
             if pdo.inhibit_time:
                 inhibit = pdo.inhibit_time * 1e-4
                 bad = idx[gg < inhibit * (1 - self.tolerance)]
-                for i in self.capped(bad, g.t[bad], node, cob).tolist():
-                    self.emit(
-                        g.t[i],
+                if bad.size:  # per frame: as columns (emit_many applies the cap)
+                    gaps_ms = [ms(x) for x in gap[bad].tolist()]
+                    inh_ms = pdo.inhibit_time * 0.1
+                    self.emit_many(
+                        g.t[bad],
                         node,
                         cob,
-                        f"{ms(gap[i])} ms after the previous one, inhibit time "
-                        f"{pdo.inhibit_time * 0.1:g} ms",
-                        ms(gap[i]),
-                        pdo.inhibit_time * 0.1,
-                        row=g.row[i],
-                        basis=self._origin(ctx, node, cob, float(g.t[i]), 3),
+                        lambda k, gaps_ms=gaps_ms, inh_ms=inh_ms: [
+                            f"{gaps_ms[j]} ms after the previous one, inhibit time {inh_ms:g} ms"
+                            for j in k.tolist()
+                        ],
+                        gaps_ms,
+                        inh_ms,
+                        row=g.row[bad],
+                        basis=[self._origin(ctx, node, cob, x, 3) for x in g.t[bad].tolist()],
                     )
             if pdo.event_timer:
                 limit = self.late(pdo.event_timer) / 1000.0

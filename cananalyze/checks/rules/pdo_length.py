@@ -30,15 +30,19 @@ class PdoLengthRule(Rule):
             rows = g.row[idx]
             d = dlc[rows]
             bad = np.flatnonzero(d != want)
-            for i in self.capped(bad, g.t[idx][bad], node, cob).tolist():
-                short = d[i] < want
-                self.emit(
-                    g.t[idx[i]],
-                    node,
-                    cob,
-                    f"{pdo.direction[0].upper()}PDO{pdo.number} has {int(d[i])} bytes, mapping needs {want}",
-                    int(d[i]),
-                    want,
-                    row=rows[i],
-                    severity=None if short else "warning",
-                )
+            if bad.size == 0:
+                continue
+            got = d[bad].tolist()  # per frame: as columns
+            name = f"{pdo.direction[0].upper()}PDO{pdo.number}"
+            self.emit_many(
+                g.t[idx[bad]],
+                node,
+                cob,
+                lambda k, got=got, name=name, want=want: [
+                    f"{name} has {got[j]} bytes, mapping needs {want}" for j in k.tolist()
+                ],
+                got,
+                want,
+                row=rows[bad],
+                severity=[self.severity if x < want else "warning" for x in got],
+            )

@@ -51,13 +51,13 @@ class PdoStateRule(Rule):
             rows = g.row[sl]
             st = state[sl]
             bad = np.flatnonzero(bad_all[sl])
-            for i in self.capped(bad, g.t[sl][bad], node, cob).tolist():
-                self.emit(
-                    g.t[sl][i],
-                    node,
-                    cob,
-                    f"PDO while node is {state_name(int(st[i]))}",
-                    state_name(int(st[i])),
-                    state_name(OPERATIONAL),
-                    row=rows[i],
-                )
+            names = [state_name(s) for s in st[bad].tolist()]  # per frame: as columns
+            self.emit_many(
+                g.t[sl][bad],
+                node,
+                cob,
+                lambda k, names=names: [f"PDO while node is {names[j]}" for j in k.tolist()],
+                names,
+                state_name(OPERATIONAL),
+                row=rows[bad],
+            )

@@ -59,15 +59,18 @@ class PdoSyncRule(Rule):
                 else:
                     bad = np.flatnonzero((prev >= 0) & (no - prev != n))
                     text = f"sent {{}} SYNCs after the previous one, transmission type {n}"
-                for i in self.capped(bad, t[bad], node, cob).tolist():
-                    self.emit(
-                        t[i],
+                if bad.size:  # per frame: as columns
+                    after = (no[bad] - prev[bad]).astype(np.int64)
+                    self.emit_many(
+                        t[bad],
                         node,
                         cob,
-                        text.format(int(no[i] - prev[i])),
-                        int(no[i] - prev[i]),
+                        lambda k, after=after, text=text: [
+                            text.format(a) for a in after[k].tolist()
+                        ],
+                        after,
                         max(n, 1),
-                        row=rows[i],
+                        row=rows[bad],
                     )
                 for run, at in runs(windows, t) if ctx.timed else ():
                     window = ctx.config.sync_window_us(at)

@@ -39,17 +39,24 @@ class SyncRule(Rule):
             bad = idx[np.abs(gap[idx] - p) > self.slack(period / 1000) / 1000]
             if self.reported:
                 bad = bad[~np.isin(g.prev[bad], list(self.reported))]
-            for i in self.capped(bad, g.t[bad], None, 0x080).tolist():
-                self.emit(
-                    g.t[i],
-                    None,
-                    0x080,
-                    f"SYNC period {ms(gap[i])} ms, 0x1006 is {period / 1000:g} ms",
-                    ms(gap[i]),
-                    period / 1000,
-                    row=g.row[i],
-                    basis=ctx.config.origin(None, 0x1006, 0, float(g.t[i]), ctx.t0),
-                )
+            if bad.size == 0:
+                continue
+            gaps_ms = [ms(x) for x in gap[bad].tolist()]
+            p_ms = period / 1000
+
+            def text(k: np.ndarray, gaps_ms=gaps_ms, p_ms=p_ms) -> list[str]:
+                return [f"SYNC period {gaps_ms[j]} ms, 0x1006 is {p_ms:g} ms" for j in k.tolist()]
+
+            self.emit_many(
+                g.t[bad],
+                None,
+                0x080,
+                text,
+                gaps_ms,
+                p_ms,
+                row=g.row[bad],
+                basis=[ctx.config.origin(None, 0x1006, 0, x, ctx.t0) for x in g.t[bad].tolist()],
+            )
         self.last_t = float(g.t[-1])
         fb = ctx.batch.frames
         has = fb.dlc[g.row] >= 1
@@ -61,15 +68,23 @@ class SyncRule(Rule):
         prev[0] = self.last_counter
         prev[1:] = c[:-1]
         bad = np.flatnonzero((prev >= 0) & (c != prev + 1) & (c != 1))
-        for i in self.capped(bad, fb.t[rows[bad]], None, 0x080).tolist():
-            self.emit(
-                fb.t[rows[i]],
+        if bad.size:  # a counter that jumps on every SYNC: columns, texts when read
+            got, after = c[bad], prev[bad]
+
+            def text(k: np.ndarray) -> list[str]:
+                return [
+                    f"SYNC counter {a} after {b}"
+                    for a, b in zip(got[k].tolist(), after[k].tolist(), strict=True)
+                ]
+
+            self.emit_many(
+                fb.t[rows[bad]],
                 None,
                 0x080,
-                f"SYNC counter {int(c[i])} after {int(prev[i])}",
-                int(c[i]),
-                int(prev[i]) + 1,
-                row=rows[i],
+                text,
+                got,
+                after.astype(np.int64) + 1,
+                row=rows[bad],
                 why="A jump in the SYNC counter means lost SYNC frames or a second SYNC producer; "
                 "check 0x1019 and that only one node produces SYNC.",
             )

@@ -88,7 +88,8 @@ class JsonlWriter(Sink):
                 self._sink.put(rendered)
                 return
         by_row: dict[int, list[dict]] = {}
-        for row, rec in batch.records:
+        records = batch.records_and_findings()
+        for row, rec in records:
             by_row.setdefault(row, []).append(rec)
         rows = range(len(batch)) if mask is None else np.flatnonzero(mask).tolist()
         lines = []
@@ -99,7 +100,7 @@ class JsonlWriter(Sink):
                 shown.add(i)
                 for rec in by_row.get(i, ()):
                     lines.append(dumps(rec))
-        for row, rec in batch.records:
+        for row, rec in records:
             if row not in shown:
                 lines.append(dumps(rec))
         if lines:

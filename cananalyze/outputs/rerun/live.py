@@ -70,7 +70,7 @@ class RerunLive:
 
     def add(self, batch: DecodedBatch) -> None:
         """Keep a decoded batch; send what was kept once `every` seconds have passed."""
-        if len(batch) or batch.records or batch.signals:
+        if len(batch) or batch.records or batch.signals or len(batch.findings):
             self._collector.add(batch)
             self._pending += 1
         if self._pending and time.monotonic() - self._last_send >= self.every:

@@ -30,6 +30,7 @@ import numpy as np
 import pyarrow as pa
 
 from ...capture import _hex_column
+from ...checks.columns import FindingColumns
 from ...checks.finding import TABLE_COLUMNS
 from ...columns import arrow_build as ab
 from ...errors import UsageError
@@ -261,7 +262,7 @@ class TableSink(OutputSink):
         self._sdo_chunks = 0
         # (column decisions, schema, writer) of the sdo file written as chunks come; False: given up
         self._sdo_spec: tuple | bool | None = None
-        self._findings: list[tuple] = []
+        self._findings: list[FindingColumns] = []  # per batch: read as columns at the end
 
     def __enter__(self) -> TableSink:
         if self._stack is None:
@@ -286,6 +287,8 @@ class TableSink(OutputSink):
         if batch.signals:
             self._add_signals(batch, off)
         self._add_records(batch)
+        if len(batch.findings):
+            self._findings.append(batch.findings)
         events, states = batch_events_of(batch, off, self._event_state)
         self._nodes.add(batch, states)
         self._add_events(events, float(fb.t[-1]) - HOLD if n else float("-inf"))
@@ -435,8 +438,6 @@ class TableSink(OutputSink):
             kind = r.get("kind")
             if kind == "sdo":
                 sdo.append((k, r))
-            elif kind == "finding":
-                self._findings.append(tuple(r.get(c, _NAN) for c in FINDING_COLUMNS))
         if not sdo and split is None:
             return
         pieces: dict = {}
@@ -640,13 +641,16 @@ class TableSink(OutputSink):
     def _write_findings(self) -> int:
         """By time, as load() and `check --json` give them: a rule that judges a span (a
         heartbeat dropout) reports after later findings were emitted."""
-        rows = sorted(self._findings, key=operator.itemgetter(0))
-        cols = list(zip(*rows, strict=True)) or [[] for _ in FINDING_COLUMNS]
+        found = FindingColumns.concat(self._findings)
+        found = found.take(np.argsort(np.asarray(found.column("t"), np.float64), kind="stable"))
         out = []
-        for name, values in zip(FINDING_COLUMNS, cols, strict=True):
-            values = list(values)
-            nullable = name in ("node", "cob_id", "line")  # line: only in a log without times
-            conv = pl.nullable_int(values) if nullable else pl.column(values)
+        for name in FINDING_COLUMNS:
+            if name in ("node", "cob_id", "line"):  # nullable (line: a log without times)
+                values, missing = found.ints(name)  # as pl.nullable_int, from the columns
+                conv = (ab.numeric(np.where(missing, 0, values), missing, pa.int64()), "int64")
+                conv += ("Int64",)
+            else:
+                conv = pl.column(found.column(name))
             out.append((name, *conv))
         return self._small_table("findings", out)
 

@@ -16,6 +16,7 @@ reference the fast writer is tested against.
 from __future__ import annotations
 
 import contextlib
+import itertools
 from typing import TextIO
 
 import numpy as np
@@ -190,6 +191,9 @@ class TextWriter(Sink):
         else:  # the other records only, read without building the pairs' dicts
             get = list.__getitem__
             listed = ((k, get(batch.records, k)) for k in pairs[2])
+        if len(batch.findings):  # after the records, in their slots' order
+            found = enumerate(batch.findings.pairs(), len(batch.records))
+            listed = itertools.chain(listed, found)
         by_row: dict[int, list[dict]] = {}
         slot_of: dict[int, list[int]] = {}  # each by_row record's slot in batch.records
         records = []
@@ -586,7 +590,8 @@ def lines_per_row(
     """The output lines of a batch, built row by row (odd batches; the fast writer's reference)."""
     fb = batch.frames
     by_row: dict[int, list[dict]] = {}
-    for row, rec in batch.records:
+    records = batch.records_and_findings()
+    for row, rec in records:
         by_row.setdefault(row, []).append(rec)
     rows = range(len(fb)) if mask is None else np.flatnonzero(mask).tolist()
     lines: list[str] = []
@@ -621,7 +626,7 @@ def lines_per_row(
     # records of rows not printed (filtered out, records-only view, end of log) still print;
     # alone (--sdo) each carries its time as a frame line does
     shown = set() if only_records else (set(rows) if mask is not None else set(range(len(fb))))
-    for row, rec in batch.records:
+    for row, rec in records:
         if row not in shown:
             text = format_record(rec) if only_records else format_alone(rec, t0)
             t = rec.get("t")
