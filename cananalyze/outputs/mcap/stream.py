@@ -52,34 +52,42 @@ from .topics import (
 
 
 def batch_messages(
-    fb, service, node, blocks, states, events, lines, file: str, drive=()
+    fb, service, node, blocks, states, events, lines, file: str, drive=(), want=None
 ) -> list[tuple]:
     """(channel key, topic, schema, log times ns, payloads) of one batch, per stream:
     signals (one stream per series, in the Capture's series order), NMT states per node,
     CiA 402 drive states per axis, events as foxglove.Log, raw frames. The one place that
     says which topic carries what: `export --mcap` writes these and `live --foxglove`
-    serves them."""
+    serves them. `want(topic)` False leaves that stream's payloads None (not built: a
+    live topic no client subscribed to costs nothing but its times)."""
     out: list[tuple] = []
+    keep = want or (lambda topic: True)
     for n, pdo, cob, rows, columns, units in sorted(blocks, key=lambda b: b[:3]):
         blk = SignalBlock(rows, n, pdo, cob, columns, units)
         key = ("signals", n, pdo, cob, tuple(columns))
-        out.append(
-            (key, signal_topic(blk), signal_schema(blk), _ns(fb.t[rows]), signal_payloads(columns))
-        )
+        topic = signal_topic(blk)
+        payload = signal_payloads(columns) if keep(topic) else None
+        out.append((key, topic, signal_schema(blk), _ns(fb.t[rows]), payload))
     by_node: dict[int, list] = {}
     for e in states:
         by_node.setdefault(e.node, []).append(e)
     for n, evs in sorted(by_node.items()):
         ns = _ns(np.array([e.t for e in evs]))
-        out.append((("state", n), state_topic(n), STATE_SCHEMA, ns, state_payloads(evs)))
+        topic = state_topic(n)
+        payload = state_payloads(evs) if keep(topic) else None
+        out.append((("state", n), topic, STATE_SCHEMA, ns, payload))
     by_drive: dict[int, list] = {}
     for c in drive:  # a batch's drive changes: the lane shows the states
         if c.kind == STATE:
             by_drive.setdefault(c.node, []).append(c)
     for n, cs in sorted(by_drive.items()):
         ns = _ns(np.array([c.t for c in cs]))
-        out.append((("drive", n), drive_topic(n), DRIVE_SCHEMA, ns, drive_payloads(cs)))
-    if len(events):
+        topic = drive_topic(n)
+        payload = drive_payloads(cs) if keep(topic) else None
+        out.append((("drive", n), topic, DRIVE_SCHEMA, ns, payload))
+    if len(events) and not keep(EVENTS_TOPIC):
+        out.append((("events",), EVENTS_TOPIC, LOG_SCHEMA, _ns(np.sort(events.t)), None))
+    elif len(events):
         order = np.lexsort((events.sort_key(), events.t))
         events = events.take(order)
         ns = _ns(events.t)
@@ -93,9 +101,8 @@ def batch_messages(
         )
         out.append((("events",), EVENTS_TOPIC, LOG_SCHEMA, ns, payload))
     if len(fb):
-        out.append(
-            (("frames",), FRAMES_TOPIC, FRAME_SCHEMA, _ns(fb.t), frame_payloads(fb, service, node))
-        )
+        payload = frame_payloads(fb, service, node) if keep(FRAMES_TOPIC) else None
+        out.append((("frames",), FRAMES_TOPIC, FRAME_SCHEMA, _ns(fb.t), payload))
     return out
 
 
