@@ -66,6 +66,7 @@ class FoxgloveSink(Sink):
         self._channels: dict[str, object] = {}  # topic -> foxglove.Channel
         self._event_state = EventState()
         self._offset = 0
+        self._buses = False  # several buses seen: decoded topics per bus (as export --mcap)
         self._file = ""
         self.sent = 0  # messages handed to the server (for subscribed channels)
         self.served = 0  # batches served
@@ -130,6 +131,7 @@ class FoxgloveSink(Sink):
             ok = (events.row != NO_ROW) & (local >= 0) & (local < len(fb))
             lines[ok] = fb.line[local[ok]]
         self._offset += len(fb)
+        self._buses = self._buses or len(fb.channels) > 1
         blocks = [(b.node, b.pdo, b.cob_id, b.rows, b.columns, b.units) for b in batch.signals]
         for key, topic, schema, ns, payload in batch_messages(
             fb,
@@ -142,6 +144,8 @@ class FoxgloveSink(Sink):
             self._file,
             batch.drive,
             want=self._watched,
+            buses=self._buses,
+            offset=off,
         ):
             ch = self._channel(key, topic, schema)  # advertised even when nobody watches
             if payload is None or not ch.has_sinks():
