@@ -186,6 +186,7 @@ def test_bench_live_keeps_every_frame(tmp_path):
         rf"send -> last sink: median {NUMBER} ms, p99 {NUMBER} ms, max {NUMBER} ms",
         got["latency"],
     )
+    assert re.fullmatch(r"\d+ frames 0\.5 s after the last send \(drained after\)", got["behind"])
     assert int(got["decoded"].split()[0]) > 0  # the network file's PDOs became signals
     assert int(got["check"].split()[0]) > 0
     recorded = sum(1 for line in (tmp_path / "r.log").read_text().splitlines() if line)
