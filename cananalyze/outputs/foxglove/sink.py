@@ -89,9 +89,13 @@ class FoxgloveSink(Sink):
         except Exception as exc:  # noqa: BLE001 - the SDK raises its own error types
             raise UsageError(f"--foxglove {self.host}:{self.port}: cannot listen: {exc}") from None
         self.port = self.server.port
-        import pyarrow  # noqa: F401 - the events' JSON is joined in it: imported now, not
+        # the events' and signals' JSON columns are built in pyarrow, whose first numpy
+        # array imports pandas: done now, not in the first batch a client watches (1-2 s
+        # the live reader would wait, profiled under load)
+        from ...columns.json_text import number_text
 
-        # in the first batch a client watches (0.4 s the live reader would wait)
+        number_text(np.zeros(1, np.int64))
+        number_text(np.zeros(1, np.float64))
         # the topics every bus has, advertised before the first frame: a client can
         # subscribe and miss nothing
         from ..mcap.frames import FRAME_SCHEMA, FRAMES_TOPIC
