@@ -8,6 +8,7 @@ a few MB whatever the log's length.
 
     python benchmarks/bench_report.py [N_FRAMES] [REPEATS] [--out DIR]   # 1e6 frames, 3 runs
     python benchmarks/bench_report.py 10e6 2                             # the issue's 10M
+    python benchmarks/bench_report.py 10e6 1 --out ../main/benchmarks/out --page /tmp  # reuse a log
 """
 
 from __future__ import annotations
@@ -40,6 +41,9 @@ def main(argv: list[str]) -> None:
     ap.add_argument("frames", nargs="?", type=float, default=1e6, help="frames (default 1e6)")
     ap.add_argument("repeats", nargs="?", type=int, default=3, help="runs each (default 3)")
     ap.add_argument("--out", type=Path, default=HERE / "out", help="where the log is generated")
+    ap.add_argument(
+        "--page", type=Path, help="where the page is written (default: --out; for a read-only log)"
+    )
     args = ap.parse_args(argv)
     n, repeats = int(args.frames), args.repeats
     args.out.mkdir(parents=True, exist_ok=True)
@@ -56,7 +60,8 @@ def main(argv: list[str]) -> None:
             check=True,
             stdout=subprocess.DEVNULL,
         )
-    page = args.out / f"bench_{n}.html"
+    (args.page or args.out).mkdir(parents=True, exist_ok=True)
+    page = (args.page or args.out) / f"bench_{n}.html"
     devices = [a for k in range(1, 17) for a in ("--device", f"{k}=dat7014")]
     cli = [sys.executable, "-m", "cananalyze"]
     cmds = {

@@ -186,6 +186,7 @@ def test_bench_live_keeps_every_frame(tmp_path):
         rf"send -> last sink: median {NUMBER} ms, p99 {NUMBER} ms, max {NUMBER} ms",
         got["latency"],
     )
+    assert re.fullmatch(r"\d+ frames 0\.5 s after the last send \(drained after\)", got["behind"])
     assert int(got["decoded"].split()[0]) > 0  # the network file's PDOs became signals
     assert int(got["check"].split()[0]) > 0
     recorded = sum(1 for line in (tmp_path / "r.log").read_text().splitlines() if line)
@@ -257,11 +258,14 @@ def test_bench_live_serves_foxglove_without_drops():
     kept = int(got["kept"].split()[0])
     assert got["dropped"] == "0" and kept > 1500
     m = re.fullmatch(
-        r"(\d+) frames and (\d+) messages on (\d+) topics received by the client \((\d+) sent\)",
+        r"(\d+) frames and (\d+) messages on (\d+) topics received by the client "
+        rf"\((\d+) sent; the client, another process, {NUMBER} s CPU\)",
         got["foxglove"],
     )
     assert m and int(m.group(1)) == kept and m.group(2) == m.group(4)
+    assert int(m.group(3)) > 2  # frames, events and the network file's PDO topics
     assert re.fullmatch(rf"{NUMBER} s user\+system beside {NUMBER} s wall", got["cpu"])
+    assert re.fullmatch(rf"{NUMBER} {NUMBER} {NUMBER} \(1, 5, 15 min, at the end\)", got["load"])
 
 
 def test_bench_dbc_compares_with_cantools():

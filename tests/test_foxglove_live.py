@@ -195,3 +195,28 @@ def test_client_receives_the_drive_state_lane(tmp_path):
     got = client.messages["/node/11/drive_state"]
     assert got == [m for m in written if m[0] >= t_split] != []
     assert {m["state"] for _, m in got} >= {"operation enabled", "fault"}
+
+
+def test_unwatched_topics_cost_no_payloads(monkeypatch):
+    """With no client subscribed, the sink advertises the topics but builds no message:
+    frame documents (the bulk of a live bus) are not serialised for nobody."""
+    import cananalyze.outputs.mcap.stream as stream
+
+    built: list[int] = []
+    real = stream.frame_payloads
+    monkeypatch.setattr(
+        stream, "frame_payloads", lambda fb, *a: built.append(len(fb)) or real(fb, *a)
+    )
+    opts = Options(network=SAMPLES / "network.toml")
+    fox = FoxgloveSink(port=0, announce=False)
+    run(read_source(), build_decoder(opts), [fox], opts)
+    assert fox.served > 0 and fox.sent == 0 and built == []
+    assert {"/can/frames", "/canopen/events", "/node/5/tpdo2"} <= set(fox._channels)
+    # an MCAP export of the same log still builds every frame's document
+    import tempfile
+
+    from cananalyze.outputs.mcap.sink import McapSink as Mcap
+
+    with tempfile.TemporaryDirectory() as d:
+        run(read_source(), build_decoder(opts), [Mcap(f"{d}/x.mcap")], opts)
+    assert sum(built) == len(read_all(SAMPLES / "demo.log"))

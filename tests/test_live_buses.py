@@ -172,3 +172,72 @@ def test_dashboard_shows_each_bus():
     load = [f"{n * 55 / (125_000 * 0.89) * 100:.1f} %" for n in per]
     assert f"can0: {per[0]} frames, {load[0]} load" in text
     assert f"can1: {per[1]} frames, {load[1]} load" in text
+
+
+def test_two_buses_live_in_foxglove_apart():
+    """`live -c A,B --foxglove`: a WebSocket client on 127.0.0.1 gets every frame of both
+    buses on /can/frames with its channel, and each bus's PDO signals on its own topic."""
+    pytest.importorskip("foxglove")
+    pytest.importorskip("websockets")
+    from helpers.foxglove_client import FoxgloveClient
+
+    from cananalyze.outputs.foxglove.sink import FoxgloveSink
+    from cananalyze.outputs.mcap.topics import on_bus
+
+    a, b = unique_channel("foxA"), unique_channel("foxB")
+    start = threading.Event()
+
+    def tpdo2(node: int, n: int) -> list[can.Message]:
+        return [
+            can.Message(
+                arbitration_id=0x280 + node, data=bytes([k & 0xFF, 0] * 4), is_extended_id=False
+            )
+            for k in range(n)
+        ]
+
+    senders = [_send(a, tpdo2(5, 300), start), _send(b, tpdo2(5, 200), start)]
+    parts = [
+        LiveSource(lambda c=c: can.Bus(interface="virtual", channel=c), channel_name=c)
+        for c in (a, b)
+    ]
+    source = LiveBuses(parts)
+    fox = FoxgloveSink(port=0, announce=False)
+    box: list = []
+
+    class Client(SummarySink):  # opened after the server: the client connects, then traffic
+        def open(self, run):
+            super().open(run)
+            client = FoxgloveClient(fox.url).start()
+            box.append(client)
+            deadline = time.monotonic() + 10
+            while "/can/frames" not in client.topics_subscribed() and time.monotonic() < deadline:
+                time.sleep(0.02)
+            time.sleep(0.3)  # the server handles the subscription
+            start.set()
+
+    opts = Options(devices={5: "dat7014"})
+
+    deadline = time.monotonic() + 30
+
+    def stop():  # once the client has every frame (the server stops with the run)
+        if time.monotonic() > deadline:
+            return True
+        sent = all(not s.is_alive() for s in senders) and source.received >= 500
+        return sent and len(box[0].messages.get("/can/frames", [])) >= 500
+
+    run(source, build_decoder(opts), [fox, Client(None)], opts, stop=stop, tick=0.1)
+    client = box[0]
+    client.stop()
+    assert client.error is None
+    frames = client.messages["/can/frames"]
+    per = {}
+    for _, m in frames:
+        per[m["channel"]] = per.get(m["channel"], 0) + 1
+    assert per == {a: 300, b: 200}
+    # node 5 on each bus: its own signal topic (the later messages: it was advertised
+    # with its first PDO, the client subscribed then)
+    for ch, n in ((a, 300), (b, 200)):
+        got = client.messages.get(on_bus(ch, "/node/5/tpdo2"), [])
+        assert 0 < len(got) <= n
+        assert len(got) >= n - 100, (ch, len(got))
+    assert "/node/5/tpdo2" not in client.topics_subscribed()

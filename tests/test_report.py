@@ -406,3 +406,35 @@ def test_pdo_rates_beside_their_configuration(faults_report):
         t = np.array([m.timestamp for m in reader if m.arbitration_id == 0x283])
     assert int(pdo["0x283"][3]) == t.size
     assert float(pdo["0x283"][7]) == pytest.approx(np.diff(t).max() * 1000, abs=0.01)
+
+
+def test_findings_explained_once_per_group(faults_report, tmp_path):
+    """Each node-and-rule group lists its findings' lines and each distinct explanation
+    once (check --json's `why`), not once per line: the 10M-frame page was half whys."""
+    import html as html_mod
+    import re
+
+    found = tmp_path / "f.json"
+    cli(
+        "check",
+        str(SAMPLES / "faults.log"),
+        *("--network", str(SAMPLES / "network.toml"), "--rules", str(SAMPLES / "rules.yaml")),
+        *("--json", str(found), "-q"),
+    )
+    findings = json.loads(found.read_text())
+    page = faults_report.read_text(encoding="utf-8")
+    groups = re.findall(r'<details class="finding [^"]*">(.*?)</details>', page, re.S)
+    assert len(groups) == len({(f["node"], f["rule"]) for f in findings})
+    for body in groups:
+        who, rule = re.match(r"<summary><b>(.*?)</b> · (\w+) · ", body).groups()
+        mine = [f for f in findings if f["rule"] == rule and who == f"node {f['node']}"] or [
+            f for f in findings if f["rule"] == rule and f["node"] is None
+        ]
+        whys = [html_mod.unescape(w) for w in re.findall(r"<p class=why>(.*?)</p>", body)]
+        assert sorted(whys) == sorted({f["why"] for f in mine}), (who, rule)
+        items = [html_mod.unescape(i) for i in re.findall(r"<li>(.*?)</li>", body)]
+        assert len(items) == len(mine)
+        assert not any(f["why"] in i for f in mine for i in items)
+        assert {f["message"] for f in mine} == {
+            f["message"] for f in mine for i in items if f["message"] in i
+        }

@@ -53,10 +53,14 @@ class PageView:
 
 
 def view(
-    path: str | Path, questions: dict[str, str], timeout: float = 60.0, full_page: bool = False
+    path: str | Path,
+    questions: dict[str, str],
+    timeout: float = 60.0,
+    full_page: bool = False,
+    scroll_to: str | None = None,
 ) -> PageView:
     """Load `path`, wait for document.body.dataset.ready, screenshot the first screen
-    (or the whole page)."""
+    (or the whole page; or the screen that starts at the element of id `scroll_to`)."""
     from websockets.sync.client import connect
 
     exe = chromium()
@@ -137,6 +141,12 @@ def view(
             for name, expr in questions.items():
                 r = call("Runtime.evaluate", expression=expr, returnByValue=True)
                 out.answers[name] = r.get("result", {}).get("value")
+            if scroll_to:
+                call(
+                    "Runtime.evaluate",
+                    expression=f"document.getElementById({json.dumps(scroll_to)}).scrollIntoView()",
+                )
+                time.sleep(0.5)
             if full_page:
                 r = call(
                     "Runtime.evaluate", expression="document.body.scrollHeight", returnByValue=True

@@ -41,6 +41,7 @@ from .topics import (
     drive_payloads,
     drive_topic,
     event_payloads,
+    on_bus,
     signal_payloads,
     signal_schema,
     signal_topic,
@@ -52,34 +53,71 @@ from .topics import (
 
 
 def batch_messages(
-    fb, service, node, blocks, states, events, lines, file: str, drive=()
+    fb,
+    service,
+    node,
+    blocks,
+    states,
+    events,
+    lines,
+    file: str,
+    drive=(),
+    want=None,
+    buses: bool = False,
+    offset: int = 0,
 ) -> list[tuple]:
     """(channel key, topic, schema, log times ns, payloads) of one batch, per stream:
     signals (one stream per series, in the Capture's series order), NMT states per node,
     CiA 402 drive states per axis, events as foxglove.Log, raw frames. The one place that
     says which topic carries what: `export --mcap` writes these and `live --foxglove`
-    serves them."""
+    serves them. `want(topic)` False leaves that stream's payloads None (not built: a
+    live topic no client subscribed to costs nothing but its times). `buses`: the run
+    has several buses, each decoded topic is per bus (`topics.on_bus`); event rows count
+    from `offset` (the batch's first row)."""
     out: list[tuple] = []
+    keep = want or (lambda topic: True)
+
+    def bus_of(row) -> str | None:  # the bus of a batch row, None for one bus or no row
+        if not buses or row is None or not 0 <= row < len(fb):
+            return None
+        return fb.channel_label(int(fb.channel[row]))
+
     for n, pdo, cob, rows, columns, units in sorted(blocks, key=lambda b: b[:3]):
-        blk = SignalBlock(rows, n, pdo, cob, columns, units)
-        key = ("signals", n, pdo, cob, tuple(columns))
-        out.append(
-            (key, signal_topic(blk), signal_schema(blk), _ns(fb.t[rows]), signal_payloads(columns))
-        )
-    by_node: dict[int, list] = {}
+        parts = [(None, rows, columns)]
+        if buses and len(rows):
+            chans = fb.channel[rows]
+            parts = []
+            for c in np.unique(chans):  # one stream per bus (rows of a block keep order)
+                sel = np.flatnonzero(chans == c)
+                cols = columns if len(sel) == len(rows) else {k: v[sel] for k, v in columns.items()}
+                parts.append((fb.channel_label(int(c)), rows[sel], cols))
+        for bus, r, cols in parts:
+            blk = SignalBlock(r, n, pdo, cob, cols, units)
+            key = ("signals", bus, n, pdo, cob, tuple(cols))
+            topic = on_bus(bus, signal_topic(blk))
+            payload = signal_payloads(cols) if keep(topic) else None
+            out.append((key, topic, signal_schema(blk), _ns(fb.t[r]), payload))
+    by_node: dict[tuple, list] = {}
     for e in states:
-        by_node.setdefault(e.node, []).append(e)
-    for n, evs in sorted(by_node.items()):
+        bus = bus_of(None if e.row is None else e.row - offset)
+        by_node.setdefault((e.node, bus or ""), []).append(e)
+    for (n, bus), evs in sorted(by_node.items()):
         ns = _ns(np.array([e.t for e in evs]))
-        out.append((("state", n), state_topic(n), STATE_SCHEMA, ns, state_payloads(evs)))
-    by_drive: dict[int, list] = {}
+        topic = on_bus(bus or None, state_topic(n))
+        payload = state_payloads(evs) if keep(topic) else None
+        out.append((("state", bus, n), topic, STATE_SCHEMA, ns, payload))
+    by_drive: dict[tuple, list] = {}
     for c in drive:  # a batch's drive changes: the lane shows the states
         if c.kind == STATE:
-            by_drive.setdefault(c.node, []).append(c)
-    for n, cs in sorted(by_drive.items()):
+            by_drive.setdefault((c.node, bus_of(c.row) or ""), []).append(c)
+    for (n, bus), cs in sorted(by_drive.items()):
         ns = _ns(np.array([c.t for c in cs]))
-        out.append((("drive", n), drive_topic(n), DRIVE_SCHEMA, ns, drive_payloads(cs)))
-    if len(events):
+        topic = on_bus(bus or None, drive_topic(n))
+        payload = drive_payloads(cs) if keep(topic) else None
+        out.append((("drive", bus, n), topic, DRIVE_SCHEMA, ns, payload))
+    if len(events) and not keep(EVENTS_TOPIC):
+        out.append((("events",), EVENTS_TOPIC, LOG_SCHEMA, _ns(np.sort(events.t)), None))
+    elif len(events):
         order = np.lexsort((events.sort_key(), events.t))
         events = events.take(order)
         ns = _ns(events.t)
@@ -87,15 +125,20 @@ def batch_messages(
             f"node {n}" if n != NO_NODE else KINDS[k]
             for n, k in zip(events.node.tolist(), events.kind.tolist(), strict=True)
         ]
+        if buses:
+            local = events.row - offset
+            names = [
+                nm if (bus := bus_of(None if r == NO_ROW else lr)) is None else f"{bus} {nm}"
+                for nm, r, lr in zip(names, events.row.tolist(), local.tolist(), strict=True)
+            ]
         line = np.asarray(lines, np.int64)[order].tolist()
         payload = event_payloads(
             ns, events.level.tolist(), events.message.tolist(), names, file, line
         )
         out.append((("events",), EVENTS_TOPIC, LOG_SCHEMA, ns, payload))
     if len(fb):
-        out.append(
-            (("frames",), FRAMES_TOPIC, FRAME_SCHEMA, _ns(fb.t), frame_payloads(fb, service, node))
-        )
+        payload = frame_payloads(fb, service, node) if keep(FRAMES_TOPIC) else None
+        out.append((("frames",), FRAMES_TOPIC, FRAME_SCHEMA, _ns(fb.t), payload))
     return out
 
 
@@ -130,6 +173,7 @@ class StreamMcap:
         self._file = Path(self.source).name
         self._lines = (0, np.zeros(0, np.int64))  # (first row, line numbers) of the last batch
         self.offset = 0
+        self._buses = False  # several buses seen: decoded topics per bus (from then on)
         # one batch waits while one is written (the decoder is rarely the slower side)
         self._writer = WriterThread(depth=1)
 
@@ -161,21 +205,37 @@ class StreamMcap:
         blocks = [(b.node, b.pdo, b.cob_id, b.rows, b.columns, b.units) for b in batch.signals]
         service, node = batch.service, batch.node
         drive = batch.drive
+        self._buses = self._buses or len(fb.channels) > 1
+        buses = self._buses
         try:
             self._writer.put(
-                lambda: self._emit(fb, service, node, blocks, states, events, lines, drive)
+                lambda: self._emit(
+                    fb, service, node, blocks, states, events, lines, drive, buses, off
+                )
             )
         except OSError as exc:  # the writer thread's: name the file it was writing
             raise _named(exc, self.path) from exc
         self.offset += len(fb)
 
-    def _emit(self, fb, service, node, blocks, states, events, lines, drive=()) -> None:
+    def _emit(
+        self, fb, service, node, blocks, states, events, lines, drive=(), buses=False, off=0
+    ) -> None:
         """One batch's messages, on the writer thread: its JSON columns (numpy, pyarrow
         and C work outside the GIL) are built beside the decoder; the writer lays out,
         compresses and writes the chunks on a thread of its own."""
         streams: list[tuple[int, np.ndarray, Texts]] = []
         for key, topic, schema, ns, payload in batch_messages(
-            fb, service, node, blocks, states, events, lines, self._file, drive
+            fb,
+            service,
+            node,
+            blocks,
+            states,
+            events,
+            lines,
+            self._file,
+            drive,
+            buses=buses,
+            offset=off,
         ):
             streams.append((self._channel(key, topic, schema), ns, payload))
         write_merged(self.w, streams)
