@@ -216,3 +216,70 @@ def test_short_frame_between_request_and_answer_breaks_the_pair() -> None:
         ]
     )
     assert_same(fb, steps=(1000, 2), object_info=_object_info)
+
+
+def _fed(fb: FrameBatch, step: int) -> list[int]:
+    """Rows (of the whole log) the fast path sent to the tracker, in batches of `step`."""
+    proc = SdoProcessor(SdoTracker(timeout=0.5, object_info=_object_info))
+    rows: list[int] = []
+    feed = proc.tracker.feed
+    proc.tracker.feed = lambda t, cob, data, ref: rows.append(ref) or feed(t, cob, data, ref)
+    dec = Decoder([proc])
+    for start in range(0, len(fb), step):
+        dec.decode(fb.take(slice(start, start + step)))
+    dec.finish()
+    return rows
+
+
+def test_stray_responses_on_idle_channels_take_the_shortcut() -> None:
+    """Initiate responses no request asked for (a log that starts mid-poll, a lost
+    request: half of what fell back on the benchmark's bus) get the tracker's notes
+    without going through it, while their channel is idle; on a channel with a
+    transfer in progress the tracker still takes them (there they fail it)."""
+    up = bytes([0x40, 0x18, 0x10, 1, 0, 0, 0, 0])
+    answer = bytes([0x43, 0x18, 0x10, 1, 0x78, 0x56, 0x34, 0x12])
+    rows = [
+        (0.001, 0x581, answer),  # stray upload response, idle channel
+        (0.002, 0x582, bytes([0x60, 0x17, 0x10, 0, 0, 0, 0, 0])),  # stray download response
+        (0.003, 0x603, up),
+        (0.004, 0x583, answer),  # a fast pair
+        (0.005, 0x604, bytes([0x40, 0x00, 0x60, 1, 0, 0, 0, 0])),
+        (0.006, 0x584, bytes([0x60, 0x00, 0x60, 1, 0, 0, 0, 0])),  # wrong answer: 4 pending
+        (0.007, 0x584, answer),  # stray on the failed channel: the tracker's
+        (0.008, 0x581, answer),  # stray on an idle channel while 4 is pending
+        (0.009, 0x601, up),
+        (0.010, 0x581, answer),
+        (2.0, 0x584, answer),  # after 4 timed out: idle again
+    ]
+    fb = from_rows(rows)
+    assert_same(fb, steps=(1000, 5, 3, 2, 1), object_info=_object_info)
+    out = Decoder([SdoProcessor(SdoTracker(timeout=0.5, object_info=_object_info))]).decode(fb)
+    assert out.notes[0] == {
+        "role": "initiate upload response",
+        "command": "initiate_upload_response",
+        "index": 0x1018,
+        "subindex": 1,
+        "sdo_problem": "initiate_upload_response with no transfer in progress",
+    }
+    assert out.notes[1]["sdo_problem"] == "initiate_download_response with no transfer in progress"
+    assert out.notes[6]["role"].endswith("after a protocol error")
+    # the tracker saw only the failed transfer's frames (4, 5, 6), whatever the batch size
+    for step in (1000, 4):
+        assert _fed(fb, step) == [4, 5, 6]
+
+
+def test_benchmark_strays_are_not_fed() -> None:
+    """On the benchmark's traffic the tracker now sees only the transfers that go wrong:
+    no stray response on an idle channel is fed to it."""
+    from generate import generate
+
+    fb = generate(60_000)
+    fed = _fed(fb, 1 << 20)
+    d = fb.data[fed]
+    stray = (fb.can_id[fed] >= 0x581) & (fb.can_id[fed] <= 0x5FF) & np.isin(d[:, 0] >> 5, (2, 3))
+    # every response fed answers a request the tracker holds (the one fed just before it
+    # on that channel)
+    fed_set = {(int(fb.can_id[r]) - 0x580, r) for r in np.asarray(fed)[stray].tolist()}
+    for node, r in fed_set:
+        earlier = [q for q in fed if q < r and int(fb.can_id[q]) == 0x600 + node]
+        assert earlier, f"stray response at row {r} went through the tracker"

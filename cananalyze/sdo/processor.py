@@ -4,8 +4,9 @@ SDO traffic is rare and stateful, so this is one of the places where per-frame
 Python is right. Rows on the default channels are found by the classifier;
 extra channels learnt from 0x1200-0x12FF writes are found by the tracker.
 Expedited request/response pairs on idle channels, the bulk of a polled bus,
-take the columnar shortcut in `fastpath` (same records and notes, ~20x less
-time); `fast=False` sends every frame through the tracker.
+and stray initiate responses on idle channels take the columnar shortcut in
+`fastpath` (same records and notes, ~20x less time); `fast=False` sends every
+frame through the tracker.
 """
 
 from __future__ import annotations
@@ -54,6 +55,7 @@ class SdoProcessor:
             self._cur_rows = rows.tolist()
             self._process_fast(batch, rows)
             self._fill(batch)
+            self._fill_strays(batch)
         else:
             for row in rows.tolist():
                 self._feed(batch, row)
@@ -108,6 +110,10 @@ class SdoProcessor:
         partner = p.partner.tolist()
         cand = p.cand.tolist()
         is_partner = p.is_partner.tolist()
+        is_stray = p.stray.tolist()
+        strays = np.flatnonzero(p.stray).tolist()
+        self._strays = strays
+        self._stray_chunks: list[tuple[int, int]] = []  # (lo, hi) in strays: taken
         req_cob = p.req_cob.tolist()
         slow_at = np.flatnonzero(p.static_slow).tolist()
         t = fb.t[rows].tolist()
@@ -130,7 +136,7 @@ class SdoProcessor:
         rejected_set: set[int] = set()
         m = len(row_of)
         # candidate requests and answers: where advance() could end a pending transfer
-        cp = np.flatnonzero(p.cand | p.is_partner)
+        cp = np.flatnonzero(p.cand | p.is_partner | p.stray)
         self._cp = cp.tolist()
         self._cp_max = np.maximum.accumulate(fb.t[rows][cp]).tolist() if cp.size else []
         self._cand_of: dict[int, list[int]] = {}
@@ -151,6 +157,9 @@ class SdoProcessor:
                 lo, hi = bisect.bisect_left(answers, pos), bisect.bisect_left(answers, stop)
                 if hi > lo:
                     self._take(batch, lo, hi)
+                lo, hi = bisect.bisect_left(strays, pos), bisect.bisect_left(strays, stop)
+                if hi > lo:
+                    self._stray_chunks.append((lo, hi))
                 pos = stop
                 if pos >= m:
                     break
@@ -171,6 +180,14 @@ class SdoProcessor:
                 lo = bisect.bisect_left(answers, i)
                 self._take(batch, lo, lo + 1)
                 continue
+            elif is_stray[i]:
+                if tracker._pending:
+                    tracker.advance(t[i])
+                    self._emit(batch)
+                if req_cob[i] not in tracker._pending:  # idle channel: only a note
+                    lo = bisect.bisect_left(strays, i)
+                    self._stray_chunks.append((lo, lo + 1))
+                    continue
             self._feed(batch, row_of[i])
 
     def _quiet_until(self, pos: int, stop: int) -> int:
@@ -178,8 +195,9 @@ class SdoProcessor:
 
         That is where advance() would time one out (the first candidate frame late
         enough, found on the running maximum of their times: never later than the
-        exact one) or where a candidate request arrives on a pending channel. Before
-        it, stepping frame by frame would only take the pairs as they are.
+        exact one) or where a candidate request or a stray response arrives on a
+        pending channel. Before it, stepping frame by frame would only take the pairs
+        (and strays) as they are.
         """
         cp, cp_max, timeout = self._cp, self._cp_max, self.tracker.timeout
         j0 = bisect.bisect_left(cp, pos)
@@ -193,7 +211,8 @@ class SdoProcessor:
             same = self._cand_of.get(cob)
             if same is None:
                 p = self._plan
-                same = self._cand_of[cob] = np.flatnonzero(p.cand & (p.req_cob == cob)).tolist()
+                on = (p.cand | p.stray) & (p.req_cob == cob)
+                same = self._cand_of[cob] = np.flatnonzero(on).tolist()
             k = bisect.bisect_left(same, pos)
             if k < len(same) and same[k] < stop:
                 stop = same[k]
@@ -258,6 +277,24 @@ class SdoProcessor:
             batch.notes.defer(write_notes, covers)
         else:
             batch.notes = LazyNotes(batch.notes, write_notes, covers)
+
+    def _fill_strays(self, batch: DecodedBatch) -> None:
+        """Notes of the stray responses taken in this batch, written when read."""
+        if not self._stray_chunks:
+            return
+        strays = self._strays
+        pos = np.concatenate([np.arange(lo, hi) for lo, hi in self._stray_chunks])
+        at = np.asarray(self._cur_rows)[np.asarray(strays, np.int64)[pos]]
+        fb = batch.frames
+
+        def write_notes(notes: dict) -> None:
+            for row, note in zip(at.tolist(), fastpath.stray_notes(fb, at), strict=True):
+                LazyNotes.write(notes, row, note)
+
+        if isinstance(batch.notes, LazyNotes):
+            batch.notes.defer(write_notes, at)
+        else:
+            batch.notes = LazyNotes(batch.notes, write_notes, at)
 
     def finish(self, batch: DecodedBatch) -> None:
         self.tracker.finish()
