@@ -283,3 +283,79 @@ def test_benchmark_strays_are_not_fed() -> None:
     for node, r in fed_set:
         earlier = [q for q in fed if q < r and int(fb.can_id[q]) == 0x600 + node]
         assert earlier, f"stray response at row {r} went through the tracker"
+
+
+def _canopen_session(node: int, block: bool) -> list:
+    """python-canopen's client against its own server (or the block server), recorded."""
+    import can
+    import canopen
+    from canopen.objectdictionary import UNSIGNED32, VISIBLE_STRING
+    from canopen.sdo.exceptions import SdoAbortedError
+
+    from tests.helpers.sdo_block_server import BlockSdoServer
+    from tests.helpers.virtual_bus import drain, unique_channel, variable
+
+    channel = unique_channel("fast-sdo")
+    recorder = can.Bus(interface="virtual", channel=channel)
+    client = canopen.Network()
+    client.connect(interface="virtual", channel=channel)
+    remote = canopen.RemoteNode(node, canopen.ObjectDictionary())
+    client.add_node(remote)
+    stop = []
+    if block:
+        server_bus = can.Bus(interface="virtual", channel=channel)
+        objects = {(0x2100, 0): bytes(range(200)) * 3, (0x2101, 0): b"ab"}
+        notifier = can.Notifier(server_bus, [BlockSdoServer(server_bus, node, objects)])
+        stop = [notifier.stop, server_bus.shutdown]
+    else:
+        server = canopen.Network()
+        server.connect(interface="virtual", channel=channel)
+        od = canopen.ObjectDictionary()
+        od.add_object(variable(0x1008, 0, "Name", VISIBLE_STRING, "ro", "a segmented name" * 3))
+        od.add_object(variable(0x2000, 0, "Counter", UNSIGNED32, "rw", 7))
+        server.add_node(canopen.LocalNode(node, od))
+        stop = [server.disconnect]
+    try:
+        if block:
+            with remote.sdo.open(0x2100, 0, "rb", block_transfer=True) as f:
+                assert len(f.read()) == 600
+            with remote.sdo.open(0x2200, 0, "wb", size=300, block_transfer=True) as f:
+                f.write(bytes(300))
+        else:
+            for k in range(5):
+                remote.sdo.download(0x2000, 0, struct_u32(k))
+                assert remote.sdo.upload(0x2000, 0) == struct_u32(k)
+                assert remote.sdo.upload(0x1008, 0).startswith(b"a segmented")
+            with pytest.raises(SdoAbortedError):
+                remote.sdo.upload(0x3000, 0)
+    finally:
+        frames = drain(recorder)
+        for s in stop:
+            s()
+        client.disconnect()
+        recorder.shutdown()
+    return frames
+
+
+def struct_u32(v: int) -> bytes:
+    return v.to_bytes(4, "little")
+
+
+def test_canopen_traffic_of_several_servers_interleaved() -> None:
+    """Expedited and segmented transfers and an abort (python-canopen's client and server,
+    nodes 5 and 6) and block transfers (node 7), merged in time so the servers' transfers
+    interleave, in batch sizes that cut transfers: the fast path's notes and records are
+    the tracker's."""
+    sessions = [_canopen_session(5, False), _canopen_session(6, False), _canopen_session(7, True)]
+    rows = []
+    for frames in sessions:
+        t0 = frames[0].timestamp
+        # spread each session over the same second, keeping its own order
+        span = max(frames[-1].timestamp - t0, 1e-6)
+        rows += [
+            (0.001 + (m.timestamp - t0) / span, m.arbitration_id, bytes(m.data)) for m in frames
+        ]
+    rows.sort(key=lambda r: r[0])
+    fb = from_rows(rows)
+    n = assert_same(fb, steps=(1 << 20, 97, 13, 5, 2), object_info=_object_info)
+    assert n >= 5 * 3 + 1 + 2 * 2 + 2
