@@ -359,3 +359,38 @@ def test_canopen_traffic_of_several_servers_interleaved() -> None:
     fb = from_rows(rows)
     n = assert_same(fb, steps=(1 << 20, 97, 13, 5, 2), object_info=_object_info)
     assert n >= 5 * 3 + 1 + 2 * 2 + 2
+
+
+def test_request_that_cuts_a_transfer_short_takes_the_shortcut() -> None:
+    """A clean expedited request on a channel whose transfer is still open (failed,
+    unanswered or mid-segmented) ends that transfer as the tracker would and is taken as
+    a fast pair with its answer; inside a block download's sub-block the same bytes are a
+    segment, so that one goes through the tracker."""
+    up = bytes([0x40, 0x00, 0x60, 1, 0, 0, 0, 0])
+    answer = bytes([0x43, 0x00, 0x60, 1, 9, 0, 0, 0])
+    rows = [
+        (0.001, 0x601, up),
+        (0.002, 0x581, bytes([0x43, 0x01, 0x60, 1, 9, 0, 0, 0])),  # names another object
+        (0.003, 0x601, up),  # 2: cuts the failed transfer short
+        (0.004, 0x581, answer),
+        (0.005, 0x602, up),  # unanswered
+        (0.006, 0x602, up),  # 5: the client's retry
+        (0.007, 0x582, answer),
+        (0.008, 0x603, bytes([0x40, 0x08, 0x10, 0, 0, 0, 0, 0])),
+        (0.009, 0x583, bytes([0x41, 0x08, 0x10, 0, 20, 0, 0, 0])),  # segmented upload begins
+        (0.010, 0x603, up),  # 9: new request mid-transfer
+        (0.011, 0x583, answer),
+        (0.012, 0x604, bytes([0xC2, 0x50, 0x1F, 1, 20, 0, 0, 0])),  # block download
+        (0.013, 0x584, bytes([0xA4, 0x50, 0x1F, 1, 4, 0, 0, 0])),  # blksize 4: segments
+        (0.014, 0x604, up),  # 13: a segment (seqno 64) here, not a request
+        (0.015, 0x584, answer),
+    ]
+    fb = from_rows(rows)
+    assert_same(fb, steps=(1000, 7, 4, 3, 2, 1), object_info=_object_info)
+    fed = _fed(fb, 1000)  # (a pair cut by a batch boundary goes through the tracker)
+    assert not {2, 3, 5, 6, 9, 10} & set(fed) and 13 in fed
+    tail = Decoder([SdoProcessor(SdoTracker(timeout=0.5, object_info=_object_info))])
+    out = tail.decode(fb)
+    results = [(r["node"], r["result"]) for _, r in out.records]
+    assert results == [(1, "protocol_error"), (1, "ok"), (2, "timeout"), (2, "ok"),
+                       (3, "protocol_error"), (3, "ok")]  # fmt: skip

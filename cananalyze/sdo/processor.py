@@ -167,6 +167,9 @@ class SdoProcessor:
                     self._emit(batch)
                 if req_cob[i] not in tracker._pending:
                     continue  # taken: its answer closes it
+                if tracker.cut_short(req_cob[i], t[i]):  # ends the transfer it interrupts
+                    self._emit(batch)
+                    continue  # taken too
                 bisect.insort(rejected, partner[i])
                 rejected_set.add(partner[i])
             elif is_partner[i] and i not in rejected_set:
