@@ -24,7 +24,8 @@ from cananalyze.events.build import (
     sdo_event,
 )
 from cananalyze.events.columns import NO_NODE, NO_ROW, EventColumns, Row
-from cananalyze.frames import FLAG_RTR, FrameBatch
+from cananalyze.frames import FLAG_RTR, FrameBatch, concat
+from cananalyze.io.source import open_log
 from cananalyze.outputs.tables.stream import HOLD
 from cananalyze.outputs.tables.stream import TableSink as StreamTables
 from cananalyze.pipeline import Options, build_decoder
@@ -273,3 +274,17 @@ def test_batch_event_columns_same_as_rows():
         assert cols.rows() == rows and states == states2
         off += len(batch)
     assert s1.last_state == s2.last_state and s1.last_t == s2.last_t
+
+
+@pytest.mark.parametrize("log", ["faults.log", "demo.log"])
+def test_finding_events_match_per_row(log):
+    """With the rules on, the findings' events (nodes or none, every level) are the
+    per-record route's, field by field and type by type."""
+    opts = Options(network=str(SAMPLES / "network.toml"), checks=True)
+    decoder = build_decoder(opts)
+    fb = concat(list(open_log(SAMPLES / log).batches()))
+    batches = [decoder.decode(fb.take(slice(s, s + 300))) for s in range(0, len(fb), 300)]
+    batches.append(decoder.finish())
+    findings = [r for b in batches for _, r in list(b.records) if r.get("kind") == "finding"]
+    assert findings
+    assert _assert_same_events(batches) > len(findings)

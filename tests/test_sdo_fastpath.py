@@ -216,3 +216,181 @@ def test_short_frame_between_request_and_answer_breaks_the_pair() -> None:
         ]
     )
     assert_same(fb, steps=(1000, 2), object_info=_object_info)
+
+
+def _fed(fb: FrameBatch, step: int) -> list[int]:
+    """Rows (of the whole log) the fast path sent to the tracker, in batches of `step`."""
+    proc = SdoProcessor(SdoTracker(timeout=0.5, object_info=_object_info))
+    rows: list[int] = []
+    feed = proc.tracker.feed
+    proc.tracker.feed = lambda t, cob, data, ref: rows.append(ref) or feed(t, cob, data, ref)
+    dec = Decoder([proc])
+    for start in range(0, len(fb), step):
+        dec.decode(fb.take(slice(start, start + step)))
+    dec.finish()
+    return rows
+
+
+def test_stray_responses_on_idle_channels_take_the_shortcut() -> None:
+    """Initiate responses no request asked for (a log that starts mid-poll, a lost
+    request: half of what fell back on the benchmark's bus) get the tracker's notes
+    without going through it, while their channel is idle; on a channel with a
+    transfer in progress the tracker still takes them (there they fail it)."""
+    up = bytes([0x40, 0x18, 0x10, 1, 0, 0, 0, 0])
+    answer = bytes([0x43, 0x18, 0x10, 1, 0x78, 0x56, 0x34, 0x12])
+    rows = [
+        (0.001, 0x581, answer),  # stray upload response, idle channel
+        (0.002, 0x582, bytes([0x60, 0x17, 0x10, 0, 0, 0, 0, 0])),  # stray download response
+        (0.003, 0x603, up),
+        (0.004, 0x583, answer),  # a fast pair
+        (0.005, 0x604, bytes([0x40, 0x00, 0x60, 1, 0, 0, 0, 0])),
+        (0.006, 0x584, bytes([0x60, 0x00, 0x60, 1, 0, 0, 0, 0])),  # wrong answer: 4 pending
+        (0.007, 0x584, answer),  # stray on the failed channel: the tracker's
+        (0.008, 0x581, answer),  # stray on an idle channel while 4 is pending
+        (0.009, 0x601, up),
+        (0.010, 0x581, answer),
+        (2.0, 0x584, answer),  # after 4 timed out: idle again
+    ]
+    fb = from_rows(rows)
+    assert_same(fb, steps=(1000, 5, 3, 2, 1), object_info=_object_info)
+    out = Decoder([SdoProcessor(SdoTracker(timeout=0.5, object_info=_object_info))]).decode(fb)
+    assert out.notes[0] == {
+        "role": "initiate upload response",
+        "command": "initiate_upload_response",
+        "index": 0x1018,
+        "subindex": 1,
+        "sdo_problem": "initiate_upload_response with no transfer in progress",
+    }
+    assert out.notes[1]["sdo_problem"] == "initiate_download_response with no transfer in progress"
+    assert out.notes[6]["role"].endswith("after a protocol error")
+    # the tracker saw only the failed transfer's frames (4, 5, 6), whatever the batch size
+    for step in (1000, 4):
+        assert _fed(fb, step) == [4, 5, 6]
+
+
+def test_benchmark_strays_are_not_fed() -> None:
+    """On the benchmark's traffic the tracker now sees only the transfers that go wrong:
+    no stray response on an idle channel is fed to it."""
+    from generate import generate
+
+    fb = generate(60_000)
+    fed = _fed(fb, 1 << 20)
+    d = fb.data[fed]
+    stray = (fb.can_id[fed] >= 0x581) & (fb.can_id[fed] <= 0x5FF) & np.isin(d[:, 0] >> 5, (2, 3))
+    # every response fed answers a request the tracker holds (the one fed just before it
+    # on that channel)
+    fed_set = {(int(fb.can_id[r]) - 0x580, r) for r in np.asarray(fed)[stray].tolist()}
+    for node, r in fed_set:
+        earlier = [q for q in fed if q < r and int(fb.can_id[q]) == 0x600 + node]
+        assert earlier, f"stray response at row {r} went through the tracker"
+
+
+def _canopen_session(node: int, block: bool) -> list:
+    """python-canopen's client against its own server (or the block server), recorded."""
+    import can
+    import canopen
+    from canopen.objectdictionary import UNSIGNED32, VISIBLE_STRING
+    from canopen.sdo.exceptions import SdoAbortedError
+
+    from tests.helpers.sdo_block_server import BlockSdoServer
+    from tests.helpers.virtual_bus import drain, unique_channel, variable
+
+    channel = unique_channel("fast-sdo")
+    recorder = can.Bus(interface="virtual", channel=channel)
+    client = canopen.Network()
+    client.connect(interface="virtual", channel=channel)
+    remote = canopen.RemoteNode(node, canopen.ObjectDictionary())
+    client.add_node(remote)
+    stop = []
+    if block:
+        server_bus = can.Bus(interface="virtual", channel=channel)
+        objects = {(0x2100, 0): bytes(range(200)) * 3, (0x2101, 0): b"ab"}
+        notifier = can.Notifier(server_bus, [BlockSdoServer(server_bus, node, objects)])
+        stop = [notifier.stop, server_bus.shutdown]
+    else:
+        server = canopen.Network()
+        server.connect(interface="virtual", channel=channel)
+        od = canopen.ObjectDictionary()
+        od.add_object(variable(0x1008, 0, "Name", VISIBLE_STRING, "ro", "a segmented name" * 3))
+        od.add_object(variable(0x2000, 0, "Counter", UNSIGNED32, "rw", 7))
+        server.add_node(canopen.LocalNode(node, od))
+        stop = [server.disconnect]
+    try:
+        if block:
+            with remote.sdo.open(0x2100, 0, "rb", block_transfer=True) as f:
+                assert len(f.read()) == 600
+            with remote.sdo.open(0x2200, 0, "wb", size=300, block_transfer=True) as f:
+                f.write(bytes(300))
+        else:
+            for k in range(5):
+                remote.sdo.download(0x2000, 0, struct_u32(k))
+                assert remote.sdo.upload(0x2000, 0) == struct_u32(k)
+                assert remote.sdo.upload(0x1008, 0).startswith(b"a segmented")
+            with pytest.raises(SdoAbortedError):
+                remote.sdo.upload(0x3000, 0)
+    finally:
+        frames = drain(recorder)
+        for s in stop:
+            s()
+        client.disconnect()
+        recorder.shutdown()
+    return frames
+
+
+def struct_u32(v: int) -> bytes:
+    return v.to_bytes(4, "little")
+
+
+def test_canopen_traffic_of_several_servers_interleaved() -> None:
+    """Expedited and segmented transfers and an abort (python-canopen's client and server,
+    nodes 5 and 6) and block transfers (node 7), merged in time so the servers' transfers
+    interleave, in batch sizes that cut transfers: the fast path's notes and records are
+    the tracker's."""
+    sessions = [_canopen_session(5, False), _canopen_session(6, False), _canopen_session(7, True)]
+    rows = []
+    for frames in sessions:
+        t0 = frames[0].timestamp
+        # spread each session over the same second, keeping its own order
+        span = max(frames[-1].timestamp - t0, 1e-6)
+        rows += [
+            (0.001 + (m.timestamp - t0) / span, m.arbitration_id, bytes(m.data)) for m in frames
+        ]
+    rows.sort(key=lambda r: r[0])
+    fb = from_rows(rows)
+    n = assert_same(fb, steps=(1 << 20, 97, 13, 5, 2), object_info=_object_info)
+    assert n >= 5 * 3 + 1 + 2 * 2 + 2
+
+
+def test_request_that_cuts_a_transfer_short_takes_the_shortcut() -> None:
+    """A clean expedited request on a channel whose transfer is still open (failed,
+    unanswered or mid-segmented) ends that transfer as the tracker would and is taken as
+    a fast pair with its answer; inside a block download's sub-block the same bytes are a
+    segment, so that one goes through the tracker."""
+    up = bytes([0x40, 0x00, 0x60, 1, 0, 0, 0, 0])
+    answer = bytes([0x43, 0x00, 0x60, 1, 9, 0, 0, 0])
+    rows = [
+        (0.001, 0x601, up),
+        (0.002, 0x581, bytes([0x43, 0x01, 0x60, 1, 9, 0, 0, 0])),  # names another object
+        (0.003, 0x601, up),  # 2: cuts the failed transfer short
+        (0.004, 0x581, answer),
+        (0.005, 0x602, up),  # unanswered
+        (0.006, 0x602, up),  # 5: the client's retry
+        (0.007, 0x582, answer),
+        (0.008, 0x603, bytes([0x40, 0x08, 0x10, 0, 0, 0, 0, 0])),
+        (0.009, 0x583, bytes([0x41, 0x08, 0x10, 0, 20, 0, 0, 0])),  # segmented upload begins
+        (0.010, 0x603, up),  # 9: new request mid-transfer
+        (0.011, 0x583, answer),
+        (0.012, 0x604, bytes([0xC2, 0x50, 0x1F, 1, 20, 0, 0, 0])),  # block download
+        (0.013, 0x584, bytes([0xA4, 0x50, 0x1F, 1, 4, 0, 0, 0])),  # blksize 4: segments
+        (0.014, 0x604, up),  # 13: a segment (seqno 64) here, not a request
+        (0.015, 0x584, answer),
+    ]
+    fb = from_rows(rows)
+    assert_same(fb, steps=(1000, 7, 4, 3, 2, 1), object_info=_object_info)
+    fed = _fed(fb, 1000)  # (a pair cut by a batch boundary goes through the tracker)
+    assert not {2, 3, 5, 6, 9, 10} & set(fed) and 13 in fed
+    tail = Decoder([SdoProcessor(SdoTracker(timeout=0.5, object_info=_object_info))])
+    out = tail.decode(fb)
+    results = [(r["node"], r["result"]) for _, r in out.records]
+    assert results == [(1, "protocol_error"), (1, "ok"), (2, "timeout"), (2, "ok"),
+                       (3, "protocol_error"), (3, "ok")]  # fmt: skip

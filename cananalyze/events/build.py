@@ -158,12 +158,58 @@ def _int_column(values: list, dtype, none: int) -> np.ndarray:
 
 
 def finding_event(row: int, r: dict, t: float) -> Row:
-    level = r.get("level") or r.get("severity") or "warning"
+    return Row(*_finding_fields(r, t, row))
+
+
+def _finding_fields(r: dict, t: float, row: int) -> tuple:
+    """(t, kind, node, level, message, row) of a finding record's event."""
+    get = r.get
+    level = get("level") or get("severity") or "warning"
     lvl = level if isinstance(level, int) else _LEVEL_BY_NAME.get(str(level).lower(), WARNING)
-    text = r.get("message") or r.get("text") or r.get("rule") or "finding"
-    if r.get("rule") and r.get("message"):
+    text = get("message") or get("text") or get("rule") or "finding"
+    if get("rule") and get("message"):
         text = f"[{r['rule']}] {text}"
-    return Row(float(r.get("t", t)), "finding", r.get("node"), lvl, str(text), row)
+    return float(get("t", t)), "finding", get("node"), lvl, str(text), row
+
+
+def _record_event_columns(pairs, fb, offset: int, last_t: float) -> tuple[EventColumns, list]:
+    """Events of the records read one by one (findings, SDO records off the fast path)
+    as columns, gathered field by field (no tuple per event), and their record slots."""
+    n = len(fb)
+    at: list[int] = []
+    t: list[float] = []
+    is_sdo: list[bool] = []
+    node: list = []
+    level: list[int] = []
+    message: list[str] = []
+    rows: list[int] = []
+    t_of = fb.t
+    for k, (row, rec) in pairs:
+        kind = rec.get("kind")
+        if kind == "sdo":
+            ev = sdo_event(row + offset, rec)
+        elif kind == "finding":
+            ev = _finding_fields(rec, float(t_of[row]) if 0 <= row < n else last_t, row + offset)
+        else:
+            continue
+        at.append(k)
+        t.append(ev[0])
+        is_sdo.append(kind == "sdo")
+        node.append(ev[2])
+        level.append(ev[3])
+        message.append(ev[4])
+        rows.append(ev[5])
+    if not at:
+        return EventColumns.empty(), at
+    events = EventColumns(
+        np.array(t, np.float64),
+        np.where(np.array(is_sdo, bool), ec.SDO, ec.FINDING).astype(np.uint8),
+        _int_column(node, np.int16, NO_NODE),
+        np.array(level, np.int8),
+        texts(message),
+        np.array(rows, np.int64),
+    )
+    return events, at
 
 
 def finding_event_columns(found, offset: int) -> EventColumns:
@@ -224,22 +270,11 @@ def batch_event_columns(
     else:  # the fast path's records as columns; the others read without building those
         get = list.__getitem__
         pairs = ((k, get(records, k)) for k in split[2])
-    slow: list[Row] = []
-    at: list[int] = []
-    for k, (row, rec) in pairs:
-        kind = rec.get("kind")
-        if kind == "sdo":
-            slow.append(sdo_event(row + offset, rec))
-            at.append(k)
-        elif kind == "finding":  # (a record made by hand; the Checker's are columns)
-            t = float(fb.t[row]) if 0 <= row < n else last_t
-            slow.append(finding_event(row + offset, rec, t))
-            at.append(k)
-    events = EventColumns.from_rows(slow)
+    events, at = _record_event_columns(pairs, fb, offset, last_t)
     if split is not None:
         fields, fast, _ = split
         fast_events = sdo_event_columns(fields, fast.row.astype(np.int64) + offset)
-        if slow:
+        if at:
             order = np.argsort(
                 np.concatenate((np.asarray(at, np.int64), fast.slots)), kind="stable"
             )

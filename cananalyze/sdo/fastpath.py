@@ -5,9 +5,12 @@ real bus, and running each frame through the stateful tracker costs ~10 us.
 Here the pairs are found per batch with numpy: a clean request (exact command
 byte, 8 data bytes) whose next frame on the same default channel is the
 matching expedited response, or a server abort, within the timeout. Their
-records and frame notes are built exactly as `SdoTracker` would build them;
-everything else (segmented, block, odd bytes, learnt channels, pairs cut by a
-batch boundary) still goes through the tracker. Whether a pair's channel is
+records and frame notes are built exactly as `SdoTracker` would build them.
+So are the notes of a stray initiate response (one whose channel has no transfer
+in progress: a log that starts mid-poll, a lost request; half the frames that
+fell back on the benchmark's bus), which changes no state. Everything else
+(segmented, block, odd bytes, learnt channels, pairs cut by a batch boundary,
+answers naming another object) still goes through the tracker. Whether a pair's channel is
 idle is only known while walking the batch, so `plan()` proposes and the
 processor decides (see `SdoProcessor`).
 """
@@ -33,6 +36,7 @@ _WORDED = np.array(sorted(WORDED), np.int64)
 _UPLOAD_REQ = sdo.INITIATE_UPLOAD_REQUEST
 _DOWNLOAD_RESP = sdo.INITIATE_DOWNLOAD_RESPONSE
 _ABORT = sdo.ABORT
+_SCS_UPLOAD, _SCS_DOWNLOAD = sdo.SCS_INITIATE_UPLOAD, sdo.SCS_INITIATE_DOWNLOAD
 _SIZES = (None, 4, 3, 2, 1)  # expedited, without or with the size (then 4 - n bytes)
 _DOWNLOAD_REQ = tuple(sdo.initiate_byte(sdo.CCS_INITIATE_DOWNLOAD, n, True) for n in _SIZES)
 _UPLOAD_RESP = tuple(sdo.initiate_byte(sdo.SCS_INITIATE_UPLOAD, n, True) for n in _SIZES)
@@ -49,7 +53,8 @@ class FastPlan:
     """Candidate pairs of one batch, indexed by position in the SDO rows list.
 
     `partner[p]` is the response position of candidate request p (else -1);
-    `is_partner[q]` marks candidate responses; `static_slow` what is never fast.
+    `is_partner[q]` marks candidate responses; `stray` initiate responses that are no
+    candidate's answer (fast when their channel is idle); `static_slow` what is never fast.
     """
 
     rows: np.ndarray  # batch row of each SDO position
@@ -59,6 +64,7 @@ class FastPlan:
     static_slow: np.ndarray  # bool: neither candidate nor candidate's answer
     req_cob: np.ndarray  # int: request COB-ID of each position's channel
     aborted: np.ndarray  # bool: the candidate answer is a server abort
+    stray: np.ndarray  # bool: an initiate response that answers no candidate
 
 
 def plan(batch: DecodedBatch, rows: np.ndarray, timeout: float, explicit: list[int]) -> FastPlan:
@@ -102,8 +108,17 @@ def plan(batch: DecodedBatch, rows: np.ndarray, timeout: float, explicit: list[i
     partner = np.where(cand, q, -1)
     is_partner = np.zeros(m, bool)
     is_partner[partner[cand]] = True
+    scs = b0 >> 5
+    stray = usable & is_resp & ~is_partner & ((scs == _SCS_UPLOAD) | (scs == _SCS_DOWNLOAD))
     return FastPlan(
-        rows, cand, partner, is_partner, ~(cand | is_partner), 0x600 + node, b0 == _ABORT
+        rows,
+        cand,
+        partner,
+        is_partner,
+        ~(cand | is_partner | stray),
+        0x600 + node,
+        b0 == _ABORT,
+        stray,
     )
 
 
@@ -472,6 +487,32 @@ def pair_notes(fb, a: np.ndarray, b: np.ndarray) -> tuple[list[dict], list[dict]
                 }
             )
     return req_notes, resp_notes
+
+
+_STRAY_COMMAND = {
+    _SCS_UPLOAD: "initiate_upload_response",
+    _SCS_DOWNLOAD: "initiate_download_response",
+}
+
+
+def stray_notes(fb, rows: np.ndarray) -> list[dict]:
+    """Notes of initiate responses on an idle channel, as the tracker writes them
+    (`SdoTracker._unexpected` with no transfer: the frame changes nothing)."""
+    d = _rows(fb.data, rows)
+    index = (d[:, 1].astype(np.int64) | (d[:, 2].astype(np.int64) << 8)).tolist()
+    out = []
+    for scs, i, s in zip((d[:, 0] >> 5).tolist(), index, d[:, 3].tolist(), strict=True):
+        command = _STRAY_COMMAND[scs]
+        out.append(
+            {
+                "role": command.replace("_", " "),
+                "command": command,
+                "index": i,
+                "subindex": s,
+                "sdo_problem": f"{command} with no transfer in progress",
+            }
+        )
+    return out
 
 
 def pair_outputs(

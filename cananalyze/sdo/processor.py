@@ -4,8 +4,9 @@ SDO traffic is rare and stateful, so this is one of the places where per-frame
 Python is right. Rows on the default channels are found by the classifier;
 extra channels learnt from 0x1200-0x12FF writes are found by the tracker.
 Expedited request/response pairs on idle channels, the bulk of a polled bus,
-take the columnar shortcut in `fastpath` (same records and notes, ~20x less
-time); `fast=False` sends every frame through the tracker.
+and stray initiate responses on idle channels take the columnar shortcut in
+`fastpath` (same records and notes, ~20x less time); `fast=False` sends every
+frame through the tracker.
 """
 
 from __future__ import annotations
@@ -52,8 +53,10 @@ class SdoProcessor:
         rows = self._rows(batch)
         if self.fast and len(rows) > 1 and not self._may_learn(batch, rows):
             self._cur_rows = rows.tolist()
+            self._cur_rows_arr = rows  # (np.asarray of the list again was 8 % of the SDO time)
             self._process_fast(batch, rows)
             self._fill(batch)
+            self._fill_strays(batch)
         else:
             for row in rows.tolist():
                 self._feed(batch, row)
@@ -108,6 +111,10 @@ class SdoProcessor:
         partner = p.partner.tolist()
         cand = p.cand.tolist()
         is_partner = p.is_partner.tolist()
+        is_stray = p.stray.tolist()
+        strays = np.flatnonzero(p.stray).tolist()
+        self._strays = strays
+        self._stray_chunks: list[tuple[int, int]] = []  # (lo, hi) in strays: taken
         req_cob = p.req_cob.tolist()
         slow_at = np.flatnonzero(p.static_slow).tolist()
         t = fb.t[rows].tolist()
@@ -118,19 +125,14 @@ class SdoProcessor:
         answers = answers_arr.tolist()
         self._answers = answers_arr
         # how each answer's transfer ends, for the tracker's `_ended` (a late abort joins it)
-        self._ended_by = list(
-            zip(
-                p.req_cob[answers_arr].tolist(),
-                map(_ENDED.__getitem__, p.aborted[answers_arr].tolist()),
-                strict=True,
-            )
-        )
+        self._ended_cob = p.req_cob[answers_arr].tolist()
+        self._ended_how = list(map(_ENDED.__getitem__, p.aborted[answers_arr].tolist()))
         self._chunks: list[tuple[int, int, int]] = []  # (first record slot, lo, hi) in answers
         rejected: list[int] = []  # answers whose request had to go through the tracker (sorted)
         rejected_set: set[int] = set()
         m = len(row_of)
         # candidate requests and answers: where advance() could end a pending transfer
-        cp = np.flatnonzero(p.cand | p.is_partner)
+        cp = np.flatnonzero(p.cand | p.is_partner | p.stray)
         self._cp = cp.tolist()
         self._cp_max = np.maximum.accumulate(fb.t[rows][cp]).tolist() if cp.size else []
         self._cand_of: dict[int, list[int]] = {}
@@ -151,6 +153,9 @@ class SdoProcessor:
                 lo, hi = bisect.bisect_left(answers, pos), bisect.bisect_left(answers, stop)
                 if hi > lo:
                     self._take(batch, lo, hi)
+                lo, hi = bisect.bisect_left(strays, pos), bisect.bisect_left(strays, stop)
+                if hi > lo:
+                    self._stray_chunks.append((lo, hi))
                 pos = stop
                 if pos >= m:
                     break
@@ -162,6 +167,9 @@ class SdoProcessor:
                     self._emit(batch)
                 if req_cob[i] not in tracker._pending:
                     continue  # taken: its answer closes it
+                if tracker.cut_short(req_cob[i], t[i]):  # ends the transfer it interrupts
+                    self._emit(batch)
+                    continue  # taken too
                 bisect.insort(rejected, partner[i])
                 rejected_set.add(partner[i])
             elif is_partner[i] and i not in rejected_set:
@@ -171,6 +179,14 @@ class SdoProcessor:
                 lo = bisect.bisect_left(answers, i)
                 self._take(batch, lo, lo + 1)
                 continue
+            elif is_stray[i]:
+                if tracker._pending:
+                    tracker.advance(t[i])
+                    self._emit(batch)
+                if req_cob[i] not in tracker._pending:  # idle channel: only a note
+                    lo = bisect.bisect_left(strays, i)
+                    self._stray_chunks.append((lo, lo + 1))
+                    continue
             self._feed(batch, row_of[i])
 
     def _quiet_until(self, pos: int, stop: int) -> int:
@@ -178,8 +194,9 @@ class SdoProcessor:
 
         That is where advance() would time one out (the first candidate frame late
         enough, found on the running maximum of their times: never later than the
-        exact one) or where a candidate request arrives on a pending channel. Before
-        it, stepping frame by frame would only take the pairs as they are.
+        exact one) or where a candidate request or a stray response arrives on a
+        pending channel. Before it, stepping frame by frame would only take the pairs
+        (and strays) as they are.
         """
         cp, cp_max, timeout = self._cp, self._cp_max, self.tracker.timeout
         j0 = bisect.bisect_left(cp, pos)
@@ -193,7 +210,8 @@ class SdoProcessor:
             same = self._cand_of.get(cob)
             if same is None:
                 p = self._plan
-                same = self._cand_of[cob] = np.flatnonzero(p.cand & (p.req_cob == cob)).tolist()
+                on = (p.cand | p.stray) & (p.req_cob == cob)
+                same = self._cand_of[cob] = np.flatnonzero(on).tolist()
             k = bisect.bisect_left(same, pos)
             if k < len(same) and same[k] < stop:
                 stop = same[k]
@@ -203,13 +221,14 @@ class SdoProcessor:
         """Reserve the record slots of the fast pairs closed by answers[lo:hi] (filled by _fill)."""
         self._chunks.append((len(batch.records), lo, hi))
         batch.records.extend([None] * (hi - lo))  # type: ignore[list-item]
-        self.tracker._ended.update(self._ended_by[lo:hi])
+        ended = zip(self._ended_cob[lo:hi], self._ended_how[lo:hi], strict=True)
+        self.tracker._ended.update(ended)
 
     def _fill(self, batch: DecodedBatch) -> None:
         """Records of every pair taken in this batch, built column-wise; notes when read."""
         if not self._chunks:
             return
-        rows = np.asarray(self._cur_rows)
+        rows = self._cur_rows_arr
         pick = np.concatenate([self._answers[lo:hi] for _, lo, hi in self._chunks])
         a, b = rows[self._req_of_arr[pick]], rows[pick]
         fb = batch.frames
@@ -264,6 +283,24 @@ class SdoProcessor:
         (the bus's clock) end as timeouts into `batch` (a zero-row one) while the bus is quiet."""
         self.tracker.advance(now)
         self._emit(batch)
+
+    def _fill_strays(self, batch: DecodedBatch) -> None:
+        """Notes of the stray responses taken in this batch, written when read."""
+        if not self._stray_chunks:
+            return
+        strays = self._strays
+        pos = np.concatenate([np.arange(lo, hi) for lo, hi in self._stray_chunks])
+        at = self._cur_rows_arr[np.asarray(strays, np.int64)[pos]]
+        fb = batch.frames
+
+        def write_notes(notes: dict) -> None:
+            for row, note in zip(at.tolist(), fastpath.stray_notes(fb, at), strict=True):
+                LazyNotes.write(notes, row, note)
+
+        if isinstance(batch.notes, LazyNotes):
+            batch.notes.defer(write_notes, at)
+        else:
+            batch.notes = LazyNotes(batch.notes, write_notes, at)
 
     def finish(self, batch: DecodedBatch) -> None:
         self.tracker.finish()

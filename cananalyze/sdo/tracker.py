@@ -273,22 +273,39 @@ class SdoTracker:
             # This frame belongs to the new transfer, not to the one it cuts short.
             xfer.frames -= 1
             xfer.t_last, xfer.ref = xfer.prev_t, xfer.prev_ref
-            if xfer.failed:
-                self._finish(xfer, xfer.t_last, "protocol_error")
-            elif xfer.t_first_response is None:
-                # Unanswered, and the client moved on (its own timeout or a retry).
-                waited = (t - xfer.t_start) * 1000.0
-                xfer.note(f"no response; the client sent a new request after {waited:.1f} ms")
-                self._finish(xfer, t, "timeout")
-            else:
-                xfer.note("new request on the channel before this transfer ended")
-                self._finish(xfer, xfer.t_last, "protocol_error")
+            self._cut_short(xfer, t)
         self._ended.pop(channel.request_cob, None)
         new = Transfer(
             channel, direction, protocol, info.get("index"), info.get("subindex"), t, t, ref
         )
         self._pending[channel.request_cob] = new
         return new
+
+    def _cut_short(self, xfer: Transfer, t: float) -> None:
+        """End the transfer a new initiate request at `t` cuts short (that frame not counted)."""
+        if xfer.failed:
+            self._finish(xfer, xfer.t_last, "protocol_error")
+        elif xfer.t_first_response is None:
+            # Unanswered, and the client moved on (its own timeout or a retry).
+            waited = (t - xfer.t_start) * 1000.0
+            xfer.note(f"no response; the client sent a new request after {waited:.1f} ms")
+            self._finish(xfer, t, "timeout")
+        else:
+            xfer.note("new request on the channel before this transfer ended")
+            self._finish(xfer, xfer.t_last, "protocol_error")
+
+    def cut_short(self, request_cob: int, t: float) -> bool:
+        """A new expedited initiate request on `request_cob` at `t`, taken elsewhere (the fast
+        path): end the transfer in progress there as `feed` would. False when that frame
+        would not start a new transfer (a block download's client segments), so `feed` must
+        take it."""
+        xfer = self._pending.get(request_cob)
+        if xfer is None:
+            return True
+        if xfer.phase == "segments" and xfer.sender_is_client:
+            return False
+        self._cut_short(xfer, t)
+        return True
 
     def _check_echo(self, xfer: Transfer, info: dict) -> str | None:
         echo = (info.get("index"), info.get("subindex"))
