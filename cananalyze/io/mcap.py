@@ -754,6 +754,7 @@ class _swar:
         h = np.clip(high_n, 1, 7).astype(np.uint64) * np.uint64(8)
         second = words[1] if len(words) > 1 else np.zeros_like(words[0])  # short fields
         shifted = (words[0] >> h) | (second << (np.uint64(64) - h))
+        shifted = np.where(high_n >= 8, second, shifted)  # 16 digits: the low 8 are word 1
         low, ok_low = cls.digits8(np.where(high_n == 0, words[0], shifted), low_n)
         return high * 10**low_n + low, ok_high & ok_low & (size >= 1)
 
