@@ -45,6 +45,8 @@ def _reference(batch, off: int, state: dict) -> tuple[list[Row], list[Row]]:
         elif rec.get("kind") == "finding":
             t = float(fb.t[row]) if 0 <= row < n else state["t"]
             events.append(finding_event(row + off, rec, t))
+    for f in batch.findings:  # the Checker's findings (columns), after every record
+        events.append(finding_event(f.row + off, f.record(), f.t))
     levels = {Service.EMCY: ERROR, Service.NMT: INFO, Service.BOOTUP: INFO}
     kinds = {Service.EMCY: "emcy", Service.NMT: "nmt", Service.BOOTUP: "bootup"}
     for i in range(n):
@@ -285,6 +287,6 @@ def test_finding_events_match_per_row(log):
     fb = concat(list(open_log(SAMPLES / log).batches()))
     batches = [decoder.decode(fb.take(slice(s, s + 300))) for s in range(0, len(fb), 300)]
     batches.append(decoder.finish())
-    findings = [r for b in batches for _, r in list(b.records) if r.get("kind") == "finding"]
+    findings = [f for b in batches for f in b.findings]
     assert findings
     assert _assert_same_events(batches) > len(findings)
