@@ -92,9 +92,14 @@ class Capture:
     # --- tables -------------------------------------------------------------
     @cached_property
     def frames(self) -> pd.DataFrame:
-        """One row per frame: t, channel, can_id, dlc, data (hex), flags, service, node, pdo."""
+        """One row per frame: t, channel, can_id, dlc, data (bytes), flags, service, node, pdo.
+
+        `data` is the payload as bytes (pandas' `binary[pyarrow]`), as the Parquet file
+        holds it; `data_hex()` gives the same payloads as lowercase hex text (the CSV's).
+        """
         import pandas as pd
-        import pyarrow as pa
+
+        from .columns.payloads import payload_bytes
 
         fb = self.batch
         channels = list(fb.channels) or ["can0"]
@@ -105,7 +110,7 @@ class Capture:
                 "channel": pd.Categorical.from_codes(chan_codes, categories=channels),
                 "can_id": fb.can_id,
                 "dlc": fb.dlc,
-                "data": pd.Series(pd.arrays.ArrowExtensionArray(_hex_column(fb, pa)), copy=False),
+                "data": pd.Series(pd.arrays.ArrowExtensionArray(payload_bytes(fb)), copy=False),
                 "flags": fb.flags,
                 "service": pd.Categorical.from_codes(
                     self.service.astype(np.int16), categories=list(SERVICE_NAMES)
@@ -114,6 +119,16 @@ class Capture:
                 "pdo": pd.arrays.IntegerArray(self.pdo.astype(np.int8), self.pdo == 0),
             }
         )
+
+    def data_hex(self) -> pd.Series:
+        """`frames.data` as lowercase hex text ("" for a remote frame), built from the
+        payload columns in one pass (a `.map(bytes.hex)` makes a Python string per frame)."""
+        import pandas as pd
+
+        from .columns.payloads import payload_hex
+
+        arr = pd.arrays.ArrowExtensionArray(payload_hex(self.batch))
+        return pd.Series(arr, name="data", copy=False)
 
     @cached_property
     def drive_states(self) -> pd.DataFrame:
@@ -336,21 +351,6 @@ def _categorical(pd, codes: np.ndarray, labels: list[str]):
     """Categorical over possibly repeated labels: map codes onto the unique labels."""
     uniq, inverse = np.unique(np.array(labels, dtype=object), return_inverse=True)
     return pd.Categorical.from_codes(inverse[codes], categories=list(uniq))
-
-
-def _hex_column(fb: FrameBatch, pa):
-    """Payloads as an Arrow string column, built from buffers (no Python string per frame)."""
-    from .columns.hexcols import hex_payload_buffers
-
-    n = len(fb)
-    chars, offsets = hex_payload_buffers(fb.data, fb.dlc, fb.flags)
-    arr = pa.Array.from_buffers(pa.string(), n, [None, pa.py_buffer(offsets), pa.py_buffer(chars)])
-    if fb.long_data:  # CAN FD payloads over 8 bytes: rare, patch them in
-        values = arr.to_pylist()
-        for row, payload in fb.long_data.items():
-            values[row] = payload.hex()
-        arr = pa.array(values, pa.string())
-    return arr
 
 
 def _event_frame(events: list[Event]):
