@@ -33,7 +33,7 @@ import numpy as np
 import pyarrow as pa
 
 from ...columns import arrow_build as ab
-from . import writer as _writer  # its ROW_GROUP and ROW_GROUP_BYTES read at each use (tests set them)
+from . import writer as _writer  # ROW_GROUP(_BYTES) read at each use: tests set them
 from .writer import ROW_GROUP, WRITE_BATCH
 
 KEYS = ("t", "node", "pdo", "cob_id")
