@@ -147,7 +147,7 @@ def main(argv: list[str]) -> int:
     for label, _, _ in runs:
         cpu, wall = best[label]
         mb = sizes[label] / 1e6
-        print(f"{label:34} {cpu:7.3f} {wall:7.3f} {mb:7.2f} {queries[label]:11.3f}")
+        print(f"{label:34} {cpu:7.3f} {wall:7.3f} {mb:7.3f} {queries[label]:11.3f}")
     print(f"load average {os.getloadavg()[0]:.1f}")
     return 0
 

@@ -210,6 +210,26 @@ class Capture:
             }
         )
 
+    @cached_property
+    def signals_by_frame(self) -> pd.DataFrame:
+        """signals.parquet's layout: one row per PDO frame (t, node, pdo, cob_id), a float64
+        column per signal, null where the row's PDO does not carry it (`outputs/tables/wide`
+        names the columns; `signals` is the same values one row per value)."""
+        from .outputs.tables import wide
+
+        names = wide.SignalColumns()
+        pdos = sorted({s.pdo for s in self.series})
+        code = {p: i for i, p in enumerate(pdos)}
+        parts = [
+            (s.rows, s.node, code[s.pdo], s.cob_id, k, s.columns, s.units)
+            for k, s in enumerate(self.series)  # sorted by node, PDO, COB-ID: the rank
+            if len(s.rows)
+        ]
+        if not parts:
+            return wide.arrow_table(wide.empty_rows(), [], wide.schema(names)).to_pandas()
+        rows = wide.frame_rows(self.batch.t, parts, names)
+        return wide.arrow_table(rows, pdos, wide.schema(names)).to_pandas()
+
     def signals_wide(self) -> pd.DataFrame:
         """Time index, one column per `node/pdo/signal`; NaN where a PDO was not sent."""
         import pandas as pd

@@ -226,6 +226,13 @@ def assert_wide_signals_is(cap: Capture, path: Path) -> None:
 
     got, want = norm(wide_signals_as_long(path)), norm(cap.signals)
     pd.testing.assert_frame_equal(got[want.columns], want, check_dtype=False)
+    # and the file is load()'s signals_by_frame, as pandas reads it (the signal columns
+    # in the order they first come: in a log whose times go back, the order written)
+    back = pd.read_parquet(path)
+    like = bool((np.diff(cap.batch.t) < 0).any())
+    pd.testing.assert_frame_equal(
+        back, cap.signals_by_frame, check_categorical=False, check_like=like
+    )
 
 
 def assert_parquet_tables(cap: Capture, folder: Path) -> None:

@@ -49,7 +49,7 @@ def test_remap_mid_log_new_columns_in_one_file(tmp_path, monkeypatch, row_group)
     signals end that part and the parts are merged. Either way one file, same content."""
     monkeypatch.setattr(table_writer, "ROW_GROUP", row_group)
     log = _remap_log(tmp_path / "remap.log")
-    out = export(log, tmp_path / "x", device=I7231D)["parquet"]
+    out = export(log, tmp_path / "x", size=10, device=I7231D)["parquet"]  # batches of 10
     path = out / "signals.parquet"
     assert sorted(p.name for p in out.iterdir()) == sorted(
         f"{n}.parquet" for n in ("frames", "signals", "sdo", "events", "findings", "nodes")

@@ -124,6 +124,18 @@ def frame_rows(t_all: np.ndarray, parts: list[tuple], names: SignalColumns) -> d
     return out
 
 
+def empty_rows() -> dict:
+    """frame_rows' result for no rows."""
+    z = np.zeros(0)
+    return {
+        "t": z,
+        "node": z.astype(np.int16),
+        "pdo": z.astype(np.int32),
+        "cob_id": z.astype(np.uint32),
+        "signals": {},
+    }
+
+
 def arrow_table(rows: dict, labels: list[str], sch: pa.Schema) -> pa.Table:
     """The batch's rows in the file's schema (signals it lacks: null)."""
     n = len(rows["t"])
@@ -199,7 +211,7 @@ class WideWriter:
         tables = [arrow_table(rows, labels, want) for rows, labels in self.buffer]
         table = pa.concat_tables(tables) if tables else pa.Table.from_batches([], want)
         self.buffer, self.buffered, self.bytes = [], 0, 0
-        self.writer.write_table(table, row_group_size=ROW_GROUP)
+        self.writer.write_table(table, row_group_size=_writer.ROW_GROUP)
         self.rows += table.num_rows
 
     def close(self) -> None:
