@@ -92,9 +92,14 @@ class Capture:
     # --- tables -------------------------------------------------------------
     @cached_property
     def frames(self) -> pd.DataFrame:
-        """One row per frame: t, channel, can_id, dlc, data (hex), flags, service, node, pdo."""
+        """One row per frame: t, channel, can_id, dlc, data (bytes), flags, service, node, pdo.
+
+        `data` is the payload as bytes (pandas' `binary[pyarrow]`), as the Parquet file
+        holds it; `data_hex()` gives the same payloads as lowercase hex text (the CSV's).
+        """
         import pandas as pd
-        import pyarrow as pa
+
+        from .columns.payloads import payload_bytes
 
         fb = self.batch
         channels = list(fb.channels) or ["can0"]
@@ -105,7 +110,7 @@ class Capture:
                 "channel": pd.Categorical.from_codes(chan_codes, categories=channels),
                 "can_id": fb.can_id,
                 "dlc": fb.dlc,
-                "data": pd.Series(pd.arrays.ArrowExtensionArray(_hex_column(fb, pa)), copy=False),
+                "data": pd.Series(pd.arrays.ArrowExtensionArray(payload_bytes(fb)), copy=False),
                 "flags": fb.flags,
                 "service": pd.Categorical.from_codes(
                     self.service.astype(np.int16), categories=list(SERVICE_NAMES)
@@ -114,6 +119,16 @@ class Capture:
                 "pdo": pd.arrays.IntegerArray(self.pdo.astype(np.int8), self.pdo == 0),
             }
         )
+
+    def data_hex(self) -> pd.Series:
+        """`frames.data` as lowercase hex text ("" for a remote frame), built from the
+        payload columns in one pass (a `.map(bytes.hex)` makes a Python string per frame)."""
+        import pandas as pd
+
+        from .columns.payloads import payload_hex
+
+        arr = pd.arrays.ArrowExtensionArray(payload_hex(self.batch))
+        return pd.Series(arr, name="data", copy=False)
 
     @cached_property
     def drive_states(self) -> pd.DataFrame:
@@ -194,6 +209,26 @@ class Capture:
                 "unit": _categorical(pd, code, [u or "" for u in units]),
             }
         )
+
+    @cached_property
+    def signals_by_frame(self) -> pd.DataFrame:
+        """signals.parquet's layout: one row per PDO frame (t, node, pdo, cob_id), a float64
+        column per signal, null where the row's PDO does not carry it (`outputs/tables/wide`
+        names the columns; `signals` is the same values one row per value)."""
+        from .outputs.tables import wide
+
+        names = wide.SignalColumns()
+        pdos = sorted({s.pdo for s in self.series})
+        code = {p: i for i, p in enumerate(pdos)}
+        parts = [
+            (s.rows, s.node, code[s.pdo], s.cob_id, k, s.columns, s.units)
+            for k, s in enumerate(self.series)  # sorted by node, PDO, COB-ID: the rank
+            if len(s.rows)
+        ]
+        if not parts:
+            return wide.arrow_table(wide.empty_rows(), [], wide.schema(names)).to_pandas()
+        rows = wide.frame_rows(self.batch.t, parts, names)
+        return wide.arrow_table(rows, pdos, wide.schema(names)).to_pandas()
 
     def signals_wide(self) -> pd.DataFrame:
         """Time index, one column per `node/pdo/signal`; NaN where a PDO was not sent."""
@@ -338,21 +373,6 @@ def _categorical(pd, codes: np.ndarray, labels: list[str]):
     """Categorical over possibly repeated labels: map codes onto the unique labels."""
     uniq, inverse = np.unique(np.array(labels, dtype=object), return_inverse=True)
     return pd.Categorical.from_codes(inverse[codes], categories=list(uniq))
-
-
-def _hex_column(fb: FrameBatch, pa):
-    """Payloads as an Arrow string column, built from buffers (no Python string per frame)."""
-    from .columns.hexcols import hex_payload_buffers
-
-    n = len(fb)
-    chars, offsets = hex_payload_buffers(fb.data, fb.dlc, fb.flags)
-    arr = pa.Array.from_buffers(pa.string(), n, [None, pa.py_buffer(offsets), pa.py_buffer(chars)])
-    if fb.long_data:  # CAN FD payloads over 8 bytes: rare, patch them in
-        values = arr.to_pylist()
-        for row, payload in fb.long_data.items():
-            values[row] = payload.hex()
-        arr = pa.array(values, pa.string())
-    return arr
 
 
 def _event_frame(events: list[Event]):

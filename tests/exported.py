@@ -182,10 +182,67 @@ def assert_parquet_is(df: pd.DataFrame, path: Path, index: bool = False) -> None
     pd.testing.assert_frame_equal(back, df, check_dtype=False, check_categorical=False)
 
 
+SIGNAL_KEYS = ["t", "node", "pdo", "cob_id"]
+
+
+def wide_signals_as_long(path: Path) -> pd.DataFrame:
+    """The wide signals file (one row per PDO frame, a column per signal) back in the long
+    form, by DuckDB's UNPIVOT (nulls dropped: a row's PDO does not carry that signal),
+    each column's signal name and unit from its Parquet field metadata (pyarrow)."""
+    import duckdb
+
+    schema = pq.read_schema(path)
+    meta = {
+        f.name: (f.metadata[b"signal"].decode(), f.metadata[b"unit"].decode())
+        for f in schema
+        if f.name not in SIGNAL_KEYS
+    }
+    if not meta:
+        return pd.DataFrame({c: [] for c in [*SIGNAL_KEYS, "signal", "value", "unit"]})
+    con = duckdb.connect()
+    long = con.execute(
+        f"UNPIVOT (SELECT * FROM read_parquet('{path}')) "
+        "ON COLUMNS(* EXCLUDE (t, node, pdo, cob_id)) INTO NAME col VALUE value"
+    ).df()
+    long["signal"] = long["col"].map(lambda c: meta[c][0])
+    long["unit"] = long["col"].map(lambda c: meta[c][1])
+    return long[[*SIGNAL_KEYS, "signal", "value", "unit"]]
+
+
+def assert_wide_signals_is(cap: Capture, path: Path) -> None:
+    """signals.parquet holds load()'s signals, one row per PDO frame: by time, each frame
+    once, and its values (DuckDB's UNPIVOT of it) are exactly `cap.signals`' rows."""
+    table = pq.read_table(path)
+    assert table.column_names[:4] == SIGNAL_KEYS, path.name
+    assert table.num_rows == sum(len(s.t) for s in cap.series), path.name
+    t = table.column("t").to_numpy()
+    assert (np.diff(t) >= 0).all(), path.name
+    key = [*SIGNAL_KEYS, "signal"]
+
+    def norm(df: pd.DataFrame) -> pd.DataFrame:
+        df = df.astype({"node": "int64", "cob_id": "int64", "pdo": str, "signal": str})
+        df = df.astype({"unit": str, "value": "float64", "t": "float64"})
+        return df.sort_values([*key, "value"], kind="stable").reset_index(drop=True)
+
+    got, want = norm(wide_signals_as_long(path)), norm(cap.signals)
+    pd.testing.assert_frame_equal(got[want.columns], want, check_dtype=False)
+    # and the file is load()'s signals_by_frame, as pandas reads it (the signal columns
+    # in the order they first come: in a log whose times go back, the order written)
+    back = pd.read_parquet(path)
+    like = bool((np.diff(cap.batch.t) < 0).any())
+    pd.testing.assert_frame_equal(
+        back, cap.signals_by_frame, check_categorical=False, check_like=like
+    )
+
+
 def assert_parquet_tables(cap: Capture, folder: Path) -> None:
-    """The folder holds the six table files, each load()'s table."""
+    """The folder holds the six table files, each load()'s table (signals in its wide
+    layout, whose long view is load()'s `signals`)."""
     assert sorted(p.name for p in folder.iterdir()) == sorted(f"{n}.parquet" for n in TABLES)
     for name in TABLES:
+        if name == "signals":
+            assert_wide_signals_is(cap, folder / "signals.parquet")
+            continue
         assert_parquet_is(getattr(cap, name), folder / f"{name}.parquet", index=name == "nodes")
 
 
@@ -202,6 +259,8 @@ def _csv_text(values: pd.Series) -> list:
             out.append("true" if v else "false")
         elif isinstance(v, (int, np.integer)):
             out.append(int(v))
+        elif isinstance(v, bytes):  # frames.data: CSV is text, the payload as hex
+            out.append(v.hex() or None)
         else:
             out.append(str(v))
     return out
@@ -413,7 +472,7 @@ def assert_mcap_is(cap: Capture, path: Path) -> Mcap:
             ("channel", f["channel"].astype(str).tolist()),
             ("can_id", f["can_id"].tolist()),
             ("dlc", f["dlc"].tolist()),
-            ("data", f["data"].tolist()),
+            ("data", [bytes(d).hex() for d in f["data"]]),
             ("flags", f["flags"].tolist()),
             ("service", f["service"].astype(str).tolist()),
             ("node", node),

@@ -25,6 +25,7 @@ SMOKED = {
     "bench_live.py",
     "bench_report.py",
     "bench_pcap.py",
+    "bench_tables.py",
     "bench_precision.py",
     "mem_profile.py",
     "fuzz_campaign.py",
@@ -73,6 +74,25 @@ def test_bench_check(logs):
     assert re.fullmatch(rf"decode --summary +best CPU +{NUMBER} s +best wall +{NUMBER} s", lines[0])
     assert re.fullmatch(rf"check +best CPU +{NUMBER} s +best wall +{NUMBER} s", lines[1])
     assert re.fullmatch(rf"check overhead: [+-]{NUMBER} % CPU \(3000 frames, best of 1\)", lines[2])
+
+
+def test_bench_tables_compares_each_layout(logs, tmp_path):
+    """Every layout variant gets CPU, wall, size and a query figure; the chosen layout is
+    smaller than the payload as hex and than signals one row per value."""
+    devices = [a for k in range(1, 17) for a in ("--device", f"{k}=dat7014")]
+    out = tmp_path / "pq"
+    cmd = [sys.executable, "-m", "cananalyze", "export", str(logs / "bench_3000.log")]
+    subprocess.run([*cmd, "--parquet", str(out), *devices, "-q"], check=True, cwd=ROOT)
+    done = _run("bench_tables.py", str(out), "--repeat", "1")
+    rows = {}
+    for line in done.stdout.splitlines()[1:-1]:
+        label, figures = line[:34].strip(), line[34:].split()
+        assert len(figures) == 4 and all(re.fullmatch(NUMBER, f) for f in figures), line
+        rows[label] = [float(f) for f in figures]
+    assert len(rows) == 12
+    assert rows["frames: as written"][2] < rows["frames: data as hex text"][2]
+    assert rows["signals: as written"][2] < rows["signals: one row per value"][2]
+    assert done.stdout.splitlines()[-1].startswith("load average")
 
 
 def test_bench_fleet(tmp_path):

@@ -53,12 +53,12 @@ def _normalised(cap, name: str, err: np.ndarray) -> pd.DataFrame:
     if name == "frames":
         df.loc[err, ["dlc", "flags"]] = 0
         df["data"] = df["data"].astype(object)
-        df.loc[err, "data"] = ""
+        df.loc[err, "data"] = b""
         df["service"] = df["service"].astype(object)
         df.loc[err, "service"] = "error_frame"
         classic = (df["flags"].to_numpy() & FLAG_FD) == 0
         df.loc[classic, "dlc"] = np.minimum(df.loc[classic, "dlc"], 8)
-        df.loc[classic, "data"] = df.loc[classic, "data"].str.slice(0, 16)
+        df.loc[classic, "data"] = df.loc[classic, "data"].map(lambda d: d[:8])
     # what each side concludes about the error frames: the fast path's error_frames
     # finding, or python-can's "unknown 29-bit identifier" for the same frames
     err_ids = {f"0x{i:08X}" for i in cap.frames["can_id"].to_numpy()[err].tolist()}
@@ -141,7 +141,7 @@ def test_a_difference_is_seen(generated: dict[str, Path]) -> None:
     fast = cananalyze.load(generated[".log"], device=DEVICES)
     frames = _normalised(fast, "frames", np.zeros(len(fast.frames), bool))
     changed = frames.copy()
-    changed.loc[100, "data"] = "ff" + str(changed.loc[100, "data"])[2:]
+    changed.loc[100, "data"] = b"\xff" + changed.loc[100, "data"][1:]
     assert not np.array_equal(frames["data"].to_numpy(), changed["data"].to_numpy())
     with pytest.raises(AssertionError):
         pd.testing.assert_frame_equal(frames, changed, obj="frames")

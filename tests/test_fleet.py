@@ -15,6 +15,7 @@ import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 import pytest
 from conftest import real_file
+from exported import wide_signals_as_long
 
 from cananalyze import __version__
 from cananalyze.cli.main import main
@@ -142,6 +143,18 @@ def _single_export(path: Path, out: Path, opts: Options) -> Path:
     return out
 
 
+def _signal_key(r: dict) -> tuple:
+    return (r["t"], r["node"], r["pdo"], r["cob_id"], r["signal"])
+
+
+def _long_rows(path: Path) -> list[dict]:
+    """The wide signals file's rows one per value (DuckDB's UNPIVOT), in a fixed order."""
+    long = wide_signals_as_long(path)
+    long = long.astype({"node": int, "cob_id": int, "pdo": str, "signal": str, "unit": str})
+    rows = pa.Table.from_pandas(long, preserve_index=False).to_pylist()  # Python values
+    return sorted(rows, key=_signal_key)
+
+
 def test_fleet_frames_equal_the_single_log_exports(fleet, tmp_path):
     """Every row of every table: the fleet's part is the one-log export plus lineage."""
     frames = _table(fleet["dataset"], "frames")
@@ -158,6 +171,9 @@ def test_fleet_frames_equal_the_single_log_exports(fleet, tmp_path):
             ]
             assert len(part) == 1, (name, log)
             theirs = pq.read_table(part[0]).to_pylist()
+            if name == "signals":  # the export's is wide, the dataset's one row per value
+                mine = _long_rows(single / "signals.parquet")
+                theirs = sorted(theirs, key=_signal_key)
             assert len(theirs) == len(mine), (name, log)
             for row in theirs:
                 assert row.pop("source") == str(log) and row.pop("hash") == digest
@@ -186,6 +202,16 @@ def test_duckdb_reads_the_dataset_with_hive_partitioning(fleet):
         "hive_partitioning = true) LIMIT 1"
     ).fetchone()[0]
     assert typ == "DATE"
+    # frames.data: the payload's bytes (a BLOB to DuckDB), dlc of them
+    bad = con.execute(
+        f"SELECT typeof(data), count(*) FROM read_parquet('{dataset}/frames/*/*.parquet') "
+        "WHERE octet_length(data) <> dlc AND flags & 2 = 0 GROUP BY ALL"
+    ).fetchall()
+    assert bad == []
+    ((blob,),) = con.execute(
+        f"SELECT DISTINCT typeof(data) FROM read_parquet('{dataset}/frames/*/*.parquet')"
+    ).fetchall()
+    assert blob == "BLOB"
     # one schema per table in every part (Spark and pyarrow.dataset need it), no null
     # type, and the lineage columns last
     for name in TABLES:

@@ -77,7 +77,7 @@ def test_frames_per_service_as_python_can_reads_them(tmp_path):
     assert len(frames) == len(msgs) == 1200  # samples/README.md
     assert frames["can_id"].tolist() == [m.arbitration_id for m in msgs]
     assert frames["t"].tolist() == pytest.approx([m.timestamp for m in msgs], abs=1e-6)
-    assert frames["data"].tolist() == [bytes(m.data).hex() for m in msgs]
+    assert frames["data"].tolist() == [bytes(m.data) for m in msgs]  # bytes, not hex text
     counts = frames["service"].astype(str).value_counts().to_dict()
     # samples/README.md: 114 SYNC, 345 heartbeats, 114 guard requests and replies,
     # 376 TPDOs, 20 RPDOs, 56 SDO requests and responses, 4 boot-ups, one NMT start

@@ -62,7 +62,8 @@ def test_frames_table_matches_log_text(cap):
     assert len(f) == len(lines)
     assert f["t"].tolist() == [x[0] for x in lines]
     assert f["can_id"].tolist() == [x[1] for x in lines]
-    assert f["data"].tolist() == [x[2] for x in lines]
+    assert f["data"].tolist() == [bytes.fromhex(x[2]) for x in lines]  # bytes
+    assert cap.data_hex().tolist() == [x[2] for x in lines]  # and as the log's hex text
     data_rows = [i for i, x in enumerate(lines) if x[2]]
     assert f["dlc"][data_rows].tolist() == [len(lines[i][2]) // 2 for i in data_rows]
     # 0x000 NMT and 0x080 SYNC belong to no node; heartbeats 0x70N do
@@ -83,7 +84,8 @@ def test_frames_table_matches_log_text(cap):
 def test_rtr_frames_have_empty_data(cap):
     rtr = (cap.batch.flags & FLAG_RTR) != 0
     assert rtr.any()
-    assert (cap.frames["data"][rtr] == "").all()
+    assert (cap.frames["data"][rtr] == b"").all()
+    assert (cap.data_hex()[rtr] == "").all()
 
 
 def test_signals_long_and_wide_agree_with_manual_values(cap):

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import bisect
 import contextlib
+import dataclasses
 import operator
 import pickle
 import tempfile
@@ -29,10 +30,10 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from ...capture import _hex_column
 from ...checks.columns import FindingColumns
 from ...checks.finding import TABLE_COLUMNS
 from ...columns import arrow_build as ab
+from ...columns.payloads import payload_bytes, payload_hex
 from ...errors import UsageError
 from ...events.build import LEVEL_NAMES, EventState, batch_events_of
 from ...events.columns import KINDS, NO_NODE, NO_ROW, EventColumns
@@ -44,7 +45,7 @@ from ...sdo.transaction import SDO_TABLE_COLUMNS
 from ..atomic import atomic_path
 from ..sink import Sink as OutputSink
 from . import pandas_like as pl
-from . import sdo_chunks
+from . import sdo_chunks, wide
 from .writer import (
     ROW_GROUP,
     ROW_GROUP_BYTES,
@@ -89,7 +90,7 @@ FRAMES = TableSpec(
         ("channel", None),
         ("can_id", pa.uint32()),
         ("dlc", pa.uint8()),
-        ("data", pa.string()),
+        ("data", pa.binary()),
         ("flags", pa.uint8()),
         ("service", pa.dictionary(pl.code_type(len(SERVICE_NAMES)), pa.string())),
         ("node", pa.int16()),
@@ -101,7 +102,7 @@ FRAMES = TableSpec(
             _cat("channel"),
             pl.field_meta("can_id", "uint32", "uint32"),
             pl.field_meta("dlc", "uint8", "uint8"),
-            pl.field_meta("data", "unicode", "string[pyarrow]"),
+            pl.field_meta("data", "bytes", "binary[pyarrow]"),
             pl.field_meta("flags", "uint8", "uint8"),
             _cat("service", len(SERVICE_NAMES)),
             pl.field_meta("node", "int16", "Int16"),
@@ -110,6 +111,7 @@ FRAMES = TableSpec(
     ),
     dictionary=("channel", "can_id", "dlc", "flags", "service", "node", "pdo"),
     split=("t",),
+    statistics=("t",),
 )
 SIGNALS = TableSpec(
     [
@@ -135,6 +137,7 @@ SIGNALS = TableSpec(
     sorted_labels=("pdo", "signal", "unit"),
     dictionary=("node", "pdo", "cob_id", "signal", "unit"),
     split=("t",),
+    statistics=("t",),
 )
 EVENTS = TableSpec(
     [
@@ -156,11 +159,20 @@ EVENTS = TableSpec(
         ]
     ),
     sorted_labels=("kind",),
+    dictionary=("kind", "level", "node"),
+    statistics=("t",),
 )
 
 
-def _frames_columns(fb: FrameBatch, service, node, pdo) -> dict:
-    """Built on the writer thread (the payload hex column is most of the frames table's cost)."""
+# CSV is text: its `data` column is the payloads' hex, as `decode --format jsonl` writes them
+FRAMES_CSV = dataclasses.replace(
+    FRAMES, fields=[(n, pa.string() if n == "data" else t) for n, t in FRAMES.fields]
+)
+
+
+def _frames_columns(fb: FrameBatch, service, node, pdo, text: bool = False) -> dict:
+    """Built on the writer thread (the payload column is the largest of the frames table);
+    `text`: the payloads as hex (CSV), else bytes."""
     channels = list(fb.channels) or ["can0"]
     chan = np.minimum(fb.channel, len(channels) - 1).astype(np.int32)
     return {
@@ -168,7 +180,7 @@ def _frames_columns(fb: FrameBatch, service, node, pdo) -> dict:
         "channel": Coded(chan, channels),
         "can_id": ab.numeric(fb.can_id),
         "dlc": ab.numeric(fb.dlc),
-        "data": _hex_column(fb, pa),
+        "data": payload_hex(fb) if text else payload_bytes(fb),
         "flags": ab.numeric(fb.flags),
         "service": ab.dictionary(service, _SERVICES, pa.int8()),
         "node": ab.numeric(node.astype(np.int16, copy=False), node < 0),
@@ -233,9 +245,21 @@ class TableSink(OutputSink):
         self.paths: dict[str, Path] = {}
         for name in TABLES:
             self.paths[name] = self._stack.enter_context(atomic_path(self.dir / f"{name}.{fmt}"))
+        # signals.parquet one row per PDO frame, a column per signal (`wide`); CSV and a
+        # fleet's dataset parts keep one row per value: a CSV header is fixed at its first
+        # line, and every part of a dataset table must share one schema whatever the
+        # devices of its log are called
+        self.wide = (
+            wide.WideWriter(self.paths["signals"], compression)
+            if fmt == "parquet" and not self.constants
+            else None
+        )
+        tables = [("frames", FRAMES if fmt == "parquet" else FRAMES_CSV), ("events", EVENTS)]
+        if self.wide is None:
+            tables.insert(1, ("signals", SIGNALS))
         self.sinks = {
             name: Sink(self.paths[name], fmt, spec, compression, self.constants)
-            for name, spec in (("frames", FRAMES), ("signals", SIGNALS), ("events", EVENTS))
+            for name, spec in tables
         }
         # two writer threads: the frames table (most of the Parquet encoding, outside
         # the GIL) runs beside the others, so neither queue holds the decoder back.
@@ -282,9 +306,11 @@ class TableSink(OutputSink):
             if len(fb.channels) > len(self._channels):
                 self._channels = tuple(fb.channels)
             frames = self.sinks["frames"]
-            args = (fb, batch.service, batch.node, batch.pdo)
+            args = (fb, batch.service, batch.node, batch.pdo, self.fmt == "csv")
             self.frames_writer.put(lambda: frames.add(_frames_columns(*args)))
-        if batch.signals:
+        if batch.signals and self.wide is not None:
+            self._add_wide(batch)
+        elif batch.signals:
             self._add_signals(batch, off)
         self._add_records(batch)
         if len(batch.findings):
@@ -368,6 +394,37 @@ class TableSink(OutputSink):
 
         sink = self.sinks["signals"]
         self.writer.put(lambda: sink.add(columns()))
+
+    def _add_wide(self, batch: DecodedBatch) -> None:
+        """The batch's PDO frames as wide rows (`wide.frame_rows`), on the writer thread."""
+        parts, keys = [], []
+        for blk in batch.signals:
+            skey = (blk.node, blk.pdo, blk.cob_id, tuple(blk.columns))
+            got = self._series.get(skey)
+            if got is None:
+                got = self._series[skey] = (len(self._series), dict(blk.units))
+            ins, units = got
+            keys.append((blk.node, blk.pdo, blk.cob_id, ins))
+            code = self._labels["pdo"].code(blk.pdo)
+            parts.append([blk.rows, blk.node, code, blk.cob_id, 0, blk.columns, units])
+        rank_of = {k: r for r, k in enumerate(sorted(set(keys)))}
+        for part, k in zip(parts, keys, strict=True):
+            part[4] = rank_of[k]
+        labels = self._labels["pdo"].snapshot()
+        t_all = batch.frames.t
+        out = self.wide
+
+        def job() -> None:
+            rows = wide.frame_rows(t_all, [tuple(p) for p in parts], out.names)
+            t = rows["t"]
+            if len(t):
+                head = (float(t[0]), int(rows["node"][0]), labels[rows["pdo"][0]])
+                if self._signal_last is not None and head < self._signal_last:
+                    self._signals_unsorted = True
+                self._signal_last = (float(t[-1]), int(rows["node"][-1]), labels[rows["pdo"][-1]])
+            out.add(rows, labels)
+
+        self.writer.put(job)
 
     def _add_events(self, events: EventColumns, horizon: float | None) -> None:
         """Queue events; write those older than `horizon` (None: all) in (t, row) order.
@@ -500,12 +557,16 @@ class TableSink(OutputSink):
                 self._sdo_spec = False
             for name, sink in self.sinks.items():
                 (self.frames_writer if name == "frames" else self.writer).put(sink.close)
+            if self.wide is not None:
+                self.writer.put(self.wide.close)
             self.frames_writer.join()
             self.writer.join()
             self._finish_signals()
             self._finish_events()
             self._finish_frames()
             self.rows.update({name: s.rows for name, s in self.sinks.items()})
+            if self.wide is not None:
+                self.rows["signals"] = self.wide.rows
             self.rows["sdo"] = self._write_sdo(sdo_done)
             self.rows["findings"] = self._write_findings()
             self.rows["nodes"] = self._write_nodes()
@@ -519,6 +580,8 @@ class TableSink(OutputSink):
         for writer in (self.frames_writer, self.writer):
             with contextlib.suppress(BaseException):
                 writer.join()
+        if self.wide is not None:
+            self.wide.discard()
         if self._sdo_spec:
             with contextlib.suppress(BaseException):
                 self._sdo_spec[2].discard()
@@ -536,6 +599,10 @@ class TableSink(OutputSink):
             rewrite(sink, {"channel": final})
 
     def _finish_signals(self) -> None:
+        if self.wide is not None:
+            if self._signals_unsorted:
+                wide.resort(self.paths["signals"], self.compression)
+            return
         sink = self.sinks["signals"]
         final = {k: sorted(sink.order.get(k, [])) for k in ("pdo", "signal", "unit")}
         if self._signals_unsorted:

@@ -81,13 +81,20 @@ class TableSpec:
     # BYTE_STREAM_SPLIT for float columns whose bytes vary at the bottom (times): the
     # frames table's `t` encodes in half the time and is a third smaller than PLAIN
     split: tuple[str, ...] = ()
+    # min/max statistics only where a reader prunes row groups with them: DuckDB and
+    # pyarrow.dataset skip a row group by the min/max of a filtered column, and only
+    # time is ordered in these tables (a row group holds every node, COB-ID and
+    # service of its quarter-second, so their ranges prune nothing); computing them
+    # on every column was a tenth of the frames table's encoding (bench_tables.py)
+    statistics: tuple[str, ...] | bool = True
 
     def parquet_options(self) -> dict:
         """The ParquetWriter keywords of this table's column encodings."""
-        d = self.dictionary
+        d, s = self.dictionary, self.statistics
         return {
             "use_dictionary": list(d) if d is not True else True,
             "use_byte_stream_split": list(self.split) if self.split else False,
+            "write_statistics": list(s) if s is not True else True,
             "write_batch_size": WRITE_BATCH,
         }
 
@@ -184,8 +191,11 @@ class Sink:
 
     def parquet_options(self) -> dict:
         opts = self.spec.parquet_options()
-        if self.constants and opts["use_dictionary"] is not True:
-            opts["use_dictionary"] = [*opts["use_dictionary"], *self.constants]
+        # a dataset part's lineage (source, hash, version) is one value per file: its
+        # statistics let DuckDB skip whole files of other logs (`WHERE source = ...`)
+        for key in ("use_dictionary", "write_statistics"):
+            if self.constants and opts[key] is not True:
+                opts[key] = [*opts[key], *self.constants]
         return opts
 
     def _batch(self, cols: dict) -> pa.RecordBatch:
