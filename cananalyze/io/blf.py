@@ -58,6 +58,7 @@ CAN_MESSAGE2 = 86
 CAN_FD_MESSAGE = 100
 CAN_FD_MESSAGE_64 = 101
 _WANTED = (CAN_MESSAGE, CAN_MESSAGE2, CAN_ERROR_EXT, CAN_FD_MESSAGE, CAN_FD_MESSAGE_64)
+_OBJ_HEADER = 32  # the shortest object header (base and v1): its flags and time end there
 # Bytes of each record body that must be present (payload starts after the object header).
 _BODY = {
     CAN_MESSAGE: 16,
@@ -200,7 +201,7 @@ class _Records:
                 break  # continues in the next container
             self.record += 1
             if kind in _WANTED:
-                if hver not in (1, 2) or size < hsize + _BODY[kind]:
+                if hver not in (1, 2) or hsize < _OBJ_HEADER or size < hsize + _BODY[kind]:
                     self.ctx.problems.add(
                         self.ctx.source,
                         f"record {self.record}",
@@ -332,8 +333,9 @@ class _Records:
             fd = (q + 12).u(4)
             direction = (q + 34).u(1)
             ext_off = (q + 35).u(1).astype(np.int64)
-            # python-can issue 1905: valid_bytes may exceed the bytes stored; pad with zeros
-            room = np.where(ext_off > 0, ext_off, size[m]) - hsize[m] - 40
+            # python-can issue 1905: valid_bytes may exceed the bytes stored; pad with zeros.
+            # An extension offset beyond the object bounds nothing: the payload ends with it.
+            room = np.minimum(np.where(ext_off > 0, ext_off, size[m]), size[m]) - hsize[m] - 40
             stored = np.clip(np.minimum(valid, room), 0, 64)
             rtr = (fd & 0x0010) != 0
             b.can_id[m] = raw & 0x1FFFFFFF
