@@ -26,8 +26,9 @@ this run generated.
 place) runs every figure's command for both trees, one after the other in the
 same rounds (the other tree's processes with PYTHONPATH=PATH, in PATH), and
 prints both trees' best CPU (user + system) and wall seconds side by side with
-their ratios, this tree over the other. python-can's and canopen-lens's figures
-are the same for both trees and are left out.
+their ratios, this tree over the other (`--only TEXT`: just the figures whose
+label contains TEXT, e.g. `--only "read only .blf"`). python-can's and
+canopen-lens's figures are the same for both trees and are left out.
 """
 
 from __future__ import annotations
@@ -231,6 +232,11 @@ def main(argv: list[str]) -> int:
         help="also run every figure for the checkout at PATH (compiled helper built), "
         "in the same rounds, and print both side by side",
     )
+    ap.add_argument(
+        "--only",
+        metavar="TEXT",
+        help="with --against: only the figures whose label contains TEXT (e.g. 'read only .blf')",
+    )
     args = ap.parse_args(argv)
     n = int(1e6 if args.quick else args.size)
     formats = args.formats.split(",")
@@ -339,6 +345,8 @@ def compare(args, n: int, formats: list[str], made: list[Path]) -> list[str]:
     pairs = []
     with tempfile.TemporaryDirectory(dir=args.out) as tmp:
         for label, argv, ok, leaves in commands(stem, formats, Path(tmp), timeline_log):
+            if args.only and args.only not in label:
+                continue
             mine = Run(argv, ok, ROOT, strict=False, after=_remove(leaves))
             theirs = Run(argv, ok, other, strict=False, after=_remove(leaves))
             pairs.append((label, mine, theirs))
