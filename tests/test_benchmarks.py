@@ -138,11 +138,12 @@ def test_bench_decode_prints_every_figure(logs):
     assert not list(logs.glob("tmp*"))  # its temporary outputs are gone
 
 
-def test_bench_decode_against_another_tree(logs):
-    """--against with this same checkout: both columns measured, every figure, ratios."""
+def test_bench_decode_against_another_tree(logs, tmp_path):
+    """--against with this same checkout: both columns measured, ratios; `--only` keeps the
+    run short (every figure's command is listed below, from the same `commands`)."""
     out = _run(
         "bench_decode.py",
-        *("--size", "3000", "--formats", ".log", "--repeat", "1"),
+        *("--size", "3000", "--formats", ".log", "--repeat", "1", "--only", "export"),
         *("--out", str(logs), "--against", str(ROOT)),
     ).stdout
     rows = out[out.index("this / other") :].splitlines()[2:]
@@ -154,6 +155,16 @@ def test_bench_decode_against_another_tree(logs):
         labels.append(m.group(1).strip())
     assert labels == [
         "export --parquet .log",
+        "export --mcap (.log, 16 devices)",
+        "export --rrd (.log, 16 devices)",
+    ]
+    assert f"other tree (--against): {ROOT}" in out
+    spec = importlib.util.spec_from_file_location("bench_decode", BENCH / "bench_decode.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    every = bench.commands(logs / "bench_3000", [".log"], tmp_path, logs / "bench_3000.log")
+    assert [c[0] for c in every] == [
+        "export --parquet .log",
         "decode --summary .log",
         "read only .log",
         "check .log",
@@ -164,7 +175,6 @@ def test_bench_decode_against_another_tree(logs):
         "export --rrd (.log, 16 devices)",
         "cananalyze --help",
     ]
-    assert f"other tree (--against): {ROOT}" in out
 
 
 def test_bench_decode_against_a_folder_without_cananalyze(tmp_path):
