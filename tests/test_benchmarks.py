@@ -5,6 +5,7 @@ so none of them rots while the code it measures changes. The numbers are not jud
 from __future__ import annotations
 
 import ctypes
+import importlib.util
 import re
 import subprocess
 import sys
@@ -117,32 +118,52 @@ def test_bench_decode_prints_every_figure(logs):
     ).stdout
     table = out[out.index("machine:") :].splitlines()[1:]
     names = [re.split(r"  +", line.strip())[0] for line in table]
+    lens = importlib.util.find_spec("canopen_lens") is not None
     assert names == [
-        "python-can LogReader / export --parquet .log",
-        "python-can LogReader / decode --summary .log",
+        "-- CPU seconds (user + system), both sides in the same rounds",
+        "python-can LogReader / export --parquet .log, cpu",
+        "canopen-lens / export --parquet .log, cpu",
+        "python-can LogReader / decode --summary .log, cpu",
+        "python-can LogReader / read only .log, cpu",
         "python-can timed on",
-        "export --parquet .log frames/s",
-        "decode --summary .log frames/s",
         "check vs decode --summary (.log), cpu",
+        "-- wall seconds, the 1-minute load average beside",
+        "export --parquet .log frames/s",
+        "python-can LogReader / export --parquet .log, wall",
+        "decode --summary .log frames/s",
+        "read only .log frames/s",
+        *(["canopen-lens .log frames/s"] if lens else []),
         "check vs decode --summary (.log), wall",
         "decode -o FILE (.log, no devices) lines/s",
         "decode -o FILE (.log, 16 devices) lines/s",
         "decode -o FILE (.log, no devices, jsonl) lines/s",
         "export --mcap (.log, 16 devices) frames/s",
         "export --rrd (.log, 16 devices) frames/s",
+        "-- memory and start-up",
         "peak RSS export --parquet at 0.003M",
         "peak RSS flatness",
         "cananalyze --help",
     ]
+    cpu = rf"{NUMBER}x  \({NUMBER} s / {NUMBER} s\)"
+    ratio = next(line for line in table if "export --parquet .log, cpu" in line)
+    assert re.search(rf"  {cpu} +>= 9x +(ok|BELOW)$", ratio), ratio
+    lens_row = next(line for line in table if line.startswith("canopen-lens / export"))
+    if lens:  # canopen-lens parsed and analysed the same log (a run that read nothing fails)
+        assert re.search(rf"  {cpu} +> 1x +(ok|BELOW)$", lens_row), lens_row
+    else:
+        assert "not installed" in lens_row
+    export = next(line for line in table if line.startswith("export --parquet .log frames/s"))
+    assert re.search(rf"cpu {NUMBER} s, load {NUMBER}, {NUMBER} MB\)", export), export
     assert "(3,091 lines," in out  # 3000 frames, and the records between them
     assert not list(logs.glob("tmp*"))  # its temporary outputs are gone
 
 
-def test_bench_decode_against_another_tree(logs):
-    """--against with this same checkout: both columns measured, every figure, ratios."""
+def test_bench_decode_against_another_tree(logs, tmp_path):
+    """--against with this same checkout: both columns measured, ratios; `--only` keeps the
+    run short (every figure's command is listed below, from the same `commands`)."""
     out = _run(
         "bench_decode.py",
-        *("--size", "3000", "--formats", ".log", "--repeat", "1"),
+        *("--size", "3000", "--formats", ".log", "--repeat", "1", "--only", "export"),
         *("--out", str(logs), "--against", str(ROOT)),
     ).stdout
     rows = out[out.index("this / other") :].splitlines()[2:]
@@ -154,7 +175,18 @@ def test_bench_decode_against_another_tree(logs):
         labels.append(m.group(1).strip())
     assert labels == [
         "export --parquet .log",
+        "export --mcap (.log, 16 devices)",
+        "export --rrd (.log, 16 devices)",
+    ]
+    assert f"other tree (--against): {ROOT}" in out
+    spec = importlib.util.spec_from_file_location("bench_decode", BENCH / "bench_decode.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    every = bench.commands(logs / "bench_3000", [".log"], tmp_path, logs / "bench_3000.log")
+    assert [c[0] for c in every] == [
+        "export --parquet .log",
         "decode --summary .log",
+        "read only .log",
         "check .log",
         "decode -o FILE (.log, no devices)",
         "decode -o FILE (.log, 16 devices)",
@@ -163,7 +195,6 @@ def test_bench_decode_against_another_tree(logs):
         "export --rrd (.log, 16 devices)",
         "cananalyze --help",
     ]
-    assert f"other tree (--against): {ROOT}" in out
 
 
 def test_bench_decode_against_a_folder_without_cananalyze(tmp_path):

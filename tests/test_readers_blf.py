@@ -273,3 +273,64 @@ def test_fast_inflate_same_outcome_as_zlib(written, monkeypatch):
         assert fast == ref
     if written.name == "w6.blf":  # compressed containers: all sound
         assert all(blf._inflate(p, blf.MAX_CONTAINER)[1] is None for p in payloads)
+
+
+def _blf_parts(path) -> tuple[bytes, bytes]:
+    """A BLF's file header and the inflated bytes of all its containers."""
+    data = path.read_bytes()
+    hs = struct.unpack_from("<I", data, 4)[0]
+    pos, inner = hs, bytearray()
+    while pos + 16 <= len(data):
+        size = struct.unpack_from("<I", data, pos + 8)[0]
+        method = struct.unpack_from("<H", data, pos + 16)[0]
+        body = data[pos + 32 : pos + size]
+        inner += zlib.decompress(body) if method == 2 else body
+        pos += size + size % 4
+    return data[:hs], bytes(inner)
+
+
+def _plain_file(head: bytes, inner: bytes) -> bytes:
+    """A BLF of one plain container holding `inner` (the file size set)."""
+    size = 32 + len(inner)
+    out = bytearray(head)
+    out += b"LOBJ" + struct.pack("<HHLL", 16, 1, size, 10)
+    out += struct.pack("<H6xL4x", 0, len(inner)) + inner + bytes(size % 4)
+    struct.pack_into("<Q", out, 16, len(out))
+    return bytes(out)
+
+
+def _fd64(ext_off: int, stored: bytes, valid: int) -> bytes:
+    """One CAN_FD_MESSAGE_64 record (object header v1) storing `stored`, claiming `valid`."""
+    body = struct.pack("<BBBBIII", 1, 13, valid, 0, 0x123, 0, 0x1000)
+    body = body.ljust(34, b"\0") + bytes([0, ext_off]) + bytes(4) + stored
+    size = 32 + len(body)
+    head = b"LOBJ" + struct.pack("<HHLL", 32, 1, size, 101) + struct.pack("<LHHQ", 2, 0, 0, 10**9)
+    return head + body + bytes(-size % 4)
+
+
+def test_fd64_extension_offset_beyond_the_object(tmp_path):
+    """The payload ends with its object, whatever offset the record claims (once read
+    beyond it, through the end of the buffer: bytes repeated from elsewhere)."""
+    head, _ = _blf_parts(real_file("hardbyte__python-can/test_CanFdMessage64.blf"))
+    path = tmp_path / "ext.blf"
+    path.write_bytes(_plain_file(head, _fd64(250, b"\x11\x22\x33\x44", 12)))
+    batch, ctx, _ = run(blf.read, path)
+    assert batch.payload(0) == b"\x11\x22\x33\x44" + bytes(8)
+    assert batch.data[0].tobytes() == b"\x11\x22\x33\x44" + bytes(4)
+    assert ctx.problems.count == 0
+
+
+def test_header_shorter_than_its_time_at_the_end_of_a_buffer(tmp_path):
+    """A CAN_MESSAGE whose header size is 0 and object size 16, the last object of the
+    data: it was read through the end of the buffer (an IndexError, a traceback)."""
+    head, data = _blf_parts(real_file("hardbyte__python-can/test_CanMessage.blf"))
+    short = b"LOBJ" + struct.pack("<HHLL", 0, 1, 16, 1)
+    path = tmp_path / "short.blf"
+    path.write_bytes(_plain_file(head, data + short))
+    batch, ctx, _ = run(blf.read, path)
+    assert len(batch) == len(
+        list(can.BLFReader(str(real_file("hardbyte__python-can/test_CanMessage.blf"))))
+    )
+    assert [p.message for p in ctx.problems.shown] == [
+        "BLF object type 1 with header v1 size 16 unreadable"
+    ]

@@ -1,11 +1,15 @@
 """Vector BLF binary logs: CAN (FD) message and extended error records in LOG_CONTAINERs.
 
 python-can's BLFReader unpacks one struct and builds one Message per frame. Here
-each container is decompressed, a short loop walks the object headers only to
-find where each record starts (records may straddle containers), and the fields
-of all CAN records are then read with numpy: through one strided view when the
-records are evenly spaced (a run of one type and size, the usual case), else by
-fancy indexing at those offsets.
+containers are decompressed (python-isal or zlib) and about 2 MiB of their bytes
+walked at once (records may straddle containers). With the compiled helper, its
+`blf_records` walks the objects and writes every CAN record straight into the
+frame columns, without the GIL (`_parse_c`). Without it (`_parse_py`), a short
+loop walks the object headers only to find where each record starts, and the
+fields of all CAN records are then read with numpy: through one strided view
+when the records are evenly spaced (a run of one type and size, the usual case),
+else by fancy indexing at those offsets. Both walks give the same rows and
+problems (tests/test_speedups_blf.py).
 Layouts follow python-can's blf.py (itself from Toby Lorenz' vector_blf).
 
 Containers are read one at a time; a container larger than MAX_CONTAINER, or one
@@ -35,6 +39,7 @@ from ..frames import (
     channel_index,
     concat,
 )
+from ..runtime import speedups
 from .registry import LogFormat, ReadContext, register
 
 try:  # python-isal: the same inflate as zlib, ~1.6x faster and outside the GIL
@@ -58,6 +63,7 @@ CAN_MESSAGE2 = 86
 CAN_FD_MESSAGE = 100
 CAN_FD_MESSAGE_64 = 101
 _WANTED = (CAN_MESSAGE, CAN_MESSAGE2, CAN_ERROR_EXT, CAN_FD_MESSAGE, CAN_FD_MESSAGE_64)
+_OBJ_HEADER = 32  # the shortest object header (base and v1): its flags and time end there
 # Bytes of each record body that must be present (payload starts after the object header).
 _BODY = {
     CAN_MESSAGE: 16,
@@ -146,6 +152,46 @@ class _At:
         return out
 
 
+# Problems of the object walk, by the code the compiled walk reports them with
+_GARBAGE, _BAD_SIZE, _UNREADABLE = 1, 2, 3
+_PROBLEMS = {
+    _GARBAGE: "garbage between BLF objects, skipped {0} bytes",
+    _BAD_SIZE: "BLF object with bad size {0}",
+    _UNREADABLE: "BLF object type {0} with header v{1} size {2} unreadable",
+}
+_PURE = object()  # the compiled walk declined a buffer
+MAX_WALK_PROBLEMS = 64  # problems one compiled walk keeps; more: the Python walk
+
+
+class _Columns:
+    """Column buffers the compiled walk fills, kept from buffer to buffer (rows: capacity)."""
+
+    def __init__(self, rows: int) -> None:
+        self.rows = rows
+        self.t = np.empty(rows, np.float64)
+        self.can_id = np.empty(rows, np.uint32)
+        self.flags = np.empty(rows, np.uint8)
+        self.dlc = np.empty(rows, np.uint8)
+        self.data = np.empty((rows, 8), np.uint8)
+        self.chan = np.empty(rows, np.uint16)
+        self.line = np.empty(rows, np.int64)
+        self.long = np.empty((rows * 2 // 3 + 1, 4), np.int64)  # each at least 72 bytes
+        self.probs = np.empty((MAX_WALK_PROBLEMS, 5), np.int64)
+
+    def buffers(self) -> tuple[np.ndarray, ...]:
+        return (
+            self.t,
+            self.can_id,
+            self.flags,
+            self.dlc,
+            self.data,
+            self.chan,
+            self.line,
+            self.long,
+            self.probs,
+        )
+
+
 def _sel(m: np.ndarray) -> np.ndarray | slice:
     """The mask itself, or a plain slice when it selects every row (no gather/scatter)."""
     return slice(None) if m.all() else m
@@ -161,9 +207,57 @@ class _Records:
         self.record = 0  # 1-based number of the last object seen inside containers
         self.channels: list[str] = []
         self._chan: dict[str, int] = {}
+        self._out: _Columns | None = None  # the compiled walk's buffers, reused
 
     def parse(self, data: bytes) -> FrameBatch | None:
+        """The records of ``data`` (after the previous tail) as one batch, None if none."""
         buf = self.tail + data if self.tail else data
+        walk = getattr(speedups.C, "blf_records", None)
+        if walk is not None:
+            got = self._parse_c(walk, buf)
+            if got is not _PURE:
+                return got
+        return self._parse_py(buf)
+
+    def _parse_c(self, walk, buf: bytes) -> FrameBatch | None | object:
+        """The compiled walk (_speedups.blf_records): the same rows and problems as
+        `_parse_py`, or _PURE when it declines the buffer (more problems in it than it
+        keeps: hostile input, which the Python walk takes)."""
+        cap = len(buf) // 48  # the most rows it can hold (each at least 48 bytes)
+        if self._out is None or self._out.rows < cap:
+            self._out = _Columns(max(cap, 1 << 16))
+        out = self._out
+        ok, n, pos, record, n_long, n_probs = walk(
+            buf, self.record, MAX_INNER, self.start, *out.buffers()
+        )
+        if not ok:
+            return _PURE
+        for rec, code, a, b, c in out.probs[:n_probs].tolist():
+            self._problem(rec, code, a, b, c)
+        self.record = record
+        self.tail = buf[pos:]
+        if not n:
+            return None
+        b = FrameBatch(
+            t=out.t[:n].copy(),
+            can_id=out.can_id[:n].copy(),
+            flags=out.flags[:n].copy(),
+            dlc=out.dlc[:n].copy(),
+            data=out.data[:n].copy(),
+            channel=self._channel_index(out.chan[:n]),
+            line=out.line[:n].copy(),
+            channels=tuple(self.channels),
+        )
+        for row, at, stored, valid in out.long[:n_long].tolist():
+            b.long_data[row] = buf[at : at + stored].ljust(valid, b"\0")
+        self.ctx.frames += n
+        return b
+
+    def _problem(self, record: int, code: int, a: int, b: int = 0, c: int = 0) -> None:
+        """Report a problem of the walk (the same words from either walk)."""
+        self.ctx.problems.add(self.ctx.source, f"record {record}", _PROBLEMS[code].format(a, b, c))
+
+    def _parse_py(self, buf: bytes) -> FrameBatch | None:
         end = len(buf)
         pos = 0
         runs: list[tuple] = []  # (offsets, kinds, record numbers, sizes), in file order
@@ -177,11 +271,7 @@ class _Records:
                 nxt = buf.find(b"LOBJ", pos, pos + 8)  # objects are padded to 4 bytes
                 if nxt < 0:
                     nxt = buf.find(b"LOBJ", pos)
-                    self.ctx.problems.add(
-                        self.ctx.source,
-                        f"record {self.record + 1}",
-                        f"garbage between BLF objects, skipped {(nxt if nxt >= 0 else end) - pos} bytes",
-                    )
+                    self._problem(self.record + 1, _GARBAGE, (nxt if nxt >= 0 else end) - pos)
                     if nxt < 0:
                         pos = end
                         break
@@ -191,21 +281,15 @@ class _Records:
             _, hsize, hver, size, kind = unpack(buf, pos)
             if size < 16 or size > MAX_INNER:  # a claimed 60 MiB swallowed the containers after it
                 self.record += 1
-                self.ctx.problems.add(
-                    self.ctx.source, f"record {self.record}", f"BLF object with bad size {size}"
-                )
+                self._problem(self.record, _BAD_SIZE, size)
                 pos += 4
                 continue
             if pos + size > end:
                 break  # continues in the next container
             self.record += 1
             if kind in _WANTED:
-                if hver not in (1, 2) or size < hsize + _BODY[kind]:
-                    self.ctx.problems.add(
-                        self.ctx.source,
-                        f"record {self.record}",
-                        f"BLF object type {kind} with header v{hver} size {size} unreadable",
-                    )
+                if hver not in (1, 2) or hsize < _OBJ_HEADER or size < hsize + _BODY[kind]:
+                    self._problem(self.record, _UNREADABLE, kind, hver, size)
                 else:
                     offs.append(pos)
                     kinds.append(kind)
@@ -332,8 +416,9 @@ class _Records:
             fd = (q + 12).u(4)
             direction = (q + 34).u(1)
             ext_off = (q + 35).u(1).astype(np.int64)
-            # python-can issue 1905: valid_bytes may exceed the bytes stored; pad with zeros
-            room = np.where(ext_off > 0, ext_off, size[m]) - hsize[m] - 40
+            # python-can issue 1905: valid_bytes may exceed the bytes stored; pad with zeros.
+            # An extension offset beyond the object bounds nothing: the payload ends with it.
+            room = np.minimum(np.where(ext_off > 0, ext_off, size[m]), size[m]) - hsize[m] - 40
             stored = np.clip(np.minimum(valid, room), 0, 64)
             rtr = (fd & 0x0010) != 0
             b.can_id[m] = raw & 0x1FFFFFFF
