@@ -438,3 +438,27 @@ def test_findings_explained_once_per_group(faults_report, tmp_path):
         assert {f["message"] for f in mine} == {
             f["message"] for f in mine for i in items if f["message"] in i
         }
+
+
+def test_a_long_finding_group_lists_fifty_lines_and_counts_the_rest(tmp_path):
+    """A rule that fires on every frame: the page lists the first LISTED lines of the
+    group and says how many more there are (the count in the summary stays whole)."""
+    from cananalyze.outputs.report.sections import LISTED
+
+    log = tmp_path / "sync.log"
+    # a SYNC counter jumping on every frame: one finding per SYNC after the first
+    log.write_text(
+        "".join(f"({k * 0.01:.6f}) can0 080#{(k * 5) % 240 + 1:02X}\n" for k in range(130))
+    )
+    page = tmp_path / "r.html"
+    cli("report", str(log), "-o", str(page))
+    html = page.read_text()
+    group = html[html.index("· sync ·") :]
+    group = group[: group.index("</details>")]
+    total = int(re.search(r"(\d+) finding\(s\)", group).group(1))
+    counters = [(k * 5) % 240 + 1 for k in range(130)]
+    # CiA 301: the counter counts up from 1 and wraps back to 1
+    jumps = sum(1 for a, b in zip(counters[:-1], counters[1:], strict=True) if b not in (a + 1, 1))
+    assert total == jumps > LISTED
+    assert group.count("<li>") == LISTED + 1
+    assert f"... and {total - LISTED} more" in group

@@ -359,6 +359,44 @@ def test_one_failing_output_commits_none(tmp_path):
     assert sorted(p.name for p in out.rglob("*")) in ([], ["pq"])
 
 
+def test_check_reports_are_committed_with_the_other_outputs(tmp_path):
+    """JUnit, JSON and the HTML page appear only when every output of the run finished:
+    an output failing after them leaves none of them (and no temporary file)."""
+    from cananalyze.outputs.findings import FindingsSink
+    from cananalyze.outputs.report.sink import ReportSink
+    from cananalyze.outputs.sink import Sink
+    from cananalyze.pipeline import Options, build_checker, build_decoder, open_source, run
+
+    class Full(Sink):
+        def finish(self):
+            raise OSError(28, "No space left on device", str(tmp_path / "other.out"))
+
+    opts = Options(network=str(ROOT / "samples" / "network.toml"), checks=True)
+    out = tmp_path / "o"
+    out.mkdir()
+
+    def reports():
+        return [
+            ReportSink(out / "r.html"),
+            FindingsSink(quiet=True, junit=str(out / "j.xml"), json_file=str(out / "f.json")),
+        ]
+
+    decoder = build_decoder(opts, build_checker(opts))
+    with pytest.raises(OSError):
+        run(open_source(ROOT / "samples" / "faults.log", opts), decoder, [*reports(), Full()], opts)
+    assert sorted(p.name for p in out.iterdir()) == []
+    # and without the failing output all three are there, complete
+    decoder = build_decoder(opts, build_checker(opts))
+    run(open_source(ROOT / "samples" / "faults.log", opts), decoder, reports(), opts)
+    import json
+    import xml.etree.ElementTree as ET
+
+    assert sorted(p.name for p in out.iterdir()) == ["f.json", "j.xml", "r.html"]
+    assert (
+        json.loads((out / "f.json").read_text()) and ET.parse(out / "j.xml").getroot() is not None
+    )
+
+
 def test_pipeline_finishes_every_sink_before_committing_any(tmp_path):
     from cananalyze.outputs.sink import Sink
     from cananalyze.pipeline import Options, build_decoder, open_source, run

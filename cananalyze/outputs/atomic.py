@@ -102,3 +102,47 @@ def write_text_atomic(dest: str | os.PathLike, text: str) -> None:
     """A whole text file (JUnit, JSON reports) written atomically."""
     with atomic_write(dest, "w", encoding="utf-8") as f:
         f.write(text)
+
+
+class Staged:
+    """One output file written in full now and put in place later (`commit`), or dropped
+    (`abort`): how a sink whose output is one text (JUnit, JSON) takes part in the
+    pipeline's all-or-nothing commit, which only renames."""
+
+    def __init__(self, dest: str | os.PathLike) -> None:
+        self.dest = Path(dest)
+        self.tmp: Path | None = None
+        self.text: str | None = None  # for a special file (/dev/stdout): written at commit
+
+    def write_text(self, text: str) -> None:
+        check_writable(self.dest)
+        if _special(self.dest):
+            self.text = text
+            return
+        fd, name = tempfile.mkstemp(
+            prefix=f".{self.dest.stem}.", suffix=_suffix(self.dest), dir=self.dest.parent
+        )
+        self.tmp = Path(name)
+        try:
+            with os.fdopen(fd, "w", encoding="utf-8") as f:
+                f.write(text)
+            os.chmod(self.tmp, _file_mode(self.dest))
+        except BaseException:
+            self.abort()
+            raise
+
+    def commit(self) -> None:
+        if self.tmp is not None:
+            os.replace(self.tmp, self.dest)
+            self.tmp = None
+        elif self.text is not None:
+            with open(self.dest, "w", encoding="utf-8") as f:
+                f.write(self.text)
+            self.text = None
+
+    def abort(self) -> None:
+        if self.tmp is not None:
+            with contextlib.suppress(OSError):
+                self.tmp.unlink()
+            self.tmp = None
+        self.text = None

@@ -16,7 +16,8 @@ import numpy as np
 from ..checks.columns import FindingColumns
 from ..checks.finding import Finding
 from . import colour
-from .junit import format_rows, write_findings_json, write_junit
+from .atomic import Staged
+from .junit import findings_json, format_rows, junit_xml
 from .sink import Sink
 
 TERMINAL_CAP = 20  # findings printed per rule and node/COB-ID; the files hold every one
@@ -78,6 +79,7 @@ class FindingsSink(Sink):
         self._parts: list[FindingColumns] = []
         self.findings = FindingColumns()  # every finding, by time (at close)
         self._sorted = False  # findings is every part, sorted, its live rows read again
+        self._staged: list[Staged] = []  # JUnit/JSON written, waiting for the commit
 
     def open(self, run) -> None:
         super().open(run)
@@ -120,6 +122,12 @@ class FindingsSink(Sink):
         return 1 if self._gather().fails.any() else 0
 
     def close(self) -> None:
+        self.finish()
+        self.commit()
+
+    def finish(self) -> None:
+        """The terminal's lines now; the JUnit and JSON files written beside their targets,
+        put in place with the run's other outputs (`commit`), or dropped (`abort`)."""
         findings = self._gather()
         checker = self.run.checker
         rules = checker.rules if checker is not None else []
@@ -159,6 +167,20 @@ class FindingsSink(Sink):
             print(colour.paint(verdict, colour.SEVERITY["error"] if failing else "", on), file=out)
         if self.junit:
             props = {"cananalyze.report": str(self.html)} if self.html else None
-            write_junit(self.junit, rules, findings, props)
+            staged = Staged(self.junit)
+            self._staged.append(staged)
+            staged.write_text(junit_xml(rules, findings, properties=props))
         if self.json_file:
-            write_findings_json(self.json_file, findings)
+            staged = Staged(self.json_file)
+            self._staged.append(staged)
+            staged.write_text(findings_json(findings))
+
+    def commit(self) -> None:
+        for staged in self._staged:
+            staged.commit()
+        self._staged = []
+
+    def abort(self) -> None:
+        for staged in self._staged:
+            staged.abort()
+        self._staged = []

@@ -8,14 +8,12 @@ from __future__ import annotations
 
 import json
 import xml.etree.ElementTree as ET
-from pathlib import Path
 
 import numpy as np
 
 from ..checks.columns import FindingColumns
 from ..checks.finding import TABLE_COLUMNS, Finding, show
 from ..checks.rule import Rule
-from .atomic import write_text_atomic
 
 
 def _subject(rule: Rule, s) -> str:
@@ -112,18 +110,10 @@ def _line(t, t_rel, line, node, cob_id, severity, rule, message, measured, expec
     )
 
 
-def write_junit(
-    path: str | Path,
-    rules: list[Rule],
-    findings: list[Finding],
-    properties: dict[str, str] | None = None,
-) -> None:
-    write_text_atomic(path, junit_xml(rules, findings, properties=properties))
-
-
-def write_findings_json(path: str | Path, findings: list[Finding] | FindingColumns) -> None:
+def findings_json(findings: list[Finding] | FindingColumns) -> str:
+    """`check --json`'s text: every finding's record, in a list."""
     if isinstance(findings, FindingColumns):
         records = findings.records()  # from the columns, no Finding objects
     else:
         records = [f.record() for f in findings]
-    write_text_atomic(path, json.dumps(records, indent=1) + "\n")
+    return json.dumps(records, indent=1) + "\n"

@@ -17,7 +17,7 @@ from ...checks.finding import Finding
 from ...events.columns import EMCY, KINDS, NO_NODE
 from ...network.node_tally import NodeTally
 from ...protocol.services import Service
-from ..atomic import check_writable, write_text_atomic
+from ..atomic import Staged, check_writable
 from ..busload import frame_bits
 from ..sink import Sink
 from .accum import Envelope, LogHistogram, WindowSums
@@ -92,6 +92,7 @@ class ReportSink(Sink):
         self.path = Path(path)
         self.bitrate = bitrate
         self.title = title
+        self._staged: Staged | None = None  # the page, written at finish, in place at commit
         self.findings: list[Finding] = []
         self.tally = NodeTally()
         self.states: list[tuple[float, int, str]] = []
@@ -249,12 +250,25 @@ class ReportSink(Sink):
 
     # --- the end --------------------------------------------------------------------
     def close(self) -> None:
+        self.finish()
+        self.commit()
+
+    def finish(self) -> None:
+        """The page rendered and written beside its target; in place at `commit`."""
         from .page import render
 
         for bus in self.buses.values():
             bus.load.finish()
         self.findings.sort(key=lambda f: f.t)
-        write_text_atomic(self.path, render(self))
+        self._staged = Staged(self.path)
+        self._staged.write_text(render(self))
+
+    def commit(self) -> None:
+        if self._staged is not None:
+            self._staged.commit()
+            self._staged = None
 
     def abort(self) -> None:
-        pass  # nothing is written before close
+        if self._staged is not None:
+            self._staged.abort()
+            self._staged = None
