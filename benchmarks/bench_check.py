@@ -17,6 +17,9 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))  # benchmarks/: the generator's log names
+from generate import log_stem  # noqa: E402
+
 ROOT = HERE.parent
 
 
@@ -39,9 +42,9 @@ def main(argv: list[str]) -> None:
     args = ap.parse_args(argv)
     n, repeats = int(args.frames), args.repeats
     args.out.mkdir(parents=True, exist_ok=True)
-    log = args.out / f"bench_{n}.log"
+    stem = log_stem(args.out, n)
+    log = stem.with_suffix(".log")
     if not log.exists():
-        stem = args.out / f"bench_{n}"
         subprocess.run(
             [sys.executable, str(HERE / "generate.py"), str(n), str(stem), ".log"],
             check=True,

@@ -44,6 +44,9 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))  # benchmarks/: the generator's log names
+from generate import log_stem  # noqa: E402
+
 ROOT = HERE.parent
 # issue 23: export --parquet CPU, python-can's LogReader over ours, per format
 RATIO_TARGET = {".log": 9.0, ".asc": 12.0, ".blf": 6.0}
@@ -156,7 +159,7 @@ def measured(cmd: list[str], repeat: int, ok: tuple[int, ...] = (0,)) -> Run:
 
 def ensure(out: Path, n: int, suffixes: list[str], made: list[Path]) -> Path:
     """The generator's n-frame logs, generated when missing (the time it took is printed)."""
-    stem = out / f"bench_{n}"
+    stem = log_stem(out, n)
     missing = [s for s in suffixes if not stem.with_suffix(s).exists()]
     if missing:
         t = time.perf_counter()

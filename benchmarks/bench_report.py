@@ -21,6 +21,9 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))  # benchmarks/: the generator's log names
+from generate import log_stem  # noqa: E402
+
 ROOT = HERE.parent
 ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
 
@@ -47,21 +50,21 @@ def main(argv: list[str]) -> None:
     args = ap.parse_args(argv)
     n, repeats = int(args.frames), args.repeats
     args.out.mkdir(parents=True, exist_ok=True)
-    log = args.out / f"bench_{n}.log"
+    log = log_stem(args.out, n).with_suffix(".log")
     if not log.exists():
         subprocess.run(
             [
                 sys.executable,
                 str(HERE / "generate.py"),
                 str(n),
-                str(args.out / f"bench_{n}"),
+                str(log_stem(args.out, n)),
                 ".log",
             ],
             check=True,
             stdout=subprocess.DEVNULL,
         )
     (args.page or args.out).mkdir(parents=True, exist_ok=True)
-    page = (args.page or args.out) / f"bench_{n}.html"
+    page = (args.page or args.out) / log_stem(Path(), n).with_suffix(".html").name
     devices = [a for k in range(1, 17) for a in ("--device", f"{k}=dat7014")]
     cli = [sys.executable, "-m", "cananalyze"]
     cmds = {

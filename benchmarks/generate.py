@@ -1,13 +1,15 @@
 """Deterministic N-frame CANopen logs for benchmarks, in candump, ASC and BLF.
 
-A steady-state network of 16 nodes: SYNC every 10 ms, TPDO1-4 and RPDO1-2 per
-node, heartbeats every 100 ms, an expedited SDO request/response pair now and
-then, and an occasional EMCY. Built as columns (no per-frame Python) so a 10M
+A steady-state network of 16 healthy nodes: SYNC with its counter, TPDO1-4 and
+RPDO1-2 per node, each node's heartbeat every 256 frames (about 61 ms), an
+expedited SDO request/response pair now and then, and an occasional EMCY that is
+reset again. Built as columns (no per-frame Python) so a 10M
 frame log takes seconds; candump and ASC are written in bulk (ASC byte for byte
 what python-can's ASCWriter writes, which takes ~14 s per 1M frames), BLF by
 python-can (~8 s per 1M frames).
 
     python benchmarks/generate.py 1000000 benchmarks/out/bench_1m   # .log .asc .blf
+    python benchmarks/generate.py 1000000 benchmarks/out/faulty_1m .log --faults
 """
 
 from __future__ import annotations
@@ -25,9 +27,23 @@ from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, Fr
 from cananalyze.io.logfile import write_log  # noqa: E402
 
 START = 1767225600.0
+# The traffic's version, in the logs' names (`log_stem`): a change of what is generated
+# must not be measured on logs an older generator left in the output folder.
+# 2: a healthy bus (version 1 drew every frame's kind at random, so its heartbeats came
+# at random times, its SYNC counters were random, its EMCYs were never reset and 3 % of
+# its SDO responses were overwritten: 424k true findings per 10M frames).
+VERSION = 2
 
 
-def generate(n: int, seed: int = 1) -> FrameBatch:
+def log_stem(out: Path, n: int) -> Path:
+    """Where the benchmarks keep the n-frame logs (suffix added per format)."""
+    return out / f"bench_v{VERSION}_{n}"
+
+
+def generate(n: int, seed: int = 1, faults: bool = False) -> FrameBatch:
+    """n frames of the healthy bus; `faults`: version 1's traffic instead (kinds drawn at
+    random: heartbeats at random times, random SYNC counters, EMCYs never reset, SDO
+    responses overwritten), a bus that breaks a rule every few frames."""
     rng = np.random.default_rng(seed)
     kinds = rng.choice(
         np.array([0x180, 0x280, 0x380, 0x480, 0x200, 0x300, 0x700, 0x080, 0x600, 0x080 + 0x1000]),
@@ -35,6 +51,12 @@ def generate(n: int, seed: int = 1) -> FrameBatch:
         p=[0.22, 0.18, 0.12, 0.08, 0.12, 0.08, 0.06, 0.10, 0.03, 0.01],
     )
     nodes = rng.integers(1, 17, size=n)
+    if not faults:
+        # heartbeats on a schedule: every 16th frame, the nodes in turn, so each node beats
+        # every 256 frames (about 61 ms, within a few per cent); elsewhere a TPDO1 instead
+        kinds[kinds == 0x700] = 0x180
+        kinds[::16] = 0x700
+        nodes[::16] = np.arange(0, n, 16) // 16 % 16 + 1
     can_id = np.where(kinds == 0x080, 0x080, kinds + nodes).astype(np.uint32)
     emcy = kinds == 0x1080
     can_id[emcy] = (0x080 + nodes[emcy]).astype(np.uint32)
@@ -48,19 +70,36 @@ def generate(n: int, seed: int = 1) -> FrameBatch:
     b.data[kinds == 0x700] = 0
     b.data[kinds == 0x700, 0] = 5
     dlc[kinds == 0x080] = 1
+    if not faults:
+        sync = np.flatnonzero(kinds == 0x080)
+        b.data[sync, 0] = np.arange(sync.size) % 240 + 1  # CiA 301: counts 1..240, wraps
+        # EMCYs come and go: every second one of a node is its reset (code 0, register 0)
+        b.data[emcy, 2] = 0x01
+        for node in range(1, 17):
+            mine = np.flatnonzero(emcy & (nodes == node))
+            b.data[mine[1::2], :3] = 0
     dlc[kinds == 0x380] = 6
     dlc[kinds == 0x300] = 2
     # SDO: expedited upload request of a process value (0x6000:01, read input 8-bit: random
     # data is a plausible answer; a communication object's read-back would configure the
     # network model); the next frame becomes its response
     sdo = np.flatnonzero(kinds == 0x600)
-    sdo = sdo[sdo + 1 < n]
+    if faults:
+        sdo = sdo[sdo + 1 < n]
+    else:
+        # the response takes the place of a PDO (not of a heartbeat, SYNC or EMCY: a
+        # healthy bus); a request with no such place is a TPDO1 instead
+        pdos = (0x180, 0x280, 0x380, 0x480, 0x200, 0x300)
+        ok = np.isin(kinds[np.minimum(sdo + 1, n - 1)], pdos) & (sdo + 1 < n)
+        b.can_id[sdo[~ok]] = (0x180 + nodes[sdo[~ok]]).astype(np.uint32)
+        sdo = sdo[ok]
     b.data[sdo] = [0x40, 0x00, 0x60, 0x01, 0, 0, 0, 0]
     resp = sdo + 1
     b.can_id[resp] = (0x580 + nodes[sdo]).astype(np.uint32)
     b.data[resp, :4] = [0x43, 0x00, 0x60, 0x01]
     dlc[resp] = 8
-    b.data[emcy, 2] = 0x01
+    if faults:
+        b.data[emcy, 2] = 0x01  # after the SDO responses: it overwrites some of them
     b.dlc[:] = dlc
     rows = np.arange(8) >= dlc[:, None]
     b.data[rows] = 0
@@ -148,11 +187,13 @@ def main(argv: list[str]) -> int:
     if len(argv) < 2:
         print(__doc__)
         return 2
+    faults = "--faults" in argv  # version 1's faulty bus (the tests' rules workload)
+    argv = [a for a in argv if a != "--faults"]
     n = int(float(argv[0]))
     stem = Path(argv[1])
     stem.parent.mkdir(parents=True, exist_ok=True)
     suffixes = argv[2].split(",") if len(argv) > 2 else [".log", ".asc", ".blf"]
-    batch = generate(n)
+    batch = generate(n, faults=faults)
     for suffix in suffixes:
         if suffix == ".asc" and write_asc(batch, stem.with_suffix(suffix)):
             print(f"wrote {stem.with_suffix(suffix)}")

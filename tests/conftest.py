@@ -15,12 +15,21 @@ SEEDS = SHARED / "seeds"
 SAMPLES = ROOT / "samples"
 
 
-def generated_log(directory: Path, frames: int) -> Path:
+def generated_log(directory: Path, frames: int, faults: bool = True) -> Path:
     """A candump log of `frames` frames from the benchmark generator (16 nodes, PDOs,
-    SDO, EMCY), written as the benchmarks write theirs."""
+    SDO, EMCY), written as the benchmarks write theirs; `faults`: its faulty bus, which
+    breaks a rule every few frames (every findings path), else the healthy one."""
     stem = directory / "g"
+    extra = ["--faults"] if faults else []
     subprocess.run(
-        [sys.executable, str(ROOT / "benchmarks" / "generate.py"), str(frames), str(stem), ".log"],
+        [
+            sys.executable,
+            str(ROOT / "benchmarks" / "generate.py"),
+            str(frames),
+            str(stem),
+            ".log",
+            *extra,
+        ],
         check=True,
         capture_output=True,
     )

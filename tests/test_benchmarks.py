@@ -16,6 +16,9 @@ import pytest
 from conftest import ROOT, SAMPLES
 
 BENCH = ROOT / "benchmarks"
+sys.path.insert(0, str(BENCH))
+from generate import log_stem  # noqa: E402  (the name the scripts give their logs)
+
 SMOKED = {
     "generate.py",
     "bench_check.py",
@@ -52,21 +55,22 @@ def test_every_benchmark_script_has_a_smoke_test():
 
 @pytest.fixture(scope="module")
 def logs(tmp_path_factory) -> Path:
-    """3000 generated frames as candump, ASC and BLF: what the scripts name bench_3000.*"""
+    """3000 generated frames as candump, ASC and BLF, named as the scripts name them."""
     out = tmp_path_factory.mktemp("bench")
-    done = _run("generate.py", "3000", str(out / "bench_3000"))
+    stem = log_stem(out, 3000)
+    done = _run("generate.py", "3000", str(stem))
     assert done.stdout.split() == [
         "wrote",
-        str(out / "bench_3000.log"),
+        str(stem.with_suffix(".log")),
         "wrote",
-        str(out / "bench_3000.asc"),
+        str(stem.with_suffix(".asc")),
         "wrote",
-        str(out / "bench_3000.blf"),
+        str(stem.with_suffix(".blf")),
     ]
     import can
 
     for suffix in (".log", ".asc", ".blf"):
-        assert sum(1 for _ in can.LogReader(str(out / f"bench_3000{suffix}"))) == 3000, suffix
+        assert sum(1 for _ in can.LogReader(str(stem.with_suffix(suffix)))) == 3000, suffix
     return out
 
 
@@ -82,7 +86,13 @@ def test_bench_tables_compares_each_layout(logs, tmp_path):
     smaller than the payload as hex and than signals one row per value."""
     devices = [a for k in range(1, 17) for a in ("--device", f"{k}=dat7014")]
     out = tmp_path / "pq"
-    cmd = [sys.executable, "-m", "cananalyze", "export", str(logs / "bench_3000.log")]
+    cmd = [
+        sys.executable,
+        "-m",
+        "cananalyze",
+        "export",
+        str(log_stem(logs, 3000).with_suffix(".log")),
+    ]
     subprocess.run([*cmd, "--parquet", str(out), *devices, "-q"], check=True, cwd=ROOT)
     done = _run("bench_tables.py", str(out), "--repeat", "1")
     rows = {}
@@ -154,7 +164,12 @@ def test_bench_decode_prints_every_figure(logs):
         assert "not installed" in lens_row
     export = next(line for line in table if line.startswith("export --parquet .log frames/s"))
     assert re.search(rf"cpu {NUMBER} s, load {NUMBER}, {NUMBER} MB\)", export), export
-    assert "(3,091 lines," in out  # 3000 frames, and the records between them
+    # 3000 frames and the records between them, as `decode -o` writes them
+    text = subprocess.run(
+        [sys.executable, "-m", "cananalyze", "decode", str(log_stem(logs, 3000).with_suffix(".log"))],
+        capture_output=True, text=True, check=True, cwd=ROOT,
+    ).stdout  # fmt: skip
+    assert f"({text.count(chr(10)):,} lines," in out
     assert not list(logs.glob("tmp*"))  # its temporary outputs are gone
 
 
@@ -182,7 +197,9 @@ def test_bench_decode_against_another_tree(logs, tmp_path):
     spec = importlib.util.spec_from_file_location("bench_decode", BENCH / "bench_decode.py")
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
-    every = bench.commands(logs / "bench_3000", [".log"], tmp_path, logs / "bench_3000.log")
+    every = bench.commands(
+        log_stem(logs, 3000), [".log"], tmp_path, log_stem(logs, 3000).with_suffix(".log")
+    )
     assert [c[0] for c in every] == [
         "export --parquet .log",
         "decode --summary .log",
@@ -290,9 +307,9 @@ def test_bench_report_prints_cpu_wall_and_page_size(logs):
         out[2],
     )
     size = float(re.fullmatch(rf"page: ({NUMBER}) MB", out[3]).group(1))
-    assert 0.5 < size < 4 and (logs / "bench_3000.html").stat().st_size == pytest.approx(
-        size * 1e6, abs=1e4
-    )
+    assert 0.5 < size < 4 and log_stem(logs, 3000).with_suffix(
+        ".html"
+    ).stat().st_size == pytest.approx(size * 1e6, abs=1e4)
 
 
 def test_bench_live_serves_foxglove_without_drops():
