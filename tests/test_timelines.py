@@ -346,7 +346,7 @@ def test_parquet_and_csv_with_mixed_findings_values(tmp_path):
 
     from cananalyze.io.logfile import write_log
 
-    write_log(generate(5000), tmp_path / "g.log")
+    write_log(generate(5000, faults=True), tmp_path / "g.log")  # the faulty bus: findings
     devices = {n: "dat7014" for n in range(1, 17)}
     c = cananalyze.load(tmp_path / "g.log", device=devices)
     kinds = {type(v) for v in c.findings["measured"] if v is not None}
