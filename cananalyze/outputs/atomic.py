@@ -52,6 +52,13 @@ def _file_mode(path: Path) -> int:
         return 0o666 & ~mask
 
 
+def _temp_beside(path: Path) -> tuple[int, Path]:
+    """A new hidden temporary file next to `path` (same file system: the rename is atomic),
+    keeping the suffix libraries choose their format by."""
+    fd, name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=_suffix(path), dir=path.parent)
+    return fd, Path(name)
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """A temporary filename to write; it replaces ``path`` when the block ends without error.
@@ -66,9 +73,8 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     if _special(path):
         yield path
         return
-    fd, name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=_suffix(path), dir=path.parent)
+    fd, tmp = _temp_beside(path)
     os.close(fd)
-    tmp = Path(name)
     try:
         yield tmp
         os.chmod(tmp, _file_mode(path))
@@ -119,13 +125,12 @@ class Staged:
         if _special(self.dest):
             self.text = text
             return
-        fd, name = tempfile.mkstemp(
-            prefix=f".{self.dest.stem}.", suffix=_suffix(self.dest), dir=self.dest.parent
-        )
-        self.tmp = Path(name)
+        fd, self.tmp = _temp_beside(self.dest)
         try:
             with os.fdopen(fd, "w", encoding="utf-8") as f:
                 f.write(text)
+                f.flush()
+                os.fsync(f.fileno())  # as atomic_write: complete on disk before the rename
             os.chmod(self.tmp, _file_mode(self.dest))
         except BaseException:
             self.abort()
