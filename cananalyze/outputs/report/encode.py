@@ -69,8 +69,8 @@ class Packed:
             e = math.floor(math.log10(abs(lo))) - 6 if lo else 0
         if self.resolution is not None:
             e = max(e, round(math.log10(self.resolution)))
-        if e < 0 and np.array_equal(v, np.rint(v)):
-            e = 0  # integers stay exact
+        if e != 0 and np.array_equal(v, np.rint(v)) and self.resolution is None:
+            e = 0  # integers (a counter, a raw value) stay exact
         return e
 
     def encode(self) -> tuple[int, int, int, int, bytes]:
