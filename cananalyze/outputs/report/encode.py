@@ -31,11 +31,18 @@ LEVELS = (
 
 
 def text7(raw: bytes) -> str:
-    """`raw` as 7 bits per character (the loader's `unpack7` reads it back)."""
-    bits = np.unpackbits(np.frombuffer(raw, np.uint8))
-    bits = np.concatenate((bits, np.zeros(-bits.size % 7, np.uint8)))
-    codes = bits.reshape(-1, 7) @ (1 << np.arange(6, -1, -1)).astype(np.uint16)
-    codes = codes.astype(np.uint16)
+    """`raw` as 7 bits per character, most significant first, the last padded with zero
+    bits (the loader's `unpack7` reads it back). Seven bytes make eight characters: one
+    56-bit integer per seven bytes, not a byte per bit."""
+    n = len(raw)
+    groups = np.frombuffer(raw + b"\0" * (-n % 7), np.uint8).reshape(-1, 7)
+    word = np.zeros(groups.shape[0], np.uint64)
+    for i in range(7):
+        word |= groups[:, i].astype(np.uint64) << np.uint64(48 - 8 * i)
+    codes = np.empty((groups.shape[0], 8), np.uint16)
+    for j in range(8):
+        codes[:, j] = (word >> np.uint64(49 - 7 * j)) & np.uint64(0x7F)
+    codes = codes.ravel()[: -(-8 * n // 7)]
     for v in ESCAPED:
         codes[codes == v] = 0x100 + v
     return codes.astype("<u2").tobytes().decode("utf-16-le")
