@@ -323,7 +323,8 @@ def test_packed_arrays_round_below_a_pixel_and_keep_integers():
     times = np.arange(20_000) * 0.18 + 0.05  # an envelope's buckets: steady differences
     huge = np.array([0.0, 5e9, 1e10])  # beyond int32 at µs
     arrays = [Packed(smooth), Packed(ints), Packed(noisy, 1e-3), Packed(times, 1e-6)]
-    arrays.append(Packed(huge, 1e-6, exact=True))
+    gap = np.array([1.5, np.nan, 2.25])  # NaN (plotly's gap) as it is
+    arrays += [Packed(huge, 1e-6, exact=True), Packed(gap)]
     page = f'<script type="text/plain" id="figures">{Blob().pack([["fig0", arrays]])}</script>'
     back = page_figures(page)["fig0"]
     step = (smooth.max() - smooth.min()) / 3000
@@ -332,6 +333,7 @@ def test_packed_arrays_round_below_a_pixel_and_keep_integers():
     assert set(np.round(back[2], 9)) == {100.0}  # was 100.00015 on node 5's axis
     assert np.abs(back[3] - times).max() <= (times.max() - times.min()) / 3000 / 2
     assert np.array_equal(back[4], huge)
+    assert np.array_equal(back[5], gap, equal_nan=True)
 
 
 def test_a_spike_survives_the_plots_point_budget():

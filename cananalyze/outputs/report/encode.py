@@ -25,9 +25,8 @@ import zlib
 import numpy as np
 
 ESCAPED = (0, 13, 60)  # NUL (read as U+FFFD), CR (read as LF), '<' (could close the script)
-LEVELS = (
-    30_000  # an array's range in at most this many steps: fits int16, and a fraction of a pixel
-)
+# an array's range in at most this many steps: offsets fit int16, a step is a tenth of a pixel
+LEVELS = 30_000
 
 
 def text7(raw: bytes) -> str:
@@ -67,6 +66,7 @@ class Packed:
         v = self.values
         if self.exact:
             return round(math.log10(self.resolution))
+        v = v[np.isfinite(v)]
         if v.size == 0:
             return 0
         lo, hi = float(v.min()), float(v.max())
@@ -81,12 +81,16 @@ class Packed:
         return e
 
     def encode(self) -> tuple[int, int, int, int, bytes]:
-        """(exponent, first value's integer, delta?, bytes per value, the integers' bytes)."""
+        """(exponent, first integer, form, bytes per value, the values' bytes), as `Blob`
+        documents them."""
         e = self.exponent()
         v = self.values
-        k = np.rint(v * 10.0**-e if e < 0 else v / 10.0**e).astype(np.int64)
-        if k.size == 0:
+        if v.size == 0:
             return e, 0, 0, 2, b""
+        scaled = v * 10.0**-e if e < 0 else v / 10.0**e
+        if not np.isfinite(scaled).all() or np.abs(scaled).max() >= 2**53:
+            return e, 0, 2, 8, v.astype("<f8").tobytes()  # as they are (NaN: a gap)
+        k = np.rint(scaled).astype(np.int64)
         best = None
         for delta in (0, 1):
             k0 = int(k[0]) if delta else int(k.min())
