@@ -4,11 +4,13 @@ The report runs the same checks and adds its own sink (statistics over every fra
 plots decimated to a pixel's min and max), so its cost is measured against `check`,
 in fresh processes, interleaved, the best of several runs each: CPU seconds
 (user + system, from wait4) beside wall seconds, and the peak RSS. The page must stay
-a few MB whatever the log's length.
+a few MB whatever the log's length, on a healthy bus and on a faulty one (the
+generator's `--faults` bus breaks a rule every few frames: its findings are most of a
+page).
 
     python benchmarks/bench_report.py [N_FRAMES] [REPEATS] [--out DIR]   # 1e6 frames, 3 runs
-    python benchmarks/bench_report.py 10e6 2                             # the issue's 10M
-    python benchmarks/bench_report.py 10e6 1 --out ../main/benchmarks/out --page /tmp  # reuse a log
+    python benchmarks/bench_report.py 10e6 2 --bus both                  # the issue's 10M
+    python benchmarks/bench_report.py 10e6 1 --out /work/benchout --page /tmp --against ../base
 """
 
 from __future__ import annotations
@@ -28,15 +30,38 @@ ROOT = HERE.parent
 ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
 
 
-def run(cmd: list[str]) -> tuple[float, float, float]:
-    """(CPU seconds, wall seconds, peak RSS MB) of one child; exit 0 or 1 (violations) is fine."""
+def run(cmd: list[str], tree: Path) -> tuple[float, float, float]:
+    """(CPU seconds, wall seconds, peak RSS MB) of one child run from `tree`'s code;
+    exit 0 or 1 (violations) is fine."""
     t = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, cwd=ROOT, env=ENV)
+    env = {**ENV, "PYTHONPATH": str(tree)}
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, cwd=tree, env=env)
     _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t
     if os.waitstatus_to_exitcode(status) not in (0, 1):
         raise SystemExit(f"failed: {' '.join(cmd)}")
     return usage.ru_utime + usage.ru_stime, wall, usage.ru_maxrss / 1024
+
+
+def the_log(out: Path, n: int, bus: str) -> Path:
+    """The n-frame log of this bus, generated once: the healthy one under the generator's
+    versioned name (the one bench_decode reads), the faulty one as faulty_N.log."""
+    stem = log_stem(out, n) if bus == "healthy" else out / f"faulty_{n}"
+    log = stem.with_suffix(".log")
+    if not log.exists():
+        flags = ["--faults"] if bus == "faulty" else []
+        cmd = [sys.executable, str(HERE / "generate.py"), str(n), str(stem), ".log", *flags]
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    return log
+
+
+def span(log: Path) -> float:
+    """Seconds from the log's first frame to its last (candump's time stamps)."""
+    with open(log, "rb") as f:
+        first = f.readline().split()[0].strip(b"()")
+        f.seek(max(0, log.stat().st_size - 200))
+        last = f.read().splitlines()[-1].split()[0].strip(b"()")
+    return float(last) - float(first)
 
 
 def main(argv: list[str]) -> None:
@@ -47,48 +72,56 @@ def main(argv: list[str]) -> None:
     ap.add_argument(
         "--page", type=Path, help="where the page is written (default: --out; for a read-only log)"
     )
+    ap.add_argument(
+        "--bus",
+        choices=("healthy", "faulty", "both"),
+        default="healthy",
+        help="the generator's healthy bus, its faulty one (--faults), or both (default healthy)",
+    )
+    ap.add_argument(
+        "--against",
+        type=Path,
+        help="another checkout (its helper built): its report and check too, interleaved",
+    )
     args = ap.parse_args(argv)
     n, repeats = int(args.frames), args.repeats
     args.out.mkdir(parents=True, exist_ok=True)
-    log = log_stem(args.out, n).with_suffix(".log")
-    if not log.exists():
-        subprocess.run(
-            [
-                sys.executable,
-                str(HERE / "generate.py"),
-                str(n),
-                str(log_stem(args.out, n)),
-                ".log",
-            ],
-            check=True,
-            stdout=subprocess.DEVNULL,
-        )
     (args.page or args.out).mkdir(parents=True, exist_ok=True)
-    page = (args.page or args.out) / log_stem(Path(), n).with_suffix(".html").name
+    trees = {"this": ROOT}
+    if args.against is not None:
+        trees["other"] = args.against.resolve()
+        if not (trees["other"] / "cananalyze" / "__init__.py").is_file():
+            ap.error(f"--against {args.against}: no cananalyze package there")
     devices = [a for k in range(1, 17) for a in ("--device", f"{k}=dat7014")]
     cli = [sys.executable, "-m", "cananalyze"]
-    cmds = {
-        "check": [*cli, "check", str(log), "-q", *devices],
-        "report": [*cli, "report", str(log), "-o", str(page), "-q", *devices],
-    }
-    best = {k: (float("inf"), float("inf"), 0.0) for k in cmds}
-    for _ in range(repeats):
-        for name, cmd in cmds.items():
-            cpu, wall, mb = run(cmd)
-            b = best[name]
-            best[name] = (min(b[0], cpu), min(b[1], wall), max(b[2], mb))
-    with open(log, "rb") as f:
-        first = f.readline().split()[0].strip(b"()")
-        f.seek(max(0, log.stat().st_size - 200))
-        last = f.read().splitlines()[-1].split()[0].strip(b"()")
-    span = float(last) - float(first)
-    for name, (cpu, wall, mb) in best.items():
-        print(f"{name:8} best CPU {cpu:7.2f} s   best wall {wall:7.2f} s   peak RSS {mb:7.0f} MB")
-    extra = best["report"][0] / best["check"][0] - 1
-    print(
-        f"report overhead: {100 * extra:+.1f} % CPU ({n} frames, {span:.0f} s of log, best of {repeats})"
-    )
-    print(f"page: {page.stat().st_size / 1e6:.2f} MB")
+    for bus in ("healthy", "faulty") if args.bus == "both" else (args.bus,):
+        log = the_log(args.out, n, bus)
+        pages = {tree: (args.page or args.out) / f"report_{tree}_{log.stem}.html" for tree in trees}
+        cmds = {
+            (tree, name): cmd
+            for tree in trees
+            for name, cmd in (
+                ("check", [*cli, "check", str(log), "-q", *devices]),
+                ("report", [*cli, "report", str(log), "-o", str(pages[tree]), "-q", *devices]),
+            )
+        }
+        best = {k: (float("inf"), float("inf"), 0.0) for k in cmds}
+        for _ in range(repeats):
+            for (tree, name), cmd in cmds.items():
+                cpu, wall, mb = run(cmd, trees[tree])
+                b = best[tree, name]
+                best[tree, name] = (min(b[0], cpu), min(b[1], wall), max(b[2], mb))
+        print(f"{bus} bus: {log.name}, {n} frames, {span(log):.0f} s of log, best of {repeats}")
+        for tree, path in trees.items():
+            where = "" if len(trees) == 1 else f"  [{tree} tree: {path}]"
+            for name in ("check", "report"):
+                cpu, wall, mb = best[tree, name]
+                print(
+                    f"  {name:7} CPU {cpu:7.2f} s   wall {wall:7.2f} s   peak RSS {mb:6.0f} MB{where}"
+                )
+            ratio = best[tree, "report"][0] / best[tree, "check"][0]
+            size = pages[tree].stat().st_size / 1e6
+            print(f"  report/check CPU {ratio:.2f}   page {size:.2f} MB{where}")
 
 
 if __name__ == "__main__":

@@ -297,19 +297,30 @@ def test_arrow_column_waits_for_a_whole_pyarrow(monkeypatch):
 
 
 def test_bench_report_prints_cpu_wall_and_page_size(logs):
-    out = _run("bench_report.py", "3000", "1", "--out", str(logs)).stdout.splitlines()
-    for line, name in zip(out, ("check", "report"), strict=False):
+    """Both buses (the faulty one generated beside the healthy one): check's and report's
+    figures, their CPU ratio and the page's size, which is the file's."""
+    out = _run("bench_report.py", "3000", "1", "--out", str(logs), "--bus", "both")
+    lines = out.stdout.splitlines()
+    assert len(lines) == 8
+    for k, (bus, log) in enumerate(
+        (("healthy", log_stem(logs, 3000)), ("faulty", logs / "faulty_3000"))
+    ):
+        head, check, report, tail = lines[4 * k : 4 * k + 4]
         assert re.fullmatch(
-            rf"{name} +best CPU +{NUMBER} s +best wall +{NUMBER} s +peak RSS +{NUMBER} MB", line
+            rf"{bus} bus: {log.name}\.log, 3000 frames, {NUMBER} s of log, best of 1", head
         )
-    assert re.fullmatch(
-        rf"report overhead: [+-]{NUMBER} % CPU \(3000 frames, {NUMBER} s of log, best of 1\)",
-        out[2],
-    )
-    size = float(re.fullmatch(rf"page: ({NUMBER}) MB", out[3]).group(1))
-    assert 0.5 < size < 4 and log_stem(logs, 3000).with_suffix(
-        ".html"
-    ).stat().st_size == pytest.approx(size * 1e6, abs=1e4)
+        for line, name in ((check, "check"), (report, "report")):
+            assert re.fullmatch(
+                rf" +{name} +CPU +{NUMBER} s +wall +{NUMBER} s +peak RSS +{NUMBER} MB", line
+            )
+        ratio, size = re.fullmatch(
+            rf" +report/check CPU ({NUMBER}) +page ({NUMBER}) MB", tail
+        ).group(1, 3)
+        assert float(ratio) > 0
+        page = logs / f"report_this_{log.name}.html"
+        assert 0.5 < float(size) < 3 and page.stat().st_size == pytest.approx(
+            float(size) * 1e6, abs=1e4
+        )
 
 
 def test_bench_live_serves_foxglove_without_drops():

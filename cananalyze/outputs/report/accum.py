@@ -57,16 +57,24 @@ class Envelope:
             arr[: merged.size] = merged
             arr[merged.size :] = np.inf if f is np.minimum else -np.inf
 
-    def points(self) -> tuple[np.ndarray, np.ndarray]:
+    def points(self, most: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(t, value) through each bucket's min and max, in time order: the envelope a
-        plot of every value would draw at this width."""
-        used = np.flatnonzero(self.hi >= self.lo)
+        plot of every value would draw at this width. `most`: at most this many buckets,
+        neighbours merged (a plot's point budget shared by its lines, or half a page)."""
+        lo, hi, width = self.lo, self.hi, self.width
+        if most is not None and most < self.n:
+            g = -(-self.n // most)
+            pad = -self.n % g
+            lo = np.concatenate((lo, np.full(pad, np.inf))).reshape(-1, g).min(axis=1)
+            hi = np.concatenate((hi, np.full(pad, -np.inf))).reshape(-1, g).max(axis=1)
+            width = width * g
+        used = np.flatnonzero(hi >= lo)
         if used.size == 0 or self.t0 is None:
             return np.zeros(0), np.zeros(0)
-        t = self.t0 + (used + 0.5) * self.width
-        same = self.lo[used] == self.hi[used]
+        t = self.t0 + (used + 0.5) * width
+        same = lo[used] == hi[used]
         tt = np.repeat(t, 2)
-        vv = np.column_stack((self.lo[used], self.hi[used])).ravel()
+        vv = np.column_stack((lo[used], hi[used])).ravel()
         keep = np.ones(tt.size, bool)
         keep[1::2] = ~same  # a bucket with one value: one point
         return tt[keep], vv[keep]

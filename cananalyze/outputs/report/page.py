@@ -1,21 +1,20 @@
 """The page around the sections: styles, the embedded plotly.js and the loader.
 
-plotly.js is 4.8 MB as text; the page carries it gzip-compressed (1.5 MB as base64)
-and the browser's own DecompressionStream unpacks it, so the file stays small and
-needs no network. Each plot's JSON waits in a <script type="application/json">
-until plotly is loaded; `document.body.dataset.ready` is set once all are drawn
-(the browser test waits for it).
+plotly.js is 4.8 MB as text; the page carries it gzip-compressed (1.47 MB, 1.72 MB as
+`encode.text7`) and the browser's own DecompressionStream unpacks it, so the file
+stays small and needs no network. The plots' figures wait in one more such element
+(`encode.Blob`: JSON and the arrays' integers) until plotly is loaded;
+`document.body.dataset.ready` is set once all are drawn (the browser test waits for it).
 """
 
 from __future__ import annotations
 
-import base64
 import functools
-import gzip
 import html
 from datetime import UTC, datetime
 
 from ... import __version__
+from .encode import Blob, gzip7
 from .sections import SECTIONS, Figures
 
 CSS = """
@@ -38,17 +37,47 @@ nav a{margin-right:10px;font-size:13px}
 
 LOADER = """
 (async function(){
-  const b64 = document.getElementById('plotlyjs').textContent;
-  const bytes = Uint8Array.from(atob(b64), c => c.charCodeAt(0));
-  const stream = new Blob([bytes]).stream().pipeThrough(new DecompressionStream('gzip'));
-  const code = await new Response(stream).text();
+  function unpack7(text) {  // encode.text7: 7 bits per character, U+0100+v for NUL, CR, '<'
+    const out = new Uint8Array(Math.floor(text.length * 7 / 8));
+    let acc = 0, bits = 0, j = 0;
+    for (let i = 0; i < text.length; i++) {
+      acc = ((acc << 7) | (text.charCodeAt(i) & 0x7f)) & 0x3fff;
+      bits += 7;
+      if (bits >= 8) { bits -= 8; out[j++] = acc >> bits; }
+    }
+    return out;
+  }
+  async function inflate(id) {  // encode.gzip7
+    const stream = new Blob([unpack7(document.getElementById(id).textContent)]).stream()
+      .pipeThrough(new DecompressionStream('gzip'));
+    return await new Response(stream).arrayBuffer();
+  }
   const s = document.createElement('script');
-  s.textContent = code;
+  s.textContent = new TextDecoder().decode(await inflate('plotlyjs'));
   document.head.appendChild(s);
-  const config = {responsive: true, displaylogo: false};
-  for (const div of document.querySelectorAll('div.plot')) {
-    const fig = JSON.parse(document.getElementById(div.id + '-data').textContent);
-    await Plotly.newPlot(div, fig.data, fig.layout, config);
+  const buf = await inflate('figures');  // encode.Blob
+  const n = new DataView(buf).getUint32(0, true);
+  const base = Math.ceil((4 + n) / 8) * 8;
+  const views = {2: Int16Array, 4: Int32Array, 8: Float64Array};
+  function values(q) {
+    const [at, count, size, form, first, e] = q;
+    const ints = new views[size](buf, base + at, count);
+    if (form === 2) return ints;
+    const out = new Float64Array(count);
+    const div = e < 0 ? 10 ** -e : 0, mul = 10 ** e;
+    let k = first;
+    for (let i = 0; i < count; i++) {
+      k = form === 1 ? k + ints[i] : first + ints[i];
+      out[i] = div ? k / div : k * mul;
+    }
+    return out;
+  }
+  const figs = JSON.parse(new TextDecoder().decode(new Uint8Array(buf, 4, n)),
+    (key, v) => (v && v.q && !Array.isArray(v) ? values(v.q) : v));
+  const config = {responsive: true, displaylogo: false, displayModeBar: 'hover',
+    modeBarButtonsToRemove: ['select2d', 'lasso2d', 'zoomIn2d', 'zoomOut2d', 'autoScale2d']};
+  for (const [id, fig] of figs) {
+    await Plotly.newPlot(document.getElementById(id), fig.data, fig.layout, config);
   }
   document.body.dataset.ready = 'yes';
 })();
@@ -56,17 +85,11 @@ LOADER = """
 
 
 @functools.lru_cache(maxsize=1)
-def plotly_js_gzip_b64() -> str:
-    """plotly's bundled plotly.js, gzip-compressed and base64-encoded (built once)."""
+def plotly_js_packed() -> str:
+    """plotly's bundled plotly.js as `encode.gzip7` text (built once per process)."""
     from plotly.offline import get_plotlyjs
 
-    packed = gzip.compress(get_plotlyjs().encode(), compresslevel=9, mtime=0)
-    return base64.b64encode(packed).decode("ascii")
-
-
-def _script_json(text: str) -> str:
-    """JSON safe inside <script>: no '</' can close the element early."""
-    return text.replace("</", "<\\/")
+    return gzip7(get_plotlyjs().encode())
 
 
 def render(sink) -> str:
@@ -77,10 +100,7 @@ def render(sink) -> str:
     sink.rules = checker.rules if checker is not None else []
     figs = Figures()
     body = "".join(section(sink, figs) for section in SECTIONS)
-    data = "".join(
-        f'<script type="application/json" id="{pid}-data">{_script_json(j)}</script>'
-        for pid, j in figs.items
-    )
+    data = f'<script type="text/plain" id="figures">{Blob().pack(figs.items)}</script>'
     title = sink.title or f"cananalyze report: {run.name}"
     when = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
     nav = "".join(
@@ -101,7 +121,7 @@ def render(sink) -> str:
     return (
         "<!DOCTYPE html>\n<html lang=en><head><meta charset=utf-8>"
         f"<title>{esc(title)}</title><style>{CSS}</style>"
-        f'<script type="text/plain" id="plotlyjs">{plotly_js_gzip_b64()}</script>'
+        f'<script type="text/plain" id="plotlyjs">{plotly_js_packed()}</script>'
         f"</head><body><h1>{esc(title)}</h1>"
         f"<p class=small>{esc(str(run.name))} · cananalyze {esc(__version__)} · {when}</p>"
         f"<nav>{nav}</nav>{body}{data}<script>{LOADER}</script></body></html>\n"

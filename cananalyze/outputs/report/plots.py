@@ -1,23 +1,25 @@
 """The report's plots as plotly figures (the page embeds plotly.js once, `page.py`).
 
-Figures are written as plotly's JSON figure documents ({"data": traces, "layout": ...})
-directly: building them through `plotly.graph_objects` validated and deep-copied every
-property, 2.5 s for fifty plots, more than the statistics of a million frames. Arrays
-travel as plotly.js typed arrays ({"dtype": "f4", "bdata": base64}): float32 is finer
-than a pixel, and a thousand-point envelope costs 11 kB. Times are seconds from the
-log's first frame.
+Figures are plotly's figure documents ({"data": traces, "layout": ...}) as dicts:
+building them through `plotly.graph_objects` validated and deep-copied every property,
+2.5 s for fifty plots, more than the statistics of a million frames. Plotted arrays are
+`encode.Packed` (rounded below a pixel, sent as integers in the page's compressed
+figures): a thousand-point envelope costs a few kB. Times are seconds from the log's
+first frame, rounded to the microsecond; periods and latencies are ms, to the µs.
 """
 
 from __future__ import annotations
 
-import base64
-import json
-
 import numpy as np
 
 from .accum import Envelope, LogHistogram
+from .encode import Packed
 
 HEIGHT = 260
+# min/max buckets across a full-width plot (about one per pixel column), shared by its
+# lines down to a floor; half-width plots get half
+PLOT_BUCKETS = 1000
+LINE_BUCKETS = 250
 NMT_COLOURS = {
     "operational": "#2ca02c",
     "pre-operational": "#1f77b4",
@@ -26,15 +28,24 @@ NMT_COLOURS = {
 }
 
 
-def typed(values) -> dict:
-    """A plotly.js typed array of float32."""
-    a = np.ascontiguousarray(values, dtype="<f4")
-    return {"dtype": "f4", "bdata": base64.b64encode(a.tobytes()).decode("ascii")}
+US = 1e-6  # s: the logs' time stamps' resolution (candump, ASC, TRC), plotted times' step
+US_MS = 1e-3  # the same in ms: periods measured between time stamps
 
 
-def _fig(traces: list[dict], title: str, x: str, y: str, **layout) -> str:
+def sig(values, digits: int = 6) -> list[float]:
+    """Floats to `digits` significant digits: a histogram's log-spaced bars, as JSON."""
+    return [float(f"{v:.{digits}g}") for v in np.asarray(values, np.float64).tolist()]
+
+
+def _share(lines: int) -> int:
+    """Each line's buckets when `lines` share a full-width plot."""
+    return max(PLOT_BUCKETS // max(lines, 1), LINE_BUCKETS)
+
+
+def _fig(traces: list[dict], title: str, x: str, y: str, **layout) -> dict:
     base = {
-        "title": {"text": title, "font": {"size": 14}},
+        # at the left: plotly's mode bar (top right) never covers it, even on half a page
+        "title": {"text": title, "font": {"size": 14}, "x": 0.01, "xanchor": "left"},
         "height": layout.pop("height", HEIGHT),
         "margin": {"l": 60, "r": 20, "t": 36, "b": 40},
         "template": {"layout": {"plot_bgcolor": "white", "paper_bgcolor": "white"}},
@@ -43,33 +54,45 @@ def _fig(traces: list[dict], title: str, x: str, y: str, **layout) -> str:
         "showlegend": layout.pop("showlegend", len(traces) > 1),
     }
     base.update(layout)
-    return json.dumps({"data": traces, "layout": base}, separators=(",", ":"))
+    return {"data": traces, "layout": base}
 
 
-def envelope_trace(env: Envelope, t0: float, name: str, scale: float = 1.0) -> dict:
-    t, v = env.points()
+def envelope_trace(
+    env: Envelope,
+    t0: float,
+    name: str,
+    scale: float = 1.0,
+    resolution: float | None = None,
+    buckets: int = PLOT_BUCKETS,
+) -> dict:
+    """A min/max envelope as a line of at most `buckets` buckets; `resolution`: the
+    value's finest meaningful step."""
+    t, v = env.points(buckets)
     return {
         "type": "scatter",
         "mode": "lines",
         "name": name,
-        "x": typed(t - t0),
-        "y": typed(v * scale),
+        "x": Packed(t - t0, US),
+        "y": Packed(v * scale, resolution),
         "line": {"width": 1},
     }
 
 
-def bus_load(buses: dict, t0: float, bitrate: int | None) -> str:
+def bus_load(buses: dict, t0: float, bitrate: int | None) -> dict:
     scale = 100.0 / bitrate if bitrate else 1e-3
     unit = "% of bitrate" if bitrate else "kbit/s"
-    traces = [envelope_trace(b.load.load, t0, ch, scale) for ch, b in buses.items()]
+    most = _share(len(buses))
+    traces = [envelope_trace(b.load.load, t0, ch, scale, buckets=most) for ch, b in buses.items()]
     return _fig(traces, "Bus load per channel (100 ms windows)", "time (s)", unit)
 
 
-def period(gaps, t0: float, kind: str, node: int, configured: list[tuple[float, float]]) -> str:
-    """The heartbeat (or guarding) period over time, against the configured value."""
-    traces = [envelope_trace(gaps.over_time, t0, "measured")]
+def period(gaps, t0: float, kind: str, node: int, configured: list[tuple[float, float]]) -> dict:
+    """The heartbeat (or guarding) period over time, against the configured value; to
+    the µs (the gaps between epoch time stamps carry float noise below it)."""
+    half = PLOT_BUCKETS // 2  # drawn beside its histogram
+    traces = [envelope_trace(gaps.over_time, t0, "measured", resolution=US_MS, buckets=half)]
     if configured:
-        xs = [t - t0 for t, _ in configured] + [(gaps.last_t or t0) - t0]
+        xs = [round(t - t0, 6) for t, _ in configured] + [round((gaps.last_t or t0) - t0, 6)]
         ys = [v for _, v in configured] + [configured[-1][1]]
         traces.append(
             {
@@ -84,14 +107,14 @@ def period(gaps, t0: float, kind: str, node: int, configured: list[tuple[float, 
     return _fig(traces, f"Node {node} {kind} period", "time (s)", "period (ms)")
 
 
-def histogram(hist: LogHistogram, title: str, x: str, marks: list[float] | None = None) -> str:
+def histogram(hist: LogHistogram, title: str, x: str, marks: list[float] | None = None) -> dict:
     left, width, count = hist.bars()
     bars = {
         "type": "bar",
         "name": "count",
-        "x": (left + width / 2).tolist(),
+        "x": sig(left + width / 2),
         "y": count.tolist(),
-        "width": width.tolist(),
+        "width": sig(width),
         "marker": {"line": {"width": 0}},
     }
     shapes = [
@@ -112,7 +135,7 @@ def histogram(hist: LogHistogram, title: str, x: str, marks: list[float] | None 
 
 def state_timeline(
     states: list[tuple[float, int, str]], t0: float, t_end: float, title: str = "NMT state per node"
-) -> str:
+) -> dict:
     """One lane per node: each state (NMT, CiA 402 drive) from its change to the next."""
     by_node: dict[int, list] = {}
     for t, node, state in sorted(states):
@@ -128,8 +151,8 @@ def state_timeline(
             "orientation": "h",
             "name": state,
             "y": [s[0] for s in rows],
-            "base": [s[1] for s in rows],
-            "x": [s[2] for s in rows],
+            "base": Packed([s[1] for s in rows], US, exact=True),
+            "x": Packed([s[2] for s in rows], US, exact=True),
             "marker": {"color": NMT_COLOURS.get(state.split()[0])},
             "hovertemplate": "%{y}: " + state + " from %{base:.3f} s for %{x:.3f} s<extra></extra>",
         }
@@ -139,10 +162,12 @@ def state_timeline(
     return _fig(traces, title, "time (s)", "", barmode="overlay", height=h, showlegend=True)
 
 
-def signals(series: list, t0: float, title: str) -> str:
+def signals(series: list, t0: float, title: str) -> dict:
     units = sorted({s.unit or "" for s in series})
     y = ", ".join(u for u in units if u) or "value"
+    most = _share(len(series))
     traces = [
-        envelope_trace(s.env, t0, f"{s.name} ({s.unit})" if s.unit else s.name) for s in series
+        envelope_trace(s.env, t0, f"{s.name} ({s.unit})" if s.unit else s.name, buckets=most)
+        for s in series
     ]
     return _fig(traces, title, "time (s)", y)

@@ -20,14 +20,14 @@ esc = html.escape
 
 
 class Figures:
-    """Plot placeholders and their JSON, drawn by the page's loader."""
+    """Plot placeholders and their figures (`plots`), drawn by the page's loader."""
 
     def __init__(self) -> None:
-        self.items: list[tuple[str, str]] = []
+        self.items: list[tuple[str, dict]] = []
 
-    def add(self, fig_json: str, cls: str = "plot") -> str:
+    def add(self, fig: dict, cls: str = "plot") -> str:
         pid = f"fig{len(self.items)}"
-        self.items.append((pid, fig_json))
+        self.items.append((pid, fig))
         return f'<div class="{cls}" id="{pid}"></div>'
 
 
