@@ -270,14 +270,24 @@ def test_findings_written_in_chunks_are_load_and_typed_over_the_whole_column(tmp
     """The findings table is converted a few rows at a time (its values are Python
     objects); the column types are still decided over the whole column, as pandas'
     from_records: faults.log with the rules file mixes text, numbers and ranges in
-    `measured` and `expected`, so chunks of 2 rows each see only some of the mix."""
+    `measured` and `expected`, so chunks of 2 rows each see only some of the mix, and
+    the chunks written with the first ones' types are written again."""
     from cananalyze.outputs.tables import stream as table_stream
 
     log, rules = SAMPLES / "faults.log", SAMPLES / "rules.yaml"
     whole = export(log, tmp_path / "whole", network=NETWORK, rules=rules)["parquet"]
     monkeypatch.setattr(table_stream, "FINDINGS_CHUNK", 2)
     monkeypatch.setattr(table_stream, "ROW_GROUP_BYTES", 500)
+    dropped = []  # the file written with the first chunks' types, dropped when they changed
+    discard = table_stream._RecordWriter.discard
+    monkeypatch.setattr(
+        table_stream._RecordWriter,
+        "discard",
+        lambda w: dropped.append(w.schema.names) or discard(w),
+    )
     cut = export(log, tmp_path / "cut", network=NETWORK, rules=rules)["parquet"]
+    # emcy texts first, numbers later: `measured` became text
+    assert list(table_stream.FINDING_COLUMNS) in dropped
     assert pq.ParquetFile(cut / "findings.parquet").num_row_groups > 1
     got = pq.read_table(cut / "findings.parquet")
     assert got.equals(pq.read_table(whole / "findings.parquet"), check_metadata=True)

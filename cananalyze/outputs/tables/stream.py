@@ -711,47 +711,58 @@ class TableSink(OutputSink):
         """By time, as load() and `check --json` give them: a rule that judges a span (a
         heartbeat dropout) reports after later findings were emitted.
 
-        Written FINDINGS_CHUNK rows at a time: the columns' types are decided over the
-        whole column first (as pandas' from_records), then each chunk is converted and
-        written. Built whole, the Python values of a 10M-frame log's 47k findings peaked
-        30 MB at the very end of the export, above the decode's own peak."""
+        Converted and written FINDINGS_CHUNK rows at a time: built whole, the Python
+        values of a 10M-frame log's 47k findings peaked 30 MB at the very end of the
+        export, above the decode's own peak. pandas types a column over all of it, so the
+        chunks are written with the types of the first while the types so far still hold
+        (as the sdo table); a later chunk that changes one (a text among numbers) makes
+        the table written again with the types of the whole column."""
         found = FindingColumns.concat(self._findings)
         self._findings = []
         found.messages()  # built once (mostly already, by the event log), read per chunk
-        t = np.asarray(found.column("t"), np.float64)
-        order = np.argsort(t, kind="stable")
-        del t
+        order = np.argsort(np.asarray(found.column("t"), np.float64), kind="stable")
         n = len(order)
         starts = range(0, n, FINDINGS_CHUNK)
-        objects = [c for c in FINDING_COLUMNS if c not in _NULLABLE_INTS]
-        stats = {c: pl.ColumnStats() for c in objects}
+        stats = {c: pl.ColumnStats() for c in FINDING_COLUMNS if c not in _NULLABLE_INTS}
+
+        def part(i: int) -> FindingColumns:
+            return found.take(order[i : i + FINDINGS_CHUNK])
+
+        def decisions() -> dict[str, tuple[str, str, str]]:
+            return {c: s.decide() for c, s in stats.items()}
+
+        out, decided, seen = None, None, 0
         for i in starts:
-            part = found.take(order[i : i + FINDINGS_CHUNK])
-            for name in objects:
-                stats[name].update(part.column(name))
-        decided = {c: stats[c].decide() for c in objects}
-        fields, metas = [], []
-        for name in FINDING_COLUMNS:
-            if name in _NULLABLE_INTS:  # nullable (line: a log without times), as pl.nullable_int
-                fields.append(pa.field(name, pa.int64()))
-                metas.append(pl.field_meta(name, "int64", "Int64"))
-            else:
-                how, pandas_type, numpy_type = decided[name]
-                fields.append(pa.field(name, pl.arrow_type(how)))
-                metas.append(pl.field_meta(name, pandas_type, numpy_type))
-        schema = pa.schema(fields, metadata=pl.schema_metadata(metas))
+            rows = part(i)
+            values = {c: rows.column(c) for c in stats}
+            for c, s in stats.items():
+                s.update(values[c])
+            seen += 1
+            if decided is None:
+                decided = decisions()
+                schema = _findings_schema(decided)
+                path, adapt = self.paths["findings"], self._adapt("findings")
+                out = _RecordWriter(path, self.fmt, schema, self.compression, adapt)
+            elif decisions() != decided:
+                out.discard()
+                out = None
+                break
+            out.add(_findings_table(rows, values, decided, schema))
+        if out is not None:
+            out.close()
+            return n
+        for i in starts[seen:]:  # the types changed: all of the column decides them
+            rows = part(i)
+            for c, s in stats.items():
+                s.update(rows.column(c))
+        decided = decisions()
+        schema = _findings_schema(decided)
 
         def tables():
             for i in starts:
-                part = found.take(order[i : i + FINDINGS_CHUNK])
-                arrays = []
-                for name in FINDING_COLUMNS:
-                    if name in _NULLABLE_INTS:
-                        values, missing = part.ints(name)
-                        arrays.append(ab.numeric(np.where(missing, 0, values), missing, pa.int64()))
-                    else:
-                        arrays.append(pl.convert(part.column(name), decided[name][0]))
-                yield pa.Table.from_arrays(arrays, schema=schema)
+                rows = part(i)
+                values = {c: rows.column(c) for c in stats}
+                yield _findings_table(rows, values, decided, schema)
 
         self._write_small("findings", tables(), schema)
         return n
@@ -782,6 +793,31 @@ def _sdo_schema(decided: tuple[tuple[str, str, str], ...]) -> pa.Schema:
             [pl.field_meta(c, d[1], d[2]) for c, d in zip(SDO_COLUMNS, decided, strict=True)]
         ),
     )
+
+
+def _findings_schema(decided: dict[str, tuple[str, str, str]]) -> pa.Schema:
+    """The findings table's schema: each column as decided (as pl.column), the nullable
+    ints (node, cob_id, line: none in a log without times) as pl.nullable_int."""
+    fields, metas = [], []
+    for name in FINDING_COLUMNS:
+        how, pandas_type, numpy_type = decided.get(name, ("int64", "int64", "Int64"))
+        fields.append(pa.field(name, pl.arrow_type(how)))
+        metas.append(pl.field_meta(name, pandas_type, numpy_type))
+    return pa.schema(fields, metadata=pl.schema_metadata(metas))
+
+
+def _findings_table(
+    rows: FindingColumns, values: dict[str, list], decided: dict, schema: pa.Schema
+) -> pa.Table:
+    """One chunk of the findings table: `values` (per decided column) converted as decided."""
+    arrays = []
+    for name in FINDING_COLUMNS:
+        if name in _NULLABLE_INTS:
+            ints, missing = rows.ints(name)
+            arrays.append(ab.numeric(np.where(missing, 0, ints), missing, pa.int64()))
+        else:
+            arrays.append(pl.convert(values[name], decided[name][0]))
+    return pa.Table.from_arrays(arrays, schema=schema)
 
 
 class _RecordWriter:
