@@ -359,24 +359,26 @@ def compare(args, n: int, formats: list[str], made: list[Path]) -> list[str]:
                 for run in (mine, theirs) if k % 2 == 0 else (theirs, mine):
                     run.once()
     width = max(len(label) for label, _, _ in pairs)
-    head = f"{'':<{width}}  {'this tree':>17}  {'other tree':>17}  {'this / other':>14}"
+    head = f"{'':<{width}}  {'this tree':>24}  {'other tree':>24}  {'this / other':>21}"
+    cols = f"{'cpu':>8} {'wall':>8} {'RSS':>6}"
     out = [
         f"this tree: {ROOT}",
         f"other tree (--against): {other}",
         head,
-        f"{'':<{width}}  {'cpu':>8} {'wall':>8}  {'cpu':>8} {'wall':>8}  {'cpu':>6} {'wall':>7}",
+        f"{'':<{width}}  {cols}  {cols}  {'cpu':>6} {'wall':>7} {'RSS':>6}",
     ]
 
     def cell(run: Run) -> str:
         if run.failed is not None:
-            return f"{'failed (' + str(run.failed) + ')':>17}"
-        return f"{run.cpu:7.2f}s {run.wall:7.2f}s"
+            return f"{'failed (' + str(run.failed) + ')':>24}"
+        return f"{run.cpu:7.2f}s {run.wall:7.2f}s {run.mb:5.0f}M"
 
     for label, mine, theirs in pairs:
         if mine.failed is None and theirs.failed is None:
             ratio = f"{mine.cpu / theirs.cpu:5.2f}x {mine.wall / theirs.wall:6.2f}x"
+            ratio += f" {mine.mb / theirs.mb:5.2f}x"
         else:
-            ratio = f"{'-':>14}"
+            ratio = f"{'-':>21}"
         out.append(f"{label:<{width}}  {cell(mine)}  {cell(theirs)}  {ratio}")
     return out
 

@@ -182,10 +182,10 @@ def test_bench_decode_against_another_tree(logs, tmp_path):
         *("--out", str(logs), "--against", str(ROOT)),
     ).stdout
     rows = out[out.index("this / other") :].splitlines()[2:]
-    cell = rf" +{NUMBER}s +{NUMBER}s"
+    cell = rf" +{NUMBER}s +{NUMBER}s +{NUMBER}M"  # CPU, wall, peak RSS
     labels = []
     for row in rows:
-        m = re.fullmatch(rf"(.+?){cell}{cell} +{NUMBER}x +{NUMBER}x", row)
+        m = re.fullmatch(rf"(.+?){cell}{cell} +{NUMBER}x +{NUMBER}x +{NUMBER}x", row)
         assert m, row
         labels.append(m.group(1).strip())
     assert labels == [

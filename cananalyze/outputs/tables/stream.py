@@ -62,6 +62,8 @@ TABLES = ("frames", "signals", "sdo", "events", "findings", "nodes")
 SDO_COLUMNS = SDO_TABLE_COLUMNS
 _SDO_ROW = operator.itemgetter(*SDO_COLUMNS)
 FINDING_COLUMNS = TABLE_COLUMNS  # as check --json
+_NULLABLE_INTS = ("node", "cob_id", "line")  # findings columns of ints or none: Int64
+FINDINGS_CHUNK = 8192  # findings rows converted at a time (their values are Python objects)
 HOLD = 10.0  # seconds of events kept back for records that complete late (see _add_events)
 _NAN = float("nan")  # an absent key: pandas fills NaN, as pandas_like.MISSING
 _SERVICES = ab.strings(list(SERVICE_NAMES))
@@ -707,19 +709,63 @@ class TableSink(OutputSink):
 
     def _write_findings(self) -> int:
         """By time, as load() and `check --json` give them: a rule that judges a span (a
-        heartbeat dropout) reports after later findings were emitted."""
+        heartbeat dropout) reports after later findings were emitted.
+
+        Converted and written FINDINGS_CHUNK rows at a time: built whole, the Python
+        values of a 10M-frame log's 47k findings peaked 30 MB at the very end of the
+        export, above the decode's own peak. pandas types a column over all of it, so the
+        chunks are written with the types of the first while the types so far still hold
+        (as the sdo table); a later chunk that changes one (a text among numbers) makes
+        the table written again with the types of the whole column."""
         found = FindingColumns.concat(self._findings)
-        found = found.take(np.argsort(np.asarray(found.column("t"), np.float64), kind="stable"))
-        out = []
-        for name in FINDING_COLUMNS:
-            if name in ("node", "cob_id", "line"):  # nullable (line: a log without times)
-                values, missing = found.ints(name)  # as pl.nullable_int, from the columns
-                conv = (ab.numeric(np.where(missing, 0, values), missing, pa.int64()), "int64")
-                conv += ("Int64",)
-            else:
-                conv = pl.column(found.column(name))
-            out.append((name, *conv))
-        return self._small_table("findings", out)
+        self._findings = []
+        found.messages()  # built once (mostly already, by the event log), read per chunk
+        order = np.argsort(np.asarray(found.column("t"), np.float64), kind="stable")
+        n = len(order)
+        starts = range(0, n, FINDINGS_CHUNK)
+        stats = {c: pl.ColumnStats() for c in FINDING_COLUMNS if c not in _NULLABLE_INTS}
+
+        def part(i: int) -> FindingColumns:
+            return found.take(order[i : i + FINDINGS_CHUNK])
+
+        def decisions() -> dict[str, tuple[str, str, str]]:
+            return {c: s.decide() for c, s in stats.items()}
+
+        out, decided, seen = None, None, 0
+        for i in starts:
+            rows = part(i)
+            values = {c: rows.column(c) for c in stats}
+            for c, s in stats.items():
+                s.update(values[c])
+            seen += 1
+            if decided is None:
+                decided = decisions()
+                schema = _findings_schema(decided)
+                path, adapt = self.paths["findings"], self._adapt("findings")
+                out = _RecordWriter(path, self.fmt, schema, self.compression, adapt)
+            elif decisions() != decided:
+                out.discard()
+                out = None
+                break
+            out.add(_findings_table(rows, values, decided, schema))
+        if out is not None:
+            out.close()
+            return n
+        for i in starts[seen:]:  # the types changed: all of the column decides them
+            rows = part(i)
+            for c, s in stats.items():
+                s.update(rows.column(c))
+        decided = decisions()
+        schema = _findings_schema(decided)
+
+        def tables():
+            for i in starts:
+                rows = part(i)
+                values = {c: rows.column(c) for c in stats}
+                yield _findings_table(rows, values, decided, schema)
+
+        self._write_small("findings", tables(), schema)
+        return n
 
     def _write_nodes(self) -> int:
         rows = self._nodes.rows(node_profiles(self.run.network) if self.run else self.profiles)
@@ -749,6 +795,31 @@ def _sdo_schema(decided: tuple[tuple[str, str, str], ...]) -> pa.Schema:
     )
 
 
+def _findings_schema(decided: dict[str, tuple[str, str, str]]) -> pa.Schema:
+    """The findings table's schema: each column as decided (as pl.column), the nullable
+    ints (node, cob_id, line: none in a log without times) as pl.nullable_int."""
+    fields, metas = [], []
+    for name in FINDING_COLUMNS:
+        how, pandas_type, numpy_type = decided.get(name, ("int64", "int64", "Int64"))
+        fields.append(pa.field(name, pl.arrow_type(how)))
+        metas.append(pl.field_meta(name, pandas_type, numpy_type))
+    return pa.schema(fields, metadata=pl.schema_metadata(metas))
+
+
+def _findings_table(
+    rows: FindingColumns, values: dict[str, list], decided: dict, schema: pa.Schema
+) -> pa.Table:
+    """One chunk of the findings table: `values` (per decided column) converted as decided."""
+    arrays = []
+    for name in FINDING_COLUMNS:
+        if name in _NULLABLE_INTS:
+            ints, missing = rows.ints(name)
+            arrays.append(ab.numeric(np.where(missing, 0, ints), missing, pa.int64()))
+        else:
+            arrays.append(pl.convert(values[name], decided[name][0]))
+    return pa.Table.from_arrays(arrays, schema=schema)
+
+
 class _RecordWriter:
     """A record table's file, chunk by chunk, in row groups of up to ROW_GROUP rows (as to_parquet)
     or ROW_GROUP_BYTES, whichever comes first (the cut depends only on the chunks, so a
@@ -776,6 +847,7 @@ class _RecordWriter:
         self.buf: list[pa.Table] = []
         self.rows = 0
         self.bytes = 0
+        self.written = False
 
     def add(self, table: pa.Table) -> None:
         if self._adapt is not None:
@@ -785,11 +857,17 @@ class _RecordWriter:
         self.bytes += table.nbytes
         if self.rows >= ROW_GROUP or self.bytes >= ROW_GROUP_BYTES:
             self._write(pa.concat_tables(self.buf))
-            self.buf, self.rows, self.bytes = [], 0, 0
+            self.buf, self.rows, self.bytes, self.written = [], 0, 0, True
 
     def close(self) -> None:
+        """The last row group; an empty one only for a table without rows (as to_parquet).
+        Built from no batches: `Schema.empty_table` goes through `pa.array`, which imports
+        pandas (0.4-0.9 s of a 10M-frame export whose findings filled a row group)."""
         try:
-            self._write(pa.concat_tables(self.buf) if self.buf else self.schema.empty_table())
+            if self.buf:
+                self._write(pa.concat_tables(self.buf))
+            elif not self.written:
+                self._write(pa.Table.from_batches([], self.schema))
         finally:
             self.writer.close()
 
