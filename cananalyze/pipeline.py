@@ -109,6 +109,13 @@ class Decoder:
     """FrameBatches in, DecodedBatches out: the columnar classifier, then each processor.
 
     Live sniffing feeds small batches to the same object, so both give the same records.
+
+    Several buses (a log or `live -c` with frames of more than one channel): node 5 on
+    can0 and node 5 on can1 are two devices, so each channel gets a decoder of its own
+    (classifier, SDO tracker, network model, PDO/EMCY/drive decoders, checker), made by
+    `spawn` when the channel is first seen; this one follows the first channel. A batch
+    of several channels is split by channel and the decoded parts merged back in row
+    order. A log of one channel takes the one-decoder path, no copy.
     """
 
     def __init__(self, processors: list[Processor] | None = None) -> None:
@@ -116,13 +123,71 @@ class Decoder:
         self.processors: list[Processor] = list(processors or [])
         self.network: NetworkModel | None = None
         self.checker: Checker | None = None  # rules and timing statistics, when asked
+        self.spawn: Callable[[], Decoder] | None = None  # a fresh decoder for another bus
+        self.bus: str | None = None  # this decoder's channel name, once several are seen
+        self._channel: int | None = None  # channel index of the frames seen so far
+        self.buses: dict[int, Decoder] | None = None  # channel -> its decoder (several)
 
     def decode(self, batch: FrameBatch) -> DecodedBatch:
+        if self.spawn is not None and len(batch):
+            ch = batch.channel
+            if self.buses is None:
+                if self._channel is None:
+                    self._channel = int(ch[0])
+                if not (ch != self._channel).any():
+                    return self._decode_one(batch)
+                self._several(batch)
+            return self._decode_buses(batch)
+        return self._decode_one(batch)
+
+    def _decode_one(self, batch: FrameBatch) -> DecodedBatch:
         c = self.classifier.classify(batch)
         out = DecodedBatch(batch, c.service, c.node, c.pdo)
         for p in self.processors:
             p.process(out)
         return out
+
+    def _several(self, batch: FrameBatch) -> None:
+        """A second channel: from now on, one decoder per channel (this one the first's)."""
+        self.buses = {self._channel: self}
+        self._name(self, batch.channel_label(self._channel))
+        if self.checker is not None:  # what it found before: on the first bus
+            for found in self.checker._found:
+                found.bus[:] = self.bus
+            self.checker._sync_objects(self.checker.findings)
+
+    def _bus(self, c: int, batch: FrameBatch) -> Decoder:
+        dec = self.buses.get(c)
+        if dec is None:
+            dec = self.buses[c] = self.spawn()
+            self._name(dec, batch.channel_label(c))
+            if dec.checker is not None and self.checker is not None:
+                dec.checker.t0 = self.checker.t0  # times from the log's first frame
+                dec.checker.first_bus = False
+                self.checker.others.append(dec.checker)  # its findings are the run's
+        return dec
+
+    @staticmethod
+    def _name(dec: Decoder, name: str) -> None:
+        dec.bus = name
+        if dec.checker is not None:
+            dec.checker.bus = name
+
+    def _decode_buses(self, batch: FrameBatch) -> DecodedBatch:
+        ch = batch.channel
+        if self.checker is not None and self.checker.t0 is None:
+            for dec in self.buses.values():  # the log's first frame, whichever bus
+                if dec.checker is not None:
+                    dec.checker.t0 = float(batch.t[0])
+        chans = np.unique(ch).tolist()
+        if len(chans) == 1:
+            return self._bus(chans[0], batch)._decode_one(batch)
+        parts = []
+        for c in chans:
+            dec = self._bus(c, batch)
+            rows = np.flatnonzero(ch == c)
+            parts.append((rows, dec._decode_one(batch.take(rows))))
+        return merge_buses(batch, parts)
 
     def tick(self, now: float) -> DecodedBatch | None:
         """Live, between frames: a zero-row batch with what time alone completes at `now`
@@ -132,6 +197,14 @@ class Decoder:
         A processor with `tick(batch, now)` is asked that (the SDO tracker, the checks);
         the others see the zero-row batch as a batch (the network model reads the SDO
         records the tick completed)."""
+        if self.buses is None:
+            return self._tick_one(now)
+        done = [out for dec in self.buses.values() if (out := dec._tick_one(now)) is not None]
+        if not done:
+            return None
+        return merge_ends(done)
+
+    def _tick_one(self, now: float) -> DecodedBatch | None:
         fb = FrameBatch.empty()
         c = self.classifier.classify(fb)
         out = DecodedBatch(fb, c.service, c.node, c.pdo)
@@ -145,10 +218,75 @@ class Decoder:
 
     def finish(self) -> DecodedBatch:
         """A zero-row batch carrying the records that only the end of the log completes."""
-        empty = self.decode(FrameBatch.empty())
+        if self.buses is None:
+            return self._finish_one()
+        decoders = list(self.buses.values())
+        checkers = [d.checker for d in decoders if d.checker is not None]
+        if len(checkers) > 1:
+            from .checks.engine import whole_log
+
+            whole_log(checkers)
+        return merge_ends([d._finish_one() for d in decoders])
+
+    def _finish_one(self) -> DecodedBatch:
+        empty = self._decode_one(FrameBatch.empty())
         for p in self.processors:
             p.finish(empty)
         return empty
+
+
+def merge_buses(batch: FrameBatch, parts: list[tuple[np.ndarray, DecodedBatch]]) -> DecodedBatch:
+    """One DecodedBatch of `batch` from its channels' decoded parts ((rows, part) each):
+    columns scattered back to their rows, records and findings at their rows, in row order
+    (a record at its part's end stays at the batch's end)."""
+    n = len(batch)
+    service = np.zeros(n, np.uint8)
+    node = np.full(n, -1, np.int16)
+    pdo = np.zeros(n, np.uint8)
+    out = DecodedBatch(batch, service, node, pdo)
+    records: list[tuple[int, dict]] = []
+    founds = []
+    for rows, part in parts:
+        at = np.append(rows, n)  # a part's row len(part): the batch's end
+        service[rows] = part.service
+        node[rows] = part.node
+        pdo[rows] = part.pdo
+        out.notes.update({int(rows[r]): v for r, v in part.notes.items()})
+        records.extend((int(at[r]), rec) for r, rec in part.records)
+        for sb in part.signals:
+            sb.rows = rows[sb.rows]
+            out.signals.append(sb)
+        out.row_notes.extend((rows[r], note) for r, note in part.row_notes)
+        out.drive.extend(c._replace(row=int(at[c.row])) for c in part.drive)
+        if len(part.findings):
+            f = part.findings
+            f.row = at[np.clip(f.row, 0, len(rows))]
+            founds.append(f)
+    records.sort(key=_row_of)
+    out.records = records
+    out.drive.sort(key=lambda c: c.row)
+    if founds:
+        from .checks.columns import FindingColumns
+
+        out.findings = FindingColumns.concat(founds).sort()
+    return out
+
+
+def merge_ends(parts: list[DecodedBatch]) -> DecodedBatch:
+    """The zero-row batches of several buses (live ticks, the end of the log) as one."""
+    if len(parts) == 1:
+        return parts[0]
+    from .checks.columns import FindingColumns
+
+    out = parts[0]
+    out.records = [r for p in parts for r in p.records]
+    out.drive = [c for p in parts for c in p.drive]
+    out.findings = FindingColumns.concat([p.findings for p in parts]).sort()
+    return out
+
+
+def _row_of(record: tuple[int, dict]) -> int:
+    return record[0]
 
 
 def network_spec(opts: Options) -> NetworkSpec:
@@ -226,7 +364,24 @@ def build_decoder(opts: Options | None = None, checker: Checker | None = None) -
         checker.config = ModelConfig(model)  # the model holds every declaration and the log
         decoder.processors.append(checker)
         decoder.checker = checker
+    decoder.spawn = _spawner(opts, checker)
     return decoder
+
+
+def _spawner(opts: Options, checker: Checker | None) -> Callable[[], Decoder]:
+    """Another bus's decoder: the same declarations, its own state (its checker a fresh
+    copy of `checker`'s rules, taken now, before any frame)."""
+    rules = None if checker is None else checker.pristine()
+
+    def spawn() -> Decoder:
+        fresh = None
+        if rules is not None:
+            fresh = rules()
+        dec = build_decoder(opts, fresh)
+        dec.spawn = None
+        return dec
+
+    return spawn
 
 
 def build_checker(opts: Options) -> Checker:

@@ -30,18 +30,67 @@ IDENTITY_KEYS = ("device_type", "vendor_id", "product_code", "revision", "serial
 
 
 class NodeTally:
-    """Per-node counts, last state and identity; `rows()` gives the nodes table."""
+    """Per-node counts, last state and identity; `rows()` gives the nodes table.
+
+    Several buses (frames of more than one channel): node 5 on can0 and node 5 on can1
+    are two rows, each with a `bus` column (a log of one bus has no such column)."""
 
     def __init__(self) -> None:
         self.counts = np.zeros((128, len(SERVICE_NAMES)), np.int64)
         self.last_state: dict[int, tuple[float, str]] = {}
         self.identity: dict[int, dict] = {}
+        # several buses: channel name -> a tally of its own (None: one bus so far)
+        self.buses: dict[str, NodeTally] | None = None
+        self._channel: int | None = None  # the one channel seen so far
+        self._names: tuple[str, ...] = ()
 
-    def add(self, batch: DecodedBatch, states: Iterable) -> None:
-        """One decoded batch and its NMT state changes (`Row`s or `Event`s)."""
+    def add(self, batch: DecodedBatch, states: Iterable, offset: int | None = None) -> None:
+        """One decoded batch and its NMT state changes (`Row`s or `Event`s); `offset`: the
+        row number of the batch's first frame in the states' rows (several buses)."""
+        fb = batch.frames
+        if self.buses is None and len(fb):
+            if self._channel is None:
+                self._channel, self._names = int(fb.channel[0]), fb.channels
+            if (fb.channel != self._channel).any():
+                self._split(fb.channel_label(self._channel))
+        if self.buses is not None:
+            self._add_buses(batch, list(states), offset)
+            return
         self.add_frames(batch.service, batch.node)
         self.add_states(states)
         self.add_identity(identity_records(batch))
+
+    def _split(self, first: str) -> None:
+        """A second bus: what was tallied so far is the first bus's."""
+        mine = NodeTally()
+        mine.counts, mine.last_state, mine.identity = self.counts, self.last_state, self.identity
+        self.counts = np.zeros_like(self.counts)
+        self.last_state, self.identity = {}, {}
+        self.buses = {first: mine}
+
+    def _add_buses(self, batch: DecodedBatch, states: list, offset: int | None) -> None:
+        fb = batch.frames
+        n = len(fb)
+        ch = fb.channel
+        off = offset
+        if off is None:  # the states' rows count from this batch's first frame
+            off = 0
+        records = identity_records(batch)
+        for c in np.unique(ch).tolist():
+            name = fb.channel_label(c)
+            tally = self.buses.get(name)
+            if tally is None:
+                tally = self.buses[name] = NodeTally()
+            mask = ch == c
+            tally.add_frames(batch.service[mask], batch.node[mask])
+            tally.add_states(
+                ev for ev in states if ev.row is not None and 0 <= ev.row - off < n
+                and ch[ev.row - off] == c
+            )  # fmt: skip
+            tally.add_identity(
+                [(k, r) for k, r in records if 0 <= (row := batch.records[k][0]) < n
+                 and ch[row] == c]
+            )  # fmt: skip
 
     def add_frames(self, service: np.ndarray, node: np.ndarray) -> None:
         has = node >= 0
@@ -61,7 +110,20 @@ class NodeTally:
 
     def rows(self, profiles: dict[int, tuple[str, str]]) -> list[dict]:
         """One dict per node seen: frames, frames_<service> for every service seen,
-        last_state(_t), identity, profile and how it was identified."""
+        last_state(_t), identity, profile and how it was identified; with several
+        buses, one per bus and node, `bus` first."""
+        if self.buses is not None:
+            parts = [(name, t.rows(profiles)) for name, t in self.buses.items()]
+            seen = [k for _, rows in parts for r in rows for k in r]
+            services = [k for k in dict.fromkeys(seen) if k.startswith("frames_")]
+            out = []
+            for name, rows in parts:
+                for r in rows:
+                    row = {"bus": name, "node": r["node"], "frames": r["frames"]}
+                    row.update({k: r.get(k, 0) for k in services})
+                    row.update({k: v for k, v in r.items() if k not in row})
+                    out.append(row)
+            return out
         counts = self.counts
         seen = np.flatnonzero(counts.sum(axis=0)).tolist()
         rows: list[dict] = []

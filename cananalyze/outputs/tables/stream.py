@@ -316,7 +316,7 @@ class TableSink(OutputSink):
         if len(batch.findings):
             self._findings.append(batch.findings)
         events, states = batch_events_of(batch, off, self._event_state)
-        self._nodes.add(batch, states)
+        self._nodes.add(batch, states, off)
         self._add_events(events, float(fb.t[-1]) - HOLD if n else float("-inf"))
         self.offset += n
 
@@ -719,6 +719,8 @@ class TableSink(OutputSink):
             else:
                 conv = pl.column(found.column(name))
             out.append((name, *conv))
+        if np.not_equal(found.bus, None).any():  # several buses: which one
+            out.append(("bus", *pl.column(found.column("bus"))))
         return self._small_table("findings", out)
 
     def _write_nodes(self) -> int:
