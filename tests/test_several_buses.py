@@ -208,8 +208,11 @@ def test_live_two_buses_same_node_id_no_false_finding(tmp_path):
 
     keep = Keep(quiet=True)
     keep.needs_events = True
-    rules = tmp_path / "rules.yaml"  # python-canopen's timer thread on a busy machine
-    rules.write_text("jitter_ms: 100\n")
+    # python-canopen's timer thread on a busy machine: a beat 240 ms late was seen with
+    # the test suite and a benchmark on 2 cores (two merged nodes 5 would give 1..99 ms
+    # gaps and flapping states whatever the floor)
+    rules = tmp_path / "rules.yaml"
+    rules.write_text("jitter_ms: 400\n")
     opts = Options(checks=True, rules=rules)
     started = time.monotonic()
 
@@ -240,5 +243,5 @@ def test_live_two_buses_same_node_id_no_false_finding(tmp_path):
         for net in nets:
             net.disconnect()
     assert state.frames > 40
-    assert [f.message for f in keep.findings] == []
+    assert [(f.bus, f.message) for f in keep.findings] == []
     assert states == {a: ["operational"], b: ["pre-operational"]}

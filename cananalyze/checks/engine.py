@@ -235,6 +235,16 @@ class Checker:
     def report(self) -> dict:
         return self.timing.report(self.nmt)
 
+    def timing_lines(self, t0: float | None) -> list[str]:
+        """`check --timing`'s lines: this bus's, or each bus's under its name."""
+        if not self.others:
+            return self.timing.lines(self.nmt, t0)
+        out: list[str] = []
+        for c in (self, *self.others):
+            out.append(f"{c.bus}:")
+            out += ["  " + line for line in c.timing.lines(c.nmt, t0)]
+        return out
+
 
 def whole_log(checkers: list[Checker]) -> None:
     """Several buses, before their end: an assertion about the whole log (the rules

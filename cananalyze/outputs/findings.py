@@ -160,9 +160,9 @@ class FindingsSink(Sink):
             if self.timing and checker is not None:
                 if checker.timed is False:
                     print("no timestamps: the times below are line numbers, no rates", file=out)
-                    print("\n".join(checker.timing.lines(checker.nmt, 0.0)), file=out)
+                    print("\n".join(checker.timing_lines(0.0)), file=out)
                 else:
-                    print("\n".join(checker.timing.lines(checker.nmt, checker.t0)), file=out)
+                    print("\n".join(checker.timing_lines(checker.t0)), file=out)
             failing = int(findings.fails.sum())
             names = ", ".join(r.name for r in rules)
             verdict = (
