@@ -226,6 +226,11 @@ class Decoder:
             from .checks.engine import whole_log
 
             whole_log(checkers)
+            # the log ends at its last frame whichever bus it was on: a node silent
+            # since is judged against that end, as on a log of one bus
+            ends = [c.t_last for c in checkers if c.t_last is not None]
+            for c in checkers:
+                c.t_last = max(ends) if ends else None
         return merge_ends([d._finish_one() for d in decoders])
 
     def _finish_one(self) -> DecodedBatch:
@@ -244,15 +249,13 @@ def merge_buses(batch: FrameBatch, parts: list[tuple[np.ndarray, DecodedBatch]])
     node = np.full(n, -1, np.int16)
     pdo = np.zeros(n, np.uint8)
     out = DecodedBatch(batch, service, node, pdo)
-    records: list[tuple[int, dict]] = []
     founds = []
     for rows, part in parts:
         at = np.append(rows, n)  # a part's row len(part): the batch's end
         service[rows] = part.service
         node[rows] = part.node
         pdo[rows] = part.pdo
-        out.notes.update({int(rows[r]): v for r, v in part.notes.items()})
-        records.extend((int(at[r]), rec) for r, rec in part.records)
+        out.notes = _merge_notes(out.notes, rows, part.notes)
         for sb in part.signals:
             sb.rows = rows[sb.rows]
             out.signals.append(sb)
@@ -262,14 +265,34 @@ def merge_buses(batch: FrameBatch, parts: list[tuple[np.ndarray, DecodedBatch]])
             f = part.findings
             f.row = at[np.clip(f.row, 0, len(rows))]
             founds.append(f)
-    records.sort(key=_row_of)
-    out.records = records
+    out.records = _merge_records([(np.append(rows, n), part) for rows, part in parts])
     out.drive.sort(key=lambda c: c.row)
     if founds:
         from .checks.columns import FindingColumns
 
         out.findings = FindingColumns.concat(founds).sort()
     return out
+
+
+def _merge_notes(merged: dict, rows: np.ndarray, notes: dict) -> dict:
+    """A part's notes at the batch's rows; the SDO notes a part has not written yet
+    (`LazyNotes`: only text outputs read them) stay unwritten until the batch's are read."""
+    from .sdo.lazynotes import LazyNotes
+
+    pending = notes.pending_rows() if isinstance(notes, LazyNotes) else None
+    if pending is None:
+        dict.update(merged, {int(rows[r]): v for r, v in notes.items()})
+        return merged
+    dict.update(merged, {int(rows[r]): v for r, v in dict.items(notes)})
+
+    def fill(into: dict) -> None:
+        for r, v in notes.items():  # the part's pending notes written, then mapped
+            LazyNotes.write(into, int(rows[r]), v)
+
+    if isinstance(merged, LazyNotes):
+        merged.defer(fill, rows[pending])
+        return merged
+    return LazyNotes(merged, fill, rows[pending])
 
 
 def merge_ends(parts: list[DecodedBatch]) -> DecodedBatch:
@@ -285,8 +308,74 @@ def merge_ends(parts: list[DecodedBatch]) -> DecodedBatch:
     return out
 
 
-def _row_of(record: tuple[int, dict]) -> int:
-    return record[0]
+def _merge_records(parts: list[tuple[np.ndarray, DecodedBatch]]) -> list:
+    """The parts' records at the batch's rows ((row map, part) each), in row order. The
+    SDO fast path's records a part has not built stay unbuilt, with their columns
+    (`sdo_fast`: the checks and the summary read those); the rest are read as they are."""
+    from .records import SdoColumns
+    from .sdo.lazyrecords import LazyRecords
+
+    get = list.__getitem__
+    rows, keys, lazy, fasts = [], [], [], []
+    for p, (at, part) in enumerate(parts):
+        recs, fast = part.records, part.sdo_fast
+        m = len(recs)
+        row = np.zeros(m, np.int64)
+        is_fast = np.zeros(m, bool)
+        if fast is not None and fast.slots.size and m > int(fast.slots[-1]):
+            is_fast[fast.slots] = True
+            row[fast.slots] = fast.row
+            fasts.append((p, at, fast))
+        others = np.flatnonzero(~is_fast)
+        row[others] = [get(recs, k)[0] for k in others.tolist()]
+        rows.append(at[np.clip(row, 0, at.size - 1)])
+        keys.append(np.stack((np.full(m, p), np.arange(m)), 1))
+        lazy.append(is_fast)
+    if not rows:
+        return []
+    row = np.concatenate(rows)
+    key = np.concatenate(keys)
+    deferred = np.concatenate(lazy)
+    order = np.argsort(row, kind="stable")
+    merged = [
+        (r, None if d else get(parts[p][1].records, k)[1])
+        for r, d, (p, k) in zip(
+            row[order].tolist(), deferred[order].tolist(), key[order].tolist(), strict=True
+        )
+    ]
+    if not fasts:
+        return merged
+    slots = np.flatnonzero(deferred[order])  # merged positions of the unbuilt ones
+    where = key[order][slots]  # (part, slot in the part) of each
+
+    def build(js: np.ndarray | None) -> list[dict]:
+        picks = where if js is None else where[js]
+        if js is None:
+            for p in set(picks[:, 0].tolist()):
+                list(parts[p][1].records)  # the part's records built at once
+        return [parts[p][1].records[k][1] for p, k in picks.tolist()]
+
+    pos = np.empty(order.size, np.int64)  # merged position of each (part, slot)
+    pos[order] = np.arange(order.size)
+    start = np.cumsum([0] + [len(part.records) for _, part in parts])
+    cols = {f: [] for f in ("slots", "row", "req_row", "node", "upload", "index")}
+    cols.update({f: [] for f in ("subindex", "ok", "latency")})
+    for p, at, fast in fasts:
+        cols["slots"].append(pos[start[p] + fast.slots])
+        cols["row"].append(at[fast.row])
+        cols["req_row"].append(at[np.clip(fast.req_row, 0, at.size - 1)])
+        for f in ("node", "upload", "index", "subindex", "ok", "latency"):
+            cols[f].append(getattr(fast, f))
+    columns = {f: np.concatenate(v) for f, v in cols.items()}
+    by_slot = np.argsort(columns["slots"], kind="stable")
+    out = LazyRecords(merged)
+    out.defer(
+        slots,
+        row[order][slots].tolist(),
+        build,
+        SdoColumns(**{f: v[by_slot] for f, v in columns.items()}),
+    )
+    return out
 
 
 def network_spec(opts: Options) -> NetworkSpec:

@@ -171,6 +171,42 @@ def test_assertion_absent_only_when_no_bus_has_it(tmp_path):
     assert got == [(9, "no heartbeat from node 9")]
 
 
+def test_nodes_split_over_two_buses_decode_as_on_one(tmp_path):
+    """The generator's bus (16 nodes, PDOs, SDO, EMCY) with the odd nodes' frames moved
+    to can1 (their SDO, PDO, EMCY, heartbeat: nothing of theirs is shared): every SDO
+    record, signal, event and finding is the one-bus log's, each finding naming its
+    node's bus; the records stay in row order."""
+    from conftest import generated_log
+
+    one = generated_log(tmp_path, 30_000, faults=True)
+    two = tmp_path / "two.log"
+    with open(one) as src, open(two, "w") as dst:
+        for line in src:
+            t, ch, frame = line.split(" ", 2)
+            cob = frame.split("#", 1)[0]
+            if len(cob) == 3 and int(cob, 16) >= 0x80 and int(cob, 16) & 1:
+                line = f"{t} can1 {frame}"
+            dst.write(line)
+    a, b = load(str(one)), load(str(two))
+    assert set(b.batch.channels) == {"can0", "can1"}
+    assert sorted(map(str, a.sdo.astype(str).values.tolist())) == sorted(
+        map(str, b.sdo.astype(str).values.tolist())
+    )
+    rows = [r for r, _ in b.records]
+    assert rows == sorted(rows)
+    assert sorted(str((e.t, e.kind, e.node, e.message)) for e in a.sorted_events()) == sorted(
+        str((e.t, e.kind, e.node, e.message)) for e in b.sorted_events()
+    )
+    key = ["t", "signal"]
+    sa = a.signals.sort_values(key).reset_index(drop=True)
+    assert sa.equals(b.signals.sort_values(key).reset_index(drop=True))
+    fa, fb = a.findings, b.findings
+    assert len(fa) > 100 and "bus" not in fa.columns
+    assert fa.equals(fb.drop(columns="bus"))
+    has = fb.node.notna()
+    assert (fb.bus[has] == np.where(fb.node[has] % 2 == 1, "can1", "can0")).all()
+
+
 # --- live: two python-can virtual buses, python-canopen nodes 5 on both -----------------
 
 
