@@ -140,6 +140,34 @@ def test_dropout_on_one_bus_is_reported_once_naming_it(tmp_path, capsys):
 
     cases = {c.name: c for suite in JUnitXml.fromfile(str(junit)) for c in suite}
     assert not cases["heartbeat can1 node 5"].is_passed
+    main(["decode", str(log), "--check"])  # a finding on a line of its own names it too
+    assert "WARNING heartbeat: can1 node 5 heartbeat dropout" in capsys.readouterr().out
+
+
+def test_report_and_nodes_table_per_bus(tmp_path):
+    """The report's node sections and finding groups, and the nodes table of `load()` and
+    of the Parquet export (read with pyarrow), have a node 5 per bus."""
+    import pyarrow.parquet as pq
+
+    from cananalyze.cli.main import main
+
+    log = _dropout_log(tmp_path)
+    page = tmp_path / "r.html"
+    main(["report", str(log), "-o", str(page)])
+    html = page.read_text()
+    assert "<h3>can0 node 5:" in html and "<h3>can1 node 5:" in html
+    assert "<b>can1 node 5</b> · heartbeat" in html and "<b>can0 node 5</b>" not in html
+    nodes = load(str(log)).nodes.reset_index()
+    got = nodes[["bus", "node", "frames", "last_state"]].values.tolist()
+    assert got == [["can0", 5, 50, "operational"], ["can1", 5, 48, "operational"]]
+    main(["export", str(log), "--parquet", str(tmp_path / "out"), "-q"])
+    table = pq.read_table(tmp_path / "out" / "nodes.parquet").to_pylist()
+    assert [(r["bus"], r["node"], r["frames"]) for r in table] == [
+        ("can0", 5, 50),
+        ("can1", 5, 48),
+    ]
+    (f,) = pq.read_table(tmp_path / "out" / "findings.parquet").to_pylist()
+    assert (f["bus"], f["node"], f["rule"]) == ("can1", 5, "heartbeat")
 
 
 def test_one_bus_says_no_bus(tmp_path, capsys):
@@ -153,6 +181,8 @@ def test_one_bus_says_no_bus(tmp_path, capsys):
     main(["check", str(log), "--json", str(js)])
     assert " node 5 0x705 [" in capsys.readouterr().out
     assert all("bus" not in r for r in json.loads(js.read_text()))
+    cap = load(str(log))
+    assert "bus" not in cap.nodes.columns and "bus" not in cap.findings.columns
 
 
 def test_assertion_absent_only_when_no_bus_has_it(tmp_path):
