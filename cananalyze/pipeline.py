@@ -151,10 +151,6 @@ class Decoder:
         """A second channel: from now on, one decoder per channel (this one the first's)."""
         self.buses = {self._channel: self}
         self._name(self, batch.channel_label(self._channel))
-        if self.checker is not None:  # what it found before: on the first bus
-            for found in self.checker._found:
-                found.bus[:] = self.bus
-            self.checker._sync_objects(self.checker.findings)
 
     def _bus(self, c: int, batch: FrameBatch) -> Decoder:
         dec = self.buses.get(c)
@@ -171,7 +167,7 @@ class Decoder:
     def _name(dec: Decoder, name: str) -> None:
         dec.bus = name
         if dec.checker is not None:
-            dec.checker.bus = name
+            dec.checker.name_bus(name)
 
     def _decode_buses(self, batch: FrameBatch) -> DecodedBatch:
         ch = batch.channel

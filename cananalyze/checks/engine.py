@@ -62,6 +62,15 @@ class Checker:
         self.first_bus = True  # the one that tells a log without timestamps (once per log)
         self.others: list[Checker] = []  # the other buses' checkers (this one: the first's)
 
+    def name_bus(self, name: str) -> None:
+        """Several buses: this Checker judges bus `name`; what it found so far (before a
+        second bus was seen) is that bus's."""
+        self.bus = name
+        for found in self._found:
+            found.bus[:] = name
+        if self._found:
+            self._sync_objects(self.findings)
+
     def pristine(self) -> Callable[[], Checker]:
         """A maker of Checkers with this one's rules as they are now (before any frame):
         another bus's, judged apart."""
