@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 
 from .errors import ProblemLog, UsageError
-from .frames import FrameBatch
+from .frames import MAX_BUSES, MAX_CHANNELS, OTHER_CHANNELS, FrameBatch
 from .protocol.cobid import CobClassifier
 from .records import DecodedBatch
 from .runtime import signals
@@ -127,6 +127,9 @@ class Decoder:
         self.bus: str | None = None  # this decoder's channel name, once several are seen
         self._channel: int | None = None  # channel index of the frames seen so far
         self.buses: dict[int, Decoder] | None = None  # channel -> its decoder (several)
+        self._decoders: list[Decoder] = []  # each bus's decoder once, this one first
+        self._slot: np.ndarray | None = None
+        self._other: int | None = None  # the decoder the channels past MAX_BUSES share
 
     def decode(self, batch: FrameBatch) -> DecodedBatch:
         if self.spawn is not None and len(batch):
@@ -150,18 +153,34 @@ class Decoder:
     def _several(self, batch: FrameBatch) -> None:
         """A second channel: from now on, one decoder per channel (this one the first's)."""
         self.buses = {self._channel: self}
+        self._decoders = [self]
+        self._slot = np.full(MAX_CHANNELS, -1, np.int32)  # channel -> index in _decoders
+        self._slot[self._channel] = 0
         self._name(self, batch.channel_label(self._channel))
 
-    def _bus(self, c: int, batch: FrameBatch) -> Decoder:
-        dec = self.buses.get(c)
-        if dec is None:
-            dec = self.buses[c] = self.spawn()
-            self._name(dec, batch.channel_label(c))
+    def _bus(self, c: int, batch: FrameBatch) -> int:
+        """The index of channel c's decoder, made on first sight; past MAX_BUSES, the
+        channels left share one (a hostile log naming thousands of channels)."""
+        k = int(self._slot[c])
+        if k >= 0:
+            return k
+        shared = len(self._decoders) >= MAX_BUSES - 1  # the last one: the shared one
+        if shared and self._other is not None:
+            k = self._other
+        else:
+            dec = self.spawn()
+            self._name(dec, OTHER_CHANNELS if shared else batch.channel_label(c))
             if dec.checker is not None and self.checker is not None:
                 dec.checker.t0 = self.checker.t0  # times from the log's first frame
                 dec.checker.first_bus = False
                 self.checker.others.append(dec.checker)  # its findings are the run's
-        return dec
+            k = len(self._decoders)
+            self._decoders.append(dec)
+            if shared:
+                self._other = k
+        self._slot[c] = k
+        self.buses[c] = self._decoders[k]
+        return k
 
     @staticmethod
     def _name(dec: Decoder, name: str) -> None:
@@ -172,16 +191,21 @@ class Decoder:
     def _decode_buses(self, batch: FrameBatch) -> DecodedBatch:
         ch = batch.channel
         if self.checker is not None and self.checker.t0 is None:
-            for dec in self.buses.values():  # the log's first frame, whichever bus
+            for dec in self._decoders:  # the log's first frame, whichever bus
                 if dec.checker is not None:
                     dec.checker.t0 = float(batch.t[0])
-        chans = np.unique(ch).tolist()
-        if len(chans) == 1:
-            return self._bus(chans[0], batch)._decode_one(batch)
+        for c in np.flatnonzero(np.bincount(ch, minlength=1)).tolist():
+            if self._slot[c] < 0:
+                self._bus(c, batch)
+        slot = self._slot[ch]
+        first = int(slot[0])
+        if not (slot != first).any():
+            return self._decoders[first]._decode_one(batch)
+        order = np.argsort(slot, kind="stable")
+        cut = np.flatnonzero(np.diff(slot[order])) + 1
         parts = []
-        for c in chans:
-            dec = self._bus(c, batch)
-            rows = np.flatnonzero(ch == c)
+        for rows in np.split(order, cut):
+            dec = self._decoders[int(slot[rows[0]])]
             parts.append((rows, dec._decode_one(batch.take(rows))))
         return merge_buses(batch, parts)
 
@@ -195,7 +219,7 @@ class Decoder:
         records the tick completed)."""
         if self.buses is None:
             return self._tick_one(now)
-        done = [out for dec in self.buses.values() if (out := dec._tick_one(now)) is not None]
+        done = [out for dec in self._decoders if (out := dec._tick_one(now)) is not None]
         if not done:
             return None
         return merge_ends(done)
@@ -216,7 +240,7 @@ class Decoder:
         """A zero-row batch carrying the records that only the end of the log completes."""
         if self.buses is None:
             return self._finish_one()
-        decoders = list(self.buses.values())
+        decoders = self._decoders
         checkers = [d.checker for d in decoders if d.checker is not None]
         if len(checkers) > 1:
             from .checks.engine import whole_log

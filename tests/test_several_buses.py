@@ -311,3 +311,18 @@ def test_live_two_buses_same_node_id_no_false_finding(tmp_path):
     assert state.frames > 40
     assert [(f.bus, f.message) for f in keep.findings] == []
     assert states == {a: ["operational"], b: ["pre-operational"]}
+
+
+def test_buses_past_the_limit_share_one_decoder():
+    """A log naming more channels than MAX_BUSES (hostile, or one name per frame): the
+    first ones are decoded apart, the rest share one decoder named "(other channels)"."""
+    from cananalyze.frames import MAX_BUSES, OTHER_CHANNELS
+
+    names = tuple(f"c{k}" for k in range(MAX_BUSES + 10))
+    rows = [(1.0 + k * 0.001, 0x705, b"\x05", 0, k) for k in range(len(names))]
+    dec = build_decoder(Options(checks=True))
+    out = dec.decode(from_rows(rows, channels=names))
+    assert len(out) == len(names) and (out.node == 5).all()
+    buses = {d.bus for d in dec.buses.values()}
+    assert len(buses) == MAX_BUSES and OTHER_CHANNELS in buses
+    assert dec.buses[len(names) - 1] is dec.buses[MAX_BUSES - 1]

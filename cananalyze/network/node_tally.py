@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from ..frames import MAX_BUSES, MAX_CHANNELS, OTHER_CHANNELS
 from ..protocol.services import SERVICE_NAMES
 from ..records import DecodedBatch
 
@@ -67,30 +68,40 @@ class NodeTally:
         self.counts = np.zeros_like(self.counts)
         self.last_state, self.identity = {}, {}
         self.buses = {first: mine}
+        self._lut = np.full(MAX_CHANNELS, -1, np.int32)  # channel -> index in buses
 
     def _add_buses(self, batch: DecodedBatch, states: list, offset: int | None) -> None:
         fb = batch.frames
         n = len(fb)
-        ch = fb.channel
-        off = offset
-        if off is None:  # the states' rows count from this batch's first frame
-            off = 0
-        records = identity_records(batch)
-        for c in np.unique(ch).tolist():
-            name = fb.channel_label(c)
-            tally = self.buses.get(name)
-            if tally is None:
-                tally = self.buses[name] = NodeTally()
-            mask = ch == c
-            tally.add_frames(batch.service[mask], batch.node[mask])
-            tally.add_states(
-                ev for ev in states if ev.row is not None and 0 <= ev.row - off < n
-                and ch[ev.row - off] == c
-            )  # fmt: skip
-            tally.add_identity(
-                [(k, r) for k, r in records if 0 <= (row := batch.records[k][0]) < n
-                 and ch[row] == c]
-            )  # fmt: skip
+        off = 0 if offset is None else offset  # the states' row of the batch's first frame
+        # each row's tally: its bus's, or past MAX_BUSES the one the others share
+        lut = self._lut
+        for c in np.flatnonzero(np.bincount(fb.channel, minlength=1)).tolist():
+            if lut[c] < 0:
+                name = fb.channel_label(c)
+                if name not in self.buses and len(self.buses) >= MAX_BUSES - 1:
+                    name = OTHER_CHANNELS
+                self.buses.setdefault(name, NodeTally())
+                lut[c] = list(self.buses).index(name)
+        tallies = list(self.buses.values())
+        slot = lut[fb.channel]
+        order = np.argsort(slot, kind="stable")
+        for rows in np.split(order, np.flatnonzero(np.diff(slot[order])) + 1):
+            if rows.size:
+                tallies[int(slot[rows[0]])].add_frames(batch.service[rows], batch.node[rows])
+        by: dict[int, list] = {}
+        for ev in states:
+            if ev.row is not None and 0 <= ev.row - off < n:
+                by.setdefault(int(slot[ev.row - off]), []).append(ev)
+        for k, evs in by.items():
+            tallies[k].add_states(evs)
+        recs: dict[int, list] = {}
+        for k, r in identity_records(batch):
+            row = batch.records[k][0]
+            if 0 <= row < n:
+                recs.setdefault(int(slot[row]), []).append((k, r))
+        for k, rs in recs.items():
+            tallies[k].add_identity(rs)
 
     def add_frames(self, service: np.ndarray, node: np.ndarray) -> None:
         has = node >= 0
