@@ -254,7 +254,7 @@ class Decoder:
         return merge_ends([d._finish_one() for d in decoders])
 
     def _finish_one(self) -> DecodedBatch:
-        empty = self._decode_one(FrameBatch.empty())
+        empty = self.decode(FrameBatch.empty())  # (no frame: this decoder's own path)
         for p in self.processors:
             p.finish(empty)
         return empty
