@@ -274,11 +274,11 @@ def test_live_two_buses_same_node_id_no_false_finding(tmp_path):
 
     keep = Keep(quiet=True)
     keep.needs_events = True
-    # python-canopen's timer thread on a busy machine: a beat 240 ms late was seen with
-    # the test suite and a benchmark on 2 cores (two merged nodes 5 would give 1..99 ms
-    # gaps and flapping states whatever the floor)
+    # python-canopen's timer thread on a busy machine: beats 240 and 550 ms late were seen
+    # with two test runs and a benchmark on 2 cores (two merged nodes 5 would give 1..99
+    # ms gaps and flapping states whatever the floor)
     rules = tmp_path / "rules.yaml"
-    rules.write_text("jitter_ms: 400\n")
+    rules.write_text("jitter_ms: 1000\n")
     opts = Options(checks=True, rules=rules)
     started = time.monotonic()
 
