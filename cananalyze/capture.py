@@ -281,9 +281,14 @@ class Capture:
         if self.checker is not None:  # read as columns: no Finding object per row
             found = self.checker.findings
             found = found.take(np.argsort(np.asarray(found.column("t")), kind="stable"))
+            if np.not_equal(found.bus, None).any():
+                cols.append("bus")  # several buses: which one
             recs: list = list(zip(*(found.column(c) for c in cols), strict=True))
         else:
             recs = [r for _, r in self.records if r.get("kind") == "finding"]
+            if any("bus" in r for r in recs):
+                cols.append("bus")
+                recs = [tuple(r.get(c) for c in cols) for r in recs]
         df = pd.DataFrame.from_records(recs, columns=cols) if recs else pd.DataFrame(columns=cols)
         for c in ("node", "cob_id", "line"):
             df[c] = df[c].astype("Int64")
@@ -363,6 +368,11 @@ class Capture:
     def node_rows(self) -> list[dict]:
         """Plain rows of the nodes table (also used by MCAP metadata, without pandas)."""
         tally = NodeTally()
+        fb = self.batch
+        if len(fb) and (fb.channel != fb.channel[0]).any():  # several buses: one row each
+            decoded = DecodedBatch(fb, self.service, self.node, self.pdo, records=self.records)
+            tally.add(decoded, self.state_changes, 0)
+            return tally.rows(self.profiles)
         tally.add_frames(self.service, self.node)
         tally.add_states(self.state_changes)
         tally.add_identity(self.records)

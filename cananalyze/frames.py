@@ -26,6 +26,8 @@ FLAG_TX = 0x40  # sent by the logging node (direction flag of the log), else rec
 # beyond the limit under one shared name
 MAX_CHANNELS = 1 << 16
 OTHER_CHANNELS = "(other channels)"
+# buses decoded apart (pipeline.Decoder, the nodes table); the channels past these share one
+MAX_BUSES = 64
 
 
 def channel_index(names: list[str], index: dict[str, int], name: str) -> int:

@@ -18,16 +18,16 @@ from cananalyze.pipeline import Options, build_decoder, run
 
 @pytest.fixture
 def two_buses(tmp_path):
-    """faults.log with every other TPDO2 of node 5 and all of node 3's heartbeats on can1."""
-    out, k = [], 0
+    """faults.log with node 3's heartbeats moved to can1 and a second node 5 on can1: every
+    frame to or from node 5 (its SDO configuration too) also on can1, as its own device."""
+    out = []
     for line in (SAMPLES / "faults.log").read_text().splitlines():
-        if " can0 285#" in line:
-            k += 1
-            if k % 2:
-                line = line.replace(" can0 ", " can1 ")
-        elif " can0 703#" in line:
+        if " can0 703#" in line:
             line = line.replace(" can0 ", " can1 ")
         out.append(line)
+        cob = line.split(" can0 ")[1].split("#")[0] if " can0 " in line else ""
+        if len(cob) == 3 and int(cob, 16) & 0x7F == 5 and int(cob, 16) >= 0x80:
+            out.append(line.replace(" can0 ", " can1 "))
     path = tmp_path / "two.log"
     path.write_text("\n".join(out) + "\n")
     return path
@@ -65,10 +65,8 @@ def test_mcap_topics_separate_the_buses(two_buses, tmp_path):
     assert "/node/5/tpdo2" in one and "/node/5/tpdo2" not in two
     for ch, times in per_bus.items():
         assert [round(t / 1e3) for t, _ in two[f"/{ch}/node/5/tpdo2"]] == times
-    # the decoding is the one-bus decoding, split by bus
-    assert sorted(two["/can0/node/5/tpdo2"] + two["/can1/node/5/tpdo2"]) == sorted(
-        one["/node/5/tpdo2"]
-    )
+    # each node 5 decodes as the one-bus log's node 5, on its own bus
+    assert two["/can0/node/5/tpdo2"] == two["/can1/node/5/tpdo2"] == one["/node/5/tpdo2"]
     # node 3's states come from its heartbeats, all on can1
     assert "/can1/node/3/nmt_state" in two and "/can0/node/3/nmt_state" not in two
     assert [m for _, m in two["/can1/node/3/nmt_state"]] == [m for _, m in one["/node/3/nmt_state"]]
@@ -109,15 +107,10 @@ def test_foxglove_client_gets_the_buses_apart(two_buses, tmp_path):
     assert "/node/5/tpdo2" not in client.topics_subscribed()
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the network model is keyed by node alone: node 5 on can0 and node 5 on can1 "
-    "are one device to the decoder and the rules (see docs/architecture.md, several buses)",
-)
 def test_same_node_id_on_two_buses_is_two_devices(tmp_path):
     """Two nodes 5, each beating every 100 ms on its own bus: no heartbeat finding and
-    one NMT state each. Today their heartbeats are merged (a 1 ms 'period', 49 dropouts,
-    the state flapping between the two nodes' states)."""
+    one NMT state each (before each bus had its decoder: their heartbeats merged, a 1 ms
+    'period', 49 dropouts, the state flapping between the two nodes' states)."""
     from cananalyze import check
 
     lines = []

@@ -50,6 +50,9 @@ def _normalised(cap, name: str, err: np.ndarray) -> pd.DataFrame:
             df[col] = (df[col].astype(float) - t0).round(6)
     if "channel" in df:
         df["channel"] = df["channel"].cat.codes
+    if "bus" in df:  # several buses (findings, nodes): the channel's code, as above
+        codes = {c: k for k, c in enumerate(cap.frames["channel"].cat.categories)}
+        df["bus"] = df["bus"].map(codes)
     if name == "frames":
         df.loc[err, ["dlc", "flags"]] = 0
         df["data"] = df["data"].astype(object)

@@ -24,7 +24,7 @@ from .finding import TABLE_COLUMNS, Finding, tidy
 NONE = -1  # node, cob_id, line: none
 # columns kept as numpy numbers (the others are object columns)
 _INTS = ("node", "cob_id", "line", "row")
-_OBJS = ("rule", "severity", "measured", "expected", "why", "basis")
+_OBJS = ("rule", "severity", "measured", "expected", "why", "basis", "bus")
 Texts = Callable[[np.ndarray], list[str]]  # the messages of some of a block's rows
 
 
@@ -58,13 +58,14 @@ def round6(x: np.ndarray) -> list:
 
 class FindingColumns:
     """Findings as columns: t, t_rel (NaN: none), rule, severity, node/cob_id/line (-1:
-    none), message (built lazily), measured, expected, why, basis, row, at_end.
+    none), message (built lazily), measured, expected, why, basis, row, at_end, bus
+    (None: a log of one bus).
 
     Iterating gives `Finding` objects (built on demand); `records()` the JSON records.
     """
 
     __slots__ = ("t", "t_rel", "node", "cob_id", "line", "row", "at_end", "_message")
-    __slots__ += ("rule", "severity", "measured", "expected", "why", "basis", "obj")
+    __slots__ += ("rule", "severity", "measured", "expected", "why", "basis", "bus", "obj")
     __slots__ += ("_texts", "_block", "_local")
 
     def __init__(self, n: int = 0) -> None:
@@ -259,7 +260,11 @@ class FindingColumns:
         cols = [self.column(c) for c in TABLE_COLUMNS]
         keys = ("kind", *TABLE_COLUMNS)
         kind = ["finding"] * len(self)
-        return [dict(zip(keys, r, strict=True)) for r in zip(kind, *cols, strict=True)]
+        out = [dict(zip(keys, r, strict=True)) for r in zip(kind, *cols, strict=True)]
+        bus = self.column("bus")
+        for i in np.flatnonzero(np.not_equal(np.asarray(bus, object), None)).tolist():
+            out[i]["bus"] = bus[i]  # several buses: which one
+        return out
 
     def finding(self, i: int, message: str | None = None) -> Finding:
         """Row i as a Finding (the object itself for a row emitted alone)."""
@@ -285,6 +290,7 @@ class FindingColumns:
             self.basis[i],
             None if line == NONE else line,
             bool(self.at_end[i]),
+            self.bus[i],
         )
 
     def findings(self, idx: np.ndarray | None = None) -> list[Finding]:

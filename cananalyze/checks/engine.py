@@ -13,7 +13,9 @@ silence while it lasts, not when the next frame (or Ctrl-C) ends it.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+from collections.abc import Callable
 
 import numpy as np
 
@@ -55,6 +57,32 @@ class Checker:
         self.findings_untimed: Finding | None = None
         self._order = 0  # frames seen (the line of an untimed frame without a line number)
         self._last_line = 0
+        # several buses (pipeline.Decoder): one Checker per bus, its findings naming it
+        self.bus: str | None = None
+        self.first_bus = True  # the one that tells a log without timestamps (once per log)
+        self.others: list[Checker] = []  # the other buses' checkers (this one: the first's)
+
+    def name_bus(self, name: str) -> None:
+        """Several buses: this Checker judges bus `name`; what it found so far (before a
+        second bus was seen) is that bus's."""
+        self.bus = name
+        for found in self._found:
+            found.bus[:] = name
+        if self._found:
+            self._sync_objects(self.findings)
+
+    def pristine(self) -> Callable[[], Checker]:
+        """A maker of Checkers with this one's rules as they are now (before any frame):
+        another bus's, judged apart."""
+        rules = copy.deepcopy(self.rules)
+        with_stats = self.timing.with_stats
+
+        def make() -> Checker:
+            fresh = Checker(copy.deepcopy(rules), self.config)
+            fresh.timing.with_stats = with_stats
+            return fresh
+
+        return make
 
     @property
     def active(self) -> list[Rule]:
@@ -80,7 +108,7 @@ class Checker:
         if self.timed is not None or t.size < 2:
             return
         self.timed = bool(t.max() > t.min())
-        if not self.timed:
+        if not self.timed and self.first_bus:
             self.timing.with_stats = False  # gaps between lines are no periods
             skipped = ", ".join(r.name for r in self.rules if r.timing)
             self.findings_untimed = Finding(
@@ -153,7 +181,8 @@ class Checker:
             rule.ending = True
         for rule in self.active:
             rule.process(ctx)  # records that only the end completes (pending SDO timeouts)
-            rule.finish(ctx)
+            if not rule.elsewhere:
+                rule.finish(ctx)
             rule.close(self.t_last or 0.0)
         self._collect(batch, at_end=True)
 
@@ -179,6 +208,8 @@ class Checker:
         new.t_rel = new.t - (t0 if t0 is not None else new.t)
         if at_end:
             new.row[:] = 0  # the end batch has no rows: after every frame
+        if self.bus is not None:
+            new.bus[:] = self.bus
         self._sync_objects(new)
         new = new.sort()
         batch.findings = FindingColumns.concat([batch.findings, new])
@@ -192,13 +223,19 @@ class Checker:
             line = int(new.line[i])
             f.t, f.line, f.row = float(new.t[i]), (None if line == NONE else line), int(new.row[i])
             f.t_rel, f.at_end = float(new.t_rel[i]), bool(new.at_end[i])
+            f.bus = new.bus[i]
 
     @property
     def findings(self) -> FindingColumns:
-        """Every finding so far, batch by batch (each batch's by time)."""
+        """Every finding so far, batch by batch (each batch's by time); with several
+        buses, every bus's, by time."""
         if len(self._found) > 1:
             self._found = [FindingColumns.concat(self._found)]
-        return self._found[0] if self._found else FindingColumns()
+        mine = self._found[0] if self._found else FindingColumns()
+        if not self.others:
+            return mine
+        found = FindingColumns.concat([mine, *(c.findings for c in self.others)])
+        return found.take(np.argsort(found.t, kind="stable")) if len(found) > 1 else found
 
     @property
     def failed(self) -> bool:
@@ -206,3 +243,26 @@ class Checker:
 
     def report(self) -> dict:
         return self.timing.report(self.nmt)
+
+    def timing_lines(self, t0: float | None) -> list[str]:
+        """`check --timing`'s lines: this bus's, or each bus's under its name."""
+        if not self.others:
+            return self.timing.lines(self.nmt, t0)
+        out: list[str] = []
+        for c in (self, *self.others):
+            out.append(f"{c.bus}:")
+            out += ["  " + line for line in c.timing.lines(c.nmt, t0)]
+        return out
+
+
+def whole_log(checkers: list[Checker]) -> None:
+    """Several buses, before their end: an assertion about the whole log (the rules
+    file's `assert:` list: node 5 boots, sends heartbeats, signal seen, PDO rate) is
+    told absent once, by the first bus, and only when no bus saw its subject; the
+    buses that saw it judge it there, the others say nothing."""
+    for k, rule in enumerate(checkers[0].rules):
+        if not hasattr(rule, "present"):
+            continue
+        seen = [c.rules[k].present(c) for c in checkers]
+        for c, here in zip(checkers, seen, strict=True):
+            c.rules[k].elsewhere = not here and (any(seen) or c is not checkers[0])

@@ -28,6 +28,9 @@ class Finding:
     # hides it. Not every finding `finish` makes: a gap judged there against a learned
     # period is an ordinary finding, capped like the others.
     at_end: bool = False
+    # the bus (channel name) of a log with several: node 5 on can1 is not node 5 on can0;
+    # None on a log of one bus (whose outputs do not name it)
+    bus: str | None = None
 
     def __post_init__(self) -> None:
         self.measured = tidy(self.measured)
@@ -39,8 +42,9 @@ class Finding:
         return self.severity != "info"
 
     def record(self) -> dict:
-        """The JSONL / --json record (field names are a stable API)."""
-        return {
+        """The JSONL / --json record (field names are a stable API; `bus` only on a log
+        of several buses)."""
+        rec = {
             "kind": "finding",
             "t": self.t,
             "t_rel": None if self.t_rel is None else round(self.t_rel, 6),
@@ -55,6 +59,15 @@ class Finding:
             "basis": self.basis,
             "line": self.line,
         }
+        if self.bus is not None:
+            rec["bus"] = self.bus
+        return rec
+
+    @property
+    def where(self) -> str:
+        """Which node, as a person reads it: 'node 5', or 'can1 node 5' on several buses."""
+        who = "node -" if self.node is None else f"node {self.node}"
+        return who if self.bus is None else f"{self.bus} {who}"
 
 
 # the findings table's columns (export, load().findings, a fleet's part): the record's

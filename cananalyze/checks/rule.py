@@ -107,6 +107,9 @@ class Rule:
     max_findings = 100_000
     timing = True  # False: judged by frame order alone (kept on logs without timestamps)
     needs_gaps: tuple[str, ...] = ()  # gap tables whose every gap Timing must keep (all_gaps)
+    # several buses: an assertion whose subject another bus holds skips its `finish`
+    # (`engine.whole_log`; such rules say where their subject is with `present(checker)`)
+    elsewhere = False
 
     def __init__(
         self,

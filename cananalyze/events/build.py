@@ -57,7 +57,7 @@ class Event:
 class EventState:
     """What event building carries from batch to batch: each node's last NMT state."""
 
-    last_state: dict[int, str] = field(default_factory=dict)
+    last_state: dict[int, str] = field(default_factory=dict)  # channel << 8 | node -> state
     last_t: float = 0.0  # time of the last event: a frameless batch's findings default to it
 
 
@@ -412,7 +412,8 @@ def _state_changes(batch: DecodedBatch, off: int, state: EventState) -> list[Row
     rows = np.flatnonzero(_any_of(batch.service, _STATE_SERVICES) & (fb.dlc > 0))
     if rows.size == 0:
         return []
-    nodes = batch.node[rows]
+    # per bus and node (node 5 on can1 is another device than node 5 on can0)
+    nodes = batch.node[rows].astype(np.int64) | (fb.channel[rows].astype(np.int64) << 8)
     order = np.argsort(nodes, kind="stable")
     rows, nodes = rows[order], nodes[order]
     code = fb.data[rows, 0] & nmt.STATE_MASK
@@ -421,7 +422,7 @@ def _state_changes(batch: DecodedBatch, off: int, state: EventState) -> list[Row
     out: list[Row] = []
     last = state.last_state
     sel = rows[change]
-    for i, n, v, t in zip(
+    for i, key, v, t in zip(
         sel.tolist(),
         nodes[change].tolist(),
         code[change].tolist(),
@@ -429,8 +430,8 @@ def _state_changes(batch: DecodedBatch, off: int, state: EventState) -> list[Row
         strict=True,
     ):
         name = nmt.state_name(v)
-        if last.get(n) == name:
+        if last.get(key) == name:
             continue
-        last[n] = name
-        out.append(Row(t, "nmt_state", n, INFO, name, i + off))
+        last[key] = name
+        out.append(Row(t, "nmt_state", key & 0xFF, INFO, name, i + off))
     return out

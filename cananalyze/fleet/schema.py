@@ -51,12 +51,14 @@ COLUMNS: dict[str, list[tuple[str, pa.DataType]]] = {
     # SDO values are text: one log decodes a REAL32, another a VISIBLE_STRING
     "sdo": [(c, _SDO_TYPES.get(c, pa.string())) for c in SDO_COLUMNS],
     # measured/expected: a number for one rule, a state name for another
-    "findings": [(c, _FINDING_TYPES.get(c, pa.string())) for c in FINDING_COLUMNS],
+    "findings": [(c, _FINDING_TYPES.get(c, pa.string())) for c in FINDING_COLUMNS]
+    + [("bus", pa.string())],  # a log of several buses: which one (else null)
     "nodes": [("node", pa.int16()), ("frames", pa.int64())]
     + [(f"frames_{s}", pa.int64()) for s in SERVICE_NAMES]
     + [("last_state", pa.string()), ("last_state_t", pa.float64())]
     + [(k, pa.int64() if k in _NODE_NUMBERS else pa.string()) for k in IDENTITY_KEYS]
-    + [("profile", pa.string()), ("identified_by", pa.string())],
+    + [("profile", pa.string()), ("identified_by", pa.string())]
+    + [("bus", pa.string())],  # a log of several buses: one row per bus and node
     "logs": [
         ("format", pa.string()),
         ("size", pa.int64()),

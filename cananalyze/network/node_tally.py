@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from ..frames import MAX_BUSES, MAX_CHANNELS, OTHER_CHANNELS
 from ..protocol.services import SERVICE_NAMES
 from ..records import DecodedBatch
 
@@ -30,18 +31,77 @@ IDENTITY_KEYS = ("device_type", "vendor_id", "product_code", "revision", "serial
 
 
 class NodeTally:
-    """Per-node counts, last state and identity; `rows()` gives the nodes table."""
+    """Per-node counts, last state and identity; `rows()` gives the nodes table.
+
+    Several buses (frames of more than one channel): node 5 on can0 and node 5 on can1
+    are two rows, each with a `bus` column (a log of one bus has no such column)."""
 
     def __init__(self) -> None:
         self.counts = np.zeros((128, len(SERVICE_NAMES)), np.int64)
         self.last_state: dict[int, tuple[float, str]] = {}
         self.identity: dict[int, dict] = {}
+        # several buses: channel name -> a tally of its own (None: one bus so far)
+        self.buses: dict[str, NodeTally] | None = None
+        self._channel: int | None = None  # the one channel seen so far
+        self._names: tuple[str, ...] = ()
 
-    def add(self, batch: DecodedBatch, states: Iterable) -> None:
-        """One decoded batch and its NMT state changes (`Row`s or `Event`s)."""
+    def add(self, batch: DecodedBatch, states: Iterable, offset: int | None = None) -> None:
+        """One decoded batch and its NMT state changes (`Row`s or `Event`s); `offset`: the
+        row number of the batch's first frame in the states' rows (several buses)."""
+        fb = batch.frames
+        if self.buses is None and len(fb):
+            if self._channel is None:
+                self._channel, self._names = int(fb.channel[0]), fb.channels
+            if (fb.channel != self._channel).any():
+                self._split(fb.channel_label(self._channel))
+        if self.buses is not None:
+            self._add_buses(batch, list(states), offset)
+            return
         self.add_frames(batch.service, batch.node)
         self.add_states(states)
         self.add_identity(identity_records(batch))
+
+    def _split(self, first: str) -> None:
+        """A second bus: what was tallied so far is the first bus's."""
+        mine = NodeTally()
+        mine.counts, mine.last_state, mine.identity = self.counts, self.last_state, self.identity
+        self.counts = np.zeros_like(self.counts)
+        self.last_state, self.identity = {}, {}
+        self.buses = {first: mine}
+        self._lut = np.full(MAX_CHANNELS, -1, np.int32)  # channel -> index in buses
+
+    def _add_buses(self, batch: DecodedBatch, states: list, offset: int | None) -> None:
+        fb = batch.frames
+        n = len(fb)
+        off = 0 if offset is None else offset  # the states' row of the batch's first frame
+        # each row's tally: its bus's, or past MAX_BUSES the one the others share
+        lut = self._lut
+        for c in np.flatnonzero(np.bincount(fb.channel, minlength=1)).tolist():
+            if lut[c] < 0:
+                name = fb.channel_label(c)
+                if name not in self.buses and len(self.buses) >= MAX_BUSES - 1:
+                    name = OTHER_CHANNELS
+                self.buses.setdefault(name, NodeTally())
+                lut[c] = list(self.buses).index(name)
+        tallies = list(self.buses.values())
+        slot = lut[fb.channel]
+        order = np.argsort(slot, kind="stable")
+        for rows in np.split(order, np.flatnonzero(np.diff(slot[order])) + 1):
+            if rows.size:
+                tallies[int(slot[rows[0]])].add_frames(batch.service[rows], batch.node[rows])
+        by: dict[int, list] = {}
+        for ev in states:
+            if ev.row is not None and 0 <= ev.row - off < n:
+                by.setdefault(int(slot[ev.row - off]), []).append(ev)
+        for k, evs in by.items():
+            tallies[k].add_states(evs)
+        recs: dict[int, list] = {}
+        for k, r in identity_records(batch):
+            row = batch.records[k][0]
+            if 0 <= row < n:
+                recs.setdefault(int(slot[row]), []).append((k, r))
+        for k, rs in recs.items():
+            tallies[k].add_identity(rs)
 
     def add_frames(self, service: np.ndarray, node: np.ndarray) -> None:
         has = node >= 0
@@ -61,7 +121,20 @@ class NodeTally:
 
     def rows(self, profiles: dict[int, tuple[str, str]]) -> list[dict]:
         """One dict per node seen: frames, frames_<service> for every service seen,
-        last_state(_t), identity, profile and how it was identified."""
+        last_state(_t), identity, profile and how it was identified; with several
+        buses, one per bus and node, `bus` first."""
+        if self.buses is not None:
+            parts = [(name, t.rows(profiles)) for name, t in self.buses.items()]
+            seen = [k for _, rows in parts for r in rows for k in r]
+            services = [k for k in dict.fromkeys(seen) if k.startswith("frames_")]
+            out = []
+            for name, rows in parts:
+                for r in rows:
+                    row = {"bus": name, "node": r["node"], "frames": r["frames"]}
+                    row.update({k: r.get(k, 0) for k in services})
+                    row.update({k: v for k, v in r.items() if k not in row})
+                    out.append(row)
+            return out
         counts = self.counts
         seen = np.flatnonzero(counts.sum(axis=0)).tolist()
         rows: list[dict] = []

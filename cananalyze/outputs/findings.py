@@ -39,6 +39,9 @@ def terminal_cap(findings: FindingColumns, cap: int) -> tuple[np.ndarray, dict]:
     # one integer per (rule, node, COB-ID, at end): node < 256, COB-ID < 2^30 (29-bit ids)
     keys = (rule_code << 40) | ((findings.node + 1) << 31) | ((findings.cob_id + 1) << 1)
     keys |= findings.at_end
+    if np.not_equal(findings.bus, None).any():  # several buses: node 5 on each apart
+        buses = {b: k for k, b in enumerate(dict.fromkeys(findings.bus.tolist()))}
+        keys = keys * len(buses) + np.array([buses[b] for b in findings.bus.tolist()], np.int64)
     _, key_of, total = np.unique(keys, return_inverse=True, return_counts=True)
     key_of = key_of.reshape(-1)
     order = np.argsort(key_of, kind="stable")
@@ -50,7 +53,11 @@ def terminal_cap(findings: FindingColumns, cap: int) -> tuple[np.ndarray, dict]:
     hidden: dict[tuple, tuple] = {}
     for i, f in zip(hidden_first.tolist(), findings.findings(hidden_first), strict=True):
         k = key_of[i]  # in the order each key's first hidden one comes
-        hidden[(f.rule, f.node, f.cob_id, f.at_end)] = (f, int(total[k]) - cap, int(total[k]))
+        hidden[(f.rule, f.node, f.cob_id, f.at_end, f.bus)] = (
+            f,
+            int(total[k]) - cap,
+            int(total[k]),
+        )
     return np.flatnonzero(shown), hidden
 
 
@@ -138,10 +145,8 @@ class FindingsSink(Sink):
             severity = findings.column("severity")
             for i, line in zip(shown.tolist(), format_rows(findings, shown), strict=True):
                 print(colour.paint(line, colour.SEVERITY.get(severity[i], ""), on), file=out)
-            for (rule, node, cob, _), (first, n, total) in hidden.items():
-                where = ("node -" if node is None else f"node {node}") + (
-                    "" if cob is None else f" 0x{cob:03X}"
-                )
+            for (rule, _, cob, _, _), (first, n, total) in hidden.items():
+                where = first.where + ("" if cob is None else f" 0x{cob:03X}")
                 more = (
                     "--json and --junit list every one"
                     if self.junit or self.json_file
@@ -155,9 +160,9 @@ class FindingsSink(Sink):
             if self.timing and checker is not None:
                 if checker.timed is False:
                     print("no timestamps: the times below are line numbers, no rates", file=out)
-                    print("\n".join(checker.timing.lines(checker.nmt, 0.0)), file=out)
+                    print("\n".join(checker.timing_lines(0.0)), file=out)
                 else:
-                    print("\n".join(checker.timing.lines(checker.nmt, checker.t0)), file=out)
+                    print("\n".join(checker.timing_lines(checker.t0)), file=out)
             failing = int(findings.fails.sum())
             names = ", ".join(r.name for r in rules)
             verdict = (

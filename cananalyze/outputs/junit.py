@@ -16,12 +16,13 @@ from ..checks.finding import TABLE_COLUMNS, Finding, show
 from ..checks.rule import Rule
 
 
-def _subject(rule: Rule, s) -> str:
+def _subject(rule: Rule, s, bus: str | None = None) -> str:
+    name = rule.name if bus is None else f"{rule.name} {bus}"  # several buses: which one
     if s is None:
-        return rule.name
+        return name
     if rule.name in ("assert_pdo_rate", "unknown_cob_id"):
-        return f"{rule.name} 0x{s:03X}"
-    return f"{rule.name} node {s}"
+        return f"{name} 0x{s:03X}"
+    return f"{name} node {s}"
 
 
 def junit_xml(
@@ -40,7 +41,7 @@ def junit_xml(
     for f in findings:
         rule = by_rule.get(f.rule)
         key = f.cob_id if rule and rule.name in ("assert_pdo_rate", "unknown_cob_id") else f.node
-        cases.setdefault(_subject(rule, key) if rule else f.rule, []).append(f)
+        cases.setdefault(_subject(rule, key, f.bus) if rule else f.rule, []).append(f)
     failing = sum(1 for fs in cases.values() if any(f.fails for f in fs))
     suite = ET.Element(
         "testsuite", name=name, tests=str(len(cases)), failures=str(failing), errors="0"
@@ -73,7 +74,7 @@ def format_finding(f: Finding) -> str:
     """One line per finding, time from the start of the log (absolute `t` stays in JSON)."""
     return _line(
         f.t, f.t_rel, f.line, f.node, f.cob_id, f.severity, f.rule, f.message, f.measured,
-        f.expected, f.basis, f.why,
+        f.expected, f.basis, f.why, f.bus,
     )  # fmt: skip
 
 
@@ -86,18 +87,22 @@ def format_rows(found: FindingColumns, idx) -> list[str]:
     cols["t_rel"] = [None if v != v else v for v in sub.t_rel.tolist()]
     for i in np.flatnonzero(np.not_equal(sub.obj, None)).tolist():
         cols["t_rel"][i] = sub.obj[i].t_rel
+    cols["bus"] = sub.column("bus")
     return [
         _line(*r)
         for r in zip(
             *(cols[c] for c in ("t", "t_rel", "line", "node", "cob_id", "severity", "rule")),
-            *(cols[c] for c in ("message", "measured", "expected", "basis", "why")),
+            *(cols[c] for c in ("message", "measured", "expected", "basis", "why", "bus")),
             strict=True,
         )
     ]
 
 
-def _line(t, t_rel, line, node, cob_id, severity, rule, message, measured, expected, basis, why):
+def _line(
+    t, t_rel, line, node, cob_id, severity, rule, message, measured, expected, basis, why, bus=None
+):
     who = "-" if node is None else str(node)
+    where = "node" if bus is None else f"{bus} node"  # several buses: "can1 node 5"
     cob = "" if cob_id is None else f" 0x{cob_id:03X}"
     if line is not None:
         when = f"line {line}"
@@ -105,7 +110,7 @@ def _line(t, t_rel, line, node, cob_id, severity, rule, message, measured, expec
         when = f"{t_rel:+.3f} s" if t_rel is not None else f"{t:.6f}"
     basis = f"; {basis}" if basis else ""
     return (
-        f"{when} node {who}{cob} [{severity}] {rule}: {message} "
+        f"{when} {where} {who}{cob} [{severity}] {rule}: {message} "
         f"(measured {show(measured)}, expected {show(expected)}{basis}). {why}"
     )
 

@@ -355,12 +355,16 @@ class SummarySink(Sink):
             rec["devices"] = device_records(model, self.summary)
             if checker is not None:
                 rec["timing"] = _plain(checker.timing.report(checker.nmt))
+                if checker.others:  # several buses: "timing" is the first's, here each
+                    rec["timing_by_bus"] = {
+                        c.bus: _plain(c.timing.report(c.nmt)) for c in (checker, *checker.others)
+                    }
             print(json.dumps(rec, separators=(",", ":"), ensure_ascii=False), file=self.out)
             return
         lines = self.summary.lines(bitrate, run.problems.count)
         lines += device_lines(model, self.summary)
         if checker is not None:
-            lines += checker.timing.lines(checker.nmt, checker.t0)
+            lines += checker.timing_lines(checker.t0)
         print("\n".join(lines), file=self.out)
 
 

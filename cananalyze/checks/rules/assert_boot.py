@@ -15,6 +15,10 @@ class AssertOperational(Rule):
         self.node, self.within = int(node), float(within_s)
         self.subjects.add(self.node)
 
+    def present(self, checker) -> bool:
+        """Whether this bus showed the node boot (several buses: `engine.whole_log`)."""
+        return "bootup" in checker.nmt.sources.get(self.node, [])
+
     def finish(self, ctx: Context) -> None:
         times = ctx.nmt.times.get(self.node, [])
         states = ctx.nmt.states.get(self.node, [])

@@ -40,6 +40,10 @@ class AssertHeartbeat(Rule):
                     basis="the rules file's assert",
                 )
 
+    def present(self, checker) -> bool:
+        """Whether this bus showed the subject (several buses: `engine.whole_log`)."""
+        return self.seen
+
     def finish(self, ctx: Context) -> None:
         if not self.seen:
             self.emit(

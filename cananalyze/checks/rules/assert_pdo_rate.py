@@ -17,6 +17,10 @@ class AssertPdoRate(Rule):
         self.lo, self.hi = float(min_hz), float(max_hz)
         self.subjects.add(self.cob)
 
+    def present(self, checker) -> bool:
+        """Whether this bus carried the PDO (several buses: `engine.whole_log`)."""
+        return checker.timing.count["pdo"].get(self.cob, 0) > 0
+
     def finish(self, ctx: Context) -> None:
         rate = ctx.timing.rate_hz("pdo", self.cob)
         if rate is None or not self.lo <= rate <= self.hi:

@@ -40,6 +40,10 @@ class AssertSignal(Rule):
                     row=row,
                 )
 
+    def present(self, checker) -> bool:
+        """Whether this bus showed the subject (several buses: `engine.whole_log`)."""
+        return self.seen
+
     def finish(self, ctx: Context) -> None:
         if not self.seen:
             self.emit(

@@ -197,7 +197,7 @@ class StreamMcap:
         fb = batch.frames
         off = self.offset
         events, states = batch_events_of(batch, off, self._event_state)
-        self._nodes.add(batch, states)
+        self._nodes.add(batch, states, off)
         lines = self._line_numbers(events.row, fb.line, off) if len(events) else []
         if len(fb):
             self._lines = (off, fb.line)

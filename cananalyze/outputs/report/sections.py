@@ -111,10 +111,11 @@ def findings(s, figs: Figures) -> str:
         return '<section id="findings"><h2>Findings</h2><p>No findings.</p></section>'
     groups: dict[tuple, list] = defaultdict(list)
     for f in s.findings:
-        groups[(f.node is None, f.node or 0, f.rule)].append(f)
+        groups[(f.bus or "", f.node is None, f.node or 0, f.rule)].append(f)
     parts = ['<section id="findings"><h2>Findings by node and rule</h2>']
-    for (_, node, rule), fs in sorted(groups.items()):
+    for (bus, _, node, rule), fs in sorted(groups.items()):
         who = "bus" if fs[0].node is None else f"node {node}"
+        who = f"{bus} {who}" if bus else who  # several buses: "can1 node 5"
         sev = "error" if any(f.fails for f in fs) else fs[0].severity
         first = fs[0]
         shown = fs[:LISTED]
@@ -138,6 +139,14 @@ def findings(s, figs: Figures) -> str:
     return "".join(parts)
 
 
+def _node_name(n: int, bus: str | None) -> str:
+    return f"Node {n}" if bus is None else f"{bus} node {n}"
+
+
+def _node_id(n: int, bus: str | None) -> str:
+    return f"node-{n}" if bus is None else f"node-{bus}-{n}"
+
+
 def nodes(s, figs: Figures) -> str:
     from ...network.node_tally import node_profiles
 
@@ -151,6 +160,7 @@ def nodes(s, figs: Figures) -> str:
         parts.append(f"<p class=warn>{s.states_dropped} more NMT state changes not drawn</p>")
     for row in rows:
         n = row["node"]
+        bus = row.get("bus")  # several buses: one section per bus and node
         dev = row.get("profile") or "unknown device"
         how = row.get("identified_by") or "not identified"
         ident = ", ".join(
@@ -159,12 +169,13 @@ def nodes(s, figs: Figures) -> str:
             if (v := row.get(k)) is not None
         )
         parts.append(
-            f'<div class="node" id="node-{n}"><h3>Node {n}: {esc(str(dev))}</h3>'
+            f'<div class="node" id="{_node_id(n, bus)}"><h3>{esc(_node_name(n, bus))}: '
+            f"{esc(str(dev))}</h3>"
             f"<p>Identified by: {esc(str(how))}{'; ' + esc(ident) if ident else ''}. "
             f"{row['frames']:,} frames; last NMT state {esc(str(row.get('last_state') or '-'))}.</p>"
         )
         for kind in ("heartbeat", "guarding"):
-            g = s.errctl.get((kind, n))
+            g = s.errctl.get((kind, n) if bus is None else (kind, n, bus))
             if g is None or g.hist.count == 0:
                 continue
             conf = _configured(cfg, kind, n, g) if cfg is not None else []

@@ -98,7 +98,8 @@ class ReportSink(Sink):
         self.states: list[tuple[float, int, str]] = []
         self.states_dropped = 0
         self.drive_states: list[tuple[float, int, str]] = []
-        self.errctl: dict[tuple[str, int], Gaps] = {}  # ("heartbeat"|"guarding", node)
+        # ("heartbeat"|"guarding", node), and the bus's name once there are several
+        self.errctl: dict[tuple, Gaps] = {}
         self.pdos: dict[int, Gaps] = {}  # COB-ID -> gaps
         self.pdo_node: dict[int, tuple[int, str]] = {}
         self.sdo_latency: dict[int, LogHistogram] = {}
@@ -123,7 +124,7 @@ class ReportSink(Sink):
     def write(self, batch) -> None:
         fb = batch.frames
         self.findings.extend(batch.findings)
-        self.tally.add(batch, batch.states)
+        self.tally.add(batch, batch.states, self.run.rows if self.run else 0)
         for s in batch.states:
             if len(self.states) < MAX_STATES:
                 self.states.append((s.t, s.node, s.message))
@@ -143,6 +144,12 @@ class ReportSink(Sink):
         service, node = batch.service, batch.node
         for kind, svc in (("heartbeat", Service.HEARTBEAT), ("guarding", Service.GUARD_RESPONSE)):
             rows = np.flatnonzero(service == svc)
+            if len(self.buses) > 1:  # several buses: node 5 on each its own gaps
+                key = node[rows].astype(np.int64) | (fb.channel[rows].astype(np.int64) << 8)
+                for k, pos in _groups(key):
+                    at = (kind, k & 0xFF, fb.channel_label(k >> 8))
+                    self.errctl.setdefault(at, Gaps()).add(t[rows[pos]])
+                continue
             for nd, pos in _groups(node[rows]):
                 self.errctl.setdefault((kind, nd), Gaps()).add(t[rows[pos]])
         boot = np.flatnonzero(service == Service.BOOTUP)
@@ -180,6 +187,9 @@ class ReportSink(Sink):
             bus.frames += pos.size
             bus.errors += int(err[pos].sum())
             bus.load.add(fb.t[pos], bits[pos])
+        if len(self.buses) > 1 and self.errctl and len(next(iter(self.errctl))) == 2:
+            first = next(iter(self.buses))  # a second bus: the gaps so far are the first's
+            self.errctl = {(kind, nd, first): g for (kind, nd), g in self.errctl.items()}
 
     def _sdo(self, batch) -> None:
         if not batch.records:

@@ -318,7 +318,7 @@ class TableSink(OutputSink):
         if len(batch.findings):
             self._findings.append(batch.findings)
         events, states = batch_events_of(batch, off, self._event_state)
-        self._nodes.add(batch, states)
+        self._nodes.add(batch, states, off)
         self._add_events(events, float(fb.t[-1]) - HOLD if n else float("-inf"))
         self.offset += n
 
@@ -723,7 +723,10 @@ class TableSink(OutputSink):
         order = np.argsort(np.asarray(found.column("t"), np.float64), kind="stable")
         n = len(order)
         starts = range(0, n, FINDINGS_CHUNK)
-        stats = {c: pl.ColumnStats() for c in FINDING_COLUMNS if c not in _NULLABLE_INTS}
+        names = FINDING_COLUMNS
+        if np.not_equal(found.bus, None).any():  # several buses: which one
+            names = (*FINDING_COLUMNS, "bus")
+        stats = {c: pl.ColumnStats() for c in names if c not in _NULLABLE_INTS}
 
         def part(i: int) -> FindingColumns:
             return found.take(order[i : i + FINDINGS_CHUNK])
@@ -797,9 +800,10 @@ def _sdo_schema(decided: tuple[tuple[str, str, str], ...]) -> pa.Schema:
 
 def _findings_schema(decided: dict[str, tuple[str, str, str]]) -> pa.Schema:
     """The findings table's schema: each column as decided (as pl.column), the nullable
-    ints (node, cob_id, line: none in a log without times) as pl.nullable_int."""
+    ints (node, cob_id, line: none in a log without times) as pl.nullable_int; `bus`
+    (after the others) when it was decided, on a log of several buses."""
     fields, metas = [], []
-    for name in FINDING_COLUMNS:
+    for name in (*FINDING_COLUMNS, "bus") if "bus" in decided else FINDING_COLUMNS:
         how, pandas_type, numpy_type = decided.get(name, ("int64", "int64", "Int64"))
         fields.append(pa.field(name, pl.arrow_type(how)))
         metas.append(pl.field_meta(name, pandas_type, numpy_type))
@@ -811,7 +815,7 @@ def _findings_table(
 ) -> pa.Table:
     """One chunk of the findings table: `values` (per decided column) converted as decided."""
     arrays = []
-    for name in FINDING_COLUMNS:
+    for name in schema.names:
         if name in _NULLABLE_INTS:
             ints, missing = rows.ints(name)
             arrays.append(ab.numeric(np.where(missing, 0, ints), missing, pa.int64()))

@@ -47,5 +47,7 @@ def format_alone(rec: dict, t0: float) -> str:
         return format_record(rec)
     node = rec.get("node")
     where = f"node {node} " if isinstance(node, int) else ""
+    if rec.get("bus") is not None:  # several buses: which one ("can1 node 5")
+        where = f"{rec['bus']} {where}"
     severity = str(rec.get("severity", "warning")).upper()
     return f"{rec['t'] - t0:12.6f}  {severity} {rec.get('rule')}: {where}{rec.get('message')}"
