@@ -285,14 +285,99 @@ def _chunks(stream: BinaryIO, parser: _LineParser) -> Iterator[FrameBatch]:
                 parser.line(first_line + i, raw.rstrip("\r"))
             merged = sink.flush()
         else:
-            starts = np.empty(C.count_lines(chunk), np.int64)
-            ends = np.empty(starts.size, np.int64)
-            C.split_lines(chunk, starts, ends, True)  # text_lines strips every trailing CR
-            line_base += starts.size
-            merged = _c_chunk(C, parser, chunk, starts, ends, first_line)
+            n_lines, merged = _c_fast_chunk(C, parser, chunk, first_line)
+            if n_lines < 0:  # a header line in the chunk, or a base/time mode the C parser leaves
+                starts = np.empty(C.count_lines(chunk), np.int64)
+                ends = np.empty(starts.size, np.int64)
+                C.split_lines(chunk, starts, ends, True)  # text_lines strips every trailing CR
+                n_lines = starts.size
+                merged = _c_chunk(C, parser, chunk, starts, ends, first_line)
+            line_base += n_lines
         if merged is not None:
             merged.channels = tuple(sink.channels)
             yield merged
+
+
+def _c_fast_chunk(C, parser: _LineParser, chunk, first_line: int) -> tuple[int, FrameBatch | None]:
+    """The usual chunk (hex base, absolute times, no `base` header line) in one C pass:
+    (lines in it, its frames or None). (-1, None) leaves the chunk to `_c_chunk`.
+
+    The C pass cuts the lines, parses the classic data-frame lines straight into
+    compact columns and lists the others, which go through the line parser in file
+    order, as in `_c_chunk` (whose results these are, without its per-line arrays).
+    """
+    if parser.base != 16 or parser.relative:
+        return -1, None
+    sink = parser.sink
+    cap = C.count_lines(chunk)
+    t = np.empty(cap, np.float64)
+    chan = np.empty(cap, np.uint16)
+    can_id = np.empty(cap, np.uint32)
+    flags = np.empty(cap, np.uint8)
+    dlc = np.empty(cap, np.uint8)
+    data = np.empty((cap, 8), np.uint8)
+    line = np.empty(cap, np.int64)
+    slow = np.empty((cap, 3), np.int64)
+    first_row = np.full(1000, -1, np.int64)  # channel numbers have 1-3 digits
+    n_lines, n, n_slow, last_base = C.asc_chunk(
+        chunk, first_line, t, chan, can_id, flags, dlc, data, line, slow, first_row
+    )
+    if last_base:
+        return -1, None
+    nums = np.flatnonzero(first_row >= 0).tolist()
+    new_chans = sorted(
+        (int(line[first_row[num]]), str(num)) for num in nums if str(num) not in parser.chan_of
+    )
+    # every other line, in order, through the line parser; note where the time base moves
+    state_at: list[tuple[int, float]] = [(-1, parser.start)]
+    nc = 0
+    for i, s, e in slow[:n_slow].tolist():
+        at = first_line + i
+        while nc < len(new_chans) and new_chans[nc][0] < at:
+            parser.chan_of.setdefault(new_chans[nc][1], sink.channel(new_chans[nc][1]))
+            nc += 1
+        parser.line(at, bytes(chunk[s:e]).decode("latin-1"))
+        if parser.start != state_at[-1][1]:
+            state_at.append((at, parser.start))
+    for _, name in new_chans[nc:]:
+        parser.chan_of.setdefault(name, sink.channel(name))
+    parts = []
+    slow_batch = sink.flush()
+    if slow_batch is not None:
+        parts.append(slow_batch)
+    if n:
+        t, line = t[:n], line[:n]
+        if len(state_at) == 1:  # one time base for the chunk (the usual case)
+            t += np.float64(state_at[0][1])
+        else:
+            where = np.array([s[0] for s in state_at], np.int64)
+            k = np.searchsorted(where, line, side="left") - 1  # last Begin Triggerblock before
+            t += np.array([s[1] for s in state_at], np.float64)[k]
+        if len(nums) == 1:
+            channel = np.full(n, parser.chan_of[str(nums[0])], np.uint16)
+        else:
+            lut = np.zeros(max(nums) + 1, np.uint16)
+            for num in nums:
+                lut[num] = parser.chan_of[str(num)]
+            channel = lut[chan[:n]]
+        parts.append(
+            FrameBatch(
+                t=t,
+                can_id=can_id[:n],
+                flags=flags[:n],
+                dlc=dlc[:n],
+                data=data[:n],
+                channel=channel,
+                line=line,
+            )
+        )
+        parser.ctx.frames += n
+    if not parts:
+        return n_lines, None
+    if len(parts) == 1:
+        return n_lines, parts[0]
+    merged = concat(parts)
+    return n_lines, merged.take(np.argsort(merged.line, kind="stable"))
 
 
 def _c_chunk(C, parser: _LineParser, chunk: bytes, starts, ends, first_line: int):
