@@ -492,10 +492,29 @@ static PyObject *asc_base_line(PyObject *self, PyObject *args) {
  * the fast parse and the line goes to the line parser. */
 static inline int asc_sep(unsigned char c) { return c == ' ' || c == '\t' || c == '\r'; }
 
-/* Skip separators; 0 when the line ends there. */
+/* Skip separators, eight spaces at a time (writers pad columns with runs of them);
+ * 0 when the line ends there. */
 static inline int asc_skip(const unsigned char **q, const unsigned char *e) {
     const unsigned char *p = *q;
-    while (p < e && asc_sep(*p)) p++;
+    while (p < e) {
+        if (*p == ' ' && e - p >= 8) {
+            uint64_t w;
+            memcpy(&w, p, 8);
+            w ^= 0x2020202020202020ull; /* zero bytes where spaces were */
+            if (!w) {
+                p += 8;
+                continue;
+            }
+            /* the first byte that is not a space: the lowest nonzero byte of w in memory
+             * order, which is the lowest-order byte on a little-endian machine only */
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+            p += __builtin_ctzll(w) >> 3;
+            continue;
+#endif
+        }
+        if (!asc_sep(*p)) break;
+        p++;
+    }
     *q = p;
     return p < e;
 }
@@ -596,7 +615,8 @@ PyDoc_STRVAR(asc_chunk_doc,
              "line not blank (only ' ', '\\t', '\\r') into slow (int64 (k, 3): index, start,\n"
              "end), for the line parser. first_row (int64, 1000, -1 where unseen): the row\n"
              "where each channel number first appears. last_base: asc_base_line(buf).\n"
-             "Column buffers need as many rows as count_lines(buf).");
+             "n_lines -1: more frame lines than the columns' rows or other lines than\n"
+             "slow's (as many as count_lines(buf) always do); nothing is final then.");
 
 static PyObject *asc_chunk(PyObject *self, PyObject *args) {
     PyObject *o[11];
@@ -607,12 +627,13 @@ static PyObject *asc_chunk(PyObject *self, PyObject *args) {
         return NULL;
     if (bufs_get(&bs, o[0], 0, -1, "buf") < 0 || bufs_get(&bs, o[2], 1, -1, "t") < 0) goto fail;
     Py_ssize_t cap = bs.b[1].len / 8;
-    static const int width[11] = {0, 0, 8, 2, 4, 1, 1, 8, 8, 24, 0};
+    static const int width[11] = {0, 0, 8, 2, 4, 1, 1, 8, 8, 0, 0};
     static const char *what[11] = {"buf", "",     "t",    "chan", "can_id", "flags",
                                    "dlc", "data", "line", "slow", "first_row"};
     for (int i = 3; i < 10; i++)
         if (bufs_get(&bs, o[i], 1, cap * width[i], what[i]) < 0) goto fail;
     if (bufs_get(&bs, o[10], 1, 1000 * 8, what[10]) < 0) goto fail;
+    Py_ssize_t cap_slow = bs.b[8].len / 24;
     const unsigned char *buf = bs.b[0].buf;
     Py_ssize_t size = bs.b[0].len;
     double *t = bs.b[1].buf;
@@ -628,7 +649,7 @@ static PyObject *asc_chunk(PyObject *self, PyObject *args) {
         const unsigned char *nl = pos < size ? memchr(buf + pos, '\n', size - pos) : NULL;
         Py_ssize_t end = nl ? (Py_ssize_t)(nl - buf) : size;
         if (!nl && pos == size && size > 0 && buf[size - 1] == '\n') break; /* no last line */
-        if (n_lines >= cap) {
+        if (n >= cap || n_slow >= cap_slow) {
             overflow = 1;
             break;
         }
@@ -654,10 +675,7 @@ static PyObject *asc_chunk(PyObject *self, PyObject *args) {
     }
     Py_END_ALLOW_THREADS;
     bufs_release(&bs);
-    if (overflow) {
-        PyErr_SetString(PyExc_ValueError, "asc_chunk: more lines than the column buffers hold");
-        return NULL;
-    }
+    if (overflow) return Py_BuildValue("(nnnn)", (Py_ssize_t)-1, n, n_slow, last_base);
     return Py_BuildValue("(nnnn)", n_lines, n, n_slow, last_base);
 fail:
     bufs_release(&bs);
