@@ -490,11 +490,16 @@ static PyObject *asc_base_line(PyObject *self, PyObject *args) {
 /* Separators of a frame line the line parser's str.split() splits on too; any other
  * byte that str.split() takes for whitespace (other controls, latin-1 NBSP/NEL) ends
  * the fast parse and the line goes to the line parser. */
-static inline int asc_sep(unsigned char c) { return c == ' ' || c == '\t' || c == '\r'; }
+#if defined(__GNUC__)
+#define ALWAYS_INLINE inline __attribute__((always_inline))
+#else
+#define ALWAYS_INLINE inline
+#endif
+static ALWAYS_INLINE int asc_sep(unsigned char c) { return c == ' ' || c == '\t' || c == '\r'; }
 
 /* Skip separators, eight spaces at a time (writers pad columns with runs of them);
  * 0 when the line ends there. */
-static inline int asc_skip(const unsigned char **q, const unsigned char *e) {
+static ALWAYS_INLINE int asc_skip(const unsigned char **q, const unsigned char *e) {
     const unsigned char *p = *q;
     while (p < e) {
         if (*p == ' ' && e - p >= 8) {
@@ -581,7 +586,12 @@ static inline int asc_frame(const unsigned char *q, const unsigned char *e, doub
     if (!ASC_END(q)) return 0;
     uint8_t d[8] = {0};
     for (int j = 0; j < n_bytes; j++) {
-        if (!asc_skip(&q, e) || e - q < 2) return 0;
+        if (e - q >= 3 && q[0] == ' ' && q[1] > ' ') { /* " XX", the usual spacing */
+            q++;
+        } else if (!asc_skip(&q, e)) {
+            return 0;
+        }
+        if (e - q < 2) return 0;
         int hi = HEXV[q[0]], lo = HEXV[q[1]];
         if ((hi | lo) < 0) return 0;
         q += 2;
