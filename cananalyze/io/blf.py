@@ -160,7 +160,6 @@ _PROBLEMS = {
     _BAD_SIZE: "BLF object with bad size {0}",
     _UNREADABLE: "BLF object type {0} with header v{1} size {2} unreadable",
 }
-_PURE = object()  # the compiled walk declined a buffer
 MAX_WALK_PROBLEMS = 64  # problems one compiled walk keeps; more: the Python walk
 
 
@@ -490,9 +489,10 @@ def _inflate(payload, limit: int, size: int = 0) -> tuple[bytes, str | None]:
     if _fast_zlib is not None and 0 < size <= limit and len(payload) * _DEFLATE_RATIO <= limit:
         # in one call into a buffer of the size the container declares: no regrowth
         # copies (a stream object grows its output step by step); deflate expands at most
-        # _DEFLATE_RATIO times, so even a lying size cannot take it past `limit`
+        # _DEFLATE_RATIO times, so neither the output nor a lying size's buffer can pass
+        # `limit` or that bound
         try:
-            out = _fast_zlib.decompress(payload, 15, size)
+            out = _fast_zlib.decompress(payload, 15, min(size, len(payload) * _DEFLATE_RATIO))
         except _fast_zlib.error:
             pass
         else:
