@@ -101,13 +101,14 @@ class FrameBatch:
 
     def take(self, idx: np.ndarray | slice) -> FrameBatch:
         """Rows selected by a boolean mask, index array or slice (columns copied or viewed)."""
-        if isinstance(idx, slice):
-            rows = np.arange(len(self))[idx]
-        else:
+        if not isinstance(idx, slice):
             idx = np.asarray(idx)
-            rows = np.flatnonzero(idx) if idx.dtype == bool else idx
         long = {}
-        if self.long_data:
+        if self.long_data:  # a slice needs no index array otherwise
+            if isinstance(idx, slice):
+                rows = np.arange(len(self))[idx]
+            else:
+                rows = np.flatnonzero(idx) if idx.dtype == bool else idx
             where = {old: new for new, old in enumerate(rows.tolist())}
             long = {where[k]: v for k, v in self.long_data.items() if k in where}
         return FrameBatch(

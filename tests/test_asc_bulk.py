@@ -140,3 +140,89 @@ def test_strict_stops_at_the_same_line() -> None:
     with pytest.raises(InputError) as b:
         run(asc.read_per_line, data, strict=True)
     assert str(a.value) == str(b.value)
+
+
+_ODD = [
+    " ",
+    "  ",
+    " " * 9,
+    " " * 17,
+    "\t",
+    " \t ",
+    "\r",
+    "\x0b",
+    "\x1c",
+    "\x01",
+    "\x85",
+    "\xa0",
+    "",
+]
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_odd_bytes_around_every_field(seed: int) -> None:
+    """The one-pass C parser checks each field as it reads it: any byte between, inside or
+    after the fields (space runs it skips eight at a time, controls and latin-1 spaces the
+    line parser splits on, bytes it does not) gives the line parser's rows and problems."""
+    rng = random.Random(seed)
+    fields = ["0.250000", "1", "181", "Rx", "d", "3", "01", "A5", "ff"]
+    lines = [HEADER.rstrip(b"\n")]
+    for _ in range(400):
+        seps = [
+            rng.choice(_ODD) if rng.random() < 0.3 else " " * rng.randint(1, 20) for _ in fields
+        ]
+        line = "".join(s + f for s, f in zip(seps, fields, strict=True))
+        if rng.random() < 0.5:  # what follows the last data byte is never read
+            line += rng.choice(_ODD) + rng.choice(["", "x", "\xff\x00", "Length = 0", "\x85 7"])
+        lines.append(line.encode("latin-1"))
+    data = b"\n".join(lines) + b"\n"
+    assert_same(data, batch_size=rng.choice([7, 1000]), chunk=rng.choice([None, 4096]))
+
+
+def test_frame_lines_never_reach_the_line_parser(monkeypatch) -> None:
+    """The compiled pass takes every classic data-frame line (the bulk of a log); the line
+    parser sees only the header and event lines."""
+    if asc.speedups.C is None:
+        pytest.skip("needs the compiled helper")
+    seen: list[int] = []
+    real = asc._LineParser.line
+
+    def counted(self, n, raw):
+        seen.append(n)
+        return real(self, n, raw)
+
+    monkeypatch.setattr(asc._LineParser, "line", counted)
+    frames = [
+        f" {i / 1000:.6f} 1  {0x181 + i % 4:X}     Rx   d 2 0{i % 10} FF" for i in range(5000)
+    ]
+    body = "\n".join(frames[:2500] + [" 2.5 Start of measurement"] + frames[2500:])
+    data = HEADER + body.encode() + b"\n"
+    monkeypatch.setattr(asc, "CHUNK", 8192)
+    got, _, _ = run(asc.read, data, batch_size=1000)
+    assert len(got) == 5000 and seen == [1, 2, 3, 2504]
+    monkeypatch.undo()
+    assert assert_same(data, batch_size=1000, chunk=8192) == 5000
+
+
+def test_chunk_of_many_event_lines(monkeypatch) -> None:
+    """More non-frame lines in a chunk than the C pass has room for at first: it counts
+    the lines and runs again, with the same rows and problems."""
+    if asc.speedups.C is None:
+        pytest.skip("needs the compiled helper")
+    C = asc.speedups.C
+    results: list[int] = []
+    real = C.asc_chunk
+
+    def spied(*args):
+        got = real(*args)
+        results.append(got[0])
+        return got
+
+    monkeypatch.setattr(C, "asc_chunk", spied)
+    lines = [b"0.1 1 181 Rx d 1 00"]
+    for i in range(3000):
+        lines.append(b"// c" if i % 3 else b"1.5 1 181 Rx r")
+        lines.append(b"x")
+    data = HEADER + b"\n".join(lines) + b"\n"
+    assert assert_same(data, batch_size=500) == 1001
+    assert -1 in results  # the first room was too small, and the second run gave the rows

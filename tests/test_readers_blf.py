@@ -5,6 +5,7 @@ from __future__ import annotations
 import random
 import struct
 import zlib
+from types import SimpleNamespace
 
 import can
 import pytest
@@ -334,3 +335,48 @@ def test_header_shorter_than_its_time_at_the_end_of_a_buffer(tmp_path):
     assert [p.message for p in ctx.problems.shown] == [
         "BLF object type 1 with header v1 size 16 unreadable"
     ]
+
+
+@pytest.mark.skipif(blf._fast_zlib is None, reason="python-isal not installed")
+def test_inflate_in_one_call_whatever_size_the_container_declares(written, monkeypatch):
+    """A container is inflated in one call into the size it declares (no regrowth copies):
+    a true, short, long or absurd declared size gives zlib's bytes and problems, and a
+    sound container never needs the stream object."""
+    data = written.read_bytes()
+    payloads = []
+    for pos in _containers(data):
+        size = struct.unpack_from("<L", data, pos + 8)[0]
+        payloads.append(data[pos + 32 : pos + size])
+    good = zlib.compress(b"x" * 5000)
+    cases = (
+        payloads
+        + [
+            good,
+            good + b"trailing",  # bytes after the stream: ignored by zlib too
+            good[:-2],  # the checksum cut: incomplete
+            b"\x78\x9c" + b"\xff" * 40,
+            zlib.compress(bytes(150_000), 9),  # 1000:1, small enough for one call under the limit
+            zlib.compress(bytes(300_000), 9),  # inflates beyond the limit
+        ]
+    )
+    limit = 200_000
+    for payload in cases:
+        monkeypatch.setattr(blf, "_fast_zlib", None)
+        ref = blf._inflate(payload, limit)
+        monkeypatch.undo()
+        true = len(ref[0])
+        for size in (0, 1, true // 2, true, true + 1000, limit, limit + 1):
+            assert blf._inflate(payload, limit, size) == ref, size
+
+    def no_stream(*_a, **_k):
+        raise AssertionError("a sound container went through the stream object")
+
+    isal = blf._fast_zlib
+    one_call = SimpleNamespace(
+        decompress=isal.decompress, decompressobj=no_stream, error=isal.error
+    )
+    monkeypatch.setattr(blf, "_fast_zlib", one_call)
+    assert blf._inflate(good, limit, 5000) == (b"x" * 5000, None)
+    if written.name == "w6.blf":
+        for p in payloads:
+            assert blf._inflate(p, blf.MAX_CONTAINER, 131072)[1] is None

@@ -130,6 +130,36 @@ def test_buffers_of_one_container(written: Path, monkeypatch, python_walks) -> N
     assert python_walks == []
 
 
+@pytest.mark.parametrize(
+    ("batch_size", "parse_bytes"), [(20000, None), (6000, 1), (100_000, 1), (4000, 1 << 14)]
+)
+def test_rows_written_into_the_batch_being_filled(
+    written: Path, monkeypatch, python_walks, batch_size: int, parse_bytes: int | None
+) -> None:
+    """The compiled walk writes a buffer's rows straight into the batch being filled when
+    they fit, else through its reused buffers: either way, and mixed across the ends of
+    batches, the Python walk's batches (exactly batch_size rows, long CAN FD payloads at
+    their rows, the channel table)."""
+    if parse_bytes is not None:
+        monkeypatch.setattr(blf, "PARSE_BYTES", parse_bytes)
+    direct: list[int] = []
+    commit = blf._Cutter.commit
+
+    def counted(self, n, channels, long):
+        direct.append(n)
+        return commit(self, n, channels, long)
+
+    monkeypatch.setattr(blf._Cutter, "commit", counted)
+    assert _same(written, batch_size=batch_size) == 15000
+    assert python_walks == [] and sum(direct) > 0
+    batch, _, batches = run(blf.read, written, batch_size=batch_size)
+    sizes = [len(b) for b in batches]
+    assert sizes == [batch_size] * (15000 // batch_size) + (
+        [15000 % batch_size] if 15000 % batch_size else []
+    )
+    assert batch.long_data and len(batch.channels) == 3
+
+
 def _parts(path: Path) -> tuple[bytes, bytes]:
     """A BLF's file header and the inflated bytes of all its containers."""
     data = path.read_bytes()

@@ -246,22 +246,36 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
 def _chunks(stream: BinaryIO, parser: _LineParser) -> Iterator[FrameBatch]:
     sink = parser.sink
     line_base = 0
-    carry = b""
+    carry = b""  # the partial line after a chunk's last newline
     eof = False
     skipping = False  # inside an over-long line: drop bytes up to its end
+    # the file is read into one reused buffer after the carried line: the chunk is a view
+    # of it, and neither the block nor the chunk is copied (streams without readinto: bytes)
+    readinto = getattr(stream, "readinto", None)
+    buf = bytearray()
     while not eof:
-        block = stream.read(CHUNK)
-        eof = not block
-        if skipping:
-            nl_at = block.find(b"\n")
+        start = len(carry)
+        if readinto is not None:
+            if len(buf) < start + CHUNK:
+                buf = bytearray(start + CHUNK)
+            buf[:start] = carry
+            got = readinto(memoryview(buf)[start : start + CHUNK]) or 0
+            data = buf
+        else:
+            block = stream.read(CHUNK)
+            got, data = len(block), carry + block
+        eof = not got
+        size = start + got
+        lo = 0
+        if skipping:  # nothing is carried then
+            nl_at = data.find(b"\n", 0, size)
             if nl_at < 0 and not eof:
                 continue
-            block, skipping = block[nl_at + 1 :] if nl_at >= 0 else b"", False
-        chunk = carry + block
+            lo, skipping = nl_at + 1 if nl_at >= 0 else size, False
         if not eof:
-            cut = chunk.rfind(b"\n") + 1
+            cut = data.rfind(b"\n", lo, size) + 1
             if cut == 0:
-                carry = chunk
+                carry = bytes(data[lo:size])
                 if len(carry) > MAX_LINE:  # never hold a newline-less file whole
                     line_base += 1
                     parser.ctx.problems.add(
@@ -271,31 +285,125 @@ def _chunks(stream: BinaryIO, parser: _LineParser) -> Iterator[FrameBatch]:
                     )
                     carry, skipping = b"", True
                 continue
-            chunk, carry = chunk[:cut], chunk[cut:]
-        elif not chunk:
+            chunk, carry = memoryview(data)[lo:cut], bytes(data[cut:size])
+        elif lo == size:
             break
+        else:
+            chunk, carry = memoryview(data)[lo:size], b""
         first_line = line_base + 1
         C = speedups.C
         if C is None:  # every line through the line parser, in order
-            lines = chunk.decode("latin-1").split("\n")
-            if chunk.endswith(b"\n"):
+            text = bytes(chunk)
+            lines = text.decode("latin-1").split("\n")
+            if text.endswith(b"\n"):
                 lines.pop()
             line_base += len(lines)
             for i, raw in enumerate(lines):
                 parser.line(first_line + i, raw.rstrip("\r"))
             merged = sink.flush()
         else:
-            starts = np.empty(C.count_lines(chunk), np.int64)
-            ends = np.empty(starts.size, np.int64)
-            C.split_lines(chunk, starts, ends, True)  # text_lines strips every trailing CR
-            line_base += starts.size
-            merged = _c_chunk(C, parser, chunk, starts, ends, first_line)
+            n_lines, merged = _c_fast_chunk(C, parser, chunk, first_line)
+            if n_lines < 0:  # a header line in the chunk, or a base/time mode the C parser leaves
+                starts = np.empty(C.count_lines(chunk), np.int64)
+                ends = np.empty(starts.size, np.int64)
+                C.split_lines(chunk, starts, ends, True)  # text_lines strips every trailing CR
+                n_lines = starts.size
+                merged = _c_chunk(C, parser, chunk, starts, ends, first_line)
+            line_base += n_lines
         if merged is not None:
             merged.channels = tuple(sink.channels)
             yield merged
 
 
-def _c_chunk(C, parser: _LineParser, chunk: bytes, starts, ends, first_line: int):
+def _c_fast_chunk(C, parser: _LineParser, chunk, first_line: int) -> tuple[int, FrameBatch | None]:
+    """The usual chunk (hex base, absolute times, no `base` header line) in one C pass:
+    (lines in it, its frames or None). (-1, None) leaves the chunk to `_c_chunk`.
+
+    The C pass cuts the lines, parses the classic data-frame lines straight into
+    compact columns and lists the others, which go through the line parser in file
+    order, as in `_c_chunk` (whose results these are, without its per-line arrays).
+    """
+    if parser.base != 16 or parser.relative:
+        return -1, None
+    sink = parser.sink
+    # room for every frame line (14 bytes at least, and its newline) and for a few other
+    # lines; a chunk with more of those (hostile, or all events) is counted and run again
+    rows, others = len(chunk) // 15 + 1, len(chunk) // 256 + 64
+    for _ in range(2):
+        t = np.empty(rows, np.float64)
+        chan = np.empty(rows, np.uint16)
+        can_id = np.empty(rows, np.uint32)
+        flags = np.empty(rows, np.uint8)
+        dlc = np.empty(rows, np.uint8)
+        data = np.empty((rows, 8), np.uint8)
+        line = np.empty(rows, np.int64)
+        slow = np.empty((others, 3), np.int64)
+        first_row = np.full(1000, -1, np.int64)  # channel numbers have 1-3 digits
+        n_lines, n, n_slow, last_base = C.asc_chunk(
+            chunk, first_line, t, chan, can_id, flags, dlc, data, line, slow, first_row
+        )
+        if n_lines >= 0:
+            break
+        rows = others = C.count_lines(chunk)
+    if last_base:
+        return -1, None
+    nums = np.flatnonzero(first_row >= 0).tolist()
+    new_chans = sorted(
+        (int(line[first_row[num]]), str(num)) for num in nums if str(num) not in parser.chan_of
+    )
+    # every other line, in order, through the line parser; note where the time base moves
+    state_at: list[tuple[int, float]] = [(-1, parser.start)]
+    nc = 0
+    for i, s, e in slow[:n_slow].tolist():
+        at = first_line + i
+        while nc < len(new_chans) and new_chans[nc][0] < at:
+            parser.chan_of.setdefault(new_chans[nc][1], sink.channel(new_chans[nc][1]))
+            nc += 1
+        parser.line(at, bytes(chunk[s:e]).decode("latin-1"))
+        if parser.start != state_at[-1][1]:
+            state_at.append((at, parser.start))
+    for _, name in new_chans[nc:]:
+        parser.chan_of.setdefault(name, sink.channel(name))
+    parts = []
+    slow_batch = sink.flush()
+    if slow_batch is not None:
+        parts.append(slow_batch)
+    if n:
+        t, line = t[:n], line[:n]
+        if len(state_at) == 1:  # one time base for the chunk (the usual case)
+            t += np.float64(state_at[0][1])
+        else:
+            where = np.array([s[0] for s in state_at], np.int64)
+            k = np.searchsorted(where, line, side="left") - 1  # last Begin Triggerblock before
+            t += np.array([s[1] for s in state_at], np.float64)[k]
+        if len(nums) == 1:
+            channel = np.full(n, parser.chan_of[str(nums[0])], np.uint16)
+        else:
+            lut = np.zeros(max(nums) + 1, np.uint16)
+            for num in nums:
+                lut[num] = parser.chan_of[str(num)]
+            channel = lut[chan[:n]]
+        parts.append(
+            FrameBatch(
+                t=t,
+                can_id=can_id[:n],
+                flags=flags[:n],
+                dlc=dlc[:n],
+                data=data[:n],
+                channel=channel,
+                line=line,
+            )
+        )
+        parser.ctx.frames += n
+    if not parts:
+        return n_lines, None
+    if len(parts) == 1:
+        return n_lines, parts[0]
+    merged = concat(parts)
+    return n_lines, merged.take(np.argsort(merged.line, kind="stable"))
+
+
+def _c_chunk(C, parser: _LineParser, chunk, starts, ends, first_line: int):
     """One chunk's frames: data-frame lines by the compiled parser, the rest by the line
     parser in file order; None when the chunk has none."""
     sink = parser.sink
@@ -303,7 +411,7 @@ def _c_chunk(C, parser: _LineParser, chunk: bytes, starts, ends, first_line: int
     # the last `base ...` line is found per line start in C
     head_end = C.asc_base_line(chunk, starts)
     for i in range(head_end):
-        parser.line(first_line + i, chunk[starts[i] : ends[i]].decode("latin-1"))
+        parser.line(first_line + i, bytes(chunk[starts[i] : ends[i]]).decode("latin-1"))
     bulk = None
     if parser.base == 16 and not parser.relative and head_end < starts.size:
         bulk = _c_bulk_lines(C, chunk, starts, ends)
@@ -318,7 +426,7 @@ def _c_chunk(C, parser: _LineParser, chunk: bytes, starts, ends, first_line: int
         while nc < len(new_chans) and new_chans[nc][0] < i:
             parser.chan_of.setdefault(new_chans[nc][1], sink.channel(new_chans[nc][1]))
             nc += 1
-        parser.line(first_line + i, chunk[starts[i] : ends[i]].decode("latin-1"))
+        parser.line(first_line + i, bytes(chunk[starts[i] : ends[i]]).decode("latin-1"))
         if parser.start != state_at[-1][1]:
             state_at.append((i, parser.start))
     for _, name in new_chans[nc:]:

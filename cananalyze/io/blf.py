@@ -37,7 +37,6 @@ from ..frames import (
     FLAG_TX,
     FrameBatch,
     channel_index,
-    concat,
 )
 from ..runtime import speedups
 from .registry import LogFormat, ReadContext, register
@@ -51,6 +50,8 @@ MAX_CONTAINER = 64 << 20  # real containers are ~128 KiB uncompressed
 MAX_FILE_HEADER = 1 << 16  # real file headers are 144 bytes
 MAX_INNER = 1 << 20  # an object inside a container (CAN records are < 200 bytes)
 PARSE_BYTES = 2 << 20  # decompressed bytes parsed in one go (see _Inflated)
+# deflate's largest expansion: a 258-byte match in 2 bits is 1032 bytes per input byte
+_DEFLATE_RATIO = 1040
 
 _FILE_HEADER = struct.Struct("<4sLBBBBBBBBQQLL8H8H")
 _OBJ_BASE = struct.Struct("<4sHHLL")  # signature, header size, header version, size, type
@@ -159,7 +160,6 @@ _PROBLEMS = {
     _BAD_SIZE: "BLF object with bad size {0}",
     _UNREADABLE: "BLF object type {0} with header v{1} size {2} unreadable",
 }
-_PURE = object()  # the compiled walk declined a buffer
 MAX_WALK_PROBLEMS = 64  # problems one compiled walk keeps; more: the Python walk
 
 
@@ -209,49 +209,70 @@ class _Records:
         self._chan: dict[str, int] = {}
         self._out: _Columns | None = None  # the compiled walk's buffers, reused
 
-    def parse(self, data: bytes) -> FrameBatch | None:
-        """The records of ``data`` (after the previous tail) as one batch, None if none."""
-        buf = self.tail + data if self.tail else data
+    def parse(self, pieces: list, batches: _Cutter) -> None:
+        """The records of ``pieces`` (inflated container bytes, after the previous tail)
+        into ``batches``. The pieces and the tail are joined in one copy, none when a
+        single piece comes alone."""
+        if self.tail or len(pieces) > 1:
+            buf = b"".join([self.tail, *pieces])
+        else:
+            buf = pieces[0]
         walk = getattr(speedups.C, "blf_records", None)
-        if walk is not None:
-            got = self._parse_c(walk, buf)
-            if got is not _PURE:
-                return got
-        return self._parse_py(buf)
+        if walk is not None and self._parse_c(walk, buf, batches):
+            return
+        got = self._parse_py(bytes(buf))
+        if got is not None:
+            batches.add(got)
 
-    def _parse_c(self, walk, buf: bytes) -> FrameBatch | None | object:
+    def _parse_c(self, walk, buf, batches: _Cutter) -> bool:
         """The compiled walk (_speedups.blf_records): the same rows and problems as
-        `_parse_py`, or _PURE when it declines the buffer (more problems in it than it
-        keeps: hostile input, which the Python walk takes)."""
+        `_parse_py`, written straight into the batch being filled when they fit in it,
+        else into reused buffers and copied; False when it declines the buffer (more
+        problems in it than it keeps: hostile input, which the Python walk takes)."""
         cap = len(buf) // 48  # the most rows it can hold (each at least 48 bytes)
         if self._out is None or self._out.rows < cap:
             self._out = _Columns(max(cap, 1 << 16))
         out = self._out
-        ok, n, pos, record, n_long, n_probs = walk(
-            buf, self.record, MAX_INNER, self.start, *out.buffers()
-        )
+        spot = batches.room(cap)
+        if spot is None:
+            cols = out.buffers()
+        else:
+            b, at = spot
+            cols = (b.t[at:], b.can_id[at:], b.flags[at:], b.dlc[at:], b.data[at:])
+            cols += (b.channel[at:], b.line[at:], out.long, out.probs)
+        ok, n, pos, record, n_long, n_probs = walk(buf, self.record, MAX_INNER, self.start, *cols)
         if not ok:
-            return _PURE
-        for rec, code, a, b, c in out.probs[:n_probs].tolist():
-            self._problem(rec, code, a, b, c)
+            return False
+        for rec, code, a, b_, c in out.probs[:n_probs].tolist():
+            self._problem(rec, code, a, b_, c)
         self.record = record
-        self.tail = buf[pos:]
+        self.tail = bytes(buf[pos:])
         if not n:
-            return None
-        b = FrameBatch(
-            t=out.t[:n].copy(),
-            can_id=out.can_id[:n].copy(),
-            flags=out.flags[:n].copy(),
-            dlc=out.dlc[:n].copy(),
-            data=out.data[:n].copy(),
-            channel=self._channel_index(out.chan[:n]),
-            line=out.line[:n].copy(),
-            channels=tuple(self.channels),
-        )
-        for row, at, stored, valid in out.long[:n_long].tolist():
-            b.long_data[row] = buf[at : at + stored].ljust(valid, b"\0")
+            return True
+        chan = cols[5][:n]
+        chan[:] = self._channel_index(chan)
+        long = {
+            row: bytes(buf[a : a + s]).ljust(v, b"\0")
+            for row, a, s, v in out.long[:n_long].tolist()
+        }
         self.ctx.frames += n
-        return b
+        if spot is not None:
+            batches.commit(n, tuple(self.channels), long)
+        else:
+            batches.add(
+                FrameBatch(
+                    t=out.t[:n],
+                    can_id=out.can_id[:n],
+                    flags=out.flags[:n],
+                    dlc=out.dlc[:n],
+                    data=out.data[:n],
+                    channel=chan,
+                    line=out.line[:n],
+                    channels=tuple(self.channels),
+                    long_data=long,
+                )
+            )
+        return True
 
     def _problem(self, record: int, code: int, a: int, b: int = 0, c: int = 0) -> None:
         """Report a problem of the walk (the same words from either walk)."""
@@ -457,14 +478,26 @@ class _Records:
         return out
 
 
-def _inflate(payload: bytes, limit: int) -> tuple[bytes, str | None]:
+def _inflate(payload, limit: int, size: int = 0) -> tuple[bytes, str | None]:
     """zlib-inflate at most ``limit`` bytes; the error text if it is broken or too big.
+    ``size``: what the container says it inflates to (a hint, never trusted).
 
     A whole, sound container (nearly all) is inflated by python-isal when it is
     installed; anything else is redone by `zlib`, whose outcome and error texts
     are the reference, so both give the same bytes and the same problems.
     """
-    if _fast_zlib is not None:
+    if _fast_zlib is not None and 0 < size <= limit and len(payload) * _DEFLATE_RATIO <= limit:
+        # in one call into a buffer of the size the container declares: no regrowth
+        # copies (a stream object grows its output step by step); deflate expands at most
+        # _DEFLATE_RATIO times, so neither the output nor a lying size's buffer can pass
+        # `limit` or that bound
+        try:
+            out = _fast_zlib.decompress(payload, 15, min(size, len(payload) * _DEFLATE_RATIO))
+        except _fast_zlib.error:
+            pass
+        else:
+            return out, None
+    elif _fast_zlib is not None:
         fast = _fast_zlib.decompressobj()
         try:
             out = fast.decompress(payload, limit)
@@ -506,37 +539,84 @@ class _Inflated:
     def flush(self, batches: _Cutter) -> None:
         if not self.chunks:
             return
-        data = self.chunks[0] if len(self.chunks) == 1 else b"".join(self.chunks)
-        self.chunks, self.size = [], 0
-        batch = self.records.parse(data)
-        if batch is not None:
-            batches.add(batch)
+        chunks, self.chunks, self.size = self.chunks, [], 0
+        self.records.parse(chunks, batches)
+
+
+_COLUMNS = ("t", "can_id", "flags", "dlc", "data", "channel", "line")
 
 
 class _Cutter:
-    """Parsed rows cut into batches of exactly `size` rows (the last one shorter)."""
+    """Parsed rows cut into batches of exactly `size` rows (the last one shorter).
+
+    Rows are written into the batch being filled: by the compiled walk directly
+    (`room`, `commit`), else copied from a parsed batch (`add`); never joined and cut
+    again.
+    """
 
     def __init__(self, size: int) -> None:
-        self.size = size
-        self.pending: list[FrameBatch] = []
-        self.rows = 0
+        self.size = max(1, int(size))
+        self.cur: FrameBatch | None = None
+        self.fill = 0  # rows of `cur` written
+        self.ready: list[FrameBatch] = []
+
+    def _current(self) -> FrameBatch:
+        if self.cur is None:  # every row is written before the batch is given out
+            n = self.size
+            self.cur = FrameBatch(
+                t=np.empty(n, np.float64),
+                can_id=np.empty(n, np.uint32),
+                flags=np.empty(n, np.uint8),
+                dlc=np.empty(n, np.uint8),
+                data=np.empty((n, 8), np.uint8),
+                channel=np.empty(n, np.uint16),
+                line=np.empty(n, np.int64),
+            )
+            self.fill = 0
+        return self.cur
+
+    def _advance(self, n: int, channels: tuple[str, ...]) -> None:
+        self.fill += n
+        if len(channels) >= len(self.cur.channels):  # type: ignore[union-attr]
+            self.cur.channels = channels  # type: ignore[union-attr]  # tables only grow
+        if self.fill == self.size:
+            self.ready.append(self.cur)  # type: ignore[arg-type]
+            self.cur = None
+
+    def room(self, rows: int) -> tuple[FrameBatch, int] | None:
+        """The batch being filled and its first free row, when `rows` more fit in it."""
+        b = self._current()
+        return (b, self.fill) if self.size - self.fill >= rows else None
+
+    def commit(self, n: int, channels: tuple[str, ...], long: dict[int, bytes]) -> None:
+        """`n` rows were written at the first free row (`room`); `long`: by their row there."""
+        b = self.cur
+        for row, payload in long.items():
+            b.long_data[self.fill + row] = payload  # type: ignore[union-attr]
+        self._advance(n, channels)
 
     def add(self, batch: FrameBatch) -> None:
-        self.pending.append(batch)
-        self.rows += len(batch)
+        """Copy the rows of a parsed batch in."""
+        n, i = len(batch), 0
+        while i < n:
+            b = self._current()
+            k = min(n - i, self.size - self.fill)
+            for col in _COLUMNS:
+                getattr(b, col)[self.fill : self.fill + k] = getattr(batch, col)[i : i + k]
+            for row, payload in batch.long_data.items():
+                if i <= row < i + k:
+                    b.long_data[self.fill + row - i] = payload
+            self._advance(k, batch.channels)
+            i += k
 
     def full(self) -> Iterator[FrameBatch]:
-        while self.rows >= self.size:
-            joined = concat(self.pending)
-            rest = joined.take(slice(self.size, None))
-            yield joined.take(slice(0, self.size))
-            self.pending = [rest] if len(rest) else []
-            self.rows = len(rest)
+        ready, self.ready = self.ready, []
+        yield from ready
 
     def rest(self) -> Iterator[FrameBatch]:
-        if self.rows:
-            yield concat(self.pending)
-            self.pending, self.rows = [], 0
+        if self.cur is not None and self.fill:
+            b, self.cur = self.cur.take(slice(0, self.fill)), None
+            yield b
 
 
 def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
@@ -609,12 +689,12 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
         if len(body) < _CONTAINER.size:
             problem(where, "file ends inside a container header")
             break
-        method, _usize = _CONTAINER.unpack_from(body)
-        payload = body[_CONTAINER.size :]
+        method, usize = _CONTAINER.unpack_from(body)
+        payload = memoryview(body)[_CONTAINER.size :]
         if method == 0:
             data, err = payload, None
         elif method == 2:
-            data, err = _inflate(payload, MAX_CONTAINER)
+            data, err = _inflate(payload, MAX_CONTAINER, usize)
         else:
             problem(where, f"unknown container compression {method}, skipped")
             continue

@@ -487,6 +487,211 @@ static PyObject *asc_base_line(PyObject *self, PyObject *args) {
     return PyLong_FromSsize_t(last);
 }
 
+/* Separators of a frame line the line parser's str.split() splits on too; any other
+ * byte that str.split() takes for whitespace (other controls, latin-1 NBSP/NEL) ends
+ * the fast parse and the line goes to the line parser. */
+#if defined(__GNUC__)
+#define ALWAYS_INLINE inline __attribute__((always_inline))
+#else
+#define ALWAYS_INLINE inline
+#endif
+static ALWAYS_INLINE int asc_sep(unsigned char c) { return c == ' ' || c == '\t' || c == '\r'; }
+
+/* Skip separators, eight spaces at a time (writers pad columns with runs of them);
+ * 0 when the line ends there. */
+static ALWAYS_INLINE int asc_skip(const unsigned char **q, const unsigned char *e) {
+    const unsigned char *p = *q;
+    while (p < e) {
+        if (*p == ' ' && e - p >= 8) {
+            uint64_t w;
+            memcpy(&w, p, 8);
+            w ^= 0x2020202020202020ull; /* zero bytes where spaces were */
+            if (!w) {
+                p += 8;
+                continue;
+            }
+            /* the first byte that is not a space: the lowest nonzero byte of w in memory
+             * order, which is the lowest-order byte on a little-endian machine only */
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+            p += __builtin_ctzll(w) >> 3;
+            continue;
+#endif
+        }
+        if (!asc_sep(*p)) break;
+        p++;
+    }
+    *q = p;
+    return p < e;
+}
+
+/* The token at q ended at p: the next byte must be a separator or the line's end. */
+#define ASC_END(p) ((p) >= e || asc_sep(*(p)))
+
+/* asc_line's grammar in one pass over the line: each field is checked byte by byte as
+ * it is read and must end at a separator, so no pass over the whole line first. The
+ * same lines give the same values; bytes after the last data byte are not read (the
+ * line parser ignores the tokens there too). */
+static inline int asc_frame(const unsigned char *q, const unsigned char *e, double *t,
+                            uint16_t *chan, uint32_t *can_id, uint8_t *flags, uint8_t *dlc,
+                            uint8_t *data) {
+    /* time: digits, optionally '.' and digits, 3 bytes or more */
+    if (!asc_skip(&q, e)) return 0;
+    const unsigned char *s = q;
+    uint64_t sec = 0, frac = 0;
+    int ni = 0, nf = 0;
+    while (q < e && is_digit(*q)) {
+        if (++ni > 18) return 0;
+        sec = sec * 10 + (*q++ - '0');
+    }
+    if (ni < 1) return 0;
+    if (q < e && *q == '.') {
+        q++;
+        while (q < e && is_digit(*q)) {
+            if (++nf > 12) return 0;
+            frac = frac * 10 + (*q++ - '0');
+        }
+    }
+    if (q - s < 3 || !ASC_END(q)) return 0;
+    /* channel: 1-3 decimal digits */
+    if (!asc_skip(&q, e)) return 0;
+    int ch = 0, k = 0;
+    while (q < e && is_digit(*q)) {
+        if (++k > 3) return 0;
+        ch = ch * 10 + (*q++ - '0');
+    }
+    if (k < 1 || !ASC_END(q)) return 0;
+    /* identifier: 1-8 hex digits, 'x' for 29-bit */
+    if (!asc_skip(&q, e)) return 0;
+    uint32_t id = 0;
+    k = 0;
+    while (q < e && HEXV[*q] >= 0) {
+        if (++k > 8) return 0;
+        id = (id << 4) | (uint32_t)HEXV[*q++];
+    }
+    if (k < 1) return 0;
+    int ext = q < e && (*q == 'x' || *q == 'X');
+    q += ext;
+    if (!ASC_END(q) || id > (ext ? 0x1FFFFFFFu : 0x7FFu)) return 0;
+    /* direction */
+    if (!asc_skip(&q, e) || e - q < 2 || q[1] != 'x' || (q[0] != 'R' && q[0] != 'T')) return 0;
+    uint8_t fl = (uint8_t)((q[0] == 'T' ? FLAG_TX : 0) | (ext ? FLAG_EXT : 0));
+    q += 2;
+    if (!ASC_END(q)) return 0;
+    /* 'd' and a one-digit DLC code (9..15 still mean 8 bytes) */
+    if (!asc_skip(&q, e) || *q != 'd') return 0;
+    q++;
+    if (!ASC_END(q) || !asc_skip(&q, e) || HEXV[*q] < 0) return 0;
+    int n_bytes = HEXV[*q] < 8 ? HEXV[*q] : 8;
+    q++;
+    if (!ASC_END(q)) return 0;
+    uint8_t d[8] = {0};
+    for (int j = 0; j < n_bytes; j++) {
+        if (e - q >= 3 && q[0] == ' ' && q[1] > ' ') { /* " XX", the usual spacing */
+            q++;
+        } else if (!asc_skip(&q, e)) {
+            return 0;
+        }
+        if (e - q < 2) return 0;
+        int hi = HEXV[q[0]], lo = HEXV[q[1]];
+        if ((hi | lo) < 0) return 0;
+        q += 2;
+        if (!ASC_END(q)) return 0;
+        d[j] = (uint8_t)((hi << 4) | lo);
+    }
+    memcpy(data, d, 8);
+    *t = seconds(sec, ni, frac, nf);
+    *chan = (uint16_t)ch;
+    *can_id = id;
+    *flags = fl;
+    *dlc = (uint8_t)n_bytes;
+    return 1;
+}
+#undef ASC_END
+
+/* A `base ...` header line: (?i)^[ \t]*base[ \t] (asc_base_line's test). */
+static inline int asc_is_base(const unsigned char *q, const unsigned char *e) {
+    while (q < e && (*q == ' ' || *q == '\t')) q++;
+    return e - q >= 5 && (q[0] | 0x20) == 'b' && (q[1] | 0x20) == 'a' && (q[2] | 0x20) == 's' &&
+           (q[3] | 0x20) == 'e' && (q[4] == ' ' || q[4] == '\t');
+}
+
+PyDoc_STRVAR(asc_chunk_doc,
+             "asc_chunk(buf, first_line, t, chan, can_id, flags, dlc, data, line, slow, first_row)\n"
+             "    -> (n_lines, n_rows, n_slow, last_base)\n\n"
+             "One pass over a chunk of ASC lines (hex base, absolute times): lines as\n"
+             "split_lines(buf, ..., True) cuts them, classic data-frame lines (asc_lines'\n"
+             "grammar and values) into rows 0..n_rows-1 of the columns (chan uint16, the\n"
+             "channel number; line int64 = first_line + the line's index); every other\n"
+             "line not blank (only ' ', '\\t', '\\r') into slow (int64 (k, 3): index, start,\n"
+             "end), for the line parser. first_row (int64, 1000, -1 where unseen): the row\n"
+             "where each channel number first appears. last_base: asc_base_line(buf).\n"
+             "n_lines -1: more frame lines than the columns' rows or other lines than\n"
+             "slow's (as many as count_lines(buf) always do); nothing is final then.");
+
+static PyObject *asc_chunk(PyObject *self, PyObject *args) {
+    PyObject *o[11];
+    long long first_line;
+    Bufs bs = {.n = 0};
+    if (!PyArg_ParseTuple(args, "OLOOOOOOOOO", &o[0], &first_line, &o[2], &o[3], &o[4], &o[5],
+                          &o[6], &o[7], &o[8], &o[9], &o[10]))
+        return NULL;
+    if (bufs_get(&bs, o[0], 0, -1, "buf") < 0 || bufs_get(&bs, o[2], 1, -1, "t") < 0) goto fail;
+    Py_ssize_t cap = bs.b[1].len / 8;
+    static const int width[11] = {0, 0, 8, 2, 4, 1, 1, 8, 8, 0, 0};
+    static const char *what[11] = {"buf", "",     "t",    "chan", "can_id", "flags",
+                                   "dlc", "data", "line", "slow", "first_row"};
+    for (int i = 3; i < 10; i++)
+        if (bufs_get(&bs, o[i], 1, cap * width[i], what[i]) < 0) goto fail;
+    if (bufs_get(&bs, o[10], 1, 1000 * 8, what[10]) < 0) goto fail;
+    Py_ssize_t cap_slow = bs.b[8].len / 24;
+    const unsigned char *buf = bs.b[0].buf;
+    Py_ssize_t size = bs.b[0].len;
+    double *t = bs.b[1].buf;
+    uint16_t *chan = bs.b[2].buf;
+    uint32_t *can_id = bs.b[3].buf;
+    uint8_t *flags = bs.b[4].buf, *dlc = bs.b[5].buf, *data = bs.b[6].buf;
+    int64_t *line = bs.b[7].buf, *slow = bs.b[8].buf, *first_row = bs.b[9].buf;
+    Py_ssize_t n_lines = 0, n = 0, n_slow = 0, last_base = 0;
+    int overflow = 0;
+    Py_BEGIN_ALLOW_THREADS;
+    Py_ssize_t pos = 0;
+    for (;;) {
+        const unsigned char *nl = pos < size ? memchr(buf + pos, '\n', size - pos) : NULL;
+        Py_ssize_t end = nl ? (Py_ssize_t)(nl - buf) : size;
+        if (!nl && pos == size && size > 0 && buf[size - 1] == '\n') break; /* no last line */
+        if (n >= cap || n_slow >= cap_slow) {
+            overflow = 1;
+            break;
+        }
+        Py_ssize_t e = end;
+        while (e > pos && buf[e - 1] == '\r') e--;
+        if (asc_frame(buf + pos, buf + e, t + n, chan + n, can_id + n, flags + n, dlc + n,
+                      data + 8 * n)) {
+            line[n] = first_line + n_lines;
+            if (first_row[chan[n]] < 0) first_row[chan[n]] = n;
+            n++;
+        } else {
+            Py_ssize_t q = pos;
+            while (q < e && asc_sep(buf[q])) q++;
+            if (q < e) { /* blank lines mean nothing to the line parser */
+                if (asc_is_base(buf + pos, buf + e)) last_base = n_lines + 1;
+                int64_t *sl = slow + 3 * n_slow++;
+                sl[0] = n_lines, sl[1] = pos, sl[2] = e;
+            }
+        }
+        n_lines++;
+        if (!nl) break;
+        pos = end + 1;
+    }
+    Py_END_ALLOW_THREADS;
+    bufs_release(&bs);
+    if (overflow) return Py_BuildValue("(nnnn)", (Py_ssize_t)-1, n, n_slow, last_base);
+    return Py_BuildValue("(nnnn)", n_lines, n, n_slow, last_base);
+fail:
+    bufs_release(&bs);
+    return NULL;
+}
+
 /* -------------------------------------------------------------------- BLF */
 
 /* The object walk of io/blf.py (_Records.parse and _columns) for one buffer of inflated
@@ -1038,6 +1243,7 @@ static PyMethodDef methods[] = {
     {"candump_lines", candump_lines, METH_VARARGS, candump_lines_doc},
     {"asc_lines", asc_lines, METH_VARARGS, asc_lines_doc},
     {"asc_base_line", asc_base_line, METH_VARARGS, asc_base_line_doc},
+    {"asc_chunk", asc_chunk, METH_VARARGS, asc_chunk_doc},
     {"blf_records", blf_records, METH_VARARGS, blf_records_doc},
     {"hex_payload", hex_payload, METH_VARARGS, hex_payload_doc},
     {"classify", classify, METH_VARARGS, classify_doc},
