@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..columns.order import stable_order
+
 
 @dataclass
 class Gaps:
@@ -34,13 +36,13 @@ class Gaps:
 
 def grouped_gaps(t: np.ndarray, keys: np.ndarray, rows: np.ndarray, last: np.ndarray) -> Gaps:
     """Gaps for rows of a batch, by key; `last` (indexed by key) carries times between batches."""
-    keys = keys.astype(np.intp)
-    # keys are node-IDs or 11-bit COB-IDs: as uint16, numpy's stable sort is a radix sort
-    small = keys.size and 0 <= keys.min() and keys.max() < 1 << 16
-    order = np.argsort(keys.astype(np.uint16) if small else keys, kind="stable")
-    k = keys[order]
-    tt = t[rows][order]
+    # keys are node-IDs or 11-bit COB-IDs: a counting sort (or numpy's radix sort) as uint16
+    top = int(keys.max()) if keys.size else 0
+    small = keys.size and 0 <= keys.min() and top < 1 << 16
+    order = stable_order(keys, top) if small else np.argsort(keys, kind="stable")
+    k = keys[order].astype(np.intp)  # the cast after the gather: one pass over the sorted keys
     r = rows[order]
+    tt = t[r]  # one gather of the times, not the rows' times then their order
     first = np.ones(k.size, bool)
     first[1:] = k[1:] != k[:-1]
     prev = np.empty_like(tt)

