@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from conftest import real_file
 
+from cananalyze.checks.gaps import grouped_gaps
 from cananalyze.checks.nmt_state import NmtStates
 from cananalyze.checks.rules.bootup import _SENT, _senders
 from cananalyze.checks.rules.drive_fault import DriveFaultRule
@@ -128,3 +129,58 @@ def test_last_emcy_per_node_as_columns_is_the_loop():
     assert cols.emcy == loop.emcy and len(loop.emcy) > 5
     cols._saw_last(Frames, rows[:0], nodes[:0], codes[:0])
     assert cols.emcy == loop.emcy
+
+
+def _gaps_by_sorting(t, keys, rows, last):
+    """grouped_gaps as first written: a stable sort, then the gathers."""
+    order = np.argsort(keys, kind="stable")
+    k = keys[order].astype(np.intp)
+    r = rows[order]
+    tt = t[r]
+    first = np.ones(k.size, bool)
+    first[1:] = k[1:] != k[:-1]
+    prev = np.empty_like(tt)
+    prev[1:] = tt[:-1]
+    prev[first] = last[k[first]]
+    end = np.ones(k.size, bool)
+    end[:-1] = first[1:]
+    last[k[end]] = tt[end]
+    return k, tt, prev, r, np.flatnonzero(first)
+
+
+def test_grouped_gaps_are_the_sorted_gaps_carried_across_batches():
+    rng = np.random.default_rng(11)
+    for size in (1, 128, 2048):
+        mine, ref = np.full(size, np.nan), np.full(size, np.nan)
+        for n in (0, 5, 64, 3000, 3000):  # batches after one another: `last` carries
+            t = np.cumsum(rng.random(n))
+            rows = np.sort(rng.choice(n, n // 2, replace=False)) if n else np.zeros(0, np.intp)
+            for dtype in (np.intp, np.uint32, np.int16):
+                keys = rng.integers(0, size, rows.size).astype(dtype)
+                got = grouped_gaps(t, keys, rows, mine)
+                want = _gaps_by_sorting(t, keys, rows, ref)
+                for col, w in zip(("key", "t", "prev", "row", "starts"), want, strict=True):
+                    g = getattr(got, col)
+                    assert g.dtype == w.dtype, col
+                    np.testing.assert_array_equal(g, w)
+                np.testing.assert_array_equal(mine, ref)
+        assert np.isfinite(mine).sum() > min(size, 1000) // 2
+
+
+@pytest.mark.skipif(getattr(speedups.C, "group_gaps", None) is None, reason="not built")
+def test_compiled_group_gaps_refuses_rows_and_keys_out_of_range():
+    def call(keys, rows, nt=10, nlast=4):
+        n = len(keys)
+        return speedups.C.group_gaps(
+            np.array(keys, np.uint16), np.array(rows, np.intp), np.zeros(nt), np.zeros(nlast),
+            np.empty(n, np.intp), np.empty(n), np.empty(n), np.empty(n, np.intp),
+            np.empty(nlast, np.intp),
+        )  # fmt: skip
+
+    assert call([3, 0, 3], [1, 2, 9]) == 2
+    with pytest.raises(ValueError, match="out of range"):
+        call([4], [1])
+    with pytest.raises(ValueError, match="out of range"):
+        call([1], [10])
+    with pytest.raises(ValueError, match="out of range"):
+        call([1], [-1])

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..columns.order import stable_order
+from ..runtime.speedups import C
 
 
 @dataclass
@@ -39,6 +40,8 @@ def grouped_gaps(t: np.ndarray, keys: np.ndarray, rows: np.ndarray, last: np.nda
     # keys are node-IDs or 11-bit COB-IDs: a counting sort (or numpy's radix sort) as uint16
     top = int(keys.max()) if keys.size else 0
     small = keys.size and 0 <= keys.min() and top < 1 << 16
+    if small and top < last.size and keys.size >= 64 and getattr(C, "group_gaps", None):
+        return _grouped_compiled(t, keys, rows, last)
     order = stable_order(keys, top) if small else np.argsort(keys, kind="stable")
     k = keys[order].astype(np.intp)  # the cast after the gather: one pass over the sorted keys
     r = rows[order]
@@ -52,3 +55,24 @@ def grouped_gaps(t: np.ndarray, keys: np.ndarray, rows: np.ndarray, last: np.nda
     end[:-1] = first[1:]
     last[k[end]] = tt[end]
     return Gaps(k, tt, prev, r, np.flatnonzero(first))
+
+
+def _grouped_compiled(t: np.ndarray, keys: np.ndarray, rows: np.ndarray, last: np.ndarray) -> Gaps:
+    """`grouped_gaps` as one counting sort that gathers and carries as it goes (the
+    compiled helper): the same Gaps, without numpy's sort and four gathers."""
+    n = keys.size
+    k, r = np.empty(n, np.intp), np.empty(n, np.intp)
+    tt, prev = np.empty(n, np.float64), np.empty(n, np.float64)
+    starts = np.empty(last.size, np.intp)
+    groups = C.group_gaps(
+        np.ascontiguousarray(keys, np.uint16),
+        np.ascontiguousarray(rows, np.intp),
+        np.ascontiguousarray(t, np.float64),
+        last,
+        k,
+        tt,
+        prev,
+        r,
+        starts,
+    )
+    return Gaps(k, tt, prev, r, starts[:groups].copy())
