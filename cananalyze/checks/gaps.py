@@ -10,6 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..columns.order import stable_order
+from ..runtime.speedups import C
+
 
 @dataclass
 class Gaps:
@@ -34,13 +37,15 @@ class Gaps:
 
 def grouped_gaps(t: np.ndarray, keys: np.ndarray, rows: np.ndarray, last: np.ndarray) -> Gaps:
     """Gaps for rows of a batch, by key; `last` (indexed by key) carries times between batches."""
-    keys = keys.astype(np.intp)
-    # keys are node-IDs or 11-bit COB-IDs: as uint16, numpy's stable sort is a radix sort
-    small = keys.size and 0 <= keys.min() and keys.max() < 1 << 16
-    order = np.argsort(keys.astype(np.uint16) if small else keys, kind="stable")
-    k = keys[order]
-    tt = t[rows][order]
+    # keys are node-IDs or 11-bit COB-IDs: a counting sort (or numpy's radix sort) as uint16
+    top = int(keys.max()) if keys.size else 0
+    small = keys.size and 0 <= keys.min() and top < 1 << 16
+    if small and top < last.size and keys.size >= 64 and getattr(C, "group_gaps", None):
+        return _grouped_compiled(t, keys, rows, last)
+    order = stable_order(keys, top) if small else np.argsort(keys, kind="stable")
+    k = keys[order].astype(np.intp)  # the cast after the gather: one pass over the sorted keys
     r = rows[order]
+    tt = t[r]  # one gather of the times, not the rows' times then their order
     first = np.ones(k.size, bool)
     first[1:] = k[1:] != k[:-1]
     prev = np.empty_like(tt)
@@ -50,3 +55,24 @@ def grouped_gaps(t: np.ndarray, keys: np.ndarray, rows: np.ndarray, last: np.nda
     end[:-1] = first[1:]
     last[k[end]] = tt[end]
     return Gaps(k, tt, prev, r, np.flatnonzero(first))
+
+
+def _grouped_compiled(t: np.ndarray, keys: np.ndarray, rows: np.ndarray, last: np.ndarray) -> Gaps:
+    """`grouped_gaps` as one counting sort that gathers and carries as it goes (the
+    compiled helper): the same Gaps, without numpy's sort and four gathers."""
+    n = keys.size
+    k, r = np.empty(n, np.intp), np.empty(n, np.intp)
+    tt, prev = np.empty(n, np.float64), np.empty(n, np.float64)
+    starts = np.empty(last.size, np.intp)
+    groups = C.group_gaps(
+        np.ascontiguousarray(keys, np.uint16),
+        np.ascontiguousarray(rows, np.intp),
+        np.ascontiguousarray(t, np.float64),
+        last,
+        k,
+        tt,
+        prev,
+        r,
+        starts,
+    )
+    return Gaps(k, tt, prev, r, starts[:groups].copy())

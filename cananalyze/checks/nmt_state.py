@@ -20,7 +20,7 @@ class NmtStates:
         self.states: dict[int, list[int]] = {}
         self.sources: dict[int, list[str]] = {}
         self._last = np.full(128, -1, np.int16)
-        self._arrays: dict[int, tuple[int, np.ndarray, np.ndarray]] = {}  # state_at's, per node
+        self._arrays: dict[int, tuple] = {}  # state_at's, per node
 
     def _add(self, node: int, t: float, state: int, source: str) -> None:
         ts = self.times.setdefault(node, [])
@@ -71,16 +71,36 @@ class NmtStates:
         ts = self.times.get(node)
         if not ts:
             return np.full(np.shape(t), -1, np.int16)
-        cached = self._arrays.get(node)
-        if cached is None or cached[0] != len(ts):  # the lists only grow: length says stale
-            cached = self._arrays[node] = (
-                len(ts),
-                np.asarray(ts),
-                np.asarray(self.states[node], np.int16),
-            )
-        _, times, states = cached
+        _, times, states, _ = self._cached(node, ts)
         idx = np.searchsorted(times, t, side="right") - 1
         return np.where(idx >= 0, states[np.maximum(idx, 0)], -1).astype(np.int16)
+
+    def steady_state(self, node: int, t_lo: float, t_hi: float) -> int | None:
+        """The state `state_at` gives at every time in [t_lo, t_hi] when no change falls
+        inside (-1 unknown), else None: a batch's rows of a node then need no lookup each."""
+        ts = self.times.get(node)
+        if not ts:
+            return -1
+        _, times, states, ordered = self._cached(node, ts)
+        if not (ordered and t_lo <= t_hi):
+            return None
+        lo, hi = (np.searchsorted(times, [t_lo, t_hi], side="right") - 1).tolist()
+        if lo != hi:
+            return None
+        return int(states[lo]) if lo >= 0 else -1
+
+    def _cached(self, node: int, ts: list[float]) -> tuple:
+        """(length, times, states, times in order) of a node as arrays."""
+        cached = self._arrays.get(node)
+        if cached is None or cached[0] != len(ts):  # the lists only grow: length says stale
+            times = np.asarray(ts)
+            cached = self._arrays[node] = (
+                len(ts),
+                times,
+                np.asarray(self.states[node], np.int16),
+                bool(np.all(times[1:] >= times[:-1])),
+            )
+        return cached
 
     def timeline(self) -> dict[int, list[tuple[float, str, str]]]:
         return {

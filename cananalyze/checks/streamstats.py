@@ -30,8 +30,14 @@ _LOG_R = math.log(RATIO)
 
 def bins_of(v: np.ndarray) -> np.ndarray:
     """Finest bin of each value (ms): -1 below 1 us, else floor(log_r(v / 1 us))."""
-    b = np.full(v.size, -1, np.int64)
     pos = v >= _FLOOR
+    if pos.all():  # the usual case: no value below 1 us, no mask; the same steps in place
+        x = np.divide(v, _FLOOR)
+        np.log(x, out=x)
+        np.divide(x, _LOG_R, out=x)
+        np.floor(x, out=x)
+        return x.astype(np.int64)
+    b = np.full(v.size, -1, np.int64)
     b[pos] = np.floor(np.log(v[pos] / _FLOOR) / _LOG_R).astype(np.int64)
     return b
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..columns.order import stable_order
 from ..frames import FLAG_RTR
 from ..profiles.words import WORDED
 from ..protocol.pdo import decode_pdo, words_of
@@ -38,13 +39,12 @@ class PdoDecoder:
             return
         segments = self.model.segments
         # only COB-IDs bound in some segment are decoded: drop the others before sorting
-        bound = np.zeros(2048, bool)
+        bound = np.zeros(2049, bool)  # [2048]: every identifier past 11 bits (clipped there)
         cobs = [c for _, b in segments for c in b if 0 <= c < 2048]
         if cobs:
             bound[cobs] = True
         bound[self.skip] = False
-        ids = fb.can_id[rows]
-        rows = rows[bound[np.where(ids < 2048, ids, 0)] & (ids < 2048)]
+        rows = rows[np.take(bound, fb.can_id[rows], mode="clip")]
         if rows.size == 0:
             return
         bounds = [start for start, _ in segments[1:]]
@@ -55,9 +55,9 @@ class PdoDecoder:
         key = fb.can_id[rows].astype(np.int64)
         if seg_of is not None:
             key = key + seg_of.astype(np.int64) * 4096
-        # as uint16 (the usual case: few segments) numpy's stable sort is a radix sort
+        # as uint16 (the usual case: few segments): a counting sort (or numpy's radix sort)
         small = len(segments) <= 16
-        order = np.argsort(key.astype(np.uint16) if small else key, kind="stable")
+        order = stable_order(key) if small else np.argsort(key, kind="stable")
         key_sorted = key[order]
         cuts = np.flatnonzero(np.diff(key_sorted)) + 1
         starts = np.concatenate(([0], cuts))

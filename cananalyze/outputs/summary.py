@@ -15,7 +15,7 @@ from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from ..protocol import nmt
 from ..protocol.services import SERVICE_NAMES, Service
 from ..records import DecodedBatch
-from .busload import frame_bits
+from .busload import bits_per_channel
 from .sink import Sink
 
 N_SVC = len(SERVICE_NAMES)
@@ -79,10 +79,8 @@ class Summary:
             key = batch.node[has].astype(np.int64) * N_SVC + batch.service[has]
             per = np.r_[np.zeros(N_SVC, np.int64), np.bincount(key, minlength=128 * N_SVC)]
         self.by_node_service += per[N_SVC:].reshape(128, N_SVC)
-        bits = frame_bits(fb.flags, fb.dlc)
-        self.bits += int(bits.sum())
-        per_frames = np.bincount(fb.channel)
-        per_bits = np.bincount(fb.channel, weights=bits)
+        per_frames, per_bits = bits_per_channel(fb.flags, fb.dlc, fb.channel)
+        self.bits += int(per_bits.sum())
         for c in np.flatnonzero(per_frames).tolist():
             entry = self.by_channel.setdefault(fb.channel_label(c), [0, 0])
             entry[0] += int(per_frames[c])

@@ -56,12 +56,12 @@ def _column(raw: np.ndarray, entry: MapEntry) -> np.ndarray:
         if bits == 32:
             return raw.astype(np.uint32).view(np.float32).astype(np.float64)
         if bits == 64:
-            return raw.view(np.float64).copy()
+            return raw.view(np.float64)  # raw is _extract's own array: no copy
         kind = "uint"  # a REAL mapped with an odd width cannot be a float: show the bits
     if kind == "int":
         shift = np.uint64(64 - bits)
         return ((raw << shift).view(np.int64)) >> np.int64(64 - bits)
-    return raw.copy()
+    return raw  # _extract's own array (a shift always makes one): no copy
 
 
 def words_of(data: np.ndarray) -> np.ndarray:

@@ -1258,10 +1258,158 @@ static struct PyModuleDef module = {
     "and the MCAP chunks (optional).", -1, methods,
 };
 
+static int add_decode_functions(PyObject *m); /* the decode section, at the end */
+
 PyMODINIT_FUNC PyInit__speedups(void) {
     memset(HEXV, -1, sizeof HEXV);
     for (int c = '0'; c <= '9'; c++) HEXV[c] = (signed char)(c - '0');
     for (int c = 'a'; c <= 'f'; c++) HEXV[c] = (signed char)(c - 'a' + 10);
     for (int c = 'A'; c <= 'F'; c++) HEXV[c] = (signed char)(c - 'A' + 10);
-    return PyModule_Create(&module);
+    PyObject *m = PyModule_Create(&module);
+    if (m && add_decode_functions(m) < 0) Py_CLEAR(m);
+    return m;
 }
+
+/* ---- the decode path (FrameBatch -> DecodedBatch): its own section and method table -------- */
+
+PyDoc_STRVAR(stable_order_doc,
+             "stable_order(keys, nkeys, order)\n\n"
+             "The stable sort order of keys (uint16, n of them, each < nkeys) into order\n"
+             "(intp, n): np.argsort(keys, kind='stable'), as a counting sort. A batch's\n"
+             "PDO rows by COB-ID have a hundred distinct keys: one count and one scatter\n"
+             "pass instead of numpy's two-pass radix sort (4x faster on such rows).");
+
+static PyObject *stable_order(PyObject *self, PyObject *args) {
+    PyObject *o_keys, *o_order;
+    Py_ssize_t nkeys;
+    if (!PyArg_ParseTuple(args, "OnO", &o_keys, &nkeys, &o_order)) return NULL;
+    if (nkeys < 1 || nkeys > 65536) {
+        PyErr_SetString(PyExc_ValueError, "stable_order: nkeys must be 1..65536");
+        return NULL;
+    }
+    Bufs bs = {.n = 0};
+    if (bufs_get(&bs, o_keys, 0, -1, "keys") < 0) goto fail;
+    Py_ssize_t n = bs.b[0].len / 2;
+    if (bufs_get(&bs, o_order, 1, n * (Py_ssize_t)sizeof(Py_ssize_t), "order") < 0) goto fail;
+    const uint16_t *keys = bs.b[0].buf;
+    Py_ssize_t *order = bs.b[1].buf;
+    Py_ssize_t *next = PyMem_Calloc((size_t)nkeys, sizeof(Py_ssize_t));
+    if (!next) {
+        PyErr_NoMemory();
+        goto fail;
+    }
+    Py_ssize_t bad = -1;
+    Py_BEGIN_ALLOW_THREADS;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        if (keys[i] >= nkeys) {
+            bad = i;
+            break;
+        }
+        next[keys[i]]++;
+    }
+    if (bad < 0) {
+        Py_ssize_t at = 0;
+        for (Py_ssize_t k = 0; k < nkeys; k++) {
+            Py_ssize_t c = next[k];
+            next[k] = at;
+            at += c;
+        }
+        for (Py_ssize_t i = 0; i < n; i++) order[next[keys[i]]++] = i;
+    }
+    Py_END_ALLOW_THREADS;
+    PyMem_Free(next);
+    if (bad >= 0) {
+        PyErr_Format(PyExc_ValueError, "stable_order: key %zd is not below nkeys", bad);
+        goto fail;
+    }
+    bufs_release(&bs);
+    Py_RETURN_NONE;
+fail:
+    bufs_release(&bs);
+    return NULL;
+}
+
+PyDoc_STRVAR(group_gaps_doc,
+             "group_gaps(keys, rows, t, last, k, tt, prev, r, starts) -> groups\n\n"
+             "checks.gaps.grouped_gaps in one counting sort: rows (intp, n) grouped by\n"
+             "keys (uint16, n, each < len(last)), row order kept in a group; writes the\n"
+             "sorted keys k (intp), their times tt = t[r] (float64), the previous time of\n"
+             "the same key prev (float64; the group's first from last, float64 per key,\n"
+             "then updated to each group's last time), the rows r (intp), and the\n"
+             "start of each group into starts (intp, len(last)); returns the groups.");
+
+static PyObject *group_gaps(PyObject *self, PyObject *args) {
+    PyObject *o[9];
+    if (!PyArg_ParseTuple(args, "OOOOOOOOO", &o[0], &o[1], &o[2], &o[3], &o[4], &o[5], &o[6],
+                          &o[7], &o[8]))
+        return NULL;
+    Bufs bs = {.n = 0};
+    Py_ssize_t *next = NULL, groups = 0, bad = -1;
+    if (bufs_get(&bs, o[0], 0, -1, "keys") < 0 || bufs_get(&bs, o[2], 0, -1, "t") < 0 ||
+        bufs_get(&bs, o[3], 1, -1, "last") < 0)
+        goto fail;
+    Py_ssize_t n = bs.b[0].len / 2, nt = bs.b[1].len / 8, nkeys = bs.b[2].len / 8;
+    const Py_ssize_t W = (Py_ssize_t)sizeof(Py_ssize_t);
+    if (bufs_get(&bs, o[1], 0, n * W, "rows") < 0 || bufs_get(&bs, o[4], 1, n * W, "k") < 0 ||
+        bufs_get(&bs, o[5], 1, n * 8, "tt") < 0 || bufs_get(&bs, o[6], 1, n * 8, "prev") < 0 ||
+        bufs_get(&bs, o[7], 1, n * W, "r") < 0 || bufs_get(&bs, o[8], 1, nkeys * W, "starts") < 0)
+        goto fail;
+    const uint16_t *keys = bs.b[0].buf;
+    const double *t = bs.b[1].buf;
+    double *last = bs.b[2].buf;
+    const Py_ssize_t *rows = bs.b[3].buf;
+    Py_ssize_t *k = bs.b[4].buf, *r = bs.b[7].buf, *starts = bs.b[8].buf;
+    double *tt = bs.b[5].buf, *prev = bs.b[6].buf;
+    next = PyMem_Calloc((size_t)(nkeys ? nkeys : 1), sizeof(Py_ssize_t));
+    if (!next) {
+        PyErr_NoMemory();
+        goto fail;
+    }
+    Py_BEGIN_ALLOW_THREADS;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        if (keys[i] >= nkeys || rows[i] < 0 || rows[i] >= nt) {
+            bad = i;
+            break;
+        }
+        next[keys[i]]++;
+    }
+    if (bad < 0) {
+        Py_ssize_t at = 0;
+        for (Py_ssize_t key = 0; key < nkeys; key++) {
+            Py_ssize_t c = next[key];
+            next[key] = at;
+            if (c) starts[groups++] = at;
+            at += c;
+        }
+        for (Py_ssize_t i = 0; i < n; i++) {
+            uint16_t key = keys[i];
+            Py_ssize_t p = next[key]++;
+            double ti = t[rows[i]];
+            k[p] = key;
+            r[p] = rows[i];
+            tt[p] = ti;
+            prev[p] = last[key];
+            last[key] = ti;
+        }
+    }
+    Py_END_ALLOW_THREADS;
+    if (bad >= 0) {
+        PyErr_Format(PyExc_ValueError, "group_gaps: key or row %zd out of range", bad);
+        goto fail;
+    }
+    PyMem_Free(next);
+    bufs_release(&bs);
+    return PyLong_FromSsize_t(groups);
+fail:
+    PyMem_Free(next);
+    bufs_release(&bs);
+    return NULL;
+}
+
+static PyMethodDef decode_methods[] = {
+    {"stable_order", stable_order, METH_VARARGS, stable_order_doc},
+    {"group_gaps", group_gaps, METH_VARARGS, group_gaps_doc},
+    {NULL, NULL, 0, NULL},
+};
+
+static int add_decode_functions(PyObject *m) { return PyModule_AddFunctions(m, decode_methods); }

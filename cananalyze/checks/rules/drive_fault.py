@@ -40,7 +40,11 @@ class DriveFaultRule(Rule):
         fb = b.frames
         rows = rows[fb.dlc[rows] >= MIN_BYTES]
         codes = fb.data[rows, 0].astype(np.int64) | (fb.data[rows, 1].astype(np.int64) << 8)
-        emcy = list(zip(rows.tolist(), b.node[rows].tolist(), codes.tolist(), strict=True))
+        nodes = b.node[rows]
+        # as tuples only for a batch with drive changes to pair them with
+        emcy = (
+            list(zip(rows.tolist(), nodes.tolist(), codes.tolist(), strict=True)) if b.drive else []
+        )
         k = 0
         for c in b.drive:
             while k < len(emcy) and emcy[k][0] <= c.row:  # the EMCYs before this change
@@ -82,8 +86,19 @@ class DriveFaultRule(Rule):
                 "no fault",
                 row=c.row,
             )
-        for e in emcy[k:]:
-            self._saw(fb, *e)
+        self._saw_last(fb, rows[k:], nodes[k:], codes[k:])
+
+    def _saw_last(self, fb, rows: np.ndarray, nodes: np.ndarray, codes: np.ndarray) -> None:
+        """`_saw` of each EMCY in order, as columns: each node's last EMCY raised is kept."""
+        raised = np.flatnonzero(codes)[::-1]  # latest first: np.unique's first is the last
+        if raised.size == 0:
+            return
+        node_ids, at = np.unique(nodes[raised], return_index=True)
+        last = raised[at]
+        for n, r, code in zip(
+            node_ids.tolist(), rows[last].tolist(), codes[last].tolist(), strict=True
+        ):
+            self.emcy[n] = (float(fb.t[r]), code)
 
     def _saw(self, fb, row: int, node: int, code: int) -> None:
         if code:

@@ -229,15 +229,18 @@ class HeartbeatRule(Rule):
         cand, segs = cand[known], segs[known]
         if cand.size == 0:
             return
-        limit = {k: self._learned_limit(m) / 1000.0 for k, (_, _, m) in learned.items()}
-        seg_list = segs.tolist()
+        # each segment's limit, looked up per gap (a long log has hundreds of thousands)
+        keys = np.fromiter(learned, np.int64, len(learned))
+        limits = np.array([self._learned_limit(m) / 1000.0 for _, _, m in learned.values()])
         # a gap across a change is judged only up to the change
         upto = np.full(cand.size, np.inf)
         inside = segs < changes.size
         upto[inside] = changes[segs[inside]]
-        over = np.minimum(gaps[cand], upto - t[cand]) > np.array([limit[k] for k in seg_list])
+        by_key = np.argsort(keys)
+        limit = limits[by_key][np.searchsorted(keys[by_key], segs)]  # every seg is a key
+        over = np.minimum(gaps[cand], upto - t[cand]) > limit
         cand = cand[over]
-        seg_list = [k for k, o in zip(seg_list, over.tolist(), strict=True) if o]
+        seg_list = segs[over].tolist()
         fresh = [not self._seen(node, v) for v in t[cand].tolist()]
         if not any(fresh):
             return

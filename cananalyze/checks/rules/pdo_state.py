@@ -24,12 +24,22 @@ class PdoStateRule(Rule):
             return
         # NMT state of every PDO row, one lookup per node (not per COB-ID)
         node_of = b.node[g.row]
-        state = np.full(g.row.size, -1, np.int16)
         present = np.bincount(node_of.astype(np.intp) + 1) if node_of.size else np.zeros(0)
+        # a node whose state holds over the batch (the usual case): one value for its rows
+        steady = np.full(present.size, -1, np.int16)  # by node + 1
+        varying = []
+        t_lo, t_hi = (float(g.t.min()), float(g.t.max())) if g.t.size else (0.0, 0.0)
         for node in (np.flatnonzero(present) - 1).tolist():  # nodes -1..127, ascending
             if node >= 0 and node in ctx.nmt.times:
-                at = np.flatnonzero(node_of == node)
-                state[at] = ctx.nmt.state_at(node, g.t[at])
+                s = ctx.nmt.steady_state(node, t_lo, t_hi)
+                if s is None:
+                    varying.append(node)
+                else:
+                    steady[node + 1] = s
+        state = steady[node_of.astype(np.intp) + 1]
+        for node in varying:
+            at = np.flatnonzero(node_of == node)
+            state[at] = ctx.nmt.state_at(node, g.t[at])
         bad_all = (state >= 0) & (state != OPERATIONAL)
         starts = g.starts
         heads = g.row[starts]

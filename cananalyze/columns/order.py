@@ -1,0 +1,26 @@
+"""The stable sort order of small integer keys (COB-IDs, node-IDs), the decode path's grouping.
+
+Rows are grouped by key (the gap tables by node or COB-ID, the PDO decoder by
+segment and COB-ID) with one stable sort per batch. With the compiled helper it is
+a counting sort (a hundred distinct keys: one count and one scatter pass); without,
+numpy's stable argsort of uint16 (a radix sort). A stable order is unique, so both
+give the same rows.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..runtime.speedups import C
+
+
+def stable_order(keys: np.ndarray, top: int | None = None) -> np.ndarray:
+    """np.argsort(keys, kind="stable") for integer keys in 0..65535; `top`: max(keys) if known."""
+    k16 = keys.astype(np.uint16, copy=False)
+    if C is None or keys.size < 64:
+        return np.argsort(k16, kind="stable")
+    if top is None:
+        top = int(k16.max())
+    order = np.empty(keys.size, np.intp)
+    C.stable_order(np.ascontiguousarray(k16), top + 1, order)
+    return order
