@@ -182,6 +182,14 @@ class Decoder:
         self.buses[c] = self._decoders[k]
         return k
 
+    def of_bus(self, name: str | None) -> Decoder:
+        """The decoder of the bus named `name` (this one when there is one bus, or no
+        decoder has that name): its network model and checker are that bus's."""
+        for dec in self._decoders:
+            if dec.bus == name:
+                return dec
+        return self
+
     @staticmethod
     def _name(dec: Decoder, name: str) -> None:
         dec.bus = name

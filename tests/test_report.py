@@ -632,3 +632,53 @@ def test_a_long_finding_group_lists_fifty_lines_and_counts_the_rest(tmp_path):
     assert total == jumps > LISTED
     assert group.count("<li>") == LISTED + 1
     assert f"... and {total - LISTED} more" in group
+
+
+def test_report_keeps_node_5_of_each_bus_apart(tmp_path):
+    """Node 5 on can0 and node 5 on can1 are two devices on the page too: NMT lanes, PDO
+    rates, EMCYs (a reset on can0 does not end can1's error) and signal plots per bus;
+    frame counts as python-can reads them."""
+    lines = []
+    for k in range(50):  # 5 s: heartbeats every 100 ms on both buses
+        t = 1000.0 + k * 0.1
+        lines.append((t, "can0", "705#05"))
+        lines.append((t + 0.001, "can1", "705#" + ("7F" if k < 10 else "05")))
+        lines.append((t + 0.002, "can0", f"285#{k:02X}00000000000000"))  # TPDO2, 100 ms
+        if k >= 10 and k % 5 == 0:  # can1's TPDO2 every 500 ms, once operational
+            lines.append((t + 0.003, "can1", f"285#{k:02X}01000000000000"))
+    lines.append((1001.5, "can1", "085#0010010000000000"))  # EMCY 0x1000 on can1
+    lines.append((1002.5, "can0", "085#0000000000000000"))  # a reset, but on can0
+    log = tmp_path / "two5.log"
+    log.write_text("".join(f"({t:.6f}) {ch} {f}\n" for t, ch, f in sorted(lines)))
+    out = tmp_path / "two5.html"
+    r = cli("report", str(log), "-o", str(out), "--device", "5=dat7014", "-q")
+    assert r.returncode in (0, 1), r.stderr
+    _, tables, figs = parse(out)
+    with can.LogReader(str(log)) as reader:
+        pdo_frames: dict[str, int] = {}
+        for m in reader:
+            if m.arbitration_id == 0x285:
+                pdo_frames[m.channel] = pdo_frames.get(m.channel, 0) + 1
+    pdo = table_with(tables, "COB-ID", "rate Hz")
+    head = pdo[0]
+    rows = {r[head.index("node")]: r for r in pdo[1:]}
+    assert set(rows) == {"can0 node 5", "can1 node 5"}
+    for bus, gap in (("can0", 100.0), ("can1", 500.0)):
+        row = rows[f"{bus} node 5"]
+        assert row[0] == "0x285"
+        assert int(row[head.index("frames")].replace(",", "")) == pdo_frames[bus]
+        assert float(row[head.index("median gap ms")]) == pytest.approx(gap, abs=0.01)
+    lanes = figs_titled(figs, "NMT state per node")
+    by_state = {d["name"]: set(d["y"]) for d in lanes["data"]}
+    assert by_state["pre-operational"] == {"can1 node 5"}
+    assert by_state["operational"] == {"can0 node 5", "can1 node 5"}
+    emcy = table_with(tables, "time", "active for")
+    (row,) = [r for r in emcy[1:] if r[2] == "0x1000"]
+    assert row[1] == "can1 node 5" and row[5] == "still active at the end of the log"
+    titles = {f["layout"]["title"]["text"] for f in figs.values()}
+    assert {"can0 node 5 TPDO2 (0x285)", "can1 node 5 TPDO2 (0x285)"} <= titles
+    assert {"can0 node 5 heartbeat period", "can1 node 5 heartbeat period"} <= titles
+
+
+def figs_titled(figs: dict, title: str) -> dict:
+    return next(f for f in figs.values() if f["layout"]["title"]["text"] == title)

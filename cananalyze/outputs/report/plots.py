@@ -86,7 +86,9 @@ def bus_load(buses: dict, t0: float, bitrate: int | None) -> dict:
     return _fig(traces, "Bus load per channel (100 ms windows)", "time (s)", unit)
 
 
-def period(gaps, t0: float, kind: str, node: int, configured: list[tuple[float, float]]) -> dict:
+def period(
+    gaps, t0: float, kind: str, node: int | str, configured: list[tuple[float, float]]
+) -> dict:
     """The heartbeat (or guarding) period over time, against the configured value; to
     the µs (the gaps between epoch time stamps carry float noise below it)."""
     half = PLOT_BUCKETS // 2  # drawn beside its histogram
@@ -104,7 +106,8 @@ def period(gaps, t0: float, kind: str, node: int, configured: list[tuple[float, 
                 "line": {"shape": "hv", "dash": "dash"},
             }
         )
-    return _fig(traces, f"Node {node} {kind} period", "time (s)", "period (ms)")
+    who = f"Node {node}" if isinstance(node, int) else node  # "can1 node 5" (several buses)
+    return _fig(traces, f"{who} {kind} period", "time (s)", "period (ms)")
 
 
 def histogram(hist: LogHistogram, title: str, x: str, marks: list[float] | None = None) -> dict:
@@ -134,17 +137,22 @@ def histogram(hist: LogHistogram, title: str, x: str, marks: list[float] | None 
 
 
 def state_timeline(
-    states: list[tuple[float, int, str]], t0: float, t_end: float, title: str = "NMT state per node"
+    states: list[tuple[float, int | str, str]],
+    t0: float,
+    t_end: float,
+    title: str = "NMT state per node",
 ) -> dict:
-    """One lane per node: each state (NMT, CiA 402 drive) from its change to the next."""
-    by_node: dict[int, list] = {}
-    for t, node, state in sorted(states):
+    """One lane per node: each state (NMT, CiA 402 drive) from its change to the next.
+    A lane is a node number, or its label ("can1 node 5" on a log of several buses)."""
+    by_node: dict[int | str, list] = {}
+    for t, node, state in sorted(states, key=lambda s: s[0]):
         by_node.setdefault(node, []).append((t, state))
     segs: dict[str, list] = {}
     for node, seq in by_node.items():
+        lane = node if isinstance(node, str) else f"node {node}"
         for k, (t, state) in enumerate(seq):
             end = seq[k + 1][0] if k + 1 < len(seq) else t_end
-            segs.setdefault(state, []).append((f"node {node}", t - t0, max(end - t, 1e-6)))
+            segs.setdefault(state, []).append((lane, t - t0, max(end - t, 1e-6)))
     traces = [
         {
             "type": "bar",

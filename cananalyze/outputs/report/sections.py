@@ -151,11 +151,11 @@ def nodes(s, figs: Figures) -> str:
     from ...network.node_tally import node_profiles
 
     model = s.run.network
-    cfg = ModelConfig(model) if model is not None else None
     rows = s.tally.rows(node_profiles(model) if model is not None else {})
     parts = ['<section id="nodes"><h2>Nodes</h2>']
     if s.states:
-        parts.append(figs.add(plots.state_timeline(s.states, s.t0, s.t_last or s.t0)))
+        lanes = [(t, s.who(bus, n), state) for t, (bus, n), state in s.states]
+        parts.append(figs.add(plots.state_timeline(lanes, s.t0, s.t_last or s.t0)))
     if s.states_dropped:
         parts.append(f"<p class=warn>{s.states_dropped} more NMT state changes not drawn</p>")
     for row in rows:
@@ -174,6 +174,8 @@ def nodes(s, figs: Figures) -> str:
             f"<p>Identified by: {esc(str(how))}{'; ' + esc(ident) if ident else ''}. "
             f"{row['frames']:,} frames; last NMT state {esc(str(row.get('last_state') or '-'))}.</p>"
         )
+        bus_model = s.network_of(bus)  # that bus's configuration, as its checker judged
+        cfg = ModelConfig(bus_model) if bus_model is not None else None
         for kind in ("heartbeat", "guarding"):
             g = s.errctl.get((kind, n) if bus is None else (kind, n, bus))
             if g is None or g.hist.count == 0:
@@ -186,11 +188,12 @@ def nodes(s, figs: Figures) -> str:
                 f"mean {_ms(h.mean)} p99 {_ms(h.quantile(0.99))} max {_ms(h.max)} "
                 f"jitter (std) {_ms(h.std)} ms; configured {expect} ms</p><div class=pair>"
             )
-            parts.append(figs.add(plots.period(g, s.t0, kind, n, conf), "plot half"))
+            who = _node_name(n, bus)
+            parts.append(figs.add(plots.period(g, s.t0, kind, who, conf), "plot half"))
             marks = sorted({v for _, v in conf})
             parts.append(
                 figs.add(
-                    plots.histogram(h, f"Node {n} {kind} period histogram", "period (ms)", marks),
+                    plots.histogram(h, f"{who} {kind} period histogram", "period (ms)", marks),
                     "plot half",
                 )
             )
@@ -270,32 +273,32 @@ def sdo(s, figs: Figures) -> str:
 def emcy(s, figs: Figures) -> str:
     if not s.emcys:
         return ""
-    active: dict[int, list] = {}
+    active: dict[tuple[str, int], list] = {}  # (bus, node): node 5 on each bus its own
     rows = []
     resets = sorted(s.bootups)
-    for t, node, code, reg, text in sorted(s.emcys):
+    for t, bus, node, code, reg, text in sorted(s.emcys):
         if code == 0:
-            for item in active.pop(node, []):
+            for item in active.pop((bus, node), []):
                 item[2] = f"{t - item[0]:.3f} s"
             continue
-        item = [t, node, "still active at the end of the log", code, reg, text]
-        active.setdefault(node, []).append(item)
+        item = [t, s.who(bus, node), "still active at the end of the log", code, reg, text]
+        active.setdefault((bus, node), []).append(item)
         rows.append(item)
-    for t, node in resets:  # a boot-up clears the node's errors
-        for item in list(active.get(node, [])):
+    for t, bus, node in resets:  # a boot-up clears the node's errors
+        for item in list(active.get((bus, node), [])):
             if item[0] < t:
                 item[2] = f"{t - item[0]:.3f} s (until boot-up)"
-                active[node].remove(item)
+                active[(bus, node)].remove(item)
     out = [
         [
             _rel(s, t),
-            node,
+            who.removeprefix("node "),
             f"0x{code:04X}" if code >= 0 else "-",
             f"0x{reg:02X}" if reg >= 0 else "-",
             esc(text),
             esc(dur),
         ]
-        for t, node, dur, code, reg, text in rows
+        for t, who, dur, code, reg, text in rows
     ]
     more = len(s.emcys) < s.emcy_count
     return (
@@ -309,16 +312,16 @@ def emcy(s, figs: Figures) -> str:
 def pdos(s, figs: Figures) -> str:
     if not s.pdos:
         return ""
-    model = s.run.network
-    cfg = ModelConfig(model) if model is not None else None
-    per_cob: dict[int, int] = defaultdict(int)
+    per_cob: dict[tuple[str, int], int] = defaultdict(int)
     for f in s.findings:
         if f.cob_id is not None and f.rule.startswith("pdo"):
-            per_cob[f.cob_id] += 1
+            per_cob[(f.bus or "", f.cob_id)] += 1
     rows = []
-    for cob in sorted(s.pdos):
-        g = s.pdos[cob]
-        node, name = s.pdo_node.get(cob, (-1, "pdo"))
+    for bus, cob in sorted(s.pdos):
+        g = s.pdos[(bus, cob)]
+        node, name = s.pdo_node.get((bus, cob), (-1, "pdo"))
+        model = s.network_of(bus)  # each bus its own PDO configuration
+        cfg = ModelConfig(model) if model is not None else None
         h = g.hist
         span = (g.last_t or 0) - (g.first_t or 0)
         rate = (g.count - 1) / span if span > 0 else float("nan")
@@ -336,7 +339,7 @@ def pdos(s, figs: Figures) -> str:
         rows.append(
             [
                 f"0x{cob:03X}",
-                node,
+                s.who(bus, node).removeprefix("node "),
                 name,
                 f"{g.count:,}",
                 _ms(rate),
@@ -346,7 +349,7 @@ def pdos(s, figs: Figures) -> str:
                 tt,
                 et,
                 inh,
-                per_cob.get(cob, 0),
+                per_cob.get((bus if s.several else "", cob), 0),
             ]
         )
     head = ["COB-ID", "node", "PDO", "frames", "rate Hz", "min gap ms", "median gap ms"]
@@ -375,10 +378,10 @@ def signals(s, figs: Figures) -> str:
         return ""
     by_pdo: dict[tuple, list] = defaultdict(list)
     for key, ser in s.series.items():
-        by_pdo[key[:3]].append(ser)
+        by_pdo[key[:4]].append(ser)
     parts = ['<section id="signals"><h2>Signals per PDO</h2>']
-    for (node, pdo, cob), series in sorted(by_pdo.items()):
-        title = f"Node {node} {pdo.upper()} (0x{cob:03X})"
+    for (bus, node, pdo, cob), series in sorted(by_pdo.items()):
+        title = f"{_node_name(node, bus if s.several else None)} {pdo.upper()} (0x{cob:03X})"
         parts.append(figs.add(plots.signals(series, s.t0, title)))
     if s.series_dropped:
         parts.append(f"<p class=warn>{s.series_dropped} more signals not plotted</p>")

@@ -72,6 +72,11 @@ class Series:
     env: Envelope = field(default_factory=Envelope)
 
 
+def _bus_of(fb, row: int) -> str:
+    """The name of the channel of the batch's row `row` ("" outside the batch)."""
+    return fb.channel_label(int(fb.channel[row])) if 0 <= row < len(fb) else ""
+
+
 def _groups(keys: np.ndarray):
     """(key, positions in original order) per distinct key (one stable sort)."""
     if keys.size == 0:
@@ -95,19 +100,23 @@ class ReportSink(Sink):
         self._staged: Staged | None = None  # the page, written at finish, in place at commit
         self.findings: list[Finding] = []
         self.tally = NodeTally()
-        self.states: list[tuple[float, int, str]] = []
+        # each keyed by its bus too (the channel's name): node 5 on can0 and on can1 are
+        # two devices; the page names the bus only when the log has more than one
+        self.states: list[tuple[float, tuple[str, int], str]] = []  # t, (bus, node), state
         self.states_dropped = 0
         self.drive_states: list[tuple[float, int, str]] = []
         # ("heartbeat"|"guarding", node), and the bus's name once there are several
         self.errctl: dict[tuple, Gaps] = {}
-        self.pdos: dict[int, Gaps] = {}  # COB-ID -> gaps
-        self.pdo_node: dict[int, tuple[int, str]] = {}
+        self.pdos: dict[tuple[str, int], Gaps] = {}  # (bus, COB-ID) -> gaps
+        self.pdo_node: dict[tuple[str, int], tuple[int, str]] = {}
         self.sdo_latency: dict[int, LogHistogram] = {}
         self.sdo_count: dict[int, list[int]] = {}  # node -> [ok, abort]
         self.aborts: list[dict] = []
-        self.emcys: list[tuple[float, int, int, int, str]] = []  # t, node, code, register, text
+        self.emcys: list[
+            tuple[float, str, int, int, int, str]
+        ] = []  # t, bus, node, code, reg, text
         self.emcy_count = 0
-        self.bootups: list[tuple[float, int]] = []
+        self.bootups: list[tuple[float, str, int]] = []  # t, bus, node
         self.buses: dict[str, Bus] = {}
         self.series: dict[tuple, Series] = {}
         self.series_dropped = 0
@@ -115,6 +124,22 @@ class ReportSink(Sink):
         self.t_first: float | None = None
         self.t_last: float | None = None
         self.events_by_row: dict = {}
+
+    @property
+    def several(self) -> bool:
+        """More than one bus: the page names each node's bus ("can1 node 5")."""
+        return len(self.buses) > 1
+
+    def who(self, bus: str, node: int) -> str:
+        """ "node 5", or "can1 node 5" on a log of several buses."""
+        return f"{bus} node {node}" if self.several and bus else f"node {node}"
+
+    def network_of(self, bus: str | None):
+        """The network model that bus's decoder kept (each bus decodes on its own)."""
+        run = self.run
+        if run is None:
+            return None
+        return run.decoder.of_bus(bus).network if bus else run.network
 
     def open(self, run) -> None:
         super().open(run)
@@ -124,10 +149,11 @@ class ReportSink(Sink):
     def write(self, batch) -> None:
         fb = batch.frames
         self.findings.extend(batch.findings)
-        self.tally.add(batch, batch.states, self.run.rows if self.run else 0)
+        off = self.run.rows if self.run else 0  # the states' row of the batch's first frame
+        self.tally.add(batch, batch.states, off)
         for s in batch.states:
             if len(self.states) < MAX_STATES:
-                self.states.append((s.t, s.node, s.message))
+                self.states.append((s.t, (_bus_of(fb, s.row - off), s.node), s.message))
             else:
                 self.states_dropped += 1
         self._sdo(batch)
@@ -153,22 +179,26 @@ class ReportSink(Sink):
             for nd, pos in _groups(node[rows]):
                 self.errctl.setdefault((kind, nd), Gaps()).add(t[rows[pos]])
         boot = np.flatnonzero(service == Service.BOOTUP)
-        self.bootups.extend(zip(t[boot].tolist(), node[boot].tolist(), strict=True))
+        buses = [_bus_of(fb, r) for r in boot.tolist()]
+        self.bootups.extend(zip(t[boot].tolist(), buses, node[boot].tolist(), strict=True))
         pdo_rows = np.flatnonzero(batch.pdo > 0)
-        for cob, pos in _groups(fb.can_id[pdo_rows].astype(np.int64)):
+        key = fb.can_id[pdo_rows].astype(np.int64) | (fb.channel[pdo_rows].astype(np.int64) << 16)
+        for k, pos in _groups(key):
             r = pdo_rows[pos]
-            self.pdos.setdefault(cob, Gaps()).add(t[r])
-            if cob not in self.pdo_node:
+            at = (fb.channel_label(k >> 16), k & 0xFFFF)  # (bus, COB-ID)
+            self.pdos.setdefault(at, Gaps()).add(t[r])
+            if at not in self.pdo_node:
                 tx = service[r[0]] == Service.TPDO
-                self.pdo_node[cob] = (
+                self.pdo_node[at] = (
                     int(node[r[0]]),
                     f"{'t' if tx else 'r'}pdo{int(batch.pdo[r[0]])}",
                 )
         self._emcy(batch)
         for sb in batch.signals:
             ts = t[sb.rows]
+            bus = _bus_of(fb, int(sb.rows[0])) if len(sb.rows) else ""  # a block: one bus's
             for name, values in sb.columns.items():
-                key = (sb.node, sb.pdo, sb.cob_id, name)
+                key = (bus, sb.node, sb.pdo, sb.cob_id, name)
                 s = self.series.get(key)
                 if s is None:
                     if len(self.series) >= MAX_SERIES or values.dtype == object:
@@ -256,7 +286,7 @@ class ReportSink(Sink):
             code = int(d[0]) | int(d[1]) << 8 if fb.dlc[r] >= 2 else -1
             reg = int(d[2]) if fb.dlc[r] >= 3 else -1
             tt, nd = float(fb.t[r]), int(batch.node[r])
-            self.emcys.append((tt, nd, code, reg, texts.get((tt, nd), "")))
+            self.emcys.append((tt, _bus_of(fb, r), nd, code, reg, texts.get((tt, nd), "")))
 
     # --- the end --------------------------------------------------------------------
     def close(self) -> None:
