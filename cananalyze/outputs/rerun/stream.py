@@ -143,6 +143,7 @@ class StreamRrd:
         except RuntimeError as exc:
             if self.path is None or "write" not in str(exc).lower():
                 raise
+            self._writer_failed()
             raise OSError(
                 errno.ENOSPC if "space" in str(exc) else errno.EIO,
                 f"cannot write the Rerun recording ({_cause(exc)})",
@@ -163,16 +164,29 @@ class StreamRrd:
             except Exception:  # noqa: BLE001 - rerun raises a plain error on its timeout
                 now = self._tmp.stat().st_size
                 if now == size:
-                    # disconnect() and the stream's __del__ would wait for it forever too:
-                    # the dead stream is kept, never dropped
-                    self._dead = True
-                    _DEAD.append(self.rec)
+                    self._writer_failed()
                     raise OSError(
                         errno.EIO,
                         "Rerun stopped writing the recording (disk full or file too large?)",
                         str(self.path),
                     ) from None
                 size = now
+
+    def _writer_failed(self) -> None:
+        """Rerun's file writer has failed (a full disk). disconnect(), the stream's
+        __del__ and rerun's own exit hook (which flushes every recording) would each wait
+        for it forever: a process that failed this way hung at exit, intermittently
+        (py-spy: `rerun_shutdown`, and `RecordingStream.__del__` when the stream was only
+        kept in a module's list, which interpreter shutdown clears). So the dead stream is
+        never disconnected and never freed (one reference no one gives back), and rerun's
+        exit hook is dropped; the outputs flush and close their recordings themselves."""
+        import ctypes
+
+        import rerun as rr
+
+        self._dead = True
+        ctypes.pythonapi.Py_IncRef(ctypes.py_object(self.rec))
+        rr.unregister_shutdown()
 
     def abort(self, typ=None, exc=None, tb=None) -> None:
         """Stop the recording and drop the temporary file."""
@@ -183,7 +197,6 @@ class StreamRrd:
 
 
 FLUSH_STEP = 5.0  # s: a flush that writes nothing for two steps has failed
-_DEAD: list = []  # recordings whose file writer failed (see StreamRrd._flush)
 
 
 def _cause(exc: BaseException) -> str:
