@@ -152,6 +152,7 @@ def nodes(s, figs: Figures) -> str:
 
     model = s.run.network
     rows = s.tally.rows(node_profiles(model) if model is not None else {})
+    configs = _Configs(s)
     parts = ['<section id="nodes"><h2>Nodes</h2>']
     if s.states:
         lanes = [(t, s.who(bus, n), state) for t, (bus, n), state in s.states]
@@ -174,8 +175,7 @@ def nodes(s, figs: Figures) -> str:
             f"<p>Identified by: {esc(str(how))}{'; ' + esc(ident) if ident else ''}. "
             f"{row['frames']:,} frames; last NMT state {esc(str(row.get('last_state') or '-'))}.</p>"
         )
-        bus_model = s.network_of(bus)  # that bus's configuration, as its checker judged
-        cfg = ModelConfig(bus_model) if bus_model is not None else None
+        cfg = configs[bus]  # that bus's configuration, as its checker judged
         for kind in ("heartbeat", "guarding"):
             g = s.errctl.get((kind, n) if bus is None else (kind, n, bus))
             if g is None or g.hist.count == 0:
@@ -201,6 +201,19 @@ def nodes(s, figs: Figures) -> str:
         parts.append("</div>")
     parts.append("</section>")
     return "".join(parts)
+
+
+class _Configs(dict):
+    """One ModelConfig per bus, made on first use (it caches the changes it looks up)."""
+
+    def __init__(self, sink) -> None:
+        super().__init__()
+        self.sink = sink
+
+    def __missing__(self, bus: str | None) -> ModelConfig | None:
+        model = self.sink.network_of(bus)
+        cfg = self[bus] = ModelConfig(model) if model is not None else None
+        return cfg
 
 
 def _configured(cfg: ModelConfig, kind: str, node: int, g) -> list[tuple[float, float]]:
@@ -312,6 +325,7 @@ def emcy(s, figs: Figures) -> str:
 def pdos(s, figs: Figures) -> str:
     if not s.pdos:
         return ""
+    configs = _Configs(s)
     per_cob: dict[tuple[str, int], int] = defaultdict(int)
     for f in s.findings:
         if f.cob_id is not None and f.rule.startswith("pdo"):
@@ -321,7 +335,7 @@ def pdos(s, figs: Figures) -> str:
         g = s.pdos[(bus, cob)]
         node, name = s.pdo_node.get((bus, cob), (-1, "pdo"))
         model = s.network_of(bus)  # each bus its own PDO configuration
-        cfg = ModelConfig(model) if model is not None else None
+        cfg = configs[bus]
         h = g.hist
         span = (g.last_t or 0) - (g.first_t or 0)
         rate = (g.count - 1) / span if span > 0 else float("nan")
