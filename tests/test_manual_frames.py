@@ -138,3 +138,14 @@ def test_lss_and_time_and_other():
     ]
     assert frames[4][2]["time"] == "2026-01-01T00:00:00.100Z"
     assert all(f[1] == -1 for f in frames[5:])
+
+
+def test_empty_lss_frame_says_what_is_wrong():
+    """An LSS frame without its command specifier is named malformed, not "None"."""
+    frames = _decode([(0.0, 0x7E5, b""), (0.1, 0x7E4, b""), (0.2, 0x7E5, bytes([0x5E]))])
+    assert [f[2]["command"] for f in frames] == [None, None, "inquire node-ID"]
+    assert frames[0][2]["problem"] == frames[1][2]["problem"] == "malformed: no command specifier"
+    assert frames[0][3] == "LSS master (malformed: no command specifier)"
+    assert frames[1][3] == "LSS slave (malformed: no command specifier)"
+    assert "problem" not in frames[2][2] and frames[2][3] == "LSS master inquire node-ID"
+    assert not any("None" in f[3] for f in frames)

@@ -35,10 +35,18 @@ def command_name(cs: int) -> str:
     return COMMANDS.get(cs, f"unknown 0x{cs:02X}")
 
 
+# CiA 305 frames carry 8 bytes, the command specifier first: one with none cannot be read
+MALFORMED = "malformed: no command specifier"
+
+
 def fields(data: bytes) -> dict:
-    """JSONL fields of an LSS frame: `command` (null when empty)."""
-    return {"command": command_name(data[0]) if data else None}
+    """JSONL fields of an LSS frame: `command` (null, and `problem`, when empty)."""
+    if not data:
+        return {"command": None, "problem": MALFORMED}
+    return {"command": command_name(data[0])}
 
 
 def text(fields: dict, master: bool) -> str:
-    return f"LSS {'master' if master else 'slave'} {fields.get('command')}"
+    """The line of an LSS frame; an empty one says what is wrong, not "None"."""
+    command = fields.get("command")
+    return f"LSS {'master' if master else 'slave'} {command or '(' + MALFORMED + ')'}"
