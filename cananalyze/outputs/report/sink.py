@@ -24,7 +24,10 @@ from .accum import Envelope, LogHistogram, WindowSums
 
 DRIVE_STATE = "drive_state"  # the event kind of CiA 402 state changes (see sections.drive_states)
 MAX_STATES = 20_000  # NMT state changes kept for the timelines (a reset loop makes many)
-MAX_LISTED = 500  # SDO aborts and EMCYs listed one by one; counted beyond
+MAX_LISTED = 500  # SDO aborts listed one by one; counted beyond
+# EMCY frames kept for the EMCY table, counted beyond: a reset (code 0) ends an error's
+# row instead of making one, so a node raising and clearing gives about half as many rows
+MAX_EMCY_FRAMES = 4 * MAX_LISTED
 MAX_SERIES = 256  # signals plotted (one envelope each)
 
 
@@ -281,7 +284,7 @@ class ReportSink(Sink):
                 ev.t[at].tolist(), ev.node[at].tolist(), ev.message[at], strict=True
             ):
                 texts[(tt, nd if nd != NO_NODE else None)] = msg
-        for r in rows[: max(MAX_LISTED * 4 - len(self.emcys), 0)].tolist():
+        for r in rows[: max(MAX_EMCY_FRAMES - len(self.emcys), 0)].tolist():
             d = fb.data[r]
             code = int(d[0]) | int(d[1]) << 8 if fb.dlc[r] >= 2 else -1
             reg = int(d[2]) if fb.dlc[r] >= 3 else -1
