@@ -67,6 +67,34 @@ def test_learned_period_is_per_segment_and_says_so(tmp_path):
     assert f.basis == "learned from the log's median over +0.000 s..+2.900 s"
 
 
+@pytest.mark.parametrize("declared", [False, True])
+@pytest.mark.parametrize(
+    "target, boot_s, dropout",
+    [(0, 0.45, False), (5, 0.45, False), (9, 0.45, True), (0, 12.0, True), (5, 12.0, True)],
+)
+def test_an_nmt_reset_gives_the_node_time_to_boot(tmp_path, declared, target, boot_s, dropout):
+    """Node 5 beats every 100 ms (learned from the log, or declared in the network file).
+    An NMT reset to it or to all nodes (node-ID 0) stops its heartbeat until its boot-up
+    (CiA 301), which answers a reset within 10 s (RESET_ANSWER_S): a boot-up 450 ms
+    after the reset is no dropout. It was one for the reset to all when the period was
+    learned (the node was known only by its heartbeat), and for both resets when it was
+    declared. A reset of another node, or a boot-up 12 s later, is still a dropout."""
+    rows = [(0.1 * k, 0x705, b"\x05") for k in range(10)]
+    boot = 0.95 + boot_s
+    rows += [(0.95, 0x000, bytes([0x81, target])), (boot, 0x705, b"\x00")]
+    rows += [(boot + 0.1 * k, 0x705, b"\x7f") for k in range(1, 10)]
+    log = tmp_path / "reset.log"
+    write_log(from_rows(rows), log)
+    net = tmp_path / "net.toml"
+    net.write_text("[nodes.5]\nheartbeat_ms = 100\n" if declared else "")
+    found = [f for f in cananalyze.check(log, network=net) if f.rule == "heartbeat"]
+    assert len(found) == dropout
+    if dropout:
+        (f,) = found
+        assert f.t == pytest.approx(0.9) and f.expected == pytest.approx(100.0)
+        assert f.measured == pytest.approx((boot + 0.1 - 0.9) * 1000)
+
+
 def test_frames_sharing_a_time_stamp_teach_no_period(tmp_path):
     """Heartbeats three to a time stamp (a coarse logger clock): the zero gaps are no period.
     Their median (0 ms) made every real gap of the 100 ms producer a "dropout"; the

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..network.model import NetworkModel
 from ..network.pdo_map import PdoConfig
+from ..network.timeline import EVERY_NODE
 from .finding import rel_time
 
 
@@ -125,9 +126,22 @@ class ModelConfig:
             times = [
                 t
                 for t, n, index in points
-                if (node is None or n == node) and (index == -1 or first <= index <= last)
+                if (node is None or n == node or n == EVERY_NODE)
+                and (index == -1 or first <= index <= last)
             ]
-            cached = self._changes[key] = (len(points), np.sort(np.asarray(times, np.float64)))
+            # unique: a reset to all nodes marks each known node and every node at one time
+            cached = self._changes[key] = (len(points), np.unique(np.asarray(times, np.float64)))
+        return cached[1]
+
+    def reset_commands(self, node: int) -> np.ndarray:
+        """Sorted times of the NMT reset commands to a node, its own and those to all."""
+        commands = self.model.timeline.commands
+        mine, every = commands.get(node, []), commands.get(EVERY_NODE, [])
+        key = ("reset", node)
+        cached = self._changes.get(key)
+        if cached is None or cached[0] != len(mine) + len(every):
+            times = np.unique(np.asarray(mine + every, np.float64))
+            cached = self._changes[key] = (len(mine) + len(every), times)
         return cached[1]
 
     def pdo_changes(self) -> np.ndarray:

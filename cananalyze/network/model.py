@@ -375,6 +375,8 @@ class NetworkModel:
 
     def _on_reset(self, t: float, node: int, kind: str) -> set[int] | None:
         """A node (0: every node) back to its declared values."""
+        if not node:
+            self.timeline.reset_all(t)
         targets = [node] if node else sorted(set(self.nodes) | self.timeline.nodes())
         rebuilt = False
         for n in targets:

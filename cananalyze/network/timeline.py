@@ -30,11 +30,16 @@ def _communication(index: int) -> bool:
     return 0x1000 <= index <= 0x1FFF
 
 
+# the node of a point that concerns every node (NMT node-ID 0: "all nodes")
+EVERY_NODE = 0
+
+
 class Timeline:
     def __init__(self) -> None:
         self.history: list[ConfigChange] = []  # every value the log showed, in order
         # (t, node, index) where an answer changed; index -1: a reset or a new profile
-        # (everything of the node may have changed)
+        # (everything of the node may have changed); node EVERY_NODE: an NMT command to
+        # all nodes, which resets nodes the log showed no value of too (heartbeat only)
         self.points: list[tuple[float, int, int]] = []
         # the values by object, with a sequence number to order them against resets
         self._values: dict[tuple[int, int, int], list[tuple[float, int, ConfigChange]]] = {}
@@ -42,6 +47,9 @@ class Timeline:
         self._subs: dict[tuple[int, int], set[int]] = {}  # (node, index) -> sub-indices seen
         self._resets: dict[int, list[tuple[float, int, bool]]] = {}  # (t, seq, comm only)
         self._pending: dict[int, float] = {}  # node -> time of an NMT reset command to it
+        # node (EVERY_NODE: all) -> times of the NMT reset commands to it, in log order:
+        # until its boot-up answers one, a node owes no heartbeat (CiA 301)
+        self.commands: dict[int, list[float]] = {}
         self._since_reset: dict[int, list[ConfigChange]] = {}
         self._seq = 0
 
@@ -62,6 +70,12 @@ class Timeline:
         """Everything of a node may have changed (it got a profile)."""
         self.points.append((t, node, -1))
 
+    def reset_all(self, t: float) -> None:
+        """An NMT reset command to all nodes: every node's timers restart, also those of
+        nodes the log showed no value of (known only by their heartbeat)."""
+        self.commands.setdefault(EVERY_NODE, []).append(t)
+        self.mark(t, EVERY_NODE)
+
     def reset(self, t: float, node: int, kind: str) -> bool:
         """One node's reset; False for the boot-up that answers an NMT reset command
         already taken (its timers start again, its values do not change again)."""
@@ -72,6 +86,7 @@ class Timeline:
                 return False
         else:
             self._pending[node] = t
+            self.commands.setdefault(node, []).append(t)
         comm_only = kind == "reset communication"
         self._seq += 1
         self._resets.setdefault(node, []).append((t, self._seq, comm_only))

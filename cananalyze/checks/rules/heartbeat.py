@@ -1,7 +1,8 @@
 """Heartbeat rules: dropouts against 0x1017, heartbeats that stop, consumer time expiry.
 
-Each heartbeat is judged by the 0x1017 in force at its time; a new value or a reset
-restarts the producer's timer, so a gap across one is judged from there. 0x1017 = 0
+Each heartbeat is judged by the 0x1017 in force at its time; a new value or a boot-up
+restarts the producer's timer, so a gap across one is judged from there, and an NMT
+reset command (to the node or to all) gives the node RESET_ANSWER_S to boot. 0x1017 = 0
 means no heartbeat is expected. Where nothing is configured the expected period is
 learned from the node's median gap, per segment between configuration changes and
 resets (never across one), and the finding says so. One gap is one finding: a
@@ -12,10 +13,17 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...network.timeline import RESET_ANSWER_S
 from ..rule import Context, Rule, ms
 from ..spans import crossing, runs
 
 MIN_LEARN = 5  # gaps a segment needs before its median is an expected period
+
+
+def _is_in(t: float, times: np.ndarray) -> bool:
+    """Whether `t` is one of the sorted `times`."""
+    k = int(np.searchsorted(times, t))
+    return k < times.size and times[k] == t
 
 
 class HeartbeatRule(Rule):
@@ -122,14 +130,18 @@ class HeartbeatRule(Rule):
 
     def _deadline(self, ctx: Context, node: int, start: float, changes, until: float):
         """(deadline, period, start of its stretch) after a heartbeat at `start`, following
-        the changes up to `until`: a new 0x1017 or a reset restarts the producer's timer."""
+        the changes up to `until`: a new 0x1017 or a boot-up restarts the producer's timer;
+        an NMT reset command gives the node RESET_ANSWER_S to boot before its timer runs."""
         p = ctx.config.heartbeat_ms(node, start)
         due = self._due(start, p)
+        commands = ctx.config.reset_commands(node)
         for c in changes[(changes > start) & (changes <= until)].tolist():
             if c > due:  # late before the change (NaN: not known, so go on)
                 break
             start, p = c, ctx.config.heartbeat_ms(node, c)
             due = self._due(c, p)
+            if p and _is_in(c, commands):
+                due += RESET_ANSWER_S
         return due, p, start
 
     def _consumer_limits(self, ctx: Context, at: float) -> dict[int, list[tuple[int, float]]]:
@@ -239,6 +251,14 @@ class HeartbeatRule(Rule):
         by_key = np.argsort(keys)
         limit = limits[by_key][np.searchsorted(keys[by_key], segs)]  # every seg is a key
         over = np.minimum(gaps[cand], upto - t[cand]) > limit
+        # ... unless the change is an NMT reset command: then the node owes its boot-up
+        # (the next change) within RESET_ANSWER_S, and a heartbeat a period after that
+        commands = ctx.config.reset_commands(node)
+        reset = inside & np.isin(upto, commands)
+        if reset.any():
+            after = np.append(changes, np.inf)[np.minimum(segs + 1, changes.size)]
+            waited = np.minimum(t[cand] + gaps[cand], after) - upto
+            over |= reset & (waited > RESET_ANSWER_S + limit)
         cand = cand[over]
         seg_list = segs[over].tolist()
         fresh = [not self._seen(node, v) for v in t[cand].tolist()]
