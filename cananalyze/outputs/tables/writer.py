@@ -189,8 +189,10 @@ class Sink:
             elif typ is None:  # no categories at all: pandas' empty Categorical has null values
                 values = pa.string() if self.order[name] else pa.null()
                 typ = pa.dictionary(code_type(len(self.order[name])), values)
+            # a column of no categories is of null values (no frames at all): nullable
+            values = typ.value_type if pa.types.is_dictionary(typ) else typ
             required = name in self.spec.required and not self.constants
-            fields.append(pa.field(name, typ, nullable=not required or pa.types.is_null(typ)))
+            fields.append(pa.field(name, typ, nullable=not required or pa.types.is_null(values)))
         return pa.schema(fields, metadata=self.metadata({k: len(v) for k, v in self.order.items()}))
 
     def metadata(self, counts: dict[str, int]) -> dict | None:
