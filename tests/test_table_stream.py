@@ -35,6 +35,7 @@ import cananalyze
 from cananalyze.io.source import read_all
 from cananalyze.outputs.tables import writer as table_sink
 from cananalyze.outputs.tables.pandas_like import MISSING, column
+from cananalyze.outputs.tables.stream import FRAMES
 from cananalyze.outputs.tables.stream import TableSink as StreamTables
 from cananalyze.pipeline import Options, build_decoder
 
@@ -156,6 +157,19 @@ def test_time_columns_byte_stream_split(tmp_path, reverse):
     assert not {"PLAIN_DICTIONARY", "RLE_DICTIONARY"} & _encodings(frames, "data")
     assert "RLE_DICTIONARY" in _encodings(frames, "can_id")
     assert "BYTE_STREAM_SPLIT" not in _encodings(tmp_path / "new" / "events.parquet", "t")
+
+
+def test_frames_columns_never_null_are_required(tmp_path):
+    """The frames table's columns that cannot be null are REQUIRED in the file (no
+    definition levels to encode); node and pdo stay optional (pandas' Int16/Int8)."""
+    _stream(SAMPLES / "faults.log", tmp_path / "new", size=13, network=NETWORK)
+    path = tmp_path / "new" / "frames.parquet"
+    parquet = pq.ParquetFile(path).schema
+    levels = {parquet.column(i).name: parquet.column(i).max_definition_level for i in range(9)}
+    assert levels == {**dict.fromkeys(FRAMES.required, 0), "node": 1, "pdo": 1}
+    schema = pq.read_schema(path)
+    assert [f.name for f in schema if not f.nullable] == list(FRAMES.required)
+    assert pd.read_parquet(path)["node"].dtype == "Int16"
 
 
 def test_writer_join_can_be_repeated_after_an_error():

@@ -13,6 +13,7 @@ import numpy as np
 import pyarrow as pa
 
 from ..frames import FLAG_RTR, FrameBatch
+from ..runtime import speedups
 from .hexcols import hex_payload_buffers
 
 _BYTE = np.arange(8)
@@ -27,8 +28,10 @@ def payload_lengths(fb: FrameBatch) -> np.ndarray:
 
 
 def payload_bytes(fb: FrameBatch) -> pa.Array:
-    """The payloads as an Arrow `binary` column (numpy only: the same bytes in both paths)."""
+    """The payloads as an Arrow `binary` column; the same bytes on both paths."""
     n = len(fb)
+    if speedups.C is not None and not fb.long_data:  # the classic bus: one pass in C
+        return _binary(n, *_packed_c(fb))
     length = payload_lengths(fb)
     offsets = np.zeros(n + 1, np.int32)
     np.cumsum(length, out=offsets[1:])
@@ -47,6 +50,27 @@ def payload_bytes(fb: FrameBatch) -> pa.Array:
             values[(offsets[:-1, None] + _BYTE[None, :])[mask]] = data[mask]
             for row, payload in fb.long_data.items():
                 values[offsets[row] : offsets[row + 1]] = np.frombuffer(payload, np.uint8)
+    return _binary(n, offsets, values)
+
+
+def _packed_c(fb: FrameBatch) -> tuple[np.ndarray, np.ndarray]:
+    """(offsets, values) of payloads of at most 8 bytes, in one pass without the GIL
+    (`payload_pack`): the numpy mask and gather were 0.7 s of CPU per 10M frames."""
+    n = len(fb)
+    values = np.empty(8 * n, np.uint8)
+    offsets = np.empty(n + 1, np.int32)
+    used = speedups.C.payload_pack(
+        np.ascontiguousarray(fb.data, np.uint8),
+        np.ascontiguousarray(fb.dlc, np.uint8),
+        np.ascontiguousarray(fb.flags, np.uint8),
+        FLAG_RTR,
+        values,
+        offsets,
+    )
+    return offsets, values[:used]
+
+
+def _binary(n: int, offsets: np.ndarray, values: np.ndarray) -> pa.Array:
     return pa.Array.from_buffers(
         pa.binary(), n, [None, pa.py_buffer(offsets), pa.py_buffer(values)]
     )

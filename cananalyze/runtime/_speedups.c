@@ -1259,6 +1259,7 @@ static struct PyModuleDef module = {
 };
 
 static int add_decode_functions(PyObject *m); /* the decode section, at the end */
+static int add_table_functions(PyObject *m);  /* the table-writer section, after it */
 
 PyMODINIT_FUNC PyInit__speedups(void) {
     memset(HEXV, -1, sizeof HEXV);
@@ -1266,7 +1267,7 @@ PyMODINIT_FUNC PyInit__speedups(void) {
     for (int c = 'a'; c <= 'f'; c++) HEXV[c] = (signed char)(c - 'a' + 10);
     for (int c = 'A'; c <= 'F'; c++) HEXV[c] = (signed char)(c - 'A' + 10);
     PyObject *m = PyModule_Create(&module);
-    if (m && add_decode_functions(m) < 0) Py_CLEAR(m);
+    if (m && (add_decode_functions(m) < 0 || add_table_functions(m) < 0)) Py_CLEAR(m);
     return m;
 }
 
@@ -1413,3 +1414,57 @@ static PyMethodDef decode_methods[] = {
 };
 
 static int add_decode_functions(PyObject *m) { return PyModule_AddFunctions(m, decode_methods); }
+
+/* ---- the table writers (outputs/tables): their own section and method table ---------------- */
+
+PyDoc_STRVAR(payload_pack_doc,
+             "payload_pack(data, dlc, flags, rtr_flag, values, offsets) -> n_bytes\n\n"
+             "Arrow binary-column buffers of the payloads: data (n, 8) uint8, dlc/flags\n"
+             "uint8; rows with rtr_flag set are empty, others min(dlc, 8) bytes.\n"
+             "values needs 8 n bytes, offsets (int32) n + 1 entries. columns.payloads'\n"
+             "numpy path gives the same bytes; its mask and boolean gather were 0.7 s of\n"
+             "CPU per 10M frames, this one pass (an 8-byte copy per row) a tenth of it.");
+
+static PyObject *payload_pack(PyObject *self, PyObject *args) {
+    PyObject *o_data, *o_dlc, *o_flags, *o_values, *o_off;
+    int rtr;
+    Bufs bs = {.n = 0};
+    if (!PyArg_ParseTuple(args, "OOOiOO", &o_data, &o_dlc, &o_flags, &rtr, &o_values, &o_off))
+        return NULL;
+    if (bufs_get(&bs, o_dlc, 0, -1, "dlc") < 0) goto fail;
+    Py_ssize_t n = bs.b[0].len;
+    if (bufs_get(&bs, o_data, 0, n * 8, "data") < 0 || bufs_get(&bs, o_flags, 0, n, "flags") < 0 ||
+        bufs_get(&bs, o_values, 1, n * 8, "values") < 0 ||
+        bufs_get(&bs, o_off, 1, (n + 1) * 4, "offsets") < 0)
+        goto fail;
+    if (n * 8 > INT32_MAX) {
+        PyErr_SetString(PyExc_OverflowError, "too many rows for int32 offsets");
+        goto fail;
+    }
+    const uint8_t *dlc = bs.b[0].buf, *data = bs.b[1].buf, *flags = bs.b[2].buf;
+    uint8_t *values = bs.b[3].buf;
+    int32_t *off = bs.b[4].buf;
+    int32_t pos = 0;
+    Py_BEGIN_ALLOW_THREADS;
+    off[0] = 0;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        /* the whole row is copied and the position advanced by its length: pos <= 8 i,
+         * so the 8 bytes stay inside values (8 n), and the next row overwrites the rest */
+        memcpy(values + pos, data + 8 * i, 8);
+        pos += (flags[i] & rtr) ? 0 : (dlc[i] < 8 ? dlc[i] : 8);
+        off[i + 1] = pos;
+    }
+    Py_END_ALLOW_THREADS;
+    bufs_release(&bs);
+    return PyLong_FromLong(pos);
+fail:
+    bufs_release(&bs);
+    return NULL;
+}
+
+static PyMethodDef table_methods[] = {
+    {"payload_pack", payload_pack, METH_VARARGS, payload_pack_doc},
+    {NULL, NULL, 0, NULL},
+};
+
+static int add_table_functions(PyObject *m) { return PyModule_AddFunctions(m, table_methods); }

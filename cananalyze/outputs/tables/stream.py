@@ -114,6 +114,7 @@ FRAMES = TableSpec(
     dictionary=("channel", "can_id", "dlc", "flags", "service", "node", "pdo"),
     split=("t",),
     statistics=("t",),
+    required=("t", "channel", "can_id", "dlc", "data", "flags", "service"),
 )
 SIGNALS = TableSpec(
     [

@@ -87,6 +87,12 @@ class TableSpec:
     # service of its quarter-second, so their ranges prune nothing); computing them
     # on every column was a tenth of the frames table's encoding (bench_tables.py)
     statistics: tuple[str, ...] | bool = True
+    # columns that are never null, declared non-nullable: Parquet writes them REQUIRED,
+    # without definition levels (their RLE encoding was a tenth of the frames table's
+    # encoding). Readers see the same types and values (pandas: the same dtypes; the
+    # Arrow schema read back says `not null`). Not in a fleet's dataset parts, whose
+    # one schema per table (fleet/schema) is nullable throughout.
+    required: tuple[str, ...] = ()
 
     def parquet_options(self) -> dict:
         """The ParquetWriter keywords of this table's column encodings."""
@@ -183,7 +189,10 @@ class Sink:
             elif typ is None:  # no categories at all: pandas' empty Categorical has null values
                 values = pa.string() if self.order[name] else pa.null()
                 typ = pa.dictionary(code_type(len(self.order[name])), values)
-            fields.append(pa.field(name, typ))
+            # a column of no categories is of null values (no frames at all): nullable
+            values = typ.value_type if pa.types.is_dictionary(typ) else typ
+            required = name in self.spec.required and not self.constants
+            fields.append(pa.field(name, typ, nullable=not required or pa.types.is_null(values)))
         return pa.schema(fields, metadata=self.metadata({k: len(v) for k, v in self.order.items()}))
 
     def metadata(self, counts: dict[str, int]) -> dict | None:
