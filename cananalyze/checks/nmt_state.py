@@ -32,16 +32,22 @@ class NmtStates:
         self.sources.setdefault(node, []).append(source)
         self._last[node] = state
 
-    def update(self, batch: DecodedBatch) -> None:
+    def update(self, batch: DecodedBatch, heartbeats=None) -> None:
+        """`heartbeats`: the batch's heartbeat gap table (`Context.gaps`), which holds the
+        heartbeat rows already grouped by node: used when the batch has no guard response."""
         svc = batch.service
         fb = batch.frames
-        report = np.flatnonzero((svc == Service.HEARTBEAT) | (svc == Service.GUARD_RESPONSE))
         events: list[tuple[float, int, int, str]] = []
-        if report.size:
+        if heartbeats is not None and not (svc == Service.GUARD_RESPONSE).any():
+            n, r = heartbeats.key, heartbeats.row
+            s = (fb.data[r, 0] & STATE_MASK).astype(np.int16)
+        else:
+            report = np.flatnonzero((svc == Service.HEARTBEAT) | (svc == Service.GUARD_RESPONSE))
             nodes = batch.node[report].astype(np.intp)
             state = (fb.data[report, 0] & STATE_MASK).astype(np.int16)
             order = np.argsort(nodes, kind="stable")
             n, s, r = nodes[order], state[order], report[order]
+        if r.size:
             prev = np.empty_like(s)
             prev[1:] = s[:-1]
             first = np.ones(n.size, bool)

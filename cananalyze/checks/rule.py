@@ -56,6 +56,8 @@ class Context:
         self.t0 = t0 if t0 is not None else self.t_first  # first frame of the log
         self._state = state
         self._gaps: dict[str, Gaps] = {}
+        # per-batch results several rules read (spans.pdo_stretches), computed by the first
+        self.shared: dict[str, object] = {}
         # live tick: the bus's latest frame (a deadline past it is seen on the wall clock)
         self.t_bus: float | None = None
 
