@@ -14,6 +14,7 @@ import pytest
 
 from cananalyze.checks.gaps import grouped_gaps
 from cananalyze.checks.nmt_state import NmtStates
+from cananalyze.checks.rule import Context, GapState
 from cananalyze.checks.timing import Timing
 from cananalyze.frames import FrameBatch
 from cananalyze.protocol.services import Service
@@ -35,6 +36,14 @@ def _batch(rng, n: int, t0: float, guards: bool) -> DecodedBatch:
     return DecodedBatch(fb, service, node, pdo)
 
 
+class _Ctx(Context):
+    """A Context whose heartbeat gap table is given (the Checker's, carried across batches)."""
+
+    def __init__(self, batch: DecodedBatch, heartbeats) -> None:
+        super().__init__(batch, None, NmtStates(), GapState())
+        self._gaps["heartbeat"] = heartbeats
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_nmt_states_from_the_heartbeat_table_are_the_sorted_ones(seed):
     rng = np.random.default_rng(seed)
@@ -47,7 +56,7 @@ def test_nmt_states_from_the_heartbeat_table_are_the_sorted_ones(seed):
         rows = np.flatnonzero(b.service == Service.HEARTBEAT)
         g = grouped_gaps(b.frames.t, b.node[rows], rows, last)
         plain.update(b)
-        grouped.update(b, g)
+        grouped.update(b, _Ctx(b, g))
     assert plain.times == grouped.times
     assert plain.states == grouped.states
     assert plain.sources == grouped.sources
@@ -111,3 +120,31 @@ def test_timing_steady_state_path_is_the_filtered_one(seed, keep, stats):
         for key in plain.gaps["pdo"]:
             for a, b in zip(fast.all_gaps("pdo", key), plain.all_gaps("pdo", key), strict=True):
                 np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_context_rows_are_the_rows_of_those_services(seed):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(0, 3000))
+    codes = np.array([int(s) for s in Service] + [16, 200, 255], np.uint8)
+    service = rng.choice(codes, n, p=None if seed % 2 else _skewed(codes.size))
+    b = DecodedBatch(FrameBatch.allocate(n), service, np.zeros(n, np.int16), np.zeros(n, np.uint8))
+    ctx = Context(b, None, NmtStates(), GapState())
+    asks = [(s,) for s in Service] + [
+        (Service.TPDO, Service.RPDO),
+        (Service.GUARD_REQUEST, Service.GUARD_RESPONSE, Service.BOOTUP),
+        (Service.SYNC, Service.EMCY, Service.NMT, Service.TIME),
+        (Service.EMCY, Service.HEARTBEAT),
+    ]
+    for services in asks * 2:  # the second time from the cache
+        got = ctx.rows(*services)
+        want = np.flatnonzero(np.isin(service, np.array(services, np.uint8)))
+        np.testing.assert_array_equal(got, want)
+        assert got.dtype == want.dtype and not got.flags.writeable
+
+
+def _skewed(k: int) -> np.ndarray:
+    """Mostly bulk traffic (PDO, SDO, heartbeat), as a real bus."""
+    p = np.ones(k)
+    p[Service.TPDO : Service.HEARTBEAT + 1] = 60.0
+    return p / p.sum()

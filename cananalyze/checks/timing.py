@@ -74,13 +74,13 @@ class Timing:
             if g.key.size == 0:
                 continue
             self._update_table(name, g)
-        emcy = b.node[b.service == Service.EMCY]
+        emcy = b.node[ctx.rows(Service.EMCY)]
         if emcy.size:
             self.emcy.update(emcy.tolist())
-        boot = b.node[b.service == Service.BOOTUP]
+        boot = b.node[ctx.rows(Service.BOOTUP)]
         if boot.size:
             self.bootups.update(boot.tolist())
-        self.error_frames += int(np.count_nonzero(b.service == Service.ERROR_FRAME))
+        self.error_frames += int(ctx.rows(Service.ERROR_FRAME).size)
         if b.records:
             self._sdo(b)
 
