@@ -79,7 +79,7 @@ class Context:
         self._state = state
         self._gaps: dict[str, Gaps] = {}
         self._rows: dict[tuple[Service, ...], np.ndarray] = {}
-        self._rare_rows: np.ndarray | None = None
+        self._rare_rows: tuple[np.ndarray, np.ndarray] | None = None
         # per-batch results several rules read (spans.pdo_stretches), computed by the first
         self.shared: dict[str, object] = {}
         # live tick: the bus's latest frame (a deadline past it is seen on the wall clock)
@@ -103,17 +103,18 @@ class Context:
         svc = self.batch.service
         if svc.dtype == np.uint8 and not any(_BULK_FIRST <= s <= _BULK_LAST for s in services):
             # a rare service: looked for among the rows of the rare services only
-            rare = self._rare()
-            return rare[_any_of(svc[rare], services)]
+            rare, rare_svc = self._rare()
+            return rare[_any_of(rare_svc, services)]
         return np.flatnonzero(_any_of(svc, services))
 
-    def _rare(self) -> np.ndarray:
-        """Rows of every service but the bulk ones (PDO, SDO, heartbeat): a tenth of a
-        batch, found with one subtraction and one comparison."""
+    def _rare(self) -> tuple[np.ndarray, np.ndarray]:
+        """Rows of every service but the bulk ones (PDO, SDO, heartbeat), a tenth of a
+        batch found with one subtraction and one comparison, and their services."""
         if self._rare_rows is None:
             svc = self.batch.service
             bulk = np.subtract(svc, np.uint8(_BULK_FIRST), dtype=np.uint8)  # below: wraps past
-            self._rare_rows = np.flatnonzero(bulk > _BULK_LAST - _BULK_FIRST)
+            rows = np.flatnonzero(bulk > _BULK_LAST - _BULK_FIRST)
+            self._rare_rows = (rows, svc[rows])
         return self._rare_rows
 
     def gaps(self, name: str) -> Gaps:
