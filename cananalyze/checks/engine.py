@@ -150,7 +150,7 @@ class Checker:
         self._decide(batch)
         ctx = self._context(batch)
         if len(batch):
-            self.nmt.update(ctx.batch)
+            self.nmt.update(ctx.batch, ctx)
             self.t_last = float(ctx.batch.frames.t[-1])
         self.timing.update(ctx)
         for rule in self.active:

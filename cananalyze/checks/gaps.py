@@ -30,9 +30,12 @@ class Gaps:
         """(key, slice) per key present in the batch: a loop over keys, not frames."""
         if self.key.size == 0:
             return
-        ends = np.append(self.starts[1:], self.key.size)
-        for s, e in zip(self.starts.tolist(), ends.tolist(), strict=True):
-            yield int(self.key[s]), slice(s, e)
+        starts = self.starts.tolist()
+        # the keys as one list, not a numpy scalar per group (a PDO table has hundreds)
+        for key, s, e in zip(
+            self.key[self.starts].tolist(), starts, starts[1:] + [self.key.size], strict=True
+        ):
+            yield key, slice(s, e)
 
 
 def grouped_gaps(t: np.ndarray, keys: np.ndarray, rows: np.ndarray, last: np.ndarray) -> Gaps:

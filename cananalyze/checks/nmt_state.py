@@ -32,16 +32,28 @@ class NmtStates:
         self.sources.setdefault(node, []).append(source)
         self._last[node] = state
 
-    def update(self, batch: DecodedBatch) -> None:
+    def update(self, batch: DecodedBatch, ctx=None) -> None:
+        """`ctx`: the batch's checks.rule.Context, whose heartbeat gap table holds the
+        heartbeat rows already grouped by node (used when the batch has no guard
+        response) and which finds each service's rows once for every rule."""
         svc = batch.service
         fb = batch.frames
-        report = np.flatnonzero((svc == Service.HEARTBEAT) | (svc == Service.GUARD_RESPONSE))
+
+        def rows(s: Service) -> np.ndarray:
+            return np.flatnonzero(svc == s) if ctx is None else ctx.rows(s)
+
         events: list[tuple[float, int, int, str]] = []
-        if report.size:
+        if ctx is not None and rows(Service.GUARD_RESPONSE).size == 0:
+            heartbeats = ctx.gaps("heartbeat")
+            n, r = heartbeats.key, heartbeats.row
+            s = (fb.data[r, 0] & STATE_MASK).astype(np.int16)
+        else:
+            report = np.flatnonzero((svc == Service.HEARTBEAT) | (svc == Service.GUARD_RESPONSE))
             nodes = batch.node[report].astype(np.intp)
             state = (fb.data[report, 0] & STATE_MASK).astype(np.int16)
             order = np.argsort(nodes, kind="stable")
             n, s, r = nodes[order], state[order], report[order]
+        if r.size:
             prev = np.empty_like(s)
             prev[1:] = s[:-1]
             first = np.ones(n.size, bool)
@@ -50,9 +62,9 @@ class NmtStates:
             change = np.flatnonzero(s != prev)
             for i in change.tolist():
                 events.append((float(fb.t[r[i]]), int(n[i]), int(s[i]), "heartbeat"))
-        for i in np.flatnonzero(svc == Service.BOOTUP).tolist():
+        for i in rows(Service.BOOTUP).tolist():
             events.append((float(fb.t[i]), int(batch.node[i]), PRE_OPERATIONAL, "bootup"))
-        for i in np.flatnonzero(svc == Service.NMT).tolist():
+        for i in rows(Service.NMT).tolist():
             if fb.dlc[i] < 2:
                 continue
             state = COMMAND_STATE.get(int(fb.data[i, 0]))

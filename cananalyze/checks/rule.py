@@ -27,6 +27,28 @@ _GAP_TABLES = {
 }
 
 
+# The bulk services, one range of codes (PDO, SDO and heartbeat: nine frames in ten);
+# Context.rows looks for the others among the rows outside it
+_BULK_FIRST, _BULK_LAST = Service.TPDO, Service.HEARTBEAT
+assert [int(s) for s in Service if _BULK_FIRST <= s <= _BULK_LAST] == [
+    Service.TPDO,
+    Service.RPDO,
+    Service.SDO_REQUEST,
+    Service.SDO_RESPONSE,
+    Service.HEARTBEAT,
+]
+
+
+def _any_of(svc: np.ndarray, services: tuple[Service, ...]) -> np.ndarray:
+    """Mask of the rows of any of `services`."""
+    if len(services) <= 3:  # a few comparisons beat np.isin's sort
+        mask = svc == services[0]
+        for s in services[1:]:
+            mask |= svc == s
+        return mask
+    return np.isin(svc, np.array(services, np.uint8))
+
+
 class GapState:
     """Carried last-frame times per gap table, owned by the Checker."""
 
@@ -56,6 +78,10 @@ class Context:
         self.t0 = t0 if t0 is not None else self.t_first  # first frame of the log
         self._state = state
         self._gaps: dict[str, Gaps] = {}
+        self._rows: dict[tuple[Service, ...], np.ndarray] = {}
+        self._rare_rows: tuple[np.ndarray, np.ndarray] | None = None
+        # per-batch results several rules read (spans.pdo_stretches), computed by the first
+        self.shared: dict[str, object] = {}
         # live tick: the bus's latest frame (a deadline past it is seen on the wall clock)
         self.t_bus: float | None = None
 
@@ -65,13 +91,31 @@ class Context:
         return rel_time(t, self.t0) if self.timed else f"line {int(t)}"
 
     def rows(self, *services: Service) -> np.ndarray:
+        """The batch's rows of these services, ascending; asked once per batch (a dozen
+        rules and the timing ask for the same few services). Read-only: shared."""
+        got = self._rows.get(services)
+        if got is None:
+            got = self._rows[services] = self._find_rows(services)
+            got.flags.writeable = False
+        return got
+
+    def _find_rows(self, services: tuple[Service, ...]) -> np.ndarray:
         svc = self.batch.service
-        if len(services) <= 3:  # a few comparisons beat np.isin's sort
-            mask = svc == services[0]
-            for s in services[1:]:
-                mask |= svc == s
-            return np.flatnonzero(mask)
-        return np.flatnonzero(np.isin(svc, np.array(services, np.uint8)))
+        if svc.dtype == np.uint8 and not any(_BULK_FIRST <= s <= _BULK_LAST for s in services):
+            # a rare service: looked for among the rows of the rare services only
+            rare, rare_svc = self._rare()
+            return rare[_any_of(rare_svc, services)]
+        return np.flatnonzero(_any_of(svc, services))
+
+    def _rare(self) -> tuple[np.ndarray, np.ndarray]:
+        """Rows of every service but the bulk ones (PDO, SDO, heartbeat), a tenth of a
+        batch found with one subtraction and one comparison, and their services."""
+        if self._rare_rows is None:
+            svc = self.batch.service
+            bulk = np.subtract(svc, np.uint8(_BULK_FIRST), dtype=np.uint8)  # below: wraps past
+            rows = np.flatnonzero(bulk > _BULK_LAST - _BULK_FIRST)
+            self._rare_rows = (rows, svc[rows])
+        return self._rare_rows
 
     def gaps(self, name: str) -> Gaps:
         g = self._gaps.get(name)

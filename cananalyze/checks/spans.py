@@ -39,9 +39,19 @@ def per_frame(changes: np.ndarray, t: np.ndarray, lookup) -> list:
     return out
 
 
-def pdo_stretches(ctx, g):
+def pdo_stretches(ctx, g) -> list:
     """Per COB-ID of a PDO gap table and stretch of its frames under one PDO configuration:
-    (COB-ID, (node, PdoConfig), indices into the table, whether each gap is judged)."""
+    (COB-ID, (node, PdoConfig), indices into the table, whether each gap is judged).
+
+    Computed once per batch and table (three rules read it: a config lookup and a few
+    arrays per COB-ID each); the readers index the arrays, never write them."""
+    got = ctx.shared.get("pdo_stretches")
+    if got is None or got[0] is not g:
+        got = ctx.shared["pdo_stretches"] = (g, list(_pdo_stretches(ctx, g)))
+    return got[1]
+
+
+def _pdo_stretches(ctx, g):
     changes = ctx.config.pdo_changes()
     for cob, sl in g.groups():
         t = g.t[sl]

@@ -74,13 +74,13 @@ class Timing:
             if g.key.size == 0:
                 continue
             self._update_table(name, g)
-        emcy = b.node[b.service == Service.EMCY]
+        emcy = b.node[ctx.rows(Service.EMCY)]
         if emcy.size:
             self.emcy.update(emcy.tolist())
-        boot = b.node[b.service == Service.BOOTUP]
+        boot = b.node[ctx.rows(Service.BOOTUP)]
         if boot.size:
             self.bootups.update(boot.tolist())
-        self.error_frames += int(np.count_nonzero(b.service == Service.ERROR_FRAME))
+        self.error_frames += int(ctx.rows(Service.ERROR_FRAME).size)
         if b.records:
             self._sdo(b)
 
@@ -101,61 +101,88 @@ class Timing:
 
     def _update_table(self, name: str, g) -> None:
         """Counts, spans and gap statistics of one gap table: moments per key in one pass."""
-        count, span, streams = self.count[name], self.span[name], self.stats[name]
-        gap = g.gap
-        ok = ~np.isnan(gap)  # a stream's first frame ever has no gap
-        v, key = gap[ok] * 1000.0, g.key[ok]
         keep = bool(self.keep) and name in self.keep
-        if keep:
-            t_prev, gap_s = g.prev[ok], gap[ok]
-        if v.size and not self.with_stats:
-            if keep:
-                first = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+        if self.with_stats or keep:  # an export's PDO table needs neither: no gap read
+            v, key, first, t_prev, gap_s = self._judged_gaps(g, self.with_stats)
+            if v.size and not self.with_stats:
                 ends = np.r_[first[1:], v.size].tolist()
                 for a, e, key_j in zip(first.tolist(), ends, key[first].tolist(), strict=True):
                     self.gaps[name].setdefault(key_j, []).append(gap_s[a:e])
                     self.gap_t[name].setdefault(key_j, []).append(t_prev[a:e])
-        elif v.size:
-            first = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
-            k = np.diff(np.r_[first, v.size])
-            mean = np.add.reduceat(v, first) / k
-            dev = v - np.repeat(mean, k)
-            m2 = np.add.reduceat(dev * dev, first)
-            lo, hi = np.minimum.reduceat(v, first), np.maximum.reduceat(v, first)
-            ends = (first + k).tolist()
-            binned: list[tuple[StreamStats, int, int]] = []  # streams past EXACT: one bincount
-            for a, e, key_j, mean_j, m2_j, lo_j, hi_j in zip(
-                first.tolist(),
-                ends,
-                key[first].tolist(),
-                mean.tolist(),
-                m2.tolist(),
-                lo.tolist(),
-                hi.tolist(),
-                strict=True,
-            ):
-                st = streams.get(key_j)
-                if st is None:
-                    st = streams[key_j] = StreamStats()
-                st.add_moments(e - a, mean_j, m2_j, lo_j, hi_j)
-                if st.exact:
-                    st.add_values(v[a:e])
-                else:
-                    binned.append((st, a, e))
-                if keep:
-                    self.gaps[name].setdefault(key_j, []).append(gap_s[a:e])
-                    self.gap_t[name].setdefault(key_j, []).append(t_prev[a:e])
-            if binned:
-                histogram_many(binned, v, bins_of(v))
-        for key_j, sl in g.groups():
-            if key_j not in streams:  # one frame so far: listed, with no gaps
+            elif v.size:
+                self._add_stats(name, v, key, first, t_prev, gap_s, keep)
+        self._count_spans(name, g)
+
+    @staticmethod
+    def _judged_gaps(g, in_ms: bool) -> tuple:
+        """(gaps in ms, keys, start of each key's run, previous times, gaps in s) of the
+        table's frames that have a gap (a stream's first frame ever has none); the gaps in
+        ms only when `in_ms`."""
+        gap = g.gap
+        nan = np.isnan(gap)
+        if not nan.any():  # the steady state: every key seen before, the table's own groups
+            return (gap * 1000.0 if in_ms else gap), g.key, g.starts, g.prev, gap
+        ok = ~nan
+        key, gap_s = g.key[ok], gap[ok]
+        first = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+        return (gap_s * 1000.0 if in_ms else gap_s), key, first, g.prev[ok], gap_s
+
+    def _add_stats(self, name: str, v, key, first, t_prev, gap_s, keep: bool) -> None:
+        """Merge each key's batch moments and values into its StreamStats (and keep its
+        gaps when `keep`)."""
+        streams = self.stats[name]
+        k = np.diff(np.r_[first, v.size])
+        mean = np.add.reduceat(v, first) / k
+        dev = v - np.repeat(mean, k)
+        m2 = np.add.reduceat(dev * dev, first)
+        lo, hi = np.minimum.reduceat(v, first), np.maximum.reduceat(v, first)
+        ends = (first + k).tolist()
+        binned: list[tuple[StreamStats, int, int]] = []  # streams past EXACT: one bincount
+        for a, e, key_j, mean_j, m2_j, lo_j, hi_j in zip(
+            first.tolist(),
+            ends,
+            key[first].tolist(),
+            mean.tolist(),
+            m2.tolist(),
+            lo.tolist(),
+            hi.tolist(),
+            strict=True,
+        ):
+            st = streams.get(key_j)
+            if st is None:
+                st = streams[key_j] = StreamStats()
+            st.add_moments(e - a, mean_j, m2_j, lo_j, hi_j)
+            if st.exact:
+                st.add_values(v[a:e])
+            else:
+                binned.append((st, a, e))
+            if keep:
+                self.gaps[name].setdefault(key_j, []).append(gap_s[a:e])
+                self.gap_t[name].setdefault(key_j, []).append(t_prev[a:e])
+        if binned:
+            histogram_many(binned, v, bins_of(v))
+
+    def _count_spans(self, name: str, g) -> None:
+        """Frames and first/last time per key; a key with one frame so far is listed with
+        no gaps. Per key, from lists (not a numpy scalar per key)."""
+        count, span, streams = self.count[name], self.span[name], self.stats[name]
+        starts = g.starts
+        ends = np.r_[starts[1:], g.key.size]
+        for key_j, n, t_a, t_e in zip(
+            g.key[starts].tolist(),
+            (ends - starts).tolist(),
+            g.t[starts].tolist(),
+            g.t[ends - 1].tolist(),
+            strict=True,
+        ):
+            if key_j not in streams:
                 streams[key_j] = StreamStats()
-            count[key_j] += sl.stop - sl.start
+            count[key_j] += n
             sp = span.get(key_j)
             if sp is None:
-                span[key_j] = [float(g.t[sl.start]), float(g.t[sl.stop - 1])]
+                span[key_j] = [t_a, t_e]
             else:
-                sp[1] = float(g.t[sl.stop - 1])
+                sp[1] = t_e
 
     def all_gaps(self, name: str, key: int) -> tuple[np.ndarray, np.ndarray]:
         """(gap start times, gaps in s) of one node / COB-ID over the whole log.

@@ -33,18 +33,17 @@ class PdoDecoder:
             return  # nothing mapped anywhere: skip the PDO scan entirely
         svc = batch.service
         fb = batch.frames
-        is_pdo = ((svc == Service.TPDO) | (svc == Service.RPDO)) & ((fb.flags & FLAG_RTR) == 0)
-        rows = np.flatnonzero(is_pdo)
-        if rows.size == 0:
-            return
         segments = self.model.segments
-        # only COB-IDs bound in some segment are decoded: drop the others before sorting
+        # only COB-IDs bound in some segment are decoded: dropped in the same mask, before
+        # sorting (one pass over the batch's COB-IDs, not a gather of the PDO rows' first)
         bound = np.zeros(2049, bool)  # [2048]: every identifier past 11 bits (clipped there)
         cobs = [c for _, b in segments for c in b if 0 <= c < 2048]
         if cobs:
             bound[cobs] = True
         bound[self.skip] = False
-        rows = rows[np.take(bound, fb.can_id[rows], mode="clip")]
+        is_pdo = ((svc == Service.TPDO) | (svc == Service.RPDO)) & ((fb.flags & FLAG_RTR) == 0)
+        is_pdo &= np.take(bound, fb.can_id, mode="clip")
+        rows = np.flatnonzero(is_pdo)
         if rows.size == 0:
             return
         bounds = [start for start, _ in segments[1:]]

@@ -51,8 +51,8 @@ class BootupRule(Rule):
 
     def process(self, ctx: Context) -> None:
         b = ctx.batch
-        boots = np.flatnonzero(b.service == Service.BOOTUP)
-        nmt = np.flatnonzero(b.service == Service.NMT)
+        boots = ctx.rows(Service.BOOTUP)
+        nmt = ctx.rows(Service.NMT)
         if boots.size == 0 and nmt.size == 0:
             self.alive[_senders(b.service, b.node)] = True
             return

@@ -36,7 +36,7 @@ class DriveFaultRule(Rule):
 
     def process(self, ctx: Context) -> None:
         b = ctx.batch
-        rows = np.flatnonzero(b.service == Service.EMCY)
+        rows = ctx.rows(Service.EMCY)
         fb = b.frames
         rows = rows[fb.dlc[rows] >= MIN_BYTES]
         codes = fb.data[rows, 0].astype(np.int64) | (fb.data[rows, 1].astype(np.int64) << 8)

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
-
 from ...protocol.services import Service
 from ..rule import Context, Rule
 
@@ -23,7 +21,7 @@ class ErrorFrameRule(Rule):
         self.first: float | None = None
 
     def process(self, ctx: Context) -> None:
-        rows = np.flatnonzero(ctx.batch.service == Service.ERROR_FRAME)
+        rows = ctx.rows(Service.ERROR_FRAME)
         self.subjects.add(None)
         if rows.size:
             if self.first is None:

@@ -33,12 +33,7 @@ class GuardingRule(Rule):
 
     def process(self, ctx: Context) -> None:
         b = ctx.batch
-        rows = np.flatnonzero(
-            np.isin(
-                b.service,
-                np.array([Service.GUARD_REQUEST, Service.GUARD_RESPONSE, Service.BOOTUP], np.uint8),
-            )
-        )
+        rows = ctx.rows(Service.GUARD_REQUEST, Service.GUARD_RESPONSE, Service.BOOTUP)
         fb = b.frames
         for row in rows.tolist():
             node = int(b.node[row])

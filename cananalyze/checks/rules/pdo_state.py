@@ -36,14 +36,17 @@ class PdoStateRule(Rule):
                     varying.append(node)
                 else:
                     steady[node + 1] = s
-        state = steady[node_of.astype(np.intp) + 1]
-        for node in varying:
-            at = np.flatnonzero(node_of == node)
-            state[at] = ctx.nmt.state_at(node, g.t[at])
-        bad_all = (state >= 0) & (state != OPERATIONAL)
         starts = g.starts
         heads = g.row[starts]
-        any_bad = np.add.reduceat(bad_all, starts) > 0 if starts.size else np.zeros(0, bool)
+        if varying or bool(((steady >= 0) & (steady != OPERATIONAL)).any()):
+            state = steady[node_of.astype(np.intp) + 1]
+            for node in varying:
+                at = np.flatnonzero(node_of == node)
+                state[at] = ctx.nmt.state_at(node, g.t[at])
+            bad_all = (state >= 0) & (state != OPERATIONAL)
+            any_bad = np.add.reduceat(bad_all, starts) > 0 if starts.size else np.zeros(0, bool)
+        else:  # every node operational (or unknown) all batch long: no row to look at
+            any_bad = np.zeros(starts.size, bool)
         for (cob, sl), svc, node, has_bad in zip(
             g.groups(),
             b.service[heads].tolist(),

@@ -29,7 +29,7 @@ class PdoSyncRule(Rule):
 
     def process(self, ctx: Context) -> None:
         b = ctx.batch
-        srows = np.flatnonzero(b.service == Service.SYNC)
+        srows = ctx.rows(Service.SYNC)
         st = b.frames.t[srows]
         g = ctx.gaps("pdo")
         if g.key.size:

@@ -24,7 +24,7 @@ class UnknownCobIdRule(Rule):
 
     def process(self, ctx: Context) -> None:
         b = ctx.batch
-        rows = np.flatnonzero(b.service == Service.OTHER)
+        rows = ctx.rows(Service.OTHER)
         if rows.size == 0:
             return
         fb = b.frames
