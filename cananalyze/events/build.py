@@ -39,6 +39,7 @@ _LEVEL_BY_NAME = {v: k for k, v in LEVEL_NAMES.items()} | {"critical": FATAL, "w
 
 _STATE_SERVICES = np.array((Service.HEARTBEAT, Service.BOOTUP, Service.GUARD_RESPONSE), np.uint8)
 _EVENT_SERVICES = np.array([Service.NMT, Service.EMCY, Service.BOOTUP], np.uint8)
+_FRAME_SERVICES = np.union1d(_STATE_SERVICES, _EVENT_SERVICES).astype(np.uint8)
 
 
 @dataclass
@@ -285,8 +286,11 @@ def batch_event_columns(
         events = EventColumns.concat([events, finding_event_columns(batch.findings, offset)])
     states: list[Row] = []
     if n:
-        parts = [events, _frame_event_columns(batch, offset)]
-        states = _state_changes(batch, offset, state)
+        # one scan of the batch for the rows of both (a few percent of it), each then
+        # picks its own from those
+        rows = np.flatnonzero(_any_of(batch.service, _FRAME_SERVICES))
+        parts = [events, _frame_event_columns(batch, offset, rows)]
+        states = _state_changes(batch, offset, state, rows)
         if states:
             parts.append(
                 EventColumns.from_rows(
@@ -350,10 +354,12 @@ def _node_prefix(nodes: np.ndarray) -> np.ndarray:
     return table[at.reshape(-1)]
 
 
-def _frame_event_columns(batch: DecodedBatch, off: int) -> EventColumns:
-    """EMCY, NMT and boot-up lines, from columns; rows with a note go through `annotation`."""
+def _frame_event_columns(batch: DecodedBatch, off: int, near: np.ndarray) -> EventColumns:
+    """EMCY, NMT and boot-up lines, from columns; rows with a note go through `annotation`.
+
+    near: the batch's rows of any of _FRAME_SERVICES."""
     fb = batch.frames
-    rows = np.flatnonzero(_any_of(batch.service, _EVENT_SERVICES))
+    rows = near[_any_of(batch.service[near], _EVENT_SERVICES)]
     m = rows.size
     if m == 0:
         return EventColumns.empty()
@@ -421,21 +427,21 @@ def _stable_order(keys: np.ndarray) -> np.ndarray:
     return np.argsort(keys, kind="stable")
 
 
-def _state_changes(batch: DecodedBatch, off: int, state: EventState) -> list[Row]:
+def _state_changes(batch: DecodedBatch, off: int, state: EventState, near: np.ndarray) -> list[Row]:
     """NMT state changes per node (heartbeat, boot-up, guarding); message = the state name.
 
     Frames grouped by node (a stable sort keeps each node's frames in order), only
     those whose state differs from the node's previous frame looked at in Python.
     """
     fb = batch.frames
-    rows = np.flatnonzero(_any_of(batch.service, _STATE_SERVICES) & (fb.dlc > 0))
+    rows = near[_any_of(batch.service[near], _STATE_SERVICES) & (fb.dlc[near] > 0)]
     if rows.size == 0:
         return []
     # per bus and node (node 5 on can1 is another device than node 5 on can0)
     nodes = batch.node[rows].astype(np.int64) | (fb.channel[rows].astype(np.int64) << 8)
     order = _stable_order(nodes)
     rows, nodes = rows[order], nodes[order]
-    code = fb.data[rows, 0] & nmt.STATE_MASK
+    code = fb.data[:, 0][rows] & nmt.STATE_MASK  # (a column, then the rows: ~2x [rows, 0])
     change = np.ones(rows.size, bool)
     change[1:] = (code[1:] != code[:-1]) | (nodes[1:] != nodes[:-1])
     out: list[Row] = []
