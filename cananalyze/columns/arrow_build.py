@@ -36,11 +36,8 @@ def strings(values: list, large: bool = False) -> pa.Array:
     column, lengths from `len`, instead of an encode per value (half the time).
     """
     n = len(values)
-    mask = None  # `in` runs in C: the mask's per-value loop only when there is a None
-    texts = values
-    if None in values:
-        mask = np.fromiter((v is None for v in values), bool, n)
-        texts = ["" if v is None else v for v in values]
+    mask = np.array([v is None for v in values], bool)
+    texts = ["" if v is None else v for v in values] if mask.any() else values
     joined = "".join(texts)
     if joined.isascii():
         data = joined.encode("ascii")

@@ -88,13 +88,7 @@ def error_class(code: int) -> str:
 
 
 def error_classes(codes: np.ndarray) -> list[str]:
-    """`error_class` of each code, by a searchsorted per mask instead of dict probes per code."""
-    pick, names = _class_picks(codes)
-    return list(map(names.__getitem__, pick.tolist()))
-
-
-def _class_picks(codes: np.ndarray) -> tuple[np.ndarray, list[str]]:
-    """(index into names of each code's `error_class`, names).
+    """`error_class` of each code, by a searchsorted per mask instead of dict probes per code.
 
     Masks from the least to the most specific, each hit overwriting: the most
     specific name wins, as `error_class`'s first hit does.
@@ -107,7 +101,7 @@ def _class_picks(codes: np.ndarray) -> tuple[np.ndarray, list[str]]:
         at = np.minimum(np.searchsorted(keys, masked), len(keys) - 1)
         hit = keys[at] == masked
         pick[hit] = at[hit]
-    return pick, names
+    return list(map(names.__getitem__, pick.tolist()))
 
 
 # error code class (high nibble) -> the error register bit it sets besides bit 0 (generic)
@@ -190,7 +184,7 @@ def _class_blocks() -> tuple[np.ndarray, np.ndarray]:
     matrix), built once: a batch's heads are then two gathers, not a search per mask.
 
     Each mask, from the least to the most specific, overwrites the codes it names:
-    a masked key covers the contiguous run of codes under it (as `_class_picks`).
+    a masked key covers the contiguous run of codes under it (as in `error_classes`).
     """
     keys = sorted(ERROR_CLASSES)
     index = np.full(1 << 16, len(keys), np.uint16)  # UNKNOWN_CLASS after the keys
