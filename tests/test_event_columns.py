@@ -290,3 +290,17 @@ def test_finding_events_match_per_row(log):
     findings = [f for b in batches for f in b.findings]
     assert findings
     assert _assert_same_events(batches) > len(findings)
+
+
+def test_stable_order_equals_a_stable_argsort() -> None:
+    """Keys that fit 16 bits sort as uint16 (radix); others (negative, wide) as they are."""
+    from cananalyze.events.build import _stable_order
+
+    rng = np.random.default_rng(7)
+    for keys in (
+        rng.integers(0, 20, 3000) | (rng.integers(0, 3, 3000) << 8),
+        rng.integers(-1, 20, 3000),
+        rng.integers(0, 1 << 20, 3000),
+        np.zeros(0, np.int64),
+    ):
+        assert np.array_equal(_stable_order(keys), np.argsort(keys, kind="stable"))

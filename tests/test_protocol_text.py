@@ -37,6 +37,13 @@ def test_error_classes_equal_error_class_for_every_code():
     assert emcy.error_classes(np.zeros(0, np.int64)) == []
 
 
+def test_emcy_head_block_equals_error_text_for_every_code():
+    """The heads built by lookup tables say what `error_text` says, code by code."""
+    codes = np.arange(1 << 16, dtype=np.int64)
+    got = bytecols.joined_rows([emcy._head_block(codes)], len(codes))
+    assert got == [f"EMCY {emcy.error_text(c)}; " for c in codes.tolist()]
+
+
 def test_object_columns_equal_object_text():
     rng = np.random.default_rng(4)
     index = rng.integers(0, 1 << 16, 5000)

@@ -17,6 +17,10 @@ PAD = 0
 MAX_PARTS = 64  # column blocks the C compaction takes at once (_speedups.c)
 HEX_UPPER = np.frombuffer(b"0123456789ABCDEF", np.uint8)
 HEX_LOWER = np.frombuffer(b"0123456789abcdef", np.uint8)  # as bytes.hex() writes
+# each byte's two hex digits as one uint16 (memory order): one gather per byte, not two
+_HEX_PAIRS = np.ascontiguousarray(
+    np.stack((HEX_LOWER[np.arange(256) >> 4], HEX_LOWER[np.arange(256) & 15]), axis=1)
+).view(np.uint16)[:, 0]
 
 
 def padded_table(texts: list[bytes]) -> np.ndarray:
@@ -76,8 +80,9 @@ def hex_upper(values: np.ndarray) -> np.ndarray:
 def hex_bytes(raw: np.ndarray, length: np.ndarray) -> np.ndarray:
     """`bytes(row[:length]).hex()` of each row of a uint8 matrix, NUL-padded (n, 2 * width)."""
     n, width = raw.shape
-    out = np.stack((HEX_LOWER[raw >> 4], HEX_LOWER[raw & 15]), axis=2).reshape(n, 2 * width)
-    out[np.arange(2 * width)[None, :] >= 2 * np.asarray(length)[:, None]] = PAD
+    out = _HEX_PAIRS[raw].view(np.uint8).reshape(n, 2 * width)
+    # PAD is 0: a multiply blanks the tail (a masked assignment is ~10x slower)
+    out *= np.arange(2 * width)[None, :] < 2 * np.asarray(length)[:, None]
     return out
 
 

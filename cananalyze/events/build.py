@@ -39,6 +39,7 @@ _LEVEL_BY_NAME = {v: k for k, v in LEVEL_NAMES.items()} | {"critical": FATAL, "w
 
 _STATE_SERVICES = np.array((Service.HEARTBEAT, Service.BOOTUP, Service.GUARD_RESPONSE), np.uint8)
 _EVENT_SERVICES = np.array([Service.NMT, Service.EMCY, Service.BOOTUP], np.uint8)
+_FRAME_SERVICES = np.union1d(_STATE_SERVICES, _EVENT_SERVICES).astype(np.uint8)
 
 
 @dataclass
@@ -285,8 +286,11 @@ def batch_event_columns(
         events = EventColumns.concat([events, finding_event_columns(batch.findings, offset)])
     states: list[Row] = []
     if n:
-        parts = [events, _frame_event_columns(batch, offset)]
-        states = _state_changes(batch, offset, state)
+        # one scan of the batch for the rows of both (a few percent of it), each then
+        # picks its own from those
+        rows = np.flatnonzero(_any_of(batch.service, _FRAME_SERVICES))
+        parts = [events, _frame_event_columns(batch, offset, rows)]
+        states = _state_changes(batch, offset, state, rows)
         if states:
             parts.append(
                 EventColumns.from_rows(
@@ -343,10 +347,19 @@ def _marked(keys, n: int) -> np.ndarray:
     return mask
 
 
-def _frame_event_columns(batch: DecodedBatch, off: int) -> EventColumns:
-    """EMCY, NMT and boot-up lines, from columns; rows with a note go through `annotation`."""
+def _node_prefix(nodes: np.ndarray) -> np.ndarray:
+    """The "node 5: " of each row as a NUL-padded byte block (nothing for a row without a node)."""
+    u, at = np.unique(nodes, return_inverse=True)
+    table = bytecols.padded_table([f"node {k}: ".encode() if k >= 0 else b"" for k in u.tolist()])
+    return table[at.reshape(-1)]
+
+
+def _frame_event_columns(batch: DecodedBatch, off: int, near: np.ndarray) -> EventColumns:
+    """EMCY, NMT and boot-up lines, from columns; rows with a note go through `annotation`.
+
+    near: the batch's rows of any of _FRAME_SERVICES."""
     fb = batch.frames
-    rows = np.flatnonzero(_any_of(batch.service, _EVENT_SERVICES))
+    rows = near[_any_of(batch.service[near], _EVENT_SERVICES)]
     m = rows.size
     if m == 0:
         return EventColumns.empty()
@@ -354,12 +367,13 @@ def _frame_event_columns(batch: DecodedBatch, off: int) -> EventColumns:
     service = batch.service[rows]
     node = batch.node[rows]
     dlc = fb.dlc[rows]
-    data = fb.data[rows]
+    data = np.take(fb.data, rows, axis=0)  # (~10x numpy's 2-D fancy indexing)
     kind = np.full(m, ec.BOOTUP, np.uint8)
     kind[service == Service.EMCY] = ec.EMCY
     kind[service == Service.NMT] = ec.NMT
     level = np.full(m, INFO, np.int8)
-    text = np.full(m, nmt.BOOTUP_TEXT, object)
+    text = np.empty(m, object)  # every row is set below (np.full of an object is slow)
+    text[kind == ec.BOOTUP] = nmt.BOOTUP_TEXT
     # dict.get: a LazyNotes must not realise its SDO notes (they are on SDO rows only)
     slow = np.zeros(m, bool)
     if len(dict.keys(notes)):
@@ -369,9 +383,12 @@ def _frame_event_columns(batch: DecodedBatch, off: int) -> EventColumns:
         slow |= _marked(fb.long_data, len(fb))[rows]
     prefixed = (node >= 0) & (service != Service.NMT)  # "node 5: " still to prepend
     at = np.flatnonzero((kind == ec.EMCY) & ~slow)
-    if at.size:
-        text[at] = bytecols.joined_rows(emcy.text_columns(data[at], dlc[at]), at.size)
-        reset = (dlc[at] >= emcy.MIN_BYTES) & (data[at, 0] == 0) & (data[at, 1] == 0)
+    if at.size:  # "node 5: " in the same byte columns, not one format per event after
+        raised = np.take(data, at, axis=0)
+        parts = [_node_prefix(node[at]), *emcy.text_columns(raised, dlc[at])]
+        text[at] = bytecols.joined_rows(parts, at.size)
+        prefixed[at] = False
+        reset = (dlc[at] >= emcy.MIN_BYTES) & (raised[:, 0] == 0) & (raised[:, 1] == 0)
         level[at[~reset]] = ERROR
     for k in np.flatnonzero((kind == ec.NMT) & ~slow).tolist():
         text[k] = nmt.command_text(nmt.command_fields(bytes(data[k, : dlc[k]])))
@@ -402,21 +419,29 @@ def _frame_event_columns(batch: DecodedBatch, off: int) -> EventColumns:
     )
 
 
-def _state_changes(batch: DecodedBatch, off: int, state: EventState) -> list[Row]:
+def _stable_order(keys: np.ndarray) -> np.ndarray:
+    """np.argsort(keys, kind="stable"); as uint16 when the keys fit, which numpy sorts by
+    radix (several times faster than an int64 merge sort, the same order)."""
+    if keys.size and int(keys.min()) >= 0 and int(keys.max()) < 1 << 16:
+        keys = keys.astype(np.uint16)
+    return np.argsort(keys, kind="stable")
+
+
+def _state_changes(batch: DecodedBatch, off: int, state: EventState, near: np.ndarray) -> list[Row]:
     """NMT state changes per node (heartbeat, boot-up, guarding); message = the state name.
 
     Frames grouped by node (a stable sort keeps each node's frames in order), only
     those whose state differs from the node's previous frame looked at in Python.
     """
     fb = batch.frames
-    rows = np.flatnonzero(_any_of(batch.service, _STATE_SERVICES) & (fb.dlc > 0))
+    rows = near[_any_of(batch.service[near], _STATE_SERVICES) & (fb.dlc[near] > 0)]
     if rows.size == 0:
         return []
     # per bus and node (node 5 on can1 is another device than node 5 on can0)
     nodes = batch.node[rows].astype(np.int64) | (fb.channel[rows].astype(np.int64) << 8)
-    order = np.argsort(nodes, kind="stable")
+    order = _stable_order(nodes)
     rows, nodes = rows[order], nodes[order]
-    code = fb.data[rows, 0] & nmt.STATE_MASK
+    code = fb.data[:, 0][rows] & nmt.STATE_MASK  # (a column, then the rows: ~2x [rows, 0])
     change = np.ones(rows.size, bool)
     change[1:] = (code[1:] != code[:-1]) | (nodes[1:] != nodes[:-1])
     out: list[Row] = []

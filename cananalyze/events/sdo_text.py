@@ -70,20 +70,25 @@ def sdo_messages(fields) -> list[str] | None:
         for i, c in zip(first.tolist(), a["name_code"][first].tolist(), strict=True)
     ]
     head = bytecols.padded_table([h.encode() for h in heads])[inv.reshape(-1)]
-    # the tail: " = v (0xV) ok", " = v ok", " data hex ok" or " ok"
+    # the tail: " = v (0xV) ok", " = v ok", " data hex ok" or " ok"; a block no row
+    # needs is left out (a polled bus's answers are often all data, or all values)
     v, none = a["value_int"], a["value_none"]
     wide = ~none & (np.abs(v) > 9)
     has_data = none & (a["data_len"] > 0)
     label = _LABELS[np.where(none, np.where(has_data, 2, 0), 1)]
-    data = bytecols.hex_bytes(a["raw"], np.where(has_data, a["data_len"], 0))
-    dec = bytecols.decimal(v)
-    dec[none] = bytecols.PAD
-    hx = bytecols.hex_upper(v)
-    hx[~wide] = bytecols.PAD
-    open_hex = _OPEN_HEX[wide.astype(np.intp)]
-    close_hex = np.where(wide, ord(")"), bytecols.PAD).astype(np.uint8)[:, None]
-    ok = bytecols.repeat(b" ok", n)
-    parts = [head, label, data, dec, open_hex, hx, close_hex, ok]
+    parts = [head, label]
+    if has_data.any():
+        parts.append(bytecols.hex_bytes(a["raw"], np.where(has_data, a["data_len"], 0)))
+    if not none.all():
+        dec = bytecols.decimal(v)
+        dec[none] = bytecols.PAD
+        parts.append(dec)
+    if wide.any():
+        hx = bytecols.hex_upper(v)
+        hx[~wide] = bytecols.PAD
+        close_hex = np.where(wide, ord(")"), bytecols.PAD).astype(np.uint8)[:, None]
+        parts += [_OPEN_HEX[wide.astype(np.intp)], hx, close_hex]
+    parts.append(bytecols.repeat(b" ok", n))
     messages = bytecols.joined_rows(parts, n)
     for k, rec in fields.aborted.items():  # aborted pairs keep their own record
         messages[k] = sdo_message(

@@ -8,6 +8,8 @@ the checks' findings and the dashboard use those pieces too.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ..columns import bytecols
@@ -172,6 +174,38 @@ def decoded_words(decoded: dict) -> str:
     return decoded.get("meaning") or ", ".join(decoded.get("flags") or []) or str(decoded)
 
 
+_HEAD_LEAD = np.frombuffer(b"EMCY 0x", np.uint8)
+_NIBBLES = np.array([12, 8, 4, 0], np.int64)
+
+
+@functools.cache
+def _class_blocks() -> tuple[np.ndarray, np.ndarray]:
+    """(index of every 16-bit code's class, " {error_class}; " of each as a NUL-padded
+    matrix), built once: a batch's heads are then two gathers, not a search per mask.
+
+    Each mask, from the least to the most specific, overwrites the codes it names:
+    a masked key covers the contiguous run of codes under it (as in `error_classes`).
+    """
+    keys = sorted(ERROR_CLASSES)
+    index = np.full(1 << 16, len(keys), np.uint16)  # UNKNOWN_CLASS after the keys
+    for mask in (*reversed(_MASKS), 0xFFFF):
+        for i, key in enumerate(keys):
+            if key & mask == key:
+                index[key : (key | (~mask & 0xFFFF)) + 1] = i
+    names = [ERROR_CLASSES[k] for k in keys] + [UNKNOWN_CLASS]
+    return index, bytecols.padded_table([f" {name}; ".encode() for name in names])
+
+
+def _head_block(code: np.ndarray) -> np.ndarray:
+    """The "EMCY {error_text}; " of each code as a NUL-padded block: the four hex digits and
+    the class by numpy (a format per distinct code was half of `text_columns`)."""
+    index, blocks = _class_blocks()
+    classes = blocks[index[code]]
+    digits = bytecols.HEX_UPPER[(code[:, None] >> _NIBBLES) & 15]  # _ERROR's 0x{:04X}
+    lead = np.broadcast_to(_HEAD_LEAD, (len(code), _HEAD_LEAD.size))
+    return np.concatenate((lead, digits, classes), axis=1)
+
+
 def text_columns(data: np.ndarray, dlc: np.ndarray) -> list[np.ndarray]:
     """`text` of m EMCY frames as column blocks (NUL-padded uint8 matrices to put side
     by side and compact); short frames get `annotation`'s malformed text.
@@ -181,14 +215,9 @@ def text_columns(data: np.ndarray, dlc: np.ndarray) -> list[np.ndarray]:
     """
     dlc = np.asarray(dlc).astype(np.int64)
     code = data[:, 0].astype(np.int64) | data[:, 1].astype(np.int64) << 8
-    codes, code_at = np.unique(code, return_inverse=True)
-    heads = [
-        f"EMCY {_ERROR.format(c, cls)}; ".encode()
-        for c, cls in zip(codes.tolist(), error_classes(codes), strict=True)
-    ]
     regs, reg_at = np.unique(data[:, 2], return_inverse=True)
     registers = [f"{register_text(r)}; mfr ".encode() for r in regs.tolist()]
-    head = bytecols.padded_table(heads)[code_at.reshape(-1)]
+    head = _head_block(code)
     register = bytecols.padded_table(registers)[reg_at.reshape(-1)]
     shown = np.clip(np.minimum(dlc, 8) - MIN_BYTES, 0, 5)
     mfr = bytecols.hex_bytes(np.ascontiguousarray(data[:, MIN_BYTES:8]), shown)

@@ -34,7 +34,9 @@ class SdoProcessor:
 
     def _rows(self, batch: DecodedBatch) -> np.ndarray:
         svc = batch.service
-        is_sdo = (svc == Service.SDO_REQUEST) | (svc == Service.SDO_RESPONSE)
+        # SDO_RESPONSE follows SDO_REQUEST: one subtraction (wrapping in uint8) and a compare
+        since = (svc - np.uint8(Service.SDO_REQUEST)).astype(np.uint8, copy=False)
+        is_sdo = since <= np.uint8(1)
         extra = self.tracker.extra_cob_ids()
         if extra:
             plain = (batch.frames.flags & (FLAG_EXT | FLAG_ERR | FLAG_RTR)) == 0
@@ -52,8 +54,7 @@ class SdoProcessor:
         n = len(fb)
         rows = self._rows(batch)
         if self.fast and len(rows) > 1 and not self._may_learn(batch, rows):
-            self._cur_rows = rows.tolist()
-            self._cur_rows_arr = rows  # (np.asarray of the list again was 8 % of the SDO time)
+            self._cur_rows_arr = rows
             self._process_fast(batch, rows)
             self._fill(batch)
             self._fill_strays(batch)
@@ -107,36 +108,30 @@ class SdoProcessor:
         tracker = self.tracker
         fb = batch.frames
         p = fastpath.plan(batch, rows, tracker.timeout, tracker.extra_cob_ids())
-        row_of = self._cur_rows
-        partner = p.partner.tolist()
-        cand = p.cand.tolist()
-        is_partner = p.is_partner.tolist()
-        is_stray = p.stray.tolist()
         strays = np.flatnonzero(p.stray).tolist()
         self._strays = strays
         self._stray_chunks: list[tuple[int, int]] = []  # (lo, hi) in strays: taken
-        req_cob = p.req_cob.tolist()
         slow_at = np.flatnonzero(p.static_slow).tolist()
-        t = fb.t[rows].tolist()
-        req_of = np.full(len(row_of), -1, np.int64)
+        m = len(rows)
+        req_of = np.full(m, -1, np.int64)
         req_of[p.partner[p.cand]] = np.flatnonzero(p.cand)
         self._req_of_arr = req_of
         answers_arr = np.flatnonzero(p.is_partner)
         answers = answers_arr.tolist()
         self._answers = answers_arr
         # how each answer's transfer ends, for the tracker's `_ended` (a late abort joins it)
-        self._ended_cob = p.req_cob[answers_arr].tolist()
-        self._ended_how = list(map(_ENDED.__getitem__, p.aborted[answers_arr].tolist()))
+        self._ended_cob = p.req_cob[answers_arr]
+        self._ended_aborted = p.aborted[answers_arr]
         self._chunks: list[tuple[int, int, int]] = []  # (first record slot, lo, hi) in answers
         rejected: list[int] = []  # answers whose request had to go through the tracker (sorted)
         rejected_set: set[int] = set()
-        m = len(row_of)
-        # candidate requests and answers: where advance() could end a pending transfer
-        cp = np.flatnonzero(p.cand | p.is_partner | p.stray)
-        self._cp = cp.tolist()
-        self._cp_max = np.maximum.accumulate(fb.t[rows][cp]).tolist() if cp.size else []
+        self._cp: tuple[list[int], list[float]] | None = None  # built by _candidates if asked
         self._cand_of: dict[int, list[int]] = {}
         self._plan = p
+        self._plan_t = fb.t[rows]
+        # per-position lists, built only when a frame is looked at alone: a quiet batch
+        # is taken in one stretch and never reads them
+        looked = False
         pos = 0
         si = 0
         while pos < m:
@@ -161,6 +156,17 @@ class SdoProcessor:
                     break
             i = pos
             pos += 1
+            if not looked:
+                looked = True
+                row_of, partner, cand, is_partner, is_stray, req_cob, t = (
+                    rows.tolist(),
+                    p.partner.tolist(),
+                    p.cand.tolist(),
+                    p.is_partner.tolist(),
+                    p.stray.tolist(),
+                    p.req_cob.tolist(),
+                    self._plan_t.tolist(),
+                )
             if cand[i]:
                 if tracker._pending:
                     tracker.advance(t[i])
@@ -198,7 +204,7 @@ class SdoProcessor:
         pending channel. Before it, stepping frame by frame would only take the pairs
         (and strays) as they are.
         """
-        cp, cp_max, timeout = self._cp, self._cp_max, self.tracker.timeout
+        (cp, cp_max), timeout = self._candidates(), self.tracker.timeout
         j0 = bisect.bisect_left(cp, pos)
         for cob, xfer in self.tracker._pending.items():
             # the first running maximum x with x - t_last > timeout: the tracker's own test
@@ -217,11 +223,25 @@ class SdoProcessor:
                 stop = same[k]
         return max(stop, pos)
 
+    def _candidates(self) -> tuple[list[int], list[float]]:
+        """Positions of the candidate requests, answers and strays (where advance() could end
+        a pending transfer), and the running maximum of their times; built once per batch."""
+        if self._cp is None:
+            p = self._plan
+            cp = np.flatnonzero(p.cand | p.is_partner | p.stray)
+            cp_max = np.maximum.accumulate(self._plan_t[cp]).tolist() if cp.size else []
+            self._cp = (cp.tolist(), cp_max)
+        return self._cp
+
     def _take(self, batch: DecodedBatch, lo: int, hi: int) -> None:
         """Reserve the record slots of the fast pairs closed by answers[lo:hi] (filled by _fill)."""
         self._chunks.append((len(batch.records), lo, hi))
         batch.records.extend([None] * (hi - lo))  # type: ignore[list-item]
-        ended = zip(self._ended_cob[lo:hi], self._ended_how[lo:hi], strict=True)
+        cob, aborted = self._ended_cob[lo:hi], self._ended_aborted[lo:hi]
+        if hi - lo > 16:  # only each channel's last answer tells: one update per channel
+            cob, last = np.unique(cob[::-1], return_index=True)
+            aborted = aborted[::-1][last]
+        ended = zip(cob.tolist(), map(_ENDED.__getitem__, aborted.tolist()), strict=True)
         self.tracker._ended.update(ended)
 
     def _fill(self, batch: DecodedBatch) -> None:

@@ -446,7 +446,7 @@ class TableSink(OutputSink):
         if np.isnan(t).any() or (horizon is not None and horizon != horizon):
             order, cut = _event_sort_py(t.tolist(), key.tolist(), horizon)
         else:
-            order = np.lexsort((np.arange(n), key, t))
+            order = np.lexsort((key, t))  # stable: ties stay in the order they came
             cut = n if horizon is None else int(np.searchsorted(t[order], horizon, "left"))
         pending = pending.take(order)
         key = key[order]
