@@ -402,17 +402,20 @@ def test_libdeflate_into_the_buffer_same_outcome_as_zlib(written, monkeypatch):
         size = struct.unpack_from("<L", data, pos + 8)[0]
         payloads.append(data[pos + 32 : pos + size])
     good = zlib.compress(b"x" * 5000)
-    cases = payloads + [
-        good,
-        good + b"trailing",  # bytes after the stream: ignored by zlib too
-        good[:-2],  # the checksum cut: incomplete
-        good[:3],
-        b"\x78\x9c" + b"\xff" * 40,  # corrupt
-        b"\x08\x1d" + good[2:],  # a 256-byte window (header byte not 0x78): the reference
-        zlib.compress(bytes(150_000), 9),
-        zlib.compress(bytes(300_000), 9),
-        b"",
-    ]
+    cases = (
+        payloads
+        + [
+            good,
+            good + b"trailing",  # bytes after the stream: ignored by zlib too
+            good[:-2],  # the checksum cut: incomplete
+            good[:3],
+            b"\x78\x9c" + b"\xff" * 40,  # corrupt
+            b"\x08\x1d" + good[2:],  # a 256-byte window (header byte not 0x78): the reference
+            zlib.compress(bytes(150_000), 9),
+            zlib.compress(bytes(300_000), 9),
+            b"",
+        ]
+    )
     for payload in cases:
         ref = blf._inflate(payload, blf.MAX_CONTAINER)
         true = len(ref[0])
