@@ -442,3 +442,16 @@ def test_buffer_grows_and_keeps_the_tail(monkeypatch):
     assert got.inflate(bytes(16) + zlib.compress(big), 16, len(big)) is None
     got.add(b"end")
     assert bytes(got.view[: got.fill]) == b"tail!" + big + b"end"
+
+
+def test_reads_in_threads_at_once(written):
+    """Each read has its own inflate state (a libdeflate decompressor is not shared):
+    BLF files read in several threads at once give the rows of one read alone."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    ref, _, _ = run(blf.read, written)
+    with ThreadPoolExecutor(4) as pool:
+        got = list(pool.map(lambda _: run(blf.read, written)[0], range(8)))
+    for b in got:
+        for col in ("t", "can_id", "flags", "dlc", "data", "channel", "line"):
+            assert (getattr(b, col) == getattr(ref, col)).all(), col

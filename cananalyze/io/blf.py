@@ -526,23 +526,22 @@ class _Libdeflate:
     new bytes object, copied there again), and inflates these containers in about
     0.6 of python-isal's time. ctypes releases the GIL for the call. Only a plain
     stream (32 KiB window, no preset dictionary) is taken, and anything it refuses
-    is redone by `_inflate`: both give the same bytes and problems.
+    is redone by `_inflate`: both give the same bytes and problems. One per read
+    (`_Inflated`): a decompressor must not be shared between threads.
     """
 
     def __init__(self, lib: ctypes.CDLL) -> None:
-        alloc = lib.libdeflate_alloc_decompressor
-        alloc.restype = ctypes.c_void_p
-        alloc.argtypes = []
-        self._state = alloc()
+        self._lib = lib
+        self._state = lib.libdeflate_alloc_decompressor()
         if not self._state:
-            raise OSError("libdeflate_alloc_decompressor failed")
-        fn = lib.libdeflate_zlib_decompress
-        fn.restype = ctypes.c_int
-        fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p]
-        fn.argtypes += [ctypes.c_size_t, ctypes.POINTER(ctypes.c_size_t)]
-        self._fn = fn
+            raise MemoryError("libdeflate_alloc_decompressor failed")
         self._got = ctypes.c_size_t()
         self._got_ref = ctypes.byref(self._got)
+
+    def __del__(self) -> None:
+        if getattr(self, "_state", None):
+            self._lib.libdeflate_free_decompressor(self._state)
+            self._state = None
 
     def inflate(self, src: bytes, start: int, dest: int, room: int) -> int | None:
         """Inflate ``src[start:]`` (one zlib stream) to address ``dest``, at most
@@ -551,19 +550,30 @@ class _Libdeflate:
         if type(src) is not bytes or len(src) < start + 6 or src[start] != 0x78:
             return None  # 0x78: deflate with a 32 KiB window (and the cast needs bytes)
         at = ctypes.cast(src, ctypes.c_void_p).value + start  # type: ignore[operator]
-        if self._fn(self._state, at, len(src) - start, dest, room, self._got_ref) != 0:
+        fn = self._lib.libdeflate_zlib_decompress
+        if fn(self._state, at, len(src) - start, dest, room, self._got_ref) != 0:
             return None  # not LIBDEFLATE_SUCCESS: bad data, or more than `room`
         return self._got.value
 
 
-def _load_libdeflate() -> _Libdeflate | None:
+def _load_libdeflate() -> ctypes.CDLL | None:
+    """The system's libdeflate with the signatures used here, or None."""
     name = ctypes.util.find_library("deflate")
     if name is None:
         return None
     try:
-        return _Libdeflate(ctypes.CDLL(name))
+        lib = ctypes.CDLL(name)
+        lib.libdeflate_alloc_decompressor.restype = ctypes.c_void_p
+        lib.libdeflate_alloc_decompressor.argtypes = []
+        lib.libdeflate_free_decompressor.restype = None
+        lib.libdeflate_free_decompressor.argtypes = [ctypes.c_void_p]
+        fn = lib.libdeflate_zlib_decompress
+        fn.restype = ctypes.c_int
+        fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p]
+        fn.argtypes += [ctypes.c_size_t, ctypes.POINTER(ctypes.c_size_t)]
     except (OSError, AttributeError):  # missing, or too old (no zlib decompress)
         return None
+    return lib
 
 
 _libdeflate = _load_libdeflate()
@@ -587,6 +597,7 @@ class _Inflated:
         self.size = 0  # bytes of containers since the last walk
         self.pieces = 0  # containers since the last walk
         self._alloc(PARSE_BYTES + (1 << 20))
+        self._libdeflate = _Libdeflate(_libdeflate) if _libdeflate is not None else None
 
     def _alloc(self, n: int) -> None:
         buf = bytearray(n)
@@ -619,13 +630,13 @@ class _Inflated:
         or too big (`_inflate`). ``size``: what the container says it inflates to."""
         n = len(body) - start
         if (
-            _libdeflate is not None
+            self._libdeflate is not None
             and 0 < size <= MAX_CONTAINER
             and n * _DEFLATE_RATIO <= MAX_CONTAINER
         ):
             room = min(size, n * _DEFLATE_RATIO)  # bounded as in `_inflate`
             self._room(room)
-            got = _libdeflate.inflate(body, start, self.addr + self.fill, room)
+            got = self._libdeflate.inflate(body, start, self.addr + self.fill, room)
             if got is not None:
                 self._added(got)
                 return None
