@@ -1,7 +1,8 @@
 """Vector BLF binary logs: CAN (FD) message and extended error records in LOG_CONTAINERs.
 
 python-can's BLFReader unpacks one struct and builds one Message per frame. Here
-containers are decompressed (python-isal or zlib) and about 2 MiB of their bytes
+containers are decompressed (the system's libdeflate straight into one reused
+buffer when it is there, else python-isal or zlib) and about 2 MiB of their bytes
 walked at once (records may straddle containers). With the compiled helper, its
 `blf_records` walks the objects and writes every CAN record straight into the
 frame columns, without the GIL (`_parse_c`). Without it (`_parse_py`), a short
