@@ -11,7 +11,6 @@ from conftest import ROOT, SAMPLES, real_file
 from readers_util import run
 
 from cananalyze.errors import InputError
-from cananalyze.frames import FrameBatch, concat
 from cananalyze.io import asc, candump
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
@@ -227,41 +226,3 @@ def test_chunk_of_many_event_lines(monkeypatch) -> None:
     data = HEADER + b"\n".join(lines) + b"\n"
     assert assert_same(data, batch_size=500) == 1001
     assert -1 in results  # the first room was too small, and the second run gave the rows
-
-
-def test_batches_cut_views_in_order_with_long_payloads():
-    """`_Batches`: rows written in place or copied in come out in order, cut into batches
-    of exactly `size` rows (the last shorter), CAN FD payloads on their rows, whatever
-    the block has to move."""
-    out = asc._Batches(7)
-    out.slack = 5  # blocks of 12 rows: full after a few parts, so rows move often
-    out.block = out._new(12)
-    expect, got = [], []
-    line = 0
-    for k in range(1, 40):
-        n = k % 9
-        if k % 3:  # in place, as the compiled pass writes them
-            cols = out.columns(n)
-            cols.t[:] = cols.line[:] = np.arange(line, line + n)
-            for c in ("can_id", "flags", "dlc", "channel"):
-                getattr(cols, c)[:] = 0
-            cols.data[:] = 0
-            out.commit(n)
-            long = {}
-        else:  # copied in, with payloads over 8 bytes on some rows
-            b = FrameBatch.allocate(n)
-            b.t[:] = b.line[:] = np.arange(line, line + n)
-            b.long_data = {r: bytes([line + r]) * 12 for r in range(n) if r % 2}
-            out.add(b)
-            long = b.long_data
-        expect += [(line + r, long.get(r)) for r in range(n)]
-        line += n
-        while out.pending >= out.size:
-            got.append(out.cut())
-    if out.pending:
-        got.append(out.cut())
-    assert all(len(b) == 7 for b in got[:-1]) and 0 < len(got[-1]) <= 7
-    whole = concat(got)
-    assert whole.line.tolist() == [e[0] for e in expect]
-    assert whole.t.tolist() == [float(e[0]) for e in expect]
-    assert whole.long_data == {i: e[1] for i, e in enumerate(expect) if e[1] is not None}
