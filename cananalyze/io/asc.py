@@ -18,7 +18,6 @@ previous event, so they are summed.
 from __future__ import annotations
 
 import re
-from collections import deque
 from collections.abc import Iterator
 from typing import BinaryIO
 
@@ -224,102 +223,27 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     sink = RowSink(ctx)
     sink.size = 1 << 62  # flushed per chunk here, merged with the bulk rows by line number
     parser = _LineParser(ctx, sink)
-    out = _Batches(ctx.batch_size)
-    for _ in _chunks(stream, parser, out):
-        while out.pending >= out.size:
-            b = out.cut()
-            b.channels = tuple(sink.channels)
-            yield b
-    if out.pending:
-        b = out.cut()
-        b.channels = tuple(sink.channels)
-        yield b
+    pending: list[FrameBatch] = []
+    pending_rows = 0
+    for part in _chunks(stream, parser):
+        pending.append(part)
+        pending_rows += len(part)
+        while pending_rows >= ctx.batch_size:
+            merged = concat(pending) if len(pending) > 1 else pending[0]
+            merged.channels = tuple(sink.channels)
+            out, rest = (
+                merged.take(slice(0, ctx.batch_size)),
+                merged.take(slice(ctx.batch_size, None)),
+            )
+            pending, pending_rows = ([rest] if len(rest) else []), len(rest)
+            yield out
+    if pending:
+        out = concat(pending) if len(pending) > 1 else pending[0]
+        out.channels = tuple(sink.channels)
+        yield out
 
 
-_COLS = ("t", "can_id", "flags", "dlc", "data", "channel", "line")
-
-
-class _Batches:
-    """The rows not yet given out, in a block with a chunk's worth of rows of slack.
-
-    The compiled pass writes a chunk's frames straight after the rows before
-    (`columns`, `commit`); other rows are copied in (`add`). A full batch is a view
-    of the block's next `size` rows, and only rows not yet given out move when the
-    block has no room for the next chunk: no per-chunk columns joined and cut again.
-    """
-
-    def __init__(self, size: int) -> None:
-        self.size = max(1, int(size))
-        self.slack = CHUNK // 15 + 1  # a chunk's frame lines at most (`_c_fast_chunk`)
-        self.start = 0  # first row not given out
-        self.fill = 0  # rows written
-        self.block = self._new(self.size + self.slack)
-        self.long: deque[tuple[int, bytes]] = deque()  # (block row, payload): CAN FD rows
-
-    @property
-    def pending(self) -> int:
-        return self.fill - self.start
-
-    @staticmethod
-    def _new(rows: int) -> FrameBatch:
-        return FrameBatch(
-            t=np.empty(rows, np.float64),
-            can_id=np.empty(rows, np.uint32),
-            flags=np.empty(rows, np.uint8),
-            dlc=np.empty(rows, np.uint8),
-            data=np.empty((rows, 8), np.uint8),
-            channel=np.empty(rows, np.uint16),
-            line=np.empty(rows, np.int64),
-        )
-
-    def _room(self, n: int) -> None:
-        """At least n free rows after `fill`: else a new block, the pending rows moved."""
-        if self.fill + n <= len(self.block):
-            return
-        old, keep = self.block, self.pending
-        self.block = self._new(max(keep + n, self.size + self.slack))
-        for col in _COLS:
-            getattr(self.block, col)[:keep] = getattr(old, col)[self.start : self.fill]
-        self.long = deque((r - self.start, v) for r, v in self.long)
-        self.start, self.fill = 0, keep
-
-    def columns(self, n: int) -> FrameBatch:
-        """The next n rows of the block, as views, for the compiled pass to write."""
-        self._room(n)
-        b = self.block
-        at = slice(self.fill, self.fill + n)
-        return FrameBatch(
-            b.t[at], b.can_id[at], b.flags[at], b.dlc[at], b.data[at], b.channel[at], b.line[at]
-        )
-
-    def commit(self, n: int) -> None:
-        """n rows were written at the start of `columns`' views."""
-        self.fill += n
-
-    def add(self, batch: FrameBatch) -> None:
-        """Copy a batch's rows in."""
-        n = len(batch)
-        self._room(n)
-        for col in _COLS:
-            getattr(self.block, col)[self.fill : self.fill + n] = getattr(batch, col)
-        for row in sorted(batch.long_data):  # kept in row order: `cut` takes from the front
-            self.long.append((self.fill + row, batch.long_data[row]))
-        self.fill += n
-
-    def cut(self) -> FrameBatch:
-        """The next `size` pending rows (fewer at the end) as a batch: views of the block."""
-        a, z = self.start, self.start + min(self.size, self.pending)
-        b = self.block
-        out = FrameBatch(*(getattr(b, col)[a:z] for col in _COLS))
-        while self.long and self.long[0][0] < z:
-            r, payload = self.long.popleft()
-            out.long_data[r - a] = payload
-        self.start = z
-        return out
-
-
-def _chunks(stream: BinaryIO, parser: _LineParser, out: _Batches) -> Iterator[None]:
-    """Each chunk's frames into `out`, in file order; yields after each chunk."""
+def _chunks(stream: BinaryIO, parser: _LineParser) -> Iterator[FrameBatch]:
     sink = parser.sink
     line_base = 0
     carry = b""  # the partial line after a chunk's last newline
@@ -378,7 +302,7 @@ def _chunks(stream: BinaryIO, parser: _LineParser, out: _Batches) -> Iterator[No
                 parser.line(first_line + i, raw.rstrip("\r"))
             merged = sink.flush()
         else:
-            n_lines, merged = _c_fast_chunk(C, parser, chunk, first_line, out)
+            n_lines, merged = _c_fast_chunk(C, parser, chunk, first_line)
             if n_lines < 0:  # a header line in the chunk, or a base/time mode the C parser leaves
                 starts = np.empty(C.count_lines(chunk), np.int64)
                 ends = np.empty(starts.size, np.int64)
@@ -387,17 +311,13 @@ def _chunks(stream: BinaryIO, parser: _LineParser, out: _Batches) -> Iterator[No
                 merged = _c_chunk(C, parser, chunk, starts, ends, first_line)
             line_base += n_lines
         if merged is not None:
-            out.add(merged)
-        yield None
+            merged.channels = tuple(sink.channels)
+            yield merged
 
 
-def _c_fast_chunk(
-    C, parser: _LineParser, chunk, first_line: int, out: _Batches
-) -> tuple[int, FrameBatch | None]:
+def _c_fast_chunk(C, parser: _LineParser, chunk, first_line: int) -> tuple[int, FrameBatch | None]:
     """The usual chunk (hex base, absolute times, no `base` header line) in one C pass:
     (lines in it, its frames or None). (-1, None) leaves the chunk to `_c_chunk`.
-    The frames are written straight into `out` (and None returned) when they are the
-    chunk's only rows, the usual case; else they are merged with the others here.
 
     The C pass cuts the lines, parses the classic data-frame lines straight into
     compact columns and lists the others, which go through the line parser in file
@@ -410,16 +330,13 @@ def _c_fast_chunk(
     # lines; a chunk with more of those (hostile, or all events) is counted and run again
     rows, others = len(chunk) // 15 + 1, len(chunk) // 256 + 64
     for _ in range(2):
-        cols = out.columns(rows)
-        t, can_id, flags, dlc, data, line = (
-            cols.t,
-            cols.can_id,
-            cols.flags,
-            cols.dlc,
-            cols.data,
-            cols.line,
-        )
-        chan = cols.channel  # the log's channel numbers first, then their indices
+        t = np.empty(rows, np.float64)
+        chan = np.empty(rows, np.uint16)
+        can_id = np.empty(rows, np.uint32)
+        flags = np.empty(rows, np.uint8)
+        dlc = np.empty(rows, np.uint8)
+        data = np.empty((rows, 8), np.uint8)
+        line = np.empty(rows, np.int64)
         slow = np.empty((others, 3), np.int64)
         first_row = np.full(1000, -1, np.int64)  # channel numbers have 1-3 digits
         n_lines, n, n_slow, last_base = C.asc_chunk(
@@ -459,19 +376,25 @@ def _c_fast_chunk(
             where = np.array([s[0] for s in state_at], np.int64)
             k = np.searchsorted(where, line, side="left") - 1  # last Begin Triggerblock before
             t += np.array([s[1] for s in state_at], np.float64)[k]
-        channel = chan[:n]
         if len(nums) == 1:
-            channel[:] = parser.chan_of[str(nums[0])]
+            channel = np.full(n, parser.chan_of[str(nums[0])], np.uint16)
         else:
             lut = np.zeros(max(nums) + 1, np.uint16)
             for num in nums:
                 lut[num] = parser.chan_of[str(num)]
-            channel[:] = lut[channel]
+            channel = lut[chan[:n]]
+        parts.append(
+            FrameBatch(
+                t=t,
+                can_id=can_id[:n],
+                flags=flags[:n],
+                dlc=dlc[:n],
+                data=data[:n],
+                channel=channel,
+                line=line,
+            )
+        )
         parser.ctx.frames += n
-        if not parts:  # the chunk's only rows: where they were written
-            out.commit(n)
-            return n_lines, None
-        parts.append(cols.take(slice(0, n)))
     if not parts:
         return n_lines, None
     if len(parts) == 1:
