@@ -559,11 +559,17 @@ class _Libdeflate:
 
 def _load_libdeflate() -> ctypes.CDLL | None:
     """The system's libdeflate with the signatures used here, or None."""
-    name = ctypes.util.find_library("deflate")
-    if name is None:
-        return None
+    try:  # the usual soname first: find_library runs ldconfig (a subprocess) on Linux
+        lib = ctypes.CDLL("libdeflate.so.0")
+    except OSError:
+        name = ctypes.util.find_library("deflate")
+        if name is None:
+            return None
+        try:
+            lib = ctypes.CDLL(name)
+        except OSError:
+            return None
     try:
-        lib = ctypes.CDLL(name)
         lib.libdeflate_alloc_decompressor.restype = ctypes.c_void_p
         lib.libdeflate_alloc_decompressor.argtypes = []
         lib.libdeflate_free_decompressor.restype = None
