@@ -231,25 +231,35 @@ def _bulk_log_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, chans
     return (t, can_id, flags, dlc, data, channel), ~good
 
 
-def _c_lines(C, text, chans: _Channels, out: _Pending):
+def _c_lines(C, text, chans: _Channels):
     """The compiled parser over a chunk: (starts, ends, columns, mask of lines it left).
 
     Interfaces are numbered in the order their first parsed line comes, as
     `_bulk_log_lines` numbers them: the C loop knows the names seen so far, and a
     line on a new one (status 1) gets it named here, then the lines still waiting
-    are parsed again with it, a round per new interface. The line bounds go to
-    buffers reused chunk after chunk, the columns where `out` says (`_Pending.columns`).
+    are parsed again with it, a round per new interface.
     """
     size = len(text)
     # room for lines of 24 bytes on average (candump's are 30-60): one pass over the
     # chunk instead of counting first; the count is only needed when lines are shorter
-    starts, ends = out.bounds(size // 24 + 64)
+    cap = size // 24 + 64
+    starts = np.empty(cap, np.int64)
+    ends = np.empty(cap, np.int64)
     n = C.split_lines(text, starts, ends, False)
     if n < 0:
-        starts, ends = out.bounds(C.count_lines(text))
-        n = C.split_lines(text, starts, ends, False)
+        n = C.count_lines(text)
+        starts = np.empty(n, np.int64)
+        ends = np.empty(n, np.int64)
+        C.split_lines(text, starts, ends, False)
     starts, ends = starts[:n], ends[:n]
-    cols = out.columns(n)
+    cols = (
+        np.empty(n, np.float64),  # t
+        np.empty(n, np.uint32),  # can_id
+        np.empty(n, np.uint8),  # flags
+        np.empty(n, np.uint8),  # dlc
+        np.empty((n, 8), np.uint8),  # data
+        np.empty(n, np.uint16),  # channel
+    )
     status = np.empty(n, np.uint8)
     C.candump_lines(text, starts, ends, _names(chans), *cols, status)
     rows = np.flatnonzero(status == 1)
@@ -266,87 +276,6 @@ def _c_lines(C, text, chans: _Channels, out: _Pending):
     for r in rows.tolist():  # many interfaces in one chunk: the rest one by one
         cols[5][r] = chans.get(_name_at(text, starts[r], ends[r]))
     return starts, ends, cols, status == 2
-
-
-class _Pending:
-    """Rows parsed but not yet given out, and the buffers the compiled parser fills.
-
-    The compiled parser writes each chunk's columns into one block of batch_size and
-    a chunk more rows, right after the chunk before; when every line of the chunks
-    of a batch was a frame (the usual log), the batch is that block's first rows: no
-    per-chunk columns first touched and then joined. Other parts (the line parser's
-    rows, the numpy path's columns) are joined as before.
-    """
-
-    def __init__(self, batch_size: int) -> None:
-        self.size = batch_size
-        self.parts: list[FrameBatch] = []
-        self.rows = 0
-        self.whole = True  # every part is the block's rows, in order from its start
-        self._block: tuple[np.ndarray, ...] | None = None
-        self._fill = 0  # rows of the block in parts
-        self._offered = False  # the last `columns` were the block's next rows
-        self._starts = self._ends = np.empty(0, np.int64)
-
-    def bounds(self, n: int) -> tuple[np.ndarray, np.ndarray]:
-        """Buffers for n line starts and ends, reused chunk after chunk."""
-        if self._starts.size < n:
-            self._starts, self._ends = np.empty(n, np.int64), np.empty(n, np.int64)
-        return self._starts, self._ends
-
-    def columns(self, n: int) -> tuple[np.ndarray, ...]:
-        """(t, can_id, flags, dlc, data, channel) for the n lines of a chunk: the block's
-        next rows when they fit (`commit` keeps them), else new arrays."""
-        if self._block is None:
-            self._block = _empty_columns(max(self.size + CHUNK // 24 + 64, n))
-        self._offered = self._fill + n <= self._block[0].size
-        if not self._offered:
-            return _empty_columns(n)[:6]
-        return tuple(c[self._fill : self._fill + n] for c in self._block[:6])
-
-    def commit(self, cols: tuple[np.ndarray, ...], line_base: int) -> FrameBatch:
-        """Keep a chunk whose every line was a frame (`cols`, from `columns`)."""
-        n = cols[0].size
-        if self._offered and self._block is not None:
-            line = self._block[6][self._fill : self._fill + n]
-            self._fill += n
-        else:
-            line = np.empty(n, np.int64)
-        np.add(np.arange(n, dtype=np.int64), line_base + 1, out=line)
-        b = FrameBatch(*cols, line)
-        self.add(b, self._offered)
-        self._offered = False
-        return b
-
-    def add(self, part: FrameBatch, kept: bool = False) -> None:
-        """A part of the next batch; `kept`: the block's next rows (`commit`)."""
-        self.parts.append(part)
-        self.rows += len(part)
-        self.whole = self.whole and kept
-
-    def take(self) -> FrameBatch:
-        """The pending rows as one batch: the block's first rows, else the parts joined
-        (then the block, its rows copied, is filled again)."""
-        if self.whole and self._block is not None:
-            out = FrameBatch(*(c[: self._fill] for c in self._block))
-            self._block = None  # given out: the next rows go to a new block
-        else:
-            out = concat(self.parts) if len(self.parts) > 1 else self.parts[0]
-        self._fill = 0
-        self.parts, self.rows, self.whole = [], 0, True
-        return out
-
-
-def _empty_columns(n: int) -> tuple[np.ndarray, ...]:
-    return (
-        np.empty(n, np.float64),  # t
-        np.empty(n, np.uint32),  # can_id
-        np.empty(n, np.uint8),  # flags
-        np.empty(n, np.uint8),  # dlc
-        np.empty((n, 8), np.uint8),  # data
-        np.empty(n, np.uint16),  # channel
-        np.empty(n, np.int64),  # line
-    )
 
 
 def _names(chans: _Channels) -> tuple[bytes, ...]:
@@ -506,7 +435,8 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     line_base = 0  # lines before the current chunk
     carry = b""
     absolute = None
-    pending = _Pending(ctx.batch_size)
+    pending: list[FrameBatch] = []
+    pending_rows = 0
     eof = False
     skipping = False  # inside a line too long to keep: drop bytes up to its newline
     chunks = _Chunks(stream)
@@ -543,7 +473,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
         text = chunks.view[start : start + size]
         C = speedups.C
         if C is not None:
-            starts, ends, cols, slow = _c_lines(C, text, chans, pending)
+            starts, ends, cols, slow = _c_lines(C, text, chans)
         else:
             # one padded array of the text: the numpy parser's windows never run off its end
             arr = np.empty(size + PAD, np.uint8)
@@ -561,19 +491,17 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
             cr = (ends > starts) & (arr[np.maximum(ends - 1, 0)] == 13)
             ends = ends - cr
             cols, slow = _bulk_log_lines(arr, starts, ends, chans)
+        line_no = line_base + 1 + np.arange(starts.size, dtype=np.int64)
+        line_base += starts.size
         nonblank = ends > starts
         slow &= nonblank
         good = ~slow & nonblank
         parts: list[FrameBatch] = []
-        every = bool(good.all())
-        if every:  # the usual chunk: every line a frame, no copies
-            pending.commit(cols, line_base).channels = chans.tuple()
+        if good.all():  # the usual chunk: every line a frame, no copies
+            parts.append(FrameBatch(*cols, line_no))
             if absolute is None:
                 absolute = bool(cols[0][0] > 1e8)
-        else:
-            line_no = line_base + 1 + np.arange(starts.size, dtype=np.int64)
-        line_base += starts.size
-        if not every and good.any():
+        elif good.any():
             t, can_id, flags, dlc, data, channel = cols
             g = np.flatnonzero(good)
             parts.append(
@@ -606,16 +534,18 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
             parts = [merged.take(order)]
         for p in parts:
             p.channels = chans.tuple()
-            pending.add(p)
-        if pending.rows >= ctx.batch_size or (eof and pending.parts):
-            out = pending.take()
+            pending.append(p)
+            pending_rows += len(p)
+        if pending_rows >= ctx.batch_size or (eof and pending):
+            out = concat(pending) if len(pending) > 1 else pending[0]
             out.channels = chans.tuple()
+            pending, pending_rows = [], 0
             ctx.frames += len(out)
             ctx.absolute_time = bool(absolute)
             ctx.extras["timestamps"] = absolute is not None
             yield out
-    if pending.parts:
-        out = pending.take()
+    if pending:
+        out = concat(pending)
         out.channels = chans.tuple()
         ctx.frames += len(out)
         yield out
