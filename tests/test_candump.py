@@ -11,12 +11,10 @@ import can
 import numpy as np
 import pytest
 from conftest import ROOT, real_file
-from readers_util import run
 
-from cananalyze.errors import InputError, ProblemLog
+from cananalyze.errors import InputError
 from cananalyze.frames import FLAG_BRS, FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, concat
 from cananalyze.io import candump
-from cananalyze.io.registry import ReadContext
 from cananalyze.io.source import open_log, read_all
 
 
@@ -201,33 +199,3 @@ def test_sniff_rejects_other_text():
     assert not candump.sniff(b"[FileInfo]\nFileName=x.eds\n")
     assert candump.sniff(b"(1.0) can0 181#00\n(2.0) can0 181#00\n")
     assert candump.sniff(io.BytesIO(b"  can0  181   [1]  00\n").read())
-
-
-class _ReadOnly:
-    """A stream with read() but no readinto(), handing out pieces shorter than asked."""
-
-    def __init__(self, data: bytes) -> None:
-        self._data, self._pos = data, 0
-
-    def read(self, n: int) -> bytes:
-        out = self._data[self._pos : self._pos + min(n, 777)]
-        self._pos += len(out)
-        return out
-
-
-def test_chunks_without_readinto_same_rows(monkeypatch):
-    """The reused chunk buffer is filled by read() when the stream has no readinto, with
-    long lines carried over chunks: the rows and problems of the usual path."""
-    lines = [
-        f"({1700000000 + i / 1000:.6f}) can0 {i % 0x7FF:03X}#{i % 256:02X}" for i in range(500)
-    ]
-    lines[100] = "(1.5) can0 " + "A" * 3000  # longer than a chunk: carried, then refused
-    text = ("\n".join(lines) + "\n").encode()
-    monkeypatch.setattr(candump, "CHUNK", 1000)
-    ref, ref_ctx, ref_batches = run(candump.read, text)
-    ctx = ReadContext(source="mem", problems=ProblemLog(), batch_size=1000)
-    got = concat(list(candump.read(_ReadOnly(text), ctx)))
-    assert len(ref) == 499 and ref_ctx.problems.count == 1
-    for col in ("t", "can_id", "flags", "dlc", "data", "channel", "line"):
-        assert (getattr(got, col) == getattr(ref, col)).all(), col
-    assert [str(p) for p in ctx.problems.shown] == [str(p) for p in ref_ctx.problems.shown]

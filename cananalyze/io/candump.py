@@ -402,33 +402,6 @@ class _Builder:
         return b
 
 
-class _Chunks:
-    """The log read CHUNK bytes at a time into one reused buffer, after the partial line
-    the previous chunk ended with: no fresh 4 MiB per chunk, and no copy joining that
-    line to the chunk (the bytes and chunk boundaries of `stream.read(CHUNK)`)."""
-
-    def __init__(self, stream: BinaryIO) -> None:
-        self.stream = stream
-        self._readinto = getattr(stream, "readinto", None)
-        self.buf = bytearray()
-        self.view = memoryview(self.buf)
-
-    def next(self, carry: bytes) -> tuple[int, int]:
-        """Put ``carry`` first and read the next chunk after it: (its start, its end)."""
-        lo = len(carry)
-        if lo + CHUNK > len(self.buf):
-            self.buf = bytearray(lo + CHUNK)
-            self.view = memoryview(self.buf)
-        self.view[:lo] = carry
-        if self._readinto is not None:
-            got = self._readinto(self.view[lo : lo + CHUNK]) or 0
-        else:
-            block = self.stream.read(CHUNK)
-            got = len(block)
-            self.view[lo : lo + got] = block
-        return lo, lo + got
-
-
 def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     ctx.format = "candump"
     chans = _Channels()
@@ -439,47 +412,46 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     pending_rows = 0
     eof = False
     skipping = False  # inside a line too long to keep: drop bytes up to its newline
-    chunks = _Chunks(stream)
     while not eof:
-        lo, hi = chunks.next(carry)  # the new bytes are chunks.buf[lo:hi], after `carry`
-        eof = hi == lo
-        buf = chunks.buf
+        block = stream.read(CHUNK)
+        eof = not block
         if skipping:
             if eof:
                 break
-            nl = buf.find(b"\n", lo, hi)
+            nl = block.find(b"\n")
             if nl < 0:
                 continue
-            lo, skipping = nl + 1, False
+            block, skipping = block[nl + 1 :], False
             line_base += 1
-        start = lo - len(carry)  # where the text of this round begins in buf
         if not eof:
-            last_nl = buf.rfind(b"\n", lo, hi)
+            last_nl = block.rfind(b"\n")
             if last_nl < 0:
-                carry += buf[lo:hi]
+                carry += block
                 if len(carry) > 1 << 24:
                     ctx.problems.add(
                         ctx.source, f"line {line_base + 1}", "line longer than 16 MiB, skipped"
                     )
                     carry, skipping = b"", True
                 continue
-            size = last_nl + 1 - start
-            tail = bytes(buf[last_nl + 1 : hi])
+            size = len(carry) + last_nl + 1
+            tail = block[last_nl + 1 :]
         elif not carry:
             break
         else:
             size, tail = len(carry), b""
-        carry = tail
-        text = chunks.view[start : start + size]
         C = speedups.C
         if C is not None:
+            body = memoryview(block)[: size - len(carry)]
+            text = carry + body if carry else body
+            carry = tail
             starts, ends, cols, slow = _c_lines(C, text, chans)
         else:
-            # one padded array of the text: the numpy parser's windows never run off its end
-            arr = np.empty(size + PAD, np.uint8)
-            arr[:size] = np.frombuffer(text, np.uint8)
+            # carry and block go straight into one padded array: a single copy of the bytes
+            text = arr = np.empty(size + PAD, np.uint8)
+            arr[: len(carry)] = np.frombuffer(carry, np.uint8)
+            arr[len(carry) : size] = np.frombuffer(block, np.uint8, count=size - len(carry))
             arr[size:] = 0
-            text = arr
+            carry = tail
             nl = np.flatnonzero(arr[:size] == 10)
             if nl.size == 0 or nl[-1] != size - 1:
                 nl = np.append(nl, size)
@@ -527,7 +499,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
                 builder.rows.append((int(line_no[r]), t, ch, can_id, flags, payload))
             if builder.rows:
                 parts.append(builder.batch(chans))
-        text = None  # the buffer is refilled next round
+        text = body = None  # let the block go: a long line's carry may follow
         if len(parts) == 2:  # keep file order when both paths produced rows
             merged = concat(parts)
             order = np.argsort(merged.line, kind="stable")
