@@ -380,3 +380,78 @@ def test_inflate_in_one_call_whatever_size_the_container_declares(written, monke
     if written.name == "w6.blf":
         for p in payloads:
             assert blf._inflate(p, blf.MAX_CONTAINER, 131072)[1] is None
+
+
+def _inflated_into(body: bytes, size: int) -> tuple[bytes, str | None, int]:
+    """What `_Inflated.inflate` puts in its buffer for one container body, its error
+    text, and the bytes the buffer held before (a tail of 5 bytes is put there first)."""
+    got = blf._Inflated(None)  # type: ignore[arg-type]
+    got.add(b"tail!")
+    err = got.inflate(body, 16, size)
+    return bytes(got.view[5 : got.fill]), err, got.pieces
+
+
+@pytest.mark.skipif(blf._libdeflate is None, reason="libdeflate not on this system")
+def test_libdeflate_into_the_buffer_same_outcome_as_zlib(written, monkeypatch):
+    """libdeflate, inflating straight into the walk's buffer, gives the bytes and problems
+    of the reference (`_inflate`, zlib) for sound and broken containers, whatever size
+    they declare; a plain sound container goes through libdeflate alone."""
+    data = written.read_bytes()
+    payloads = []
+    for pos in _containers(data):
+        size = struct.unpack_from("<L", data, pos + 8)[0]
+        payloads.append(data[pos + 32 : pos + size])
+    good = zlib.compress(b"x" * 5000)
+    cases = (
+        payloads
+        + [
+            good,
+            good + b"trailing",  # bytes after the stream: ignored by zlib too
+            good[:-2],  # the checksum cut: incomplete
+            good[:3],
+            b"\x78\x9c" + b"\xff" * 40,  # corrupt
+            b"\x08\x1d" + good[2:],  # a 256-byte window (header byte not 0x78): the reference
+            zlib.compress(bytes(150_000), 9),
+            zlib.compress(bytes(300_000), 9),
+            b"",
+        ]
+    )
+    for payload in cases:
+        ref = blf._inflate(payload, blf.MAX_CONTAINER)
+        true = len(ref[0])
+        for size in (0, 1, true // 2, true, true + 1000, blf.MAX_CONTAINER + 1):
+            body = bytes(16) + payload
+            got = _inflated_into(body, size)
+            monkeypatch.setattr(blf, "_libdeflate", None)
+            assert got == _inflated_into(body, size) == (ref[0], ref[1], 2), size
+            monkeypatch.undo()
+
+    def no_fallback(*_a, **_k):
+        raise AssertionError("a sound container was inflated twice")
+
+    monkeypatch.setattr(blf, "_inflate", no_fallback)
+    assert _inflated_into(bytes(16) + good, 5000) == (b"x" * 5000, None, 2)
+
+
+def test_buffer_grows_and_keeps_the_tail(monkeypatch):
+    """Containers larger than the buffer make it grow, keeping what it holds."""
+    monkeypatch.setattr(blf, "PARSE_BYTES", 16)
+    got = blf._Inflated(None)  # type: ignore[arg-type]
+    big = bytes(range(256)) * 20000
+    got.add(b"tail!")
+    assert got.inflate(bytes(16) + zlib.compress(big), 16, len(big)) is None
+    got.add(b"end")
+    assert bytes(got.view[: got.fill]) == b"tail!" + big + b"end"
+
+
+def test_reads_in_threads_at_once(written):
+    """Each read has its own inflate state (a libdeflate decompressor is not shared):
+    BLF files read in several threads at once give the rows of one read alone."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    ref, _, _ = run(blf.read, written)
+    with ThreadPoolExecutor(4) as pool:
+        got = list(pool.map(lambda _: run(blf.read, written)[0], range(8)))
+    for b in got:
+        for col in ("t", "can_id", "flags", "dlc", "data", "channel", "line"):
+            assert (getattr(b, col) == getattr(ref, col)).all(), col
