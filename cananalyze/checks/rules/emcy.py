@@ -9,7 +9,7 @@ import numpy as np
 
 from ...protocol.emcy import MIN_BYTES, SIZE, code_texts, decoded_words, error_lines, error_text
 from ...protocol.services import Service
-from ..columns import FindingColumns
+from ..columns import FindingColumns, objects
 from ..rule import Context, Rule, ms
 from ..spans import crossing, per_frame
 
@@ -163,9 +163,7 @@ class EmcyRule(Rule):
         frame_rows = rows[ks]
         codes, regs = code[ks], reg[ks]
         err = np.flatnonzero(kinds == 2)
-        severity = np.full(m, self.severity, object)
-        why = np.full(m, self.why, object)
-        basis = np.full(m, "", object)
+        severity, why, basis = objects(self.severity, m), objects(self.why, m), objects("", m)
         measured = np.empty(m, object)
         expected = np.empty(m, object)
         measured[err] = code_texts(codes[err])
