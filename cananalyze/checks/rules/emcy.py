@@ -13,8 +13,6 @@ from ..columns import FindingColumns, objects
 from ..rule import Context, Rule, ms
 from ..spans import crossing, per_frame
 
-_NONE: dict = {}  # a row without notes
-
 
 class EmcyRule(Rule):
     name = "emcy"
@@ -66,11 +64,12 @@ class EmcyRule(Rule):
         prev_s[head_of] = [self.last_t.get(n, np.nan) for n in ns[head_of].tolist()]
         prev = np.empty_like(t)
         prev[srt] = prev_s
+        cut = np.append(np.flatnonzero(head_of), ns.size)
+        groups = [srt[a:b] for a, b in zip(cut[:-1].tolist(), cut[1:].tolist(), strict=True)]
         inhibit = np.zeros(node.size, np.float64)
         across = np.zeros(node.size, bool)
         for j in seen.tolist():  # 0x1015 in force at each EMCY: one lookup per stretch
-            n = int(uniq[j])
-            at = np.flatnonzero(node == n)
+            n, at = int(uniq[j]), groups[j]  # the node's EMCYs, in frame order
             changes = ctx.config.changes(n, 0x1015, 0x1015)
             inhibit[at] = per_frame(
                 changes, t[at], lambda x, n=n: ctx.config.emcy_inhibit_100us(n, x) or 0
@@ -88,18 +87,18 @@ class EmcyRule(Rule):
         raised = (dlc >= MIN_BYTES) & (code != 0)
         if self.allow:
             raised &= ~np.isin(code, np.fromiter(self.allow, np.int64))
-        last_row = np.full(uniq.size, -1, np.int64)
-        np.maximum.at(last_row, np.searchsorted(uniq, node), np.arange(node.size))
+        last_row = srt[cut[1:] - 1]  # each node's last EMCY
         for j in seen.tolist():
             self.last_t[int(uniq[j])] = float(t[last_row[j]])
-        self._active(node, uniq, seen, t, dlc, code, reg)
+        self._active(groups, uniq, seen, t, dlc, code, reg)
         self._findings(ctx, rows, node, t, dlc, code, reg, prev, inhibit, fast, short, raised)
 
-    def _active(self, node, uniq, seen, t, dlc, code, reg) -> None:
-        """Errors active per node after this batch: those raised since the last reset."""
+    def _active(self, groups, uniq, seen, t, dlc, code, reg) -> None:
+        """Errors active per node after this batch: those raised since the last reset
+        (`groups`: each node's EMCYs in frame order, nodes as in `uniq`)."""
         for j in seen.tolist():
-            n = int(uniq[j])
-            at = np.flatnonzero((node == n) & (dlc >= MIN_BYTES))
+            n, at = int(uniq[j]), groups[j]
+            at = at[dlc[at] >= MIN_BYTES]
             if at.size == 0:
                 continue
             act = self.active.setdefault(n, {})
@@ -226,14 +225,16 @@ class EmcyRule(Rule):
         """The errors' ' (meaning of the vendor bytes)' where the node's profile reads them
         (None: none has one), and each (node, code)'s latest in `self.words` for the
         errors still active at the end."""
-        # dict.get, not the notes' own: `LazyNotes` would check per row whether a pending
-        # SDO writer covers it; those write SDO notes only, and the profile's readings
-        # (EmcyDecoder) are in the dict already
-        get = dict.get
+        # the dict's own methods, not the notes': `LazyNotes` would check per row whether
+        # a pending SDO writer covers it; those write SDO notes only, and the profile's
+        # readings (EmcyDecoder) are in the dict already. The rows with a note are
+        # found among the dict's keys (a few per batch), not looked up per error.
         notes = ctx.batch.notes
-        decoded = [
-            (get(notes, r) or _NONE).get("manufacturer_decoded") for r in frame_rows[err].tolist()
-        ]
+        keys = np.fromiter(dict.keys(notes), np.int64, dict.__len__(notes))
+        at = frame_rows[err]
+        decoded: list = [None] * err.size
+        for j in np.flatnonzero(np.isin(at, keys)).tolist():
+            decoded[j] = dict.get(notes, int(at[j])).get("manufacturer_decoded")
         if not any(decoded) and not self.words:
             return None
         words = np.full(m, "", object)
