@@ -25,7 +25,8 @@ NONE = -1  # node, cob_id, line: none
 # columns kept as numpy numbers (the others are object columns)
 _INTS = ("node", "cob_id", "line", "row")
 _OBJS = ("rule", "severity", "measured", "expected", "why", "basis", "bus")
-Texts = Callable[[np.ndarray], list[str]]  # the messages of some of a block's rows
+# the messages of some of a block's rows: a list, or a str object array (no list made)
+Texts = Callable[[np.ndarray], "list[str] | np.ndarray"]
 
 
 def objects(values, n: int) -> np.ndarray:

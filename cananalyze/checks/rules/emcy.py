@@ -197,13 +197,13 @@ class EmcyRule(Rule):
                 )
         is_fixed = np.not_equal(fixed, None)
 
-        def text(idx: np.ndarray) -> list[str]:
+        def text(idx: np.ndarray) -> np.ndarray:
             out = error_lines(codes[idx], regs[idx])
             if words is not None:
                 out += words[idx]
             own = is_fixed[idx]
             out[own] = fixed[idx[own]]
-            return out.tolist()
+            return out
 
         self.emit_rows(
             FindingColumns.block(
