@@ -54,9 +54,14 @@ def _missing(v) -> bool:
 
 
 def _text(values: list) -> pa.Array:
-    # _missing inlined (a call per value was most of this); `v != v` is only NaN
+    # _missing inlined (a call per value was most of this); `v != v` is only NaN; a str
+    # (most of a findings' measured column) is its own text, asked first
     return ab.strings(
-        [None if v is None or v is MISSING or v != v else str(v) for v in values], large=True
+        [
+            v if type(v) is str else None if v is None or v is MISSING or v != v else str(v)
+            for v in values
+        ],
+        large=True,
     )
 
 
