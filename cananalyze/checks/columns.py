@@ -25,7 +25,8 @@ NONE = -1  # node, cob_id, line: none
 # columns kept as numpy numbers (the others are object columns)
 _INTS = ("node", "cob_id", "line", "row")
 _OBJS = ("rule", "severity", "measured", "expected", "why", "basis", "bus")
-Texts = Callable[[np.ndarray], list[str]]  # the messages of some of a block's rows
+# the messages of some of a block's rows: a list, or a str object array (no list made)
+Texts = Callable[[np.ndarray], "list[str] | np.ndarray"]
 
 
 def objects(values, n: int) -> np.ndarray:
@@ -33,6 +34,8 @@ def objects(values, n: int) -> np.ndarray:
     value may itself be a list, a measured range), or any other value repeated."""
     out = np.empty(n, object)
     if isinstance(values, np.ndarray):
+        if values.dtype == object and values.shape == (n,):
+            return values.copy()  # as tolist() would give: the same objects
         values = values.tolist()
     if isinstance(values, list):
         return np.fromiter(values, object, n)
@@ -41,19 +44,25 @@ def objects(values, n: int) -> np.ndarray:
 
 
 def round6(x: np.ndarray) -> list:
-    """`round(v, 6)` of each value (None for NaN), as columns: numpy's rint(x * 1e6) / 1e6
+    """`round(v, 6)` of each value (None for NaN), as columns."""
+    values = rounded6(x).tolist()
+    for i in np.flatnonzero(np.isnan(x)).tolist():
+        values[i] = None
+    return values
+
+
+def rounded6(x: np.ndarray) -> np.ndarray:
+    """`round(v, 6)` of each value as float64 (NaN stays NaN): numpy's rint(x * 1e6) / 1e6
     is Python's correctly rounded result except where x * 1e6 is within rounding error
     of a half; those few are rounded by Python."""
     r = x * 1e6
     out = np.rint(r) / 1e6
     near = np.abs(np.abs(r - np.floor(r)) - 0.5) < 1e-6 * np.maximum(1.0, np.abs(r) * 1e-9)
     near |= np.abs(r) > 2.0**52  # beyond exact integers: Python decides
-    values = out.tolist()
+    near &= ~np.isnan(x)
     for i in np.flatnonzero(near).tolist():
-        values[i] = round(float(x[i]), 6)
-    for i in np.flatnonzero(np.isnan(x)).tolist():
-        values[i] = None
-    return values
+        out[i] = round(float(x[i]), 6)
+    return out
 
 
 class FindingColumns:
@@ -239,13 +248,21 @@ class FindingColumns:
             values = round6(self.t_rel)
         elif name in ("measured", "expected"):
             values = getattr(self, name).tolist()  # tidy changes only floats and lists
-            values = [v if type(v) is int or type(v) is str else tidy(v) for v in values]
+            if not set(map(type, values)) <= {int, str}:
+                values = [v if type(v) is int or type(v) is str else tidy(v) for v in values]
         else:
             values = getattr(self, name).tolist()
         for i in self._live().tolist():
             v = getattr(self.obj[i], name)
             values[i] = round(v, 6) if name == "t_rel" and v is not None else v
         return values
+
+    def times(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The t and t_rel columns as `column` gives them, as float64 arrays; None when a
+        row is read from its Finding or has no t_rel (None, not NaN): then read `column`."""
+        if np.isnan(self.t_rel).any() or self._live().size:
+            return None
+        return self.t, rounded6(self.t_rel)
 
     def ints(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         """(values, missing) of node, cob_id or line, as `column` gives them."""

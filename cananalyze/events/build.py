@@ -221,16 +221,26 @@ def finding_event_columns(found, offset: int) -> EventColumns:
         return EventColumns.empty()
     rules, sev = found.column("rule"), found.column("severity")
     levels = {s: _LEVEL_BY_NAME.get(str(s).lower(), WARNING) for s in set(sev)}
-    text = [
-        f"[{r}] {m}" if r and m else str(m or r or "finding")
-        for r, m in zip(rules, found.messages(), strict=True)
-    ]
+    messages = found.messages()
+    if set(map(type, rules)) == {str} == set(map(type, messages)) and all(rules) and all(messages):
+        # the usual case, "[rule] message" without a format per row: the rule's prefix
+        # (a few distinct) and the message put together by numpy's object add
+        prefix = {r: f"[{r}] " for r in set(rules)}
+        text = texts(list(map(prefix.__getitem__, rules))) + texts(messages)
+    else:
+        text = texts(
+            [
+                f"[{r}] {m}" if r and m else str(m or r or "finding")
+                for r, m in zip(rules, messages, strict=True)
+            ]
+        )
+    times = found.times()
     return EventColumns(
-        np.asarray(found.column("t"), np.float64),
+        times[0].copy() if times is not None else np.asarray(found.column("t"), np.float64),
         np.full(n, ec.FINDING, np.uint8),
         found.node.astype(np.int16),  # -1: no node, as NO_NODE
         np.array([levels[s] for s in sev], np.int8),
-        texts(text),
+        text,
         found.row + offset,
     )
 

@@ -88,20 +88,25 @@ def error_class(code: int) -> str:
 
 
 def error_classes(codes: np.ndarray) -> list[str]:
-    """`error_class` of each code, by a searchsorted per mask instead of dict probes per code.
+    """`error_class` of each code, by a searchsorted per mask instead of dict probes per code."""
+    names = [*(ERROR_CLASSES[k] for k in sorted(ERROR_CLASSES)), UNKNOWN_CLASS]
+    return list(map(names.__getitem__, _class_index(codes).tolist()))
+
+
+def _class_index(codes: np.ndarray) -> np.ndarray:
+    """Each code's class as an index into the sorted `ERROR_CLASSES` (its length: unknown).
 
     Masks from the least to the most specific, each hit overwriting: the most
     specific name wins, as `error_class`'s first hit does.
     """
     keys = np.array(sorted(ERROR_CLASSES), np.int64)
-    names = [ERROR_CLASSES[k] for k in keys.tolist()] + [UNKNOWN_CLASS]
     pick = np.full(len(codes), len(keys), np.intp)
     for mask in (*reversed(_MASKS), 0xFFFF):
         masked = codes & mask
         at = np.minimum(np.searchsorted(keys, masked), len(keys) - 1)
         hit = keys[at] == masked
         pick[hit] = at[hit]
-    return list(map(names.__getitem__, pick.tolist()))
+    return pick
 
 
 # error code class (high nibble) -> the error register bit it sets besides bit 0 (generic)
@@ -127,6 +132,46 @@ def error_text(code: int) -> str:
 def register_text(register: int) -> str:
     """'register 0x11 [generic,communication]'."""
     return _REGISTER.format(register, ",".join(register_names(register)) or "none")
+
+
+def error_lines(codes: np.ndarray, registers: np.ndarray) -> np.ndarray:
+    """'EMCY {error_text}; {register_text}' of each (code, register), as a str object array.
+
+    A fault storm lists tens of thousands of errors, of as many distinct codes: built
+    as byte columns (code in hex, its class and register from tables) joined in one
+    pass, not formatted per row (1-2 us each).
+    """
+    codes = np.asarray(codes, np.int64)
+    n = codes.size
+    names = [*(ERROR_CLASSES[k] for k in sorted(ERROR_CLASSES)), UNKNOWN_CLASS]
+    uregs, reg_at = np.unique(np.asarray(registers, np.int64), return_inverse=True)
+    parts = [
+        bytecols.repeat(b"EMCY ", n),
+        _hex_code(codes),
+        bytecols.repeat(b" ", n),
+        bytecols.padded_table([x.encode() for x in names])[_class_index(codes)],
+        bytecols.padded_table([f"; {register_text(r)}".encode() for r in uregs.tolist()])[
+            reg_at.reshape(-1)
+        ],
+    ]
+    out = np.empty(n, object)
+    out[:] = bytecols.joined_rows(parts, n) if n else []
+    return out
+
+
+def code_texts(codes: np.ndarray) -> list[str]:
+    """'0x8130' of each error code (a finding's measured value), as byte columns."""
+    codes = np.asarray(codes, np.int64)
+    return bytecols.joined_rows([_hex_code(codes)], codes.size) if codes.size else []
+
+
+def _hex_code(codes: np.ndarray) -> np.ndarray:
+    """`f"0x{code:04X}"` of each 16-bit code as an (n, 6) byte matrix."""
+    out = np.empty((codes.size, 6), np.uint8)
+    out[:, :2] = np.frombuffer(b"0x", np.uint8)
+    for j in range(4):
+        out[:, 2 + j] = bytecols.HEX_UPPER[(codes >> (12 - 4 * j)) & 15]
+    return out
 
 
 def fields(data: bytes) -> dict:

@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...protocol.emcy import MIN_BYTES, SIZE, decoded_words, error_text, register_text
+from ...protocol.emcy import MIN_BYTES, SIZE, code_texts, decoded_words, error_lines, error_text
 from ...protocol.services import Service
-from ..columns import FindingColumns
+from ..columns import FindingColumns, objects
 from ..rule import Context, Rule, ms
 from ..spans import crossing, per_frame
 
@@ -64,11 +64,12 @@ class EmcyRule(Rule):
         prev_s[head_of] = [self.last_t.get(n, np.nan) for n in ns[head_of].tolist()]
         prev = np.empty_like(t)
         prev[srt] = prev_s
+        cut = np.append(np.flatnonzero(head_of), ns.size)
+        groups = [srt[a:b] for a, b in zip(cut[:-1].tolist(), cut[1:].tolist(), strict=True)]
         inhibit = np.zeros(node.size, np.float64)
         across = np.zeros(node.size, bool)
         for j in seen.tolist():  # 0x1015 in force at each EMCY: one lookup per stretch
-            n = int(uniq[j])
-            at = np.flatnonzero(node == n)
+            n, at = int(uniq[j]), groups[j]  # the node's EMCYs, in frame order
             changes = ctx.config.changes(n, 0x1015, 0x1015)
             inhibit[at] = per_frame(
                 changes, t[at], lambda x, n=n: ctx.config.emcy_inhibit_100us(n, x) or 0
@@ -86,18 +87,18 @@ class EmcyRule(Rule):
         raised = (dlc >= MIN_BYTES) & (code != 0)
         if self.allow:
             raised &= ~np.isin(code, np.fromiter(self.allow, np.int64))
-        last_row = np.full(uniq.size, -1, np.int64)
-        np.maximum.at(last_row, np.searchsorted(uniq, node), np.arange(node.size))
+        last_row = srt[cut[1:] - 1]  # each node's last EMCY
         for j in seen.tolist():
             self.last_t[int(uniq[j])] = float(t[last_row[j]])
-        self._active(node, uniq, seen, t, dlc, code, reg)
+        self._active(groups, uniq, seen, t, dlc, code, reg)
         self._findings(ctx, rows, node, t, dlc, code, reg, prev, inhibit, fast, short, raised)
 
-    def _active(self, node, uniq, seen, t, dlc, code, reg) -> None:
-        """Errors active per node after this batch: those raised since the last reset."""
+    def _active(self, groups, uniq, seen, t, dlc, code, reg) -> None:
+        """Errors active per node after this batch: those raised since the last reset
+        (`groups`: each node's EMCYs in frame order, nodes as in `uniq`)."""
         for j in seen.tolist():
-            n = int(uniq[j])
-            at = np.flatnonzero((node == n) & (dlc >= MIN_BYTES))
+            n, at = int(uniq[j]), groups[j]
+            at = at[dlc[at] >= MIN_BYTES]
             if at.size == 0:
                 continue
             act = self.active.setdefault(n, {})
@@ -149,75 +150,66 @@ class EmcyRule(Rule):
 
     def _emit_listed(self, ctx, rows, ks, kinds, node, t, dlc, code, reg, prev, inhibit) -> None:
         """The findings listed, in frame order, as one block of columns: an inhibit-time
-        (kind 0), a length (1) or an error (2) finding per entry; the errors' texts are
-        built when read."""
+        (kind 0), a length (1) or an error (2) finding per entry. The errors (a fault
+        storm lists tens of thousands) are columns; only the rare others are walked. The
+        errors' texts are built when read, once per distinct code and register."""
         m = ks.size
         if m == 0:
             return
         nodes = node[ks]
         for n, c in zip(*np.unique(nodes, return_counts=True), strict=True):
             self._count[(int(n), 0x80 + int(n))] += int(c)
-        kl, nl, tl = kinds.tolist(), nodes.tolist(), t[ks].tolist()
         frame_rows = rows[ks]
-        cl, rl = code[ks].tolist(), reg[ks].tolist()
-        measured: list = [None] * m
-        expected: list = [None] * m
-        severity: list = [self.severity] * m
-        why: list = [self.why] * m
-        basis: list = [""] * m
-        fixed: dict[int, str] = {}  # texts of the rare inhibit and length findings
-        words = [""] * m
-        allowed = (
+        codes, regs = code[ks], reg[ks]
+        err = np.flatnonzero(kinds == 2)
+        severity, why, basis = objects(self.severity, m), objects(self.why, m), objects("", m)
+        measured = np.empty(m, object)
+        expected = np.empty(m, object)
+        measured[err] = code_texts(codes[err])
+        expected[err] = (
             "no EMCY"
             if not self.allow
             else "one of " + ", ".join(f"0x{x:04X}" for x in sorted(self.allow))
         )
-        notes = ctx.batch.notes
-        for j, kind in enumerate(kl):
-            n, tk = nl[j], tl[j]
-            if kind == 0:
-                k = int(ks[j])
+        words = self._words(ctx, err, nodes, codes, frame_rows, m)
+        fixed = np.empty(m, object)  # texts of the rare inhibit and length findings
+        for j in np.flatnonzero(kinds != 2).tolist():
+            k, n, tk = int(ks[j]), int(nodes[j]), float(t[ks[j]])
+            severity[j] = "error"
+            if kinds[j] == 0:
                 gap = tk - float(prev[k])
                 inh = float(inhibit[k])  # int or float as configured: the same products
                 fixed[j] = (
                     f"EMCY {ms(gap)} ms after the previous one, inhibit "
                     f"time 0x1015 is {inh * 0.1:g} ms"
                 )
-                measured[j], expected[j], severity[j] = ms(gap), inh * 0.1, "error"
+                measured[j], expected[j] = ms(gap), inh * 0.1
                 basis[j] = ctx.config.origin(n, 0x1015, 0, tk, ctx.t0)
                 why[j] = (
                     "EMCY faster than its inhibit time can flood the bus in a fault storm; check 0x1015."
                 )
-            elif kind == 1:
-                d = int(dlc[ks[j]])
+            else:
+                d = int(dlc[k])
                 fixed[j] = f"EMCY with {d} data bytes, CiA 301 needs {SIZE}"
-                measured[j], expected[j], severity[j] = d, SIZE, "error"
+                measured[j], expected[j] = d, SIZE
                 why[j] = (
                     "A short EMCY cannot be decoded by a standard master; check the node's firmware."
                 )
-            else:
-                c = cl[j]
-                decoded = notes.get(int(frame_rows[j]), {}).get("manufacturer_decoded")
-                w = f" ({decoded_words(decoded)})" if decoded else ""
-                if w:
-                    self.words[(n, c)] = words[j] = w
-                else:
-                    self.words.pop((n, c), None)
-                measured[j], expected[j] = f"0x{c:04X}", allowed
+        is_fixed = np.not_equal(fixed, None)
 
-        def text(idx: np.ndarray) -> list[str]:
-            return [
-                fixed[j]
-                if j in fixed
-                else f"EMCY {error_text(cl[j])}; {register_text(rl[j])}{words[j]}"
-                for j in idx.tolist()
-            ]
+        def text(idx: np.ndarray) -> np.ndarray:
+            out = error_lines(codes[idx], regs[idx])
+            if words is not None:
+                out += words[idx]
+            own = is_fixed[idx]
+            out[own] = fixed[idx[own]]
+            return out
 
         self.emit_rows(
             FindingColumns.block(
                 self.name,
                 severity,
-                tl,
+                t[ks],
                 nodes,
                 nodes + 0x80,
                 text,
@@ -228,6 +220,31 @@ class EmcyRule(Rule):
                 basis,
             )  # fmt: skip
         )
+
+    def _words(self, ctx, err, nodes, codes, frame_rows, m: int) -> np.ndarray | None:
+        """The errors' ' (meaning of the vendor bytes)' where the node's profile reads them
+        (None: none has one), and each (node, code)'s latest in `self.words` for the
+        errors still active at the end."""
+        # the dict's own methods, not the notes': `LazyNotes` would check per row whether
+        # a pending SDO writer covers it; those write SDO notes only, and the profile's
+        # readings (EmcyDecoder) are in the dict already. The rows with a note are
+        # found among the dict's keys (a few per batch), not looked up per error.
+        notes = ctx.batch.notes
+        keys = np.fromiter(dict.keys(notes), np.int64, dict.__len__(notes))
+        at = frame_rows[err]
+        decoded: list = [None] * err.size
+        for j in np.flatnonzero(np.isin(at, keys)).tolist():
+            decoded[j] = dict.get(notes, int(at[j])).get("manufacturer_decoded")
+        if not any(decoded) and not self.words:
+            return None
+        words = np.full(m, "", object)
+        for j, d in zip(err.tolist(), decoded, strict=True):
+            key = (int(nodes[j]), int(codes[j]))
+            if d:
+                self.words[key] = words[j] = f" ({decoded_words(d)})"
+            else:
+                self.words.pop(key, None)
+        return words if any(decoded) else None
 
     def finish(self, ctx: Context) -> None:
         """Errors still active, per node by code, as columns (a node raising one EMCY

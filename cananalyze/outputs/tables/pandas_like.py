@@ -54,9 +54,14 @@ def _missing(v) -> bool:
 
 
 def _text(values: list) -> pa.Array:
-    # _missing inlined (a call per value was most of this); `v != v` is only NaN
+    # _missing inlined (a call per value was most of this); `v != v` is only NaN; a str
+    # (most of a findings' measured column) is its own text, asked first
     return ab.strings(
-        [None if v is None or v is MISSING or v != v else str(v) for v in values], large=True
+        [
+            v if type(v) is str else None if v is None or v is MISSING or v != v else str(v)
+            for v in values
+        ],
+        large=True,
     )
 
 
@@ -163,8 +168,20 @@ def arrow_type(how: str) -> pa.DataType:
     return pa.null() if how == "null" else _TYPES.get(how, pa.large_string())
 
 
-def convert(values: list | tuple, how: str) -> pa.Array:
-    """One chunk of a column as `ColumnStats.decide` said."""
+def convert(
+    values: list | tuple | np.ndarray, how: str, types: set[type] | None = None
+) -> pa.Array:
+    """One chunk of a column as `ColumnStats.decide` said.
+
+    values: Python values, or a float64 array (as its `tolist()`: `update_array`'s);
+    types: the values' types when known (`ColumnStats.update` returns them), which
+    spares a column of str its scan for the others."""
+    if isinstance(values, np.ndarray):
+        if how == "float" and values.dtype == np.float64:
+            return ab.numeric(values, np.isnan(values))
+        values = values.tolist()
+    if how in ("string", "large") and types == {str}:
+        return ab.strings(values, large=how == "large", nulls=False)
     if how == "null":
         return pa.nulls(len(values))
     if how == "text":

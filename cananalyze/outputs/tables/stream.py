@@ -738,9 +738,8 @@ class TableSink(OutputSink):
         out, decided, seen = None, None, 0
         for i in starts:
             rows = part(i)
-            values = {c: rows.column(c) for c in stats}
-            for c, s in stats.items():
-                s.update(values[c])
+            values = _finding_values(rows, stats)
+            types = _update(stats, values)
             seen += 1
             if decided is None:
                 decided = decisions()
@@ -751,22 +750,21 @@ class TableSink(OutputSink):
                 out.discard()
                 out = None
                 break
-            out.add(_findings_table(rows, values, decided, schema))
+            out.add(_findings_table(rows, values, types, decided, schema))
         if out is not None:
             out.close()
             return n
         for i in starts[seen:]:  # the types changed: all of the column decides them
-            rows = part(i)
-            for c, s in stats.items():
-                s.update(rows.column(c))
+            _update(stats, _finding_values(part(i), stats))
         decided = decisions()
         schema = _findings_schema(decided)
 
         def tables():
             for i in starts:
                 rows = part(i)
-                values = {c: rows.column(c) for c in stats}
-                yield _findings_table(rows, values, decided, schema)
+                values = _finding_values(rows, stats)
+                types = {c: set(map(type, v)) for c, v in values.items() if type(v) is list}
+                yield _findings_table(rows, values, types, decided, schema)
 
         self._write_small("findings", tables(), schema)
         return n
@@ -811,17 +809,42 @@ def _findings_schema(decided: dict[str, tuple[str, str, str]]) -> pa.Schema:
     return pa.schema(fields, metadata=pl.schema_metadata(metas))
 
 
+def _finding_values(rows: FindingColumns, names) -> dict[str, list | np.ndarray]:
+    """A chunk's values of the columns `names`, as `FindingColumns.column` gives them; t
+    and t_rel as float64 arrays where they can be (no list of floats to make and read)."""
+    times = rows.times()
+    values: dict[str, list | np.ndarray] = {}
+    for c in names:
+        if times is not None and c in ("t", "t_rel"):
+            values[c] = times[c == "t_rel"]
+        else:
+            values[c] = rows.column(c)
+    return values
+
+
+def _update(stats: dict[str, pl.ColumnStats], values: dict) -> dict[str, set[type]]:
+    """Each column's statistics take in its values; the types of the lists' values."""
+    types = {}
+    for c, s in stats.items():
+        if type(values[c]) is list:
+            types[c] = s.update(values[c])
+        else:
+            s.update_array(values[c])
+    return types
+
+
 def _findings_table(
-    rows: FindingColumns, values: dict[str, list], decided: dict, schema: pa.Schema
+    rows: FindingColumns, values: dict, types: dict, decided: dict, schema: pa.Schema
 ) -> pa.Table:
-    """One chunk of the findings table: `values` (per decided column) converted as decided."""
+    """One chunk of the findings table: `values` (per decided column; `types`: those of
+    the lists) converted as decided."""
     arrays = []
     for name in schema.names:
         if name in _NULLABLE_INTS:
             ints, missing = rows.ints(name)
             arrays.append(ab.numeric(np.where(missing, 0, ints), missing, pa.int64()))
         else:
-            arrays.append(pl.convert(values[name], decided[name][0]))
+            arrays.append(pl.convert(values[name], decided[name][0], types.get(name)))
     return pa.Table.from_arrays(arrays, schema=schema)
 
 
