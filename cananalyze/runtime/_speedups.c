@@ -926,22 +926,35 @@ PyDoc_STRVAR(hex_payload_doc,
              "dlc/flags uint8; rows with rtr_flag set are empty, others min(dlc, 8) bytes.\n"
              "chars needs 16 n bytes, offsets (int32) n + 1 entries.");
 
-static PyObject *hex_payload(PyObject *self, PyObject *args) {
-    PyObject *o_data, *o_dlc, *o_flags, *o_chars, *o_off;
-    int rtr;
-    Bufs bs = {.n = 0};
-    if (!PyArg_ParseTuple(args, "OOOiOO", &o_data, &o_dlc, &o_flags, &rtr, &o_chars, &o_off))
-        return NULL;
-    if (bufs_get(&bs, o_dlc, 0, -1, "dlc") < 0) goto fail;
-    Py_ssize_t n = bs.b[0].len;
-    if (bufs_get(&bs, o_data, 0, n * 8, "data") < 0 || bufs_get(&bs, o_flags, 0, n, "flags") < 0 ||
-        bufs_get(&bs, o_chars, 1, n * 16, "chars") < 0 ||
-        bufs_get(&bs, o_off, 1, (n + 1) * 4, "offsets") < 0)
+/* The arguments of hex_payload and payload_pack: (data, dlc, flags, rtr_flag, out, offsets),
+ * into bs as dlc, data, flags, out, offsets, with out holding `per_row` bytes a row; the row
+ * count, or -1 with an exception set (bs released). */
+static Py_ssize_t payload_args(PyObject *args, Bufs *bs, int *rtr, Py_ssize_t per_row,
+                               const char *out_name) {
+    PyObject *o_data, *o_dlc, *o_flags, *o_out, *o_off;
+    if (!PyArg_ParseTuple(args, "OOOiOO", &o_data, &o_dlc, &o_flags, rtr, &o_out, &o_off))
+        return -1;
+    if (bufs_get(bs, o_dlc, 0, -1, "dlc") < 0) goto fail;
+    Py_ssize_t n = bs->b[0].len;
+    if (bufs_get(bs, o_data, 0, n * 8, "data") < 0 || bufs_get(bs, o_flags, 0, n, "flags") < 0 ||
+        bufs_get(bs, o_out, 1, n * per_row, out_name) < 0 ||
+        bufs_get(bs, o_off, 1, (n + 1) * 4, "offsets") < 0)
         goto fail;
-    if (n * 16 > INT32_MAX) {
+    if (n * per_row > INT32_MAX) {
         PyErr_SetString(PyExc_OverflowError, "too many rows for int32 offsets");
         goto fail;
     }
+    return n;
+fail:
+    bufs_release(bs);
+    return -1;
+}
+
+static PyObject *hex_payload(PyObject *self, PyObject *args) {
+    int rtr;
+    Bufs bs = {.n = 0};
+    Py_ssize_t n = payload_args(args, &bs, &rtr, 16, "chars");
+    if (n < 0) return NULL;
     const uint8_t *dlc = bs.b[0].buf, *data = bs.b[1].buf, *flags = bs.b[2].buf;
     char *chars = bs.b[3].buf;
     int32_t *off = bs.b[4].buf;
@@ -961,9 +974,6 @@ static PyObject *hex_payload(PyObject *self, PyObject *args) {
     Py_END_ALLOW_THREADS;
     bufs_release(&bs);
     return PyLong_FromLong(pos);
-fail:
-    bufs_release(&bs);
-    return NULL;
 }
 
 /* ---------------------------------------------------------- classification */
@@ -1426,21 +1436,10 @@ PyDoc_STRVAR(payload_pack_doc,
              "CPU per 10M frames, this one pass (an 8-byte copy per row) a tenth of it.");
 
 static PyObject *payload_pack(PyObject *self, PyObject *args) {
-    PyObject *o_data, *o_dlc, *o_flags, *o_values, *o_off;
     int rtr;
     Bufs bs = {.n = 0};
-    if (!PyArg_ParseTuple(args, "OOOiOO", &o_data, &o_dlc, &o_flags, &rtr, &o_values, &o_off))
-        return NULL;
-    if (bufs_get(&bs, o_dlc, 0, -1, "dlc") < 0) goto fail;
-    Py_ssize_t n = bs.b[0].len;
-    if (bufs_get(&bs, o_data, 0, n * 8, "data") < 0 || bufs_get(&bs, o_flags, 0, n, "flags") < 0 ||
-        bufs_get(&bs, o_values, 1, n * 8, "values") < 0 ||
-        bufs_get(&bs, o_off, 1, (n + 1) * 4, "offsets") < 0)
-        goto fail;
-    if (n * 8 > INT32_MAX) {
-        PyErr_SetString(PyExc_OverflowError, "too many rows for int32 offsets");
-        goto fail;
-    }
+    Py_ssize_t n = payload_args(args, &bs, &rtr, 8, "values");
+    if (n < 0) return NULL;
     const uint8_t *dlc = bs.b[0].buf, *data = bs.b[1].buf, *flags = bs.b[2].buf;
     uint8_t *values = bs.b[3].buf;
     int32_t *off = bs.b[4].buf;
@@ -1457,9 +1456,6 @@ static PyObject *payload_pack(PyObject *self, PyObject *args) {
     Py_END_ALLOW_THREADS;
     bufs_release(&bs);
     return PyLong_FromLong(pos);
-fail:
-    bufs_release(&bs);
-    return NULL;
 }
 
 static PyMethodDef table_methods[] = {
