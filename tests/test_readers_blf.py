@@ -337,28 +337,40 @@ def test_header_shorter_than_its_time_at_the_end_of_a_buffer(tmp_path):
     ]
 
 
+GOOD = zlib.compress(b"x" * 5000)
+
+
+def _bodies(data: bytes) -> list[bytes]:
+    """The compressed bodies of a BLF file's containers."""
+    out = []
+    for pos in _containers(data):
+        size = struct.unpack_from("<L", data, pos + 8)[0]
+        out.append(data[pos + 32 : pos + size])
+    return out
+
+
+def _inflate_cases(data: bytes) -> list[bytes]:
+    """Every container body of a written file, then sound and broken zlib streams."""
+    return (
+        _bodies(data)
+        + [
+            GOOD,
+            GOOD + b"trailing",  # bytes after the stream: ignored by zlib too
+            GOOD[:-2],  # the checksum cut: incomplete
+            b"\x78\x9c" + b"\xff" * 40,  # corrupt
+            zlib.compress(bytes(150_000), 9),  # 1000:1, small enough for one call under the limit
+            zlib.compress(bytes(300_000), 9),  # inflates beyond the limit
+        ]
+    )
+
+
 @pytest.mark.skipif(blf._fast_zlib is None, reason="python-isal not installed")
 def test_inflate_in_one_call_whatever_size_the_container_declares(written, monkeypatch):
     """A container is inflated in one call into the size it declares (no regrowth copies):
     a true, short, long or absurd declared size gives zlib's bytes and problems, and a
     sound container never needs the stream object."""
     data = written.read_bytes()
-    payloads = []
-    for pos in _containers(data):
-        size = struct.unpack_from("<L", data, pos + 8)[0]
-        payloads.append(data[pos + 32 : pos + size])
-    good = zlib.compress(b"x" * 5000)
-    cases = (
-        payloads
-        + [
-            good,
-            good + b"trailing",  # bytes after the stream: ignored by zlib too
-            good[:-2],  # the checksum cut: incomplete
-            b"\x78\x9c" + b"\xff" * 40,
-            zlib.compress(bytes(150_000), 9),  # 1000:1, small enough for one call under the limit
-            zlib.compress(bytes(300_000), 9),  # inflates beyond the limit
-        ]
-    )
+    payloads, good, cases = _bodies(data), GOOD, _inflate_cases(data)
     limit = 200_000
     for payload in cases:
         monkeypatch.setattr(blf, "_fast_zlib", None)
@@ -396,26 +408,12 @@ def test_libdeflate_into_the_buffer_same_outcome_as_zlib(written, monkeypatch):
     """libdeflate, inflating straight into the walk's buffer, gives the bytes and problems
     of the reference (`_inflate`, zlib) for sound and broken containers, whatever size
     they declare; a plain sound container goes through libdeflate alone."""
-    data = written.read_bytes()
-    payloads = []
-    for pos in _containers(data):
-        size = struct.unpack_from("<L", data, pos + 8)[0]
-        payloads.append(data[pos + 32 : pos + size])
-    good = zlib.compress(b"x" * 5000)
-    cases = (
-        payloads
-        + [
-            good,
-            good + b"trailing",  # bytes after the stream: ignored by zlib too
-            good[:-2],  # the checksum cut: incomplete
-            good[:3],
-            b"\x78\x9c" + b"\xff" * 40,  # corrupt
-            b"\x08\x1d" + good[2:],  # a 256-byte window (header byte not 0x78): the reference
-            zlib.compress(bytes(150_000), 9),
-            zlib.compress(bytes(300_000), 9),
-            b"",
-        ]
-    )
+    good = GOOD
+    cases = _inflate_cases(written.read_bytes()) + [
+        good[:3],
+        b"\x08\x1d" + good[2:],  # a 256-byte window (header byte not 0x78): the reference
+        b"",
+    ]
     for payload in cases:
         ref = blf._inflate(payload, blf.MAX_CONTAINER)
         true = len(ref[0])
