@@ -28,10 +28,12 @@ import numpy as np
 import pyarrow as pa
 
 # Imported here, before any writer thread starts: since Arrow 21 importing
-# pyarrow.compute registers the compute kernels in the global registry, and doing
+# pyarrow._compute registers the compute kernels in the global registry, and doing
 # that on one writer thread while another's Parquet writer looks a kernel up fails
-# at random ("No function registered with name: unique").
-import pyarrow.compute  # noqa: F401
+# at random ("No function registered with name: unique"). Only the kernels: the
+# pyarrow.compute module (which imports this too) also builds a Python wrapper
+# per kernel, ~60 ms of CPU that an export whose tables need no pc.* call saves.
+import pyarrow._compute  # noqa: F401
 
 from ...columns import arrow_build as ab
 from .pandas_like import code_type
