@@ -252,20 +252,6 @@ def test_take_strings_is_pc_take(seed):
         sc.take_strings(arr, np.array([len(arr)]))
 
 
-def test_table_writer_does_not_import_pyarrow_compute():
-    """The writer registers the kernels (pyarrow._compute) without the wrappers
-    pyarrow.compute builds on import (~60 ms of every export)."""
-    import subprocess
-    import sys
-
-    code = (
-        "import sys, pyarrow._compute, cananalyze.outputs.tables.stream, "
-        "cananalyze.outputs.tables.sdo_chunks; print('pyarrow.compute' in sys.modules)"
-    )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "False"
-
-
 def test_int_column_decode_matches_decode_column():
     """`decode_int_column` (the export's numbers) holds what `decode_column` gives, for every type."""
     from cananalyze.protocol.datatypes import DATA_TYPES, decode_column, decode_int_column
