@@ -33,7 +33,11 @@ import pyarrow as pa
 # at random ("No function registered with name: unique"). Only the kernels: the
 # pyarrow.compute module (which imports this too) also builds a Python wrapper
 # per kernel, ~60 ms of CPU that an export whose tables need no pc.* call saves.
-import pyarrow._compute  # noqa: F401
+# pyarrow._compute is private: a pyarrow without it gets the public module.
+try:
+    import pyarrow._compute  # noqa: F401
+except ImportError:  # pragma: no cover - pyarrow's layout changed
+    import pyarrow.compute  # noqa: F401
 
 from ...columns import arrow_build as ab
 from .pandas_like import code_type
