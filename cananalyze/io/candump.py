@@ -232,7 +232,19 @@ def _bulk_log_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, chans
     return (t, can_id, flags, dlc, data, channel), ~good
 
 
-def _c_lines(C, text, chans: _Channels):
+class _Bounds:
+    """Line start and end buffers reused chunk after chunk (only read within a round)."""
+
+    def __init__(self) -> None:
+        self.starts = self.ends = np.empty(0, np.int64)
+
+    def get(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        if self.starts.size < n:
+            self.starts, self.ends = np.empty(n, np.int64), np.empty(n, np.int64)
+        return self.starts, self.ends
+
+
+def _c_lines(C, text, chans: _Channels, bounds: _Bounds):
     """The compiled parser over a chunk: (starts, ends, columns, mask of lines it left).
 
     Interfaces are numbered in the order their first parsed line comes, as
@@ -243,15 +255,11 @@ def _c_lines(C, text, chans: _Channels):
     size = len(text)
     # room for lines of 24 bytes on average (candump's are 30-60): one pass over the
     # chunk instead of counting first; the count is only needed when lines are shorter
-    cap = size // 24 + 64
-    starts = np.empty(cap, np.int64)
-    ends = np.empty(cap, np.int64)
+    starts, ends = bounds.get(size // 24 + 64)
     n = C.split_lines(text, starts, ends, False)
     if n < 0:
-        n = C.count_lines(text)
-        starts = np.empty(n, np.int64)
-        ends = np.empty(n, np.int64)
-        C.split_lines(text, starts, ends, False)
+        starts, ends = bounds.get(C.count_lines(text))
+        n = C.split_lines(text, starts, ends, False)
     starts, ends = starts[:n], ends[:n]
     cols = (
         np.empty(n, np.float64),  # t
@@ -451,6 +459,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     chans = _Channels()
     line_base = 0  # lines before the current chunk
     chunks = _Chunks(stream)
+    bounds = _Bounds()
     absolute = None
     pending: list[FrameBatch] = []
     pending_rows = 0
@@ -489,7 +498,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
         C = speedups.C
         if C is not None:
             text = memoryview(buf)[lo : lo + size]
-            starts, ends, cols, slow = _c_lines(C, text, chans)
+            starts, ends, cols, slow = _c_lines(C, text, chans, bounds)
         else:
             # the text goes straight into one padded array: a single copy of the bytes
             text = arr = np.empty(size + PAD, np.uint8)
