@@ -129,6 +129,65 @@ def test_bulk_and_line_parser_agree_across_chunk_boundaries(tmp_path, monkeypatc
         assert b.line.tolist() == list(range(1, len(lines) + 1))
 
 
+class _ShortReads(io.RawIOBase):
+    """A stream whose readinto gives at most 7 bytes a call (a pipe, a socket)."""
+
+    def __init__(self, data: bytes) -> None:
+        self.data, self.at = data, 0
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, b) -> int:
+        n = min(7, len(b), len(self.data) - self.at)
+        b[:n] = self.data[self.at : self.at + n]
+        self.at += n
+        return n
+
+
+class _NoReadinto:
+    """A stream with read only (the reader falls back to bytes)."""
+
+    def __init__(self, data: bytes) -> None:
+        self.f = io.BytesIO(data)
+
+    def read(self, n: int = -1) -> bytes:
+        return self.f.read(n)
+
+
+@pytest.mark.parametrize("kind", ["short_reads", "no_readinto"])
+def test_chunk_buffer_streams_and_lines_longer_than_a_chunk(kind, monkeypatch):
+    """The reused chunk buffer gives the frames and problems of plain bytes: short reads,
+    streams without readinto, a line longer than a chunk (the carry grows in place) and
+    one longer than MAX_LINE (skipped), in both the compiled and numpy paths."""
+    from cananalyze.errors import ProblemLog
+    from cananalyze.io.registry import ReadContext
+
+    rng = np.random.default_rng(5)
+    lines = [
+        f"({1600000000 + i * 0.001:.6f}) can0 {int(rng.integers(0, 0x800)):03X}#{i % 256:02X}".encode()
+        for i in range(400)
+    ]
+    lines[50] = b"(1.5) can0 181#" + b"A" * 300  # longer than a chunk: a problem, not a frame
+    lines[90] = b"B" * 900  # longer than MAX_LINE: skipped
+    lines[91] = b"(1.25) can1 181#01"  # right after the skipped line
+    data = b"\n".join(lines) + b"\n(2.0) can0 1FF#0102"  # the last line without newline
+
+    def frames(stream):
+        ctx = ReadContext(source="x.log", problems=ProblemLog(keep=100))
+        b = concat(list(candump.read(stream, ctx)))
+        return b.t.tolist(), b.can_id.tolist(), b.line.tolist(), b.data.tolist(), ctx.problems
+
+    monkeypatch.setattr(candump, "CHUNK", 64)
+    monkeypatch.setattr(candump, "MAX_LINE", 512)
+    stream = _ShortReads(data) if kind == "short_reads" else _NoReadinto(data)
+    t, ids, line, payload, problems = frames(stream)
+    assert line == [i + 1 for i in range(len(lines) + 1) if i not in (50, 90)]
+    assert ids[-1] == 0x1FF and t[line.index(92)] == 1.25
+    assert problems.count == 2
+    assert (t, ids, line, payload) == frames(io.BytesIO(data))[:4]
+
+
 @pytest.mark.parametrize(
     "relative",
     [

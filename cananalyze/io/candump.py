@@ -36,6 +36,7 @@ from ..runtime import speedups
 from .registry import LogFormat, ReadContext, register
 
 CHUNK = 1 << 22  # bytes per bulk parse (about 90k log-file lines)
+MAX_LINE = 1 << 24  # a line longer than this (no newline in 16 MiB) is skipped
 PAD = 128  # zero bytes after a chunk, so the numpy parser's windows never run off its end
 CAN_ERR_FLAG = 0x20000000
 
@@ -231,7 +232,19 @@ def _bulk_log_lines(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray, chans
     return (t, can_id, flags, dlc, data, channel), ~good
 
 
-def _c_lines(C, text, chans: _Channels):
+class _Bounds:
+    """Line start and end buffers reused chunk after chunk (only read within a round)."""
+
+    def __init__(self) -> None:
+        self.starts = self.ends = np.empty(0, np.int64)
+
+    def get(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        if self.starts.size < n:
+            self.starts, self.ends = np.empty(n, np.int64), np.empty(n, np.int64)
+        return self.starts, self.ends
+
+
+def _c_lines(C, text, chans: _Channels, bounds: _Bounds):
     """The compiled parser over a chunk: (starts, ends, columns, mask of lines it left).
 
     Interfaces are numbered in the order their first parsed line comes, as
@@ -242,15 +255,11 @@ def _c_lines(C, text, chans: _Channels):
     size = len(text)
     # room for lines of 24 bytes on average (candump's are 30-60): one pass over the
     # chunk instead of counting first; the count is only needed when lines are shorter
-    cap = size // 24 + 64
-    starts = np.empty(cap, np.int64)
-    ends = np.empty(cap, np.int64)
+    starts, ends = bounds.get(size // 24 + 64)
     n = C.split_lines(text, starts, ends, False)
     if n < 0:
-        n = C.count_lines(text)
-        starts = np.empty(n, np.int64)
-        ends = np.empty(n, np.int64)
-        C.split_lines(text, starts, ends, False)
+        starts, ends = bounds.get(C.count_lines(text))
+        n = C.split_lines(text, starts, ends, False)
     starts, ends = starts[:n], ends[:n]
     cols = (
         np.empty(n, np.float64),  # t
@@ -402,56 +411,99 @@ class _Builder:
         return b
 
 
+class _Chunks:
+    """The log read CHUNK bytes at a time into one reused buffer, after the partial line
+    the previous chunk ended with, which stays at the buffer's start (moved there, never
+    also held as bytes): no fresh 4 MiB per chunk and no copy joining it to the chunk.
+    A line longer than a chunk grows the buffer in place, up to MAX_LINE."""
+
+    def __init__(self, stream: BinaryIO) -> None:
+        self.stream = stream
+        self.readinto = getattr(stream, "readinto", None)
+        self.buf = bytearray(CHUNK)
+        self.carry = 0  # bytes of the partial line at buf[:carry]
+
+    def fill(self) -> int:
+        """Read the next chunk after the carried line: the bytes read (0 at the end)."""
+        need = self.carry + CHUNK
+        if len(self.buf) < need:  # a line longer than a chunk: grow in place
+            self.buf += bytes(need - len(self.buf))
+        lo = self.carry
+        if self.readinto is None:
+            block = self.stream.read(CHUNK)
+            self.buf[lo : lo + len(block)] = block
+            return len(block)
+        with memoryview(self.buf) as view:
+            got = 0
+            while got < CHUNK:  # the chunk bounds of read(CHUNK), even from short reads
+                n = self.readinto(view[lo + got : lo + CHUNK]) or 0
+                if n == 0:
+                    break
+                got += n
+        return got
+
+    def keep(self, start: int, end: int) -> None:
+        """Carry buf[start:end] (the partial line after the last newline) to the next chunk."""
+        if start:
+            self.buf[: end - start] = self.buf[start:end]
+        self.carry = end - start
+
+    def drop(self) -> None:
+        """Forget the carried line (skipped as too long) and shrink back to one chunk."""
+        self.carry = 0
+        del self.buf[CHUNK:]
+
+
 def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     ctx.format = "candump"
     chans = _Channels()
     line_base = 0  # lines before the current chunk
-    carry = b""
+    chunks = _Chunks(stream)
+    bounds = _Bounds()
     absolute = None
     pending: list[FrameBatch] = []
     pending_rows = 0
     eof = False
     skipping = False  # inside a line too long to keep: drop bytes up to its newline
     while not eof:
-        block = stream.read(CHUNK)
-        eof = not block
-        if skipping:
+        got = chunks.fill()
+        eof = got == 0
+        buf = chunks.buf
+        lo = 0  # this round's text is buf[lo:lo + size]
+        hi = chunks.carry + got
+        if skipping:  # nothing is carried then
             if eof:
                 break
-            nl = block.find(b"\n")
+            nl = buf.find(b"\n", 0, hi)
             if nl < 0:
                 continue
-            block, skipping = block[nl + 1 :], False
+            lo, skipping = nl + 1, False
             line_base += 1
         if not eof:
-            last_nl = block.rfind(b"\n")
+            last_nl = buf.rfind(b"\n", lo, hi)
             if last_nl < 0:
-                carry += block
-                if len(carry) > 1 << 24:
+                chunks.keep(lo, hi)
+                if chunks.carry > MAX_LINE:
                     ctx.problems.add(
                         ctx.source, f"line {line_base + 1}", "line longer than 16 MiB, skipped"
                     )
-                    carry, skipping = b"", True
+                    chunks.drop()
+                    skipping = True
                 continue
-            size = len(carry) + last_nl + 1
-            tail = block[last_nl + 1 :]
-        elif not carry:
+            size = last_nl + 1 - lo
+        elif not chunks.carry:
             break
         else:
-            size, tail = len(carry), b""
+            size = chunks.carry
         C = speedups.C
         if C is not None:
-            body = memoryview(block)[: size - len(carry)]
-            text = carry + body if carry else body
-            carry = tail
-            starts, ends, cols, slow = _c_lines(C, text, chans)
+            text = memoryview(buf)[lo : lo + size]
+            starts, ends, cols, slow = _c_lines(C, text, chans, bounds)
         else:
-            # carry and block go straight into one padded array: a single copy of the bytes
+            # the text goes straight into one padded array: a single copy of the bytes
             text = arr = np.empty(size + PAD, np.uint8)
-            arr[: len(carry)] = np.frombuffer(carry, np.uint8)
-            arr[len(carry) : size] = np.frombuffer(block, np.uint8, count=size - len(carry))
+            arr[:size] = np.frombuffer(buf, np.uint8, count=size, offset=lo)
             arr[size:] = 0
-            carry = tail
             nl = np.flatnonzero(arr[:size] == 10)
             if nl.size == 0 or nl[-1] != size - 1:
                 nl = np.append(nl, size)
@@ -499,7 +551,8 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
                 builder.rows.append((int(line_no[r]), t, ch, can_id, flags, payload))
             if builder.rows:
                 parts.append(builder.batch(chans))
-        text = body = None  # let the block go: a long line's carry may follow
+        text = None  # release the buffer's view: the carry is moved next
+        chunks.keep(lo + size, hi)
         if len(parts) == 2:  # keep file order when both paths produced rows
             merged = concat(parts)
             order = np.argsort(merged.line, kind="stable")
