@@ -50,6 +50,10 @@ def bus():
         local = canopen.LocalNode(NODE, od)
         server_net.add_node(local)
     remote = canopen.RemoteNode(NODE, _od())
+    # python-canopen resends a request after 0.3 s without an answer: a stall that long on
+    # a loaded machine put a second segment request and answer on the bus (seen once in
+    # CI), a transfer the tests here do not describe
+    remote.sdo.RESPONSE_TIMEOUT = 5.0
     client_net.add_node(remote)
     yield client_net, remote, recorder, od
     recorder.shutdown()
