@@ -270,7 +270,7 @@ def test_canopen_heartbeat_off_then_300_and_read_back(tmp_path):
     import canopen
     from canopen.objectdictionary import UNSIGNED16
 
-    from tests.helpers.virtual_bus import drain, unique_channel, variable
+    from tests.helpers.virtual_bus import drain, patient_client, unique_channel, variable
 
     channel = unique_channel("hb")
     od = canopen.ObjectDictionary()
@@ -282,7 +282,7 @@ def test_canopen_heartbeat_off_then_300_and_read_back(tmp_path):
     try:
         local = canopen.LocalNode(5, od)
         slave.add_node(local)
-        remote = canopen.RemoteNode(5, canopen.ObjectDictionary())
+        remote = patient_client(5)
         master.add_node(remote)
         local.nmt.state = "OPERATIONAL"  # a heartbeat of state 0 would be a boot-up
         local.nmt.start_heartbeat(100)

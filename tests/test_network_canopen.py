@@ -16,6 +16,7 @@ from cananalyze.network.spec import NetworkSpec, NodeSpec
 from cananalyze.pipeline import Decoder
 from cananalyze.sdo.processor import SdoProcessor
 from tests.conftest import real_file
+from tests.helpers.virtual_bus import patient_client
 
 
 def _record_configuration(eds: str, channel: str) -> list[tuple[float, int, bytes]]:
@@ -26,7 +27,7 @@ def _record_configuration(eds: str, channel: str) -> list[tuple[float, int, byte
     try:
         local = canopen.LocalNode(2, eds)
         slave.add_node(local)
-        remote = canopen.RemoteNode(2, eds)
+        remote = patient_client(2, eds)
         master.add_node(remote)
         remote.tpdo.read()
         tpdo = remote.tpdo[1]

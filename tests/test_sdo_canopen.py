@@ -19,7 +19,14 @@ from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
 from cananalyze.sdo import SdoTracker
 from tests.helpers.sdo_block_server import BlockSdoServer
-from tests.helpers.virtual_bus import drain, od_info, track, unique_channel, variable
+from tests.helpers.virtual_bus import (
+    drain,
+    od_info,
+    patient_client,
+    track,
+    unique_channel,
+    variable,
+)
 
 NODE = 5
 NAME = b"cananalyze test device, segmented"
@@ -49,11 +56,7 @@ def bus():
     if local is None:
         local = canopen.LocalNode(NODE, od)
         server_net.add_node(local)
-    remote = canopen.RemoteNode(NODE, _od())
-    # python-canopen resends a request after 0.3 s without an answer: a stall that long on
-    # a loaded machine put a second segment request and answer on the bus (seen once in
-    # CI), a transfer the tests here do not describe
-    remote.sdo.RESPONSE_TIMEOUT = 5.0
+    remote = patient_client(NODE, _od())
     client_net.add_node(remote)
     yield client_net, remote, recorder, od
     recorder.shutdown()
@@ -142,7 +145,7 @@ def test_block_transfers_with_canopen_client(crc: bool, blksizes: tuple[int, ...
     recorder = can.Bus(interface="virtual", channel=channel)
     net = canopen.Network()
     net.connect(interface="virtual", channel=channel)
-    remote = canopen.RemoteNode(NODE, canopen.ObjectDictionary())
+    remote = patient_client(NODE)
     net.add_node(remote)
     try:
         with remote.sdo.open(0x2100, 0, "rb", block_transfer=True, request_crc_support=crc) as f:

@@ -293,13 +293,13 @@ def _canopen_session(node: int, block: bool) -> list:
     from canopen.sdo.exceptions import SdoAbortedError
 
     from tests.helpers.sdo_block_server import BlockSdoServer
-    from tests.helpers.virtual_bus import drain, unique_channel, variable
+    from tests.helpers.virtual_bus import drain, patient_client, unique_channel, variable
 
     channel = unique_channel("fast-sdo")
     recorder = can.Bus(interface="virtual", channel=channel)
     client = canopen.Network()
     client.connect(interface="virtual", channel=channel)
-    remote = canopen.RemoteNode(node, canopen.ObjectDictionary())
+    remote = patient_client(node)
     client.add_node(remote)
     stop = []
     if block:

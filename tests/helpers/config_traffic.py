@@ -26,7 +26,7 @@ import canopen
 from canopen.objectdictionary import UNSIGNED8, UNSIGNED16, UNSIGNED32, ODRecord
 
 from cananalyze.frames import FLAG_RTR
-from tests.helpers.virtual_bus import drain, unique_channel, variable
+from tests.helpers.virtual_bus import drain, patient_client, unique_channel, variable
 
 NODE = 5
 # seen on a loaded 2-core machine (load 9): a first heartbeat 155 ms late
@@ -66,7 +66,7 @@ class Bench:
         self.od = _od(heartbeat_ms)
         self.local = canopen.LocalNode(NODE, self.od)
         self.slave_net.add_node(self.local)
-        self.remote = canopen.RemoteNode(NODE, canopen.ObjectDictionary())
+        self.remote = patient_client(NODE)
         self.master_net.add_node(self.remote)
         self.frames: list[can.Message] = []
 

@@ -19,6 +19,19 @@ def unique_channel(prefix: str) -> str:
     return f"cananalyze-{prefix}-{next(_channels)}-{time.monotonic_ns()}"
 
 
+# python-canopen resends a request after 0.3 s without an answer (RESPONSE_TIMEOUT, MAX_RETRIES
+# = 1): a stall that long on a loaded machine puts a second request and answer on the bus (seen
+# twice in CI), a transfer no test here describes. Clients under test wait this long instead.
+PATIENT_TIMEOUT_S = 5.0
+
+
+def patient_client(node_id: int, od=None) -> canopen.RemoteNode:
+    """A python-canopen RemoteNode whose SDO client does not resend under a scheduling stall."""
+    remote = canopen.RemoteNode(node_id, canopen.ObjectDictionary() if od is None else od)
+    remote.sdo.RESPONSE_TIMEOUT = PATIENT_TIMEOUT_S
+    return remote
+
+
 def variable(
     index: int, subindex: int, name: str, data_type: int, access: str = "rw", default=None
 ):
