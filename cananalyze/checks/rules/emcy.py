@@ -39,7 +39,7 @@ class EmcyRule(Rule):
         order), counted against the node's cap in frame order.
         """
         b = ctx.batch
-        rows = np.flatnonzero(b.service == Service.EMCY)
+        rows = ctx.rows(Service.EMCY)
         if rows.size == 0:
             return
         fb = b.frames
