@@ -256,3 +256,21 @@ def test_canopen_logs_have_no_wrong_length_error_control(rel):
     cap = cananalyze.load(real_file(rel))
     assert not (cap.frames["service"] == "errctl_invalid").any()
     assert not (cap.findings["rule"] == "errctl_length").any() if len(cap.findings) else True
+
+
+def test_each_length_its_own_text_in_one_batch(tmp_path):
+    """The columnar writers group rows by what their text says: here, the length."""
+    log = tmp_path / "lengths.log"
+    lengths = [8, 2, 0, 8, 3, 2, 7]
+    write_log(from_rows([(0.1 * i, 0x705, bytes(n)) for i, n in enumerate(lengths)]), log)
+    cap = cananalyze.load(log)
+    assert (cap.frames["service"] == "errctl_invalid").all()
+    cmd = [sys.executable, "-m", "cananalyze", "decode", str(log)]
+    text = subprocess.run(cmd, capture_output=True, text=True, check=True, cwd=ROOT).stdout
+    said = [ln.split("error control (malformed: ")[1].split(" ")[0] for ln in text.splitlines()]
+    assert said == [str(n) for n in lengths]
+    out = subprocess.run(
+        [*cmd, "--format", "jsonl"], capture_output=True, text=True, check=True, cwd=ROOT
+    ).stdout
+    problems = [json.loads(ln)["problem"] for ln in out.splitlines()]
+    assert problems == [f"malformed: {n} data bytes, CiA 301 says 1" for n in lengths]
