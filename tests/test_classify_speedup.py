@@ -98,6 +98,30 @@ def test_random_frames_across_batches(seed):
     # the traffic covers every error-control reading
     for s in (Service.HEARTBEAT, Service.BOOTUP, Service.GUARD_REQUEST, Service.GUARD_RESPONSE):
         assert (services == s).any(), s
+    assert (services == Service.ERRCTL_INVALID).any()  # data frames of 0, 2..8 bytes
+
+
+def test_wrong_length_frames_between_request_and_answer():
+    """RTR, frames of every other length, then the 1-byte answer, on three COB-IDs,
+    cut at every batch size: both paths keep the RTR state across the invalid frames."""
+    rows = []
+    for k in range(40):
+        cob = 0x701 + k % 3
+        rows.append((cob, FLAG_RTR, 1, 0))
+        rows += [(cob, 0, n, 0x05) for n in (0, 2, 8)[: k % 4]]
+        rows.append((cob, 0, 1, 0x85 if k % 2 else 0x05))
+    n = len(rows)
+    b = FrameBatch.allocate(n, ("can0",))
+    b.t[:] = np.arange(n) / 1000.0
+    b.can_id[:] = [r[0] for r in rows]
+    b.flags[:] = [r[1] for r in rows]
+    b.dlc[:] = [r[2] for r in rows]
+    b.data[:, 0] = [r[3] for r in rows]
+    for size in (1, 2, 3, 7, n):
+        assert _same(_cut(b, size)) == n
+    services = CobClassifier().classify(b).service
+    assert (services == Service.GUARD_RESPONSE).sum() == 40
+    assert (services == Service.ERRCTL_INVALID).sum() == sum(min(k % 4, 3) for k in range(40))
 
 
 def test_remapped_tables():

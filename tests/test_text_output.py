@@ -277,7 +277,7 @@ def test_background_writer_raises_in_close() -> None:
 def test_key_groups_partition_rows_as_a_sort_would(share: float) -> None:
     """_key_groups (counting over a dense key) groups the keyed rows exactly as np.unique
     of the full key does; unkeyed rows are group 0; first_at is each group's first row."""
-    from cananalyze.outputs.text.writer import _BYTE_MATTERS, _key_groups
+    from cananalyze.outputs.text.writer import _BYTE_MATTERS, _LENGTH_MATTERS, _key_groups
     from cananalyze.protocol.services import Service
 
     rng = np.random.default_rng(int(share * 100))
@@ -291,6 +291,7 @@ def test_key_groups_partition_rows_as_a_sort_would(share: float) -> None:
     inv, first_at = _key_groups(svc, pdo, rtr, dlc, data, keyed)
     is_pdo = (svc == Service.TPDO) | (svc == Service.RPDO)
     first = np.where((dlc > 0) & _BYTE_MATTERS[svc], data[:, 0].astype(np.int64), 256)
+    first = np.where(_LENGTH_MATTERS[svc], dlc, first)  # errctl_invalid: its length, in words
     key = ((svc.astype(np.int64) * 256 + np.where(is_pdo, pdo, 0)) * 2 + (rtr & is_pdo)) * 257
     key = np.where(keyed, key + first, -1)
     uniq, first_ref, inv_ref = np.unique(key, return_index=True, return_inverse=True)

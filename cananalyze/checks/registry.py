@@ -12,6 +12,7 @@ from .rules.drive_command import DriveCommandRule
 from .rules.drive_fault import DriveFaultRule
 from .rules.drive_transition import DriveTransitionRule
 from .rules.emcy import EmcyRule
+from .rules.errctl_length import ErrctlLengthRule
 from .rules.error_frames import ErrorFrameRule
 from .rules.guarding import GuardingRule
 from .rules.heartbeat import HeartbeatRule
@@ -31,6 +32,7 @@ RULES: dict[str, type[Rule]] = {
         HeartbeatRule,
         BootupRule,
         GuardingRule,
+        ErrctlLengthRule,
         SyncRule,
         PdoSyncRule,
         PdoAsyncRule,

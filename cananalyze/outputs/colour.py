@@ -26,6 +26,7 @@ SERVICE = {
     "lss_master": "\033[35m",
     "lss_slave": "\033[35m",
     "error_frame": "\033[1;31m",
+    "errctl_invalid": "\033[33m",  # malformed: noticed, not alarming
     "other": "\033[2m",
 }
 SEVERITY = {"error": "\033[1;31m", "warning": "\033[33m", "info": "\033[2m"}

@@ -128,8 +128,14 @@ class Summary:
         sdo = data_frame & std & ((svc == Service.SDO_REQUEST) | (svc == Service.SDO_RESPONSE))
         self.sdo_frames += int(sdo.sum())
         self.sdo_bad += np.bincount(ids[sdo & (fb.dlc != 8)], minlength=2048)
-        ec = np.flatnonzero(
-            data_frame & std & ((svc == Service.HEARTBEAT) | (svc == Service.BOOTUP))
+        ec = np.flatnonzero(  # the frames of the wrong length are evidence too
+            data_frame
+            & std
+            & (
+                (svc == Service.HEARTBEAT)
+                | (svc == Service.BOOTUP)
+                | (svc == Service.ERRCTL_INVALID)
+            )
         )
         self.ec_frames += int(ec.size)
         state_ok = _IS_STATE[fb.data[ec, 0]]  # the byte tables only for the rows concerned

@@ -27,6 +27,7 @@ _C_CODES = np.array(
         Service.BOOTUP,
         Service.GUARD_RESPONSE,
         Service.GUARD_REQUEST,
+        Service.ERRCTL_INVALID,
     ],
     np.uint8,
 )
@@ -78,7 +79,10 @@ class CobClassifier:
 
     Error control (0x700+n) is one COB-ID for heartbeat, boot-up and guarding: a
     1-byte frame answering an RTR on the same COB-ID is a guard response; a 0x00
-    byte otherwise is a boot-up; anything else a heartbeat.
+    byte otherwise is a boot-up; anything else a heartbeat. A data frame there of
+    any other length is none of them (CiA 301: 1 byte; another protocol's traffic
+    on these identifiers): `errctl_invalid`, and it leaves the RTR state alone so a
+    guard request still pairs with its answer.
     """
 
     def __init__(self) -> None:
@@ -155,8 +159,12 @@ class CobClassifier:
         rows = np.flatnonzero(service == Service.HEARTBEAT)
         if rows.size == 0:
             return
-        ids = batch.can_id[rows].astype(np.intp)
         rtr = (batch.flags[rows] & FLAG_RTR) != 0
+        invalid = ~rtr & (batch.dlc[rows] != 1)
+        if invalid.any():
+            service[rows[invalid]] = Service.ERRCTL_INVALID
+            rows, rtr = rows[~invalid], rtr[~invalid]
+        ids = batch.can_id[rows].astype(np.intp)
         # previous error-control frame on the same COB-ID: within the batch by a stable
         # sort on COB-ID, across batches from the carried state.
         order = np.argsort(ids, kind="stable")
@@ -171,11 +179,10 @@ class CobClassifier:
         self._prev_rtr[sid[last]] = srtr[last]
         after_rtr = np.empty_like(prev_rtr)
         after_rtr[order] = prev_rtr
-        byte0 = batch.data[rows, 0]
-        has_byte = batch.dlc[rows] >= 1
+        byte0 = batch.data[rows, 0]  # every data frame left has its 1 byte
         out = np.full(rows.size, Service.HEARTBEAT, np.uint8)
-        out[has_byte & (byte0 == nmt.BOOTUP)] = Service.BOOTUP
+        out[~rtr & (byte0 == nmt.BOOTUP)] = Service.BOOTUP
         state = byte0 & nmt.STATE_MASK
-        out[after_rtr & has_byte & ~rtr & (state != nmt.BOOTUP)] = Service.GUARD_RESPONSE
+        out[after_rtr & ~rtr & (state != nmt.BOOTUP)] = Service.GUARD_RESPONSE
         out[rtr] = Service.GUARD_REQUEST
         service[rows] = out

@@ -32,6 +32,8 @@ def frame_fields(service: int, data: bytes, rtr: bool = False, can_id: int = 0) 
         return emcy.fields(data)
     if s in (Service.HEARTBEAT, Service.BOOTUP, Service.GUARD_RESPONSE):
         return nmt.state_fields(data, guard=s is Service.GUARD_RESPONSE)
+    if s is Service.ERRCTL_INVALID:
+        return nmt.errctl_invalid_fields(data)
     if s in (Service.SDO_REQUEST, Service.SDO_RESPONSE):
         return sdo.fields(data, s is Service.SDO_REQUEST)
     if s in (Service.LSS_MASTER, Service.LSS_SLAVE):
@@ -62,6 +64,8 @@ def annotation(service: int, node: int, pdo_number: int, fields: dict, rtr: bool
         return nmt.GUARD_REQUEST_TEXT
     if s is Service.GUARD_RESPONSE:
         return nmt.guard_response_text(fields)
+    if s is Service.ERRCTL_INVALID:
+        return nmt.errctl_invalid_text(fields)
     if s in (Service.LSS_MASTER, Service.LSS_SLAVE):
         return lss.text(fields, master=s is Service.LSS_MASTER)
     if s is Service.ERROR_FRAME:

@@ -51,6 +51,12 @@ COMMAND_STATE: dict[int, int] = {
 MALFORMED = "malformed: needs 2 bytes"  # a module control frame shorter than CiA 301's 2
 BOOTUP_TEXT = "boot-up"  # what a boot-up frame (and the node after it) is called in text
 GUARD_REQUEST_TEXT = "node guarding request (RTR)"
+ERRCTL_BYTES = 1  # CiA 301: heartbeat, boot-up and guard response carry exactly this many
+
+
+def errctl_malformed(n_bytes: int) -> str:
+    """Why a data frame on an error-control COB-ID of another length is none of them."""
+    return f"malformed: {n_bytes} data bytes, CiA 301 says {ERRCTL_BYTES}"
 
 
 def command_name(cs: int) -> str:
@@ -91,6 +97,15 @@ def state_fields(data: bytes, guard: bool = False) -> dict:
     if guard:
         out["toggle"] = toggle_of(data[0])
     return out
+
+
+def errctl_invalid_fields(data: bytes) -> dict:
+    """JSONL fields of such a frame: no `state` (it reports none), the `problem`."""
+    return {"problem": errctl_malformed(len(data))}
+
+
+def errctl_invalid_text(fields: dict) -> str:
+    return f"error control ({fields.get('problem')})"
 
 
 def heartbeat_text(fields: dict) -> str:

@@ -26,6 +26,9 @@ class Service(IntEnum):
     LSS_MASTER = 13
     LSS_SLAVE = 14
     ERROR_FRAME = 15
+    # a data frame on 0x701-0x77F that is not 1 byte: not a heartbeat, boot-up or guard
+    # response (CiA 301), so it says nothing about any node's state
+    ERRCTL_INVALID = 16
 
     @property
     def label(self) -> str:
@@ -49,6 +52,7 @@ SERVICE_NAMES: tuple[str, ...] = (
     "lss_master",
     "lss_slave",
     "error_frame",
+    "errctl_invalid",
 )
 
 SERVICE_BY_NAME: dict[str, Service] = {name: Service(i) for i, name in enumerate(SERVICE_NAMES)}
@@ -57,7 +61,13 @@ SERVICE_BY_NAME: dict[str, Service] = {name: Service(i) for i, name in enumerate
 SERVICE_GROUPS: dict[str, tuple[Service, ...]] = {
     "pdo": (Service.TPDO, Service.RPDO),
     "sdo": (Service.SDO_REQUEST, Service.SDO_RESPONSE),
-    "errctl": (Service.HEARTBEAT, Service.BOOTUP, Service.GUARD_REQUEST, Service.GUARD_RESPONSE),
+    "errctl": (
+        Service.HEARTBEAT,
+        Service.BOOTUP,
+        Service.GUARD_REQUEST,
+        Service.GUARD_RESPONSE,
+        Service.ERRCTL_INVALID,  # a filter only: no rule reads this group
+    ),
     "guard": (Service.GUARD_REQUEST, Service.GUARD_RESPONSE),
     "lss": (Service.LSS_MASTER, Service.LSS_SLAVE),
 }

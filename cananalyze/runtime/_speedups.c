@@ -985,9 +985,11 @@ PyDoc_STRVAR(classify_doc,
              "int16, uint8) looked up for standard frames with an 11-bit id (others and\n"
              "29-bit frames are OTHER), error frames marked, and the\n"
              "error-control COB-IDs split into heartbeat / boot-up / guarding with the\n"
-             "per-COB-ID 'last frame was an RTR' state (prev_rtr, 2048 bytes, updated).\n"
+             "per-COB-ID 'last frame was an RTR' state (prev_rtr, 2048 bytes, updated);\n"
+             "a data frame there that is not 1 byte is ERRCTL_INVALID and leaves prev_rtr.\n"
              "codes: uint8 [OTHER, ERROR_FRAME, HEARTBEAT, BOOTUP, GUARD_RESPONSE,\n"
-             "GUARD_REQUEST]. Outputs: service uint8, node int16, pdo uint8 (n each).");
+             "GUARD_REQUEST, ERRCTL_INVALID]. Outputs: service uint8, node int16, pdo uint8\n"
+             "(n each).");
 
 static PyObject *classify(PyObject *self, PyObject *args) {
     PyObject *o[12];
@@ -1001,7 +1003,7 @@ static PyObject *classify(PyObject *self, PyObject *args) {
         bufs_get(&bs, o[3], 0, n * 8, "data") < 0 || bufs_get(&bs, o[4], 0, 2048, "svc_tab") < 0 ||
         bufs_get(&bs, o[5], 0, 2048 * 2, "node_tab") < 0 ||
         bufs_get(&bs, o[6], 0, 2048, "pdo_tab") < 0 ||
-        bufs_get(&bs, o[7], 1, 2048, "prev_rtr") < 0 || bufs_get(&bs, o[8], 0, 6, "codes") < 0 ||
+        bufs_get(&bs, o[7], 1, 2048, "prev_rtr") < 0 || bufs_get(&bs, o[8], 0, 7, "codes") < 0 ||
         bufs_get(&bs, o[9], 1, n, "service") < 0 || bufs_get(&bs, o[10], 1, n * 2, "node") < 0 ||
         bufs_get(&bs, o[11], 1, n, "pdo") < 0)
         goto fail;
@@ -1013,6 +1015,7 @@ static PyObject *classify(PyObject *self, PyObject *args) {
     int16_t *node = bs.b[10].buf;
     const uint8_t OTHER = codes[0], ERROR_FRAME = codes[1], HEARTBEAT = codes[2];
     const uint8_t BOOTUP = codes[3], GUARD_RESPONSE = codes[4], GUARD_REQUEST = codes[5];
+    const uint8_t ERRCTL_INVALID = codes[6];
     Py_BEGIN_ALLOW_THREADS;
     for (Py_ssize_t i = 0; i < n; i++) {
         uint8_t f = flags[i];
@@ -1034,14 +1037,17 @@ static PyObject *classify(PyObject *self, PyObject *args) {
         pdo[i] = pdo_tab[idx];
         if (s == HEARTBEAT) { /* error control: the previous frame on this COB-ID decides */
             int rtr = (f & FLAG_RTR) != 0;
+            if (!rtr && dlc[i] != 1) { /* CiA 301: 1 byte; not error control, state kept */
+                service[i] = ERRCTL_INVALID;
+                continue;
+            }
             int after_rtr = prev_rtr[idx] != 0;
             uint8_t b0 = data[8 * i];
-            int has_byte = dlc[i] >= 1;
             if (rtr)
                 s = GUARD_REQUEST;
-            else if (has_byte && b0 == 0)
+            else if (b0 == 0)
                 s = BOOTUP;
-            else if (after_rtr && has_byte && (b0 & 0x7F) != 0)
+            else if (after_rtr && (b0 & 0x7F) != 0)
                 s = GUARD_RESPONSE;
             prev_rtr[idx] = (uint8_t)rtr;
         }

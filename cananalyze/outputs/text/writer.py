@@ -63,12 +63,15 @@ _KEYED[
         Service.GUARD_RESPONSE,
         Service.LSS_MASTER,
         Service.LSS_SLAVE,  # (not ERROR_FRAME: its classes are in the identifier)
+        Service.ERRCTL_INVALID,
     ]
 ] = True
 _BYTE_MATTERS = np.zeros(256, bool)  # the first data byte changes the text
 _BYTE_MATTERS[
     [Service.SYNC, Service.HEARTBEAT, Service.GUARD_RESPONSE, Service.LSS_MASTER, Service.LSS_SLAVE]
 ] = True
+_LENGTH_MATTERS = np.zeros(256, bool)  # the text names the frame's length instead
+_LENGTH_MATTERS[Service.ERRCTL_INVALID] = True
 
 
 def _time_column(rel: np.ndarray) -> np.ndarray:
@@ -450,10 +453,10 @@ def _key_groups(
     svc, pdo, rtr, dlc, data, keyed, byte_matters: np.ndarray = _BYTE_MATTERS
 ) -> tuple[np.ndarray, np.ndarray]:
     """(group of each row, first row of each group): keyed rows grouped by what their
-    text depends on (service, PDO number, RTR, the first byte where it matters);
-    group 0 is every other row. Counted over a dense key (the (service, PDO, RTR)
-    combinations present, then the byte) in O(n): np.unique sorted all the rows,
-    three times as long."""
+    text depends on (service, PDO number, RTR, the first byte where it matters, the
+    length where that does); group 0 is every other row. Counted over a dense key
+    (the (service, PDO, RTR) combinations present, then the byte or length) in O(n):
+    np.unique sorted all the rows, three times as long."""
     n = svc.size
     inv = np.zeros(n, np.int64)
     if not keyed.any():
@@ -463,6 +466,7 @@ def _key_groups(
     present = np.bincount(combo[keyed], minlength=1 << 17) > 0
     compact = np.cumsum(present) - 1  # combination -> its number among those present
     first = np.where((dlc > 0) & byte_matters[svc], data[:, 0].astype(np.int64), 256)
+    first = np.where(_LENGTH_MATTERS[svc], dlc, first)  # 0..64: below 256
     dense = (compact[combo] * 257 + first)[keyed]
     group_of = np.cumsum(np.bincount(dense) > 0)  # dense key -> group (1, 2, ...), in order
     inv[keyed] = group_of[dense]
