@@ -17,7 +17,8 @@ from ..checks.columns import FindingColumns
 from ..checks.finding import Finding
 from . import colour
 from .atomic import Staged
-from .junit import findings_json, format_rows, junit_xml
+from .findings_json import findings_json_parts
+from .junit import format_rows, junit_xml
 from .sink import Sink
 
 TERMINAL_CAP = 20  # findings printed per rule and node/COB-ID; the files hold every one
@@ -178,7 +179,7 @@ class FindingsSink(Sink):
         if self.json_file:
             staged = Staged(self.json_file)
             self._staged.append(staged)
-            staged.write_text(findings_json(findings))
+            staged.write_text(findings_json_parts(findings))
 
     def commit(self) -> None:
         for staged in self._staged:

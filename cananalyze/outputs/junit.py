@@ -6,7 +6,6 @@ junitparser reads it back in the tests.
 
 from __future__ import annotations
 
-import json
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -113,12 +112,3 @@ def _line(
         f"{when} {where} {who}{cob} [{severity}] {rule}: {message} "
         f"(measured {show(measured)}, expected {show(expected)}{basis}). {why}"
     )
-
-
-def findings_json(findings: list[Finding] | FindingColumns) -> str:
-    """`check --json`'s text: every finding's record, in a list."""
-    if isinstance(findings, FindingColumns):
-        records = findings.records()  # from the columns, no Finding objects
-    else:
-        records = [f.record() for f in findings]
-    return json.dumps(records, indent=1) + "\n"
