@@ -6,7 +6,8 @@ object, its record dict and its event row each cost microseconds apiece. So find
 travel as numpy and object columns (`FindingColumns`), their messages built only when
 read (`messages()`: the findings table, the event log; the terminal builds only the
 rows it shows), and `Finding` objects are made only where a person reads them (the
-terminal's capped list, JUnit and JSON at exit, Python callers iterating).
+terminal's capped list, Python callers iterating); JUnit and JSON at exit read the
+columns a chunk of rows at a time.
 
 A finding emitted one at a time (`Rule.emit`: rare, stateful rules) keeps its `Finding`
 object in `obj`: live, the heartbeat rule completes the finding of a silence when it

@@ -14,7 +14,7 @@ import contextlib
 import os
 import stat
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import IO
 
@@ -118,17 +118,19 @@ class Staged:
     def __init__(self, dest: str | os.PathLike) -> None:
         self.dest = Path(dest)
         self.tmp: Path | None = None
-        self.text: str | None = None  # for a special file (/dev/stdout): written at commit
+        # for a special file (/dev/stdout): the text, written at commit
+        self.text: str | Iterable[str] | None = None
 
-    def write_text(self, text: str) -> None:
+    def write_text(self, text: str | Iterable[str]) -> None:
+        """`text`: a str, or its pieces (a generator: the whole text is never held)."""
         check_writable(self.dest)
         if _special(self.dest):
-            self.text = text
+            self.text = text  # pieces are produced at commit, as they are written
             return
         fd, self.tmp = _temp_beside(self.dest)
         try:
-            with os.fdopen(fd, "w", encoding="utf-8") as f:
-                f.write(text)
+            with self._named(), os.fdopen(fd, "w", encoding="utf-8") as f:
+                _write(f, text)
                 f.flush()
                 os.fsync(f.fileno())  # as atomic_write: complete on disk before the rename
             os.chmod(self.tmp, _file_mode(self.dest))
@@ -141,9 +143,9 @@ class Staged:
             os.replace(self.tmp, self.dest)
             self.tmp = None
         elif self.text is not None:
-            with open(self.dest, "w", encoding="utf-8") as f:
-                f.write(self.text)
-            self.text = None
+            text, self.text = self.text, None
+            with self._named(), open(self.dest, "w", encoding="utf-8") as f:
+                _write(f, text)
 
     def abort(self) -> None:
         if self.tmp is not None:
@@ -151,3 +153,22 @@ class Staged:
                 self.tmp.unlink()
             self.tmp = None
         self.text = None
+
+    @contextlib.contextmanager
+    def _named(self) -> Iterator[None]:
+        """A write error without a file name (a full disk) names this file: a sink writing
+        two (JUnit and JSON) has no one `dest` for the pipeline to name."""
+        try:
+            yield
+        except OSError as exc:
+            if exc.filename:
+                raise
+            raise OSError(exc.errno, exc.strerror or str(exc), str(self.dest)) from exc
+
+
+def _write(f: IO, text: str | Iterable[str]) -> None:
+    if isinstance(text, str):
+        f.write(text)
+    else:
+        for piece in text:
+            f.write(piece)

@@ -17,7 +17,8 @@ from ..checks.columns import FindingColumns
 from ..checks.finding import Finding
 from . import colour
 from .atomic import Staged
-from .junit import findings_json, format_rows, junit_xml
+from .findings_json import findings_json_parts
+from .junit import format_rows, junit_xml_parts
 from .sink import Sink
 
 TERMINAL_CAP = 20  # findings printed per rule and node/COB-ID; the files hold every one
@@ -174,11 +175,11 @@ class FindingsSink(Sink):
             props = {"cananalyze.report": str(self.html)} if self.html else None
             staged = Staged(self.junit)
             self._staged.append(staged)
-            staged.write_text(junit_xml(rules, findings, properties=props))
+            staged.write_text(junit_xml_parts(rules, findings, properties=props))
         if self.json_file:
             staged = Staged(self.json_file)
             self._staged.append(staged)
-            staged.write_text(findings_json(findings))
+            staged.write_text(findings_json_parts(findings))
 
     def commit(self) -> None:
         for staged in self._staged:

@@ -1,13 +1,15 @@
 """JUnit XML: one testcase per rule and node (or COB-ID), failures carrying the findings.
 
-Written with the standard library's ElementTree (the format is five elements);
-junitparser reads it back in the tests.
+Written with the standard library's ElementTree (the format is five elements), the
+findings' lines streamed into it a chunk at a time; junitparser reads it back in the tests.
 """
 
 from __future__ import annotations
 
-import json
+import re
 import xml.etree.ElementTree as ET
+from collections.abc import Iterator, Sequence
+from xml.sax.saxutils import escape
 
 import numpy as np
 
@@ -15,34 +17,47 @@ from ..checks.columns import FindingColumns
 from ..checks.finding import TABLE_COLUMNS, Finding, show
 from ..checks.rule import Rule
 
+CHUNK = 4096  # findings' lines formatted at a time
+_BY_COB_ID = ("assert_pdo_rate", "unknown_cob_id")  # rules whose testcases are per COB-ID
+
 
 def _subject(rule: Rule, s, bus: str | None = None) -> str:
     name = rule.name if bus is None else f"{rule.name} {bus}"  # several buses: which one
     if s is None:
         return name
-    if rule.name in ("assert_pdo_rate", "unknown_cob_id"):
+    if rule.name in _BY_COB_ID:
         return f"{name} 0x{s:03X}"
     return f"{name} node {s}"
 
 
 def junit_xml(
     rules: list[Rule],
-    findings: list[Finding],
+    findings: Sequence[Finding] | FindingColumns,
     name: str = "cananalyze check",
     properties: dict[str, str] | None = None,
 ) -> str:
     """The report; `properties` (e.g. the HTML report's path) go in the suite's <properties>."""
-    cases: dict[str, list[Finding]] = {}
-    for rule in rules:
-        subjects = rule.subjects or {None}
-        for s in sorted(subjects, key=lambda x: (x is not None, x or 0)):
-            cases.setdefault(_subject(rule, s), [])
-    by_rule = {r.name: r for r in rules}
-    for f in findings:
-        rule = by_rule.get(f.rule)
-        key = f.cob_id if rule and rule.name in ("assert_pdo_rate", "unknown_cob_id") else f.node
-        cases.setdefault(_subject(rule, key, f.bus) if rule else f.rule, []).append(f)
-    failing = sum(1 for fs in cases.values() if any(f.fails for f in fs))
+    return "".join(junit_xml_parts(rules, findings, name, properties))
+
+
+def junit_xml_parts(
+    rules: list[Rule],
+    findings: Sequence[Finding] | FindingColumns,
+    name: str = "cananalyze check",
+    properties: dict[str, str] | None = None,
+) -> Iterator[str]:
+    """`junit_xml`'s text in pieces: the findings' lines a chunk at a time.
+
+    The elements (one testcase per rule and node) are few and built with ElementTree as
+    they always were; each failure's and system-out's text, which holds every finding's
+    line, is a row-number placeholder there, and is written in its place from the
+    columns, escaped as ElementTree escapes text. A faulty bus's hundreds of thousands
+    of findings never become Finding objects nor one string."""
+    found = findings if isinstance(findings, FindingColumns) else FindingColumns.of(findings)
+    cases, rows = _cases(rules, found)
+    fails = found.fails
+    texts: list[np.ndarray] = []  # each placeholder's rows
+    failing = sum(1 for idx in rows if fails[idx].any())
     suite = ET.Element(
         "testsuite", name=name, tests=str(len(cases)), failures=str(failing), errors="0"
     )
@@ -50,24 +65,77 @@ def junit_xml(
         props = ET.SubElement(suite, "properties")
         for key, value in properties.items():
             ET.SubElement(props, "property", name=key, value=value)
-    for case, fs in cases.items():
+    for case, idx in zip(cases, rows, strict=True):
         tc = ET.SubElement(suite, "testcase", classname=f"cananalyze.{case.split()[0]}", name=case)
-        bad = [f for f in fs if f.fails]
-        if bad:
+        bad = idx[fails[idx]]
+        if bad.size:
+            first = found.finding(int(bad[0]))
             fail = ET.SubElement(
                 tc,
                 "failure",
-                message=f"{len(bad)} finding(s): {bad[0].message}",
-                type=bad[0].severity,
+                message=f"{bad.size} finding(s): {first.message}",
+                type=first.severity,
             )
-            fail.text = "\n".join(format_finding(f) for f in bad)
-        info = [f for f in fs if not f.fails]
-        if info:
-            ET.SubElement(tc, "system-out").text = "\n".join(format_finding(f) for f in info)
+            fail.text = str(len(texts))
+            texts.append(bad)
+        info = idx[~fails[idx]]
+        if info.size:
+            ET.SubElement(tc, "system-out").text = str(len(texts))
+            texts.append(info)
     root = ET.Element("testsuites")
     root.append(suite)
     ET.indent(root)
-    return ET.tostring(root, encoding="unicode", xml_declaration=True) + "\n"
+    skeleton = ET.tostring(root, encoding="unicode", xml_declaration=True) + "\n"
+    # ">N</" is only ever a placeholder: the other texts are indentation, and attribute
+    # values have their ">" escaped
+    pieces = re.split(r">(\d+)</", skeleton)
+    yield pieces[0]
+    for k in range(1, len(pieces), 2):
+        yield ">"
+        idx = texts[int(pieces[k])]
+        for start in range(0, idx.size, CHUNK):
+            lines = "\n".join(format_rows(found, idx[start : start + CHUNK]))
+            yield ("\n" if start else "") + escape(lines)  # as ElementTree escapes text
+        yield "</" + pieces[k + 1]
+
+
+def _cases(rules: list[Rule], found: FindingColumns) -> tuple[list[str], list[np.ndarray]]:
+    """The testcases (each rule's subjects, then as findings first name them) and the
+    rows of each, in row order; counted on columns, one name per (rule, node, bus)."""
+    names: dict[str, int] = {}
+    for rule in rules:
+        subjects = rule.subjects or {None}
+        for s in sorted(subjects, key=lambda x: (x is not None, x or 0)):
+            names.setdefault(_subject(rule, s), len(names))
+    case = np.zeros(len(found), np.int64)
+    if len(found):
+        by_rule = {r.name: r for r in rules}
+        rule_code, rule_names = _codes(found.column("rule"))
+        by_cob = np.array([r in by_rule and r in _BY_COB_ID for r in rule_names])
+        key = np.where(by_cob[rule_code], found.ints("cob_id")[0], found.ints("node")[0])
+        bus_code, buses = _codes(found.column("bus"))
+        combo = ((rule_code << 31) | (key + 1)) * len(buses) + bus_code  # key: 29 bits
+        del rule_code, key, bus_code
+        _, first, inverse = np.unique(combo, return_index=True, return_inverse=True)
+        del combo
+        case_of = np.empty(first.size, np.int64)
+        for u in np.argsort(first, kind="stable").tolist():  # as the findings name them
+            f = found.finding(int(first[u]))  # one per (rule, node, bus)
+            rule = by_rule.get(f.rule)
+            key = f.cob_id if rule and rule.name in _BY_COB_ID else f.node
+            name = _subject(rule, key, f.bus) if rule else f.rule
+            case_of[u] = names.setdefault(name, len(names))
+        case = case_of[inverse.reshape(-1)]
+    order = np.argsort(case, kind="stable")
+    bounds = np.searchsorted(case[order], np.arange(len(names) + 1))
+    rows = [order[bounds[c] : bounds[c + 1]] for c in range(len(names))]
+    return list(names), rows
+
+
+def _codes(values: list) -> tuple[np.ndarray, list]:
+    """Each value's number among the distinct values (in the order they come), and those."""
+    codes = {v: k for k, v in enumerate(dict.fromkeys(values))}
+    return np.fromiter((codes[v] for v in values), np.int64, len(values)), list(codes)
 
 
 def format_finding(f: Finding) -> str:
@@ -113,12 +181,3 @@ def _line(
         f"{when} {where} {who}{cob} [{severity}] {rule}: {message} "
         f"(measured {show(measured)}, expected {show(expected)}{basis}). {why}"
     )
-
-
-def findings_json(findings: list[Finding] | FindingColumns) -> str:
-    """`check --json`'s text: every finding's record, in a list."""
-    if isinstance(findings, FindingColumns):
-        records = findings.records()  # from the columns, no Finding objects
-    else:
-        records = [f.record() for f in findings]
-    return json.dumps(records, indent=1) + "\n"
