@@ -111,10 +111,12 @@ FRAMES = TableSpec(
             pl.field_meta("pdo", "int8", "Int8"),
         ]
     ),
-    dictionary=("channel", "can_id", "dlc", "flags", "service", "node", "pdo"),
+    dictionary=("channel", "can_id", "service"),
     split=("t",),
     statistics=("t",),
     required=("t", "channel", "can_id", "dlc", "data", "flags", "service"),
+    uncompressed=("channel", "can_id", "dlc", "data", "flags", "service", "node", "pdo"),
+    delta=("dlc", "flags", "node", "pdo"),
 )
 SIGNALS = TableSpec(
     [
