@@ -850,6 +850,16 @@ def _findings_table(
     return pa.Table.from_arrays(arrays, schema=schema)
 
 
+def _record_options(schema: pa.Schema) -> dict:
+    """A record table's encodings, chosen as the stream tables' (TableSpec): dictionaries
+    where values repeat (not on times and measured floats: half the SDO table's write),
+    min/max statistics on its times only, the columns a reader filters row groups by."""
+    return {
+        "use_dictionary": [f.name for f in schema if not pa.types.is_floating(f.type)],
+        "write_statistics": [n for n in ("t", "t_start") if n in schema.names],
+    }
+
+
 class _RecordWriter:
     """A record table's file, chunk by chunk, in row groups of up to ROW_GROUP rows (as to_parquet)
     or ROW_GROUP_BYTES, whichever comes first (the cut depends only on the chunks, so a
@@ -867,7 +877,9 @@ class _RecordWriter:
         if fmt == "parquet":
             import pyarrow.parquet as pq
 
-            self.writer = pq.ParquetWriter(path, schema, compression=compression)
+            self.writer = pq.ParquetWriter(
+                path, schema, compression=compression, **_record_options(schema)
+            )
             self._write = lambda t: self.writer.write_table(t, row_group_size=ROW_GROUP)
         else:
             import pyarrow.csv as pacsv
