@@ -172,6 +172,39 @@ def test_frames_columns_never_null_are_required(tmp_path):
     assert pd.read_parquet(path)["node"].dtype == "Int16"
 
 
+def test_frames_small_integers_delta_payloads_uncompressed(tmp_path):
+    """dlc, flags, node and pdo are DELTA_BINARY_PACKED (no dictionary to hash every value
+    into), payloads and the dictionary-coded columns are not snappy-compressed, times
+    are; DuckDB, another Parquet reader, reads every value as python-can reads the log."""
+    import can
+    import duckdb
+
+    log = SAMPLES / "faults.log"
+    _stream(log, tmp_path / "new", size=13, network=NETWORK)
+    path = tmp_path / "new" / "frames.parquet"
+    for name in ("dlc", "flags", "node", "pdo"):
+        assert "DELTA_BINARY_PACKED" in _encodings(path, name), name
+        assert not {"PLAIN_DICTIONARY", "RLE_DICTIONARY"} & _encodings(path, name), name
+    meta = pq.ParquetFile(path).metadata
+    codecs = {
+        meta.row_group(0).column(i).path_in_schema: meta.row_group(0).column(i).compression
+        for i in range(meta.num_columns)
+    }
+    assert codecs["t"] == "SNAPPY"
+    assert {codecs[c] for c in FRAMES.uncompressed} == {"UNCOMPRESSED"}
+    with can.LogReader(str(log)) as reader:
+        msgs = [m for m in reader if not m.is_error_frame]
+    got = duckdb.sql(f"SELECT dlc, can_id FROM '{path}' ORDER BY t, can_id").fetchall()
+    assert sorted(got) == sorted((m.dlc, m.arbitration_id) for m in msgs)
+    nodes = duckdb.sql(f"SELECT count(node), count(pdo), sum(node) FROM '{path}'").fetchall()[0]
+    table = pq.read_table(path)
+    assert nodes == (
+        len(table) - table.column("node").null_count,
+        len(table) - table.column("pdo").null_count,
+        int(table.column("node").drop_null().to_numpy().astype(np.int64).sum()),
+    )
+
+
 def test_writer_join_can_be_repeated_after_an_error():
     """close() joins, raises the writer's error, and abort() joins again (then __exit__
     once more): every join must return, with a one-deep queue too."""

@@ -111,10 +111,12 @@ FRAMES = TableSpec(
             pl.field_meta("pdo", "int8", "Int8"),
         ]
     ),
-    dictionary=("channel", "can_id", "dlc", "flags", "service", "node", "pdo"),
+    dictionary=("channel", "can_id", "service"),
     split=("t",),
     statistics=("t",),
     required=("t", "channel", "can_id", "dlc", "data", "flags", "service"),
+    uncompressed=("channel", "can_id", "dlc", "data", "flags", "service", "node", "pdo"),
+    delta=("dlc", "flags", "node", "pdo"),
 )
 SIGNALS = TableSpec(
     [
@@ -848,6 +850,16 @@ def _findings_table(
     return pa.Table.from_arrays(arrays, schema=schema)
 
 
+def _record_options(schema: pa.Schema) -> dict:
+    """A record table's encodings, chosen as the stream tables' (TableSpec): dictionaries
+    where values repeat (not on times and measured floats: half the SDO table's write),
+    min/max statistics on its times only, the columns a reader filters row groups by."""
+    return {
+        "use_dictionary": [f.name for f in schema if not pa.types.is_floating(f.type)],
+        "write_statistics": [n for n in ("t", "t_start") if n in schema.names],
+    }
+
+
 class _RecordWriter:
     """A record table's file, chunk by chunk, in row groups of up to ROW_GROUP rows (as to_parquet)
     or ROW_GROUP_BYTES, whichever comes first (the cut depends only on the chunks, so a
@@ -865,7 +877,9 @@ class _RecordWriter:
         if fmt == "parquet":
             import pyarrow.parquet as pq
 
-            self.writer = pq.ParquetWriter(path, schema, compression=compression)
+            self.writer = pq.ParquetWriter(
+                path, schema, compression=compression, **_record_options(schema)
+            )
             self._write = lambda t: self.writer.write_table(t, row_group_size=ROW_GROUP)
         else:
             import pyarrow.csv as pacsv

@@ -99,16 +99,39 @@ class TableSpec:
     # Arrow schema read back says `not null`). Not in a fleet's dataset parts, whose
     # one schema per table (fleet/schema) is nullable throughout.
     required: tuple[str, ...] = ()
+    # columns written without the table's compression, where it costs more than it
+    # saves: snappy took ~0.17 s CPU per 10M frames on the frames table's payloads
+    # (5 % of the whole export) to make them 17 % smaller (payloads are near random);
+    # on dictionary-coded small integers it saves almost nothing (bench_tables.py)
+    uncompressed: tuple[str, ...] = ()
+    # DELTA_BINARY_PACKED for small integer columns instead of a dictionary: hashing
+    # every value into a dictionary was the frames table's costliest encoding (~0.1 s
+    # CPU per 10M frames more for dlc, flags, node and pdo, for 4 % less file)
+    delta: tuple[str, ...] = ()
+
+    def compression(self, names: list[str], codec: str) -> str | dict[str, str]:
+        """ParquetWriter's `compression`: `codec` for every column but `uncompressed`."""
+        if not self.uncompressed or codec.lower() == "none":
+            return codec
+        return {n: "none" if n in self.uncompressed else codec for n in names}
 
     def parquet_options(self) -> dict:
         """The ParquetWriter keywords of this table's column encodings."""
         d, s = self.dictionary, self.statistics
-        return {
+        opts = {
             "use_dictionary": list(d) if d is not True else True,
             "use_byte_stream_split": list(self.split) if self.split else False,
             "write_statistics": list(s) if s is not True else True,
             "write_batch_size": WRITE_BATCH,
         }
+        if self.delta:  # pyarrow takes per-column encodings in one keyword or the other
+            assert d is not True and not set(d) & set(self.delta), "dictionary or delta"
+            del opts["use_byte_stream_split"]
+            opts["column_encoding"] = {
+                **dict.fromkeys(self.split, "BYTE_STREAM_SPLIT"),
+                **dict.fromkeys(self.delta, "DELTA_BINARY_PACKED"),
+            }
+        return opts
 
 
 # The one label type of a dataset's parts (`constants` given): every file of a table must
@@ -242,9 +265,8 @@ class Sink:
         if self.fmt == "parquet":
             import pyarrow.parquet as pq
 
-            return pq.ParquetWriter(
-                self.path, schema, compression=self.compression, **self.parquet_options()
-            )
+            codec = self.spec.compression(schema.names, self.compression)
+            return pq.ParquetWriter(self.path, schema, compression=codec, **self.parquet_options())
         import pyarrow.csv as pacsv
 
         return pacsv.CSVWriter(self.path, csv_schema(schema))
@@ -373,9 +395,8 @@ def _rewrite(sink: Sink, categories: dict, order, tmp: Path) -> None:
         parts = whole.to_batches(max_chunksize=ROW_GROUP)
     else:
         parts = (source.read_row_group(i) for i in range(source.num_row_groups))
-    with pq.ParquetWriter(
-        tmp, schema, compression=sink.compression, **sink.parquet_options()
-    ) as out:
+    codec = sink.spec.compression(schema.names, sink.compression)
+    with pq.ParquetWriter(tmp, schema, compression=codec, **sink.parquet_options()) as out:
         for part in parts:
             if isinstance(part, pa.RecordBatch):
                 part = pa.Table.from_batches([part])
