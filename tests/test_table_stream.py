@@ -205,6 +205,24 @@ def test_frames_small_integers_delta_payloads_uncompressed(tmp_path):
     )
 
 
+def test_frames_every_column_compressed_with_the_codec_asked_for(tmp_path):
+    """Only the default codec (snappy, for speed) leaves payloads uncompressed: a user
+    who asks for zstd wants the smaller file."""
+    dest = tmp_path / "z"
+    _cli(
+        "export",
+        str(SAMPLES / "faults.log"),
+        "--parquet",
+        str(dest),
+        "--parquet-compression",
+        "zstd",
+        "-q",
+    )
+    meta = pq.ParquetFile(dest / "frames.parquet").metadata
+    got = {meta.row_group(0).column(i).compression for i in range(meta.num_columns)}
+    assert got == {"ZSTD"}
+
+
 def test_writer_join_can_be_repeated_after_an_error():
     """close() joins, raises the writer's error, and abort() joins again (then __exit__
     once more): every join must return, with a one-deep queue too."""

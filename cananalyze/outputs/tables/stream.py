@@ -47,6 +47,7 @@ from ..sink import Sink as OutputSink
 from . import pandas_like as pl
 from . import sdo_chunks, wide
 from .writer import (
+    DEFAULT_CODEC,
     ROW_GROUP,
     ROW_GROUP_BYTES,
     Coded,
@@ -222,7 +223,7 @@ class TableSink(OutputSink):
         self,
         path: str | Path,
         fmt: str = "parquet",
-        compression: str = "snappy",
+        compression: str = DEFAULT_CODEC,
         profiles: dict[int, tuple[str, str]] | None = None,
         depth: int = 1,
         constants: dict[str, str] | None = None,

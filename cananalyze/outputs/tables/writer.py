@@ -57,6 +57,7 @@ ROW_GROUP_BYTES = 4 << 20
 # Rows the Parquet encoders take per call (Arrow's default is 1024): 16k makes the
 # frames and signals tables 5 % quicker to encode, with the same pages and file.
 WRITE_BATCH = 1 << 14
+DEFAULT_CODEC = "snappy"  # as pandas writes Parquet; --parquet-compression picks another
 
 
 def nbytes(value) -> int:
@@ -99,10 +100,11 @@ class TableSpec:
     # Arrow schema read back says `not null`). Not in a fleet's dataset parts, whose
     # one schema per table (fleet/schema) is nullable throughout.
     required: tuple[str, ...] = ()
-    # columns written without the table's compression, where it costs more than it
-    # saves: snappy took ~0.17 s CPU per 10M frames on the frames table's payloads
-    # (5 % of the whole export) to make them 17 % smaller (payloads are near random);
-    # on dictionary-coded small integers it saves almost nothing (bench_tables.py)
+    # columns the default codec (snappy, chosen for speed) leaves uncompressed, where it
+    # costs more than it saves: ~0.17 s CPU per 10M frames on the frames table's payloads
+    # (5 % of the whole export) for 17 % smaller payloads (near random bytes), almost
+    # nothing saved on dictionary-coded small integers. A codec the user asks for
+    # (--parquet-compression zstd: for size) compresses every column.
     uncompressed: tuple[str, ...] = ()
     # DELTA_BINARY_PACKED for small integer columns instead of a dictionary: hashing
     # every value into a dictionary was the frames table's costliest encoding (~0.1 s
@@ -110,8 +112,9 @@ class TableSpec:
     delta: tuple[str, ...] = ()
 
     def compression(self, names: list[str], codec: str) -> str | dict[str, str]:
-        """ParquetWriter's `compression`: `codec` for every column but `uncompressed`."""
-        if not self.uncompressed or codec.lower() == "none":
+        """ParquetWriter's `compression`: snappy for every column but `uncompressed`;
+        another codec for every column."""
+        if not self.uncompressed or codec.lower() != DEFAULT_CODEC:
             return codec
         return {n: "none" if n in self.uncompressed else codec for n in names}
 
