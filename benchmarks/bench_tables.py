@@ -40,9 +40,13 @@ def _cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def _options(spec, **change) -> dict:
-    opts = {**spec.parquet_options(), **change}
-    return opts
+def _options(spec, table: pa.Table, **change) -> dict:
+    """The writer keywords of `spec` (its per-column compression included), changed."""
+    opts = {**spec.parquet_options(), "compression": spec.compression(table.column_names, "snappy")}
+    if "use_dictionary" in change and "column_encoding" in opts:  # dictionaries, not DELTA
+        del opts["column_encoding"]
+        opts["use_byte_stream_split"] = list(spec.split) or False
+    return {**opts, **change}
 
 
 def _hex(table: pa.Table) -> pa.Table:
@@ -77,34 +81,50 @@ def _long(wide: pa.Table) -> pa.Table:
 
 LABELS = ["channel", "service"]  # the frames table's string columns
 MESSAGE = ["kind", "level", "node", "message"]
+SMALL = ["channel", "can_id", "dlc", "flags", "service", "node", "pdo"]  # the layout before
 
 
 def variants(folder: Path) -> list[tuple[str, pa.Table, dict]]:
     frames = pq.read_table(folder / "frames.parquet")
     events = pq.read_table(folder / "events.parquet")
     signals = pq.read_table(folder / "signals.parquet")
+    hexed = _hex(frames)
     out = [
-        ("frames: as written", frames, _options(FRAMES)),
-        ("frames: data as hex text", _hex(frames), _options(FRAMES)),
-        ("frames: statistics on all", frames, _options(FRAMES, write_statistics=True)),
-        ("frames: no statistics", frames, _options(FRAMES, write_statistics=False)),
-        ("frames: dictionary on all", frames, _options(FRAMES, use_dictionary=True)),
-        ("frames: dictionary on labels only", frames, _options(FRAMES, use_dictionary=LABELS)),
-        ("events: as written", events, _options(EVENTS)),
-        ("events: dictionary on all", events, _options(EVENTS, use_dictionary=True)),
-        ("events: dictionary, message too", events, _options(EVENTS, use_dictionary=MESSAGE)),
-        ("events: statistics on all", events, _options(EVENTS, write_statistics=True)),
-        ("signals: as written", signals, _options(SIGNALS)),
+        ("frames: as written", frames, _options(FRAMES, frames)),
+        ("frames: data as hex text", hexed, _options(FRAMES, hexed)),
+        ("frames: statistics on all", frames, _options(FRAMES, frames, write_statistics=True)),
+        ("frames: no statistics", frames, _options(FRAMES, frames, write_statistics=False)),
+        ("frames: dictionary on all", frames, _options(FRAMES, frames, use_dictionary=True)),
+        (
+            "frames: dictionary on labels only",
+            frames,
+            _options(FRAMES, frames, use_dictionary=LABELS),
+        ),
+        (
+            "frames: dictionary on small ints",
+            frames,
+            _options(FRAMES, frames, use_dictionary=SMALL),
+        ),
+        ("frames: snappy on every column", frames, _options(FRAMES, frames, compression="snappy")),
+        ("events: as written", events, _options(EVENTS, events)),
+        ("events: dictionary on all", events, _options(EVENTS, events, use_dictionary=True)),
+        (
+            "events: dictionary, message too",
+            events,
+            _options(EVENTS, events, use_dictionary=MESSAGE),
+        ),
+        ("events: statistics on all", events, _options(EVENTS, events, write_statistics=True)),
+        ("signals: as written", signals, _options(SIGNALS, signals)),
     ]
     if "value" not in signals.column_names:  # the wide file: compare with one row per value
         long = _long(signals)
-        opts = _options(SIGNALS, use_dictionary=["node", "pdo", "cob_id", "signal"])
+        opts = _options(SIGNALS, long, use_dictionary=["node", "pdo", "cob_id", "signal"])
         out.append(("signals: one row per value", long, opts))
     return out
 
 
 def write(table: pa.Table, path: Path, opts: dict) -> None:
-    with pq.ParquetWriter(path, table.schema, compression="snappy", **opts) as w:
+    with pq.ParquetWriter(path, table.schema, **opts) as w:
         w.write_table(table, row_group_size=ROW_GROUP)
 
 

@@ -100,7 +100,7 @@ def test_bench_tables_compares_each_layout(logs, tmp_path):
         label, figures = line[:34].strip(), line[34:].split()
         assert len(figures) == 4 and all(re.fullmatch(NUMBER, f) for f in figures), line
         rows[label] = [float(f) for f in figures]
-    assert len(rows) == 12
+    assert len(rows) == 14
     assert rows["frames: as written"][2] < rows["frames: data as hex text"][2]
     assert rows["signals: as written"][2] < rows["signals: one row per value"][2]
     assert done.stdout.splitlines()[-1].startswith("load average")
