@@ -1289,6 +1289,29 @@ PyMODINIT_FUNC PyInit__speedups(void) {
 
 /* ---- the decode path (FrameBatch -> DecodedBatch): its own section and method table -------- */
 
+/* A counting sort's first half, shared by stable_order and group_gaps (called without
+   the GIL): next[key] becomes the first slot of each key's rows (exclusive prefix sums of
+   the counts), and the start of each key that has rows goes to starts (if not NULL), in
+   key order; returns the number of such keys, or -(i + 1) for the first row i whose key
+   is not below nkeys or whose row is not below nrows (rows given; next is left unusable). */
+static Py_ssize_t bucket_starts(const uint16_t *keys, Py_ssize_t n, Py_ssize_t nkeys,
+                                const Py_ssize_t *rows, Py_ssize_t nrows, Py_ssize_t *next,
+                                Py_ssize_t *starts) {
+    for (Py_ssize_t i = 0; i < n; i++) {
+        if (keys[i] >= nkeys || (rows && (rows[i] < 0 || rows[i] >= nrows))) return -(i + 1);
+        next[keys[i]]++;
+    }
+    Py_ssize_t at = 0, groups = 0;
+    for (Py_ssize_t k = 0; k < nkeys; k++) {
+        Py_ssize_t c = next[k];
+        next[k] = at;
+        if (c && starts) starts[groups] = at;
+        groups += c != 0;
+        at += c;
+    }
+    return groups;
+}
+
 PyDoc_STRVAR(stable_order_doc,
              "stable_order(keys, nkeys, order)\n\n"
              "The stable sort order of keys (uint16, n of them, each < nkeys) into order\n"
@@ -1315,28 +1338,15 @@ static PyObject *stable_order(PyObject *self, PyObject *args) {
         PyErr_NoMemory();
         goto fail;
     }
-    Py_ssize_t bad = -1;
+    Py_ssize_t got;
     Py_BEGIN_ALLOW_THREADS;
-    for (Py_ssize_t i = 0; i < n; i++) {
-        if (keys[i] >= nkeys) {
-            bad = i;
-            break;
-        }
-        next[keys[i]]++;
-    }
-    if (bad < 0) {
-        Py_ssize_t at = 0;
-        for (Py_ssize_t k = 0; k < nkeys; k++) {
-            Py_ssize_t c = next[k];
-            next[k] = at;
-            at += c;
-        }
+    got = bucket_starts(keys, n, nkeys, NULL, 0, next, NULL);
+    if (got >= 0)
         for (Py_ssize_t i = 0; i < n; i++) order[next[keys[i]]++] = i;
-    }
     Py_END_ALLOW_THREADS;
     PyMem_Free(next);
-    if (bad >= 0) {
-        PyErr_Format(PyExc_ValueError, "stable_order: key %zd is not below nkeys", bad);
+    if (got < 0) {
+        PyErr_Format(PyExc_ValueError, "stable_order: key %zd is not below nkeys", -got - 1);
         goto fail;
     }
     bufs_release(&bs);
@@ -1383,21 +1393,11 @@ static PyObject *group_gaps(PyObject *self, PyObject *args) {
         goto fail;
     }
     Py_BEGIN_ALLOW_THREADS;
-    for (Py_ssize_t i = 0; i < n; i++) {
-        if (keys[i] >= nkeys || rows[i] < 0 || rows[i] >= nt) {
-            bad = i;
-            break;
-        }
-        next[keys[i]]++;
-    }
-    if (bad < 0) {
-        Py_ssize_t at = 0;
-        for (Py_ssize_t key = 0; key < nkeys; key++) {
-            Py_ssize_t c = next[key];
-            next[key] = at;
-            if (c) starts[groups++] = at;
-            at += c;
-        }
+    groups = bucket_starts(keys, n, nkeys, rows, nt, next, starts);
+    if (groups < 0) {
+        bad = -groups - 1;
+        groups = 0;
+    } else {
         for (Py_ssize_t i = 0; i < n; i++) {
             uint16_t key = keys[i];
             Py_ssize_t p = next[key]++;
