@@ -261,7 +261,12 @@ class Capture:
     @cached_property
     def events(self) -> pd.DataFrame:
         """NMT commands, EMCY, boot-ups, NMT state changes, SDO transactions, findings."""
-        return _event_frame(self.sorted_events())
+        return _event_frame(self.sorted_events(), self._first_bus())
+
+    def _first_bus(self) -> str | None:
+        """The first frame's bus: what events built before a second bus was seen are on."""
+        fb = self.batch
+        return fb.channel_label(int(fb.channel[0])) if len(fb) else None
 
     def sorted_events(self) -> list[Event]:
         """Events by time, then by frame row (logs without timestamps have t = 0 throughout)."""
@@ -385,10 +390,11 @@ def _categorical(pd, codes: np.ndarray, labels: list[str]):
     return pd.Categorical.from_codes(inverse[codes], categories=list(uniq))
 
 
-def _event_frame(events: list[Event]):
+def _event_frame(events: list[Event], first_bus: str | None = None):
+    """The events table; a `bus` column (after the others) only on a log of several buses."""
     import pandas as pd
 
-    return pd.DataFrame(
+    df = pd.DataFrame(
         {
             "t": np.array([e.t for e in events], np.float64),
             "kind": pd.Categorical([e.kind for e in events]),
@@ -400,6 +406,9 @@ def _event_frame(events: list[Event]):
             "row": pd.array([e.row for e in events], dtype="Int64"),
         }
     )
+    if any(e.bus is not None for e in events):
+        df["bus"] = np.array([first_bus if e.bus is None else e.bus for e in events], object)
+    return df
 
 
 class Collector:

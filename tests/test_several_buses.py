@@ -326,3 +326,154 @@ def test_buses_past_the_limit_share_one_decoder():
     buses = {d.bus for d in dec.buses.values()}
     assert len(buses) == MAX_BUSES and OTHER_CHANNELS in buses
     assert dec.buses[len(names) - 1] is dec.buses[MAX_BUSES - 1]
+
+
+# --- the events table says which bus ---------------------------------------------------
+
+_EVENT_COLUMNS = ["t", "kind", "node", "level", "message", "row"]
+
+
+def _bootups_log(tmp_path, late: float = 0.0):
+    """Node 5 boots on can0, then on can1 (`late` s after can0's traffic), each with an
+    NMT start and its heartbeat; can0 keeps beating meanwhile."""
+    lines = [(1000.0, "can0", "705#00"), (1000.01, "can0", "000#0105")]
+    lines += _beats("can0", "05", 1000.1, int(late * 10) + 20)
+    t1 = 1000.05 + late
+    lines += [(t1, "can1", "705#00"), (t1 + 0.01, "can1", "000#0105")]
+    lines += _beats("can1", "05", t1 + 0.1, 10)
+    return _log(tmp_path, lines)
+
+
+def _bootup_buses(rows) -> list:
+    return [(r["bus"], r["node"]) for r in rows if r["kind"] == "bootup"]
+
+
+def _export_events(log, out) -> tuple[list[dict], list[dict]]:
+    """events.parquet (pyarrow) and events.csv (csv module) of `export`."""
+    import csv
+
+    import pyarrow.parquet as pq
+
+    from cananalyze.cli.main import main
+
+    assert main(["export", str(log), "--parquet", str(out / "p"), "-q"]) == 0
+    assert main(["export", str(log), "--csv", str(out / "c"), "-q"]) == 0
+    parquet = pq.read_table(out / "p" / "events.parquet").to_pylist()
+    with open(out / "c" / "events.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    for r in rows:
+        r["node"] = int(r["node"]) if r["node"] else None
+    return parquet, rows
+
+
+def test_events_carry_their_bus(tmp_path):
+    """Node 5's boot-up on can0 and on can1 are told apart in load().events, events.parquet
+    (pyarrow) and events.csv (csv module): a `bus` column, last, from the frame's channel."""
+    import pandas as pd
+
+    log = _bootups_log(tmp_path)
+    cap = load(str(log))
+    ev = cap.events
+    assert list(ev.columns) == [*_EVENT_COLUMNS, "bus"]
+    got = [(b, n, m) for b, n, m, k in ev[["bus", "node", "message", "kind"]].values if k != "sdo"]
+    assert got[:2] == [("can0", 5, "node 5: boot-up"), ("can0", 5, "node 5: NMT state bootup")]
+    assert ("can1", 5, "node 5: boot-up") in got and ("can1", None, "NMT start node 5") in [
+        (b, None if pd.isna(n) else n, m) for b, n, m in got
+    ]
+    channels = cap.frames.channel.astype(str).tolist()
+    framed = ev.row < len(channels)  # (a finding at the log's end: no frame of its own)
+    assert ev.bus[framed].tolist() == [channels[r] for r in ev.row[framed].tolist()]
+    assert ev.bus.notna().all()
+    parquet, rows = _export_events(log, tmp_path)
+    assert _bootup_buses(parquet) == _bootup_buses(rows) == [("can0", 5), ("can1", 5)]
+    assert [r["bus"] for r in parquet] == [r["bus"] for r in rows] == ev.bus.tolist()
+    assert list(rows[0]) == [*_EVENT_COLUMNS, "bus"]
+    assert pd.read_parquet(tmp_path / "p" / "events.parquet").equals(ev)
+
+
+@pytest.mark.parametrize("fmt", ["parquet", "csv"])
+def test_events_bus_when_can1_comes_after_rows_were_written(tmp_path, monkeypatch, fmt):
+    """can1 first seen 30 s into the log, in a later batch, after a row group of events was
+    written: the table gains its bus column then, can0's for the rows written before
+    (the file read back and widened), as load() says."""
+    import csv
+
+    import pandas as pd
+
+    from cananalyze.outputs.tables import writer
+    from cananalyze.outputs.tables.stream import TableSink
+
+    monkeypatch.setattr(writer, "ROW_GROUP", 2)
+    widened = []
+    fill = writer.Sink.fill_column
+
+    def spy(self, *args):
+        widened.append(self.writer is not None)
+        fill(self, *args)
+
+    monkeypatch.setattr(writer.Sink, "fill_column", spy)
+    log = _bootups_log(tmp_path, late=30.0)
+    cap = load(str(log))
+    rows = cap.frames
+    frames = [
+        (t, int(c), bytes(d), 0, ["can0", "can1"].index(ch))
+        for t, c, d, ch in zip(
+            rows.t, rows.can_id, rows.data, rows.channel.astype(str), strict=True
+        )
+    ]
+    cut = next(k for k, f in enumerate(frames) if f[4] == 1)
+    dec = build_decoder(Options(checks=True))
+    out = tmp_path / "out"
+    sink = TableSink(out, fmt)
+    sink.open()
+    for part in (frames[:cut], frames[cut:]):
+        sink.write(dec.decode(from_rows(part, channels=("can0", "can1"))))
+    sink.write(dec.finish())
+    sink.close()
+    assert widened == [True]
+    if fmt == "parquet":
+        got = pd.read_parquet(out / "events.parquet")
+        assert got.equals(cap.events)
+        return
+    with open(out / "events.csv", newline="") as f:
+        table = list(csv.DictReader(f))
+    want = cap.events
+    assert [[r["bus"], r["message"]] for r in table] == want[["bus", "message"]].values.tolist()
+    assert _bootup_buses([{**r, "node": int(r["node"] or -1)} for r in table]) == [
+        ("can0", 5),
+        ("can1", 5),
+    ]
+
+
+def test_one_bus_events_have_no_bus_column(tmp_path):
+    """A log of one channel: the events table of load(), Parquet and CSV as before."""
+    import pyarrow.parquet as pq
+
+    log = _log(tmp_path, [(1000.0, "can0", "705#00"), (1000.01, "can0", "000#0105")])
+    assert list(load(str(log)).events.columns) == _EVENT_COLUMNS
+    parquet, rows = _export_events(log, tmp_path)
+    assert pq.read_schema(tmp_path / "p" / "events.parquet").names == _EVENT_COLUMNS
+    assert list(rows[0]) == _EVENT_COLUMNS and len(rows) == len(parquet) == 3
+
+
+def test_fleet_events_bus_column(tmp_path):
+    """A dataset's events parts all have a `bus`: the channel on a log of two buses, null
+    on a log of one (one schema for every part)."""
+    import pyarrow.parquet as pq
+
+    from cananalyze.fleet.schema import schema as fleet_schema
+    from cananalyze.fleet.task import LogTask, process
+
+    two = _bootups_log(tmp_path)
+    one = _log(tmp_path, [(1000.0, "can0", "705#00")], "one.log")
+    dataset = tmp_path / "ds"
+    for log in (two, one):
+        assert process(LogTask(str(log), str(dataset), Options(checks=True)))["status"] == "ok"
+    parts = {}
+    for p in (dataset / "events").glob("date=*/*.parquet"):
+        t = pq.read_table(p)
+        assert t.schema.remove_metadata() == fleet_schema("events").remove_metadata()
+        rows = t.to_pylist()
+        parts[rows[0]["source"]] = rows
+    assert _bootup_buses(parts[str(two)]) == [("can0", 5), ("can1", 5)]
+    assert {r["bus"] for r in parts[str(one)]} == {None}
