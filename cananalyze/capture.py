@@ -69,6 +69,8 @@ class Capture:
     problems: ProblemLog
     network: str = ""
     profiles: dict[int, tuple[str, str]] = field(default_factory=dict)  # node -> (profile, how)
+    # several buses: bus -> its own network model's profiles (a device identified on can1)
+    bus_profiles: dict[str, dict[int, tuple[str, str]]] = field(default_factory=dict)
     checker: Any = None  # the Checker that ran in the pipeline (load() attaches one)
     options: Any = None  # the pipeline Options it was decoded with
     drive_changes: list = field(default_factory=list)  # CiA 402 (network.drive_tracker)
@@ -377,7 +379,7 @@ class Capture:
         if len(fb) and (fb.channel != fb.channel[0]).any():  # several buses: one row each
             decoded = DecodedBatch(fb, self.service, self.node, self.pdo, records=self.records)
             tally.add(decoded, self.state_changes, 0)
-            return tally.rows(self.profiles)
+            return tally.rows(self.profiles, self.bus_profiles)
         tally.add_frames(self.service, self.node)
         tally.add_states(self.state_changes)
         tally.add_identity(self.records)
@@ -507,12 +509,13 @@ class CaptureSink(Sink):
         self.collector.add(batch)
 
     def close(self) -> None:
-        from .network.node_tally import node_profiles
+        from .network.node_tally import bus_profiles, node_profiles
 
         run = self.run
         self.capture = self.collector.capture(
             run.problems, str(run.options.network or ""), node_profiles(run.network)
         )
+        self.capture.bus_profiles = bus_profiles(run.decoder)
         self.capture.checker = run.checker
         self.capture.options = run.options
 

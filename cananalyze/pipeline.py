@@ -190,6 +190,13 @@ class Decoder:
                 return dec
         return self
 
+    def networks(self) -> dict[str | None, NetworkModel | None]:
+        """Each bus's network model by bus name ({None: the one} on a log of one bus): a
+        device identified by its 0x1018 read on can1 is in can1's model only."""
+        if self.buses is None:
+            return {None: self.network}
+        return {dec.bus: dec.network for dec in self._decoders}
+
     @staticmethod
     def _name(dec: Decoder, name: str) -> None:
         dec.bus = name

@@ -477,3 +477,75 @@ def test_fleet_events_bus_column(tmp_path):
         parts[rows[0]["source"]] = rows
     assert _bootup_buses(parts[str(two)]) == [("can0", 5), ("can1", 5)]
     assert {r["bus"] for r in parts[str(one)]} == {None}
+
+
+# --- each bus's devices: its own network model ----------------------------------------
+
+
+def _identity_log(tmp_path):
+    """Nodes 5 and 7 beat on can0 and can1; node 5's identity (a DAT 7014's vendor and
+    product, 0x1018:01/02) is read on can1 only, node 7's on can0 only."""
+
+    def upload(t, ch, node, sub, value):
+        req = (t, ch, f"{0x600 + node:03X}#401810{sub:02X}00000000")
+        ans = f"{0x580 + node:03X}#431810{sub:02X}{value.to_bytes(4, 'little').hex().upper()}"
+        return [req, (t + 0.001, ch, ans)]
+
+    lines = []
+    for node in (5, 7):
+        for ch, t0 in (("can0", 1000.0), ("can1", 1000.05)):
+            lines += [(t0 + k * 0.1 + node * 1e-4, ch, f"{0x700 + node:03X}#05") for k in range(10)]
+    lines += upload(1000.2, "can1", 5, 1, 0x3CD) + upload(1000.3, "can1", 5, 2, 2)
+    lines += upload(1000.4, "can0", 7, 1, 0x3CD) + upload(1000.5, "can0", 7, 2, 2)
+    return _log(tmp_path, lines)
+
+
+_PROFILES = [("can0", 5, None), ("can0", 7, "dat7014"), ("can1", 5, "dat7014"), ("can1", 7, None)]
+
+
+def test_nodes_table_profile_per_bus(tmp_path):
+    """The nodes table's profile column is each bus's own: node 7 identified on can0 is
+    not a DAT 7014 on can1 (load(), nodes.parquet read with pyarrow, the report's node
+    sections)."""
+    import pyarrow.parquet as pq
+
+    from cananalyze.cli.main import main
+
+    log = _identity_log(tmp_path)
+    nodes = load(str(log)).nodes.reset_index()
+    got = [
+        (b, n, p if isinstance(p, str) else None)
+        for b, n, p in nodes[["bus", "node", "profile"]].values
+    ]
+    assert got == _PROFILES
+    main(["export", str(log), "--parquet", str(tmp_path / "out"), "-q"])
+    table = pq.read_table(tmp_path / "out" / "nodes.parquet").to_pylist()
+    assert [(r["bus"], r["node"], r["profile"]) for r in table] == _PROFILES
+    page = tmp_path / "r.html"
+    main(["report", str(log), "-o", str(page)])
+    html = page.read_text()
+    assert (
+        "<h3>can0 node 7: dat7014</h3>" in html and "<h3>can1 node 7: unknown device</h3>" in html
+    )
+
+
+def test_summary_devices_per_bus(tmp_path, capsys):
+    """`decode --summary` lists each bus's devices from its own model: node 5 identified
+    on can1 is a DAT 7014 there, unknown on can0 (text and the JSON's `devices`)."""
+    from cananalyze.cli.main import main
+
+    log = _identity_log(tmp_path)
+    main(["decode", str(log), "--summary"])
+    text = capsys.readouterr().out
+    devices = text.split("devices:\n", 1)[1].splitlines()[:4]
+    assert [ln.split(":")[0].strip() for ln in devices] == [
+        "can0 node   5",
+        "can0 node   7",
+        "can1 node   5",
+        "can1 node   7",
+    ]
+    assert "unknown device" in devices[0] and "unknown device" in devices[3]
+    assert "Datexel DAT 7014" in devices[1] and "Datexel DAT 7014" in devices[2]
+    main(["decode", str(log), "--summary", "--format", "jsonl"])
+    rec = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert [(d["bus"], d["node"], d["profile"]) for d in rec["devices"]] == _PROFILES

@@ -148,10 +148,12 @@ def _node_id(n: int, bus: str | None) -> str:
 
 
 def nodes(s, figs: Figures) -> str:
-    from ...network.node_tally import node_profiles
+    from ...network.node_tally import bus_profiles, node_profiles
 
     model = s.run.network
-    rows = s.tally.rows(node_profiles(model) if model is not None else {})
+    rows = s.tally.rows(
+        node_profiles(model) if model is not None else {}, bus_profiles(s.run.decoder)
+    )
     configs = _Configs(s)
     parts = ['<section id="nodes"><h2>Nodes</h2>']
     if s.states:

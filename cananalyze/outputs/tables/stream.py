@@ -38,7 +38,7 @@ from ...errors import UsageError
 from ...events.build import LEVEL_NAMES, EventState, batch_events_of
 from ...events.columns import KINDS, NO_NODE, NO_ROW, EventColumns
 from ...frames import FrameBatch
-from ...network.node_tally import NodeTally, node_profiles
+from ...network.node_tally import NodeTally, bus_profiles, node_profiles
 from ...protocol.services import SERVICE_NAMES
 from ...records import DecodedBatch
 from ...sdo.transaction import SDO_TABLE_COLUMNS
@@ -805,7 +805,11 @@ class TableSink(OutputSink):
         return n
 
     def _write_nodes(self) -> int:
-        rows = self._nodes.rows(node_profiles(self.run.network) if self.run else self.profiles)
+        run = self.run
+        if run is None:
+            rows = self._nodes.rows(self.profiles)
+        else:
+            rows = self._nodes.rows(node_profiles(run.network), bus_profiles(run.decoder))
         names = list(rows[0]) if rows else ["node"]
         others = [c for c in names if c != "node"]
         # Parquet keeps the index last (to_parquet), CSV first (reset_index)
