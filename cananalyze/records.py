@@ -80,6 +80,7 @@ class SdoTable:
     result_keys: list
     result: np.ndarray  # int64 code into result_keys
     latency: np.ndarray  # float64 ms, NaN where the record has none
+    slots: np.ndarray | None = None  # int64 position of each in DecodedBatch.records
 
     def first_seen(self, codes: np.ndarray) -> list[int]:
         """Distinct codes in the order they first appear (dict insertion order of a loop)."""
@@ -365,6 +366,7 @@ class DecodedBatch:
         node = np.asarray(nodes, np.int64)
         result = np.asarray(results, np.int64)
         latency = np.asarray(lats, np.float64)
+        slots = np.asarray(pos, np.int64)
         if fast is not None:
             for key in sorted(set(fast.node.tolist())):  # (np.unique's first call: ~10 ms)
                 if key not in node_code:
@@ -384,7 +386,8 @@ class DecodedBatch:
             node = np.concatenate((node, lut[fast.node]))[order]
             result = np.concatenate((result, fres))[order]
             latency = np.concatenate((latency, fast.latency))[order]
-        return SdoTable(node_keys, node, result_keys, result, latency)
+            slots = at[order]
+        return SdoTable(node_keys, node, result_keys, result, latency, slots)
 
 
 def _no_findings() -> FindingColumns:

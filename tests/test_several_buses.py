@@ -549,3 +549,31 @@ def test_summary_devices_per_bus(tmp_path, capsys):
     main(["decode", str(log), "--summary", "--format", "jsonl"])
     rec = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert [(d["bus"], d["node"], d["profile"]) for d in rec["devices"]] == _PROFILES
+
+
+# --- the report's SDO transfers per bus and node ---------------------------------------
+
+
+def test_report_sdo_table_and_aborts_per_bus(tmp_path):
+    """Node 5 answers two uploads on can0 and aborts one on can1: the report's SDO table
+    has a row per bus and node (not three transfers, one abort for node 5), and the
+    abort list names can1 node 5 (tables read with html.parser)."""
+    from test_report import parse
+
+    from cananalyze.cli.main import main
+
+    lines = _beats("can0", "05", 1000.0, 10) + _beats("can1", "05", 1000.05, 10)
+    for k, t in enumerate((1000.2, 1000.4)):
+        lines.append(_sdo(t, "can0", 0x605, bytes([0x40, 0x18, 0x10, 1 + k, 0, 0, 0, 0])))
+        lines.append(_sdo(t + 0.002, "can0", 0x585, bytes([0x43, 0x18, 0x10, 1 + k, 1, 0, 0, 0])))
+    lines.append(_sdo(1000.3, "can1", 0x605, bytes([0x40, 0x00, 0x20, 0, 0, 0, 0, 0])))
+    abort = bytes([0x80, 0x00, 0x20, 0, 0x00, 0x00, 0x02, 0x06])  # 0x06020000: no object
+    lines.append(_sdo(1000.301, "can1", 0x585, abort))
+    page = tmp_path / "r.html"
+    main(["report", str(_log(tmp_path, lines)), "-o", str(page)])
+    _, tables, _ = parse(page)
+    (sdo,) = [t for t in tables.tables if t[0][:3] == ["node", "transfers", "aborts"]]
+    assert [r[:3] for r in sdo[1:]] == [["can0 node 5", "2", "0"], ["can1 node 5", "1", "1"]]
+    assert [r[3] for r in sdo[1:]] == ["2.00", "1.00"]  # min latency, each its own
+    (aborts,) = [t for t in tables.tables if t[0][:2] == ["time", "node"]]
+    assert [r[1:4] for r in aborts[1:]] == [["can1 node 5", "upload", "0x2000:00"]]
