@@ -577,3 +577,37 @@ def test_report_sdo_table_and_aborts_per_bus(tmp_path):
     assert [r[3] for r in sdo[1:]] == ["2.00", "1.00"]  # min latency, each its own
     (aborts,) = [t for t in tables.tables if t[0][:2] == ["time", "node"]]
     assert [r[1:4] for r in aborts[1:]] == [["can1 node 5", "upload", "0x2000:00"]]
+
+
+def test_export_dbc_one_per_bus(tmp_path):
+    """`export --dbc OUT` on a log of two buses: OUT.can0.dbc and OUT.can1.dbc, each its
+    bus's node 5 TPDO2 as that bus mapped it (read with cantools)."""
+    import cantools
+
+    from cananalyze.cli.main import main
+
+    rows = []
+    for k, ch in enumerate(("can0", "can1")):
+        t = 1.0 + k * 0.01
+        rows += _download(t, ch, 0x1A01, 0, 0, 1)
+        rows += _download(t + 0.001, ch, 0x1A01, 1, 0x60000108, 4)
+        rows += _download(t + 0.002, ch, 0x1A01, 2, 0x60000208, 4)
+        rows += _download(t + 0.003, ch, 0x1A01, 0, 2, 1)
+    rows += _download(1.1, "can1", 0x1A01, 0, 0, 1)  # can1 only: one 16-bit object
+    rows += _download(1.101, "can1", 0x1A01, 1, 0x64010110, 4)
+    rows += _download(1.102, "can1", 0x1A01, 0, 1, 1)
+    for k in range(4):
+        rows += [(1.2 + k * 0.01, 0x285, b"\x34\x12", 0, ch) for ch in ("can0", "can1")]
+    lines = [(t, ch, f"{cob:03X}#{bytes(d).hex().upper()}") for t, cob, d, _, ch in rows]
+    log = _log(tmp_path, lines)
+    out = tmp_path / "net.dbc"
+    assert main(["export", str(log), "--dbc", str(out), "-q"]) == 0
+    assert not out.exists()
+    got = {}
+    for bus in ("can0", "can1"):
+        db = cantools.database.load_file(str(tmp_path / f"net.{bus}.dbc"))
+        msg = db.get_message_by_frame_id(0x285)
+        got[bus] = [(s.start, s.length) for s in msg.signals]
+        want = [0x34, 0x12] if bus == "can0" else [0x1234]
+        assert list(msg.decode(b"\x34\x12").values()) == want
+    assert got == {"can0": [(0, 8), (8, 8)], "can1": [(0, 16)]}
