@@ -611,3 +611,29 @@ def test_export_dbc_one_per_bus(tmp_path):
         want = [0x34, 0x12] if bus == "can0" else [0x1234]
         assert list(msg.decode(b"\x34\x12").values()) == want
     assert got == {"can0": [(0, 8), (8, 8)], "can1": [(0, 16)]}
+
+
+def test_dashboard_nodes_panel_per_bus(tmp_path):
+    """The live dashboard's nodes panel: a row per bus and node, each bus's device from
+    its own network model (node 5 identified on can1 only, node 7 on can0 only)."""
+    from rich.console import Console
+
+    from cananalyze.outputs.dashboard import DashboardSink
+    from cananalyze.pipeline import open_source, run
+
+    log = _identity_log(tmp_path)
+    opts = Options()
+    sink = DashboardSink(show=False)
+    run(open_source(str(log), opts), build_decoder(opts), [sink], opts)
+    console = Console(record=True, width=200, color_system=None)
+    console.print(sink.view.render(wall=0.0, height=40))
+    text = console.export_text()
+    rows = [[c.strip() for c in ln.split("│")[1:-1]] for ln in text.splitlines()]
+    got = [(r[0], r[1], "Datexel" in r[2]) for r in rows if r and r[0] in ("can0", "can1")]
+    assert got == [
+        ("can0", "5", False),
+        ("can0", "7", True),
+        ("can1", "5", True),
+        ("can1", "7", False),
+    ]
+    assert sink.view.nodes[5].state == "operational"  # the first bus's, as on one bus
