@@ -637,3 +637,42 @@ def test_dashboard_nodes_panel_per_bus(tmp_path):
         ("can1", "7", False),
     ]
     assert sink.view.nodes[5].state == "operational"  # the first bus's, as on one bus
+
+
+def test_events_resorted_at_the_end_keep_their_bus(tmp_path, monkeypatch):
+    """can1's batch starts before can0's ended (times going back between batches): the
+    events table is re-sorted at the end (written and widened before), each row keeping
+    its bus: the channel of its frame in frames.parquet (pyarrow)."""
+    import pyarrow.parquet as pq
+
+    from cananalyze.outputs.tables import writer
+    from cananalyze.outputs.tables.stream import TableSink
+
+    monkeypatch.setattr(writer, "ROW_GROUP", 2)
+
+    def rows(lines, ch):
+        return [(t, int(f[:3], 16), bytes.fromhex(f[4:]), 0, ch) for t, _, f in lines]
+
+    can0 = [(1000.0, "can0", "705#00"), (1000.01, "can0", "000#0105")]
+    can0 += _beats("can0", "05", 1000.1, 300)
+    can1 = [(1000.05, "can1", "705#00"), (1000.06, "can1", "000#0105")]
+    can1 += _beats("can1", "04", 1000.1, 10)
+    dec = build_decoder(Options(checks=True))
+    sink = TableSink(tmp_path / "out", "parquet")
+    sink.open()
+    for part, ch in ((can0, 0), (can1, 1)):
+        sink.write(dec.decode(from_rows(rows(part, ch), channels=("can0", "can1"))))
+    sink.write(dec.finish())
+    sink.close()
+    events = pq.read_table(tmp_path / "out" / "events.parquet").to_pylist()
+    channel = pq.read_table(tmp_path / "out" / "frames.parquet").column("channel").to_pylist()
+    assert [e["t"] for e in events] == sorted(e["t"] for e in events)
+    assert [(e["bus"], e["message"]) for e in events[:6]] == [
+        ("can0", "node 5: boot-up"),
+        ("can0", "node 5: NMT state bootup"),
+        ("can0", "NMT start node 5"),
+        ("can1", "node 5: boot-up"),
+        ("can1", "node 5: NMT state bootup"),
+        ("can1", "NMT start node 5"),
+    ]
+    assert all(e["bus"] == channel[e["row"]] for e in events if e["row"] < len(channel))
