@@ -69,6 +69,8 @@ class Capture:
     problems: ProblemLog
     network: str = ""
     profiles: dict[int, tuple[str, str]] = field(default_factory=dict)  # node -> (profile, how)
+    # several buses: bus -> its own network model's profiles (a device identified on can1)
+    bus_profiles: dict[str, dict[int, tuple[str, str]]] = field(default_factory=dict)
     checker: Any = None  # the Checker that ran in the pipeline (load() attaches one)
     options: Any = None  # the pipeline Options it was decoded with
     drive_changes: list = field(default_factory=list)  # CiA 402 (network.drive_tracker)
@@ -261,7 +263,12 @@ class Capture:
     @cached_property
     def events(self) -> pd.DataFrame:
         """NMT commands, EMCY, boot-ups, NMT state changes, SDO transactions, findings."""
-        return _event_frame(self.sorted_events())
+        return _event_frame(self.sorted_events(), self._first_bus())
+
+    def _first_bus(self) -> str | None:
+        """The first frame's bus: what events built before a second bus was seen are on."""
+        fb = self.batch
+        return fb.channel_label(int(fb.channel[0])) if len(fb) else None
 
     def sorted_events(self) -> list[Event]:
         """Events by time, then by frame row (logs without timestamps have t = 0 throughout)."""
@@ -372,7 +379,7 @@ class Capture:
         if len(fb) and (fb.channel != fb.channel[0]).any():  # several buses: one row each
             decoded = DecodedBatch(fb, self.service, self.node, self.pdo, records=self.records)
             tally.add(decoded, self.state_changes, 0)
-            return tally.rows(self.profiles)
+            return tally.rows(self.profiles, self.bus_profiles)
         tally.add_frames(self.service, self.node)
         tally.add_states(self.state_changes)
         tally.add_identity(self.records)
@@ -385,10 +392,11 @@ def _categorical(pd, codes: np.ndarray, labels: list[str]):
     return pd.Categorical.from_codes(inverse[codes], categories=list(uniq))
 
 
-def _event_frame(events: list[Event]):
+def _event_frame(events: list[Event], first_bus: str | None = None):
+    """The events table; a `bus` column (after the others) only on a log of several buses."""
     import pandas as pd
 
-    return pd.DataFrame(
+    df = pd.DataFrame(
         {
             "t": np.array([e.t for e in events], np.float64),
             "kind": pd.Categorical([e.kind for e in events]),
@@ -400,6 +408,9 @@ def _event_frame(events: list[Event]):
             "row": pd.array([e.row for e in events], dtype="Int64"),
         }
     )
+    if any(e.bus is not None for e in events):
+        df["bus"] = np.array([first_bus if e.bus is None else e.bus for e in events], object)
+    return df
 
 
 class Collector:
@@ -498,12 +509,13 @@ class CaptureSink(Sink):
         self.collector.add(batch)
 
     def close(self) -> None:
-        from .network.node_tally import node_profiles
+        from .network.node_tally import bus_profiles, node_profiles
 
         run = self.run
         self.capture = self.collector.capture(
             run.problems, str(run.options.network or ""), node_profiles(run.network)
         )
+        self.capture.bus_profiles = bus_profiles(run.decoder)
         self.capture.checker = run.checker
         self.capture.options = run.options
 

@@ -145,7 +145,7 @@ class Decoder:
 
     def _decode_one(self, batch: FrameBatch) -> DecodedBatch:
         c = self.classifier.classify(batch)
-        out = DecodedBatch(batch, c.service, c.node, c.pdo)
+        out = DecodedBatch(batch, c.service, c.node, c.pdo, bus=self.bus)
         for p in self.processors:
             p.process(out)
         return out
@@ -189,6 +189,13 @@ class Decoder:
             if dec.bus == name:
                 return dec
         return self
+
+    def networks(self) -> dict[str | None, NetworkModel | None]:
+        """Each bus's network model by bus name ({None: the one} on a log of one bus): a
+        device identified by its 0x1018 read on can1 is in can1's model only."""
+        if self.buses is None:
+            return {None: self.network}
+        return {dec.bus: dec.network for dec in self._decoders}
 
     @staticmethod
     def _name(dec: Decoder, name: str) -> None:
@@ -235,7 +242,7 @@ class Decoder:
     def _tick_one(self, now: float) -> DecodedBatch | None:
         fb = FrameBatch.empty()
         c = self.classifier.classify(fb)
-        out = DecodedBatch(fb, c.service, c.node, c.pdo)
+        out = DecodedBatch(fb, c.service, c.node, c.pdo, bus=self.bus)
         for p in self.processors:
             tick = getattr(p, "tick", None)
             if tick is not None:
@@ -277,9 +284,11 @@ def merge_buses(batch: FrameBatch, parts: list[tuple[np.ndarray, DecodedBatch]])
     node = np.full(n, -1, np.int16)
     pdo = np.zeros(n, np.uint8)
     out = DecodedBatch(batch, service, node, pdo)
+    out.row_bus = np.empty(n, object)
     founds = []
     for rows, part in parts:
         at = np.append(rows, n)  # a part's row len(part): the batch's end
+        out.row_bus[rows] = part.bus
         service[rows] = part.service
         node[rows] = part.node
         pdo[rows] = part.pdo
@@ -293,7 +302,8 @@ def merge_buses(batch: FrameBatch, parts: list[tuple[np.ndarray, DecodedBatch]])
             f = part.findings
             f.row = at[np.clip(f.row, 0, len(rows))]
             founds.append(f)
-    out.records = _merge_records([(np.append(rows, n), part) for rows, part in parts])
+    out.records, of_part = _merge_records([(np.append(rows, n), part) for rows, part in parts])
+    out.record_bus = _bus_names([part.bus for _, part in parts], of_part)
     out.drive.sort(key=lambda c: c.row)
     if founds:
         from .checks.columns import FindingColumns
@@ -331,13 +341,17 @@ def merge_ends(parts: list[DecodedBatch]) -> DecodedBatch:
 
     out = parts[0]
     out.records = [r for p in parts for r in p.records]
+    of_part = np.repeat(np.arange(len(parts)), [len(p.records) for p in parts])
+    out.record_bus = _bus_names([p.bus for p in parts], of_part)
+    out.bus = None
     out.drive = [c for p in parts for c in p.drive]
     out.findings = FindingColumns.concat([p.findings for p in parts]).sort()
     return out
 
 
-def _merge_records(parts: list[tuple[np.ndarray, DecodedBatch]]) -> list:
-    """The parts' records at the batch's rows ((row map, part) each), in row order. The
+def _merge_records(parts: list[tuple[np.ndarray, DecodedBatch]]) -> tuple[list, np.ndarray]:
+    """The parts' records at the batch's rows ((row map, part) each), in row order, and
+    the part each came from. The
     SDO fast path's records a part has not built stay unbuilt, with their columns
     (`sdo_fast`: the checks and the summary read those); the rest are read as they are."""
     from .records import SdoColumns
@@ -360,7 +374,7 @@ def _merge_records(parts: list[tuple[np.ndarray, DecodedBatch]]) -> list:
         keys.append(np.stack((np.full(m, p), np.arange(m)), 1))
         lazy.append(is_fast)
     if not rows:
-        return []
+        return [], np.zeros(0, np.int64)
     row = np.concatenate(rows)
     key = np.concatenate(keys)
     deferred = np.concatenate(lazy)
@@ -371,8 +385,9 @@ def _merge_records(parts: list[tuple[np.ndarray, DecodedBatch]]) -> list:
             row[order].tolist(), deferred[order].tolist(), key[order].tolist(), strict=True
         )
     ]
+    of_part = key[order][:, 0]
     if not fasts:
-        return merged
+        return merged, of_part
     slots = np.flatnonzero(deferred[order])  # merged positions of the unbuilt ones
     where = key[order][slots]  # (part, slot in the part) of each
 
@@ -403,7 +418,14 @@ def _merge_records(parts: list[tuple[np.ndarray, DecodedBatch]]) -> list:
         build,
         SdoColumns(**{f: v[by_slot] for f, v in columns.items()}),
     )
-    return out
+    return out, of_part
+
+
+def _bus_names(names: list[str | None], of_part: np.ndarray) -> np.ndarray:
+    """Each merged record's bus: the name of the part it came from."""
+    table = np.empty(len(names), object)
+    table[:] = names
+    return table[of_part]
 
 
 def network_spec(opts: Options) -> NetworkSpec:

@@ -80,6 +80,7 @@ class SdoTable:
     result_keys: list
     result: np.ndarray  # int64 code into result_keys
     latency: np.ndarray  # float64 ms, NaN where the record has none
+    slots: np.ndarray | None = None  # int64 position of each in DecodedBatch.records
 
     def first_seen(self, codes: np.ndarray) -> list[int]:
         """Distinct codes in the order they first appear (dict insertion order of a loop)."""
@@ -126,6 +127,11 @@ class DecodedBatch:
     events: object = None  # events.columns.EventColumns, built once by the pipeline
     states: list = field(default_factory=list)  # NMT state changes (events.columns.Row)
     drive: list = field(default_factory=list)  # CiA 402 changes (network.drive_tracker)
+    # several buses (else None): the bus of the whole batch (one bus's decoder), or of
+    # each frame row and each record (object arrays: a batch merged from several)
+    bus: str | None = None
+    row_bus: np.ndarray | None = None
+    record_bus: np.ndarray | None = None
     _lazy: tuple | None = field(default=None, repr=False, compare=False)
     _sdo_cache: tuple | None = field(default=None, repr=False, compare=False)
 
@@ -154,10 +160,10 @@ class DecodedBatch:
         pos[rows] = np.arange(n)
         frames = self.frames.take(rows)
         notes = {int(pos[r]): v for r, v in self.notes.items() if 0 <= r < len(self) and mask[r]}
+        kept = [k for k, (_, rec) in enumerate(self.records) if keep_record(rec)]
         records = [
             (int(pos[row]) if 0 <= row < len(self) else n, rec)
-            for row, rec in self.records
-            if keep_record(rec)
+            for row, rec in map(self.records.__getitem__, kept)
         ]
         signals = []
         for sb in self.signals:
@@ -204,6 +210,11 @@ class DecodedBatch:
             row_notes,
             findings,
             drive=drive,
+            bus=self.bus,
+            row_bus=None if self.row_bus is None else self.row_bus[rows],
+            record_bus=None
+            if self.record_bus is None
+            else self.record_bus[np.asarray(kept, np.int64)],
         )
 
     def fields(self, i: int) -> dict:
@@ -355,6 +366,7 @@ class DecodedBatch:
         node = np.asarray(nodes, np.int64)
         result = np.asarray(results, np.int64)
         latency = np.asarray(lats, np.float64)
+        slots = np.asarray(pos, np.int64)
         if fast is not None:
             for key in sorted(set(fast.node.tolist())):  # (np.unique's first call: ~10 ms)
                 if key not in node_code:
@@ -374,7 +386,8 @@ class DecodedBatch:
             node = np.concatenate((node, lut[fast.node]))[order]
             result = np.concatenate((result, fres))[order]
             latency = np.concatenate((latency, fast.latency))[order]
-        return SdoTable(node_keys, node, result_keys, result, latency)
+            slots = at[order]
+        return SdoTable(node_keys, node, result_keys, result, latency, slots)
 
 
 def _no_findings() -> FindingColumns:

@@ -326,3 +326,353 @@ def test_buses_past_the_limit_share_one_decoder():
     buses = {d.bus for d in dec.buses.values()}
     assert len(buses) == MAX_BUSES and OTHER_CHANNELS in buses
     assert dec.buses[len(names) - 1] is dec.buses[MAX_BUSES - 1]
+
+
+# --- the events table says which bus ---------------------------------------------------
+
+_EVENT_COLUMNS = ["t", "kind", "node", "level", "message", "row"]
+
+
+def _bootups_log(tmp_path, late: float = 0.0):
+    """Node 5 boots on can0, then on can1 (`late` s after can0's traffic), each with an
+    NMT start and its heartbeat; can0 keeps beating meanwhile."""
+    lines = [(1000.0, "can0", "705#00"), (1000.01, "can0", "000#0105")]
+    lines += _beats("can0", "05", 1000.1, int(late * 10) + 20)
+    t1 = 1000.05 + late
+    lines += [(t1, "can1", "705#00"), (t1 + 0.01, "can1", "000#0105")]
+    lines += _beats("can1", "05", t1 + 0.1, 10)
+    return _log(tmp_path, lines)
+
+
+def _bootup_buses(rows) -> list:
+    return [(r["bus"], r["node"]) for r in rows if r["kind"] == "bootup"]
+
+
+def _export_events(log, out) -> tuple[list[dict], list[dict]]:
+    """events.parquet (pyarrow) and events.csv (csv module) of `export`."""
+    import csv
+
+    import pyarrow.parquet as pq
+
+    from cananalyze.cli.main import main
+
+    assert main(["export", str(log), "--parquet", str(out / "p"), "-q"]) == 0
+    assert main(["export", str(log), "--csv", str(out / "c"), "-q"]) == 0
+    parquet = pq.read_table(out / "p" / "events.parquet").to_pylist()
+    with open(out / "c" / "events.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    for r in rows:
+        r["node"] = int(r["node"]) if r["node"] else None
+    return parquet, rows
+
+
+def test_events_carry_their_bus(tmp_path):
+    """Node 5's boot-up on can0 and on can1 are told apart in load().events, events.parquet
+    (pyarrow) and events.csv (csv module): a `bus` column, last, from the frame's channel."""
+    import pandas as pd
+
+    log = _bootups_log(tmp_path)
+    cap = load(str(log))
+    ev = cap.events
+    assert list(ev.columns) == [*_EVENT_COLUMNS, "bus"]
+    got = [(b, n, m) for b, n, m, k in ev[["bus", "node", "message", "kind"]].values if k != "sdo"]
+    assert got[:2] == [("can0", 5, "node 5: boot-up"), ("can0", 5, "node 5: NMT state bootup")]
+    assert ("can1", 5, "node 5: boot-up") in got and ("can1", None, "NMT start node 5") in [
+        (b, None if pd.isna(n) else n, m) for b, n, m in got
+    ]
+    channels = cap.frames.channel.astype(str).tolist()
+    framed = ev.row < len(channels)  # (a finding at the log's end: no frame of its own)
+    assert ev.bus[framed].tolist() == [channels[r] for r in ev.row[framed].tolist()]
+    assert ev.bus.notna().all()
+    parquet, rows = _export_events(log, tmp_path)
+    assert _bootup_buses(parquet) == _bootup_buses(rows) == [("can0", 5), ("can1", 5)]
+    assert [r["bus"] for r in parquet] == [r["bus"] for r in rows] == ev.bus.tolist()
+    assert list(rows[0]) == [*_EVENT_COLUMNS, "bus"]
+    assert pd.read_parquet(tmp_path / "p" / "events.parquet").equals(ev)
+
+
+@pytest.mark.parametrize("fmt", ["parquet", "csv"])
+def test_events_bus_when_can1_comes_after_rows_were_written(tmp_path, monkeypatch, fmt):
+    """can1 first seen 30 s into the log, in a later batch, after a row group of events was
+    written: the table gains its bus column then, can0's for the rows written before
+    (the file read back and widened), as load() says."""
+    import csv
+
+    import pandas as pd
+
+    from cananalyze.outputs.tables import writer
+    from cananalyze.outputs.tables.stream import TableSink
+
+    monkeypatch.setattr(writer, "ROW_GROUP", 2)
+    widened = []
+    fill = writer.Sink.fill_column
+
+    def spy(self, *args):
+        widened.append(self.writer is not None)
+        fill(self, *args)
+
+    monkeypatch.setattr(writer.Sink, "fill_column", spy)
+    log = _bootups_log(tmp_path, late=30.0)
+    cap = load(str(log))
+    rows = cap.frames
+    frames = [
+        (t, int(c), bytes(d), 0, ["can0", "can1"].index(ch))
+        for t, c, d, ch in zip(
+            rows.t, rows.can_id, rows.data, rows.channel.astype(str), strict=True
+        )
+    ]
+    cut = next(k for k, f in enumerate(frames) if f[4] == 1)
+    dec = build_decoder(Options(checks=True))
+    out = tmp_path / "out"
+    sink = TableSink(out, fmt)
+    sink.open()
+    for part in (frames[:cut], frames[cut:]):
+        sink.write(dec.decode(from_rows(part, channels=("can0", "can1"))))
+    sink.write(dec.finish())
+    sink.close()
+    assert widened == [True]
+    if fmt == "parquet":
+        got = pd.read_parquet(out / "events.parquet")
+        assert got.equals(cap.events)
+        return
+    with open(out / "events.csv", newline="") as f:
+        table = list(csv.DictReader(f))
+    want = cap.events
+    assert [[r["bus"], r["message"]] for r in table] == want[["bus", "message"]].values.tolist()
+    assert _bootup_buses([{**r, "node": int(r["node"] or -1)} for r in table]) == [
+        ("can0", 5),
+        ("can1", 5),
+    ]
+
+
+def test_one_bus_events_have_no_bus_column(tmp_path):
+    """A log of one channel: the events table of load(), Parquet and CSV as before."""
+    import pyarrow.parquet as pq
+
+    log = _log(tmp_path, [(1000.0, "can0", "705#00"), (1000.01, "can0", "000#0105")])
+    assert list(load(str(log)).events.columns) == _EVENT_COLUMNS
+    parquet, rows = _export_events(log, tmp_path)
+    assert pq.read_schema(tmp_path / "p" / "events.parquet").names == _EVENT_COLUMNS
+    assert list(rows[0]) == _EVENT_COLUMNS and len(rows) == len(parquet) == 3
+
+
+def test_fleet_events_bus_column(tmp_path):
+    """A dataset's events parts all have a `bus`: the channel on a log of two buses, null
+    on a log of one (one schema for every part)."""
+    import pyarrow.parquet as pq
+
+    from cananalyze.fleet.schema import schema as fleet_schema
+    from cananalyze.fleet.task import LogTask, process
+
+    two = _bootups_log(tmp_path)
+    one = _log(tmp_path, [(1000.0, "can0", "705#00")], "one.log")
+    dataset = tmp_path / "ds"
+    for log in (two, one):
+        assert process(LogTask(str(log), str(dataset), Options(checks=True)))["status"] == "ok"
+    parts = {}
+    for p in (dataset / "events").glob("date=*/*.parquet"):
+        t = pq.read_table(p)
+        assert t.schema.remove_metadata() == fleet_schema("events").remove_metadata()
+        rows = t.to_pylist()
+        parts[rows[0]["source"]] = rows
+    assert _bootup_buses(parts[str(two)]) == [("can0", 5), ("can1", 5)]
+    assert {r["bus"] for r in parts[str(one)]} == {None}
+
+
+# --- each bus's devices: its own network model ----------------------------------------
+
+
+def _identity_log(tmp_path):
+    """Nodes 5 and 7 beat on can0 and can1; node 5's identity (a DAT 7014's vendor and
+    product, 0x1018:01/02) is read on can1 only, node 7's on can0 only."""
+
+    def upload(t, ch, node, sub, value):
+        req = (t, ch, f"{0x600 + node:03X}#401810{sub:02X}00000000")
+        ans = f"{0x580 + node:03X}#431810{sub:02X}{value.to_bytes(4, 'little').hex().upper()}"
+        return [req, (t + 0.001, ch, ans)]
+
+    lines = []
+    for node in (5, 7):
+        for ch, t0 in (("can0", 1000.0), ("can1", 1000.05)):
+            lines += [(t0 + k * 0.1 + node * 1e-4, ch, f"{0x700 + node:03X}#05") for k in range(10)]
+    lines += upload(1000.2, "can1", 5, 1, 0x3CD) + upload(1000.3, "can1", 5, 2, 2)
+    lines += upload(1000.4, "can0", 7, 1, 0x3CD) + upload(1000.5, "can0", 7, 2, 2)
+    return _log(tmp_path, lines)
+
+
+_PROFILES = [("can0", 5, None), ("can0", 7, "dat7014"), ("can1", 5, "dat7014"), ("can1", 7, None)]
+
+
+def test_nodes_table_profile_per_bus(tmp_path):
+    """The nodes table's profile column is each bus's own: node 7 identified on can0 is
+    not a DAT 7014 on can1 (load(), nodes.parquet read with pyarrow, the report's node
+    sections)."""
+    import pyarrow.parquet as pq
+
+    from cananalyze.cli.main import main
+
+    log = _identity_log(tmp_path)
+    nodes = load(str(log)).nodes.reset_index()
+    got = [
+        (b, n, p if isinstance(p, str) else None)
+        for b, n, p in nodes[["bus", "node", "profile"]].values
+    ]
+    assert got == _PROFILES
+    main(["export", str(log), "--parquet", str(tmp_path / "out"), "-q"])
+    table = pq.read_table(tmp_path / "out" / "nodes.parquet").to_pylist()
+    assert [(r["bus"], r["node"], r["profile"]) for r in table] == _PROFILES
+    page = tmp_path / "r.html"
+    main(["report", str(log), "-o", str(page)])
+    html = page.read_text()
+    assert (
+        "<h3>can0 node 7: dat7014</h3>" in html and "<h3>can1 node 7: unknown device</h3>" in html
+    )
+
+
+def test_summary_devices_per_bus(tmp_path, capsys):
+    """`decode --summary` lists each bus's devices from its own model: node 5 identified
+    on can1 is a DAT 7014 there, unknown on can0 (text and the JSON's `devices`)."""
+    from cananalyze.cli.main import main
+
+    log = _identity_log(tmp_path)
+    main(["decode", str(log), "--summary"])
+    text = capsys.readouterr().out
+    devices = text.split("devices:\n", 1)[1].splitlines()[:4]
+    assert [ln.split(":")[0].strip() for ln in devices] == [
+        "can0 node   5",
+        "can0 node   7",
+        "can1 node   5",
+        "can1 node   7",
+    ]
+    assert "unknown device" in devices[0] and "unknown device" in devices[3]
+    assert "Datexel DAT 7014" in devices[1] and "Datexel DAT 7014" in devices[2]
+    main(["decode", str(log), "--summary", "--format", "jsonl"])
+    rec = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert [(d["bus"], d["node"], d["profile"]) for d in rec["devices"]] == _PROFILES
+
+
+# --- the report's SDO transfers per bus and node ---------------------------------------
+
+
+def test_report_sdo_table_and_aborts_per_bus(tmp_path):
+    """Node 5 answers two uploads on can0 and aborts one on can1: the report's SDO table
+    has a row per bus and node (not three transfers, one abort for node 5), and the
+    abort list names can1 node 5 (tables read with html.parser)."""
+    from test_report import parse
+
+    from cananalyze.cli.main import main
+
+    lines = _beats("can0", "05", 1000.0, 10) + _beats("can1", "05", 1000.05, 10)
+    for k, t in enumerate((1000.2, 1000.4)):
+        lines.append(_sdo(t, "can0", 0x605, bytes([0x40, 0x18, 0x10, 1 + k, 0, 0, 0, 0])))
+        lines.append(_sdo(t + 0.002, "can0", 0x585, bytes([0x43, 0x18, 0x10, 1 + k, 1, 0, 0, 0])))
+    lines.append(_sdo(1000.3, "can1", 0x605, bytes([0x40, 0x00, 0x20, 0, 0, 0, 0, 0])))
+    abort = bytes([0x80, 0x00, 0x20, 0, 0x00, 0x00, 0x02, 0x06])  # 0x06020000: no object
+    lines.append(_sdo(1000.301, "can1", 0x585, abort))
+    page = tmp_path / "r.html"
+    main(["report", str(_log(tmp_path, lines)), "-o", str(page)])
+    _, tables, _ = parse(page)
+    (sdo,) = [t for t in tables.tables if t[0][:3] == ["node", "transfers", "aborts"]]
+    assert [r[:3] for r in sdo[1:]] == [["can0 node 5", "2", "0"], ["can1 node 5", "1", "1"]]
+    assert [r[3] for r in sdo[1:]] == ["2.00", "1.00"]  # min latency, each its own
+    (aborts,) = [t for t in tables.tables if t[0][:2] == ["time", "node"]]
+    assert [r[1:4] for r in aborts[1:]] == [["can1 node 5", "upload", "0x2000:00"]]
+
+
+def test_export_dbc_one_per_bus(tmp_path):
+    """`export --dbc OUT` on a log of two buses: OUT.can0.dbc and OUT.can1.dbc, each its
+    bus's node 5 TPDO2 as that bus mapped it (read with cantools)."""
+    import cantools
+
+    from cananalyze.cli.main import main
+
+    rows = []
+    for k, ch in enumerate(("can0", "can1")):
+        t = 1.0 + k * 0.01
+        rows += _download(t, ch, 0x1A01, 0, 0, 1)
+        rows += _download(t + 0.001, ch, 0x1A01, 1, 0x60000108, 4)
+        rows += _download(t + 0.002, ch, 0x1A01, 2, 0x60000208, 4)
+        rows += _download(t + 0.003, ch, 0x1A01, 0, 2, 1)
+    rows += _download(1.1, "can1", 0x1A01, 0, 0, 1)  # can1 only: one 16-bit object
+    rows += _download(1.101, "can1", 0x1A01, 1, 0x64010110, 4)
+    rows += _download(1.102, "can1", 0x1A01, 0, 1, 1)
+    for k in range(4):
+        rows += [(1.2 + k * 0.01, 0x285, b"\x34\x12", 0, ch) for ch in ("can0", "can1")]
+    lines = [(t, ch, f"{cob:03X}#{bytes(d).hex().upper()}") for t, cob, d, _, ch in rows]
+    log = _log(tmp_path, lines)
+    out = tmp_path / "net.dbc"
+    assert main(["export", str(log), "--dbc", str(out), "-q"]) == 0
+    assert not out.exists()
+    got = {}
+    for bus in ("can0", "can1"):
+        db = cantools.database.load_file(str(tmp_path / f"net.{bus}.dbc"))
+        msg = db.get_message_by_frame_id(0x285)
+        got[bus] = [(s.start, s.length) for s in msg.signals]
+        want = [0x34, 0x12] if bus == "can0" else [0x1234]
+        assert list(msg.decode(b"\x34\x12").values()) == want
+    assert got == {"can0": [(0, 8), (8, 8)], "can1": [(0, 16)]}
+
+
+def test_dashboard_nodes_panel_per_bus(tmp_path):
+    """The live dashboard's nodes panel: a row per bus and node, each bus's device from
+    its own network model (node 5 identified on can1 only, node 7 on can0 only)."""
+    from rich.console import Console
+
+    from cananalyze.outputs.dashboard import DashboardSink
+    from cananalyze.pipeline import open_source, run
+
+    log = _identity_log(tmp_path)
+    opts = Options()
+    sink = DashboardSink(show=False)
+    run(open_source(str(log), opts), build_decoder(opts), [sink], opts)
+    console = Console(record=True, width=200, color_system=None)
+    console.print(sink.view.render(wall=0.0, height=40))
+    text = console.export_text()
+    rows = [[c.strip() for c in ln.split("│")[1:-1]] for ln in text.splitlines()]
+    got = [(r[0], r[1], "Datexel" in r[2]) for r in rows if r and r[0] in ("can0", "can1")]
+    assert got == [
+        ("can0", "5", False),
+        ("can0", "7", True),
+        ("can1", "5", True),
+        ("can1", "7", False),
+    ]
+    assert sink.view.nodes[5].state == "operational"  # the first bus's, as on one bus
+
+
+def test_events_resorted_at_the_end_keep_their_bus(tmp_path, monkeypatch):
+    """can1's batch starts before can0's ended (times going back between batches): the
+    events table is re-sorted at the end (written and widened before), each row keeping
+    its bus: the channel of its frame in frames.parquet (pyarrow)."""
+    import pyarrow.parquet as pq
+
+    from cananalyze.outputs.tables import writer
+    from cananalyze.outputs.tables.stream import TableSink
+
+    monkeypatch.setattr(writer, "ROW_GROUP", 2)
+
+    def rows(lines, ch):
+        return [(t, int(f[:3], 16), bytes.fromhex(f[4:]), 0, ch) for t, _, f in lines]
+
+    can0 = [(1000.0, "can0", "705#00"), (1000.01, "can0", "000#0105")]
+    can0 += _beats("can0", "05", 1000.1, 300)
+    can1 = [(1000.05, "can1", "705#00"), (1000.06, "can1", "000#0105")]
+    can1 += _beats("can1", "04", 1000.1, 10)
+    dec = build_decoder(Options(checks=True))
+    sink = TableSink(tmp_path / "out", "parquet")
+    sink.open()
+    for part, ch in ((can0, 0), (can1, 1)):
+        sink.write(dec.decode(from_rows(rows(part, ch), channels=("can0", "can1"))))
+    sink.write(dec.finish())
+    sink.close()
+    events = pq.read_table(tmp_path / "out" / "events.parquet").to_pylist()
+    channel = pq.read_table(tmp_path / "out" / "frames.parquet").column("channel").to_pylist()
+    assert [e["t"] for e in events] == sorted(e["t"] for e in events)
+    assert [(e["bus"], e["message"]) for e in events[:6]] == [
+        ("can0", "node 5: boot-up"),
+        ("can0", "node 5: NMT state bootup"),
+        ("can0", "NMT start node 5"),
+        ("can1", "node 5: boot-up"),
+        ("can1", "node 5: NMT state bootup"),
+        ("can1", "NMT start node 5"),
+    ]
+    assert all(e["bus"] == channel[e["row"]] for e in events if e["row"] < len(channel))

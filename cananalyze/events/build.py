@@ -52,6 +52,7 @@ class Event:
     level: int
     message: str
     row: int | None = None
+    bus: str | None = None  # several buses: which one
 
 
 @dataclass
@@ -281,10 +282,15 @@ def batch_event_columns(
     else:  # the fast path's records as columns; the others read without building those
         get = list.__getitem__
         pairs = ((k, get(records, k)) for k in split[2])
+    several = batch.bus is not None or batch.row_bus is not None or batch.record_bus is not None
     events, at = _record_event_columns(pairs, fb, offset, last_t)
+    if several:
+        events.bus = _record_bus(batch, np.asarray(at, np.int64))
     if split is not None:
         fields, fast, _ = split
         fast_events = sdo_event_columns(fields, fast.row.astype(np.int64) + offset)
+        if several:
+            fast_events.bus = _record_bus(batch, fast.slots)
         if at:
             order = np.argsort(
                 np.concatenate((np.asarray(at, np.int64), fast.slots)), kind="stable"
@@ -293,7 +299,10 @@ def batch_event_columns(
         else:
             events = fast_events
     if len(batch.findings):  # after every record, as the Checker adds them last
-        events = EventColumns.concat([events, finding_event_columns(batch.findings, offset)])
+        found = finding_event_columns(batch.findings, offset)
+        if several:
+            found.bus = np.asarray(batch.findings.column("bus"), object)
+        events = EventColumns.concat([events, found])
     states: list[Row] = []
     if n:
         # one scan of the batch for the rows of both (a few percent of it), each then
@@ -313,12 +322,40 @@ def batch_event_columns(
                     ]
                 )
             )
+        if several:
+            for part in parts[1:]:
+                part.bus = _row_bus(batch, part.row - offset)
         events = EventColumns.concat(parts)
     if batch.drive:
-        events = EventColumns.concat([events, drive_event_columns(batch.drive, offset)])
+        drive = drive_event_columns(batch.drive, offset)
+        if several:
+            drive.bus = _row_bus(batch, drive.row - offset)
+        events = EventColumns.concat([events, drive])
     if len(events):
         state.last_t = float(events.t[-1])
     return events, states
+
+
+def _row_bus(batch: DecodedBatch, rows: np.ndarray) -> np.ndarray:
+    """The bus of each of the batch's frame rows (None for a row past its frames)."""
+    out = np.empty(len(rows), object)
+    if batch.row_bus is None:
+        out[:] = batch.bus
+        return out
+    inside = (rows >= 0) & (rows < len(batch.row_bus))
+    out[inside] = batch.row_bus[rows[inside]]
+    return out
+
+
+def _record_bus(batch: DecodedBatch, slots: np.ndarray) -> np.ndarray:
+    """The bus of each of the batch's record slots (None for one added after the merge)."""
+    out = np.empty(len(slots), object)
+    if batch.record_bus is None:
+        out[:] = batch.bus
+        return out
+    inside = (slots >= 0) & (slots < len(batch.record_bus))
+    out[inside] = batch.record_bus[slots[inside]]
+    return out
 
 
 _DRIVE_LEVEL = {cia402.FAULT: ERROR, cia402.FAULT_REACTION: ERROR, cia402.QUICK_STOP: WARNING}

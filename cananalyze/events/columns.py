@@ -43,11 +43,13 @@ class Row(NamedTuple):
     level: int
     message: str
     row: int | None
+    bus: str | None = None  # several buses: which one (None: one bus, or not known yet)
 
 
 @dataclass
 class EventColumns:
-    """Events as columns: t, kind (index into KINDS), node, level, message (str objects), row."""
+    """Events as columns: t, kind (index into KINDS), node, level, message (str objects), row,
+    and on a log of several buses each event's bus (else None: no column at all)."""
 
     t: np.ndarray  # float64
     kind: np.ndarray  # uint8
@@ -55,6 +57,7 @@ class EventColumns:
     level: np.ndarray  # int8
     message: np.ndarray  # object (str)
     row: np.ndarray  # int64, NO_ROW for none
+    bus: np.ndarray | None = None  # object (str, None before the second bus was seen)
 
     def __len__(self) -> int:
         return len(self.t)
@@ -75,7 +78,7 @@ class EventColumns:
         """Columns of event tuples (rare events: findings, SDO records off the fast path)."""
         if not rows:
             return cls.empty()
-        t, kind, node, level, message, row = zip(*rows, strict=True)
+        t, kind, node, level, message, row = list(zip(*rows, strict=True))[:6]
         return cls(
             np.array(t, np.float64),
             np.array([kind_code(k) for k in kind], np.uint8),
@@ -92,12 +95,17 @@ class EventColumns:
             return cls.empty()
         if len(parts) == 1:
             return parts[0]
-        return cls(
+        out = cls(
             *(
                 np.concatenate([getattr(p, f) for p in parts])
                 for f in ("t", "kind", "node", "level", "message", "row")
             )
         )
+        if any(p.bus is not None for p in parts):
+            out.bus = np.concatenate(
+                [np.empty(len(p), object) if p.bus is None else p.bus for p in parts]
+            )
+        return out
 
     def take(self, index) -> EventColumns:
         """The events at `index` (an index array, a boolean mask or a slice)."""
@@ -108,6 +116,7 @@ class EventColumns:
             self.level[index],
             self.message[index],
             self.row[index],
+            None if self.bus is None else self.bus[index],
         )
 
     def sort_key(self) -> np.ndarray:
@@ -121,20 +130,10 @@ class EventColumns:
         if (self.row == NO_ROW).any():
             row = [None if r == NO_ROW else r for r in row]
         kind = list(map(KINDS.__getitem__, self.kind.tolist()))
-        return list(
-            starmap(
-                Row,
-                zip(
-                    self.t.tolist(),
-                    kind,
-                    node,
-                    self.level.tolist(),
-                    self.message.tolist(),
-                    row,
-                    strict=True,
-                ),
-            )
-        )
+        cols = [self.t.tolist(), kind, node, self.level.tolist(), self.message.tolist(), row]
+        if self.bus is not None:
+            cols.append(self.bus.tolist())
+        return list(starmap(Row, zip(*cols, strict=True)))
 
 
 def texts(values) -> np.ndarray:

@@ -119,12 +119,18 @@ class NodeTally:
         for node, info in identity(records).items():
             self.identity.setdefault(node, {}).update(info)
 
-    def rows(self, profiles: dict[int, tuple[str, str]]) -> list[dict]:
+    def rows(
+        self,
+        profiles: dict[int, tuple[str, str]],
+        by_bus: dict[str, dict[int, tuple[str, str]]] | None = None,
+    ) -> list[dict]:
         """One dict per node seen: frames, frames_<service> for every service seen,
         last_state(_t), identity, profile and how it was identified; with several
-        buses, one per bus and node, `bus` first."""
+        buses, one per bus and node, `bus` first, each bus's profiles from `by_bus`
+        (its own network model) where given."""
         if self.buses is not None:
-            parts = [(name, t.rows(profiles)) for name, t in self.buses.items()]
+            by_bus = by_bus or {}
+            parts = [(name, t.rows(by_bus.get(name, profiles))) for name, t in self.buses.items()]
             seen = [k for _, rows in parts for r in rows for k in r]
             services = [k for k in dict.fromkeys(seen) if k.startswith("frames_")]
             out = []
@@ -153,6 +159,14 @@ class NodeTally:
             row["identified_by"] = how
             rows.append(row)
         return rows
+
+
+def bus_profiles(decoder) -> dict[str, dict[int, tuple[str, str]]]:
+    """bus -> `node_profiles` of that bus's network model (`Decoder.networks`; empty on a
+    log of one bus): the nodes table's profile column per bus."""
+    if decoder is None:
+        return {}
+    return {b: node_profiles(m) for b, m in decoder.networks().items() if b is not None}
 
 
 def node_profiles(model) -> dict[int, tuple[str, str]]:

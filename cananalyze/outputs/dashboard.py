@@ -18,6 +18,7 @@ from typing import TextIO
 
 import numpy as np
 
+from ..frames import MAX_BUSES, OTHER_CHANNELS
 from ..protocol import nmt
 from ..protocol.emcy import error_text
 from ..protocol.fields import annotation
@@ -95,7 +96,12 @@ class LiveView:
         self.violations = 0
         self.notes = 0
         self.summary = Summary()
-        self.nodes: dict[int, NodeState] = {}
+        self.declared = dict(devices or {})  # node -> device name, on every bus
+        # node states per bus (channel name; None until the first frame names it): node
+        # 5 on can0 and on can1 are two devices. `nodes` is the first bus's
+        self.buses: dict[str | None, dict[int, NodeState]] = {None: {}}
+        self.nodes: dict[int, NodeState] = self.buses[None]
+        self.networks = None  # () -> {bus: NetworkModel} (Decoder.networks), several buses
         self.signals: dict[tuple[int, str, str], SignalValue] = {}
         self.events: deque[tuple[float, str, str]] = deque(maxlen=events)  # (t, level, text)
         # the latest findings, newest last: a panel of their own, so the event log's
@@ -106,24 +112,61 @@ class LiveView:
         self.clock_offset = 0.0  # frame time minus wall time at the newest frame
         self._window: deque[tuple[float, int, int]] = deque()  # (wall, frames, bits) per batch
         self.status = ""  # e.g. "recording to x.blf"
-        for node, name in (devices or {}).items():
-            self._node(node).device = name
+        for node in self.declared:
+            self._node(node)
 
-    def _node(self, n: int) -> NodeState:
-        st = self.nodes.get(n)
+    def _node(self, n: int, bus: str | None = None) -> NodeState:
+        """Node n of `bus` (a channel name; None: the first bus)."""
+        nodes = self.nodes if bus is None else self._bus(bus)
+        st = nodes.get(n)
         if st is None:
-            st = self.nodes[n] = NodeState(n)
+            st = nodes[n] = NodeState(n, device=self.declared.get(n))
         return st
+
+    def _bus(self, bus: str) -> dict[int, NodeState]:
+        """The node states of `bus`: the first bus named takes those kept so far; past
+        MAX_BUSES the channels share one (as the decoder's)."""
+        nodes = self.buses.get(bus)
+        if nodes is not None:
+            return nodes
+        if None in self.buses:
+            self.buses = {bus: self.buses.pop(None)}
+            return self.nodes
+        if len(self.buses) >= MAX_BUSES:
+            return self._bus(OTHER_CHANNELS)
+        nodes = self.buses[bus] = {}
+        return nodes
+
+    @property
+    def several(self) -> bool:
+        """More than one bus seen: the nodes panel has a bus column."""
+        return len(self.buses) > 1
+
+    def _who(self, node: int, bus: str | None) -> str:
+        return f"{bus} node {node}" if self.several and bus else f"node {node}"
+
+    def _row_bus(self, batch: DecodedBatch, row: int) -> str | None:
+        """The channel name of the batch's row (a record past the frames: its bus, if
+        the decoder said, else the first bus)."""
+        fb = batch.frames
+        if 0 <= row < len(fb):
+            return fb.channel_label(int(fb.channel[row]))
+        return batch.bus
 
     def _event(self, t: float, text: str, level: str = INFO) -> None:
         self.events.append((t, level, text))
 
-    def device(self, n: int) -> str | None:
-        """The node's device: the network model's profile, else what SDO identity told."""
-        cfg = self.model.nodes.get(n) if self.model is not None else None
+    def device(self, n: int, bus: str | None = None) -> str | None:
+        """The node's device: the network model's profile (that bus's, several buses),
+        else what SDO identity told."""
+        model = self.model
+        if bus is not None and self.several and self.networks is not None:
+            model = self.networks().get(bus, model)
+        cfg = model.nodes.get(n) if model is not None else None
         if cfg is not None and cfg.profile is not None:
             return cfg.profile.name
-        return self.nodes[n].device if n in self.nodes else None
+        nodes = self.nodes if bus is None else self.buses.get(bus, {})
+        return nodes[n].device if n in nodes else None
 
     # --- feeding --------------------------------------------------------------
     def add(self, batch: DecodedBatch, wall: float | None = None) -> None:
@@ -162,10 +205,11 @@ class LiveView:
         rows = np.flatnonzero(np.isin(batch.service, _ERRCTL) & (batch.node >= 0))
         if not rows.size:
             return
-        nodes = batch.node[rows]
-        for node in np.unique(nodes).tolist():
-            mine = rows[nodes == node]
-            st = self._node(node)
+        keys = batch.node[rows].astype(np.int64) | (fb.channel[rows].astype(np.int64) << 8)
+        for key in np.unique(keys).tolist():
+            mine = rows[keys == key]
+            node, bus = key & 0xFF, fb.channel_label(key >> 8)
+            st = self._node(node, bus)
             t = fb.t[mine]
             hb = mine[batch.service[mine] == Service.HEARTBEAT]
             if hb.size:
@@ -182,7 +226,7 @@ class LiveView:
             st.last_seen = float(t[-1])
             boots = mine[batch.service[mine] == Service.BOOTUP]
             for r in boots.tolist():
-                self._event(float(fb.t[r]), f"node {node} {nmt.BOOTUP_TEXT}")
+                self._event(float(fb.t[r]), f"{self._who(node, bus)} {nmt.BOOTUP_TEXT}")
                 st.emcy.clear()
 
     def _rare(self, batch: DecodedBatch) -> None:
@@ -193,12 +237,13 @@ class LiveView:
             f = batch.fields(r)
             text = annotation(svc, node, 0, f)
             if svc == Service.EMCY and node >= 0:
-                st = self._node(node)
+                bus = self._row_bus(batch, r)
+                st = self._node(node, bus)
                 if f.get("reset"):
                     st.emcy.clear()
                 elif f.get("error_code") is not None:
                     st.emcy[f["error_code"]] = error_text(f["error_code"])
-                text = f"node {node} {text}"
+                text = f"{self._who(node, bus)} {text}"
                 level = INFO if f.get("reset") else ERROR
             else:
                 level = INFO
@@ -209,10 +254,12 @@ class LiveView:
         rows = np.flatnonzero(np.isin(batch.service, _SDO) & (batch.node >= 0))
         if not rows.size:
             return
-        nodes = batch.node[rows]
-        for node in np.unique(nodes).tolist():
-            r = int(rows[nodes == node][-1])
-            st = self._node(node)
+        fb = batch.frames
+        keys = batch.node[rows].astype(np.int64) | (fb.channel[rows].astype(np.int64) << 8)
+        for key in np.unique(keys).tolist():
+            r = int(rows[keys == key][-1])
+            node = key & 0xFF
+            st = self._node(node, fb.channel_label(key >> 8))
             if st.last_sdo is None or st.last_sdo.startswith("frame: "):
                 text = annotation(int(batch.service[r]), node, 0, batch.fields(r))
                 st.last_sdo = f"frame: {text}"
@@ -227,7 +274,7 @@ class LiveView:
             level = INFO if rec.get("result") == "ok" else WARNING
             node = rec.get("node")
             if isinstance(node, int) and node >= 0:
-                st = self._node(node)
+                st = self._node(node, self._row_bus(batch, row))
                 st.last_sdo = text.removeprefix(f"node {node} ")
                 if rec.get("result") == "ok" and rec.get("index") in (0x1000, 0x1008, 0x1018):
                     self._identity(st, rec)
@@ -341,6 +388,9 @@ class LiveView:
                 head.append(f", {load:.1f} % load" if load is not None else "")
 
         nodes = Table(title="Nodes", title_justify="left", expand=True, pad_edge=False)
+        several = self.several  # node 5 of each bus a row of its own
+        if several:
+            nodes.add_column("bus", width=8, overflow="ellipsis", no_wrap=True)
         for col, kw in (
             ("node", {"width": 4, "justify": "right"}),
             ("device", {"ratio": 2}),
@@ -351,8 +401,8 @@ class LiveView:
             ("last SDO", {"ratio": 3}),
         ):
             nodes.add_column(col, overflow="ellipsis", no_wrap=True, **kw)
-        for n in sorted(self.nodes):
-            st = self.nodes[n]
+        shown = [(bus, n, states[n]) for bus, states in self.buses.items() for n in sorted(states)]
+        for bus, n, st in shown:
             age_s = now - st.last_seen if st.last_seen is not None else None
             age = Text(f"{age_s * 1e3:.0f} ms" if age_s is not None else "-")
             period = st.period_ms
@@ -361,8 +411,9 @@ class LiveView:
             state_style = _STATE_STYLE.get(st.state or "", "")
             emcy = ", ".join(st.emcy.values()) or "-"
             nodes.add_row(
+                *((bus or "-",) if several else ()),
                 str(n),
-                self.device(n) or "-",
+                self.device(n, bus if several else None) or "-",
                 Text(st.state or "-", style=state_style),
                 age,
                 f"{period:.0f} ms" if period is not None else "-",
@@ -378,7 +429,7 @@ class LiveView:
             by_pdo.setdefault((s.node, s.pdo), []).append(s)
         # lines: header 1, each table title + borders + heading 5 + rows, the log panel 2 + room,
         # one spare so the cursor line never scrolls the screen
-        nodes_h = 5 + max(1, len(self.nodes))
+        nodes_h = 5 + max(1, len(shown))
         room_sigs = max(2, height - 1 - nodes_h - 5 - (2 + 8) - 1)  # 8 lines kept for the log
         rows = list(by_pdo.items())
         shown = rows if len(rows) <= room_sigs else rows[: room_sigs - 1]
@@ -467,6 +518,7 @@ class DashboardSink(Sink):
     def open(self, run) -> None:
         super().open(run)
         self.view = LiveView(bitrate=self.bitrate, model=run.network, checking=self.checking)
+        self.view.networks = run.decoder.networks
         self.view.status = self.status
         if self.show:
             from rich.console import Console

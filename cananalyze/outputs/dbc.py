@@ -136,20 +136,39 @@ def write_dbc(path: str | Path, db) -> None:
 _NOT_CP1252 = {"\u03a9": "Ohm", "\u2126": "Ohm"}  # units cp1252 cannot hold (omegas)
 
 
+def bus_path(path: str | Path, bus: str) -> Path:
+    """Where a log of several buses puts one bus's DBC: NAME.can1.dbc beside NAME.dbc."""
+    p = Path(path)
+    return p.with_name(f"{p.stem}.{re.sub(r'[^0-9A-Za-z_.-]', '_', bus)}{p.suffix}")
+
+
 class DbcSink(Sink):
     """`export --dbc OUT`: the network's PDOs as configured at the end of the log (the
-    network model's bindings after the last batch: remaps by SDO included)."""
+    network model's bindings after the last batch: remaps by SDO included). A log of
+    several buses: one DBC per bus, each from its own model (`bus_path`: OUT.can0.dbc,
+    OUT.can1.dbc), as node 5's TPDO2 may be mapped differently on each."""
 
     def __init__(self, path: str | Path) -> None:
         self.path = path
         self.messages = 0
+        self.paths: list[Path] = []  # the files written
 
     def open(self, run) -> None:
         check_writable(self.path)
         self.run = run
 
     def close(self) -> None:
-        model = self.run.network
+        decoder = self.run.decoder
+        buses = list(decoder.networks())
+        if buses == [None]:
+            self._write(Path(self.path), decoder)
+            return
+        for bus in buses:
+            self._write(bus_path(self.path, bus), decoder.of_bus(bus))
+
+    def _write(self, path: Path, decoder) -> None:
+        """One bus's DBC: its decoder's network model and the DBC it decoded with."""
+        model = decoder.network
         bindings = model.bindings if model is not None else {}
         pdos = [
             (b.node, b.config)
@@ -161,10 +180,11 @@ class DbcSink(Sink):
         drives = {node for node, _ in pdos if model.family(node) == 402}
         carried = [
             m.source
-            for p in self.run.decoder.processors
+            for p in decoder.processors
             if isinstance(p, DbcDecoder)
             for m in p.dbc.messages.values()
         ]
         db = pdo_database(pdos, drives, carried)
-        self.messages = len(db.messages)
-        write_dbc(self.path, db)
+        self.messages += len(db.messages)
+        write_dbc(path, db)
+        self.paths.append(path)

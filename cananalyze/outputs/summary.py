@@ -58,6 +58,7 @@ class Summary:
     )  # not 1 byte NMT state
     nmt_good: int = 0  # well-formed NMT commands
     by_channel: dict = field(default_factory=dict)  # channel name -> [frames, bits]
+    nodes_by_channel: dict = field(default_factory=dict)  # channel name -> nodes seen on it
 
     def add(self, batch: DecodedBatch) -> None:
         n = len(batch)
@@ -81,10 +82,12 @@ class Summary:
         self.by_node_service += per[N_SVC:].reshape(128, N_SVC)
         per_frames, per_bits = bits_per_channel(fb.flags, fb.dlc, fb.channel)
         self.bits += int(per_bits.sum())
-        for c in np.flatnonzero(per_frames).tolist():
+        present = np.flatnonzero(per_frames).tolist()
+        for c in present:
             entry = self.by_channel.setdefault(fb.channel_label(c), [0, 0])
             entry[0] += int(per_frames[c])
             entry[1] += int(per_bits[c])
+        self._nodes_by_channel(batch, present, per[N_SVC:].reshape(128, N_SVC))
         self._evidence(batch)
         if len(self.ids_seen) < 4096:
             ids = fb.can_id[(fb.flags & FLAG_EXT) == 0]
@@ -93,6 +96,20 @@ class Summary:
             else:
                 ids = np.unique(ids)
             self.ids_seen.update(ids.tolist())
+
+    def _nodes_by_channel(self, batch: DecodedBatch, present: list[int], per: np.ndarray) -> None:
+        """The nodes seen on each channel (each bus's devices): this batch's node counts
+        when it holds one channel, else a count per channel."""
+        fb = batch.frames
+        if len(present) == 1:
+            seen = {present[0]: np.flatnonzero(per.sum(axis=1))}
+        else:
+            seen = {}
+            for c in present:
+                nodes = batch.node[(fb.channel == c) & (batch.node >= 0)]
+                seen[c] = np.flatnonzero(np.bincount(nodes, minlength=1))
+        for c, nodes in seen.items():
+            self.nodes_by_channel.setdefault(fb.channel_label(c), set()).update(nodes.tolist())
 
     def _sdo(self, batch: DecodedBatch) -> None:
         """Result counts and latencies per node, from the batch's SDO records as columns."""
@@ -310,18 +327,28 @@ class Summary:
         return out
 
 
-def device_lines(model, summary: Summary | None = None) -> list[str]:
-    """Each node seen or declared: its device and how it was identified."""
+def _seen_nodes(model, summary: Summary | None, bus: str | None) -> list[int]:
+    """The nodes a device line is given for: declared or identified in `model`, and those
+    seen (on `bus` only, when the log has several)."""
+    seen = set(getattr(model, "nodes", {}))
+    if summary is not None and bus is None:
+        seen |= {int(n) for n in np.flatnonzero(summary.by_node_service.sum(axis=1))}
+    elif summary is not None:
+        seen |= summary.nodes_by_channel.get(bus, set())
+    return sorted(seen)
+
+
+def device_lines(model, summary: Summary | None = None, bus: str | None = None) -> list[str]:
+    """Each node seen or declared: its device and how it was identified (`bus`: one bus's
+    of a log of several, its own network model; the lines name it, no header)."""
     known = dict(getattr(model, "nodes", {}))
-    seen_nodes = set(known)
-    if summary is not None:
-        seen_nodes |= {int(n) for n in np.flatnonzero(summary.by_node_service.sum(axis=1))}
+    who = "node" if bus is None else f"{bus} node"
     out = []
-    for node in sorted(seen_nodes):
+    for node in _seen_nodes(model, summary, bus):
         cfg = known.get(node)
         if cfg is None:
             out.append(
-                f"  node {node:>3}: unknown device (no identity read in the log; give --device or --eds)"
+                f"  {who} {node:>3}: unknown device (no identity read in the log; give --device or --eds)"
             )
             continue
         name = cfg.profile.name if cfg.profile is not None else "unknown device"
@@ -329,8 +356,19 @@ def device_lines(model, summary: Summary | None = None) -> list[str]:
             f"{k} 0x{v:X}" if isinstance(v, int) else f"{k} {v!r}"
             for k, v in sorted(cfg.identity.items())
         )
-        line = f"  node {node:>3}: {name} (identified by {cfg.identified_by})"
+        line = f"  {who} {node:>3}: {name} (identified by {cfg.identified_by})"
         out.append(line + (f"; seen {seen}" if seen else ""))
+    if bus is not None:
+        return out
+    return ["devices:", *out] if out else []
+
+
+def bus_device_lines(networks: dict, summary: Summary | None = None) -> list[str]:
+    """`device_lines` of every bus (`Decoder.networks`): each bus's devices from its own
+    network model ("can1 node 5"); one bus: as `device_lines`."""
+    if list(networks) == [None]:
+        return device_lines(networks[None], summary)
+    out = [line for bus, model in networks.items() for line in device_lines(model, summary, bus)]
     return ["devices:", *out] if out else []
 
 
@@ -356,7 +394,7 @@ class SummarySink(Sink):
             import json
 
             rec = self.summary.record(bitrate, run.problems.count)
-            rec["devices"] = device_records(model, self.summary)
+            rec["devices"] = bus_device_records(run.decoder.networks(), self.summary)
             if checker is not None:
                 rec["timing"] = _plain(checker.timing.report(checker.nmt))
                 if checker.others:  # several buses: "timing" is the first's, here each
@@ -366,7 +404,7 @@ class SummarySink(Sink):
             print(json.dumps(rec, separators=(",", ":"), ensure_ascii=False), file=self.out)
             return
         lines = self.summary.lines(bitrate, run.problems.count)
-        lines += device_lines(model, self.summary)
+        lines += bus_device_lines(run.decoder.networks(), self.summary)
         if checker is not None:
             lines += checker.timing_lines(checker.t0)
         print("\n".join(lines), file=self.out)
@@ -385,14 +423,19 @@ def _plain(value):
     return value
 
 
-def device_records(model, summary: Summary | None = None) -> list[dict]:
-    """`device_lines` as records: node, device, how it was identified, identity seen."""
+def bus_device_records(networks: dict, summary: Summary | None = None) -> list[dict]:
+    """`device_records` of every bus, each record with its `bus` on a log of several."""
+    if list(networks) == [None]:
+        return device_records(networks[None], summary)
+    return [r for bus, m in networks.items() for r in device_records(m, summary, bus)]
+
+
+def device_records(model, summary: Summary | None = None, bus: str | None = None) -> list[dict]:
+    """`device_lines` as records: node, device, how it was identified, identity seen
+    (and `bus`, given one of a log of several)."""
     known = dict(getattr(model, "nodes", {}))
-    seen_nodes = set(known)
-    if summary is not None:
-        seen_nodes |= {int(n) for n in np.flatnonzero(summary.by_node_service.sum(axis=1))}
     out = []
-    for node in sorted(seen_nodes):
+    for node in _seen_nodes(model, summary, bus):
         cfg = known.get(node)
         prof = cfg.profile if cfg is not None else None
         out.append(
@@ -404,4 +447,6 @@ def device_records(model, summary: Summary | None = None) -> list[dict]:
                 "identity": _plain(dict(cfg.identity)) if cfg is not None else {},
             }
         )
+        if bus is not None:
+            out[-1]["bus"] = bus
     return out

@@ -148,10 +148,12 @@ def _node_id(n: int, bus: str | None) -> str:
 
 
 def nodes(s, figs: Figures) -> str:
-    from ...network.node_tally import node_profiles
+    from ...network.node_tally import bus_profiles, node_profiles
 
     model = s.run.network
-    rows = s.tally.rows(node_profiles(model) if model is not None else {})
+    rows = s.tally.rows(
+        node_profiles(model) if model is not None else {}, bus_profiles(s.run.decoder)
+    )
     configs = _Configs(s)
     parts = ['<section id="nodes"><h2>Nodes</h2>']
     if s.states:
@@ -235,14 +237,15 @@ def _configured(cfg: ModelConfig, kind: str, node: int, g) -> list[tuple[float, 
 def sdo(s, figs: Figures) -> str:
     if not s.sdo_count:
         return ""
+    from .accum import LogHistogram
+
     rows = []
-    for n in sorted(s.sdo_count):
-        ok, bad = s.sdo_count[n]
-        h = s.sdo_latency.get(n)
+    for (bus, n), (ok, bad, h) in sorted(_sdo_by_bus(s).items()):
+        who = esc(s.who(bus, n)) if s.several else n
         if h is not None and h.count:
             rows.append(
                 [
-                    n,
+                    who,
                     ok + bad,
                     bad,
                     _ms(h.min),
@@ -252,12 +255,11 @@ def sdo(s, figs: Figures) -> str:
                 ]
             )
         else:
-            rows.append([n, ok + bad, bad, "-", "-", "-", "-"])
+            rows.append([who, ok + bad, bad, "-", "-", "-", "-"])
     parts = ['<section id="sdo"><h2>SDO transfers</h2>']
     parts.append(
         _table(["node", "transfers", "aborts", "min ms", "median ms", "p99 ms", "max ms"], rows)
     )
-    from .accum import LogHistogram
 
     allh = LogHistogram()
     for h in s.sdo_latency.values():
@@ -268,19 +270,37 @@ def sdo(s, figs: Figures) -> str:
         arows = [
             [
                 _rel(s, r.get("t")),
-                r.get("node"),
+                esc(s.who(s.first_bus(bus), r["node"]))
+                if s.several and r.get("node") is not None
+                else r.get("node"),
                 esc(str(r.get("direction") or "")),
                 f"0x{r.get('index', 0):04X}:{r.get('subindex', 0):02X}",
                 esc(str(r.get("name") or "")),
                 esc(f"0x{r['abort_code']:08X}" if isinstance(r.get("abort_code"), int) else "-"),
                 esc(str(r.get("abort_text") or r.get("result") or "")),
             ]
-            for r in s.aborts
+            for bus, r in s.aborts
         ]
         parts.append("<h3>Aborts and timeouts</h3>")
         parts.append(_table(["time", "node", "direction", "object", "name", "code", "text"], arows))
     parts.append("</section>")
     return "".join(parts)
+
+
+def _sdo_by_bus(s) -> dict:
+    """(bus, node) -> [ok, aborts, latency histogram]: the transfers counted before a
+    second bus was seen (bus "") are the first bus's."""
+    from .accum import LogHistogram
+
+    out: dict = {}
+    for (bus, n), (ok, bad) in s.sdo_count.items():
+        item = out.setdefault((s.first_bus(bus), n), [0, 0, LogHistogram()])
+        item[0] += ok
+        item[1] += bad
+        h = s.sdo_latency.get((bus, n))
+        if h is not None:
+            item[2].merge(h)
+    return out
 
 
 def emcy(s, figs: Figures) -> str:

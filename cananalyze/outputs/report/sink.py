@@ -80,6 +80,20 @@ def _bus_of(fb, row: int) -> str:
     return fb.channel_label(int(fb.channel[row])) if 0 <= row < len(fb) else ""
 
 
+def _record_buses(batch, slots: np.ndarray | None) -> np.ndarray:
+    """The bus of each record slot: "" on a log of one bus (and before a second bus was
+    seen), else the bus the decoder gave it (`DecodedBatch.bus`, `record_bus`)."""
+    n = 0 if slots is None else len(slots)
+    out = np.full(n, "", object)
+    if batch.record_bus is not None:
+        inside = (slots >= 0) & (slots < len(batch.record_bus))
+        out[inside] = batch.record_bus[slots[inside]]
+        out[np.equal(out, None)] = ""
+    elif batch.bus is not None:
+        out[:] = batch.bus
+    return out
+
+
 def _groups(keys: np.ndarray):
     """(key, positions in original order) per distinct key (one stable sort)."""
     if keys.size == 0:
@@ -112,9 +126,11 @@ class ReportSink(Sink):
         self.errctl: dict[tuple, Gaps] = {}
         self.pdos: dict[tuple[str, int], Gaps] = {}  # (bus, COB-ID) -> gaps
         self.pdo_node: dict[tuple[str, int], tuple[int, str]] = {}
-        self.sdo_latency: dict[int, LogHistogram] = {}
-        self.sdo_count: dict[int, list[int]] = {}  # node -> [ok, abort]
-        self.aborts: list[dict] = []
+        # SDO transfers by (bus, node): bus "" until the decoder split by bus (then
+        # the first bus's, `first_bus`), a channel's name after
+        self.sdo_latency: dict[tuple[str, int], LogHistogram] = {}
+        self.sdo_count: dict[tuple[str, int], list[int]] = {}  # -> [ok, abort]
+        self.aborts: list[tuple[str, dict]] = []  # (bus, record)
         self.emcys: list[
             tuple[float, str, int, int, int, str]
         ] = []  # t, bus, node, code, reg, text
@@ -136,6 +152,10 @@ class ReportSink(Sink):
     def who(self, bus: str, node: int) -> str:
         """ "node 5", or "can1 node 5" on a log of several buses."""
         return f"{bus} node {node}" if self.several and bus else f"node {node}"
+
+    def first_bus(self, bus: str) -> str:
+        """`bus`, or the log's first bus for "" (what was seen before a second bus)."""
+        return bus or next(iter(self.buses), "")
 
     def network_of(self, bus: str | None):
         """The network model that bus's decoder kept (each bus decodes on its own)."""
@@ -228,15 +248,21 @@ class ReportSink(Sink):
         if not batch.records:
             return
         table = batch.sdo_table()
-        for code, pos in table.groups(table.node):
-            nd = table.node_keys[code]
+        buses = _record_buses(batch, table.slots)
+        codes = table.node
+        if len(set(buses.tolist())) > 1:  # (bus, node) pairs
+            names, bus_code = np.unique(buses.astype(str), return_inverse=True)
+            codes = codes * len(names) + bus_code.reshape(-1)
+        for _, pos in table.groups(codes):
+            nd = table.node_keys[table.node[pos[0]]]
             if nd is None:
                 continue
-            self.sdo_latency.setdefault(nd, LogHistogram()).add(table.latency[pos])
+            key = (buses[pos[0]], nd)
+            self.sdo_latency.setdefault(key, LogHistogram()).add(table.latency[pos])
             res = table.result[pos]
             ok_code = table.result_keys.index("ok") if "ok" in table.result_keys else -1
             ok = int((res == ok_code).sum())
-            c = self.sdo_count.setdefault(nd, [0, 0])
+            c = self.sdo_count.setdefault(key, [0, 0])
             c[0] += ok
             c[1] += pos.size - ok
         if len(self.aborts) >= MAX_LISTED:
@@ -245,14 +271,17 @@ class ReportSink(Sink):
         records = batch.records
         slots = range(len(records)) if split is None else split[2]
         found = [
-            r
+            (k, r)
             for k in slots
             if (r := records[k][1]).get("kind") == "sdo" and r.get("result") != "ok"
         ]
         if split is not None:
-            found.extend(split[0].aborted.values())
-        found.sort(key=lambda r: r.get("t") or 0.0)
-        self.aborts.extend(found[: MAX_LISTED - len(self.aborts)])
+            fast = split[1]
+            found.extend((int(fast.slots[j]), r) for j, r in split[0].aborted.items())
+        found.sort(key=lambda kr: kr[1].get("t") or 0.0)
+        found = found[: MAX_LISTED - len(self.aborts)]
+        at = _record_buses(batch, np.array([k for k, _ in found], np.int64))
+        self.aborts.extend(zip(at.tolist(), [r for _, r in found], strict=True))
 
     def _drive_states(self, batch) -> None:
         """CiA 402 drive states, once the decoder puts them in the event log as kind

@@ -38,7 +38,7 @@ from ...errors import UsageError
 from ...events.build import LEVEL_NAMES, EventState, batch_events_of
 from ...events.columns import KINDS, NO_NODE, NO_ROW, EventColumns
 from ...frames import FrameBatch
-from ...network.node_tally import NodeTally, node_profiles
+from ...network.node_tally import NodeTally, bus_profiles, node_profiles
 from ...protocol.services import SERVICE_NAMES
 from ...records import DecodedBatch
 from ...sdo.transaction import SDO_TABLE_COLUMNS
@@ -145,6 +145,14 @@ SIGNALS = TableSpec(
     split=("t",),
     statistics=("t",),
 )
+_EVENT_META = [
+    pl.field_meta("t", "float64", "float64"),
+    _cat("kind"),
+    pl.field_meta("node", "int16", "Int16"),
+    _cat("level", len(LEVEL_NAMES)),
+    pl.field_meta("message", "object", "string"),
+    pl.field_meta("row", "int64", "Int64"),
+]
 EVENTS = TableSpec(
     [
         ("t", pa.float64()),
@@ -154,19 +162,18 @@ EVENTS = TableSpec(
         ("message", pa.large_string()),
         ("row", pa.int64()),
     ],
-    _meta(
-        [
-            pl.field_meta("t", "float64", "float64"),
-            _cat("kind"),
-            pl.field_meta("node", "int16", "Int16"),
-            _cat("level", len(LEVEL_NAMES)),
-            pl.field_meta("message", "object", "string"),
-            pl.field_meta("row", "int64", "Int64"),
-        ]
-    ),
+    _meta(_EVENT_META),
     sorted_labels=("kind",),
     dictionary=("kind", "level", "node"),
     statistics=("t",),
+)
+# a log of several buses: which one, after the other columns (text, as the findings' `bus`;
+# a fleet's parts always have it, null on a log of one bus)
+EVENTS_BUS = dataclasses.replace(
+    EVENTS,
+    fields=[*EVENTS.fields, ("bus", pa.string())],
+    metadata=_meta([*_EVENT_META, pl.field_meta("bus", *pl.column(["can0"])[1:])]),
+    dictionary=(*EVENTS.dictionary, "bus"),
 )
 
 
@@ -260,7 +267,12 @@ class TableSink(OutputSink):
             if fmt == "parquet" and not self.constants
             else None
         )
-        tables = [("frames", FRAMES if fmt == "parquet" else FRAMES_CSV), ("events", EVENTS)]
+        # a dataset part's events always say which bus (one schema for every log)
+        self._events_bus = bool(self.constants)  # the events table has a bus column
+        self._several = False  # events of several buses seen: the bus column is filled
+        self._first_bus: str | None = None  # the first frame's bus (events before the second)
+        events = EVENTS_BUS if self._events_bus else EVENTS
+        tables = [("frames", FRAMES if fmt == "parquet" else FRAMES_CSV), ("events", events)]
         if self.wide is None:
             tables.insert(1, ("signals", SIGNALS))
         self.sinks = {
@@ -309,6 +321,8 @@ class TableSink(OutputSink):
         n = len(fb)
         off = self.offset
         if n:
+            if self._first_bus is None:
+                self._first_bus = fb.channel_label(int(fb.channel[0]))
             if len(fb.channels) > len(self._channels):
                 self._channels = tuple(fb.channels)
             frames = self.sinks["frames"]
@@ -444,6 +458,11 @@ class TableSink(OutputSink):
         n = len(pending)
         if not n:
             return
+        if pending.bus is not None and not self._several:  # the second bus: say which
+            self._several = True
+            sink, first = self.sinks["events"], self._first_bus
+            self.writer.put(lambda: sink.fill_column(EVENTS_BUS, "bus", first))
+            self._events_bus = True
         key = pending.sort_key()
         t = pending.t
         if np.isnan(t).any() or (horizon is not None and horizon != horizon):
@@ -476,8 +495,24 @@ class TableSink(OutputSink):
             "message": ab.strings(events.message.tolist(), large=True),
             "row": ab.numeric(np.where(no_row, 0, events.row), no_row, pa.int64()),
         }
+        if self._events_bus:
+            cols["bus"] = self._bus_column(events)
         sink = self.sinks["events"]
         self.writer.put(lambda: sink.add(cols))
+
+    def _bus_column(self, events: EventColumns) -> pa.Array:
+        """The events' bus: the first bus's for those built before a second was seen; all
+        null on a log of one bus (a dataset part's column)."""
+        if not self._several:
+            return pa.nulls(len(events), pa.string())
+        bus = events.bus
+        if bus is None:
+            return ab.strings([self._first_bus] * len(events))
+        none = np.equal(bus, None)
+        if none.any():
+            bus = bus.copy()
+            bus[none] = self._first_bus
+        return ab.strings(bus.tolist())
 
     def _add_records(self, batch: DecodedBatch) -> None:
         """SDO rows and findings of a batch.
@@ -773,7 +808,11 @@ class TableSink(OutputSink):
         return n
 
     def _write_nodes(self) -> int:
-        rows = self._nodes.rows(node_profiles(self.run.network) if self.run else self.profiles)
+        run = self.run
+        if run is None:
+            rows = self._nodes.rows(self.profiles)
+        else:
+            rows = self._nodes.rows(node_profiles(run.network), bus_profiles(run.decoder))
         names = list(rows[0]) if rows else ["node"]
         others = [c for c in names if c != "node"]
         # Parquet keeps the index last (to_parquet), CSV first (reset_index)

@@ -186,6 +186,31 @@ class Sink:
         if self.buffered >= ROW_GROUP or self.buffered_bytes >= ROW_GROUP_BYTES:
             self.flush()
 
+    def fill_column(self, spec: TableSpec, name: str, value: str) -> None:
+        """Every row so far, buffered or written, gets `value` in column `name` (of `spec`,
+        the table with that column; added if this one lacks it). For a log whose second
+        bus comes after events were written: the file is read back and written again
+        (rare: a row group of events before it)."""
+        typ = dict(spec.fields)[name]
+        self.spec = spec
+        self.fields = list(spec.fields) + [(c, None) for c in self.constants]
+        for cols in self.buffer:
+            cols[name] = pa.array([value] * len(cols["t"]), typ)
+        if self.writer is None:
+            return
+        self.writer.close()
+        self.writer = None
+        old = self.schema
+        table = _read_back(self, old)
+        table = table.drop_columns([name]) if name in table.column_names else table
+        table = table.append_column(name, pa.array([value] * table.num_rows, typ))
+        fields = [old.field(n) if n in old.names else pa.field(n, typ) for n, _ in self.fields]
+        counts = {k: len(v) for k, v in self.order.items()}
+        self.schema = pa.schema(fields, metadata=self.metadata(counts))
+        target = self.schema if self.fmt == "parquet" else csv_schema(self.schema)
+        self.rows = 0
+        self._write(pa.Table.from_arrays([table.column(f.name) for f in target], schema=target))
+
     def _extend_order(self) -> None:
         for name, typ in self.fields:
             if typ is not None:
@@ -362,21 +387,31 @@ def rewrite(
         raise
 
 
+def _read_back(sink: Sink, schema: pa.Schema) -> pa.Table:
+    """A table file as written (`schema`: its schema; CSV read as its text columns)."""
+    if sink.fmt == "parquet":
+        import pyarrow.parquet as pq
+
+        return pq.read_table(sink.path)
+    import pyarrow.csv as pacsv
+
+    return pacsv.read_csv(
+        sink.path,
+        convert_options=pacsv.ConvertOptions(
+            column_types=csv_schema(schema),
+            strings_can_be_null=True,
+            quoted_strings_can_be_null=False,
+        ),
+    )
+
+
 def _rewrite(sink: Sink, categories: dict, order, tmp: Path) -> None:
     if sink.fmt == "csv":
         if order is None:
             return  # CSV holds labels, not codes: only the row order can be wrong
         import pyarrow.csv as pacsv
 
-        schema = csv_schema(sink.schema)
-        table = pacsv.read_csv(
-            sink.path,
-            convert_options=pacsv.ConvertOptions(
-                column_types=schema,
-                strings_can_be_null=True,
-                quoted_strings_can_be_null=False,
-            ),
-        )
+        table = _read_back(sink, sink.schema)
         table = table.take(ab.numeric(np.ascontiguousarray(order(table), np.int64)))
         pacsv.write_csv(csv_table(table), tmp)
         tmp.replace(sink.path)
