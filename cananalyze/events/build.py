@@ -338,23 +338,23 @@ def batch_event_columns(
 
 def _row_bus(batch: DecodedBatch, rows: np.ndarray) -> np.ndarray:
     """The bus of each of the batch's frame rows (None for a row past its frames)."""
-    out = np.empty(len(rows), object)
-    if batch.row_bus is None:
-        out[:] = batch.bus
-        return out
-    inside = (rows >= 0) & (rows < len(batch.row_bus))
-    out[inside] = batch.row_bus[rows[inside]]
-    return out
+    return _bus_at(batch.row_bus, batch.bus, rows)
 
 
 def _record_bus(batch: DecodedBatch, slots: np.ndarray) -> np.ndarray:
     """The bus of each of the batch's record slots (None for one added after the merge)."""
-    out = np.empty(len(slots), object)
-    if batch.record_bus is None:
-        out[:] = batch.bus
+    return _bus_at(batch.record_bus, batch.bus, slots)
+
+
+def _bus_at(per: np.ndarray | None, bus, at: np.ndarray) -> np.ndarray:
+    """per[at] as an object array, None where `at` is outside it; `bus` everywhere when
+    the batch has one bus (`per` None)."""
+    out = np.empty(len(at), object)
+    if per is None:
+        out[:] = bus
         return out
-    inside = (slots >= 0) & (slots < len(batch.record_bus))
-    out[inside] = batch.record_bus[slots[inside]]
+    inside = (at >= 0) & (at < len(per))
+    out[inside] = per[at[inside]]
     return out
 
 
