@@ -222,7 +222,8 @@ class Decoder:
         for rows in np.split(order, cut):
             dec = self._decoders[int(slot[rows[0]])]
             parts.append((rows, dec._decode_one(batch.take(rows))))
-        return merge_buses(batch, parts)
+        names = np.array([None] + [d.bus for d in self._decoders], object)
+        return merge_buses(batch, parts, names[self._slot + 1])
 
     def tick(self, now: float) -> DecodedBatch | None:
         """Live, between frames: a zero-row batch with what time alone completes at `now`
@@ -275,20 +276,24 @@ class Decoder:
         return empty
 
 
-def merge_buses(batch: FrameBatch, parts: list[tuple[np.ndarray, DecodedBatch]]) -> DecodedBatch:
+def merge_buses(
+    batch: FrameBatch,
+    parts: list[tuple[np.ndarray, DecodedBatch]],
+    channel_bus: np.ndarray | None = None,
+) -> DecodedBatch:
     """One DecodedBatch of `batch` from its channels' decoded parts ((rows, part) each):
     columns scattered back to their rows, records and findings at their rows, in row order
-    (a record at its part's end stays at the batch's end)."""
+    (a record at its part's end stays at the batch's end). `channel_bus`: the bus name of
+    each channel index (a frame row's bus is its channel's)."""
     n = len(batch)
     service = np.zeros(n, np.uint8)
     node = np.full(n, -1, np.int16)
     pdo = np.zeros(n, np.uint8)
     out = DecodedBatch(batch, service, node, pdo)
-    out.row_bus = np.empty(n, object)
+    out.channel_bus = channel_bus
     founds = []
     for rows, part in parts:
         at = np.append(rows, n)  # a part's row len(part): the batch's end
-        out.row_bus[rows] = part.bus
         service[rows] = part.service
         node[rows] = part.node
         pdo[rows] = part.pdo

@@ -128,9 +128,10 @@ class DecodedBatch:
     states: list = field(default_factory=list)  # NMT state changes (events.columns.Row)
     drive: list = field(default_factory=list)  # CiA 402 changes (network.drive_tracker)
     # several buses (else None): the bus of the whole batch (one bus's decoder), or of
-    # each frame row and each record (object arrays: a batch merged from several)
+    # each channel index (a frame row's bus is its channel's) and of each record (object
+    # arrays: a batch merged from several)
     bus: str | None = None
-    row_bus: np.ndarray | None = None
+    channel_bus: np.ndarray | None = None
     record_bus: np.ndarray | None = None
     _lazy: tuple | None = field(default=None, repr=False, compare=False)
     _sdo_cache: tuple | None = field(default=None, repr=False, compare=False)
@@ -211,7 +212,7 @@ class DecodedBatch:
             findings,
             drive=drive,
             bus=self.bus,
-            row_bus=None if self.row_bus is None else self.row_bus[rows],
+            channel_bus=self.channel_bus,
             record_bus=None
             if self.record_bus is None
             else self.record_bus[np.asarray(kept, np.int64)],

@@ -282,7 +282,7 @@ def batch_event_columns(
     else:  # the fast path's records as columns; the others read without building those
         get = list.__getitem__
         pairs = ((k, get(records, k)) for k in split[2])
-    several = batch.bus is not None or batch.row_bus is not None or batch.record_bus is not None
+    several = batch.bus is not None or batch.channel_bus is not None or batch.record_bus is not None
     events, at = _record_event_columns(pairs, fb, offset, last_t)
     if several:
         events.bus = _record_bus(batch, np.asarray(at, np.int64))
@@ -338,7 +338,12 @@ def batch_event_columns(
 
 def _row_bus(batch: DecodedBatch, rows: np.ndarray) -> np.ndarray:
     """The bus of each of the batch's frame rows (None for a row past its frames)."""
-    return _bus_at(batch.row_bus, batch.bus, rows)
+    if batch.channel_bus is None:
+        return _bus_at(None, batch.bus, rows)
+    out = np.empty(len(rows), object)
+    inside = (rows >= 0) & (rows < len(batch.frames))
+    out[inside] = batch.channel_bus[batch.frames.channel[rows[inside]]]
+    return out
 
 
 def _record_bus(batch: DecodedBatch, slots: np.ndarray) -> np.ndarray:

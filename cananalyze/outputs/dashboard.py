@@ -146,11 +146,14 @@ class LiveView:
         return f"{bus} node {node}" if self.several and bus else f"node {node}"
 
     def _row_bus(self, batch: DecodedBatch, row: int) -> str | None:
-        """The channel name of the batch's row (a record past the frames: its bus, if
-        the decoder said, else the first bus)."""
+        """The bus of the batch's row: its channel's decoder's name (past 64 channels the
+        shared one's); a record past the frames: the batch's bus, if the decoder said."""
         fb = batch.frames
         if 0 <= row < len(fb):
-            return fb.channel_label(int(fb.channel[row]))
+            c = int(fb.channel[row])
+            if batch.channel_bus is not None:
+                return batch.channel_bus[c]
+            return batch.bus or fb.channel_label(c)
         return batch.bus
 
     def _event(self, t: float, text: str, level: str = INFO) -> None:
