@@ -528,13 +528,17 @@ def _spawner(opts: Options, checker: Checker | None) -> Callable[[], Decoder]:
     return spawn
 
 
-def build_checker(opts: Options) -> Checker:
+def build_checker(opts: Options, keep_findings: bool = True) -> Checker:
     """The rules the options ask for: the CANopen rules and the rules file's assertions
-    when checking, none (timing statistics only) otherwise."""
+    when checking, none (timing statistics only) otherwise.
+
+    `keep_findings=False` for a run whose sinks take every finding from the batches
+    (export, fleet): the checker then holds none to the end of the log."""
     from .checks.build import build_checker as from_files
     from .checks.engine import Checker
 
     checker = from_files(opts.rules) if opts.checking else Checker(rules=[])
+    checker.keep_findings = keep_findings
     # the gap statistics only for a report that prints them (--timing, --summary)
     checker.timing.with_stats = opts.timing
     return checker

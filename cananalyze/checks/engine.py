@@ -1,8 +1,10 @@
 """Checker: the processor that runs the timing analysis and every enabled rule on each batch.
 
 Findings go into `batch.findings` as columns (`FindingColumns`, each at its row, so
-`decode --format jsonl` streams them among the frames) and into `self.findings` for the
-CLI, JUnit and the Python assertions.
+`decode --format jsonl` streams them among the frames) and, unless built with
+`keep_findings=False`, into `self.findings` for load(), `check` and the Python assertions. An
+export takes every finding from the batches: kept here too, a 50M-frame log's
+findings were held to the end for nobody.
 
 A log without timestamps (candump screen output: every frame at one time) is told
 once, its timing rules are skipped, and the order-based rules (PDO before start,
@@ -32,7 +34,12 @@ UNTIMED = "timestamps"  # the rule name of the one "no timestamps" finding
 
 
 class Checker:
-    def __init__(self, rules: list[Rule] | None = None, config: ConfigSource | None = None) -> None:
+    def __init__(
+        self,
+        rules: list[Rule] | None = None,
+        config: ConfigSource | None = None,
+        keep_findings: bool = True,
+    ) -> None:
         if rules is None:
             from .registry import default_rules
 
@@ -47,6 +54,9 @@ class Checker:
         self.nmt = NmtStates()
         # every gap is kept only for the tables a rule reads after the fact (flat memory otherwise)
         self.timing = Timing(keep={n for r in rules for n in getattr(r, "needs_gaps", ())})
+        self.keep_findings = (
+            keep_findings  # False: findings only in the batches (self.findings unreadable)
+        )
         self._found: list[FindingColumns] = []  # per batch (self.findings: all)
         self._gaps = GapState()
         self.t_last: float | None = None
@@ -78,7 +88,7 @@ class Checker:
         with_stats = self.timing.with_stats
 
         def make() -> Checker:
-            fresh = Checker(copy.deepcopy(rules), self.config)
+            fresh = Checker(copy.deepcopy(rules), self.config, self.keep_findings)
             fresh.timing.with_stats = with_stats
             return fresh
 
@@ -213,7 +223,8 @@ class Checker:
         self._sync_objects(new)
         new = new.sort()
         batch.findings = FindingColumns.concat([batch.findings, new])
-        self._found.append(new)
+        if self.keep_findings:
+            self._found.append(new)
 
     @staticmethod
     def _sync_objects(new: FindingColumns) -> None:
@@ -229,6 +240,10 @@ class Checker:
     def findings(self) -> FindingColumns:
         """Every finding so far, batch by batch (each batch's by time); with several
         buses, every bus's, by time."""
+        if not self.keep_findings:
+            raise RuntimeError(
+                "this Checker was built with keep_findings=False: read batch.findings"
+            )
         if len(self._found) > 1:
             self._found = [FindingColumns.concat(self._found)]
         mine = self._found[0] if self._found else FindingColumns()

@@ -72,7 +72,8 @@ def run(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     opts = options(args, checks=not args.no_check)
-    checker = build_checker(opts) if opts.checking else None  # a bad rules file fails first
+    # a bad rules file fails first; the sinks take the findings from the batches
+    checker = build_checker(opts, keep_findings=False) if opts.checking else None
     source = open_source(args.log, opts)
     decoder = build_decoder(opts, checker)
     sinks = []
