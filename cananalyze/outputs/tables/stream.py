@@ -4,8 +4,9 @@
 DataFrames (4 GB for 10M frames); this path keeps nothing per frame: frames and
 signals go batch by batch to a writer thread (`writer`), SDO records are
 spooled to a temporary file (pandas types their columns over the whole column)
-and written as they come while the types so far hold, and the small tables
-(findings, nodes) are built at the end. The files hold the tables of `load(log)`:
+and written as they come while the types so far hold, findings are spooled
+(`findings_spool`) and written by time at the end, and the nodes table is built
+at the end. The files hold the tables of `load(log)`:
 `pd.read_parquet` gives its DataFrames back, with their dtypes (mixed-type record
 columns as text: Parquet has one type per column); tests read them with pandas.
 
@@ -46,6 +47,7 @@ from ..atomic import atomic_path
 from ..sink import Sink as OutputSink
 from . import pandas_like as pl
 from . import sdo_chunks, wide
+from .findings_spool import FindingsSpool
 from .writer import (
     DEFAULT_CODEC,
     ROW_GROUP,
@@ -304,7 +306,7 @@ class TableSink(OutputSink):
         self._sdo_chunks = 0
         # (column decisions, schema, writer) of the sdo file written as chunks come; False: given up
         self._sdo_spec: tuple | bool | None = None
-        self._findings: list[FindingColumns] = []  # per batch: read as columns at the end
+        self._findings = FindingsSpool(self.dir)  # by time at the end, from disk
 
     def __enter__(self) -> TableSink:
         if self._stack is None:
@@ -333,8 +335,7 @@ class TableSink(OutputSink):
         elif batch.signals:
             self._add_signals(batch, off)
         self._add_records(batch)
-        if len(batch.findings):
-            self._findings.append(batch.findings)
+        self._findings.add(batch.findings)
         events, states = batch_events_of(batch, off, self._event_state)
         self._nodes.add(batch, states, off)
         self._add_events(events, float(fb.t[-1]) - HOLD if n else float("-inf"))
@@ -586,6 +587,7 @@ class TableSink(OutputSink):
     def commit(self) -> None:
         """The finished files replace their targets (pipeline.run: after every sink finished)."""
         self._sdo_spool.close()
+        self._findings.close()
         self._stack.close()
 
     def finish(self) -> dict[str, int]:
@@ -630,6 +632,7 @@ class TableSink(OutputSink):
                 self._sdo_spec[2].discard()
             self._sdo_spec = False
         self._sdo_spool.close()
+        self._findings.close()
         self._stack.__exit__(typ or RuntimeError, exc or RuntimeError("aborted"), tb)
         if self._made_dir:
             with contextlib.suppress(OSError):
@@ -752,25 +755,31 @@ class TableSink(OutputSink):
         """By time, as load() and `check --json` give them: a rule that judges a span (a
         heartbeat dropout) reports after later findings were emitted.
 
-        Converted and written FINDINGS_CHUNK rows at a time: built whole, the Python
-        values of a 10M-frame log's 47k findings peaked 30 MB at the very end of the
-        export, above the decode's own peak. pandas types a column over all of it, so the
-        chunks are written with the types of the first while the types so far still hold
-        (as the sdo table); a later chunk that changes one (a text among numbers) makes
-        the table written again with the types of the whole column."""
-        found = FindingColumns.concat(self._findings)
-        self._findings = []
-        found.messages()  # built once (mostly already, by the event log), read per chunk
-        order = np.argsort(np.asarray(found.column("t"), np.float64), kind="stable")
-        n = len(order)
+        Read from the spool and written FINDINGS_CHUNK rows at a time: built whole, the
+        Python values of a 10M-frame log's 47k findings peaked 30 MB at the very end of
+        the export, above the decode's own peak. pandas types a column over all of it, so
+        the chunks are written with the types of the first while the types so far still
+        hold (as the sdo table); a later chunk that changes one (a text among numbers)
+        makes the table written again with the types of the whole column. On a log of
+        several buses, the findings made before the second bus was seen are the first
+        bus's (as the events)."""
+        spool = self._findings
+        n = len(spool)
         starts = range(0, n, FINDINGS_CHUNK)
         names = FINDING_COLUMNS
-        if np.not_equal(found.bus, None).any():  # several buses: which one
+        if spool.named or self._several:  # several buses: which one
             names = (*FINDING_COLUMNS, "bus")
         stats = {c: pl.ColumnStats() for c in names if c not in _NULLABLE_INTS}
+        first = self._first_bus
 
         def part(i: int) -> FindingColumns:
-            return found.take(order[i : i + FINDINGS_CHUNK])
+            return spool.chunk(i, FINDINGS_CHUNK)
+
+        def values_of(rows: FindingColumns, names) -> dict[str, list | np.ndarray]:
+            values = _finding_values(rows, names)
+            if "bus" in values:
+                values["bus"] = [first if b is None else b for b in values["bus"]]
+            return values
 
         def decisions() -> dict[str, tuple[str, str, str]]:
             return {c: s.decide() for c, s in stats.items()}
@@ -778,7 +787,7 @@ class TableSink(OutputSink):
         out, decided, seen = None, None, 0
         for i in starts:
             rows = part(i)
-            values = _finding_values(rows, stats)
+            values = values_of(rows, stats)
             types = _update(stats, values)
             seen += 1
             if decided is None:
@@ -795,14 +804,14 @@ class TableSink(OutputSink):
             out.close()
             return n
         for i in starts[seen:]:  # the types changed: all of the column decides them
-            _update(stats, _finding_values(part(i), stats))
+            _update(stats, values_of(part(i), stats))
         decided = decisions()
         schema = _findings_schema(decided)
 
         def tables():
             for i in starts:
                 rows = part(i)
-                values = _finding_values(rows, stats)
+                values = values_of(rows, stats)
                 types = {c: set(map(type, v)) for c, v in values.items() if type(v) is list}
                 yield _findings_table(rows, values, types, decided, schema)
 
