@@ -91,8 +91,7 @@ def _plain_update_table(timing: Timing, name: str, g) -> None:
     elif v.size and keep:
         ends = np.r_[first[1:], v.size].tolist()
         for a, e, key_j in zip(first.tolist(), ends, key[first].tolist(), strict=True):
-            timing.gaps[name].setdefault(key_j, []).append(gap[ok][a:e])
-            timing.gap_t[name].setdefault(key_j, []).append(g.prev[ok][a:e])
+            timing.gaps[name].add(key_j, g.prev[ok][a:e], gap[ok][a:e])
     for key_j, sl in g.groups():
         if key_j not in timing.stats[name]:
             timing.stats[name][key_j] = StreamStats()
@@ -117,7 +116,8 @@ def test_timing_steady_state_path_is_the_filtered_one(seed, keep, stats):
     assert fast.lines() == plain.lines()
     assert fast.count == plain.count and fast.span == plain.span
     if keep:
-        for key in plain.gaps["pdo"]:
+        assert fast.gaps["pdo"].keys() == plain.gaps["pdo"].keys()
+        for key in plain.gaps["pdo"].keys():
             for a, b in zip(fast.all_gaps("pdo", key), plain.all_gaps("pdo", key), strict=True):
                 np.testing.assert_array_equal(a, b)
 

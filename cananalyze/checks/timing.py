@@ -16,6 +16,7 @@ import numpy as np
 from ..protocol.services import Service
 from .finding import rel_time
 from .rule import Context
+from .spool import KeyedSpool
 from .streamstats import StreamStats, bins_of, histogram_many
 
 
@@ -47,12 +48,8 @@ class Timing:
         self.keep = set(keep)  # gap tables whose every gap is kept (for all_gaps)
         self.with_stats = stats
         self.stats: dict[str, dict[int, StreamStats]] = {"heartbeat": {}, "pdo": {}, "sync": {}}
-        self.gaps: dict[str, dict[int, list[np.ndarray]]] = {"heartbeat": {}, "pdo": {}, "sync": {}}
-        self.gap_t: dict[str, dict[int, list[np.ndarray]]] = {
-            "heartbeat": {},
-            "pdo": {},
-            "sync": {},
-        }
+        # the kept tables' (gap start, gap in s) per key, on disk past a buffer (flat memory)
+        self.gaps: dict[str, KeyedSpool] = {name: KeyedSpool(2) for name in self.keep}
         self.count: dict[str, Counter] = {
             "heartbeat": Counter(),
             "pdo": Counter(),
@@ -107,8 +104,7 @@ class Timing:
             if v.size and not self.with_stats:
                 ends = np.r_[first[1:], v.size].tolist()
                 for a, e, key_j in zip(first.tolist(), ends, key[first].tolist(), strict=True):
-                    self.gaps[name].setdefault(key_j, []).append(gap_s[a:e])
-                    self.gap_t[name].setdefault(key_j, []).append(t_prev[a:e])
+                    self.gaps[name].add(key_j, t_prev[a:e], gap_s[a:e])
             elif v.size:
                 self._add_stats(name, v, key, first, t_prev, gap_s, keep)
         self._count_spans(name, g)
@@ -157,8 +153,7 @@ class Timing:
             else:
                 binned.append((st, a, e))
             if keep:
-                self.gaps[name].setdefault(key_j, []).append(gap_s[a:e])
-                self.gap_t[name].setdefault(key_j, []).append(t_prev[a:e])
+                self.gaps[name].add(key_j, t_prev[a:e], gap_s[a:e])
         if binned:
             histogram_many(binned, v, bins_of(v))
 
@@ -191,10 +186,7 @@ class Timing:
         """
         if name not in self.keep:
             raise ValueError(f"Timing(keep=...) does not keep the {name} gaps")
-        parts = self.gaps[name].get(key)
-        if not parts:
-            return np.zeros(0), np.zeros(0)
-        return np.concatenate(self.gap_t[name][key]), np.concatenate(parts)
+        return self.gaps[name].get(key)
 
     def rate_hz(self, name: str, key: int) -> float | None:
         n = self.count[name].get(key, 0)

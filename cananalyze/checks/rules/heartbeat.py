@@ -16,6 +16,7 @@ import numpy as np
 from ...network.timeline import RESET_ANSWER_S
 from ..rule import Context, Rule, ms
 from ..spans import crossing, runs
+from ..spool import KeyedSpool
 
 MIN_LEARN = 5  # gaps a segment needs before its median is an expected period
 
@@ -39,7 +40,7 @@ class HeartbeatRule(Rule):
         self.last_seen: dict[int, float] = {}
         # node -> start times of the gaps judged without a known period (no 0x1017 known
         # at that time): finish() learns the period for these from the segment's median
-        self.unjudged: dict[int, list[np.ndarray]] = {}
+        self.unjudged = KeyedSpool(1)  # on disk past a buffer: a long log has millions
         self.reported: dict[int, set[float]] = {}  # node -> gap starts already reported
         self.silent: dict[int, float] = {}  # node -> the silence tick() reported, from t
         self._limits: dict[tuple[int, int], dict] = {}  # _consumer_limits per stretch
@@ -60,7 +61,7 @@ class HeartbeatRule(Rule):
             deadline, period = self._deadlines(ctx, node, prev, t)
             unknown = np.isnan(deadline) & ~np.isnan(prev)
             if unknown.any():
-                self.unjudged.setdefault(node, []).append(prev[unknown])
+                self.unjudged.add(node, prev[unknown])
             bad = np.flatnonzero(t > deadline) + sl.start
             for i in self.capped(bad, g.prev[bad], node, 0x700 + node).tolist():
                 start = float(g.prev[i])
@@ -235,7 +236,7 @@ class HeartbeatRule(Rule):
         """The gaps judged without a known 0x1017, against their segment's median, as
         columns: a jittery node on a long log has thousands. Not end-of-log results:
         the terminal caps them like the others."""
-        cand = np.flatnonzero(np.isin(t, np.concatenate(self.unjudged[node])))
+        cand = np.flatnonzero(np.isin(t, self.unjudged.get(node)[0]))
         segs = seg[cand]
         known = np.isin(segs, np.fromiter(learned, np.int64, len(learned)))
         cand, segs = cand[known], segs[known]
