@@ -461,3 +461,69 @@ def test_payload_pack_checks_its_buffers() -> None:
         C.payload_pack(data, dlc, dlc, FLAG_RTR, np.empty(31, np.uint8), np.empty(5, np.int32))
     with pytest.raises(ValueError, match="offsets"):
         C.payload_pack(data, dlc, dlc, FLAG_RTR, np.empty(32, np.uint8), np.empty(4, np.int32))
+
+
+def _frame_docs(fb, service, node):
+    """frame_payloads with the helper, then the numpy path: (bytes, offsets) each."""
+    from cananalyze.outputs.mcap.frames import frame_payloads
+
+    got = frame_payloads(fb, service, node)
+    saved = speedups.C
+    speedups.C = None
+    try:
+        ref = frame_payloads(fb, service, node)
+    finally:
+        speedups.C = saved
+    return (bytes(got.data), got.offsets.tolist()), (bytes(ref.data), ref.offsets.tolist())
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_frame_json_is_the_numpy_documents(seed: int) -> None:
+    """/can/frames documents: any identifier, dlc, flags (RTR: no data), service, node
+    (-1: none), channel label (JSON-escaped), CAN FD payloads past 8 bytes."""
+    import json
+
+    from cananalyze.protocol.services import SERVICE_NAMES
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(0, 3000))
+    labels = ("can0", "CAN 1", 'bus "2"', "vcan\u00e9")[: int(rng.integers(1, 5))]
+    fb = FrameBatch.allocate(n, labels)
+    fb.can_id[:] = rng.integers(0, 1 << 29, n)
+    fb.dlc[:] = rng.integers(0, 9, n)
+    fb.flags[:] = rng.integers(0, 128, n)
+    fb.data[:] = rng.integers(0, 256, (n, 8))
+    fb.channel[:] = rng.integers(0, len(labels), n)
+    for i in rng.choice(n, min(n, 5), replace=False).tolist() if n else []:
+        fb.long_data[i] = rng.bytes(int(rng.integers(9, 65)))
+        fb.dlc[i] = len(fb.long_data[i])
+    service = rng.integers(0, len(SERVICE_NAMES), n).astype(np.uint8)
+    node = rng.integers(-1, 128, n).astype(np.int16)
+    got, ref = _frame_docs(fb, service, node)
+    assert got == ref
+    docs = [json.loads(got[0][a:b]) for a, b in zip(got[1], got[1][1:], strict=False)]
+    assert len(docs) == n
+    for i, d in enumerate(docs):
+        assert d["channel"] == labels[fb.channel[i]] and d["node"] == node[i]
+        assert d["data"] == ("" if fb.flags[i] & FLAG_RTR else fb.payload(i).hex())
+
+
+@pytest.mark.parametrize("name", ["demo.log", "faults.asc"])
+def test_frame_json_on_the_samples(name: str) -> None:
+    import cananalyze
+
+    c = cananalyze.load(SAMPLES / name)
+    got, ref = _frame_docs(c.batch, c.service, c.node)
+    assert got == ref and len(got[1]) == len(c.batch) + 1
+
+
+def test_frame_json_checks_its_tables() -> None:
+    fb = FrameBatch.allocate(3, ("can0",))
+    fb.channel[1] = 1  # no label for channel 1
+    args = (fb.channel, fb.can_id, fb.dlc, fb.data, np.zeros(3, np.int64), fb.flags)
+    with pytest.raises(ValueError, match="row 1"):
+        C.frame_json([b'"can0"'], [b'"x"'], *args, np.zeros(3, np.uint8),
+                     np.zeros(3, np.int16), np.empty(3, np.int64))  # fmt: skip
+    with pytest.raises(TypeError):
+        C.frame_json(["can0"], [b'"x"'], *args, np.zeros(3, np.uint8),
+                     np.zeros(3, np.int16), np.empty(3, np.int64))  # fmt: skip
