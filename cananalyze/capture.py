@@ -416,11 +416,16 @@ def _event_frame(events: list[Event], first_bus: str | None = None):
 class Collector:
     """Accumulates DecodedBatches; `capture()` joins them once at the end."""
 
-    def __init__(self, source: str = "", event_state: EventState | None = None) -> None:
+    def __init__(
+        self, source: str = "", event_state: EventState | None = None, records: bool = True
+    ) -> None:
         """event_state: what event building carried from earlier batches, when this
         Collector takes over a log part-way (live and streamed Rerun, a batch or a
-        flush at a time: NMT lanes show changes only, late findings keep their time)."""
+        flush at a time: NMT lanes show changes only, late findings keep their time).
+        records=False: the Capture has no records (Rerun sends signals, states and
+        events): the SDO fast path's records stay columns, not a dict each."""
         self.source = source
+        self.keep_records = records
         self._frames: list[FrameBatch] = []
         self._cols: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self._blocks: dict[tuple[int, str, int, tuple[str, ...]], list] = {}
@@ -440,8 +445,8 @@ class Collector:
         for blk in batch.signals:
             key = (blk.node, blk.pdo, blk.cob_id, tuple(blk.columns))
             self._blocks.setdefault(key, []).append((fb.t[blk.rows], blk.rows + off, blk))
-        for row, rec in batch.records:
-            self.records.append((row + off, rec))
+        if self.keep_records:
+            self.records.extend((row + off, rec) for row, rec in batch.records)
         cols, states = batch_events_of(batch, off, self.event_state)
         self.events.extend(Event(*e) for e in cols.rows())
         self.states.extend(Event(*e) for e in states)

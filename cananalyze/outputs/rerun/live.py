@@ -48,7 +48,7 @@ class RerunLive:
         self.counts: dict[str, int] = {}
         self._named: set[str] = set()
         self._layout: tuple[set, set] = (set(), set())  # PDOs and NMT lanes in the blueprint
-        self._collector = Collector(name)
+        self._collector = Collector(name, records=False)
         self._pending = 0
         self._last_send = time.monotonic()
         self._absolute: bool | None = None
@@ -85,7 +85,7 @@ class RerunLive:
         """Send everything kept so far (and, when final, the last partial load window)."""
         col = self._collector
         cap = col.capture(ProblemLog())
-        self._collector = Collector(col.source, col.event_state)
+        self._collector = Collector(col.source, col.event_state, records=False)
         self._pending = 0
         self._last_send = time.monotonic()
         t = cap.batch.t

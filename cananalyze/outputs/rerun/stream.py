@@ -88,7 +88,7 @@ class StreamRrd:
 
     def add(self, batch: DecodedBatch) -> None:
         """Send the batch's signals, NMT states and events; count its bits for the bus load."""
-        col = Collector(self.source, self._event_state)
+        col = Collector(self.source, self._event_state, records=False)
         col.add(batch)
         cap = col.capture(ProblemLog())
         fb = batch.frames
