@@ -93,3 +93,18 @@ def test_findings_table_read_back_from_the_spool_by_time(monkeypatch, tmp_path, 
         assert math.isclose(t_row, f.t, abs_tol=1e-9)
     alone = [f for f in checked if f.rule == "heartbeat" and "dropout" in f.message]
     assert alone  # rows emitted alone (their Finding kept in memory) are among them
+
+
+def test_keyed_spool_without_a_temporary_directory_keeps_the_values(monkeypatch):
+    def refuse(*args, **kwargs):
+        raise PermissionError("read-only")
+
+    monkeypatch.setattr(spool, "FLUSH", 2)
+    monkeypatch.setattr(spool.tempfile, "TemporaryFile", refuse)
+    s = KeyedSpool(1)
+    for k in range(5):
+        s.add(3, np.arange(k, k + 3, dtype=float))
+    assert s._file is None
+    np.testing.assert_array_equal(
+        s.get(3)[0], np.concatenate([np.arange(k, k + 3) for k in range(5)])
+    )

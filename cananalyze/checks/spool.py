@@ -27,6 +27,7 @@ class KeyedSpool:
         self._records: dict[int, list[tuple[int, int]]] = {}  # key -> (offset, rows)
         self._buffer: dict[int, list[tuple[np.ndarray, ...]]] = {}  # key -> parts not written
         self._pending: dict[int, int] = {}  # key -> rows in its buffer
+        self._disk = True  # False: no temporary file could be made (all kept in memory)
 
     def __contains__(self, key: int) -> bool:
         return key in self._records
@@ -48,15 +49,19 @@ class KeyedSpool:
         self._buffer.setdefault(key, []).append(tuple(np.array(v, np.float64) for v in values))
         self._records.setdefault(key, [])
         self._pending[key] = self._pending.get(key, 0) + n
-        if self._pending[key] >= FLUSH:
+        if self._pending[key] >= FLUSH and self._disk:
             self._flush(key)
 
     def _flush(self, key: int) -> None:
+        if self._file is None:
+            try:
+                self._file = tempfile.TemporaryFile(prefix="cananalyze-gaps.")
+            except OSError:  # no writable temporary directory: the old way, in memory
+                self._disk = False
+                return
         parts = self._buffer.pop(key)
         del self._pending[key]
         cols = [np.concatenate([p[c] for p in parts]) for c in range(self.columns)]
-        if self._file is None:
-            self._file = tempfile.TemporaryFile(prefix="cananalyze-gaps.")
         self._file.seek(0, 2)
         self._records[key].append((self._file.tell(), cols[0].size))
         for col in cols:
