@@ -1352,8 +1352,8 @@ static PyObject *frame_json(PyObject *self, PyObject *args) {
     }
     for (Py_ssize_t i = 0; i < n; i++) {
         if (channel[i] >= n_ch || service[i] >= n_svc || shown[i] < 0 || shown[i] > width) {
-            PyErr_Format(PyExc_ValueError, "frame_json: row %zd: channel, service or shown out of range",
-                         i);
+            PyErr_Format(PyExc_ValueError,
+                         "frame_json: row %zd: channel, service or shown out of range", i);
             goto done;
         }
     }
