@@ -27,6 +27,8 @@ from ...checks.columns import FindingColumns
 
 BLOCK = 8192  # rows pickled together (pickle's per-call cost, and its memo of repeated texts)
 CACHED = 4  # blocks held while the sorted chunks are read (a late finding's block)
+# (a block leaves as soon as the order has no row of it further on: by time, a log's
+# findings mostly come block after block)
 # the columns a block is stored by (messages built: their builders are closures)
 _FIELDS = tuple(
     n for n in FindingColumns.__slots__ if n not in ("obj", "_texts", "_block", "_local")
@@ -46,6 +48,7 @@ class FindingsSpool:
         self._pending_rows = 0
         self.named = False  # a row names its bus (several buses)
         self._order: np.ndarray | None = None
+        self._last = np.zeros(0, np.int64)  # each block's last place in the order
         self._cache: OrderedDict[int, FindingColumns] = OrderedDict()
 
     def __len__(self) -> int:
@@ -107,6 +110,10 @@ class FindingsSpool:
             for row, f in self._live:
                 t[row] = f.t
             self._order = np.argsort(t, kind="stable")
+            # each block's last place in that order: after it, the block leaves the cache
+            block = np.searchsorted(self._starts, self._order, "right") - 1
+            self._last = np.full(len(self._offsets), -1, np.int64)
+            np.maximum.at(self._last, block, np.arange(block.size))
         return self._order
 
     def chunk(self, start: int, size: int) -> FindingColumns:
@@ -118,6 +125,8 @@ class FindingsSpool:
             mine = np.flatnonzero(blocks == b)
             pieces.append(self._load(b).take(picked[mine] - self._starts[b]))
             places.append(mine)
+            if self._last[b] < start + size:  # no row of it further on (until a re-read)
+                self._cache.pop(b, None)
         if len(pieces) == 1:
             return pieces[0]
         out = FindingColumns.concat(pieces)
