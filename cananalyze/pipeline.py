@@ -463,13 +463,16 @@ def network_spec(opts: Options) -> NetworkSpec:
     return spec
 
 
-def build_decoder(opts: Options | None = None, checker: Checker | None = None) -> Decoder:
+def build_decoder(
+    opts: Options | None = None, checker: Checker | None = None, keep_findings: bool = True
+) -> Decoder:
     """The decoder the options describe. Processor order matters: SDO transactions first
     (the network model reads them), the PDO and EMCY decoders after the model, the
     checks last (they read everything the others found).
 
     `checker`: one built earlier (so a bad rules file fails before the log is opened);
-    otherwise built here when the options ask for checks or timing statistics.
+    otherwise built here when the options ask for checks or timing statistics (keeping
+    its findings unless `keep_findings=False`: see `build_checker`).
     """
     from .network.drive_tracker import DriveTracker
     from .network.emcy_notes import EmcyDecoder
@@ -501,7 +504,7 @@ def build_decoder(opts: Options | None = None, checker: Checker | None = None) -
     model.attach(decoder)
     decoder.network = model
     if checker is None and (opts.checking or opts.timing):
-        checker = build_checker(opts)
+        checker = build_checker(opts, keep_findings)
     if checker is not None:
         from .checks.model_config import ModelConfig
 

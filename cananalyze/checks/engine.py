@@ -54,9 +54,8 @@ class Checker:
         self.nmt = NmtStates()
         # every gap is kept only for the tables a rule reads after the fact (flat memory otherwise)
         self.timing = Timing(keep={n for r in rules for n in getattr(r, "needs_gaps", ())})
-        self.keep_findings = (
-            keep_findings  # False: findings only in the batches (self.findings unreadable)
-        )
+        # False: findings only in the batches (self.findings unreadable)
+        self.keep_findings = keep_findings
         self._found: list[FindingColumns] = []  # per batch (self.findings: all)
         self._gaps = GapState()
         self.t_last: float | None = None

@@ -12,6 +12,26 @@ import numpy as np
 import pyarrow as pa
 
 
+def kernel(name: str, args: list, options=None) -> pa.Array:
+    """Arrow's compute function `name`, called by its registry name as `pc.<name>` calls
+    it: importing pyarrow.compute builds a Python wrapper per kernel (~60 ms of CPU) that
+    nothing here needs."""
+    try:
+        from pyarrow._compute import call_function
+    except ImportError:  # pragma: no cover - private module gone: the public one
+        from pyarrow.compute import call_function
+    return call_function(name, args, options)
+
+
+def cast(arr: pa.Array, typ: pa.DataType) -> pa.Array:
+    """`pc.cast(arr, typ)` (safe) through `kernel`."""
+    try:
+        from pyarrow._compute import CastOptions
+    except ImportError:  # pragma: no cover - private module gone: the public one
+        from pyarrow.compute import CastOptions
+    return kernel("cast", [arr], CastOptions.safe(typ))
+
+
 def _validity(mask: np.ndarray | None) -> pa.Buffer | None:
     """Arrow validity bitmap (1 = valid) from a numpy mask of missing values."""
     if mask is None or not mask.any():

@@ -76,38 +76,27 @@ def number_text(values: np.ndarray) -> pa.Array:
     """JSON numbers (or true/false) as a string array; NaN and inf become null.
 
     Floats go through float64 first so the text is the value the other outputs
-    (Parquet, rerun) hold; integers keep their full 64-bit precision.
+    (Parquet, rerun) hold; integers keep their full 64-bit precision. Arrays made from
+    buffers and kernels called by name (`arrow_build`): pa.array and pa.scalar import
+    pandas (~150 ms CPU) in pyarrow 26, pyarrow.compute its wrappers (~60 ms).
     """
     import pyarrow as pa
 
-    call, cast_to = _kernels()
     values = np.asarray(values)
     if values.dtype == bool or np.issubdtype(values.dtype, np.integer):
-        return call("cast", [ab.numeric(values)], cast_to(pa.string()))
+        return ab.cast(ab.numeric(values), pa.string())
     v = values.astype(np.float64, copy=False)
-    text = call("cast", [ab.numeric(v)], cast_to(pa.string()))
+    text = ab.cast(ab.numeric(v), pa.string())
     finite = np.isfinite(v)
     if not finite.all():
-        text = call("if_else", [ab.numeric(finite), text, _scalar("null")])
+        text = ab.kernel("if_else", [ab.numeric(finite), text, _scalar("null")])
     return text
 
 
 def join(parts: list) -> Texts:
     """Concatenate row by row; parts are str (same in every row) or string arrays."""
-    call, _ = _kernels()
     args = [_scalar(p) if isinstance(p, str) else p for p in parts]
-    return Texts.from_arrow(call("binary_join_element_wise", [*args, _scalar("")]))
-
-
-def _kernels():
-    """(call_function, CastOptions.safe) from Arrow's kernel registry. Not through
-    pyarrow.compute (~60 ms of wrappers to import), and arrays made from buffers, not
-    pa.array/pa.scalar: those import pandas (~150 ms CPU) in pyarrow 26."""
-    try:
-        from pyarrow._compute import CastOptions, call_function
-    except ImportError:  # pragma: no cover - pyarrow's private layout changed
-        from pyarrow.compute import CastOptions, call_function
-    return call_function, CastOptions.safe
+    return Texts.from_arrow(ab.kernel("binary_join_element_wise", [*args, _scalar("")]))
 
 
 def _scalar(text: str):

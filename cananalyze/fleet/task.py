@@ -237,15 +237,14 @@ def _decode(task: LogTask, stage: layout.Stage, lineage: dict, findings: _Findin
     """`pipeline.run` into the export's TableSink in the stage, writing the dataset's schema;
     (the Run, the rules) or (None, []) with the row marked failed."""
     from ..outputs.tables.stream import TableSink
-    from ..pipeline import build_checker, build_decoder, open_source, run
+    from ..pipeline import build_decoder, open_source, run
     from ..runtime.gcpolicy import fewer_collections
 
     try:
         source = open_source(task.path, task.opts)
         row["format"] = getattr(getattr(source, "fmt", None), "name", None)
-        opts = task.opts
-        checker = build_checker(opts, keep_findings=False) if opts.checking or opts.timing else None
-        decoder = build_decoder(opts, checker)  # the sinks take the findings from the batches
+        # the sinks take the findings from the batches: the checker keeps none
+        decoder = build_decoder(task.opts, keep_findings=False)
         conform = schema.Conform(lineage)
         tables = TableSink(
             stage.dir / EXPORT, "parquet", task.compression, constants=lineage, conform=conform

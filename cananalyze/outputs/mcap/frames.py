@@ -107,7 +107,7 @@ def frame_payloads(fb: FrameBatch, service: np.ndarray, node: np.ndarray) -> Tex
             "dlc": [bytecols.decimal(fb.dlc[a:b])],
             "data": [
                 '"',
-                bytecols.hex_bytes(raw, np.where((flags & FLAG_RTR) != 0, 0, shown)),
+                bytecols.hex_bytes(raw, shown),
                 '"',
             ],
             "flags": [bytecols.decimal(flags)],
@@ -132,7 +132,6 @@ def _compiled(frame_json, fb: FrameBatch, service, node, labels, services) -> Te
     for a in range(0, len(fb), SLICE):
         b = min(a + SLICE, len(fb))
         raw, shown = _payload_bytes(fb, a, b)
-        shown = np.where((fb.flags[a:b] & FLAG_RTR) != 0, 0, shown)
         offsets = np.zeros(b - a + 1, np.int64)
         blob = frame_json(
             labels,
@@ -169,11 +168,13 @@ def _columns(pieces: list, n: int) -> list[np.ndarray]:
 
 
 def _payload_bytes(fb: FrameBatch, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
-    """Rows a..b's payload bytes as a matrix and how many of each to show: the 8-byte
-    column, widened to 64 when CAN FD frames carry more (`long_data`, rare)."""
+    """Rows a..b's payload bytes as a matrix and how many of each to show (none for a
+    remote request): the 8-byte column, widened to 64 when CAN FD frames carry more
+    (`long_data`, rare)."""
     data = fb.data[a:b]
-    shown = np.minimum(fb.dlc[a:b], data.shape[1]).astype(np.int64)
-    long_rows = [i for i in fb.long_data if a <= i < b]
+    rtr = (fb.flags[a:b] & FLAG_RTR) != 0
+    shown = np.where(rtr, 0, np.minimum(fb.dlc[a:b], data.shape[1])).astype(np.int64)
+    long_rows = [i for i in fb.long_data if a <= i < b and not rtr[i - a]]
     if not long_rows:
         return data, shown
     wide = np.zeros((b - a, 64), np.uint8)

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...checks.columns import FindingColumns
+from ...checks.columns import NONE, FindingColumns
 
 BLOCK = 8192  # rows pickled together (pickle's per-call cost, and its memo of repeated texts)
 CACHED = 4  # blocks held while the sorted chunks are read (a late finding's block)
@@ -36,7 +36,7 @@ _FIELDS = tuple(
 
 
 class FindingsSpool:
-    """Findings in emission order on disk; `chunk(i)` gives rows i*size... of the time order."""
+    """Findings in emission order on disk; `chunk(start, size)` gives rows of the time order."""
 
     def __init__(self, where: Path | str) -> None:
         self._file = tempfile.TemporaryFile(dir=where, prefix=".findings-spool.")
@@ -91,7 +91,7 @@ class FindingsSpool:
             setattr(block, n, v)
         size = len(block)
         block.obj = np.empty(size, object)
-        block._block = np.full(size, -1, np.int64)
+        block._block = np.full(size, NONE, np.int64)  # every message built
         block._local = np.zeros(size, np.int64)
         start, end = self._starts[b], self._starts[b + 1]
         for row, f in self._live:

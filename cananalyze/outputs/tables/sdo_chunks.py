@@ -138,12 +138,7 @@ def take_strings(arr: pa.Array, order: np.ndarray) -> pa.Array:
 
     The kernel by name, as pc.take calls it: importing pyarrow.compute builds a Python
     wrapper per kernel (~60 ms of CPU), which an export needs nowhere else."""
-    try:
-        from pyarrow._compute import call_function
-    except ImportError:  # pragma: no cover - private module gone: the public one
-        from pyarrow.compute import call_function
-
-    return call_function("take", [arr, ab.numeric(np.asarray(order, np.int64))])
+    return ab.kernel("take", [arr, ab.numeric(np.asarray(order, np.int64))])
 
 
 def _concat(parts: list[pa.Array]) -> pa.Array:
