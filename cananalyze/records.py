@@ -135,6 +135,7 @@ class DecodedBatch:
     record_bus: np.ndarray | None = None
     _lazy: tuple | None = field(default=None, repr=False, compare=False)
     _sdo_cache: tuple | None = field(default=None, repr=False, compare=False)
+    _senders: tuple | None = field(default=None, repr=False, compare=False)
 
     def __len__(self) -> int:
         return len(self.frames)
@@ -310,6 +311,27 @@ class DecodedBatch:
         rest = np.ones(len(records), bool)
         rest[fast.slots] = False
         return fields(), fast, np.flatnonzero(rest).tolist()
+
+    def sender_counts(self) -> np.ndarray | None:
+        """Frames per service and node as `counts[service, node + 1]` (column 0: the rows
+        of no node), or None when a node falls outside -1..127.
+
+        One bincount of the batch, kept for its service and node arrays: the node tally
+        and the boot-up rule both ask (after the processors, which may reclassify rows).
+        """
+        got = self._senders
+        if got is not None and got[0] is self.service and got[1] is self.node:
+            return got[2]
+        svc, node = self.service, self.node
+        counts = None
+        if not node.size or (int(node.min()) >= -1 and int(node.max()) <= 127):
+            key = svc.astype(np.intp) * 129
+            key += node
+            key += 1
+            counts = np.bincount(key, minlength=256 * 129)
+            counts = counts.reshape(256, 129) if counts.size == 256 * 129 else None
+        self._senders = (svc, node, counts)
+        return counts
 
     def sdo_table(self) -> SdoTable:
         """The batch's `sdo` records as columns: the fast path's from `sdo_fast`, the rest read.

@@ -18,9 +18,12 @@ from cananalyze.checks.nmt_state import NmtStates
 from cananalyze.checks.rules.bootup import _SENT, _senders
 from cananalyze.checks.rules.drive_fault import DriveFaultRule
 from cananalyze.columns.order import stable_order
-from cananalyze.frames import FLAG_BRS, FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX
+from cananalyze.frames import FLAG_BRS, FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, FrameBatch
 from cananalyze.io.source import read_all
+from cananalyze.network.node_tally import NodeTally
 from cananalyze.outputs.busload import bits_per_channel, frame_bits
+from cananalyze.protocol.services import SERVICE_NAMES, Service
+from cananalyze.records import DecodedBatch
 from cananalyze.runtime import speedups
 
 
@@ -79,13 +82,43 @@ def test_bits_per_channel_sums_frame_bits(channels):
 def test_senders_are_the_nodes_with_a_row_they_sent():
     rng = np.random.default_rng(5)
     for n in (0, 1, 1000):
-        service = rng.integers(0, 20, n).astype(np.uint8)
+        service = rng.integers(0, len(SERVICE_NAMES), n).astype(np.uint8)
         node = rng.integers(-1, 128, n).astype(np.int16)
         want = np.zeros(128, bool)
         want[node[_SENT[service] & (node >= 0)]] = True
         got = np.zeros(128, bool)
-        got[_senders(service, node)] = True
+        batch = _batch(service, node)
+        got[_senders(batch)] = True
         np.testing.assert_array_equal(got, want)
+        # the same counts the node tally adds (one bincount, kept for both)
+        assert batch.sender_counts() is batch.sender_counts()
+        tally = NodeTally()
+        tally.add(batch, [])
+        per = np.zeros((128, len(SERVICE_NAMES)), np.int64)
+        has = node >= 0
+        np.add.at(per, (node[has], service[has]), 1)
+        np.testing.assert_array_equal(tally.counts, per)
+
+
+def test_sender_counts_refuse_a_node_out_of_range():
+    service = np.full(2, Service.HEARTBEAT, np.uint8)
+    batch = _batch(service, np.array([3, 200], np.int16))
+    assert batch.sender_counts() is None
+    assert sorted(_senders(batch).tolist()) == [3, 200]  # read from the rows instead
+
+
+def _batch(service: np.ndarray, node: np.ndarray) -> DecodedBatch:
+    n = service.size
+    fb = FrameBatch(
+        t=np.arange(n, dtype=np.float64),
+        can_id=np.zeros(n, np.uint32),
+        flags=np.zeros(n, np.uint8),
+        dlc=np.zeros(n, np.uint8),
+        data=np.zeros((n, 8), np.uint8),
+        channel=np.zeros(n, np.uint16),
+        line=np.arange(1, n + 1, dtype=np.int64),
+    )
+    return DecodedBatch(fb, service, node, np.zeros(n, np.uint8))
 
 
 def test_steady_state_agrees_with_state_at():

@@ -57,7 +57,11 @@ class NodeTally:
         if self.buses is not None:
             self._add_buses(batch, list(states), offset)
             return
-        self.add_frames(batch.service, batch.node)
+        counts = batch.sender_counts()  # shared with the boot-up rule
+        if counts is None:
+            self.add_frames(batch.service, batch.node)
+        else:
+            self.counts += counts[: len(SERVICE_NAMES), 1:].T
         self.add_states(states)
         self.add_identity(identity_records(batch))
 
@@ -104,9 +108,17 @@ class NodeTally:
             tallies[k].add_identity(rs)
 
     def add_frames(self, service: np.ndarray, node: np.ndarray) -> None:
-        has = node >= 0
-        key = node[has].astype(np.int64) * len(SERVICE_NAMES) + service[has]
-        self.counts += np.bincount(key, minlength=self.counts.size).reshape(self.counts.shape)
+        """Count frames per (node, service); rows of no node (-1) counted apart and
+        dropped, not cut out first (a pass over the batch saved)."""
+        k = len(SERVICE_NAMES)
+        if node.size and int(node.min()) < -1:  # neither a node-ID nor none: not counted
+            keep = node >= -1
+            service, node = service[keep], node[keep]
+        key = node.astype(np.intp) + 1
+        key *= k
+        key += service
+        per = np.bincount(key, minlength=(self.counts.shape[0] + 1) * k)
+        self.counts += per[k : (self.counts.shape[0] + 1) * k].reshape(self.counts.shape)
 
     def add_states(self, states: Iterable) -> None:
         """The latest state by time wins; of equal times, the later one."""

@@ -23,16 +23,13 @@ _SENT = np.zeros(256, bool)  # service -> sent by the node itself: a lookup, not
 _SENT[_SENT_BY_NODE] = True
 
 
-def _senders(service: np.ndarray, node: np.ndarray) -> np.ndarray:
-    """Nodes (0..127) with a row of a service the node sends itself: one count per (service,
-    node), not a gather of the rows (a third of the cost)."""
-    key = service.astype(np.intp) * 129
-    key += node
-    key += 1  # node -1 (none): column 0, dropped
-    per = np.bincount(key, minlength=256 * 129)
-    if per.size != 256 * 129 or (node.size and node.min() < -1):  # a node past 127
-        return node[_SENT[service] & (node >= 0)]
-    return np.flatnonzero(per.reshape(256, 129)[_SENT, 1:].any(axis=0))
+def _senders(batch) -> np.ndarray:
+    """Nodes (0..127) with a row of a service the node sends itself: read from the batch's
+    counts per (service, node) (`DecodedBatch.sender_counts`), not a gather of the rows."""
+    per = batch.sender_counts()
+    if per is None:  # a node past 127
+        return batch.node[_SENT[batch.service] & (batch.node >= 0)]
+    return np.flatnonzero(per[_SENT, 1:].any(axis=0))
 
 
 class BootupRule(Rule):
@@ -54,7 +51,7 @@ class BootupRule(Rule):
         boots = ctx.rows(Service.BOOTUP)
         nmt = ctx.rows(Service.NMT)
         if boots.size == 0 and nmt.size == 0:
-            self.alive[_senders(b.service, b.node)] = True
+            self.alive[_senders(b)] = True
             return
         fb = b.frames
         events = sorted(
