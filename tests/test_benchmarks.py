@@ -132,6 +132,7 @@ def test_bench_decode_prints_every_figure(logs):
     assert names == [
         "-- CPU seconds (user + system), both sides in the same rounds",
         "python-can LogReader / export --parquet .log, cpu",
+        "per round, export --parquet .log",
         "canopen-lens / export --parquet .log, cpu",
         "python-can LogReader / decode --summary .log, cpu",
         "python-can LogReader / read only .log, cpu",
@@ -157,6 +158,12 @@ def test_bench_decode_prints_every_figure(logs):
     cpu = rf"{NUMBER}x  \({NUMBER} s / {NUMBER} s\)"
     ratio = next(line for line in table if "export --parquet .log, cpu" in line)
     assert re.search(rf"  {cpu} +>= 9x +(ok|BELOW)$", ratio), ratio
+    # one round: its own ratio is the best-of ratio (the same two runs)
+    per = next(line for line in table if line.strip().startswith("per round"))
+    x = r"(\d+\.\d)x"
+    got = re.search(rf"{x} median \({x}-{x}, 1 rounds\)", per)
+    assert got, per
+    assert got[1] == got[2] == got[3] == re.search(x, ratio)[1], (per, ratio)
     lens_row = next(line for line in table if line.startswith("canopen-lens / export"))
     if lens:  # canopen-lens parsed and analysed the same log (a run that read nothing fails)
         assert re.search(rf"  {cpu} +> 1x +(ok|BELOW)$", lens_row), lens_row
