@@ -108,3 +108,39 @@ def test_keyed_spool_without_a_temporary_directory_keeps_the_values(monkeypatch)
     np.testing.assert_array_equal(
         s.get(3)[0], np.concatenate([np.arange(k, k + 3) for k in range(5)])
     )
+
+
+def test_keyed_spool_keeps_the_values_when_the_disk_fills_up(monkeypatch):
+    """A temporary directory that fills up mid-log (a small /tmp): what was written is
+    read back, what could not be stays in memory, and nothing is lost or doubled."""
+    monkeypatch.setattr(spool, "FLUSH", 4)
+    real = spool.tempfile.TemporaryFile
+
+    class Full:
+        """The real unbuffered file, whose writes fail past `room` bytes, partway through
+        a write (the first bytes go in, then ENOSPC) and with short writes before that."""
+
+        def __init__(self, *args, **kwargs):
+            self.f, self.room = real(*args, **kwargs), 200
+
+        def write(self, data):
+            data = memoryview(data)[:24]  # at most 24 bytes a call: short writes
+            if self.f.tell() + len(data) > self.room:
+                self.f.write(data[:8])
+                raise OSError(28, "No space left on device")
+            return self.f.write(data)
+
+        def __getattr__(self, name):
+            return getattr(self.f, name)
+
+    monkeypatch.setattr(spool.tempfile, "TemporaryFile", Full)
+    s, want = KeyedSpool(2), {0: [], 1: []}
+    for k in range(40):
+        key, a = k % 2, np.arange(k, k + 3, dtype=float)
+        s.add(key, a, -a)
+        want[key].append(a)
+    assert s._records[0] and not s._disk  # some rows went to the file before it filled
+    for key, parts in want.items():
+        got = s.get(key)
+        np.testing.assert_array_equal(got[0], np.concatenate(parts))
+        np.testing.assert_array_equal(got[1], -np.concatenate(parts))

@@ -54,27 +54,52 @@ class KeyedSpool:
 
     def _flush(self, key: int) -> None:
         if self._file is None:
-            try:
-                self._file = tempfile.TemporaryFile(prefix="cananalyze-gaps.")
+            try:  # unbuffered: a write that fails fails here, not at a later seek or read
+                self._file = tempfile.TemporaryFile(prefix="cananalyze-gaps.", buffering=0)
             except OSError:  # no writable temporary directory: the old way, in memory
                 self._disk = False
                 return
         parts = self._buffer.pop(key)
         del self._pending[key]
         cols = [np.concatenate([p[c] for p in parts]) for c in range(self.columns)]
-        self._file.seek(0, 2)
-        self._records[key].append((self._file.tell(), cols[0].size))
-        for col in cols:
-            self._file.write(col.tobytes())
+        try:
+            at = self._file.seek(0, 2)
+            for col in cols:
+                _write_all(self._file, col.tobytes())
+        except OSError:  # the temporary directory filled up: the rest stays in memory
+            self._disk = False
+            self._buffer[key] = [tuple(cols)]
+            self._pending[key] = cols[0].size
+            return
+        self._records[key].append((at, cols[0].size))
 
     def get(self, key: int) -> tuple[np.ndarray, ...]:
         """Every value of `key`, per column (empty arrays for a key never added)."""
         parts: list[tuple[np.ndarray, ...]] = []
         for offset, rows in self._records.get(key, ()):
             self._file.seek(offset)
-            raw = np.frombuffer(self._file.read(8 * rows * self.columns), np.float64)
+            raw = np.frombuffer(_read_all(self._file, 8 * rows * self.columns), np.float64)
             parts.append(tuple(raw[c * rows : (c + 1) * rows] for c in range(self.columns)))
         parts.extend(self._buffer.get(key, ()))
         if not parts:
             return tuple(np.zeros(0) for _ in range(self.columns))
         return tuple(np.concatenate([p[c] for p in parts]) for c in range(self.columns))
+
+
+def _write_all(f, data: bytes) -> None:
+    """An unbuffered file's write may take part of the bytes: write until all are."""
+    view = memoryview(data)
+    while view:
+        view = view[f.write(view) :]
+
+
+def _read_all(f, n: int) -> bytes:
+    """n bytes (an unbuffered read may return fewer); short only at the end of the file."""
+    parts, got = [], 0
+    while got < n:
+        part = f.read(n - got)
+        if not part:
+            break
+        parts.append(part)
+        got += len(part)
+    return b"".join(parts)
