@@ -112,6 +112,17 @@ class SdoTable:
         return out
 
 
+def sender_counts(service: np.ndarray, node: np.ndarray) -> np.ndarray | None:
+    """Frames per service and node as `counts[service, node + 1]` (column 0: the rows of
+    no node), in one bincount; None when a node falls outside -1..127."""
+    if node.size and not (int(node.min()) >= -1 and int(node.max()) <= 127):
+        return None
+    key = service.astype(np.intp) * 129
+    key += node
+    key += 1
+    return np.bincount(key, minlength=256 * 129)[: 256 * 129].reshape(256, 129)
+
+
 @dataclass
 class DecodedBatch:
     frames: FrameBatch
@@ -313,24 +324,14 @@ class DecodedBatch:
         return fields(), fast, np.flatnonzero(rest).tolist()
 
     def sender_counts(self) -> np.ndarray | None:
-        """Frames per service and node as `counts[service, node + 1]` (column 0: the rows
-        of no node), or None when a node falls outside -1..127.
-
-        One bincount of the batch, kept for its service and node arrays: the node tally
-        and the boot-up rule both ask (after the processors, which may reclassify rows).
-        """
+        """`sender_counts` of the batch's rows, kept for its service and node arrays: the
+        node tally and the boot-up rule both ask (after the processors, which may
+        reclassify rows)."""
         got = self._senders
         if got is not None and got[0] is self.service and got[1] is self.node:
             return got[2]
-        svc, node = self.service, self.node
-        counts = None
-        if not node.size or (int(node.min()) >= -1 and int(node.max()) <= 127):
-            key = svc.astype(np.intp) * 129
-            key += node
-            key += 1
-            counts = np.bincount(key, minlength=256 * 129)
-            counts = counts.reshape(256, 129) if counts.size == 256 * 129 else None
-        self._senders = (svc, node, counts)
+        counts = sender_counts(self.service, self.node)
+        self._senders = (self.service, self.node, counts)
         return counts
 
     def sdo_table(self) -> SdoTable:

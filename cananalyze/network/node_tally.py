@@ -16,7 +16,7 @@ import numpy as np
 
 from ..frames import MAX_BUSES, MAX_CHANNELS, OTHER_CHANNELS
 from ..protocol.services import SERVICE_NAMES
-from ..records import DecodedBatch
+from ..records import DecodedBatch, sender_counts
 
 IDENTITY = {
     (0x1000, 0): "device_type",
@@ -57,11 +57,8 @@ class NodeTally:
         if self.buses is not None:
             self._add_buses(batch, list(states), offset)
             return
-        counts = batch.sender_counts()  # shared with the boot-up rule
-        if counts is None:
-            self.add_frames(batch.service, batch.node)
-        else:
-            self.counts += counts[: len(SERVICE_NAMES), 1:].T
+        # the batch's count, shared with the boot-up rule
+        self._add_counts(batch.sender_counts(), batch.service, batch.node)
         self.add_states(states)
         self.add_identity(identity_records(batch))
 
@@ -108,17 +105,14 @@ class NodeTally:
             tallies[k].add_identity(rs)
 
     def add_frames(self, service: np.ndarray, node: np.ndarray) -> None:
-        """Count frames per (node, service); rows of no node (-1) counted apart and
-        dropped, not cut out first (a pass over the batch saved)."""
-        k = len(SERVICE_NAMES)
-        if node.size and int(node.min()) < -1:  # neither a node-ID nor none: not counted
-            keep = node >= -1
-            service, node = service[keep], node[keep]
-        key = node.astype(np.intp) + 1
-        key *= k
-        key += service
-        per = np.bincount(key, minlength=(self.counts.shape[0] + 1) * k)
-        self.counts += per[k : (self.counts.shape[0] + 1) * k].reshape(self.counts.shape)
+        """Count frames per (node, service) (`records.sender_counts`)."""
+        self._add_counts(sender_counts(service, node), service, node)
+
+    def _add_counts(self, counts: np.ndarray | None, service: np.ndarray, node: np.ndarray) -> None:
+        if counts is None:  # a node outside -1..127 (not a node-ID): its rows not counted
+            keep = (node >= -1) & (node <= 127)
+            counts = sender_counts(service[keep], node[keep])
+        self.counts += counts[: len(SERVICE_NAMES), 1:].T
 
     def add_states(self, states: Iterable) -> None:
         """The latest state by time wins; of equal times, the later one."""

@@ -6,6 +6,7 @@ import numpy as np
 
 from ...protocol.nmt import ALL_NODES, RESET_COMMUNICATION, RESET_NODE
 from ...protocol.services import Service
+from ...records import DecodedBatch
 from ..rule import Context, Rule
 
 _SENT_BY_NODE = np.array(
@@ -23,7 +24,7 @@ _SENT = np.zeros(256, bool)  # service -> sent by the node itself: a lookup, not
 _SENT[_SENT_BY_NODE] = True
 
 
-def _senders(batch) -> np.ndarray:
+def _senders(batch: DecodedBatch) -> np.ndarray:
     """Nodes (0..127) with a row of a service the node sends itself: read from the batch's
     counts per (service, node) (`DecodedBatch.sender_counts`), not a gather of the rows."""
     per = batch.sender_counts()
