@@ -323,6 +323,27 @@ class DecodedBatch:
         rest[fast.slots] = False
         return fields(), fast, np.flatnonzero(rest).tolist()
 
+    @property
+    def several(self) -> bool:
+        """The batch came from a log of several buses (seen so far): its rows and records
+        say which (`bus`, `channel_bus`, `record_bus`)."""
+        return self.bus is not None or self.channel_bus is not None or self.record_bus is not None
+
+    def row_buses(self, rows: np.ndarray) -> np.ndarray:
+        """The bus of each of these frame rows, an object array: None on a log of one bus
+        so far, or for a row past the batch's frames."""
+        if self.channel_bus is None:
+            return _bus_at(None, self.bus, rows)
+        out = np.empty(len(rows), object)
+        inside = (rows >= 0) & (rows < len(self.frames))
+        out[inside] = self.channel_bus[self.frames.channel[rows[inside]]]
+        return out
+
+    def record_buses(self, slots: np.ndarray) -> np.ndarray:
+        """The bus of each of these record slots, an object array: None on a log of one
+        bus so far, or for a record added after the buses' batches were merged."""
+        return _bus_at(self.record_bus, self.bus, slots)
+
     def sender_counts(self) -> np.ndarray | None:
         """`sender_counts` of the batch's rows, kept for its service and node arrays: the
         node tally and the boot-up rule both ask (after the processors, which may
@@ -429,4 +450,16 @@ def _labels(values: dict, choices: dict[str, dict[int, str]]) -> dict[str, str]:
             v = int(v)
         if isinstance(v, int) and v in table:
             out[name] = table[v]
+    return out
+
+
+def _bus_at(per: np.ndarray | None, bus: str | None, at: np.ndarray) -> np.ndarray:
+    """per[at] as an object array, None where `at` is outside it; `bus` everywhere when
+    the batch has one bus (`per` None)."""
+    out = np.empty(len(at), object)
+    if per is None:
+        out[:] = bus
+        return out
+    inside = (at >= 0) & (at < len(per))
+    out[inside] = per[at[inside]]
     return out

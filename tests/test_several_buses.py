@@ -676,3 +676,98 @@ def test_events_resorted_at_the_end_keep_their_bus(tmp_path, monkeypatch):
         ("can1", "NMT start node 5"),
     ]
     assert all(e["bus"] == channel[e["row"]] for e in events if e["row"] < len(channel))
+
+
+# --- the summary's frames and SDO transfers per bus and node ----------------------------
+
+
+def _summary_log_lines() -> list[tuple[float, str, str]]:
+    """Node 5 on can0 answers three uploads in 2 ms; node 5 on can1 answers two in 50 ms
+    and aborts one; node 7 beats on can1 only. can1 starts 2 s into the log."""
+    lines = _beats("can0", "05", 1000.0, 40) + _beats("can1", "05", 1002.05, 20)
+    lines += [(1002.5 + k * 0.1, "can1", "707#7F") for k in range(3)]
+    for k in range(3):
+        t = 1000.2 + k
+        lines.append(_sdo(t, "can0", 0x605, bytes([0x40, 0x18, 0x10, 1, 0, 0, 0, 0])))
+        lines.append(_sdo(t + 0.002, "can0", 0x585, bytes([0x43, 0x18, 0x10, 1, 1, 0, 0, 0])))
+    for k in range(2):
+        t = 1002.3 + k * 0.5
+        lines.append(_sdo(t, "can1", 0x605, bytes([0x40, 0x00, 0x10, 0, 0, 0, 0, 0])))
+        lines.append(_sdo(t + 0.05, "can1", 0x585, bytes([0x43, 0x00, 0x10, 0, 0x92, 1, 2, 0])))
+    lines.append(_sdo(1003.6, "can1", 0x605, bytes([0x40, 0x00, 0x20, 0, 0, 0, 0, 0])))
+    abort = bytes([0x80, 0x00, 0x20, 0, 0x00, 0x00, 0x02, 0x06])  # 0x06020000: no object
+    lines.append(_sdo(1003.601, "can1", 0x585, abort))
+    return sorted(lines)
+
+
+def _frames_per_bus_node(lines) -> dict:
+    """Frames per bus and node counted from the log's lines themselves (COB-ID & 0x7F)."""
+    out: dict = {}
+    for _, ch, frame in lines:
+        node = int(frame.split("#")[0], 16) & 0x7F
+        out.setdefault(ch, {}).setdefault(node, 0)
+        out[ch][node] += 1
+    return out
+
+
+def test_summary_frames_and_sdo_per_bus(tmp_path, capsys):
+    """`decode --summary` counts node 5 on can0 and node 5 on can1 apart: frames per node
+    and SDO transactions (results, latency) per bus and node, in the text and the JSON
+    (`frames_per_node_by_bus`, `sdo_by_bus`); `frames_per_node` and `sdo` stay the
+    whole log's. Merged, node 5 had 5 transfers with a 26 ms median."""
+    from cananalyze.cli.main import main
+
+    lines = _summary_log_lines()
+    log = _log(tmp_path, lines)
+    main(["decode", str(log), "--summary"])
+    text = capsys.readouterr().out
+    per_node = text.split("frames per node:\n", 1)[1].split("SDO transactions per node:")[0]
+    want = _frames_per_bus_node(lines)
+    got = {}
+    for line in per_node.strip().splitlines():
+        bus, _, node, total = line.split()[:4]
+        got.setdefault(bus, {})[int(node.rstrip(":"))] = int(total)
+    assert got == want == {"can0": {5: 46}, "can1": {5: 26, 7: 3}}
+    sdo = text.split("SDO transactions per node:\n", 1)[1].split("devices:")[0].splitlines()
+    assert sdo == [
+        "  can0 node 5: 3 (ok 3); latency ms min 2.00 median 2.00 max 2.00",
+        "  can1 node 5: 3 (abort 1, ok 2); latency ms min 1.00 median 50.00 max 50.00",
+    ]
+    main(["decode", str(log), "--summary", "--format", "jsonl"])
+    rec = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    by_bus = rec["frames_per_node_by_bus"]
+    assert {b: {int(n): sum(c.values()) for n, c in v.items()} for b, v in by_bus.items()} == want
+    assert rec["frames_per_node"]["5"]["heartbeat"] == 60  # the whole log's
+    assert rec["sdo_by_bus"]["can0"]["5"] == {
+        "results": {"ok": 3},
+        "latency_ms": {"min": 2.0, "median": 2.0, "max": 2.0},
+    }
+    assert rec["sdo_by_bus"]["can1"]["5"]["results"] == {"abort": 1, "ok": 2}
+    assert rec["sdo"]["5"]["results"] == {"abort": 1, "ok": 5}
+
+
+def test_summary_per_bus_when_can1_comes_in_a_later_batch(tmp_path):
+    """can1 first seen in the second batch: what the first batch counted is can0's, and
+    the summary per bus is the same as from one batch of the whole log."""
+    from cananalyze.outputs.summary import Summary
+
+    lines = _summary_log_lines()
+    frames = [
+        (t, int(f.split("#")[0], 16), bytes.fromhex(f.split("#")[1]), 0, ["can0", "can1"].index(c))
+        for t, c, f in lines
+    ]
+    cut = next(k for k, f in enumerate(frames) if f[4] == 1)
+    assert cut > 10
+
+    def summary(parts) -> Summary:
+        dec = build_decoder(Options())
+        s = Summary()
+        for part in parts:
+            s.add(dec.decode(from_rows(part, channels=("can0", "can1"))))
+        s.add(dec.finish())
+        return s
+
+    whole, split = summary([frames]), summary([frames[:cut], frames[cut:]])
+    assert split.lines() == whole.lines()
+    assert split.record()["sdo_by_bus"] == whole.record()["sdo_by_bus"]
+    assert {b: c.sum() for b, c in split.node_service_by_bus.items()} == {"can0": 46, "can1": 29}

@@ -282,15 +282,15 @@ def batch_event_columns(
     else:  # the fast path's records as columns; the others read without building those
         get = list.__getitem__
         pairs = ((k, get(records, k)) for k in split[2])
-    several = batch.bus is not None or batch.channel_bus is not None or batch.record_bus is not None
+    several = batch.several
     events, at = _record_event_columns(pairs, fb, offset, last_t)
     if several:
-        events.bus = _record_bus(batch, np.asarray(at, np.int64))
+        events.bus = batch.record_buses(np.asarray(at, np.int64))
     if split is not None:
         fields, fast, _ = split
         fast_events = sdo_event_columns(fields, fast.row.astype(np.int64) + offset)
         if several:
-            fast_events.bus = _record_bus(batch, fast.slots)
+            fast_events.bus = batch.record_buses(fast.slots)
         if at:
             order = np.argsort(
                 np.concatenate((np.asarray(at, np.int64), fast.slots)), kind="stable"
@@ -324,43 +324,16 @@ def batch_event_columns(
             )
         if several:
             for part in parts[1:]:
-                part.bus = _row_bus(batch, part.row - offset)
+                part.bus = batch.row_buses(part.row - offset)
         events = EventColumns.concat(parts)
     if batch.drive:
         drive = drive_event_columns(batch.drive, offset)
         if several:
-            drive.bus = _row_bus(batch, drive.row - offset)
+            drive.bus = batch.row_buses(drive.row - offset)
         events = EventColumns.concat([events, drive])
     if len(events):
         state.last_t = float(events.t[-1])
     return events, states
-
-
-def _row_bus(batch: DecodedBatch, rows: np.ndarray) -> np.ndarray:
-    """The bus of each of the batch's frame rows (None for a row past its frames)."""
-    if batch.channel_bus is None:
-        return _bus_at(None, batch.bus, rows)
-    out = np.empty(len(rows), object)
-    inside = (rows >= 0) & (rows < len(batch.frames))
-    out[inside] = batch.channel_bus[batch.frames.channel[rows[inside]]]
-    return out
-
-
-def _record_bus(batch: DecodedBatch, slots: np.ndarray) -> np.ndarray:
-    """The bus of each of the batch's record slots (None for one added after the merge)."""
-    return _bus_at(batch.record_bus, batch.bus, slots)
-
-
-def _bus_at(per: np.ndarray | None, bus, at: np.ndarray) -> np.ndarray:
-    """per[at] as an object array, None where `at` is outside it; `bus` everywhere when
-    the batch has one bus (`per` None)."""
-    out = np.empty(len(at), object)
-    if per is None:
-        out[:] = bus
-        return out
-    inside = (at >= 0) & (at < len(per))
-    out[inside] = per[at[inside]]
-    return out
 
 
 _DRIVE_LEVEL = {cia402.FAULT: ERROR, cia402.FAULT_REACTION: ERROR, cia402.QUICK_STOP: WARNING}

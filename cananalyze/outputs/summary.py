@@ -5,6 +5,7 @@ Bus load is a lower bound (nominal bits, no stuff bits): see cananalyze.busload.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 from typing import TextIO
 
@@ -59,9 +60,21 @@ class Summary:
     nmt_good: int = 0  # well-formed NMT commands
     by_channel: dict = field(default_factory=dict)  # channel name -> [frames, bits]
     nodes_by_channel: dict = field(default_factory=dict)  # channel name -> nodes seen on it
+    # a log of several buses: node 5 on can0 and node 5 on can1 are two devices, so the
+    # frames and SDO transactions per node are kept per bus too (the decoder's bus names;
+    # what was counted before a second bus was seen is the first bus's). Empty on one
+    # bus, where they would only repeat by_node_service and sdo_results.
+    first_bus: str | None = None  # the first frame's
+    node_service_by_bus: dict = field(default_factory=dict)  # bus -> (128, N_SVC) counts
+    sdo_results_by_bus: dict = field(default_factory=dict)  # (bus, node) -> {result: count}
+    sdo_latency_by_bus: dict = field(default_factory=dict)  # (bus, node) -> StreamStats
 
     def add(self, batch: DecodedBatch) -> None:
         n = len(batch)
+        if self.first_bus is None and n:
+            self.first_bus = batch.frames.channel_label(int(batch.frames.channel[0]))
+        if batch.several and not self.node_service_by_bus:
+            self._several()
         if batch.records:
             self._sdo(batch)
         if n == 0:
@@ -80,6 +93,8 @@ class Summary:
             key = batch.node[has].astype(np.int64) * N_SVC + batch.service[has]
             per = np.r_[np.zeros(N_SVC, np.int64), np.bincount(key, minlength=128 * N_SVC)]
         self.by_node_service += per[N_SVC:].reshape(128, N_SVC)
+        if batch.several:
+            self._by_bus(batch, per[N_SVC:].reshape(128, N_SVC))
         per_frames, per_bits = bits_per_channel(fb.flags, fb.dlc, fb.channel)
         self.bits += int(per_bits.sum())
         present = np.flatnonzero(per_frames).tolist()
@@ -97,6 +112,35 @@ class Summary:
                 ids = np.unique(ids)
             self.ids_seen.update(ids.tolist())
 
+    def _several(self) -> None:
+        """A second bus, before its batch is counted: what was counted so far is the
+        first bus's."""
+        first = self.first_bus
+        self.node_service_by_bus[first] = self.by_node_service.copy()
+        self.sdo_results_by_bus.update({(first, nd): dict(r) for nd, r in self.sdo_results.items()})
+        self.sdo_latency_by_bus.update(
+            {(first, nd): copy.deepcopy(st) for nd, st in self.sdo_latency.items()}
+        )
+
+    def _by_bus(self, batch: DecodedBatch, per: np.ndarray) -> None:
+        """Frames per node and service of each bus of a batch of a log of several."""
+        if batch.channel_bus is None:  # one bus's decoder made the whole batch
+            self._add_bus(batch.bus or self.first_bus, per)
+            return
+        fb = batch.frames
+        for c in np.flatnonzero(np.bincount(fb.channel, minlength=1)).tolist():
+            at = (fb.channel == c) & (batch.node >= 0) & (batch.node < 128)
+            key = batch.node[at].astype(np.intp) * N_SVC + batch.service[at]
+            counts = np.bincount(key, minlength=128 * N_SVC).reshape(128, N_SVC)
+            self._add_bus(batch.channel_bus[c] or self.first_bus, counts)
+
+    def _add_bus(self, bus: str | None, counts: np.ndarray) -> None:
+        have = self.node_service_by_bus.get(bus)
+        if have is None:
+            self.node_service_by_bus[bus] = counts.copy()
+        else:
+            have += counts
+
     def _nodes_by_channel(self, batch: DecodedBatch, present: list[int], per: np.ndarray) -> None:
         """The nodes seen on each channel (each bus's devices): this batch's node counts
         when it holds one channel, else a count per channel."""
@@ -112,27 +156,26 @@ class Summary:
             self.nodes_by_channel.setdefault(fb.channel_label(c), set()).update(nodes.tolist())
 
     def _sdo(self, batch: DecodedBatch) -> None:
-        """Result counts and latencies per node, from the batch's SDO records as columns."""
+        """Result counts and latencies per node (and per bus and node on a log of several
+        buses), from the batch's SDO records as columns."""
         tab = batch.sdo_table()
         if tab.node.size == 0:
             return
-        nk, rk = tab.node_keys, tab.result_keys
-        for c, at in tab.groups(tab.node):  # dict order as a loop over the records gives
-            res = tab.result[at]
-            results = self.sdo_results.get(nk[c])
-            if results is None:
-                results = self.sdo_results[nk[c]] = {}
-            if len(rk) == 1:
-                results[rk[0]] = results.get(rk[0], 0) + res.size
-                continue
-            counts = np.bincount(res, minlength=len(rk)).tolist()
-            for r in tab.first_seen(res):
-                results[rk[r]] = results.get(rk[r], 0) + counts[r]
-        for c, at in tab.groups(tab.node, ~np.isnan(tab.latency)):
-            st = self.sdo_latency.get(nk[c])
-            if st is None:
-                st = self.sdo_latency[nk[c]] = StreamStats()
-            st.add(tab.latency[at])
+        nk = tab.node_keys
+        _sdo_into(tab, tab.node, lambda i: nk[tab.node[i]], self.sdo_results, self.sdo_latency)
+        if not batch.several:
+            return
+        buses = batch.record_buses(tab.slots)
+        buses[np.equal(buses, None)] = self.first_bus  # made before the second bus was seen
+        code = {b: i for i, b in enumerate(dict.fromkeys(buses.tolist()))}
+        keys = tab.node * len(code) + np.array([code[b] for b in buses.tolist()], np.int64)
+        _sdo_into(
+            tab,
+            keys,
+            lambda i: (buses[i], nk[tab.node[i]]),
+            self.sdo_results_by_bus,
+            self.sdo_latency_by_bus,
+        )
 
     def _evidence(self, batch: DecodedBatch) -> None:
         """Count frames whose shape says CANopen or says otherwise (CiA 301 sizes and values)."""
@@ -242,21 +285,22 @@ class Summary:
         load = None
         if bitrate and self.duration > 0:
             load = round(self.bits / (bitrate * self.duration) * 100, 3)
-        nodes = {}
-        for n in np.flatnonzero(self.by_node_service.sum(axis=1)).tolist():
-            counts = self.by_node_service[n]
-            nodes[str(n)] = {SERVICE_NAMES[s]: int(c) for s, c in enumerate(counts) if c}
-        sdo = {}
-        for node in sorted(self.sdo_results, key=lambda x: (x is None, x)):
-            entry: dict = {"results": dict(sorted(self.sdo_results[node].items()))}
-            lat = self.sdo_latency.get(node)
-            if lat is not None and lat.n:
-                entry["latency_ms"] = {
-                    "min": lat.min,
-                    "median": lat.quantile(0.5),
-                    "max": lat.max,
-                }
-            sdo[str(node)] = entry
+        nodes = _node_counts(self.by_node_service)
+        sdo = {
+            str(node): _sdo_entry(self.sdo_results[node], self.sdo_latency.get(node))
+            for node in sorted(self.sdo_results, key=lambda x: (x is None, x))
+        }
+        several = {}
+        if self.node_service_by_bus:  # a log of several buses: each bus's nodes too
+            several["frames_per_node_by_bus"] = {
+                bus: _node_counts(counts) for bus, counts in self.node_service_by_bus.items()
+            }
+            by_bus: dict = {}
+            for bus, node in self._sdo_bus_keys():
+                key = (bus, node)
+                entry = _sdo_entry(self.sdo_results_by_bus[key], self.sdo_latency_by_bus.get(key))
+                by_bus.setdefault(bus, {})[str(node)] = entry
+            several["sdo_by_bus"] = by_bus
         return {
             "kind": "summary",
             "frames": self.frames,
@@ -273,8 +317,17 @@ class Summary:
             },
             "frames_per_node": nodes,
             "sdo": sdo,
+            **several,
             "verdict": self.canopen_verdict(),
         }
+
+    def _sdo_bus_keys(self) -> list[tuple]:
+        """(bus, node) of the SDO transactions per bus: buses as first seen, nodes in order."""
+        rank = {bus: i for i, bus in enumerate(self.node_service_by_bus)}
+        return sorted(
+            self.sdo_results_by_bus,
+            key=lambda k: (rank.get(k[0], len(rank)), str(k[0]), k[1] is None, k[1] or 0),
+        )
 
     def lines(self, bitrate: int | None = None, problems: int = 0) -> list[str]:
         out = [f"frames: {self.frames}", f"duration: {self.duration:.6f} s"]
@@ -292,35 +345,29 @@ class Summary:
         for i, name in enumerate(SERVICE_NAMES):
             if self.by_service[i]:
                 out.append(f"  {name:<15} {int(self.by_service[i]):>10}")
-        nodes = np.flatnonzero(self.by_node_service.sum(axis=1))
-        if nodes.size:
-            out.append("frames per node:")
-            for n in nodes:
-                parts = [
-                    f"{SERVICE_NAMES[s]}={int(c)}"
-                    for s, c in enumerate(self.by_node_service[n])
-                    if c
-                ]
-                out.append(
-                    f"  node {int(n):>3}: {int(self.by_node_service[n].sum()):>8}  "
-                    + " ".join(parts)
-                )
-        if self.sdo_results:
+        if self.node_service_by_bus:  # node 5 on can0 and on can1: two devices
+            node_lines = [
+                _node_line(f"{bus} node", n, counts[n])
+                for bus, counts in self.node_service_by_bus.items()
+                for n in np.flatnonzero(counts.sum(axis=1)).tolist()
+            ]
+        else:
+            node_lines = [
+                _node_line("node", n, self.by_node_service[n])
+                for n in np.flatnonzero(self.by_node_service.sum(axis=1)).tolist()
+            ]
+        if node_lines:
+            out += ["frames per node:", *node_lines]
+        if self.sdo_results_by_bus:
+            out.append("SDO transactions per node:")
+            for key in self._sdo_bus_keys():
+                results, lat = self.sdo_results_by_bus[key], self.sdo_latency_by_bus.get(key)
+                out.append(_sdo_line(f"{key[0]} node {key[1]}", results, lat))
+        elif self.sdo_results:
             out.append("SDO transactions per node:")
             for node in sorted(self.sdo_results, key=lambda x: (x is None, x)):
-                results = self.sdo_results[node]
                 lat = self.sdo_latency.get(node)
-                text = (
-                    f"  node {node}: {sum(results.values())} ("
-                    + ", ".join(f"{k} {v}" for k, v in sorted(results.items()))
-                    + ")"
-                )
-                if lat is not None and lat.n:
-                    text += (
-                        f"; latency ms min {lat.min:.2f} median {lat.quantile(0.5):.2f} "
-                        f"max {lat.max:.2f}"
-                    )
-                out.append(text)
+                out.append(_sdo_line(f"node {node}", self.sdo_results[node], lat))
         verdict = self.canopen_verdict()
         if verdict:
             out.append(verdict)
@@ -450,3 +497,57 @@ def device_records(model, summary: Summary | None = None, bus: str | None = None
         if bus is not None:
             out[-1]["bus"] = bus
     return out
+
+
+def _sdo_into(tab, codes: np.ndarray, key_of, results_by: dict, latency_by: dict) -> None:
+    """Add an SdoTable's result counts and latencies into `results_by` and `latency_by`,
+    per distinct code, under `key_of(position of its first record)`; dict order as a
+    loop over the records gives."""
+    rk = tab.result_keys
+    for _, at in tab.groups(codes):
+        results = results_by.setdefault(key_of(at[0]), {})
+        res = tab.result[at]
+        if len(rk) == 1:
+            results[rk[0]] = results.get(rk[0], 0) + res.size
+            continue
+        counts = np.bincount(res, minlength=len(rk)).tolist()
+        for r in tab.first_seen(res):
+            results[rk[r]] = results.get(rk[r], 0) + counts[r]
+    for _, at in tab.groups(codes, ~np.isnan(tab.latency)):
+        key = key_of(at[0])
+        st = latency_by.get(key)
+        if st is None:
+            st = latency_by[key] = StreamStats()
+        st.add(tab.latency[at])
+
+
+def _node_counts(counts: np.ndarray) -> dict:
+    """{node: {service: frames}} of a (128, N_SVC) count table, nodes with frames only."""
+    return {
+        str(n): {SERVICE_NAMES[s]: int(c) for s, c in enumerate(counts[n]) if c}
+        for n in np.flatnonzero(counts.sum(axis=1)).tolist()
+    }
+
+
+def _node_line(who: str, node: int, counts: np.ndarray) -> str:
+    parts = [f"{SERVICE_NAMES[s]}={int(c)}" for s, c in enumerate(counts) if c]
+    return f"  {who} {node:>3}: {int(counts.sum()):>8}  " + " ".join(parts)
+
+
+def _sdo_entry(results: dict, lat: StreamStats | None) -> dict:
+    """One node's SDO transactions in the summary's JSON: result counts, latency."""
+    entry: dict = {"results": dict(sorted(results.items()))}
+    if lat is not None and lat.n:
+        entry["latency_ms"] = {"min": lat.min, "median": lat.quantile(0.5), "max": lat.max}
+    return entry
+
+
+def _sdo_line(who: str, results: dict, lat: StreamStats | None) -> str:
+    text = (
+        f"  {who}: {sum(results.values())} ("
+        + ", ".join(f"{k} {v}" for k, v in sorted(results.items()))
+        + ")"
+    )
+    if lat is not None and lat.n:
+        text += f"; latency ms min {lat.min:.2f} median {lat.quantile(0.5):.2f} max {lat.max:.2f}"
+    return text

@@ -80,17 +80,11 @@ def _bus_of(fb, row: int) -> str:
     return fb.channel_label(int(fb.channel[row])) if 0 <= row < len(fb) else ""
 
 
-def _record_buses(batch, slots: np.ndarray | None) -> np.ndarray:
-    """The bus of each record slot: "" on a log of one bus (and before a second bus was
-    seen), else the bus the decoder gave it (`DecodedBatch.bus`, `record_bus`)."""
-    n = 0 if slots is None else len(slots)
-    out = np.full(n, "", object)
-    if batch.record_bus is not None:
-        inside = (slots >= 0) & (slots < len(batch.record_bus))
-        out[inside] = batch.record_bus[slots[inside]]
-        out[np.equal(out, None)] = ""
-    elif batch.bus is not None:
-        out[:] = batch.bus
+def _record_buses(batch, slots: np.ndarray) -> np.ndarray:
+    """The bus of each record slot (`DecodedBatch.record_buses`), "" where it has none: a
+    log of one bus, or a record made before a second bus was seen."""
+    out = batch.record_buses(slots)
+    out[np.equal(out, None)] = ""
     return out
 
 
