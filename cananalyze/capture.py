@@ -74,6 +74,9 @@ class Capture:
     checker: Any = None  # the Checker that ran in the pipeline (load() attaches one)
     options: Any = None  # the pipeline Options it was decoded with
     drive_changes: list = field(default_factory=list)  # CiA 402 (network.drive_tracker)
+    # a log of several buses: each record's bus (None: made before a second bus was seen,
+    # the first bus's); None on a log of one bus
+    record_bus: list | None = None
 
     def __len__(self) -> int:
         return len(self.batch)
@@ -254,10 +257,14 @@ class Capture:
         import pandas as pd
 
         cols = list(SDO_TABLE_COLUMNS)
-        recs = [r for _, r in self.records if r.get("kind") == "sdo"]
+        at = [k for k, (_, r) in enumerate(self.records) if r.get("kind") == "sdo"]
+        recs = [self.records[k][1] for k in at]
         df = pd.DataFrame.from_records(recs, columns=cols) if recs else pd.DataFrame(columns=cols)
         if "value" in df:
             df["value"] = df["value"].astype(object)  # mixed ints, floats, strings
+        if self.record_bus is not None:  # several buses: which one, last (as the events)
+            first = self._first_bus()
+            df["bus"] = [self.record_bus[k] or first for k in at]
         return df
 
     @cached_property
@@ -430,6 +437,7 @@ class Collector:
         self._cols: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self._blocks: dict[tuple[int, str, int, tuple[str, ...]], list] = {}
         self.records: list[tuple[int, dict]] = []
+        self.record_bus: list | None = None  # each record's bus, once a second bus is seen
         self.events: list[Event] = []
         self.states: list[Event] = []
         self.drive: list = []
@@ -446,7 +454,12 @@ class Collector:
             key = (blk.node, blk.pdo, blk.cob_id, tuple(blk.columns))
             self._blocks.setdefault(key, []).append((fb.t[blk.rows], blk.rows + off, blk))
         if self.keep_records:
+            if batch.several and self.record_bus is None:
+                self.record_bus = [None] * len(self.records)  # before: the first bus's
             self.records.extend((row + off, rec) for row, rec in batch.records)
+            if self.record_bus is not None:
+                slots = np.arange(len(batch.records))
+                self.record_bus.extend(batch.record_buses(slots).tolist())
         cols, states = batch_events_of(batch, off, self.event_state)
         self.events.extend(Event(*e) for e in cols.rows())
         self.states.extend(Event(*e) for e in states)
@@ -497,6 +510,7 @@ class Collector:
             network,
             profiles or {},
             drive_changes=self.drive,
+            record_bus=self.record_bus,
         )
 
 

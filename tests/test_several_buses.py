@@ -219,9 +219,11 @@ def test_nodes_split_over_two_buses_decode_as_on_one(tmp_path):
             dst.write(line)
     a, b = load(str(one)), load(str(two))
     assert set(b.batch.channels) == {"can0", "can1"}
+    assert "bus" not in a.sdo.columns
     assert sorted(map(str, a.sdo.astype(str).values.tolist())) == sorted(
-        map(str, b.sdo.astype(str).values.tolist())
+        map(str, b.sdo.drop(columns="bus").astype(str).values.tolist())
     )
+    assert (b.sdo.bus == np.where(b.sdo.node % 2 == 1, "can1", "can0")).all()
     rows = [r for r, _ in b.records]
     assert rows == sorted(rows)
     assert sorted(str((e.t, e.kind, e.node, e.message)) for e in a.sorted_events()) == sorted(
@@ -771,3 +773,72 @@ def test_summary_per_bus_when_can1_comes_in_a_later_batch(tmp_path):
     assert split.lines() == whole.lines()
     assert split.record()["sdo_by_bus"] == whole.record()["sdo_by_bus"]
     assert {b: c.sum() for b, c in split.node_service_by_bus.items()} == {"can0": 46, "can1": 29}
+
+
+# --- the SDO table: which bus ------------------------------------------------------------
+
+
+@pytest.mark.parametrize("fmt", ["parquet", "csv"])
+@pytest.mark.parametrize("size", [None, 7])
+def test_sdo_table_says_which_bus(tmp_path, fmt, size):
+    """Node 5's transfers on can0 and on can1 in load().sdo, sdo.parquet (pyarrow) and
+    sdo.csv: a `bus` column, last, each transfer's the channel python-can reads on its
+    response line. Cut in batches of 7 frames, can1 comes after SDO rows were spooled
+    (and the first row groups written): those are can0's. Every table is load()'s."""
+    import csv
+
+    import pyarrow.parquet as pq
+    from exported import assert_csv_tables, assert_parquet_tables, export, load_cut
+
+    log = _log(tmp_path, _summary_log_lines())
+    with can.LogReader(str(log)) as reader:
+        answered = {round(m.timestamp, 6): m.channel for m in reader if m.arbitration_id == 0x585}
+    cap = load_cut(log, size)
+    sdo = cap.sdo
+    assert sdo.columns[-1] == "bus"
+    assert sdo.bus.tolist() == [answered[round(t, 6)] for t in sdo.t]
+    assert sdo.bus.tolist() == ["can0"] * 3 + ["can1"] * 3
+    out = export(log, tmp_path / "x", (fmt,), size)[fmt]
+    if fmt == "parquet":
+        assert_parquet_tables(cap, out)
+        assert pq.read_table(out / "sdo.parquet").column("bus").to_pylist() == sdo.bus.tolist()
+    else:
+        assert_csv_tables(cap, out)
+        with open(out / "sdo.csv", newline="") as f:
+            assert [r["bus"] for r in csv.DictReader(f)] == sdo.bus.tolist()
+
+
+def test_one_bus_sdo_table_has_no_bus_column(tmp_path):
+    """A log of one channel: the sdo table of load() and Parquet as before."""
+    import pyarrow.parquet as pq
+    from exported import export
+
+    lines = [ln for ln in _summary_log_lines() if ln[1] == "can0"]
+    log = _log(tmp_path, lines)
+    assert "bus" not in load(str(log)).sdo.columns
+    out = export(log, tmp_path / "x")["parquet"]
+    assert "bus" not in pq.read_schema(out / "sdo.parquet").names
+    assert pq.read_table(out / "sdo.parquet").num_rows == 3
+
+
+def test_fleet_sdo_bus_column(tmp_path):
+    """A dataset's sdo parts all have a `bus` (the fleet schema's): each transfer's on a
+    log of two buses, null on a log of one; DuckDB reads them as one table."""
+    import duckdb
+    import pyarrow.parquet as pq
+
+    from cananalyze.fleet.schema import schema as fleet_schema
+    from cananalyze.fleet.task import LogTask, process
+
+    two = _log(tmp_path, _summary_log_lines())
+    one = _log(tmp_path, [ln for ln in _summary_log_lines() if ln[1] == "can0"], "one.log")
+    dataset = tmp_path / "ds"
+    for log in (two, one):
+        assert process(LogTask(str(log), str(dataset), Options(checks=True)))["status"] == "ok"
+    for p in (dataset / "sdo").glob("date=*/*.parquet"):
+        assert pq.read_schema(p).remove_metadata() == fleet_schema("sdo").remove_metadata()
+    rows = duckdb.sql(
+        f"select source, bus, count(*) from read_parquet('{dataset}/sdo/*/*.parquet') "
+        "group by all order by all"
+    ).fetchall()
+    assert rows == [(str(one), None, 3), (str(two), "can0", 3), (str(two), "can1", 3)]

@@ -49,7 +49,8 @@ COLUMNS: dict[str, list[tuple[str, pa.DataType]]] = {
     "signals": _from_spec(SIGNALS),
     "events": _from_spec(EVENTS_BUS),  # `bus`: a log of several buses (else null)
     # SDO values are text: one log decodes a REAL32, another a VISIBLE_STRING
-    "sdo": [(c, _SDO_TYPES.get(c, pa.string())) for c in SDO_COLUMNS],
+    "sdo": [(c, _SDO_TYPES.get(c, pa.string())) for c in SDO_COLUMNS]
+    + [("bus", pa.string())],  # a log of several buses: which one (else null)
     # measured/expected: a number for one rule, a state name for another
     "findings": [(c, _FINDING_TYPES.get(c, pa.string())) for c in FINDING_COLUMNS]
     + [("bus", pa.string())],  # a log of several buses: which one (else null)

@@ -171,10 +171,12 @@ EVENTS = TableSpec(
 )
 # a log of several buses: which one, after the other columns (text, as the findings' `bus`;
 # a fleet's parts always have it, null on a log of one bus)
+_BUS = pl.column(["can0"])  # a text column as pandas writes it: (array, pandas, numpy type)
+_BUS_META = pl.field_meta("bus", *_BUS[1:])
 EVENTS_BUS = dataclasses.replace(
     EVENTS,
-    fields=[*EVENTS.fields, ("bus", pa.string())],
-    metadata=_meta([*_EVENT_META, pl.field_meta("bus", *pl.column(["can0"])[1:])]),
+    fields=[*EVENTS.fields, ("bus", _BUS[0].type)],
+    metadata=_meta([*_EVENT_META, _BUS_META]),
     dictionary=(*EVENTS.dictionary, "bus"),
 )
 
@@ -306,6 +308,7 @@ class TableSink(OutputSink):
         self._sdo_chunks = 0
         # (column decisions, schema, writer) of the sdo file written as chunks come; False: given up
         self._sdo_spec: tuple | bool | None = None
+        self._sdo_bus = False  # SDO rows of a log of several buses seen: a bus column
         self._findings = FindingsSpool(self.dir)  # by time at the end, from disk
 
     def __enter__(self) -> TableSink:
@@ -549,10 +552,17 @@ class TableSink(OutputSink):
                 sdo.extend((int(fast.slots[j]), fields.aborted[j]) for j in gone)
                 keep = np.delete(np.arange(len(fast.slots)), gone)
             pieces = sdo_chunks.fast_pieces(fields, keep)
+            slots = fast.slots if keep is None else fast.slots[keep]
             if sdo:
-                slots = fast.slots if keep is None else fast.slots[keep]
                 at = np.concatenate((np.array([k for k, _ in sdo], np.int64), slots))
                 order = np.argsort(at, kind="stable")
+        bus = None  # a log of several buses: each row's (None: the first bus's)
+        if batch.several:
+            self._sdo_bus = True
+            at = np.array([k for k, _ in sdo], np.int64)
+            if split is not None:
+                at = np.concatenate((at, slots))
+            bus = batch.record_buses(at if order is None else at[order])
         rows = []
         for _, r in sdo:  # one C call per record that has every column (nearly all)
             try:
@@ -565,14 +575,15 @@ class TableSink(OutputSink):
         self._sdo_chunks += 1
         out = self._speculate_sdo()
         spool = self._sdo_spool
+        first = self._first_bus
 
         def chunk() -> None:
             """Spooled (as the pieces: smaller than the merged columns), merged and written
             if the types hold, on the writer thread: numpy and Arrow work."""
-            pickle.dump((mine, pieces, order), spool, pickle.HIGHEST_PROTOCOL)
+            pickle.dump((mine, pieces, order, bus), spool, pickle.HIGHEST_PROTOCOL)
             if out is not None:
-                decided, schema, writer = out
-                writer.add(_sdo_table(mine, pieces, order, decided, schema))
+                decided, schema, writer, _ = out
+                writer.add(_sdo_table(mine, pieces, order, decided, schema, bus, first))
 
         self.writer.put(chunk)
 
@@ -722,16 +733,16 @@ class TableSink(OutputSink):
             return None
         decided = self._sdo_decided()
         spec = self._sdo_spec
-        if spec is not None and spec[0] != decided:
-            self._sdo_spec = False
+        if spec is not None and (spec[0] != decided or spec[3] != self._sdo_bus):
+            self._sdo_spec = False  # (or a second bus: the table gains its bus column)
             self.writer.put(spec[2].discard)
             return None
         if spec is None:
-            schema = _sdo_schema(decided)
+            schema = _sdo_schema(decided, self._sdo_bus)
             out = _RecordWriter(
                 self.paths["sdo"], self.fmt, schema, self.compression, self._adapt("sdo")
             )
-            spec = self._sdo_spec = (decided, schema, out)
+            spec = self._sdo_spec = (decided, schema, out, self._sdo_bus)
         return spec
 
     def _write_sdo(self, written: bool) -> int:
@@ -740,13 +751,14 @@ class TableSink(OutputSink):
         if written:
             return rows
         decided = self._sdo_decided()
-        schema = _sdo_schema(decided)
+        schema = _sdo_schema(decided, self._sdo_bus)
         self._sdo_spool.seek(0)
+        first = self._first_bus
 
         def tables():
             for _ in range(self._sdo_chunks):
-                mine, pieces, order = pickle.load(self._sdo_spool)
-                yield _sdo_table(mine, pieces, order, decided, schema)
+                mine, pieces, order, bus = pickle.load(self._sdo_spool)
+                yield _sdo_table(mine, pieces, order, decided, schema, bus, first)
 
         self._write_small("sdo", tables(), schema)
         return rows
@@ -832,22 +844,37 @@ class TableSink(OutputSink):
         return self._small_table("nodes", out, index="node" if self.fmt == "parquet" else None)
 
 
-def _sdo_table(mine: list, pieces: dict, order, decided: tuple, schema: pa.Schema) -> pa.Table:
-    """One chunk of the sdo table: each column merged by record slot and typed as decided."""
+def _sdo_table(
+    mine: list,
+    pieces: dict,
+    order,
+    decided: tuple,
+    schema: pa.Schema,
+    bus: np.ndarray | None = None,
+    first: str | None = None,
+) -> pa.Table:
+    """One chunk of the sdo table: each column merged by record slot and typed as decided;
+    with a `bus` column in the schema, each row's `bus` (None, or all of it: `first`)."""
     arrays = [
         sdo_chunks.to_arrow(sdo_chunks.merge(v, pieces.get(c), order), d[0])
         for c, v, d in zip(SDO_COLUMNS, mine, decided, strict=True)
     ]
+    if "bus" in schema.names:
+        n = len(arrays[0]) if arrays else 0
+        names = [first] * n if bus is None else [first if b is None else b for b in bus.tolist()]
+        arrays.append(pa.array(names, _BUS[0].type))
     return pa.Table.from_arrays(arrays, schema=schema)
 
 
-def _sdo_schema(decided: tuple[tuple[str, str, str], ...]) -> pa.Schema:
-    return pa.schema(
-        [pa.field(c, pl.arrow_type(d[0])) for c, d in zip(SDO_COLUMNS, decided, strict=True)],
-        metadata=pl.schema_metadata(
-            [pl.field_meta(c, d[1], d[2]) for c, d in zip(SDO_COLUMNS, decided, strict=True)]
-        ),
-    )
+def _sdo_schema(decided: tuple[tuple[str, str, str], ...], bus: bool = False) -> pa.Schema:
+    """The sdo table's schema: each column as decided; `bus` last on a log of several
+    buses (as the events and findings)."""
+    fields = [pa.field(c, pl.arrow_type(d[0])) for c, d in zip(SDO_COLUMNS, decided, strict=True)]
+    metas = [pl.field_meta(c, d[1], d[2]) for c, d in zip(SDO_COLUMNS, decided, strict=True)]
+    if bus:
+        fields.append(pa.field("bus", _BUS[0].type))
+        metas.append(_BUS_META)
+    return pa.schema(fields, metadata=pl.schema_metadata(metas))
 
 
 def _findings_schema(decided: dict[str, tuple[str, str, str]]) -> pa.Schema:
