@@ -47,10 +47,13 @@ class SignalSeries:
     rows: np.ndarray  # frame rows in Capture.batch
     columns: dict[str, np.ndarray]
     units: dict[str, str | None]
+    bus: str | None = None  # a log of several buses: which one (node 5 on can1 is its own)
 
     @property
     def key(self) -> str:
-        return f"{self.node}/{self.pdo}"
+        return (
+            f"{self.node}/{self.pdo}" if self.bus is None else f"{self.bus}/{self.node}/{self.pdo}"
+        )
 
 
 @dataclass
@@ -176,6 +179,7 @@ class Capture:
         names: list[str] = []
         pdos: list[str] = []
         units: list[str | None] = []
+        buses: list[str | None] = []
         for s in self.series:
             for name, values in s.columns.items():
                 n = len(values)
@@ -187,6 +191,7 @@ class Capture:
                 names.append(name)
                 pdos.append(s.pdo)
                 units.append(s.units.get(name))
+                buses.append(s.bus)
         if not names:
             return pd.DataFrame(
                 {
@@ -203,7 +208,7 @@ class Capture:
         t = np.concatenate(parts["t"])
         order = np.argsort(t, kind="stable")
         code = code[order]
-        return pd.DataFrame(
+        df = pd.DataFrame(
             {
                 "t": t[order],
                 "node": np.concatenate(parts["node"])[order],
@@ -214,6 +219,9 @@ class Capture:
                 "unit": _categorical(pd, code, [u or "" for u in units]),
             }
         )
+        if any(b is not None for b in buses):  # several buses: which one, last (as events)
+            df["bus"] = np.asarray(buses, object)[code]
+        return df
 
     @cached_property
     def signals_by_frame(self) -> pd.DataFrame:
@@ -225,15 +233,17 @@ class Capture:
         names = wide.SignalColumns()
         pdos = sorted({s.pdo for s in self.series})
         code = {p: i for i, p in enumerate(pdos)}
+        buses = list(dict.fromkeys(s.bus for s in self.series if s.bus is not None))
+        bus = {b: i for i, b in enumerate(buses)}
         parts = [
-            (s.rows, s.node, code[s.pdo], s.cob_id, k, s.columns, s.units)
+            (s.rows, s.node, code[s.pdo], s.cob_id, k, s.columns, s.units, bus.get(s.bus, -1))
             for k, s in enumerate(self.series)  # sorted by node, PDO, COB-ID: the rank
             if len(s.rows)
         ]
         if not parts:
             return wide.arrow_table(wide.empty_rows(), [], wide.schema(names)).to_pandas()
         rows = wide.frame_rows(self.batch.t, parts, names)
-        return wide.arrow_table(rows, pdos, wide.schema(names)).to_pandas()
+        return wide.arrow_table(rows, pdos, wide.schema(names, bool(buses)), buses).to_pandas()
 
     def signals_wide(self) -> pd.DataFrame:
         """Time index, one column per `node/pdo/signal`; NaN where a PDO was not sent."""
@@ -435,7 +445,11 @@ class Collector:
         self.keep_records = records
         self._frames: list[FrameBatch] = []
         self._cols: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-        self._blocks: dict[tuple[int, str, int, tuple[str, ...]], list] = {}
+        # (node, pdo, cob_id, signal names, bus) -> blocks; bus: the first frame's before a
+        # second bus was seen (the same series after it), told only when blocks of several came
+        self._blocks: dict[tuple[int, str, int, tuple[str, ...], str | None], list] = {}
+        self._first_bus: str | None = None
+        self._several_signals = False
         self.records: list[tuple[int, dict]] = []
         self.record_bus: list | None = None  # each record's bus, once a second bus is seen
         self.events: list[Event] = []
@@ -450,8 +464,12 @@ class Collector:
         if len(fb):
             self._frames.append(fb)
             self._cols.append((batch.service, batch.node, batch.pdo))
+            if self._first_bus is None:
+                self._first_bus = fb.channel_label(int(fb.channel[0]))
         for blk in batch.signals:
-            key = (blk.node, blk.pdo, blk.cob_id, tuple(blk.columns))
+            bus = batch.block_bus(blk)
+            self._several_signals |= bus is not None
+            key = (blk.node, blk.pdo, blk.cob_id, tuple(blk.columns), bus or self._first_bus)
             self._blocks.setdefault(key, []).append((fb.t[blk.rows], blk.rows + off, blk))
         if self.keep_records:
             if batch.several and self.record_bus is None:
@@ -482,7 +500,9 @@ class Collector:
             node = np.zeros(0, np.int16)
             pdo = np.zeros(0, np.uint8)
         series = []
-        for (n, p, cob, names), parts in sorted(self._blocks.items(), key=lambda kv: kv[0][:3]):
+        for (n, p, cob, names, bus), parts in sorted(
+            self._blocks.items(), key=lambda kv: kv[0][:3]
+        ):
             blk = parts[0][2]
             series.append(
                 SignalSeries(
@@ -493,6 +513,7 @@ class Collector:
                     rows=np.concatenate([x[1] for x in parts]),
                     columns={k: np.concatenate([x[2].columns[k] for x in parts]) for k in names},
                     units=dict(blk.units),
+                    bus=bus if self._several_signals else None,
                 )
             )
         self.states.sort(key=lambda e: e.t)

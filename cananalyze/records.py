@@ -339,6 +339,13 @@ class DecodedBatch:
         out[inside] = self.channel_bus[self.frames.channel[rows[inside]]]
         return out
 
+    def block_bus(self, block: SignalBlock) -> str | None:
+        """The bus of a signal block (one bus's decoder made it: its first row's), None on
+        a log of one bus so far."""
+        if not self.several or not len(block.rows):
+            return None
+        return self.row_buses(block.rows[:1])[0]
+
     def record_buses(self, slots: np.ndarray) -> np.ndarray:
         """The bus of each of these record slots, an object array: None on a log of one
         bus so far, or for a record added after the buses' batches were merged."""

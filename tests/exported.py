@@ -200,21 +200,22 @@ def wide_signals_as_long(path: Path) -> pd.DataFrame:
     import duckdb
 
     schema = pq.read_schema(path)
+    keys = [*SIGNAL_KEYS, "bus"] if "bus" in schema.names else SIGNAL_KEYS  # several buses
     meta = {
         f.name: (f.metadata[b"signal"].decode(), f.metadata[b"unit"].decode())
         for f in schema
-        if f.name not in SIGNAL_KEYS
+        if f.name not in keys
     }
     if not meta:
-        return pd.DataFrame({c: [] for c in [*SIGNAL_KEYS, "signal", "value", "unit"]})
+        return pd.DataFrame({c: [] for c in [*keys, "signal", "value", "unit"]})
     con = duckdb.connect()
     long = con.execute(
         f"UNPIVOT (SELECT * FROM read_parquet('{path}')) "
-        "ON COLUMNS(* EXCLUDE (t, node, pdo, cob_id)) INTO NAME col VALUE value"
+        f"ON COLUMNS(* EXCLUDE ({', '.join(keys)})) INTO NAME col VALUE value"
     ).df()
     long["signal"] = long["col"].map(lambda c: meta[c][0])
     long["unit"] = long["col"].map(lambda c: meta[c][1])
-    return long[[*SIGNAL_KEYS, "signal", "value", "unit"]]
+    return long[[*SIGNAL_KEYS, "signal", "value", "unit", *keys[len(SIGNAL_KEYS) :]]]
 
 
 def assert_wide_signals_is(cap: Capture, path: Path) -> None:
@@ -225,7 +226,7 @@ def assert_wide_signals_is(cap: Capture, path: Path) -> None:
     assert table.num_rows == sum(len(s.t) for s in cap.series), path.name
     t = table.column("t").to_numpy()
     assert (np.diff(t) >= 0).all(), path.name
-    key = [*SIGNAL_KEYS, "signal"]
+    key = [*SIGNAL_KEYS, "signal", *(["bus"] if "bus" in table.column_names else [])]
 
     def norm(df: pd.DataFrame) -> pd.DataFrame:
         df = df.astype({"node": "int64", "cob_id": "int64", "pdo": str, "signal": str})

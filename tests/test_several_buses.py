@@ -842,3 +842,125 @@ def test_fleet_sdo_bus_column(tmp_path):
         "group by all order by all"
     ).fetchall()
     assert rows == [(str(one), None, 3), (str(two), "can0", 3), (str(two), "can1", 3)]
+
+
+# --- the signals: which bus ----------------------------------------------------------------
+
+
+def _late_pdo_log(tmp_path):
+    """faults.log, and past its middle a second node 5 on can1: node 5's SDO configuration
+    of its TPDO2 sent again there, then a copy of each of node 5's PDOs 0.1 ms after the
+    original. Node 5's TPDO2 is two series from then on, can1's first seen after rows of
+    can0's were written."""
+    from conftest import SAMPLES
+
+    lines = (SAMPLES / "faults.log").read_text().splitlines()
+    timed = [(float(ln[1:].split(")")[0]), ln.split(") ", 1)[1]) for ln in lines]
+    mid = timed[len(timed) // 2][0]
+    out = list(timed)
+    config = [rest for _, rest in timed if rest.split("#")[0] in ("can0 605", "can0 585")][:22]
+    for k, rest in enumerate(config):
+        out.append((mid + 0.001 + k * 1e-4, rest.replace("can0 ", "can1 ")))
+    for t, rest in timed:
+        cob = int(rest.split(" ")[1].split("#")[0], 16)
+        if t > mid + 0.01 and 0x180 <= cob < 0x580 and cob & 0x7F == 5:
+            out.append((t + 1e-4, rest.replace("can0 ", "can1 ")))
+    path = tmp_path / "late.log"
+    path.write_text("".join(f"({t:.6f}) {rest}\n" for t, rest in sorted(out)))
+    return path
+
+
+def _pdo_frames(log, node: int) -> dict[str, list[float]]:
+    """Times of node's TPDO frames per channel, as python-can reads the log."""
+    out: dict[str, list[float]] = {}
+    with can.LogReader(str(log)) as reader:
+        for m in reader:
+            if 0x180 <= m.arbitration_id < 0x500 and m.arbitration_id & 0x7F == node:
+                out.setdefault(m.channel, []).append(round(m.timestamp, 6))
+    return out
+
+
+@pytest.mark.parametrize("fmt", ["parquet", "csv"])
+@pytest.mark.parametrize("size", [None, 7])
+def test_signals_say_which_bus(tmp_path, monkeypatch, fmt, size):
+    """Node 5's PDOs on can0 and on can1 are two series: load().signals and the signals
+    table (Parquet: one row per frame; CSV: one row per value) have a `bus` column, each
+    row's the channel python-can reads for its frame, and every table is load()'s. Merged,
+    the two nodes' values were one series with each time twice. Row groups of 2 rows: the
+    file is begun before can1 comes, and widened."""
+    import pandas as pd
+    from exported import NETWORK, assert_csv_tables, assert_parquet_tables, export, load_cut
+
+    from cananalyze.outputs.tables import writer
+
+    monkeypatch.setattr(writer, "ROW_GROUP", 2)
+    log = _late_pdo_log(tmp_path)
+    want = _pdo_frames(log, 5)
+    assert len(want["can1"]) > 5 and len(want["can0"]) > len(want["can1"])
+    cap = load_cut(log, size, network=NETWORK)
+    sig = cap.signals
+    assert sig.columns[-1] == "bus"
+    five = sig[sig.node == 5]
+    for bus, times in want.items():
+        mine = five[five.bus == bus]
+        assert sorted(set(mine.t.round(6))) == sorted(times)
+        assert len(mine) == len(times) * mine.signal.nunique()
+    assert set(sig[sig.node != 5].bus) == {"can0"}
+    assert {s.key for s in cap.series if s.node == 5} >= {"can0/5/tpdo2", "can1/5/tpdo2"}
+    out = export(log, tmp_path / "x", (fmt,), size, network=NETWORK)[fmt]
+    if fmt == "parquet":
+        assert_parquet_tables(cap, out)
+        frames = pd.read_parquet(out / "signals.parquet")
+        per_bus = frames[frames.node == 5].groupby("bus").t.count().to_dict()
+        assert per_bus == {b: len(t) for b, t in want.items()}
+    else:
+        assert_csv_tables(cap, out)
+
+
+def test_one_bus_signals_have_no_bus_column(tmp_path):
+    """A log of one channel: the signals of load() and of the Parquet and CSV tables as
+    before, no `bus`."""
+    import pyarrow.parquet as pq
+    from conftest import SAMPLES
+    from exported import NETWORK, export
+
+    log = SAMPLES / "faults.log"
+    cap = load(str(log), network=NETWORK)
+    assert len(cap.signals) and "bus" not in cap.signals.columns
+    assert all(s.bus is None and "/" not in s.key[len(str(s.node)) + 1 :] for s in cap.series)
+    out = export(log, tmp_path / "x", ("parquet", "csv"), network=NETWORK)
+    assert "bus" not in pq.read_schema(out["parquet"] / "signals.parquet").names
+    assert "bus" not in (out["csv"] / "signals.csv").read_text().splitlines()[0]
+
+
+def test_fleet_signals_bus_column(tmp_path):
+    """A dataset's signals parts (one row per value) all have a `bus`: each row's on a log
+    of two buses, null on a log of one (DuckDB reads them as one table)."""
+    import duckdb
+    import pyarrow.parquet as pq
+    from conftest import SAMPLES
+    from exported import NETWORK
+
+    from cananalyze.fleet.schema import schema as fleet_schema
+    from cananalyze.fleet.task import LogTask, process
+
+    two, one = _late_pdo_log(tmp_path), SAMPLES / "faults.log"
+    dataset = tmp_path / "ds"
+    for log in (two, one):
+        task = LogTask(str(log), str(dataset), Options(checks=True, network=NETWORK))
+        assert process(task)["status"] == "ok"
+    for p in (dataset / "signals").glob("date=*/*.parquet"):
+        assert pq.read_schema(p).remove_metadata() == fleet_schema("signals").remove_metadata()
+    rows = duckdb.sql(
+        f"select source, bus, count(distinct t) from read_parquet('{dataset}/signals/*/*.parquet') "
+        "where node = 5 group by all order by all"
+    ).fetchall()
+    want = _pdo_frames(two, 5)
+    assert rows == sorted(
+        [
+            (str(one), None, len(_pdo_frames(one, 5)["can0"])),
+            (str(two), "can0", len(set(want["can0"]))),
+            (str(two), "can1", len(set(want["can1"]))),
+        ],
+        key=str,
+    )

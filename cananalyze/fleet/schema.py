@@ -17,7 +17,13 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from ..network.node_tally import IDENTITY_KEYS
-from ..outputs.tables.stream import EVENTS_BUS, FINDING_COLUMNS, FRAMES, SDO_COLUMNS, SIGNALS
+from ..outputs.tables.stream import (
+    EVENTS_BUS,
+    FINDING_COLUMNS,
+    FRAMES,
+    SDO_COLUMNS,
+    SIGNALS_BUS,
+)
 from ..outputs.tables.writer import LABEL  # categories: one type for every part
 from ..protocol.services import SERVICE_NAMES
 
@@ -46,7 +52,7 @@ _NODE_NUMBERS = ("device_type", "vendor_id", "product_code", "revision", "serial
 
 COLUMNS: dict[str, list[tuple[str, pa.DataType]]] = {
     "frames": _from_spec(FRAMES),
-    "signals": _from_spec(SIGNALS),
+    "signals": _from_spec(SIGNALS_BUS),  # `bus`: a log of several buses (else null)
     "events": _from_spec(EVENTS_BUS),  # `bus`: a log of several buses (else null)
     # SDO values are text: one log decodes a REAL32, another a VISIBLE_STRING
     "sdo": [(c, _SDO_TYPES.get(c, pa.string())) for c in SDO_COLUMNS]

@@ -121,6 +121,15 @@ FRAMES = TableSpec(
     uncompressed=("channel", "can_id", "dlc", "data", "flags", "service", "node", "pdo"),
     delta=("dlc", "flags", "node", "pdo"),
 )
+_SIGNAL_META = [
+    pl.field_meta("t", "float64", "float64"),
+    pl.field_meta("node", "int16", "int16"),
+    _cat("pdo"),
+    pl.field_meta("cob_id", "uint32", "uint32"),
+    _cat("signal"),
+    pl.field_meta("value", "float64", "float64"),
+    _cat("unit"),
+]
 SIGNALS = TableSpec(
     [
         ("t", pa.float64()),
@@ -131,17 +140,7 @@ SIGNALS = TableSpec(
         ("value", pa.float64()),
         ("unit", None),
     ],
-    _meta(
-        [
-            pl.field_meta("t", "float64", "float64"),
-            pl.field_meta("node", "int16", "int16"),
-            _cat("pdo"),
-            pl.field_meta("cob_id", "uint32", "uint32"),
-            _cat("signal"),
-            pl.field_meta("value", "float64", "float64"),
-            _cat("unit"),
-        ]
-    ),
+    _meta(_SIGNAL_META),
     sorted_labels=("pdo", "signal", "unit"),
     dictionary=("node", "pdo", "cob_id", "signal", "unit"),
     split=("t",),
@@ -171,13 +170,19 @@ EVENTS = TableSpec(
 )
 # a log of several buses: which one, after the other columns (text, as the findings' `bus`;
 # a fleet's parts always have it, null on a log of one bus)
-_BUS = pl.column(["can0"])  # a text column as pandas writes it: (array, pandas, numpy type)
-_BUS_META = pl.field_meta("bus", *_BUS[1:])
+_BUS_META = pl.field_meta("bus", *pl.column(["can0"])[1:])  # a text column, as pandas's
 EVENTS_BUS = dataclasses.replace(
     EVENTS,
-    fields=[*EVENTS.fields, ("bus", _BUS[0].type)],
+    fields=[*EVENTS.fields, ("bus", wide.BUS)],
     metadata=_meta([*_EVENT_META, _BUS_META]),
     dictionary=(*EVENTS.dictionary, "bus"),
+)
+# the long form of the signals (CSV, a fleet's parts) of a log of several buses
+SIGNALS_BUS = dataclasses.replace(
+    SIGNALS,
+    fields=[*SIGNALS.fields, ("bus", wide.BUS)],
+    metadata=_meta([*_SIGNAL_META, _BUS_META]),
+    dictionary=(*SIGNALS.dictionary, "bus"),
 )
 
 
@@ -277,8 +282,10 @@ class TableSink(OutputSink):
         self._first_bus: str | None = None  # the first frame's bus (events before the second)
         events = EVENTS_BUS if self._events_bus else EVENTS
         tables = [("frames", FRAMES if fmt == "parquet" else FRAMES_CSV), ("events", events)]
+        # a dataset part's signals always say which bus too; a CSV's once a second comes
+        self._signals_bus_column = bool(self.constants)
         if self.wide is None:
-            tables.insert(1, ("signals", SIGNALS))
+            tables.insert(1, ("signals", SIGNALS_BUS if self.constants else SIGNALS))
         self.sinks = {
             name: Sink(self.paths[name], fmt, spec, compression, self.constants)
             for name, spec in tables
@@ -295,6 +302,8 @@ class TableSink(OutputSink):
         # signals: series key -> (insertion index, units of its first block)
         self._series: dict[tuple, tuple[int, dict]] = {}
         self._labels = {"pdo": _Vocab(), "signal": _Vocab(), "unit": _Vocab(), "kind": _Vocab()}
+        self._labels["bus"] = _Vocab()  # signal blocks' buses, the first bus first
+        self._signals_bus = False  # signals of a log of several buses seen: a bus column
         self._signal_last: tuple | None = None
         self._signals_unsorted = False
         self._event_state = EventState()
@@ -352,15 +361,14 @@ class TableSink(OutputSink):
         keys: list[tuple] = []  # (node, pdo, cob, insertion) per part: the series order
         col_of: list[int] = []
         rows_of: list[np.ndarray] = []
+        consts["bus"] = []
         for blk in batch.signals:
-            skey = (blk.node, blk.pdo, blk.cob_id, tuple(blk.columns))
-            got = self._series.get(skey)
-            if got is None:
-                got = self._series[skey] = (len(self._series), dict(blk.units))
-            ins, units = got
+            ins, units, bus = self._series_of(batch, blk)
             pdo_code = self._labels["pdo"].code(blk.pdo)
+            bus_code = self._labels["bus"].code(bus)
             for j, (name, values) in enumerate(blk.columns.items()):
                 v_parts.append(values)
+                consts["bus"].append(bus_code)
                 consts["node"].append(blk.node)
                 consts["cob"].append(blk.cob_id)
                 consts["pdo"].append(pdo_code)
@@ -371,7 +379,13 @@ class TableSink(OutputSink):
                 rows_of.append(blk.rows)
         if not keys:
             return
-        labels = {k: self._labels[k].snapshot() for k in ("pdo", "signal", "unit")}
+        labels = {k: self._labels[k].snapshot() for k in ("pdo", "signal", "unit", "bus")}
+        sink = self.sinks["signals"]
+        if self._signals_bus and not self._signals_bus_column:  # a second bus: say which
+            first = self._first_bus
+            self.writer.put(lambda: sink.fill_column(SIGNALS_BUS, "bus", first))
+            self._signals_bus_column = True
+        with_bus, named = self._signals_bus_column, self._signals_bus
         # what the job needs, not the batch: a queued job holding the DecodedBatch kept its
         # frames and records alive too, ~10 MB a batch while this writer was behind
         blocks = [(blk.rows, len(blk.columns)) for blk in batch.signals]
@@ -406,7 +420,7 @@ class TableSink(OutputSink):
                 return np.array(consts[name], dtype)[part_of]
 
             values = np.concatenate([np.asarray(v, np.float64) for v in v_parts])
-            return {
+            out = {
                 "t": t[order],
                 "node": const("node", np.int16),
                 "pdo": Coded(const("pdo", np.int32), labels["pdo"]),
@@ -415,30 +429,48 @@ class TableSink(OutputSink):
                 "value": values[order],
                 "unit": Coded(const("unit", np.int32), labels["unit"]),
             }
+            if with_bus:  # (a dataset part of a log of one bus: null)
+                code = ab.numeric(const("bus", np.int64))
+                names = pa.array(labels["bus"], wide.BUS)
+                out["bus"] = names.take(code) if named else pa.nulls(len(values), wide.BUS)
+            return out
 
-        sink = self.sinks["signals"]
         self.writer.put(lambda: sink.add(columns()))
+
+    def _series_of(self, batch: DecodedBatch, blk) -> tuple[int, dict, str]:
+        """(insertion index, units of its first block, bus) of a signal block's series: its
+        node, PDO, COB-ID, signal names and bus (the first frame's before a second bus
+        was seen: the same series after it), as the Capture keys them."""
+        bus = batch.block_bus(blk)
+        if bus is not None:
+            self._signals_bus = True
+        bus = bus or self._first_bus
+        skey = (blk.node, blk.pdo, blk.cob_id, tuple(blk.columns), bus)
+        got = self._series.get(skey)
+        if got is None:
+            got = self._series[skey] = (len(self._series), dict(blk.units))
+        return (*got, bus)
 
     def _add_wide(self, batch: DecodedBatch) -> None:
         """The batch's PDO frames as wide rows (`wide.frame_rows`), on the writer thread."""
         parts, keys = [], []
+        vocab = self._labels["bus"]
         for blk in batch.signals:
-            skey = (blk.node, blk.pdo, blk.cob_id, tuple(blk.columns))
-            got = self._series.get(skey)
-            if got is None:
-                got = self._series[skey] = (len(self._series), dict(blk.units))
-            ins, units = got
+            ins, units, bus = self._series_of(batch, blk)
             keys.append((blk.node, blk.pdo, blk.cob_id, ins))
             code = self._labels["pdo"].code(blk.pdo)
-            parts.append([blk.rows, blk.node, code, blk.cob_id, 0, blk.columns, units])
+            row = [blk.rows, blk.node, code, blk.cob_id, 0, blk.columns, units, vocab.code(bus)]
+            parts.append(row)
         rank_of = {k: r for r, k in enumerate(sorted(set(keys)))}
         for part, k in zip(parts, keys, strict=True):
             part[4] = rank_of[k]
         labels = self._labels["pdo"].snapshot()
+        buses, several = vocab.snapshot(), self._signals_bus
         t_all = batch.frames.t
         out = self.wide
 
         def job() -> None:
+            out.bus = several  # (in the writer's order: rows before it have no bus column)
             rows = wide.frame_rows(t_all, [tuple(p) for p in parts], out.names)
             t = rows["t"]
             if len(t):
@@ -446,7 +478,7 @@ class TableSink(OutputSink):
                 if self._signal_last is not None and head < self._signal_last:
                     self._signals_unsorted = True
                 self._signal_last = (float(t[-1]), int(rows["node"][-1]), labels[rows["pdo"][-1]])
-            out.add(rows, labels)
+            out.add(rows, labels, buses)
 
         self.writer.put(job)
 
@@ -670,17 +702,19 @@ class TableSink(OutputSink):
     def _signal_order(self, table: pa.Table) -> np.ndarray:
         """The Capture's order again, for a table whose batches overlap in time."""
         rank: dict[tuple, tuple[int, int]] = {}
-        for (node, pdo, cob, names), (ins, _) in self._series.items():
+        named = "bus" in table.column_names and self._signals_bus
+        for (node, pdo, cob, names, bus), (ins, _) in self._series.items():
             for j, name in enumerate(names):
-                rank.setdefault((node, pdo, cob, name), (ins, j))
+                rank.setdefault((node, pdo, cob, name, bus if named else None), (ins, j))
         node = table.column("node").to_pylist()
         pdo = table.column("pdo").to_pylist()
         cob = table.column("cob_id").to_pylist()
         sig = table.column("signal").to_pylist()
-        keys = sorted({(a, b, c, d) for a, b, c, d in zip(node, pdo, cob, sig, strict=True)})
-        series = sorted(keys, key=lambda k: (k[0], k[1], k[2], *rank.get(k, (0, 0))))
+        bus = table.column("bus").to_pylist() if named else [None] * len(node)
+        rows = list(zip(node, pdo, cob, sig, bus, strict=True))
+        series = sorted(sorted(set(rows)), key=lambda k: (k[0], k[1], k[2], *rank.get(k, (0, 0))))
         code_of = {k: i for i, k in enumerate(series)}
-        code = np.array([code_of[k] for k in zip(node, pdo, cob, sig, strict=True)], np.int64)
+        code = np.array([code_of[k] for k in rows], np.int64)
         t = ab.to_numpy(table.column("t"))
         return np.lexsort((np.arange(len(t)), code, t))
 
@@ -862,7 +896,7 @@ def _sdo_table(
     if "bus" in schema.names:
         n = len(arrays[0]) if arrays else 0
         names = [first] * n if bus is None else [first if b is None else b for b in bus.tolist()]
-        arrays.append(pa.array(names, _BUS[0].type))
+        arrays.append(pa.array(names, wide.BUS))
     return pa.Table.from_arrays(arrays, schema=schema)
 
 
@@ -872,7 +906,7 @@ def _sdo_schema(decided: tuple[tuple[str, str, str], ...], bus: bool = False) ->
     fields = [pa.field(c, pl.arrow_type(d[0])) for c, d in zip(SDO_COLUMNS, decided, strict=True)]
     metas = [pl.field_meta(c, d[1], d[2]) for c, d in zip(SDO_COLUMNS, decided, strict=True)]
     if bus:
-        fields.append(pa.field("bus", _BUS[0].type))
+        fields.append(pa.field("bus", wide.BUS))
         metas.append(_BUS_META)
     return pa.schema(fields, metadata=pl.schema_metadata(metas))
 

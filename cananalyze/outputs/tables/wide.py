@@ -38,6 +38,7 @@ from .writer import ROW_GROUP, WRITE_BATCH
 
 KEYS = ("t", "node", "pdo", "cob_id")
 PDO = pa.dictionary(pa.int32(), pa.string())
+BUS = pa.large_string()  # what pandas writes a text column as
 
 
 class SignalColumns:
@@ -67,22 +68,25 @@ class SignalColumns:
         ]
 
 
-def schema(columns: SignalColumns) -> pa.Schema:
+def schema(columns: SignalColumns, bus: bool = False) -> pa.Schema:
+    """The file's columns: the keys, a column per signal, and `bus` last on a log of
+    several buses (text, as the events' and the sdo table's)."""
     keys = [
         pa.field("t", pa.float64()),
         pa.field("node", pa.int16()),
         pa.field("pdo", PDO),
         pa.field("cob_id", pa.uint32()),
     ]
-    return pa.schema(keys + columns.fields())
+    return pa.schema(keys + columns.fields() + ([pa.field("bus", BUS)] if bus else []))
 
 
 def frame_rows(t_all: np.ndarray, parts: list[tuple], names: SignalColumns) -> dict:
     """One row per (block, frame), sorted by time then series: the columns of a batch.
 
     `parts`: per signal block (rows, node, pdo code, cob_id, rank, {signal: values},
-    units); `rank` orders series that share a time (as the long form does).
-    Returns t, node, pdo codes, cob_id, and per signal column (values, valid).
+    units[, bus code]); `rank` orders series that share a time (as the long form does).
+    Returns t, node, pdo codes, cob_id, bus codes (-1: none given), and per signal
+    column (values, valid).
     """
     sizes = [len(p[0]) for p in parts]
     rows = np.concatenate([p[0] for p in parts])
@@ -100,9 +104,10 @@ def frame_rows(t_all: np.ndarray, parts: list[tuple], names: SignalColumns) -> d
         "node": np.repeat(np.array([p[1] for p in parts], np.int16), sizes),
         "pdo": np.repeat(np.array([p[2] for p in parts], np.int32), sizes),
         "cob_id": np.repeat(np.array([p[3] for p in parts], np.uint32), sizes),
+        "bus": np.repeat(np.array([p[7] if len(p) > 7 else -1 for p in parts], np.int32), sizes),
     }
     if order is not None:
-        for k in ("node", "pdo", "cob_id"):
+        for k in ("node", "pdo", "cob_id", "bus"):
             out[k] = out[k][order]
     signals: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     # new columns in the order their first value comes in the rows (time, then series,
@@ -111,7 +116,7 @@ def frame_rows(t_all: np.ndarray, parts: list[tuple], names: SignalColumns) -> d
         int(inv[s0 : s0 + n].min()) if n else total for s0, n in zip(start, sizes, strict=True)
     ]
     for k in sorted(range(len(parts)), key=first.__getitem__):
-        _, _, _, _, _, cols, units = parts[k]
+        cols, units = parts[k][5:7]
         where = inv[start[k] : start[k] + sizes[k]]
         for signal, values in cols.items():
             name = names.column(signal, units.get(signal))
@@ -132,12 +137,17 @@ def empty_rows() -> dict:
         "node": z.astype(np.int16),
         "pdo": z.astype(np.int32),
         "cob_id": z.astype(np.uint32),
+        "bus": z.astype(np.int32),
         "signals": {},
     }
 
 
-def arrow_table(rows: dict, labels: list[str], sch: pa.Schema) -> pa.Table:
-    """The batch's rows in the file's schema (signals it lacks: null)."""
+def arrow_table(
+    rows: dict, labels: list[str], sch: pa.Schema, buses: list[str] | None = None
+) -> pa.Table:
+    """The batch's rows in the file's schema (signals it lacks: null); its `bus`, when
+    the schema has one, from the rows' bus codes into `buses` (-1: `buses[0]`, the first
+    bus: rows decoded before a second bus was seen)."""
     n = len(rows["t"])
     arrays = [
         ab.numeric(rows["t"]),
@@ -146,10 +156,13 @@ def arrow_table(rows: dict, labels: list[str], sch: pa.Schema) -> pa.Table:
         ab.numeric(rows["cob_id"]),
     ]
     for f in sch:
-        if f.name in KEYS:
+        if f.name in KEYS or f.name == "bus":
             continue
         got = rows["signals"].get(f.name)
         arrays.append(pa.nulls(n, pa.float64()) if got is None else ab.numeric(got[0], ~got[1]))
+    if "bus" in sch.names:
+        code = np.maximum(rows["bus"], 0)
+        arrays.append(pa.array(buses or [None], BUS).take(ab.numeric(code.astype(np.int64))))
     return pa.Table.from_arrays(arrays, schema=sch)
 
 
@@ -172,7 +185,9 @@ class WideWriter:
         self.path = path
         self.compression = compression
         self.names = SignalColumns()
-        self.buffer: list[tuple[dict, list[str]]] = []
+        self.bus = False  # a log of several buses: a bus column (parts before it: the first's)
+        self.buses: list[str] = []  # bus names, the first bus first
+        self.buffer: list[tuple[dict, list[str], list[str]]] = []
         self.buffered = 0
         self.bytes = 0
         self.rows = 0
@@ -180,11 +195,13 @@ class WideWriter:
         self.schema: pa.Schema | None = None
         self.parts: list[Path] = []  # closed parts (a remap brought new columns)
 
-    def add(self, rows: dict, labels: list[str]) -> None:
+    def add(self, rows: dict, labels: list[str], buses: list[str] | None = None) -> None:
         n = len(rows["t"])
+        if buses:
+            self.buses = buses
         if not n:
             return
-        self.buffer.append((rows, labels))
+        self.buffer.append((rows, labels, buses or []))
         self.buffered += n
         self.bytes += n * (22 + 9 * len(rows["signals"]))
         if self.buffered >= _writer.ROW_GROUP or self.bytes >= _writer.ROW_GROUP_BYTES:
@@ -198,7 +215,7 @@ class WideWriter:
 
         if not self.buffer and self.writer is not None:
             return
-        want = schema(self.names)
+        want = schema(self.names, self.bus)
         if self.writer is not None and want != self.schema:
             self.writer.close()  # new signals: this part is done, the rest is wider
             part = self.path.with_name(f"{self.path.name}.part{len(self.parts)}")
@@ -208,7 +225,7 @@ class WideWriter:
         if self.writer is None:
             self.schema = want
             self.writer = pq.ParquetWriter(self.path, want, **self._options())
-        tables = [arrow_table(rows, labels, want) for rows, labels in self.buffer]
+        tables = [arrow_table(rows, labels, want, buses) for rows, labels, buses in self.buffer]
         table = pa.concat_tables(tables) if tables else pa.Table.from_batches([], want)
         self.buffer, self.buffered, self.bytes = [], 0, 0
         self.writer.write_table(table, row_group_size=_writer.ROW_GROUP)
@@ -233,7 +250,7 @@ class WideWriter:
             for src in sources:
                 f = pq.ParquetFile(src)
                 for i in range(f.num_row_groups):
-                    out.write_table(conform(f.read_row_group(i), self.schema))
+                    out.write_table(conform(f.read_row_group(i), self.schema, self.buses[:1]))
                 f.close()
         self.discard_parts()
 
@@ -281,10 +298,16 @@ def resort(path: Path, compression: str) -> None:
             tmp.unlink()
 
 
-def conform(table: pa.Table, sch: pa.Schema) -> pa.Table:
-    """`table` with the columns of `sch` (those it lacks null), in its order."""
+def conform(table: pa.Table, sch: pa.Schema, first: list[str] | None = None) -> pa.Table:
+    """`table` with the columns of `sch` (those it lacks null), in its order; a `bus` it
+    lacks is `first[0]` (rows written before a second bus was seen: the first bus's)."""
     n = table.num_rows
-    cols = [
-        table.column(f.name) if f.name in table.column_names else pa.nulls(n, f.type) for f in sch
-    ]
+    cols = []
+    for f in sch:
+        if f.name in table.column_names:
+            cols.append(table.column(f.name))
+        elif f.name == "bus" and first:
+            cols.append(pa.array(first * n, f.type))
+        else:
+            cols.append(pa.nulls(n, f.type))
     return pa.Table.from_arrays(cols, schema=sch)
