@@ -292,10 +292,19 @@ class DecodedBatch:
 
     def records_and_findings(self) -> list[tuple[int, dict]]:
         """The records, then the findings' records: (row, record) in the order the
-        streamed outputs (text, JSONL, dashboard) place them at their rows."""
+        streamed outputs (text, JSONL, dashboard) place them at their rows. On a log of
+        several buses, each record that has none gains its `bus` (last; the findings'
+        have theirs): a copy, the batch's records are not changed."""
+        records = self.records
+        if self.several and records:
+            buses = self.record_buses(np.arange(len(records))).tolist()
+            records = [
+                (row, rec if bus is None or "bus" in rec else {**rec, "bus": bus})
+                for (row, rec), bus in zip(records, buses, strict=True)
+            ]
         if not len(self.findings):
-            return self.records
-        return [*self.records, *self.findings.pairs()]
+            return records
+        return [*records, *self.findings.pairs()]
 
     @property
     def sdo_fast(self) -> SdoColumns | None:

@@ -964,3 +964,25 @@ def test_fleet_signals_bus_column(tmp_path):
         ],
         key=str,
     )
+
+
+def test_jsonl_sdo_records_say_which_bus(tmp_path, capsys):
+    """`decode --format jsonl`: on a log of two buses each `sdo` record has a `bus` (the
+    channel python-can reads on its response line); on a log of one, none."""
+    from cananalyze.cli.main import main
+
+    lines = _summary_log_lines()
+    log = _log(tmp_path, lines)
+    with can.LogReader(str(log)) as reader:
+        answered = {round(m.timestamp, 6): m.channel for m in reader if m.arbitration_id == 0x585}
+    main(["decode", str(log), "--format", "jsonl"])
+    recs = [json.loads(ln) for ln in capsys.readouterr().out.splitlines()]
+    sdo = [r for r in recs if r["kind"] == "sdo"]
+    assert [r["bus"] for r in sdo] == [answered[round(r["t"], 6)] for r in sdo]
+    assert sorted(r["bus"] for r in sdo) == ["can0"] * 3 + ["can1"] * 3
+    assert all("bus" not in r for r in recs if r["kind"] == "frame")  # frames: `channel`
+    one = _log(tmp_path, [ln for ln in lines if ln[1] == "can0"], "one.log")
+    main(["decode", str(one), "--format", "jsonl"])
+    recs = [json.loads(ln) for ln in capsys.readouterr().out.splitlines()]
+    assert [r for r in recs if r["kind"] == "sdo" and "bus" in r] == []
+    assert len([r for r in recs if r["kind"] == "sdo"]) == 3

@@ -61,7 +61,7 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
     sel = np.arange(len(fb)) if mask is None else np.flatnonzero(mask)
     n = sel.size
     pairs = fast_pairs(batch) if mask is None else None  # before anything reads the notes
-    records = [*batch.records, *batch.findings.pairs()]
+    records = batch.records_and_findings()
     by_row: dict[int, list[dict]] = {}
     for row, rec in records:
         by_row.setdefault(row, []).append(rec)
