@@ -9,16 +9,28 @@ capture's decoded columns and the configuration its pipeline saw (`config`).
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Iterable
+from dataclasses import dataclass
 from pathlib import Path
 
-from .checks.engine import Checker
+from .checks.engine import Checker, whole_log
 from .checks.finding import Finding
 from .checks.rule import Rule
 from .frames import FrameBatch
 from .records import DecodedBatch
 
-Source = str | Path | FrameBatch | Iterable[DecodedBatch]
+
+@dataclass
+class ByBus:
+    """A decoded log of several buses (`Capture` gives it): each bus's batches and the
+    configuration its checks saw, judged by one Checker per bus as the pipeline does
+    (node 5 on can0 and on can1 are two devices)."""
+
+    parts: list[tuple[str, list[DecodedBatch], object]]  # (bus, batches, config)
+
+
+Source = str | Path | FrameBatch | Iterable[DecodedBatch] | ByBus
 
 
 def run_rules(source: Source, rules: list[Rule], config=None, **options) -> list[Finding]:
@@ -41,19 +53,52 @@ def run_rules(source: Source, rules: list[Rule], config=None, **options) -> list
         checker = Checker(rules)
         run(open_source(source, opts), build_decoder(opts, checker), [], opts)
         return checker.findings
+    if isinstance(source, ByBus):
+        return _run_buses(source, rules)
+    checker = Checker(rules, config)
+    last = None
+    for last in source:
+        checker.process(_view(last))
+    checker.finish(_end(last))
+    return checker.findings
+
+
+def _view(b: DecodedBatch) -> DecodedBatch:
+    """A batch for the checker to add to: the records copied, the caller's unchanged."""
+    return DecodedBatch(b.frames, b.service, b.node, b.pdo, b.notes, list(b.records), b.signals)
+
+
+def _end(last: DecodedBatch | None) -> DecodedBatch:
+    """An empty end-of-log batch, of the channels of the log's last batch."""
     from .pipeline import Decoder
 
-    checker = Checker(rules, config)
-    # decoded batches: run the checker as a processor on each (copy records so the
-    # caller's batches are not changed), then an empty end-of-log batch
-    last = None
-    for b in source:
-        view = DecodedBatch(b.frames, b.service, b.node, b.pdo, b.notes, list(b.records), b.signals)
-        checker.process(view)
-        last = b
-    tail = Decoder().decode(FrameBatch.empty(last.frames.channels if last else ()))
-    checker.finish(tail)
-    return checker.findings
+    return Decoder().decode(FrameBatch.empty(last.frames.channels if last else ()))
+
+
+def _run_buses(source: ByBus, rules: list[Rule]) -> list[Finding]:
+    """One Checker per bus (a fresh copy of the rules each, that bus's configuration),
+    times from the log's first frame, an assertion told absent only when no bus has its
+    subject (`engine.whole_log`), a node silent at the end judged against the log's last
+    frame whichever bus it was on: every bus's findings, each naming its bus."""
+    checkers = []
+    for k, (bus, _, config) in enumerate(source.parts):
+        c = Checker(copy.deepcopy(rules) if k else rules, config)
+        c.name_bus(bus)
+        c.first_bus = k == 0
+        checkers.append(c)
+    frames = [b.frames.t for _, batches, _ in source.parts for b in batches if len(b)]
+    for c in checkers:
+        c.t0 = min(float(t[0]) for t in frames) if frames else None
+    for c, (_, batches, _) in zip(checkers, source.parts, strict=True):
+        for b in batches:
+            c.process(_view(b))
+    whole_log(checkers)
+    end = max(float(t[-1]) for t in frames) if frames else None
+    for c, (_, batches, _) in zip(checkers, source.parts, strict=True):
+        c.t_last = end
+        c.finish(_end(batches[-1] if batches else None))
+    checkers[0].others = checkers[1:]
+    return checkers[0].findings
 
 
 def _fail(findings: list[Finding], what: str) -> None:

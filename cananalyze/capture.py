@@ -319,12 +319,24 @@ class Capture:
         return df
 
     # --- statistics and assertions for tests -------------------------------------
-    def heartbeat(self, node: int) -> dict:
+    def heartbeat(self, node: int, bus: str | None = None) -> dict:
         """Heartbeat gaps of one node in ms: count, min, median, mean, p99, max, jitter
-        (the numbers of `check --timing`; {"count": 0} with fewer than two heartbeats)."""
-        from .checks.timing import stats
+        (the numbers of `check --timing`; {"count": 0} with fewer than two heartbeats).
 
-        t = self.batch.t[(self.service == Service.HEARTBEAT) & (self.node == node)]
+        On a log of several buses the node on each bus is its own device: `bus` (a
+        channel name) says which, and is needed when the node beats on more than one."""
+        from .checks.timing import stats
+        from .errors import UsageError
+
+        fb = self.batch
+        mine = (self.service == Service.HEARTBEAT) & (self.node == node)
+        channels = np.unique(fb.channel[mine]).tolist()
+        if bus is not None and len(fb):
+            mine &= np.asarray(fb.channels, object)[fb.channel] == bus
+        elif bus is None and len(channels) > 1:
+            names = ", ".join(fb.channel_label(c) for c in channels)
+            raise UsageError(f"node {node} beats on several buses ({names}): give bus=")
+        t = fb.t[mine]
         # to the microsecond: epoch-second floats carry sub-us noise into every gap
         return {k: round(v, 3) if isinstance(v, float) else v for k, v in stats(np.diff(t)).items()}
 
@@ -346,41 +358,91 @@ class Capture:
         """What the checks compare against (network file, rules file, SDO writes, profiles)."""
         return self.checker.config if self.checker is not None else None
 
+    def _judged(self) -> tuple:
+        """(source, config) for the `assert_*` helpers: the decoded batch and `config`; on
+        a log of several buses each bus's own part and configuration (`assertions.ByBus`),
+        judged apart as `check` judges them (node 5 on can0 and on can1: two devices)."""
+        checkers = [] if self.checker is None else [self.checker, *self.checker.others]
+        if len(checkers) < 2:
+            return self.decoded(), self.config
+        from .assertions import ByBus
+        from .frames import OTHER_CHANNELS
+        from .records import SignalBlock
+
+        fb = self.batch
+        buses = [c.bus for c in checkers]
+        other = buses.index(OTHER_CHANNELS) if OTHER_CHANNELS in buses else 0
+        of_channel = np.array([buses.index(c) if c in buses else other for c in fb.channels])
+        row_bus = of_channel[fb.channel] if len(fb) else np.zeros(0, np.intp)
+        first = buses[0]
+        rec_bus = self.record_bus or [None] * len(self.records)
+        parts = []
+        for k, c in enumerate(checkers):
+            rows = np.flatnonzero(row_bus == k)
+            pos = np.full(len(fb) + 1, rows.size, np.int64)  # a row not its: at the end
+            pos[rows] = np.arange(rows.size)
+            records = [
+                (int(pos[row]) if 0 <= row < len(fb) else rows.size, rec)
+                for (row, rec), bus in zip(self.records, rec_bus, strict=True)
+                if (bus or first) == c.bus
+            ]
+            blocks = [
+                SignalBlock(pos[s.rows], s.node, s.pdo, s.cob_id, s.columns, s.units)
+                for s in self.series
+                if (s.bus or first) == c.bus
+            ]
+            batch = DecodedBatch(
+                fb.take(rows),
+                self.service[rows],
+                self.node[rows],
+                self.pdo[rows],
+                records=records,
+                signals=blocks,
+            )
+            parts.append((c.bus, [batch], c.config))
+        return ByBus(parts), None
+
     def assert_heartbeat(self, node: int, period_ms: float, tolerance: float = 0.1) -> None:
         """Every heartbeat gap of `node` within period_ms ± tolerance (a fraction)."""
         from .assertions import assert_heartbeat
 
-        assert_heartbeat(self.decoded(), node, period_ms, tolerance, config=self.config)
+        source, config = self._judged()
+        assert_heartbeat(source, node, period_ms, tolerance, config=config)
 
     def assert_no_emcy(self, allow: Iterable[int] = (), node: int | None = None) -> None:
         """No EMCY (other than the `allow`ed error codes), from any node or from `node`."""
         from .assertions import assert_no_emcy
 
-        assert_no_emcy(self.decoded(), allow, node, config=self.config)
+        source, config = self._judged()
+        assert_no_emcy(source, allow, node, config=config)
 
     def assert_sdo_ok(self, max_latency_ms: float | None = None) -> None:
         """Every SDO transfer ends ok (no abort, timeout or protocol error), none slower."""
         from .assertions import assert_sdo_ok
 
-        assert_sdo_ok(self.decoded(), max_latency_ms, config=self.config)
+        source, config = self._judged()
+        assert_sdo_ok(source, max_latency_ms, config=config)
 
     def assert_pdo_rate(self, cob_id: int, min_hz: float, max_hz: float) -> None:
         """The PDO on `cob_id` arrives at min_hz..max_hz over the log."""
         from .assertions import assert_pdo_rate
 
-        assert_pdo_rate(self.decoded(), cob_id, min_hz, max_hz, config=self.config)
+        source, config = self._judged()
+        assert_pdo_rate(source, cob_id, min_hz, max_hz, config=config)
 
     def assert_signal_range(self, node: int, signal: str, lo: float, hi: float) -> None:
         """Every decoded value of `signal` from `node` within lo..hi (and seen at all)."""
         from .assertions import assert_signal_range
 
-        assert_signal_range(self.decoded(), node, signal, lo, hi, config=self.config)
+        source, config = self._judged()
+        assert_signal_range(source, node, signal, lo, hi, config=config)
 
     def assert_operational_after_boot(self, node: int, within_s: float) -> None:
         """After each boot-up, `node` is operational within `within_s` seconds."""
         from .assertions import assert_operational_after_boot
 
-        assert_operational_after_boot(self.decoded(), node, within_s, config=self.config)
+        source, config = self._judged()
+        assert_operational_after_boot(source, node, within_s, config=config)
 
     @cached_property
     def nodes(self) -> pd.DataFrame:

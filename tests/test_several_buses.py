@@ -986,3 +986,61 @@ def test_jsonl_sdo_records_say_which_bus(tmp_path, capsys):
     recs = [json.loads(ln) for ln in capsys.readouterr().out.splitlines()]
     assert [r for r in recs if r["kind"] == "sdo" and "bus" in r] == []
     assert len([r for r in recs if r["kind"] == "sdo"]) == 3
+
+
+# --- load()'s assert_* helpers judge each bus on its own ---------------------------------
+
+
+def _raised(fn, *args) -> str | None:
+    try:
+        fn(*args)
+    except AssertionError as exc:
+        return str(exc)
+    return None
+
+
+def test_capture_assertions_judge_each_bus(tmp_path):
+    """`load(log).assert_*` judge node 5 on can0 and on can1 apart, as the same helpers given
+    the log's path do (the pipeline's one Checker per bus): a clean two-bus log passes
+    (judged merged: 50 'gaps' of 1 ms, a false alarm), a dropout on can1 fails naming
+    can1, an absent node is told once, the SDO abort on can1 names its bus."""
+    from cananalyze import assertions
+
+    clean = _log(tmp_path, _beats("can0", "05", 1000.0, 50) + _beats("can1", "05", 1000.001, 50))
+    cap = load(str(clean))
+    assert _raised(cap.assert_heartbeat, 5, 100) is None
+    assert _raised(assertions.assert_heartbeat, str(clean), 5, 100) is None
+
+    lines = _beats("can0", "05", 1000.0, 50) + _beats("can1", "05", 1000.001, 50, skip={20, 21})
+    log = _log(tmp_path, lines, "drop.log")
+    cap = load(str(log))
+    got = _raised(cap.assert_heartbeat, 5, 100)
+    assert got is not None and "1 violation(s)" in got and "can1 node 5" in got
+    assert got == _raised(assertions.assert_heartbeat, str(log), 5, 100)
+    absent = _raised(cap.assert_heartbeat, 7, 100)
+    assert (
+        absent is not None and "1 violation(s)" in absent and "no heartbeat from node 7" in absent
+    )
+    assert absent == _raised(assertions.assert_heartbeat, str(log), 7, 100)
+
+    sdo = _log(tmp_path, _summary_log_lines(), "sdo.log")
+    got = _raised(load(str(sdo)).assert_sdo_ok)
+    assert got is not None and "1 violation(s)" in got and "can1 node 5" in got
+    assert got == _raised(assertions.assert_sdo_ok, str(sdo))
+
+
+def test_capture_heartbeat_per_bus(tmp_path):
+    """`load(log).heartbeat(5, bus=...)`: each bus's node 5 its own gaps (100 ms on can0,
+    two 200 ms gaps on can1); without `bus` on a node of two buses, a usage error naming
+    them (merged, the 'gaps' were 1 and 99 ms)."""
+    from cananalyze.errors import UsageError
+
+    lines = _beats("can0", "05", 1000.0, 50) + _beats("can1", "05", 1000.001, 50, skip={20, 22})
+    cap = load(str(_log(tmp_path, lines)))
+    can0, can1 = cap.heartbeat(5, bus="can0"), cap.heartbeat(5, bus="can1")
+    assert can0["count"] == 49 and can0["max"] == pytest.approx(100.0)
+    assert can1["count"] == 47 and can1["max"] == pytest.approx(200.0)
+    with pytest.raises(UsageError, match="can0, can1"):
+        cap.heartbeat(5)
+    one = load(str(_log(tmp_path, _beats("can0", "05", 1000.0, 5), "one.log")))
+    assert one.heartbeat(5)["count"] == 4
