@@ -331,9 +331,13 @@ class Capture:
         fb = self.batch
         mine = (self.service == Service.HEARTBEAT) & (self.node == node)
         channels = np.unique(fb.channel[mine]).tolist()
-        if bus is not None and len(fb):
-            mine &= np.asarray(fb.channels, object)[fb.channel] == bus
-        elif bus is None and len(channels) > 1:
+        if bus is not None:
+            names = {fb.channel_label(c): c for c in np.unique(fb.channel).tolist()}
+            if bus not in names:
+                known = ", ".join(names) or "none"
+                raise UsageError(f"no bus {bus!r} in this log (its buses: {known})")
+            mine &= fb.channel == names[bus]
+        elif len(channels) > 1:
             names = ", ".join(fb.channel_label(c) for c in channels)
             raise UsageError(f"node {node} beats on several buses ({names}): give bus=")
         t = fb.t[mine]

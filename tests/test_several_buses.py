@@ -821,26 +821,35 @@ def test_one_bus_sdo_table_has_no_bus_column(tmp_path):
     assert pq.read_table(out / "sdo.parquet").num_rows == 3
 
 
-def test_fleet_sdo_bus_column(tmp_path):
-    """A dataset's sdo parts all have a `bus` (the fleet schema's): each transfer's on a
-    log of two buses, null on a log of one; DuckDB reads them as one table."""
-    import duckdb
+def _fleet_parts(tmp_path, logs, table: str, opts: Options) -> str:
+    """The logs processed into one fleet dataset; every part of `table` in the fleet
+    schema (pyarrow); DuckDB's `read_parquet` of those parts."""
     import pyarrow.parquet as pq
 
     from cananalyze.fleet.schema import schema as fleet_schema
     from cananalyze.fleet.task import LogTask, process
 
+    dataset = tmp_path / "ds"
+    for log in logs:
+        assert process(LogTask(str(log), str(dataset), opts))["status"] == "ok"
+    for p in (dataset / table).glob("date=*/*.parquet"):
+        assert pq.read_schema(p).remove_metadata() == fleet_schema(table).remove_metadata()
+    return f"read_parquet('{dataset}/{table}/*/*.parquet')"
+
+
+def _duckdb(sql: str) -> list[tuple]:
+    import duckdb
+
+    return duckdb.sql(sql).fetchall()
+
+
+def test_fleet_sdo_bus_column(tmp_path):
+    """A dataset's sdo parts all have a `bus` (the fleet schema's): each transfer's on a
+    log of two buses, null on a log of one; DuckDB reads them as one table."""
     two = _log(tmp_path, _summary_log_lines())
     one = _log(tmp_path, [ln for ln in _summary_log_lines() if ln[1] == "can0"], "one.log")
-    dataset = tmp_path / "ds"
-    for log in (two, one):
-        assert process(LogTask(str(log), str(dataset), Options(checks=True)))["status"] == "ok"
-    for p in (dataset / "sdo").glob("date=*/*.parquet"):
-        assert pq.read_schema(p).remove_metadata() == fleet_schema("sdo").remove_metadata()
-    rows = duckdb.sql(
-        f"select source, bus, count(*) from read_parquet('{dataset}/sdo/*/*.parquet') "
-        "group by all order by all"
-    ).fetchall()
+    parts = _fleet_parts(tmp_path, (two, one), "sdo", Options(checks=True))
+    rows = _duckdb(f"select source, bus, count(*) from {parts} group by all order by all")
     assert rows == [(str(one), None, 3), (str(two), "can0", 3), (str(two), "can1", 3)]
 
 
@@ -936,25 +945,14 @@ def test_one_bus_signals_have_no_bus_column(tmp_path):
 def test_fleet_signals_bus_column(tmp_path):
     """A dataset's signals parts (one row per value) all have a `bus`: each row's on a log
     of two buses, null on a log of one (DuckDB reads them as one table)."""
-    import duckdb
-    import pyarrow.parquet as pq
     from conftest import SAMPLES
     from exported import NETWORK
 
-    from cananalyze.fleet.schema import schema as fleet_schema
-    from cananalyze.fleet.task import LogTask, process
-
     two, one = _late_pdo_log(tmp_path), SAMPLES / "faults.log"
-    dataset = tmp_path / "ds"
-    for log in (two, one):
-        task = LogTask(str(log), str(dataset), Options(checks=True, network=NETWORK))
-        assert process(task)["status"] == "ok"
-    for p in (dataset / "signals").glob("date=*/*.parquet"):
-        assert pq.read_schema(p).remove_metadata() == fleet_schema("signals").remove_metadata()
-    rows = duckdb.sql(
-        f"select source, bus, count(distinct t) from read_parquet('{dataset}/signals/*/*.parquet') "
-        "where node = 5 group by all order by all"
-    ).fetchall()
+    parts = _fleet_parts(tmp_path, (two, one), "signals", Options(checks=True, network=NETWORK))
+    rows = _duckdb(
+        f"select source, bus, count(distinct t) from {parts} where node = 5 group by all order by all"
+    )
     want = _pdo_frames(two, 5)
     assert rows == sorted(
         [
@@ -1042,5 +1040,7 @@ def test_capture_heartbeat_per_bus(tmp_path):
     assert can1["count"] == 47 and can1["max"] == pytest.approx(200.0)
     with pytest.raises(UsageError, match="can0, can1"):
         cap.heartbeat(5)
+    with pytest.raises(UsageError, match="no bus 'can2' in this log"):
+        cap.heartbeat(5, bus="can2")
     one = load(str(_log(tmp_path, _beats("can0", "05", 1000.0, 5), "one.log")))
     assert one.heartbeat(5)["count"] == 4

@@ -576,25 +576,26 @@ class TableSink(OutputSink):
             return
         pieces: dict = {}
         order = None
+        slots = np.array([k for k, _ in sdo], np.int64)  # each row's record slot, as merged
         if split is not None:
             fields, fast, _ = split
             keep = None
             if fields.aborted:  # (rare) read as the dicts they are
                 gone = sorted(fields.aborted)
                 sdo.extend((int(fast.slots[j]), fields.aborted[j]) for j in gone)
+                slots = np.array([k for k, _ in sdo], np.int64)
                 keep = np.delete(np.arange(len(fast.slots)), gone)
             pieces = sdo_chunks.fast_pieces(fields, keep)
-            slots = fast.slots if keep is None else fast.slots[keep]
             if sdo:
-                at = np.concatenate((np.array([k for k, _ in sdo], np.int64), slots))
-                order = np.argsort(at, kind="stable")
+                slots = np.concatenate((slots, fast.slots if keep is None else fast.slots[keep]))
+                order = np.argsort(slots, kind="stable")
+                slots = slots[order]
+            else:
+                slots = fast.slots
         bus = None  # a log of several buses: each row's (None: the first bus's)
         if batch.several:
             self._sdo_bus = True
-            at = np.array([k for k, _ in sdo], np.int64)
-            if split is not None:
-                at = np.concatenate((at, slots))
-            bus = batch.record_buses(at if order is None else at[order])
+            bus = batch.record_buses(slots)
         rows = []
         for _, r in sdo:  # one C call per record that has every column (nearly all)
             try:

@@ -84,9 +84,8 @@ def frame_rows(t_all: np.ndarray, parts: list[tuple], names: SignalColumns) -> d
     """One row per (block, frame), sorted by time then series: the columns of a batch.
 
     `parts`: per signal block (rows, node, pdo code, cob_id, rank, {signal: values},
-    units[, bus code]); `rank` orders series that share a time (as the long form does).
-    Returns t, node, pdo codes, cob_id, bus codes (-1: none given), and per signal
-    column (values, valid).
+    units, bus code); `rank` orders series that share a time (as the long form does).
+    Returns t, node, pdo codes, cob_id, bus codes, and per signal column (values, valid).
     """
     sizes = [len(p[0]) for p in parts]
     rows = np.concatenate([p[0] for p in parts])
@@ -104,7 +103,7 @@ def frame_rows(t_all: np.ndarray, parts: list[tuple], names: SignalColumns) -> d
         "node": np.repeat(np.array([p[1] for p in parts], np.int16), sizes),
         "pdo": np.repeat(np.array([p[2] for p in parts], np.int32), sizes),
         "cob_id": np.repeat(np.array([p[3] for p in parts], np.uint32), sizes),
-        "bus": np.repeat(np.array([p[7] if len(p) > 7 else -1 for p in parts], np.int32), sizes),
+        "bus": np.repeat(np.array([p[7] for p in parts], np.int32), sizes),
     }
     if order is not None:
         for k in ("node", "pdo", "cob_id", "bus"):
@@ -116,7 +115,7 @@ def frame_rows(t_all: np.ndarray, parts: list[tuple], names: SignalColumns) -> d
         int(inv[s0 : s0 + n].min()) if n else total for s0, n in zip(start, sizes, strict=True)
     ]
     for k in sorted(range(len(parts)), key=first.__getitem__):
-        cols, units = parts[k][5:7]
+        _, _, _, _, _, cols, units, _ = parts[k]
         where = inv[start[k] : start[k] + sizes[k]]
         for signal, values in cols.items():
             name = names.column(signal, units.get(signal))
@@ -146,8 +145,8 @@ def arrow_table(
     rows: dict, labels: list[str], sch: pa.Schema, buses: list[str] | None = None
 ) -> pa.Table:
     """The batch's rows in the file's schema (signals it lacks: null); its `bus`, when
-    the schema has one, from the rows' bus codes into `buses` (-1: `buses[0]`, the first
-    bus: rows decoded before a second bus was seen)."""
+    the schema has one, from the rows' bus codes into `buses` (-1: none, on a log of one
+    bus: null)."""
     n = len(rows["t"])
     arrays = [
         ab.numeric(rows["t"]),
@@ -161,8 +160,8 @@ def arrow_table(
         got = rows["signals"].get(f.name)
         arrays.append(pa.nulls(n, pa.float64()) if got is None else ab.numeric(got[0], ~got[1]))
     if "bus" in sch.names:
-        code = np.maximum(rows["bus"], 0)
-        arrays.append(pa.array(buses or [None], BUS).take(ab.numeric(code.astype(np.int64))))
+        code = rows["bus"].astype(np.int64)
+        arrays.append(pa.array(buses or [], BUS).take(ab.numeric(code, code < 0)))
     return pa.Table.from_arrays(arrays, schema=sch)
 
 
@@ -186,8 +185,8 @@ class WideWriter:
         self.compression = compression
         self.names = SignalColumns()
         self.bus = False  # a log of several buses: a bus column (parts before it: the first's)
-        self.buses: list[str] = []  # bus names, the first bus first
-        self.buffer: list[tuple[dict, list[str], list[str]]] = []
+        self.buses: list[str] = []  # the rows' bus codes index it, the first bus first
+        self.buffer: list[tuple[dict, list[str]]] = []
         self.buffered = 0
         self.bytes = 0
         self.rows = 0
@@ -198,10 +197,10 @@ class WideWriter:
     def add(self, rows: dict, labels: list[str], buses: list[str] | None = None) -> None:
         n = len(rows["t"])
         if buses:
-            self.buses = buses
+            self.buses = buses  # (a growing list: earlier rows' codes index it too)
         if not n:
             return
-        self.buffer.append((rows, labels, buses or []))
+        self.buffer.append((rows, labels))
         self.buffered += n
         self.bytes += n * (22 + 9 * len(rows["signals"]))
         if self.buffered >= _writer.ROW_GROUP or self.bytes >= _writer.ROW_GROUP_BYTES:
@@ -225,7 +224,7 @@ class WideWriter:
         if self.writer is None:
             self.schema = want
             self.writer = pq.ParquetWriter(self.path, want, **self._options())
-        tables = [arrow_table(rows, labels, want, buses) for rows, labels, buses in self.buffer]
+        tables = [arrow_table(rows, labels, want, self.buses) for rows, labels in self.buffer]
         table = pa.concat_tables(tables) if tables else pa.Table.from_batches([], want)
         self.buffer, self.buffered, self.bytes = [], 0, 0
         self.writer.write_table(table, row_group_size=_writer.ROW_GROUP)
@@ -250,7 +249,8 @@ class WideWriter:
             for src in sources:
                 f = pq.ParquetFile(src)
                 for i in range(f.num_row_groups):
-                    out.write_table(conform(f.read_row_group(i), self.schema, self.buses[:1]))
+                    first = self.buses[0] if self.buses else None
+                    out.write_table(conform(f.read_row_group(i), self.schema, first))
                 f.close()
         self.discard_parts()
 
@@ -298,16 +298,16 @@ def resort(path: Path, compression: str) -> None:
             tmp.unlink()
 
 
-def conform(table: pa.Table, sch: pa.Schema, first: list[str] | None = None) -> pa.Table:
+def conform(table: pa.Table, sch: pa.Schema, first: str | None = None) -> pa.Table:
     """`table` with the columns of `sch` (those it lacks null), in its order; a `bus` it
-    lacks is `first[0]` (rows written before a second bus was seen: the first bus's)."""
+    lacks is `first` (rows written before a second bus was seen: the first bus's)."""
     n = table.num_rows
     cols = []
     for f in sch:
         if f.name in table.column_names:
             cols.append(table.column(f.name))
-        elif f.name == "bus" and first:
-            cols.append(pa.array(first * n, f.type))
+        elif f.name == "bus" and first is not None:
+            cols.append(pa.array([first] * n, f.type))
         else:
             cols.append(pa.nulls(n, f.type))
     return pa.Table.from_arrays(cols, schema=sch)
