@@ -141,19 +141,21 @@ class Capture:
     @cached_property
     def drive_states(self) -> pd.DataFrame:
         """Each CiA 402 axis's state timeline: t, node, state, statusword, source, row
-        (one row per state entered; source "tpdo1", "sdo", ...)."""
+        (one row per state entered; source "tpdo1", "sdo", ...), and bus on a log of
+        several buses (node 1 on can0 and node 1 on can1 are two drives)."""
         return self._drive_table("state", "statusword")
 
     @cached_property
     def drive_commands(self) -> pd.DataFrame:
-        """Each CiA 402 axis's commands: t, node, command, controlword, source, row."""
+        """Each CiA 402 axis's commands: t, node, command, controlword, source, row (and
+        bus, as drive_states)."""
         return self._drive_table("command", "controlword")
 
     def _drive_table(self, kind: str, word: str) -> pd.DataFrame:
         import pandas as pd
 
         rows = [c for c in self.drive_changes if c.kind == kind]
-        return pd.DataFrame(
+        df = pd.DataFrame(
             {
                 "t": np.array([c.t for c in rows], np.float64),
                 "node": np.array([c.node for c in rows], np.int16),
@@ -163,6 +165,10 @@ class Capture:
                 "row": np.array([c.row for c in rows], np.int64),
             }
         )
+        if any(c.bus is not None for c in rows):  # several buses: which one, last (as events)
+            first = self._first_bus()
+            df["bus"] = np.array([first if c.bus is None else c.bus for c in rows], object)
+        return df
 
     @cached_property
     def signals(self) -> pd.DataFrame:

@@ -302,7 +302,7 @@ def merge_buses(
             sb.rows = rows[sb.rows]
             out.signals.append(sb)
         out.row_notes.extend((rows[r], note) for r, note in part.row_notes)
-        out.drive.extend(c._replace(row=int(at[c.row])) for c in part.drive)
+        out.drive.extend(c._replace(row=int(at[c.row]), bus=part.bus) for c in part.drive)
         if len(part.findings):
             f = part.findings
             f.row = at[np.clip(f.row, 0, len(rows))]
@@ -349,7 +349,7 @@ def merge_ends(parts: list[DecodedBatch]) -> DecodedBatch:
     of_part = np.repeat(np.arange(len(parts)), [len(p.records) for p in parts])
     out.record_bus = _bus_names([p.bus for p in parts], of_part)
     out.bus = None
-    out.drive = [c for p in parts for c in p.drive]
+    out.drive = [c._replace(bus=p.bus) for p in parts for c in p.drive]
     out.findings = FindingColumns.concat([p.findings for p in parts]).sort()
     return out
 

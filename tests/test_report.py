@@ -530,36 +530,27 @@ def test_a_clock_that_jumps_by_years_costs_nothing(tmp_path):
     assert len(_values(load["data"][0]["y"])) <= 2000
 
 
-def test_drive_state_section_reads_the_event_log(tmp_path):
-    """The place left for CiA 402: `drive_state` events in the event log become one lane
-    per drive (here put there by a sink ahead of the report, as the decoder will)."""
-    from cananalyze.events.columns import EventColumns, Row
-    from cananalyze.io.source import read_all
-    from cananalyze.outputs.report.sink import ReportSink
-    from cananalyze.outputs.sink import Sink
-    from cananalyze.pipeline import MemorySource, Options, build_decoder, run
+def test_drive_state_section_of_a_real_drive(tmp_path):
+    """ZeroErr's enable sequence (remapped TPDO1 carries the statusword): one lane for
+    the drive, a bar per state entered, named by the state (as load().drive_states)."""
+    import cananalyze
 
-    class DriveStates(Sink):
-        needs_events = True
-
-        def write(self, batch):
-            if len(batch.frames):
-                t = float(batch.frames.t[0])
-                rows = [
-                    Row(t + 1.0, "drive_state", 3, 2, "Switched on", None),
-                    Row(t + 2.0, "drive_state", 3, 2, "Operation enabled", None),
-                ]
-                batch.events = EventColumns.concat([batch.events, EventColumns.from_rows(rows)])
-
+    log = real_file("SeonilChoi__CANOPEN-SDK/log2.txt")
     out = tmp_path / "drive.html"
-    opts = Options(checks=True)
-    fb = read_all(SAMPLES / "faults.log")
-    run(MemorySource(fb), build_decoder(opts), [DriveStates(), ReportSink(out)], opts)
+    r = cli("report", str(log), "--device", "11=cia402", "-o", str(out), "-q")
+    assert r.returncode in (0, 1), r.stderr
     text, _, figs = parse(out)
     assert '<section id="drive">' in text
     fig = next(f for f in figs.values() if f["layout"]["title"]["text"] == "Drive state per node")
-    assert {d["name"] for d in fig["data"]} == {"Switched on", "Operation enabled"}
-    assert all(d["y"] == ["node 3"] for d in fig["data"])
+    states = cananalyze.load(log, device={11: "cia402"}).drive_states.state.tolist()
+    assert states == [
+        "switch on disabled",
+        "ready to switch on",
+        "switched on",
+        "operation enabled",
+    ]
+    assert [d["name"] for d in fig["data"]] == states
+    assert all(d["y"] == ["node 11"] for d in fig["data"])
 
 
 def test_pdo_rates_beside_their_configuration(faults_report):

@@ -325,6 +325,8 @@ def batch_event_columns(
         if several:
             for part in parts[1:]:
                 part.bus = batch.row_buses(part.row - offset)
+            at = np.array([r.row - offset for r in states], np.int64)
+            states = [r._replace(bus=b) for r, b in zip(states, batch.row_buses(at), strict=True)]
         events = EventColumns.concat(parts)
     if batch.drive:
         drive = drive_event_columns(batch.drive, offset)

@@ -36,6 +36,7 @@ class DriveChange(NamedTuple):
     word: int  # the statusword or controlword
     source: str  # "tpdo1", "rpdo1", "sdo"
     cob_id: int = 0  # the PDO's COB-ID (0: SDO or reset)
+    bus: str | None = None  # a log of several buses: which one's drive (pipeline.merge_buses)
 
     @property
     def name(self) -> str:

@@ -428,7 +428,8 @@ def drive_states(s, figs: Figures) -> str:
     events (`ReportSink._drive_states`); no section while the log has none."""
     if not s.drive_states:
         return ""
-    fig = plots.state_timeline(s.drive_states, s.t0, s.t_last or s.t0, "Drive state per node")
+    lanes = [(t, s.who(bus, n), state) for t, (bus, n), state in s.drive_states]
+    fig = plots.state_timeline(lanes, s.t0, s.t_last or s.t0, "Drive state per node")
     return '<section id="drive"><h2>Drive states (CiA 402)</h2>' + figs.add(fig) + "</section>"
 
 

@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from ...checks.finding import Finding
-from ...events.columns import EMCY, KINDS, NO_NODE
+from ...events.columns import EMCY, NO_NODE
+from ...network.drive_tracker import STATE
 from ...network.node_tally import NodeTally
 from ...protocol.services import Service
 from ..atomic import Staged, check_writable
@@ -22,7 +23,6 @@ from ..busload import frame_bits
 from ..sink import Sink
 from .accum import Envelope, LogHistogram, WindowSums
 
-DRIVE_STATE = "drive_state"  # the event kind of CiA 402 state changes (see sections.drive_states)
 MAX_STATES = 20_000  # NMT state changes kept for the timelines (a reset loop makes many)
 MAX_LISTED = 500  # SDO aborts listed one by one; counted beyond
 # EMCY frames kept for the EMCY table, counted beyond: a reset (code 0) ends an error's
@@ -115,7 +115,7 @@ class ReportSink(Sink):
         # two devices; the page names the bus only when the log has more than one
         self.states: list[tuple[float, tuple[str, int], str]] = []  # t, (bus, node), state
         self.states_dropped = 0
-        self.drive_states: list[tuple[float, int, str]] = []
+        self.drive_states: list[tuple[float, tuple[str, int], str]] = []  # as states
         # ("heartbeat"|"guarding", node), and the bus's name once there are several
         self.errctl: dict[tuple, Gaps] = {}
         self.pdos: dict[tuple[str, int], Gaps] = {}  # (bus, COB-ID) -> gaps
@@ -278,20 +278,15 @@ class ReportSink(Sink):
         self.aborts.extend(zip(at.tolist(), [r for _, r in found], strict=True))
 
     def _drive_states(self, batch) -> None:
-        """CiA 402 drive states, once the decoder puts them in the event log as kind
-        DRIVE_STATE (the drive-state lane): the report draws them as the NMT lanes."""
-        ev = batch.events
-        if ev is None or not len(ev) or DRIVE_STATE not in KINDS:
-            return
-        at = np.flatnonzero(ev.kind == KINDS.index(DRIVE_STATE))
-        room = MAX_STATES - len(self.drive_states)
-        for tt, nd, msg in zip(
-            ev.t[at[:room]].tolist(),
-            ev.node[at[:room]].tolist(),
-            ev.message[at[:room]],
-            strict=True,
-        ):
-            self.drive_states.append((tt, nd, msg))
+        """CiA 402 drive states, drawn as the NMT lanes: a lane per bus and node (node 1
+        on can0 and node 1 on can1 are two drives), a bar per state entered."""
+        fb = batch.frames
+        for c in batch.drive:
+            if c.kind != STATE:
+                continue
+            if len(self.drive_states) >= MAX_STATES:
+                break
+            self.drive_states.append((c.t, (_bus_of(fb, c.row), c.node), c.name))
 
     def _emcy(self, batch) -> None:
         fb = batch.frames
