@@ -36,6 +36,16 @@ def signal_path(node: int, pdo: str) -> str:
     return f"/node/{node}/{pdo}" if node >= 0 else f"/dbc/{pdo}"
 
 
+def on_bus(bus: str | None, path: str) -> str:
+    """Where one bus's copy of a path lives when the log has several: '/can1' + path (MCAP
+    topics, rerun entities); unchanged for one bus (None). Characters a path should not
+    hold become '_'."""
+    if bus is None:
+        return path
+    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in bus) or "_"
+    return f"/{safe}{path}"
+
+
 @dataclass
 class SignalBlock:
     """Decoded values of one PDO (one COB-ID and mapping) for some rows of a batch."""

@@ -551,7 +551,8 @@ def _layout(chunks) -> list[tuple]:
     return sorted(out)
 
 
-def read_rrd(path: Path) -> Rrd:
+def read_rrd(path: Path, layout: bool = True) -> Rrd:
+    """layout=False: the rows only (a live recording sends its layout again as it grows)."""
     from rerun.chunk import RrdReader
 
     reader = RrdReader(path)
@@ -566,6 +567,8 @@ def read_rrd(path: Path) -> Rrd:
                 if "time" in r:  # a Timestamp (epoch times) or a Timedelta (relative)
                     r["time"] = r["time"].value
                 rows[chunk.entity_path].append(r)
+    if not layout:
+        return Rrd(dict(rows), dict(static), [])
     (blueprint,) = [s for s in reader.blueprints() if s.kind == "blueprint"]
     return Rrd(dict(rows), dict(static), _layout(reader.stream(store=blueprint)))
 

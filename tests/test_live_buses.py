@@ -182,7 +182,7 @@ def test_two_buses_live_in_foxglove_apart():
     from helpers.foxglove_client import FoxgloveClient
 
     from cananalyze.outputs.foxglove.sink import FoxgloveSink
-    from cananalyze.outputs.mcap.topics import on_bus
+    from cananalyze.records import on_bus
 
     a, b = unique_channel("foxA"), unique_channel("foxB")
     start = threading.Event()

@@ -263,11 +263,11 @@ def test_blueprint_has_a_plot_per_pdo_and_a_lane_per_node(cap, files):
     """Checked against a screenshot of the viewer: a node's PDOs on one axis hid
     the digital input bytes under 10 V analogue values, and a `/node/*/nmt`
     pattern left the NMT lanes empty, so both are spelled out."""
-    from cananalyze.outputs.rerun.send import blueprint_for
+    from cananalyze.outputs.rerun.send import Layout
 
-    bp = blueprint_for(
-        {(s.node, s.pdo, s.cob_id) for s in cap.series}, {e.node for e in cap.state_changes}
-    )
+    layout = Layout()
+    layout.add(cap)
+    bp = layout.blueprint()
     plots, states, log = bp.root_container.contents
     columns = {c.name: [(v.origin, v.name) for v in c.contents] for c in plots.contents[:-1]}
     assert columns == {
@@ -295,13 +295,13 @@ def test_blueprint_puts_many_nodes_in_a_grid(tmp_path):
     from generate import generate
 
     from cananalyze.io.logfile import write_log
-    from cananalyze.outputs.rerun.send import blueprint_for
+    from cananalyze.outputs.rerun.send import Layout
 
     write_log(generate(3000), tmp_path / "g.log")
     c = cananalyze.load(tmp_path / "g.log", device=[f"{n}=dat7014" for n in range(1, 17)])
-    bp = blueprint_for(
-        {(s.node, s.pdo, s.cob_id) for s in c.series}, {e.node for e in c.state_changes}
-    )
+    layout = Layout()
+    layout.add(c)
+    bp = layout.blueprint()
     plots, states, _ = bp.root_container.contents
     assert isinstance(plots, rrb.Grid)
     assert [col.name for col in plots.contents[:-1]] == [f"node {n}" for n in range(1, 17)]
@@ -317,6 +317,17 @@ def test_bus_load_of_steady_traffic_is_flat_to_the_end():
     starts, load = load_series(t, np.full(t.size, 111), 0.1, 250000)
     assert starts[0] == t[0] and len(starts) == 10
     assert load == pytest.approx(np.full(10, 111 / 0.01 / 250000 * 100), rel=0.15)
+
+
+def test_bus_load_windows_start_where_their_frames_are_when_times_go_back():
+    """A frame logged 0.15 s before the first one (a log's times going back) opens the
+    window 9.8 s, not one labelled 10.0 s that holds frames of 9.85 s."""
+    from cananalyze.outputs.busload import load_series
+
+    t = np.array([10.0, 10.05, 9.85, 10.28])
+    starts, load = load_series(t, np.full(t.size, 100), 0.1)
+    assert starts.tolist() == pytest.approx([9.8, 9.9, 10.0, 10.1, 10.2])
+    assert load[starts.round(1).tolist().index(9.8)] == pytest.approx(100 / 0.1)
 
 
 def test_decode_rerun_and_connect_are_exclusive(capsys):

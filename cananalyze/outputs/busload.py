@@ -63,9 +63,10 @@ def load_series(
         return np.zeros(0), np.zeros(0)
     t0 = float(t[0])
     idx = np.floor((t - t0) / window).astype(np.int64)
-    idx -= idx.min()
+    lo = int(idx.min())  # below 0 when times went back before the first frame's
+    idx -= lo
     sums = np.bincount(idx, weights=bits, minlength=int(idx.max()) + 1)
-    return load_windows(sums, t0, float(t[-1]), window, bitrate)
+    return load_windows(sums, t0 + lo * window, float(t[-1]), window, bitrate)
 
 
 def load_windows(

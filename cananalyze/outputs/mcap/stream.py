@@ -27,7 +27,7 @@ from ...events.build import EventState, batch_events_of
 from ...events.columns import KINDS, NO_NODE, NO_ROW
 from ...network.drive_tracker import STATE
 from ...network.node_tally import NodeTally
-from ...records import DecodedBatch, SignalBlock
+from ...records import DecodedBatch, SignalBlock, on_bus
 from ..atomic import atomic_path
 from ..tables.writer import WriterThread
 from .bulk import BulkMcapWriter
@@ -41,7 +41,6 @@ from .topics import (
     drive_payloads,
     drive_topic,
     event_payloads,
-    on_bus,
     signal_payloads,
     signal_schema,
     signal_topic,
@@ -72,7 +71,7 @@ def batch_messages(
     says which topic carries what: `export --mcap` writes these and `live --foxglove`
     serves them. `want(topic)` False leaves that stream's payloads None (not built: a
     live topic no client subscribed to costs nothing but its times). `buses`: the run
-    has several buses, each decoded topic is per bus (`topics.on_bus`); event rows count
+    has several buses, each decoded topic is per bus (`records.on_bus`); event rows count
     from `offset` (the batch's first row)."""
     out: list[tuple] = []
     keep = want or (lambda topic: True)

@@ -8,7 +8,7 @@ Topics (all JSON-encoded with JSON Schema, so Foxglove needs no configuration):
   /canopen/events     foxglove.Log: SDO transactions, EMCY, NMT commands, findings
   /can/frames         every raw frame (schema and builder: `frames.py`)
 With several buses (a log of several channels, `live -c can0,can1`), the decoded topics
-of each bus carry its name in front (`on_bus`): /can1/node/5/tpdo1, /can1/node/5/nmt_state;
+of each bus carry its name in front (`records.on_bus`): /can1/node/5/tpdo1, /can1/node/5/nmt_state;
 events name it ("can1 node 5"). /can/frames stays one topic of every frame, its channel
 in each message (Foxglove: `/can/frames{channel=="can1"}`): it is what the MCAP reader
 and `live --record` read back, and frames are the bulk a second copy would double.
@@ -195,15 +195,6 @@ def state_topic(node: int) -> str:
 
 def drive_topic(node: int) -> str:
     return f"/node/{node}/drive_state"
-
-
-def on_bus(bus: str | None, topic: str) -> str:
-    """The topic of one bus of several: '/can1' + topic; unchanged for one bus (None).
-    Characters a topic path should not hold become '_'."""
-    if bus is None:
-        return topic
-    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in bus) or "_"
-    return f"/{safe}{topic}"
 
 
 def write_merged(w: BulkMcapWriter, streams: list[tuple[int, np.ndarray, Texts]]) -> None:

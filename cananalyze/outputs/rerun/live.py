@@ -4,7 +4,8 @@ Same entities and blueprint as the offline export (`rerun_out`). Decoded batches
 are gathered for `every` seconds, turned into columns by the same Collector the
 offline Capture uses, and sent with `send_columns`: one call per series per flush,
 never one log call per frame. Bus load is summed into 0.1 s windows aligned to the
-clock, a window sent once it is complete. The .rrd sink is flushed after every
+clock, a window sent once it is complete; per bus once the session has several
+(`live -c can0,can1`: /can0/bus/load, /can1/bus/load, as the offline export). The .rrd sink is flushed after every
 send, so a file cut short holds everything up to the last flush; `close()` writes
 the footer, which is what Ctrl-C / SIGTERM reach through the live command's cleanup.
 """
@@ -20,7 +21,7 @@ from ...capture import Collector
 from ...errors import ProblemLog, UsageError
 from ...records import DecodedBatch
 from ..busload import frame_bits
-from .send import LOAD_WINDOW, blueprint_for, is_absolute, send_header, send_load, send_parts
+from .send import LOAD_WINDOW, Layout, is_absolute, send_header, send_load, send_parts
 
 
 class RerunLive:
@@ -47,13 +48,13 @@ class RerunLive:
         self.every = every
         self.counts: dict[str, int] = {}
         self._named: set[str] = set()
-        self._layout: tuple[set, set] = (set(), set())  # PDOs and NMT lanes in the blueprint
+        self._layout = Layout()  # what the blueprint sent last names
         self._collector = Collector(name, records=False)
         self._pending = 0
         self._last_send = time.monotonic()
         self._absolute: bool | None = None
-        self._load_bin: int | None = None  # window index of the incomplete bus load window
-        self._load_bits = 0.0
+        # channel name -> (window index, bits) of its incomplete bus load window
+        self._load_open: dict[str, tuple[int, float]] = {}
         self.rec = rr.RecordingStream("cananalyze", send_properties=True)
         sinks = []
         if spawn:
@@ -62,7 +63,7 @@ class RerunLive:
         if rrd:
             sinks.append(rr.FileSink(str(rrd)))
         try:
-            self.rec.set_sinks(*sinks, default_blueprint=blueprint_for(set(), set()))
+            self.rec.set_sinks(*sinks, default_blueprint=self._layout.blueprint())
         except Exception as exc:  # noqa: BLE001 - rerun raises its own types for sink failures
             raise UsageError(f"rerun: cannot open {rrd or 'the viewer'}: {exc}") from None
         self.rec.send_recording_name(name)
@@ -92,42 +93,67 @@ class RerunLive:
         if self._absolute is None and t.size:
             self._absolute = is_absolute(t)
         absolute = bool(self._absolute)
-        pdos = self._layout[0] | {(s.node, s.pdo, s.cob_id) for s in cap.series}
-        lanes = self._layout[1] | {e.node for e in cap.state_changes}
-        if (pdos, lanes) != self._layout:
-            self._layout = (pdos, lanes)
-            self.rec.send_blueprint(blueprint_for(pdos, lanes), make_active=True, make_default=True)
+        grew = self._layout.add(cap)
         send_parts(cap, self.rec, absolute, self.counts, self._named)
-        self._send_load(cap, absolute, final)
+        grew |= self._send_load(cap, absolute, final)
+        if grew:
+            self.rec.send_blueprint(self._layout.blueprint(), make_active=True, make_default=True)
         self.rec.flush()
 
-    def _send_load(self, cap, absolute: bool, final: bool) -> None:
+    def _send_load(self, cap, absolute: bool, final: bool) -> bool:
+        """Each bus's complete windows (and, when final, its open one); True when a bus
+        load entity is new to the layout."""
         fb = cap.batch
+        bits = frame_bits(fb.flags, fb.dlc).astype(np.float64)
+        parts: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        if len(fb):
+            for c in np.unique(fb.channel) if len(fb.channels) > 1 else fb.channel[:1]:
+                mine = fb.channel == c if len(fb.channels) > 1 else slice(None)
+                parts[fb.channel_label(int(c))] = (fb.t[mine], bits[mine])
+        several = len(fb.channels) > 1 or len(self._load_open) > 1
+        grew = False
+        for label in sorted(set(parts) | set(self._load_open)):
+            t, b = parts.get(label, (np.zeros(0), np.zeros(0)))
+            starts, values = self._windows(label, t, b, final)
+            if values.size:
+                if self.bitrate:
+                    values = values / self.bitrate * 100.0
+                path = send_load(
+                    self.rec,
+                    label if several else None,
+                    starts,
+                    values,
+                    absolute,
+                    self.bitrate,
+                    self.counts,
+                    self._named,
+                )
+                grew |= path not in self._layout.loads
+                self._layout.loads.add(path)
+        return grew
+
+    def _windows(self, label: str, t: np.ndarray, bits: np.ndarray, final: bool):
+        """(window starts, bits/s) of one bus's windows this send completes; the last stays
+        open for the next send unless final."""
         starts: list[float] = []
         values: list[float] = []
-        if len(fb):
-            idx = np.floor(fb.t / LOAD_WINDOW).astype(np.int64)
-            bits = frame_bits(fb.flags, fb.dlc).astype(np.float64)
-            if self._load_bin is not None:  # the window left open by the last flush
-                idx = np.concatenate([[self._load_bin], idx])
-                bits = np.concatenate([[self._load_bits], bits])
+        idx = np.floor(t / LOAD_WINDOW).astype(np.int64)
+        if label in self._load_open:  # the window left open by the last flush
+            at, open_bits = self._load_open.pop(label)
+            idx = np.concatenate([[at], idx])
+            bits = np.concatenate([[open_bits], bits])
+        if idx.size:
             first = int(idx.min())
             sums = np.bincount(idx - first, weights=bits)
-            last = first + sums.size - 1
             starts = ((first + np.arange(sums.size - 1)) * LOAD_WINDOW).tolist()
             values = (sums[:-1] / LOAD_WINDOW).tolist()
-            self._load_bin, self._load_bits = last, float(sums[-1])
-        if final and self._load_bin is not None:
-            starts.append(self._load_bin * LOAD_WINDOW)
-            values.append(self._load_bits / LOAD_WINDOW)
-            self._load_bin = None
-        if values:
-            load = np.array(values)
-            if self.bitrate:
-                load = load / self.bitrate * 100.0
-            send_load(
-                self.rec, np.array(starts), load, absolute, self.bitrate, self.counts, self._named
-            )
+            last = (first + sums.size - 1, float(sums[-1]))
+            if final:
+                starts.append(last[0] * LOAD_WINDOW)
+                values.append(last[1] / LOAD_WINDOW)
+            else:
+                self._load_open[label] = last
+        return np.array(starts), np.array(values)
 
     def close(self) -> None:
         """Send the rest and finish the recording (the .rrd footer); idempotent."""

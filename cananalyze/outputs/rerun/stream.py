@@ -6,8 +6,8 @@ Sending a whole Capture peaked at 1.1 GB for a 5M-frame log. Here each decoded
 batch becomes a small Capture of its own (the same Collector, NMT states carried
 across batches so lanes show changes only) whose signals, states and events go
 out with `send_columns` at once. The bus load is summed into its windows as
-frames come (a float per 0.1 s: 290 KB for an hour) and sent at the end with
-`busload.load_series`'s rule for the last window. The layout
+frames come (a float per 0.1 s: 290 KB for an hour), per bus on a log of several, and
+sent at the end with `busload.load_series`'s rule for the last window. The layout
 (blueprint) names every PDO and NMT lane, so it is sent when all are known:
 after the data, as the recording's default.
 """
@@ -28,7 +28,7 @@ from ..atomic import atomic_path
 from ..busload import frame_bits, load_windows
 from .send import (
     LOAD_WINDOW,
-    blueprint_for,
+    Layout,
     grpc_url,
     is_absolute,
     recording,
@@ -72,12 +72,11 @@ class StreamRrd:
             self.rec.spawn()
         send_header(self.rec, self.source, network or "")
         self._named: set[str] = set()
-        self._pdos: set[tuple[int, str, int]] = set()
-        self._lanes: set[int] = set()
-        self._drives: set[int] = set()
+        self._layout = Layout()
         self._absolute: bool | None = None
         self._event_state = EventState()
-        self._load = _LoadWindows(LOAD_WINDOW)
+        self._load: dict[str, _LoadWindows] = {}  # channel name -> its bus load windows
+        self._t0: float | None = None  # the first frame's time: every bus's windows align to it
 
     def __enter__(self) -> StreamRrd:
         return self
@@ -94,13 +93,27 @@ class StreamRrd:
         fb = batch.frames
         if self._absolute is None and len(fb):
             self._absolute = is_absolute(fb.t)
-        self._pdos |= {(s.node, s.pdo, s.cob_id) for s in cap.series}
-        self._lanes |= {e.node for e in cap.state_changes}
-        self._drives |= {c.node for c in cap.drive_changes if c.kind == "state"}
+        self._layout.add(cap)
         with self._named_errors():
             send_parts(cap, self.rec, bool(self._absolute), self.counts, self._named)
         if len(fb):
-            self._load.add(fb.t, frame_bits(fb.flags, fb.dlc))
+            self._add_load(fb)
+
+    def _add_load(self, fb) -> None:
+        """The batch's frame bits into their bus's windows (one bus: all of them)."""
+        if self._t0 is None:
+            self._t0 = float(fb.t[0])
+        bits = frame_bits(fb.flags, fb.dlc)
+        if len(fb.channels) > 1:
+            parts = [(int(c), fb.channel == c) for c in np.unique(fb.channel)]
+        else:
+            parts = [(int(fb.channel[0]), None)]
+        for c, mine in parts:
+            label = fb.channel_label(c)
+            windows = self._load.get(label)
+            if windows is None:
+                windows = self._load[label] = _LoadWindows(LOAD_WINDOW, self._t0)
+            windows.add(fb.t if mine is None else fb.t[mine], bits if mine is None else bits[mine])
 
     def close(self) -> dict[str, int]:
         """Bus load, the layout and the end of the recording; the file replaces its target.
@@ -116,15 +129,21 @@ class StreamRrd:
     def finish(self) -> dict[str, int]:
         """close() but the rename."""
         try:
-            starts, load = self._load.series(self.bitrate)
-            send_load(
-                self.rec, starts, load, bool(self._absolute), self.bitrate, self.counts, self._named
-            )
-            self.rec.send_blueprint(
-                blueprint_for(self._pdos, self._lanes, self._drives),
-                make_active=True,
-                make_default=True,
-            )
+            several = len(self._load) > 1
+            for label, windows in self._load.items():
+                starts, load = windows.series(self.bitrate)
+                path = send_load(
+                    self.rec,
+                    label if several else None,
+                    starts,
+                    load,
+                    bool(self._absolute),
+                    self.bitrate,
+                    self.counts,
+                    self._named,
+                )
+                self._layout.loads.add(path)
+            self.rec.send_blueprint(self._layout.blueprint(), make_active=True, make_default=True)
             with self._named_errors():
                 self._flush()
                 if self._file:  # a viewer keeps the recording; the file needs its end
@@ -205,11 +224,12 @@ def _cause(exc: BaseException) -> str:
 
 
 class _LoadWindows:
-    """Bits per window, windows aligned to the first frame, summed batch by batch."""
+    """Bits per window, windows aligned to t0 (the first frame's time unless given),
+    summed batch by batch."""
 
-    def __init__(self, window: float) -> None:
+    def __init__(self, window: float, t0: float | None = None) -> None:
         self.window = window
-        self.t0: float | None = None
+        self.t0 = t0
         self.first = 0  # window index of sums[0] (negative when times went back before t0)
         self.sums = np.zeros(0)
         self.t_last = 0.0
@@ -231,6 +251,7 @@ class _LoadWindows:
         self.t_last = float(t[-1])
 
     def series(self, bitrate: int | None) -> tuple[np.ndarray, np.ndarray]:
-        if self.t0 is None:
+        if self.t0 is None or not self.sums.size:
             return np.zeros(0), np.zeros(0)
-        return load_windows(self.sums.copy(), self.t0, self.t_last, self.window, bitrate)
+        start = self.t0 + self.first * self.window  # sums[0]'s window (a later bus's is not t0's)
+        return load_windows(self.sums.copy(), start, self.t_last, self.window, bitrate)
