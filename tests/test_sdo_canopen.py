@@ -178,3 +178,32 @@ def _sub_blocks(segments: int, blksizes: tuple[int, ...]) -> int:
         segments -= blksizes[min(count, len(blksizes) - 1)]
         count += 1
     return count
+
+
+def test_a_long_download_is_shown_short_and_kept_whole(bus, tmp_path) -> None:
+    """A 5000-byte DOMAIN download (a program download's shape) by canopen's client: the
+    text line and the event message show its first 32 bytes and its size (the whole hex
+    made a 10 kB line), the SDO table (read with pyarrow) keeps every byte."""
+    import subprocess
+    import sys
+
+    import pyarrow.parquet as pq
+
+    _, remote, recorder, _ = bus
+    blob = bytes(k * 7 % 251 for k in range(5000))
+    remote.sdo.download(0x2003, 0, blob)
+    log = tmp_path / "blob.log"
+    with can.Logger(str(log)) as writer:
+        for msg in drain(recorder):
+            writer(msg)
+    cmd = [sys.executable, "-m", "cananalyze"]
+    text = subprocess.run([*cmd, "decode", str(log)], capture_output=True, text=True).stdout
+    (line,) = [ln for ln in text.splitlines() if "SDO write 0x2003" in ln]
+    assert f"-> ok: data {blob[:32].hex()}... (5000 bytes)" in line and len(line) < 200
+    out = tmp_path / "out"
+    subprocess.run([*cmd, "export", str(log), "--parquet", str(out), "-q"], check=True)
+    (sdo,) = pq.read_table(out / "sdo.parquet").to_pylist()
+    assert (sdo["data"], sdo["size"]) == (blob.hex(), 5000)
+    events = pq.read_table(out / "events.parquet").to_pylist()
+    (msg,) = [e["message"] for e in events if e["kind"] == "sdo"]
+    assert msg == f"SDO download 0x2003:00 data {blob[:32].hex()}... (5000 bytes) ok"

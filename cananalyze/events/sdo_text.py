@@ -19,6 +19,23 @@ _LABELS = bytecols.padded_table([b"", b" = ", b" data "])  # no value or data, v
 _OPEN_HEX = bytecols.padded_table([b"", b" (0x"])
 
 
+SHOWN_BYTES = 32  # data bytes (and string characters x2) a text line shows of a transfer
+
+
+def shown_data(data: str, size: bool = True) -> str:
+    """Hex `data` as a text line shows it: the first SHOWN_BYTES bytes then "...", and
+    with `size` the whole length. A 1 MB program download (0x1F50) was a 2 MB line in
+    `decode` and in every event log; the SDO table and JSONL keep all of it."""
+    if len(data) <= 2 * SHOWN_BYTES:
+        return data
+    return data[: 2 * SHOWN_BYTES] + (f"... ({len(data) // 2} bytes)" if size else "...")
+
+
+def shown_text(value: str) -> str:
+    """A string value as a text line shows it: at most 2 x SHOWN_BYTES characters."""
+    return value if len(value) <= 2 * SHOWN_BYTES else value[: 2 * SHOWN_BYTES] + "..."
+
+
 def sdo_message(direction, index, sub, name, result, value, data, abort, detail) -> str:
     """The event text of one SDO record, from its fields (one implementation for dicts and columns)."""
     return sdo_head(direction, index, sub, name) + sdo_tail(result, value, data, abort, detail)
@@ -37,10 +54,12 @@ def sdo_tail(result, value, data, abort, detail) -> str:
     if ok:
         if isinstance(value, int) and not isinstance(value, bool) and abs(value) > 9:
             text = f" = {value} (0x{value & U64:X}) ok"  # as the text output shows it
+        elif isinstance(value, str):
+            text = f" = {shown_text(value)} ok"
         elif value is not None:
             text = f" = {value} ok"
         elif data:
-            text = f" data {data} ok"
+            text = f" data {shown_data(data)} ok"
         else:
             text = " ok"
     else:

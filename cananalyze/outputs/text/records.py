@@ -3,6 +3,7 @@ the live dashboard show it under the frame that completed it."""
 
 from __future__ import annotations
 
+from ...events.sdo_text import shown_data, shown_text
 from ...protocol.sdo import object_text
 
 
@@ -18,9 +19,9 @@ def format_record(rec: dict) -> str:
         if rec.get("result") == "ok":
             value = rec.get("value")
             if value is None:
-                line += f": data {rec.get('data') or '-'}"
+                line += f": data {shown_data(rec.get('data') or '-', size=False)}"
             elif isinstance(value, str):
-                line += f": {value!r}"
+                line += f": {shown_text(value)!r}"
             elif isinstance(value, int) and not isinstance(value, bool) and abs(value) > 9:
                 line += f": {value} (0x{value & 0xFFFFFFFFFFFFFFFF:X})"
             else:
