@@ -166,8 +166,7 @@ class Capture:
             }
         )
         if any(c.bus is not None for c in rows):  # several buses: which one, last (as events)
-            first = self._first_bus()
-            df["bus"] = np.array([first if c.bus is None else c.bus for c in rows], object)
+            df["bus"] = _buses([c.bus for c in rows], self._first_bus())
         return df
 
     @cached_property
@@ -279,8 +278,7 @@ class Capture:
         if "value" in df:
             df["value"] = df["value"].astype(object)  # mixed ints, floats, strings
         if self.record_bus is not None:  # several buses: which one, last (as the events)
-            first = self._first_bus()
-            df["bus"] = [self.record_bus[k] or first for k in at]
+            df["bus"] = _buses([self.record_bus[k] for k in at], self._first_bus())
         return df
 
     @cached_property
@@ -498,8 +496,16 @@ def _event_frame(events: list[Event], first_bus: str | None = None):
         }
     )
     if any(e.bus is not None for e in events):
-        df["bus"] = np.array([first_bus if e.bus is None else e.bus for e in events], object)
+        df["bus"] = _buses([e.bus for e in events], first_bus)
     return df
+
+
+def _buses(buses: list, first: str | None) -> np.ndarray:
+    """A table's `bus` column: each row's bus, the first bus's where it has none (made
+    before a second bus was seen)."""
+    out = np.array(buses, object)
+    out[np.equal(out, None)] = first
+    return out
 
 
 class Collector:

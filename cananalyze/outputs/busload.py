@@ -48,6 +48,21 @@ def bits_per_channel(flags: np.ndarray, dlc: np.ndarray, channel: np.ndarray):
     return frames, counts @ _BITS_OF_SHAPE
 
 
+def bits_by_channel(fb) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Each channel's frame times and nominal bits, by channel name: each bus's load is
+    its own (two buses summed could read over 100 %)."""
+    if not len(fb):
+        return {}
+    bits = frame_bits(fb.flags, fb.dlc)
+    if len(fb.channels) <= 1:
+        return {fb.channel_label(int(fb.channel[0])): (fb.t, bits)}
+    out = {}
+    for c in np.unique(fb.channel).tolist():
+        mine = fb.channel == c
+        out[fb.channel_label(c)] = (fb.t[mine], bits[mine])
+    return out
+
+
 def load_series(
     t: np.ndarray, bits: np.ndarray, window: float = 0.1, bitrate: int | None = None
 ) -> tuple[np.ndarray, np.ndarray]:

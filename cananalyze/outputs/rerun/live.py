@@ -20,7 +20,7 @@ import numpy as np
 from ...capture import Collector
 from ...errors import ProblemLog, UsageError
 from ...records import DecodedBatch
-from ..busload import frame_bits
+from ..busload import bits_by_channel
 from .send import LOAD_WINDOW, Layout, is_absolute, send_header, send_load, send_parts
 
 
@@ -104,12 +104,7 @@ class RerunLive:
         """Each bus's complete windows (and, when final, its open one); True when a bus
         load entity is new to the layout."""
         fb = cap.batch
-        bits = frame_bits(fb.flags, fb.dlc).astype(np.float64)
-        parts: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-        if len(fb):
-            for c in np.unique(fb.channel) if len(fb.channels) > 1 else fb.channel[:1]:
-                mine = fb.channel == c if len(fb.channels) > 1 else slice(None)
-                parts[fb.channel_label(int(c))] = (fb.t[mine], bits[mine])
+        parts = bits_by_channel(fb)
         several = len(fb.channels) > 1 or len(self._load_open) > 1
         grew = False
         for label in sorted(set(parts) | set(self._load_open)):

@@ -25,7 +25,7 @@ from ...errors import ProblemLog
 from ...events.build import EventState
 from ...records import DecodedBatch
 from ..atomic import atomic_path
-from ..busload import frame_bits, load_windows
+from ..busload import bits_by_channel, load_windows
 from .send import (
     LOAD_WINDOW,
     Layout,
@@ -103,17 +103,11 @@ class StreamRrd:
         """The batch's frame bits into their bus's windows (one bus: all of them)."""
         if self._t0 is None:
             self._t0 = float(fb.t[0])
-        bits = frame_bits(fb.flags, fb.dlc)
-        if len(fb.channels) > 1:
-            parts = [(int(c), fb.channel == c) for c in np.unique(fb.channel)]
-        else:
-            parts = [(int(fb.channel[0]), None)]
-        for c, mine in parts:
-            label = fb.channel_label(c)
+        for label, (t, bits) in bits_by_channel(fb).items():
             windows = self._load.get(label)
             if windows is None:
                 windows = self._load[label] = _LoadWindows(LOAD_WINDOW, self._t0)
-            windows.add(fb.t if mine is None else fb.t[mine], bits if mine is None else bits[mine])
+            windows.add(t, bits)
 
     def close(self) -> dict[str, int]:
         """Bus load, the layout and the end of the recording; the file replaces its target.
