@@ -14,8 +14,8 @@ from typing import TYPE_CHECKING
 __version__ = "0.1.0"
 
 if TYPE_CHECKING:
-    from .capture import Capture
-    from .checks.finding import Finding
+    from cananalyze.capture import Capture
+    from cananalyze.checks.finding import Finding
 
 # public name -> module that defines it
 _LAZY = {
@@ -37,7 +37,7 @@ _LAZY = {
 
 def load(path, **options) -> Capture:
     """Decode and check a log into a Capture of DataFrames; see `cananalyze.capture.load`."""
-    from .capture import load as _load
+    from cananalyze.capture import load as _load
 
     return _load(path, **options)
 
@@ -45,9 +45,9 @@ def load(path, **options) -> Capture:
 def check(path, **options) -> list[Finding]:
     """The findings `cananalyze check` reports for a log, in time order (rules and network
     as keyword arguments, like `load()`); `[f for f in found if f.fails]` are violations."""
-    from .capture import load_options
-    from .outputs.findings import FindingsSink
-    from .pipeline import build_checker, build_decoder, open_source, run
+    from cananalyze.capture import load_options
+    from cananalyze.outputs.findings import FindingsSink
+    from cananalyze.pipeline import build_checker, build_decoder, open_source, run
 
     opts = load_options(**options)
     checker = build_checker(opts)

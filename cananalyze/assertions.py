@@ -14,11 +14,11 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from .checks.engine import Checker, whole_log
-from .checks.finding import Finding
-from .checks.rule import Rule
-from .frames import FrameBatch
-from .records import DecodedBatch
+from cananalyze.checks.engine import Checker, whole_log
+from cananalyze.checks.finding import Finding
+from cananalyze.checks.rule import Rule
+from cananalyze.frames import FrameBatch
+from cananalyze.records import DecodedBatch
 
 
 @dataclass
@@ -41,9 +41,9 @@ def run_rules(source: Source, rules: list[Rule], config=None, **options) -> list
     them. `config` is for decoded batches (a Capture's `config`).
     """
     if isinstance(source, (str, Path, FrameBatch)):
-        from .capture import load_options
-        from .errors import UsageError
-        from .pipeline import build_decoder, open_source, run
+        from cananalyze.capture import load_options
+        from cananalyze.errors import UsageError
+        from cananalyze.pipeline import build_decoder, open_source, run
 
         if config is not None:
             raise UsageError(
@@ -70,7 +70,7 @@ def _view(b: DecodedBatch) -> DecodedBatch:
 
 def _end(last: DecodedBatch | None) -> DecodedBatch:
     """An empty end-of-log batch, of the channels of the log's last batch."""
-    from .pipeline import Decoder
+    from cananalyze.pipeline import Decoder
 
     return Decoder().decode(FrameBatch.empty(last.frames.channels if last else ()))
 
@@ -102,7 +102,7 @@ def _run_buses(source: ByBus, rules: list[Rule]) -> list[Finding]:
 
 
 def _fail(findings: list[Finding], what: str) -> None:
-    from .outputs.junit import format_finding
+    from cananalyze.outputs.junit import format_finding
 
     bad = [f for f in findings if f.fails]
     if bad:
@@ -114,7 +114,7 @@ def _fail(findings: list[Finding], what: str) -> None:
 def assert_heartbeat(
     source: Source, node: int, period_ms: float, tolerance: float = 0.1, config=None, **options
 ) -> None:
-    from .checks.rules.assert_heartbeat import AssertHeartbeat
+    from cananalyze.checks.rules.assert_heartbeat import AssertHeartbeat
 
     rule = AssertHeartbeat(node=node, period_ms=period_ms, tolerance=tolerance)
     _fail(
@@ -126,7 +126,7 @@ def assert_heartbeat(
 def assert_no_emcy(
     source: Source, allow: Iterable[int] = (), node: int | None = None, config=None, **options
 ) -> None:
-    from .checks.rules.emcy import EmcyRule
+    from cananalyze.checks.rules.emcy import EmcyRule
 
     found = [
         f
@@ -139,7 +139,7 @@ def assert_no_emcy(
 def assert_sdo_ok(
     source: Source, max_latency_ms: float | None = None, config=None, **options
 ) -> None:
-    from .checks.rules.sdo import SdoRule
+    from cananalyze.checks.rules.sdo import SdoRule
 
     _fail(
         run_rules(source, [SdoRule(max_latency_ms=max_latency_ms)], config, **options),
@@ -150,7 +150,7 @@ def assert_sdo_ok(
 def assert_pdo_rate(
     source: Source, cob_id: int, min_hz: float, max_hz: float, config=None, **options
 ) -> None:
-    from .checks.rules.assert_pdo_rate import AssertPdoRate
+    from cananalyze.checks.rules.assert_pdo_rate import AssertPdoRate
 
     rule = AssertPdoRate(cob_id=cob_id, min_hz=min_hz, max_hz=max_hz)
     _fail(
@@ -162,7 +162,7 @@ def assert_pdo_rate(
 def assert_signal_range(
     source: Source, node: int, signal: str, lo: float, hi: float, config=None, **options
 ) -> None:
-    from .checks.rules.assert_signal import AssertSignal
+    from cananalyze.checks.rules.assert_signal import AssertSignal
 
     rule = AssertSignal(node=node, signal=signal, min=lo, max=hi)
     _fail(
@@ -174,7 +174,7 @@ def assert_signal_range(
 def assert_operational_after_boot(
     source: Source, node: int, within_s: float, config=None, **options
 ) -> None:
-    from .checks.rules.assert_boot import AssertOperational
+    from cananalyze.checks.rules.assert_boot import AssertOperational
 
     rule = AssertOperational(node=node, within_s=within_s)
     _fail(
@@ -188,7 +188,7 @@ def assert_clean(
 ) -> None:
     """Every default rule (and the rules file's) passes, judged by the network file and
     the rules file's `network:` section."""
-    from .checks.build import build_checker
+    from cananalyze.checks.build import build_checker
 
     checker = build_checker(rules_file)
     if isinstance(source, (str, Path, FrameBatch)):

@@ -17,20 +17,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .errors import ProblemLog
-from .events.build import (
-    LEVEL_NAMES,
-    Event,
-    EventState,
-    batch_events_of,
-)
-from .frames import FrameBatch, concat
-from .network.node_tally import NodeTally
-from .outputs.sink import Sink
-from .protocol.services import SERVICE_NAMES, Service
-from .records import DecodedBatch
-from .runtime.gcpolicy import fewer_collections
-from .sdo.transaction import SDO_TABLE_COLUMNS
+from cananalyze.errors import ProblemLog
+from cananalyze.events.build import LEVEL_NAMES, Event, EventState, batch_events_of
+from cananalyze.frames import FrameBatch, concat
+from cananalyze.network.node_tally import NodeTally
+from cananalyze.outputs.sink import Sink
+from cananalyze.protocol.services import SERVICE_NAMES, Service
+from cananalyze.records import DecodedBatch
+from cananalyze.runtime.gcpolicy import fewer_collections
+from cananalyze.sdo.transaction import SDO_TABLE_COLUMNS
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -107,7 +102,7 @@ class Capture:
         """
         import pandas as pd
 
-        from .columns.payloads import payload_bytes
+        from cananalyze.columns.payloads import payload_bytes
 
         fb = self.batch
         channels = list(fb.channels) or ["can0"]
@@ -133,7 +128,7 @@ class Capture:
         payload columns in one pass (a `.map(bytes.hex)` makes a Python string per frame)."""
         import pandas as pd
 
-        from .columns.payloads import payload_hex
+        from cananalyze.columns.payloads import payload_hex
 
         arr = pd.arrays.ArrowExtensionArray(payload_hex(self.batch))
         return pd.Series(arr, name="data", copy=False)
@@ -233,7 +228,7 @@ class Capture:
         """signals.parquet's layout: one row per PDO frame (t, node, pdo, cob_id), a float64
         column per signal, null where the row's PDO does not carry it (`outputs/tables/wide`
         names the columns; `signals` is the same values one row per value)."""
-        from .outputs.tables import wide
+        from cananalyze.outputs.tables import wide
 
         names = wide.SignalColumns()
         pdos = sorted({s.pdo for s in self.series})
@@ -303,7 +298,7 @@ class Capture:
         the expected value came from, line: in a log without times)."""
         import pandas as pd
 
-        from .checks.finding import TABLE_COLUMNS
+        from cananalyze.checks.finding import TABLE_COLUMNS
 
         cols = list(TABLE_COLUMNS)
         if self.checker is not None:  # read as columns: no Finding object per row
@@ -329,8 +324,8 @@ class Capture:
 
         On a log of several buses the node on each bus is its own device: `bus` (a
         channel name) says which, and is needed when the node beats on more than one."""
-        from .checks.timing import stats
-        from .errors import UsageError
+        from cananalyze.checks.timing import stats
+        from cananalyze.errors import UsageError
 
         fb = self.batch
         mine = (self.service == Service.HEARTBEAT) & (self.node == node)
@@ -350,7 +345,7 @@ class Capture:
 
     def decoded(self) -> list[DecodedBatch]:
         """The whole capture as one DecodedBatch again, for rules run after the fact."""
-        from .records import SignalBlock
+        from cananalyze.records import SignalBlock
 
         blocks = [
             SignalBlock(s.rows, s.node, s.pdo, s.cob_id, s.columns, s.units) for s in self.series
@@ -373,9 +368,9 @@ class Capture:
         checkers = [] if self.checker is None else [self.checker, *self.checker.others]
         if len(checkers) < 2:
             return self.decoded(), self.config
-        from .assertions import ByBus
-        from .frames import OTHER_CHANNELS
-        from .records import SignalBlock
+        from cananalyze.assertions import ByBus
+        from cananalyze.frames import OTHER_CHANNELS
+        from cananalyze.records import SignalBlock
 
         fb = self.batch
         buses = [c.bus for c in checkers]
@@ -412,42 +407,42 @@ class Capture:
 
     def assert_heartbeat(self, node: int, period_ms: float, tolerance: float = 0.1) -> None:
         """Every heartbeat gap of `node` within period_ms ± tolerance (a fraction)."""
-        from .assertions import assert_heartbeat
+        from cananalyze.assertions import assert_heartbeat
 
         source, config = self._judged()
         assert_heartbeat(source, node, period_ms, tolerance, config=config)
 
     def assert_no_emcy(self, allow: Iterable[int] = (), node: int | None = None) -> None:
         """No EMCY (other than the `allow`ed error codes), from any node or from `node`."""
-        from .assertions import assert_no_emcy
+        from cananalyze.assertions import assert_no_emcy
 
         source, config = self._judged()
         assert_no_emcy(source, allow, node, config=config)
 
     def assert_sdo_ok(self, max_latency_ms: float | None = None) -> None:
         """Every SDO transfer ends ok (no abort, timeout or protocol error), none slower."""
-        from .assertions import assert_sdo_ok
+        from cananalyze.assertions import assert_sdo_ok
 
         source, config = self._judged()
         assert_sdo_ok(source, max_latency_ms, config=config)
 
     def assert_pdo_rate(self, cob_id: int, min_hz: float, max_hz: float) -> None:
         """The PDO on `cob_id` arrives at min_hz..max_hz over the log."""
-        from .assertions import assert_pdo_rate
+        from cananalyze.assertions import assert_pdo_rate
 
         source, config = self._judged()
         assert_pdo_rate(source, cob_id, min_hz, max_hz, config=config)
 
     def assert_signal_range(self, node: int, signal: str, lo: float, hi: float) -> None:
         """Every decoded value of `signal` from `node` within lo..hi (and seen at all)."""
-        from .assertions import assert_signal_range
+        from cananalyze.assertions import assert_signal_range
 
         source, config = self._judged()
         assert_signal_range(source, node, signal, lo, hi, config=config)
 
     def assert_operational_after_boot(self, node: int, within_s: float) -> None:
         """After each boot-up, `node` is operational within `within_s` seconds."""
-        from .assertions import assert_operational_after_boot
+        from cananalyze.assertions import assert_operational_after_boot
 
         source, config = self._judged()
         assert_operational_after_boot(source, node, within_s, config=config)
@@ -627,7 +622,7 @@ class CaptureSink(Sink):
         self.collector.add(batch)
 
     def close(self) -> None:
-        from .network.node_tally import bus_profiles, node_profiles
+        from cananalyze.network.node_tally import bus_profiles, node_profiles
 
         run = self.run
         self.capture = self.collector.capture(
@@ -650,7 +645,7 @@ def load_options(
 ):
     """Options from `load()`'s keyword arguments: devices and EDS files as {node: value}
     or as the command line's ["NODE=VALUE", ...]."""
-    from .pipeline import Options
+    from cananalyze.pipeline import Options
 
     return Options(
         network=network,
@@ -666,7 +661,7 @@ def load_options(
 
 
 def _by_node(value, what: str) -> dict:
-    from .errors import UsageError
+    from cananalyze.errors import UsageError
 
     if value is None:
         return {}
@@ -710,7 +705,7 @@ def load(
     DBC files (`--dbc`), whose messages join `signals`. The same
     pipeline as `cananalyze check` and `export`: the same findings and tables.
     """
-    from .pipeline import build_checker, build_decoder, open_source, run
+    from cananalyze.pipeline import build_checker, build_decoder, open_source, run
 
     dbc = () if dbc is None else (dbc,) if isinstance(dbc, (str, Path)) else tuple(dbc)
     opts = load_options(network, eds, device, strict, input_format, sdo_timeout, rules, dbc=dbc)

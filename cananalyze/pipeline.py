@@ -21,17 +21,17 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
-from .errors import ProblemLog, UsageError
-from .frames import MAX_BUSES, MAX_CHANNELS, OTHER_CHANNELS, FrameBatch
-from .protocol.cobid import CobClassifier
-from .records import DecodedBatch
-from .runtime import signals
+from cananalyze.errors import ProblemLog, UsageError
+from cananalyze.frames import MAX_BUSES, MAX_CHANNELS, OTHER_CHANNELS, FrameBatch
+from cananalyze.protocol.cobid import CobClassifier
+from cananalyze.records import DecodedBatch
+from cananalyze.runtime import signals
 
 if TYPE_CHECKING:
-    from .checks.engine import Checker
-    from .network.model import NetworkModel
-    from .network.spec import NetworkSpec
-    from .outputs.sink import Sink
+    from cananalyze.checks.engine import Checker
+    from cananalyze.network.model import NetworkModel
+    from cananalyze.network.spec import NetworkSpec
+    from cananalyze.outputs.sink import Sink
 
 TIME_MODES = ("rel", "abs")
 
@@ -259,7 +259,7 @@ class Decoder:
         decoders = self._decoders
         checkers = [d.checker for d in decoders if d.checker is not None]
         if len(checkers) > 1:
-            from .checks.engine import whole_log
+            from cananalyze.checks.engine import whole_log
 
             whole_log(checkers)
             # the log ends at its last frame whichever bus it was on: a node silent
@@ -311,7 +311,7 @@ def merge_buses(
     out.record_bus = _bus_names([part.bus for _, part in parts], of_part)
     out.drive.sort(key=lambda c: c.row)
     if founds:
-        from .checks.columns import FindingColumns
+        from cananalyze.checks.columns import FindingColumns
 
         out.findings = FindingColumns.concat(founds).sort()
     return out
@@ -320,7 +320,7 @@ def merge_buses(
 def _merge_notes(merged: dict, rows: np.ndarray, notes: dict) -> dict:
     """A part's notes at the batch's rows; the SDO notes a part has not written yet
     (`LazyNotes`: only text outputs read them) stay unwritten until the batch's are read."""
-    from .sdo.lazynotes import LazyNotes
+    from cananalyze.sdo.lazynotes import LazyNotes
 
     pending = notes.pending_rows() if isinstance(notes, LazyNotes) else None
     if pending is None:
@@ -342,7 +342,7 @@ def merge_ends(parts: list[DecodedBatch]) -> DecodedBatch:
     """The zero-row batches of several buses (live ticks, the end of the log) as one."""
     if len(parts) == 1:
         return parts[0]
-    from .checks.columns import FindingColumns
+    from cananalyze.checks.columns import FindingColumns
 
     out = parts[0]
     out.records = [r for p in parts for r in p.records]
@@ -359,8 +359,8 @@ def _merge_records(parts: list[tuple[np.ndarray, DecodedBatch]]) -> tuple[list, 
     the part each came from. The
     SDO fast path's records a part has not built stay unbuilt, with their columns
     (`sdo_fast`: the checks and the summary read those); the rest are read as they are."""
-    from .records import SdoColumns
-    from .sdo.lazyrecords import LazyRecords
+    from cananalyze.records import SdoColumns
+    from cananalyze.sdo.lazyrecords import LazyRecords
 
     get = list.__getitem__
     rows, keys, lazy, fasts = [], [], [], []
@@ -438,20 +438,20 @@ def network_spec(opts: Options) -> NetworkSpec:
     the rules file's `network:` section (the more specific document: one test's
     expectations of one installation), then --device/--eds (a node's device named last,
     on the command line). docs/network-file.md, "Combining sources"."""
-    from .network.netfile import combine, read_network_file
+    from cananalyze.network.netfile import combine, read_network_file
 
     sources = []
     if opts.network:
         sources.append(read_network_file(opts.network))
     if opts.rules:
-        from .checks.rulesfile import rules_network
+        from cananalyze.checks.rulesfile import rules_network
 
         section = rules_network(opts.rules)
         if section is not None:
             sources.append(section)
     spec = combine(*sources, source=str(opts.network) if opts.network else None)
     if opts.devices or opts.eds:
-        from .network.profile import load_builtin, load_eds
+        from cananalyze.network.profile import load_builtin, load_eds
 
         for node, name in opts.devices.items():
             ns = spec.node(node)
@@ -474,17 +474,17 @@ def build_decoder(
     otherwise built here when the options ask for checks or timing statistics (keeping
     its findings unless `keep_findings=False`: see `build_checker`).
     """
-    from .network.drive_tracker import DriveTracker
-    from .network.emcy_notes import EmcyDecoder
-    from .network.model import NetworkModel
-    from .network.pdo_processor import PdoDecoder
-    from .sdo.processor import SdoProcessor
-    from .sdo.tracker import SdoTracker
+    from cananalyze.network.drive_tracker import DriveTracker
+    from cananalyze.network.emcy_notes import EmcyDecoder
+    from cananalyze.network.model import NetworkModel
+    from cananalyze.network.pdo_processor import PdoDecoder
+    from cananalyze.sdo.processor import SdoProcessor
+    from cananalyze.sdo.tracker import SdoTracker
 
     opts = opts or Options()
     dbc = None
     if opts.dbc:
-        from .network.dbc import load_dbc
+        from cananalyze.network.dbc import load_dbc
 
         dbc = load_dbc(opts.dbc)  # a bad DBC fails before the log is opened
     spec = network_spec(opts)
@@ -497,7 +497,7 @@ def build_decoder(
     skip = dbc.standard_ids if dbc else set()  # the DBC's layout wins over the profile's
     processors = [SdoProcessor(tracker), model, PdoDecoder(model, skip), EmcyDecoder(model)]
     if dbc:
-        from .network.dbc_processor import DbcDecoder
+        from cananalyze.network.dbc_processor import DbcDecoder
 
         processors.insert(3, DbcDecoder(dbc))
     decoder = Decoder([*processors, DriveTracker(model)])
@@ -506,7 +506,7 @@ def build_decoder(
     if checker is None and (opts.checking or opts.timing):
         checker = build_checker(opts, keep_findings)
     if checker is not None:
-        from .checks.model_config import ModelConfig
+        from cananalyze.checks.model_config import ModelConfig
 
         checker.config = ModelConfig(model)  # the model holds every declaration and the log
         decoder.processors.append(checker)
@@ -537,8 +537,8 @@ def build_checker(opts: Options, keep_findings: bool = True) -> Checker:
 
     `keep_findings=False` for a run whose sinks take every finding from the batches
     (export, fleet): the checker then holds none to the end of the log."""
-    from .checks.build import build_checker as from_files
-    from .checks.engine import Checker
+    from cananalyze.checks.build import build_checker as from_files
+    from cananalyze.checks.engine import Checker
 
     checker = from_files(opts.rules) if opts.checking else Checker(rules=[])
     checker.keep_findings = keep_findings
@@ -578,12 +578,12 @@ def open_source(log: str | Path | object, opts: Options | None = None) -> Source
     """
     opts = opts or Options()
     if isinstance(log, (str, Path)):
-        from .io.source import open_log
+        from cananalyze.io.source import open_log
 
         return open_log(log, strict=opts.strict, fmt=opts.input_format)
     if isinstance(log, FrameBatch):
         return MemorySource(log)
-    from .io.live import LiveSource
+    from cananalyze.io.live import LiveSource
 
     return LiveSource(log)
 
@@ -632,7 +632,7 @@ class _Filter:
         self.opts = opts
         self.nodes = None if opts.nodes is None else np.array(sorted(opts.nodes), np.int16)
         self.services = None if opts.services is None else np.array(sorted(opts.services), np.uint8)
-        from .protocol.services import SERVICE_NAMES
+        from cananalyze.protocol.services import SERVICE_NAMES
 
         labels = {SERVICE_NAMES[s] for s in opts.services or ()}
         # records pass the service filter when their own services are asked for
@@ -690,7 +690,7 @@ def run(
     the adapter or the logger may be what stopped), as are SDO requests left
     unanswered. A file is judged by its frames alone: its end is no silence.
     """
-    from .events.build import EventBuilder
+    from cananalyze.events.build import EventBuilder
 
     opts = opts or Options()
     sinks = list(sinks)
@@ -760,7 +760,7 @@ def unmatched_filter(state: Run) -> str | None:
     if opts.nodes is not None:
         asked.append("--node " + ",".join(map(str, sorted(opts.nodes))))
     if opts.services is not None:
-        from .protocol.services import SERVICE_NAMES
+        from cananalyze.protocol.services import SERVICE_NAMES
 
         asked.append("--service " + ",".join(SERVICE_NAMES[s] for s in sorted(opts.services)))
     if opts.t_from is not None:
@@ -780,17 +780,17 @@ def _read_ahead(source: Source, ended: list) -> Iterator[FrameBatch]:
     """A file is parsed on the other core while this one decodes; a live bus is not
     (its reader thread already runs beside the loop). A live interface that fails ends
     the run like a stop: what was decoded is written, then the error is raised."""
-    from .io.live import LiveSource
+    from cananalyze.io.live import LiveSource
 
     if isinstance(source, LiveSource):
         return _until_failure(source.batches(), ended)
-    from .io.prefetch import prefetch
+    from cananalyze.io.prefetch import prefetch
 
     return prefetch(source.batches())
 
 
 def _until_failure(batches: Iterator[FrameBatch], ended: list) -> Iterator[FrameBatch]:
-    from .io.live import LiveError, LiveOpenError
+    from cananalyze.io.live import LiveError, LiveOpenError
 
     try:
         yield from batches

@@ -23,11 +23,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .frames import FLAG_RTR, FrameBatch
-from .protocol.fields import frame_fields
+from cananalyze.frames import FLAG_RTR, FrameBatch
+from cananalyze.protocol.fields import frame_fields
 
 if TYPE_CHECKING:
-    from .checks.columns import FindingColumns
+    from cananalyze.checks.columns import FindingColumns
 
 
 def signal_path(node: int, pdo: str) -> str:
@@ -262,7 +262,7 @@ class DecodedBatch:
                 if sb.pdo[:4] not in ("tpdo", "rpdo"):
                     f["message"] = sb.pdo  # a DBC message on a non-PDO identifier
                 if sb.words:
-                    from .profiles.words import word
+                    from cananalyze.profiles.words import word
 
                     f["signal_words"] = {
                         k: word(i, int(sb.columns[k][p])) for k, i in sb.words.items()
@@ -462,7 +462,7 @@ class DecodedBatch:
 
 
 def _no_findings() -> FindingColumns:
-    from .checks.columns import FindingColumns  # (checks imports this module)
+    from cananalyze.checks.columns import FindingColumns  # (checks imports this module)
 
     return FindingColumns()
 

@@ -1,7 +1,7 @@
 """Timing analysis and conformance rules (`cananalyze check`)."""
 
-from .config import ConfigSource
-from .engine import Checker
-from .finding import Finding
+from cananalyze.checks.config import ConfigSource
+from cananalyze.checks.engine import Checker
+from cananalyze.checks.finding import Finding
 
 __all__ = ["Checker", "ConfigSource", "Finding"]

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .engine import Checker
-from .rule import Rule
+from cananalyze.checks.engine import Checker
+from cananalyze.checks.rule import Rule
 
 
 def build_checker(rules_file: str | Path | None = None, rules: list[Rule] | None = None) -> Checker:
@@ -14,9 +14,9 @@ def build_checker(rules_file: str | Path | None = None, rules: list[Rule] | None
     Until a pipeline binds it to the network model that follows the log, the checker
     reads what the rules file's `network:` section declares (unknown otherwise).
     """
-    from ..network.model import NetworkModel
-    from .model_config import ModelConfig
-    from .rulesfile import load_rules
+    from cananalyze.checks.model_config import ModelConfig
+    from cananalyze.checks.rulesfile import load_rules
+    from cananalyze.network.model import NetworkModel
 
     config = None
     if rules_file:

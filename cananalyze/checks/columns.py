@@ -20,7 +20,7 @@ from collections.abc import Callable, Iterator, Sequence
 
 import numpy as np
 
-from .finding import TABLE_COLUMNS, Finding, tidy
+from cananalyze.checks.finding import TABLE_COLUMNS, Finding, tidy
 
 NONE = -1  # node, cob_id, line: none
 # columns kept as numpy numbers (the others are object columns)

@@ -14,7 +14,7 @@ from typing import Protocol
 
 import numpy as np
 
-from ..network.pdo_map import PdoConfig
+from cananalyze.network.pdo_map import PdoConfig
 
 
 class ConfigSource(Protocol):

@@ -21,14 +21,14 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..frames import FrameBatch
-from ..records import DecodedBatch
-from .columns import NONE, FindingColumns
-from .config import ConfigSource
-from .finding import Finding
-from .nmt_state import NmtStates
-from .rule import Context, GapState, Rule
-from .timing import Timing
+from cananalyze.checks.columns import NONE, FindingColumns
+from cananalyze.checks.config import ConfigSource
+from cananalyze.checks.finding import Finding
+from cananalyze.checks.nmt_state import NmtStates
+from cananalyze.checks.rule import Context, GapState, Rule
+from cananalyze.checks.timing import Timing
+from cananalyze.frames import FrameBatch
+from cananalyze.records import DecodedBatch
 
 UNTIMED = "timestamps"  # the rule name of the one "no timestamps" finding
 
@@ -41,13 +41,13 @@ class Checker:
         keep_findings: bool = True,
     ) -> None:
         if rules is None:
-            from .registry import default_rules
+            from cananalyze.checks.registry import default_rules
 
             rules = default_rules()
         self.rules = rules
         if config is None:  # nothing declared and no log followed: every value unknown
-            from ..network.model import NetworkModel
-            from .model_config import ModelConfig
+            from cananalyze.checks.model_config import ModelConfig
+            from cananalyze.network.model import NetworkModel
 
             config = ModelConfig(NetworkModel())
         self.config: ConfigSource = config

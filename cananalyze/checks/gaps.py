@@ -10,8 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..columns.order import stable_order
-from ..runtime.speedups import C
+from cananalyze.columns.order import stable_order
+from cananalyze.runtime.speedups import C
 
 
 @dataclass

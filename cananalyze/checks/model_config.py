@@ -16,10 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..network.model import NetworkModel
-from ..network.pdo_map import PdoConfig
-from ..network.timeline import EVERY_NODE
-from .finding import rel_time
+from cananalyze.checks.finding import rel_time
+from cananalyze.network.model import NetworkModel
+from cananalyze.network.pdo_map import PdoConfig
+from cananalyze.network.timeline import EVERY_NODE
 
 
 class ModelConfig:

@@ -9,9 +9,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..protocol.nmt import ALL_NODES, COMMAND_STATE, PRE_OPERATIONAL, STATE_MASK, state_name
-from ..protocol.services import Service
-from ..records import DecodedBatch
+from cananalyze.protocol.nmt import (
+    ALL_NODES,
+    COMMAND_STATE,
+    PRE_OPERATIONAL,
+    STATE_MASK,
+    state_name,
+)
+from cananalyze.protocol.services import Service
+from cananalyze.records import DecodedBatch
 
 
 class NmtStates:

@@ -2,28 +2,28 @@
 
 from __future__ import annotations
 
-from .rule import Rule
-from .rules.assert_boot import AssertOperational
-from .rules.assert_heartbeat import AssertHeartbeat
-from .rules.assert_pdo_rate import AssertPdoRate
-from .rules.assert_signal import AssertSignal
-from .rules.bootup import BootupRule
-from .rules.drive_command import DriveCommandRule
-from .rules.drive_fault import DriveFaultRule
-from .rules.drive_transition import DriveTransitionRule
-from .rules.emcy import EmcyRule
-from .rules.errctl_length import ErrctlLengthRule
-from .rules.error_frames import ErrorFrameRule
-from .rules.guarding import GuardingRule
-from .rules.heartbeat import HeartbeatRule
-from .rules.pdo_async import PdoAsyncRule
-from .rules.pdo_length import PdoLengthRule
-from .rules.pdo_state import PdoStateRule
-from .rules.pdo_sync import PdoSyncRule
-from .rules.pdo_valid import PdoValidRule
-from .rules.sdo import SdoRule
-from .rules.sync import SyncRule
-from .rules.unknown_cobid import UnknownCobIdRule
+from cananalyze.checks.rule import Rule
+from cananalyze.checks.rules.assert_boot import AssertOperational
+from cananalyze.checks.rules.assert_heartbeat import AssertHeartbeat
+from cananalyze.checks.rules.assert_pdo_rate import AssertPdoRate
+from cananalyze.checks.rules.assert_signal import AssertSignal
+from cananalyze.checks.rules.bootup import BootupRule
+from cananalyze.checks.rules.drive_command import DriveCommandRule
+from cananalyze.checks.rules.drive_fault import DriveFaultRule
+from cananalyze.checks.rules.drive_transition import DriveTransitionRule
+from cananalyze.checks.rules.emcy import EmcyRule
+from cananalyze.checks.rules.errctl_length import ErrctlLengthRule
+from cananalyze.checks.rules.error_frames import ErrorFrameRule
+from cananalyze.checks.rules.guarding import GuardingRule
+from cananalyze.checks.rules.heartbeat import HeartbeatRule
+from cananalyze.checks.rules.pdo_async import PdoAsyncRule
+from cananalyze.checks.rules.pdo_length import PdoLengthRule
+from cananalyze.checks.rules.pdo_state import PdoStateRule
+from cananalyze.checks.rules.pdo_sync import PdoSyncRule
+from cananalyze.checks.rules.pdo_valid import PdoValidRule
+from cananalyze.checks.rules.sdo import SdoRule
+from cananalyze.checks.rules.sync import SyncRule
+from cananalyze.checks.rules.unknown_cobid import UnknownCobIdRule
 
 # Enabled unless the rules file disables them.
 RULES: dict[str, type[Rule]] = {

@@ -11,13 +11,13 @@ from collections import Counter
 
 import numpy as np
 
-from ..protocol.services import Service
-from ..records import DecodedBatch
-from .columns import FindingColumns, Texts
-from .config import ConfigSource
-from .finding import Finding, rel_time
-from .gaps import Gaps, grouped_gaps
-from .nmt_state import NmtStates
+from cananalyze.checks.columns import FindingColumns, Texts
+from cananalyze.checks.config import ConfigSource
+from cananalyze.checks.finding import Finding, rel_time
+from cananalyze.checks.gaps import Gaps, grouped_gaps
+from cananalyze.checks.nmt_state import NmtStates
+from cananalyze.protocol.services import Service
+from cananalyze.records import DecodedBatch
 
 # Which rows each shared gap table covers, and its key column.
 _GAP_TABLES = {

@@ -10,13 +10,13 @@ from __future__ import annotations
 import inspect
 from pathlib import Path
 
-from ..errors import InputError
-from ..network.filelines import read_tree
-from ..network.netfile import combine, read_network
-from ..network.spec import NetworkSpec
-from .finding import SEVERITIES
-from .registry import ASSERTIONS, RULES
-from .rule import Rule
+from cananalyze.checks.finding import SEVERITIES
+from cananalyze.checks.registry import ASSERTIONS, RULES
+from cananalyze.checks.rule import Rule
+from cananalyze.errors import InputError
+from cananalyze.network.filelines import read_tree
+from cananalyze.network.netfile import combine, read_network
+from cananalyze.network.spec import NetworkSpec
 
 _COMMON = {"enabled", "severity", "tolerance", "jitter_ms"}
 

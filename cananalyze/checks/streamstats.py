@@ -185,7 +185,7 @@ class StreamStats:
         if self.n == 0:
             return {"count": 0}
         if self._exact is not None:
-            from .timing import stats_ms
+            from cananalyze.checks.timing import stats_ms
 
             return stats_ms(np.concatenate(self._exact))
         return {

@@ -13,11 +13,11 @@ from collections import Counter
 
 import numpy as np
 
-from ..protocol.services import Service
-from .finding import rel_time
-from .rule import Context
-from .spool import KeyedSpool
-from .streamstats import StreamStats, bins_of, histogram_many
+from cananalyze.checks.finding import rel_time
+from cananalyze.checks.rule import Context
+from cananalyze.checks.spool import KeyedSpool
+from cananalyze.checks.streamstats import StreamStats, bins_of, histogram_many
+from cananalyze.protocol.services import Service
 
 
 def stats(gaps_s: np.ndarray) -> dict:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import add_filter_options, add_input_options, options, report_problems
+from cananalyze.cli.common import add_filter_options, add_input_options, options, report_problems
 
 # The checker, readers and decoder are imported in run(): `cananalyze --help` stays light.
 
@@ -25,7 +25,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--timing", action="store_true", help="also print the timing analysis")
     p.add_argument("--no-color", action="store_true", help="no ANSI colours even on a terminal")
     add_filter_options(p)
-    from .report import add_html_options
+    from cananalyze.cli.report import add_html_options
 
     add_html_options(p)
     add_progress_option(p)
@@ -37,9 +37,9 @@ def add_progress_option(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..outputs.findings import FindingsSink
-    from ..pipeline import build_checker, build_decoder, open_source
-    from .common import run_with_progress
+    from cananalyze.cli.common import run_with_progress
+    from cananalyze.outputs.findings import FindingsSink
+    from cananalyze.pipeline import build_checker, build_decoder, open_source
 
     opts = options(args, checks=True, timing=bool(args.timing))
     checker = build_checker(opts)  # a bad rules file fails before the log is read
@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     )
     sinks: list = [report]
     if args.html:
-        from ..outputs.report.sink import ReportSink
+        from cananalyze.outputs.report.sink import ReportSink
 
         # before the findings: the page exists when the JUnit file names it
         sinks.insert(0, ReportSink(args.html, bitrate=args.bitrate, title=args.title))

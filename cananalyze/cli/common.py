@@ -7,10 +7,10 @@ import argparse
 import sys
 from typing import TYPE_CHECKING
 
-from ..errors import ProblemLog, UsageError
+from cananalyze.errors import ProblemLog, UsageError
 
 if TYPE_CHECKING:
-    from ..pipeline import Options
+    from cananalyze.pipeline import Options
 
 
 def add_input_options(parser: argparse.ArgumentParser, dbc_flag: str = "--dbc") -> None:
@@ -138,7 +138,7 @@ def _node_set(text: str | None) -> frozenset[int] | None:
 def _service_set(text: str | None) -> frozenset[int] | None:
     if not text:
         return None
-    from ..protocol.services import parse_services
+    from cananalyze.protocol.services import parse_services
 
     try:
         return frozenset(int(s) for s in parse_services(text))
@@ -148,7 +148,7 @@ def _service_set(text: str | None) -> frozenset[int] | None:
 
 def options(args: argparse.Namespace, **overrides) -> Options:
     """The pipeline's Options from parsed arguments (only the ones the command has)."""
-    from ..pipeline import Options
+    from cananalyze.pipeline import Options
 
     get = lambda name, default=None: getattr(args, name, default)  # noqa: E731
     values = dict(
@@ -174,11 +174,11 @@ def options(args: argparse.Namespace, **overrides) -> Options:
 def run_with_progress(source, decoder, sinks: list, opts: Options, quiet: bool = False):
     """`pipeline.run` with a progress bar on a terminal (unless quiet), and a warning when
     the filters matched nothing."""
-    from ..pipeline import run, unmatched_filter
+    from cananalyze.pipeline import run, unmatched_filter
 
     sinks = list(sinks)
     if not quiet and sys.stderr.isatty():
-        from ..outputs.progress import ProgressSink
+        from cananalyze.outputs.progress import ProgressSink
 
         sinks.append(ProgressSink(sys.stderr))
     state = run(source, decoder, sinks, opts)

@@ -6,14 +6,14 @@ import argparse
 import contextlib
 import sys
 
-from ..errors import UsageError
-from .common import (
+from cananalyze.cli.common import (
     add_filter_options,
     add_input_options,
     add_time_option,
     options,
     report_problems,
 )
+from cananalyze.errors import UsageError
 
 # Readers, numpy and the decoder are imported in run(): `cananalyze --help` builds
 # every sub-command's parser and must stay fast.
@@ -65,7 +65,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..pipeline import build_checker, build_decoder, open_source
+    from cananalyze.pipeline import build_checker, build_decoder, open_source
 
     if args.rerun and args.connect:
         raise UsageError("--rerun spawns a viewer, --connect uses a running one: give one of them")
@@ -83,8 +83,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _decode(args: argparse.Namespace, source, decoder, opts) -> None:
-    from ..outputs.atomic import atomic_write
-    from .common import run_with_progress
+    from cananalyze.cli.common import run_with_progress
+    from cananalyze.outputs.atomic import atomic_write
 
     with contextlib.ExitStack() as stack:
         # -o FILE appears only when complete: an interrupted or failed run leaves none
@@ -110,21 +110,21 @@ def _decode(args: argparse.Namespace, source, decoder, opts) -> None:
 def _main_sink(args: argparse.Namespace, out):
     """What decode prints: the summary, the SDO table, the signals, or every frame."""
     if args.summary:
-        from ..outputs.summary import SummarySink
+        from cananalyze.outputs.summary import SummarySink
 
         return SummarySink(out, args.format)
     if args.signals:
-        from ..outputs.text.signals import SignalWriter
+        from cananalyze.outputs.text.signals import SignalWriter
 
         return SignalWriter(out, args.format)
     if args.format == "jsonl":
-        from ..outputs.jsonl.rows import JsonlWriter
+        from cananalyze.outputs.jsonl.rows import JsonlWriter
 
         # in the caller's thread: a worker gained ~1 s of 16 at 10M frames for 100-200 MB
         # more peak (JSONL batches are wider than text ones)
         return JsonlWriter(out, frames=not args.sdo)
-    from ..outputs.colour import use_colour
-    from ..outputs.text.writer import TextWriter
+    from cananalyze.outputs.colour import use_colour
+    from cananalyze.outputs.text.writer import TextWriter
 
     # finished lines are written by a thread while the next batch decodes
     return TextWriter(
@@ -135,11 +135,11 @@ def _main_sink(args: argparse.Namespace, out):
 def _timeline_sinks(args: argparse.Namespace) -> list:
     sinks = []
     if args.mcap:
-        from ..outputs.mcap.sink import McapSink
+        from cananalyze.outputs.mcap.sink import McapSink
 
         sinks.append(McapSink(args.mcap))
     if args.rerun or args.connect:
-        from ..outputs.rerun.sink import RerunSink
+        from cananalyze.outputs.rerun.sink import RerunSink
 
         sinks.append(RerunSink(connect=args.connect, spawn=args.rerun, bitrate=args.bitrate))
     return sinks

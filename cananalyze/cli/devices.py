@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..errors import UsageError
+from cananalyze.errors import UsageError
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -54,7 +54,7 @@ def _hex(value: int | None, width: int = 8) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..network.profile import (
+    from cananalyze.network.profile import (
         DEVICE_KEYS,
         PROFILE_KEYS,
         builtin_profiles,
@@ -114,8 +114,8 @@ def run(args: argparse.Namespace) -> int:
         for note in prof.notes:
             print(f"  - {note}")
     if args.dbc:
-        from ..outputs.atomic import check_writable
-        from ..outputs.dbc import pdo_database, write_dbc
+        from cananalyze.outputs.atomic import check_writable
+        from cananalyze.outputs.dbc import pdo_database, write_dbc
 
         check_writable(args.dbc)
         drives = {args.node} if prof.family == 402 else set()
@@ -127,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _cia402_summary() -> None:
     """The CiA 402 words cananalyze uses, from the profile's tables."""
-    from ..profiles import cia402
+    from cananalyze.profiles import cia402
 
     print("CiA 402 (statusword 0x6041, controlword 0x6040, modes 0x6060/0x6061):")
     print("  states (statusword & mask == value):")

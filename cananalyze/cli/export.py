@@ -7,8 +7,8 @@ import argparse
 import sys
 import time
 
-from ..errors import UsageError
-from .common import add_filter_options, add_input_options, options, report_problems
+from cananalyze.cli.common import add_filter_options, add_input_options, options, report_problems
+from cananalyze.errors import UsageError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -67,8 +67,8 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.no_check and args.rules:
         raise UsageError("export: --rules needs the checks; leave out --no-check")
-    from ..pipeline import build_checker, build_decoder, open_source
-    from .common import run_with_progress
+    from cananalyze.cli.common import run_with_progress
+    from cananalyze.pipeline import build_checker, build_decoder, open_source
 
     t0 = time.perf_counter()
     opts = options(args, checks=not args.no_check)
@@ -79,19 +79,19 @@ def run(args: argparse.Namespace) -> int:
     sinks = []
     for kind in ("parquet", "csv"):
         if getattr(args, kind):
-            from ..outputs.tables.stream import TableSink
+            from cananalyze.outputs.tables.stream import TableSink
 
             sinks.append(TableSink(getattr(args, kind), kind, args.parquet_compression))
     if args.mcap:
-        from ..outputs.mcap.sink import McapSink
+        from cananalyze.outputs.mcap.sink import McapSink
 
         sinks.append(McapSink(args.mcap, args.mcap_compression))
     if args.rrd:
-        from ..outputs.rerun.sink import RerunSink
+        from cananalyze.outputs.rerun.sink import RerunSink
 
         sinks.append(RerunSink(args.rrd, bitrate=args.bitrate))
     if args.dbc:
-        from ..outputs.dbc import DbcSink
+        from cananalyze.outputs.dbc import DbcSink
 
         sinks.append(DbcSink(args.dbc))
     state = run_with_progress(source, decoder, sinks, opts, quiet=args.quiet)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..errors import UsageError
-from .common import add_device_options, options
+from cananalyze.cli.common import add_device_options, options
+from cananalyze.errors import UsageError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -61,17 +61,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..fleet.orchestrate import run_fleet, summary_lines
+    from cananalyze.fleet.orchestrate import run_fleet, summary_lines
 
     if args.workers is not None and args.scheduler:
         raise UsageError("fleet: --workers sizes a local cluster; leave it out with --scheduler")
     opts = options(args, checks=True)
     if opts.rules:
-        from ..pipeline import build_checker
+        from cananalyze.pipeline import build_checker
 
         build_checker(opts)  # a bad rules file fails here, not once per log
     if opts.network:
-        from ..pipeline import network_spec
+        from cananalyze.pipeline import network_spec
 
         network_spec(opts)  # as a bad --network, --device or --eds
     result = run_fleet(

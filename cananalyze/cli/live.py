@@ -16,8 +16,8 @@ import signal
 import sys
 import time
 
-from ..errors import UsageError
-from .common import add_time_option
+from cananalyze.cli.common import add_time_option
+from cananalyze.errors import UsageError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -162,11 +162,11 @@ def buses(interfaces: list[str] | None, channels: list[str] | None) -> list[tupl
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..io.live import HwFilter, LiveSource, open_bus
-    from ..outputs.findings import FindingsSink
-    from ..pipeline import build_checker, build_decoder
-    from ..pipeline import run as run_pipeline
-    from .common import options
+    from cananalyze.cli.common import options
+    from cananalyze.io.live import HwFilter, LiveSource, open_bus
+    from cananalyze.outputs.findings import FindingsSink
+    from cananalyze.pipeline import build_checker, build_decoder
+    from cananalyze.pipeline import run as run_pipeline
 
     try:
         filters = [HwFilter.parse(f) for f in args.filter]
@@ -189,11 +189,11 @@ def run(args: argparse.Namespace) -> int:
     plain = args.plain or not sys.stdout.isatty()
     sinks: list = []
     if args.record:
-        from ..outputs.recording import RecordSink
+        from cananalyze.outputs.recording import RecordSink
 
         sinks.append(RecordSink(args.record))
     if args.rrd or args.rerun:
-        from ..outputs.rerun.sink import RerunLiveSink
+        from cananalyze.outputs.rerun.sink import RerunLiveSink
 
         sinks.append(
             RerunLiveSink(
@@ -204,10 +204,10 @@ def run(args: argparse.Namespace) -> int:
             )
         )
     if args.foxglove:
-        from ..outputs.foxglove.sink import FoxgloveSink, parse_address
+        from cananalyze.outputs.foxglove.sink import FoxgloveSink, parse_address
 
         sinks.append(FoxgloveSink(*parse_address(args.foxglove)))
-    from ..outputs.dashboard import DashboardSink
+    from cananalyze.outputs.dashboard import DashboardSink
 
     view = DashboardSink(
         bitrate=args.bitrate,
@@ -217,8 +217,8 @@ def run(args: argparse.Namespace) -> int:
         summary=sys.stdout,
     )
     if plain:
-        from ..outputs.colour import use_colour
-        from ..outputs.text.writer import TextWriter
+        from cananalyze.outputs.colour import use_colour
+        from cananalyze.outputs.text.writer import TextWriter
 
         sinks.append(
             TextWriter(sys.stdout, color=use_colour(sys.stdout, args.no_color), flush=True)
@@ -239,7 +239,7 @@ def run(args: argparse.Namespace) -> int:
     if len(parts) == 1:
         source = parts[0]
     else:
-        from ..io.live_buses import LiveBuses
+        from cananalyze.io.live_buses import LiveBuses
 
         source = LiveBuses(parts)
     deadline = time.monotonic() + args.duration if args.duration else None

@@ -11,10 +11,10 @@ import importlib
 import signal
 import sys
 
-from .. import __version__
-from ..errors import CananalyzeError
-from ..runtime import allocator, speedups
-from ..runtime.gcpolicy import fewer_collections
+from cananalyze import __version__
+from cananalyze.errors import CananalyzeError
+from cananalyze.runtime import allocator, speedups
+from cananalyze.runtime.gcpolicy import fewer_collections
 
 # One module per sub-command, each with add_parser(subparsers) and run(args) -> int.
 SUBCOMMANDS = [

@@ -55,7 +55,7 @@ def print_table(names: list[str], rows: list[tuple], out=None) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..fleet.query import query
+    from cananalyze.fleet.query import query
 
     names, rows = query(args.dataset, args.sql)
     if args.csv:

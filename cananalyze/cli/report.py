@@ -6,8 +6,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .check import add_progress_option
-from .common import add_filter_options, add_input_options, options, report_problems
+from cananalyze.cli.check import add_progress_option
+from cananalyze.cli.common import add_filter_options, add_input_options, options, report_problems
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -33,10 +33,10 @@ def add_html_options(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..outputs.findings import FindingsSink
-    from ..outputs.report.sink import ReportSink
-    from ..pipeline import build_checker, build_decoder, open_source
-    from .common import run_with_progress
+    from cananalyze.cli.common import run_with_progress
+    from cananalyze.outputs.findings import FindingsSink
+    from cananalyze.outputs.report.sink import ReportSink
+    from cananalyze.pipeline import build_checker, build_decoder, open_source
 
     opts = options(args, checks=True)
     checker = build_checker(opts)  # a bad rules file fails before the log is read

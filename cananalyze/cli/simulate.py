@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..errors import InputError, UsageError
+from cananalyze.errors import InputError, UsageError
 
 
 def add_parser(subparsers) -> None:
@@ -59,9 +59,9 @@ def add_parser(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..sim.network import default_network, load_network
-    from ..sim.scenarios import SCENARIOS
-    from ..sim.session import build
+    from cananalyze.sim.network import default_network, load_network
+    from cananalyze.sim.scenarios import SCENARIOS
+    from cananalyze.sim.session import build
 
     # checked here, not with argparse choices, so `--help` need not import the simulator
     if args.scenario not in SCENARIOS:
@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
         profiles, bitrate, config = default_network(), 500_000, {}
     bitrate = args.bitrate or bitrate
     if args.to:
-        from ..io.logfile import write_log
+        from cananalyze.io.logfile import write_log
 
         if not args.to.lower().endswith((".log", ".asc", ".blf")):
             raise UsageError(f"{args.to}: --to writes .log (candump), .asc or .blf")

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..runtime import speedups
+from cananalyze.runtime import speedups
 
 PAD = 0
 MAX_PARTS = 64  # column blocks the C compaction takes at once (_speedups.c)

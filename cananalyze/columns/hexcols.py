@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..frames import FLAG_RTR
-from ..runtime import speedups
+from cananalyze.frames import FLAG_RTR
+from cananalyze.runtime import speedups
 
 _HEX = np.frombuffer(b"0123456789abcdef", np.uint8)
 

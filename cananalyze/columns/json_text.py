@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import arrow_build as ab
+from cananalyze.columns import arrow_build as ab
 
 if TYPE_CHECKING:
     import pyarrow as pa

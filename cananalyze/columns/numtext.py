@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import bytecols
+from cananalyze.columns import bytecols
 
 _PAD = 0
 _ZERO = 48

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..runtime.speedups import C
+from cananalyze.runtime.speedups import C
 
 
 def stable_order(keys: np.ndarray, top: int | None = None) -> np.ndarray:

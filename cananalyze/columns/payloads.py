@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 import pyarrow as pa
 
-from ..frames import FLAG_RTR, FrameBatch
-from ..runtime import speedups
-from .hexcols import hex_payload_buffers
+from cananalyze.columns.hexcols import hex_payload_buffers
+from cananalyze.frames import FLAG_RTR, FrameBatch
+from cananalyze.runtime import speedups
 
 _BYTE = np.arange(8)
 

@@ -21,16 +21,16 @@ from itertools import repeat
 
 import numpy as np
 
-from ..columns import bytecols
-from ..frames import FLAG_RTR
-from ..profiles import cia402
-from ..protocol import emcy, nmt
-from ..protocol.fields import annotation, frame_fields
-from ..protocol.services import Service
-from ..records import DecodedBatch
-from . import columns as ec
-from .columns import NO_NODE, EventColumns, Row, texts
-from .sdo_text import U64, sdo_head, sdo_message, sdo_messages, sdo_tail
+from cananalyze.columns import bytecols
+from cananalyze.events import columns as ec
+from cananalyze.events.columns import NO_NODE, EventColumns, Row, texts
+from cananalyze.events.sdo_text import U64, sdo_head, sdo_message, sdo_messages, sdo_tail
+from cananalyze.frames import FLAG_RTR
+from cananalyze.profiles import cia402
+from cananalyze.protocol import emcy, nmt
+from cananalyze.protocol.fields import annotation, frame_fields
+from cananalyze.protocol.services import Service
+from cananalyze.records import DecodedBatch
 
 # foxglove.Log levels, used for every event (MCAP, rerun, the events table).
 DEBUG, INFO, WARNING, ERROR, FATAL = 1, 2, 3, 4, 5

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..columns import bytecols
-from ..protocol.sdo import object_text
+from cananalyze.columns import bytecols
+from cananalyze.protocol.sdo import object_text
 
 U64 = 0xFFFFFFFFFFFFFFFF
 _LABELS = bytecols.padded_table([b"", b" = ", b" data "])  # no value or data, value, data

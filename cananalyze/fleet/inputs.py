@@ -7,8 +7,8 @@ import glob
 from dataclasses import replace
 from pathlib import Path
 
-from ..errors import UsageError
-from ..pipeline import Options
+from cananalyze.errors import UsageError
+from cananalyze.pipeline import Options
 
 FOLDER_NETWORK = "network.toml"
 # In a folder, files with these suffixes are descriptions, not logs (device files,

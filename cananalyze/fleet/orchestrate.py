@@ -16,11 +16,11 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TextIO
 
-from ..errors import UsageError
-from ..pipeline import Options
-from . import layout
-from .inputs import expand, options_for
-from .task import LogTask, process, record_failure
+from cananalyze.errors import UsageError
+from cananalyze.fleet import layout
+from cananalyze.fleet.inputs import expand, options_for
+from cananalyze.fleet.task import LogTask, process, record_failure
+from cananalyze.pipeline import Options
 
 
 @dataclass
@@ -156,7 +156,7 @@ def run_fleet(
     except OSError as exc:
         raise UsageError(f"{dataset}: cannot create the dataset folder ({exc.strerror})") from None
     if junit:
-        from ..outputs.atomic import check_writable
+        from cananalyze.outputs.atomic import check_writable
 
         check_writable(junit)
     recovered = layout.recover(dataset)
@@ -210,7 +210,7 @@ def _write_junit(dest: str, results: list[dict]) -> None:
     """One testsuite per log (a skipped log's: its recorded verdict, no cases)."""
     import xml.etree.ElementTree as ET
 
-    from ..outputs.atomic import write_text_atomic
+    from cananalyze.outputs.atomic import write_text_atomic
 
     root = ET.Element("testsuites", name="cananalyze fleet")
     for r in results:

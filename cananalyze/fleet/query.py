@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import UsageError
-from .schema import TABLES
+from cananalyze.errors import UsageError
+from cananalyze.fleet.schema import TABLES
 
 
 def _sql_text(value: str) -> str:

@@ -16,16 +16,16 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from ..network.node_tally import IDENTITY_KEYS
-from ..outputs.tables.stream import (
+from cananalyze.network.node_tally import IDENTITY_KEYS
+from cananalyze.outputs.tables.stream import (
     EVENTS_BUS,
     FINDING_COLUMNS,
     FRAMES,
     SDO_COLUMNS,
     SIGNALS_BUS,
 )
-from ..outputs.tables.writer import LABEL  # categories: one type for every part
-from ..protocol.services import SERVICE_NAMES
+from cananalyze.outputs.tables.writer import LABEL  # categories: one type for every part
+from cananalyze.protocol.services import SERVICE_NAMES
 
 # every row's lineage: which file (as given, absolute), its content, which cananalyze
 LINEAGE = (("source", LABEL), ("hash", LABEL), ("version", LABEL))

@@ -24,11 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import __version__
-from ..errors import CananalyzeError
-from ..outputs.sink import Sink
-from ..pipeline import Options
-from . import layout, schema
+from cananalyze import __version__
+from cananalyze.errors import CananalyzeError
+from cananalyze.fleet import layout, schema
+from cananalyze.outputs.sink import Sink
+from cananalyze.pipeline import Options
 
 # times at or after 2000-01-01 and before 2100 are wall-clock times; smaller ones count
 # from the logger's start (candump without -t a, relative ASC): the file's mtime dates those
@@ -172,7 +172,7 @@ def _logs_part(dest: Path, row: dict, lineage: dict) -> None:
 def _suite(path: str, rules, findings, error: str | None) -> str:
     """One JUnit testsuite for this log (check's report, or one failing `decode` case)."""
     if error is None:
-        from ..outputs.junit import junit_xml
+        from cananalyze.outputs.junit import junit_xml
 
         suite = ET.fromstring(junit_xml(rules, findings, name=path).split("?>", 1)[-1])[0]
     else:
@@ -184,7 +184,7 @@ def _suite(path: str, rules, findings, error: str | None) -> str:
 
 def process(task: LogTask) -> dict:
     """Decode one log into the dataset; the result row (never raises for a bad log)."""
-    from ..runtime import allocator
+    from cananalyze.runtime import allocator
 
     allocator.tune()
     wall0, cpu0 = time.perf_counter(), time.process_time()
@@ -236,9 +236,9 @@ def process(task: LogTask) -> dict:
 def _decode(task: LogTask, stage: layout.Stage, lineage: dict, findings: _Findings, row: dict):
     """`pipeline.run` into the export's TableSink in the stage, writing the dataset's schema;
     (the Run, the rules) or (None, []) with the row marked failed."""
-    from ..outputs.tables.stream import TableSink
-    from ..pipeline import build_decoder, open_source, run
-    from ..runtime.gcpolicy import fewer_collections
+    from cananalyze.outputs.tables.stream import TableSink
+    from cananalyze.pipeline import build_decoder, open_source, run
+    from cananalyze.runtime.gcpolicy import fewer_collections
 
     try:
         source = open_source(task.path, task.opts)
@@ -265,7 +265,7 @@ def _decode(task: LogTask, stage: layout.Stage, lineage: dict, findings: _Findin
 def _parts(stage: layout.Stage, dataset: Path, date: str, digest: str, row: dict, path: str):
     """(staged file, final part path) of every table; none, with the row failed, when a
     table is not in the dataset's schema."""
-    from ..outputs.tables.stream import TABLES
+    from cananalyze.outputs.tables.stream import TABLES
 
     parts = []
     try:

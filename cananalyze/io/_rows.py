@@ -13,8 +13,8 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from ..frames import FrameBatch, channel_index
-from .registry import ReadContext
+from cananalyze.frames import FrameBatch, channel_index
+from cananalyze.io.registry import ReadContext
 
 _ZERO8 = bytes(8)
 EPOCH_2000 = 946684800.0  # a first time stamp later than this is taken as Unix time

@@ -23,7 +23,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-from ..frames import (
+from cananalyze.frames import (
     FLAG_BRS,
     FLAG_ERR,
     FLAG_ESI,
@@ -34,10 +34,10 @@ from ..frames import (
     FrameBatch,
     concat,
 )
-from ..runtime import speedups
-from ._rows import MAX_LINE, RowSink
-from .candump import CHUNK
-from .registry import LogFormat, ReadContext, register
+from cananalyze.io._rows import MAX_LINE, RowSink
+from cananalyze.io.candump import CHUNK
+from cananalyze.io.registry import LogFormat, ReadContext, register
+from cananalyze.runtime import speedups
 
 _DLC2LEN = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
 # `[ \t]*`, not `\s*`: under (?m) `^\s*` runs over newlines from every line start,

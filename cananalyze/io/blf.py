@@ -30,7 +30,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-from ..frames import (
+from cananalyze.frames import (
     FLAG_BRS,
     FLAG_ERR,
     FLAG_ESI,
@@ -41,8 +41,8 @@ from ..frames import (
     FrameBatch,
     channel_index,
 )
-from ..runtime import speedups
-from .registry import LogFormat, ReadContext, register
+from cananalyze.io.registry import LogFormat, ReadContext, register
+from cananalyze.runtime import speedups
 
 try:  # python-isal: the same inflate as zlib, ~1.6x faster and outside the GIL
     from isal import isal_zlib as _fast_zlib

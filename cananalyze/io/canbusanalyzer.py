@@ -13,9 +13,9 @@ import io
 from collections.abc import Iterator
 from typing import BinaryIO
 
-from ..frames import FLAG_EXT, FrameBatch
-from ._rows import RowSink, text_lines
-from .registry import LogFormat, ReadContext, register
+from cananalyze.frames import FLAG_EXT, FrameBatch
+from cananalyze.io._rows import RowSink, text_lines
+from cananalyze.io.registry import LogFormat, ReadContext, register
 
 
 class _Bad(Exception):

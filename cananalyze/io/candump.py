@@ -19,7 +19,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-from ..frames import (
+from cananalyze.frames import (
     FLAG_BRS,
     FLAG_ERR,
     FLAG_ESI,
@@ -32,8 +32,8 @@ from ..frames import (
     concat,
     set_row,
 )
-from ..runtime import speedups
-from .registry import LogFormat, ReadContext, register
+from cananalyze.io.registry import LogFormat, ReadContext, register
+from cananalyze.runtime import speedups
 
 CHUNK = 1 << 22  # bytes per bulk parse (about 90k log-file lines)
 MAX_LINE = 1 << 24  # a line longer than this (no newline in 16 MiB) is skipped

@@ -11,9 +11,9 @@ from __future__ import annotations
 from collections.abc import Iterator
 from typing import BinaryIO
 
-from ..frames import FLAG_EXT, FLAG_FD, FLAG_TX, FrameBatch
-from ._rows import RowSink, text_lines
-from .registry import LogFormat, ReadContext, register
+from cananalyze.frames import FLAG_EXT, FLAG_FD, FLAG_TX, FrameBatch
+from cananalyze.io._rows import RowSink, text_lines
+from cananalyze.io.registry import LogFormat, ReadContext, register
 
 
 class _Bad(Exception):

@@ -21,9 +21,9 @@ import re
 from collections.abc import Iterator
 from typing import BinaryIO
 
-from ..frames import FLAG_EXT, FLAG_RTR, FrameBatch
-from ._rows import RowSink, text_lines
-from .registry import LogFormat, ReadContext, register
+from cananalyze.frames import FLAG_EXT, FLAG_RTR, FrameBatch
+from cananalyze.io._rows import RowSink, text_lines
+from cananalyze.io.registry import LogFormat, ReadContext, register
 
 _HEADER = b'"Time";"Identifier (hex)"'
 _RTR_DLC = re.compile(r"DLC\s*=\s*(\d+)")

@@ -17,8 +17,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import CananalyzeError, ProblemLog
-from ..frames import FLAG_BRS, FLAG_ERR, FLAG_ESI, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, FrameBatch
+from cananalyze.errors import CananalyzeError, ProblemLog
+from cananalyze.frames import (
+    FLAG_BRS,
+    FLAG_ERR,
+    FLAG_ESI,
+    FLAG_EXT,
+    FLAG_FD,
+    FLAG_RTR,
+    FLAG_TX,
+    FrameBatch,
+)
 
 
 class LiveError(CananalyzeError):

@@ -14,9 +14,9 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from ..errors import ProblemLog
-from ..frames import FrameBatch, concat
-from .live import LiveError, LiveSource
+from cananalyze.errors import ProblemLog
+from cananalyze.frames import FrameBatch, concat
+from cananalyze.io.live import LiveError, LiveSource
 
 
 class LiveBuses(LiveSource):

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, FrameBatch
-from ..outputs.atomic import atomic_path
+from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, FrameBatch
+from cananalyze.outputs.atomic import atomic_path
 
 _HEX2 = np.array([f"{i:02X}" for i in range(256)])
 

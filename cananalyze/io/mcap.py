@@ -30,8 +30,8 @@ from typing import BinaryIO
 
 import numpy as np
 
-from ..errors import InputError
-from ..frames import (
+from cananalyze.errors import InputError
+from cananalyze.frames import (
     FLAG_BRS,
     FLAG_ERR,
     FLAG_ESI,
@@ -42,15 +42,15 @@ from ..frames import (
     FrameBatch,
     channel_index,
 )
-from ..outputs.mcap.frames import (
+from cananalyze.io._rows import EPOCH_2000
+from cananalyze.io.registry import LogFormat, ReadContext, register
+from cananalyze.outputs.mcap.frames import (
     FRAME_FIELDS,
     FRAME_SCHEMA_NAME,
     FRAMES_TOPIC,
     LEGACY_FRAME_SCHEMA_NAME,
     seconds,
 )
-from ._rows import EPOCH_2000
-from .registry import LogFormat, ReadContext, register
 
 MAGIC = b"\x89MCAP0\r\n"
 OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_MESSAGE_INDEX = 0x03, 0x04, 0x05, 0x06, 0x07
@@ -884,7 +884,7 @@ def _arrow_columns(kind: int, ndjson: bytes, n: int):
     import pyarrow.compute as pc
     import pyarrow.json as pj
 
-    from ..columns.json_text import Texts
+    from cananalyze.columns.json_text import Texts
 
     fields = [("channel", pa.string()), ("dlc", pa.int64()), ("data", pa.string())]
     if kind == FRAME:

@@ -22,8 +22,8 @@ from typing import BinaryIO
 
 import numpy as np
 
-from ..errors import InputError
-from ..frames import (
+from cananalyze.errors import InputError
+from cananalyze.frames import (
     FLAG_BRS,
     FLAG_ERR,
     FLAG_ESI,
@@ -34,8 +34,8 @@ from ..frames import (
     FrameBatch,
     concat,
 )
-from .blf import _Cutter
-from .registry import LogFormat, ReadContext, register
+from cananalyze.io.blf import _Cutter
+from cananalyze.io.registry import LogFormat, ReadContext, register
 
 LINKTYPE_CAN_SOCKETCAN = 227
 LINKTYPE_LINUX_SLL = 113

@@ -12,9 +12,9 @@ from base64 import b64decode
 from collections.abc import Iterator
 from typing import BinaryIO
 
-from ..frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FrameBatch
-from ._rows import RowSink, text_lines
-from .registry import LogFormat, ReadContext, register
+from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FrameBatch
+from cananalyze.io._rows import RowSink, text_lines
+from cananalyze.io.registry import LogFormat, ReadContext, register
 
 HEADER = "timestamp,arbitration_id,extended,remote,error,dlc,data"
 

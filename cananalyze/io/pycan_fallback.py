@@ -13,9 +13,18 @@ from collections.abc import Iterator
 from pathlib import PurePath
 from typing import BinaryIO
 
-from ..frames import FLAG_BRS, FLAG_ERR, FLAG_ESI, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, FrameBatch
-from ._rows import RowSink
-from .registry import LogFormat, ReadContext, register
+from cananalyze.frames import (
+    FLAG_BRS,
+    FLAG_ERR,
+    FLAG_ESI,
+    FLAG_EXT,
+    FLAG_FD,
+    FLAG_RTR,
+    FLAG_TX,
+    FrameBatch,
+)
+from cananalyze.io._rows import RowSink
+from cananalyze.io.registry import LogFormat, ReadContext, register
 
 # python-can's MESSAGE_READERS less the formats read here (checked by a test), written
 # out so that importing the readers does not import python-can

@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import UsageError
-from ..frames import FrameBatch, concat
-from ..records import DecodedBatch
+from cananalyze.errors import UsageError
+from cananalyze.frames import FrameBatch, concat
+from cananalyze.records import DecodedBatch
 
 LOG_SUFFIXES = (".log", ".asc", ".blf")
 
@@ -59,7 +59,7 @@ class FrameRecorder:
         if self._mcap is not None:
             self._mcap.write(batch)
         else:
-            from .logfile import to_messages
+            from cananalyze.io.logfile import to_messages
 
             for msg in to_messages(fb):
                 self._logger.on_message_received(msg)
@@ -88,10 +88,10 @@ class McapRecording:
     FLUSH_SECONDS = 1.0
 
     def __init__(self, path: Path) -> None:
-        from .. import __version__
-        from ..outputs.mcap.bulk import BulkMcapWriter
-        from ..outputs.mcap.frames import FRAME_SCHEMA, FRAME_SCHEMA_NAME, FRAMES_TOPIC
-        from ..protocol.cobid import CobClassifier
+        from cananalyze import __version__
+        from cananalyze.outputs.mcap.bulk import BulkMcapWriter
+        from cananalyze.outputs.mcap.frames import FRAME_SCHEMA, FRAME_SCHEMA_NAME, FRAMES_TOPIC
+        from cananalyze.protocol.cobid import CobClassifier
 
         self.path = path
         self._file = open(path, "wb")  # noqa: SIM115 - closed in close()
@@ -125,7 +125,7 @@ class McapRecording:
 
     def flush(self) -> None:
         """Write the pending frames as a chunk (in time order: the writer needs it)."""
-        from ..outputs.mcap.frames import frame_payloads, log_time_ns
+        from cananalyze.outputs.mcap.frames import frame_payloads, log_time_ns
 
         if not self._pending:
             return
@@ -147,7 +147,7 @@ class McapRecording:
 
     def close(self) -> None:
         """Pending frames, metadata, summary and footer (idempotent)."""
-        from .. import __version__
+        from cananalyze import __version__
 
         if self._file.closed:
             return

@@ -10,8 +10,8 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import BinaryIO
 
-from ..errors import ProblemLog
-from ..frames import FrameBatch
+from cananalyze.errors import ProblemLog
+from cananalyze.frames import FrameBatch
 
 DEFAULT_BATCH = 262144
 

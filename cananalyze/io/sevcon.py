@@ -20,9 +20,9 @@ import re
 from collections.abc import Iterator
 from typing import BinaryIO
 
-from ..frames import FLAG_TX, FrameBatch
-from ._rows import RowSink, text_lines
-from .registry import LogFormat, ReadContext, register
+from cananalyze.frames import FLAG_TX, FrameBatch
+from cananalyze.io._rows import RowSink, text_lines
+from cananalyze.io.registry import LogFormat, ReadContext, register
 
 _LINE = re.compile(rb"(?m)^0x[0-9A-Fa-f]{1,8}\s+\d+\s+-\s+d\s*-?[\d.]+\s+\d+\s+\S+")
 _ROW = re.compile(r"^0x([0-9A-Fa-f]{1,8})\s+(\d+)\s+\S*\s+d\s*(-?[\d.]+)\s+(\d+)\s+(\S+)(.*)$")
@@ -33,7 +33,7 @@ _EMCY = re.compile(r"^(.+?)\.\s+Sevcon code:\s*0x([0-9A-Fa-f]{1,4})$")
 
 def _emcy(text: str) -> bytes | None:
     """The 8 EMCY bytes a DVT line stands for (see the module docstring), or None."""
-    from ..protocol.emcy import ERROR_CLASSES
+    from cananalyze.protocol.emcy import ERROR_CLASSES
 
     m = _EMCY.match(text)
     if m is None:

@@ -18,11 +18,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO
 
-from ..errors import InputError, ProblemLog
-from ..frames import FrameBatch
-from . import registry
-from .formats import FORMAT_MODULES
-from .registry import DEFAULT_BATCH, LogFormat, ReadContext
+from cananalyze.errors import InputError, ProblemLog
+from cananalyze.frames import FrameBatch
+from cananalyze.io import registry
+from cananalyze.io.formats import FORMAT_MODULES
+from cananalyze.io.registry import DEFAULT_BATCH, LogFormat, ReadContext
 
 SNIFF_BYTES = 65536
 
@@ -300,7 +300,7 @@ class _Replay(io.RawIOBase):
 
 def read_all(path: str | Path, strict: bool = False, fmt: str | None = None) -> FrameBatch:
     """Every frame of a small log in one batch (tests, samples, notebooks)."""
-    from ..frames import concat
+    from cananalyze.frames import concat
 
     src = open_log(path, strict=strict, fmt=fmt)
     return concat(src.batches())

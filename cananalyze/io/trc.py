@@ -20,9 +20,9 @@ import re
 from collections.abc import Iterator
 from typing import BinaryIO
 
-from ..frames import FLAG_BRS, FLAG_ESI, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, FrameBatch
-from ._rows import RowSink, text_lines
-from .registry import LogFormat, ReadContext, register
+from cananalyze.frames import FLAG_BRS, FLAG_ESI, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, FrameBatch
+from cananalyze.io._rows import RowSink, text_lines
+from cananalyze.io.registry import LogFormat, ReadContext, register
 
 _DLC2LEN = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
 _EPOCH_1899 = datetime.datetime(1899, 12, 30, tzinfo=datetime.UTC)

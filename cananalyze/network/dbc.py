@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from cananalyze.errors import InputError
 
 
 @dataclass(frozen=True)

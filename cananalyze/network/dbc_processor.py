@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
-from ..protocol.services import Service
-from ..records import DecodedBatch, SignalBlock
-from .dbc import DbcMessage, DbcSet, decode_columns, decode_rows
+from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
+from cananalyze.network.dbc import DbcMessage, DbcSet, decode_columns, decode_rows
+from cananalyze.protocol.services import Service
+from cananalyze.records import DecodedBatch, SignalBlock
 
 
 class DbcDecoder:

@@ -14,10 +14,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..profiles import cia402
-from ..protocol.services import Service
-from ..records import DecodedBatch
-from .model import NetworkModel, sdo_value
+from cananalyze.network.model import NetworkModel, sdo_value
+from cananalyze.profiles import cia402
+from cananalyze.protocol.services import Service
+from cananalyze.records import DecodedBatch
 
 STATE, COMMAND, RESET, SEEN = "state", "command", "reset", "seen"
 _OBJECTS = np.array([cia402.STATUSWORD, cia402.CONTROLWORD], np.int64)

@@ -13,7 +13,7 @@ from configparser import Error as ConfigParserError
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import InputError
+from cananalyze.errors import InputError
 
 
 @dataclass(frozen=True)

@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..protocol.emcy import MIN_BYTES
-from ..protocol.services import Service
-from ..records import DecodedBatch
-from .model import NetworkModel
+from cananalyze.network.model import NetworkModel
+from cananalyze.protocol.emcy import MIN_BYTES
+from cananalyze.protocol.services import Service
+from cananalyze.records import DecodedBatch
 
 
 def _has_emcy_table(profile) -> bool:

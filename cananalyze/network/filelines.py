@@ -12,7 +12,7 @@ import sys
 import tomllib
 from pathlib import Path
 
-from ..errors import InputError
+from cananalyze.errors import InputError
 
 # (file, old key) pairs already warned about: one warning per key per file and process
 _warned: set[tuple[str, str]] = set()

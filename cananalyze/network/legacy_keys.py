@@ -11,9 +11,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import InputError
-from .filelines import Lines, integer
-from .profile import DEVICE_KEYS, load_builtin, load_eds
+from cananalyze.errors import InputError
+from cananalyze.network.filelines import Lines, integer
+from cananalyze.network.profile import DEVICE_KEYS, load_builtin, load_eds
 
 NODE_RENAMES = {"emcy_inhibit_100us": "emcy_inhibit_time"}
 PDO_RENAMES = {"inhibit_100us": "inhibit_time", "event_timer_ms": "event_timer"}

@@ -22,20 +22,20 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from ..frames import FLAG_ERR, FLAG_EXT
-from ..protocol.cobid import NO_NODE, CobClassifier
-from ..protocol.comm_objects import comm_object
-from ..protocol.services import Service
-from ..records import DecodedBatch
-from .node_config import TOUCHES_COB_IDS, NodeConfig
-from .node_tally import IDENTITY
-from .pdo_map import PdoConfig, split_cob_id
-from .profile import identify
-from .spec import NetworkSpec
-from .timeline import ConfigChange, Timeline
+from cananalyze.frames import FLAG_ERR, FLAG_EXT
+from cananalyze.network.node_config import TOUCHES_COB_IDS, NodeConfig
+from cananalyze.network.node_tally import IDENTITY
+from cananalyze.network.pdo_map import PdoConfig, split_cob_id
+from cananalyze.network.profile import identify
+from cananalyze.network.spec import NetworkSpec
+from cananalyze.network.timeline import ConfigChange, Timeline
+from cananalyze.protocol.cobid import NO_NODE, CobClassifier
+from cananalyze.protocol.comm_objects import comm_object
+from cananalyze.protocol.services import Service
+from cananalyze.records import DecodedBatch
 
 if TYPE_CHECKING:
-    from ..pipeline import Decoder
+    from cananalyze.pipeline import Decoder
 
 NOT_VALID = (
     "is not valid (COB-ID bit 31 set)"  # PdoBinding.problem; the pdo_not_valid rule looks for it
@@ -46,7 +46,7 @@ USER_SOURCES = ("user --device", "user --eds", "network file", "rules file")
 
 def generic_for(device_type) -> object:
     """The CiA 402/401 defaults for a device type naming them, else None."""
-    from ..profiles.generic import family, generic_profile
+    from cananalyze.profiles.generic import family, generic_profile
 
     fam = family(device_type)
     return generic_profile(fam) if fam else None
@@ -176,7 +176,7 @@ class NetworkModel:
     def family(self, node: int) -> int | None:
         """402 or 401 when the node's profile, or its device type read in the log, names
         CiA 402 (drives) or CiA 401 (I/O)."""
-        from ..profiles.generic import family
+        from cananalyze.profiles.generic import family
 
         cfg = self.nodes.get(node)
         if cfg is None:

@@ -13,12 +13,12 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from ..errors import InputError
-from .filelines import Lines, integer, read_tree
-from .legacy_keys import translate
-from .pdo_map import COB_ID_INVALID
-from .profile import DEVICE_KEYS, load_builtin, load_eds
-from .spec import NetworkSpec, NodeSpec
+from cananalyze.errors import InputError
+from cananalyze.network.filelines import Lines, integer, read_tree
+from cananalyze.network.legacy_keys import translate
+from cananalyze.network.pdo_map import COB_ID_INVALID
+from cananalyze.network.profile import DEVICE_KEYS, load_builtin, load_eds
+from cananalyze.network.spec import NetworkSpec, NodeSpec
 
 TOP_KEYS = {"bitrate", "nodes", "sync", "known_cob_ids"}
 NODE_KEYS = {

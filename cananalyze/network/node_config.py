@@ -11,9 +11,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
-from ..protocol.datatypes import DUMMY_INDICES
-from .pdo_map import COB_ID_INVALID, MapEntry, PdoConfig, split_cob_id, split_mapping_word
-from .profile import DeviceProfile
+from cananalyze.network.pdo_map import (
+    COB_ID_INVALID,
+    MapEntry,
+    PdoConfig,
+    split_cob_id,
+    split_mapping_word,
+)
+from cananalyze.network.profile import DeviceProfile
+from cananalyze.protocol.datatypes import DUMMY_INDICES
 
 Direction = Literal["tx", "rx"]
 _UINT_BY_BITS = {

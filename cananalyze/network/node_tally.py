@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from ..frames import MAX_BUSES, MAX_CHANNELS, OTHER_CHANNELS
-from ..protocol.services import SERVICE_NAMES
-from ..records import DecodedBatch, sender_counts
+from cananalyze.frames import MAX_BUSES, MAX_CHANNELS, OTHER_CHANNELS
+from cananalyze.protocol.services import SERVICE_NAMES
+from cananalyze.records import DecodedBatch, sender_counts
 
 IDENTITY = {
     (0x1000, 0): "device_type",
@@ -232,7 +232,7 @@ def identity(records: Iterable[tuple[int, dict]]) -> dict[int, dict]:
 def match_profile(info: dict) -> tuple[str | None, str | None]:
     """The built-in profile the identity names, and "sdo identity"; (None, None) if none."""
     try:
-        from .profile import identify
+        from cananalyze.network.profile import identify
 
         ints = {
             k: info.get(k) if isinstance(info.get(k), int) else None

@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..columns.order import stable_order
-from ..frames import FLAG_RTR
-from ..profiles.words import WORDED
-from ..protocol.pdo import decode_pdo, words_of
-from ..protocol.services import Service
-from ..records import DecodedBatch, SignalBlock
-from .model import NetworkModel
+from cananalyze.columns.order import stable_order
+from cananalyze.frames import FLAG_RTR
+from cananalyze.network.model import NetworkModel
+from cananalyze.profiles.words import WORDED
+from cananalyze.protocol.pdo import decode_pdo, words_of
+from cananalyze.protocol.services import Service
+from cananalyze.records import DecodedBatch, SignalBlock
 
 
 class PdoDecoder:

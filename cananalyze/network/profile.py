@@ -15,12 +15,11 @@ from functools import cache
 from pathlib import Path
 
 import cananalyze
-
-from ..errors import InputError
-from ..protocol.datatypes import DATA_TYPES, DUMMY_INDICES
-from .eds import ObjectInfo, effective_value, object_info, read_od, variable
-from .pdo_map import MapEntry, PdoConfig, split_cob_id, split_mapping_word
-from .sidecar import Sidecar, load_sidecar
+from cananalyze.errors import InputError
+from cananalyze.network.eds import ObjectInfo, effective_value, object_info, read_od, variable
+from cananalyze.network.pdo_map import MapEntry, PdoConfig, split_cob_id, split_mapping_word
+from cananalyze.network.sidecar import Sidecar, load_sidecar
+from cananalyze.protocol.datatypes import DATA_TYPES, DUMMY_INDICES
 
 BUILTIN_KEYS = ("dat7130", "dat7014", "i7231d", "mcb560")
 PROFILE_KEYS = ("cia402", "cia401")  # CiA 4xx defaults without an EDS (cananalyze/profiles/)
@@ -59,7 +58,7 @@ class DeviceProfile:
     @property
     def family(self) -> int | None:
         """402 or 401 when the device type names CiA 402 (drives) or CiA 401 (I/O)."""
-        from ..profiles.generic import family
+        from cananalyze.profiles.generic import family
 
         return family(self.device_type)
 
@@ -102,7 +101,7 @@ class DeviceProfile:
         """A CiA 402 object's unit when the EDS names the profile but says no unit."""
         if self.family != 402:
             return None
-        from ..profiles.generic import object_unit
+        from cananalyze.profiles.generic import object_unit
 
         return object_unit(402, index, subindex)
 
@@ -215,7 +214,7 @@ def _build(path: Path, sidecar: Sidecar | None, node_id: int | None) -> DevicePr
 def load_builtin(key: str) -> DeviceProfile:
     """A built-in profile by key (dat7130, dat7014, i7231d, mcb560; cia402, cia401)."""
     if key in PROFILE_KEYS:
-        from ..profiles.generic import KEYS, generic_profile
+        from cananalyze.profiles.generic import KEYS, generic_profile
 
         return generic_profile(KEYS[key])
     if key not in BUILTIN_KEYS:

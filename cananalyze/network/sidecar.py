@@ -12,7 +12,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import InputError
+from cananalyze.errors import InputError
 
 
 @dataclass(frozen=True)

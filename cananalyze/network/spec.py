@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .profile import DeviceProfile
+from cananalyze.network.profile import DeviceProfile
 
 
 @dataclass

@@ -18,7 +18,7 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import IO
 
-from ..errors import UsageError
+from cananalyze.errors import UsageError
 
 
 def check_writable(dest: str | os.PathLike) -> None:

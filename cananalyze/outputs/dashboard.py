@@ -18,15 +18,15 @@ from typing import TextIO
 
 import numpy as np
 
-from ..frames import MAX_BUSES, OTHER_CHANNELS
-from ..protocol import nmt
-from ..protocol.emcy import error_text
-from ..protocol.fields import annotation
-from ..protocol.services import Service
-from ..records import DecodedBatch
-from .sink import Sink
-from .summary import Summary
-from .text.records import format_record
+from cananalyze.frames import MAX_BUSES, OTHER_CHANNELS
+from cananalyze.outputs.sink import Sink
+from cananalyze.outputs.summary import Summary
+from cananalyze.outputs.text.records import format_record
+from cananalyze.protocol import nmt
+from cananalyze.protocol.emcy import error_text
+from cananalyze.protocol.fields import annotation
+from cananalyze.protocol.services import Service
+from cananalyze.records import DecodedBatch
 
 _ERRCTL = np.array([Service.HEARTBEAT, Service.BOOTUP, Service.GUARD_RESPONSE], np.uint8)
 _RARE = np.array([Service.NMT, Service.EMCY], np.uint8)
@@ -313,7 +313,7 @@ class LiveView:
             value = int.from_bytes(raw[:4], "little")
         st.identity[key] = value
         if st.device is None or st.device.startswith("?"):
-            from ..network.profile import identify
+            from cananalyze.network.profile import identify
 
             ident = {k: v for k, v in st.identity.items()}
             name = ident.get("device_name")

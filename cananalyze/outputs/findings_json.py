@@ -15,8 +15,8 @@ from collections.abc import Iterator, Sequence
 
 import numpy as np
 
-from ..checks.columns import FindingColumns
-from ..checks.finding import Finding
+from cananalyze.checks.columns import FindingColumns
+from cananalyze.checks.finding import Finding
 
 CHUNK = 4096  # findings encoded at a time: big enough that the per-chunk cost vanishes
 

@@ -14,8 +14,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from ..pipeline import Run
-    from ..records import DecodedBatch
+    from cananalyze.pipeline import Run
+    from cananalyze.records import DecodedBatch
 
 
 class Sink:

@@ -11,13 +11,13 @@ from typing import TextIO
 
 import numpy as np
 
-from ..checks.streamstats import StreamStats
-from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
-from ..protocol import nmt
-from ..protocol.services import SERVICE_NAMES, Service
-from ..records import DecodedBatch
-from .busload import bits_per_channel
-from .sink import Sink
+from cananalyze.checks.streamstats import StreamStats
+from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
+from cananalyze.outputs.busload import bits_per_channel
+from cananalyze.outputs.sink import Sink
+from cananalyze.protocol import nmt
+from cananalyze.protocol.services import SERVICE_NAMES, Service
+from cananalyze.records import DecodedBatch
 
 N_SVC = len(SERVICE_NAMES)
 # byte -> is an NMT state (toggle bit ignored) / an NMT command: lookups, not np.isin per batch

@@ -12,9 +12,9 @@ from __future__ import annotations
 
 from functools import cache
 
-from ..network.profile import DeviceProfile
-from ..network.sidecar import Sidecar, SignalSpec
-from . import cia401, cia402
+from cananalyze.network.profile import DeviceProfile
+from cananalyze.network.sidecar import Sidecar, SignalSpec
+from cananalyze.profiles import cia401, cia402
 
 FAMILIES = {402: cia402, 401: cia401}
 KEYS = {"cia402": 402, "cia401": 401}

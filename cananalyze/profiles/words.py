@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import cia402
+from cananalyze.profiles import cia402
 
 WORDED = frozenset(cia402.WORDS)  # the objects of a CiA 402 node that have words
 

@@ -12,10 +12,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR, FrameBatch
-from ..runtime import speedups
-from . import nmt
-from .services import Service
+from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR, FrameBatch
+from cananalyze.protocol import nmt
+from cananalyze.protocol.services import Service
+from cananalyze.runtime import speedups
 
 NO_NODE = -1
 # the service codes the compiled classifier needs, in its order

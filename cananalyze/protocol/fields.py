@@ -10,9 +10,9 @@ row, for the rows it prints.
 
 from __future__ import annotations
 
-from . import emcy, error_frame, lss, nmt, pdo, sdo, sync
-from . import time as time_of_day
-from .services import Service
+from cananalyze.protocol import emcy, error_frame, lss, nmt, pdo, sdo, sync
+from cananalyze.protocol import time as time_of_day
+from cananalyze.protocol.services import Service
 
 
 def frame_fields(service: int, data: bytes, rtr: bool = False, can_id: int = 0) -> dict:

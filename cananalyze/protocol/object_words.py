@@ -13,7 +13,7 @@ from __future__ import annotations
 import re
 from collections.abc import Callable
 
-from ..profiles import cia402
+from cananalyze.profiles import cia402
 
 NameOf = Callable[[int, int], str | None]  # (index, subindex) -> the node's name for it
 
@@ -178,7 +178,7 @@ def object_words(
             return config_words(index, sub, ivalue & 0xFFFFFFFF, name_of)
         worded = _NAMES_WITH_WORDS.get(_norm(name))
         if worded == index and sub == 0:
-            from ..profiles.words import word
+            from cananalyze.profiles.words import word
 
             return word(index, ivalue)
     if value is None and data:

@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..network.pdo_map import MapEntry
-from .datatypes import DATA_TYPES, DUMMY_INDICES
+from cananalyze.network.pdo_map import MapEntry
+from cananalyze.protocol.datatypes import DATA_TYPES, DUMMY_INDICES
 
 
 @dataclass

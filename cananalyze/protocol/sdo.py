@@ -16,7 +16,7 @@ import struct
 
 import numpy as np
 
-from ..columns import bytecols
+from cananalyze.columns import bytecols
 
 # Client command specifiers (ccs, bits 7..5 of byte 0, client -> server).
 CCS_DOWNLOAD_SEGMENT = 0

@@ -21,7 +21,7 @@ def _load() -> tuple[ModuleType | None, str]:
     if os.environ.get("CANANALYZE_PURE", "") not in ("", "0"):
         return None, _OFF
     try:
-        from . import _speedups
+        from cananalyze.runtime import _speedups
     except ImportError:
         return None, _MISSING
     return _speedups, _ON

@@ -4,8 +4,8 @@ Per-frame Python is fine here: SDO traffic is rare next to PDOs and heartbeats,
 and every CiA 301 transfer protocol (expedited, segmented, block) needs state.
 """
 
-from .channels import SdoChannel
-from .tracker import SdoTracker
-from .transaction import FrameRole, SdoTransaction
+from cananalyze.sdo.channels import SdoChannel
+from cananalyze.sdo.tracker import SdoTracker
+from cananalyze.sdo.transaction import FrameRole, SdoTransaction
 
 __all__ = ["FrameRole", "SdoChannel", "SdoTracker", "SdoTransaction"]

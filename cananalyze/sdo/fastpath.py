@@ -22,14 +22,14 @@ from functools import cached_property
 
 import numpy as np
 
-from ..frames import FLAG_TX
-from ..profiles.words import WORDED
-from ..protocol import sdo
-from ..protocol.datatypes import decode_column, decode_int_column, decode_value
-from ..records import DecodedBatch, SdoColumns
-from .tracker import ObjectInfo
-from .transaction import SDO_TABLE_COLUMNS
-from .words import sdo_words
+from cananalyze.frames import FLAG_TX
+from cananalyze.profiles.words import WORDED
+from cananalyze.protocol import sdo
+from cananalyze.protocol.datatypes import decode_column, decode_int_column, decode_value
+from cananalyze.records import DecodedBatch, SdoColumns
+from cananalyze.sdo.tracker import ObjectInfo
+from cananalyze.sdo.transaction import SDO_TABLE_COLUMNS
+from cananalyze.sdo.words import sdo_words
 
 _WORDED = np.array(sorted(WORDED), np.int64)
 

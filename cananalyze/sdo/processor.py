@@ -15,13 +15,13 @@ import bisect
 
 import numpy as np
 
-from ..frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
-from ..protocol.services import Service
-from ..records import DecodedBatch
-from . import fastpath
-from .lazynotes import LazyNotes
-from .lazyrecords import LazyRecords
-from .tracker import SdoTracker
+from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
+from cananalyze.protocol.services import Service
+from cananalyze.records import DecodedBatch
+from cananalyze.sdo import fastpath
+from cananalyze.sdo.lazynotes import LazyNotes
+from cananalyze.sdo.lazyrecords import LazyRecords
+from cananalyze.sdo.tracker import SdoTracker
 
 _ENDED = ("ok", "abort")  # by "aborted": no numpy string array per batch
 

@@ -17,8 +17,8 @@ from __future__ import annotations
 import binascii
 from collections.abc import Callable
 
-from ..protocol.datatypes import decode_value
-from ..protocol.sdo import (
+from cananalyze.protocol.datatypes import decode_value
+from cananalyze.protocol.sdo import (
     ABORT,
     CCS_BLOCK_DOWNLOAD,
     CCS_BLOCK_UPLOAD,
@@ -39,10 +39,10 @@ from ..protocol.sdo import (
     describe_sdo,
     object_text,
 )
-from .channels import ChannelTable, SdoChannel
-from .transaction import FrameRole, SdoTransaction
-from .transfer import PHASE_TEXT, Transfer
-from .words import sdo_words
+from cananalyze.sdo.channels import ChannelTable, SdoChannel
+from cananalyze.sdo.transaction import FrameRole, SdoTransaction
+from cananalyze.sdo.transfer import PHASE_TEXT, Transfer
+from cananalyze.sdo.words import sdo_words
 
 ObjectInfo = Callable[[int, int, int], "tuple[str, int] | None"]
 

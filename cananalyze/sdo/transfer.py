@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .channels import SdoChannel
+from cananalyze.sdo.channels import SdoChannel
 
 PHASE_TEXT = {
     "init_resp": "the initiate response",

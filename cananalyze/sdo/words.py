@@ -3,7 +3,7 @@ the node's own names for the objects a PDO mapping entry points at."""
 
 from __future__ import annotations
 
-from ..protocol.object_words import object_words
+from cananalyze.protocol.object_words import object_words
 
 
 def sdo_words(node, index, sub, value, data: bytes | None, name, object_info) -> str | None:

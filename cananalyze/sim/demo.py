@@ -14,9 +14,9 @@ import struct
 import sys
 from pathlib import Path
 
-from ..frames import FLAG_RTR, FLAG_TX, FrameBatch, from_rows
-from ..protocol import nmt
-from ..protocol.sync import FIRST_COUNTER, MAX_COUNTER, next_counter
+from cananalyze.frames import FLAG_RTR, FLAG_TX, FrameBatch, from_rows
+from cananalyze.protocol import nmt
+from cananalyze.protocol.sync import FIRST_COUNTER, MAX_COUNTER, next_counter
 
 START = 1767225600.0  # 2026-01-01T00:00:00Z
 
@@ -112,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
     import os
     import time
 
-    from ..io.logfile import write_log
+    from cananalyze.io.logfile import write_log
 
     # python-can formats ASC header times in local time: pin it so files are reproducible
     os.environ["TZ"] = "UTC"

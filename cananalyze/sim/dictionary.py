@@ -7,8 +7,8 @@ exist for the node's own logic (NMT, heartbeat, PDO parameters, signals).
 
 from __future__ import annotations
 
-from ..network.profile import DeviceProfile
-from ..protocol.sdo import (
+from cananalyze.network.profile import DeviceProfile
+from cananalyze.protocol.sdo import (
     ABORT_NO_OBJECT,
     ABORT_NO_SUBINDEX,
     ABORT_READ_ONLY,

@@ -13,12 +13,12 @@ import struct
 from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
 
-from ..frames import FLAG_ERR, FLAG_RTR, FLAG_TX
-from ..protocol import sdo
-from ..protocol.sdo import block_byte, initiate_byte, segment_byte
-from ..protocol.sync import next_counter
-from .crc import crc16
-from .engine import Simulation
+from cananalyze.frames import FLAG_ERR, FLAG_RTR, FLAG_TX
+from cananalyze.protocol import sdo
+from cananalyze.protocol.sdo import block_byte, initiate_byte, segment_byte
+from cananalyze.protocol.sync import next_counter
+from cananalyze.sim.crc import crc16
+from cananalyze.sim.engine import Simulation
 
 
 @dataclass(frozen=True)

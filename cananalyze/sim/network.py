@@ -12,8 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import InputError
-from ..network.profile import DeviceProfile, load_builtin
+from cananalyze.errors import InputError
+from cananalyze.network.profile import DeviceProfile, load_builtin
 
 # The default bus: one of each seed device (node IDs as in samples/network.toml).
 DEFAULT_NODES = {3: "mcb560", 5: "dat7014", 6: "dat7130", 7: "i7231d"}
@@ -33,7 +33,7 @@ def default_network() -> dict[int, DeviceProfile]:
 
 def load_network(path: str | Path) -> SimNetwork:
     """The nodes of a network file; InputError when a node has no device or EDS."""
-    from ..network.netfile import load_network as read_netfile
+    from cananalyze.network.netfile import load_network as read_netfile
 
     spec = read_netfile(path)
     profiles: dict[int, DeviceProfile] = {}

@@ -12,15 +12,15 @@ import random
 import struct
 from dataclasses import dataclass, field
 
-from ..frames import FLAG_RTR
-from ..network.profile import DeviceProfile
-from ..protocol import nmt
-from ..protocol.emcy import register_for
-from ..protocol.nmt import BOOTUP, OPERATIONAL, PRE_OPERATIONAL, STOPPED
-from .dictionary import Dictionary
-from .engine import Simulation
-from .sdo_server import SdoServer
-from .waveforms import Waveform, default_signals
+from cananalyze.frames import FLAG_RTR
+from cananalyze.network.profile import DeviceProfile
+from cananalyze.protocol import nmt
+from cananalyze.protocol.emcy import register_for
+from cananalyze.protocol.nmt import BOOTUP, OPERATIONAL, PRE_OPERATIONAL, STOPPED
+from cananalyze.sim.dictionary import Dictionary
+from cananalyze.sim.engine import Simulation
+from cananalyze.sim.sdo_server import SdoServer
+from cananalyze.sim.waveforms import Waveform, default_signals
 
 SCAN_PERIOD = 0.010  # how often inputs are sampled for change-driven TPDOs
 SDO_DELAY = 0.0004  # server processing time before a response

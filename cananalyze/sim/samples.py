@@ -24,8 +24,8 @@ def pin_utc() -> None:
 
 
 def write_samples(out: Path) -> list[Path]:
-    from ..io.logfile import write_log
-    from .session import simulate
+    from cananalyze.io.logfile import write_log
+    from cananalyze.sim.session import simulate
 
     pin_utc()
     out.mkdir(parents=True, exist_ok=True)
@@ -40,7 +40,7 @@ def write_samples(out: Path) -> list[Path]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from . import demo
+    from cananalyze.sim import demo
 
     args = sys.argv[1:] if argv is None else argv
     out = Path(args[0] if args else "samples")

@@ -9,11 +9,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from ..frames import FLAG_ERR, FLAG_EXT
-from ..protocol import nmt
-from .master import Do, Guard, Nmt, Read, Send, Sync, Until, Wait, Write, u8, u16, u32
-from .node import SimNode, i7231d_emcy, mcb560_emcy
-from .waveforms import Override
+from cananalyze.frames import FLAG_ERR, FLAG_EXT
+from cananalyze.protocol import nmt
+from cananalyze.sim.master import Do, Guard, Nmt, Read, Send, Sync, Until, Wait, Write, u8, u16, u32
+from cananalyze.sim.node import SimNode, i7231d_emcy, mcb560_emcy
+from cananalyze.sim.waveforms import Override
 
 Nodes = dict[int, SimNode]
 HEARTBEAT_MS = 100

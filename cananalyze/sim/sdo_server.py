@@ -12,8 +12,8 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass, field
 
-from ..protocol import sdo
-from ..protocol.sdo import (
+from cananalyze.protocol import sdo
+from cananalyze.protocol.sdo import (
     ABORT_BLOCK_SIZE,
     ABORT_COMMAND,
     ABORT_CRC,
@@ -23,8 +23,8 @@ from ..protocol.sdo import (
     initiate_byte,
     segment_byte,
 )
-from .crc import crc16
-from .dictionary import Dictionary, SdoAbort
+from cananalyze.sim.crc import crc16
+from cananalyze.sim.dictionary import Dictionary, SdoAbort
 
 BLOCK_SIZE = sdo.MAX_BLKSIZE  # segments per block the server accepts in block downloads
 

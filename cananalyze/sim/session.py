@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import random
 
-from ..frames import FrameBatch
-from ..network.profile import DeviceProfile
-from .engine import Simulation
-from .master import Master
-from .network import default_network
-from .node import SimNode
-from .scenarios import SCENARIOS, script
+from cananalyze.frames import FrameBatch
+from cananalyze.network.profile import DeviceProfile
+from cananalyze.sim.engine import Simulation
+from cananalyze.sim.master import Master
+from cananalyze.sim.network import default_network
+from cananalyze.sim.node import SimNode
+from cananalyze.sim.scenarios import SCENARIOS, script
 
 
 def build(

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from ...protocol.nmt import OPERATIONAL
-from ..rule import Context, Rule
+from cananalyze.checks.rule import Context, Rule
+from cananalyze.protocol.nmt import OPERATIONAL
 
 
 class AssertOperational(Rule):

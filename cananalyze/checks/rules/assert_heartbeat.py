@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..rule import Context, Rule, ms
+from cananalyze.checks.rule import Context, Rule, ms
 
 
 class AssertHeartbeat(Rule):

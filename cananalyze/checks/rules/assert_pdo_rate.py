@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..rule import Context, Rule
+from cananalyze.checks.rule import Context, Rule
 
 
 class AssertPdoRate(Rule):

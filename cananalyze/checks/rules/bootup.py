@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...protocol.nmt import ALL_NODES, RESET_COMMUNICATION, RESET_NODE
-from ...protocol.services import Service
-from ...records import DecodedBatch
-from ..rule import Context, Rule
+from cananalyze.checks.rule import Context, Rule
+from cananalyze.protocol.nmt import ALL_NODES, RESET_COMMUNICATION, RESET_NODE
+from cananalyze.protocol.services import Service
+from cananalyze.records import DecodedBatch
 
 _SENT_BY_NODE = np.array(
     [

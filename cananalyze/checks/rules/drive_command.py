@@ -9,9 +9,9 @@ reset replaces the expectation.
 
 from __future__ import annotations
 
-from ...network.drive_tracker import COMMAND, RESET, SEEN, STATE
-from ...profiles import cia402
-from ..rule import Context, Rule, ms
+from cananalyze.checks.rule import Context, Rule, ms
+from cananalyze.network.drive_tracker import COMMAND, RESET, SEEN, STATE
+from cananalyze.profiles import cia402
 
 
 class DriveCommandRule(Rule):

@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...network.drive_tracker import RESET, STATE
-from ...profiles import cia402
-from ...protocol.emcy import MIN_BYTES, error_text
-from ...protocol.services import Service
-from ..rule import Context, Rule
+from cananalyze.checks.rule import Context, Rule
+from cananalyze.network.drive_tracker import RESET, STATE
+from cananalyze.profiles import cia402
+from cananalyze.protocol.emcy import MIN_BYTES, error_text
+from cananalyze.protocol.services import Service
 
 _FAULTS = (cia402.FAULT_REACTION, cia402.FAULT)
 

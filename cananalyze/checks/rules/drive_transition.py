@@ -10,9 +10,9 @@ into fault (transitions 13 and 14 with a short fault reaction between) is allowe
 
 from __future__ import annotations
 
-from ...network.drive_tracker import RESET, STATE
-from ...profiles import cia402
-from ..rule import Context, Rule
+from cananalyze.checks.rule import Context, Rule
+from cananalyze.network.drive_tracker import RESET, STATE
+from cananalyze.profiles import cia402
 
 
 class DriveTransitionRule(Rule):

@@ -7,11 +7,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...protocol.emcy import MIN_BYTES, SIZE, code_texts, decoded_words, error_lines, error_text
-from ...protocol.services import Service
-from ..columns import FindingColumns, objects
-from ..rule import Context, Rule, ms
-from ..spans import crossing, per_frame
+from cananalyze.checks.columns import FindingColumns, objects
+from cananalyze.checks.rule import Context, Rule, ms
+from cananalyze.checks.spans import crossing, per_frame
+from cananalyze.protocol.emcy import (
+    MIN_BYTES,
+    SIZE,
+    code_texts,
+    decoded_words,
+    error_lines,
+    error_text,
+)
+from cananalyze.protocol.services import Service
 
 
 class EmcyRule(Rule):

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...protocol.nmt import ERRCTL_BYTES
-from ...protocol.services import Service
-from ..rule import Context, Rule
+from cananalyze.checks.rule import Context, Rule
+from cananalyze.protocol.nmt import ERRCTL_BYTES
+from cananalyze.protocol.services import Service
 
 
 class ErrctlLengthRule(Rule):

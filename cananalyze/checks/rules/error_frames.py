@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from ...protocol.services import Service
-from ..rule import Context, Rule
+from cananalyze.checks.rule import Context, Rule
+from cananalyze.protocol.services import Service
 
 
 class ErrorFrameRule(Rule):

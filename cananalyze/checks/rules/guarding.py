@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...protocol.nmt import toggle_of
-from ...protocol.services import Service
-from ..rule import Context, Rule, ms
-from ..spans import crossing
+from cananalyze.checks.rule import Context, Rule, ms
+from cananalyze.checks.spans import crossing
+from cananalyze.protocol.nmt import toggle_of
+from cananalyze.protocol.services import Service
 
 
 class GuardingRule(Rule):

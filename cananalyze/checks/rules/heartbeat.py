@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...network.timeline import RESET_ANSWER_S
-from ..rule import Context, Rule, ms
-from ..spans import crossing, runs
-from ..spool import KeyedSpool
+from cananalyze.checks.rule import Context, Rule, ms
+from cananalyze.checks.spans import crossing, runs
+from cananalyze.checks.spool import KeyedSpool
+from cananalyze.network.timeline import RESET_ANSWER_S
 
 MIN_LEARN = 5  # gaps a segment needs before its median is an expected period
 

@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...protocol.nmt import OPERATIONAL
-from ..rule import Context, Rule, ms
-from ..spans import pdo_stretches
+from cananalyze.checks.rule import Context, Rule, ms
+from cananalyze.checks.spans import pdo_stretches
+from cananalyze.protocol.nmt import OPERATIONAL
 
 # CiA 301 lets a node send PDOs only while operational: a node whose NMT state the log
 # never showed (no boot-up, heartbeat or NMT command seen) but whose PDOs bound a gap was

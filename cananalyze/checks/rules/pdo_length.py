@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..rule import Context, Rule
-from ..spans import pdo_stretches
+from cananalyze.checks.rule import Context, Rule
+from cananalyze.checks.spans import pdo_stretches
 
 
 class PdoLengthRule(Rule):

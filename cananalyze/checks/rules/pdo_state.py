@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...protocol.nmt import OPERATIONAL, state_name
-from ...protocol.services import Service
-from ..rule import Context, Rule
+from cananalyze.checks.rule import Context, Rule
+from cananalyze.protocol.nmt import OPERATIONAL, state_name
+from cananalyze.protocol.services import Service
 
 
 class PdoStateRule(Rule):

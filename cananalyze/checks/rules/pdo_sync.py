@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...protocol.services import Service
-from ..rule import Context, Rule, ms
-from ..spans import pdo_stretches, runs
+from cananalyze.checks.rule import Context, Rule, ms
+from cananalyze.checks.spans import pdo_stretches, runs
+from cananalyze.protocol.services import Service
 
 
 class PdoSyncRule(Rule):

@@ -7,8 +7,8 @@ file, SDO writes in the log) and the PDO decoder marks such rows with a
 
 from __future__ import annotations
 
-from ...network.model import NOT_VALID
-from ..rule import Context, Rule
+from cananalyze.checks.rule import Context, Rule
+from cananalyze.network.model import NOT_VALID
 
 
 class PdoValidRule(Rule):

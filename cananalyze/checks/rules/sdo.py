@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...protocol.sdo import object_text
-from ..rule import Context, Rule
+from cananalyze.checks.rule import Context, Rule
+from cananalyze.protocol.sdo import object_text
 
 
 class SdoRule(Rule):

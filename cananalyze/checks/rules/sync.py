@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..rule import Context, Rule, ms
-from ..spans import crossing, runs
+from cananalyze.checks.rule import Context, Rule, ms
+from cananalyze.checks.spans import crossing, runs
 
 
 class SyncRule(Rule):

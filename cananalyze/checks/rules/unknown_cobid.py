@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...frames import FLAG_EXT
-from ...protocol.services import Service
-from ..rule import Context, Rule
+from cananalyze.checks.rule import Context, Rule
+from cananalyze.frames import FLAG_EXT
+from cananalyze.protocol.services import Service
 
 # Unknown identifiers listed one by one (per bus); frames on more are counted in one
 # finding at the end. A log of random 29-bit identifiers made a finding per frame: 200k

@@ -20,16 +20,16 @@ import json
 
 import numpy as np
 
-from ...columns import bytecols
-from ...frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
-from ...profiles.words import word_column
-from ...protocol.fields import frame_fields
-from ...protocol.services import SERVICE_NAMES, Service
-from ...records import DecodedBatch
-from ..text.sdo import fast_pairs
-from ..text.writer import _KEYED, Rendered, _key_groups, _padded_table
-from .rows import _clean, clean_fields, dumps
-from .sdo import pair_fields
+from cananalyze.columns import bytecols
+from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
+from cananalyze.outputs.jsonl.rows import _clean, clean_fields, dumps
+from cananalyze.outputs.jsonl.sdo import pair_fields
+from cananalyze.outputs.text.sdo import fast_pairs
+from cananalyze.outputs.text.writer import _KEYED, Rendered, _key_groups, _padded_table
+from cananalyze.profiles.words import word_column
+from cananalyze.protocol.fields import frame_fields
+from cananalyze.protocol.services import SERVICE_NAMES, Service
+from cananalyze.records import DecodedBatch
 
 # keyed rows whose fields read the first data byte (boot-up's state too, unlike its text)
 _BYTE = np.zeros(256, bool)
@@ -230,7 +230,7 @@ def _floats(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     import pyarrow as pa
     import pyarrow.compute as pc
 
-    from ...columns.json_text import Texts
+    from cananalyze.columns.json_text import Texts
 
     v = np.asarray(v, np.float64)
     n = v.size

@@ -8,11 +8,11 @@ from typing import TextIO
 
 import numpy as np
 
-from ...frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
-from ...protocol.services import SERVICE_NAMES
-from ...records import DecodedBatch
-from ..background import ByteSink
-from ..sink import Sink
+from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
+from cananalyze.outputs.background import ByteSink
+from cananalyze.outputs.sink import Sink
+from cananalyze.protocol.services import SERVICE_NAMES
+from cananalyze.records import DecodedBatch
 
 
 def _clean(value):
@@ -81,7 +81,7 @@ class JsonlWriter(Sink):
 
     def write(self, batch: DecodedBatch, mask: np.ndarray | None = None) -> None:
         if self.frames:
-            from .columns import render  # imports this module
+            from cananalyze.outputs.jsonl.columns import render  # imports this module
 
             rendered = render(batch, mask)
             if rendered is not None:

@@ -41,8 +41,8 @@ from mcap.records import (
     SummaryOffset,
 )
 
-from ...columns.json_text import Texts
-from ...runtime import speedups
+from cananalyze.columns.json_text import Texts
+from cananalyze.runtime import speedups
 
 try:  # python-isal's CRC-32 is the same checksum, ~9x faster than zlib's (1.2 GB per 10M frames)
     from isal.isal_zlib import crc32 as _crc32

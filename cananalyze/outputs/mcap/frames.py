@@ -22,11 +22,11 @@ import json
 
 import numpy as np
 
-from ...columns import bytecols
-from ...columns.json_text import Texts
-from ...frames import FLAG_RTR, FrameBatch
-from ...protocol.services import SERVICE_NAMES
-from ...runtime import speedups
+from cananalyze.columns import bytecols
+from cananalyze.columns.json_text import Texts
+from cananalyze.frames import FLAG_RTR, FrameBatch
+from cananalyze.protocol.services import SERVICE_NAMES
+from cananalyze.runtime import speedups
 
 FRAMES_TOPIC = "/can/frames"
 FRAME_SCHEMA_NAME = "cananalyze.Frame"

@@ -21,18 +21,16 @@ from pathlib import Path
 
 import numpy as np
 
-from ... import __version__
-from ...columns.json_text import Texts
-from ...events.build import EventState, batch_events_of
-from ...events.columns import KINDS, NO_NODE, NO_ROW
-from ...network.drive_tracker import STATE
-from ...network.node_tally import NodeTally
-from ...records import DecodedBatch, SignalBlock, on_bus
-from ..atomic import atomic_path
-from ..tables.writer import WriterThread
-from .bulk import BulkMcapWriter
-from .frames import FRAME_SCHEMA, FRAMES_TOPIC, frame_payloads
-from .topics import (
+from cananalyze import __version__
+from cananalyze.columns.json_text import Texts
+from cananalyze.events.build import EventState, batch_events_of
+from cananalyze.events.columns import KINDS, NO_NODE, NO_ROW
+from cananalyze.network.drive_tracker import STATE
+from cananalyze.network.node_tally import NodeTally
+from cananalyze.outputs.atomic import atomic_path
+from cananalyze.outputs.mcap.bulk import BulkMcapWriter
+from cananalyze.outputs.mcap.frames import FRAME_SCHEMA, FRAMES_TOPIC, frame_payloads
+from cananalyze.outputs.mcap.topics import (
     DRIVE_SCHEMA,
     EVENTS_TOPIC,
     LOG_SCHEMA,
@@ -49,6 +47,8 @@ from .topics import (
     write_merged,
     write_metadata,
 )
+from cananalyze.outputs.tables.writer import WriterThread
+from cananalyze.records import DecodedBatch, SignalBlock, on_bus
 
 
 def batch_messages(

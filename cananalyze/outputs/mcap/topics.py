@@ -26,13 +26,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ... import __version__
-from ...capture import SignalSeries
-from ...columns import arrow_build as ab
-from ...columns.json_text import Texts, join, number_text, object_template
-from ...records import SignalBlock, signal_path
-from .bulk import BulkMcapWriter
-from .frames import log_time_ns
+from cananalyze import __version__
+from cananalyze.capture import SignalSeries
+from cananalyze.columns import arrow_build as ab
+from cananalyze.columns.json_text import Texts, join, number_text, object_template
+from cananalyze.outputs.mcap.bulk import BulkMcapWriter
+from cananalyze.outputs.mcap.frames import log_time_ns
+from cananalyze.records import SignalBlock, signal_path
 
 LOG_SCHEMA = {
     "title": "foxglove.Log",

@@ -13,9 +13,9 @@ import functools
 import html
 from datetime import UTC, datetime
 
-from ... import __version__
-from .encode import Blob, gzip7
-from .sections import SECTIONS, Figures
+from cananalyze import __version__
+from cananalyze.outputs.report.encode import Blob, gzip7
+from cananalyze.outputs.report.sections import SECTIONS, Figures
 
 CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:0 auto;max-width:1200px;

@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .accum import Envelope, LogHistogram
-from .encode import Packed
+from cananalyze.outputs.report.accum import Envelope, LogHistogram
+from cananalyze.outputs.report.encode import Packed
 
 HEIGHT = 260
 # min/max buckets across a full-width plot (about one per pixel column), shared by its

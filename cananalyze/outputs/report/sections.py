@@ -11,10 +11,10 @@ from __future__ import annotations
 import html
 from collections import defaultdict
 
-from ...checks.finding import show
-from ...checks.model_config import ModelConfig
-from ..junit import format_finding
-from . import plots
+from cananalyze.checks.finding import show
+from cananalyze.checks.model_config import ModelConfig
+from cananalyze.outputs.junit import format_finding
+from cananalyze.outputs.report import plots
 
 esc = html.escape
 
@@ -148,7 +148,7 @@ def _node_id(n: int, bus: str | None) -> str:
 
 
 def nodes(s, figs: Figures) -> str:
-    from ...network.node_tally import bus_profiles, node_profiles
+    from cananalyze.network.node_tally import bus_profiles, node_profiles
 
     model = s.run.network
     rows = s.tally.rows(
@@ -237,7 +237,7 @@ def _configured(cfg: ModelConfig, kind: str, node: int, g) -> list[tuple[float, 
 def sdo(s, figs: Figures) -> str:
     if not s.sdo_count:
         return ""
-    from .accum import LogHistogram
+    from cananalyze.outputs.report.accum import LogHistogram
 
     rows = []
     for (bus, n), (ok, bad, h) in sorted(_sdo_by_bus(s).items()):
@@ -290,7 +290,7 @@ def sdo(s, figs: Figures) -> str:
 def _sdo_by_bus(s) -> dict:
     """(bus, node) -> [ok, aborts, latency histogram]: the transfers counted before a
     second bus was seen (bus "") are the first bus's."""
-    from .accum import LogHistogram
+    from cananalyze.outputs.report.accum import LogHistogram
 
     out: dict = {}
     for (bus, n), (ok, bad) in s.sdo_count.items():

@@ -13,15 +13,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ...checks.finding import Finding
-from ...events.columns import EMCY, NO_NODE
-from ...network.drive_tracker import STATE
-from ...network.node_tally import NodeTally
-from ...protocol.services import Service
-from ..atomic import Staged, check_writable
-from ..busload import frame_bits
-from ..sink import Sink
-from .accum import Envelope, LogHistogram, WindowSums
+from cananalyze.checks.finding import Finding
+from cananalyze.events.columns import EMCY, NO_NODE
+from cananalyze.network.drive_tracker import STATE
+from cananalyze.network.node_tally import NodeTally
+from cananalyze.outputs.atomic import Staged, check_writable
+from cananalyze.outputs.busload import frame_bits
+from cananalyze.outputs.report.accum import Envelope, LogHistogram, WindowSums
+from cananalyze.outputs.sink import Sink
+from cananalyze.protocol.services import Service
 
 MAX_STATES = 20_000  # NMT state changes kept for the timelines (a reset loop makes many)
 MAX_LISTED = 500  # SDO aborts listed one by one; counted beyond
@@ -316,7 +316,7 @@ class ReportSink(Sink):
 
     def finish(self) -> None:
         """The page rendered and written beside its target; in place at `commit`."""
-        from .page import render
+        from cananalyze.outputs.report.page import render
 
         for bus in self.buses.values():
             bus.load.finish()

@@ -17,11 +17,18 @@ from pathlib import Path
 
 import numpy as np
 
-from ...capture import Collector
-from ...errors import ProblemLog, UsageError
-from ...records import DecodedBatch
-from ..busload import bits_by_channel
-from .send import LOAD_WINDOW, Layout, is_absolute, send_header, send_load, send_parts
+from cananalyze.capture import Collector
+from cananalyze.errors import ProblemLog, UsageError
+from cananalyze.outputs.busload import bits_by_channel
+from cananalyze.outputs.rerun.send import (
+    LOAD_WINDOW,
+    Layout,
+    is_absolute,
+    send_header,
+    send_load,
+    send_parts,
+)
+from cananalyze.records import DecodedBatch
 
 
 class RerunLive:
@@ -41,7 +48,7 @@ class RerunLive:
         if not rrd and not spawn:
             raise ValueError("RerunLive needs an .rrd file, a viewer, or both")
         if rrd:
-            from ..atomic import check_writable
+            from cananalyze.outputs.atomic import check_writable
 
             check_writable(rrd)
         self.bitrate = bitrate

@@ -23,9 +23,9 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from ... import __version__
-from ...capture import Capture
-from ...records import on_bus, signal_path
+from cananalyze import __version__
+from cananalyze.capture import Capture
+from cananalyze.records import on_bus, signal_path
 
 TIMELINE = "time"
 _RR_LEVEL = {1: "DEBUG", 2: "INFO", 3: "WARN", 4: "ERROR", 5: "CRITICAL"}

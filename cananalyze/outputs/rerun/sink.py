@@ -8,9 +8,9 @@ import sys
 from pathlib import Path
 from urllib.parse import urlparse
 
-from ...errors import UsageError
-from ..sink import Sink
-from .send import grpc_url
+from cananalyze.errors import UsageError
+from cananalyze.outputs.rerun.send import grpc_url
+from cananalyze.outputs.sink import Sink
 
 
 class RerunSink(Sink):
@@ -36,7 +36,7 @@ class RerunSink(Sink):
         super().open(run)
         if self.connect:
             reachable(self.connect)
-        from .stream import StreamRrd
+        from cananalyze.outputs.rerun.stream import StreamRrd
 
         self.stream = StreamRrd(
             self.path,
@@ -98,7 +98,7 @@ class RerunLiveSink(Sink):
         if not rrd and not spawn:
             raise ValueError("RerunLiveSink needs an .rrd file, a viewer, or both")
         if rrd:
-            from ..atomic import check_writable
+            from cananalyze.outputs.atomic import check_writable
 
             check_writable(rrd)
         self.rrd, self.spawn, self.bitrate, self.name = rrd, spawn, bitrate, name
@@ -106,7 +106,7 @@ class RerunLiveSink(Sink):
 
     def open(self, run) -> None:
         super().open(run)
-        from .live import RerunLive
+        from cananalyze.outputs.rerun.live import RerunLive
 
         self.live = RerunLive(
             rrd=self.rrd,

@@ -20,13 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ...capture import Collector
-from ...errors import ProblemLog
-from ...events.build import EventState
-from ...records import DecodedBatch
-from ..atomic import atomic_path
-from ..busload import bits_by_channel, load_windows
-from .send import (
+from cananalyze.capture import Collector
+from cananalyze.errors import ProblemLog
+from cananalyze.events.build import EventState
+from cananalyze.outputs.atomic import atomic_path
+from cananalyze.outputs.busload import bits_by_channel, load_windows
+from cananalyze.outputs.rerun.send import (
     LOAD_WINDOW,
     Layout,
     grpc_url,
@@ -36,6 +35,7 @@ from .send import (
     send_load,
     send_parts,
 )
+from cananalyze.records import DecodedBatch
 
 
 class StreamRrd:

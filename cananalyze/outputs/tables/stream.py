@@ -31,24 +31,21 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from ...checks.columns import FindingColumns
-from ...checks.finding import TABLE_COLUMNS
-from ...columns import arrow_build as ab
-from ...columns.payloads import payload_bytes, payload_hex
-from ...errors import UsageError
-from ...events.build import LEVEL_NAMES, EventState, batch_events_of
-from ...events.columns import KINDS, NO_NODE, NO_ROW, EventColumns
-from ...frames import FrameBatch
-from ...network.node_tally import NodeTally, bus_profiles, node_profiles
-from ...protocol.services import SERVICE_NAMES
-from ...records import DecodedBatch
-from ...sdo.transaction import SDO_TABLE_COLUMNS
-from ..atomic import atomic_path
-from ..sink import Sink as OutputSink
-from . import pandas_like as pl
-from . import sdo_chunks, wide
-from .findings_spool import FindingsSpool
-from .writer import (
+from cananalyze.checks.columns import FindingColumns
+from cananalyze.checks.finding import TABLE_COLUMNS
+from cananalyze.columns import arrow_build as ab
+from cananalyze.columns.payloads import payload_bytes, payload_hex
+from cananalyze.errors import UsageError
+from cananalyze.events.build import LEVEL_NAMES, EventState, batch_events_of
+from cananalyze.events.columns import KINDS, NO_NODE, NO_ROW, EventColumns
+from cananalyze.frames import FrameBatch
+from cananalyze.network.node_tally import NodeTally, bus_profiles, node_profiles
+from cananalyze.outputs.atomic import atomic_path
+from cananalyze.outputs.sink import Sink as OutputSink
+from cananalyze.outputs.tables import pandas_like as pl
+from cananalyze.outputs.tables import sdo_chunks, wide
+from cananalyze.outputs.tables.findings_spool import FindingsSpool
+from cananalyze.outputs.tables.writer import (
     DEFAULT_CODEC,
     ROW_GROUP,
     ROW_GROUP_BYTES,
@@ -60,6 +57,9 @@ from .writer import (
     csv_table,
     rewrite,
 )
+from cananalyze.protocol.services import SERVICE_NAMES
+from cananalyze.records import DecodedBatch
+from cananalyze.sdo.transaction import SDO_TABLE_COLUMNS
 
 TABLES = ("frames", "signals", "sdo", "events", "findings", "nodes")
 SDO_COLUMNS = SDO_TABLE_COLUMNS

@@ -32,9 +32,11 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from ...columns import arrow_build as ab
-from . import writer as _writer  # ROW_GROUP(_BYTES) read at each use: tests set them
-from .writer import ROW_GROUP, WRITE_BATCH
+from cananalyze.columns import arrow_build as ab
+from cananalyze.outputs.tables import (
+    writer as _writer,  # ROW_GROUP(_BYTES) read at each use: tests set them
+)
+from cananalyze.outputs.tables.writer import ROW_GROUP, WRITE_BATCH
 
 KEYS = ("t", "node", "pdo", "cob_id")
 PDO = pa.dictionary(pa.int32(), pa.string())

@@ -39,8 +39,8 @@ try:
 except ImportError:  # pragma: no cover - pyarrow's layout changed
     import pyarrow.compute  # noqa: F401
 
-from ...columns import arrow_build as ab
-from .pandas_like import code_type
+from cananalyze.columns import arrow_build as ab
+from cananalyze.outputs.tables.pandas_like import code_type
 
 # Rows per row group: 256k (pyarrow's default is 1M) lets the writer start while the
 # decoder is still at the first quarter of a 1M-frame log, and bounds what waits in memory.

@@ -3,8 +3,8 @@ the live dashboard show it under the frame that completed it."""
 
 from __future__ import annotations
 
-from ...events.sdo_text import shown_data, shown_text
-from ...protocol.sdo import object_text
+from cananalyze.events.sdo_text import shown_data, shown_text
+from cananalyze.protocol.sdo import object_text
 
 
 def format_record(rec: dict) -> str:

@@ -12,8 +12,8 @@ from typing import TextIO
 
 import numpy as np
 
-from ...records import DecodedBatch
-from ..sink import Sink
+from cananalyze.outputs.sink import Sink
+from cananalyze.records import DecodedBatch
 
 
 def signal_records(batch: DecodedBatch, mask: np.ndarray | None = None) -> list[dict]:

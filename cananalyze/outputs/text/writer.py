@@ -21,24 +21,24 @@ from typing import TextIO
 
 import numpy as np
 
-from ...columns import bytecols as _bytecols
-from ...columns.bytecols import HEX_UPPER as _HEXCHARS
-from ...columns.bytecols import PAD as _PAD
-from ...columns.bytecols import compact as _compact
-from ...columns.bytecols import digits as _digits
-from ...columns.bytecols import padded_table as _padded_table
-from ...columns.numtext import g6_text, value_text
-from ...frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
-from ...profiles.words import word_column
-from ...protocol import emcy as emcy_text
-from ...protocol.fields import annotation, frame_fields
-from ...protocol.services import SERVICE_NAMES, Service
-from ...records import DecodedBatch
-from .. import colour
-from ..background import ByteSink
-from ..sink import Sink
-from .records import format_alone, format_record
-from .sdo import fast_pairs, pair_text
+from cananalyze.columns import bytecols as _bytecols
+from cananalyze.columns.bytecols import HEX_UPPER as _HEXCHARS
+from cananalyze.columns.bytecols import PAD as _PAD
+from cananalyze.columns.bytecols import compact as _compact
+from cananalyze.columns.bytecols import digits as _digits
+from cananalyze.columns.bytecols import padded_table as _padded_table
+from cananalyze.columns.numtext import g6_text, value_text
+from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
+from cananalyze.outputs import colour
+from cananalyze.outputs.background import ByteSink
+from cananalyze.outputs.sink import Sink
+from cananalyze.outputs.text.records import format_alone, format_record
+from cananalyze.outputs.text.sdo import fast_pairs, pair_text
+from cananalyze.profiles.words import word_column
+from cananalyze.protocol import emcy as emcy_text
+from cananalyze.protocol.fields import annotation, frame_fields
+from cananalyze.protocol.services import SERVICE_NAMES, Service
+from cananalyze.records import DecodedBatch
 
 _HEX3 = [f"{i:02X} " for i in range(256)]
 
