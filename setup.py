@@ -5,7 +5,7 @@ extension and installs the pure-Python package, which gives the same results,
 slower. `_BuildExt` says so in one line instead of setuptools' quiet warning;
 `cananalyze --version` tells an installed copy which path it takes. The
 repository's decoders/ folder ships inside the wheel as cananalyze/_decoders
-(network/profile.py looks there first, then in the checkout).
+(devices/profile.py looks there first, then in the checkout).
 """
 
 import sys

@@ -57,7 +57,7 @@ def _cpu() -> float:
 
 
 def _frames(n: int):
-    from cananalyze.frames import FrameBatch
+    from cananalyze.core.frames import FrameBatch
 
     rng = np.random.default_rng(0)
     fb = FrameBatch.allocate(n, ("can0",))

@@ -81,7 +81,7 @@ assert len(log) > 0, "canopen-lens read no frame"
 # the reader alone: every batch of the log, nothing decoded (the tree's cananalyze)
 READER = """
 import sys
-from cananalyze.io.source import open_log
+from cananalyze.formats.source import open_log
 src = open_log(sys.argv[1])
 print(sum(len(b) for b in src.batches()))
 """

@@ -28,7 +28,7 @@ sys.path.insert(0, str(HERE))
 
 from generate import generate, write_asc  # noqa: E402
 
-from cananalyze.io.logfile import write_log  # noqa: E402
+from cananalyze.formats.logfile import write_log  # noqa: E402
 
 DAY = 86_400.0
 

@@ -33,7 +33,7 @@ READ = """
 import sys, time
 from cananalyze.runtime import allocator
 allocator.tune()  # as the CLI runs
-from cananalyze.io.source import open_log
+from cananalyze.formats.source import open_log
 c = time.process_time()
 for _ in open_log(sys.argv[1]).batches():
     pass

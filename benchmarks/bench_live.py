@@ -37,9 +37,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import can  # noqa: E402
 
-from cananalyze.io.live import LiveSource  # noqa: E402
-from cananalyze.outputs.sink import Sink  # noqa: E402
+from cananalyze.formats.live import LiveSource  # noqa: E402
 from cananalyze.pipeline import Options, build_checker, build_decoder, run  # noqa: E402
+from cananalyze.pipeline.sink import Sink  # noqa: E402
 
 CHANNEL = "bench-live"
 DRAIN = 10.0  # s after the last send a loaded machine gets to finish the queued frames

@@ -44,8 +44,8 @@ def write_files(n: int, folder: Path) -> tuple[Path, Path]:
     head += np.array([0x40000, 227], "<u4").tobytes()
     pcap = folder / "bench.pcap"
     pcap.write_bytes(head + rec.tobytes())
-    from cananalyze.io.logfile import write_log
-    from cananalyze.io.source import read_all
+    from cananalyze.formats.logfile import write_log
+    from cananalyze.formats.source import read_all
 
     log = folder / "bench.log"
     write_log(read_all(pcap), log)
@@ -58,7 +58,7 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--scapy-frames", type=float, default=1e5, help="scapy reads this many")
     args = ap.parse_args()
-    from cananalyze.io.source import read_all
+    from cananalyze.formats.source import read_all
 
     n = int(args.frames)
     with tempfile.TemporaryDirectory() as tmp:

@@ -45,8 +45,8 @@ def real_logs(data: Path) -> list[Path]:
 def stack_logs(out: Path) -> list[tuple[Path, Path]]:
     """The python-canopen scenarios as candump logs and their rules files (made once)."""
     sys.path.insert(0, str(ROOT))
-    from cananalyze.frames import from_rows
-    from cananalyze.io.logfile import write_log
+    from cananalyze.core.frames import from_rows
+    from cananalyze.formats.logfile import write_log
     from tests.helpers.config_traffic import SCENARIOS
 
     out.mkdir(parents=True, exist_ok=True)

@@ -22,9 +22,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cananalyze.columns.bytecols import digits as _digits  # noqa: E402  (the text writer's ASCII digits)
-from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, FrameBatch  # noqa: E402
-from cananalyze.io.logfile import write_log  # noqa: E402
+from cananalyze.core.columns.bytecols import digits as _digits  # noqa: E402  (the text writer's ASCII digits)
+from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, FrameBatch  # noqa: E402
+from cananalyze.formats.logfile import write_log  # noqa: E402
 
 START = 1767225600.0
 # The traffic's version, in the logs' names (`log_stem`): a change of what is generated

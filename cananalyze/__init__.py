@@ -11,49 +11,42 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-__version__ = "0.1.0"
+from cananalyze.core.version import __version__
 
 if TYPE_CHECKING:
-    from cananalyze.capture import Capture
-    from cananalyze.checks.finding import Finding
+    from cananalyze.api.capture import Capture
+    from cananalyze.core.finding import Finding
 
 # public name -> module that defines it
 _LAZY = {
-    "Capture": "capture",
-    "Finding": "checks.finding",
-    "FrameBatch": "frames",
-    "DecodedBatch": "records",
+    "Capture": "api.capture",
+    "Finding": "core.finding",
+    "FrameBatch": "core.frames",
+    "DecodedBatch": "core.records",
     "Options": "pipeline",
     "Run": "pipeline",
     "build_decoder": "pipeline",
     "open_source": "pipeline",
     "run": "pipeline",
-    "Sink": "outputs.sink",
-    "CananalyzeError": "errors",
-    "InputError": "errors",
-    "UsageError": "errors",
+    "Sink": "pipeline.sink",
+    "CananalyzeError": "core.errors",
+    "InputError": "core.errors",
+    "UsageError": "core.errors",
 }
 
 
 def load(path, **options) -> Capture:
-    """Decode and check a log into a Capture of DataFrames; see `cananalyze.capture.load`."""
-    from cananalyze.capture import load as _load
+    """Decode and check a log into a Capture of DataFrames; see `cananalyze.api.capture.load`."""
+    from cananalyze.api.capture import load as _load
 
     return _load(path, **options)
 
 
 def check(path, **options) -> list[Finding]:
-    """The findings `cananalyze check` reports for a log, in time order (rules and network
-    as keyword arguments, like `load()`); `[f for f in found if f.fails]` are violations."""
-    from cananalyze.capture import load_options
-    from cananalyze.outputs.findings import FindingsSink
-    from cananalyze.pipeline import build_checker, build_decoder, open_source, run
+    """The findings `cananalyze check` reports for a log; see `cananalyze.api.capture.check`."""
+    from cananalyze.api.capture import check as _check
 
-    opts = load_options(**options)
-    checker = build_checker(opts)
-    report = FindingsSink(quiet=True)
-    run(open_source(path, opts), build_decoder(opts, checker), [report], opts)
-    return report.findings.findings()  # Finding objects: what a Python caller reads
+    return _check(path, **options)
 
 
 def __getattr__(name: str):

@@ -27,8 +27,8 @@ import pyarrow.parquet as pq
 from conftest import SAMPLES
 
 import cananalyze
-from cananalyze.capture import Capture, load_options
-from cananalyze.io.source import read_all
+from cananalyze.api.capture import Capture, load_options
+from cananalyze.formats.source import read_all
 from cananalyze.pipeline import Options, Run, build_checker, build_decoder, open_source, run
 
 NETWORK = str(SAMPLES / "network.toml")
@@ -58,7 +58,7 @@ class CutSource:
         self.path, self.problems, self.size = self.inner.path, self.inner.problems, size
 
     def batches(self):
-        from cananalyze.frames import concat
+        from cananalyze.core.frames import concat
 
         if self.size is None:
             yield from self.inner.batches()
@@ -111,7 +111,7 @@ def load_cut(log: Path, size: int | None = None, **load_kw) -> Capture:
     a cut export is compared with a Capture cut the same way."""
     if size is None:
         return cananalyze.load(log, **load_kw)
-    from cananalyze.capture import CaptureSink
+    from cananalyze.outputs.capture import CaptureSink
 
     sink = CaptureSink()
     export_run(log, [sink], size, **load_kw)

@@ -6,8 +6,8 @@ import io
 
 import numpy as np
 
-from cananalyze.errors import ProblemLog
-from cananalyze.frames import (
+from cananalyze.core.errors import ProblemLog
+from cananalyze.core.frames import (
     FLAG_BRS,
     FLAG_ERR,
     FLAG_ESI,
@@ -18,7 +18,7 @@ from cananalyze.frames import (
     FrameBatch,
     concat,
 )
-from cananalyze.io.registry import ReadContext
+from cananalyze.formats.registry import ReadContext
 
 
 def run(

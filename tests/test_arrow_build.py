@@ -5,7 +5,7 @@ from __future__ import annotations
 import pyarrow as pa
 import pytest
 
-from cananalyze.columns.arrow_build import strings
+from cananalyze.core.columns.arrow_build import strings
 
 CASES = [
     [],

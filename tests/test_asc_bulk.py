@@ -10,8 +10,8 @@ import pytest
 from conftest import ROOT, SAMPLES, real_file
 from readers_util import run
 
-from cananalyze.errors import InputError
-from cananalyze.io import asc, candump
+from cananalyze.core.errors import InputError
+from cananalyze.formats import asc, candump
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
@@ -62,7 +62,7 @@ def test_python_can_fixtures(name: str) -> None:
 def test_sample_and_benchmark_mix(tmp_path) -> None:
     from generate import generate
 
-    from cananalyze.io.logfile import write_log
+    from cananalyze.formats.logfile import write_log
 
     assert assert_same((SAMPLES / "demo.asc").read_bytes()) > 100
     path = tmp_path / "mix.asc"

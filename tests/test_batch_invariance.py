@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 from conftest import SAMPLES
 
-from cananalyze.io.source import read_all
+from cananalyze.formats.source import read_all
 from cananalyze.outputs.jsonl.rows import dumps, frame_record
 from cananalyze.pipeline import Options, build_decoder
 

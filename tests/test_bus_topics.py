@@ -11,7 +11,7 @@ import pytest
 from conftest import SAMPLES
 from test_foxglove_live import Halves, _mcap_messages
 
-from cananalyze.io.source import open_log, read_all
+from cananalyze.formats.source import open_log, read_all
 from cananalyze.outputs.mcap.sink import McapSink
 from cananalyze.pipeline import Options, build_decoder, run
 

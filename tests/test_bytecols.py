@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cananalyze.columns import bytecols
+from cananalyze.core.columns import bytecols
 
 EDGES = [0, 1, 9, 10, -1, -9, -10, 255, 4096, 2**31 - 1, -(2**31), 2**32 - 1, 2**63 - 1, -(2**63)]
 
@@ -50,7 +50,7 @@ def test_split_rows_keeps_non_ascii_text() -> None:
 
 def _pairs(rng: np.random.Generator, m: int):
     """m expedited SDO pairs (uploads and downloads, 1-4 bytes, some aborted) as frames."""
-    from cananalyze.frames import FrameBatch
+    from cananalyze.core.frames import FrameBatch
 
     fb = FrameBatch.allocate(2 * m, ("can0",))
     fb.t[:] = np.arange(2 * m) * 0.001
@@ -83,8 +83,8 @@ def _pairs(rng: np.random.Generator, m: int):
 def test_sdo_messages_equal_the_per_record_text() -> None:
     """Integer values of every sign and size, unknown objects (data only), aborts, names
     with non-ASCII letters: the columns say what `sdo_message` says of each record."""
-    from cananalyze.events.sdo_text import sdo_message, sdo_messages
-    from cananalyze.sdo import fastpath
+    from cananalyze.decode.events.sdo_text import sdo_message, sdo_messages
+    from cananalyze.decode.sdo import fastpath
 
     # INTEGER8/16/32 and UNSIGNED32; 0x6000 unknown (no name, no type: data only)
     types = {0x2000: ("Drehzahl", 0x0002), 0x2001: ("Temp", 0x0003), 0x2002: ("Zähler", 0x0007)}

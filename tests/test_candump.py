@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 from conftest import ROOT, real_file
 
-from cananalyze.errors import InputError
-from cananalyze.frames import FLAG_BRS, FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, concat
-from cananalyze.io import candump
-from cananalyze.io.source import open_log, read_all
+from cananalyze.core.errors import InputError
+from cananalyze.core.frames import FLAG_BRS, FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, concat
+from cananalyze.formats import candump
+from cananalyze.formats.source import open_log, read_all
 
 
 def _read(tmp_path, text: str, strict: bool = False, name: str = "x.log"):
@@ -160,8 +160,8 @@ def test_chunk_buffer_streams_and_lines_longer_than_a_chunk(kind, monkeypatch):
     """The reused chunk buffer gives the frames and problems of plain bytes: short reads,
     streams without readinto, a line longer than a chunk (the carry grows in place) and
     one longer than MAX_LINE (skipped), in both the compiled and numpy paths."""
-    from cananalyze.errors import ProblemLog
-    from cananalyze.io.registry import ReadContext
+    from cananalyze.core.errors import ProblemLog
+    from cananalyze.formats.registry import ReadContext
 
     rng = np.random.default_rng(5)
     lines = [

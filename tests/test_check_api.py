@@ -12,8 +12,8 @@ from conftest import ROOT, real_file
 
 import cananalyze
 from cananalyze.cli.main import main
-from cananalyze.frames import from_rows
-from cananalyze.io.logfile import write_log
+from cananalyze.core.frames import from_rows
+from cananalyze.formats.logfile import write_log
 
 SAMPLES = ROOT / "samples"
 FAULTS, COMMISSIONING = SAMPLES / "faults.log", SAMPLES / "commissioning.log"

@@ -16,9 +16,9 @@ from cananalyze.checks.gaps import grouped_gaps
 from cananalyze.checks.nmt_state import NmtStates
 from cananalyze.checks.rule import Context, GapState
 from cananalyze.checks.timing import Timing
-from cananalyze.frames import FrameBatch
+from cananalyze.core.frames import FrameBatch
+from cananalyze.core.records import DecodedBatch
 from cananalyze.protocol.services import Service
-from cananalyze.records import DecodedBatch
 
 
 def _batch(rng, n: int, t0: float, guards: bool) -> DecodedBatch:

@@ -11,13 +11,13 @@ from pathlib import Path
 import pytest
 import yaml
 
-from cananalyze.assertions import assert_heartbeat, assert_no_emcy, run_rules
+from cananalyze.api.assertions import assert_heartbeat, assert_no_emcy, run_rules
 from cananalyze.checks.build import build_checker
 from cananalyze.checks.engine import Checker
-from cananalyze.errors import InputError
-from cananalyze.frames import FLAG_ERR, FLAG_RTR, from_rows
-from cananalyze.io.logfile import write_log
-from cananalyze.io.source import read_all
+from cananalyze.core.errors import InputError
+from cananalyze.core.frames import FLAG_ERR, FLAG_RTR, from_rows
+from cananalyze.formats.logfile import write_log
+from cananalyze.formats.source import read_all
 from cananalyze.pipeline import Decoder, Options, build_decoder
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -300,7 +300,7 @@ def test_sdo_records_and_error_frames():
 
 
 def test_assertions_heartbeat_pdo_rate_signal_and_boot(tmp_path):
-    from cananalyze.records import SignalBlock
+    from cananalyze.core.records import SignalBlock
 
     rules = tmp_path / "rules.yaml"
     rules.write_text(

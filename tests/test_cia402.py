@@ -12,8 +12,8 @@ import pytest
 from canopen.profiles.p402 import OperationMode, State402
 
 import cananalyze
-from cananalyze.network.profile import load_builtin, load_eds
-from cananalyze.profiles import cia401, cia402
+from cananalyze.devices import cia401, cia402
+from cananalyze.devices.profile import load_builtin, load_eds
 from tests.conftest import real_file
 from tests.helpers.drive402 import Drive402
 from tests.helpers.virtual_bus import unique_channel
@@ -343,7 +343,7 @@ def test_network_file_device_cia402(tmp_path):
 def test_unknown_data_as_text_only_beyond_expedited():
     """One in 50 random 4-byte values is printable ASCII: expedited data of an unknown type
     is never worded as text; a segmented transfer's string is."""
-    from cananalyze.protocol.object_words import object_words, visible_string
+    from cananalyze.devices.object_words import object_words, visible_string
 
     assert visible_string(b"AB12") is None and visible_string(b"Ab") is None
     assert object_words(0x2000, 0, None, b"MyDrive v1.2\x00\x00") == 'text "MyDrive v1.2"'

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from conftest import real_file
 
-from cananalyze.frames import FLAG_RTR
-from cananalyze.io.source import read_all
+from cananalyze.core.frames import FLAG_RTR
+from cananalyze.formats.source import read_all
 from cananalyze.protocol.cobid import CobClassifier
 from cananalyze.protocol.services import SERVICE_NAMES
 

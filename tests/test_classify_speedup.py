@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 from conftest import real_file
 
-from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR, FLAG_TX, FrameBatch
-from cananalyze.io.source import read_all
+from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR, FLAG_TX, FrameBatch
+from cananalyze.formats.source import read_all
 from cananalyze.protocol.cobid import CobClassifier
 from cananalyze.protocol.services import Service
 from cananalyze.runtime import speedups

@@ -9,7 +9,7 @@ import numpy as np
 from conftest import ROOT, SAMPLES
 
 from cananalyze.cli.main import main
-from cananalyze.io.source import read_all
+from cananalyze.formats.source import read_all
 from cananalyze.sim.network import load_network
 from cananalyze.sim.session import simulate
 

@@ -11,9 +11,9 @@ import pytest
 from conftest import real_file
 
 import cananalyze
-from cananalyze.frames import from_rows
-from cananalyze.io.logfile import write_log
-from cananalyze.network.profile import load_builtin
+from cananalyze.core.frames import from_rows
+from cananalyze.devices.profile import load_builtin
+from cananalyze.formats.logfile import write_log
 from cananalyze.sim.engine import START, Simulation
 from cananalyze.sim.master import Guard, Master, Nmt, Read, Until, Write, u16
 from cananalyze.sim.node import SimNode

@@ -12,9 +12,9 @@ from conftest import ROOT, SAMPLES
 
 from cananalyze.checks.build import build_checker
 from cananalyze.checks.rulesfile import rules_network
-from cananalyze.errors import InputError
-from cananalyze.network.netfile import combine, load_network
-from cananalyze.network.profile import decoders_dir
+from cananalyze.config.netfile import combine, load_network
+from cananalyze.core.errors import InputError
+from cananalyze.devices.profile import decoders_dir
 from cananalyze.pipeline import Options, network_spec
 
 EDS = decoders_dir() / "dat7014.eds"

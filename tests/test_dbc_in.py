@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import cananalyze
-from cananalyze.frames import FLAG_EXT, FrameBatch
+from cananalyze.core.frames import FLAG_EXT, FrameBatch
 from cananalyze.pipeline import Options, build_decoder, run
 from tests.conftest import real_file
 
@@ -295,7 +295,7 @@ def test_live_bus_decodes_by_the_dbc(tmp_path):
 
     from cananalyze.cli.common import options
     from cananalyze.cli.main import build_parser
-    from cananalyze.io.live import LiveSource
+    from cananalyze.formats.live import LiveSource
     from cananalyze.outputs.text.writer import TextWriter
 
     path = tmp_path / "mixed.dbc"

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import cananalyze
-from cananalyze.network.profile import BUILTIN_KEYS
+from cananalyze.devices.profile import BUILTIN_KEYS
 from tests.conftest import real_file
 
 TMCM = "nigel-bruce-khan__ros_canopen-tmcm-1636/"

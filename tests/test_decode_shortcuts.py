@@ -17,13 +17,21 @@ from cananalyze.checks.gaps import grouped_gaps
 from cananalyze.checks.nmt_state import NmtStates
 from cananalyze.checks.rules.bootup import _SENT, _senders
 from cananalyze.checks.rules.drive_fault import DriveFaultRule
-from cananalyze.columns.order import stable_order
-from cananalyze.frames import FLAG_BRS, FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, FrameBatch
-from cananalyze.io.source import read_all
-from cananalyze.network.node_tally import NodeTally
+from cananalyze.core.columns.order import stable_order
+from cananalyze.core.frames import (
+    FLAG_BRS,
+    FLAG_ERR,
+    FLAG_EXT,
+    FLAG_FD,
+    FLAG_RTR,
+    FLAG_TX,
+    FrameBatch,
+)
+from cananalyze.core.records import DecodedBatch
+from cananalyze.decode.node_tally import NodeTally
+from cananalyze.formats.source import read_all
 from cananalyze.outputs.busload import bits_per_channel, frame_bits
 from cananalyze.protocol.services import SERVICE_NAMES, Service
-from cananalyze.records import DecodedBatch
 from cananalyze.runtime import speedups
 
 

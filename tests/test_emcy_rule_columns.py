@@ -14,7 +14,7 @@ import pytest
 from cananalyze.checks.engine import Checker
 from cananalyze.checks.rule import Context, Rule, ms
 from cananalyze.checks.rules.emcy import EmcyRule
-from cananalyze.frames import from_rows
+from cananalyze.core.frames import from_rows
 from cananalyze.pipeline import Decoder
 from cananalyze.protocol.emcy import error_text, register_text
 from cananalyze.protocol.services import Service

@@ -21,10 +21,10 @@ import pytest
 from conftest import ROOT, real_file
 
 import cananalyze
+from cananalyze.core.frames import FLAG_RTR, from_rows
 from cananalyze.fleet import schema as fleet_schema
-from cananalyze.frames import FLAG_RTR, from_rows
-from cananalyze.io.logfile import write_log
-from cananalyze.io.source import read_all
+from cananalyze.formats.logfile import write_log
+from cananalyze.formats.source import read_all
 from cananalyze.outputs.tables.stream import TableSink
 from cananalyze.pipeline import Options, build_decoder, open_source, run
 from cananalyze.protocol.cobid import CobClassifier

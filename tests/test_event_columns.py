@@ -13,7 +13,8 @@ import pytest
 from conftest import SAMPLES, real_file
 from exported import DEVICES, decoded_batches
 
-from cananalyze.events.build import (
+from cananalyze.core.frames import FLAG_RTR, FrameBatch, concat
+from cananalyze.decode.events.build import (
     ERROR,
     INFO,
     WARNING,
@@ -23,9 +24,8 @@ from cananalyze.events.build import (
     finding_event,
     sdo_event,
 )
-from cananalyze.events.columns import NO_NODE, NO_ROW, EventColumns, Row
-from cananalyze.frames import FLAG_RTR, FrameBatch, concat
-from cananalyze.io.source import open_log
+from cananalyze.decode.events.columns import NO_NODE, NO_ROW, EventColumns, Row
+from cananalyze.formats.source import open_log
 from cananalyze.outputs.tables.stream import HOLD
 from cananalyze.outputs.tables.stream import TableSink as StreamTables
 from cananalyze.pipeline import Options, build_decoder
@@ -294,7 +294,7 @@ def test_finding_events_match_per_row(log):
 
 def test_stable_order_equals_a_stable_argsort() -> None:
     """Keys that fit 16 bits sort as uint16 (radix); others (negative, wide) as they are."""
-    from cananalyze.events.build import _stable_order
+    from cananalyze.decode.events.build import _stable_order
 
     rng = np.random.default_rng(7)
     for keys in (

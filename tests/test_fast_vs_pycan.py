@@ -32,8 +32,8 @@ import pandas as pd
 import pytest
 
 import cananalyze
-from cananalyze.frames import FLAG_FD
-from cananalyze.io.logfile import write_log
+from cananalyze.core.frames import FLAG_FD
+from cananalyze.formats.logfile import write_log
 from tests.conftest import real_file
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -22,7 +22,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from cananalyze.checks.columns import FindingColumns
+from cananalyze.core.finding_columns import FindingColumns
 from tests.conftest import ROOT, generated_log
 
 DEVICES = [a for k in range(1, 17) for a in ("--device", f"{k}=dat7014")]
@@ -212,7 +212,7 @@ def test_findings_sink_output_matches_the_finding_objects() -> None:
 def test_round6_is_pythons_round() -> None:
     """The table's t_rel, rounded as columns, is `round(v, 6)` value for value: random
     times, exact halves of a microsecond and their neighbours, NaN."""
-    from cananalyze.checks.columns import round6
+    from cananalyze.core.finding_columns import round6
 
     rng = np.random.default_rng(7)
     halves = (np.arange(1, 2000) + 0.5) / 1e6

@@ -12,8 +12,8 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from cananalyze.checks.columns import FindingColumns, round6, rounded6
-from cananalyze.events.build import finding_event_columns
+from cananalyze.core.finding_columns import FindingColumns, round6, rounded6
+from cananalyze.decode.events.build import finding_event_columns
 from cananalyze.outputs.tables import pandas_like as pl
 from cananalyze.protocol.emcy import (
     ERROR_CLASSES,

@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 from conftest import ROOT, SAMPLES, generated_log
 
-from cananalyze.checks.columns import FindingColumns
-from cananalyze.checks.finding import Finding
-from cananalyze.outputs.atomic import Staged
+from cananalyze.core.atomic import Staged
+from cananalyze.core.finding import Finding
+from cananalyze.core.finding_columns import FindingColumns
 from cananalyze.outputs.findings import FindingsSink
 from cananalyze.outputs.findings_json import findings_json, findings_json_parts
 from cananalyze.outputs.junit import _subject, format_finding, junit_xml, junit_xml_parts

@@ -484,7 +484,7 @@ def test_ctrl_c_then_a_rerun_finishes_the_fleet(tmp_path):
         from generate import generate
     finally:
         sys.path.pop(0)
-    from cananalyze.io.logfile import write_log
+    from cananalyze.formats.logfile import write_log
 
     logs = tmp_path / "logs"
     logs.mkdir()

@@ -13,9 +13,9 @@ import pytest
 from conftest import SAMPLES
 from helpers.foxglove_client import FoxgloveClient
 
-from cananalyze.errors import ProblemLog, UsageError
-from cananalyze.frames import FrameBatch
-from cananalyze.io.source import read_all
+from cananalyze.core.errors import ProblemLog, UsageError
+from cananalyze.core.frames import FrameBatch
+from cananalyze.formats.source import read_all
 from cananalyze.outputs.foxglove.sink import FoxgloveSink, parse_address
 from cananalyze.outputs.mcap.sink import McapSink
 from cananalyze.pipeline import Options, build_decoder, run

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
-from cananalyze.frames import FLAG_ERR, FLAG_EXT, FrameBatch
+from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FrameBatch
 from cananalyze.protocol.cobid import NO_NODE, CobClassifier
 from cananalyze.protocol.services import SERVICE_NAMES
 

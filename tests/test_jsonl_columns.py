@@ -14,11 +14,11 @@ from helpers.broken_disk import broken_text_stream
 
 from cananalyze.cli.common import options
 from cananalyze.cli.main import build_parser
-from cananalyze.io.source import open_log
+from cananalyze.core.records import SignalBlock
+from cananalyze.formats.source import open_log
 from cananalyze.outputs.jsonl import columns as jsonl_columns
 from cananalyze.outputs.jsonl.rows import JsonlWriter
 from cananalyze.pipeline import build_decoder
-from cananalyze.records import SignalBlock
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 

@@ -6,7 +6,7 @@ import copy
 import json
 import pickle
 
-from cananalyze.sdo.lazynotes import LazyNotes
+from cananalyze.decode.sdo.lazynotes import LazyNotes
 
 
 def _make():

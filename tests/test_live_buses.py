@@ -13,9 +13,9 @@ import pytest
 from helpers.virtual_bus import unique_channel
 
 from cananalyze.cli.live import buses
-from cananalyze.errors import UsageError
-from cananalyze.io.live import LiveSource
-from cananalyze.io.live_buses import LiveBuses
+from cananalyze.core.errors import UsageError
+from cananalyze.formats.live import LiveSource
+from cananalyze.formats.live_buses import LiveBuses
 from cananalyze.outputs.report.sink import ReportSink
 from cananalyze.outputs.summary import SummarySink
 from cananalyze.pipeline import Options, build_decoder, run
@@ -156,7 +156,7 @@ def test_dashboard_shows_each_bus():
     (frames counted here from the batch independently, load from nominal bits)."""
     from rich.console import Console
 
-    from cananalyze.frames import from_rows
+    from cananalyze.core.frames import from_rows
     from cananalyze.outputs.dashboard import LiveView
     from cananalyze.pipeline import Decoder
 
@@ -181,8 +181,8 @@ def test_two_buses_live_in_foxglove_apart():
     pytest.importorskip("websockets")
     from helpers.foxglove_client import FoxgloveClient
 
+    from cananalyze.core.records import on_bus
     from cananalyze.outputs.foxglove.sink import FoxgloveSink
-    from cananalyze.records import on_bus
 
     a, b = unique_channel("foxA"), unique_channel("foxB")
     start = threading.Event()

@@ -18,7 +18,7 @@ from conftest import SAMPLES
 from helpers.live_slcan import start_live
 from junitparser import JUnitXml
 
-from cananalyze.capture import load
+from cananalyze.api.capture import load
 from cananalyze.sim.slcan_replay import replay
 
 RULES = SAMPLES / "rules.yaml"

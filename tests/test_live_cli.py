@@ -17,8 +17,8 @@ import pytest
 from conftest import ROOT, SAMPLES
 from helpers.live_slcan import start_live
 
-from cananalyze.io.source import read_all
-from cananalyze.outputs.mcap.frames import log_time_ns
+from cananalyze.formats.mcap_frames import log_time_ns
+from cananalyze.formats.source import read_all
 from cananalyze.outputs.text.writer import TextWriter
 from cananalyze.pipeline import Options, build_decoder
 from cananalyze.sim.slcan_replay import SlcanAdapter, replay

@@ -9,7 +9,7 @@ from conftest import SAMPLES
 from rich.console import Console
 
 from cananalyze.checks.build import build_checker
-from cananalyze.io.source import read_all
+from cananalyze.formats.source import read_all
 from cananalyze.outputs.dashboard import LiveView
 from cananalyze.pipeline import Decoder, Options, build_decoder
 

@@ -13,8 +13,8 @@ from helpers.live_slcan import start_live
 from junitparser import JUnitXml
 from test_live_check import _Lines
 
-from cananalyze.frames import from_rows
-from cananalyze.io.logfile import write_log
+from cananalyze.core.frames import from_rows
+from cananalyze.formats.logfile import write_log
 from cananalyze.sim.slcan_replay import replay
 
 PERIOD_S = 0.1

@@ -12,7 +12,7 @@ import can
 from conftest import SAMPLES
 
 from cananalyze.checks.build import build_checker
-from cananalyze.io.live import LiveSource
+from cananalyze.formats.live import LiveSource
 from cananalyze.outputs.dashboard import LiveView
 from cananalyze.pipeline import Options, build_decoder
 from cananalyze.sim.network import load_network

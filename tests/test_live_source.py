@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 from conftest import SAMPLES
 
-from cananalyze.frames import FLAG_TX, concat
-from cananalyze.io.live import HwFilter, LiveError, LiveSource, open_bus
-from cananalyze.io.logfile import to_messages
-from cananalyze.io.source import read_all
+from cananalyze.core.frames import FLAG_TX, concat
+from cananalyze.formats.live import HwFilter, LiveError, LiveSource, open_bus
+from cananalyze.formats.logfile import to_messages
+from cananalyze.formats.source import read_all
+from cananalyze.outputs.fields import row_fields
 from cananalyze.pipeline import Decoder
 from cananalyze.protocol.fields import annotation
 
@@ -62,12 +63,12 @@ def test_demo_frames_arrive_whole_and_decode_like_offline():
     for b in got:
         d = dec_live.decode(b)
         live_fields += [
-            annotation(int(d.service[i]), int(d.node[i]), int(d.pdo[i]), d.fields(i))
+            annotation(int(d.service[i]), int(d.node[i]), int(d.pdo[i]), row_fields(d, i))
             for i in range(len(b))
         ]
     d = dec_off.decode(offline)
     off_fields = [
-        annotation(int(d.service[i]), int(d.node[i]), int(d.pdo[i]), d.fields(i))
+        annotation(int(d.service[i]), int(d.node[i]), int(d.pdo[i]), row_fields(d, i))
         for i in range(len(offline))
     ]
     assert live_fields == off_fields

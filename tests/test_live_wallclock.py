@@ -22,11 +22,11 @@ from canopen.objectdictionary import UNSIGNED16
 from canopen.sdo.exceptions import SdoError
 from rich.console import Console
 
-from cananalyze.frames import from_rows
-from cananalyze.io.live import LiveSource
+from cananalyze.core.frames import from_rows
+from cananalyze.formats.live import LiveSource
 from cananalyze.outputs.dashboard import DashboardSink
-from cananalyze.outputs.sink import Sink
 from cananalyze.pipeline import MemorySource, Options, build_checker, build_decoder, run
+from cananalyze.pipeline.sink import Sink
 from tests.helpers.virtual_bus import unique_channel, variable
 
 NODE = 5

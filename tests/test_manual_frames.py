@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from conftest import seed_file
 
-from cananalyze.frames import FLAG_RTR, from_rows
+from cananalyze.core.frames import FLAG_RTR, from_rows
 from cananalyze.protocol.cobid import CobClassifier
 from cananalyze.protocol.fields import annotation, frame_fields
 from cananalyze.protocol.services import SERVICE_NAMES

@@ -39,9 +39,9 @@ from mcap.records import (
 )
 
 import cananalyze
-from cananalyze.capture import Capture
-from cananalyze.frames import FLAG_RTR
-from cananalyze.outputs.mcap.frames import FRAME_SCHEMA
+from cananalyze.core.frames import FLAG_RTR
+from cananalyze.formats.mcap_frames import FRAME_SCHEMA
+from cananalyze.outputs.capture import Capture
 from cananalyze.outputs.mcap.stream import StreamMcap
 from cananalyze.outputs.mcap.topics import LOG_SCHEMA, STATE_SCHEMA, signal_schema
 from cananalyze.protocol.services import SERVICE_NAMES
@@ -59,7 +59,7 @@ def generated(tmp_path_factory):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
     from generate import generate
 
-    from cananalyze.io.logfile import write_log
+    from cananalyze.formats.logfile import write_log
 
     log = tmp_path_factory.mktemp("gen") / "g.log"
     write_log(generate(30000), log)
@@ -329,9 +329,9 @@ def test_time_window_reads_use_chunk_indexes(generated, tmp_path):
 
 
 def test_json_columns_fd_payloads_and_non_finite_values(tmp_path):
-    from cananalyze.capture import load
-    from cananalyze.columns.json_text import join, number_text, object_template
-    from cananalyze.outputs.mcap.frames import frame_payloads
+    from cananalyze.api.capture import load
+    from cananalyze.core.columns.json_text import join, number_text, object_template
+    from cananalyze.formats.mcap_frames import frame_payloads
 
     big = np.array([2**63 - 1, -(2**63), 0], np.int64)
     vals = np.array([0.1, np.nan, -np.inf])
@@ -358,7 +358,7 @@ def test_json_columns_fd_payloads_and_non_finite_values(tmp_path):
 
 def test_payloads_built_in_slices_are_the_same(demo, tmp_path, monkeypatch):
     """Big logs are formatted a slice of rows at a time (pyarrow's 32-bit offsets)."""
-    from cananalyze.outputs.mcap import frames as mcap_frames
+    from cananalyze.formats import mcap_frames
     from cananalyze.outputs.mcap import topics as mcap_out
 
     log, devices = demo
@@ -371,8 +371,8 @@ def test_payloads_built_in_slices_are_the_same(demo, tmp_path, monkeypatch):
 
 
 def test_writer_on_its_own_empty_payloads_and_several_texts(tmp_path):
-    from cananalyze.columns.json_text import Texts
-    from cananalyze.outputs.mcap.bulk import BulkMcapWriter
+    from cananalyze.core.columns.json_text import Texts
+    from cananalyze.formats.mcap_bulk import BulkMcapWriter
 
     a = Texts.from_list([b"", b"first", b""])
     b = Texts.from_list([b"second", b""])
@@ -410,7 +410,7 @@ def test_writer_on_its_own_empty_payloads_and_several_texts(tmp_path):
     st.sampled_from([np.int32, np.int64]),
 )
 def test_ragged_ranges_match_repeat_and_arange(ranges, dtype):
-    from cananalyze.outputs.mcap.bulk import _ranges
+    from cananalyze.formats.mcap_bulk import _ranges
 
     first = np.array([f for f, _ in ranges], np.int64)
     lengths = np.array([n for _, n in ranges], np.int64)

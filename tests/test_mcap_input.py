@@ -28,9 +28,9 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from cananalyze.cli.main import main
-from cananalyze.columns.json_text import Texts
-from cananalyze.errors import InputError
-from cananalyze.frames import (
+from cananalyze.core.columns.json_text import Texts
+from cananalyze.core.errors import InputError
+from cananalyze.core.frames import (
     FLAG_BRS,
     FLAG_ERR,
     FLAG_ESI,
@@ -42,13 +42,11 @@ from cananalyze.frames import (
     concat,
     set_row,
 )
-from cananalyze.io import mcap as mcap_in
-from cananalyze.io.live import LiveSource
-from cananalyze.io.logfile import to_messages, write_log
-from cananalyze.io.record import FrameRecorder, McapRecording
-from cananalyze.io.source import open_log, read_all
-from cananalyze.outputs.mcap.bulk import BulkMcapWriter
-from cananalyze.outputs.mcap.frames import (
+from cananalyze.formats import mcap as mcap_in
+from cananalyze.formats.live import LiveSource
+from cananalyze.formats.logfile import to_messages, write_log
+from cananalyze.formats.mcap_bulk import BulkMcapWriter
+from cananalyze.formats.mcap_frames import (
     FRAME_FIELDS,
     FRAME_SCHEMA,
     FRAMES_TOPIC,
@@ -56,6 +54,8 @@ from cananalyze.outputs.mcap.frames import (
     log_time_ns,
     seconds,
 )
+from cananalyze.formats.record import FrameRecorder, McapRecording
+from cananalyze.formats.source import open_log, read_all
 from cananalyze.pipeline import Decoder
 from cananalyze.protocol.cobid import CobClassifier
 from cananalyze.runtime import speedups

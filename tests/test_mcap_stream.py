@@ -155,7 +155,7 @@ def test_disk_failing_in_the_chunk_thread(tmp_path, monkeypatch, capsys):
     """A write that fails on the MCAP writer's own thread (a full disk) stops the export
     with one line naming the error, and leaves no file behind."""
     from cananalyze.cli.main import main
-    from cananalyze.outputs.mcap import bulk as mcap_bulk
+    from cananalyze.formats import mcap_bulk
 
     def full(self, *_a):
         raise OSError(28, "No space left on device")

@@ -8,13 +8,14 @@ import can
 import canopen
 import pytest
 
-from cananalyze.frames import from_rows
-from cananalyze.network.model import NetworkModel
-from cananalyze.network.pdo_processor import PdoDecoder
-from cananalyze.network.profile import load_eds
-from cananalyze.network.spec import NetworkSpec, NodeSpec
+from cananalyze.config.spec import NetworkSpec, NodeSpec
+from cananalyze.core.frames import from_rows
+from cananalyze.decode.model import NetworkModel
+from cananalyze.decode.pdo_processor import PdoDecoder
+from cananalyze.decode.sdo.processor import SdoProcessor
+from cananalyze.devices.profile import load_eds
+from cananalyze.outputs.fields import row_fields
 from cananalyze.pipeline import Decoder
-from cananalyze.sdo.processor import SdoProcessor
 from tests.conftest import real_file
 from tests.helpers.virtual_bus import patient_client
 
@@ -75,6 +76,6 @@ def test_canopen_pdo_api_mapping_is_followed(with_eds):
     assert state.cob_id == 0x1A2 and state.valid and state.transmission_type == 254
     row = int(blocks[0].rows[0])
     assert (
-        batch.fields(row)["signals"] == {k: v[0] for k, v in values.items()}
+        row_fields(batch, row)["signals"] == {k: v[0] for k, v in values.items()}
         and batch.node[row] == 2
     )

@@ -6,17 +6,18 @@ import cantools
 import numpy as np
 import pytest
 
-from cananalyze.errors import InputError
-from cananalyze.frames import from_rows
-from cananalyze.io.source import read_all
-from cananalyze.network.model import NetworkModel
-from cananalyze.network.netfile import load_network
-from cananalyze.network.pdo_processor import PdoDecoder
-from cananalyze.network.profile import load_builtin, load_eds
-from cananalyze.network.spec import NetworkSpec, NodeSpec
+from cananalyze.config.netfile import load_network
+from cananalyze.config.spec import NetworkSpec, NodeSpec
+from cananalyze.core.errors import InputError
+from cananalyze.core.frames import from_rows
+from cananalyze.decode.model import NetworkModel
+from cananalyze.decode.pdo_processor import PdoDecoder
+from cananalyze.decode.sdo.processor import SdoProcessor
+from cananalyze.devices.profile import load_builtin, load_eds
+from cananalyze.formats.source import read_all
+from cananalyze.outputs.fields import row_fields
 from cananalyze.pipeline import Decoder
 from cananalyze.protocol.services import Service
-from cananalyze.sdo.processor import SdoProcessor
 from tests.conftest import real_file, seed_file
 
 
@@ -117,7 +118,7 @@ def test_dat7014_sensor_type_written_mid_log_changes_units_from_next_frame():
     assert first.rows.tolist() == [0] and second.rows.tolist() == [3]
     assert first.units["ch1"] == "°C" and first.columns["ch1"][0] == pytest.approx(100.0)
     assert second.units["ch1"] == "Ω" and second.columns["ch1"][0] == pytest.approx(1000.0)
-    assert batch.fields(3)["units"]["ch1"] == "Ω"
+    assert row_fields(batch, 3)["units"]["ch1"] == "Ω"
 
 
 def test_axiomatic_network_file_matches_cantools(tmp_path):
@@ -158,7 +159,9 @@ def test_tmcm1636_dcf_and_log_writes():
     assert r4.columns["modes_of_operation"].tolist() == [0]
     # RPDO3 0x401 is not valid in the DCF and never enabled, yet frames arrive: flagged
     rows401 = np.flatnonzero(fb.can_id == 0x401)
-    assert rows401.size and all("not valid" in batch.fields(int(r))["pdo_problem"] for r in rows401)
+    assert rows401.size and all(
+        "not valid" in row_fields(batch, int(r))["pdo_problem"] for r in rows401
+    )
 
 
 def test_tmcm1636_short_pdo_against_dcf_default_mapping(tmp_path):
@@ -175,7 +178,7 @@ def test_tmcm1636_short_pdo_against_dcf_default_mapping(tmp_path):
     )
     _, batch = run(frames_at([(0x501, b"\x00")]), spec)
     assert batch.signals == []
-    assert batch.fields(0)["pdo_problem"].startswith("DLC 1 shorter than the 6 bytes mapped")
+    assert row_fields(batch, 0)["pdo_problem"].startswith("DLC 1 shorter than the 6 bytes mapped")
 
 
 def test_roboteq_bus_yml_mapping():
@@ -186,7 +189,7 @@ def test_roboteq_bus_yml_mapping():
     first = list(r1.columns.values())[0]
     assert r1.node == 12 and r1.pdo == "rpdo1" and 1000 in first.tolist()  # "E8 03" = 1000
     i = int(np.flatnonzero(first == 1000)[0])
-    assert batch.fields(int(r1.rows[i]))["signals"][next(iter(r1.columns))] == 1000
+    assert row_fields(batch, int(r1.rows[i]))["signals"][next(iter(r1.columns))] == 1000
 
 
 def test_network_file_errors_name_file_and_line(tmp_path):

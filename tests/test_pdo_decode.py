@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from conftest import real_file
 
-from cananalyze.network.pdo_map import MapEntry
 from cananalyze.protocol.pdo import decode_pdo
+from cananalyze.protocol.pdo_map import MapEntry
 
 U8, U16, U32, I16, I32, REAL32, REAL64, I24, U64, I64, BOOL = (
     0x05,
@@ -138,7 +138,7 @@ def test_matches_cantools_on_real_axiomatic_log():
     import cantools
     import yaml
 
-    from cananalyze.network.profile import load_eds
+    from cananalyze.devices.profile import load_eds
 
     folder = "calumroy__CANopen_socketCAN_Test/"
     log = real_file(folder + "can_log_070825_brake_sensor_test1.log")

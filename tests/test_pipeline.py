@@ -19,7 +19,7 @@ import pytest
 from conftest import ROOT, SAMPLES, generated_log
 
 import cananalyze
-from cananalyze import assertions
+from cananalyze.api import assertions
 
 FAULTS = SAMPLES / "faults.log"
 NETWORK = SAMPLES / "network.toml"

@@ -7,9 +7,9 @@ import threading
 import pytest
 from conftest import SAMPLES
 
-from cananalyze.errors import InputError
-from cananalyze.io.prefetch import prefetch
-from cananalyze.io.source import open_log
+from cananalyze.core.errors import InputError
+from cananalyze.formats.prefetch import prefetch
+from cananalyze.formats.source import open_log
 
 
 def test_same_batches_in_order() -> None:

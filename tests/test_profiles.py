@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from conftest import real_file, seed_file
 
-from cananalyze.errors import InputError
-from cananalyze.network.profile import builtin_profiles, identify, load_builtin, load_eds
+from cananalyze.core.errors import InputError
+from cananalyze.devices.profile import builtin_profiles, identify, load_builtin, load_eds
 from cananalyze.protocol.pdo import decode_pdo
 
 

@@ -13,7 +13,7 @@ import sys
 import numpy as np
 from conftest import ROOT, real_file
 
-from cananalyze.columns import bytecols
+from cananalyze.core.columns import bytecols
 from cananalyze.protocol import emcy, nmt, sdo
 from cananalyze.protocol.fields import annotation, frame_fields
 from cananalyze.protocol.services import Service

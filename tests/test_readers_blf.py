@@ -12,9 +12,9 @@ import pytest
 from conftest import real_file
 from readers_util import assert_same_as_python_can, run
 
-from cananalyze.errors import InputError
-from cananalyze.frames import FLAG_ERR, FLAG_FD
-from cananalyze.io import blf
+from cananalyze.core.errors import InputError
+from cananalyze.core.frames import FLAG_ERR, FLAG_FD
+from cananalyze.formats import blf
 
 FIXTURES = [
     "test_CanMessage.blf",

@@ -11,9 +11,9 @@ import pytest
 from conftest import real_file
 from readers_util import assert_same_as_python_can, run
 
-from cananalyze.errors import InputError
-from cananalyze.frames import FLAG_EXT, FLAG_TX
-from cananalyze.io import gvret, pycan_csv
+from cananalyze.core.errors import InputError
+from cananalyze.core.frames import FLAG_EXT, FLAG_TX
+from cananalyze.formats import gvret, pycan_csv
 
 GVRET = "collin80__SavvyCAN/GVRET_Log.csv"
 

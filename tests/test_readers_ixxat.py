@@ -8,9 +8,9 @@ import pytest
 from conftest import real_file
 from readers_util import run
 
-from cananalyze.errors import InputError
-from cananalyze.frames import FLAG_EXT, FLAG_RTR
-from cananalyze.io import ixxat
+from cananalyze.core.errors import InputError
+from cananalyze.core.frames import FLAG_EXT, FLAG_RTR
+from cananalyze.formats import ixxat
 
 TRACE = "hilch__canopen-message-interpreter/ixxat1.trc"
 

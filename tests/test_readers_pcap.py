@@ -12,9 +12,9 @@ import sys
 import numpy as np
 import pytest
 
-from cananalyze.errors import InputError
-from cananalyze.frames import FLAG_BRS, FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX
-from cananalyze.io.source import read_all
+from cananalyze.core.errors import InputError
+from cananalyze.core.frames import FLAG_BRS, FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX
+from cananalyze.formats.source import read_all
 
 scapy_all = pytest.importorskip("scapy.all")
 from scapy.layers.can import CAN, CANFD  # noqa: E402

@@ -7,9 +7,9 @@ import pytest
 from conftest import real_file
 from readers_util import run
 
-from cananalyze.errors import InputError
-from cananalyze.frames import FLAG_TX
-from cananalyze.io import sevcon
+from cananalyze.core.errors import InputError
+from cananalyze.core.frames import FLAG_TX
+from cananalyze.formats import sevcon
 
 # (file, lines counted as frames in SOURCES.md, EMCY lines with decoded text only)
 DUMPS = [

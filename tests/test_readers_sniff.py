@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from conftest import real_file
 
-from cananalyze.io.registry import FORMATS
+from cananalyze.formats.registry import FORMATS
 
 MINE = {"asc", "blf", "trc", "canbusanalyzer", "ixxat", "gvret", "pycan_csv", "sevcon", "pycan"}
 
@@ -46,7 +46,7 @@ FACADE = [
 
 @pytest.mark.parametrize("name,fmt,count", FACADE)
 def test_open_log_picks_the_reader_and_reads_everything(name, fmt, count):
-    from cananalyze.io.source import open_log
+    from cananalyze.formats.source import open_log
 
     src = open_log(real_file(name), batch_size=10000)
     assert src.fmt.name == fmt

@@ -9,9 +9,9 @@ import pytest
 from conftest import real_file
 from readers_util import assert_same_as_python_can, run
 
-from cananalyze.errors import InputError
-from cananalyze.frames import FLAG_EXT, FLAG_RTR, FLAG_TX
-from cananalyze.io import trc
+from cananalyze.core.errors import InputError
+from cananalyze.core.frames import FLAG_EXT, FLAG_RTR, FLAG_TX
+from cananalyze.formats import trc
 
 FIXTURES = [
     ("hardbyte__python-can/test_CanMessage.trc", 2),

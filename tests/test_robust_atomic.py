@@ -8,10 +8,10 @@ import stat
 import pytest
 
 from cananalyze.cli.main import main
-from cananalyze.frames import from_rows
-from cananalyze.io import logfile
-from cananalyze.io.source import read_all
-from cananalyze.outputs.atomic import atomic_path, atomic_write
+from cananalyze.core.atomic import atomic_path, atomic_write
+from cananalyze.core.frames import from_rows
+from cananalyze.formats import logfile
+from cananalyze.formats.source import read_all
 
 SAMPLE = os.path.join(os.path.dirname(__file__), "..", "samples", "demo.log")
 

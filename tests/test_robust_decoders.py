@@ -12,12 +12,12 @@ import json
 from hypothesis import given
 from hypothesis import strategies as st
 
-from cananalyze.frames import FLAG_RTR
+from cananalyze.core.frames import FLAG_RTR
+from cananalyze.decode.sdo.tracker import SdoTracker
 from cananalyze.protocol.cobid import CobClassifier
 from cananalyze.protocol.fields import annotation, frame_fields
 from cananalyze.protocol.sdo import describe_sdo
 from cananalyze.protocol.services import SERVICE_NAMES
-from cananalyze.sdo.tracker import SdoTracker
 from tests.fuzz.harness import decode_all
 from tests.fuzz.strategies import frame_rows, fuzz_settings, make_batch, payloads
 

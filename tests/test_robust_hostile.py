@@ -11,7 +11,7 @@ import time
 import pytest
 from conftest import ROOT
 
-from cananalyze.io.source import open_log, read_all
+from cananalyze.formats.source import open_log, read_all
 
 CANDUMP = [
     f"({1.0 + i * 0.01:.6f}) can0 {0x181 + i % 3:03X}#{i % 256:02X}11223344" for i in range(185)
@@ -80,7 +80,7 @@ def test_blank_lines_sniff_in_linear_time(tmp_path):
     assert done.returncode == 2 and "Traceback" not in done.stderr
     assert "not a log" in done.stderr
     assert time.process_time() - t0 < 5
-    from cananalyze.io import asc, trc
+    from cananalyze.formats import asc, trc
 
     head = b"\n" * 65536
     t0 = time.process_time()
@@ -364,8 +364,8 @@ def test_check_reports_are_committed_with_the_other_outputs(tmp_path):
     an output failing after them leaves none of them (and no temporary file)."""
     from cananalyze.outputs.findings import FindingsSink
     from cananalyze.outputs.report.sink import ReportSink
-    from cananalyze.outputs.sink import Sink
     from cananalyze.pipeline import Options, build_checker, build_decoder, open_source, run
+    from cananalyze.pipeline.sink import Sink
 
     class Full(Sink):
         def finish(self):
@@ -398,8 +398,8 @@ def test_check_reports_are_committed_with_the_other_outputs(tmp_path):
 
 
 def test_pipeline_finishes_every_sink_before_committing_any(tmp_path):
-    from cananalyze.outputs.sink import Sink
     from cananalyze.pipeline import Options, build_decoder, open_source, run
+    from cananalyze.pipeline.sink import Sink
 
     calls = []
 
@@ -470,9 +470,9 @@ def test_a_signal_while_committing_waits_until_every_output_is_in_place(tmp_path
     import os
     import signal
 
-    from cananalyze.io.source import open_log
-    from cananalyze.outputs.sink import Sink
+    from cananalyze.formats.source import open_log
     from cananalyze.pipeline import Options, build_decoder, run
+    from cananalyze.pipeline.sink import Sink
 
     class Stopped(Exception):
         pass
@@ -613,8 +613,8 @@ def test_seventy_thousand_channel_names(tmp_path, pure):
 # item 13: a live MCAP recording killed with SIGKILL
 KILLED_RECORDER = """
 import os, signal, sys
-from cananalyze.frames import from_rows
-from cananalyze.io.record import FrameRecorder
+from cananalyze.core.frames import from_rows
+from cananalyze.formats.record import FrameRecorder
 rec = FrameRecorder(sys.argv[1])
 rec._mcap.FLUSH_SECONDS = 0.0  # a chunk per batch: as a live bus gives one per second
 for k in range(0, int(sys.argv[2]), 500):

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 from conftest import real_file
 
-from cananalyze.frames import from_rows
-from cananalyze.io.source import open_log
+from cananalyze.core.frames import from_rows
+from cananalyze.formats.source import open_log
 from cananalyze.outputs.summary import Summary
 from cananalyze.pipeline import Options, build_decoder
 

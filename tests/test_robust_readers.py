@@ -17,8 +17,8 @@ from conftest import real_file
 from hypothesis import given
 
 from cananalyze.cli.main import main
-from cananalyze.errors import InputError
-from cananalyze.io.source import open_log, read_all
+from cananalyze.core.errors import InputError
+from cananalyze.formats.source import open_log, read_all
 from tests.fuzz.harness import run_log
 from tests.fuzz.strategies import fuzz_settings, mutated
 
@@ -47,7 +47,7 @@ def _read(data: bytes, name: str, tmp_path, **kw):
     path = tmp_path / name
     path.write_bytes(data)
     src = open_log(path, **kw)
-    from cananalyze.frames import concat
+    from cananalyze.core.frames import concat
 
     return concat(list(src.batches())), src
 

@@ -17,7 +17,7 @@ import pytest
 from canopen.objectdictionary import DOMAIN, INTEGER16, REAL32, UNSIGNED32, VISIBLE_STRING
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
-from cananalyze.sdo import SdoTracker
+from cananalyze.decode.sdo import SdoTracker
 from tests.helpers.sdo_block_server import BlockSdoServer
 from tests.helpers.virtual_bus import (
     drain,

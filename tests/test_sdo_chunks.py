@@ -12,7 +12,7 @@ import pandas as pd
 import pyarrow as pa
 import pytest
 
-from cananalyze.columns import arrow_build as ab
+from cananalyze.core.columns import arrow_build as ab
 from cananalyze.outputs.tables import pandas_like as pl
 from cananalyze.outputs.tables import sdo_chunks as sc
 
@@ -324,7 +324,7 @@ def test_sdo_written_as_chunks_come_is_the_file_written_at_close(
 
 
 def test_hex_texts_as_bytes_hex():
-    from cananalyze.sdo.fastpath import hex_texts
+    from cananalyze.decode.sdo.fastpath import hex_texts
 
     rng = np.random.default_rng(1)
     raw = rng.integers(0, 256, (500, 4), dtype=np.uint8)
@@ -337,8 +337,8 @@ def test_hex_texts_as_bytes_hex():
 
 
 def _record_batch(t0: float, records: list[dict]):
-    from cananalyze.frames import FrameBatch
-    from cananalyze.records import DecodedBatch
+    from cananalyze.core.frames import FrameBatch
+    from cananalyze.core.records import DecodedBatch
 
     n = 4
     fb = FrameBatch.allocate(n, ("can0",))
@@ -379,8 +379,8 @@ def test_tracker_only_chunks_of_every_kind_as_capture(tmp_path, fmt):
     load()'s Capture builds), through pandas' own Parquet file of it; CSV cell by cell."""
     from exported import assert_csv_is, assert_parquet_is
 
+    from cananalyze.decode.sdo.transaction import SDO_TABLE_COLUMNS
     from cananalyze.outputs.tables.stream import TableSink as StreamTables
-    from cananalyze.sdo.transaction import SDO_TABLE_COLUMNS
 
     gone = _sdo()
     del gone["detail"], gone["latency_ms"]

@@ -19,11 +19,11 @@ import pytest
 from conftest import ROOT, SAMPLES, real_file
 
 from cananalyze.checks.build import build_checker
-from cananalyze.frames import FrameBatch
-from cananalyze.io.source import read_all
+from cananalyze.core.frames import FrameBatch
+from cananalyze.decode.sdo.lazyrecords import LazyRecords
+from cananalyze.formats.source import read_all
 from cananalyze.outputs.summary import Summary, device_lines
 from cananalyze.pipeline import Options, build_decoder
-from cananalyze.sdo.lazyrecords import LazyRecords
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 

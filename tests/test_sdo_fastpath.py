@@ -16,11 +16,11 @@ from conftest import ROOT, SAMPLES, real_file
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from cananalyze.frames import FrameBatch, concat, from_rows
-from cananalyze.io.source import open_log
+from cananalyze.core.frames import FrameBatch, concat, from_rows
+from cananalyze.decode.sdo.processor import SdoProcessor
+from cananalyze.decode.sdo.tracker import SdoTracker
+from cananalyze.formats.source import open_log
 from cananalyze.pipeline import Decoder
-from cananalyze.sdo.processor import SdoProcessor
-from cananalyze.sdo.tracker import SdoTracker
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 

@@ -11,9 +11,9 @@ import re
 
 import pytest
 
+from cananalyze.decode.sdo import SdoTracker
 from cananalyze.protocol.datatypes import DATA_TYPES_BY_NAME
 from cananalyze.protocol.sdo import describe_sdo
-from cananalyze.sdo import SdoTracker
 from tests.conftest import seed_file
 from tests.helpers.sdo_frames import replay
 

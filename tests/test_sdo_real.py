@@ -15,8 +15,8 @@ from pathlib import Path
 import can
 import pytest
 
+from cananalyze.decode.sdo import SdoTracker
 from cananalyze.protocol.sdo import ABORT_CODES, describe_sdo
-from cananalyze.sdo import SdoTracker
 from tests.conftest import real_file
 
 FOLDER = "hilch__canopen-message-interpreter"

@@ -10,12 +10,12 @@ import pytest
 from conftest import SAMPLES, generated_log, real_file
 from exported import DEVICES, assert_parquet_is, assert_same_table_files, decoded_batches
 
-from cananalyze.capture import Collector
-from cananalyze.errors import ProblemLog
-from cananalyze.events.build import EventState, batch_events
+from cananalyze.core.errors import ProblemLog
+from cananalyze.decode.events.build import EventState, batch_events
+from cananalyze.decode.sdo.fastpath import RECORD_COLUMNS
+from cananalyze.outputs.capture import Collector
 from cananalyze.outputs.tables.stream import SDO_COLUMNS
 from cananalyze.outputs.tables.stream import TableSink as StreamTables
-from cananalyze.sdo.fastpath import RECORD_COLUMNS
 
 
 def _as_dicts(batch):

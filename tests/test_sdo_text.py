@@ -17,14 +17,14 @@ import numpy as np
 import pytest
 from conftest import SAMPLES, real_file
 
-from cananalyze.columns import bytecols
-from cananalyze.io.source import read_all
+from cananalyze.core.columns import bytecols
+from cananalyze.decode.sdo.fastpath import pair_notes
+from cananalyze.formats.source import read_all
 from cananalyze.outputs.text import writer as text_module
 from cananalyze.outputs.text.records import format_record
 from cananalyze.outputs.text.sdo import fast_pairs, pair_text
 from cananalyze.outputs.text.writer import TextWriter
 from cananalyze.pipeline import Options, build_decoder
-from cananalyze.sdo.fastpath import pair_notes
 
 # (request, answer) payloads on node 1 (a DAT 7014) unless the id says otherwise
 PAIRS = [

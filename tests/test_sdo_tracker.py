@@ -5,8 +5,8 @@ from __future__ import annotations
 import random
 import struct
 
-from cananalyze.sdo import SdoTracker
-from cananalyze.sdo.tracker import block_crc
+from cananalyze.decode.sdo import SdoTracker
+from cananalyze.decode.sdo.tracker import block_crc
 
 
 def _seg_upload(node: int, index: int, value: bytes) -> list[tuple[int, bytes]]:

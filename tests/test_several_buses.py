@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from cananalyze import check, load
-from cananalyze.frames import from_rows
+from cananalyze.core.frames import from_rows
 from cananalyze.pipeline import Options, build_decoder
 from cananalyze.protocol.services import Service
 
@@ -250,8 +250,8 @@ def test_live_two_buses_same_node_id_no_false_finding(tmp_path):
     from canopen.objectdictionary import UNSIGNED16
     from helpers.virtual_bus import unique_channel, variable
 
-    from cananalyze.io.live import LiveSource
-    from cananalyze.io.live_buses import LiveBuses
+    from cananalyze.formats.live import LiveSource
+    from cananalyze.formats.live_buses import LiveBuses
     from cananalyze.outputs.findings import FindingsSink
     from cananalyze.pipeline import run
 
@@ -318,7 +318,7 @@ def test_live_two_buses_same_node_id_no_false_finding(tmp_path):
 def test_buses_past_the_limit_share_one_decoder():
     """A log naming more channels than MAX_BUSES (hostile, or one name per frame): the
     first ones are decoded apart, the rest share one decoder named "(other channels)"."""
-    from cananalyze.frames import MAX_BUSES, OTHER_CHANNELS
+    from cananalyze.core.frames import MAX_BUSES, OTHER_CHANNELS
 
     names = tuple(f"c{k}" for k in range(MAX_BUSES + 10))
     rows = [(1.0 + k * 0.001, 0x705, b"\x05", 0, k) for k in range(len(names))]
@@ -1002,7 +1002,7 @@ def test_capture_assertions_judge_each_bus(tmp_path):
     the log's path do (the pipeline's one Checker per bus): a clean two-bus log passes
     (judged merged: 50 'gaps' of 1 ms, a false alarm), a dropout on can1 fails naming
     can1, an absent node is told once, the SDO abort on can1 names its bus."""
-    from cananalyze import assertions
+    from cananalyze.api import assertions
 
     clean = _log(tmp_path, _beats("can0", "05", 1000.0, 50) + _beats("can1", "05", 1000.001, 50))
     cap = load(str(clean))
@@ -1031,7 +1031,7 @@ def test_capture_heartbeat_per_bus(tmp_path):
     """`load(log).heartbeat(5, bus=...)`: each bus's node 5 its own gaps (100 ms on can0,
     two 200 ms gaps on can1); without `bus` on a node of two buses, a usage error naming
     them (merged, the 'gaps' were 1 and 99 ms)."""
-    from cananalyze.errors import UsageError
+    from cananalyze.core.errors import UsageError
 
     lines = _beats("can0", "05", 1000.0, 50) + _beats("can1", "05", 1000.001, 50, skip={20, 22})
     cap = load(str(_log(tmp_path, lines)))

@@ -8,8 +8,8 @@ import struct
 
 import numpy as np
 
-from cananalyze.frames import FLAG_RTR
-from cananalyze.network.profile import load_builtin
+from cananalyze.core.frames import FLAG_RTR
+from cananalyze.devices.profile import load_builtin
 from cananalyze.sim.engine import Simulation
 from cananalyze.sim.master import Guard, Nmt, Read, Send, Sync, Until, Wait, Write, u8, u16, u32
 from cananalyze.sim.node import SimNode, i7231d_emcy, mcb560_emcy

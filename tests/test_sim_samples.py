@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from conftest import SAMPLES
 
-from cananalyze.io.source import read_all
+from cananalyze.decode.sdo.processor import SdoProcessor
+from cananalyze.decode.sdo.tracker import SdoTracker
+from cananalyze.formats.source import read_all
 from cananalyze.pipeline import Decoder, Options, build_decoder
 from cananalyze.protocol.services import Service
-from cananalyze.sdo.processor import SdoProcessor
-from cananalyze.sdo.tracker import SdoTracker
 from cananalyze.sim.samples import write_samples
 
 SUFFIXES = (".log", ".asc", ".blf")

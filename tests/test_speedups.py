@@ -22,10 +22,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from cananalyze.errors import InputError, ProblemLog
-from cananalyze.frames import FLAG_RTR, FrameBatch
-from cananalyze.io import asc, candump
-from cananalyze.io.source import open_log
+from cananalyze.core.errors import InputError, ProblemLog
+from cananalyze.core.frames import FLAG_RTR, FrameBatch
+from cananalyze.formats import asc, candump
+from cananalyze.formats.source import open_log
 from cananalyze.runtime import speedups
 from tests.conftest import real_file
 
@@ -127,7 +127,7 @@ def _generate():
 
 @pytest.mark.parametrize("suffix", [".log", ".asc"])
 def test_generated_traffic_across_chunks(tmp_path: Path, monkeypatch, suffix: str) -> None:
-    from cananalyze.io.logfile import write_log
+    from cananalyze.formats.logfile import write_log
 
     gen = _generate()
     path = tmp_path / f"bench{suffix}"
@@ -287,7 +287,7 @@ def test_fuzzed_bytes(tmp_path: Path, head: bytes, body: bytes, suffix: str) -> 
 def test_hex_payload_column() -> None:
     import pyarrow as pa
 
-    from cananalyze.columns import hexcols
+    from cananalyze.core.columns import hexcols
 
     rng = np.random.default_rng(1)
     n = 5000
@@ -333,7 +333,7 @@ def test_candump_chunk_of_short_lines(tmp_path: Path) -> None:
 @pytest.mark.parametrize("seed", range(4))
 def test_compact_rows_matches_numpy(seed: int) -> None:
     """The text writer's compaction: the same bytes and row ends as the numpy passes."""
-    from cananalyze.columns import bytecols
+    from cananalyze.core.columns import bytecols
 
     rng = np.random.default_rng(seed)
     n = int(rng.integers(0, 3000))
@@ -374,8 +374,8 @@ def test_compact_rows_checks_its_buffers() -> None:
 def test_gather_rows_matches_numpy_layout(seed: int) -> None:
     """The MCAP chunk layout: records from many texts, merged and in any row order, are
     the same bytes with gather_rows as with the numpy gather."""
-    from cananalyze.columns.json_text import Texts
-    from cananalyze.outputs.mcap.bulk import BulkMcapWriter, _Rows
+    from cananalyze.core.columns.json_text import Texts
+    from cananalyze.formats.mcap_bulk import BulkMcapWriter, _Rows
 
     rng = np.random.default_rng(seed)
     texts = []
@@ -434,7 +434,7 @@ def _frames(rng, n: int) -> FrameBatch:
 def test_payload_pack_matches_numpy(seed: int) -> None:
     """The frames table's binary column: the C pass and the numpy path give the same
     buffers and values (RTR rows and every dlc, 0-15; empty and one-row batches)."""
-    from cananalyze.columns import payloads
+    from cananalyze.core.columns import payloads
 
     rng = np.random.default_rng(seed)
     fb = _frames(rng, [0, 1, 7, 5000, 100_000, 3][seed])
@@ -465,7 +465,7 @@ def test_payload_pack_checks_its_buffers() -> None:
 
 def _frame_docs(fb, service, node):
     """frame_payloads with the helper, then the numpy path: (bytes, offsets) each."""
-    from cananalyze.outputs.mcap.frames import frame_payloads
+    from cananalyze.formats.mcap_frames import frame_payloads
 
     got = frame_payloads(fb, service, node)
     saved = speedups.C

@@ -32,7 +32,7 @@ from exported import (
 )
 
 import cananalyze
-from cananalyze.io.source import read_all
+from cananalyze.formats.source import read_all
 from cananalyze.outputs.tables import writer as table_sink
 from cananalyze.outputs.tables.pandas_like import MISSING, column
 from cananalyze.outputs.tables.stream import FRAMES
@@ -421,8 +421,8 @@ def test_row_groups_cut_by_bytes(tmp_path, monkeypatch):
 
 
 def _signal_batch(t: list[float]):
-    from cananalyze.frames import FrameBatch
-    from cananalyze.records import DecodedBatch, SignalBlock
+    from cananalyze.core.frames import FrameBatch
+    from cananalyze.core.records import DecodedBatch, SignalBlock
 
     n = len(t)
     fb = FrameBatch.allocate(n, ("can0",))

@@ -15,8 +15,8 @@ import pytest
 from conftest import ROOT, SAMPLES, real_file
 from helpers.broken_disk import broken_text_stream
 
-from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR, FLAG_TX, FrameBatch, from_rows
-from cananalyze.io.source import open_log
+from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR, FLAG_TX, FrameBatch, from_rows
+from cananalyze.formats.source import open_log
 from cananalyze.outputs.text.writer import TextWriter, lines_per_row
 from cananalyze.pipeline import Options, build_decoder
 
@@ -216,7 +216,7 @@ def test_emcy_rows() -> None:
 
 def test_signal_values_of_every_kind() -> None:
     """Signal columns as text: floats (ties, exponents, NaN, -0), integers to 64 bits, booleans."""
-    from cananalyze.columns.numtext import g6_text, int_text, value_text
+    from cananalyze.core.columns.numtext import g6_text, int_text, value_text
 
     rng = np.random.default_rng(5)
     floats = np.concatenate(

@@ -31,7 +31,7 @@ from exported import (
 
 import cananalyze
 from cananalyze.cli.main import main
-from cananalyze.frames import FLAG_RTR
+from cananalyze.core.frames import FLAG_RTR
 
 DEMO = SAMPLES / "demo.log"
 
@@ -294,7 +294,7 @@ def test_blueprint_puts_many_nodes_in_a_grid(tmp_path):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
     from generate import generate
 
-    from cananalyze.io.logfile import write_log
+    from cananalyze.formats.logfile import write_log
     from cananalyze.outputs.rerun.send import Layout
 
     write_log(generate(3000), tmp_path / "g.log")
@@ -355,7 +355,7 @@ def test_parquet_and_csv_with_mixed_findings_values(tmp_path):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
     from generate import generate
 
-    from cananalyze.io.logfile import write_log
+    from cananalyze.formats.logfile import write_log
 
     write_log(generate(5000, faults=True), tmp_path / "g.log")  # the faulty bus: findings
     devices = {n: "dat7014" for n in range(1, 17)}
@@ -463,7 +463,7 @@ def test_export_of_generated_log(tmp_path):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
     from generate import generate
 
-    from cananalyze.io.logfile import write_log
+    from cananalyze.formats.logfile import write_log
 
     batch = generate(20000)
     log = tmp_path / "g.log"

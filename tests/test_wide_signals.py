@@ -22,8 +22,8 @@ from exported import NETWORK, assert_wide_signals_is, export, wide_signals_as_lo
 from test_network_model import frames_at, sdo_write
 
 import cananalyze
-from cananalyze.io.logfile import write_log
-from cananalyze.network.profile import load_builtin
+from cananalyze.devices.profile import load_builtin
+from cananalyze.formats.logfile import write_log
 from cananalyze.outputs.tables import writer as table_writer
 
 I7231D = {1: "i7231d"}

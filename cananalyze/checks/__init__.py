@@ -2,6 +2,6 @@
 
 from cananalyze.checks.config import ConfigSource
 from cananalyze.checks.engine import Checker
-from cananalyze.checks.finding import Finding
+from cananalyze.core.finding import Finding
 
 __all__ = ["Checker", "ConfigSource", "Finding"]

@@ -16,7 +16,7 @@ def build_checker(rules_file: str | Path | None = None, rules: list[Rule] | None
     """
     from cananalyze.checks.model_config import ModelConfig
     from cananalyze.checks.rulesfile import load_rules
-    from cananalyze.network.model import NetworkModel
+    from cananalyze.decode.model import NetworkModel
 
     config = None
     if rules_file:

@@ -14,7 +14,7 @@ from typing import Protocol
 
 import numpy as np
 
-from cananalyze.network.pdo_map import PdoConfig
+from cananalyze.protocol.pdo_map import PdoConfig
 
 
 class ConfigSource(Protocol):

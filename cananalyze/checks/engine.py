@@ -21,14 +21,14 @@ from collections.abc import Callable
 
 import numpy as np
 
-from cananalyze.checks.columns import NONE, FindingColumns
 from cananalyze.checks.config import ConfigSource
-from cananalyze.checks.finding import Finding
 from cananalyze.checks.nmt_state import NmtStates
 from cananalyze.checks.rule import Context, GapState, Rule
 from cananalyze.checks.timing import Timing
-from cananalyze.frames import FrameBatch
-from cananalyze.records import DecodedBatch
+from cananalyze.core.finding import Finding
+from cananalyze.core.finding_columns import NONE, FindingColumns
+from cananalyze.core.frames import FrameBatch
+from cananalyze.core.records import DecodedBatch
 
 UNTIMED = "timestamps"  # the rule name of the one "no timestamps" finding
 
@@ -47,7 +47,7 @@ class Checker:
         self.rules = rules
         if config is None:  # nothing declared and no log followed: every value unknown
             from cananalyze.checks.model_config import ModelConfig
-            from cananalyze.network.model import NetworkModel
+            from cananalyze.decode.model import NetworkModel
 
             config = ModelConfig(NetworkModel())
         self.config: ConfigSource = config

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cananalyze.columns.order import stable_order
+from cananalyze.core.columns.order import stable_order
 from cananalyze.runtime.speedups import C
 
 

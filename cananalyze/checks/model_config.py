@@ -16,10 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from cananalyze.checks.finding import rel_time
-from cananalyze.network.model import NetworkModel
-from cananalyze.network.pdo_map import PdoConfig
-from cananalyze.network.timeline import EVERY_NODE
+from cananalyze.config.timeline import EVERY_NODE
+from cananalyze.core.finding import rel_time
+from cananalyze.decode.model import NetworkModel
+from cananalyze.protocol.pdo_map import PdoConfig
 
 
 class ModelConfig:

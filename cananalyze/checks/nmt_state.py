@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from cananalyze.core.records import DecodedBatch
 from cananalyze.protocol.nmt import (
     ALL_NODES,
     COMMAND_STATE,
@@ -17,7 +18,6 @@ from cananalyze.protocol.nmt import (
     state_name,
 )
 from cananalyze.protocol.services import Service
-from cananalyze.records import DecodedBatch
 
 
 class NmtStates:

@@ -11,13 +11,13 @@ from collections import Counter
 
 import numpy as np
 
-from cananalyze.checks.columns import FindingColumns, Texts
 from cananalyze.checks.config import ConfigSource
-from cananalyze.checks.finding import Finding, rel_time
 from cananalyze.checks.gaps import Gaps, grouped_gaps
 from cananalyze.checks.nmt_state import NmtStates
+from cananalyze.core.finding import Finding, rel_time
+from cananalyze.core.finding_columns import FindingColumns, Texts
+from cananalyze.core.records import DecodedBatch
 from cananalyze.protocol.services import Service
-from cananalyze.records import DecodedBatch
 
 # Which rows each shared gap table covers, and its key column.
 _GAP_TABLES = {

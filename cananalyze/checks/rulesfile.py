@@ -10,13 +10,13 @@ from __future__ import annotations
 import inspect
 from pathlib import Path
 
-from cananalyze.checks.finding import SEVERITIES
 from cananalyze.checks.registry import ASSERTIONS, RULES
 from cananalyze.checks.rule import Rule
-from cananalyze.errors import InputError
-from cananalyze.network.filelines import read_tree
-from cananalyze.network.netfile import combine, read_network
-from cananalyze.network.spec import NetworkSpec
+from cananalyze.config.filelines import read_tree
+from cananalyze.config.netfile import combine, read_network
+from cananalyze.config.spec import NetworkSpec
+from cananalyze.core.errors import InputError
+from cananalyze.core.finding import SEVERITIES
 
 _COMMON = {"enabled", "severity", "tolerance", "jitter_ms"}
 

@@ -13,10 +13,10 @@ from collections import Counter
 
 import numpy as np
 
-from cananalyze.checks.finding import rel_time
 from cananalyze.checks.rule import Context
 from cananalyze.checks.spool import KeyedSpool
 from cananalyze.checks.streamstats import StreamStats, bins_of, histogram_many
+from cananalyze.core.finding import rel_time
 from cananalyze.protocol.services import Service
 
 

@@ -7,7 +7,7 @@ import argparse
 import sys
 from typing import TYPE_CHECKING
 
-from cananalyze.errors import ProblemLog, UsageError
+from cananalyze.core.errors import ProblemLog, UsageError
 
 if TYPE_CHECKING:
     from cananalyze.pipeline import Options

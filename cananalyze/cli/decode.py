@@ -13,7 +13,7 @@ from cananalyze.cli.common import (
     options,
     report_problems,
 )
-from cananalyze.errors import UsageError
+from cananalyze.core.errors import UsageError
 
 # Readers, numpy and the decoder are imported in run(): `cananalyze --help` builds
 # every sub-command's parser and must stay fast.
@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _decode(args: argparse.Namespace, source, decoder, opts) -> None:
     from cananalyze.cli.common import run_with_progress
-    from cananalyze.outputs.atomic import atomic_write
+    from cananalyze.core.atomic import atomic_write
 
     with contextlib.ExitStack() as stack:
         # -o FILE appears only when complete: an interrupted or failed run leaves none

@@ -1,6 +1,6 @@
 """`cananalyze devices [KEY|FILE]`: list built-in device profiles, or show one's PDOs and notes.
 
-`cia402` and `cia401` are the CiA profiles' defaults (cananalyze/profiles/); a drive's own
+`cia402` and `cia401` are the CiA profiles' defaults (cananalyze/devices/cia402.py, cia401.py); a drive's own
 EDS/DCF that names CiA 402 is shown with the same state machine summary."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from cananalyze.errors import UsageError
+from cananalyze.core.errors import UsageError
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -54,7 +54,7 @@ def _hex(value: int | None, width: int = 8) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from cananalyze.network.profile import (
+    from cananalyze.devices.profile import (
         DEVICE_KEYS,
         PROFILE_KEYS,
         builtin_profiles,
@@ -114,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
         for note in prof.notes:
             print(f"  - {note}")
     if args.dbc:
-        from cananalyze.outputs.atomic import check_writable
+        from cananalyze.core.atomic import check_writable
         from cananalyze.outputs.dbc import pdo_database, write_dbc
 
         check_writable(args.dbc)
@@ -127,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _cia402_summary() -> None:
     """The CiA 402 words cananalyze uses, from the profile's tables."""
-    from cananalyze.profiles import cia402
+    from cananalyze.devices import cia402
 
     print("CiA 402 (statusword 0x6041, controlword 0x6040, modes 0x6060/0x6061):")
     print("  states (statusword & mask == value):")

@@ -8,7 +8,7 @@ import sys
 import time
 
 from cananalyze.cli.common import add_filter_options, add_input_options, options, report_problems
-from cananalyze.errors import UsageError
+from cananalyze.core.errors import UsageError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

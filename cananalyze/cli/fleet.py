@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from cananalyze.cli.common import add_device_options, options
-from cananalyze.errors import UsageError
+from cananalyze.core.errors import UsageError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

@@ -17,7 +17,7 @@ import sys
 import time
 
 from cananalyze.cli.common import add_time_option
-from cananalyze.errors import UsageError
+from cananalyze.core.errors import UsageError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -163,7 +163,7 @@ def buses(interfaces: list[str] | None, channels: list[str] | None) -> list[tupl
 
 def run(args: argparse.Namespace) -> int:
     from cananalyze.cli.common import options
-    from cananalyze.io.live import HwFilter, LiveSource, open_bus
+    from cananalyze.formats.live import HwFilter, LiveSource, open_bus
     from cananalyze.outputs.findings import FindingsSink
     from cananalyze.pipeline import build_checker, build_decoder
     from cananalyze.pipeline import run as run_pipeline
@@ -239,7 +239,7 @@ def run(args: argparse.Namespace) -> int:
     if len(parts) == 1:
         source = parts[0]
     else:
-        from cananalyze.io.live_buses import LiveBuses
+        from cananalyze.formats.live_buses import LiveBuses
 
         source = LiveBuses(parts)
     deadline = time.monotonic() + args.duration if args.duration else None

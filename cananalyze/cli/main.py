@@ -11,8 +11,8 @@ import importlib
 import signal
 import sys
 
-from cananalyze import __version__
-from cananalyze.errors import CananalyzeError
+from cananalyze.core.errors import CananalyzeError
+from cananalyze.core.version import __version__
 from cananalyze.runtime import allocator, speedups
 from cananalyze.runtime.gcpolicy import fewer_collections
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-from cananalyze.errors import InputError, UsageError
+from cananalyze.core.errors import InputError, UsageError
 
 
 def add_parser(subparsers) -> None:
@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
         profiles, bitrate, config = default_network(), 500_000, {}
     bitrate = args.bitrate or bitrate
     if args.to:
-        from cananalyze.io.logfile import write_log
+        from cananalyze.formats.logfile import write_log
 
         if not args.to.lower().endswith((".log", ".asc", ".blf")):
             raise UsageError(f"{args.to}: --to writes .log (candump), .asc or .blf")

@@ -7,7 +7,7 @@ import glob
 from dataclasses import replace
 from pathlib import Path
 
-from cananalyze.errors import UsageError
+from cananalyze.core.errors import UsageError
 from cananalyze.pipeline import Options
 
 FOLDER_NETWORK = "network.toml"

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TextIO
 
-from cananalyze.errors import UsageError
+from cananalyze.core.errors import UsageError
 from cananalyze.fleet import layout
 from cananalyze.fleet.inputs import expand, options_for
 from cananalyze.fleet.task import LogTask, process, record_failure
@@ -156,7 +156,7 @@ def run_fleet(
     except OSError as exc:
         raise UsageError(f"{dataset}: cannot create the dataset folder ({exc.strerror})") from None
     if junit:
-        from cananalyze.outputs.atomic import check_writable
+        from cananalyze.core.atomic import check_writable
 
         check_writable(junit)
     recovered = layout.recover(dataset)
@@ -210,7 +210,7 @@ def _write_junit(dest: str, results: list[dict]) -> None:
     """One testsuite per log (a skipped log's: its recorded verdict, no cases)."""
     import xml.etree.ElementTree as ET
 
-    from cananalyze.outputs.atomic import write_text_atomic
+    from cananalyze.core.atomic import write_text_atomic
 
     root = ET.Element("testsuites", name="cananalyze fleet")
     for r in results:

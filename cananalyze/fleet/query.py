@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from cananalyze.errors import UsageError
+from cananalyze.core.errors import UsageError
 from cananalyze.fleet.schema import TABLES
 
 

@@ -16,7 +16,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from cananalyze.network.node_tally import IDENTITY_KEYS
+from cananalyze.decode.node_tally import IDENTITY_KEYS
 from cananalyze.outputs.tables.stream import (
     EVENTS_BUS,
     FINDING_COLUMNS,

@@ -24,11 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
-from cananalyze import __version__
-from cananalyze.errors import CananalyzeError
+from cananalyze.core.errors import CananalyzeError
+from cananalyze.core.version import __version__
 from cananalyze.fleet import layout, schema
-from cananalyze.outputs.sink import Sink
 from cananalyze.pipeline import Options
+from cananalyze.pipeline.sink import Sink
 
 # times at or after 2000-01-01 and before 2100 are wall-clock times; smaller ones count
 # from the logger's start (candump without -t a, relative ASC): the file's mtime dates those

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
+from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
 
 
 def frame_bits(flags: np.ndarray, dlc: np.ndarray) -> np.ndarray:

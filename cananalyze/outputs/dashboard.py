@@ -18,15 +18,16 @@ from typing import TextIO
 
 import numpy as np
 
-from cananalyze.frames import MAX_BUSES, OTHER_CHANNELS
-from cananalyze.outputs.sink import Sink
+from cananalyze.core.frames import MAX_BUSES, OTHER_CHANNELS
+from cananalyze.core.records import DecodedBatch
+from cananalyze.outputs.fields import row_fields
 from cananalyze.outputs.summary import Summary
 from cananalyze.outputs.text.records import format_record
+from cananalyze.pipeline.sink import Sink
 from cananalyze.protocol import nmt
 from cananalyze.protocol.emcy import error_text
 from cananalyze.protocol.fields import annotation
 from cananalyze.protocol.services import Service
-from cananalyze.records import DecodedBatch
 
 _ERRCTL = np.array([Service.HEARTBEAT, Service.BOOTUP, Service.GUARD_RESPONSE], np.uint8)
 _RARE = np.array([Service.NMT, Service.EMCY], np.uint8)
@@ -237,7 +238,7 @@ class LiveView:
         for r in np.flatnonzero(np.isin(batch.service, _RARE)).tolist():
             svc = int(batch.service[r])
             node = int(batch.node[r])
-            f = batch.fields(r)
+            f = row_fields(batch, r)
             text = annotation(svc, node, 0, f)
             if svc == Service.EMCY and node >= 0:
                 bus = self._row_bus(batch, r)
@@ -264,7 +265,7 @@ class LiveView:
             node = key & 0xFF
             st = self._node(node, fb.channel_label(key >> 8))
             if st.last_sdo is None or st.last_sdo.startswith("frame: "):
-                text = annotation(int(batch.service[r]), node, 0, batch.fields(r))
+                text = annotation(int(batch.service[r]), node, 0, row_fields(batch, r))
                 st.last_sdo = f"frame: {text}"
 
     def _record(self, batch: DecodedBatch, row: int, rec: dict) -> None:
@@ -313,7 +314,7 @@ class LiveView:
             value = int.from_bytes(raw[:4], "little")
         st.identity[key] = value
         if st.device is None or st.device.startswith("?"):
-            from cananalyze.network.profile import identify
+            from cananalyze.devices.profile import identify
 
             ident = {k: v for k, v in st.identity.items()}
             name = ident.get("device_name")

@@ -17,10 +17,10 @@ import re
 from collections.abc import Collection, Iterable
 from pathlib import Path
 
-from cananalyze.network.pdo_map import PdoConfig
-from cananalyze.outputs.atomic import atomic_write, check_writable
-from cananalyze.outputs.sink import Sink
+from cananalyze.core.atomic import atomic_write, check_writable
+from cananalyze.pipeline.sink import Sink
 from cananalyze.protocol.datatypes import DATA_TYPES, DUMMY_INDICES
+from cananalyze.protocol.pdo_map import PdoConfig
 
 
 def _identifier(name: str) -> str:
@@ -62,7 +62,7 @@ def pdo_message(node: int, pdo: PdoConfig, drive: bool = False):
     the node is a CiA 402 drive (its modes and commands get value tables)."""
     from cantools.database.can import Message
 
-    from cananalyze.profiles import cia402
+    from cananalyze.devices import cia402
 
     if not pdo.valid or not pdo.mapping or pdo.bits > 64:
         return None
@@ -175,7 +175,7 @@ class DbcSink(Sink):
             for _, b in sorted(bindings.items())
             if b.problem is None  # a PDO not valid at the end is not on the bus
         ]
-        from cananalyze.network.dbc_processor import DbcDecoder
+        from cananalyze.decode.dbc_processor import DbcDecoder
 
         drives = {node for node, _ in pdos if model.family(node) == 402}
         carried = [

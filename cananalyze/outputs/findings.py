@@ -13,13 +13,13 @@ from typing import TextIO
 
 import numpy as np
 
-from cananalyze.checks.columns import FindingColumns
-from cananalyze.checks.finding import Finding
+from cananalyze.core.atomic import Staged
+from cananalyze.core.finding import Finding
+from cananalyze.core.finding_columns import FindingColumns
 from cananalyze.outputs import colour
-from cananalyze.outputs.atomic import Staged
 from cananalyze.outputs.findings_json import findings_json_parts
 from cananalyze.outputs.junit import format_rows, junit_xml_parts
-from cananalyze.outputs.sink import Sink
+from cananalyze.pipeline.sink import Sink
 
 TERMINAL_CAP = 20  # findings printed per rule and node/COB-ID; the files hold every one
 
@@ -92,7 +92,7 @@ class FindingsSink(Sink):
     def open(self, run) -> None:
         super().open(run)
         if self.junit or self.json_file:
-            from cananalyze.outputs.atomic import check_writable
+            from cananalyze.core.atomic import check_writable
 
             for dest in (self.junit, self.json_file):
                 if dest:

@@ -15,8 +15,8 @@ from collections.abc import Iterator, Sequence
 
 import numpy as np
 
-from cananalyze.checks.columns import FindingColumns
-from cananalyze.checks.finding import Finding
+from cananalyze.core.finding import Finding
+from cananalyze.core.finding_columns import FindingColumns
 
 CHUNK = 4096  # findings encoded at a time: big enough that the per-chunk cost vanishes
 

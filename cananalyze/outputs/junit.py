@@ -13,9 +13,9 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from cananalyze.checks.columns import FindingColumns
-from cananalyze.checks.finding import TABLE_COLUMNS, Finding, show
 from cananalyze.checks.rule import Rule
+from cananalyze.core.finding import TABLE_COLUMNS, Finding, show
+from cananalyze.core.finding_columns import FindingColumns
 
 CHUNK = 4096  # findings' lines formatted at a time
 _BY_COB_ID = ("assert_pdo_rate", "unknown_cob_id")  # rules whose testcases are per COB-ID

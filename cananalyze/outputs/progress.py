@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import TextIO
 
-from cananalyze.outputs.sink import Sink
+from cananalyze.pipeline.sink import Sink
 
 
 class ProgressSink(Sink):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from cananalyze.outputs.sink import Sink
+from cananalyze.pipeline.sink import Sink
 
 
 class RecordSink(Sink):
@@ -16,7 +16,7 @@ class RecordSink(Sink):
     """
 
     def __init__(self, path: str | Path) -> None:
-        from cananalyze.io.record import FrameRecorder
+        from cananalyze.formats.record import FrameRecorder
 
         self.path = path
         self.dest = str(path) if path is not None else None

@@ -12,12 +12,12 @@ from typing import TextIO
 import numpy as np
 
 from cananalyze.checks.streamstats import StreamStats
-from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
+from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
+from cananalyze.core.records import DecodedBatch
 from cananalyze.outputs.busload import bits_per_channel
-from cananalyze.outputs.sink import Sink
+from cananalyze.pipeline.sink import Sink
 from cananalyze.protocol import nmt
 from cananalyze.protocol.services import SERVICE_NAMES, Service
-from cananalyze.records import DecodedBatch
 
 N_SVC = len(SERVICE_NAMES)
 # byte -> is an NMT state (toggle bit ignored) / an NMT command: lookups, not np.isin per batch

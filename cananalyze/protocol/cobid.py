@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR, FrameBatch
+from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR, FrameBatch
 from cananalyze.protocol import nmt
 from cananalyze.protocol.services import Service
 from cananalyze.runtime import speedups

@@ -12,7 +12,7 @@ import functools
 
 import numpy as np
 
-from cananalyze.columns import bytecols
+from cananalyze.core.columns import bytecols
 
 # CiA 301 table 21: emergency error code classes, matched on the high byte
 # (or high nibble where only the nibble is defined). Longest match wins.

@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cananalyze.network.pdo_map import MapEntry
 from cananalyze.protocol.datatypes import DATA_TYPES, DUMMY_INDICES
+from cananalyze.protocol.pdo_map import MapEntry
 
 
 @dataclass

@@ -6,7 +6,7 @@ how an object's index and sub-index are written, and the stateless reading of
 one frame: the command specifier and its bits, index and subindex, expedited
 data, abort code. This is what a frame means *outside* a block transfer;
 inside one, a frame carries no command specifier at all (byte 0 is c +
-seqno), and only the stateful tracker (`cananalyze.sdo`) knows that. So this
+seqno), and only the stateful tracker (`cananalyze.decode.sdo`) knows that. So this
 module never guesses "block segment": the tracker overrides its answer.
 """
 
@@ -16,7 +16,7 @@ import struct
 
 import numpy as np
 
-from cananalyze.columns import bytecols
+from cananalyze.core.columns import bytecols
 
 # Client command specifiers (ccs, bits 7..5 of byte 0, client -> server).
 CCS_DOWNLOAD_SEGMENT = 0

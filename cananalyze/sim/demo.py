@@ -14,7 +14,7 @@ import struct
 import sys
 from pathlib import Path
 
-from cananalyze.frames import FLAG_RTR, FLAG_TX, FrameBatch, from_rows
+from cananalyze.core.frames import FLAG_RTR, FLAG_TX, FrameBatch, from_rows
 from cananalyze.protocol import nmt
 from cananalyze.protocol.sync import FIRST_COUNTER, MAX_COUNTER, next_counter
 
@@ -112,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
     import os
     import time
 
-    from cananalyze.io.logfile import write_log
+    from cananalyze.formats.logfile import write_log
 
     # python-can formats ASC header times in local time: pin it so files are reproducible
     os.environ["TZ"] = "UTC"

@@ -7,7 +7,7 @@ exist for the node's own logic (NMT, heartbeat, PDO parameters, signals).
 
 from __future__ import annotations
 
-from cananalyze.network.profile import DeviceProfile
+from cananalyze.devices.profile import DeviceProfile
 from cananalyze.protocol.sdo import (
     ABORT_NO_OBJECT,
     ABORT_NO_SUBINDEX,

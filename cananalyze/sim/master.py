@@ -13,7 +13,7 @@ import struct
 from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
 
-from cananalyze.frames import FLAG_ERR, FLAG_RTR, FLAG_TX
+from cananalyze.core.frames import FLAG_ERR, FLAG_RTR, FLAG_TX
 from cananalyze.protocol import sdo
 from cananalyze.protocol.sdo import block_byte, initiate_byte, segment_byte
 from cananalyze.protocol.sync import next_counter

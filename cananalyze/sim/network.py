@@ -1,7 +1,7 @@
 """Which nodes the simulator emulates: the project's network file, or the four seed devices.
 
 The network file is the analyser's own (docs/network-file.md, read by
-`cananalyze.network.netfile`), so one file describes the bus to both. Its node
+`cananalyze.config.netfile`), so one file describes the bus to both. Its node
 settings (heartbeat, consumer heartbeat, guarding, EMCY inhibit, PDO settings) become
 the node's stored parameters: applied over the profile defaults at every reset, as a
 configured device keeps them. The bus-wide [sync] and known_cob_ids are the analyser's.
@@ -12,8 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from cananalyze.errors import InputError
-from cananalyze.network.profile import DeviceProfile, load_builtin
+from cananalyze.core.errors import InputError
+from cananalyze.devices.profile import DeviceProfile, load_builtin
 
 # The default bus: one of each seed device (node IDs as in samples/network.toml).
 DEFAULT_NODES = {3: "mcb560", 5: "dat7014", 6: "dat7130", 7: "i7231d"}
@@ -33,7 +33,7 @@ def default_network() -> dict[int, DeviceProfile]:
 
 def load_network(path: str | Path) -> SimNetwork:
     """The nodes of a network file; InputError when a node has no device or EDS."""
-    from cananalyze.network.netfile import load_network as read_netfile
+    from cananalyze.config.netfile import load_network as read_netfile
 
     spec = read_netfile(path)
     profiles: dict[int, DeviceProfile] = {}

@@ -12,8 +12,8 @@ import random
 import struct
 from dataclasses import dataclass, field
 
-from cananalyze.frames import FLAG_RTR
-from cananalyze.network.profile import DeviceProfile
+from cananalyze.core.frames import FLAG_RTR
+from cananalyze.devices.profile import DeviceProfile
 from cananalyze.protocol import nmt
 from cananalyze.protocol.emcy import register_for
 from cananalyze.protocol.nmt import BOOTUP, OPERATIONAL, PRE_OPERATIONAL, STOPPED

@@ -24,7 +24,7 @@ def pin_utc() -> None:
 
 
 def write_samples(out: Path) -> list[Path]:
-    from cananalyze.io.logfile import write_log
+    from cananalyze.formats.logfile import write_log
     from cananalyze.sim.session import simulate
 
     pin_utc()

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from cananalyze.frames import FLAG_ERR, FLAG_EXT
+from cananalyze.core.frames import FLAG_ERR, FLAG_EXT
 from cananalyze.protocol import nmt
 from cananalyze.sim.master import Do, Guard, Nmt, Read, Send, Sync, Until, Wait, Write, u8, u16, u32
 from cananalyze.sim.node import SimNode, i7231d_emcy, mcb560_emcy

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import random
 
-from cananalyze.frames import FrameBatch
-from cananalyze.network.profile import DeviceProfile
+from cananalyze.core.frames import FrameBatch
+from cananalyze.devices.profile import DeviceProfile
 from cananalyze.sim.engine import Simulation
 from cananalyze.sim.master import Master
 from cananalyze.sim.network import default_network

@@ -92,8 +92,8 @@ def replay(adapter: SlcanAdapter, log_path: str, timed: bool = True) -> int:
     """
     import can
 
-    from cananalyze.io.logfile import to_messages
-    from cananalyze.io.source import read_all
+    from cananalyze.formats.logfile import to_messages
+    from cananalyze.formats.source import read_all
 
     reader = to_messages(read_all(log_path))
     messages = can.MessageSync(reader, timestamps=True, skip=3600) if timed else reader

@@ -123,7 +123,7 @@ def mutate_tokens(rng: random.Random, data: bytes) -> bytes:
 
 
 def random_batch(rng: random.Random):
-    from cananalyze.frames import from_rows
+    from cananalyze.core.frames import from_rows
 
     rows = []
     for _ in range(rng.randint(0, 200)):

@@ -13,8 +13,8 @@ import json
 import os
 import tempfile
 
-from cananalyze.errors import InputError
-from cananalyze.io.source import open_log
+from cananalyze.core.errors import InputError
+from cananalyze.formats.source import open_log
 from cananalyze.outputs.jsonl.rows import JsonlWriter
 from cananalyze.outputs.summary import Summary
 from cananalyze.outputs.text.writer import TextWriter

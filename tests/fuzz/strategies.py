@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from hypothesis import strategies as st
 
-from cananalyze.frames import (
+from cananalyze.core.frames import (
     FLAG_BRS,
     FLAG_ERR,
     FLAG_ESI,

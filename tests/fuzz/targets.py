@@ -13,7 +13,7 @@ import random
 import tempfile
 from pathlib import Path
 
-from cananalyze.errors import CananalyzeError, InputError
+from cananalyze.core.errors import CananalyzeError, InputError
 
 GOOD_NETWORK = b"""bitrate: 500000
 nodes:
@@ -106,7 +106,7 @@ def _tmp(data: bytes, suffix: str) -> str:
 def load_config(data: bytes, kind: str) -> None:
     """`kind`: network.yaml, network.toml or rules.yaml, read by the program's loaders."""
     from cananalyze.checks.rulesfile import load_rules
-    from cananalyze.network.netfile import load_network
+    from cananalyze.config.netfile import load_network
 
     path = _tmp(data, "." + kind.split(".")[1])
     try:
@@ -121,7 +121,7 @@ def load_config(data: bytes, kind: str) -> None:
 
 
 def load_eds(data: bytes, suffix: str = ".eds") -> None:
-    from cananalyze.network.eds import read_od
+    from cananalyze.devices.eds import read_od
 
     path = _tmp(data, suffix)
     try:
@@ -149,7 +149,7 @@ def junk_mixed(rng: random.Random, frames: int = 300) -> tuple[bytes, int]:
 
 def kept_frames(data: bytes, suffix: str = ".log") -> int:
     """Frames read from a log (lenient)."""
-    from cananalyze.io.source import read_all
+    from cananalyze.formats.source import read_all
 
     path = _tmp(data, suffix)
     try:

@@ -26,7 +26,7 @@ import can
 import canopen
 from canopen.objectdictionary import UNSIGNED8, UNSIGNED16, UNSIGNED32, ODRecord
 
-from cananalyze.frames import FLAG_RTR
+from cananalyze.core.frames import FLAG_RTR
 from tests.helpers.virtual_bus import drain, patient_client, unique_channel, variable
 
 NODE = 5

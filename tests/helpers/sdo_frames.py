@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from cananalyze.sdo import FrameRole, SdoTracker
+from cananalyze.decode.sdo import FrameRole, SdoTracker
 
 
 def replay(

@@ -9,7 +9,7 @@ import can
 import canopen
 from canopen.objectdictionary import ODVariable
 
-from cananalyze.sdo import SdoTracker
+from cananalyze.decode.sdo import SdoTracker
 
 _channels = itertools.count()
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from cananalyze.checks.rule import Context, Rule
+from cananalyze.core.records import DecodedBatch
 from cananalyze.protocol.nmt import ALL_NODES, RESET_COMMUNICATION, RESET_NODE
 from cananalyze.protocol.services import Service
-from cananalyze.records import DecodedBatch
 
 _SENT_BY_NODE = np.array(
     [

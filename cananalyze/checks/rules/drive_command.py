@@ -10,8 +10,8 @@ reset replaces the expectation.
 from __future__ import annotations
 
 from cananalyze.checks.rule import Context, Rule, ms
-from cananalyze.network.drive_tracker import COMMAND, RESET, SEEN, STATE
-from cananalyze.profiles import cia402
+from cananalyze.decode.drive_tracker import COMMAND, RESET, SEEN, STATE
+from cananalyze.devices import cia402
 
 
 class DriveCommandRule(Rule):

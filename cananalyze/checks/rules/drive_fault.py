@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from cananalyze.checks.rule import Context, Rule
-from cananalyze.network.drive_tracker import RESET, STATE
-from cananalyze.profiles import cia402
+from cananalyze.decode.drive_tracker import RESET, STATE
+from cananalyze.devices import cia402
 from cananalyze.protocol.emcy import MIN_BYTES, error_text
 from cananalyze.protocol.services import Service
 

@@ -11,8 +11,8 @@ into fault (transitions 13 and 14 with a short fault reaction between) is allowe
 from __future__ import annotations
 
 from cananalyze.checks.rule import Context, Rule
-from cananalyze.network.drive_tracker import RESET, STATE
-from cananalyze.profiles import cia402
+from cananalyze.decode.drive_tracker import RESET, STATE
+from cananalyze.devices import cia402
 
 
 class DriveTransitionRule(Rule):

@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from cananalyze.checks.columns import FindingColumns, objects
 from cananalyze.checks.rule import Context, Rule, ms
 from cananalyze.checks.spans import crossing, per_frame
+from cananalyze.core.finding_columns import FindingColumns, objects
 from cananalyze.protocol.emcy import (
     MIN_BYTES,
     SIZE,

@@ -16,7 +16,7 @@ import numpy as np
 from cananalyze.checks.rule import Context, Rule, ms
 from cananalyze.checks.spans import crossing, runs
 from cananalyze.checks.spool import KeyedSpool
-from cananalyze.network.timeline import RESET_ANSWER_S
+from cananalyze.config.timeline import RESET_ANSWER_S
 
 MIN_LEARN = 5  # gaps a segment needs before its median is an expected period
 

@@ -8,7 +8,7 @@ file, SDO writes in the log) and the PDO decoder marks such rows with a
 from __future__ import annotations
 
 from cananalyze.checks.rule import Context, Rule
-from cananalyze.network.model import NOT_VALID
+from cananalyze.decode.model import NOT_VALID
 
 
 class PdoValidRule(Rule):

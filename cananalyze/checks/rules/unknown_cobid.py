@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from cananalyze.checks.rule import Context, Rule
-from cananalyze.frames import FLAG_EXT
+from cananalyze.core.frames import FLAG_EXT
 from cananalyze.protocol.services import Service
 
 # Unknown identifiers listed one by one (per bus); frames on more are counted in one

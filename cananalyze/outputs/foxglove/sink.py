@@ -22,11 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
-from cananalyze.errors import UsageError
-from cananalyze.events.build import EventState, batch_events_of
-from cananalyze.events.columns import NO_ROW
+from cananalyze.core.errors import UsageError
+from cananalyze.decode.events.build import EventState, batch_events_of
+from cananalyze.decode.events.columns import NO_ROW
 from cananalyze.outputs.mcap.stream import batch_messages
-from cananalyze.outputs.sink import Sink
+from cananalyze.pipeline.sink import Sink
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8765
@@ -92,13 +92,13 @@ class FoxgloveSink(Sink):
         # the events' and signals' JSON columns are built in pyarrow, whose first numpy
         # array imports pandas: done now, not in the first batch a client watches (1-2 s
         # the live reader would wait, profiled under load)
-        from cananalyze.columns.json_text import number_text
+        from cananalyze.core.columns.json_text import number_text
 
         number_text(np.zeros(1, np.int64))
         number_text(np.zeros(1, np.float64))
         # the topics every bus has, advertised before the first frame: a client can
         # subscribe and miss nothing
-        from cananalyze.outputs.mcap.frames import FRAME_SCHEMA, FRAMES_TOPIC
+        from cananalyze.formats.mcap_frames import FRAME_SCHEMA, FRAMES_TOPIC
         from cananalyze.outputs.mcap.topics import EVENTS_TOPIC, LOG_SCHEMA
 
         self._channel(("frames",), FRAMES_TOPIC, FRAME_SCHEMA)

@@ -20,16 +20,17 @@ import json
 
 import numpy as np
 
-from cananalyze.columns import bytecols
-from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
+from cananalyze.core.columns import bytecols
+from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
+from cananalyze.core.records import DecodedBatch
+from cananalyze.devices.words import word_column
+from cananalyze.outputs.fields import row_fields
 from cananalyze.outputs.jsonl.rows import _clean, clean_fields, dumps
 from cananalyze.outputs.jsonl.sdo import pair_fields
 from cananalyze.outputs.text.sdo import fast_pairs
 from cananalyze.outputs.text.writer import _KEYED, Rendered, _key_groups, _padded_table
-from cananalyze.profiles.words import word_column
 from cananalyze.protocol.fields import frame_fields
 from cananalyze.protocol.services import SERVICE_NAMES, Service
-from cananalyze.records import DecodedBatch
 
 # keyed rows whose fields read the first data byte (boot-up's state too, unlike its text)
 _BYTE = np.zeros(256, bool)
@@ -108,7 +109,7 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
         noted_rows = np.zeros(len(fb), bool)
         noted_rows[np.fromiter(dict.keys(notes), np.int64, written)] = True
         noted = noted_rows[sel]
-    lazy = batch._lazy_index()
+    lazy = batch.row_index()
     in_block = np.full(n, -1, np.int32) if lazy is None else lazy[0][sel]
     shared = np.full(n, -1, np.int32) if lazy is None else lazy[2][sel]
     pending = np.zeros(n, bool)  # the fast pairs' rows: notes still to be written
@@ -143,7 +144,7 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
             done[rows[free]] = True
     slow = np.flatnonzero(~done)  # notes, EMCY, NMT, other SDO...: their fields by Python
     for i, row in zip(slow.tolist(), sel[slow].tolist(), strict=True):
-        spliced[i] = _fields_text(batch.fields(row))
+        spliced[i] = _fields_text(row_fields(batch, row))
     width = max(m.shape[1] for _, m in fields_col)
     fields_m = np.zeros((n, width), np.uint8)
     for rows, m in fields_col:
@@ -230,7 +231,7 @@ def _floats(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     import pyarrow as pa
     import pyarrow.compute as pc
 
-    from cananalyze.columns.json_text import Texts
+    from cananalyze.core.columns.json_text import Texts
 
     v = np.asarray(v, np.float64)
     n = v.size

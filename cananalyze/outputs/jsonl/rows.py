@@ -8,11 +8,12 @@ from typing import TextIO
 
 import numpy as np
 
-from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
+from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
+from cananalyze.core.records import DecodedBatch
 from cananalyze.outputs.background import ByteSink
-from cananalyze.outputs.sink import Sink
+from cananalyze.outputs.fields import row_fields
+from cananalyze.pipeline.sink import Sink
 from cananalyze.protocol.services import SERVICE_NAMES
-from cananalyze.records import DecodedBatch
 
 
 def _clean(value):
@@ -53,7 +54,7 @@ def frame_record(batch: DecodedBatch, i: int) -> dict:
     rec["node"] = None if node < 0 else node
     if batch.pdo[i]:
         rec["pdo"] = int(batch.pdo[i])
-    rec.update(clean_fields(batch.fields(i)))
+    rec.update(clean_fields(row_fields(batch, i)))
     return rec
 
 

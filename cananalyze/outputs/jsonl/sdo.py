@@ -17,10 +17,10 @@ import json
 
 import numpy as np
 
-from cananalyze.columns import bytecols
+from cananalyze.core.columns import bytecols
+from cananalyze.decode.sdo.fastpath import pair_outputs
 from cananalyze.outputs.text.sdo import pair_text
 from cananalyze.protocol.sdo import fields as sdo_fields
-from cananalyze.sdo.fastpath import pair_outputs
 
 _EXPEDITED = ("expedited", "size_indicated", "n", "size", "sdo_data")
 

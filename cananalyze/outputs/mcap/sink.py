@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from cananalyze.network.node_tally import node_profiles
+from cananalyze.decode.node_tally import node_profiles
 from cananalyze.outputs.mcap.stream import StreamMcap
-from cananalyze.outputs.sink import Sink
+from cananalyze.pipeline.sink import Sink
 
 
 class McapSink(Sink):

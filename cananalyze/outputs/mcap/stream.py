@@ -21,15 +21,16 @@ from pathlib import Path
 
 import numpy as np
 
-from cananalyze import __version__
-from cananalyze.columns.json_text import Texts
-from cananalyze.events.build import EventState, batch_events_of
-from cananalyze.events.columns import KINDS, NO_NODE, NO_ROW
-from cananalyze.network.drive_tracker import STATE
-from cananalyze.network.node_tally import NodeTally
-from cananalyze.outputs.atomic import atomic_path
-from cananalyze.outputs.mcap.bulk import BulkMcapWriter
-from cananalyze.outputs.mcap.frames import FRAME_SCHEMA, FRAMES_TOPIC, frame_payloads
+from cananalyze.core.atomic import atomic_path
+from cananalyze.core.columns.json_text import Texts
+from cananalyze.core.records import DecodedBatch, SignalBlock, on_bus
+from cananalyze.core.version import __version__
+from cananalyze.decode.drive_tracker import STATE
+from cananalyze.decode.events.build import EventState, batch_events_of
+from cananalyze.decode.events.columns import KINDS, NO_NODE, NO_ROW
+from cananalyze.decode.node_tally import NodeTally
+from cananalyze.formats.mcap_bulk import BulkMcapWriter
+from cananalyze.formats.mcap_frames import FRAME_SCHEMA, FRAMES_TOPIC, frame_payloads
 from cananalyze.outputs.mcap.topics import (
     DRIVE_SCHEMA,
     EVENTS_TOPIC,
@@ -48,7 +49,6 @@ from cananalyze.outputs.mcap.topics import (
     write_metadata,
 )
 from cananalyze.outputs.tables.writer import WriterThread
-from cananalyze.records import DecodedBatch, SignalBlock, on_bus
 
 
 def batch_messages(

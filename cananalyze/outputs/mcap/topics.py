@@ -6,7 +6,7 @@ Topics (all JSON-encoded with JSON Schema, so Foxglove needs no configuration):
   /node/<N>/nmt_state NMT state changes seen in heartbeat, boot-up, guarding
   /node/<N>/drive_state CiA 402 state changes of a drive (statusword by PDO or SDO)
   /canopen/events     foxglove.Log: SDO transactions, EMCY, NMT commands, findings
-  /can/frames         every raw frame (schema and builder: `frames.py`)
+  /can/frames         every raw frame (schema and builder: `formats/mcap_frames.py`)
 With several buses (a log of several channels, `live -c can0,can1`), the decoded topics
 of each bus carry its name in front (`records.on_bus`): /can1/node/5/tpdo1, /can1/node/5/nmt_state;
 events name it ("can1 node 5"). /can/frames stays one topic of every frame, its channel
@@ -26,13 +26,13 @@ from pathlib import Path
 
 import numpy as np
 
-from cananalyze import __version__
-from cananalyze.capture import SignalSeries
-from cananalyze.columns import arrow_build as ab
-from cananalyze.columns.json_text import Texts, join, number_text, object_template
-from cananalyze.outputs.mcap.bulk import BulkMcapWriter
-from cananalyze.outputs.mcap.frames import log_time_ns
-from cananalyze.records import SignalBlock, signal_path
+from cananalyze.core.columns import arrow_build as ab
+from cananalyze.core.columns.json_text import Texts, join, number_text, object_template
+from cananalyze.core.records import SignalBlock, signal_path
+from cananalyze.core.version import __version__
+from cananalyze.formats.mcap_bulk import BulkMcapWriter
+from cananalyze.formats.mcap_frames import log_time_ns
+from cananalyze.outputs.capture import SignalSeries
 
 LOG_SCHEMA = {
     "title": "foxglove.Log",

@@ -13,7 +13,7 @@ import functools
 import html
 from datetime import UTC, datetime
 
-from cananalyze import __version__
+from cananalyze.core.version import __version__
 from cananalyze.outputs.report.encode import Blob, gzip7
 from cananalyze.outputs.report.sections import SECTIONS, Figures
 

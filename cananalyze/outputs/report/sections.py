@@ -11,8 +11,8 @@ from __future__ import annotations
 import html
 from collections import defaultdict
 
-from cananalyze.checks.finding import show
 from cananalyze.checks.model_config import ModelConfig
+from cananalyze.core.finding import show
 from cananalyze.outputs.junit import format_finding
 from cananalyze.outputs.report import plots
 
@@ -148,7 +148,7 @@ def _node_id(n: int, bus: str | None) -> str:
 
 
 def nodes(s, figs: Figures) -> str:
-    from cananalyze.network.node_tally import bus_profiles, node_profiles
+    from cananalyze.decode.node_tally import bus_profiles, node_profiles
 
     model = s.run.network
     rows = s.tally.rows(

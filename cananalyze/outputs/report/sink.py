@@ -13,14 +13,14 @@ from pathlib import Path
 
 import numpy as np
 
-from cananalyze.checks.finding import Finding
-from cananalyze.events.columns import EMCY, NO_NODE
-from cananalyze.network.drive_tracker import STATE
-from cananalyze.network.node_tally import NodeTally
-from cananalyze.outputs.atomic import Staged, check_writable
+from cananalyze.core.atomic import Staged, check_writable
+from cananalyze.core.finding import Finding
+from cananalyze.decode.drive_tracker import STATE
+from cananalyze.decode.events.columns import EMCY, NO_NODE
+from cananalyze.decode.node_tally import NodeTally
 from cananalyze.outputs.busload import frame_bits
 from cananalyze.outputs.report.accum import Envelope, LogHistogram, WindowSums
-from cananalyze.outputs.sink import Sink
+from cananalyze.pipeline.sink import Sink
 from cananalyze.protocol.services import Service
 
 MAX_STATES = 20_000  # NMT state changes kept for the timelines (a reset loop makes many)

@@ -17,9 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from cananalyze.capture import Collector
-from cananalyze.errors import ProblemLog, UsageError
+from cananalyze.core.errors import ProblemLog, UsageError
+from cananalyze.core.records import DecodedBatch
 from cananalyze.outputs.busload import bits_by_channel
+from cananalyze.outputs.capture import Collector
 from cananalyze.outputs.rerun.send import (
     LOAD_WINDOW,
     Layout,
@@ -28,7 +29,6 @@ from cananalyze.outputs.rerun.send import (
     send_load,
     send_parts,
 )
-from cananalyze.records import DecodedBatch
 
 
 class RerunLive:
@@ -48,7 +48,7 @@ class RerunLive:
         if not rrd and not spawn:
             raise ValueError("RerunLive needs an .rrd file, a viewer, or both")
         if rrd:
-            from cananalyze.outputs.atomic import check_writable
+            from cananalyze.core.atomic import check_writable
 
             check_writable(rrd)
         self.bitrate = bitrate

@@ -23,9 +23,9 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from cananalyze import __version__
-from cananalyze.capture import Capture
-from cananalyze.records import on_bus, signal_path
+from cananalyze.core.records import on_bus, signal_path
+from cananalyze.core.version import __version__
+from cananalyze.outputs.capture import Capture
 
 TIMELINE = "time"
 _RR_LEVEL = {1: "DEBUG", 2: "INFO", 3: "WARN", 4: "ERROR", 5: "CRITICAL"}

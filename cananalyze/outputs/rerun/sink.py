@@ -8,9 +8,9 @@ import sys
 from pathlib import Path
 from urllib.parse import urlparse
 
-from cananalyze.errors import UsageError
+from cananalyze.core.errors import UsageError
 from cananalyze.outputs.rerun.send import grpc_url
-from cananalyze.outputs.sink import Sink
+from cananalyze.pipeline.sink import Sink
 
 
 class RerunSink(Sink):
@@ -98,7 +98,7 @@ class RerunLiveSink(Sink):
         if not rrd and not spawn:
             raise ValueError("RerunLiveSink needs an .rrd file, a viewer, or both")
         if rrd:
-            from cananalyze.outputs.atomic import check_writable
+            from cananalyze.core.atomic import check_writable
 
             check_writable(rrd)
         self.rrd, self.spawn, self.bitrate, self.name = rrd, spawn, bitrate, name

@@ -20,11 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
-from cananalyze.capture import Collector
-from cananalyze.errors import ProblemLog
-from cananalyze.events.build import EventState
-from cananalyze.outputs.atomic import atomic_path
+from cananalyze.core.atomic import atomic_path
+from cananalyze.core.errors import ProblemLog
+from cananalyze.core.records import DecodedBatch
+from cananalyze.decode.events.build import EventState
 from cananalyze.outputs.busload import bits_by_channel, load_windows
+from cananalyze.outputs.capture import Collector
 from cananalyze.outputs.rerun.send import (
     LOAD_WINDOW,
     Layout,
@@ -35,7 +36,6 @@ from cananalyze.outputs.rerun.send import (
     send_load,
     send_parts,
 )
-from cananalyze.records import DecodedBatch
 
 
 class StreamRrd:

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cananalyze.checks.columns import NONE, FindingColumns
+from cananalyze.core.finding_columns import NONE, FindingColumns
 
 BLOCK = 8192  # rows pickled together (pickle's per-call cost, and its memo of repeated texts)
 CACHED = 4  # blocks held while the sorted chunks are read (a late finding's block)

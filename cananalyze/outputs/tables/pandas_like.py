@@ -19,7 +19,7 @@ from importlib import metadata
 import numpy as np
 import pyarrow as pa
 
-from cananalyze.columns import arrow_build as ab
+from cananalyze.core.columns import arrow_build as ab
 
 
 class _Missing:

@@ -26,10 +26,10 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
-from cananalyze.columns import arrow_build as ab
-from cananalyze.columns.hexcols import hex_payload_buffers
+from cananalyze.core.columns import arrow_build as ab
+from cananalyze.core.columns.hexcols import hex_payload_buffers
+from cananalyze.decode.sdo.fastpath import NUMBER_FIELDS, OK_CONSTANTS, RecordColumns
 from cananalyze.outputs.tables import pandas_like as pl
-from cananalyze.sdo.fastpath import NUMBER_FIELDS, OK_CONSTANTS, RecordColumns
 
 _EXACT = 2**53  # ints below this in magnitude print as float the way they print as int
 _NONE = type(None)

@@ -31,17 +31,18 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from cananalyze.checks.columns import FindingColumns
-from cananalyze.checks.finding import TABLE_COLUMNS
-from cananalyze.columns import arrow_build as ab
-from cananalyze.columns.payloads import payload_bytes, payload_hex
-from cananalyze.errors import UsageError
-from cananalyze.events.build import LEVEL_NAMES, EventState, batch_events_of
-from cananalyze.events.columns import KINDS, NO_NODE, NO_ROW, EventColumns
-from cananalyze.frames import FrameBatch
-from cananalyze.network.node_tally import NodeTally, bus_profiles, node_profiles
-from cananalyze.outputs.atomic import atomic_path
-from cananalyze.outputs.sink import Sink as OutputSink
+from cananalyze.core.atomic import atomic_path
+from cananalyze.core.columns import arrow_build as ab
+from cananalyze.core.columns.payloads import payload_bytes, payload_hex
+from cananalyze.core.errors import UsageError
+from cananalyze.core.finding import TABLE_COLUMNS
+from cananalyze.core.finding_columns import FindingColumns
+from cananalyze.core.frames import FrameBatch
+from cananalyze.core.records import DecodedBatch
+from cananalyze.decode.events.build import LEVEL_NAMES, EventState, batch_events_of
+from cananalyze.decode.events.columns import KINDS, NO_NODE, NO_ROW, EventColumns
+from cananalyze.decode.node_tally import NodeTally, bus_profiles, node_profiles
+from cananalyze.decode.sdo.transaction import SDO_TABLE_COLUMNS
 from cananalyze.outputs.tables import pandas_like as pl
 from cananalyze.outputs.tables import sdo_chunks, wide
 from cananalyze.outputs.tables.findings_spool import FindingsSpool
@@ -57,9 +58,8 @@ from cananalyze.outputs.tables.writer import (
     csv_table,
     rewrite,
 )
+from cananalyze.pipeline.sink import Sink as OutputSink
 from cananalyze.protocol.services import SERVICE_NAMES
-from cananalyze.records import DecodedBatch
-from cananalyze.sdo.transaction import SDO_TABLE_COLUMNS
 
 TABLES = ("frames", "signals", "sdo", "events", "findings", "nodes")
 SDO_COLUMNS = SDO_TABLE_COLUMNS

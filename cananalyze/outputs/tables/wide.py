@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from cananalyze.columns import arrow_build as ab
+from cananalyze.core.columns import arrow_build as ab
 from cananalyze.outputs.tables import (
     writer as _writer,  # ROW_GROUP(_BYTES) read at each use: tests set them
 )

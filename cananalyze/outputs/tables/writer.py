@@ -39,7 +39,7 @@ try:
 except ImportError:  # pragma: no cover - pyarrow's layout changed
     import pyarrow.compute  # noqa: F401
 
-from cananalyze.columns import arrow_build as ab
+from cananalyze.core.columns import arrow_build as ab
 from cananalyze.outputs.tables.pandas_like import code_type
 
 # Rows per row group: 256k (pyarrow's default is 1M) lets the writer start while the

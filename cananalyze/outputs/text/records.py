@@ -3,7 +3,7 @@ the live dashboard show it under the frame that completed it."""
 
 from __future__ import annotations
 
-from cananalyze.events.sdo_text import shown_data, shown_text
+from cananalyze.decode.events.sdo_text import shown_data, shown_text
 from cananalyze.protocol.sdo import object_text
 
 

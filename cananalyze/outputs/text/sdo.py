@@ -17,12 +17,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cananalyze.columns import bytecols
+from cananalyze.core.columns import bytecols
+from cananalyze.core.records import DecodedBatch
+from cananalyze.decode.sdo.fastpath import pair_outputs, py_round
+from cananalyze.decode.sdo.lazynotes import LazyNotes
 from cananalyze.outputs.text.records import format_record
 from cananalyze.protocol.sdo import SIZE_INDICATED, object_columns, object_text
-from cananalyze.records import DecodedBatch
-from cananalyze.sdo.fastpath import pair_outputs, py_round
-from cananalyze.sdo.lazynotes import LazyNotes
 
 _REQ_ROLE = bytecols.padded_table([b"SDO upload request ", b"SDO expedited download request "])
 _RESP_ROLE = bytecols.padded_table([b"SDO expedited upload response ", b"SDO download response "])

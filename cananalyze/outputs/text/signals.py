@@ -12,8 +12,8 @@ from typing import TextIO
 
 import numpy as np
 
-from cananalyze.outputs.sink import Sink
-from cananalyze.records import DecodedBatch
+from cananalyze.core.records import DecodedBatch
+from cananalyze.pipeline.sink import Sink
 
 
 def signal_records(batch: DecodedBatch, mask: np.ndarray | None = None) -> list[dict]:

@@ -21,24 +21,25 @@ from typing import TextIO
 
 import numpy as np
 
-from cananalyze.columns import bytecols as _bytecols
-from cananalyze.columns.bytecols import HEX_UPPER as _HEXCHARS
-from cananalyze.columns.bytecols import PAD as _PAD
-from cananalyze.columns.bytecols import compact as _compact
-from cananalyze.columns.bytecols import digits as _digits
-from cananalyze.columns.bytecols import padded_table as _padded_table
-from cananalyze.columns.numtext import g6_text, value_text
-from cananalyze.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
+from cananalyze.core.columns import bytecols as _bytecols
+from cananalyze.core.columns.bytecols import HEX_UPPER as _HEXCHARS
+from cananalyze.core.columns.bytecols import PAD as _PAD
+from cananalyze.core.columns.bytecols import compact as _compact
+from cananalyze.core.columns.bytecols import digits as _digits
+from cananalyze.core.columns.bytecols import padded_table as _padded_table
+from cananalyze.core.columns.numtext import g6_text, value_text
+from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
+from cananalyze.core.records import DecodedBatch
+from cananalyze.devices.words import word_column
 from cananalyze.outputs import colour
 from cananalyze.outputs.background import ByteSink
-from cananalyze.outputs.sink import Sink
+from cananalyze.outputs.fields import row_fields
 from cananalyze.outputs.text.records import format_alone, format_record
 from cananalyze.outputs.text.sdo import fast_pairs, pair_text
-from cananalyze.profiles.words import word_column
+from cananalyze.pipeline.sink import Sink
 from cananalyze.protocol import emcy as emcy_text
 from cananalyze.protocol.fields import annotation, frame_fields
 from cananalyze.protocol.services import SERVICE_NAMES, Service
-from cananalyze.records import DecodedBatch
 
 _HEX3 = [f"{i:02X} " for i in range(256)]
 
@@ -285,7 +286,7 @@ class TextWriter(Sink):
             notes = dict(zip(dict.keys(notes), dict.values(notes), strict=True))
         elif pairs is not None:
             notes = {}
-        lazy = batch._lazy_index()  # rows with PDO signals or shared notes
+        lazy = batch.row_index()  # rows with PDO signals or shared notes
         in_block = shared = None
         if lazy is not None:
             in_block = lazy[0][sel]
@@ -339,7 +340,7 @@ class TextWriter(Sink):
                     chunks.append("SDO " + role + end)
                 else:
                     rtr_i = bool(flags[i] & FLAG_RTR)
-                    f = batch.fields(row)
+                    f = row_fields(batch, row)
                     chunks.append(
                         annotation(int(svc[i]), int(node[i]), int(pdo[i]), f, rtr_i) + end
                     )
@@ -375,7 +376,9 @@ class TextWriter(Sink):
                 text = "SDO " + role
             else:
                 rtr_i = bool(flags[i] & FLAG_RTR)
-                text = annotation(int(svc[i]), int(node[i]), int(pdo[i]), batch.fields(row), rtr_i)
+                text = annotation(
+                    int(svc[i]), int(node[i]), int(pdo[i]), row_fields(batch, row), rtr_i
+                )
             text += end + "".join("    └─ " + format_record(rec) + "\n" for rec in by_row[row])
             inserts.append(text.encode())
         tail = ("\n".join(tail_lines) + "\n").encode() if tail_lines else b""
@@ -522,7 +525,7 @@ def _signal_text(
         return None
     if sb.choices:
         return None  # value-table names: the per-row way
-    pos = batch._lazy_index()[1][rows]
+    pos = batch.row_index()[1][rows]
     parts: list[np.ndarray] = []
     m = rows.size
 
@@ -616,7 +619,7 @@ def lines_per_row(
                 data = "".join(_HEX3[b] for b in fb.payload(i)).rstrip()
             svc = SERVICE_NAMES[services[i]]
             node = nodes[i]
-            text = annotation(services[i], node, pdos[i], batch.fields(i), bool(fl & FLAG_RTR))
+            text = annotation(services[i], node, pdos[i], row_fields(batch, i), bool(fl & FLAG_RTR))
             ch = fb.channel_name(i)
             line = (
                 f"{rel[i]:12.6f}  {ch:<5} {ident:>8}  [{dlcs[i]}]  {data:<23}  "

@@ -1,0 +1,497 @@
+"""NetworkModel: the analyser's picture of each node, kept up to date from the log.
+
+It starts from what the user declared (profiles, network file, the rules file's
+`network:`) and then follows the log in time order: completed SDO transfers (writes
+and read-backs alike) of communication objects and unit-changing device objects, and
+resets (boot-ups, NMT reset commands), which return a node to its declared values.
+Uploads of the identity objects (0x1018, 0x1000, 0x1008) pick a built-in profile.
+
+Two views of the same facts: the current configuration that decoding needs (PDO
+bindings, kept in step with the COB-ID classifier, so a PDO moved to another COB-ID is
+attributed to the right node from the frame after the write on), and `known()`, the
+value of any object at any time the checks ask about (the log's values are kept in
+timeline.py; the rule is docs/network-file.md, "Precedence"). Per-frame Python here
+touches only SDO records and resets, which are rare.
+"""
+
+from __future__ import annotations
+
+import bisect
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from cananalyze.config.node_config import TOUCHES_COB_IDS, NodeConfig
+from cananalyze.config.spec import NetworkSpec
+from cananalyze.config.timeline import ConfigChange, Timeline
+from cananalyze.core.frames import FLAG_ERR, FLAG_EXT
+from cananalyze.core.records import DecodedBatch
+from cananalyze.decode.node_tally import IDENTITY
+from cananalyze.devices.profile import identify
+from cananalyze.protocol.cobid import NO_NODE, CobClassifier
+from cananalyze.protocol.comm_objects import comm_object
+from cananalyze.protocol.pdo_map import PdoConfig, split_cob_id
+from cananalyze.protocol.services import Service
+
+NOT_VALID = (
+    "is not valid (COB-ID bit 31 set)"  # PdoBinding.problem; the pdo_not_valid rule looks for it
+)
+_IDENTITY_INDICES = np.array([0x1018, 0x1000, 0x1008], np.int64)
+USER_SOURCES = ("user --device", "user --eds", "network file", "rules file")
+
+
+def generic_for(device_type) -> object:
+    """The CiA 402/401 defaults for a device type naming them, else None."""
+    from cananalyze.devices.generic import family, generic_profile
+
+    fam = family(device_type)
+    return generic_profile(fam) if fam else None
+
+
+@dataclass(frozen=True)
+class PdoBinding:
+    """Which node's PDO a COB-ID carries, with the mapping in force."""
+
+    node: int
+    kind: str  # "tpdo" / "rpdo"
+    number: int
+    config: PdoConfig
+    problem: str | None = None  # set when frames arrive on a PDO that is not valid
+
+
+class Known(NamedTuple):
+    """An object's expected value and where it comes from: "log" (an SDO write or read at
+    or before the time asked, since the node's last reset), "file" (the user's
+    declarations) or "profile" (DCF value, else EDS default)."""
+
+    value: int
+    source: str
+
+
+def sdo_value(rec: dict) -> int | str | None:
+    data = rec.get("data")
+    if isinstance(data, str) and data:
+        try:
+            raw = bytes.fromhex(data)
+        except ValueError:
+            raw = None
+        if raw is not None:
+            if (rec.get("index"), rec.get("subindex")) == (0x1008, 0):
+                return raw.split(b"\0")[0].decode("latin-1").strip()
+            return int.from_bytes(raw[:8], "little")
+    value = rec.get("value")
+    return value if isinstance(value, (int, str)) and not isinstance(value, bool) else None
+
+
+class NetworkModel:
+    """Per-node configuration state; a Processor that runs after the SDO tracker."""
+
+    def __init__(
+        self, spec: NetworkSpec | None = None, classifier: CobClassifier | None = None
+    ) -> None:
+        self.spec = spec or NetworkSpec()
+        self.nodes: dict[int, NodeConfig] = {}
+        self.timeline = Timeline()  # the values the log showed, and the resets
+        self._file = {
+            (node, index, sub): value
+            for node, ns in self.spec.nodes.items()
+            for index, sub, value in ns.writes
+        }
+        self._bus_file = {(index, sub): value for index, sub, value in self.spec.bus_writes}
+        self.bindings: dict[int, PdoBinding] = {}
+        self.binding_times: list[float] = []  # when the bindings changed, and to what
+        self.binding_log: list[dict[int, PdoBinding]] = []
+        # Bindings in force within the current batch: (first row, bindings), ascending.
+        self.segments: list[tuple[int, dict[int, PdoBinding]]] = [(0, {})]
+        self.classifier: CobClassifier | None = None
+        self._assigned: dict[int, tuple[int, int, int]] = {}
+        # (node, index, subindex) -> object_info answer; cleared when a node's profile changes
+        self._info: dict[tuple[int, int, int], tuple[str, int] | None] = {}
+        for node, ns in self.spec.nodes.items():
+            self.nodes[node] = self._declared_config(node, ns.profile, ns.how)
+        self._rebind(float("-inf"))
+        if classifier is not None:
+            self.bind(classifier)
+
+    def _declared_config(self, node: int, profile, how: str) -> NodeConfig:
+        """A node as declared: its profile's defaults with the user's values on top."""
+        cfg = NodeConfig.from_profile(node, profile, how)
+        ns = self.spec.nodes.get(node)
+        if ns is not None:
+            for index, sub, value in ns.writes:
+                cfg.apply(index, sub, value)
+            for (direction, number), length in ns.pdo_lengths.items():
+                cfg.pdo(direction, number).length = length  # type: ignore[arg-type]
+            cfg.sdo_channels = list(ns.sdo_channels)
+            cfg.signals = ns.signals
+        return cfg
+
+    # --- wiring ------------------------------------------------------------------
+    def bind(self, classifier: CobClassifier) -> None:
+        """Give the model the decoder's classifier (before the first batch is decoded)."""
+        self.classifier = classifier
+        self._assigned = {}
+        self._sync_classifier()
+
+    def attach(self, decoder) -> NetworkModel:
+        """Joined to a decoder as one of its processors: it needs the decoder's classifier."""
+        self.bind(decoder.classifier)
+        return self
+
+    @property
+    def sdo_channels(self) -> list[tuple[int, int, int]]:
+        """User-declared extra SDO channels: (server node, request COB-ID, response COB-ID)."""
+        return [
+            (n, req, resp)
+            for n, cfg in sorted(self.nodes.items())
+            for req, resp in cfg.sdo_channels
+        ]
+
+    # --- queries -----------------------------------------------------------------
+    def object_info(self, node: int, index: int, subindex: int) -> tuple[str, int] | None:
+        """(name, data type) of an object on a node: its profile, else CiA 301's common objects.
+
+        The SDO tracker calls this to name and decode transaction values: answers are
+        kept until a node's profile changes (a profile lookup costs microseconds).
+        """
+        key = (node, index, subindex)
+        found = self._info.get(key, self._info)
+        if found is not self._info:
+            return found  # type: ignore[return-value]
+        found = self._info[key] = self._object_info(node, index, subindex)
+        return found
+
+    def _object_info(self, node: int, index: int, subindex: int) -> tuple[str, int] | None:
+        cfg = self.nodes.get(node)
+        profile = cfg.profile if cfg is not None else None
+        if profile is not None:
+            info = profile.object(index, subindex)
+            if info is not None:
+                return info.name, info.datatype
+        return comm_object(index, subindex)
+
+    def family(self, node: int) -> int | None:
+        """402 or 401 when the node's profile, or its device type read in the log, names
+        CiA 402 (drives) or CiA 401 (I/O)."""
+        from cananalyze.devices.generic import family
+
+        cfg = self.nodes.get(node)
+        if cfg is None:
+            return None
+        if cfg.profile is not None and cfg.profile.family:
+            return cfg.profile.family
+        return family(cfg.identity.get("device_type"))
+
+    def config_at(self, node: int) -> NodeConfig:
+        """Current configuration of a node (an empty 'unknown' one if never seen)."""
+        cfg = self.nodes.get(node)
+        if cfg is None:
+            cfg = self.nodes[node] = NodeConfig(node)
+            self._info.clear()
+        return cfg
+
+    @property
+    def history(self) -> list[ConfigChange]:
+        """Every value the log showed (SDO writes and reads), in order."""
+        return self.timeline.history
+
+    @property
+    def points(self) -> list[tuple[float, int, int]]:
+        """(t, node, index) where an expected value may have changed (index -1: all)."""
+        return self.timeline.points
+
+    def known(self, node: int, index: int, subindex: int, t: float) -> Known | None:
+        """The value an object is expected to hold at time t: the last one the log showed
+        at or before t (a write or a read, unless the node was reset since), else the
+        user's declaration, else the profile's (None: nothing says)."""
+        entry = self.timeline.last(node, index, subindex, t)
+        if entry is not None:
+            return Known(entry[2].value, "log")
+        return self.declared(node, index, subindex)
+
+    def declared(self, node: int, index: int, subindex: int) -> Known | None:
+        """The value before the log says anything (and after each reset of the node)."""
+        value = self._file.get((node, index, subindex))
+        if value is not None:
+            return Known(value, "file")
+        cfg = self.nodes.get(node)
+        if cfg is not None and cfg.profile is not None:
+            p = cfg.profile.value(index, subindex, node)
+            if isinstance(p, int) and not isinstance(p, bool):
+                return Known(p, "profile")
+        return None
+
+    def bus_known(self, index: int, t: float) -> Known | None:
+        """A bus-wide object (SYNC 0x1006/0x1007): the latest value the log showed on any
+        node, else the network's declaration ([sync]), else the SYNC producer's profile."""
+        latest = self.timeline.latest(index, t)
+        if latest is not None:
+            return Known(latest.value, "log")
+        value = self._bus_file.get((index, 0))
+        if value is not None:
+            return Known(value, "file")
+        for node, cfg in sorted(self.nodes.items()):
+            if cfg.sync_cob_raw is not None and cfg.sync_cob_raw & 0x40000000:
+                return self.declared(node, index, 0)
+        return None
+
+    def subindices(self, node: int, index: int) -> list[int]:
+        """Sub-indices 1.. of an array object (0x1016) that the user, the log or the
+        node's profile gives a value for."""
+        subs = {s for (n, i, s) in self._file if n == node and i == index and s}
+        subs |= {s for s in self.timeline.subindices(node, index) if s}
+        cfg = self.nodes.get(node)
+        count = cfg.profile.value(index, 0, node) if cfg and cfg.profile else None
+        if isinstance(count, int):
+            subs |= set(range(1, min(count, 127) + 1))
+        return sorted(subs)
+
+    def binding_at(self, cob_id: int, t: float) -> PdoBinding | None:
+        """The PDO a COB-ID carried at time t (the bindings after every change up to t)."""
+        k = bisect.bisect_right(self.binding_times, t) - 1
+        return self.binding_log[max(k, 0)].get(cob_id) if self.binding_log else None
+
+    def binding(self, cob_id: int) -> PdoBinding | None:
+        return self.bindings.get(cob_id)
+
+    # --- Processor ---------------------------------------------------------------
+    def process(self, batch: DecodedBatch) -> None:
+        self.segments = [(0, self.bindings)]
+        events = [
+            (row, rec)
+            for row, rec in self._candidates(batch)
+            if rec.get("kind") == "sdo" and rec.get("result") == "ok"
+        ]
+        events += self.resets_in(batch)
+        events.sort(key=lambda e: e[0])
+        n = len(batch)
+        for row, rec in events:
+            changed = self._on_reset(*rec) if isinstance(rec, tuple) else self._on_sdo(rec)
+            if changed is None:
+                continue
+            start = max(0, min(row + 1, n))
+            if self.segments[-1][0] == start:
+                self.segments[-1] = (start, self.bindings)
+            else:
+                self.segments.append((start, self.bindings))
+            if changed and start < n:
+                self._reclassify(batch, start, changed)
+
+    def finish(self, batch: DecodedBatch) -> None:
+        self.segments = [(0, self.bindings)]
+
+    def _candidates(self, batch: DecodedBatch) -> list:
+        """The records `_on_sdo` may act on, in record order; the fast path's others skipped.
+
+        A fast-path record (expedited, with data) matters only when it writes or reads
+        a communication object (0x1000-0x1FFF) or a unit-changing object, or is the
+        first seen of a node the model does not know yet: `_on_sdo` leaves the state
+        untouched for every other one. A batch with an identity read takes them all.
+        """
+        records = batch.records
+        fast = batch.sdo_fast
+        if fast is None or fast.slots.size == 0 or len(records) <= int(fast.slots[-1]):
+            return records
+        rest = np.ones(len(records), bool)
+        rest[fast.slots] = False
+        others = np.flatnonzero(rest).tolist()
+        # an identification may bring a profile with other unit-changing objects: all then
+        get = list.__getitem__  # the other records are written: no lazy lookup for them
+        if (fast.upload & np.isin(fast.index, _IDENTITY_INDICES)).any() or any(
+            rec.get("direction") == "upload" and (rec.get("index"), rec.get("subindex")) in IDENTITY
+            for _, rec in (get(records, k) for k in others)
+        ):
+            return records
+        want = fast.ok & (fast.index >= 0x1000) & (fast.index <= 0x1FFF)
+        context = {o for cfg in self.nodes.values() for o in cfg.context_objects()}
+        if context:
+            key = fast.index * 256 + fast.subindex
+            objs = np.array([i * 256 + s for i, s in context], np.int64)
+            want |= fast.ok & np.isin(key, objs)
+        known = np.array(sorted(self.nodes), np.int64)
+        new = fast.ok & ~np.isin(fast.node, known)
+        if new.any():
+            _, first = np.unique(fast.node[new], return_index=True)
+            want[np.flatnonzero(new)[first]] = True
+        picked = [(k, get(records, k)) for k in others]
+        picked += [(k, records[k]) for k in fast.slots[want].tolist()]  # built one by one
+        if len(picked) > len(others):
+            picked.sort(key=lambda x: x[0])
+        return [rec for _, rec in picked]
+
+    # --- internals ---------------------------------------------------------------
+    def _on_sdo(self, rec: dict) -> set[int] | None:
+        """Apply one completed transfer; None if nothing that decoding depends on changed,
+        else the COB-IDs whose classification changed (maybe empty)."""
+        node, index, sub = rec.get("node"), rec.get("index"), rec.get("subindex")
+        if not isinstance(node, int) or index is None or sub is None:
+            return None
+        upload = rec.get("direction") == "upload"
+        value = sdo_value(rec)
+        if value is None:
+            return None
+        t = float(rec.get("t") or 0.0)
+        if upload and (index, sub) in IDENTITY:
+            cfg = self.config_at(node)
+            cfg.identity[IDENTITY[(index, sub)]] = value
+            return self._identify(cfg, t)
+        known = self.nodes.get(node)
+        tracked = 0x1000 <= index <= 0x1FFF or (
+            known is not None and (index, sub) in known.context_objects()
+        )
+        cfg = self.config_at(node)  # a node that answers SDO exists
+        if not tracked or isinstance(value, str):
+            return None  # most SDO traffic: process data, names
+        before = self.known(node, index, sub, t)
+        change = ConfigChange(t, node, (index, sub), value, "read" if upload else "write")
+        same = before is not None and before.value == value
+        self.timeline.add(change, changed=not same)
+        if same:
+            return None  # a read-back (or write) of the value in force: nothing changes
+        if cfg.apply(index, sub, value) not in TOUCHES_COB_IDS:
+            return None
+        self._rebind(t)
+        return self._sync_classifier()
+
+    def resets_in(self, batch: DecodedBatch) -> list[tuple[int, tuple[float, int, str]]]:
+        """Boot-ups and NMT reset commands of a batch: (row, (t, node, kind))."""
+        svc = batch.service
+        rows = np.flatnonzero((svc == Service.BOOTUP) | (svc == Service.NMT))
+        if rows.size == 0:
+            return []
+        fb = batch.frames
+        out = []
+        for row in rows.tolist():
+            t = float(fb.t[row])
+            if svc[row] == Service.BOOTUP:
+                out.append((row, (t, int(batch.node[row]), "boot-up")))
+            elif fb.dlc[row] >= 2 and fb.data[row, 0] in (0x81, 0x82):
+                kind = "reset node" if fb.data[row, 0] == 0x81 else "reset communication"
+                out.append((row, (t, int(fb.data[row, 1]), kind)))
+        return out
+
+    def _on_reset(self, t: float, node: int, kind: str) -> set[int] | None:
+        """A node (0: every node) back to its declared values."""
+        if not node:
+            self.timeline.reset_all(t)
+        targets = [node] if node else sorted(set(self.nodes) | self.timeline.nodes())
+        rebuilt = False
+        for n in targets:
+            cfg = self.nodes.get(n)
+            if not self.timeline.reset(t, n, kind) or cfg is None:
+                continue
+            fresh = self._declared_config(n, cfg.profile, cfg.identified_by)
+            fresh.identity = cfg.identity
+            for c in self.timeline.since_reset(n):  # a reset communication keeps these
+                fresh.apply(*c.object, c.value)
+            self.nodes[n] = fresh
+            rebuilt = True
+        if not rebuilt:
+            return None
+        self._rebind(t)
+        return self._sync_classifier()
+
+    def _identify(self, cfg: NodeConfig, t: float) -> set[int] | None:
+        if cfg.identified_by in USER_SOURCES:
+            return None
+        ident = cfg.identity
+        prof = identify(
+            ident.get("vendor_id"),
+            ident.get("product_code"),
+            ident.get("device_type"),
+            ident.get("device_name"),
+        )
+        if prof is None and cfg.profile is None:
+            # no device of ours, but a device type naming CiA 402/401: the profile's defaults
+            prof = generic_for(ident.get("device_type"))
+        if prof is None or (cfg.profile is not None and cfg.profile.key == prof.key):
+            return None
+        how = (
+            "SDO 0x1000 device type"
+            if prof.generic
+            else "SDO 0x1018 vendor/product"
+            if "vendor_id" in ident or "product_code" in ident
+            else "SDO 0x1008 name"
+        )
+        fresh = self._declared_config(cfg.node, prof, how)
+        fresh.identity = dict(cfg.identity)
+        fresh.sdo_channels = cfg.sdo_channels
+        for change in self.timeline.since_reset(cfg.node):  # what the log changed still holds
+            fresh.apply(*change.object, change.value)
+        self.nodes[cfg.node] = fresh
+        self.timeline.mark(t, cfg.node)
+        self._info.clear()
+        self._rebind(t)
+        return self._sync_classifier()
+
+    def _rebind(self, t: float) -> None:
+        valid: dict[int, PdoBinding] = {}
+        fallback: dict[int, PdoBinding] = {}
+        for node, cfg in sorted(self.nodes.items()):
+            for (direction, number), state in sorted(cfg.pdos.items()):
+                cob, ok = split_cob_id(state.cob_raw)
+                if not cob:
+                    continue
+                kind = "tpdo" if direction == "tx" else "rpdo"
+                if ok:
+                    valid.setdefault(cob, PdoBinding(node, kind, number, cfg.pdo_config(state)))
+                else:
+                    fallback.setdefault(
+                        cob,
+                        PdoBinding(
+                            node,
+                            kind,
+                            number,
+                            cfg.pdo_config(state),
+                            f"{kind.upper()}{number} of node {node} {NOT_VALID}",
+                        ),
+                    )
+        for cob, b in fallback.items():
+            valid.setdefault(cob, b)
+        if valid != self.bindings or not self.binding_log:
+            self.bindings = valid
+            self.binding_times.append(t)
+            self.binding_log.append(valid)
+
+    def _wanted(self) -> dict[int, tuple[int, int, int]]:
+        out: dict[int, tuple[int, int, int]] = {}
+        for node, cfg in self.nodes.items():
+            if cfg.sync_cob_raw is not None:
+                out[cfg.sync_cob_raw & 0x7FF] = (Service.SYNC, NO_NODE, 0)
+            if cfg.emcy_cob_raw is not None:
+                cob, ok = split_cob_id(cfg.emcy_cob_raw)
+                if ok and cob:
+                    out[cob] = (Service.EMCY, node, 0)
+        for cob, b in self.bindings.items():
+            if b.problem is None:
+                out[cob] = (Service.TPDO if b.kind == "tpdo" else Service.RPDO, b.node, b.number)
+        return out
+
+    def _sync_classifier(self) -> set[int]:
+        """Edit the classifier tables to match; return the COB-IDs whose meaning changed."""
+        if self.classifier is None:
+            return set()
+        wanted = self._wanted()
+        changed: set[int] = set()
+        for cob in set(self._assigned) - set(wanted):
+            self.classifier.release(cob)
+            changed.add(cob)
+        for cob, entry in wanted.items():
+            if self._assigned.get(cob) != entry:
+                self.classifier.assign(cob, *entry)
+                changed.add(cob)
+        self._assigned = wanted
+        return {c for c in changed if 0 <= c < 2048}
+
+    def _reclassify(self, batch: DecodedBatch, start: int, cobs: set[int]) -> None:
+        fb = batch.frames
+        ids = fb.can_id[start:]
+        std = (fb.flags[start:] & (FLAG_EXT | FLAG_ERR)) == 0
+        rows = np.flatnonzero(std & np.isin(ids, np.fromiter(cobs, np.uint32))) + start
+        if rows.size == 0 or self.classifier is None:
+            return
+        idx = fb.can_id[rows].astype(np.intp)
+        batch.service[rows] = self.classifier.svc[idx]
+        batch.node[rows] = self.classifier.node[idx]
+        batch.pdo[rows] = self.classifier.pdo[idx]

@@ -1,0 +1,167 @@
+"""PdoDecoder: PDO rows become named values with units, one numpy column per signal.
+
+Rows classified TPDO/RPDO are grouped by COB-ID and by the stretch of the batch in
+which one configuration held (the network model's segments), and each group is
+decoded at once by `decode_pdo`. The result stays columnar (`batch.signals`); the
+per-row `signals`/`units` fields of the outputs are derived from it only when a row
+is printed. Problems (short or long DLC, PDO not valid) are shared notes per group.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cananalyze.core.columns.order import stable_order
+from cananalyze.core.frames import FLAG_RTR
+from cananalyze.core.records import DecodedBatch, SignalBlock
+from cananalyze.decode.model import NetworkModel
+from cananalyze.devices.words import WORDED
+from cananalyze.protocol.pdo import decode_pdo, words_of
+from cananalyze.protocol.services import Service
+
+
+class PdoDecoder:
+    """Processor after the network model: decodes PDOs with the mapping in force."""
+
+    def __init__(self, model: NetworkModel, skip: set[int] | frozenset[int] = frozenset()) -> None:
+        self.model = model
+        self.skip = np.array(sorted(c for c in skip if 0 <= c < 2048), np.intp)  # a DBC's ids
+        self._words: tuple | None = None  # (FrameBatch, its data as uint64 words)
+
+    def process(self, batch: DecodedBatch) -> None:
+        if not self.model.bindings and len(self.model.segments) <= 1:
+            return  # nothing mapped anywhere: skip the PDO scan entirely
+        svc = batch.service
+        fb = batch.frames
+        segments = self.model.segments
+        # only COB-IDs bound in some segment are decoded: dropped in the same mask, before
+        # sorting (one pass over the batch's COB-IDs, not a gather of the PDO rows' first)
+        bound = np.zeros(2049, bool)  # [2048]: every identifier past 11 bits (clipped there)
+        cobs = [c for _, b in segments for c in b if 0 <= c < 2048]
+        if cobs:
+            bound[cobs] = True
+        bound[self.skip] = False
+        is_pdo = ((svc == Service.TPDO) | (svc == Service.RPDO)) & ((fb.flags & FLAG_RTR) == 0)
+        is_pdo &= np.take(bound, fb.can_id, mode="clip")
+        rows = np.flatnonzero(is_pdo)
+        if rows.size == 0:
+            return
+        bounds = [start for start, _ in segments[1:]]
+        seg_of = (
+            np.searchsorted(np.asarray(bounds, np.int64), rows, side="right") if bounds else None
+        )
+        # one sort groups rows by (segment, COB-ID), keeping row order inside each group
+        key = fb.can_id[rows].astype(np.int64)
+        if seg_of is not None:
+            key = key + seg_of.astype(np.int64) * 4096
+        # as uint16 (the usual case: few segments): a counting sort (or numpy's radix sort)
+        small = len(segments) <= 16
+        order = stable_order(key) if small else np.argsort(key, kind="stable")
+        key_sorted = key[order]
+        cuts = np.flatnonzero(np.diff(key_sorted)) + 1
+        starts = np.concatenate(([0], cuts))
+        ends = np.concatenate((cuts, [key_sorted.size]))
+        for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
+            k = int(key_sorted[a])
+            seg, cob = divmod(k, 4096)
+            binding = segments[seg][1].get(cob)
+            if binding is None:
+                continue
+            group = rows[order[a:b]]
+            if binding.config.assumed and binding.config.mapping:
+                self._decode_assumed(batch, group, binding)
+            else:
+                self._decode_group(batch, group, binding)
+        self._words = None  # not kept past the batch
+
+    def _decode_assumed(self, batch: DecodedBatch, group: np.ndarray, binding) -> None:
+        """A profile's default mapping: each frame decoded by the entries its length holds
+        (a CiA 401 module with fewer channels sends a shorter PDO), one group per length."""
+        dlc = batch.frames.dlc[group]
+        for d in np.unique(dlc).tolist():
+            mapping, bits = [], 0
+            for e in binding.config.mapping:
+                if bits + e.bits > 8 * d:
+                    break
+                mapping.append(e)
+                bits += e.bits
+            if mapping:
+                partial = len(mapping) < len(binding.config.mapping)
+                self._decode_group(batch, group[dlc == d], binding, mapping, partial)
+
+    def _decode_group(
+        self,
+        batch: DecodedBatch,
+        group: np.ndarray,
+        binding,
+        mapping: list | None = None,
+        partial: bool = False,
+    ) -> None:
+        fb = batch.frames
+        mapping = binding.config.mapping if mapping is None else mapping
+        if binding.problem:
+            batch.row_notes.append((group, {"pdo_problem": binding.problem}))
+        if not mapping:
+            if not binding.problem:
+                batch.row_notes.append(
+                    (
+                        group,
+                        {
+                            "pdo_problem": f"{binding.kind.upper()}{binding.number} "
+                            f"of node {binding.node}: mapping not known (none mapped, or "
+                            "not every entry seen yet)"
+                        },
+                    )
+                )
+            return
+        if self._words is None or self._words[0] is not fb:
+            self._words = (fb, words_of(fb.data))  # once per batch
+        dlc = fb.dlc[group]
+        cols = decode_pdo(None, dlc, mapping, words=self._words[1][group])
+        ok = ~cols.short
+        for mask, what in (
+            (
+                cols.short,
+                f"shorter than the {cols.bytes_needed} bytes mapped in "
+                f"{binding.kind.upper()}{binding.number}: not decoded",
+            ),
+            (
+                cols.extra & (not partial),  # a default mapping's entries the frame holds
+                f"longer than the {cols.bytes_needed} bytes mapped: extra bytes ignored",
+            ),
+        ):
+            if mask.any():  # one shared note per group of rows, not a dict per row
+                have = ",".join(map(str, sorted(set(dlc[mask].tolist()))))
+                batch.row_notes.append((group[mask], {"pdo_problem": f"DLC {have} {what}"}))
+        if not ok.any() or not cols.values:
+            return
+        all_ok = bool(ok.all())
+        units = {}
+        for e in mapping:
+            units.setdefault(e.name, e.unit)
+        batch.signals.append(
+            SignalBlock(
+                rows=group if all_ok else group[ok],
+                node=binding.node,
+                pdo=f"{binding.kind}{binding.number}",
+                cob_id=int(fb.can_id[group[0]]),
+                columns={name: (v if all_ok else v[ok]) for name, v in cols.values.items()},
+                units={name: units.get(name) for name in cols.values},
+                mapped_bytes=cols.bytes_needed,
+                objects={e.name: (e.index, e.subindex) for e in mapping if e.name in cols.values},
+                words=self._words_of(binding.node, mapping, cols.values),
+            )
+        )
+
+    def _words_of(self, node: int, mapping: list, values: dict) -> dict[str, int]:
+        """Signals shown in words too (a CiA 402 node's statusword, controlword, modes)."""
+        if self.model.family(node) != 402:
+            return {}
+        return {
+            e.name: e.index
+            for e in mapping
+            if e.index in WORDED and e.subindex == 0 and e.name in values
+        }
+
+    def finish(self, batch: DecodedBatch) -> None:
+        pass

@@ -1,0 +1,135 @@
+"""Reading EDS/DCF files through `canopen.objectdictionary.import_od`.
+
+canopen parses CiA 306 well (compact sub-objects, $NODEID, DCF ParameterValue);
+this module only turns its exceptions into one-line InputErrors and answers the
+few questions the profile asks: an object's description and its effective value.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+from configparser import Error as ConfigParserError
+from dataclasses import dataclass
+from pathlib import Path
+
+from cananalyze.core.errors import InputError
+
+
+@dataclass(frozen=True)
+class ObjectInfo:
+    """What the object dictionary says about one (index, subindex)."""
+
+    index: int
+    subindex: int
+    name: str
+    datatype: int
+    access: str
+    default: int | float | str | bytes | None  # DCF ParameterValue if given, else DefaultValue
+    pdo_mappable: bool = False
+
+
+def read_od(path: str | Path, node_id: int | None = None):
+    """canopen ObjectDictionary of an EDS/DCF, or InputError naming the file and the problem."""
+    from canopen.objectdictionary import import_od
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such EDS/DCF file")
+    if path.suffix.lower() not in (".eds", ".dcf"):
+        raise InputError(f"{path}: not an EDS or DCF file (expected .eds or .dcf)")
+    # canopen logs warnings for every odd entry of vendor files; they are not ours to show.
+    logger = logging.getLogger("canopen.objectdictionary.eds")
+    level = logger.level
+    logger.setLevel(logging.ERROR)
+    try:
+        od = import_od(str(path), node_id)
+    except (ConfigParserError, UnicodeDecodeError) as exc:
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise InputError(f"{path}: not a valid EDS/DCF: {msg}") from None
+    except (KeyError, ValueError, TypeError, IndexError) as exc:
+        raise InputError(f"{path}: not a valid EDS/DCF: {type(exc).__name__}: {exc}") from None
+    finally:
+        logger.setLevel(level)
+    if len(od) == 0:
+        raise InputError(f"{path}: EDS/DCF holds no objects")
+    return od
+
+
+_NODEID = re.compile(r"\+?\$NODEID\+?", re.IGNORECASE)
+
+
+def resolve_raw(raw: str | None, node_id: int | None) -> int | None:
+    """Integer value of a DefaultValue/ParameterValue string that may hold $NODEID."""
+    if raw is None:
+        return None
+    text = raw.replace(" ", "")
+    try:
+        if "$NODEID" in text.upper():
+            if node_id is None:
+                return None
+            rest = _NODEID.sub("", text)
+            return (int(rest, 0) if rest else 0) + node_id
+        return int(text, 0)
+    except ValueError:
+        return None
+
+
+def effective_value(var, node_id: int | None) -> int | float | str | bytes | None:
+    """DCF ParameterValue if present, else DefaultValue, with $NODEID resolved for node_id."""
+    for raw_attr, attr in (("value_raw", "value"), ("default_raw", "default")):
+        raw = getattr(var, raw_attr, None)
+        if raw is None:
+            continue
+        if isinstance(raw, str) and "$NODEID" in raw.upper():
+            return resolve_raw(raw, node_id)
+        value = getattr(var, attr, None)
+        if value is not None:
+            return value
+    return None
+
+
+def variable(od, index: int, subindex: int):
+    """The canopen ODVariable at (index, subindex), or None.
+
+    Absent objects are answered from canopen's dicts first: its KeyError path
+    formats a message, and building a node's configuration asks for ~1000 of them.
+    """
+    indices = getattr(od, "indices", None)
+    if type(index) is int and isinstance(indices, dict):
+        if index not in indices and index not in od.names:
+            return None
+    try:
+        entry = od[index]
+    except KeyError:
+        return None
+    subs = getattr(entry, "subindices", None)
+    if (
+        type(entry).__name__ == "ODRecord"
+        and type(subindex) is int
+        and isinstance(subs, dict)
+        and subindex not in subs
+        and subindex not in entry.names
+    ):
+        return None  # a record has no template for missing sub-indices (an array has)
+    if hasattr(entry, "subindices"):
+        try:
+            return entry[subindex]
+        except KeyError:
+            return None
+    return entry if subindex == 0 else None
+
+
+def object_info(od, index: int, subindex: int, node_id: int | None) -> ObjectInfo | None:
+    var = variable(od, index, subindex)
+    if var is None:
+        return None
+    return ObjectInfo(
+        index=index,
+        subindex=subindex,
+        name=var.name,
+        datatype=int(var.data_type or 0),
+        access=var.access_type,
+        default=effective_value(var, node_id),
+        pdo_mappable=bool(var.pdo_mappable),
+    )

@@ -1,0 +1,884 @@
+"""Vector BLF binary logs: CAN (FD) message and extended error records in LOG_CONTAINERs.
+
+python-can's BLFReader unpacks one struct and builds one Message per frame. Here
+containers are decompressed (the system's libdeflate straight into one reused
+buffer when it is there, else python-isal or zlib) and about 2 MiB of their bytes
+walked at once (records may straddle containers). With the compiled helper, its
+`blf_records` walks the objects and writes every CAN record straight into the
+frame columns, without the GIL (`_parse_c`). Without it (`_parse_py`), a short
+loop walks the object headers only to find where each record starts, and the
+fields of all CAN records are then read with numpy: through one strided view
+when the records are evenly spaced (a run of one type and size, the usual case),
+else by fancy indexing at those offsets. Both walks give the same rows and
+problems (tests/test_speedups_blf.py).
+Layouts follow python-can's blf.py (itself from Toby Lorenz' vector_blf).
+
+Containers are read one at a time; a container larger than MAX_CONTAINER, or one
+that inflates beyond it, is refused with a problem (decompression bomb), and a
+file cut inside a container yields the complete records and reports the rest.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import datetime
+import struct
+import zlib
+from collections.abc import Iterator
+from typing import BinaryIO
+
+import numpy as np
+
+from cananalyze.core.frames import (
+    FLAG_BRS,
+    FLAG_ERR,
+    FLAG_ESI,
+    FLAG_EXT,
+    FLAG_FD,
+    FLAG_RTR,
+    FLAG_TX,
+    FrameBatch,
+    channel_index,
+)
+from cananalyze.formats.registry import LogFormat, ReadContext, register
+from cananalyze.runtime import speedups
+
+try:  # python-isal: the same inflate as zlib, ~1.6x faster and outside the GIL
+    from isal import isal_zlib as _fast_zlib
+except ImportError:  # not installed (no wheel for this machine): the standard library's
+    _fast_zlib = None
+
+MAX_CONTAINER = 64 << 20  # real containers are ~128 KiB uncompressed
+MAX_FILE_HEADER = 1 << 16  # real file headers are 144 bytes
+MAX_INNER = 1 << 20  # an object inside a container (CAN records are < 200 bytes)
+PARSE_BYTES = 2 << 20  # decompressed bytes parsed in one go (see _Inflated)
+# deflate's largest expansion: a 258-byte match in 2 bits is 1032 bytes per input byte
+_DEFLATE_RATIO = 1040
+
+_FILE_HEADER = struct.Struct("<4sLBBBBBBBBQQLL8H8H")
+_OBJ_BASE = struct.Struct("<4sHHLL")  # signature, header size, header version, size, type
+_CONTAINER = struct.Struct("<H6xL4x")  # compression method, uncompressed size
+
+CAN_MESSAGE = 1
+LOG_CONTAINER = 10
+CAN_ERROR_EXT = 73
+CAN_MESSAGE2 = 86
+CAN_FD_MESSAGE = 100
+CAN_FD_MESSAGE_64 = 101
+_WANTED = (CAN_MESSAGE, CAN_MESSAGE2, CAN_ERROR_EXT, CAN_FD_MESSAGE, CAN_FD_MESSAGE_64)
+_OBJ_HEADER = 32  # the shortest object header (base and v1): its flags and time end there
+# Bytes of each record body that must be present (payload starts after the object header).
+_BODY = {
+    CAN_MESSAGE: 16,
+    CAN_MESSAGE2: 16,
+    CAN_ERROR_EXT: 32,
+    CAN_FD_MESSAGE: 84,
+    CAN_FD_MESSAGE_64: 40,
+}
+
+_DLC2LEN = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64], np.uint8)
+
+
+def sniff(head: bytes) -> bool:
+    return head[:4] == b"LOGG"
+
+
+def _systemtime(fields: tuple[int, ...]) -> float | None:
+    """Epoch of a BLF SYSTEMTIME (UTC, millisecond resolution), None when unset."""
+    year, month, _dow, day, hour, minute, sec, ms = fields
+    try:
+        dt = datetime.datetime(year, month, day, hour, minute, sec, ms * 1000, tzinfo=datetime.UTC)
+    except ValueError:
+        return None
+    return dt.timestamp()
+
+
+# _KEEP8[k] keeps the first k bytes of a little-endian uint64 (an 8-byte data slot)
+_KEEP8 = np.array([(1 << (8 * k)) - 1 for k in range(9)], np.uint64)
+_WIDTH = {1: "<u1", 2: "<u2", 4: "<u4", 8: "<u8"}
+
+
+class _At:
+    """Byte offsets of records in ``buf``: any offsets, or an evenly spaced run.
+
+    An evenly spaced run (every record of one type and size, the usual case) is
+    read through a strided view with no index arrays; other offsets are
+    gathered with fancy indexing.
+    """
+
+    def __init__(self, buf: np.ndarray, base: np.ndarray, stride: int = 0, shift: int = 0) -> None:
+        self.buf = buf
+        self.base = base
+        self.stride = stride
+        self.shift = shift
+
+    @property
+    def at(self) -> np.ndarray:
+        return self.base + self.shift
+
+    def __add__(self, k: int) -> _At:
+        return _At(self.buf, self.base, self.stride, self.shift + k)
+
+    def __getitem__(self, sel) -> _At:
+        if isinstance(sel, slice):
+            return self
+        return _At(self.buf, self.base[sel], 0, self.shift)
+
+    def _view(self, width: int, cols: int) -> np.ndarray | None:
+        n = len(self.base)
+        if not self.stride or not n:
+            return None
+        first = int(self.base[0]) + self.shift
+        if first + (n - 1) * self.stride + width * cols > len(self.buf):
+            return None
+        shape, strides = ((n,), (self.stride,)) if cols == 1 else ((n, cols), (self.stride, 1))
+        dtype = _WIDTH[width] if cols == 1 else np.uint8
+        return np.ndarray(shape, dtype, buffer=self.buf, offset=first, strides=strides)
+
+    def u(self, width: int) -> np.ndarray:
+        """Little-endian unsigned ints of ``width`` bytes at these offsets."""
+        view = self._view(width, 1)
+        if view is not None:
+            return view.copy()
+        idx = self.at[:, None] + np.arange(width)
+        return np.ascontiguousarray(self.buf[idx]).view(_WIDTH[width])[:, 0]
+
+    def bytes8(self, count: np.ndarray) -> np.ndarray:
+        """(n, 8) data slots from these offsets, bytes beyond ``count`` zeroed."""
+        out = self._view(1, 8)
+        if out is not None:
+            out = out.copy()
+        else:
+            idx = np.minimum(self.at[:, None] + np.arange(8), len(self.buf) - 1)
+            out = self.buf[idx]
+        out.view("<u8")[:, 0] &= _KEEP8[np.minimum(count, 8)]
+        return out
+
+
+# Problems of the object walk, by the code the compiled walk reports them with
+_GARBAGE, _BAD_SIZE, _UNREADABLE = 1, 2, 3
+_PROBLEMS = {
+    _GARBAGE: "garbage between BLF objects, skipped {0} bytes",
+    _BAD_SIZE: "BLF object with bad size {0}",
+    _UNREADABLE: "BLF object type {0} with header v{1} size {2} unreadable",
+}
+MAX_WALK_PROBLEMS = 64  # problems one compiled walk keeps; more: the Python walk
+
+
+class _Columns:
+    """Column buffers the compiled walk fills, kept from buffer to buffer (rows: capacity)."""
+
+    def __init__(self, rows: int) -> None:
+        self.rows = rows
+        self.t = np.empty(rows, np.float64)
+        self.can_id = np.empty(rows, np.uint32)
+        self.flags = np.empty(rows, np.uint8)
+        self.dlc = np.empty(rows, np.uint8)
+        self.data = np.empty((rows, 8), np.uint8)
+        self.chan = np.empty(rows, np.uint16)
+        self.line = np.empty(rows, np.int64)
+        self.long = np.empty((rows * 2 // 3 + 1, 4), np.int64)  # each at least 72 bytes
+        self.probs = np.empty((MAX_WALK_PROBLEMS, 5), np.int64)
+
+    def buffers(self) -> tuple[np.ndarray, ...]:
+        return (
+            self.t,
+            self.can_id,
+            self.flags,
+            self.dlc,
+            self.data,
+            self.chan,
+            self.line,
+            self.long,
+            self.probs,
+        )
+
+
+def _sel(m: np.ndarray) -> np.ndarray | slice:
+    """The mask itself, or a plain slice when it selects every row (no gather/scatter)."""
+    return slice(None) if m.all() else m
+
+
+class _Records:
+    """The record walk over inflated bytes; its record count and channel table carry
+    from buffer to buffer."""
+
+    def __init__(self, ctx: ReadContext, start: float) -> None:
+        self.ctx = ctx
+        self.start = start
+        self.record = 0  # 1-based number of the last object seen inside containers
+        self.channels: list[str] = []
+        self._chan: dict[str, int] = {}
+        self._out: _Columns | None = None  # the compiled walk's buffers, reused
+
+    def parse(self, buf, batches: _Cutter) -> int:
+        """The records of ``buf`` (the previous tail, then inflated container bytes)
+        into ``batches``; returns how many bytes were walked (the rest is the new tail:
+        a record that continues in the next container)."""
+        walk = getattr(speedups.C, "blf_records", None)
+        if walk is not None:
+            pos = self._parse_c(walk, buf, batches)
+            if pos is not None:
+                return pos
+        got, pos = self._parse_py(bytes(buf))
+        if got is not None:
+            batches.add(got)
+        return pos
+
+    def _parse_c(self, walk, buf, batches: _Cutter) -> int | None:
+        """The compiled walk (_speedups.blf_records): the same rows and problems as
+        `_parse_py`, written straight into the batch being filled when they fit in it,
+        else into reused buffers and copied; the bytes walked, or None when it declines
+        the buffer (more problems in it than it keeps: hostile input, which the Python
+        walk takes)."""
+        cap = len(buf) // 48  # the most rows it can hold (each at least 48 bytes)
+        if self._out is None or self._out.rows < cap:
+            self._out = _Columns(max(cap, 1 << 16))
+        out = self._out
+        spot = batches.room(cap)
+        if spot is None:
+            cols = out.buffers()
+        else:
+            b, at = spot
+            cols = (b.t[at:], b.can_id[at:], b.flags[at:], b.dlc[at:], b.data[at:])
+            cols += (b.channel[at:], b.line[at:], out.long, out.probs)
+        ok, n, pos, record, n_long, n_probs = walk(buf, self.record, MAX_INNER, self.start, *cols)
+        if not ok:
+            return None
+        for rec, code, a, b_, c in out.probs[:n_probs].tolist():
+            self._problem(rec, code, a, b_, c)
+        self.record = record
+        if not n:
+            return pos
+        chan = cols[5][:n]
+        chan[:] = self._channel_index(chan)
+        long = {
+            row: bytes(buf[a : a + s]).ljust(v, b"\0")
+            for row, a, s, v in out.long[:n_long].tolist()
+        }
+        self.ctx.frames += n
+        if spot is not None:
+            batches.commit(n, tuple(self.channels), long)
+        else:
+            batches.add(
+                FrameBatch(
+                    t=out.t[:n],
+                    can_id=out.can_id[:n],
+                    flags=out.flags[:n],
+                    dlc=out.dlc[:n],
+                    data=out.data[:n],
+                    channel=chan,
+                    line=out.line[:n],
+                    channels=tuple(self.channels),
+                    long_data=long,
+                )
+            )
+        return pos
+
+    def _problem(self, record: int, code: int, a: int, b: int = 0, c: int = 0) -> None:
+        """Report a problem of the walk (the same words from either walk)."""
+        self.ctx.problems.add(self.ctx.source, f"record {record}", _PROBLEMS[code].format(a, b, c))
+
+    def _parse_py(self, buf: bytes) -> tuple[FrameBatch | None, int]:
+        """The Python walk: the rows of ``buf`` (None when none) and the bytes walked."""
+        end = len(buf)
+        pos = 0
+        runs: list[tuple] = []  # (offsets, kinds, record numbers, sizes), in file order
+        offs: list[int] = []
+        kinds: list[int] = []
+        nums: list[int] = []
+        sizes: list[int] = []
+        unpack = _OBJ_BASE.unpack_from
+        while pos + 16 <= end:
+            if buf[pos : pos + 4] != b"LOBJ":
+                nxt = buf.find(b"LOBJ", pos, pos + 8)  # objects are padded to 4 bytes
+                if nxt < 0:
+                    nxt = buf.find(b"LOBJ", pos)
+                    self._problem(self.record + 1, _GARBAGE, (nxt if nxt >= 0 else end) - pos)
+                    if nxt < 0:
+                        pos = end
+                        break
+                pos = nxt
+                if pos + 16 > end:
+                    break
+            _, hsize, hver, size, kind = unpack(buf, pos)
+            if size < 16 or size > MAX_INNER:  # a claimed 60 MiB swallowed the containers after it
+                self.record += 1
+                self._problem(self.record, _BAD_SIZE, size)
+                pos += 4
+                continue
+            if pos + size > end:
+                break  # continues in the next container
+            self.record += 1
+            if kind in _WANTED:
+                if hver not in (1, 2) or hsize < _OBJ_HEADER or size < hsize + _BODY[kind]:
+                    self._problem(self.record, _UNREADABLE, kind, hver, size)
+                else:
+                    offs.append(pos)
+                    kinds.append(kind)
+                    nums.append(self.record)
+                    sizes.append(size)
+                    run = self._uniform_run(buf, pos + size, end, buf[pos : pos + 16])
+                    if run:
+                        if offs:
+                            runs.append((offs, kinds, nums, sizes))
+                            offs, kinds, nums, sizes = [], [], [], []
+                        at = pos + size * np.arange(1, run + 1, dtype=np.int64)
+                        rec = self.record + np.arange(1, run + 1, dtype=np.int64)
+                        runs.append((at, np.full(run, kind), rec, np.full(run, size)))
+                        self.record += run
+                        pos += size * run
+            pos += size
+        if offs:
+            runs.append((offs, kinds, nums, sizes))
+        if not runs:
+            return None, pos
+        cols = [np.concatenate([np.asarray(r[k], np.int64) for r in runs]) for k in range(4)]
+        return self._columns(np.frombuffer(buf, np.uint8), *cols), pos
+
+    @staticmethod
+    def _uniform_run(buf: bytes, pos: int, end: int, header: bytes) -> int:
+        """How many objects from `pos` on have exactly this 16-byte object header.
+
+        Loggers write long runs of one record type and size (CAN_MESSAGE: 48
+        bytes); such a run is checked in one numpy pass instead of walked.
+        """
+        size = int.from_bytes(header[8:12], "little")
+        count = (end - pos) // size
+        if count < 4:
+            return 0
+        # the 16 header bytes of each object as two uint64 columns, compared in place
+        rows = np.ndarray((count, 2), "<u8", buffer=buf, offset=pos, strides=(size, 8))
+        h = np.frombuffer(header, "<u8")
+        same = (rows[:, 0] == h[0]) & (rows[:, 1] == h[1])
+        bad = np.flatnonzero(~same)
+        return int(bad[0]) if bad.size else count
+
+    def _columns(self, buf, offs, kinds, nums, sizes) -> FrameBatch:
+        o = np.asarray(offs, np.int64)
+        kind = np.asarray(kinds, np.int64)
+        size = np.asarray(sizes, np.int64)
+        n = len(o)
+        step = int(size[0])
+        even = bool((size == step).all() and (np.diff(o) == step).all())
+        obj = _At(buf, o, step if even else 0)
+        hsize = (obj + 4).u(2).astype(np.int64)
+        tflags = (obj + 16).u(4)
+        stamp = (obj + 24).u(8).astype(np.float64)
+        t = np.where(tflags == 1, stamp * 1e-5, stamp * 1e-9) + self.start
+        h0 = int(hsize[0])
+        same_h = even and bool((hsize == h0).all())
+        p = _At(buf, o + hsize, step if same_h else 0)  # record bodies
+        b = FrameBatch.allocate(n)
+        b.t = t
+        b.line = np.array(nums, np.int64)
+        chan = np.zeros(n, np.int64)
+
+        m = (kind == CAN_MESSAGE) | (kind == CAN_MESSAGE2)
+        if m.any():
+            m = _sel(m)
+            q = p[m]
+            chan[m] = q.u(2)
+            fl = (q + 2).u(1)
+            dlc = np.minimum((q + 3).u(1), 8)
+            raw = (q + 4).u(4)
+            b.can_id[m] = raw & 0x1FFFFFFF
+            b.flags[m] = (
+                np.where(raw & 0x80000000, FLAG_EXT, 0)
+                | np.where(fl & 0x80, FLAG_RTR, 0)
+                | np.where(fl & 0x01, FLAG_TX, 0)
+            )
+            b.dlc[m] = dlc
+            b.data[m] = (q + 8).bytes8(np.where(fl & 0x80, 0, dlc))
+
+        m = kind == CAN_ERROR_EXT
+        if m.any():
+            m = _sel(m)
+            q = p[m]
+            chan[m] = q.u(2)
+            dlc = np.minimum((q + 11).u(1), 8)
+            raw = (q + 16).u(4)
+            b.can_id[m] = raw & 0x1FFFFFFF
+            b.flags[m] = FLAG_ERR | np.where(raw & 0x80000000, FLAG_EXT, 0)
+            b.dlc[m] = dlc
+            b.data[m] = (q + 24).bytes8(dlc)
+
+        m = kind == CAN_FD_MESSAGE
+        if m.any():
+            m = _sel(m)
+            q = p[m]
+            chan[m] = q.u(2)
+            fl = (q + 2).u(1)
+            code = (q + 3).u(1) & 0x0F
+            raw = (q + 4).u(4)
+            fd = (q + 13).u(1)
+            valid = np.minimum((q + 14).u(1), 64)
+            rtr = (fl & 0x80) != 0
+            b.can_id[m] = raw & 0x1FFFFFFF
+            b.flags[m] = (
+                np.where(raw & 0x80000000, FLAG_EXT, 0)
+                | np.where(rtr, FLAG_RTR, 0)
+                | np.where(fl & 0x01, FLAG_TX, 0)
+                | np.where(fd & 0x1, FLAG_FD, 0)
+                | np.where(fd & 0x2, FLAG_BRS, 0)
+                | np.where(fd & 0x4, FLAG_ESI, 0)
+            )
+            b.dlc[m] = np.where(rtr & (valid == 0), _DLC2LEN[code], valid)
+            b.data[m] = (q + 20).bytes8(valid)
+            self._long(b, buf, np.arange(n)[m], (q + 20).at, valid, valid)
+
+        m = kind == CAN_FD_MESSAGE_64
+        if m.any():
+            m = _sel(m)
+            q = p[m]
+            chan[m] = q.u(1)
+            code = (q + 1).u(1) & 0x0F
+            valid = np.minimum((q + 2).u(1), 64).astype(np.int64)
+            raw = (q + 4).u(4)
+            fd = (q + 12).u(4)
+            direction = (q + 34).u(1)
+            ext_off = (q + 35).u(1).astype(np.int64)
+            # python-can issue 1905: valid_bytes may exceed the bytes stored; pad with zeros.
+            # An extension offset beyond the object bounds nothing: the payload ends with it.
+            room = np.minimum(np.where(ext_off > 0, ext_off, size[m]), size[m]) - hsize[m] - 40
+            stored = np.clip(np.minimum(valid, room), 0, 64)
+            rtr = (fd & 0x0010) != 0
+            b.can_id[m] = raw & 0x1FFFFFFF
+            b.flags[m] = (
+                np.where(raw & 0x80000000, FLAG_EXT, 0)
+                | np.where(rtr, FLAG_RTR, 0)
+                | np.where(direction != 0, FLAG_TX, 0)
+                | np.where(fd & 0x1000, FLAG_FD, 0)
+                | np.where(fd & 0x2000, FLAG_BRS, 0)
+                | np.where(fd & 0x4000, FLAG_ESI, 0)
+            )
+            b.dlc[m] = np.where(rtr & (valid == 0), _DLC2LEN[code], valid)
+            b.data[m] = (q + 40).bytes8(np.minimum(stored, 8))
+            self._long(b, buf, np.arange(n)[m], (q + 40).at, stored, valid)
+
+        b.channel = self._channel_index(chan)
+        b.channels = tuple(self.channels)
+        self.ctx.frames += n
+        return b
+
+    @staticmethod
+    def _long(b, buf, rows, at, stored, valid) -> None:
+        """CAN FD payloads over 8 bytes go to long_data (rare, so per row is fine)."""
+        for r, a, s, v in zip(rows, at, stored, valid, strict=True):
+            if v > 8:
+                b.long_data[int(r)] = buf[a : a + s].tobytes().ljust(int(v), b"\0")
+
+    def _channel_index(self, chan: np.ndarray) -> np.ndarray:
+        """Map BLF channel numbers (1-based, as Vector shows them) to stable indices."""
+        out = np.zeros(len(chan), np.uint16)
+        if len(chan) and chan.min() == chan.max():  # the usual single-channel log
+            out[:] = channel_index(self.channels, self._chan, str(int(chan[0])))
+            return out
+        for c in np.unique(chan).tolist():
+            out[chan == c] = channel_index(self.channels, self._chan, str(c))
+        return out
+
+
+def _inflate(payload, limit: int, size: int = 0) -> tuple[bytes, str | None]:
+    """zlib-inflate at most ``limit`` bytes; the error text if it is broken or too big.
+    ``size``: what the container says it inflates to (a hint, never trusted).
+
+    A whole, sound container (nearly all) is inflated by python-isal when it is
+    installed; anything else is redone by `zlib`, whose outcome and error texts
+    are the reference, so both give the same bytes and the same problems.
+    """
+    if _fast_zlib is not None and 0 < size <= limit and len(payload) * _DEFLATE_RATIO <= limit:
+        # in one call into a buffer of the size the container declares: no regrowth
+        # copies (a stream object grows its output step by step); deflate expands at most
+        # _DEFLATE_RATIO times, so neither the output nor a lying size's buffer can pass
+        # `limit` or that bound
+        try:
+            out = _fast_zlib.decompress(payload, 15, min(size, len(payload) * _DEFLATE_RATIO))
+        except _fast_zlib.error:
+            pass
+        else:
+            return out, None
+    elif _fast_zlib is not None:
+        fast = _fast_zlib.decompressobj()
+        try:
+            out = fast.decompress(payload, limit)
+        except _fast_zlib.error:
+            pass
+        else:
+            if fast.eof and not fast.unconsumed_tail:
+                return out, None
+    z = zlib.decompressobj()
+    try:
+        out = z.decompress(payload, limit)
+    except zlib.error as e:
+        return b"", f"corrupt zlib data ({e})"
+    if z.unconsumed_tail:
+        return out, f"container inflates beyond {limit} bytes (refused)"
+    if not z.eof:
+        return out, "compressed container is incomplete"
+    return out, None
+
+
+class _Libdeflate:
+    """libdeflate's whole-buffer zlib inflate, through ctypes, when the system has it.
+
+    It writes straight into the buffer the walk reads (python-isal and zlib return a
+    new bytes object, copied there again), and inflates these containers in about
+    0.6 of python-isal's time. ctypes releases the GIL for the call. Only a plain
+    stream (32 KiB window, no preset dictionary) is taken, and anything it refuses
+    is redone by `_inflate`: both give the same bytes and problems. One per read
+    (`_Inflated`): a decompressor must not be shared between threads.
+    """
+
+    def __init__(self, lib: ctypes.CDLL) -> None:
+        self._lib = lib
+        self._state = lib.libdeflate_alloc_decompressor()
+        if not self._state:
+            raise MemoryError("libdeflate_alloc_decompressor failed")
+        self._got = ctypes.c_size_t()
+        self._got_ref = ctypes.byref(self._got)
+
+    def __del__(self) -> None:
+        if getattr(self, "_state", None):
+            self._lib.libdeflate_free_decompressor(self._state)
+            self._state = None
+
+    def inflate(self, src: bytes, start: int, dest: int, room: int) -> int | None:
+        """Inflate ``src[start:]`` (one zlib stream) to address ``dest``, at most
+        ``room`` bytes; the bytes written, or None when it is not a sound plain stream
+        that fits."""
+        if type(src) is not bytes or len(src) < start + 6 or src[start] != 0x78:
+            return None  # 0x78: deflate with a 32 KiB window (and the cast needs bytes)
+        at = ctypes.cast(src, ctypes.c_void_p).value + start  # type: ignore[operator]
+        fn = self._lib.libdeflate_zlib_decompress
+        if fn(self._state, at, len(src) - start, dest, room, self._got_ref) != 0:
+            return None  # not LIBDEFLATE_SUCCESS: bad data, or more than `room`
+        return self._got.value
+
+
+def _load_libdeflate() -> ctypes.CDLL | None:
+    """The system's libdeflate with the signatures used here, or None."""
+    try:  # the usual soname first: find_library runs ldconfig (a subprocess) on Linux
+        lib = ctypes.CDLL("libdeflate.so.0")
+    except OSError:
+        name = ctypes.util.find_library("deflate")
+        if name is None:
+            return None
+        try:
+            lib = ctypes.CDLL(name)
+        except OSError:
+            return None
+    try:
+        lib.libdeflate_alloc_decompressor.restype = ctypes.c_void_p
+        lib.libdeflate_alloc_decompressor.argtypes = []
+        lib.libdeflate_free_decompressor.restype = None
+        lib.libdeflate_free_decompressor.argtypes = [ctypes.c_void_p]
+        fn = lib.libdeflate_zlib_decompress
+        fn.restype = ctypes.c_int
+        fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p]
+        fn.argtypes += [ctypes.c_size_t, ctypes.POINTER(ctypes.c_size_t)]
+    except (OSError, AttributeError):  # missing, or too old (no zlib decompress)
+        return None
+    return lib
+
+
+_libdeflate = _load_libdeflate()
+
+
+class _Inflated:
+    """Inflated container bytes waiting to be walked together, in one reused buffer.
+
+    A container holds ~2-3k records; parsing each alone cost ~200 us of Python
+    and small numpy calls, most of a 10M-frame BLF read, all under the GIL.
+    Parsing PARSE_BYTES at once gives the same records (objects that straddle
+    containers are joined either way) for a sixteenth of the calls. The buffer
+    holds the tail the last walk left (a record continued in the next container)
+    and then the containers since, inflated into it in place (`_libdeflate`) or
+    copied in: no joining, and no fresh pages for every 2 MiB.
+    """
+
+    def __init__(self, records: _Records) -> None:
+        self.records = records
+        self.fill = 0  # bytes in the buffer: the tail, then the containers since
+        self.size = 0  # bytes of containers since the last walk
+        self.pieces = 0  # containers since the last walk
+        self._alloc(PARSE_BYTES + (1 << 20))
+        self._libdeflate = _Libdeflate(_libdeflate) if _libdeflate is not None else None
+
+    def _alloc(self, n: int) -> None:
+        buf = bytearray(n)
+        if self.fill:
+            buf[: self.fill] = self.view[: self.fill]
+        self.buf = buf
+        self.view = memoryview(buf)
+        # the address pins the buffer (it is never resized, only replaced)
+        self._pin = ctypes.c_char.from_buffer(buf)
+        self.addr = ctypes.addressof(self._pin)
+
+    def _room(self, n: int) -> None:
+        if self.fill + n > len(self.buf):
+            self._alloc(max(2 * len(self.buf), self.fill + n))
+
+    def add(self, data) -> None:
+        """Copy a container's bytes in (stored plain, or inflated elsewhere)."""
+        k = len(data)
+        self._room(k)
+        self.view[self.fill : self.fill + k] = data
+        self._added(k)
+
+    def _added(self, k: int) -> None:
+        self.fill += k
+        self.size += k
+        self.pieces += 1
+
+    def inflate(self, body: bytes, start: int, size: int) -> str | None:
+        """Inflate the zlib stream at ``body[start:]`` in; the error text if it is broken
+        or too big (`_inflate`). ``size``: what the container says it inflates to."""
+        n = len(body) - start
+        if (
+            self._libdeflate is not None
+            and 0 < size <= MAX_CONTAINER
+            and n * _DEFLATE_RATIO <= MAX_CONTAINER
+        ):
+            room = min(size, n * _DEFLATE_RATIO)  # bounded as in `_inflate`
+            self._room(room)
+            got = self._libdeflate.inflate(body, start, self.addr + self.fill, room)
+            if got is not None:
+                self._added(got)
+                return None
+        data, err = _inflate(memoryview(body)[start:], MAX_CONTAINER, size)
+        self.add(data)
+        return err
+
+    def flush(self, batches: _Cutter) -> None:
+        if not self.pieces:
+            return
+        pos = self.records.parse(self.view[: self.fill], batches)
+        tail = bytes(self.view[pos : self.fill])
+        self.view[: len(tail)] = tail
+        self.fill = len(tail)
+        self.size = self.pieces = 0
+
+    @property
+    def tail(self) -> int:
+        """Bytes left unwalked (after the last flush: an incomplete record)."""
+        return self.fill
+
+
+_COLUMNS = ("t", "can_id", "flags", "dlc", "data", "channel", "line")
+
+
+class _Cutter:
+    """Parsed rows cut into batches of exactly `size` rows (the last one shorter).
+
+    Rows are written into the batch being filled: by the compiled walk directly
+    (`room`, `commit`), else copied from a parsed batch (`add`); never joined and cut
+    again.
+    """
+
+    def __init__(self, size: int) -> None:
+        self.size = max(1, int(size))
+        self.cur: FrameBatch | None = None
+        self.fill = 0  # rows of `cur` written
+        self.ready: list[FrameBatch] = []
+
+    def _current(self) -> FrameBatch:
+        if self.cur is None:  # every row is written before the batch is given out
+            n = self.size
+            self.cur = FrameBatch(
+                t=np.empty(n, np.float64),
+                can_id=np.empty(n, np.uint32),
+                flags=np.empty(n, np.uint8),
+                dlc=np.empty(n, np.uint8),
+                data=np.empty((n, 8), np.uint8),
+                channel=np.empty(n, np.uint16),
+                line=np.empty(n, np.int64),
+            )
+            self.fill = 0
+        return self.cur
+
+    def _advance(self, n: int, channels: tuple[str, ...]) -> None:
+        self.fill += n
+        if len(channels) >= len(self.cur.channels):  # type: ignore[union-attr]
+            self.cur.channels = channels  # type: ignore[union-attr]  # tables only grow
+        if self.fill == self.size:
+            self.ready.append(self.cur)  # type: ignore[arg-type]
+            self.cur = None
+
+    def room(self, rows: int) -> tuple[FrameBatch, int] | None:
+        """The batch being filled and its first free row, when `rows` more fit in it."""
+        b = self._current()
+        return (b, self.fill) if self.size - self.fill >= rows else None
+
+    def commit(self, n: int, channels: tuple[str, ...], long: dict[int, bytes]) -> None:
+        """`n` rows were written at the first free row (`room`); `long`: by their row there."""
+        b = self.cur
+        for row, payload in long.items():
+            b.long_data[self.fill + row] = payload  # type: ignore[union-attr]
+        self._advance(n, channels)
+
+    def add(self, batch: FrameBatch) -> None:
+        """Copy the rows of a parsed batch in."""
+        n, i = len(batch), 0
+        while i < n:
+            b = self._current()
+            k = min(n - i, self.size - self.fill)
+            for col in _COLUMNS:
+                getattr(b, col)[self.fill : self.fill + k] = getattr(batch, col)[i : i + k]
+            for row, payload in batch.long_data.items():
+                if i <= row < i + k:
+                    b.long_data[self.fill + row - i] = payload
+            self._advance(k, batch.channels)
+            i += k
+
+    def full(self) -> Iterator[FrameBatch]:
+        ready, self.ready = self.ready, []
+        yield from ready
+
+    def rest(self) -> Iterator[FrameBatch]:
+        if self.cur is not None and self.fill:
+            b, self.cur = self.cur.take(slice(0, self.fill)), None
+            yield b
+
+
+def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
+    ctx.format = "blf"
+    head = stream.read(_FILE_HEADER.size)
+    if len(head) < _FILE_HEADER.size or head[:4] != b"LOGG":
+        ctx.problems.add(ctx.source, "offset 0", "not a BLF file (no LOGG header)")
+        return
+    fields = _FILE_HEADER.unpack(head)
+    start = _systemtime(fields[14:22])
+    if start is not None:
+        ctx.absolute_time = True
+        ctx.start_time = start
+    stream = _Pushback(stream)
+    rest = max(0, fields[1] - _FILE_HEADER.size)
+    if rest > MAX_FILE_HEADER:  # one read of a claimed 2 GB header was a MemoryError
+        ctx.problems.add(
+            ctx.source,
+            "offset 4",
+            f"BLF file header claims {fields[1]} bytes (refused); objects are looked for after it",
+        )
+        rest = 0
+    if len(stream.read(rest)) < rest:
+        ctx.problems.add(
+            ctx.source, f"offset {_FILE_HEADER.size}", "file ends inside the BLF file header"
+        )
+        return
+    offset = _FILE_HEADER.size + rest
+    declared_size = fields[10]  # 0 when the logger never closed the file
+    records = _Records(ctx, start or 0.0)
+    inflated = _Inflated(records)
+    batches = _Cutter(ctx.batch_size)
+
+    def problem(where: str, text: str) -> None:
+        inflated.flush(batches)  # what came before is parsed (and reported) first
+        ctx.problems.add(ctx.source, where, text)
+
+    while True:
+        base = stream.read(16)
+        if not base:
+            if (
+                declared_size > offset
+            ):  # ends cleanly between objects, but short of its own header's size
+                problem(
+                    f"offset {offset}",
+                    f"file ends here but its header says {declared_size} bytes (cut short?)",
+                )
+            break
+        where = f"offset {offset}"
+        if len(base) < 16:
+            problem(where, f"file ends inside an object header ({len(base)} bytes)")
+            break
+        sig, _, _, size, kind = _OBJ_BASE.unpack(base)
+        if sig != b"LOBJ" or size < 16 or size > MAX_CONTAINER:
+            # resynchronise on the next signature (python-can stops here: half a log lost)
+            skipped = stream.skip_to(b"LOBJ", base, 1)
+            what = "no BLF object (LOBJ)" if sig != b"LOBJ" else f"BLF object size {size} is absurd"
+            problem(where, f"{what}: skipped {skipped} bytes to the next object")
+            offset += skipped
+            continue
+        body = stream.read(size - 16)
+        stream.read(size % 4)  # padding
+        offset += size + size % 4
+        truncated = len(body) < size - 16
+        if kind != LOG_CONTAINER:
+            if truncated:
+                problem(where, "file ends inside an object")
+                break
+            continue
+        if len(body) < _CONTAINER.size:
+            problem(where, "file ends inside a container header")
+            break
+        method, usize = _CONTAINER.unpack_from(body)
+        if method == 0:
+            inflated.add(memoryview(body)[_CONTAINER.size :])
+            err = None
+        elif method == 2:
+            err = inflated.inflate(body, _CONTAINER.size, usize)
+        else:
+            problem(where, f"unknown container compression {method}, skipped")
+            continue
+        if truncated:
+            err = f"file ends inside a container ({len(body) + 16} of {size} bytes)"
+        if err:
+            problem(where, err)
+        elif inflated.size >= PARSE_BYTES:
+            inflated.flush(batches)
+        yield from batches.full()
+        if truncated or (err and method == 2 and "incomplete" in err):
+            break
+    inflated.flush(batches)
+    yield from batches.full()
+    if inflated.tail:
+        ctx.problems.add(
+            ctx.source,
+            f"record {records.record + 1}",
+            f"incomplete BLF object at end of data ({inflated.tail} bytes) skipped",
+        )
+    yield from batches.rest()
+
+
+class _Pushback:
+    """The file stream with bytes put back, for resynchronising on a signature."""
+
+    def __init__(self, stream: BinaryIO) -> None:
+        self._stream = stream
+        self._back = b""
+
+    def read(self, n: int) -> bytes:
+        if not self._back:
+            return self._stream.read(n)
+        head, self._back = self._back[:n], self._back[n:]
+        return head + self._stream.read(n - len(head)) if len(head) < n else head
+
+    def skip_to(self, sig: bytes, consumed: bytes, start: int) -> int:
+        """Drop bytes up to the next `sig` at or after `start` in `consumed` (bytes read
+        already) and put the rest back, so the next read starts at the signature; reads
+        in 64 KiB steps. Returns how many bytes were dropped."""
+        buf, base, pos = consumed, 0, start
+        while True:
+            at = buf.find(sig, pos)
+            if at >= 0:
+                self._back = buf[at:] + self._back
+                return base + at
+            cut = max(0, len(buf) - (len(sig) - 1))
+            base, buf, pos = base + cut, buf[cut:], 0
+            more = self.read(1 << 16)
+            if not more:
+                return base + len(buf)
+            buf += more
+
+
+FORMAT = register(
+    LogFormat(
+        name="blf",
+        description="Vector BLF binary log",
+        sniff=sniff,
+        read=read,
+        suffixes=(".blf",),
+        priority=10,
+    )
+)

@@ -1,0 +1,53 @@
+"""The table of log formats: how to recognise each from its first bytes, and its reader.
+
+One module per format registers one LogFormat here (python-can's LogReader facade,
+but choosing by content first and by suffix only as a tie-breaker).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from typing import BinaryIO
+
+from cananalyze.core.errors import ProblemLog
+from cananalyze.core.frames import FrameBatch
+
+DEFAULT_BATCH = 262144
+
+
+@dataclass
+class ReadContext:
+    """What a reader needs besides the stream, and what it reports back."""
+
+    source: str  # file name for messages ("-" for stdin)
+    problems: ProblemLog
+    batch_size: int = DEFAULT_BATCH
+    # filled in by the reader:
+    format: str = ""
+    absolute_time: bool = False  # timestamps are Unix epoch seconds
+    start_time: float | None = None  # epoch of the log's start, if the header says
+    frames: int = 0  # frames yielded so far
+    extras: dict = field(default_factory=dict)
+
+
+Reader = Callable[[BinaryIO, ReadContext], Iterator[FrameBatch]]
+
+
+@dataclass(frozen=True)
+class LogFormat:
+    name: str  # "candump", "asc", "blf", "trc", ...
+    description: str
+    sniff: Callable[[bytes], bool]  # given the first few KiB (decompressed)
+    read: Reader
+    suffixes: tuple[str, ...] = ()
+    priority: int = 50  # lower sniffs first
+
+
+FORMATS: list[LogFormat] = []
+
+
+def register(fmt: LogFormat) -> LogFormat:
+    FORMATS.append(fmt)
+    FORMATS.sort(key=lambda f: f.priority)
+    return fmt

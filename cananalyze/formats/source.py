@@ -1,0 +1,306 @@
+"""open_log(): the one facade from a path (or '-') to a stream of FrameBatch.
+
+Decompresses .gz, reads stdin, picks the format from the content (suffix only
+breaks ties), and turns unreadable files into one-line InputErrors.
+"""
+
+from __future__ import annotations
+
+import gzip
+import importlib
+import io
+import os
+import stat
+import sys
+import zlib
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import BinaryIO
+
+from cananalyze.core.errors import InputError, ProblemLog
+from cananalyze.core.frames import FrameBatch
+from cananalyze.formats import registry
+from cananalyze.formats.known import FORMAT_MODULES
+from cananalyze.formats.registry import DEFAULT_BATCH, LogFormat, ReadContext
+
+SNIFF_BYTES = 65536
+
+for _name in FORMAT_MODULES:
+    importlib.import_module(f"{__package__}.{_name}")
+
+
+def _describe(head: bytes) -> str:
+    """A few words on what an unrecognised file looks like, for the error message."""
+    if not head:
+        return "the file is empty"
+    if head[:4] == b"LOGG":
+        return "it looks like a BLF file but no BLF reader is available"
+    if head[:4] == b"PK\x03\x04":
+        return "it looks like a ZIP file, not a CAN log"
+    text = sum(32 <= c < 127 or c in (9, 10, 13) for c in head[:4096]) / max(1, len(head[:4096]))
+    if text < 0.9:
+        return "it is binary data of no known CAN log format"
+    lower = head[:4096].lower()
+    if b"[fileinfo]" in lower or b"[deviceinfo]" in lower:
+        return "it is an EDS/DCF device description, not a log (give it with --eds NODE=FILE)"
+    if lower.startswith(b"version") and b"bo_ " in lower:
+        return "it is a DBC database, not a log"
+    first = head.splitlines()[0][:60].decode("latin-1", "replace") if head.strip() else ""
+    return f"it is text of no known CAN log format (first line: {first!r})"
+
+
+class _TolerantGzip(io.RawIOBase):
+    """gzip stream that hands over what it decompressed before a cut or corrupt end.
+
+    GzipFile.read(n) raises EOFError and drops the partial block, which would lose
+    frames a half-copied log still holds; read1() in a loop keeps them.
+    """
+
+    def __init__(self, raw: BinaryIO) -> None:
+        self._gz = gzip.GzipFile(fileobj=raw, mode="rb")
+        self.error: str | None = None
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, buf) -> int:  # type: ignore[override]
+        if self.error:
+            return 0
+        try:
+            data = self._gz.read1(len(buf))
+        except (EOFError, gzip.BadGzipFile, zlib.error, OSError) as exc:
+            self.error = str(exc) or exc.__class__.__name__
+            return 0
+        buf[: len(data)] = data
+        return len(data)
+
+    def close(self) -> None:
+        self._gz.close()
+        super().close()
+
+
+@dataclass
+class LogSource:
+    """An opened log: its format, the reading context, and its batches (read once)."""
+
+    path: str
+    fmt: LogFormat
+    ctx: ReadContext
+    _stream: BinaryIO
+    _closers: list = field(default_factory=list)
+    strict: bool = False
+    size: int | None = None  # bytes of the file on disk (None: stdin, a pipe)
+
+    def fraction(self) -> float | None:
+        """How far into the file the reader is (0..1), from the position on disk; None
+        when the size is unknown. A compressed file reports its compressed position."""
+        if not self.size or not self._closers:
+            return None
+        try:
+            return min(1.0, self._closers[0].tell() / self.size)
+        except (OSError, ValueError):
+            return None
+
+    @property
+    def problems(self) -> ProblemLog:
+        return self.ctx.problems
+
+    def batches(self) -> Iterator[FrameBatch]:
+        """The log's frames in batches; in strict mode, those before the first problem, then InputError.
+
+        Readers always run leniently; strictness is applied here, once for every
+        format, so the frames read before a bad line are never lost.
+        """
+        for batch in self._lenient_batches():
+            if self.strict and self.ctx.problems.count:
+                first = self.ctx.problems.shown[0]
+                kind, _, number = first.location.partition(" ")
+                if kind in ("line", "record", "message") and number.isdecimal():
+                    batch = batch.take(batch.line < int(number))
+                if len(batch):
+                    yield batch
+                raise InputError(str(first))
+            yield batch
+        if self.strict and self.ctx.problems.count:
+            raise InputError(str(self.ctx.problems.shown[0]))
+
+    def _lenient_batches(self) -> Iterator[FrameBatch]:
+        try:
+            yield from self.fmt.read(self._stream, self.ctx)
+            for c in self._closers:
+                if isinstance(c, _TolerantGzip) and c.error:
+                    self.ctx.problems.add(
+                        self.path,
+                        f"after frame {self.ctx.frames}",
+                        f"gzip data ends early or is corrupt ({c.error})",
+                    )
+        except (EOFError, zlib.error, gzip.BadGzipFile) as exc:
+            self.ctx.problems.add(
+                self.path,
+                f"after frame {self.ctx.frames}",
+                f"file ends early or is corrupt ({exc})",
+            )
+        except OSError as exc:
+            raise InputError(f"{self.path}: cannot read: {exc.strerror or exc}") from None
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        for c in self._closers:
+            c.close()
+        self._closers.clear()
+
+
+def _detect(head: bytes, name: str, forced: str | None) -> LogFormat:
+    formats = registry.FORMATS
+    if forced:
+        for f in formats:
+            if f.name == forced:
+                return f
+        raise InputError(
+            f"{name}: unknown format {forced!r} (known: {', '.join(f.name for f in formats)})"
+        )
+    suffix = Path(name[:-3] if name.endswith(".gz") else name).suffix.lower()
+    claims = [f for f in formats if _safe_sniff(f, head)]
+    if not claims:
+        raise InputError(f"{name}: not a log cananalyze can read: {_describe(head)}")
+    for f in claims:
+        if suffix in f.suffixes:
+            return f
+    return claims[0]
+
+
+def _safe_sniff(fmt: LogFormat, head: bytes) -> bool:
+    try:
+        return bool(fmt.sniff(head))
+    except Exception:  # a sniffer must never take the program down on odd bytes
+        return False
+
+
+def open_log(
+    path: str | Path,
+    strict: bool = False,
+    batch_size: int = DEFAULT_BATCH,
+    fmt: str | None = None,
+    problems: ProblemLog | None = None,
+) -> LogSource:
+    """Open a log for batch reading; raises InputError with a one-line reason."""
+    name = str(path)
+    closers: list = []
+    try:
+        if name == "-":
+            if sys.stdin is None:  # `decode - <&-`: no file descriptor 0 at all
+                raise InputError("-: standard input is closed, nothing to read")
+            raw: BinaryIO = sys.stdin.buffer
+        else:
+            raw = open(name, "rb")  # noqa: SIM115 - closed by LogSource
+            closers.append(raw)
+    except FileNotFoundError:
+        raise InputError(f"{name}: no such file") from None
+    except IsADirectoryError:
+        raise InputError(f"{name}: is a directory, not a log file") from None
+    except OSError as exc:
+        raise InputError(f"{name}: cannot open: {exc.strerror or exc}") from None
+    stream: BinaryIO = raw if hasattr(raw, "peek") else io.BufferedReader(raw)  # type: ignore[arg-type]
+    magic = stream.peek(2)[:2]
+    if magic == b"\x1f\x8b":
+        gz = _TolerantGzip(stream)
+        closers.append(gz)
+        stream = io.BufferedReader(gz, buffer_size=SNIFF_BYTES)  # type: ignore[assignment]
+    try:
+        head = _read_head(stream, pipe=stream is raw and not _regular(raw))
+    except (EOFError, gzip.BadGzipFile, zlib.error, OSError) as exc:
+        for c in closers:
+            c.close()
+        raise InputError(f"{name}: cannot read: {exc}") from None
+    bom = len(_BOM) if head.startswith(_BOM) else 0  # no part of the first line or 'date'
+    head = head[bom:]
+    cr_only = b"\r" in head and b"\n" not in head  # classic Mac line ends
+    if cr_only:
+        head = head.replace(b"\r", b"\n")
+    if stream.seekable() and not cr_only:
+        stream.seek(bom)  # a file: read again from the start (the MCAP reader seeks)
+    else:
+        stream = io.BufferedReader(_Replay(head, stream, cr_only), buffer_size=SNIFF_BYTES)  # type: ignore[assignment]
+    try:
+        chosen = _detect(head, name, fmt)
+    except InputError:
+        for c in closers:
+            c.close()
+        raise
+    ctx = ReadContext(source=name, problems=problems or ProblemLog(), batch_size=batch_size)
+    size = None
+    if name != "-":
+        try:
+            st = os.fstat(raw.fileno())
+            size = st.st_size if stat.S_ISREG(st.st_mode) else None
+        except (OSError, ValueError):
+            size = None
+    return LogSource(name, chosen, ctx, stream, closers, strict=strict, size=size)
+
+
+_BOM = b"\xef\xbb\xbf"
+
+
+def _regular(raw) -> bool:
+    try:
+        return stat.S_ISREG(os.fstat(raw.fileno()).st_mode)
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def _read_head(stream: BinaryIO, pipe: bool) -> bytes:
+    """The first SNIFF_BYTES bytes the format is told from (one peek gives only one buffer,
+    8 KB: a TRC whose frames start later was refused). A pipe stops early when its writer
+    pauses for half a second, so `candump can0 | cananalyze decode -` starts at once."""
+    import select
+
+    parts: list[bytes] = []
+    got = 0
+    while got < SNIFF_BYTES:
+        part = stream.read1(SNIFF_BYTES - got)  # type: ignore[attr-defined]
+        if not part:
+            break
+        parts.append(part)
+        got += len(part)
+        if pipe:
+            try:  # read1 took the whole buffer: the descriptor tells if more is waiting
+                if not select.select([stream], [], [], 0.5)[0]:
+                    break
+            except (OSError, ValueError, TypeError):
+                pipe = False
+    return b"".join(parts)
+
+
+class _Replay(io.RawIOBase):
+    """The head read for detection, then the rest of the stream: readers see the whole file.
+    `cr_only` turns classic Mac line ends into newlines (else such a log is one long line)."""
+
+    def __init__(self, head: bytes, rest: BinaryIO, cr_only: bool = False) -> None:
+        self._head = memoryview(head)
+        self._rest = rest
+        self._cr_only = cr_only
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, buf) -> int:  # type: ignore[override]
+        if self._head:
+            n = min(len(buf), len(self._head))
+            buf[:n] = self._head[:n]
+            self._head = self._head[n:]
+            return n
+        data = self._rest.read1(len(buf))  # type: ignore[attr-defined]
+        if self._cr_only:
+            data = data.replace(b"\r", b"\n")
+        buf[: len(data)] = data
+        return len(data)
+
+
+def read_all(path: str | Path, strict: bool = False, fmt: str | None = None) -> FrameBatch:
+    """Every frame of a small log in one batch (tests, samples, notebooks)."""
+    from cananalyze.core.frames import concat
+
+    src = open_log(path, strict=strict, fmt=fmt)
+    return concat(src.batches())

@@ -1,1 +1,0 @@
-"""Log readers: one module per format, each yielding FrameBatch columns."""

@@ -1,1 +1,0 @@
-"""Network model: device profiles, node map, configuration tracked from the log."""

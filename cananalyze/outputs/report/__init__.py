@@ -1,0 +1,1 @@
+"""The HTML report: accumulators, plots, sections and the page, one sink."""
