@@ -27,7 +27,8 @@ import pyarrow.parquet as pq
 from conftest import SAMPLES
 
 import cananalyze
-from cananalyze.api.capture import Capture, load_options
+from cananalyze.api.capture import Capture
+from cananalyze.api.options import load_options
 from cananalyze.formats.source import read_all
 from cananalyze.pipeline import Options, Run, build_checker, build_decoder, open_source, run
 

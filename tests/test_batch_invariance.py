@@ -7,7 +7,8 @@ import pytest
 from conftest import SAMPLES
 
 from cananalyze.formats.source import read_all
-from cananalyze.outputs.jsonl.rows import dumps, frame_record
+from cananalyze.outputs.jsonl.encode import dumps
+from cananalyze.outputs.jsonl.rows import frame_record
 from cananalyze.pipeline import Options, build_decoder
 
 

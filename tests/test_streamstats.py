@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cananalyze.checks.streamstats import EXACT, MAX_BINS, StreamStats
-from cananalyze.checks.timing import stats_ms
+from cananalyze.checks.streamstats import EXACT, MAX_BINS, StreamStats, stats_ms
 
 
 def _fed(values: np.ndarray, batch: int) -> StreamStats:

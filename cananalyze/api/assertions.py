@@ -41,7 +41,7 @@ def run_rules(source: Source, rules: list[Rule], config=None, **options) -> list
     them. `config` is for decoded batches (a Capture's `config`).
     """
     if isinstance(source, (str, Path, FrameBatch)):
-        from cananalyze.api.capture import load_options
+        from cananalyze.api.options import load_options
         from cananalyze.core.errors import UsageError
         from cananalyze.pipeline import build_decoder, open_source, run
 

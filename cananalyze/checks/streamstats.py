@@ -185,8 +185,6 @@ class StreamStats:
         if self.n == 0:
             return {"count": 0}
         if self._exact is not None:
-            from cananalyze.checks.timing import stats_ms
-
             return stats_ms(np.concatenate(self._exact))
         return {
             "count": self.n,
@@ -263,3 +261,23 @@ def histogram_many(items: list[tuple[StreamStats, int, int]], v: np.ndarray, b: 
         st = many[j][0]
         st._count += counts[off : off + size]
         st._sum += sums[off : off + size]
+
+
+def stats(gaps_s: np.ndarray) -> dict:
+    """count, min, median, mean, p99, max and jitter (standard deviation), in ms."""
+    return stats_ms(gaps_s * 1000.0)
+
+
+def stats_ms(g: np.ndarray) -> dict:
+    """`stats` of values already in ms (exact: from every value)."""
+    if g.size == 0:
+        return {"count": 0}
+    return {
+        "count": int(g.size),
+        "min": float(g.min()),
+        "median": float(np.median(g)),
+        "mean": float(g.mean()),
+        "p99": float(np.percentile(g, 99)),
+        "max": float(g.max()),
+        "jitter": float(g.std()),
+    }

@@ -20,26 +20,6 @@ from cananalyze.core.finding import rel_time
 from cananalyze.protocol.services import Service
 
 
-def stats(gaps_s: np.ndarray) -> dict:
-    """count, min, median, mean, p99, max and jitter (standard deviation), in ms."""
-    return stats_ms(gaps_s * 1000.0)
-
-
-def stats_ms(g: np.ndarray) -> dict:
-    """`stats` of values already in ms (exact: from every value)."""
-    if g.size == 0:
-        return {"count": 0}
-    return {
-        "count": int(g.size),
-        "min": float(g.min()),
-        "median": float(np.median(g)),
-        "mean": float(g.mean()),
-        "p99": float(np.percentile(g, 99)),
-        "max": float(g.max()),
-        "jitter": float(g.std()),
-    }
-
-
 class Timing:
     def __init__(self, keep: set[str] | frozenset[str] = frozenset(), stats: bool = True) -> None:
         """`stats`: keep each stream's gap statistics (the `--timing` and summary report);

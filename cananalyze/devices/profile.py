@@ -21,7 +21,10 @@ from cananalyze.protocol.datatypes import DATA_TYPES, DUMMY_INDICES
 from cananalyze.protocol.pdo_map import MapEntry, PdoConfig, split_cob_id, split_mapping_word
 
 BUILTIN_KEYS = ("dat7130", "dat7014", "i7231d", "mcb560")
-PROFILE_KEYS = ("cia402", "cia401")  # CiA 4xx defaults without an EDS (cananalyze/devices/cia402.py, cia401.py)
+PROFILE_KEYS = (
+    "cia402",
+    "cia401",
+)  # CiA 4xx defaults without an EDS (cananalyze/devices/cia402.py, cia401.py)
 DEVICE_KEYS = BUILTIN_KEYS + PROFILE_KEYS  # what --device and the network file's device take
 BOOLEAN = 0x01
 _UINT_BY_BITS = {8: 0x05, 16: 0x06, 24: 0x16, 32: 0x07, 40: 0x18, 48: 0x19, 56: 0x1A, 64: 0x1B}

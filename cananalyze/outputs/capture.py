@@ -322,7 +322,7 @@ class Capture:
 
         On a log of several buses the node on each bus is its own device: `bus` (a
         channel name) says which, and is needed when the node beats on more than one."""
-        from cananalyze.checks.timing import stats
+        from cananalyze.checks.streamstats import stats
         from cananalyze.core.errors import UsageError
 
         fb = self.batch

@@ -20,9 +20,10 @@ from cananalyze.pipeline.decoder import (
     network_spec,
 )
 from cananalyze.pipeline.options import TIME_MODES, Options
-from cananalyze.pipeline.run import Run, named_errors, run, unmatched_filter
+from cananalyze.pipeline.run import named_errors, run, unmatched_filter
 from cananalyze.pipeline.sink import Sink
 from cananalyze.pipeline.source import MemorySource, Source, open_source
+from cananalyze.pipeline.state import Run
 
 __all__ = [
     "TIME_MODES",

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from cananalyze.core.records import DecodedBatch
-    from cananalyze.pipeline.run import Run
+    from cananalyze.pipeline.state import Run
 
 
 class Sink:

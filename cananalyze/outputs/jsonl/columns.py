@@ -25,7 +25,7 @@ from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
 from cananalyze.core.records import DecodedBatch
 from cananalyze.devices.words import word_column
 from cananalyze.outputs.fields import row_fields
-from cananalyze.outputs.jsonl.rows import _clean, clean_fields, dumps
+from cananalyze.outputs.jsonl.encode import clean, clean_fields, dumps
 from cananalyze.outputs.jsonl.sdo import pair_fields
 from cananalyze.outputs.text.sdo import fast_pairs
 from cananalyze.outputs.text.writer import _KEYED, Rendered, _key_groups, _padded_table
@@ -210,7 +210,7 @@ def _signal_text(sb, pos: np.ndarray) -> np.ndarray | None:
             return None
         head = (',"signals":{' if j == 0 else ",") + json.dumps(name, ensure_ascii=False) + ":"
         parts += [bytecols.repeat(head.encode(), m), text]
-    units = dumps({k: _clean(u) for k, u in sb.units.items() if u})
+    units = dumps({k: clean(u) for k, u in sb.units.items() if u})
     parts.append(
         bytecols.repeat(
             (("}" if sb.columns else ',"signals":{}') + ',"units":' + units).encode(), m

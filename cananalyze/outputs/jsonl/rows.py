@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import json
 from typing import TextIO
 
 import numpy as np
@@ -12,22 +11,9 @@ from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
 from cananalyze.core.records import DecodedBatch
 from cananalyze.outputs.background import ByteSink
 from cananalyze.outputs.fields import row_fields
+from cananalyze.outputs.jsonl.encode import clean_fields, dumps
 from cananalyze.pipeline.sink import Sink
 from cananalyze.protocol.services import SERVICE_NAMES
-
-
-def _clean(value):
-    if isinstance(value, float) and (value != value or value in (float("inf"), float("-inf"))):
-        return None
-    if isinstance(value, (np.integer,)):
-        return int(value)
-    if isinstance(value, (np.floating,)):
-        return float(value)
-    if isinstance(value, (np.bool_,)):
-        return bool(value)
-    if isinstance(value, bytes):
-        return value.hex()
-    return value
 
 
 def frame_record(batch: DecodedBatch, i: int) -> dict:
@@ -56,18 +42,6 @@ def frame_record(batch: DecodedBatch, i: int) -> dict:
         rec["pdo"] = int(batch.pdo[i])
     rec.update(clean_fields(row_fields(batch, i)))
     return rec
-
-
-def clean_fields(fields: dict) -> dict:
-    """A row's fields as the JSON line holds them (nested dicts cleaned one level down)."""
-    return {
-        k: {kk: _clean(vv) for kk, vv in v.items()} if isinstance(v, dict) else _clean(v)
-        for k, v in fields.items()
-    }
-
-
-def dumps(rec: dict) -> str:
-    return json.dumps(rec, separators=(",", ":"), ensure_ascii=False, default=_clean)
 
 
 class JsonlWriter(Sink):
