@@ -13,7 +13,8 @@ from canopen.profiles.p402 import OperationMode, State402
 
 import cananalyze
 from cananalyze.devices import cia401, cia402
-from cananalyze.devices.profile import load_builtin, load_eds
+from cananalyze.devices.builtin import load_builtin
+from cananalyze.devices.profile import load_eds
 from tests.conftest import real_file
 from tests.helpers.drive402 import Drive402
 from tests.helpers.virtual_bus import unique_channel

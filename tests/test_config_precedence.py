@@ -12,7 +12,7 @@ from conftest import real_file
 
 import cananalyze
 from cananalyze.core.frames import from_rows
-from cananalyze.devices.profile import load_builtin
+from cananalyze.devices.builtin import load_builtin
 from cananalyze.formats.logfile import write_log
 from cananalyze.sim.engine import START, Simulation
 from cananalyze.sim.master import Guard, Master, Nmt, Read, Until, Write, u16

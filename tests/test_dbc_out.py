@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import cananalyze
-from cananalyze.devices.profile import BUILTIN_KEYS
+from cananalyze.devices.builtin import builtin_keys
 from tests.conftest import real_file
 
 TMCM = "nigel-bruce-khan__ros_canopen-tmcm-1636/"
@@ -48,7 +48,7 @@ def _compare(cap, db, frames) -> int:
     return checked
 
 
-@pytest.mark.parametrize("key", BUILTIN_KEYS)
+@pytest.mark.parametrize("key", builtin_keys())
 def test_devices_dbc_decodes_as_cananalyze(tmp_path, key):
     out = tmp_path / f"{key}.dbc"
     text = _cli("devices", key, "--node", "5", "--dbc", str(out)).stdout

@@ -239,7 +239,7 @@ def test_guard_requests_faster_than_the_guard_time_are_information(tmp_path):
 
 # --- EMCY findings in the device's words -----------------------------------------------
 def test_emcy_finding_carries_the_manufacturer_meaning(tmp_path):
-    from cananalyze.devices.profile import load_builtin
+    from cananalyze.devices.builtin import load_builtin
 
     profile = load_builtin("mcb560")
     data = bytes([0x00, 0xFF, 0x81, 0x00, 0x01, 0x00, 0x00, 0x80])  # Chip-EC 0x80000001

@@ -13,7 +13,8 @@ from cananalyze.core.frames import from_rows
 from cananalyze.decode.model import NetworkModel
 from cananalyze.decode.pdo_processor import PdoDecoder
 from cananalyze.decode.sdo.processor import SdoProcessor
-from cananalyze.devices.profile import load_builtin, load_eds
+from cananalyze.devices.builtin import load_builtin
+from cananalyze.devices.profile import load_eds
 from cananalyze.formats.source import read_all
 from cananalyze.outputs.fields import row_fields
 from cananalyze.pipeline import Decoder

@@ -8,7 +8,8 @@ import pytest
 from conftest import real_file, seed_file
 
 from cananalyze.core.errors import InputError
-from cananalyze.devices.profile import builtin_profiles, identify, load_builtin, load_eds
+from cananalyze.devices.builtin import builtin_profiles, identify, load_builtin
+from cananalyze.devices.profile import load_eds
 from cananalyze.protocol.pdo import decode_pdo
 
 

@@ -10,7 +10,7 @@ import can
 import canopen
 import pytest
 
-from cananalyze.devices.profile import load_builtin
+from cananalyze.devices.builtin import load_builtin
 from cananalyze.sim.session import build
 
 

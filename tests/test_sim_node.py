@@ -9,7 +9,7 @@ import struct
 import numpy as np
 
 from cananalyze.core.frames import FLAG_RTR
-from cananalyze.devices.profile import load_builtin
+from cananalyze.devices.builtin import load_builtin
 from cananalyze.sim.engine import Simulation
 from cananalyze.sim.master import Guard, Nmt, Read, Send, Sync, Until, Wait, Write, u8, u16, u32
 from cananalyze.sim.node import SimNode, i7231d_emcy, mcb560_emcy

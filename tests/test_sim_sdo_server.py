@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import struct
 
-from cananalyze.devices.profile import load_builtin
+from cananalyze.devices.builtin import load_builtin
 from cananalyze.sim.crc import crc16
 from cananalyze.sim.dictionary import Dictionary
 from cananalyze.sim.sdo_server import SdoServer

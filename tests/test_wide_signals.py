@@ -22,7 +22,7 @@ from exported import NETWORK, assert_wide_signals_is, export, wide_signals_as_lo
 from test_network_model import frames_at, sdo_write
 
 import cananalyze
-from cananalyze.devices.profile import load_builtin
+from cananalyze.devices.builtin import load_builtin
 from cananalyze.formats.logfile import write_log
 from cananalyze.outputs.tables import writer as table_writer
 

@@ -54,13 +54,8 @@ def _hex(value: int | None, width: int = 8) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from cananalyze.devices.profile import (
-        DEVICE_KEYS,
-        PROFILE_KEYS,
-        builtin_profiles,
-        load_builtin,
-        load_eds,
-    )
+    from cananalyze.devices.builtin import PROFILE_KEYS, builtin_profiles, device_keys, load_builtin
+    from cananalyze.devices.profile import load_eds
 
     if not args.key:
         print(f"{'key':<9} {'vendor ID':<11} {'product':<11} {'device type':<11} name")
@@ -79,12 +74,12 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if not 1 <= args.node <= 127:
         raise UsageError(f"--node {args.node}: node ID must be 1..127")
-    if args.key in DEVICE_KEYS:
+    if args.key in device_keys():
         prof = load_builtin(args.key)
     elif Path(args.key).suffix.lower() in (".eds", ".dcf"):
         prof = load_eds(args.key)
     else:
-        raise UsageError(f"unknown device {args.key!r}: use one of {', '.join(DEVICE_KEYS)}")
+        raise UsageError(f"unknown device {args.key!r}: use one of {', '.join(device_keys())}")
     print(f"{prof.key}: {prof.name}")
     print(
         f"  vendor ID {_hex(prof.vendor_id)}  product {_hex(prof.product_code)}  "

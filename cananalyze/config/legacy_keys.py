@@ -13,7 +13,8 @@ from pathlib import Path
 
 from cananalyze.config.filelines import Lines, integer
 from cananalyze.core.errors import InputError
-from cananalyze.devices.profile import DEVICE_KEYS, load_builtin, load_eds
+from cananalyze.devices.builtin import device_keys, load_builtin
+from cananalyze.devices.profile import load_eds
 
 NODE_RENAMES = {"emcy_inhibit_100us": "emcy_inhibit_time"}
 PDO_RENAMES = {"inhibit_100us": "inhibit_time", "event_timer_ms": "event_timer"}
@@ -50,7 +51,7 @@ def _node(raw, lines: Lines, where: tuple):
             raise lines.error((*where, "profile"), "give device or eds, not profile as well")
         value = raw.pop("profile")
         key = str(value).lower().replace("-", "").replace(" ", "")
-        new = "device" if key in DEVICE_KEYS else "eds"
+        new = "device" if key in device_keys() else "eds"
         lines.deprecated((*where, "profile"), "profile", "'device' (built-in) or 'eds' (file)")
         raw[new] = value
         lines.alias((*where, new), (*where, "profile"))
@@ -143,7 +144,7 @@ def _profile_of(table: dict, node: int, base: Path):
         return None
     key = str(name).lower().replace("-", "").replace(" ", "")
     try:
-        if key in DEVICE_KEYS:
+        if key in device_keys():
             return load_builtin(key)
         path = Path(str(name))
         return load_eds(path if path.is_absolute() else base / path, node)

@@ -17,7 +17,8 @@ from cananalyze.config.filelines import Lines, integer, read_tree
 from cananalyze.config.legacy_keys import translate
 from cananalyze.config.spec import NetworkSpec, NodeSpec
 from cananalyze.core.errors import InputError
-from cananalyze.devices.profile import DEVICE_KEYS, load_builtin, load_eds
+from cananalyze.devices.builtin import device_keys, load_builtin
+from cananalyze.devices.profile import load_eds
 from cananalyze.protocol.pdo_map import COB_ID_INVALID
 
 TOP_KEYS = {"bitrate", "nodes", "sync", "known_cob_ids"}
@@ -165,10 +166,10 @@ def _profile(raw: dict, node: int, base: Path, lines: Lines, where: tuple, how: 
         raise lines.error(where, "give either device or eds, not both")
     if "device" in raw:
         key = str(raw["device"]).lower().replace("-", "").replace(" ", "")
-        if key not in DEVICE_KEYS:
+        if key not in device_keys():
             raise lines.error(
                 (*where, "device"),
-                f"unknown device {raw['device']!r} (known: {', '.join(DEVICE_KEYS)})",
+                f"unknown device {raw['device']!r} (known: {', '.join(device_keys())})",
             )
         return load_builtin(key), how
     path = Path(str(raw["eds"]))

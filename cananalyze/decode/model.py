@@ -28,7 +28,7 @@ from cananalyze.config.timeline import ConfigChange, Timeline
 from cananalyze.core.frames import FLAG_ERR, FLAG_EXT
 from cananalyze.core.records import DecodedBatch
 from cananalyze.decode.node_tally import IDENTITY
-from cananalyze.devices.profile import identify
+from cananalyze.devices.builtin import identify
 from cananalyze.protocol.cobid import NO_NODE, CobClassifier
 from cananalyze.protocol.comm_objects import comm_object
 from cananalyze.protocol.pdo_map import PdoConfig, split_cob_id
@@ -43,7 +43,8 @@ USER_SOURCES = ("user --device", "user --eds", "network file", "rules file")
 
 def generic_for(device_type) -> object:
     """The CiA 402/401 defaults for a device type naming them, else None."""
-    from cananalyze.devices.generic import family, generic_profile
+    from cananalyze.devices.family import family
+    from cananalyze.devices.generic import generic_profile
 
     fam = family(device_type)
     return generic_profile(fam) if fam else None
@@ -174,7 +175,7 @@ class NetworkModel:
     def family(self, node: int) -> int | None:
         """402 or 401 when the node's profile, or its device type read in the log, names
         CiA 402 (drives) or CiA 401 (I/O)."""
-        from cananalyze.devices.generic import family
+        from cananalyze.devices.family import family
 
         cfg = self.nodes.get(node)
         if cfg is None:

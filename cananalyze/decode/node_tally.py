@@ -232,7 +232,7 @@ def identity(records: Iterable[tuple[int, dict]]) -> dict[int, dict]:
 def match_profile(info: dict) -> tuple[str | None, str | None]:
     """The built-in profile the identity names, and "sdo identity"; (None, None) if none."""
     try:
-        from cananalyze.devices.profile import identify
+        from cananalyze.devices.builtin import identify
 
         ints = {
             k: info.get(k) if isinstance(info.get(k), int) else None

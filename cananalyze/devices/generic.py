@@ -12,29 +12,12 @@ from __future__ import annotations
 
 from functools import cache
 
-from cananalyze.devices import cia401, cia402
+from cananalyze.devices.family import FAMILIES, KEYS
 from cananalyze.devices.profile import DeviceProfile
 from cananalyze.devices.sidecar import Sidecar, SignalSpec
 
-FAMILIES = {402: cia402, 401: cia401}
-KEYS = {"cia402": 402, "cia401": 401}
 NAMES = {402: "CiA 402 drive (profile defaults)", 401: "CiA 401 generic I/O (profile defaults)"}
 U8, U16, U32 = 0x05, 0x06, 0x07
-
-
-def family(device_type: int | None) -> int | None:
-    """402 or 401 when a device type value (0x1000) names one of these profiles."""
-    if not isinstance(device_type, int) or isinstance(device_type, bool):
-        return None
-    profile = device_type & 0xFFFF
-    return profile if profile in FAMILIES else None
-
-
-def object_unit(profile: int | None, index: int, subindex: int) -> str | None:
-    """The profile's unit of an object (None: none, or not a profile object)."""
-    table = FAMILIES.get(profile) if profile else None
-    entry = table.OBJECTS.get((index, subindex)) if table else None
-    return entry[2] if entry else None
 
 
 def _var(name: str, index: int, sub: int, datatype: int, raw: str | None):

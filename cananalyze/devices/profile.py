@@ -1,7 +1,7 @@
 """Device profiles: an object dictionary (EDS/DCF) plus the sidecar's display knowledge.
 
-Built-in profiles live in `decoders/` (shipped in the wheel as `cananalyze/_decoders`);
-a user's own EDS/DCF loads the same way, without a sidecar. The network model asks a
+Built-in profiles (`builtin.py`) live in `decoders/`; a user's own EDS/DCF loads the same
+way, with the sidecar beside it if there is one. The network model asks a
 profile for a node's default PDOs, the decoder asks it for signal names and units and
 for the meaning of vendor EMCY bytes, and identification matches SDO-read identity
 objects against the built-ins.
@@ -11,30 +11,15 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from functools import cache
 from pathlib import Path
 
-from cananalyze.core.errors import InputError
 from cananalyze.devices.eds import ObjectInfo, effective_value, object_info, read_od, variable
 from cananalyze.devices.sidecar import Sidecar, load_sidecar
 from cananalyze.protocol.datatypes import DATA_TYPES, DUMMY_INDICES
 from cananalyze.protocol.pdo_map import MapEntry, PdoConfig, split_cob_id, split_mapping_word
 
-BUILTIN_KEYS = ("dat7130", "dat7014", "i7231d", "mcb560")
-PROFILE_KEYS = (
-    "cia402",
-    "cia401",
-)  # CiA 4xx defaults without an EDS (cananalyze/devices/cia402.py, cia401.py)
-DEVICE_KEYS = BUILTIN_KEYS + PROFILE_KEYS  # what --device and the network file's device take
 BOOLEAN = 0x01
 _UINT_BY_BITS = {8: 0x05, 16: 0x06, 24: 0x16, 32: 0x07, 40: 0x18, 48: 0x19, 56: 0x1A, 64: 0x1B}
-
-
-def decoders_dir() -> Path:
-    """Where the built-in profiles are: inside the wheel, else the checkout's decoders/."""
-    pkg = Path(__file__).resolve().parents[1]  # the installed cananalyze/
-    wheel = pkg / "_decoders"
-    return wheel if wheel.is_dir() else pkg.parent / "decoders"
 
 
 def _signal_name(name: str) -> str:
@@ -60,7 +45,7 @@ class DeviceProfile:
     @property
     def family(self) -> int | None:
         """402 or 401 when the device type names CiA 402 (drives) or CiA 401 (I/O)."""
-        from cananalyze.devices.generic import family
+        from cananalyze.devices.family import family
 
         return family(self.device_type)
 
@@ -103,7 +88,7 @@ class DeviceProfile:
         """A CiA 402 object's unit when the EDS names the profile but says no unit."""
         if self.family != 402:
             return None
-        from cananalyze.devices.generic import object_unit
+        from cananalyze.devices.family import object_unit
 
         return object_unit(402, index, subindex)
 
@@ -181,7 +166,7 @@ def _int_or(value, default: int) -> int:
     return value if isinstance(value, int) and not isinstance(value, bool) else default
 
 
-def _build(path: Path, sidecar: Sidecar | None, node_id: int | None) -> DeviceProfile:
+def build_profile(path: Path, sidecar: Sidecar | None, node_id: int | None) -> DeviceProfile:
     od = read_od(path, node_id)
     info = od.device_information
 
@@ -212,24 +197,6 @@ def _build(path: Path, sidecar: Sidecar | None, node_id: int | None) -> DevicePr
     )
 
 
-@cache
-def load_builtin(key: str) -> DeviceProfile:
-    """A built-in profile by key (dat7130, dat7014, i7231d, mcb560; cia402, cia401)."""
-    if key in PROFILE_KEYS:
-        from cananalyze.devices.generic import KEYS, generic_profile
-
-        return generic_profile(KEYS[key])
-    if key not in BUILTIN_KEYS:
-        raise InputError(f"unknown device profile {key!r} (known: {', '.join(DEVICE_KEYS)})")
-    base = decoders_dir()
-    sidecar = load_sidecar(base / f"{key}.toml")
-    return _build(base / f"{key}.eds", sidecar, None)
-
-
-def builtin_profiles() -> list[DeviceProfile]:
-    return [load_builtin(k) for k in BUILTIN_KEYS]
-
-
 def load_eds(path: str | Path, node_id: int | None = None) -> DeviceProfile:
     """Profile from any EDS/DCF; a DCF's ParameterValues take precedence over defaults.
 
@@ -237,50 +204,4 @@ def load_eds(path: str | Path, node_id: int | None = None) -> DeviceProfile:
     `decoders/*.toml`) is the user's own units, scales, bit names and EMCY meanings."""
     path = Path(path)
     side = path.with_suffix(".toml")
-    return _build(path, load_sidecar(side) if side.is_file() else None, node_id)
-
-
-def _norm(name: str | None) -> str:
-    return re.sub(r"[\s_\-]+", "", name or "").upper()
-
-
-def identify(
-    vendor_id: int | None = None,
-    product_code: int | None = None,
-    device_type: int | None = None,
-    device_name: str | None = None,
-) -> DeviceProfile | None:
-    """The built-in profile matching SDO-read 0x1018/0x1000/0x1008, or None.
-
-    A given value that contradicts a profile excludes it; among the rest the most
-    matched facts win, and a tie (e.g. only the Datexel vendor ID) gives None.
-    """
-    scored: list[tuple[int, DeviceProfile]] = []
-    for prof in builtin_profiles():
-        hints = prof.sidecar.identity if prof.sidecar else {}
-        names = {_norm(n) for n in hints.get("device_names", [])} | {_norm(prof.device_name)}
-        score = 0
-        ok = True
-        for given, known, weight in (
-            (vendor_id, prof.vendor_id, 2),
-            (product_code, prof.product_code, 2),
-            (device_type, prof.device_type, 1),
-        ):
-            if given is None or known is None:
-                continue
-            if given != known:
-                ok = False
-            score += weight
-        if device_name is not None:
-            if _norm(device_name) in names:
-                score += 3
-            elif names - {""}:
-                ok = False
-        if ok and score >= 2:  # the device type alone is shared by many CiA 401 devices
-            scored.append((score, prof))
-    if not scored:
-        return None
-    scored.sort(key=lambda sp: -sp[0])
-    if len(scored) > 1 and scored[0][0] == scored[1][0]:
-        return None
-    return scored[0][1]
+    return build_profile(path, load_sidecar(side) if side.is_file() else None, node_id)

@@ -314,7 +314,7 @@ class LiveView:
             value = int.from_bytes(raw[:4], "little")
         st.identity[key] = value
         if st.device is None or st.device.startswith("?"):
-            from cananalyze.devices.profile import identify
+            from cananalyze.devices.builtin import identify
 
             ident = {k: v for k, v in st.identity.items()}
             name = ident.get("device_name")

@@ -373,7 +373,8 @@ def network_spec(opts: Options) -> NetworkSpec:
             sources.append(section)
     spec = combine(*sources, source=str(opts.network) if opts.network else None)
     if opts.devices or opts.eds:
-        from cananalyze.devices.profile import load_builtin, load_eds
+        from cananalyze.devices.builtin import load_builtin
+        from cananalyze.devices.profile import load_eds
 
         for node, name in opts.devices.items():
             ns = spec.node(node)

@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from cananalyze.core.errors import InputError
-from cananalyze.devices.profile import DeviceProfile, load_builtin
+from cananalyze.devices.builtin import load_builtin
+from cananalyze.devices.profile import DeviceProfile
 
 # The default bus: one of each seed device (node IDs as in samples/network.toml).
 DEFAULT_NODES = {3: "mcb560", 5: "dat7014", 6: "dat7130", 7: "i7231d"}
