@@ -5,7 +5,7 @@ RemoteNode master (canopen's SDO client and NMT master) on one python-can virtua
 recorded by a passive bus. Each scenario returns the frames as (t, id, data, flags)
 rows and the rules file text that declares what a user would (the node's defaults);
 nothing in the traffic is a fault, so `check` must find nothing. Used by the tests
-(tests/test_findings_trust.py) and by benchmarks/bench_precision.py.
+(tests/checks/test_findings_trust.py) and by benchmarks/bench_precision.py.
 
 The virtual bus runs on Python threads: periods jitter by a few ms on a busy machine,
 over a hundred ms on a loaded one, so the rules text widens the absolute jitter floor

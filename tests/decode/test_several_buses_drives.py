@@ -56,7 +56,7 @@ def test_one_bus_drive_table_has_no_bus_column(tmp_path):
 
 
 def test_report_draws_a_drive_lane_per_bus(tmp_path):
-    sys.path.insert(0, str(Path(__file__).parent))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from test_report import page_figures
 
     page = tmp_path / "r.html"

@@ -11,7 +11,7 @@ import pytest
 
 from cananalyze.runtime import allocator
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 PROBE = """
 import os, sys

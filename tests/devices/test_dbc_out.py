@@ -156,7 +156,7 @@ def test_drive_dbc_names_modes_and_commands_as_cananalyze_does(tmp_path):
 def test_export_dbc_carries_the_dbc_the_log_was_decoded_with(tmp_path):
     """`export --dbc-in MINE --dbc OUT`: OUT holds the user's messages as they were
     (non-CANopen identifiers, and a PDO the user's DBC redefines) beside the PDOs."""
-    from tests.test_dbc_in import MIXED_DBC
+    from tests.devices.test_dbc_in import MIXED_DBC
 
     mine = tmp_path / "mine.dbc"
     mine.write_text(MIXED_DBC)

@@ -479,7 +479,7 @@ def test_ctrl_c_then_a_rerun_finishes_the_fleet(tmp_path):
     import sys
     import time
 
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
     try:
         from generate import generate
     finally:
@@ -491,7 +491,7 @@ def test_ctrl_c_then_a_rerun_finishes_the_fleet(tmp_path):
     for i in range(24):
         write_log(generate(20_000, seed=i + 1), logs / f"run{i:02d}.log")
     dataset = tmp_path / "ds"
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     env = {**os.environ, "PYTHONPATH": str(root)}
     cmd = [sys.executable, "-m", "cananalyze", "fleet", str(logs), "--out", str(dataset)]
     cmd += ["--workers", "2", "-q"]

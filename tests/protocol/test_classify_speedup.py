@@ -28,7 +28,7 @@ from cananalyze.runtime import speedups
 pytestmark = pytest.mark.skipif(
     getattr(speedups.C, "classify", None) is None, reason="compiled helper not built"
 )
-SAMPLES = Path(__file__).resolve().parent.parent / "samples"
+SAMPLES = Path(__file__).resolve().parents[2] / "samples"
 
 
 def _cut(batch: FrameBatch, size: int) -> list[FrameBatch]:

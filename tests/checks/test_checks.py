@@ -20,7 +20,7 @@ from cananalyze.formats.logfile import write_log
 from cananalyze.formats.source import read_all
 from cananalyze.pipeline import Decoder, Options, build_decoder
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "samples" / "demo.log"
 
 

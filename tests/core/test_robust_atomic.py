@@ -13,7 +13,7 @@ from cananalyze.core.frames import from_rows
 from cananalyze.formats import logfile
 from cananalyze.formats.source import read_all
 
-SAMPLE = os.path.join(os.path.dirname(__file__), "..", "samples", "demo.log")
+SAMPLE = os.path.join(os.path.dirname(__file__), "..", "..", "samples", "demo.log")
 
 
 def _leftovers(d):

@@ -27,7 +27,7 @@ from readers_util import run
 from cananalyze.formats import blf
 from cananalyze.runtime import speedups
 from tests.conftest import REAL, real_file
-from tests.test_speedups import SAMPLES, _read, _same
+from tests.runtime.test_speedups import SAMPLES, _read, _same
 
 C = speedups.C
 pytestmark = pytest.mark.skipif(C is None, reason=f"needs the compiled helper: {speedups.status()}")
@@ -264,8 +264,8 @@ def test_random_byte_damage(tmp_path: Path, inner, seed: int, python_walks) -> N
 
 @pytest.mark.parametrize("case", ["huge header", "garbage between containers", "inner 60 MiB"])
 def test_hostile_input_files(tmp_path: Path, case: str, python_walks) -> None:
-    """The damaged BLFs of tests/test_robust_hostile.py, read both ways."""
-    from tests.test_robust_hostile import _blf, _blf_parts
+    """The damaged BLFs of tests/pipeline/test_robust_hostile.py, read both ways."""
+    from tests.pipeline.test_robust_hostile import _blf, _blf_parts
 
     a, b = tmp_path / "a.blf", tmp_path / "b.blf"
     _blf(a, 200)

@@ -291,7 +291,7 @@ def test_blueprint_puts_many_nodes_in_a_grid(tmp_path):
     """16 node columns side by side were a few pixels wide each in the viewer."""
     import rerun.blueprint as rrb
 
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
     from generate import generate
 
     from cananalyze.formats.logfile import write_log
@@ -352,7 +352,7 @@ def test_parquet_round_trip(cap, files):
 def test_parquet_and_csv_with_mixed_findings_values(tmp_path):
     """Findings' measured/expected hold numbers and text (160.3 ms, "0xFFA8", "cleared"):
     Parquet needs one type per column, so they are written as text."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
     from generate import generate
 
     from cananalyze.formats.logfile import write_log
@@ -460,7 +460,7 @@ def test_decode_with_mcap_writes_text_and_timeline(tmp_path, capsys):
 
 def test_export_of_generated_log(tmp_path):
     """A generated log's frames, events and EMCY (the generator's known frames) in every file."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
     from generate import generate
 
     from cananalyze.formats.logfile import write_log

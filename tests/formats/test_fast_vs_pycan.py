@@ -36,7 +36,7 @@ from cananalyze.core.frames import FLAG_FD
 from cananalyze.formats.logfile import write_log
 from tests.conftest import real_file
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = ROOT / "samples"
 TABLES = ("frames", "signals", "sdo", "events", "findings")
 DEVICES = [f"{k}=dat7014" for k in range(1, 17)]

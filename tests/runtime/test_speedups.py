@@ -31,7 +31,7 @@ from tests.conftest import real_file
 
 C = speedups.C
 pytestmark = pytest.mark.skipif(C is None, reason=f"needs the compiled helper: {speedups.status()}")
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = ROOT / "samples"
 COLUMNS = ("t", "can_id", "flags", "dlc", "data", "channel", "line")
 
