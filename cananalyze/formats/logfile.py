@@ -156,24 +156,61 @@ def _set_asc_date(path: Path, start: float) -> None:
         path.write_text("\n".join(lines), encoding="ascii")
 
 
-def write_log(batch: FrameBatch, path: str | Path) -> None:
-    """Write a batch as candump (.log), ASC (.asc) or BLF (.blf), atomically (outputs/atomic)."""
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in (".log", ".candump", ".txt", ".asc", ".blf"):
-        raise ValueError(f"{path}: write .log, .asc or .blf")
-    with atomic_path(path) as tmp:  # keeps the suffix: python-can picks the format by it
-        if suffix in (".log", ".candump", ".txt"):
-            tmp.write_bytes(candump_bytes(batch))
-            return
-        import can
+# The log formats we write, by suffix: the one table `write_log`, `simulate --to` and
+# `live --record` (formats/record.py) read. candump is ours (bulk, as candump -l writes it);
+# ASC and BLF are python-can's writers, the reference implementations of those formats.
+WRITTEN = {".log": "candump", ".asc": "asc", ".blf": "blf"}
 
-        writer_cls = can.ASCWriter if suffix == ".asc" else can.BLFWriter
-        writer = writer_cls(str(tmp))
-        try:
+
+class LogWriter:
+    """Appends batches to a candump, ASC or BLF file, the format from its suffix."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.format = WRITTEN.get(self.path.suffix.lower())
+        if self.format is None:
+            raise ValueError(f"{path}: write .log, .asc or .blf")
+        self._start: float | None = None
+        if self.format == "candump":
+            self._file = open(self.path, "wb")  # noqa: SIM115 - closed in close()
+            self._writer = None
+        else:
+            import can
+
+            self._file = None
+            self._writer = (can.ASCWriter if self.format == "asc" else can.BLFWriter)(str(path))
+
+    def write(self, batch: FrameBatch) -> None:
+        if not len(batch):
+            return
+        if self._start is None:
+            self._start = float(batch.t[0])
+        if self._file is not None:
+            self._file.write(candump_bytes(batch))
+        else:
             for msg in to_messages(batch):
-                writer.on_message_received(msg)
+                self._writer.on_message_received(msg)
+
+    def close(self) -> None:
+        """Finish the file (idempotent); an ASC file's header date is its first frame's."""
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+        elif self._writer is not None:
+            self._writer.stop()
+            self._writer = None
+            if self.format == "asc" and self._start is not None:
+                _set_asc_date(self.path, self._start)
+
+
+def write_log(batch: FrameBatch, path: str | Path) -> None:
+    """Write a batch as candump (.log), ASC (.asc) or BLF (.blf), atomically (core/atomic)."""
+    path = Path(path)
+    if path.suffix.lower() not in WRITTEN:
+        raise ValueError(f"{path}: write .log, .asc or .blf")
+    with atomic_path(path) as tmp:  # keeps the suffix: the format comes from it
+        writer = LogWriter(tmp)
+        try:
+            writer.write(batch)
         finally:
-            writer.stop()
-        if suffix == ".asc" and len(batch):
-            _set_asc_date(tmp, float(batch.t[0]))
+            writer.close()

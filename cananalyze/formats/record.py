@@ -1,7 +1,7 @@
 """FrameRecorder: the raw frames of a live session, saved as candump, ASC, BLF or MCAP.
 
-Log formats go through python-can's writers (its `can.Logger` picks one by suffix),
-the reference implementations of those formats. MCAP has no python-can writer: the
+Log formats go through `logfile.LogWriter`, the one writer table `write_log` uses too
+(candump as candump -l writes it; ASC and BLF by python-can's writers). MCAP has no python-can writer: the
 frames go on the `/can/frames` topic in the export's `cananalyze.Frame` schema,
 built column-wise by the export's own payload builder and written as chunked,
 indexed MCAP by its bulk writer (`formats/mcap_frames.py`, `mcap_bulk.py`), so a
@@ -21,8 +21,7 @@ import numpy as np
 from cananalyze.core.errors import UsageError
 from cananalyze.core.frames import FrameBatch, concat
 from cananalyze.core.records import DecodedBatch
-
-LOG_SUFFIXES = (".log", ".asc", ".blf")
+from cananalyze.formats.logfile import WRITTEN, LogWriter
 
 
 class FrameRecorder:
@@ -31,7 +30,7 @@ class FrameRecorder:
     @staticmethod
     def check_suffix(path: str | Path) -> None:
         suffix = Path(path).suffix.lower()
-        if suffix != ".mcap" and suffix not in LOG_SUFFIXES:
+        if suffix != ".mcap" and suffix not in WRITTEN:
             raise UsageError(f"--record {path}: use a .log (candump), .asc, .blf or .mcap file")
 
     def __init__(self, path: str | Path) -> None:
@@ -45,9 +44,7 @@ class FrameRecorder:
             if suffix == ".mcap":
                 self._mcap = McapRecording(self.path)
             else:
-                import can
-
-                self._logger = can.Logger(str(self.path))
+                self._logger = LogWriter(self.path)
         except OSError as exc:
             raise UsageError(f"--record {path}: cannot write: {exc.strerror or exc}") from None
 
@@ -59,10 +56,7 @@ class FrameRecorder:
         if self._mcap is not None:
             self._mcap.write(batch)
         else:
-            from cananalyze.formats.logfile import to_messages
-
-            for msg in to_messages(fb):
-                self._logger.on_message_received(msg)
+            self._logger.write(fb)
         self.frames += len(fb)
 
     def close(self) -> None:
@@ -70,7 +64,7 @@ class FrameRecorder:
         if self._mcap is not None:
             self._mcap.close()
         elif self._logger is not None:
-            self._logger.stop()
+            self._logger.close()
             self._logger = None
 
 
