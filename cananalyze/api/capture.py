@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from cananalyze.api.options import load_options
+from cananalyze.core.defaults import SDO_TIMEOUT
 from cananalyze.core.finding import Finding
 from cananalyze.core.records import DecodedBatch
 from cananalyze.outputs import capture as tables
@@ -117,7 +118,7 @@ def load(
     device: dict[int, str] | list[str] | None = None,
     strict: bool = False,
     input_format: str | None = None,
-    sdo_timeout: float = 1.0,
+    sdo_timeout: float = SDO_TIMEOUT,
     rules: str | Path | None = None,
     dbc: str | Path | list[str | Path] | None = None,
 ) -> Capture:

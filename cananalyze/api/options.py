@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from cananalyze.core.defaults import SDO_TIMEOUT
+
 
 def load_options(
     network=None,
@@ -11,7 +13,7 @@ def load_options(
     device=None,
     strict: bool = False,
     input_format: str | None = None,
-    sdo_timeout: float = 1.0,
+    sdo_timeout: float = SDO_TIMEOUT,
     rules=None,
     **more,
 ):

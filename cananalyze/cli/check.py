@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from cananalyze.cli.common import add_filter_options, add_input_options, options, report_problems
+from cananalyze.cli import options as options_
+from cananalyze.cli.common import DBC, options, report_problems
 
 # The checker, readers and decoder are imported in run(): `cananalyze --help` stays light.
 
@@ -17,23 +18,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Check timing and conformance of a CANopen log; exit 0 when every "
         "enabled rule passes, 1 on violations, 2 on bad input.",
     )
-    add_input_options(p)
-    p.add_argument("--rules", metavar="FILE", help="rules file (YAML, see docs/rules-file.md)")
-    p.add_argument("--junit", metavar="FILE", help="write a JUnit XML report")
-    p.add_argument("--json", metavar="FILE", help="write the findings as a JSON list")
-    p.add_argument("--html", metavar="FILE", help="also write the HTML report (as `report`)")
-    p.add_argument("--timing", action="store_true", help="also print the timing analysis")
-    p.add_argument("--no-color", action="store_true", help="no ANSI colours even on a terminal")
-    add_filter_options(p)
-    from cananalyze.cli.report import add_html_options
-
-    add_html_options(p)
-    add_progress_option(p)
+    options_.add(p, *options_.INPUT, "rules", "junit", "json", "html", "timing", extra_names=DBC)
+    options_.add(p, "no_color", *options_.FILTERS, "bitrate", "title", "quiet")
     p.set_defaults(func=run)
-
-
-def add_progress_option(p: argparse.ArgumentParser) -> None:
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
 
 
 def run(args: argparse.Namespace) -> int:

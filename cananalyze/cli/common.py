@@ -1,5 +1,6 @@
-"""Options shared by the commands that read a log (decode, check, export, live), and the
-one place that turns them into the pipeline's `Options`."""
+"""The one place that turns parsed arguments into the pipeline's `Options`, and what every
+command that reads a log does around the run (problems, progress). The flags are
+declared in `options.py`."""
 
 from __future__ import annotations
 
@@ -7,32 +8,11 @@ import argparse
 import sys
 from typing import TYPE_CHECKING
 
+from cananalyze.core.defaults import SDO_TIMEOUT
 from cananalyze.core.errors import ProblemLog, UsageError
 
 if TYPE_CHECKING:
     from cananalyze.pipeline import Options
-
-
-def add_input_options(parser: argparse.ArgumentParser, dbc_flag: str = "--dbc") -> None:
-    parser.add_argument(
-        "log", help="log file (candump, ASC, BLF, TRC, CSV, pcap/pcapng; .gz too), or - for stdin"
-    )
-    parser.add_argument(
-        "--strict",
-        action="store_true",
-        help="stop at the first unreadable line or record (exit 2) instead of skipping it",
-    )
-    parser.add_argument(
-        "--input-format", metavar="NAME", help="force the log format instead of detecting it"
-    )
-    parser.add_argument(
-        "--sdo-timeout",
-        type=float,
-        default=1.0,
-        metavar="S",
-        help="an SDO request unanswered this long is a timeout (default 1 s)",
-    )
-    add_device_options(parser, dbc_flag)
 
 
 def report_problems(problems: ProblemLog, stream=None) -> None:
@@ -46,70 +26,8 @@ def report_problems(problems: ProblemLog, stream=None) -> None:
         print(f"warning: {problems.count} unreadable lines/records skipped", file=stream)
 
 
-def add_device_options(parser: argparse.ArgumentParser, dbc_flag: str = "--dbc") -> None:
-    """--device, --eds, --network, --dbc: what the user knows about the nodes and the bus.
-
-    `dbc_flag`: export's `--dbc` names the DBC it writes, so it reads one as `--dbc-in`
-    (every command takes `--dbc-in`, so scripts can pass one name to all)."""
-    parser.add_argument(
-        "--device",
-        action="append",
-        default=[],
-        metavar="NODE=NAME",
-        help="node NODE is this built-in device (dat7130, dat7014, i7231d, mcb560) or a CiA profile's defaults (cia402 drive, cia401 I/O); repeatable",
-    )
-    parser.add_argument(
-        "--eds",
-        action="append",
-        default=[],
-        metavar="NODE=FILE",
-        help="node NODE is described by this EDS/DCF file; repeatable",
-    )
-    parser.add_argument(
-        "--network",
-        metavar="FILE",
-        help="network file (TOML/YAML): nodes, profiles, PDO/heartbeat overrides, SDO channels",
-    )
-    flags = [dbc_flag] if dbc_flag == "--dbc-in" else [dbc_flag, "--dbc-in"]
-    parser.add_argument(
-        *flags,
-        dest="dbc_in",
-        action="append",
-        default=[],
-        metavar="FILE",
-        help="DBC file (read with cantools): its messages decoded as signals, its layouts, "
-        "scaling, units and value tables winning over the profile's PDOs; repeatable",
-    )
-
-
-def add_filter_options(parser: argparse.ArgumentParser) -> None:
-    """--node, --service, --from, --to: what the outputs show (decoding sees everything)."""
-    parser.add_argument("--node", metavar="N[,N]", help="only frames and records of these node-IDs")
-    parser.add_argument(
-        "--service",
-        metavar="S[,S]",
-        help="only these services (nmt, sync, time, emcy, tpdo, rpdo, pdo, sdo, heartbeat, ...)",
-    )
-    parser.add_argument(
-        "--from",
-        dest="t_from",
-        type=float,
-        metavar="S",
-        help="start, seconds after the first frame",
-    )
-    parser.add_argument(
-        "--to", dest="t_to", type=float, metavar="S", help="end, seconds after the first frame"
-    )
-
-
-def add_time_option(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--time",
-        choices=["rel", "abs"],
-        default="rel",
-        help="times in text output: seconds from the first frame (rel, default) or as logged "
-        "(abs, like candump -ta)",
-    )
+# every command that reads a DBC takes it as --dbc-in; those that write none also as --dbc
+DBC = {"dbc_in": ("--dbc",)}
 
 
 def _node_assignments(items: list[str] | None, option: str) -> dict[int, str]:
@@ -156,7 +74,7 @@ def options(args: argparse.Namespace, **overrides) -> Options:
         devices=_node_assignments(get("device"), "--device"),
         eds=_node_assignments(get("eds"), "--eds"),
         rules=get("rules"),
-        sdo_timeout=get("sdo_timeout", 1.0),
+        sdo_timeout=get("sdo_timeout", SDO_TIMEOUT),
         strict=bool(get("strict", False)),
         input_format=get("input_format"),
         bitrate=get("bitrate"),

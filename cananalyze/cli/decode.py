@@ -6,13 +6,8 @@ import argparse
 import contextlib
 import sys
 
-from cananalyze.cli.common import (
-    add_filter_options,
-    add_input_options,
-    add_time_option,
-    options,
-    report_problems,
-)
+from cananalyze.cli import options as options_
+from cananalyze.cli.common import DBC, options, report_problems
 from cananalyze.core.errors import UsageError
 
 # Readers, numpy and the decoder are imported in run(): `cananalyze --help` builds
@@ -25,42 +20,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="annotate every frame of a log",
         description="Decode a CANopen log: every frame named for what it is.",
     )
-    add_input_options(p)
-    p.add_argument("--format", choices=["text", "jsonl"], default="text", help="output format")
-    p.add_argument("--no-color", action="store_true", help="no ANSI colours even on a terminal")
-    add_filter_options(p)
-    add_time_option(p)
-    p.add_argument("--summary", action="store_true", help="print only the summary")
-    p.add_argument("--sdo", action="store_true", help="print only the SDO transaction table")
-    p.add_argument(
-        "--signals",
-        action="store_true",
-        help="print only decoded PDO values, one signal record per value (t, node, pdo, signal, value, unit)",
-    )
-    p.add_argument(
-        "--check",
-        action="store_true",
-        help="run the CANopen rules too: findings appear in the output at their frames",
-    )
-    p.add_argument(
-        "--rules",
-        metavar="FILE",
-        help="rules file for --check (docs/rules-file.md); implies --check",
-    )
-    p.add_argument(
-        "--bitrate", type=int, metavar="BIT/S", help="bus bitrate, for the bus load in --summary"
-    )
-    p.add_argument("-o", "--output", metavar="FILE", help="write to FILE instead of stdout")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
-    p.add_argument("--mcap", metavar="FILE", help="also write an MCAP file for Foxglove")
-    p.add_argument(
-        "--rerun", action="store_true", help="also show the log in a spawned Rerun viewer"
-    )
-    p.add_argument(
-        "--connect",
-        metavar="ADDR",
-        help="also stream to a running Rerun viewer (host:port or rerun+http:// URL)",
-    )
+    options_.add(p, *options_.INPUT, "format", "no_color", extra_names=DBC)
+    options_.add(p, *options_.FILTERS, "time", "summary", "sdo", "signals", "check", "rules")
+    options_.add(p, "bitrate", "output", "quiet", "mcap", "rerun", "connect")
     p.set_defaults(func=run)
 
 

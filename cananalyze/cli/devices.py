@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from cananalyze.cli import options as options_
 from cananalyze.core.errors import UsageError
 
 
@@ -25,11 +26,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     )
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.epilog = EPILOG
-    parser.add_argument("key", nargs="?", help="profile key (e.g. dat7130) or an EDS/DCF file")
-    parser.add_argument("--node", type=int, default=1, help="node ID for $NODEID defaults (1)")
-    parser.add_argument(
-        "--dbc", metavar="OUT.dbc", help="write the device's PDOs at --node as a DBC file"
-    )
+    options_.add(parser, "profile_key", "profile_node", "profile_dbc")
     parser.set_defaults(func=run)
     return parser
 
@@ -54,7 +51,8 @@ def _hex(value: int | None, width: int = 8) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from cananalyze.devices.builtin import PROFILE_KEYS, builtin_profiles, device_keys, load_builtin
+    from cananalyze.devices.builtin import builtin_profiles, load_builtin
+    from cananalyze.devices.catalog import PROFILE_KEYS, device_keys
     from cananalyze.devices.profile import load_eds
 
     if not args.key:

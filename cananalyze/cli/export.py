@@ -7,7 +7,8 @@ import argparse
 import sys
 import time
 
-from cananalyze.cli.common import add_filter_options, add_input_options, options, report_problems
+from cananalyze.cli import options as options_
+from cananalyze.cli.common import options, report_problems
 from cananalyze.core.errors import UsageError
 
 
@@ -18,43 +19,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Decode a log once and write it in one or more timeline/table formats. "
         "The CANopen rules run as for `check`: their findings are in every output.",
     )
-    add_input_options(p, dbc_flag="--dbc-in")
-    p.add_argument(
-        "--mcap", metavar="FILE", help="MCAP file for Foxglove (PDO signal topics, events)"
-    )
-    p.add_argument(
-        "--mcap-compression",
-        choices=["zstd", "lz4", "none"],
-        default="zstd",
-        help="MCAP chunk compression (default zstd)",
-    )
-    p.add_argument("--rrd", metavar="FILE", help="Rerun recording (.rrd)")
-    p.add_argument(
-        "--parquet", metavar="DIR", help="directory for frames/signals/sdo/events/... .parquet"
-    )
-    p.add_argument("--csv", metavar="DIR", help="directory for the same tables as CSV")
-    p.add_argument(
-        "--dbc",
-        metavar="FILE",
-        help="DBC file (written with cantools) of the network's PDOs as configured at the "
-        "end of the log, SDO remaps included (to read a DBC, use --dbc-in)",
-    )
-    p.add_argument(
-        "--parquet-compression",
-        choices=["snappy", "zstd", "lz4", "none"],
-        default="snappy",
-        help="Parquet page compression (default snappy, as pandas writes; zstd files are "
-        "40 %% smaller but cost 1/3 more time at 10M frames)",
-    )
-    p.add_argument("--rules", metavar="FILE", help="rules file: its assertions join the findings")
-    p.add_argument(
-        "--no-check",
-        action="store_true",
-        help="skip the CANopen rules (no findings; a little faster)",
-    )
-    p.add_argument("--bitrate", type=int, metavar="BIT/S", help="bus bitrate: bus load in percent")
-    add_filter_options(p)
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary line")
+    options_.add(p, *options_.INPUT, "mcap", "mcap_compression", "rrd", "parquet", "csv")
+    options_.add(p, "dbc_out", "parquet_compression", "rules", "no_check", "bitrate")
+    options_.add(p, *options_.FILTERS, "quiet")
     p.set_defaults(func=run)
 
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from cananalyze.cli.common import add_device_options, options
+from cananalyze.cli import options as options_
+from cananalyze.cli.common import DBC, options
 from cananalyze.core.errors import UsageError
 
 
@@ -20,43 +21,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "them instead of --network. Exit 0 when every log decoded and no rule was violated, "
         "1 when a log failed or had violations, 2 on usage errors.",
     )
-    p.add_argument("inputs", nargs="+", metavar="INPUT", help="log file, folder or glob")
-    p.add_argument("--out", required=True, metavar="DATASET", help="the dataset folder")
-    add_device_options(p)
-    p.add_argument("--rules", metavar="FILE", help="rules file: its assertions join the findings")
-    p.add_argument(
-        "--sdo-timeout",
-        type=float,
-        default=1.0,
-        metavar="S",
-        help="an SDO request unanswered this long is a timeout (default 1 s)",
-    )
-    p.add_argument(
-        "--strict",
-        action="store_true",
-        help="a log with an unreadable line or record fails (instead of skipping the line)",
-    )
-    p.add_argument(
-        "--workers",
-        type=int,
-        metavar="N",
-        help="local worker processes (default: the number of cores)",
-    )
-    p.add_argument(
-        "--scheduler",
-        metavar="tcp://HOST:PORT",
-        help="use this running Dask scheduler instead of a local cluster "
-        "(its workers must see the same paths)",
-    )
-    p.add_argument("--force", action="store_true", help="decode logs already in the dataset again")
-    p.add_argument("--junit", metavar="FILE", help="JUnit XML report, one testsuite per log")
-    p.add_argument(
-        "--parquet-compression",
-        choices=["snappy", "zstd", "lz4", "none"],
-        default="snappy",
-        help="Parquet page compression (default snappy)",
-    )
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+    options_.add(p, "inputs", "out", "device", "eds", "network", "dbc_in", "rules", "sdo_timeout")
+    options_.add(p, "strict", "workers", "scheduler", "force", "junit", "parquet_compression")
+    options_.add(p, "quiet", extra_names=DBC)
     p.set_defaults(func=run)
 
 

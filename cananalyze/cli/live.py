@@ -16,7 +16,8 @@ import signal
 import sys
 import time
 
-from cananalyze.cli.common import add_time_option
+from cananalyze.cli import options as options_
+from cananalyze.cli.common import DBC
 from cananalyze.core.errors import UsageError
 
 
@@ -27,101 +28,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Decode a live CAN bus through python-can. Without -i/-c python-can's own "
         "configuration (~/.canrc, CAN_INTERFACE/CAN_CHANNEL/CAN_BITRATE) applies.",
     )
-    p.add_argument(
-        "-i",
-        "--interface",
-        action="append",
-        help="python-can interface (socketcan, pcan, slcan, virtual, ...); repeat with -c "
-        "for several buses",
-    )
-    p.add_argument(
-        "-c",
-        "--channel",
-        action="append",
-        help="channel (can0, PCAN_USBBUS1, /dev/ttyACM0, ...); several buses: can0,can1 or "
-        "repeated -i/-c pairs",
-    )
-    p.add_argument(
-        "-b", "--bitrate", type=int, metavar="BIT/S", help="bus bitrate (also for the bus load)"
-    )
-    p.add_argument(
-        "--filter",
-        action="append",
-        default=[],
-        metavar="ID:MASK",
-        help="hardware acceptance filter, hex (e.g. 580:780 = SDO responses); repeatable",
-    )
-    p.add_argument(
-        "--bus-option",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="extra python-can interface argument (e.g. tty_baudrate=921600); repeatable",
-    )
-    p.add_argument(
-        "--network",
-        metavar="FILE",
-        help="network file (TOML/YAML): nodes, profiles, PDO/heartbeat overrides, SDO channels",
-    )
-    p.add_argument(
-        "--device",
-        action="append",
-        default=[],
-        metavar="NODE=NAME",
-        help="node NODE is this built-in device (dat7130, dat7014, i7231d, mcb560); repeatable",
-    )
-    p.add_argument(
-        "--eds",
-        action="append",
-        default=[],
-        metavar="NODE=FILE",
-        help="EDS/DCF of a node; repeatable",
-    )
-    p.add_argument(
-        "--dbc",
-        "--dbc-in",
-        dest="dbc_in",
-        action="append",
-        default=[],
-        metavar="FILE",
-        help="DBC file (cantools): its messages decoded as signals; repeatable",
-    )
-    p.add_argument(
-        "--check",
-        metavar="RULES",
-        help="check the rules of this rules file live; exit 1 on violations, as `check` does",
-    )
-    p.add_argument("--junit", metavar="FILE", help="with --check: write a JUnit XML report at exit")
-    p.add_argument(
-        "--json", metavar="FILE", help="with --check: write the findings as JSON at exit"
-    )
-    p.add_argument(
-        "--rerun", action="store_true", help="stream the timelines to a spawned Rerun viewer"
-    )
-    p.add_argument("--rrd", metavar="FILE", help="stream the timelines into a Rerun .rrd file")
-    p.add_argument(
-        "--foxglove",
-        nargs="?",
-        const="127.0.0.1:8765",
-        metavar="HOST:PORT",
-        help="serve the decode to Foxglove over WebSocket (default 127.0.0.1:8765; "
-        "the topics of export --mcap)",
-    )
-    p.add_argument(
-        "--plain", action="store_true", help="decode-style lines instead of the dashboard"
-    )
-    p.add_argument("--no-color", action="store_true", help="no ANSI colours in --plain output")
-    add_time_option(p)
-    p.add_argument(
-        "--record", metavar="FILE", help="record the raw frames (.log candump, .asc, .blf, .mcap)"
-    )
-    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
-    p.add_argument(
-        "--sdo-timeout",
-        type=float,
-        default=1.0,
-        metavar="S",
-        help="an SDO request unanswered this long is a timeout (default 1 s)",
+    options_.add(p, "interface", "channel", "bitrate", "filter", "bus_option", "network", "device")
+    options_.add(p, "eds", "dbc_in", "live_check", "junit", "json", "rerun", "rrd", "foxglove")
+    options_.add(
+        p, "plain", "no_color", "time", "record", "duration", "sdo_timeout", extra_names=DBC
     )
     p.set_defaults(func=run, strict=False, input_format=None)
 

@@ -11,9 +11,9 @@ import importlib
 import signal
 import sys
 
+from cananalyze.cli import options as options_
 from cananalyze.core.errors import CananalyzeError
-from cananalyze.core.version import __version__
-from cananalyze.runtime import allocator, speedups
+from cananalyze.runtime import allocator
 from cananalyze.runtime.gcpolicy import fewer_collections
 
 # One module per sub-command, each with add_parser(subparsers) and run(args) -> int.
@@ -37,9 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="cananalyze",
         description="CANopen bus traffic analyser and log decoder.",
     )
-    parser.add_argument(
-        "--version", action="version", version=f"cananalyze {__version__} ({speedups.status()})"
-    )
+    options_.add(parser, "version")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in SUBCOMMANDS:
         try:

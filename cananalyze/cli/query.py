@@ -8,6 +8,8 @@ import datetime as dt
 import json
 import sys
 
+from cananalyze.cli import options as options_
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -16,11 +18,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Run one SQL statement over a dataset written by `cananalyze fleet`. "
         "Each table is a view of its Parquet parts, with the partition column `date`.",
     )
-    p.add_argument("dataset", help="the dataset folder (fleet --out)")
-    p.add_argument("sql", help='the statement, e.g. "SELECT status, count(*) FROM logs GROUP BY 1"')
-    fmt = p.add_mutually_exclusive_group()
-    fmt.add_argument("--csv", action="store_true", help="CSV with a header line")
-    fmt.add_argument("--json", action="store_true", help="one JSON object per row")
+    options_.add(p, "dataset", "sql")
+    options_.add(p.add_mutually_exclusive_group(), "query_csv", "query_json")
     p.set_defaults(func=run)
 
 

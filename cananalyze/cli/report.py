@@ -6,8 +6,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from cananalyze.cli.check import add_progress_option
-from cananalyze.cli.common import add_filter_options, add_input_options, options, report_problems
+from cananalyze.cli import options as options_
+from cananalyze.cli.common import DBC, options, report_problems
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -18,18 +18,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "network needed to open it); exit 0 when every rule passes, 1 on violations, 2 on "
         "bad input.",
     )
-    add_input_options(p)
-    p.add_argument("-o", "--output", metavar="FILE", required=True, help="the HTML file to write")
-    p.add_argument("--rules", metavar="FILE", help="rules file (YAML, see docs/rules-file.md)")
-    add_html_options(p)
-    add_filter_options(p)
-    add_progress_option(p)
+    options_.add(p, *options_.INPUT, "output", "rules", "bitrate", "title", extra_names=DBC)
+    options_.add(p, *options_.FILTERS, "quiet")
     p.set_defaults(func=run)
-
-
-def add_html_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--bitrate", type=int, metavar="BIT/S", help="bus bitrate: bus load in percent")
-    p.add_argument("--title", help="the page's title (default: the log's name)")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 
+from cananalyze.cli import options as options_
 from cananalyze.core.errors import InputError, UsageError
 
 
@@ -17,44 +18,8 @@ def add_parser(subparsers) -> None:
         help="emulate CANopen devices and a master: write a log or drive a bus",
         description=__doc__.splitlines()[0],
     )
-    p.add_argument(
-        "--network",
-        metavar="FILE",
-        help="network file (docs/network-file.md; default: one of each seed device)",
-    )
-    p.add_argument(
-        "-i",
-        "--interface",
-        help="python-can interface for real-time mode (e.g. socketcan, virtual)",
-    )
-    p.add_argument("-c", "--channel", help="python-can channel for real-time mode (e.g. can0)")
-    p.add_argument(
-        "--to",
-        metavar="FILE",
-        help="write the traffic to a log (.log candump, .asc, .blf) on a simulated clock",
-    )
-    p.add_argument(
-        "--duration", type=float, default=10.0, metavar="S", help="seconds to simulate (default 10)"
-    )
-    p.add_argument(
-        "--seed", type=int, default=0, help="random seed: same seed, same log (default 0)"
-    )
-    p.add_argument(
-        "--scenario",
-        default="steady",
-        help="what the master does: steady, commissioning or faults (default steady)",
-    )
-    p.add_argument(
-        "--bitrate",
-        type=int,
-        default=None,
-        help="bus bit rate for frame timing (default: network file or 500000)",
-    )
-    p.add_argument(
-        "--no-master",
-        action="store_true",
-        help="real-time mode: emulate only the devices, another tool is the master",
-    )
+    options_.add(p, "network", "sim_interface", "sim_channel", "sim_to", "seed", "scenario")
+    options_.add(p, "duration", "bitrate", "no_master", duration=10.0)
     p.set_defaults(func=run)
 
 

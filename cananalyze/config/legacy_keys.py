@@ -13,7 +13,8 @@ from pathlib import Path
 
 from cananalyze.config.filelines import Lines, integer
 from cananalyze.core.errors import InputError
-from cananalyze.devices.builtin import device_keys, load_builtin
+from cananalyze.devices.builtin import load_builtin
+from cananalyze.devices.catalog import device_keys
 from cananalyze.devices.profile import load_eds
 
 NODE_RENAMES = {"emcy_inhibit_100us": "emcy_inhibit_time"}

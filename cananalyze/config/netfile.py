@@ -17,7 +17,8 @@ from cananalyze.config.filelines import Lines, integer, read_tree
 from cananalyze.config.legacy_keys import translate
 from cananalyze.config.spec import NetworkSpec, NodeSpec
 from cananalyze.core.errors import InputError
-from cananalyze.devices.builtin import device_keys, load_builtin
+from cananalyze.devices.builtin import load_builtin
+from cananalyze.devices.catalog import device_keys
 from cananalyze.devices.profile import load_eds
 from cananalyze.protocol.pdo_map import COB_ID_INVALID
 

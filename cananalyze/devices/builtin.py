@@ -6,37 +6,14 @@ from __future__ import annotations
 
 import re
 from functools import cache
-from pathlib import Path
 
 from cananalyze.core.errors import InputError
+from cananalyze.devices import catalog
+from cananalyze.devices.catalog import PROFILE_KEYS, device_keys
 from cananalyze.devices.family import KEYS
 from cananalyze.devices.generic import generic_profile
 from cananalyze.devices.profile import DeviceProfile, build_profile
 from cananalyze.devices.sidecar import load_sidecar
-
-PROFILE_KEYS = (
-    "cia402",
-    "cia401",
-)  # CiA 4xx defaults without an EDS (devices/cia402.py, cia401.py)
-
-
-def decoders_dir() -> Path:
-    """Where the built-in profiles are: inside the wheel, else the checkout's decoders/."""
-    pkg = Path(__file__).resolve().parents[1]  # the installed cananalyze/
-    wheel = pkg / "_decoders"
-    return wheel if wheel.is_dir() else pkg.parent / "decoders"
-
-
-@cache
-def builtin_keys() -> tuple[str, ...]:
-    """The keys of the devices in decoders/: each `<key>.eds` that has a `<key>.toml`, sorted."""
-    base = decoders_dir()
-    return tuple(sorted(p.stem for p in base.glob("*.eds") if p.with_suffix(".toml").is_file()))
-
-
-def device_keys() -> tuple[str, ...]:
-    """What `--device` and the network file's `device` take: the built-ins, then the profiles."""
-    return builtin_keys() + PROFILE_KEYS
 
 
 @cache
@@ -44,15 +21,15 @@ def load_builtin(key: str) -> DeviceProfile:
     """A built-in profile by key (`builtin_keys()`, or cia402 / cia401)."""
     if key in PROFILE_KEYS:
         return generic_profile(KEYS[key])
-    if key not in builtin_keys():
+    if key not in catalog.builtin_keys():
         raise InputError(f"unknown device profile {key!r} (known: {', '.join(device_keys())})")
-    base = decoders_dir()
+    base = catalog.decoders_dir()
     sidecar = load_sidecar(base / f"{key}.toml")
     return build_profile(base / f"{key}.eds", sidecar, None)
 
 
 def builtin_profiles() -> list[DeviceProfile]:
-    return [load_builtin(k) for k in builtin_keys()]
+    return [load_builtin(k) for k in catalog.builtin_keys()]
 
 
 def identify(

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from cananalyze.core.defaults import SDO_TIMEOUT
 from cananalyze.core.errors import UsageError
 
 if TYPE_CHECKING:
@@ -34,7 +35,7 @@ class Options:
     rules: str | Path | None = None
     checks: bool = False
     timing: bool = False
-    sdo_timeout: float = 1.0
+    sdo_timeout: float = SDO_TIMEOUT
     strict: bool = False
     input_format: str | None = None
     bitrate: int | None = None

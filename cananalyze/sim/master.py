@@ -13,6 +13,7 @@ import struct
 from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
 
+from cananalyze.core.defaults import SDO_TIMEOUT
 from cananalyze.core.frames import FLAG_ERR, FLAG_RTR, FLAG_TX
 from cananalyze.protocol import sdo
 from cananalyze.protocol.sdo import block_byte, initiate_byte, segment_byte
@@ -115,7 +116,9 @@ class _Client:
 class Master:
     """The network master; frames it sends carry the log's TX direction flag."""
 
-    def __init__(self, script: Script | None = None, sdo_timeout: float = 1.0, blksize: int = 16):
+    def __init__(
+        self, script: Script | None = None, sdo_timeout: float = SDO_TIMEOUT, blksize: int = 16
+    ):
         self.script = script
         self.sdo_timeout = sdo_timeout
         self.blksize = blksize

@@ -14,7 +14,7 @@ from cananalyze.checks.build import build_checker
 from cananalyze.checks.rulesfile import rules_network
 from cananalyze.config.netfile import combine, load_network
 from cananalyze.core.errors import InputError
-from cananalyze.devices.builtin import decoders_dir
+from cananalyze.devices.catalog import decoders_dir
 from cananalyze.pipeline import Options, network_spec
 
 EDS = decoders_dir() / "dat7014.eds"

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import cananalyze
-from cananalyze.devices.builtin import builtin_keys
+from cananalyze.devices.catalog import builtin_keys
 from tests.conftest import real_file
 
 TMCM = "nigel-bruce-khan__ros_canopen-tmcm-1636/"

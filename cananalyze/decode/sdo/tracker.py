@@ -17,6 +17,7 @@ from __future__ import annotations
 import binascii
 from collections.abc import Callable
 
+from cananalyze.core.defaults import SDO_TIMEOUT
 from cananalyze.decode.sdo.channels import ChannelTable, SdoChannel
 from cananalyze.decode.sdo.transaction import FrameRole, SdoTransaction
 from cananalyze.decode.sdo.transfer import PHASE_TEXT, Transfer
@@ -60,7 +61,7 @@ def _mux(index: int | None, subindex: int | None) -> str:
 class SdoTracker:
     """Feed SDO frames in time order; collect finished transactions with `pop_completed()`."""
 
-    def __init__(self, timeout: float = 1.0, object_info: ObjectInfo | None = None) -> None:
+    def __init__(self, timeout: float = SDO_TIMEOUT, object_info: ObjectInfo | None = None) -> None:
         self.timeout = timeout
         self.object_info = object_info
         self._channels = ChannelTable()
