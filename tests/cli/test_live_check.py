@@ -82,9 +82,15 @@ def test_faults_found_live_with_report_exit_1_and_rrd(tmp_path):
 
     # the findings stream with the frames while the session runs
     # (under the frame that showed them, or on a line of their own: a deadline the tick saw)
+    # (in the order of the output, not by the wall clock: a loaded machine only delays both)
     live = [(t, x) for t, x in timed if re.match(r"(    └─ |\s*\d+\.\d{6}  )?(ERROR|WARNING) ", x)]
-    signal_hit = [t for t, x in live if "assert_signal: ch3 = 3276.7 outside -200..850" in x]
-    assert signal_hit and signal_hit[0] < t_end - 3  # ch3 breaks 4 s into a 10 s log
+    order = [x for _, x in timed]
+    hit = next(
+        i for i, x in enumerate(order) if "assert_signal: ch3 = 3276.7 outside -200..850" in x
+    )
+    frame_at = [re.match(r"\s*(\d+\.\d{6})  ", x) for x in order]
+    later = [i for i, m in enumerate(frame_at) if m and float(m.group(1)) >= 7.0]
+    assert later and hit < later[0]  # ch3 breaks 4 s into a 10 s log: shown before 7 s's frames
     # node 6's 1.6 s silence, seen while it lasted (the rest of the bus talks on)
     assert any(
         re.search(
@@ -119,10 +125,8 @@ def test_faults_found_live_with_report_exit_1_and_rrd(tmp_path):
     # ... and once, completed with the whole gap when node 6 came back
     # (a loaded machine may add jitter findings of its own, never a second one for this gap)
     hb6 = [
-        f
-        for f in findings
-        if f["rule"] == "heartbeat" and f["node"] == 6 and abs(f["t_rel"] - 4.3) < 0.1
-    ]
+        f for f in findings if f["rule"] == "heartbeat" and f["node"] == 6 and f["measured"] > 1000
+    ]  # by its length, not its time: a loaded machine shifts a live session's receive times
     assert len(hb6) == 1 and hb6[0]["measured"] > 1500
     assert hb6[0]["message"].startswith("heartbeat dropout: no heartbeat for ")
     emcy = sorted(f["measured"] for f in findings if f["rule"] == "emcy" and f["node"] == 3)

@@ -31,7 +31,8 @@ from tests.helpers.virtual_bus import drain, patient_client, unique_channel, var
 
 NODE = 5
 # seen on a loaded 2-core machine (load 9): a first heartbeat 155 ms late
-RULES_HEAD = "jitter_ms: 100  # python-canopen on a virtual bus: thread scheduling\n"
+JITTER_MS = 100
+RULES_HEAD = f"jitter_ms: {JITTER_MS}  # python-canopen on a virtual bus: thread scheduling\n"
 Rows = list[tuple[float, int, bytes, int]]
 
 
