@@ -1,4 +1,4 @@
-"""The README's pictures of the HTML report: `cananalyze report` of samples/faults.log and
+"""The pictures of the HTML report in docs/checks.md: `cananalyze report` of samples/faults.log and
 of a real log (PEAK trace pcan3.trc of ../shared/data/real), opened in headless Chromium
 (Debian's package) with no network, the first screen saved as PNG in docs/images/.
 

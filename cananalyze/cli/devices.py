@@ -21,7 +21,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "for --node and the notes on manual quirks; for a CiA 402 drive also its states, "
         "commands and modes as cananalyze names them. --dbc OUT.dbc writes those PDOs as a "
         "DBC file (cantools) with their scaling, units and signedness. A user's EDS picks up "
-        "a TOML sidecar of the same name beside it (units and scales per object: README, "
+        "a TOML sidecar of the same name beside it (units and scales per object: docs/decoding.md, "
         "Your own units).",
     )
     parser.formatter_class = argparse.RawDescriptionHelpFormatter

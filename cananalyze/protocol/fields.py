@@ -16,7 +16,7 @@ from cananalyze.protocol.services import Service
 
 
 def frame_fields(service: int, data: bytes, rtr: bool = False, can_id: int = 0) -> dict:
-    """Service-specific JSONL fields of one frame (names are a stable API, see README).
+    """Service-specific JSONL fields of one frame (names are a stable API, docs/outputs.md).
 
     `can_id`: an error frame's classes are in its identifier."""
     s = Service(service)

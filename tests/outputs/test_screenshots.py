@@ -1,4 +1,4 @@
-"""docs/screenshots.py: the README's pictures of the report come out of headless Chromium."""
+"""docs/screenshots.py: docs/checks.md's pictures of the report come out of headless Chromium."""
 
 from __future__ import annotations
 

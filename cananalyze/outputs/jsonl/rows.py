@@ -1,4 +1,4 @@
-"""`--format jsonl`: one JSON object per line; field names are a stable API (README)."""
+"""`--format jsonl`: one JSON object per line; field names are a stable API (docs/outputs.md)."""
 
 from __future__ import annotations
 
