@@ -4,10 +4,9 @@ A single-log export types its record tables as pandas would for that log (an SDO
 column of one log is text, of another all-null; the nodes table has a column per
 service seen), which is right for `load()` and wrong for a dataset: DuckDB, Spark
 and `pyarrow.dataset` need every part of a table to agree. So each part is
-conformed to the schema here as it is committed. The column names come from the
-export's own tables (`outputs/tables/stream`: frames, signals, events; the SDO,
-findings and node columns): this module only fixes their types. docs/fleet.md
-lists them.
+conformed to the schema here as it is committed. The columns and their
+dataset types are declared once, in `outputs/schemas` (docs/outputs.md lists them):
+this module casts each part to them.
 """
 
 from __future__ import annotations
@@ -16,73 +15,15 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from cananalyze.decode.node_tally import IDENTITY_KEYS
-from cananalyze.outputs.tables.stream import (
-    EVENTS_BUS,
-    FINDING_COLUMNS,
-    FRAMES,
-    SDO_COLUMNS,
-    SIGNALS_BUS,
-)
+from cananalyze.outputs import schemas
 from cananalyze.outputs.tables.writer import LABEL  # categories: one type for every part
-from cananalyze.protocol.services import SERVICE_NAMES
 
 # every row's lineage: which file (as given, absolute), its content, which cananalyze
 LINEAGE = (("source", LABEL), ("hash", LABEL), ("version", LABEL))
 
-
-def _from_spec(spec) -> list[tuple[str, pa.DataType]]:
-    """The columns the export's writer gives a dataset part (`writer.Sink` with constants)."""
-    return [(name, LABEL if typ is None else typ) for name, typ in spec.fields]
-
-
-_SDO_TYPES = {
-    "t_start": pa.float64(),
-    "t": pa.float64(),
-    "latency_ms": pa.float64(),
-    "node": pa.int16(),
-    "index": pa.int32(),
-    "subindex": pa.int16(),
-    "size": pa.int64(),
-    "abort_code": pa.int64(),
-}
-_FINDING_TYPES = {"t": pa.float64(), "t_rel": pa.float64(), "node": pa.int16()}
-_FINDING_TYPES["cob_id"] = _FINDING_TYPES["line"] = pa.int64()
-_NODE_NUMBERS = ("device_type", "vendor_id", "product_code", "revision", "serial")
-
+# each table's columns and types, from their one declaration (outputs/schemas)
 COLUMNS: dict[str, list[tuple[str, pa.DataType]]] = {
-    "frames": _from_spec(FRAMES),
-    "signals": _from_spec(SIGNALS_BUS),  # `bus`: a log of several buses (else null)
-    "events": _from_spec(EVENTS_BUS),  # `bus`: a log of several buses (else null)
-    # SDO values are text: one log decodes a REAL32, another a VISIBLE_STRING
-    "sdo": [(c, _SDO_TYPES.get(c, pa.string())) for c in SDO_COLUMNS]
-    + [("bus", pa.string())],  # a log of several buses: which one (else null)
-    # measured/expected: a number for one rule, a state name for another
-    "findings": [(c, _FINDING_TYPES.get(c, pa.string())) for c in FINDING_COLUMNS]
-    + [("bus", pa.string())],  # a log of several buses: which one (else null)
-    "nodes": [("node", pa.int16()), ("frames", pa.int64())]
-    + [(f"frames_{s}", pa.int64()) for s in SERVICE_NAMES]
-    + [("last_state", pa.string()), ("last_state_t", pa.float64())]
-    + [(k, pa.int64() if k in _NODE_NUMBERS else pa.string()) for k in IDENTITY_KEYS]
-    + [("profile", pa.string()), ("identified_by", pa.string())]
-    + [("bus", pa.string())],  # a log of several buses: one row per bus and node
-    "logs": [
-        ("format", pa.string()),
-        ("size", pa.int64()),
-        ("frames", pa.int64()),
-        ("t_first", pa.float64()),
-        ("t_last", pa.float64()),
-        ("date_from", pa.string()),  # "log": the log's own times; "mtime": the file's
-        ("status", pa.string()),  # ok | failed
-        ("error", pa.string()),
-        ("seconds", pa.float64()),
-        ("cpu_seconds", pa.float64()),  # the worker process's, threads included
-        ("peak_rss_mb", pa.float64()),  # the worker's peak resident memory so far
-        ("skipped_lines", pa.int64()),
-        ("findings", pa.int64()),
-        ("violations", pa.int64()),
-        ("config", pa.string()),  # sha256 of the options and the files they name
-    ],
+    name: table.dataset_columns() for name, table in schemas.TABLES.items()
 }
 TABLES = ("frames", "signals", "sdo", "events", "findings", "nodes", "logs")
 

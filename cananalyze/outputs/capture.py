@@ -21,7 +21,7 @@ from cananalyze.core.frames import FrameBatch, concat
 from cananalyze.core.records import DecodedBatch
 from cananalyze.decode.events.build import LEVEL_NAMES, Event, EventState, batch_events_of
 from cananalyze.decode.node_tally import NodeTally
-from cananalyze.decode.sdo.transaction import SDO_TABLE_COLUMNS
+from cananalyze.outputs import schemas
 from cananalyze.pipeline.sink import Sink
 from cananalyze.protocol.services import SERVICE_NAMES, Service
 
@@ -105,7 +105,9 @@ class Capture:
         fb = self.batch
         channels = list(fb.channels) or ["can0"]
         chan_codes = np.minimum(fb.channel, len(channels) - 1).astype(np.int32)
-        return pd.DataFrame(
+        return _table(
+            pd,
+            schemas.FRAMES,
             {
                 "t": fb.t,
                 "channel": pd.Categorical.from_codes(chan_codes, categories=channels),
@@ -118,7 +120,7 @@ class Capture:
                 ),
                 "node": pd.arrays.IntegerArray(self.node.astype(np.int16), self.node < 0),
                 "pdo": pd.arrays.IntegerArray(self.pdo.astype(np.int8), self.pdo == 0),
-            }
+            },
         )
 
     def data_hex(self) -> pd.Series:
@@ -191,7 +193,9 @@ class Capture:
                 units.append(s.units.get(name))
                 buses.append(s.bus)
         if not names:
-            return pd.DataFrame(
+            return _table(
+                pd,
+                schemas.SIGNALS,
                 {
                     "t": np.zeros(0),
                     "node": np.zeros(0, np.int16),
@@ -200,13 +204,15 @@ class Capture:
                     "signal": pd.Categorical([]),
                     "value": np.zeros(0),
                     "unit": pd.Categorical([]),
-                }
+                },
             )
         code = np.concatenate(parts["code"])
         t = np.concatenate(parts["t"])
         order = np.argsort(t, kind="stable")
         code = code[order]
-        df = pd.DataFrame(
+        df = _table(
+            pd,
+            schemas.SIGNALS,
             {
                 "t": t[order],
                 "node": np.concatenate(parts["node"])[order],
@@ -215,7 +221,7 @@ class Capture:
                 "signal": _categorical(pd, code, names),
                 "value": np.concatenate(parts["value"])[order],
                 "unit": _categorical(pd, code, [u or "" for u in units]),
-            }
+            },
         )
         if any(b is not None for b in buses):  # several buses: which one, last (as events)
             df["bus"] = np.asarray(buses, object)[code]
@@ -264,7 +270,7 @@ class Capture:
         """The SDO transaction records, one row each, in completion order."""
         import pandas as pd
 
-        cols = list(SDO_TABLE_COLUMNS)
+        cols = [c for c in schemas.SDO.names if c != "bus"]
         at = [k for k, (_, r) in enumerate(self.records) if r.get("kind") == "sdo"]
         recs = [self.records[k][1] for k in at]
         df = pd.DataFrame.from_records(recs, columns=cols) if recs else pd.DataFrame(columns=cols)
@@ -296,9 +302,7 @@ class Capture:
         the expected value came from, line: in a log without times)."""
         import pandas as pd
 
-        from cananalyze.core.finding import TABLE_COLUMNS
-
-        cols = list(TABLE_COLUMNS)
+        cols = [c for c in schemas.FINDINGS.names if c != "bus"]
         if self.checker is not None:  # read as columns: no Finding object per row
             found = self.checker.findings
             found = found.take(np.argsort(np.asarray(found.column("t")), kind="stable"))
@@ -380,6 +384,16 @@ class Capture:
         return tally.rows(self.profiles)
 
 
+def _table(pd, table: schemas.Table, columns: dict):
+    """A DataFrame of a declared table's columns, in their declared order; `bus` (last)
+    is added by the caller on a log of several buses. A column built here that the
+    declaration lacks, or the reverse, is a bug caught on the first load()."""
+    names = [n for n in table.names if n != "bus"]
+    if list(columns) != names:
+        raise RuntimeError(f"{table.name}: built {list(columns)}, declared {names}")
+    return pd.DataFrame(columns)
+
+
 def _categorical(pd, codes: np.ndarray, labels: list[str]):
     """Categorical over possibly repeated labels: map codes onto the unique labels."""
     uniq, inverse = np.unique(np.array(labels, dtype=object), return_inverse=True)
@@ -390,7 +404,9 @@ def _event_frame(events: list[Event], first_bus: str | None = None):
     """The events table; a `bus` column (after the others) only on a log of several buses."""
     import pandas as pd
 
-    df = pd.DataFrame(
+    df = _table(
+        pd,
+        schemas.EVENTS,
         {
             "t": np.array([e.t for e in events], np.float64),
             "kind": pd.Categorical([e.kind for e in events]),
@@ -400,7 +416,7 @@ def _event_frame(events: list[Event], first_bus: str | None = None):
             ),
             "message": pd.array([e.message for e in events], dtype="string"),
             "row": pd.array([e.row for e in events], dtype="Int64"),
-        }
+        },
     )
     if any(e.bus is not None for e in events):
         df["bus"] = _buses([e.bus for e in events], first_bus)

@@ -11,11 +11,11 @@ import time
 
 from helpers.live_slcan import start_live
 from junitparser import JUnitXml
-from test_live_check import _Lines
 
 from cananalyze.core.frames import from_rows
 from cananalyze.formats.logfile import write_log
 from cananalyze.sim.slcan_replay import replay
+from tests.cli.test_live_check import _Lines
 
 PERIOD_S = 0.1
 JITTER_MS = 150  # slcan frames are time-stamped when the host reads the pty: loaded-machine slack

@@ -8,7 +8,6 @@ on the other's lane)."""
 from __future__ import annotations
 
 import collections
-import sys
 from pathlib import Path
 
 from cananalyze import load
@@ -56,8 +55,7 @@ def test_one_bus_drive_table_has_no_bus_column(tmp_path):
 
 
 def test_report_draws_a_drive_lane_per_bus(tmp_path):
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from test_report import page_figures
+    from tests.outputs.test_report import page_figures
 
     page = tmp_path / "r.html"
     main(["report", str(_log(tmp_path)), "--device", "1=cia402", "-o", str(page), "-q"])

@@ -9,11 +9,11 @@ import json
 import can
 import pytest
 from conftest import SAMPLES
-from test_foxglove_live import Halves, _mcap_messages
 
 from cananalyze.formats.source import open_log, read_all
 from cananalyze.outputs.mcap.sink import McapSink
 from cananalyze.pipeline import Options, build_decoder, run
+from tests.outputs.test_foxglove_live import Halves, _mcap_messages
 
 
 @pytest.fixture

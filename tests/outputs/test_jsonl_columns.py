@@ -165,9 +165,8 @@ def test_the_cli_writes_it(tmp_path):
 def test_sdo_pairs_from_columns(tmp_path, monkeypatch):
     """The fast pairs' frames (uploads, downloads with and without a size, an abort) get
     their fields from columns, per command byte, and print as the per-row writer prints."""
-    from test_sdo_text import PAIRS, _log
-
     from cananalyze.outputs.jsonl import sdo as sdo_jsonl
+    from tests.outputs.test_sdo_text import PAIRS, _log
 
     taken = []
     group = sdo_jsonl._group

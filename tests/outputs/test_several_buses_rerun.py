@@ -14,11 +14,11 @@ import can
 import numpy as np
 import pytest
 from exported import decoded_batches, read_rrd
-from test_several_buses_drives import DEVICE, _log
 
 from cananalyze import load
 from cananalyze.cli.main import main
 from cananalyze.outputs.busload import frame_bits, load_series
+from tests.decode.test_several_buses_drives import DEVICE, _log
 
 BITRATE = 250_000
 

@@ -19,12 +19,12 @@ import pyarrow.parquet as pq
 import pytest
 from conftest import ROOT, SAMPLES
 from exported import NETWORK, assert_wide_signals_is, export, wide_signals_as_long
-from test_network_model import frames_at, sdo_write
 
 import cananalyze
 from cananalyze.devices.builtin import load_builtin
 from cananalyze.formats.logfile import write_log
 from cananalyze.outputs.tables import writer as table_writer
+from tests.decode.test_network_model import frames_at, sdo_write
 
 I7231D = {1: "i7231d"}
 

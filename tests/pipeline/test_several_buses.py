@@ -560,9 +560,8 @@ def test_report_sdo_table_and_aborts_per_bus(tmp_path):
     """Node 5 answers two uploads on can0 and aborts one on can1: the report's SDO table
     has a row per bus and node (not three transfers, one abort for node 5), and the
     abort list names can1 node 5 (tables read with html.parser)."""
-    from test_report import parse
-
     from cananalyze.cli.main import main
+    from tests.outputs.test_report import parse
 
     lines = _beats("can0", "05", 1000.0, 10) + _beats("can1", "05", 1000.05, 10)
     for k, t in enumerate((1000.2, 1000.4)):

@@ -18,16 +18,16 @@ from canopen import timestamp as co_timestamp
 from canopen.emcy import EmcyError
 from canopen.sdo import constants as co_sdo
 from canopen.sdo.exceptions import SdoAbortedError
-from test_sdo_manual import (
+
+from cananalyze.protocol import emcy, lss, nmt, sdo
+from cananalyze.protocol import time as canopen_time
+from tests.conftest import seed_file
+from tests.protocol.test_sdo_manual import (
     ABORT_1008_1,
     BLOCK_DOWNLOAD_1400_2,
     BLOCK_UPLOAD_1008,
     SEGMENTED_UPLOAD_1008,
 )
-
-from cananalyze.protocol import emcy, lss, nmt, sdo
-from cananalyze.protocol import time as canopen_time
-from tests.conftest import seed_file
 
 I7231D = "002_8af3d3370e33cdbc.txt"
 

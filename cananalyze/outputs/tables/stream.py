@@ -35,14 +35,13 @@ from cananalyze.core.atomic import atomic_path
 from cananalyze.core.columns import arrow_build as ab
 from cananalyze.core.columns.payloads import payload_bytes, payload_hex
 from cananalyze.core.errors import UsageError
-from cananalyze.core.finding import TABLE_COLUMNS
 from cananalyze.core.finding_columns import FindingColumns
 from cananalyze.core.frames import FrameBatch
 from cananalyze.core.records import DecodedBatch
 from cananalyze.decode.events.build import LEVEL_NAMES, EventState, batch_events_of
 from cananalyze.decode.events.columns import KINDS, NO_NODE, NO_ROW, EventColumns
 from cananalyze.decode.node_tally import NodeTally, bus_profiles, node_profiles
-from cananalyze.decode.sdo.transaction import SDO_TABLE_COLUMNS
+from cananalyze.outputs import schemas
 from cananalyze.outputs.tables import pandas_like as pl
 from cananalyze.outputs.tables import sdo_chunks, wide
 from cananalyze.outputs.tables.findings_spool import FindingsSpool
@@ -62,9 +61,9 @@ from cananalyze.pipeline.sink import Sink as OutputSink
 from cananalyze.protocol.services import SERVICE_NAMES
 
 TABLES = ("frames", "signals", "sdo", "events", "findings", "nodes")
-SDO_COLUMNS = SDO_TABLE_COLUMNS
+SDO_COLUMNS = schemas.SDO.without("bus").names
 _SDO_ROW = operator.itemgetter(*SDO_COLUMNS)
-FINDING_COLUMNS = TABLE_COLUMNS  # as check --json
+FINDING_COLUMNS = schemas.FINDINGS.without("bus").names  # as check --json
 _NULLABLE_INTS = ("node", "cob_id", "line")  # findings columns of ints or none: Int64
 FINDINGS_CHUNK = 8192  # findings rows converted at a time (their values are Python objects)
 HOLD = 10.0  # seconds of events kept back for records that complete late (see _add_events)
@@ -85,105 +84,52 @@ def _meta(fields: list[dict], index: str | None = None):
     )
 
 
-def _cat(name: str, n: int = 0) -> dict:
-    return pl.field_meta(name, "categorical", "", n)  # count filled in at open
+def _column_meta(c: schemas.Column) -> dict:
+    """pandas' metadata of one declared column (a Coded column's categories counted when
+    the file opens, unless fixed)."""
+    if c.pandas and c.pandas[0] == "categorical":
+        return pl.field_meta(c.name, "categorical", "", c.categories)
+    return pl.field_meta(c.name, *c.pandas)
 
 
-FRAMES = TableSpec(
-    [
-        ("t", pa.float64()),
-        ("channel", None),
-        ("can_id", pa.uint32()),
-        ("dlc", pa.uint8()),
-        ("data", pa.binary()),
-        ("flags", pa.uint8()),
-        ("service", pa.dictionary(pl.code_type(len(SERVICE_NAMES)), pa.string())),
-        ("node", pa.int16()),
-        ("pdo", pa.int8()),
-    ],
-    _meta(
-        [
-            pl.field_meta("t", "float64", "float64"),
-            _cat("channel"),
-            pl.field_meta("can_id", "uint32", "uint32"),
-            pl.field_meta("dlc", "uint8", "uint8"),
-            pl.field_meta("data", "bytes", "binary[pyarrow]"),
-            pl.field_meta("flags", "uint8", "uint8"),
-            _cat("service", len(SERVICE_NAMES)),
-            pl.field_meta("node", "int16", "Int16"),
-            pl.field_meta("pdo", "int8", "Int8"),
-        ]
-    ),
+def _pandas_meta(table: schemas.Table) -> list[dict]:
+    return [_column_meta(c) for c in table.columns]
+
+
+_BUS_META = _column_meta(schemas.SDO.column("bus"))  # a text column, as pandas's
+
+
+def _spec(table: schemas.Table, **writer) -> TableSpec:
+    """A table's writer spec: its declared columns, plus how the writer encodes them."""
+    return TableSpec(
+        table.export_fields(), _meta(_pandas_meta(table)), required=table.required(), **writer
+    )
+
+
+FRAMES = _spec(
+    schemas.FRAMES,
     dictionary=("channel", "can_id", "service"),
     split=("t",),
     statistics=("t",),
-    required=("t", "channel", "can_id", "dlc", "data", "flags", "service"),
     uncompressed=("channel", "can_id", "dlc", "data", "flags", "service", "node", "pdo"),
     delta=("dlc", "flags", "node", "pdo"),
 )
-_SIGNAL_META = [
-    pl.field_meta("t", "float64", "float64"),
-    pl.field_meta("node", "int16", "int16"),
-    _cat("pdo"),
-    pl.field_meta("cob_id", "uint32", "uint32"),
-    _cat("signal"),
-    pl.field_meta("value", "float64", "float64"),
-    _cat("unit"),
-]
-SIGNALS = TableSpec(
-    [
-        ("t", pa.float64()),
-        ("node", pa.int16()),
-        ("pdo", None),
-        ("cob_id", pa.uint32()),
-        ("signal", None),
-        ("value", pa.float64()),
-        ("unit", None),
-    ],
-    _meta(_SIGNAL_META),
+_SIGNAL_WRITER = dict(
     sorted_labels=("pdo", "signal", "unit"),
     dictionary=("node", "pdo", "cob_id", "signal", "unit"),
     split=("t",),
     statistics=("t",),
 )
-_EVENT_META = [
-    pl.field_meta("t", "float64", "float64"),
-    _cat("kind"),
-    pl.field_meta("node", "int16", "Int16"),
-    _cat("level", len(LEVEL_NAMES)),
-    pl.field_meta("message", "object", "string"),
-    pl.field_meta("row", "int64", "Int64"),
-]
-EVENTS = TableSpec(
-    [
-        ("t", pa.float64()),
-        ("kind", None),
-        ("node", pa.int16()),
-        ("level", pa.dictionary(pl.code_type(len(LEVEL_NAMES)), pa.string())),
-        ("message", pa.large_string()),
-        ("row", pa.int64()),
-    ],
-    _meta(_EVENT_META),
-    sorted_labels=("kind",),
-    dictionary=("kind", "level", "node"),
-    statistics=("t",),
-)
-# a log of several buses: which one, after the other columns (text, as the findings' `bus`;
-# a fleet's parts always have it, null on a log of one bus)
-_BUS_META = pl.field_meta("bus", *pl.column(["can0"])[1:])  # a text column, as pandas's
-EVENTS_BUS = dataclasses.replace(
-    EVENTS,
-    fields=[*EVENTS.fields, ("bus", wide.BUS)],
-    metadata=_meta([*_EVENT_META, _BUS_META]),
-    dictionary=(*EVENTS.dictionary, "bus"),
-)
+SIGNALS = _spec(schemas.SIGNALS.without("bus"), **_SIGNAL_WRITER)
 # the long form of the signals (CSV, a fleet's parts) of a log of several buses
-SIGNALS_BUS = dataclasses.replace(
-    SIGNALS,
-    fields=[*SIGNALS.fields, ("bus", wide.BUS)],
-    metadata=_meta([*_SIGNAL_META, _BUS_META]),
-    dictionary=(*SIGNALS.dictionary, "bus"),
+SIGNALS_BUS = _spec(
+    schemas.SIGNALS, **{**_SIGNAL_WRITER, "dictionary": (*_SIGNAL_WRITER["dictionary"], "bus")}
 )
+_EVENT_WRITER = dict(sorted_labels=("kind",), statistics=("t",))
+EVENTS = _spec(schemas.EVENTS.without("bus"), dictionary=("kind", "level", "node"), **_EVENT_WRITER)
+# a log of several buses: which one, after the other columns (a fleet's parts always have
+# it, null on a log of one bus)
+EVENTS_BUS = _spec(schemas.EVENTS, dictionary=("kind", "level", "node", "bus"), **_EVENT_WRITER)
 
 
 # CSV is text: its `data` column is the payloads' hex, as `decode --format jsonl` writes them
