@@ -82,6 +82,28 @@ def block_byte(cs: int, sub: int, crc: bool = False, sized: bool = False, unused
     return command_byte(cs) | unused << 2 | flags | sub
 
 
+# Reading a command byte: the inverse of the builders above, one place for every field
+def command_specifier(byte: int) -> int:
+    """The command specifier (ccs / scs / cs): the top three bits."""
+    return byte >> 5
+
+
+def segment_unused(byte: int) -> int:
+    """n of a segment frame: bytes of its 7 that hold no data."""
+    return (byte >> 1) & 0x07
+
+
+def block_subcommand(byte: int, one_bit: bool = False) -> int:
+    """A block frame's sub-command: two bits (ss / cs), or bit 0 alone (`one_bit`) in the
+    initiate and end frames of a block's sender, whose bit 1 is the size flag (s)."""
+    return byte & (0x01 if one_bit else 0x03)
+
+
+def block_end_unused(byte: int) -> int:
+    """n of a block end frame: bytes of the last segment that hold no data."""
+    return (byte >> 2) & 0x07
+
+
 # The command bytes the fast path matches whole
 INITIATE_UPLOAD_REQUEST = command_byte(CCS_INITIATE_UPLOAD)
 INITIATE_DOWNLOAD_RESPONSE = command_byte(SCS_INITIATE_DOWNLOAD)
@@ -202,7 +224,7 @@ def describe_sdo(data: bytes, is_request: bool) -> dict:
     if not data:
         return {"command": "empty", "cs": None}
     b0 = data[0]
-    cs = b0 >> 5
+    cs = command_specifier(b0)
     out: dict = {"cs": cs}
     if cs == CS_ABORT:
         out["command"] = "abort"
@@ -238,7 +260,7 @@ def _initiate_fields(b0: int, data: bytes, out: dict) -> None:
 def _segment_fields(b0: int, data: bytes, out: dict, with_data: bool) -> None:
     out["toggle"] = int(bool(b0 & TOGGLE))
     if with_data:
-        out["n"] = (b0 >> 1) & 0x07
+        out["n"] = segment_unused(b0)
         out["c"] = b0 & LAST_SEGMENT
         out["data"] = bytes(data[1 : 8 - out["n"]]).hex()
 
@@ -254,9 +276,9 @@ def _block_initiate_or_end(
     b0: int, data: bytes, out: dict, what: str, initiate: str | None = None
 ) -> dict:
     """The sender's block frames (download client, upload server): initiate or end."""
-    if b0 & 0x01 == BLOCK_END:
+    if block_subcommand(b0, one_bit=True) == BLOCK_END:
         out["command"] = f"{what}_end"
-        out["n"] = (b0 >> 2) & 0x07
+        out["n"] = block_end_unused(b0)
         if len(data) >= 3:
             out["crc"] = struct.unpack_from("<H", data, 1)[0]
     else:
@@ -283,7 +305,7 @@ def _describe_request(b0: int, cs: int, data: bytes, out: dict) -> dict:
             _segment_fields(b0, data, out, with_data=False)
         return out
     if cs == CCS_BLOCK_UPLOAD:
-        sub = b0 & 0x03
+        sub = block_subcommand(b0)
         out["command"] = _BLOCK_UPLOAD_REQUEST[sub]
         if sub == BLOCK_INITIATE:
             _multiplexer(data, out)
@@ -314,7 +336,7 @@ def _describe_response(b0: int, cs: int, data: bytes, out: dict) -> dict:
             _segment_fields(b0, data, out, with_data=False)
         return out
     if cs == SCS_BLOCK_DOWNLOAD:
-        sub = b0 & 0x03
+        sub = block_subcommand(b0)
         out["command"] = _BLOCK_DOWNLOAD_RESPONSE[sub]
         if sub == BLOCK_INITIATE:
             _multiplexer(data, out)

@@ -244,7 +244,7 @@ class Master:
         if c.state == "block_data":
             self._block_segment(data)
             return
-        scs = data[0] >> 5
+        scs = sdo.command_specifier(data[0])
         mux = struct.pack("<HB", c.cmd.index, c.cmd.subindex)
         self._arm_timeout()
         if c.state == "up_init" and scs == sdo.SCS_INITIATE_UPLOAD:
@@ -254,7 +254,7 @@ class Master:
                 c.state = "up_seg"
                 self._req(bytes([segment_byte(sdo.CCS_UPLOAD_SEGMENT, 0)]) + b"\x00" * 7)
         elif c.state == "up_seg" and scs == sdo.SCS_UPLOAD_SEGMENT:
-            n = sdo.SEGMENT_SIZE - ((data[0] >> 1) & 0x07)
+            n = sdo.SEGMENT_SIZE - sdo.segment_unused(data[0])
             c.data += data[1 : 1 + n]
             if data[0] & sdo.LAST_SEGMENT:
                 self._finish(bytes(c.data))
@@ -281,9 +281,9 @@ class Master:
         elif (
             c.state == "block_end"
             and scs == sdo.SCS_BLOCK_UPLOAD
-            and data[0] & 0x03 == sdo.BLOCK_END
+            and sdo.block_subcommand(data[0]) == sdo.BLOCK_END
         ):
-            unused = (data[0] >> 2) & 0x07
+            unused = sdo.block_end_unused(data[0])
             if unused:
                 del c.data[-unused:]
             crc = struct.unpack_from("<H", data, 1)[0]

@@ -63,7 +63,7 @@ class SdoServer:
         try:
             if t is not None and t.kind == "block_down" and not t.done and req[0] != sdo.ABORT:
                 return self._block_down_segment(req)
-            ccs = req[0] >> 5
+            ccs = sdo.command_specifier(req[0])
             if ccs == sdo.CS_ABORT:  # abort from the client: drop the transfer silently
                 self.t = None
                 return []
@@ -84,7 +84,7 @@ class SdoServer:
             index, sub = (t.index, t.subindex) if t else struct.unpack_from("<HB", req, 1)
             initiate = (sdo.CCS_INITIATE_DOWNLOAD, sdo.CCS_INITIATE_UPLOAD)
             block = (sdo.CCS_BLOCK_UPLOAD, sdo.CCS_BLOCK_DOWNLOAD)
-            if ccs in initiate or (ccs in block and req[0] & 0x03 == sdo.BLOCK_INITIATE):
+            if ccs in initiate or (ccs in block and sdo.block_subcommand(req[0]) == sdo.BLOCK_INITIATE):
                 index, sub = struct.unpack_from("<HB", req, 1)
             self.t = None
             return [abort_frame(index, sub, exc.code)]
@@ -115,7 +115,7 @@ class SdoServer:
         toggle = int(bool(req[0] & sdo.TOGGLE))
         if toggle != t.toggle:
             raise SdoAbort(ABORT_TOGGLE)
-        n = sdo.SEGMENT_SIZE - ((req[0] >> 1) & 0x07)
+        n = sdo.SEGMENT_SIZE - sdo.segment_unused(req[0])
         t.data += req[1 : 1 + n]
         t.toggle ^= 1
         if req[0] & sdo.LAST_SEGMENT:
@@ -156,7 +156,7 @@ class SdoServer:
 
     # --- block upload ------------------------------------------------------------------
     def _block_upload(self, req: bytes) -> list[bytes]:
-        cs = req[0] & 0x03
+        cs = sdo.block_subcommand(req[0])
         t = self.t
         if cs == sdo.BLOCK_INITIATE:
             index, sub = struct.unpack_from("<HB", req, 1)
@@ -219,7 +219,7 @@ class SdoServer:
 
     # --- block download ------------------------------------------------------------------
     def _block_download(self, req: bytes) -> list[bytes]:
-        cs = req[0] & 0x01
+        cs = sdo.block_subcommand(req[0], one_bit=True)
         t = self.t
         if cs == sdo.BLOCK_INITIATE:
             index, sub = struct.unpack_from("<HB", req, 1)
@@ -233,7 +233,7 @@ class SdoServer:
             return [bytes([head]) + struct.pack("<HBB", index, sub, BLOCK_SIZE) + b"\x00" * 3]
         if t is None or t.kind != "block_down" or not t.done:
             raise SdoAbort(ABORT_COMMAND)
-        unused = (req[0] >> 2) & 0x07  # end: bytes of the last segment without data
+        unused = sdo.block_end_unused(req[0])  # end: bytes of the last segment without data
         if unused:
             del t.data[-unused:]
         if t.crc and struct.unpack_from("<H", req, 1)[0] != crc16(bytes(t.data)):

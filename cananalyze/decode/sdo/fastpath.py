@@ -110,7 +110,7 @@ def plan(batch: DecodedBatch, rows: np.ndarray, timeout: float, explicit: list[i
     partner = np.where(cand, q, -1)
     is_partner = np.zeros(m, bool)
     is_partner[partner[cand]] = True
-    scs = b0 >> 5
+    scs = sdo.command_specifier(b0)
     stray = usable & is_resp & ~is_partner & ((scs == _SCS_UPLOAD) | (scs == _SCS_DOWNLOAD))
     return FastPlan(
         rows,
