@@ -64,6 +64,7 @@ def outputs(tmp_path_factory) -> dict:
     return out
 
 
+@pytest.mark.slow
 def test_every_column_path_is_exercised(outputs) -> None:
     found = outputs["plain"]["json"]
     rules = Counter(f["rule"] for f in found)

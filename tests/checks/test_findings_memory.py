@@ -155,6 +155,7 @@ def _writing_peak(found: FindingColumns, dest) -> int:
     return peak
 
 
+@pytest.mark.slow
 def test_json_writing_holds_a_chunk_not_the_text(tmp_path):
     """Four times the findings, about the same peak while writing them, well under the
     file's size (the text built at once held more than the file)."""
@@ -176,6 +177,7 @@ def _peak_rss_kb(args: list[str]) -> int:
     return usage.ru_maxrss
 
 
+@pytest.mark.slow
 def test_check_json_peak_memory_does_not_grow_with_the_findings(tmp_path):
     """What --json adds to check's peak RSS, on a faulty log and on one 4x longer: it
     grew by about 8x the extra JSON text (every record and the text held at once); now

@@ -63,6 +63,7 @@ def _late_heartbeats(rows, declared_ms: float | None, jitter_ms: float) -> tuple
 
 
 @pytest.mark.parametrize("name", sorted(config_traffic.SCENARIOS))
+@pytest.mark.slow
 def test_configuration_changes_give_no_false_finding(name, tmp_path):
     rows, rules_text = config_traffic.SCENARIOS[name]()
     log, rules, found = _check_rows(tmp_path, rows, rules_text)
@@ -83,6 +84,7 @@ def test_configuration_changes_give_no_false_finding(name, tmp_path):
     assert len(cap.frames) == len(rows) > 20
 
 
+@pytest.mark.slow
 def test_period_changed_by_sdo_a_late_heartbeat_is_still_found(tmp_path):
     """The same traffic with two heartbeats held back after the change to 100 ms: the one
     late gap (300 ms, past 100 ms and the scenario's 100 ms jitter floor) is found,

@@ -68,6 +68,7 @@ def _run(log, args, tmp_path):
     return proc.returncode, lines, err, t_end, sent, out.lines
 
 
+@pytest.mark.slow
 def test_faults_found_live_with_report_exit_1_and_rrd(tmp_path):
     junit, js, rrd = tmp_path / "r.xml", tmp_path / "f.json", tmp_path / "live.rrd"
     rc, lines, err, t_end, sent, timed = _run(
@@ -175,6 +176,7 @@ def test_faults_found_live_with_report_exit_1_and_rrd(tmp_path):
     assert len(rows["/bus/load"]) >= 95  # 0.1 s windows over a ~10 s session
 
 
+@pytest.mark.slow
 def test_commissioning_passes_live_exit_0(tmp_path):
     # The sample's own rules with a looser timing tolerance: slcan frames are time-stamped
     # when the host reads them, and a replay over a pty on a loaded machine moves frames

@@ -56,6 +56,7 @@ def _same_frames(got: list[can.Message], sent: list[can.Message]) -> None:
             assert bytes(g.data) == bytes(s.data)
 
 
+@pytest.mark.slow
 def test_plain_decode_and_candump_record_match_what_was_sent(tmp_path):
     rec = tmp_path / "live.log"
     proc, adapter, slave = _start_live(["--plain", "--record", str(rec)])
@@ -97,6 +98,7 @@ def test_plain_decode_and_candump_record_match_what_was_sent(tmp_path):
 
 
 @pytest.mark.parametrize(("suffix", "sig"), [(".blf", signal.SIGINT), (".mcap", signal.SIGTERM)])
+@pytest.mark.slow
 def test_interrupted_session_leaves_a_valid_recording(tmp_path, suffix, sig):
     rec = tmp_path / f"live{suffix}"
     proc, adapter, _ = _start_live(["--plain", "--record", str(rec)])
@@ -144,6 +146,7 @@ def test_interrupted_session_leaves_a_valid_recording(tmp_path, suffix, sig):
     _same_frames(got, sent)
 
 
+@pytest.mark.slow
 def test_adapter_unplugged_gives_one_line_and_a_valid_recording(tmp_path):
     rec = tmp_path / "cut.blf"
     proc, adapter, slave = _start_live(["--plain", "--record", str(rec)])

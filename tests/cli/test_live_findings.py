@@ -9,6 +9,7 @@ import re
 import signal
 import time
 
+import pytest
 from helpers.live_slcan import start_live
 from junitparser import JUnitXml
 
@@ -23,6 +24,7 @@ STOP_S = 2.0  # node 5's last heartbeat; node 6 goes on to END_S
 END_S = 5.0
 
 
+@pytest.mark.slow
 def test_silent_node_reported_while_the_session_runs(tmp_path):
     rows = [(0.0, 0x705, b"\x05"), (0.0, 0x706, b"\x05")]
     k = 1
@@ -72,6 +74,7 @@ def test_silent_node_reported_while_the_session_runs(tmp_path):
     assert case.result and "heartbeat stopped" in case.result[0].message
 
 
+@pytest.mark.slow
 def test_only_node_on_the_bus_falls_silent_into_a_file(tmp_path):
     """The only node stops: no frame arrives at all. The finding is on the wall clock,
     within the bound, written into a file (stdout redirected) as it happens; at exit it is

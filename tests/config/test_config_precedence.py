@@ -265,6 +265,7 @@ def test_real_pcan3_nmt_reset_is_not_a_heartbeat_dropout():
 
 
 # --- python-canopen: a real SDO client and heartbeat producer on a virtual bus ----------
+@pytest.mark.slow
 def test_canopen_heartbeat_off_then_300_and_read_back(tmp_path):
     import can
     import canopen

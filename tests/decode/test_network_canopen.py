@@ -55,6 +55,7 @@ def _record_configuration(eds: str, channel: str) -> list[tuple[float, int, byte
 
 
 @pytest.mark.parametrize("with_eds", [False, True])
+@pytest.mark.slow
 def test_canopen_pdo_api_mapping_is_followed(with_eds):
     eds = str(real_file("christiansandberg__canopen/sample.eds"))
     frames = _record_configuration(eds, f"cananalyze-net-{with_eds}")

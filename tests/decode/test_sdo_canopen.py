@@ -64,6 +64,7 @@ def bus():
     server_net.disconnect()
 
 
+@pytest.mark.slow
 def test_expedited_segmented_reads_writes_abort(bus) -> None:
     client_net, remote, recorder, od = bus
     sdo = remote.sdo
@@ -135,6 +136,7 @@ def test_missing_node_times_out(bus) -> None:
 
 @pytest.mark.parametrize("crc", [True, False])
 @pytest.mark.parametrize("blksizes", [(127,), (4, 7, 2)])
+@pytest.mark.slow
 def test_block_transfers_with_canopen_client(crc: bool, blksizes: tuple[int, ...]) -> None:
     channel = unique_channel("block")
     big = bytes((i * 7 + 3) & 0xFF for i in range(1000))  # > 127 * 7: two upload sub-blocks

@@ -77,6 +77,7 @@ def _read(path: Path) -> FrameBatch:
         "SeonilChoi__CANOPEN-SDK/log2.txt",
     ],
 )
+@pytest.mark.slow
 def test_real_logs(rel: str) -> None:
     fb = _read(real_file(rel))
     assert len(fb)
@@ -164,6 +165,7 @@ def traffic(draw):
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(traffic(), st.sampled_from([1000, 5, 3, 2]))
+@pytest.mark.slow
 def test_random_traffic(fb: FrameBatch, step: int) -> None:
     assert_same(fb, steps=(step,), object_info=_object_info)
 
@@ -341,6 +343,7 @@ def struct_u32(v: int) -> bytes:
     return v.to_bytes(4, "little")
 
 
+@pytest.mark.slow
 def test_canopen_traffic_of_several_servers_interleaved() -> None:
     """Expedited and segmented transfers and an abort (python-canopen's client and server,
     nodes 5 and 6) and block transfers (node 7), merged in time so the servers' transfers

@@ -135,6 +135,7 @@ def _drive_run(tmp_path, refuse=(), steps=("OPERATION ENABLED", "SWITCH ON DISAB
         d.close()
 
 
+@pytest.mark.slow
 def test_python_canopen_drive_states_and_a_fault(tmp_path):
     log, failed = _drive_run(tmp_path)
     assert not failed
@@ -169,6 +170,7 @@ def test_python_canopen_drive_states_and_a_fault(tmp_path):
     assert "Control word expedited -> ok: 15 (0xF) (enable operation; " in text
 
 
+@pytest.mark.slow
 def test_a_command_the_drive_does_not_follow(tmp_path):
     log, failed = _drive_run(
         tmp_path, refuse={"OPERATION ENABLED"}, steps=("OPERATION ENABLED",), fault=False

@@ -82,6 +82,7 @@ def _table(dataset: Path, name: str) -> pa.Table:
     return ds.dataset(dataset / name, format="parquet", partitioning="hive").to_table()
 
 
+@pytest.mark.slow
 def test_cluster_is_local_only(fleet):
     r = fleet["result"]
     assert r.scheduler.startswith("tcp://127.0.0.1:")
@@ -273,6 +274,7 @@ def test_junit_has_one_testsuite_per_log(fleet):
     assert pcan1.failures >= 1 and pcan1.tests > 1
 
 
+@pytest.mark.slow
 def test_second_run_skips_and_force_redoes(fleet, tmp_path):
     dataset = tmp_path / "ds"
     logs = [str(real_file(r)) for r in REAL_LOGS[:2]]
@@ -291,6 +293,7 @@ def test_second_run_skips_and_force_redoes(fleet, tmp_path):
     assert not any((dataset / layout.STAGING).iterdir())
 
 
+@pytest.mark.slow
 def test_a_rerun_with_another_configuration_decodes_again(tmp_path):
     """The skip key holds the options and the content of the files they name: tables
     made under one network file are not kept when the next run gives another."""
@@ -445,6 +448,7 @@ def test_query_cli_table_csv_json_and_errors(fleet, capsys):
     assert main(["query", str(fleet["root"] / "none"), "SELECT 1"]) == 2
 
 
+@pytest.mark.slow
 def test_fleet_cli_exit_codes(tmp_path, capsys):
     ok = real_file(REAL_LOGS[2])  # brake sensor: decodes, no violations
     out = tmp_path / "ds"
@@ -470,6 +474,7 @@ def test_export_of_a_log_without_frames_writes_empty_tables(tmp_path):
         assert pq.read_table(tmp_path / "out" / f"{name}.parquet").num_rows == 0, name
 
 
+@pytest.mark.slow
 def test_ctrl_c_then_a_rerun_finishes_the_fleet(tmp_path):
     """SIGINT to a running `cananalyze fleet`: exit 130, no part without its log's row once
     the next run has started, and the rerun completes every log exactly once."""

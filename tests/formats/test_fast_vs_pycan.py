@@ -135,6 +135,7 @@ REAL = [
 
 
 @pytest.mark.parametrize("rel,kw", REAL, ids=[r for r, _ in REAL])
+@pytest.mark.slow
 def test_real_logs(rel: str, kw: dict) -> None:
     _assert_same(real_file(rel), **kw)
 

@@ -117,6 +117,7 @@ def test_bus_arguments():
         buses(["virtual", "pcan", "kvaser"], ["a", "b"])
 
 
+@pytest.mark.slow
 def test_live_cli_two_buses_record_and_summary(tmp_path, monkeypatch, capsys):
     """`live -i virtual -c A,B --record x.log --plain`: the candump recording names both
     buses, as python-can's reader reads them back."""

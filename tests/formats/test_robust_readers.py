@@ -78,6 +78,7 @@ def _cuts(data: bytes, limit: int = 120) -> list[int]:
 
 
 @pytest.mark.parametrize("key", sorted(TEXT_LOGS))
+@pytest.mark.slow
 def test_text_log_cut_anywhere_keeps_complete_lines(key, tmp_path):
     path = real_file(TEXT_LOGS[key])
     data = path.read_bytes()[:60000]
@@ -127,6 +128,7 @@ def _blf_with(container_payload: bytes, tmp_path, method: int = 2, usize: int = 
     )
 
 
+@pytest.mark.slow
 def test_blf_decompression_bomb_memory_bounded(tmp_path):
     """A container inflating to 1 GiB of zeros is refused after 64 MiB; memory stays bounded."""
     import tracemalloc

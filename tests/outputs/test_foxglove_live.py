@@ -115,6 +115,7 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+@pytest.mark.slow
 def test_live_cli_serves_and_records_at_once(tmp_path):
     """`live --record x.mcap --foxglove 127.0.0.1:PORT` on an slcan pty: the client gets
     every frame, and the recording has the same ones."""

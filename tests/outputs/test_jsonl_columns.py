@@ -83,6 +83,7 @@ def test_samples(argv, monkeypatch):
         "nigel-bruce-khan__ros_canopen-tmcm-1636/candump.txt",
     ],
 )
+@pytest.mark.slow
 def test_real_logs(rel, monkeypatch):
     assert _both(_decode([str(real_file(rel))]), monkeypatch) > 10
 

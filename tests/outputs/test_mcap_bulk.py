@@ -170,6 +170,7 @@ def _by_topic(summary) -> dict:
 
 
 @pytest.mark.parametrize("which", ["demo", "generated"])
+@pytest.mark.slow
 def test_same_messages_as_mcap_writer(which, request, tmp_path):
     log, devices = request.getfixturevalue(which)
     cap = cananalyze.load(log, device=devices)

@@ -53,6 +53,7 @@ def test_samples_mcap_is_load(tmp_path, name):
 
 
 @pytest.mark.parametrize("size", [1, 7, 1000])
+@pytest.mark.slow
 def test_batch_size_invariance(tmp_path, size):
     """Cut anywhere (a frame at a time, like live), the messages are those of one batch."""
     log = SAMPLES / "faults.log"
@@ -62,6 +63,7 @@ def test_batch_size_invariance(tmp_path, size):
     assert_same_mcap(whole, tmp_path / "cut" / "x.mcap")
 
 
+@pytest.mark.slow
 def test_generated_devices_small_batches(tmp_path):
     """16 nodes with profiles: signal topics, SDO transfers and EMCY cut across batches."""
     m = _as_load(tmp_path, generated_log(tmp_path, 30000), 997, device=DEVICES)
@@ -111,6 +113,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.slow
 def test_cli_export_and_decode_write_the_same_mcap(tmp_path):
     """export --mcap (with --parquet beside it) writes load()'s log, findings included;
     decode --mcap (no rules) the same messages but the findings; the nodes attachment names

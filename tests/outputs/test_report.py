@@ -218,6 +218,7 @@ def test_report_is_self_contained(faults_report):
     assert faults_report.stat().st_size < 4_000_000
 
 
+@pytest.mark.slow
 def test_page_of_a_long_faulty_log_stays_under_3_mb(tmp_path):
     """Issue 25: a few MB whatever the log's length. The page is plotly.js (fixed), lists
     capped (50 lines per finding group, 2000 EMCYs, 500 SDO aborts) and plots of a fixed
@@ -448,6 +449,7 @@ def _browser_check(page: Path, shot_name: str) -> None:
     assert coloured.sum() > 200
 
 
+@pytest.mark.slow
 def test_report_in_chromium(faults_report):
     _browser_check(faults_report, "faults.png")
 
@@ -468,6 +470,7 @@ READABLE = {
 }
 
 
+@pytest.mark.slow
 def test_report_readable_in_chromium(faults_report):
     """What the eye meets: no plot's title under plotly's mode bar; tick labels without
     float noise (node 5's heartbeat is 100 ms to the µs: its axis read 100.00015); and
@@ -504,6 +507,7 @@ def test_report_readable_in_chromium(faults_report):
                     assert np.asarray(seen, float) == pytest.approx(np.asarray(mine, float))
 
 
+@pytest.mark.slow
 def test_real_log_report_in_chromium(tmp_path):
     log = real_file("hilch__canopen-message-interpreter/pcan3.trc")
     out = tmp_path / "pcan3.html"

@@ -50,6 +50,7 @@ def test_samples_rrd_is_load(tmp_path, name):
 
 
 @pytest.mark.parametrize("size", [1, 7, 1000])
+@pytest.mark.slow
 def test_batch_size_invariance(tmp_path, size):
     """Cut anywhere (a frame at a time, like live), the recording is that of one batch."""
     log = SAMPLES / "faults.log"

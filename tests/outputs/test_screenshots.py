@@ -10,6 +10,7 @@ import pytest
 from conftest import ROOT
 
 
+@pytest.mark.slow
 def test_screenshots_script_draws_the_reports(tmp_path):
     from helpers import browser
 

@@ -102,6 +102,7 @@ def test_frames_per_service_as_python_can_reads_them(tmp_path):
 
 @pytest.mark.parametrize("fmt", ["parquet", "csv"])
 @pytest.mark.parametrize("size", [1, 7, 1000])
+@pytest.mark.slow
 def test_batch_size_invariance(tmp_path, fmt, size):
     """Cut anywhere (a frame at a time, like live), the files are those of one batch."""
     log = SAMPLES / "faults.log"
@@ -111,6 +112,7 @@ def test_batch_size_invariance(tmp_path, fmt, size):
 
 
 @pytest.mark.parametrize("fmt", ["parquet", "csv"])
+@pytest.mark.slow
 def test_generated_devices_small_batches(tmp_path, fmt):
     """Generated 16-node traffic with device profiles (signals, SDO, EMCY), cut in batches
     that end mid-way through transfers and make categories appear after the first chunk."""

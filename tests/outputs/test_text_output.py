@@ -170,6 +170,7 @@ def test_signals_of_a_builtin_device(tmp_path: Path) -> None:
     assert _check(batches, color=False) >= 3
 
 
+@pytest.mark.slow
 def test_benchmark_mix_with_devices() -> None:
     """16 DAT 7014 nodes: TPDO2 rows carry four scaled signals, formatted per column."""
     from generate import generate

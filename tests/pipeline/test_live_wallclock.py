@@ -18,6 +18,7 @@ import time
 
 import can
 import canopen
+import pytest
 from canopen.objectdictionary import UNSIGNED16
 from canopen.sdo.exceptions import SdoError
 from rich.console import Console
@@ -100,6 +101,7 @@ def _heartbeat(got):
     return [(at, f) for at, f in got if f.rule == "heartbeat" and f.node == NODE]
 
 
+@pytest.mark.slow
 def test_only_node_silent_reported_on_the_wall_clock(tmp_path):
     channel = unique_channel("wallclock")
     session = _Session(channel, _rules(tmp_path))
@@ -157,6 +159,7 @@ class _Screen(DashboardSink):
             self.seen = (now, line)
 
 
+@pytest.mark.slow
 def test_dashboard_findings_panel_shows_the_silent_node(tmp_path):
     channel = unique_channel("wallclock-dash")
     screen = _Screen(f"heartbeat: node {NODE} heartbeat stopped")
@@ -180,6 +183,7 @@ def test_dashboard_findings_panel_shows_the_silent_node(tmp_path):
     assert screen.view.violations == 1
 
 
+@pytest.mark.slow
 def test_every_producer_stopping_each_reported(tmp_path):
     """A heartbeat and python-canopen's SYNC producer stop together: the bus goes quiet.
     Each deadline is reported on the wall clock, once, each saying no frame came at all."""
@@ -214,6 +218,7 @@ def test_every_producer_stopping_each_reported(tmp_path):
     assert got["sync"][0][1].message.startswith("no SYNC since +")
 
 
+@pytest.mark.slow
 def test_node_back_late_is_one_finding(tmp_path):
     """The silence seen on the wall clock, then the node's next heartbeat: one finding,
     completed with the whole gap (a dropout), not a second one."""
@@ -242,6 +247,7 @@ def test_node_back_late_is_one_finding(tmp_path):
     assert f.measured > (BOUND_S + 0.8) * 1000 - 200
 
 
+@pytest.mark.slow
 def test_unanswered_sdo_request_times_out_on_the_tick(tmp_path):
     """python-canopen's SDO client asks node 9, which is not there: the only frame on the
     bus. The tracker's timeout (1 s) is reported while the client still waits."""

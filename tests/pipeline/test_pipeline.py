@@ -233,6 +233,7 @@ def test_check_is_coloured_on_a_terminal_unless_no_color():
     assert b"\x1b[" not in decoded and b"boot-up" in decoded
 
 
+@pytest.mark.slow
 def test_progress_bar_on_a_terminal(tmp_path):
     log = generated_log(tmp_path, 300_000)
     shown = _on_a_terminal(["export", log, "--parquet", tmp_path / "pq"], stream="stderr")

@@ -431,6 +431,7 @@ def test_pipeline_finishes_every_sink_before_committing_any(tmp_path):
 
 
 @pytest.mark.parametrize("after", [0.05, 0.6, 1.5])
+@pytest.mark.slow
 def test_sigterm_during_export_leaves_no_temporary_file(tmp_path, after):
     import signal
 

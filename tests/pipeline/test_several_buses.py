@@ -242,6 +242,7 @@ def test_nodes_split_over_two_buses_decode_as_on_one(tmp_path):
 # --- live: two python-can virtual buses, python-canopen nodes 5 on both -----------------
 
 
+@pytest.mark.slow
 def test_live_two_buses_same_node_id_no_false_finding(tmp_path):
     """python-canopen LocalNodes with id 5 on two virtual buses, heartbeats every 100 ms
     (different states): `live -c A,B --check` finds nothing, and each bus's node 5 keeps
@@ -890,6 +891,7 @@ def _pdo_frames(log, node: int) -> dict[str, list[float]]:
 
 @pytest.mark.parametrize("fmt", ["parquet", "csv"])
 @pytest.mark.parametrize("size", [None, 7])
+@pytest.mark.slow
 def test_signals_say_which_bus(tmp_path, monkeypatch, fmt, size):
     """Node 5's PDOs on can0 and on can1 are two series: load().signals and the signals
     table (Parquet: one row per frame; CSV: one row per value) have a `bus` column, each

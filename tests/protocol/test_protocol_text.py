@@ -11,6 +11,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 from conftest import ROOT, real_file
 
 from cananalyze.core.columns import bytecols
@@ -103,6 +104,7 @@ def _subindexes(text: str) -> set[str]:
     return set(_OBJECT.findall(text))
 
 
+@pytest.mark.slow
 def test_objects_written_with_a_two_digit_hex_subindex_everywhere(tmp_path):
     """pcan3.trc reads 0x2010:08 and 0x205B:01 (aborted): the frame lines, their
     transaction lines, the findings and the events table all write the sub-index so."""

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -80,6 +81,7 @@ def test_sdo_tracker_any_sequence(frames):
 
 @fuzz_settings(150)
 @given(st.lists(st.lists(frame_rows, max_size=40), min_size=1, max_size=4), st.booleans())
+@pytest.mark.slow
 def test_full_decoder_and_writers(batches, sort):
     """The decode pipeline over several batches: text and JSONL without error, JSON valid."""
     n, jsonl, text = decode_all(make_batch(rows, sort) for rows in batches)

@@ -9,6 +9,7 @@ import threading
 import time
 
 import can
+import pytest
 from conftest import SAMPLES
 
 from cananalyze.checks.build import build_checker
@@ -21,6 +22,7 @@ from cananalyze.sim.session import build
 NETWORK = SAMPLES / "network.toml"
 
 
+@pytest.mark.slow
 def test_simulated_faults_are_found_live():
     net = load_network(str(NETWORK))
     sim, _, _ = build(net.profiles, "faults", 10.5, 0, net.bitrate, config=net.config)

@@ -106,6 +106,7 @@ def test_bench_tables_compares_each_layout(logs, tmp_path):
     assert done.stdout.splitlines()[-1].startswith("load average")
 
 
+@pytest.mark.slow
 def test_bench_fleet(tmp_path):
     """Four logs on 1 and 2 real local workers: every run complete, every figure printed."""
     out = _run("bench_fleet.py", "5", "1500", "--repeats", "1", "--out", str(tmp_path), timeout=300)
@@ -120,6 +121,7 @@ def test_bench_fleet(tmp_path):
     assert re.fullmatch(rf"speed-up 2 vs 1 workers: {NUMBER}x wall", lines[-1])
 
 
+@pytest.mark.slow
 def test_bench_decode_prints_every_figure(logs):
     out = _run(
         "bench_decode.py",
@@ -180,6 +182,7 @@ def test_bench_decode_prints_every_figure(logs):
     assert not list(logs.glob("tmp*"))  # its temporary outputs are gone
 
 
+@pytest.mark.slow
 def test_bench_decode_against_another_tree(logs, tmp_path):
     """--against with this same checkout: both columns measured, ratios; `--only` keeps the
     run short (every figure's command is listed below, from the same `commands`)."""
@@ -230,6 +233,7 @@ def test_bench_decode_against_a_folder_without_cananalyze(tmp_path):
     assert done.returncode == 2 and "no cananalyze package there" in done.stderr
 
 
+@pytest.mark.slow
 def test_bench_floor_table_for_every_format(logs):
     """The library-only CPU of an export and the floor it sets, per input format."""
     lines = _run(
@@ -244,6 +248,7 @@ def test_bench_floor_table_for_every_format(logs):
     assert not list(logs.glob("tmp*"))  # the exported tables are cleaned up
 
 
+@pytest.mark.slow
 def test_bench_live_keeps_every_frame(tmp_path):
     """live's sinks, the rules and both recordings on a virtual bus: nothing dropped."""
     out = _run(
@@ -303,6 +308,7 @@ def test_arrow_column_waits_for_a_whole_pyarrow(monkeypatch):
     assert mem_profile._arrow_mb() == 5
 
 
+@pytest.mark.slow
 def test_bench_report_prints_cpu_wall_and_page_size(logs):
     """Both buses (the faulty one generated beside the healthy one): check's and report's
     figures, their CPU ratio and the page's size, which is the file's."""
@@ -330,6 +336,7 @@ def test_bench_report_prints_cpu_wall_and_page_size(logs):
         )
 
 
+@pytest.mark.slow
 def test_bench_live_serves_foxglove_without_drops():
     """--foxglove: the server's client (another process) gets every frame the sinks kept."""
     pytest.importorskip("foxglove")
@@ -370,6 +377,7 @@ def test_bench_pcap_reads_every_frame():
         assert re.search(rf"  {side} +wall +{NUMBER} s  cpu +{NUMBER} s .*\({count} frames\)", out)
 
 
+@pytest.mark.slow
 def test_bench_precision_table_per_rule_and_per_1000_frames():
     """The samples as the "real" folder, this checkout against itself: every log listed
     with its findings in both columns, per rule counts and rates, CPU beside wall."""
@@ -389,6 +397,7 @@ def test_bench_precision_table_per_rule_and_per_1000_frames():
         )
 
 
+@pytest.mark.slow
 def test_fuzz_campaign_counts_every_category(tmp_path):
     done = _run("fuzz_campaign.py", "--seconds", "6", "--seed", "5", "--out", str(tmp_path))
     lines = done.stdout.splitlines()
