@@ -84,7 +84,9 @@ class SdoServer:
             index, sub = (t.index, t.subindex) if t else struct.unpack_from("<HB", req, 1)
             initiate = (sdo.CCS_INITIATE_DOWNLOAD, sdo.CCS_INITIATE_UPLOAD)
             block = (sdo.CCS_BLOCK_UPLOAD, sdo.CCS_BLOCK_DOWNLOAD)
-            if ccs in initiate or (ccs in block and sdo.block_subcommand(req[0]) == sdo.BLOCK_INITIATE):
+            if ccs in initiate or (
+                ccs in block and sdo.block_subcommand(req[0]) == sdo.BLOCK_INITIATE
+            ):
                 index, sub = struct.unpack_from("<HB", req, 1)
             self.t = None
             return [abort_frame(index, sub, exc.code)]
