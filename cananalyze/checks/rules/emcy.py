@@ -281,6 +281,3 @@ class EmcyRule(Rule):
                 why="No error reset (EMCY 0x0000) followed; the node may still be in its fault "
                 "reaction; check whether the cause was removed.",
             )
-
-    def active_errors(self) -> dict[int, list[int]]:
-        return {n: sorted(a) for n, a in self.active.items() if a}

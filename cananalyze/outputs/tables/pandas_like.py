@@ -210,12 +210,6 @@ def column(values: list, as_object: bool = False) -> tuple[pa.Array, str, str]:
     return convert(values, how), pandas_type, numpy_type
 
 
-def nullable_int(values: list) -> tuple[pa.Array, str, str]:
-    """A column the Capture casts with .astype("Int64") (findings node and cob_id)."""
-    ints = [None if _missing(v) else int(v) for v in values]
-    return ab.optional_ints(ints, pa.int64()), "int64", "Int64"
-
-
 def field_meta(name: str, pandas_type: str, numpy_type: str, meta: dict | None = None) -> dict:
     return {
         "name": name,

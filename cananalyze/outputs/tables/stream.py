@@ -860,7 +860,7 @@ def _sdo_schema(decided: tuple[tuple[str, str, str], ...], bus: bool = False) ->
 
 def _findings_schema(decided: dict[str, tuple[str, str, str]]) -> pa.Schema:
     """The findings table's schema: each column as decided (as pl.column), the nullable
-    ints (node, cob_id, line: none in a log without times) as pl.nullable_int; `bus`
+    ints (node, cob_id, line: none in a log without times) as nullable Int64; `bus`
     (after the others) when it was decided, on a log of several buses."""
     fields, metas = [], []
     for name in (*FINDING_COLUMNS, "bus") if "bus" in decided else FINDING_COLUMNS:
