@@ -540,7 +540,7 @@ FORMAT = register(
         sniff=sniff,
         read=read,
         suffixes=(".asc",),
-        priority=30,
+        priority=31,
     )
 )
 

@@ -879,6 +879,6 @@ FORMAT = register(
         sniff=sniff,
         read=read,
         suffixes=(".blf",),
-        priority=10,
+        priority=11,
     )
 )

@@ -441,6 +441,6 @@ FORMAT = register(
         sniff=sniff,
         read=read,
         suffixes=(".pcap", ".pcapng", ".cap"),
-        priority=10,
+        priority=12,
     )
 )

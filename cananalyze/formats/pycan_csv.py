@@ -95,6 +95,6 @@ FORMAT = register(
         sniff=sniff,
         read=read,
         suffixes=(".csv",),
-        priority=40,
+        priority=41,
     )
 )

@@ -41,13 +41,19 @@ class LogFormat:
     sniff: Callable[[bytes], bool]  # given the first few KiB (decompressed)
     read: Reader
     suffixes: tuple[str, ...] = ()
-    priority: int = 50  # lower sniffs first
+    priority: int = 50  # lower sniffs first; one format a number, so the order is this data
 
 
 FORMATS: list[LogFormat] = []
 
 
 def register(fmt: LogFormat) -> LogFormat:
+    """Called once by each format module as it is imported (the source facade imports
+    every module of this package): a new format is its module and nothing else."""
+    taken = {f.priority: f.name for f in FORMATS if f.name != fmt.name}
+    if fmt.priority in taken:
+        raise ValueError(f"{fmt.name}: priority {fmt.priority} is {taken[fmt.priority]}'s")
+    FORMATS[:] = [f for f in FORMATS if f.name != fmt.name]
     FORMATS.append(fmt)
     FORMATS.sort(key=lambda f: f.priority)
     return fmt

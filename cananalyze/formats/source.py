@@ -10,6 +10,7 @@ import gzip
 import importlib
 import io
 import os
+import pkgutil
 import stat
 import sys
 import zlib
@@ -21,13 +22,14 @@ from typing import BinaryIO
 from cananalyze.core.errors import InputError, ProblemLog
 from cananalyze.core.frames import FrameBatch
 from cananalyze.formats import registry
-from cananalyze.formats.known import FORMAT_MODULES
 from cananalyze.formats.registry import DEFAULT_BATCH, LogFormat, ReadContext
 
 SNIFF_BYTES = 65536
 
-for _name in FORMAT_MODULES:
-    importlib.import_module(f"{__package__}.{_name}")
+# every module of this package: each format module registers its LogFormat as it is
+# imported (the others are the facade's own parts, cheap to import)
+for _module in pkgutil.iter_modules(sys.modules[__package__].__path__):
+    importlib.import_module(f"{__package__}.{_module.name}")
 
 
 def _describe(head: bytes) -> str:

@@ -229,6 +229,6 @@ FORMAT = register(
         sniff=sniff,
         read=read,
         suffixes=(".trc",),
-        priority=30,
+        priority=32,
     )
 )
