@@ -21,9 +21,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "them instead of --network. Exit 0 when every log decoded and no rule was violated, "
         "1 when a log failed or had violations, 2 on usage errors.",
     )
-    options_.add(p, "inputs", "out", "device", "eds", "network", "dbc_in", "rules", "sdo_timeout")
-    options_.add(p, "strict", "workers", "scheduler", "force", "junit", "parquet_compression")
-    options_.add(p, "quiet", extra_names=DBC)
+    options_.add(p, "inputs", "out", "device", "eds", "network", "dbc_in", extra_names=DBC)
+    options_.add(p, "rules", "sdo_timeout", "strict", "workers", "scheduler", "force", "junit")
+    options_.add(p, "parquet_compression", "quiet")
     p.set_defaults(func=run)
 
 

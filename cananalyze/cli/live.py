@@ -29,10 +29,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "configuration (~/.canrc, CAN_INTERFACE/CAN_CHANNEL/CAN_BITRATE) applies.",
     )
     options_.add(p, "interface", "channel", "bitrate", "filter", "bus_option", "network", "device")
-    options_.add(p, "eds", "dbc_in", "live_check", "junit", "json", "rerun", "rrd", "foxglove")
-    options_.add(
-        p, "plain", "no_color", "time", "record", "duration", "sdo_timeout", extra_names=DBC
-    )
+    options_.add(p, "eds", "dbc_in", "live_check", "junit", "json", extra_names=DBC)
+    options_.add(p, "rerun", "rrd", "foxglove", "plain", "no_color", "time", "record", "duration")
+    options_.add(p, "sdo_timeout")
     p.set_defaults(func=run, strict=False, input_format=None)
 
 

@@ -401,9 +401,9 @@ def add(
     `extra_names` gives a flag another spelling in this command only (`--dbc` for
     `--dbc-in` where no `--dbc` is written); `defaults` override a flag's default here
     (`duration=10.0`), the help saying so."""
-    unknown = set(defaults) - set(keys)
+    unknown = (set(defaults) | set(extra_names or ())) - set(keys)
     if unknown:
-        raise ValueError(f"defaults for flags not added here: {sorted(unknown)}")
+        raise ValueError(f"defaults or names for flags not added here: {sorted(unknown)}")
     for key in keys:
         flag = FLAGS[key]
         kwargs = dict(flag.kwargs)

@@ -88,6 +88,22 @@ def test_shared_flags_are_the_same_in_every_command():
     assert timeout == Options().sdo_timeout == 1.0
 
 
+def test_every_command_that_reads_a_dbc_but_writes_none_takes_dbc_too():
+    """--dbc-in everywhere; --dbc as its other name except in export, where --dbc writes one."""
+    for name, sub in _subparsers(build_parser()).items():
+        dbc = [a for a in sub._actions if a.dest == "dbc_in"]
+        if not dbc:
+            continue
+        want = ["--dbc-in"] if name == "export" else ["--dbc", "--dbc-in"]
+        assert dbc[0].option_strings == want, name
+        if name != "export":
+            assert sub.parse_args(["--dbc", "x.dbc", *_required(name)]).dbc_in == ["x.dbc"]
+
+
+def _required(name: str) -> list[str]:
+    return {"fleet": ["log.log", "--out", "ds"], "live": []}.get(name, ["log.log"])
+
+
 @pytest.fixture
 def one_more_device(tmp_path, monkeypatch):
     """decoders/ copied with one more device: dat7014's EDS and sidecar as `mydevice`."""
