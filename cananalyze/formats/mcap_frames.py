@@ -1,7 +1,7 @@
 """The `/can/frames` MCAP topic: its one schema, its payload builder and its clock.
 
 `export --mcap` (StreamMcap, write_mcap), `live --record x.mcap` (FrameRecorder) and
-the MCAP reader (`formats/mcap.py`) all take the topic from here, so a file written by
+the MCAP reader (`formats/logs/mcap.py`) all take the topic from here, so a file written by
 either opens in the other. One JSON message per frame, schema `cananalyze.Frame`:
 
   {"channel":"can0","can_id":385,"dlc":8,"data":"0102030405060708","flags":0,

@@ -21,15 +21,14 @@ from typing import BinaryIO
 
 from cananalyze.core.errors import InputError, ProblemLog
 from cananalyze.core.frames import FrameBatch
-from cananalyze.formats import registry
+from cananalyze.formats import logs, registry
 from cananalyze.formats.registry import DEFAULT_BATCH, LogFormat, ReadContext
 
 SNIFF_BYTES = 65536
 
-# every module of this package: each format module registers its LogFormat as it is
-# imported (the others are the facade's own parts, cheap to import)
-for _module in pkgutil.iter_modules(sys.modules[__package__].__path__):
-    importlib.import_module(f"{__package__}.{_module.name}")
+# every module of formats/logs/: each registers its LogFormat as it is imported
+for _module in pkgutil.iter_modules(logs.__path__):
+    importlib.import_module(f"{logs.__name__}.{_module.name}")
 
 
 def _describe(head: bytes) -> str:

@@ -60,7 +60,7 @@ static signed char HEXV[256]; /* hex digit value, -1 otherwise */
 static inline int is_digit(unsigned char c) { return c >= '0' && c <= '9'; }
 
 /* Seconds from `sec` (ni digits) and `frac` (nf digits), exactly as the numpy
- * candump parser computes them (formats/candump.py _parse_time), and float(text):
+ * candump parser computes them (formats/logs/candump.py _parse_time), and float(text):
  * one integer divided once by 10**nf while it is below 2**53, else the sum. */
 static inline double seconds(uint64_t sec, int ni, uint64_t frac, int nf) {
     if (nf == 0) return (double)(int64_t)sec;
@@ -694,7 +694,7 @@ fail:
 
 /* -------------------------------------------------------------------- BLF */
 
-/* The object walk of formats/blf.py (_Records.parse and _columns) for one buffer of inflated
+/* The object walk of formats/logs/blf.py (_Records.parse and _columns) for one buffer of inflated
  * container bytes: python-can makes one Message per record and its struct unpacking
  * is the whole cost; numpy needs a dozen strided passes per field. Here each object
  * header is read once and each CAN record goes straight into the frame columns. */
@@ -707,7 +707,7 @@ fail:
 #define BLF_FLAG_FD 0x08
 #define BLF_FLAG_BRS 0x10
 #define BLF_FLAG_ESI 0x20
-/* problem codes, as formats/blf.py words them */
+/* problem codes, as formats/logs/blf.py words them */
 #define BLF_GARBAGE 1
 #define BLF_BAD_SIZE 2
 #define BLF_UNREADABLE 3
@@ -723,7 +723,7 @@ static inline uint64_t rd64(const unsigned char *p) {
     return (uint64_t)rd32(p) | (uint64_t)rd32(p + 4) << 32;
 }
 
-/* bytes of a record body that must be present (formats/blf.py _BODY); 0: not a CAN record */
+/* bytes of a record body that must be present (formats/logs/blf.py _BODY); 0: not a CAN record */
 static inline int64_t blf_body(uint32_t kind) {
     switch (kind) {
     case BLF_CAN_MESSAGE:
@@ -756,7 +756,7 @@ static Py_ssize_t find_lobj(const unsigned char *buf, Py_ssize_t from, Py_ssize_
 PyDoc_STRVAR(blf_records_doc,
              "blf_records(buf, record, max_inner, start, t, can_id, flags, dlc, data, chan,\n"
              "            line, long, probs) -> (ok, n, pos, record, n_long, n_probs)\n\n"
-             "formats/blf.py's object walk over buf (inflated container bytes, the previous\n"
+             "formats/logs/blf.py's object walk over buf (inflated container bytes, the previous\n"
              "tail first) into column buffers of at least len(buf) // 48 rows: t float64,\n"
              "can_id uint32, flags, dlc uint8, data (n, 8) uint8, chan uint16 (the BLF\n"
              "channel number), line int64 (record number). record: objects seen before buf.\n"

@@ -11,7 +11,7 @@ from conftest import ROOT, SAMPLES, real_file
 from readers_util import run
 
 from cananalyze.core.errors import InputError
-from cananalyze.formats import asc, candump
+from cananalyze.formats.logs import asc, candump
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 

@@ -6,7 +6,7 @@ import random
 
 from readers_util import run
 
-from cananalyze.formats import asc, candump
+from cananalyze.formats.logs import asc, candump
 
 
 def _times(seed: int, n: int = 3000) -> list[str]:

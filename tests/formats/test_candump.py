@@ -14,7 +14,7 @@ from conftest import ROOT, real_file
 
 from cananalyze.core.errors import InputError
 from cananalyze.core.frames import FLAG_BRS, FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX, concat
-from cananalyze.formats import candump
+from cananalyze.formats.logs import candump
 from cananalyze.formats.source import open_log, read_all
 
 

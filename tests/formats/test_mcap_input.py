@@ -42,9 +42,9 @@ from cananalyze.core.frames import (
     concat,
     set_row,
 )
-from cananalyze.formats import mcap as mcap_in
 from cananalyze.formats.live import LiveSource
 from cananalyze.formats.logfile import to_messages, write_log
+from cananalyze.formats.logs import mcap as mcap_in
 from cananalyze.formats.mcap_bulk import BulkMcapWriter
 from cananalyze.formats.mcap_frames import (
     FRAME_FIELDS,

@@ -11,7 +11,7 @@ from readers_util import assert_same_as_python_can, run
 
 from cananalyze.core.errors import InputError
 from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FLAG_TX
-from cananalyze.formats import asc
+from cananalyze.formats.logs import asc
 
 FIXTURES = [
     "issue_1256.asc",

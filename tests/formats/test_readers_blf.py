@@ -14,7 +14,7 @@ from readers_util import assert_same_as_python_can, run
 
 from cananalyze.core.errors import InputError
 from cananalyze.core.frames import FLAG_ERR, FLAG_FD
-from cananalyze.formats import blf
+from cananalyze.formats.logs import blf
 
 FIXTURES = [
     "test_CanMessage.blf",

@@ -7,7 +7,7 @@ import pytest
 from conftest import real_file
 from readers_util import run
 
-from cananalyze.formats import canbusanalyzer, trc
+from cananalyze.formats.logs import canbusanalyzer, trc
 
 FILE = "collin80__SavvyCAN/CarBusAnalyzer.trc"
 

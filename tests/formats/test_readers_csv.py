@@ -13,7 +13,7 @@ from readers_util import assert_same_as_python_can, run
 
 from cananalyze.core.errors import InputError
 from cananalyze.core.frames import FLAG_EXT, FLAG_TX
-from cananalyze.formats import gvret, pycan_csv
+from cananalyze.formats.logs import gvret, pycan_csv
 
 GVRET = "collin80__SavvyCAN/GVRET_Log.csv"
 

@@ -8,7 +8,7 @@ import can
 from conftest import real_file
 from readers_util import assert_same_as_python_can, run
 
-from cananalyze.formats import pycan_fallback
+from cananalyze.formats.logs import pycan_fallback
 
 
 def test_asc_through_python_can_equals_python_can():
@@ -56,7 +56,7 @@ def test_unknown_suffix_is_a_problem():
 def test_suffixes_are_python_cans_other_readers():
     from can.io.player import MESSAGE_READERS
 
-    from cananalyze.formats.pycan_fallback import PYCAN_ONLY_SUFFIXES
+    from cananalyze.formats.logs.pycan_fallback import PYCAN_ONLY_SUFFIXES
 
     ours = (".asc", ".blf", ".trc", ".csv", ".log")
     assert set(PYCAN_ONLY_SUFFIXES) == {s for s in MESSAGE_READERS if s not in ours}

@@ -10,7 +10,7 @@ from readers_util import run
 
 from cananalyze.core.errors import InputError
 from cananalyze.core.frames import FLAG_EXT, FLAG_RTR
-from cananalyze.formats import ixxat
+from cananalyze.formats.logs import ixxat
 
 TRACE = "hilch__canopen-message-interpreter/ixxat1.trc"
 

@@ -9,7 +9,7 @@ from readers_util import run
 
 from cananalyze.core.errors import InputError
 from cananalyze.core.frames import FLAG_TX
-from cananalyze.formats import sevcon
+from cananalyze.formats.logs import sevcon
 
 # (file, lines counted as frames in SOURCES.md, EMCY lines with decoded text only)
 DUMPS = [

@@ -11,7 +11,7 @@ from readers_util import assert_same_as_python_can, run
 
 from cananalyze.core.errors import InputError
 from cananalyze.core.frames import FLAG_EXT, FLAG_RTR, FLAG_TX
-from cananalyze.formats import trc
+from cananalyze.formats.logs import trc
 
 FIXTURES = [
     ("hardbyte__python-can/test_CanMessage.trc", 2),

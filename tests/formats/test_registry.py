@@ -1,5 +1,5 @@
 """Formats are registered once, by their own module: the source facade imports every module
-of the formats folder, and the order they are tried in is their priorities."""
+of formats/logs/, and the order they are tried in is their priorities."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pkgutil
 
 import pytest
 
-import cananalyze.formats as formats_package
+import cananalyze.formats.logs as formats_package
 from cananalyze.formats import registry, source  # noqa: F401 - importing it registers them
 
 

@@ -80,7 +80,7 @@ def test_blank_lines_sniff_in_linear_time(tmp_path):
     assert done.returncode == 2 and "Traceback" not in done.stderr
     assert "not a log" in done.stderr
     assert time.process_time() - t0 < 5
-    from cananalyze.formats import asc, trc
+    from cananalyze.formats.logs import asc, trc
 
     head = b"\n" * 65536
     t0 = time.process_time()

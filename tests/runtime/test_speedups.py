@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 
 from cananalyze.core.errors import InputError, ProblemLog
 from cananalyze.core.frames import FLAG_RTR, FrameBatch
-from cananalyze.formats import asc, candump
+from cananalyze.formats.logs import asc, candump
 from cananalyze.formats.source import open_log
 from cananalyze.runtime import speedups
 from tests.conftest import real_file

@@ -24,7 +24,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from readers_util import run
 
-from cananalyze.formats import blf
+from cananalyze.formats.logs import blf
 from cananalyze.runtime import speedups
 from tests.conftest import REAL, real_file
 from tests.runtime.test_speedups import SAMPLES, _read, _same

@@ -42,7 +42,7 @@ from cananalyze.core.frames import (
     FrameBatch,
     channel_index,
 )
-from cananalyze.formats._rows import EPOCH_2000
+from cananalyze.formats.logs._rows import EPOCH_2000
 from cananalyze.formats.mcap_frames import (
     FRAME_FIELDS,
     FRAME_SCHEMA_NAME,

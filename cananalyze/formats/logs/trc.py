@@ -29,7 +29,7 @@ from cananalyze.core.frames import (
     FLAG_TX,
     FrameBatch,
 )
-from cananalyze.formats._rows import RowSink, text_lines
+from cananalyze.formats.logs._rows import RowSink, text_lines
 from cananalyze.formats.registry import LogFormat, ReadContext, register
 
 _DLC2LEN = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)

@@ -34,8 +34,8 @@ from cananalyze.core.frames import (
     FrameBatch,
     concat,
 )
-from cananalyze.formats._rows import MAX_LINE, RowSink
-from cananalyze.formats.candump import CHUNK
+from cananalyze.formats.logs._rows import MAX_LINE, RowSink
+from cananalyze.formats.logs.candump import CHUNK
 from cananalyze.formats.registry import LogFormat, ReadContext, register
 from cananalyze.runtime import speedups
 

@@ -34,7 +34,7 @@ from cananalyze.core.frames import (
     FrameBatch,
     concat,
 )
-from cananalyze.formats.blf import _Cutter
+from cananalyze.formats.logs.blf import _Cutter
 from cananalyze.formats.registry import LogFormat, ReadContext, register
 
 LINKTYPE_CAN_SOCKETCAN = 227

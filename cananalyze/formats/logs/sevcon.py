@@ -21,7 +21,7 @@ from collections.abc import Iterator
 from typing import BinaryIO
 
 from cananalyze.core.frames import FLAG_TX, FrameBatch
-from cananalyze.formats._rows import RowSink, text_lines
+from cananalyze.formats.logs._rows import RowSink, text_lines
 from cananalyze.formats.registry import LogFormat, ReadContext, register
 
 _LINE = re.compile(rb"(?m)^0x[0-9A-Fa-f]{1,8}\s+\d+\s+-\s+d\s*-?[\d.]+\s+\d+\s+\S+")

@@ -22,7 +22,7 @@ from collections.abc import Iterator
 from typing import BinaryIO
 
 from cananalyze.core.frames import FLAG_EXT, FLAG_RTR, FrameBatch
-from cananalyze.formats._rows import RowSink, text_lines
+from cananalyze.formats.logs._rows import RowSink, text_lines
 from cananalyze.formats.registry import LogFormat, ReadContext, register
 
 _HEADER = b'"Time";"Identifier (hex)"'

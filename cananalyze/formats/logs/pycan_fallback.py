@@ -23,7 +23,7 @@ from cananalyze.core.frames import (
     FLAG_TX,
     FrameBatch,
 )
-from cananalyze.formats._rows import RowSink
+from cananalyze.formats.logs._rows import RowSink
 from cananalyze.formats.registry import LogFormat, ReadContext, register
 
 # python-can's MESSAGE_READERS less the formats read here (checked by a test), written

@@ -14,7 +14,7 @@ from collections.abc import Iterator
 from typing import BinaryIO
 
 from cananalyze.core.frames import FLAG_EXT, FrameBatch
-from cananalyze.formats._rows import RowSink, text_lines
+from cananalyze.formats.logs._rows import RowSink, text_lines
 from cananalyze.formats.registry import LogFormat, ReadContext, register
 
 

@@ -13,7 +13,7 @@ from collections.abc import Iterator
 from typing import BinaryIO
 
 from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FrameBatch
-from cananalyze.formats._rows import RowSink, text_lines
+from cananalyze.formats.logs._rows import RowSink, text_lines
 from cananalyze.formats.registry import LogFormat, ReadContext, register
 
 HEADER = "timestamp,arbitration_id,extended,remote,error,dlc,data"
