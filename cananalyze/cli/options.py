@@ -394,16 +394,18 @@ def add(
     parser: argparse.ArgumentParser | argparse._ArgumentGroup,
     *keys: str,
     extra_names: dict[str, tuple[str, ...]] | None = None,
+    required: tuple[str, ...] = (),
     **defaults,
 ) -> None:
     """Add the registry's flags `keys` to a parser (or a group), in that order.
 
     `extra_names` gives a flag another spelling in this command only (`--dbc` for
-    `--dbc-in` where no `--dbc` is written); `defaults` override a flag's default here
+    `--dbc-in` where no `--dbc` is written); `required` names the flags this command
+    cannot do without (`report`'s `-o`); `defaults` override a flag's default here
     (`duration=10.0`), the help saying so."""
-    unknown = (set(defaults) | set(extra_names or ())) - set(keys)
+    unknown = (set(defaults) | set(extra_names or ()) | set(required)) - set(keys)
     if unknown:
-        raise ValueError(f"defaults or names for flags not added here: {sorted(unknown)}")
+        raise ValueError(f"defaults, names or required for flags not added here: {sorted(unknown)}")
     for key in keys:
         flag = FLAGS[key]
         kwargs = dict(flag.kwargs)
@@ -412,6 +414,8 @@ def add(
                 kwargs[text] = kwargs[text]()
         if key in defaults:
             kwargs["default"] = defaults[key]
+        if key in required:
+            kwargs["required"] = True
         names = (extra_names or {}).get(key, ()) + flag.names
         parser.add_argument(*names, **kwargs)
 

@@ -18,7 +18,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "network needed to open it); exit 0 when every rule passes, 1 on violations, 2 on "
         "bad input.",
     )
-    options_.add(p, *options_.INPUT, "output", "rules", "bitrate", "title", extra_names=DBC)
+    options_.add(p, *options_.INPUT, extra_names=DBC)
+    options_.add(p, "output", "rules", "bitrate", "title", required=("output",))
     options_.add(p, *options_.FILTERS, "quiet")
     p.set_defaults(func=run)
 

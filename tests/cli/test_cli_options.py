@@ -100,8 +100,23 @@ def test_every_command_that_reads_a_dbc_but_writes_none_takes_dbc_too():
             assert sub.parse_args(["--dbc", "x.dbc", *_required(name)]).dbc_in == ["x.dbc"]
 
 
+def test_report_needs_its_output_file(capsys):
+    """-o is optional where stdout is the default (decode), required where there is none."""
+    with pytest.raises(SystemExit) as exit_:
+        main(["report", "log.log"])
+    assert exit_.value.code == 2
+    assert "-o/--output" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="output"):
+        options.add(argparse.ArgumentParser(), "title", required=("output",))
+
+
 def _required(name: str) -> list[str]:
-    return {"fleet": ["log.log", "--out", "ds"], "live": []}.get(name, ["log.log"])
+    required = {
+        "fleet": ["log.log", "--out", "ds"],
+        "live": [],
+        "report": ["log.log", "-o", "r.html"],
+    }
+    return required.get(name, ["log.log"])
 
 
 @pytest.fixture
