@@ -63,7 +63,7 @@ class Timing:
 
     def _sdo(self, b) -> None:
         """Result counts and latency per node, from the batch's SDO records as columns."""
-        tab = b.sdo_table()
+        tab = b.records.table()
         if tab.node.size == 0:
             return
         counts = np.bincount(tab.result, minlength=len(tab.result_keys)).tolist()

@@ -5,8 +5,8 @@ parts, each built in one place:
 
 - frames: the FrameBatch and the classifier's columns (service, node, PDO number),
   with sparse per-row `notes` (an SDO frame's role in its transfer, a PDO problem);
-- SDO transactions: `records` of kind "sdo", completed at a row (the SDO tracker and
-  its fast path, whose records stay columns until read: `sdo_fast`, `sdo_table()`);
+- SDO transactions: `records` (core.sdo_records.SdoRecords), each completed at a row,
+  made by the SDO tracker or its fast path;
 - signals: `signals`, one SignalBlock of columns per PDO and mapping (PdoDecoder);
 - findings: `findings` (checks.columns.FindingColumns, each at its row, so that
   streamed outputs place it among the frames: `records_and_findings`) (Checker);
@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from cananalyze.core.frames import FrameBatch
+from cananalyze.core.sdo_records import SdoRecords
 
 if TYPE_CHECKING:
     from cananalyze.core.finding_columns import FindingColumns
@@ -61,66 +62,6 @@ class SignalBlock:
     words: dict[str, int] = field(default_factory=dict)  # signals shown in words -> object index
 
 
-@dataclass
-class SdoColumns:
-    """The SDO fast path's records of a batch as columns (the dicts stay in `records`).
-
-    Summary, timing and the network model aggregate these instead of reading
-    tens of thousands of dicts; `slots` says where each one sits in `records`.
-    """
-
-    slots: np.ndarray  # int64 position in DecodedBatch.records
-    row: np.ndarray  # int64 row the record is attached to (the answer)
-    req_row: np.ndarray  # int64 row of the request
-    node: np.ndarray  # int64
-    upload: np.ndarray  # bool (else download)
-    index: np.ndarray  # int64
-    subindex: np.ndarray  # int64
-    ok: np.ndarray  # bool: result "ok" (else "abort")
-    latency: np.ndarray  # float64 latency_ms as in the record
-
-
-@dataclass
-class SdoTable:
-    """Every `sdo` record of a batch in record order, as codes into small key lists."""
-
-    node_keys: list
-    node: np.ndarray  # int64 code into node_keys
-    result_keys: list
-    result: np.ndarray  # int64 code into result_keys
-    latency: np.ndarray  # float64 ms, NaN where the record has none
-    slots: np.ndarray | None = None  # int64 position of each in DecodedBatch.records
-
-    def first_seen(self, codes: np.ndarray) -> list[int]:
-        """Distinct codes in the order they first appear (dict insertion order of a loop)."""
-        if codes.size == 0:
-            return []
-        uniq, first = np.unique(codes, return_index=True)
-        return uniq[np.argsort(first)].tolist()
-
-    def groups(self, codes: np.ndarray, where: np.ndarray | None = None) -> list:
-        """(code, positions in record order) per distinct code, first seen first.
-
-        One stable sort instead of a mask per code; `where` picks the records taken.
-        """
-        sel = np.arange(codes.size) if where is None else np.flatnonzero(where)
-        if sel.size == 0:
-            return []
-        c = codes[sel]
-        order = np.argsort(c, kind="stable")
-        cs = c[order]
-        cut = np.flatnonzero(cs[1:] != cs[:-1]) + 1
-        starts = np.concatenate(([0], cut))
-        ends = np.concatenate((cut, [cs.size]))
-        pos = sel[order]
-        out = [
-            (code, pos[a:b])
-            for code, a, b in zip(cs[starts].tolist(), starts.tolist(), ends.tolist(), strict=True)
-        ]
-        out.sort(key=lambda g: g[1][0])  # first seen first
-        return out
-
-
 def sender_counts(service: np.ndarray, node: np.ndarray) -> np.ndarray | None:
     """Frames per service and node as `counts[service, node + 1]` (column 0: the rows of
     no node), in one bincount; None when a node falls outside -1..127."""
@@ -139,7 +80,7 @@ class DecodedBatch:
     node: np.ndarray  # int16, -1 = none
     pdo: np.ndarray  # uint8 PDO number, 0 = not a PDO
     notes: dict[int, dict] = field(default_factory=dict)  # row -> extra/overriding fields
-    records: list[tuple[int, dict]] = field(default_factory=list)  # (row, record) done at row
+    records: SdoRecords = field(default_factory=SdoRecords)  # SDO transfers, by end row
     signals: list[SignalBlock] = field(default_factory=list)
     # Notes shared by many rows, kept columnar (e.g. one pdo_problem for every short PDO).
     row_notes: list[tuple[np.ndarray, dict]] = field(default_factory=list)
@@ -154,8 +95,11 @@ class DecodedBatch:
     channel_bus: np.ndarray | None = None
     record_bus: np.ndarray | None = None
     _lazy: tuple | None = field(default=None, repr=False, compare=False)
-    _sdo_cache: tuple | None = field(default=None, repr=False, compare=False)
     _senders: tuple | None = field(default=None, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.records, SdoRecords):
+            self.records = SdoRecords(self.records)
 
     def __len__(self) -> int:
         return len(self.frames)
@@ -182,11 +126,15 @@ class DecodedBatch:
         pos[rows] = np.arange(n)
         frames = self.frames.take(rows)
         notes = {int(pos[r]): v for r, v in self.notes.items() if 0 <= r < len(self) and mask[r]}
-        kept = [k for k, (_, rec) in enumerate(self.records) if keep_record(rec)]
-        records = [
-            (int(pos[row]) if 0 <= row < len(self) else n, rec)
-            for row, rec in map(self.records.__getitem__, kept)
-        ]
+        recs = self.records
+        kept = [k for k, (_, rec) in enumerate(recs) if keep_record(rec)]
+        records = recs.take(
+            kept,
+            [
+                int(pos[row]) if 0 <= row < len(self) else n
+                for row in map(recs.rows.__getitem__, kept)
+            ],
+        )
         signals = []
         for sb in self.signals:
             keep = mask[sb.rows]
@@ -262,7 +210,7 @@ class DecodedBatch:
         return self._lazy
 
     def add_record(self, row: int, record: dict) -> None:
-        self.records.append((row, record))
+        self.records.append(row, record)
 
     def records_and_findings(self) -> list[tuple[int, dict]]:
         """The records, then the findings' records: (row, record) in the order the
@@ -279,32 +227,6 @@ class DecodedBatch:
         if not len(self.findings):
             return records
         return [*records, *self.findings.pairs()]
-
-    @property
-    def sdo_fast(self) -> SdoColumns | None:
-        """Columns of the SDO fast path's records, while `records` is still the decoder's list.
-
-        They live on the list itself: a consumer that replaces `records` (a filter)
-        drops them, and readers fall back to the dicts.
-        """
-        return getattr(self.records, "sdo_fast", None)
-
-    def sdo_fast_split(self) -> tuple[object, SdoColumns, list[int]] | None:
-        """(fast records' fields, their SdoColumns, the other record slots), or None.
-
-        Lets a reader take the fast path's records as columns (`RecordColumns`)
-        and read only the other slots (`list.__getitem__`: nothing gets built).
-        """
-        records = self.records
-        fast = self.sdo_fast
-        fields = getattr(records, "sdo_fast_fields", None)
-        if fast is None or fields is None or not fast.slots.size:
-            return None
-        if len(records) <= int(fast.slots[-1]):
-            return None
-        rest = np.ones(len(records), bool)
-        rest[fast.slots] = False
-        return fields(), fast, np.flatnonzero(rest).tolist()
 
     @property
     def several(self) -> bool:
@@ -344,85 +266,6 @@ class DecodedBatch:
         counts = sender_counts(self.service, self.node)
         self._senders = (self.service, self.node, counts)
         return counts
-
-    def sdo_table(self) -> SdoTable:
-        """The batch's `sdo` records as columns: the fast path's from `sdo_fast`, the rest read.
-
-        Kept while the records list only grows by records of other kinds (findings):
-        timing, the SDO rule and the summary all ask.
-        """
-        records = self.records
-        cached = self._sdo_cache
-        if cached is not None and cached[0] is records and cached[1] <= len(records):
-            get = list.__getitem__
-            if all(get(records, k)[1].get("kind") != "sdo" for k in range(cached[1], len(records))):
-                self._sdo_cache = (records, len(records), cached[2])
-                return cached[2]
-        table = self._sdo_table()
-        self._sdo_cache = (records, len(records), table)
-        return table
-
-    def _sdo_table(self) -> SdoTable:
-        records = self.records
-        fast = self.sdo_fast
-        if fast is not None and fast.slots.size and len(records) > int(fast.slots[-1]):
-            rest = np.ones(len(records), bool)
-            rest[fast.slots] = False
-            others = np.flatnonzero(rest).tolist()
-        else:
-            fast, others = None, range(len(records))
-        node_keys: list = []
-        node_code: dict = {}
-        result_keys: list = []
-        result_code: dict = {}
-        pos: list[int] = []
-        nodes: list[int] = []
-        results: list[int] = []
-        lats: list[float] = []
-        nan = float("nan")
-        get = list.__getitem__  # the other slots are written: no need to build the fast ones
-        for k in others:
-            rec = get(records, k)[1]
-            if rec.get("kind") != "sdo":
-                continue
-            node, result, lat = rec.get("node"), rec.get("result"), rec.get("latency_ms")
-            c = node_code.get(node)
-            if c is None:
-                c = node_code[node] = len(node_keys)
-                node_keys.append(node)
-            r = result_code.get(result)
-            if r is None:
-                r = result_code[result] = len(result_keys)
-                result_keys.append(result)
-            pos.append(k)
-            nodes.append(c)
-            results.append(r)
-            lats.append(nan if lat is None else lat)
-        node = np.asarray(nodes, np.int64)
-        result = np.asarray(results, np.int64)
-        latency = np.asarray(lats, np.float64)
-        slots = np.asarray(pos, np.int64)
-        if fast is not None:
-            for key in sorted(set(fast.node.tolist())):  # (np.unique's first call: ~10 ms)
-                if key not in node_code:
-                    node_code[key] = len(node_keys)
-                    node_keys.append(key)
-            lut = np.full(int(fast.node.max()) + 1, -1, np.int64)
-            for key, c in node_code.items():
-                if type(key) is int and 0 <= key < lut.size:
-                    lut[key] = c
-            for key in ("ok", "abort"):
-                if key not in result_code:
-                    result_code[key] = len(result_keys)
-                    result_keys.append(key)
-            fres = np.where(fast.ok, result_code["ok"], result_code["abort"])
-            at = np.concatenate((np.asarray(pos, np.int64), fast.slots))
-            order = np.argsort(at, kind="stable")
-            node = np.concatenate((node, lut[fast.node]))[order]
-            result = np.concatenate((result, fres))[order]
-            latency = np.concatenate((latency, fast.latency))[order]
-            slots = at[order]
-        return SdoTable(node_keys, node, result_keys, result, latency, slots)
 
 
 def _no_findings() -> FindingColumns:

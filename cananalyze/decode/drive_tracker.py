@@ -143,16 +143,8 @@ class DriveTracker:
         records = batch.records
         if not records or not any(self.model.family(n) == 402 for n in self.model.nodes):
             return []  # no drive on the bus: not a record read
-        fast = batch.sdo_fast
-        get = list.__getitem__  # the other records are written: no lazy building for them
-        if fast is not None and fast.slots.size and len(records) > int(fast.slots[-1]):
-            rest = np.ones(len(records), bool)
-            rest[fast.slots] = False
-            picked = [get(records, k) for k in np.flatnonzero(rest).tolist()]
-            wanted = fast.slots[fast.ok & np.isin(fast.index, _OBJECTS)].tolist()
-            picked += [records[k] for k in wanted]  # built one by one
-        else:
-            picked = list(records)
+        c = records.cols
+        picked = records.picked(np.flatnonzero(c.ok & np.isin(c.index, _OBJECTS)).tolist())
         out = []
         last: dict[int, tuple] = {}
         for row, rec in picked:

@@ -290,36 +290,22 @@ class NetworkModel:
         first seen of a node the model does not know yet: `_on_sdo` leaves the state
         untouched for every other one. A batch with an identity read takes them all.
         """
-        records = batch.records
-        fast = batch.sdo_fast
-        if fast is None or fast.slots.size == 0 or len(records) <= int(fast.slots[-1]):
-            return records
-        rest = np.ones(len(records), bool)
-        rest[fast.slots] = False
-        others = np.flatnonzero(rest).tolist()
-        # an identification may bring a profile with other unit-changing objects: all then
-        get = list.__getitem__  # the other records are written: no lazy lookup for them
-        if (fast.upload & np.isin(fast.index, _IDENTITY_INDICES)).any() or any(
-            rec.get("direction") == "upload" and (rec.get("index"), rec.get("subindex")) in IDENTITY
-            for _, rec in (get(records, k) for k in others)
-        ):
-            return records
-        want = fast.ok & (fast.index >= 0x1000) & (fast.index <= 0x1FFF)
+        recs = batch.records
+        c = recs.cols
+        if (c.upload & np.isin(c.index, _IDENTITY_INDICES)).any():
+            return list(recs)
+        want = (c.req_row < 0) | (c.ok & (c.index >= 0x1000) & (c.index <= 0x1FFF))
         context = {o for cfg in self.nodes.values() for o in cfg.context_objects()}
         if context:
-            key = fast.index * 256 + fast.subindex
+            key = c.index * 256 + c.subindex
             objs = np.array([i * 256 + s for i, s in context], np.int64)
-            want |= fast.ok & np.isin(key, objs)
+            want |= c.ok & np.isin(key, objs)
         known = np.array(sorted(self.nodes), np.int64)
-        new = fast.ok & ~np.isin(fast.node, known)
+        new = c.ok & ~np.isin(c.node, known)
         if new.any():
-            _, first = np.unique(fast.node[new], return_index=True)
+            _, first = np.unique(c.node[new], return_index=True)
             want[np.flatnonzero(new)[first]] = True
-        picked = [(k, get(records, k)) for k in others]
-        picked += [(k, records[k]) for k in fast.slots[want].tolist()]  # built one by one
-        if len(picked) > len(others):
-            picked.sort(key=lambda x: x[0])
-        return [rec for _, rec in picked]
+        return recs.picked(np.flatnonzero(want).tolist())
 
     # --- internals ---------------------------------------------------------------
     def _on_sdo(self, rec: dict) -> set[int] | None:

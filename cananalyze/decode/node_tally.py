@@ -186,28 +186,11 @@ def node_profiles(model) -> dict[int, tuple[str, str]]:
 
 
 def identity_records(batch: DecodedBatch) -> list[tuple[int, dict]]:
-    """(record slot, record) of the batch's SDO records on identity objects, in slot order.
-
-    The SDO fast path's records are looked up as columns; only those on an
-    identity index are built as dicts (aborted ones are dicts already).
-    """
-    records = batch.records
-    if not records:
-        return []
-    split = batch.sdo_fast_split()
-    slots: Iterable[int] = range(len(records)) if split is None else split[2]
-    out = [
-        (k, r)
-        for k in slots
-        if (r := records[k][1]).get("kind") == "sdo" and r.get("index") in IDENTITY_INDEX
-    ]
-    if split is not None:
-        fields, fast, _ = split
-        for j in np.flatnonzero(np.isin(fast.index, IDENTITY_INDEX)).tolist():
-            rec = fields.aborted[j] if j in fields.aborted else fields.record(j)
-            out.append((int(fast.slots[j]), rec))
-        out.sort(key=lambda kr: kr[0])
-    return out
+    """(record position, record) of the batch's SDO records on identity objects, in order;
+    only those are built as dicts."""
+    recs = batch.records
+    at = np.flatnonzero(np.isin(recs.cols.index, IDENTITY_INDEX)).tolist() if recs else []
+    return [(k, recs.record(k)) for k in at]
 
 
 def identity(records: Iterable[tuple[int, dict]]) -> dict[int, dict]:

@@ -158,7 +158,7 @@ class Summary:
     def _sdo(self, batch: DecodedBatch) -> None:
         """Result counts and latencies per node (and per bus and node on a log of several
         buses), from the batch's SDO records as columns."""
-        tab = batch.sdo_table()
+        tab = batch.records.table()
         if tab.node.size == 0:
             return
         nk = tab.node_keys

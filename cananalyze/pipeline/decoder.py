@@ -9,6 +9,7 @@ import numpy as np
 
 from cananalyze.core.frames import MAX_BUSES, MAX_CHANNELS, OTHER_CHANNELS, FrameBatch
 from cananalyze.core.records import DecodedBatch
+from cananalyze.core.sdo_records import SdoRecords
 from cananalyze.protocol.cobid import CobClassifier
 
 if TYPE_CHECKING:
@@ -229,7 +230,7 @@ def merge_buses(
             f = part.findings
             f.row = at[np.clip(f.row, 0, len(rows))]
             founds.append(f)
-    out.records, of_part = _merge_records([(np.append(rows, n), part) for rows, part in parts])
+    out.records, of_part = SdoRecords.merge([(np.append(rows, n), p.records) for rows, p in parts])
     out.record_bus = _bus_names([part.bus for _, part in parts], of_part)
     out.drive.sort(key=lambda c: c.row)
     if founds:
@@ -267,85 +268,13 @@ def merge_ends(parts: list[DecodedBatch]) -> DecodedBatch:
     from cananalyze.core.finding_columns import FindingColumns
 
     out = parts[0]
-    out.records = [r for p in parts for r in p.records]
+    out.records = SdoRecords([r for p in parts for r in p.records])
     of_part = np.repeat(np.arange(len(parts)), [len(p.records) for p in parts])
     out.record_bus = _bus_names([p.bus for p in parts], of_part)
     out.bus = None
     out.drive = [c._replace(bus=p.bus) for p in parts for c in p.drive]
     out.findings = FindingColumns.concat([p.findings for p in parts]).sort()
     return out
-
-
-def _merge_records(parts: list[tuple[np.ndarray, DecodedBatch]]) -> tuple[list, np.ndarray]:
-    """The parts' records at the batch's rows ((row map, part) each), in row order, and
-    the part each came from. The
-    SDO fast path's records a part has not built stay unbuilt, with their columns
-    (`sdo_fast`: the checks and the summary read those); the rest are read as they are."""
-    from cananalyze.core.records import SdoColumns
-    from cananalyze.decode.sdo.lazyrecords import LazyRecords
-
-    get = list.__getitem__
-    rows, keys, lazy, fasts = [], [], [], []
-    for p, (at, part) in enumerate(parts):
-        recs, fast = part.records, part.sdo_fast
-        m = len(recs)
-        row = np.zeros(m, np.int64)
-        is_fast = np.zeros(m, bool)
-        if fast is not None and fast.slots.size and m > int(fast.slots[-1]):
-            is_fast[fast.slots] = True
-            row[fast.slots] = fast.row
-            fasts.append((p, at, fast))
-        others = np.flatnonzero(~is_fast)
-        row[others] = [get(recs, k)[0] for k in others.tolist()]
-        rows.append(at[np.clip(row, 0, at.size - 1)])
-        keys.append(np.stack((np.full(m, p), np.arange(m)), 1))
-        lazy.append(is_fast)
-    if not rows:
-        return [], np.zeros(0, np.int64)
-    row = np.concatenate(rows)
-    key = np.concatenate(keys)
-    deferred = np.concatenate(lazy)
-    order = np.argsort(row, kind="stable")
-    merged = [
-        (r, None if d else get(parts[p][1].records, k)[1])
-        for r, d, (p, k) in zip(
-            row[order].tolist(), deferred[order].tolist(), key[order].tolist(), strict=True
-        )
-    ]
-    of_part = key[order][:, 0]
-    if not fasts:
-        return merged, of_part
-    slots = np.flatnonzero(deferred[order])  # merged positions of the unbuilt ones
-    where = key[order][slots]  # (part, slot in the part) of each
-
-    def build(js: np.ndarray | None) -> list[dict]:
-        picks = where if js is None else where[js]
-        if js is None:
-            for p in set(picks[:, 0].tolist()):
-                list(parts[p][1].records)  # the part's records built at once
-        return [parts[p][1].records[k][1] for p, k in picks.tolist()]
-
-    pos = np.empty(order.size, np.int64)  # merged position of each (part, slot)
-    pos[order] = np.arange(order.size)
-    start = np.cumsum([0] + [len(part.records) for _, part in parts])
-    cols = {f: [] for f in ("slots", "row", "req_row", "node", "upload", "index")}
-    cols.update({f: [] for f in ("subindex", "ok", "latency")})
-    for p, at, fast in fasts:
-        cols["slots"].append(pos[start[p] + fast.slots])
-        cols["row"].append(at[fast.row])
-        cols["req_row"].append(at[np.clip(fast.req_row, 0, at.size - 1)])
-        for f in ("node", "upload", "index", "subindex", "ok", "latency"):
-            cols[f].append(getattr(fast, f))
-    columns = {f: np.concatenate(v) for f, v in cols.items()}
-    by_slot = np.argsort(columns["slots"], kind="stable")
-    out = LazyRecords(merged)
-    out.defer(
-        slots,
-        row[order][slots].tolist(),
-        build,
-        SdoColumns(**{f: v[by_slot] for f, v in columns.items()}),
-    )
-    return out, of_part
 
 
 def _bus_names(names: list[str | None], of_part: np.ndarray) -> np.ndarray:

@@ -1,8 +1,8 @@
 """The columnar SDO aggregates give what reading every record dict gives.
 
 Summary, timing statistics, the SDO rule and the network model read the fast
-path's transactions from `SdoColumns` (and the record dicts are built only when
-read, `LazyRecords`). Each log is decoded twice through the whole `check`
+path's transactions from columns (`SdoRecords.cols`, `table()`: the record dicts
+are built only when read). Each log is decoded twice through the whole `check`
 pipeline, once with the fast path and once with every frame through the tracker
 (plain dicts, no columns): summary lines, timing report, findings, the model's
 configuration history and every record must be the same.
@@ -10,7 +10,6 @@ configuration history and every record must be the same.
 
 from __future__ import annotations
 
-import pickle
 import sys
 from pathlib import Path
 
@@ -20,7 +19,6 @@ from conftest import ROOT, SAMPLES, real_file
 
 from cananalyze.checks.build import build_checker
 from cananalyze.core.frames import FrameBatch
-from cananalyze.decode.sdo.lazyrecords import LazyRecords
 from cananalyze.formats.source import read_all
 from cananalyze.outputs.summary import Summary, device_lines
 from cananalyze.pipeline import Options, build_decoder
@@ -41,7 +39,7 @@ def _check(
     for start in range(0, len(fb), step):
         batch = decoder.decode(fb.take(slice(start, start + step)))
         summary.add(batch)
-        tab = batch.sdo_table()
+        tab = batch.records.table()
         tables.append(
             (
                 [tab.node_keys[c] for c in tab.node.tolist()],
@@ -123,56 +121,3 @@ def test_samples(name: str) -> None:
 )
 def test_real_logs(rel: str) -> None:
     assert_same(read_all(real_file(rel)), steps=(1 << 20, 777))
-
-
-# -- LazyRecords ---------------------------------------------------------------------
-
-
-def _lazy():
-    built = []
-
-    def build(js):
-        js = range(3) if js is None else js.tolist()
-        built.append(list(js))
-        return [{"kind": "sdo", "j": j} for j in js]
-
-    recs = LazyRecords([(0, {"kind": "x"}), None, (5, {"kind": "y"}), None, None])
-    recs.defer(np.array([1, 3, 4]), [1, 3, 4], build)
-    return recs, built
-
-
-def test_lazy_records_build_only_when_read() -> None:
-    recs, built = _lazy()
-    recs.append((9, {"kind": "finding"}))
-    assert len(recs) == 6 and recs and built == []
-    assert recs[2] == (5, {"kind": "y"}) and built == []  # another slot: nothing built
-    one = recs[3][1]
-    assert built == [[1]] and one == {"kind": "sdo", "j": 1}
-    assert list(recs)[3][1] is one  # the full build keeps the dict already handed out
-    assert built == [[1], [0, 1, 2]]
-    assert [r for _, r in recs] == [
-        {"kind": "x"}, {"kind": "sdo", "j": 0}, {"kind": "y"}, {"kind": "sdo", "j": 1},
-        {"kind": "sdo", "j": 2}, {"kind": "finding"},
-    ]  # fmt: skip
-
-
-@pytest.mark.parametrize(
-    "access",
-    [
-        lambda r: list(r),
-        lambda r: r[1:3],
-        lambda r: r == list(r),
-        lambda r: pickle.loads(pickle.dumps(r)),
-        lambda r: repr(r),
-        lambda r: sorted(r, key=lambda x: x[0]),
-        lambda r: r[-1],
-    ],
-)
-def test_lazy_records_every_read_sees_the_records(access) -> None:
-    recs, built = _lazy()
-    access(recs)
-    assert built and None not in list.__iter__(recs) or built == [[2]]
-    assert (
-        pickle.loads(pickle.dumps(recs)) == list(recs)
-        and type(pickle.loads(pickle.dumps(recs))) is list
-    )

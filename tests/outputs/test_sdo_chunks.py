@@ -13,6 +13,7 @@ import pyarrow as pa
 import pytest
 
 from cananalyze.core.columns import arrow_build as ab
+from cananalyze.core.sdo_records import SdoRecords
 from cananalyze.outputs.tables import pandas_like as pl
 from cananalyze.outputs.tables import sdo_chunks as sc
 
@@ -345,7 +346,7 @@ def _record_batch(t0: float, records: list[dict]):
     fb.t[:] = t0 + np.arange(n) * 0.001
     fb.can_id[:] = 0x181
     batch = DecodedBatch(fb, np.zeros(n, np.uint8), np.ones(n, np.int16), np.zeros(n, np.uint8))
-    batch.records = [(k % n, {"kind": "sdo"} | r) for k, r in enumerate(records)]
+    batch.records = SdoRecords([(k % n, {"kind": "sdo"} | r) for k, r in enumerate(records)])
     return batch
 
 

@@ -1,4 +1,4 @@
-"""The fast path's SDO records read as columns (`RecordColumns`, `DecodedBatch.sdo_fast_split`)
+"""The fast path's SDO records read as columns (`RecordColumns`, `SdoRecords.split`)
 give the same SDO table and events as the dicts: the export and the Capture take the columns,
 a plain records list (what a filter leaves) takes the dicts."""
 
@@ -11,6 +11,7 @@ from conftest import SAMPLES, generated_log, real_file
 from exported import DEVICES, assert_parquet_is, assert_same_table_files, decoded_batches
 
 from cananalyze.core.errors import ProblemLog
+from cananalyze.core.sdo_records import SdoRecords
 from cananalyze.decode.events.build import EventState, batch_events
 from cananalyze.decode.sdo.fastpath import RECORD_COLUMNS
 from cananalyze.outputs.capture import Collector
@@ -20,7 +21,7 @@ from cananalyze.outputs.tables.stream import TableSink as StreamTables
 
 def _as_dicts(batch):
     """The same batch with its records as a plain list: readers fall back to the dicts."""
-    batch.records = list(batch.records)
+    batch.records = SdoRecords(list(batch.records))
     return batch
 
 
@@ -51,11 +52,13 @@ def test_events_same_from_columns_and_dicts(tmp_path, which, size):
     for b1, b2 in zip(
         decoded_batches(log, size, **kw), decoded_batches(log, size, **kw), strict=True
     ):
-        fast += b1.sdo_fast_split() is not None
+        fast += b1.records.split()[0] is not None
         e1 = batch_events(b1, off, s1)
         e2 = batch_events(_as_dicts(b2), off, s2)
         assert e1 == e2
-        assert list(b1.records) == b2.records  # reading the columns left the dicts as they were
+        assert list(b1.records) == list(
+            b2.records
+        )  # reading the columns left the dicts as they were
         off += len(b1)
     if which in ("generated", "faults"):
         assert fast  # the column route was taken
@@ -86,12 +89,12 @@ def test_aborted_pairs_and_record_columns_agree():
     for batch in decoded_batches(
         SAMPLES / "faults.log", None, network=str(SAMPLES / "network.toml")
     ):
-        split = batch.sdo_fast_split()
-        if split is None:
+        part, _ = batch.records.split()
+        if part is None:
             continue
-        fields, fast, _ = split
+        fields = part.fields()
         aborted += len(fields.aborted)
-        built = [batch.records[int(k)][1] for k in fast.slots]
+        built = [batch.records[int(k)][1] for k in part.at]
         assert built == fields.records()
         for j, rec in enumerate(built):
             assert {c: rec[c] for c in RECORD_COLUMNS} == {

@@ -67,7 +67,7 @@ def _assert_pair_texts(batch) -> int:
     fields, fast, _ = pairs
     pt = pair_text(batch.frames, fields, fast, b"\n")
     m = len(fields)
-    req_notes, resp_notes = pair_notes(batch.frames, fast.req_row, fast.row)
+    req_notes, resp_notes = pair_notes(batch.frames, fast.cols.req_row, fast.cols.row)
     for matrix, notes in ((pt.req_role, req_notes), (pt.resp_role, resp_notes)):
         blob, ends = bytecols.compact([matrix], m, with_ends=True)
         assert bytecols.split_rows(blob, ends) == ["SDO " + n["role"] + "\n" for n in notes]
@@ -111,9 +111,13 @@ def test_rows_with_other_records_too(tmp_path, monkeypatch, color):
     with another row's note written)."""
     batches = [_batch(_log(tmp_path, PAIRS), "1=dat7014") for _ in range(2)]
     for batch in batches:
-        fast = batch.sdo_fast
-        batch.add_record(int(fast.row[0]), {"kind": "finding", "rule": "r1", "message": "late"})
-        batch.add_record(int(fast.req_row[1]), {"kind": "finding", "rule": "r2", "message": "x"})
+        fast = batch.records.split()[0]
+        batch.add_record(
+            int(fast.cols.row[0]), {"kind": "finding", "rule": "r1", "message": "late"}
+        )
+        batch.add_record(
+            int(fast.cols.req_row[1]), {"kind": "finding", "rule": "r2", "message": "x"}
+        )
         batch.add_record(-1, {"kind": "finding", "rule": "r3", "message": "end"})
         batch.notes[len(batch) - 1] = {"noted": "by hand"}  # a written note beside them
     assert fast_pairs(batches[0]) is not None
@@ -147,4 +151,5 @@ def test_notes_read_before_rendering_take_the_other_path(tmp_path):
     batch = _batch(_log(tmp_path, PAIRS), "1=dat7014")
     assert len(batch.notes) > 0
     assert fast_pairs(batch) is None
-    assert np.all(batch.sdo_fast.req_row < batch.sdo_fast.row)
+    cols = batch.records.split()[0].cols
+    assert np.all(cols.req_row < cols.row)

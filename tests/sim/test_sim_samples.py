@@ -32,7 +32,7 @@ def _decode(path):
     dec = Decoder([SdoProcessor(SdoTracker(timeout=1.0))])
     out = dec.decode(batch)
     fin = dec.finish()
-    sdo = [r for _, r in out.records + fin.records if r["kind"] == "sdo"]
+    sdo = [r for _, r in [*out.records, *fin.records] if r["kind"] == "sdo"]
     return batch, out, sdo
 
 

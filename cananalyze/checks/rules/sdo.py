@@ -21,26 +21,16 @@ class SdoRule(Rule):
         self.max_latency = max_latency_ms
 
     def _picked(self, batch) -> list:
-        """Records that may need a finding, in order: the fast path's ok, quick ones skipped."""
-        records = batch.records
-        fast = batch.sdo_fast
-        if fast is None or fast.slots.size == 0 or len(records) <= int(fast.slots[-1]):
-            return list(records)
-        tab = batch.sdo_table()
+        """Records that may need a finding, in order: the ok, quick ones skipped."""
+        recs = batch.records
+        tab = recs.table()
         for c in tab.first_seen(tab.node):  # the order a loop over the records adds them in
             self.subjects.add(tab.node_keys[c])
-        flag = ~fast.ok
+        cols = recs.cols
+        flag = ~cols.ok
         if self.max_latency is not None:
-            flag |= fast.latency > self.max_latency
-        rest = np.ones(len(records), bool)
-        rest[fast.slots] = False
-        get = list.__getitem__  # written records: no lazy lookup
-        picked = [(k, get(records, k)) for k in np.flatnonzero(rest).tolist()]
-        flagged = fast.slots[flag].tolist()
-        if flagged:
-            picked += [(k, records[k]) for k in flagged]  # built one by one (or all)
-            picked.sort(key=lambda x: x[0])
-        return [item for _, item in picked]
+            flag |= cols.latency > self.max_latency
+        return recs.picked(np.flatnonzero(flag).tolist())
 
     def process(self, ctx: Context) -> None:
         subjects = self.subjects

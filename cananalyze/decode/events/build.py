@@ -275,26 +275,19 @@ def batch_event_columns(
     fb = batch.frames
     n = len(fb)
     last_t = float(fb.t[-1]) if n else state.last_t
-    split = batch.sdo_fast_split()
+    part, others = batch.records.split()
     records = batch.records
-    if split is None:
-        pairs = enumerate(records)
-    else:  # the fast path's records as columns; the others read without building those
-        get = list.__getitem__
-        pairs = ((k, get(records, k)) for k in split[2])
+    pairs = ((k, records[k]) for k in others)
     several = batch.several
     events, at = _record_event_columns(pairs, fb, offset, last_t)
     if several:
         events.bus = batch.record_buses(np.asarray(at, np.int64))
-    if split is not None:
-        fields, fast, _ = split
-        fast_events = sdo_event_columns(fields, fast.row.astype(np.int64) + offset)
+    if part is not None:
+        fast_events = sdo_event_columns(part.fields(), part.cols.row + offset)
         if several:
-            fast_events.bus = batch.record_buses(fast.slots)
+            fast_events.bus = batch.record_buses(part.at)
         if at:
-            order = np.argsort(
-                np.concatenate((np.asarray(at, np.int64), fast.slots)), kind="stable"
-            )
+            order = np.argsort(np.concatenate((np.asarray(at, np.int64), part.at)), kind="stable")
             events = EventColumns.concat([events, fast_events]).take(order)
         else:
             events = fast_events

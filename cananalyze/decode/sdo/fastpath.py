@@ -23,7 +23,8 @@ from functools import cached_property
 import numpy as np
 
 from cananalyze.core.frames import FLAG_TX
-from cananalyze.core.records import DecodedBatch, SdoColumns
+from cananalyze.core.records import DecodedBatch
+from cananalyze.core.sdo_records import SdoColumns
 from cananalyze.decode.sdo.tracker import ObjectInfo
 from cananalyze.decode.sdo.transaction import SDO_TABLE_COLUMNS
 from cananalyze.decode.sdo.words import sdo_words
@@ -166,12 +167,11 @@ def _rounded_latency(dt: np.ndarray) -> np.ndarray:
     return py_round(py_round(np.asarray(dt, np.float64) * 1000.0, 6), 3)
 
 
-def pair_columns(fb, a: np.ndarray, b: np.ndarray, slots: np.ndarray) -> SdoColumns:
+def pair_columns(fb, a: np.ndarray, b: np.ndarray) -> SdoColumns:
     """What summary, timing and the network model read of taken pairs, as columns."""
     da, db = _rows(fb.data, a), _rows(fb.data, b)
     t0, t1 = fb.t[a], fb.t[b]
     return SdoColumns(
-        slots=np.asarray(slots, np.int64),
         row=np.asarray(b, np.int64),
         req_row=np.asarray(a, np.int64),
         node=fb.can_id[a].astype(np.int64) - 0x600,
@@ -180,6 +180,7 @@ def pair_columns(fb, a: np.ndarray, b: np.ndarray, slots: np.ndarray) -> SdoColu
         subindex=da[:, 3].astype(np.int64),
         ok=db[:, 0] != _ABORT,
         latency=_rounded_latency(t1 - t0),
+        t=t1.astype(np.float64),
     )
 
 

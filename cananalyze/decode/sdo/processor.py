@@ -17,9 +17,9 @@ import numpy as np
 
 from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from cananalyze.core.records import DecodedBatch
+from cananalyze.core.sdo_records import FastPart
 from cananalyze.decode.sdo import fastpath
 from cananalyze.decode.sdo.lazynotes import LazyNotes
-from cananalyze.decode.sdo.lazyrecords import LazyRecords
 from cananalyze.decode.sdo.tracker import SdoTracker
 from cananalyze.protocol.services import Service
 
@@ -235,8 +235,7 @@ class SdoProcessor:
 
     def _take(self, batch: DecodedBatch, lo: int, hi: int) -> None:
         """Reserve the record slots of the fast pairs closed by answers[lo:hi] (filled by _fill)."""
-        self._chunks.append((len(batch.records), lo, hi))
-        batch.records.extend([None] * (hi - lo))  # type: ignore[list-item]
+        self._chunks.append((batch.records.reserve(hi - lo), lo, hi))
         cob, aborted = self._ended_cob[lo:hi], self._ended_aborted[lo:hi]
         if hi - lo > 16:  # only each channel's last answer tells: one update per channel
             cob, last = np.unique(cob[::-1], return_index=True)
@@ -255,7 +254,7 @@ class SdoProcessor:
         slots = np.concatenate(
             [np.arange(slot, slot + hi - lo, dtype=np.int64) for slot, lo, hi in self._chunks]
         )
-        cols = fastpath.pair_columns(fb, a, b, slots)
+        cols = fastpath.pair_columns(fb, a, b)
         latency = cols.latency
         info = lookup = self.tracker.object_info
         if info is not None:
@@ -282,9 +281,7 @@ class SdoProcessor:
                 return columns().records()
             return fastpath.pair_records(fb, a[js], b[js], lookup, latency[js])
 
-        if not isinstance(batch.records, LazyRecords):
-            batch.records = LazyRecords(batch.records)
-        batch.records.defer(slots, b.tolist(), build, cols, columns)
+        batch.records.defer(FastPart(slots, cols, build, columns))
 
         def write_notes(notes: dict) -> None:
             req, resp = fastpath.pair_notes(fb, a, b)

@@ -114,7 +114,7 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
     shared = np.full(n, -1, np.int32) if lazy is None else lazy[2][sel]
     pending = np.zeros(n, bool)  # the fast pairs' rows: notes still to be written
     if pairs is not None:
-        pending[np.concatenate((pairs[1].req_row, pairs[1].row))] = True
+        pending[np.concatenate((pairs[1].cols.req_row, pairs[1].cols.row))] = True
     plain = ~noted & ~pending & (shared < 0)
     keyed = _KEYED[svc] & plain & (in_block < 0)
     inv, first_at = _key_groups(svc, pdo, rtr, dlc, data, keyed, byte_matters=_BYTE)

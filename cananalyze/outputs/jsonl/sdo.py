@@ -35,8 +35,8 @@ def pair_fields(fb, fields, fast, fields_text) -> list[tuple[np.ndarray, list[by
     ok[list(fields.aborted)] = False
     out = []
     for is_req, rows, roles in (
-        (True, fast.req_row, pt.req_role[:, 4:]),  # without "SDO "
-        (False, fast.row, pt.resp_role[:, 4:]),
+        (True, fast.cols.req_row, pt.req_role[:, 4:]),  # without "SDO "
+        (False, fast.cols.row, pt.resp_role[:, 4:]),
     ):
         b0 = fb.data[rows, 0]
         for code in np.unique(b0[ok]).tolist():
@@ -50,7 +50,9 @@ def pair_fields(fb, fields, fast, fields_text) -> list[tuple[np.ndarray, list[by
 def _group(fb, fast, a, is_req, rows, roles, js, fields_text) -> list[bytes] | None:
     j = int(js[0])
     row = int(rows[j])
-    note = pair_outputs(fb, int(fast.req_row[j]), int(fast.row[j]), int(a["node"][j]), None)
+    note = pair_outputs(
+        fb, int(fast.cols.req_row[j]), int(fast.cols.row[j]), int(a["node"][j]), None
+    )
     f = sdo_fields(fb.payload(row), is_req)
     f.update(note[0] if is_req else note[1])
     keys = [k for k in f if k not in _EXPEDITED]

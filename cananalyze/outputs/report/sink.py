@@ -241,7 +241,7 @@ class ReportSink(Sink):
     def _sdo(self, batch) -> None:
         if not batch.records:
             return
-        table = batch.sdo_table()
+        table = batch.records.table()
         buses = _record_buses(batch, table.slots)
         codes = table.node
         if len(set(buses.tolist())) > 1:  # (bus, node) pairs
@@ -261,17 +261,9 @@ class ReportSink(Sink):
             c[1] += pos.size - ok
         if len(self.aborts) >= MAX_LISTED:
             return
-        split = batch.sdo_fast_split()
-        records = batch.records
-        slots = range(len(records)) if split is None else split[2]
-        found = [
-            (k, r)
-            for k in slots
-            if (r := records[k][1]).get("kind") == "sdo" and r.get("result") != "ok"
-        ]
-        if split is not None:
-            fast = split[1]
-            found.extend((int(fast.slots[j]), r) for j, r in split[0].aborted.items())
+        recs = batch.records
+        at = np.flatnonzero(~recs.cols.ok).tolist()
+        found = [(k, recs.record(k)) for k in at]
         found.sort(key=lambda kr: kr[1].get("t") or 0.0)
         found = found[: MAX_LISTED - len(self.aborts)]
         at = _record_buses(batch, np.array([k for k, _ in found], np.int64))

@@ -499,45 +499,34 @@ class TableSink(OutputSink):
     def _add_records(self, batch: DecodedBatch) -> None:
         """SDO rows and findings of a batch.
 
-        The fast path's records are taken as columns (`DecodedBatch.sdo_fast_split`),
-        the other records read one by one. Here only the column statistics are taken
+        The fast path's records are taken as columns (`SdoRecords.split`), the other
+        records read one by one. Here only the column statistics are taken
         in; merging by record slot, spooling and writing (`sdo_chunks`) are numpy
         work for the writer thread.
         """
         records = batch.records
         if not records:
             return
-        split = batch.sdo_fast_split()
-        if split is None:
-            pairs: Iterable = enumerate(records)
-        else:
-            get = list.__getitem__
-            pairs = ((k, get(records, k)) for k in split[2])
-        sdo: list[tuple[int, dict]] = []
-        for k, (_, r) in pairs:
-            kind = r.get("kind")
-            if kind == "sdo":
-                sdo.append((k, r))
-        if not sdo and split is None:
-            return
+        part, others = records.split()
+        sdo = [(k, records.record(k)) for k in others]
         pieces: dict = {}
         order = None
-        slots = np.array([k for k, _ in sdo], np.int64)  # each row's record slot, as merged
-        if split is not None:
-            fields, fast, _ = split
+        slots = np.array(others, np.int64)  # each row's record slot, as merged
+        if part is not None:
+            fields = part.fields()
             keep = None
             if fields.aborted:  # (rare) read as the dicts they are
                 gone = sorted(fields.aborted)
-                sdo.extend((int(fast.slots[j]), fields.aborted[j]) for j in gone)
+                sdo.extend((int(part.at[j]), fields.aborted[j]) for j in gone)
                 slots = np.array([k for k, _ in sdo], np.int64)
-                keep = np.delete(np.arange(len(fast.slots)), gone)
+                keep = np.delete(np.arange(len(part.at)), gone)
             pieces = sdo_chunks.fast_pieces(fields, keep)
             if sdo:
-                slots = np.concatenate((slots, fast.slots if keep is None else fast.slots[keep]))
+                slots = np.concatenate((slots, part.at if keep is None else part.at[keep]))
                 order = np.argsort(slots, kind="stable")
                 slots = slots[order]
             else:
-                slots = fast.slots
+                slots = part.at
         bus = None  # a log of several buses: each row's (None: the first bus's)
         if batch.several:
             self._sdo_bus = True

@@ -45,28 +45,28 @@ class PairText:
 
 
 def fast_pairs(batch: DecodedBatch) -> tuple | None:
-    """(records' fields, SdoColumns, other record slots) of the batch's fast pairs, when
-    their frame notes are still unwritten and only theirs are: then no one has read or
-    changed them, and they are what `pair_notes` would write. Else None (the caller
+    """(records' fields, the fast part, other record positions) of the batch's fast pairs,
+    when their frame notes are still unwritten and only theirs are: then no one has read
+    or changed them, and they are what `pair_notes` would write. Else None (the caller
     reads notes and records as they are)."""
-    split = batch.sdo_fast_split()
+    part, others = batch.records.split()
     notes = batch.notes
-    if split is None or not isinstance(notes, LazyNotes):
+    if part is None or not isinstance(notes, LazyNotes):
         return None
     pending = notes.pending_rows()
-    fast = split[1]
+    cols = part.cols
     if pending is None or not np.array_equal(
-        pending, np.unique(np.concatenate((fast.req_row, fast.row)))
+        pending, np.unique(np.concatenate((cols.req_row, cols.row)))
     ):
         return None
-    return split
+    return part.fields(), part, others
 
 
 def pair_text(fb, fields, fast, end: bytes) -> PairText:
-    """Texts of the fast pairs `fast` (SdoColumns) with their records' `fields`."""
+    """Texts of the fast pairs `fast` (a FastPart) with their records' `fields`."""
     a = fields.arrays
     m = len(fields)
-    req, resp = fast.req_row, fast.row
+    req, resp = fast.cols.req_row, fast.cols.row
     upload = a["upload"]
     where = [object_columns(a["index"], a["subindex"])]  # "0x1018:01"
     endm = bytecols.repeat(end, m)

@@ -193,8 +193,7 @@ class TextWriter(Sink):
         if pairs is None:
             listed = enumerate(batch.records)
         else:  # the other records only, read without building the pairs' dicts
-            get = list.__getitem__
-            listed = ((k, get(batch.records, k)) for k in pairs[2])
+            listed = ((k, batch.records[k]) for k in pairs[2])
         if len(batch.findings):  # after the records, in their slots' order
             found = enumerate(batch.findings.pairs(), len(batch.records))
             listed = itertools.chain(listed, found)
@@ -400,7 +399,7 @@ class TextWriter(Sink):
         mixed = [r for r in (*pt.req.tolist(), *resp) if r in by_row]
         if mixed:
             j_of = {r: j for j, r in enumerate(resp)}
-            slots = fast.slots.tolist()
+            slots = fast.at.tolist()
             for row in mixed:
                 lines = [
                     (k, ("    └─ " + format_record(rec) + "\n").encode())

@@ -1,0 +1,113 @@
+"""SdoRecords: one type for a batch's SDO transfers, tracker-made and fast-path alike.
+
+The fast path's dicts are built only when read; the columns, the table, merging
+and pickling must all see the transfers in the order they ended.
+"""
+
+from __future__ import annotations
+
+import pickle
+
+import numpy as np
+
+from cananalyze.core.sdo_records import FastPart, SdoColumns, SdoRecords
+
+
+def _fast(rows: list[int], built: list) -> tuple[SdoColumns, object]:
+    m = len(rows)
+    cols = SdoColumns(
+        row=np.asarray(rows, np.int64),
+        req_row=np.asarray(rows, np.int64) - 1,
+        node=np.full(m, 7, np.int64),
+        upload=np.ones(m, bool),
+        index=np.arange(0x2000, 0x2000 + m, dtype=np.int64),
+        subindex=np.zeros(m, np.int64),
+        ok=np.array([True] * (m - 1) + [False]),
+        latency=np.full(m, 1.5),
+        t=np.asarray(rows, np.float64) / 10,
+    )
+
+    def build(js):
+        js = range(m) if js is None else js.tolist()
+        built.append(list(js))
+        return [
+            {
+                "kind": "sdo",
+                "node": 7,
+                "index": 0x2000 + j,
+                "result": "ok" if j < m - 1 else "abort",
+            }
+            for j in js
+        ]
+
+    return cols, build
+
+
+def _records() -> tuple[SdoRecords, list]:
+    """Positions: 0 tracker (row 0), 1-2 fast (rows 3, 5), 3 tracker (row 6), 4 fast (row 9)."""
+    built: list = []
+    recs = SdoRecords([(0, {"kind": "sdo", "node": 3, "result": "timeout", "latency_ms": None})])
+    first = recs.reserve(2)
+    recs.append(6, {"kind": "sdo", "node": None, "index": 0x1017, "result": "ok", "t": 0.6})
+    last = recs.reserve(1)
+    cols, build = _fast([3, 5, 9], built)
+    recs.defer(FastPart(np.array([first, first + 1, last]), cols, build))
+    return recs, built
+
+
+def test_columns_and_table_without_building() -> None:
+    recs, built = _records()
+    assert len(recs) == 5 and recs.rows == [0, 3, 5, 6, 9]
+    c = recs.cols
+    assert c.node.tolist() == [3, 7, 7, -1, 7]
+    assert c.index.tolist() == [-1, 0x2000, 0x2001, 0x1017, 0x2002]
+    assert c.ok.tolist() == [False, True, True, True, False]
+    assert c.req_row.tolist() == [-1, 2, 4, -1, 8]
+    tab = recs.table()
+    assert [tab.node_keys[k] for k in tab.node.tolist()] == [3, 7, 7, None, 7]
+    assert [tab.result_keys[k] for k in tab.result.tolist()] == [
+        "timeout", "ok", "ok", "ok", "abort",
+    ]  # fmt: skip
+    assert tab.first_seen(tab.result) == [0, 1, 2]
+    assert built == []
+
+
+def test_one_read_builds_one_and_keeps_it() -> None:
+    recs, built = _records()
+    one = recs.record(2)
+    assert built == [[1]] and one["index"] == 0x2001
+    assert recs[3] == (6, recs.record(3)) and built == [[1]]  # a tracker record: no build
+    everything = list(recs)
+    assert everything[2][1] is one  # the full build keeps the dict already handed out
+    assert [row for row, _ in everything] == [0, 3, 5, 6, 9]
+    assert [r.get("index") for _, r in everything] == [None, 0x2000, 0x2001, 0x1017, 0x2002]
+
+
+def test_split_take_and_pickle() -> None:
+    recs, built = _records()
+    part, others = recs.split()
+    assert part is None and others == list(range(5))  # no columns to write from: read all
+    kept = recs.take([1, 3], [10, 11])
+    assert list(kept) == [(10, recs.record(1)), (11, recs.record(3))]
+    back = pickle.loads(pickle.dumps(recs))
+    assert type(back) is SdoRecords and list(back) == list(recs) and back == recs
+
+
+def test_merge_puts_parts_in_row_order_unbuilt() -> None:
+    a, built_a = _records()  # rows 0 3 5 6 9
+    b = SdoRecords([(1, {"kind": "sdo", "node": 9, "result": "ok"})])
+    pos = b.reserve(1)
+    cols, build_b = _fast([4], built_b := [])
+    cols.ok[:] = True
+    b.defer(FastPart(np.array([pos]), cols, build_b))
+    # part a's rows 0..9 sit at batch rows 2x; part b's rows 0..4 at 2x+1
+    merged, of = SdoRecords.merge([(np.arange(11) * 2, a), (np.arange(6) * 2 + 1, b)])
+    assert merged.rows == [0, 3, 6, 9, 10, 12, 18]
+    assert of.tolist() == [0, 1, 0, 1, 0, 0, 0]
+    assert built_a == [] and built_b == []
+    c = merged.cols
+    assert c.node.tolist() == [3, 9, 7, 7, 7, -1, 7]
+    assert c.req_row.tolist() == [-1, -1, 4, 7, 8, -1, 16]
+    assert merged.record(3) == {"kind": "sdo", "node": 7, "index": 0x2000, "result": "abort"}
+    assert built_b == [[0]]
+    assert [r["node"] for _, r in merged] == [3, 9, 7, 7, 7, None, 7]
