@@ -94,6 +94,7 @@ class NetworkModel:
         self.spec = spec or NetworkSpec()
         self.nodes: dict[int, NodeConfig] = {}
         self.timeline = Timeline()  # the values the log showed, and the resets
+        self._early: dict[int, tuple[dict, set[int] | None]] = {}  # identify_now's, by id
         self._file = {
             (node, index, sub): value
             for node, ns in self.spec.nodes.items()
@@ -257,8 +258,23 @@ class NetworkModel:
         return self.bindings.get(cob_id)
 
     # --- Processor ---------------------------------------------------------------
+    def may_identify(self, node: int, index: int, subindex: int) -> bool:
+        """Whether reading this object of this node may name its device: an identity
+        object whose value the model has not seen, on a node the user did not declare."""
+        key = IDENTITY.get((index, subindex))
+        cfg = self.nodes.get(node)
+        if key is None or (cfg is not None and cfg.identified_by in USER_SOURCES):
+            return False
+        return cfg is None or key not in cfg.identity
+
+    def identify_now(self, row: int, rec: dict) -> None:
+        """An identity read as the SDO tracker ends it (before the later transfers of the
+        batch are named): applied now, its changes taken up at its row by `process`."""
+        self._early[id(rec)] = (rec, self._on_sdo(rec))
+
     def process(self, batch: DecodedBatch) -> None:
         self.segments = [(0, self.bindings)]
+        early, self._early = self._early, {}
         events = [
             (row, rec)
             for row, rec in self._candidates(batch)
@@ -268,7 +284,12 @@ class NetworkModel:
         events.sort(key=lambda e: e[0])
         n = len(batch)
         for row, rec in events:
-            changed = self._on_reset(*rec) if isinstance(rec, tuple) else self._on_sdo(rec)
+            if isinstance(rec, tuple):
+                changed = self._on_reset(*rec)
+            elif id(rec) in early:
+                changed = early[id(rec)][1]  # applied when the tracker ended it
+            else:
+                changed = self._on_sdo(rec)
             if changed is None:
                 continue
             start = max(0, min(row + 1, n))

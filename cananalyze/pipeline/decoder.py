@@ -347,7 +347,12 @@ def build_decoder(
     for node, request, response in model.sdo_channels:
         tracker.add_channel(node, request, response)
     skip = dbc.standard_ids if dbc else set()  # the DBC's layout wins over the profile's
-    processors = [SdoProcessor(tracker), model, PdoDecoder(model, skip), EmcyDecoder(model)]
+    processors = [
+        SdoProcessor(tracker, identifier=model),
+        model,
+        PdoDecoder(model, skip),
+        EmcyDecoder(model),
+    ]
     if dbc:
         from cananalyze.decode.dbc_processor import DbcDecoder
 

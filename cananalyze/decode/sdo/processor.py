@@ -12,24 +12,42 @@ frame through the tracker.
 from __future__ import annotations
 
 import bisect
+from typing import Protocol
 
 import numpy as np
 
 from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from cananalyze.core.records import DecodedBatch
 from cananalyze.core.sdo_records import FastPart
+from cananalyze.decode.node_tally import IDENTITY, IDENTITY_INDEX
 from cananalyze.decode.sdo import fastpath
 from cananalyze.decode.sdo.lazynotes import LazyNotes
 from cananalyze.decode.sdo.tracker import SdoTracker
+from cananalyze.protocol import sdo
 from cananalyze.protocol.services import Service
 
 _ENDED = ("ok", "abort")  # by "aborted": no numpy string array per batch
 
 
+class Identifier(Protocol):
+    """What names a node's device from its identity reads (the network model)."""
+
+    def may_identify(self, node: int, index: int, subindex: int) -> bool: ...
+
+    def identify_now(self, row: int, rec: dict) -> None: ...
+
+
 class SdoProcessor:
-    def __init__(self, tracker: SdoTracker | None = None, fast: bool = True) -> None:
+    def __init__(
+        self,
+        tracker: SdoTracker | None = None,
+        fast: bool = True,
+        identifier: Identifier | None = None,
+    ) -> None:
         self.tracker = tracker or SdoTracker()
         self.fast = fast
+        # told of each identity read as it ends, so that the transfers after it are named
+        self.identifier = identifier
         self._offset = 0  # frames before the current batch, so refs are global
 
     def _rows(self, batch: DecodedBatch) -> np.ndarray:
@@ -67,15 +85,27 @@ class SdoProcessor:
         self._offset += n
 
     def _may_learn(self, batch: DecodedBatch, rows: np.ndarray) -> bool:
-        """Whether a write to an SDO parameter object (0x1200-0x12FF) may end in this batch.
+        """Whether a write to an SDO parameter object (0x1200-0x12FF), or a read that may
+        name a node's device, may end in this batch.
 
-        Such a write can add or move a channel mid-batch, which the plan's fixed
-        channel map cannot follow: then the whole batch goes through the tracker.
+        The first can add or move a channel mid-batch, which the plan's fixed channel
+        map cannot follow; the second renames the node's objects from that transfer
+        on, while the fast path names a batch's pairs at once. Then the whole batch
+        goes through the tracker (a few batches of a log: where nodes start).
         """
         d = np.take(batch.frames.data, rows, axis=0)  # (~10x 2-D fancy indexing)
         index = d[:, 1].astype(np.uint16) | (d[:, 2].astype(np.uint16) << 8)
         if ((index >= 0x1200) & (index <= 0x12FF)).any():
             return True
+        if self.identifier is not None:
+            ask = np.isin(index, IDENTITY_INDEX) & (d[:, 0] == sdo.INITIATE_UPLOAD_REQUEST)
+            if ask.any():
+                node = batch.frames.can_id[rows[ask]].astype(np.int64) - 0x600
+                for nd, i, s in zip(
+                    node.tolist(), index[ask].tolist(), d[ask, 3].tolist(), strict=True
+                ):
+                    if 1 <= nd <= 127 and self.identifier.may_identify(nd, i, s):
+                        return True
         return any(
             x.index is not None and 0x1200 <= x.index <= 0x12FF
             for x in self.tracker._pending.values()
@@ -330,4 +360,12 @@ class SdoProcessor:
             row = ref - self._offset
             if not 0 <= row < n:
                 row = n - 1  # completed by time passing (timeout) or at the end: after this batch
-            batch.add_record(row, tx.to_record())
+            rec = tx.to_record()
+            batch.add_record(row, rec)
+            if (
+                self.identifier is not None
+                and rec["direction"] == "upload"
+                and rec["result"] == "ok"
+                and (rec["index"], rec["subindex"]) in IDENTITY
+            ):
+                self.identifier.identify_now(row, rec)
