@@ -209,3 +209,25 @@ def test_a_long_download_is_shown_short_and_kept_whole(bus, tmp_path) -> None:
     events = pq.read_table(out / "events.parquet").to_pylist()
     (msg,) = [e["message"] for e in events if e["kind"] == "sdo"]
     assert msg == f"SDO download 0x2003:00 data {blob[:32].hex()}... (5000 bytes) ok"
+
+
+def test_an_abort_whose_request_is_not_in_the_log(bus, tmp_path) -> None:
+    """A log that starts between python-canopen's request and its server's abort: every
+    text says which COB-ID and node and that the start is not in the log, never `None`."""
+    import subprocess
+    import sys
+
+    client_net, remote, recorder, od = bus
+    with pytest.raises(SdoAbortedError):
+        remote.sdo.upload(0x3000, 0)
+    frames = drain(recorder)
+    assert [m.arbitration_id for m in frames] == [0x605, 0x585]
+    log = tmp_path / "late.log"
+    log.write_text(f"({frames[1].timestamp:.6f}) vcan0 585#{frames[1].data.hex().upper()}\n")
+    run = [sys.executable, "-m", "cananalyze"]
+    text = subprocess.run([*run, "decode", str(log)], capture_output=True, text=True).stdout
+    check = subprocess.run([*run, "check", str(log)], capture_output=True, text=True).stdout
+    start = "abort by server on 0x585 (node 5), the transfer's start is not in the log"
+    assert "node 5 SDO transfer 0x3000:00 -> abort: 0x06020000 " in text and start in text
+    assert "sdo: SDO transfer 0x3000:00 abort: " in check and start in check
+    assert "None" not in text + check

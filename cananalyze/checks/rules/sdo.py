@@ -51,9 +51,11 @@ class SdoRule(Rule):
             if result == "ok" and not slow:
                 continue  # the usual case: nothing to format
             obj = object_text(rec.get("index", 0), rec.get("subindex", 0))
-            what = f"{rec.get('direction')} {obj}"
+            what = f"{rec.get('direction') or 'transfer'} {obj}"
             if result and result != "ok":
                 detail = rec.get("abort_text") or rec.get("detail") or ""
+                if rec.get("direction") is None and rec.get("abort_text") and rec.get("detail"):
+                    detail += f" [{rec['detail']}]"  # which COB-ID, and that its start is not here
                 code = rec.get("abort_code")
                 measured = f"0x{code:08X}" if isinstance(code, int) else result
                 self.emit(

@@ -80,7 +80,7 @@ def sdo_event(row: int, r: dict) -> Row:
     get = r.get
     result = get("result", "?")
     text = sdo_message(
-        get("direction", "?"),
+        get("direction"),
         get("index"),
         get("subindex"),
         get("name"),

@@ -42,6 +42,7 @@ def sdo_message(direction, index, sub, name, result, value, data, abort, detail)
 
 
 def sdo_head(direction, index, sub, name) -> str:
+    direction = direction or "transfer"  # an abort whose start is not in the log
     if isinstance(index, int) and isinstance(sub, int):
         text = f"SDO {direction} {object_text(index, sub)}"
     else:
@@ -111,7 +112,7 @@ def sdo_messages(fields) -> list[str] | None:
     messages = bytecols.joined_rows(parts, n)
     for k, rec in fields.aborted.items():  # aborted pairs keep their own record
         messages[k] = sdo_message(
-            rec.get("direction", "?"),
+            rec.get("direction"),
             rec.get("index"),
             rec.get("subindex"),
             rec.get("name"),

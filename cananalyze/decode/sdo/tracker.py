@@ -238,7 +238,11 @@ class SdoTracker:
             xfer = Transfer(channel, None, None, index, subindex, t, t, ref)  # type: ignore[arg-type]
             if not is_request:
                 xfer.t_first_response = t
-            xfer.note(f"abort by {side} with no transfer in progress")
+            cob = channel.request_cob if is_request else channel.response_cob
+            xfer.note(
+                f"abort by {side} on 0x{cob:03X} (node {channel.node}), "
+                "the transfer's start is not in the log"
+            )
         else:
             xfer.note(f"aborted by {side}")
             if (index, subindex) != (xfer.index, xfer.subindex) and xfer.index is not None:

@@ -7,11 +7,14 @@ from cananalyze.decode.events.sdo_text import shown_data, shown_text
 from cananalyze.protocol.sdo import object_text
 
 
+_VERB = {"upload": "read", "download": "write"}
+
+
 def format_record(rec: dict) -> str:
     """One line for a record of kind sdo / finding / event."""
     kind = rec.get("kind")
     if kind == "sdo":
-        what = "read" if rec.get("direction") == "upload" else "write"
+        what = _VERB.get(rec.get("direction"), "transfer")  # an abort alone: no direction
         obj = object_text(rec["index"], rec["subindex"]) if rec.get("index") is not None else "?"
         name = f" {rec['name']}" if rec.get("name") else ""
         proto = f" {rec['protocol']}" if rec.get("protocol") else ""  # unknown when aborted at once
