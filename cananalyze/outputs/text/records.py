@@ -6,7 +6,6 @@ from __future__ import annotations
 from cananalyze.decode.events.sdo_text import shown_data, shown_text
 from cananalyze.protocol.sdo import object_text
 
-
 _VERB = {"upload": "read", "download": "write"}
 
 
