@@ -37,6 +37,8 @@ def row_fields(batch: DecodedBatch, i: int) -> dict:
             f.update(batch.row_notes[s][1])
     note = batch.notes.get(i)
     if note:
+        if note.get("command") == "block_segment":
+            f = {}  # no command specifier: the initiate layout's fields would be made up
         f.update(note)
     return f
 

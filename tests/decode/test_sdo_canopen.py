@@ -231,3 +231,58 @@ def test_an_abort_whose_request_is_not_in_the_log(bus, tmp_path) -> None:
     assert "node 5 SDO transfer 0x3000:00 -> abort: 0x06020000 " in text and start in text
     assert "sdo: SDO transfer 0x3000:00 abort: " in check and start in check
     assert "None" not in text + check
+
+
+def test_block_segments_in_frame_records(tmp_path) -> None:
+    """python-canopen's block download segments, as JSONL frame records: `seqno` and `last`
+    (CiA 301: bit 7 is c, bits 0-6 the sequence number), no command specifier, no abort."""
+    import json
+    import subprocess
+    import sys
+
+    channel = unique_channel("block-json")
+    objects = {(0x2200, 0): b""}
+    server_bus = can.Bus(interface="virtual", channel=channel)
+    server = BlockSdoServer(server_bus, NODE, objects, blksizes=(4,), crc=True)
+    notifier = can.Notifier(server_bus, [server])
+    recorder = can.Bus(interface="virtual", channel=channel)
+    net = canopen.Network()
+    net.connect(interface="virtual", channel=channel)
+    remote = patient_client(NODE)
+    net.add_node(remote)
+    payload = b"CANopen block transfer, recorded"  # 32 bytes: 5 segments, sub-blocks of 4
+    try:
+        with remote.sdo.open(
+            0x2200, 0, "wb", size=len(payload), block_transfer=True, request_crc_support=True
+        ) as f:
+            f.write(payload)
+    finally:
+        notifier.stop()
+        frames = drain(recorder)
+        net.disconnect()
+        server_bus.shutdown()
+        recorder.shutdown()
+    log = tmp_path / "block.log"
+    log.write_text(
+        "".join(
+            f"({m.timestamp:.6f}) vcan0 {m.arbitration_id:03X}#{m.data.hex().upper()}\n"
+            for m in frames
+        )
+    )
+    out = subprocess.run(
+        [sys.executable, "-m", "cananalyze", "decode", str(log), "--format", "jsonl"],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    recs = [json.loads(x) for x in out.splitlines()]
+    segs = [r for r in recs if r.get("command") == "block_segment"]
+    assert [(s["seqno"], s["last"]) for s in segs] == [
+        (1, False), (2, False), (3, False), (4, False), (1, True),
+    ]  # fmt: skip
+    assert bytes.fromhex("".join(s["sdo_data"] for s in segs))[: len(payload)] == payload
+    for s in segs:
+        assert not {"cs", "toggle", "c", "n", "abort_code", "abort_text"} & set(s), s
+        assert s["index"] == 0x2200 and s["role"].startswith("block download segment")
+    sdo = [r for r in recs if r.get("kind") == "sdo"]
+    assert [(r["protocol"], r["result"], r["size"]) for r in sdo] == [("block", "ok", 32)]

@@ -123,6 +123,13 @@ class SdoProcessor:
             "index": role.index,
             "subindex": role.subindex,
         }
+        if role.command == "block_segment":  # bit 7 `last` (c), bits 0-6 the sequence number
+            data = fb.payload(row)
+            note |= {
+                "seqno": data[0] & 0x7F,
+                "last": bool(data[0] & 0x80),
+                "sdo_data": data[1:8].hex(),
+            }
         if role.problem:
             note["sdo_problem"] = role.problem
         batch.notes.setdefault(row, {}).update(note)
