@@ -187,7 +187,9 @@ class SdoRecords:
 
     def record(self, k: int) -> dict:
         """The record at position k (a fast one built now, and kept)."""
-        rec = self._dicts.get(k) or self._built.get(k)
+        rec = self._dicts.get(k)
+        if rec is None:
+            rec = self._built.get(k)
         if rec is None:
             for p in self._fast:
                 j = int(np.searchsorted(p.at, k))
