@@ -38,7 +38,7 @@ Reader = Callable[[BinaryIO, ReadContext], Iterator[FrameBatch]]
 class LogFormat:
     name: str  # "candump", "asc", "blf", "trc", ...
     description: str
-    sniff: Callable[[bytes], bool]  # given the first few KiB (decompressed)
+    sniff: Callable[[bytes], bool]  # given the head: 64 KiB, more when none claims that
     read: Reader
     suffixes: tuple[str, ...] = ()
     priority: int = 50  # lower sniffs first; one format a number, so the order is this data

@@ -24,7 +24,12 @@ from cananalyze.core.frames import FrameBatch
 from cananalyze.formats import logs, registry
 from cananalyze.formats.registry import DEFAULT_BATCH, LogFormat, ReadContext
 
-SNIFF_BYTES = 65536
+SNIFF_BYTES = 65536  # the first look: most logs are told from this much
+# A log whose frames come later (after a long header, or a line longer than the first
+# look) is read on, the head doubling each round and every format asked again, until
+# one claims it or this much has been read: bytes, or lines, whichever comes first
+DETECT_BYTES = 8 << 20
+DETECT_LINES = 10000
 
 # every module of formats/logs/: each registers its LogFormat as it is imported
 for _module in pkgutil.iter_modules(logs.__path__):
@@ -153,23 +158,61 @@ class LogSource:
         self._closers.clear()
 
 
-def _detect(head: bytes, name: str, forced: str | None) -> LogFormat:
+def _forced(name: str, forced: str) -> LogFormat:
     formats = registry.FORMATS
-    if forced:
-        for f in formats:
-            if f.name == forced:
-                return f
-        raise InputError(
-            f"{name}: unknown format {forced!r} (known: {', '.join(f.name for f in formats)})"
-        )
+    for f in formats:
+        if f.name == forced:
+            return f
+    raise InputError(
+        f"{name}: unknown format {forced!r} (known: {', '.join(f.name for f in formats)})"
+    )
+
+
+def _claim(head: bytes, name: str) -> LogFormat | None:
+    """The format whose sniffer claims the head (the suffix breaks ties), or None."""
     suffix = Path(name[:-3] if name.endswith(".gz") else name).suffix.lower()
-    claims = [f for f in formats if _safe_sniff(f, head)]
-    if not claims:
-        raise InputError(f"{name}: not a log cananalyze can read: {_describe(head)}")
+    claims = [f for f in registry.FORMATS if _safe_sniff(f, head)]
     for f in claims:
         if suffix in f.suffixes:
             return f
-    return claims[0]
+    return claims[0] if claims else None
+
+
+def _detect(stream: BinaryIO, head: bytes, ended: bool, name: str, pipe: bool, cr_only: bool):
+    """(format, head): the format told from the head, reading on when none claims it.
+
+    The first SNIFF_BYTES tell nearly every log. When they do not (a TRC whose frames
+    come after a line longer than that, a candump capture after a long header), the
+    head is read on, doubling, and every format is asked again each round, up to
+    DETECT_BYTES or DETECT_LINES; a log that none claims by then is refused in one
+    line. The head returned is every byte read, for the readers to see again.
+    """
+    chosen = _claim(head, name)
+    target = SNIFF_BYTES
+    while chosen is None and not ended and len(head) < DETECT_BYTES:
+        if head.count(b"\n") >= DETECT_LINES:
+            break
+        target = min(2 * target, DETECT_BYTES)
+        more, ended = _read_upto(stream, target - len(head), pipe)
+        if not more:
+            break
+        if cr_only:
+            more = more.replace(b"\r", b"\n")
+        head += more
+        chosen = _claim(_first_lines(head, DETECT_LINES), name)
+    if chosen is None:
+        raise InputError(f"{name}: not a log cananalyze can read: {_describe(head[:SNIFF_BYTES])}")
+    return chosen, head
+
+
+def _first_lines(head: bytes, lines: int) -> bytes:
+    """The head up to the end of its `lines`-th line (all of it when it has fewer)."""
+    if head.count(b"\n") <= lines:
+        return head
+    at = -1
+    for _ in range(lines):
+        at = head.index(b"\n", at + 1)
+    return head[: at + 1]
 
 
 def _safe_sniff(fmt: LogFormat, head: bytes) -> bool:
@@ -209,27 +252,30 @@ def open_log(
         gz = _TolerantGzip(stream)
         closers.append(gz)
         stream = io.BufferedReader(gz, buffer_size=SNIFF_BYTES)  # type: ignore[assignment]
+    pipe = stream is raw and not _regular(raw)
     try:
-        head = _read_head(stream, pipe=stream is raw and not _regular(raw))
+        head, ended = _read_upto(stream, SNIFF_BYTES, pipe)
+        bom = len(_BOM) if head.startswith(_BOM) else 0  # no part of the first line or 'date'
+        head = head[bom:]
+        cr_only = b"\r" in head and b"\n" not in head  # classic Mac line ends
+        if cr_only:
+            head = head.replace(b"\r", b"\n")
+        if fmt:
+            chosen = _forced(name, fmt)
+        else:
+            chosen, head = _detect(stream, head, ended, name, pipe, cr_only)
     except (EOFError, gzip.BadGzipFile, zlib.error, OSError) as exc:
         for c in closers:
             c.close()
         raise InputError(f"{name}: cannot read: {exc}") from None
-    bom = len(_BOM) if head.startswith(_BOM) else 0  # no part of the first line or 'date'
-    head = head[bom:]
-    cr_only = b"\r" in head and b"\n" not in head  # classic Mac line ends
-    if cr_only:
-        head = head.replace(b"\r", b"\n")
-    if stream.seekable() and not cr_only:
-        stream.seek(bom)  # a file: read again from the start (the MCAP reader seeks)
-    else:
-        stream = io.BufferedReader(_Replay(head, stream, cr_only), buffer_size=SNIFF_BYTES)  # type: ignore[assignment]
-    try:
-        chosen = _detect(head, name, fmt)
     except InputError:
         for c in closers:
             c.close()
         raise
+    if stream.seekable() and not cr_only:
+        stream.seek(bom)  # a file: read again from the start (the MCAP reader seeks)
+    else:
+        stream = io.BufferedReader(_Replay(head, stream, cr_only), buffer_size=SNIFF_BYTES)  # type: ignore[assignment]
     ctx = ReadContext(source=name, problems=problems or ProblemLog(), batch_size=batch_size)
     size = None
     if name != "-":
@@ -251,17 +297,19 @@ def _regular(raw) -> bool:
         return False
 
 
-def _read_head(stream: BinaryIO, pipe: bool) -> bytes:
-    """The first SNIFF_BYTES bytes the format is told from (one peek gives only one buffer,
-    8 KB: a TRC whose frames start later was refused). A pipe stops early when its writer
+def _read_upto(stream: BinaryIO, size: int, pipe: bool) -> tuple[bytes, bool]:
+    """(up to `size` bytes of the stream, whether it ended). One peek gives only one buffer,
+    8 KB: a TRC whose frames start later was refused. A pipe stops early when its writer
     pauses for half a second, so `candump can0 | cananalyze decode -` starts at once."""
     import select
 
     parts: list[bytes] = []
     got = 0
-    while got < SNIFF_BYTES:
-        part = stream.read1(SNIFF_BYTES - got)  # type: ignore[attr-defined]
+    ended = False
+    while got < size:
+        part = stream.read1(size - got)  # type: ignore[attr-defined]
         if not part:
+            ended = True
             break
         parts.append(part)
         got += len(part)
@@ -271,7 +319,7 @@ def _read_head(stream: BinaryIO, pipe: bool) -> bytes:
                     break
             except (OSError, ValueError, TypeError):
                 pipe = False
-    return b"".join(parts)
+    return b"".join(parts), ended
 
 
 class _Replay(io.RawIOBase):

@@ -6,8 +6,10 @@ built, else by `_bulk_log_lines` (numpy). Both take exactly the same lines, with
 the same values (python-can's CanutilsLogReader makes one Message per frame and
 converts hex byte by byte: about 140k frames/s; these paths run in the millions).
 Every line they leave, and every screen format line (`  can0  181   [2]  01 02`,
-optionally after `(time)`), goes through the line parser below, which is also
-where problems are reported.
+optionally after `(time)` or a bare `1700000000.123456`, with `-x`'s `TX B -`
+direction and CAN FD marks), goes through the line parser below, which is also
+where problems are reported. The `-x` direction is the frame's FLAG_TX, as the ` T`
+that `-l -x` writes is.
 """
 
 from __future__ import annotations
@@ -52,8 +54,16 @@ for _i, _c in enumerate(b"0123456789"):
 _LOG_RE = re.compile(
     rb"^\s*\((?P<t>[^)]*)\)\s+(?P<ch>\S+)\s+(?P<id>[0-9A-Fa-f]+)#(?P<rest>\S*)(?:\s+(?P<dir>[RT]))?\s*$"
 )
+# The screen format (can-utils candump.c, lib.c snprintf_long_canframe):
+#   " (1700000000.123456)  can0  TX B -  123  [12]  11 22 ..."
+# a time in parentheses (-ta/-td/-tz/-tA) or none, or a bare number (some loggers print
+# `1768357807.264241 can0 601 [8] 2B ...`); then the interface; with -x the direction and
+# the CAN FD BRS and ESI marks ("TX"/"RX", then "B"/"-" and "E"/"-"); the identifier;
+# the length, one digit for classic CAN ("[8]"), two for CAN FD ("[08]", "[12]").
 _SCREEN_RE = re.compile(
-    rb"^\s*(?:\((?P<t>[^)]*)\)\s+)?(?P<ch>\S+)\s+(?P<id>[0-9A-Fa-f]{3}|[0-9A-Fa-f]{8})\s+"
+    rb"^\s*(?:\((?P<t>[^)]*)\)\s+|(?P<bare>\d+\.\d+)\s+)?(?P<ch>\S+)\s+"
+    rb"(?:(?P<dir>[RT]X)\s+(?P<brs>[B-])\s(?P<esi>[E-])\s+)?"
+    rb"(?P<id>[0-9A-Fa-f]{3}|[0-9A-Fa-f]{8})\s+"
     rb"(?:(?P<fl>[BEI-]{3})\s+)?\[(?P<len>\d+)\]\s*(?P<rest>.*)$"
 )
 _HEXBYTE = re.compile(rb"^[0-9A-Fa-f]{2}$")
@@ -360,10 +370,11 @@ def _parse_line(line: bytes):
     m = _SCREEN_RE.match(line)
     if m:
         t = None
-        if m["t"] is not None:
-            t = _parse_time_text(m["t"])
+        stamp = m["t"] if m["t"] is not None else m["bare"]
+        if stamp is not None:
+            t = _parse_time_text(stamp)
             if t is None:
-                return f"bad timestamp {m['t'].decode('latin-1')!r}"
+                return f"bad timestamp {stamp.decode('latin-1')!r}"
         ident = m["id"]
         can_id = int(ident, 16)
         if len(ident) == 3 and can_id > 0x7FF:
@@ -372,6 +383,8 @@ def _parse_line(line: bytes):
         if len(ident) == 8 and can_id & CAN_ERR_FLAG:
             flags = FLAG_ERR
             can_id &= 0x1FFFFFFF
+        if m["dir"] == b"TX":  # candump -x: sent by this host's socket
+            flags |= FLAG_TX
         length = int(m["len"])
         rest = m["rest"].split()
         if rest[:2] == [b"remote", b"request"]:
@@ -379,21 +392,41 @@ def _parse_line(line: bytes):
         fields = rest[:length]
         if length > 64 or len(fields) < length or not all(_HEXBYTE.match(f) for f in fields):
             return f"expected {length} hex data bytes after [{length}]"
-        if length > 8:
+        # CAN FD: candump prints its length with two digits ([08], [12]); -x marks BRS, ESI
+        if length > 8 or len(m["len"]) == 2 or m["brs"] == b"B" or m["esi"] == b"E":
             flags |= FLAG_FD
+            if m["brs"] == b"B":
+                flags |= FLAG_BRS
+            if m["esi"] == b"E":
+                flags |= FLAG_ESI
         # anything after the data bytes (a user's comment) is ignored
         return t, m["ch"], can_id, flags, bytes(int(f, 16) for f in fields)
     return "not a candump line"
 
 
+SNIFF_LINES = 40  # candump lines must be half of this many lines from the first one on
+
+
+def _is_frame_line(line: bytes) -> bool:
+    return bool(_LOG_RE.match(line) or _SCREEN_RE.match(line))
+
+
 def sniff(head: bytes) -> bool:
-    lines = [
-        ln for ln in head.splitlines()[1:40] if ln.strip()
-    ]  # first line may be cut or a command
+    """Half of the SNIFF_LINES non-blank lines from the first candump line on are candump
+    lines. The lines before it are a header (notes, the capture's commands) or a first
+    line that is cut or long: only the lines after the first matter, as many as the
+    head holds (the source facade reads on past a long header until a format claims it).
+    """
+    raw = head.splitlines()
+    lines = [ln for ln in raw[1:] if ln.strip()]  # the first line may be cut or a command
     if not lines:
-        lines = [ln for ln in head.splitlines() if ln.strip()]
-    hits = sum(1 for ln in lines if _LOG_RE.match(ln) or _SCREEN_RE.match(ln))
-    return bool(lines) and hits >= max(1, len(lines) // 2)
+        lines = [ln for ln in raw if ln.strip()]
+    for i, line in enumerate(lines):
+        if _is_frame_line(line):
+            window = lines[i : i + SNIFF_LINES]
+            hits = 1 + sum(1 for ln in window[1:] if _is_frame_line(ln))
+            return hits >= max(1, len(window) // 2)
+    return False
 
 
 class _Builder:
