@@ -248,10 +248,9 @@ class Rule:
         why: str | None = None,
         severity: str | None = None,
         basis: str = "",
-        at_end: bool | None = None,
     ) -> None:
-        """One finding (rare, stateful rules); `at_end`: whether it is an end-of-log result
-        the terminal never hides (default: found by `finish`)."""
+        """One finding (rare, stateful rules); one `finish` emits is an end-of-log result
+        the terminal never hides (`at_end`)."""
         key = (node, cob_id)
         self._count[key] += 1
         if self._count[key] > self.max_findings:
@@ -270,7 +269,7 @@ class Rule:
                 why if why is not None else self.why,
                 int(row),
                 basis=basis,
-                at_end=self.ending if at_end is None else at_end,
+                at_end=self.ending,
             )
         )
 

@@ -34,10 +34,9 @@ def junit_xml(
     rules: list[Rule],
     findings: Sequence[Finding] | FindingColumns,
     name: str = "cananalyze check",
-    properties: dict[str, str] | None = None,
 ) -> str:
-    """The report; `properties` (e.g. the HTML report's path) go in the suite's <properties>."""
-    return "".join(junit_xml_parts(rules, findings, name, properties))
+    """The report (the whole text of `junit_xml_parts`)."""
+    return "".join(junit_xml_parts(rules, findings, name))
 
 
 def junit_xml_parts(
