@@ -120,7 +120,6 @@ def run(
                                 sink.tick(now)
                         next_tick = now + tick
                 if stop is not None and stop():
-                    state.stopped = True
                     _stop(source)
         finally:
             close = getattr(batches, "close", None)
