@@ -224,18 +224,6 @@ class Rule:
             return idx[:left]
         return idx
 
-    def dropped(self, t: float, node: int | None, cob_id: int | None) -> bool:
-        """Count a finding that `emit` would only count (the cap is reached); True if so.
-
-        Lets a rule skip formatting the message of a finding nobody will see.
-        """
-        key = (node, cob_id)
-        if self._count[key] < self.max_findings:
-            return False
-        self._count[key] += 1
-        self._first_dropped.setdefault(key, t)
-        return True
-
     def emit(
         self,
         t: float,
