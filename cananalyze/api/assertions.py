@@ -181,18 +181,3 @@ def assert_operational_after_boot(
         run_rules(source, [rule], config, **options),
         f"node {node} operational within {within_s:g} s of boot-up",
     )
-
-
-def assert_clean(
-    source: Source, rules_file: str | Path | None = None, network_file: str | Path | None = None
-) -> None:
-    """Every default rule (and the rules file's) passes, judged by the network file and
-    the rules file's `network:` section."""
-    from cananalyze.checks.build import build_checker
-
-    checker = build_checker(rules_file)
-    if isinstance(source, (str, Path, FrameBatch)):
-        found = run_rules(source, checker.rules, network=network_file, rules=rules_file)
-    else:
-        found = run_rules(source, checker.rules, checker.config)
-    _fail(found, "all rules pass")

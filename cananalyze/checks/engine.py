@@ -251,10 +251,6 @@ class Checker:
         found = FindingColumns.concat([mine, *(c.findings for c in self.others)])
         return found.take(np.argsort(found.t, kind="stable")) if len(found) > 1 else found
 
-    @property
-    def failed(self) -> bool:
-        return bool(self.findings.fails.any())
-
     def report(self) -> dict:
         return self.timing.report(self.nmt)
 

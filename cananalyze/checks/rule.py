@@ -224,18 +224,6 @@ class Rule:
             return idx[:left]
         return idx
 
-    def dropped(self, t: float, node: int | None, cob_id: int | None) -> bool:
-        """Count a finding that `emit` would only count (the cap is reached); True if so.
-
-        Lets a rule skip formatting the message of a finding nobody will see.
-        """
-        key = (node, cob_id)
-        if self._count[key] < self.max_findings:
-            return False
-        self._count[key] += 1
-        self._first_dropped.setdefault(key, t)
-        return True
-
     def emit(
         self,
         t: float,
@@ -248,10 +236,9 @@ class Rule:
         why: str | None = None,
         severity: str | None = None,
         basis: str = "",
-        at_end: bool | None = None,
     ) -> None:
-        """One finding (rare, stateful rules); `at_end`: whether it is an end-of-log result
-        the terminal never hides (default: found by `finish`)."""
+        """One finding (rare, stateful rules); one `finish` emits is an end-of-log result
+        the terminal never hides (`at_end`)."""
         key = (node, cob_id)
         self._count[key] += 1
         if self._count[key] > self.max_findings:
@@ -270,7 +257,7 @@ class Rule:
                 why if why is not None else self.why,
                 int(row),
                 basis=basis,
-                at_end=self.ending if at_end is None else at_end,
+                at_end=self.ending,
             )
         )
 

@@ -418,8 +418,3 @@ def add(
             kwargs["required"] = True
         names = (extra_names or {}).get(key, ()) + flag.names
         parser.add_argument(*names, **kwargs)
-
-
-def spelled(parser: argparse.ArgumentParser) -> list[tuple[str, ...]]:
-    """The option strings of every argument a parser has (for the registry's test)."""
-    return [tuple(a.option_strings) or (a.dest,) for a in parser._actions]

@@ -14,7 +14,6 @@ from dataclasses import dataclass
 # A node's boot-up this long after an NMT reset command addressed to it answers that
 # command (the reset is taken at the command); a later one is a reset of its own.
 RESET_ANSWER_S = 10.0
-RESET_KINDS = ("boot-up", "reset node", "reset communication")
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cananalyze.core.columns.order import first_seen_codes
+
 
 @dataclass
 class SdoColumns:
@@ -256,8 +258,9 @@ class SdoRecords:
             nodes = c.node
             odd = [k for k, rec in d.items() if c.node[k] < 0 and rec.get("node") is not None]
             if odd:  # a node that is no int (hand-made records): coded by value
-                node_keys, node = _codes([d[k]["node"] if k in d else v
-                                          for k, v in enumerate(nodes.tolist())])  # fmt: skip
+                node, node_keys = first_seen_codes(
+                    [d[k]["node"] if k in d else v for k, v in enumerate(nodes.tolist())]
+                )
             else:
                 node_keys, node = _int_codes(nodes)
                 node_keys = [None if v < 0 else v for v in node_keys]
@@ -316,22 +319,9 @@ class SdoRecords:
         return out, part[order]
 
 
-def _codes(values: list) -> tuple[list, np.ndarray]:
-    """(distinct values first seen first, each value's code)."""
-    keys: list = []
-    code: dict = {}
-    out = np.empty(len(values), np.int64)
-    for i, v in enumerate(values):
-        c = code.get(v)
-        if c is None:
-            c = code[v] = len(keys)
-            keys.append(v)
-        out[i] = c
-    return keys, out
-
-
 def _int_codes(values: np.ndarray) -> tuple[list, np.ndarray]:
-    """`_codes` of an int array, column-wise."""
+    """(distinct values first seen first, each value's code) of an int array, column-wise
+    (`first_seen_codes`'s, the other way round)."""
     if values.size == 0:
         return [], np.zeros(0, np.int64)
     uniq, first, inv = np.unique(values, return_index=True, return_inverse=True)

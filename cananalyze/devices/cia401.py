@@ -9,7 +9,6 @@ the PDO decoder notes as too short: give its EDS (`--eds`) for the real layout.
 
 from __future__ import annotations
 
-PROFILE = 401
 U8, I16 = 0x05, 0x03
 
 OBJECTS: dict[tuple[int, int], tuple[str, int, str | None]] = {}

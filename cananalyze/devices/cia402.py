@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import numpy as np
 
-PROFILE = 402
 STATUSWORD, CONTROLWORD = 0x6041, 0x6040
 MODES, MODES_DISPLAY = 0x6060, 0x6061
 U8, U16, U32, I8, I16, I32 = 0x05, 0x06, 0x07, 0x02, 0x03, 0x04

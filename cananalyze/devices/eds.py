@@ -24,7 +24,6 @@ class ObjectInfo:
     subindex: int
     name: str
     datatype: int
-    access: str
     default: int | float | str | bytes | None  # DCF ParameterValue if given, else DefaultValue
     pdo_mappable: bool = False
 
@@ -129,7 +128,6 @@ def object_info(od, index: int, subindex: int, node_id: int | None) -> ObjectInf
         subindex=subindex,
         name=var.name,
         datatype=int(var.data_type or 0),
-        access=var.access_type,
         default=effective_value(var, node_id),
         pdo_mappable=bool(var.pdo_mappable),
     )

@@ -334,11 +334,3 @@ class LiveSource:
     @property
     def channels(self) -> tuple[str, ...]:
         return tuple(self._channels)
-
-    def stats(self) -> dict:
-        return {
-            "received": self.received,
-            "high_water": self.high_water,
-            "stalls": self.stalls,
-            "ring_size": self._size,
-        }

@@ -38,14 +38,6 @@ class LiveBuses(LiveSource):
         return sum(p.received for p in self.parts)
 
     @property
-    def high_water(self) -> int:
-        return max((p.high_water for p in self.parts), default=0)
-
-    @property
-    def stalls(self) -> int:
-        return sum(p.stalls for p in self.parts)
-
-    @property
     def channels(self) -> tuple[str, ...]:
         return tuple(self._names)
 
@@ -117,12 +109,3 @@ class LiveBuses(LiveSource):
         self.stop()
         for p in self.parts:
             p.close()
-
-    def stats(self) -> dict:
-        return {
-            "received": self.received,
-            "high_water": self.high_water,
-            "stalls": self.stalls,
-            "ring_size": sum(p._size for p in self.parts),
-            "buses": len(self.parts),
-        }

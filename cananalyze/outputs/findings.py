@@ -14,6 +14,7 @@ from typing import TextIO
 import numpy as np
 
 from cananalyze.core.atomic import Staged
+from cananalyze.core.columns.order import first_seen_codes
 from cananalyze.core.finding import Finding
 from cananalyze.core.finding_columns import FindingColumns
 from cananalyze.outputs import colour
@@ -34,15 +35,13 @@ def terminal_cap(findings: FindingColumns, cap: int) -> tuple[np.ndarray, dict]:
     n = len(findings)
     if n == 0:
         return np.zeros(0, np.int64), {}
-    names = findings.rule.tolist()
-    code = {r: k for k, r in enumerate(dict.fromkeys(names))}
-    rule_code = np.array([code[r] for r in names], np.int64)
+    rule_code, _ = first_seen_codes(findings.rule.tolist())
     # one integer per (rule, node, COB-ID, at end): node < 256, COB-ID < 2^30 (29-bit ids)
     keys = (rule_code << 40) | ((findings.node + 1) << 31) | ((findings.cob_id + 1) << 1)
     keys |= findings.at_end
     if np.not_equal(findings.bus, None).any():  # several buses: node 5 on each apart
-        buses = {b: k for k, b in enumerate(dict.fromkeys(findings.bus.tolist()))}
-        keys = keys * len(buses) + np.array([buses[b] for b in findings.bus.tolist()], np.int64)
+        bus_code, buses = first_seen_codes(findings.bus.tolist())
+        keys = keys * len(buses) + bus_code
     _, key_of, total = np.unique(keys, return_inverse=True, return_counts=True)
     key_of = key_of.reshape(-1)
     order = np.argsort(key_of, kind="stable")

@@ -24,7 +24,8 @@ CHUNK = 4096  # findings encoded at a time: big enough that the per-chunk cost v
 def findings_json_parts(
     findings: Sequence[Finding] | FindingColumns, chunk: int = CHUNK
 ) -> Iterator[str]:
-    """The text of `findings_json`, in pieces of at most `chunk` records each."""
+    """`check --json`'s text (every finding's record, in a list), in pieces of at most
+    `chunk` records each."""
     n = len(findings)
     if n == 0:
         yield "[]\n"
@@ -35,11 +36,6 @@ def findings_json_parts(
         # "[\n <records>\n]": the items with the list's own separators, without its brackets
         yield ("" if start == 0 else ",") + text[1:-2]
     yield "\n]\n"
-
-
-def findings_json(findings: Sequence[Finding] | FindingColumns) -> str:
-    """`check --json`'s text: every finding's record, in a list (for a caller wanting a str)."""
-    return "".join(findings_json_parts(findings))
 
 
 def _records(findings: Sequence[Finding] | FindingColumns, start: int, stop: int) -> list[dict]:

@@ -14,6 +14,7 @@ from xml.sax.saxutils import escape
 import numpy as np
 
 from cananalyze.checks.rule import Rule
+from cananalyze.core.columns.order import first_seen_codes
 from cananalyze.core.finding import TABLE_COLUMNS, Finding, show
 from cananalyze.core.finding_columns import FindingColumns
 
@@ -34,10 +35,9 @@ def junit_xml(
     rules: list[Rule],
     findings: Sequence[Finding] | FindingColumns,
     name: str = "cananalyze check",
-    properties: dict[str, str] | None = None,
 ) -> str:
-    """The report; `properties` (e.g. the HTML report's path) go in the suite's <properties>."""
-    return "".join(junit_xml_parts(rules, findings, name, properties))
+    """The report (the whole text of `junit_xml_parts`)."""
+    return "".join(junit_xml_parts(rules, findings, name))
 
 
 def junit_xml_parts(
@@ -110,10 +110,10 @@ def _cases(rules: list[Rule], found: FindingColumns) -> tuple[list[str], list[np
     case = np.zeros(len(found), np.int64)
     if len(found):
         by_rule = {r.name: r for r in rules}
-        rule_code, rule_names = _codes(found.column("rule"))
+        rule_code, rule_names = first_seen_codes(found.column("rule"))
         by_cob = np.array([r in by_rule and r in _BY_COB_ID for r in rule_names])
         key = np.where(by_cob[rule_code], found.ints("cob_id")[0], found.ints("node")[0])
-        bus_code, buses = _codes(found.column("bus"))
+        bus_code, buses = first_seen_codes(found.column("bus"))
         combo = ((rule_code << 31) | (key + 1)) * len(buses) + bus_code  # key: 29 bits
         del rule_code, key, bus_code
         _, first, inverse = np.unique(combo, return_index=True, return_inverse=True)
@@ -130,12 +130,6 @@ def _cases(rules: list[Rule], found: FindingColumns) -> tuple[list[str], list[np
     bounds = np.searchsorted(case[order], np.arange(len(names) + 1))
     rows = [order[bounds[c] : bounds[c + 1]] for c in range(len(names))]
     return list(names), rows
-
-
-def _codes(values: list) -> tuple[np.ndarray, list]:
-    """Each value's number among the distinct values (in the order they come), and those."""
-    codes = {v: k for k, v in enumerate(dict.fromkeys(values))}
-    return np.fromiter((codes[v] for v in values), np.int64, len(values)), list(codes)
 
 
 def format_finding(f: Finding) -> str:

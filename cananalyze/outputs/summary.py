@@ -12,6 +12,7 @@ from typing import TextIO
 import numpy as np
 
 from cananalyze.checks.streamstats import StreamStats
+from cananalyze.core.columns.order import first_seen_codes
 from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from cananalyze.core.records import DecodedBatch
 from cananalyze.outputs.busload import bits_per_channel
@@ -167,8 +168,8 @@ class Summary:
             return
         buses = batch.record_buses(tab.slots)
         buses[np.equal(buses, None)] = self.first_bus  # made before the second bus was seen
-        code = {b: i for i, b in enumerate(dict.fromkeys(buses.tolist()))}
-        keys = tab.node * len(code) + np.array([code[b] for b in buses.tolist()], np.int64)
+        bus_code, distinct = first_seen_codes(buses.tolist())
+        keys = tab.node * len(distinct) + bus_code
         _sdo_into(
             tab,
             keys,

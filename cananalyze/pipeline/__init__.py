@@ -10,35 +10,22 @@ disagree about what a log holds: they read the same decoded batches.
     run(source, build_decoder(opts), [TableSink("out", "parquet")], opts)
 """
 
-from cananalyze.pipeline.decoder import (
-    Decoder,
-    Processor,
-    build_checker,
-    build_decoder,
-    merge_buses,
-    merge_ends,
-    network_spec,
-)
-from cananalyze.pipeline.options import TIME_MODES, Options
-from cananalyze.pipeline.run import named_errors, run, unmatched_filter
+from cananalyze.pipeline.decoder import Decoder, build_checker, build_decoder, network_spec
+from cananalyze.pipeline.options import Options
+from cananalyze.pipeline.run import run, unmatched_filter
 from cananalyze.pipeline.sink import Sink
 from cananalyze.pipeline.source import MemorySource, Source, open_source
 from cananalyze.pipeline.state import Run
 
 __all__ = [
-    "TIME_MODES",
     "Decoder",
     "MemorySource",
     "Options",
-    "Processor",
     "Run",
     "Sink",
     "Source",
     "build_checker",
     "build_decoder",
-    "merge_buses",
-    "merge_ends",
-    "named_errors",
     "network_spec",
     "open_source",
     "run",

@@ -5,14 +5,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from cananalyze.core.defaults import SDO_TIMEOUT
 from cananalyze.core.errors import UsageError
-
-if TYPE_CHECKING:
-    pass
-
 
 TIME_MODES = ("rel", "abs")
 

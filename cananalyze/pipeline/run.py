@@ -5,22 +5,17 @@ from __future__ import annotations
 import contextlib
 import time
 from collections.abc import Callable, Iterable, Iterator
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from cananalyze.core.frames import FrameBatch
 from cananalyze.core.records import DecodedBatch
-from cananalyze.runtime import signals
-
-if TYPE_CHECKING:
-    pass
-
 from cananalyze.pipeline.decoder import Decoder
 from cananalyze.pipeline.options import Options
 from cananalyze.pipeline.sink import Sink
 from cananalyze.pipeline.source import Source
 from cananalyze.pipeline.state import Run
+from cananalyze.runtime import signals
 
 
 class _Filter:
@@ -125,7 +120,6 @@ def run(
                                 sink.tick(now)
                         next_tick = now + tick
                 if stop is not None and stop():
-                    state.stopped = True
                     _stop(source)
         finally:
             close = getattr(batches, "close", None)

@@ -4,14 +4,10 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING, Protocol
+from typing import Protocol
 
 from cananalyze.core.errors import ProblemLog
 from cananalyze.core.frames import FrameBatch
-
-if TYPE_CHECKING:
-    pass
-
 from cananalyze.pipeline.options import Options
 
 

@@ -29,7 +29,6 @@ class Run:
     frames: int = 0  # frames read
     shown: int = 0  # frames that passed the filters
     rows: int = 0  # rows written to the sinks so far (row numbers of events)
-    stopped: bool = False  # a live run ended by the user or its duration
     t_last: float | None = None
     # frames per node (index node + 1, 0 = no node), counted when filtering: what to
     # tell a user whose --node matched nothing

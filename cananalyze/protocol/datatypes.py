@@ -79,26 +79,6 @@ def decode_value(data: bytes, code: int) -> int | float | str | bool | None:
     return int.from_bytes(raw, "little", signed=dtype.kind == "int")
 
 
-def value_decoder(code: int):
-    """`decode_value` with the type fixed: a callable data -> value, for loops over many values.
-
-    Integer types, the bulk of polled objects, skip the per-call type lookup;
-    the others fall back to `decode_value` itself, so results are the same.
-    """
-    dtype = DATA_TYPES.get(code)
-    if dtype is None or dtype.kind not in ("int", "uint"):
-        return lambda data: decode_value(data, code)
-    size = max(1, dtype.bits // 8)
-    signed = dtype.kind == "int"
-
-    def decode(data: bytes):
-        if len(data) < size:
-            return None
-        return int.from_bytes(data[:size], "little", signed=signed)
-
-    return decode
-
-
 def decode_column(raw, length, code: int) -> list:
     """`decode_value` of many short values of one type at once: a list, one value per row.
 

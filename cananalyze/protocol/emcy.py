@@ -87,28 +87,6 @@ def error_class(code: int) -> str:
     return UNKNOWN_CLASS
 
 
-def error_classes(codes: np.ndarray) -> list[str]:
-    """`error_class` of each code, by a searchsorted per mask instead of dict probes per code."""
-    names = [*(ERROR_CLASSES[k] for k in sorted(ERROR_CLASSES)), UNKNOWN_CLASS]
-    return list(map(names.__getitem__, _class_index(codes).tolist()))
-
-
-def _class_index(codes: np.ndarray) -> np.ndarray:
-    """Each code's class as an index into the sorted `ERROR_CLASSES` (its length: unknown).
-
-    Masks from the least to the most specific, each hit overwriting: the most
-    specific name wins, as `error_class`'s first hit does.
-    """
-    keys = np.array(sorted(ERROR_CLASSES), np.int64)
-    pick = np.full(len(codes), len(keys), np.intp)
-    for mask in (*reversed(_MASKS), 0xFFFF):
-        masked = codes & mask
-        at = np.minimum(np.searchsorted(keys, masked), len(keys) - 1)
-        hit = keys[at] == masked
-        pick[hit] = at[hit]
-    return pick
-
-
 # error code class (high nibble) -> the error register bit it sets besides bit 0 (generic)
 _CLASS_REGISTER_BIT = {0x2: 0x02, 0x3: 0x04, 0x4: 0x08, 0x8: 0x10, 0xF: 0x80}
 
@@ -143,14 +121,10 @@ def error_lines(codes: np.ndarray, registers: np.ndarray) -> np.ndarray:
     """
     codes = np.asarray(codes, np.int64)
     n = codes.size
-    names = [*(ERROR_CLASSES[k] for k in sorted(ERROR_CLASSES)), UNKNOWN_CLASS]
     uregs, reg_at = np.unique(np.asarray(registers, np.int64), return_inverse=True)
     parts = [
-        bytecols.repeat(b"EMCY ", n),
-        _hex_code(codes),
-        bytecols.repeat(b" ", n),
-        bytecols.padded_table([x.encode() for x in names])[_class_index(codes)],
-        bytecols.padded_table([f"; {register_text(r)}".encode() for r in uregs.tolist()])[
+        _head_block(codes),
+        bytecols.padded_table([register_text(r).encode() for r in uregs.tolist()])[
             reg_at.reshape(-1)
         ],
     ]
@@ -165,12 +139,14 @@ def code_texts(codes: np.ndarray) -> list[str]:
     return bytecols.joined_rows([_hex_code(codes)], codes.size) if codes.size else []
 
 
+_NIBBLES = np.array([12, 8, 4, 0], np.int64)
+
+
 def _hex_code(codes: np.ndarray) -> np.ndarray:
     """`f"0x{code:04X}"` of each 16-bit code as an (n, 6) byte matrix."""
     out = np.empty((codes.size, 6), np.uint8)
     out[:, :2] = np.frombuffer(b"0x", np.uint8)
-    for j in range(4):
-        out[:, 2 + j] = bytecols.HEX_UPPER[(codes >> (12 - 4 * j)) & 15]
+    out[:, 2:] = bytecols.HEX_UPPER[(codes[:, None] >> _NIBBLES) & 15]
     return out
 
 
@@ -219,17 +195,14 @@ def decoded_words(decoded: dict) -> str:
     return decoded.get("meaning") or ", ".join(decoded.get("flags") or []) or str(decoded)
 
 
-_HEAD_LEAD = np.frombuffer(b"EMCY 0x", np.uint8)
-_NIBBLES = np.array([12, 8, 4, 0], np.int64)
-
-
 @functools.cache
 def _class_blocks() -> tuple[np.ndarray, np.ndarray]:
     """(index of every 16-bit code's class, " {error_class}; " of each as a NUL-padded
     matrix), built once: a batch's heads are then two gathers, not a search per mask.
 
     Each mask, from the least to the most specific, overwrites the codes it names:
-    a masked key covers the contiguous run of codes under it (as in `error_classes`).
+    a masked key covers the contiguous run of codes under it, so the most specific name
+    wins, as `error_class`'s first hit does.
     """
     keys = sorted(ERROR_CLASSES)
     index = np.full(1 << 16, len(keys), np.uint16)  # UNKNOWN_CLASS after the keys
@@ -245,10 +218,8 @@ def _head_block(code: np.ndarray) -> np.ndarray:
     """The "EMCY {error_text}; " of each code as a NUL-padded block: the four hex digits and
     the class by numpy (a format per distinct code was half of `text_columns`)."""
     index, blocks = _class_blocks()
-    classes = blocks[index[code]]
-    digits = bytecols.HEX_UPPER[(code[:, None] >> _NIBBLES) & 15]  # _ERROR's 0x{:04X}
-    lead = np.broadcast_to(_HEAD_LEAD, (len(code), _HEAD_LEAD.size))
-    return np.concatenate((lead, digits, classes), axis=1)
+    lead = bytecols.repeat(b"EMCY ", len(code))
+    return np.concatenate((lead, _hex_code(code), blocks[index[code]]), axis=1)
 
 
 def text_columns(data: np.ndarray, dlc: np.ndarray) -> list[np.ndarray]:

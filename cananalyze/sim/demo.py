@@ -5,14 +5,12 @@ configures a heartbeat, gets one abort, starts the network; then SYNC, TIME,
 heartbeats, node guarding, PDOs and an emergency raised and cleared. Frame
 times are whole microseconds so candump, ASC and BLF carry them identically.
 
-Regenerate the samples with: python -m cananalyze.sim.demo samples/
+`python -m cananalyze.sim.samples samples/` writes it with the other samples.
 """
 
 from __future__ import annotations
 
 import struct
-import sys
-from pathlib import Path
 
 from cananalyze.core.frames import FLAG_RTR, FLAG_TX, FrameBatch, from_rows
 from cananalyze.protocol import nmt
@@ -106,26 +104,3 @@ def demo_rows() -> list[tuple[float, int, bytes, int]]:
 
 def demo_batch() -> FrameBatch:
     return from_rows(demo_rows(), channels=("can0",))
-
-
-def main(argv: list[str] | None = None) -> int:
-    import os
-    import time
-
-    from cananalyze.formats.logfile import write_log
-
-    # python-can formats ASC header times in local time: pin it so files are reproducible
-    os.environ["TZ"] = "UTC"
-    time.tzset()
-    args = sys.argv[1:] if argv is None else argv
-    out = Path(args[0] if args else "samples")
-    out.mkdir(parents=True, exist_ok=True)
-    batch = demo_batch()
-    for suffix in (".log", ".asc", ".blf"):
-        write_log(batch, out / f"demo{suffix}")
-    print(f"wrote {len(batch)} frames to {out}/demo.log, demo.asc, demo.blf")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -96,7 +96,7 @@ class Simulation:
         return from_rows(rows, channels=("can0",))
 
     # --- real time ------------------------------------------------------------------
-    def run_realtime(self, bus, duration: float, on_frame: Callable | None = None) -> None:
+    def run_realtime(self, bus, duration: float) -> None:
         """Run against a python-can bus until duration seconds have passed."""
         self.bus = bus
         self._t0 = time.monotonic()
@@ -117,8 +117,6 @@ class Simulation:
             self.now = time.monotonic() - self._t0
             flags = FLAG_RTR if msg.is_remote_frame else 0
             data = b"" if msg.is_remote_frame else bytes(msg.data)
-            if on_frame is not None:
-                on_frame(msg)
             for p in self.participants:
                 p.on_frame(msg.arbitration_id, data, flags)
 

@@ -261,13 +261,13 @@ class SimNode:
                 self._maybe_send(n, params)
         self.sim.after(SCAN_PERIOD, lambda: self._scan(gen))
 
-    def _maybe_send(self, n: int, params, force: bool = False) -> None:
+    def _maybe_send(self, n: int, params) -> None:
         pdo = self.tpdos[n]
         payload = self.tpdo_payload(n)
-        if not force and payload == pdo.last:
+        if payload == pdo.last:
             return
         ready = pdo.last_sent + params[4] + 1e-6 if params[4] else 0.0  # 1 us: clear of rounding
-        if force or self.sim.now >= ready:
+        if self.sim.now >= ready:
             self.send_tpdo(n)
         elif not pdo.pending:  # inhibit time: send when it has passed
             pdo.pending = True

@@ -25,13 +25,17 @@ def pin_utc() -> None:
 
 def write_samples(out: Path) -> list[Path]:
     from cananalyze.formats.logfile import write_log
+    from cananalyze.sim.demo import demo_batch
     from cananalyze.sim.session import simulate
 
     pin_utc()
     out.mkdir(parents=True, exist_ok=True)
     written = []
-    for name, duration in SAMPLES.items():
-        batch = simulate(scenario=name, duration=duration, seed=SEED)
+    for name in ("demo", *SAMPLES):
+        if name == "demo":
+            batch = demo_batch()
+        else:
+            batch = simulate(scenario=name, duration=SAMPLES[name], seed=SEED)
         for suffix in (".log", ".asc", ".blf"):
             path = out / f"{name}{suffix}"
             write_log(batch, path)
@@ -40,11 +44,8 @@ def write_samples(out: Path) -> list[Path]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from cananalyze.sim import demo
-
     args = sys.argv[1:] if argv is None else argv
     out = Path(args[0] if args else "samples")
-    demo.main([str(out)])
     for path in write_samples(out):
         print(f"wrote {path} ({path.stat().st_size} bytes)")
     return 0

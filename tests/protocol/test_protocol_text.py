@@ -32,12 +32,6 @@ def test_emcy_text_columns_equal_the_scalar_text():
     assert got == want
 
 
-def test_error_classes_equal_error_class_for_every_code():
-    codes = np.arange(1 << 16, dtype=np.int64)
-    assert emcy.error_classes(codes) == [emcy.error_class(c) for c in codes.tolist()]
-    assert emcy.error_classes(np.zeros(0, np.int64)) == []
-
-
 def test_emcy_head_block_equals_error_text_for_every_code():
     """The heads built by lookup tables say what `error_text` says, code by code."""
     codes = np.arange(1 << 16, dtype=np.int64)

@@ -1,4 +1,5 @@
-"""The stable sort order of small integer keys (COB-IDs, node-IDs), the decode path's grouping.
+"""The stable sort order of small integer keys (COB-IDs, node-IDs), the decode path's grouping,
+and values numbered in the order they first come (`first_seen_codes`).
 
 Rows are grouped by key (the gap tables by node or COB-ID, the PDO decoder by
 segment and COB-ID) with one stable sort per batch. With the compiled helper it is
@@ -24,3 +25,11 @@ def stable_order(keys: np.ndarray, top: int | None = None) -> np.ndarray:
     order = np.empty(keys.size, np.intp)
     C.stable_order(np.ascontiguousarray(k16), top + 1, order)
     return order
+
+
+def first_seen_codes(values) -> tuple[np.ndarray, list]:
+    """Each value's number among the distinct values, numbered in the order they first come
+    (pandas.factorize without sorting), and those distinct values."""
+    code: dict = {}
+    out = np.fromiter((code.setdefault(v, len(code)) for v in values), np.int64, len(values))
+    return out, list(code)

@@ -30,13 +30,12 @@ from cananalyze.decode.events.build import EventState, batch_events_of
 from cananalyze.decode.events.columns import KINDS, NO_NODE, NO_ROW
 from cananalyze.decode.node_tally import NodeTally
 from cananalyze.formats.mcap_bulk import BulkMcapWriter
-from cananalyze.formats.mcap_frames import FRAME_SCHEMA, FRAMES_TOPIC, frame_payloads
+from cananalyze.formats.mcap_frames import FRAME_SCHEMA, FRAMES_TOPIC, frame_payloads, log_time_ns
 from cananalyze.outputs.mcap.topics import (
     DRIVE_SCHEMA,
     EVENTS_TOPIC,
     LOG_SCHEMA,
     STATE_SCHEMA,
-    _ns,
     drive_payloads,
     drive_topic,
     event_payloads,
@@ -95,13 +94,13 @@ def batch_messages(
             key = ("signals", bus, n, pdo, cob, tuple(cols))
             topic = on_bus(bus, signal_topic(blk))
             payload = signal_payloads(cols) if keep(topic) else None
-            out.append((key, topic, signal_schema(blk), _ns(fb.t[r]), payload))
+            out.append((key, topic, signal_schema(blk), log_time_ns(fb.t[r]), payload))
     by_node: dict[tuple, list] = {}
     for e in states:
         bus = bus_of(None if e.row is None else e.row - offset)
         by_node.setdefault((e.node, bus or ""), []).append(e)
     for (n, bus), evs in sorted(by_node.items()):
-        ns = _ns(np.array([e.t for e in evs]))
+        ns = log_time_ns(np.array([e.t for e in evs]))
         topic = on_bus(bus or None, state_topic(n))
         payload = state_payloads(evs) if keep(topic) else None
         out.append((("state", bus, n), topic, STATE_SCHEMA, ns, payload))
@@ -110,16 +109,16 @@ def batch_messages(
         if c.kind == STATE:
             by_drive.setdefault((c.node, bus_of(c.row) or ""), []).append(c)
     for (n, bus), cs in sorted(by_drive.items()):
-        ns = _ns(np.array([c.t for c in cs]))
+        ns = log_time_ns(np.array([c.t for c in cs]))
         topic = on_bus(bus or None, drive_topic(n))
         payload = drive_payloads(cs) if keep(topic) else None
         out.append((("drive", bus, n), topic, DRIVE_SCHEMA, ns, payload))
     if len(events) and not keep(EVENTS_TOPIC):
-        out.append((("events",), EVENTS_TOPIC, LOG_SCHEMA, _ns(np.sort(events.t)), None))
+        out.append((("events",), EVENTS_TOPIC, LOG_SCHEMA, log_time_ns(np.sort(events.t)), None))
     elif len(events):
         order = np.lexsort((events.sort_key(), events.t))
         events = events.take(order)
-        ns = _ns(events.t)
+        ns = log_time_ns(events.t)
         names = [
             f"node {n}" if n != NO_NODE else KINDS[k]
             for n, k in zip(events.node.tolist(), events.kind.tolist(), strict=True)
@@ -137,7 +136,7 @@ def batch_messages(
         out.append((("events",), EVENTS_TOPIC, LOG_SCHEMA, ns, payload))
     if len(fb):
         payload = frame_payloads(fb, service, node) if keep(FRAMES_TOPIC) else None
-        out.append((("frames",), FRAMES_TOPIC, FRAME_SCHEMA, _ns(fb.t), payload))
+        out.append((("frames",), FRAMES_TOPIC, FRAME_SCHEMA, log_time_ns(fb.t), payload))
     return out
 
 

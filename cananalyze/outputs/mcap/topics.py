@@ -31,7 +31,6 @@ from cananalyze.core.columns.json_text import Texts, join, number_text, object_t
 from cananalyze.core.records import SignalBlock, signal_path
 from cananalyze.core.version import __version__
 from cananalyze.formats.mcap_bulk import BulkMcapWriter
-from cananalyze.formats.mcap_frames import log_time_ns
 from cananalyze.outputs.capture import SignalSeries
 
 LOG_SCHEMA = {
@@ -80,9 +79,6 @@ DRIVE_SCHEMA = {
     "type": "object",
     "properties": {"state": {"type": "string"}, "statusword": {"type": "integer"}},
 }
-
-
-_ns = log_time_ns  # every topic's log times, as the frames topic keeps them
 
 
 def _json_type(values: np.ndarray) -> str:
