@@ -42,6 +42,9 @@ class LogFormat:
     read: Reader
     suffixes: tuple[str, ...] = ()
     priority: int = 50  # lower sniffs first; one format a number, so the order is this data
+    # a text format's CR-only line ends are made newlines; a binary format's bytes are never
+    # touched (0x0D is just a byte in a pcap's microseconds or a BLF's payload)
+    text: bool = True
 
 
 FORMATS: list[LogFormat] = []

@@ -168,10 +168,12 @@ def _forced(name: str, forced: str) -> LogFormat:
     )
 
 
-def _claim(head: bytes, name: str) -> LogFormat | None:
-    """The format whose sniffer claims the head (the suffix breaks ties), or None."""
+def _claim(head: bytes, name: str, text: bool | None = None) -> LogFormat | None:
+    """The format whose sniffer claims the head (the suffix breaks ties), or None;
+    `text` asks only the text (True) or the binary (False) formats."""
     suffix = Path(name[:-3] if name.endswith(".gz") else name).suffix.lower()
-    claims = [f for f in registry.FORMATS if _safe_sniff(f, head)]
+    formats = [f for f in registry.FORMATS if text is None or f.text == text]
+    claims = [f for f in formats if _safe_sniff(f, head)]
     for f in claims:
         if suffix in f.suffixes:
             return f
@@ -187,7 +189,8 @@ def _detect(stream: BinaryIO, head: bytes, ended: bool, name: str, pipe: bool, c
     DETECT_BYTES or DETECT_LINES; a log that none claims by then is refused in one
     line. The head returned is every byte read, for the readers to see again.
     """
-    chosen = _claim(head, name)
+    text = True if cr_only else None  # repaired line ends: only a text format may claim them
+    chosen = _claim(head, name, text)
     target = SNIFF_BYTES
     while chosen is None and not ended and len(head) < DETECT_BYTES:
         if head.count(b"\n") >= DETECT_LINES:
@@ -199,7 +202,7 @@ def _detect(stream: BinaryIO, head: bytes, ended: bool, name: str, pipe: bool, c
         if cr_only:
             more = more.replace(b"\r", b"\n")
         head += more
-        chosen = _claim(_first_lines(head, DETECT_LINES), name)
+        chosen = _claim(_first_lines(head, DETECT_LINES), name, text)
     if chosen is None:
         raise InputError(f"{name}: not a log cananalyze can read: {_describe(head[:SNIFF_BYTES])}")
     return chosen, head
@@ -257,13 +260,21 @@ def open_log(
         head, ended = _read_upto(stream, SNIFF_BYTES, pipe)
         bom = len(_BOM) if head.startswith(_BOM) else 0  # no part of the first line or 'date'
         head = head[bom:]
-        cr_only = b"\r" in head and b"\n" not in head  # classic Mac line ends
-        if cr_only:
-            head = head.replace(b"\r", b"\n")
+        # Classic Mac line ends (CR only) are made newlines for the text formats alone,
+        # after the format is known: a binary file whose head has a 0x0D and no 0x0A (a
+        # pcap's microseconds 0x00030D40) is read byte for byte
+        cr = b"\r" in head and b"\n" not in head
         if fmt:
             chosen = _forced(name, fmt)
         else:
-            chosen, head = _detect(stream, head, ended, name, pipe, cr_only)
+            chosen = _claim(head, name, text=False) if cr else None
+            if chosen is None:
+                chosen, head = _detect(
+                    stream, head.replace(b"\r", b"\n") if cr else head, ended, name, pipe, cr
+                )
+        cr_only = cr and chosen.text
+        if cr_only and fmt:
+            head = head.replace(b"\r", b"\n")
     except (EOFError, gzip.BadGzipFile, zlib.error, OSError) as exc:
         for c in closers:
             c.close()

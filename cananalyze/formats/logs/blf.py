@@ -880,5 +880,6 @@ FORMAT = register(
         read=read,
         suffixes=(".blf",),
         priority=11,
+        text=False,
     )
 )

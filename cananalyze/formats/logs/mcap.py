@@ -992,5 +992,6 @@ FORMAT = register(
         read=read,
         suffixes=(".mcap",),
         priority=10,
+        text=False,
     )
 )

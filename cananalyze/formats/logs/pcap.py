@@ -442,5 +442,6 @@ FORMAT = register(
         read=read,
         suffixes=(".pcap", ".pcapng", ".cap"),
         priority=12,
+        text=False,
     )
 )

@@ -114,5 +114,6 @@ FORMAT = register(
         read=read,
         suffixes=PYCAN_ONLY_SUFFIXES,
         priority=90,
+        text=False,
     )
 )
