@@ -60,26 +60,55 @@ class _TolerantGzip(io.RawIOBase):
     """gzip stream that hands over what it decompressed before a cut or corrupt end.
 
     GzipFile.read(n) raises EOFError and drops the partial block, which would lose
-    frames a half-copied log still holds; read1() in a loop keeps them.
+    frames a half-copied log still holds; read1() in a loop keeps them. The bytes after
+    the last newline wait until more comes: when the data breaks off, that incomplete
+    line is dropped (`dropped`), not read as a frame ("(t) can0 285#" cut from its data
+    bytes is a valid empty frame to a text reader). A binary stream's tail waits at most
+    TAIL_MAX bytes.
     """
 
+    TAIL_MAX = 1 << 16
+
     def __init__(self, raw: BinaryIO) -> None:
+        self._raw = raw
         self._gz = gzip.GzipFile(fileobj=raw, mode="rb")
         self.error: str | None = None
+        self.offset = 0  # compressed bytes read when the error came (it is at or before)
+        self.dropped = 0  # bytes of an incomplete last line left out after the error
+        self._out = memoryview(b"")
+        self._tail = b""
+        self._ended = False
 
     def readable(self) -> bool:
         return True
 
     def readinto(self, buf) -> int:  # type: ignore[override]
-        if self.error:
-            return 0
-        try:
-            data = self._gz.read1(len(buf))
-        except (EOFError, gzip.BadGzipFile, zlib.error, OSError) as exc:
-            self.error = str(exc) or exc.__class__.__name__
-            return 0
-        buf[: len(data)] = data
-        return len(data)
+        while not self._out:
+            if self.error or self._ended:
+                return 0
+            try:
+                data = self._gz.read1(max(len(buf), self.TAIL_MAX))
+            except (EOFError, gzip.BadGzipFile, zlib.error, OSError) as exc:
+                self.error = str(exc) or exc.__class__.__name__
+                try:
+                    self.offset = self._raw.tell()
+                except (OSError, ValueError):
+                    self.offset = 0
+                self.dropped, self._tail = len(self._tail), b""
+                return 0
+            if not data:
+                self._ended = True
+                self._out, self._tail = memoryview(self._tail), b""
+                continue
+            data = self._tail + data
+            cut = data.rfind(b"\n") + 1
+            if len(data) - cut > self.TAIL_MAX:
+                cut = len(data)
+            self._out, self._tail = memoryview(data)[:cut], data[cut:]
+        n = min(len(buf), len(self._out))
+        buf[:n] = self._out[:n]
+        self._out = self._out[n:]
+        return n
 
     def close(self) -> None:
         self._gz.close()
@@ -118,7 +147,9 @@ class LogSource:
         Readers always run leniently; strictness is applied here, once for every
         format, so the frames read before a bad line are never lost.
         """
+        frames = 0
         for batch in self._lenient_batches():
+            frames += len(batch)
             if self.strict and self.ctx.problems.count:
                 first = self.ctx.problems.shown[0]
                 kind, _, number = first.location.partition(" ")
@@ -128,8 +159,13 @@ class LogSource:
                     yield batch
                 raise InputError(str(first))
             yield batch
-        if self.strict and self.ctx.problems.count:
-            raise InputError(str(self.ctx.problems.shown[0]))
+        if self.ctx.problems.count and (self.strict or not frames):
+            # a file of which nothing could be read is a failure, not "0 frames"
+            first = self.ctx.problems.shown[0]
+            if self.strict:
+                raise InputError(str(first))
+            n = self.ctx.problems.count
+            raise InputError(f"{first} (no frame could be read; {n} problem(s) in all)")
 
     def _lenient_batches(self) -> Iterator[FrameBatch]:
         try:
@@ -139,7 +175,13 @@ class LogSource:
                     self.ctx.problems.add(
                         self.path,
                         f"after frame {self.ctx.frames}",
-                        f"gzip data ends early or is corrupt ({c.error})",
+                        f"corrupt gzip at or before compressed byte {c.offset:,}: "
+                        f"the data ends early or is damaged ({c.error})"
+                        + (
+                            f"; its last {c.dropped} bytes, an incomplete line, left out"
+                            if c.dropped
+                            else ""
+                        ),
                     )
         except (EOFError, zlib.error, gzip.BadGzipFile) as exc:
             self.ctx.problems.add(
@@ -251,6 +293,7 @@ def open_log(
         raise InputError(f"{name}: cannot open: {exc.strerror or exc}") from None
     stream: BinaryIO = raw if hasattr(raw, "peek") else io.BufferedReader(raw)  # type: ignore[arg-type]
     magic = stream.peek(2)[:2]
+    gz = None
     if magic == b"\x1f\x8b":
         gz = _TolerantGzip(stream)
         closers.append(gz)
@@ -258,6 +301,10 @@ def open_log(
     pipe = stream is raw and not _regular(raw)
     try:
         head, ended = _read_upto(stream, SNIFF_BYTES, pipe)
+        if gz is not None and gz.error and not head:  # not "the file is empty"
+            raise InputError(
+                f"{name}: corrupt gzip at or before compressed byte {gz.offset:,}: {gz.error}"
+            )
         bom = len(_BOM) if head.startswith(_BOM) else 0  # no part of the first line or 'date'
         head = head[bom:]
         # Classic Mac line ends (CR only) are made newlines for the text formats alone,

@@ -57,7 +57,7 @@ def fleet(tmp_path_factory):
     broken = root / "broken"
     broken.mkdir()
     (broken / "garbage.blf").write_bytes(bytes(range(256))[::-1] * 8)  # binary, not a log
-    # a BLF file signature and nothing readable after it (a log with no frames)
+    # a BLF file signature and nothing readable after it: a failure, not "0 frames"
     (broken / "headonly.blf").write_bytes(b"LOGG" + bytes(range(256)) * 4)
     (broken / "notes.txt").write_text("these are not CAN frames\njust words\n")
     blf = real_file("hardbyte__python-can/issue_1905.blf").read_bytes()
@@ -104,7 +104,7 @@ def test_every_input_has_one_logs_row_and_failures_are_isolated(fleet):
         assert row["status"] == "ok", row
         assert row["hash"] == _sha(p) and row["version"] == __version__
         assert row["frames"] > 0 and row["seconds"] > 0
-    for name in ("garbage.blf", "notes.txt", "empty.log"):
+    for name in ("garbage.blf", "headonly.blf", "notes.txt", "empty.log"):
         row = by_source[str(broken / name)]
         assert row["status"] == "failed"
         assert row["error"].startswith(str(broken / name)) and "\n" not in row["error"]
@@ -112,10 +112,7 @@ def test_every_input_has_one_logs_row_and_failures_are_isolated(fleet):
     # what a truncated BLF held before the cut is kept, the rest counted as skipped
     cut = by_source[str(broken / "truncated.blf")]
     assert cut["status"] == "ok" and cut["frames"] > 0 and cut["skipped_lines"] > 0
-    # a log with no frames is decoded (empty parts), not a failure
-    empty = by_source[str(broken / "headonly.blf")]
-    # (the header, and each stretch the BLF reader resynchronises over, is counted)
-    assert empty["status"] == "ok" and empty["frames"] == 0 and empty["skipped_lines"] >= 1
+    assert "no frame could be read" in by_source[str(broken / "headonly.blf")]["error"]
     # a failed log has a logs row and no data parts; the rest of the fleet completed
     failed = {r["hash"] for r in logs if r["status"] == "failed"}
     frames = _table(fleet["dataset"], "frames")
@@ -465,10 +462,13 @@ def test_fleet_cli_exit_codes(tmp_path, capsys):
 
 
 def test_export_of_a_log_without_frames_writes_empty_tables(tmp_path):
-    """A BLF whose header is cut off holds no frame: six empty tables, not a traceback
-    (the channel column's rewrite met a null column)."""
-    log = tmp_path / "headonly.blf"
-    log.write_bytes(b"LOGG" + bytes(range(256)) * 4)
+    """A BLF with no frame (python-can's writer, no message): six empty tables, not a
+    traceback (the channel column's rewrite met a null column)."""
+    import can
+
+    log = tmp_path / "empty.blf"
+    with can.BLFWriter(str(log)):
+        pass
     assert main(["export", str(log), "--parquet", str(tmp_path / "out"), "-q"]) == 0
     for name in ("frames", "signals", "sdo", "events", "findings", "nodes"):
         assert pq.read_table(tmp_path / "out" / f"{name}.parquet").num_rows == 0, name

@@ -103,12 +103,17 @@ def test_blf_cut_at_every_offset_keeps_a_prefix(name, tmp_path):
     data = real_file(name).read_bytes()
     full, _ = _read(data, "full.blf", tmp_path)
     want = _rows(full)
+    some = False  # a cut has given frames: every longer one gives them too
     for cut in range(len(data)):
         try:
             got, src = _read(data[:cut], "cut.blf", tmp_path)
         except InputError as exc:
-            assert cut < 4 and "\n" not in str(exc)  # not even the LOGG signature left
+            # not even the LOGG signature left, or cut before the first frame: nothing
+            # readable is a failure (issue 38), in one line
+            assert "\n" not in str(exc) and not some, f"cut at {cut}: {exc}"
+            assert cut < 4 or "no frame could be read" in str(exc)
             continue
+        some = some or len(got) > 0
         rows = _rows(got)
         assert rows == want[: len(rows)], f"cut at {cut}"
         if cut < len(data) and len(rows) < len(want):
@@ -152,11 +157,11 @@ def test_blf_decompression_bomb_memory_bounded(tmp_path):
 def test_blf_corrupt_zlib_and_unknown_compression(tmp_path):
     good = zlib.compress(b"LOBJ" + bytes(60))
     corrupt = good[:10] + bytes(b ^ 0x5A for b in good[10:])
-    batch, src = _read(_blf_with(corrupt, tmp_path), "z.blf", tmp_path)
-    assert len(batch) == 0 and src.problems.count >= 1
-    assert any("zlib" in p.message or "BLF" in p.message for p in src.problems.shown)
-    batch, src = _read(_blf_with(good, tmp_path, method=7), "m.blf", tmp_path)
-    assert any("unknown container compression 7" in p.message for p in src.problems.shown)
+    # nothing readable: a failure naming the first problem (issue 38), not "0 frames"
+    with pytest.raises(InputError, match=r"z\.blf:offset 144: corrupt zlib.*no frame could be"):
+        _read(_blf_with(corrupt, tmp_path), "z.blf", tmp_path)
+    with pytest.raises(InputError, match="unknown container compression 7"):
+        _read(_blf_with(good, tmp_path, method=7), "m.blf", tmp_path)
 
 
 def test_gzip_ending_early_keeps_frames_before_the_cut(tmp_path):
@@ -166,9 +171,9 @@ def test_gzip_ending_early_keeps_frames_before_the_cut(tmp_path):
     for frac in (0.3, 0.6, 0.95):
         got, src = _read(packed[: int(len(packed) * frac)], "cut.log.gz", tmp_path)
         assert 0 < len(got) < len(full)
-        n = len(got) - 1  # the last line may be cut mid-way
-        assert _rows(got)[:n] == _rows(full)[:n]
-        assert any("gzip data ends early" in p.message for p in src.problems.shown)
+        # the line the cut broke is left out, not read as a frame of fewer bytes
+        assert _rows(got) == _rows(full)[: len(got)]
+        assert any("corrupt gzip at or before" in p.message for p in src.problems.shown)
 
 
 def test_gzip_ending_early_strict_exits_2_after_frames(tmp_path, capsys):
@@ -180,9 +185,9 @@ def test_gzip_ending_early_strict_exits_2_after_frames(tmp_path, capsys):
     out, err = capsys.readouterr()
     assert rc == 2
     assert out.count('"kind":"frame"') > 1000
-    # the first problem is the line the cut broke (or the gzip end, if it fell between lines)
+    # the first problem is the gzip's end (the line it broke is left out, not misread)
     assert err.count("\n") == 1 and err.startswith("cananalyze: error:") and "cut.log.gz:" in err
-    assert "not a candump line" in err or "gzip data ends early" in err
+    assert "corrupt gzip at or before compressed byte" in err
 
 
 def test_strict_stops_at_the_bad_line_after_yielding_the_ones_before(tmp_path, capsys):
@@ -457,5 +462,5 @@ def test_fuzzer_crash_regressions(name, text, problem, tmp_path):
 
 def test_blf_cut_inside_file_header_is_reported(tmp_path):
     data = real_file("hardbyte__python-can/test_CanMessage.blf").read_bytes()
-    got, src = _read(data[:100], "h.blf", tmp_path)
-    assert len(got) == 0 and "file ends inside the BLF file header" in src.problems.shown[0].message
+    with pytest.raises(InputError, match=r"h\.blf:offset 72: file ends inside the BLF file header"):
+        _read(data[:100], "h.blf", tmp_path)
