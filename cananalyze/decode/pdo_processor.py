@@ -78,7 +78,21 @@ class PdoDecoder:
         """A profile's default mapping: each frame decoded by the entries its length holds
         (a CiA 401 module with fewer channels sends a shorter PDO), one group per length."""
         dlc = batch.frames.dlc[group]
+        full = (sum(e.bits for e in binding.config.mapping) + 7) // 8
         for d in np.unique(dlc).tolist():
+            if d > full:  # more bytes than the default maps: the node's mapping is another
+                name = f"{binding.kind.upper()}{binding.number}"
+                batch.row_notes.append(
+                    (
+                        group[dlc == d],
+                        {
+                            "pdo_problem": f"DLC {d} longer than the {full} bytes of {name}'s "
+                            "default mapping, and no mapping is known from the log or a "
+                            "file: not decoded (the node maps other objects)"
+                        },
+                    )
+                )
+                continue
             mapping, bits = [], 0
             for e in binding.config.mapping:
                 if bits + e.bits > 8 * d:

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from cananalyze.protocol.pdo import fields_text
+
 STATUSWORD, CONTROLWORD = 0x6041, 0x6040
 MODES, MODES_DISPLAY = 0x6060, 0x6061
 U8, U16, U32, I8, I16, I32 = 0x05, 0x06, 0x07, 0x02, 0x03, 0x04
@@ -274,12 +276,15 @@ def _flags(word: int, table: tuple[tuple[int, str], ...]) -> list[str]:
     return [name for bit, name in table if word >> bit & 1]
 
 
+def statusword_fields(word: int) -> dict:
+    """{"state": "operation enabled", "flags": ["voltage enabled", "remote", ...]}."""
+    word = int(word)
+    return {"state": STATE_NAMES[int(STATE_OF[word & 0x7F])], "flags": _flags(word, STATUS_FLAGS)}
+
+
 def statusword_text(word: int) -> str:
     """ "operation enabled; voltage enabled, remote, target reached" for 0x0637."""
-    word = int(word)
-    state = STATE_NAMES[int(STATE_OF[word & 0x7F])]
-    flags = _flags(word, STATUS_FLAGS)
-    return f"{state}; {', '.join(flags)}" if flags else state
+    return fields_text(statusword_fields(word))
 
 
 def command_name(word: int, state: int | None = None) -> str:
@@ -290,21 +295,30 @@ def command_name(word: int, state: int | None = None) -> str:
     return COMMAND_NAMES[code]
 
 
-def controlword_text(word: int) -> str:
-    """ "enable operation; switch on, enable voltage, quick stop off, enable operation"."""
+def controlword_fields(word: int) -> dict:
+    """{"command": "enable operation", "flags": ["switch on", "enable voltage", ...]}."""
     word = int(word)
-    flags = _flags(word, CONTROL_FLAGS)
     name = command_name(word)
     if name == "switch on":
         name = "switch on / disable operation"
-    return f"{name}; {', '.join(flags)}" if flags else name
+    return {"command": name, "flags": _flags(word, CONTROL_FLAGS)}
+
+
+def controlword_text(word: int) -> str:
+    """ "enable operation; switch on, enable voltage, quick stop off, enable operation"."""
+    return fields_text(controlword_fields(word))
+
+
+def mode_fields(value: int) -> dict:
+    """{"mode": "profile position"} (0x6060, 0x6061)."""
+    value = int(value)
+    if value < 0:
+        return {"mode": f"manufacturer-specific mode {value}"}
+    return {"mode": MODES_OF_OPERATION.get(value, f"reserved mode {value}")}
 
 
 def mode_text(value: int) -> str:
-    value = int(value)
-    if value < 0:
-        return f"manufacturer-specific mode {value}"
-    return MODES_OF_OPERATION.get(value, f"reserved mode {value}")
+    return fields_text(mode_fields(value))
 
 
 def value_tables() -> dict[int, dict[int, str]]:
@@ -318,7 +332,13 @@ def value_tables() -> dict[int, dict[int, str]]:
             CONTROLWORD: dict(sorted(commands.items()))}  # fmt: skip
 
 
-# words for single object values (SDO reads and writes, signal text)
+# a value as data (JSONL's "drive" field) and in words (SDO reads and writes, signal text)
+FIELDS = {
+    STATUSWORD: statusword_fields,
+    CONTROLWORD: controlword_fields,
+    MODES: mode_fields,
+    MODES_DISPLAY: mode_fields,
+}
 WORDS = {
     STATUSWORD: statusword_text,
     CONTROLWORD: controlword_text,

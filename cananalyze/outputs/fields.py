@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from cananalyze.core.frames import FLAG_RTR
 from cananalyze.core.records import DecodedBatch
-from cananalyze.devices.words import word
+from cananalyze.devices.words import word_fields
 from cananalyze.protocol.fields import frame_fields
 
 
@@ -30,8 +30,8 @@ def row_fields(batch: DecodedBatch, i: int) -> dict:
                 f["labels"] = _labels(f["signals"], sb.choices)
             if sb.pdo[:4] not in ("tpdo", "rpdo"):
                 f["message"] = sb.pdo  # a DBC message on a non-PDO identifier
-            if sb.words:
-                f["signal_words"] = {k: word(i, int(sb.columns[k][p])) for k, i in sb.words.items()}
+            if sb.words:  # a CiA 402 drive's statusword, controlword, modes as data
+                f["drive"] = {k: word_fields(i, int(sb.columns[k][p])) for k, i in sb.words.items()}
         s = int(shared[i])
         if s >= 0:
             f.update(batch.row_notes[s][1])

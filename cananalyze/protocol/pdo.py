@@ -139,11 +139,19 @@ def signals_text(fields: dict) -> str:
     (a DBC's value table, or a CiA 402 statusword/controlword/mode)."""
     units = fields.get("units") or {}
     labels = fields.get("labels") or {}
-    words = fields.get("signal_words") or {}
+    words = {k: fields_text(v) for k, v in (fields.get("drive") or {}).items() if v}
     return " ".join(
         _signal_text(k, v, units.get(k), labels.get(k) or words.get(k))
         for k, v in fields["signals"].items()
     )
+
+
+def fields_text(fields: dict) -> str:
+    """A drive value's fields in words (`devices/cia402`: statusword, controlword, mode):
+    its state, command or mode, then its flags."""
+    head = fields.get("state") or fields.get("command") or fields.get("mode") or ""
+    flags = fields.get("flags")
+    return f"{head}; {', '.join(flags)}" if flags else head
 
 
 def _signal_text(name: str, value, unit: str | None, label: str | None = None) -> str:

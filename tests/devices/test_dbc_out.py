@@ -138,13 +138,13 @@ def test_drive_dbc_names_modes_and_commands_as_cananalyze_does(tmp_path):
         "".join(f"({k * 0.001:.6f}) can0 303#{d.hex()}\n" for k, (_, d) in enumerate(frames))
     )
     rows = _cli("decode", str(log), "--device", "3=cia402", "--format", "jsonl").stdout
-    ours = [json.loads(r)["signal_words"] for r in rows.splitlines() if '"signal_words"' in r]
+    ours = [json.loads(r)["drive"] for r in rows.splitlines() if '"drive"' in r]
     assert len(ours) == len(frames)
     for (_, data), mine in zip(frames, ours, strict=True):
         theirs = rpdo2.decode(data)  # value tables applied
-        assert str(theirs["modes_of_operation"]) == mine["modes_of_operation"]
-        # cananalyze adds the controlword's bits after the command: "shutdown; enable voltage"
-        assert mine["controlword"].split(";")[0] == str(theirs["controlword"])
+        assert str(theirs["modes_of_operation"]) == mine["modes_of_operation"]["mode"]
+        # cananalyze gives the controlword's bits beside the command
+        assert mine["controlword"]["command"] == str(theirs["controlword"])
     statusword = db.get_message_by_frame_id(0x183).get_signal_by_name("statusword")
     assert not statusword.choices  # states are bit patterns: no exact-value table
     # a node that is not a drive gets no drive tables on the same objects

@@ -23,7 +23,7 @@ import numpy as np
 from cananalyze.core.columns import bytecols
 from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
 from cananalyze.core.records import DecodedBatch
-from cananalyze.devices.words import word_column
+from cananalyze.devices.words import fields_column
 from cananalyze.outputs.fields import row_fields
 from cananalyze.outputs.jsonl.encode import clean, clean_fields, dumps
 from cananalyze.outputs.jsonl.sdo import pair_fields
@@ -217,10 +217,10 @@ def _signal_text(sb, pos: np.ndarray) -> np.ndarray | None:
         )
     )
     for j, (name, index) in enumerate(sb.words.items()):  # one text per distinct value
-        texts, inv = word_column(index, np.asarray(sb.columns[name])[pos])
-        head = (',"signal_words":{' if j == 0 else ",") + json.dumps(name) + ":"
+        fields, inv = fields_column(index, np.asarray(sb.columns[name])[pos])
+        head = (',"drive":{' if j == 0 else ",") + json.dumps(name) + ":"
         parts += [bytecols.repeat(head.encode(), m)]
-        parts += [_padded_table([json.dumps(w).encode() for w in texts])[inv]]
+        parts += [_padded_table([dumps(w).encode() for w in fields])[inv]]
     if sb.words:
         parts.append(bytecols.repeat(b"}", m))
     return bytecols.left_aligned(*bytecols.compact(parts, m, with_ends=True))
