@@ -5,15 +5,21 @@ plotly.js is 4.8 MB as text; the page carries it gzip-compressed (1.47 MB, 1.72 
 stays small and needs no network. The plots' figures wait in one more such element
 (`encode.Blob`: JSON and the arrays' integers) until plotly is loaded;
 `document.body.dataset.ready` is set once all are drawn (the browser test waits for it).
+
+The page is `templates.PAGE` (Jinja2, autoescape on): the sections' data and every
+name in it are escaped there. `Markup` (passed as it is) only for what this module
+makes itself: the CSS and the loader (constants) and the packed script text.
 """
 
 from __future__ import annotations
 
 import functools
-import html
 from datetime import UTC, datetime
 
+from markupsafe import Markup
+
 from cananalyze.core.version import __version__
+from cananalyze.outputs.report import templates
 from cananalyze.outputs.report.encode import Blob, gzip7
 from cananalyze.outputs.report.sections import SECTIONS, Figures
 
@@ -92,6 +98,28 @@ def plotly_js_packed() -> str:
     return gzip7(get_plotlyjs().encode())
 
 
+# the links above the sections: (section, its element's id, label), for those it has
+NAV = (
+    ("findings", "findings", "Findings"),
+    ("buses", "buses", "Buses"),
+    ("nodes", "nodes", "Nodes"),
+    ("sdo", "sdo", "SDO"),
+    ("emcy", "emcy", "EMCY"),
+    ("pdos", "pdo", "PDO"),
+    ("signals", "signals", "Signals"),
+    ("drive_states", "drive", "Drive states"),
+)
+
+
+def _packed(text: str) -> Markup:
+    """Script text of our own encoding (`encode.text7`: gzip as 7-bit characters, never
+    a '<', so it cannot close its element), passed to the template as it is: escaping
+    would change it (`&`, quotes) where the loader reads it raw."""
+    if "<" in text:
+        raise ValueError("packed script text with a '<'")
+    return Markup(text)
+
+
 def render(sink) -> str:
     """The whole page for a finished ReportSink."""
     run = sink.run
@@ -99,30 +127,18 @@ def render(sink) -> str:
     checker = run.checker
     sink.rules = checker.rules if checker is not None else []
     figs = Figures()
-    body = "".join(section(sink, figs) for section in SECTIONS)
-    data = f'<script type="text/plain" id="figures">{Blob().pack(figs.items)}</script>'
-    title = sink.title or f"cananalyze report: {run.name}"
-    when = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
-    nav = "".join(
-        f'<a href="#{a}">{t}</a>'
-        for a, t in (
-            ("findings", "Findings"),
-            ("buses", "Buses"),
-            ("nodes", "Nodes"),
-            ("sdo", "SDO"),
-            ("emcy", "EMCY"),
-            ("pdo", "PDO"),
-            ("signals", "Signals"),
-            ("drive", "Drive states"),
-        )
-        if f'id="{a}"' in body
-    )
-    esc = html.escape
-    return (
-        "<!DOCTYPE html>\n<html lang=en><head><meta charset=utf-8>"
-        f"<title>{esc(title)}</title><style>{CSS}</style>"
-        f'<script type="text/plain" id="plotlyjs">{plotly_js_packed()}</script>'
-        f"</head><body><h1>{esc(title)}</h1>"
-        f"<p class=small>{esc(str(run.name))} · cananalyze {esc(__version__)} · {when}</p>"
-        f"<nav>{nav}</nav>{body}{data}<script>{LOADER}</script></body></html>\n"
+    sections = [(f.__name__, f(sink, figs)) for f in SECTIONS]
+    sections = [(kind, data) for kind, data in sections if data is not None]
+    present = {kind for kind, _ in sections}
+    return templates.page().render(
+        title=sink.title or f"cananalyze report: {run.name}",
+        name=str(run.name),
+        version=__version__,
+        when=datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        nav=[(anchor, label) for kind, anchor, label in NAV if kind in present],
+        sections=sections,
+        css=Markup(CSS),  # constants of this module
+        loader=Markup(LOADER),
+        plotly_js=_packed(plotly_js_packed()),
+        figures=_packed(Blob().pack(figs.items)),
     )

@@ -6,6 +6,10 @@ building them through `plotly.graph_objects` validated and deep-copied every pro
 `encode.Packed` (rounded below a pixel, sent as integers in the page's compressed
 figures): a thousand-point envelope costs a few kB. Times are seconds from the log's
 first frame, rounded to the microsecond; periods and latencies are ms, to the µs.
+
+Texts in a figure are plotly's own markup: it draws <b>, <br>, <a href> and more, and
+reads entities. The names in them come from the log and the files given (channel,
+node, signal and PDO names, units), so `_fig` writes every text as `plain` text.
 """
 
 from __future__ import annotations
@@ -42,15 +46,31 @@ def _share(lines: int) -> int:
     return max(PLOT_BUCKETS // max(lines, 1), LINE_BUCKETS)
 
 
+def plain(text: str) -> str:
+    """`text` as plotly draws it, character for character: '&', '<' and '>' as entities
+    (plotly turns them back into the characters), so no part of it is read as markup."""
+    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+
+
 def _fig(traces: list[dict], title: str, x: str, y: str, **layout) -> dict:
+    """The figure; the one place its texts are made `plain`: the title, the axes'
+    titles, the traces' names and category values (the state lanes). A hover template
+    is ours (it names its trace as %{fullData.name}, made plain here)."""
+    for trace in traces:
+        if "name" in trace:
+            trace["name"] = plain(trace["name"])
+        for k in ("x", "y"):
+            values = trace.get(k)
+            if isinstance(values, list) and any(isinstance(v, str) for v in values):
+                trace[k] = [plain(v) if isinstance(v, str) else v for v in values]
     base = {
         # at the left: plotly's mode bar (top right) never covers it, even on half a page
-        "title": {"text": title, "font": {"size": 14}, "x": 0.01, "xanchor": "left"},
+        "title": {"text": plain(title), "font": {"size": 14}, "x": 0.01, "xanchor": "left"},
         "height": layout.pop("height", HEIGHT),
         "margin": {"l": 60, "r": 20, "t": 36, "b": 40},
         "template": {"layout": {"plot_bgcolor": "white", "paper_bgcolor": "white"}},
-        "xaxis": {"title": {"text": x}, "gridcolor": "#eee", **layout.pop("xaxis", {})},
-        "yaxis": {"title": {"text": y}, "gridcolor": "#eee"},
+        "xaxis": {"title": {"text": plain(x)}, "gridcolor": "#eee", **layout.pop("xaxis", {})},
+        "yaxis": {"title": {"text": plain(y)}, "gridcolor": "#eee"},
         "showlegend": layout.pop("showlegend", len(traces) > 1),
     }
     base.update(layout)
@@ -162,7 +182,8 @@ def state_timeline(
             "base": Packed([s[1] for s in rows], US, exact=True),
             "x": Packed([s[2] for s in rows], US, exact=True),
             "marker": {"color": NMT_COLOURS.get(state.split()[0])},
-            "hovertemplate": "%{y}: " + state + " from %{base:.3f} s for %{x:.3f} s<extra></extra>",
+            "hovertemplate": "%{y}: %{fullData.name} from %{base:.3f} s for %{x:.3f} s"
+            "<extra></extra>",
         }
         for state, rows in segs.items()
     ]

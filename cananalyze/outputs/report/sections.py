@@ -1,22 +1,30 @@
-"""The report's sections, in reading order, as HTML fragments.
+"""The report's sections, in reading order, as plain data for the page's templates.
 
-Each takes the ReportSink's summaries and a `Figures` that collects the plots.
-Texts are escaped with `html.escape`; nothing here judges the log: the verdict
-and every alarm are the Checker's findings, the tables show what was measured
-beside what was configured.
+Each takes the ReportSink's summaries and a `Figures` that collects the plots, and
+returns what its section shows (None: no section), as text and numbers, unescaped:
+the macro of the same name in `templates.py` lays it out and escapes it. Nothing here
+judges the log: the verdict and every alarm are the Checker's findings, the tables
+show what was measured beside what was configured.
 """
 
 from __future__ import annotations
 
-import html
+import hashlib
+import re
 from collections import defaultdict
+from typing import NamedTuple
 
 from cananalyze.checks.model_config import ModelConfig
 from cananalyze.core.finding import show
 from cananalyze.outputs.junit import format_finding
 from cananalyze.outputs.report import plots
 
-esc = html.escape
+
+class Plot(NamedTuple):
+    """A plot's placeholder: the element the page's loader draws figure `id` in."""
+
+    id: str
+    cls: str
 
 
 class Figures:
@@ -25,16 +33,10 @@ class Figures:
     def __init__(self) -> None:
         self.items: list[tuple[str, dict]] = []
 
-    def add(self, fig: dict, cls: str = "plot") -> str:
+    def add(self, fig: dict, cls: str = "plot") -> Plot:
         pid = f"fig{len(self.items)}"
         self.items.append((pid, fig))
-        return f'<div class="{cls}" id="{pid}"></div>'
-
-
-def _table(head: list[str], rows: list[list], cls: str = "") -> str:
-    th = "".join(f"<th>{esc(h)}</th>" for h in head)
-    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>" for r in rows)
-    return f'<table class="{cls}"><thead><tr>{th}</tr></thead><tbody>{body}</tbody></table>'
+        return Plot(pid, cls)
 
 
 def _ms(v: float | None, nd: int = 2) -> str:
@@ -47,51 +49,43 @@ def _rel(s, t: float | None) -> str:
     return "-" if t is None else f"{t - s.t0:+.3f} s"
 
 
-def verdict(s, figs: Figures) -> str:
+def verdict(s, figs: Figures) -> dict:
     failing = [f for f in s.findings if f.fails]
     rules = s.rules
     counts: dict[str, int] = {}
     for r in rules:  # a rules file's assertions share a name: one entry each, counted
         counts[r.name] = counts.get(r.name, 0) + 1
     names = ", ".join(f"{n} ×{k}" if k > 1 else n for n, k in counts.items())
-    ok = not failing
-    word = "PASS" if ok else "FAIL"
     dur = (s.t_last - s.t_first) if s.t_first is not None else 0.0
     text = (
         f"{len(rules)} rules: {len(failing)} violation(s), {len(s.findings) - len(failing)} "
         f"note(s) in {s.frames:,} frames over {dur:.1f} s"
     )
-    skipped = s.run.problems.count
-    skip = f"<p class=warn>{skipped} unreadable lines/records skipped</p>" if skipped else ""
-    load = figs.add(plots.bus_load(s.buses, s.t0, s.bitrate)) if s.buses else ""
-    return (
-        f'<section id="verdict"><div class="verdict {"pass" if ok else "fail"}" id="verdict-banner">'
-        f"<b>{word}</b> {esc(text)}</div><p class=small>Rules: {esc(names) or 'none'}</p>"
-        f"{skip}{load}</section>"
-    )
+    load = figs.add(plots.bus_load(s.buses, s.t0, s.bitrate)) if s.buses else None
+    return {
+        "ok": not failing,
+        "text": text,
+        "rules": names,
+        "skipped": s.run.problems.count,
+        "load": load,
+    }
 
 
-def buses(s, figs: Figures) -> str:
+def buses(s, figs: Figures) -> dict:
     rows = []
     for ch, b in s.buses.items():
         unit = 100.0 / s.bitrate if s.bitrate else 1e-3
         u = "%" if s.bitrate else " kbit/s"
         rows.append(
             [
-                esc(ch),
+                ch,
                 f"{b.frames:,}",
                 f"{b.errors:,}",
                 f"{b.load.mean * unit:.2f}{u}",
                 f"{b.load.peak * unit:.2f}{u}",
             ]
         )
-    note = "" if s.bitrate else "<p class=small>Give --bitrate for the load in percent.</p>"
-    return (
-        '<section id="buses"><h2>Buses</h2>'
-        + _table(["channel", "frames", "error frames", "mean load", "peak load (100 ms)"], rows)
-        + note
-        + "<p class=small>Nominal bits without stuff bits: a lower bound.</p></section>"
-    )
+    return {"rows": rows, "bitrate": s.bitrate}
 
 
 # findings listed per node and rule: all are counted, `check --json`/JUnit hold every one.
@@ -106,37 +100,36 @@ def _without_why(f) -> str:
     return text[: -len(f.why)].rstrip() if f.why and text.endswith(f.why) else text
 
 
-def findings(s, figs: Figures) -> str:
-    if not s.findings:
-        return '<section id="findings"><h2>Findings</h2><p>No findings.</p></section>'
+def findings(s, figs: Figures) -> dict:
     groups: dict[tuple, list] = defaultdict(list)
     for f in s.findings:
         groups[(f.bus or "", f.node is None, f.node or 0, f.rule)].append(f)
-    parts = ['<section id="findings"><h2>Findings by node and rule</h2>']
+    out = []
     for (bus, _, node, rule), fs in sorted(groups.items()):
         who = "bus" if fs[0].node is None else f"node {node}"
         who = f"{bus} {who}" if bus else who  # several buses: "can1 node 5"
         sev = "error" if any(f.fails for f in fs) else fs[0].severity
         first = fs[0]
         shown = fs[:LISTED]
-        # each explanation once, above the list: repeated on every line it made most of a
-        # 10M-frame page (3.4 of 7 MB for 16 nodes' 86k SYNC and EMCY findings)
-        whys = "".join(f"<p class=why>{esc(w)}</p>" for w in dict.fromkeys(f.why for f in shown))
-        items = "".join(f"<li>{esc(_without_why(f))}</li>" for f in shown)
-        more = (
-            f"<li>... and {len(fs) - LISTED} more (every one in <code>check --json</code> "
-            "and JUnit)</li>"
-            if len(fs) > LISTED
-            else ""
+        out.append(
+            {
+                "severity": sev,
+                "who": who,
+                "rule": rule,
+                "count": len(fs),
+                "first_at": _rel(s, first.t),
+                "message": first.message,
+                "measured": show(first.measured),
+                "expected": show(first.expected),
+                # each explanation once, above the list: repeated on every line it made
+                # most of a 10M-frame page (3.4 of 7 MB for 16 nodes' 86k SYNC and EMCY
+                # findings)
+                "whys": list(dict.fromkeys(f.why for f in shown)),
+                "lines": [_without_why(f) for f in shown],
+                "more": max(len(fs) - LISTED, 0),  # listed as a count
+            }
         )
-        parts.append(
-            f'<details class="finding {esc(sev)}"><summary><b>{esc(who)}</b> · {esc(rule)} · '
-            f"{len(fs)} finding(s), first at {_rel(s, first.t)}: {esc(first.message)} "
-            f"(measured {esc(show(first.measured))}, expected {esc(show(first.expected))})"
-            f"</summary>{whys}<ul>{items}{more}</ul></details>"
-        )
-    parts.append("</section>")
-    return "".join(parts)
+    return {"groups": out}
 
 
 def _node_name(n: int, bus: str | None) -> str:
@@ -144,10 +137,17 @@ def _node_name(n: int, bus: str | None) -> str:
 
 
 def _node_id(n: int, bus: str | None) -> str:
-    return f"node-{n}" if bus is None else f"node-{bus}-{n}"
+    """The node's element id ("node-5", "node-can1-5"): a bus's name as it is where it
+    is a slug, else its other characters as "-" and a hash of the name (unique)."""
+    if bus is None:
+        return f"node-{n}"
+    slug = re.sub(r"[^A-Za-z0-9_-]", "-", bus)
+    if slug != bus:
+        slug += "-" + hashlib.sha1(bus.encode()).hexdigest()[:8]
+    return f"node-{slug}-{n}"
 
 
-def nodes(s, figs: Figures) -> str:
+def nodes(s, figs: Figures) -> dict:
     from cananalyze.decode.node_tally import bus_profiles, node_profiles
 
     model = s.run.network
@@ -155,12 +155,11 @@ def nodes(s, figs: Figures) -> str:
         node_profiles(model) if model is not None else {}, bus_profiles(s.run.decoder)
     )
     configs = _Configs(s)
-    parts = ['<section id="nodes"><h2>Nodes</h2>']
+    timeline = None
     if s.states:
         lanes = [(t, s.who(bus, n), state) for t, (bus, n), state in s.states]
-        parts.append(figs.add(plots.state_timeline(lanes, s.t0, s.t_last or s.t0)))
-    if s.states_dropped:
-        parts.append(f"<p class=warn>{s.states_dropped} more NMT state changes not drawn</p>")
+        timeline = figs.add(plots.state_timeline(lanes, s.t0, s.t_last or s.t0))
+    out = []
     for row in rows:
         n = row["node"]
         bus = row.get("bus")  # several buses: one section per bus and node
@@ -171,12 +170,7 @@ def nodes(s, figs: Figures) -> str:
             for k in ("vendor_id", "product_code", "revision", "serial", "device_name")
             if (v := row.get(k)) is not None
         )
-        parts.append(
-            f'<div class="node" id="{_node_id(n, bus)}"><h3>{esc(_node_name(n, bus))}: '
-            f"{esc(str(dev))}</h3>"
-            f"<p>Identified by: {esc(str(how))}{'; ' + esc(ident) if ident else ''}. "
-            f"{row['frames']:,} frames; last NMT state {esc(str(row.get('last_state') or '-'))}.</p>"
-        )
+        periods = []
         cfg = configs[bus]  # that bus's configuration, as its checker judged
         for kind in ("heartbeat", "guarding"):
             g = s.errctl.get((kind, n) if bus is None else (kind, n, bus))
@@ -184,25 +178,40 @@ def nodes(s, figs: Figures) -> str:
                 continue
             conf = _configured(cfg, kind, n, g) if cfg is not None else []
             h = g.hist
-            expect = ", ".join(sorted({_ms(v, 0) for _, v in conf})) or "not configured"
-            parts.append(
-                f"<p>{kind} period: n={h.count:,} min {_ms(h.min)} median {_ms(h.quantile(0.5))} "
-                f"mean {_ms(h.mean)} p99 {_ms(h.quantile(0.99))} max {_ms(h.max)} "
-                f"jitter (std) {_ms(h.std)} ms; configured {expect} ms</p><div class=pair>"
-            )
             who = _node_name(n, bus)
-            parts.append(figs.add(plots.period(g, s.t0, kind, who, conf), "plot half"))
             marks = sorted({v for _, v in conf})
-            parts.append(
-                figs.add(
-                    plots.histogram(h, f"{who} {kind} period histogram", "period (ms)", marks),
-                    "plot half",
-                )
+            periods.append(
+                {
+                    "kind": kind,
+                    "count": f"{h.count:,}",
+                    "min": _ms(h.min),
+                    "median": _ms(h.quantile(0.5)),
+                    "mean": _ms(h.mean),
+                    "p99": _ms(h.quantile(0.99)),
+                    "max": _ms(h.max),
+                    "std": _ms(h.std),
+                    "configured": ", ".join(sorted({_ms(v, 0) for _, v in conf}))
+                    or "not configured",
+                    "plot": figs.add(plots.period(g, s.t0, kind, who, conf), "plot half"),
+                    "histogram": figs.add(
+                        plots.histogram(h, f"{who} {kind} period histogram", "period (ms)", marks),
+                        "plot half",
+                    ),
+                }
             )
-            parts.append("</div>")
-        parts.append("</div>")
-    parts.append("</section>")
-    return "".join(parts)
+        out.append(
+            {
+                "id": _node_id(n, bus),
+                "name": _node_name(n, bus),
+                "device": str(dev),
+                "how": str(how),
+                "ident": ident,
+                "frames": f"{row['frames']:,}",
+                "last_state": str(row.get("last_state") or "-"),
+                "periods": periods,
+            }
+        )
+    return {"timeline": timeline, "states_dropped": s.states_dropped, "nodes": out}
 
 
 class _Configs(dict):
@@ -234,14 +243,14 @@ def _configured(cfg: ModelConfig, kind: str, node: int, g) -> list[tuple[float, 
     return out
 
 
-def sdo(s, figs: Figures) -> str:
+def sdo(s, figs: Figures) -> dict | None:
     if not s.sdo_count:
-        return ""
+        return None
     from cananalyze.outputs.report.accum import LogHistogram
 
     rows = []
     for (bus, n), (ok, bad, h) in sorted(_sdo_by_bus(s).items()):
-        who = esc(s.who(bus, n)) if s.several else n
+        who = s.who(bus, n) if s.several else n
         if h is not None and h.count:
             rows.append(
                 [
@@ -256,35 +265,25 @@ def sdo(s, figs: Figures) -> str:
             )
         else:
             rows.append([who, ok + bad, bad, "-", "-", "-", "-"])
-    parts = ['<section id="sdo"><h2>SDO transfers</h2>']
-    parts.append(
-        _table(["node", "transfers", "aborts", "min ms", "median ms", "p99 ms", "max ms"], rows)
-    )
-
     allh = LogHistogram()
     for h in s.sdo_latency.values():
         allh.merge(h)
-    if allh.count:
-        parts.append(figs.add(plots.histogram(allh, "SDO latency", "latency (ms)")))
-    if s.aborts:
-        arows = [
-            [
-                _rel(s, r.get("t")),
-                esc(s.who(s.first_bus(bus), r["node"]))
-                if s.several and r.get("node") is not None
-                else r.get("node"),
-                esc(str(r.get("direction") or "")),
-                f"0x{r.get('index', 0):04X}:{r.get('subindex', 0):02X}",
-                esc(str(r.get("name") or "")),
-                esc(f"0x{r['abort_code']:08X}" if isinstance(r.get("abort_code"), int) else "-"),
-                esc(str(r.get("abort_text") or r.get("result") or "")),
-            ]
-            for bus, r in s.aborts
+    latency = figs.add(plots.histogram(allh, "SDO latency", "latency (ms)")) if allh.count else None
+    aborts = [
+        [
+            _rel(s, r.get("t")),
+            s.who(s.first_bus(bus), r["node"])
+            if s.several and r.get("node") is not None
+            else r.get("node"),
+            str(r.get("direction") or ""),
+            f"0x{r.get('index', 0):04X}:{r.get('subindex', 0):02X}",
+            str(r.get("name") or ""),
+            f"0x{r['abort_code']:08X}" if isinstance(r.get("abort_code"), int) else "-",
+            str(r.get("abort_text") or r.get("result") or ""),
         ]
-        parts.append("<h3>Aborts and timeouts</h3>")
-        parts.append(_table(["time", "node", "direction", "object", "name", "code", "text"], arows))
-    parts.append("</section>")
-    return "".join(parts)
+        for bus, r in s.aborts
+    ]
+    return {"rows": rows, "latency": latency, "aborts": aborts}
 
 
 def _sdo_by_bus(s) -> dict:
@@ -303,9 +302,9 @@ def _sdo_by_bus(s) -> dict:
     return out
 
 
-def emcy(s, figs: Figures) -> str:
+def emcy(s, figs: Figures) -> dict | None:
     if not s.emcys:
-        return ""
+        return None
     active: dict[tuple[str, int], list] = {}  # (bus, node): node 5 on each bus its own
     rows = []
     resets = sorted(s.bootups)
@@ -328,23 +327,17 @@ def emcy(s, figs: Figures) -> str:
             who.removeprefix("node "),
             f"0x{code:04X}" if code >= 0 else "-",
             f"0x{reg:02X}" if reg >= 0 else "-",
-            esc(text),
-            esc(dur),
+            text,
+            dur,
         ]
         for t, who, dur, code, reg, text in rows
     ]
-    more = len(s.emcys) < s.emcy_count
-    return (
-        '<section id="emcy"><h2>EMCY</h2>'
-        + _table(["time", "node", "code", "register", "meaning", "active for"], out)
-        + (f"<p class=warn>{s.emcy_count - len(s.emcys)} more EMCYs not listed</p>" if more else "")
-        + "</section>"
-    )
+    return {"rows": out, "more": s.emcy_count - len(s.emcys)}
 
 
-def pdos(s, figs: Figures) -> str:
+def pdos(s, figs: Figures) -> dict | None:
     if not s.pdos:
-        return ""
+        return None
     configs = _Configs(s)
     per_cob: dict[tuple[str, int], int] = defaultdict(int)
     for f in s.findings:
@@ -386,15 +379,7 @@ def pdos(s, figs: Figures) -> str:
                 per_cob.get((bus if s.several else "", cob), 0),
             ]
         )
-    head = ["COB-ID", "node", "PDO", "frames", "rate Hz", "min gap ms", "median gap ms"]
-    head += ["max gap ms", "transmission type", "event timer", "inhibit time", "findings"]
-    return (
-        '<section id="pdo"><h2>PDO rates</h2>'
-        + _table(head, rows)
-        + "<p class=small>Configured values as known at the end of the log, with where each "
-        "comes from: log (an SDO write or read), file (network or rules file, --device/--eds) "
-        "or profile (EDS/DCF).</p></section>"
-    )
+    return {"rows": rows}
 
 
 def _pdo_param(model, node: int, index: int, sub: int, t: float, value: int, text) -> str:
@@ -407,30 +392,27 @@ def _pdo_param(model, node: int, index: int, sub: int, t: float, value: int, tex
     return f"{text(value)} ({source})"
 
 
-def signals(s, figs: Figures) -> str:
+def signals(s, figs: Figures) -> dict | None:
     if not s.series:
-        return ""
+        return None
     by_pdo: dict[tuple, list] = defaultdict(list)
     for key, ser in s.series.items():
         by_pdo[key[:4]].append(ser)
-    parts = ['<section id="signals"><h2>Signals per PDO</h2>']
+    out = []
     for (bus, node, pdo, cob), series in sorted(by_pdo.items()):
         title = f"{_node_name(node, bus if s.several else None)} {pdo.upper()} (0x{cob:03X})"
-        parts.append(figs.add(plots.signals(series, s.t0, title)))
-    if s.series_dropped:
-        parts.append(f"<p class=warn>{s.series_dropped} more signals not plotted</p>")
-    parts.append("</section>")
-    return "".join(parts)
+        out.append(figs.add(plots.signals(series, s.t0, title)))
+    return {"plots": out, "dropped": s.series_dropped}
 
 
-def drive_states(s, figs: Figures) -> str:
+def drive_states(s, figs: Figures) -> dict | None:
     """CiA 402 drive states, one lane per drive, from the event log's `drive_state`
     events (`ReportSink._drive_states`); no section while the log has none."""
     if not s.drive_states:
-        return ""
+        return None
     lanes = [(t, s.who(bus, n), state) for t, (bus, n), state in s.drive_states]
     fig = plots.state_timeline(lanes, s.t0, s.t_last or s.t0, "Drive state per node")
-    return '<section id="drive"><h2>Drive states (CiA 402)</h2>' + figs.add(fig) + "</section>"
+    return {"plot": figs.add(fig)}
 
 
 SECTIONS = [verdict, buses, findings, nodes, sdo, emcy, pdos, signals, drive_states]
