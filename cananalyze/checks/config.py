@@ -48,6 +48,9 @@ class ConfigSource(Protocol):
     def known_cob_ids(self) -> set[int]:
         """Identifiers the network file declares as expected (non-CANopen traffic)."""
 
+    def declared_nodes(self) -> set[int]:
+        """Node-IDs the user declared (network or rules file, --device, --eds)."""
+
     def changes(self, node: int | None, first: int, last: int) -> np.ndarray:
         """Times (ascending) at which an answer about objects first..last of `node`
         (None: of any node) may change: a value the log showed, a reset."""

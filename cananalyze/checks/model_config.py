@@ -118,6 +118,9 @@ class ModelConfig:
     def known_cob_ids(self) -> set[int]:
         return self.model.spec.known_cob_ids
 
+    def declared_nodes(self) -> set[int]:
+        return set(self.model.spec.nodes)
+
     def changes(self, node: int | None, first: int, last: int) -> np.ndarray:
         points = self.model.points
         key = (node, first, last)
