@@ -18,6 +18,8 @@ if TYPE_CHECKING:
 def report_problems(problems: ProblemLog, stream=None) -> None:
     """Warnings for skipped input, with file and line, and the total at the end."""
     stream = stream or sys.stderr  # looked up per call: a default would keep a replaced stderr
+    for note in problems.notes:
+        print(f"note: {note}", file=stream)
     for p in problems.shown:
         print(f"warning: {p}", file=stream)
     if problems.count > len(problems.shown):

@@ -41,6 +41,13 @@ class ProblemLog:
     count: int = 0
     shown: list[Problem] = field(default_factory=list)
 
+    # what a reader did that is no problem but changes what the user sees (loop-back
+    # echoes left out): said once per run, never counted as skipped nor stopped at
+    notes: list[str] = field(default_factory=list)
+
+    def note(self, source: str, message: str) -> None:
+        self.notes.append(f"{source}: {message}")
+
     def add(self, source: str, location: str, message: str) -> None:
         problem = Problem(source, location, message)
         if self.strict:

@@ -35,6 +35,7 @@ from cananalyze.core.frames import (
     concat,
 )
 from cananalyze.formats.logs.blf import _Cutter
+from cananalyze.formats.logs.echoes import EchoFilter
 from cananalyze.formats.registry import LogFormat, ReadContext, register
 
 LINKTYPE_CAN_SOCKETCAN = 227
@@ -414,6 +415,22 @@ def _epb_run(rec: np.ndarray, order, ifaces, frames: _Frames, cutter, ctx, warne
 
 
 def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
+    echoes = EchoFilter()  # a Linux cooked capture's outgoing frames, seen again as echoes
+    for fb in _read(stream, ctx):
+        kept = echoes.apply(fb)
+        ctx.frames -= len(fb) - len(kept)
+        if len(kept):
+            yield kept
+    if echoes.dropped:
+        ctx.extras["echoes"] = echoes.dropped
+        ctx.problems.note(
+            ctx.source,
+            f"{echoes.dropped:,} loop-back echoes of frames this host sent left out (each "
+            "appears going out and again as received: one frame, marked sent)",
+        )
+
+
+def _read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     head = stream.read(24)
     if head[:4] in _PCAP_MAGIC:
         yield from _read_pcap(stream, ctx, head)
