@@ -16,7 +16,7 @@ from cananalyze.devices import cia401, cia402
 from cananalyze.devices.builtin import load_builtin
 from cananalyze.devices.profile import load_eds
 from tests.conftest import real_file
-from tests.helpers.drive402 import Drive402
+from tests.helpers.drive402 import STATUSWORD, Drive402
 from tests.helpers.virtual_bus import unique_channel
 
 TMCM = "nigel-bruce-khan__ros_canopen-tmcm-1636/"
@@ -352,3 +352,52 @@ def test_unknown_data_as_text_only_beyond_expedited():
     assert object_words(0x2000, 0, None, b"MyDrive v1.2\x00\x00") == 'text "MyDrive v1.2"'
     assert object_words(0x2000, 0, None, b"\x01\x02\x03\x04\x05") is None
     assert object_words(0x2000, 0, 7, b"Hello world") is None  # typed: the value says it
+
+
+def _self_enabling_run(tmp_path, jump: str | None) -> str:
+    """python-canopen's master walks its drive to operation enabled and back to switch on
+    disabled by SDO; then (jump) the drive moves to `jump` by itself and the master reads
+    its statusword."""
+    logging.getLogger("canopen").setLevel(logging.ERROR)
+    d = Drive402(str(real_file(SLAVE_EDS)), 5, unique_channel("p402self"))
+    try:
+        d.master.setup_402_state_machine(read_pdos=False)
+        assert d.master.sdo[0x1000].raw == 0x00060192  # names the drive CiA 402
+        d.master.TIMEOUT_SWITCH_STATE_FINAL = 2.0
+        for target in ("OPERATION ENABLED", "SWITCH ON DISABLED"):
+            d.master.state = target
+        if jump is not None:
+            d._set(jump)  # no controlword: the drive moves on its own
+        assert d.master.sdo[0x6041].raw in (STATUSWORD[jump or "SWITCH ON DISABLED"],)
+        return _log(d.frames(), tmp_path / "self.log")
+    finally:
+        d.close()
+
+
+@pytest.mark.parametrize("jump", ["OPERATION ENABLED", "READY TO SWITCH ON"])
+def test_a_drive_that_enables_itself_without_a_command(tmp_path, jump):
+    """The statusword is polled by SDO (states may be skipped between reads), but the
+    controlwords are on the bus: a drive reaching an enabled state with no command that
+    leads there is a finding, naming the command in force and those sent since."""
+    log = _self_enabling_run(tmp_path, jump)
+    f = cananalyze.load(log).findings  # the 0x1000 read names CiA 402
+    jumps = f[f.rule == "drive_transition"]
+    (msg,) = jumps.message
+    name = jump.lower()
+    assert msg.startswith(f"drive went from switch on disabled to {name} (statusword 0x")
+    assert "in SDO) without a command that leads there: in force disable voltage" in msg
+    assert msg.endswith("sent since: none")
+    assert jumps.severity.iloc[0] == "error" and jumps.node.iloc[0] == 5
+
+
+def test_the_enable_sequence_by_sdo_is_no_finding(tmp_path):
+    log = _self_enabling_run(tmp_path, None)
+    cap = cananalyze.load(log)
+    assert cap.drive_states.state.tolist() == [
+        "switch on disabled",
+        "ready to switch on",
+        "switched on",
+        "operation enabled",
+        "switch on disabled",
+    ]
+    assert not cap.findings.rule.str.startswith("drive_").any()
