@@ -11,13 +11,15 @@ from __future__ import annotations
 
 U8, I16 = 0x05, 0x03
 
+# (index, subindex) -> (name in the EDS ParameterName style, data type, unit): the signal
+# of a mapped object is `profile.signal_name` of it, as for an EDS
 OBJECTS: dict[tuple[int, int], tuple[str, int, str | None]] = {}
 for _s in range(1, 9):
-    OBJECTS[(0x6000, _s)] = (f"digital_inputs_{8 * _s - 7}_{8 * _s}", U8, None)
-    OBJECTS[(0x6200, _s)] = (f"digital_outputs_{8 * _s - 7}_{8 * _s}", U8, None)
+    OBJECTS[(0x6000, _s)] = (f"Digital inputs {8 * _s - 7}-{8 * _s}", U8, None)
+    OBJECTS[(0x6200, _s)] = (f"Digital outputs {8 * _s - 7}-{8 * _s}", U8, None)
 for _s in range(1, 13):
-    OBJECTS[(0x6401, _s)] = (f"analog_input_{_s}", I16, None)
-    OBJECTS[(0x6411, _s)] = (f"analog_output_{_s}", I16, None)
+    OBJECTS[(0x6401, _s)] = (f"Analog input {_s}", I16, None)
+    OBJECTS[(0x6411, _s)] = (f"Analog output {_s}", I16, None)
 
 DEFAULT_PDOS: dict[tuple[str, int], tuple[tuple[int, int], ...]] = {
     ("tx", 1): tuple((0x6000, s) for s in range(1, 9)),

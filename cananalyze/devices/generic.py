@@ -13,7 +13,7 @@ from __future__ import annotations
 from functools import cache
 
 from cananalyze.devices.family import FAMILIES, KEYS
-from cananalyze.devices.profile import DeviceProfile
+from cananalyze.devices.profile import DeviceProfile, signal_name
 from cananalyze.devices.sidecar import Sidecar, SignalSpec
 
 NAMES = {402: "CiA 402 drive (profile defaults)", 401: "CiA 401 generic I/O (profile defaults)"}
@@ -92,7 +92,10 @@ def generic_profile(profile: int) -> DeviceProfile:
     sidecar = Sidecar(
         key=key,
         name=NAMES[profile],
-        signals={obj: SignalSpec(name, unit) for obj, (name, _, unit) in table.OBJECTS.items()},
+        signals={
+            obj: SignalSpec(signal_name(name), unit)
+            for obj, (name, _, unit) in table.OBJECTS.items()
+        },
     )
     return DeviceProfile(
         key=key,

@@ -22,7 +22,7 @@ BOOLEAN = 0x01
 _UINT_BY_BITS = {8: 0x05, 16: 0x06, 24: 0x16, 32: 0x07, 40: 0x18, 48: 0x19, 56: 0x1A, 64: 0x1B}
 
 
-def _signal_name(name: str) -> str:
+def signal_name(name: str) -> str:
     """Object name as a column-friendly signal name ("Read Input 8 bit" -> "read_input_8_bit")."""
     return re.sub(r"[^0-9a-zA-Z]+", "_", name).strip("_").lower() or "value"
 
@@ -72,7 +72,7 @@ class DeviceProfile:
         spec = self.sidecar.signals.get((index, subindex)) if self.sidecar else None
         if spec is None:
             info = self.object(index, subindex)
-            name = _signal_name(info.name) if info else f"obj_{index:04x}_{subindex:02x}"
+            name = signal_name(info.name) if info else f"obj_{index:04x}_{subindex:02x}"
             return name, self._profile_unit(index, subindex), None, 0.0
         if spec.unit_table and spec.context and self.sidecar:
             ctx = (context or {}).get(spec.context)

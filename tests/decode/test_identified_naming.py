@@ -67,20 +67,20 @@ def test_transfers_after_the_device_type_read_are_named(tmp_path, monkeypatch, p
     sdo = cap.sdo.set_index(["index", "subindex"])
     *before, after = sdo.loc[(0x6041, 0)]["name"].tolist()
     assert len(before) == 2 and sdo.loc[(0x6041, 0)]["name"].isna().tolist() == [True, True, False]
-    assert after.lower() == "statusword"  # read after the device type: named
+    assert after == "Statusword"  # read after the device type: named, as an EDS names it
     assert sdo.loc[(0x6041, 0)]["value"].tolist()[2] == 0x0237
-    assert "modes" in sdo.loc[(0x6060, 0)]["name"].lower()
-    assert "statusword" in sdo.loc[(0x1A00, 1)]["words"].lower()
+    assert set(sdo.loc[[(0x6060, 0)], "name"]) == {"Modes of operation"}
+    assert set(sdo.loc[[(0x1A00, 1)], "words"]) == {"6041:00, 16 bit, Statusword"}
 
 
 def test_text_and_jsonl_name_them_too(tmp_path):
     log = _record(tmp_path)
     run = [sys.executable, "-m", "cananalyze", "decode", log]
     text = subprocess.run(run, capture_output=True, text=True, check=True).stdout
-    assert "SDO read 0x6041:00 statusword expedited -> ok: 567 (0x237) (operation enabled" in text
+    assert "SDO read 0x6041:00 Statusword expedited -> ok: 567 (0x237) (operation enabled" in text
     lines = subprocess.run(
         [*run, "--format", "jsonl"], capture_output=True, text=True, check=True
     ).stdout
     recs = [json.loads(x) for x in lines.splitlines()]
     named = {(r["index"], r["subindex"]): r["name"] for r in recs if r.get("kind") == "sdo"}
-    assert named[(0x1000, 0)] == "Device type" and named[(0x6041, 0)] == "statusword"
+    assert named[(0x1000, 0)] == "Device type" and named[(0x6041, 0)] == "Statusword"

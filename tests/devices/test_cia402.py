@@ -104,7 +104,7 @@ def test_generic_402_profile_has_the_standard_default_pdos():
     assert [e.index for e in pdos[("rx", 1)].mapping] == [0x6040]
     assert [e.index for e in pdos[("tx", 3)].mapping] == [0x6041, 0x6064]
     assert pdos[("rx", 4)].cob_id == 0x507
-    assert prof.object(0x607A, 0).name == "target_position"
+    assert prof.object(0x607A, 0).name == "Target position"  # the EDS ParameterName style
 
 
 def _log(frames, path) -> str:
@@ -281,8 +281,8 @@ def test_drive_state_lanes_in_mcap_rerun_and_the_event_tables(tmp_path):
     sdo = pq.read_table(out / "sdo.parquet").to_pandas()
     keys = zip(sdo["index"], sdo["subindex"], strict=True)
     words = dict(zip(keys, sdo["words"], strict=True))
-    assert words[(0x1A00, 1)] == "6041:00, 16 bit, statusword"
-    assert words[(0x1A00, 2)] == "6064:00, 32 bit, position_actual_value"
+    assert words[(0x1A00, 1)] == "6041:00, 16 bit, Statusword"
+    assert words[(0x1A00, 2)] == "6064:00, 32 bit, Position actual value"
     assert words[(0x1800, 1)].startswith("COB-ID 0x18B, ")
     assert words[(0x6060, 0)].endswith("position")
 
