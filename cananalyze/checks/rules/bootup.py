@@ -5,32 +5,10 @@ from __future__ import annotations
 import numpy as np
 
 from cananalyze.checks.rule import Context, Rule
-from cananalyze.core.records import DecodedBatch
+from cananalyze.checks.senders import SENT as _SENT
+from cananalyze.checks.senders import senders as _senders
 from cananalyze.protocol.nmt import ALL_NODES, RESET_COMMUNICATION, RESET_NODE
 from cananalyze.protocol.services import Service
-
-_SENT_BY_NODE = np.array(
-    [
-        Service.HEARTBEAT,
-        Service.TPDO,
-        Service.EMCY,
-        Service.SDO_RESPONSE,
-        Service.GUARD_RESPONSE,
-        Service.BOOTUP,
-    ],
-    np.uint8,
-)
-_SENT = np.zeros(256, bool)  # service -> sent by the node itself: a lookup, not np.isin
-_SENT[_SENT_BY_NODE] = True
-
-
-def _senders(batch: DecodedBatch) -> np.ndarray:
-    """Nodes (0..127) with a row of a service the node sends itself: read from the batch's
-    counts per (service, node) (`DecodedBatch.sender_counts`), not a gather of the rows."""
-    per = batch.sender_counts()
-    if per is None:  # a node past 127
-        return batch.node[_SENT[batch.service] & (batch.node >= 0)]
-    return np.flatnonzero(per[_SENT, 1:].any(axis=0))
 
 
 class BootupRule(Rule):

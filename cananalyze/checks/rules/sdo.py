@@ -6,17 +6,14 @@ from __future__ import annotations
 import numpy as np
 
 from cananalyze.checks.rule import Context, Rule
+from cananalyze.checks.senders import senders
 from cananalyze.protocol.sdo import object_text
-from cananalyze.protocol.services import Service
 
 # A scan: unanswered reads of one object by at least this many node-IDs that never sent a
 # frame (python-canopen's `scanner.search()` and commissioning tools probe 1..127); the
 # timeouts of a smaller group are findings, once no further probe came for SCAN_QUIET_S.
 SCAN_MIN = 8
 SCAN_QUIET_S = 10.0
-# services a node sends itself: a node-ID seen in one of them is on the bus
-_SENT = [Service.EMCY, Service.TPDO, Service.SDO_RESPONSE, Service.HEARTBEAT, Service.BOOTUP]
-_SENT.append(Service.GUARD_RESPONSE)
 
 
 class _Scan:
@@ -70,10 +67,7 @@ class SdoRule(Rule):
 
     def _see(self, ctx: Context) -> None:
         """Which node-IDs sent a frame, and what each first answered to a read."""
-        counts = ctx.batch.sender_counts()
-        if counts is not None:
-            sent = counts[_SENT].sum(axis=0)[1:]
-            self._seen.update(np.flatnonzero(sent).tolist())
+        self._seen.update(senders(ctx.batch).tolist())
         recs = ctx.batch.records
         if not recs:
             return
