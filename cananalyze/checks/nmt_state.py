@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from cananalyze.checks.senders import senders
 from cananalyze.core.records import DecodedBatch
 from cananalyze.protocol.nmt import (
     ALL_NODES,
@@ -26,6 +27,7 @@ class NmtStates:
         self.states: dict[int, list[int]] = {}
         self.sources: dict[int, list[str]] = {}
         self._last = np.full(128, -1, np.int16)
+        self._heard = np.zeros(128, bool)  # nodes that sent a frame themselves
         self._arrays: dict[int, tuple] = {}  # state_at's, per node
 
     def _add(self, node: int, t: float, state: int, source: str) -> None:
@@ -44,6 +46,8 @@ class NmtStates:
         response) and which finds each service's rows once for every rule."""
         svc = batch.service
         fb = batch.frames
+        heard = senders(batch)
+        self._heard[heard[heard < 128]] = True
 
         def rows(s: Service) -> np.ndarray:
             return np.flatnonzero(svc == s) if ctx is None else ctx.rows(s)
@@ -121,10 +125,13 @@ class NmtStates:
         return cached
 
     def timeline(self) -> dict[int, list[tuple[float, str, str]]]:
+        """Each node's states, of the nodes that sent a frame: a node the master only
+        commanded (a reset sent to every node-ID in turn) never said it was there."""
         return {
             n: [
                 (t, state_name(s), src)
                 for t, s, src in zip(self.times[n], self.states[n], self.sources[n], strict=True)
             ]
             for n in sorted(self.times)
+            if self._heard[n]
         }

@@ -220,7 +220,7 @@ class Timing:
             out.append("SDO latency per node:")
             out += [
                 f"  node {n}: {fmt(s)}"
-                for n, s in sorted(r["sdo_latency"].items(), key=lambda x: str(x[0]))
+                for n, s in sorted(r["sdo_latency"].items(), key=_node_order)
             ]
         if any(not st.exact for table in self.stats.values() for st in table.values()) or any(
             not st.exact for st in self.sdo_latency.values()
@@ -246,3 +246,9 @@ class Timing:
             more = f", ... {len(changes) - 12} more" if len(changes) > 12 else ""
             out.append(f"NMT state node {node}: {steps}{more}")
         return out
+
+
+def _node_order(item: tuple) -> tuple:
+    """Node-IDs in number order (10 after 9, not after 1), names after them."""
+    key = item[0]
+    return (0, key, "") if isinstance(key, int) else (1, 0, str(key))

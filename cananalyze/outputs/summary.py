@@ -399,12 +399,14 @@ def device_lines(model, summary: Summary | None = None, bus: str | None = None) 
                 f"  {who} {node:>3}: unknown device (no identity read in the log; give --device or --eds)"
             )
             continue
-        name = cfg.profile.name if cfg.profile is not None else "unknown device"
         seen = ", ".join(
             f"{k} 0x{v:X}" if isinstance(v, int) else f"{k} {v!r}"
             for k, v in sorted(cfg.identity.items())
         )
-        line = f"  {who} {node:>3}: {name} (identified by {cfg.identified_by})"
+        if cfg.profile is None:  # not "unknown device (identified by unknown)"
+            line = f"  {who} {node:>3}: unknown device (no profile matches what the log shows)"
+        else:
+            line = f"  {who} {node:>3}: {cfg.profile.name} (identified by {cfg.identified_by})"
         out.append(line + (f"; seen {seen}" if seen else ""))
     if bus is not None:
         return out

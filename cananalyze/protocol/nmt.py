@@ -85,8 +85,12 @@ def command_text(fields: dict) -> str:
     target = fields.get("target")
     if target is None:
         return f"NMT ({fields.get('problem', MALFORMED)})"
-    who = "all nodes" if target == ALL_NODES else f"node {target}"
-    return f"NMT {fields.get('command')} {who}"
+    command = fields.get("command")
+    if target == ALL_NODES:
+        return f"NMT {command} all nodes"
+    if command == "reset node":  # not "reset node node 32"
+        return f"NMT reset node {target}"
+    return f"NMT {command} node {target}"
 
 
 def state_fields(data: bytes, guard: bool = False) -> dict:
