@@ -206,6 +206,23 @@ def test_report_plots_signals_with_units_and_heartbeats_against_config(faults_re
     assert "NMT state per node" in titles
 
 
+def test_integer_signals_are_steps_and_scaled_ones_lines(faults_report):
+    """Digital inputs and counters hold their value until the next frame (plotly's "hv"
+    shape); a scaled temperature is drawn as a line (issue 44: inputs ramped 0 to 1)."""
+    _, _, figs = parse(faults_report)
+    titles = {f["layout"]["title"]["text"]: f for f in figs.values()}
+    shape = {
+        (title, d["name"]): d.get("line", {}).get("shape")
+        for title, f in titles.items()
+        if "PDO" in title
+        for d in f["data"]
+    }
+    assert shape[("Node 6 TPDO1 (0x186)", "di1")] == "hv"
+    assert shape[("Node 6 TPDO2 (0x286)", "counter1 (pulses)")] == "hv"
+    assert shape[("Node 5 TPDO2 (0x285)", "ch1 (°C)")] is None  # plotly's default: linear
+    assert shape[("Node 7 TPDO2 (0x287)", "ai0_i7012 (V)")] is None
+
+
 def _values(y) -> np.ndarray:
     """A plotly array: a JSON list or a packed array (numpy, from `page_figures`)."""
     return np.asarray(y, float)

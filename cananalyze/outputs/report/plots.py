@@ -84,17 +84,20 @@ def envelope_trace(
     scale: float = 1.0,
     resolution: float | None = None,
     buckets: int = PLOT_BUCKETS,
+    stepped: bool = False,
 ) -> dict:
     """A min/max envelope as a line of at most `buckets` buckets; `resolution`: the
-    value's finest meaningful step."""
+    value's finest meaningful step; `stepped`: drawn as steps (each value held until the
+    next), for integer values."""
     t, v = env.points(buckets)
+    line = {"width": 1, "shape": "hv"} if stepped else {"width": 1}
     return {
         "type": "scatter",
         "mode": "lines",
         "name": name,
         "x": Packed(t - t0, US),
         "y": Packed(v * scale, resolution),
-        "line": {"width": 1},
+        "line": line,
     }
 
 
@@ -196,7 +199,13 @@ def signals(series: list, t0: float, title: str) -> dict:
     y = ", ".join(u for u in units if u) or "value"
     most = _share(len(series))
     traces = [
-        envelope_trace(s.env, t0, f"{s.name} ({s.unit})" if s.unit else s.name, buckets=most)
+        envelope_trace(
+            s.env,
+            t0,
+            f"{s.name} ({s.unit})" if s.unit else s.name,
+            buckets=most,
+            stepped=s.stepped,
+        )
         for s in series
     ]
     return _fig(traces, title, "time (s)", y)

@@ -73,6 +73,9 @@ class Series:
     name: str
     unit: str | None
     env: Envelope = field(default_factory=Envelope)
+    # integer and boolean values (digital inputs, states, counters) are drawn as steps:
+    # a line between two samples would show values the signal never had
+    stepped: bool = True
 
 
 def _bus_of(fb, row: int) -> str:
@@ -224,6 +227,8 @@ class ReportSink(Sink):
                     s = self.series[key] = Series(
                         sb.node, sb.pdo, sb.cob_id, name, sb.units.get(name)
                     )
+                if values.dtype.kind not in "iub":
+                    s.stepped = False
                 s.env.add(ts, values.astype(np.float64))
 
     def _buses(self, fb) -> None:
