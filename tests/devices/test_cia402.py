@@ -189,7 +189,9 @@ def test_a_command_the_drive_does_not_follow(tmp_path):
     assert (f.rule == "drive_command").sum() == 0
 
 
-def test_tmcm_1636_fault_read_by_sdo_with_its_emcy():
+def test_tmcm_1636_fault_read_by_sdo_and_a_later_emcy_not_blamed():
+    """A log without times: the fault read at line 14 is not the EMCY 0x6320 the drive
+    sends 88 lines later, after a parameter write (issue 44); the EMCY is its own finding."""
     log = real_file(TMCM + "candump.txt")
     cap = cananalyze.load(log, eds={1: str(real_file(TMCM + "TMCM-1636-CANopen.dcf"))})
     assert cap.drive_states.state.tolist() == ["fault"]
@@ -197,7 +199,9 @@ def test_tmcm_1636_fault_read_by_sdo_with_its_emcy():
     assert cap.drive_commands.command.tolist() == ["disable voltage", "fault reset"]
     f = cap.findings
     fault = f[f.rule == "drive_fault"].message.tolist()
-    assert len(fault) == 1 and "EMCY 0x6320" in fault[0]
+    assert fault == ["drive entered fault (statusword 0x0618) (no EMCY from the node around it)"]
+    emcy = f[f.rule == "emcy"].message.tolist()
+    assert len(emcy) == 1 and "EMCY 0x6320" in emcy[0]
 
 
 def test_zeroerr_log2_enable_sequence_from_remapped_tpdo1():
@@ -401,3 +405,22 @@ def test_the_enable_sequence_by_sdo_is_no_finding(tmp_path):
         "switch on disabled",
     ]
     assert not cap.findings.rule.str.startswith("drive_").any()
+
+
+@pytest.mark.slow
+def test_fault_and_its_emcy_paired_in_a_log_without_times(tmp_path):
+    """python-canopen's drive faults (EMCY 0x2310, then fault); the log printed as candump's
+    screen output has no times: the EMCY before the fault read still goes with it."""
+    log, _ = _drive_run(tmp_path)
+    screen = tmp_path / "screen.txt"
+    lines = []
+    for line in open(log).read().splitlines():
+        _, chan, frame = line.split()
+        cob, data = frame.split("#")
+        raw = bytes.fromhex(data)
+        lines.append(f"  {chan}  {cob}   [{len(raw)}]  {' '.join(f'{b:02X}' for b in raw)}")
+    screen.write_text("\n".join(lines) + "\n")
+    f = cananalyze.load(screen).findings
+    assert (f.rule == "timestamps").any()  # read as a log without times
+    (msg,) = f[f.rule == "drive_fault"].message
+    assert msg.startswith("drive entered fault (statusword 0x") and "with EMCY 0x2310" in msg

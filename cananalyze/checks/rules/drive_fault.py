@@ -3,7 +3,8 @@
 The EMCY a drive sends with its fault is looked for from `emcy_window_ms` before the
 statusword shows the fault to as long after it within the same batch (the EMCY usually
 comes first, since the statusword waits for the next TPDO or poll). In a log without
-times the window has no length: the node's last EMCY before, or its next one in the batch.
+times the window is counted in frames: the node's last EMCY raised before (and not
+reset since), or one within UNTIMED_FRAMES frames after.
 """
 
 from __future__ import annotations
@@ -17,6 +18,9 @@ from cananalyze.protocol.emcy import MIN_BYTES, error_text
 from cananalyze.protocol.services import Service
 
 _FAULTS = (cia402.FAULT_REACTION, cia402.FAULT)
+# a log without times: an EMCY this many frames after the statusword still goes with it
+# (a drive sends it at once; the statusword's next TPDO or poll may come first)
+UNTIMED_FRAMES = 20
 
 
 class DriveFaultRule(Rule):
@@ -60,14 +64,21 @@ class DriveFaultRule(Rule):
             self.subjects.add(c.node)
             if c.code not in _FAULTS or before in _FAULTS:
                 continue
-            window = self.window if ctx.timed else float("inf")
             sent = self.emcy.get(c.node)
-            if sent is None or c.t - sent[0] > window:
+            if sent is not None and ctx.timed and c.t - sent[0] > self.window:
+                sent = None
+            if sent is None:
                 sent = next(
                     (
                         (float(fb.t[r]), code)
                         for r, n, code in emcy[k:]
-                        if n == c.node and code and float(fb.t[r]) - c.t <= window
+                        if n == c.node
+                        and code
+                        and (
+                            float(fb.t[r]) - c.t <= self.window
+                            if ctx.timed
+                            else r - c.row <= UNTIMED_FRAMES
+                        )
                     ),
                     None,
                 )
@@ -90,16 +101,19 @@ class DriveFaultRule(Rule):
 
     def _saw_last(self, fb, rows: np.ndarray, nodes: np.ndarray, codes: np.ndarray) -> None:
         """`_saw` of each EMCY in order, as columns: each node's last EMCY raised is kept."""
-        raised = np.flatnonzero(codes)[::-1]  # latest first: np.unique's first is the last
-        if raised.size == 0:
+        if codes.size == 0:
             return
-        node_ids, at = np.unique(nodes[raised], return_index=True)
-        last = raised[at]
+        order = np.arange(codes.size)[::-1]  # latest first: np.unique's first is the last
+        node_ids, at = np.unique(nodes[order], return_index=True)
+        last = order[at]
         for n, r, code in zip(
             node_ids.tolist(), rows[last].tolist(), codes[last].tolist(), strict=True
         ):
-            self.emcy[n] = (float(fb.t[r]), code)
+            self._saw(fb, r, n, code)
 
     def _saw(self, fb, row: int, node: int, code: int) -> None:
+        """A node's EMCY: raised (kept to pair with a fault) or reset (code 0: none)."""
         if code:
             self.emcy[node] = (float(fb.t[row]), code)
+        else:
+            self.emcy.pop(node, None)
