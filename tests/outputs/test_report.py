@@ -694,3 +694,38 @@ def test_report_keeps_node_5_of_each_bus_apart(tmp_path):
 
 def figs_titled(figs: dict, title: str) -> dict:
     return next(f for f in figs.values() if f["layout"]["title"]["text"] == title)
+
+
+def test_a_log_without_times_orders_emcys_by_line(tmp_path):
+    """TMCM-1636's candump screen output has no times: its EMCY 0x6320 at line 102 is
+    reset at line 105 (not "still active at the end of the log", which sorting by one
+    shared time made it); PDO rates and gaps need times and are not given (issue 44)."""
+    tmcm = "nigel-bruce-khan__ros_canopen-tmcm-1636/"
+    out = tmp_path / "tmcm.html"
+    dcf = real_file(tmcm + "TMCM-1636-CANopen.dcf")
+    r = cli("report", str(real_file(tmcm + "candump.txt")), "--eds", f"1={dcf}", "-o", str(out))
+    assert r.returncode == 1, r.stderr
+    text, tables, _ = parse(out)
+    emcy = table_with(tables, "time", "active for")
+    assert len(emcy) == 2
+    assert emcy[1][0] == "line 102" and emcy[1][2] == "0x6320"
+    assert emcy[1][5] == "reset at line 105"
+    assert "still active at the end of the log" not in text
+    pdo = table_with(tables, "COB-ID", "rate Hz")
+    rpdo3 = next(row for row in pdo if row[0] == "0x401")
+    assert rpdo3[4:8] == ["-", "-", "-", "-"]
+
+
+def test_pdo_settings_nothing_configured_are_not_known(tmp_path):
+    """pcan3's node 85: no network file, no EDS, no SDO write of its TPDO timers: the PDO
+    table says it does not know them, not "off (network file)" (issue 44)."""
+    out = tmp_path / "pcan3.html"
+    log = real_file("hilch__canopen-message-interpreter/pcan3.trc")
+    assert cli("report", str(log), "-o", str(out), "-q").returncode == 1
+    text, tables, _ = parse(out)
+    pdo = table_with(tables, "COB-ID", "event timer")
+    head = pdo[0]
+    row = next(r for r in pdo if r[0] == "0x1D5")
+    assert row[head.index("event timer")] == "not known"
+    assert row[head.index("inhibit time")] == "not known"
+    assert "(network file)" not in text and "configured not configured" not in text

@@ -190,8 +190,11 @@ def nodes(s, figs: Figures) -> dict:
                     "p99": _ms(h.quantile(0.99)),
                     "max": _ms(h.max),
                     "std": _ms(h.std),
-                    "configured": ", ".join(sorted({_ms(v, 0) for _, v in conf}))
-                    or "not configured",
+                    "configured": (
+                        "configured " + ", ".join(sorted({_ms(v, 0) for _, v in conf})) + " ms"
+                        if conf
+                        else "not configured"  # not "configured not configured ms"
+                    ),
                     "plot": figs.add(plots.period(g, s.t0, kind, who, conf), "plot half"),
                     "histogram": figs.add(
                         plots.histogram(h, f"{who} {kind} period histogram", "period (ms)", marks),
@@ -303,34 +306,41 @@ def _sdo_by_bus(s) -> dict:
 
 
 def emcy(s, figs: Figures) -> dict | None:
+    """Each EMCY and how long it stayed active, in log order: a log without times orders
+    by line and says at which line an error ended instead of after how long."""
     if not s.emcys:
         return None
+    timed = s.timed
     active: dict[tuple[str, int], list] = {}  # (bus, node): node 5 on each bus its own
     rows = []
     resets = sorted(s.bootups)
-    for t, bus, node, code, reg, text in sorted(s.emcys):
+    for t, line, bus, node, code, reg, text in sorted(s.emcys, key=lambda e: e[:2]):
         if code == 0:
             for item in active.pop((bus, node), []):
-                item[2] = f"{t - item[0]:.3f} s"
+                item[2] = f"{t - item[0]:.3f} s" if timed else f"reset at line {line}"
             continue
-        item = [t, s.who(bus, node), "still active at the end of the log", code, reg, text]
+        item = [t, s.who(bus, node), "still active at the end of the log", code, reg, text, line]
         active.setdefault((bus, node), []).append(item)
         rows.append(item)
-    for t, bus, node in resets:  # a boot-up clears the node's errors
+    for t, line, bus, node in resets:  # a boot-up clears the node's errors
         for item in list(active.get((bus, node), [])):
-            if item[0] < t:
-                item[2] = f"{t - item[0]:.3f} s (until boot-up)"
+            if (item[0], item[6]) < (t, line):
+                item[2] = (
+                    f"{t - item[0]:.3f} s (until boot-up)"
+                    if timed
+                    else f"until the boot-up at line {line}"
+                )
                 active[(bus, node)].remove(item)
     out = [
         [
-            _rel(s, t),
+            _rel(s, t) if timed else f"line {line}",
             who.removeprefix("node "),
             f"0x{code:04X}" if code >= 0 else "-",
             f"0x{reg:02X}" if reg >= 0 else "-",
             text,
             dur,
         ]
-        for t, who, dur, code, reg, text in rows
+        for t, who, dur, code, reg, text, line in rows
     ]
     return {"rows": out, "more": s.emcy_count - len(s.emcys)}
 
@@ -369,10 +379,11 @@ def pdos(s, figs: Figures) -> dict | None:
                 s.who(bus, node).removeprefix("node "),
                 name,
                 f"{g.count:,}",
-                _ms(rate),
-                _ms(h.min),
-                _ms(h.quantile(0.5)),
-                _ms(h.max),
+                *(
+                    (_ms(rate), _ms(h.min), _ms(h.quantile(0.5)), _ms(h.max))
+                    if s.timed  # a log without times has no rates nor gaps
+                    else ("-", "-", "-", "-")
+                ),
                 tt,
                 et,
                 inh,
@@ -386,10 +397,11 @@ def _pdo_param(model, node: int, index: int, sub: int, t: float, value: int, tex
     """A PDO timing parameter and where it comes from; 0 means off (CiA 301) unless only
     the profile says 0, which is unknown (docs/network-file.md, as the checks read it)."""
     k = model.known(node, index, sub, t)
-    source = k.source if k is not None else "network file"
+    if k is None:  # nothing in the log, a file or a profile sets it
+        return f"{text(value)} (default)" if value else "not known"
     if not value:
-        return "unknown (profile says 0)" if source == "profile" else f"off ({source})"
-    return f"{text(value)} ({source})"
+        return "unknown (profile says 0)" if k.source == "profile" else f"off ({k.source})"
+    return f"{text(value)} ({k.source})"
 
 
 def signals(s, figs: Figures) -> dict | None:

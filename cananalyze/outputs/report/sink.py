@@ -16,7 +16,7 @@ import numpy as np
 from cananalyze.core.atomic import Staged, check_writable
 from cananalyze.core.finding import Finding
 from cananalyze.decode.drive_tracker import STATE
-from cananalyze.decode.events.columns import EMCY, NO_NODE
+from cananalyze.decode.events.columns import EMCY
 from cananalyze.decode.node_tally import NodeTally
 from cananalyze.outputs.busload import frame_bits
 from cananalyze.outputs.report.accum import Envelope, LogHistogram, WindowSums
@@ -128,11 +128,10 @@ class ReportSink(Sink):
         self.sdo_latency: dict[tuple[str, int], LogHistogram] = {}
         self.sdo_count: dict[tuple[str, int], list[int]] = {}  # -> [ok, abort]
         self.aborts: list[tuple[str, dict]] = []  # (bus, record)
-        self.emcys: list[
-            tuple[float, str, int, int, int, str]
-        ] = []  # t, bus, node, code, reg, text
+        # t, line, bus, node, code, reg, text; the line orders a log without times
+        self.emcys: list[tuple[float, int, str, int, int, int, str]] = []
         self.emcy_count = 0
-        self.bootups: list[tuple[float, str, int]] = []  # t, bus, node
+        self.bootups: list[tuple[float, int, str, int]] = []  # t, line, bus, node
         self.buses: dict[str, Bus] = {}
         self.series: dict[tuple, Series] = {}
         self.series_dropped = 0
@@ -145,6 +144,15 @@ class ReportSink(Sink):
     def several(self) -> bool:
         """More than one bus: the page names each node's bus ("can1 node 5")."""
         return len(self.buses) > 1
+
+    @property
+    def timed(self) -> bool:
+        """False for a log without times (candump's screen output): every frame has one
+        time, so the report orders and places things by line."""
+        checker = self.run.checker
+        if checker is not None and checker.timed is not None:
+            return bool(checker.timed)
+        return not (self.frames > 1 and self.t_first == self.t_last)
 
     def who(self, bus: str, node: int) -> str:
         """ "node 5", or "can1 node 5" on a log of several buses."""
@@ -200,7 +208,9 @@ class ReportSink(Sink):
                 self.errctl.setdefault((kind, nd), Gaps()).add(t[rows[pos]])
         boot = np.flatnonzero(service == Service.BOOTUP)
         buses = [_bus_of(fb, r) for r in boot.tolist()]
-        self.bootups.extend(zip(t[boot].tolist(), buses, node[boot].tolist(), strict=True))
+        self.bootups.extend(
+            zip(t[boot].tolist(), fb.line[boot].tolist(), buses, node[boot].tolist(), strict=True)
+        )
         pdo_rows = np.flatnonzero(batch.pdo > 0)
         key = fb.can_id[pdo_rows].astype(np.int64) | (fb.channel[pdo_rows].astype(np.int64) << 16)
         for k, pos in _groups(key):
@@ -291,20 +301,18 @@ class ReportSink(Sink):
         if rows.size == 0:
             return
         self.emcy_count += rows.size
-        texts: dict[tuple, str] = {}
+        texts: dict[int, str] = {}  # by the frame's row: a log without times has one t
         ev = batch.events
         if ev is not None and len(ev):
             at = np.flatnonzero(ev.kind == EMCY)
-            for tt, nd, msg in zip(
-                ev.t[at].tolist(), ev.node[at].tolist(), ev.message[at], strict=True
-            ):
-                texts[(tt, nd if nd != NO_NODE else None)] = msg
+            for row, msg in zip(ev.row[at].tolist(), ev.message[at], strict=True):
+                texts[row] = msg
         for r in rows[: max(MAX_EMCY_FRAMES - len(self.emcys), 0)].tolist():
             d = fb.data[r]
             code = int(d[0]) | int(d[1]) << 8 if fb.dlc[r] >= 2 else -1
             reg = int(d[2]) if fb.dlc[r] >= 3 else -1
-            tt, nd = float(fb.t[r]), int(batch.node[r])
-            self.emcys.append((tt, _bus_of(fb, r), nd, code, reg, texts.get((tt, nd), "")))
+            tt, nd, line = float(fb.t[r]), int(batch.node[r]), int(fb.line[r])
+            self.emcys.append((tt, line, _bus_of(fb, r), nd, code, reg, texts.get(r, "")))
 
     # --- the end --------------------------------------------------------------------
     def close(self) -> None:

@@ -102,7 +102,7 @@ SECTIONS = """
     {% for p in n.periods %}
       <p>{{ p.kind }} period: n={{ p.count }} min {{ p.min }} median {{ p.median }}
       {{ " " }}mean {{ p.mean }} p99 {{ p.p99 }} max {{ p.max }} jitter (std) {{ p.std }} ms;
-      {{ " " }}configured {{ p.configured }} ms</p>
+      {{ " " }}{{ p.configured }}</p>
       <div class=pair>{{ plot(p.plot) }}{{ plot(p.histogram) }}</div>
     {% endfor %}
     </div>
