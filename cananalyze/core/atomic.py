@@ -11,7 +11,10 @@ directly: renaming over them would replace the device with a file.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
+import re
+import socket
 import stat
 import tempfile
 from collections.abc import Iterable, Iterator
@@ -52,10 +55,57 @@ def _file_mode(path: Path) -> int:
         return 0o666 & ~mask
 
 
+# Temporary files carry this machine and the process that writes them: a run killed with
+# SIGKILL (no handler runs) leaves its files behind, and the next run in that folder on this
+# machine removes those whose process is gone (`sweep`).
+_HOST = hashlib.sha1(socket.gethostname().encode()).hexdigest()[:8]
+_TAG = re.compile(r"^\..*\.cananalyze-([0-9a-f]{8})-(\d+)-[^/]*$")
+_swept: set[Path] = set()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # another user's process: alive
+        return True
+    return True
+
+
+def sweep(folder: Path) -> list[Path]:
+    """Remove the temporary files that runs on this machine left in `folder` when they were
+    killed (their process is gone); the files removed. Once per folder and process."""
+    folder = folder.resolve() if folder.exists() else folder
+    if folder in _swept:
+        return []
+    _swept.add(folder)
+    gone = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return gone
+    for e in entries:
+        m = _TAG.match(e.name)
+        if m is None or m.group(1) != _HOST or int(m.group(2)) == os.getpid():
+            continue
+        if not _alive(int(m.group(2))):
+            with contextlib.suppress(OSError):
+                os.unlink(e.path)
+                gone.append(Path(e.path))
+    return gone
+
+
 def _temp_beside(path: Path) -> tuple[int, Path]:
     """A new hidden temporary file next to `path` (same file system: the rename is atomic),
-    keeping the suffix libraries choose their format by."""
-    fd, name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=_suffix(path), dir=path.parent)
+    keeping the suffix libraries choose their format by; an error names `path`, the file
+    the user asked for, not the temporary one."""
+    sweep(path.parent)
+    prefix = f".{path.stem}.cananalyze-{_HOST}-{os.getpid()}-"
+    try:
+        fd, name = tempfile.mkstemp(prefix=prefix, suffix=_suffix(path), dir=path.parent)
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from None
     return fd, Path(name)
 
 
