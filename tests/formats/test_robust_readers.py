@@ -375,6 +375,35 @@ def test_mutated_real_logs_never_crash(rel):
     check()
 
 
+@pytest.fixture(scope="module")
+def binary_seeds(tmp_path_factory) -> dict:
+    from tests.fuzz.seeds import write_seeds
+
+    return {p.name: p for p in write_seeds(tmp_path_factory.mktemp("seeds"))}
+
+
+@pytest.mark.parametrize(
+    "name", ["seed.pcap", "seed.pcapng", "sll2.pcapng", "seed.blf", "seed.mcap", "seed.log.gz"]
+)
+def test_mutated_binary_captures_never_crash(binary_seeds, name):
+    """The formats the real logs lack (pcap, pcapng, a cooked capture, MCAP, gzip), each
+    from its own writer, mutated: a reader answers with frames or one InputError."""
+    if name not in binary_seeds:
+        pytest.skip(f"{name}: its writer is not installed")
+    path = binary_seeds[name]
+    data = path.read_bytes()
+    suffix = ".log.gz" if name.endswith(".gz") else path.suffix
+    run_log(data, suffix)  # the seed itself reads
+
+    @fuzz_settings(40)
+    @given(mutated(data))
+    def check(blob):
+        run_log(blob, suffix)
+        run_log(blob, suffix, strict=True)
+
+    check()
+
+
 # ---- regressions: each input crashed a reader (found by the fuzzers) ---------------------------
 
 _ASC_HEAD = "date Mon Jan 1 10:00:00.000 am 2024\nbase hex  timestamps absolute\n"

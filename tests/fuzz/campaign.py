@@ -69,8 +69,15 @@ HOSTILE = [
 
 
 def _logs() -> list[Path]:
+    """The real logs, the samples, and seeds of the binary formats the real logs lack
+    (pcap, pcapng, a cooked capture, MCAP, gzip: `tests.fuzz.seeds`)."""
+    import tempfile
+
+    from tests.fuzz.seeds import write_seeds
+
     found = [p for p in REAL.glob("*/*") if p.is_file() and not p.name.endswith(_NOT_LOGS)]
-    return found + sorted((ROOT / "samples").glob("demo.*"))
+    seeds = write_seeds(Path(tempfile.mkdtemp(prefix="cananalyze-seeds.")))
+    return found + sorted((ROOT / "samples").glob("demo.*")) + seeds
 
 
 def _suffix(p: Path) -> str:
