@@ -89,6 +89,12 @@ def open_bus(
     try:
         return can.Bus(**kwargs)
     except can.CanInterfaceNotImplementedError as exc:
+        if not interface and "None" in str(exc):  # nothing given, nothing configured
+            raise LiveError(
+                "no CAN interface given: name one with -i/--interface and -c/--channel "
+                "(e.g. -i socketcan -c can0, -i virtual -c test), or set a default in "
+                "python-can's configuration file (~/.canrc) or CAN_INTERFACE/CAN_CHANNEL"
+            ) from None
         raise LiveError(f"{where}: interface not available: {exc}") from None
     except (can.CanError, OSError, ValueError, TypeError, ImportError) as exc:
         raise LiveError(f"{where}: cannot open: {exc}") from None

@@ -216,3 +216,26 @@ def test_duration_stops_by_itself():
     assert proc.returncode == 0, proc.stderr
     assert time.monotonic() - t < 10
     assert "frames: 0" in proc.stdout  # stdout is a pipe: plain mode, then the summary
+
+
+def test_live_without_an_interface_says_how_to_name_one(tmp_path):
+    """No -i, no python-can configuration (an empty home, no CAN_* variables): one line
+    naming -i/-c and python-can's configuration, not 'Unknown interface type "None"'."""
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if not k.startswith("CAN_")}
+    env["HOME"] = str(tmp_path)
+    r = subprocess.run(
+        [sys.executable, "-m", "cananalyze", "live"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env=env,
+        timeout=60,
+    )
+    assert r.returncode == 2
+    (line,) = r.stderr.strip().splitlines()
+    assert line.startswith("cananalyze: error: no CAN interface given: name one with -i/")
+    assert "~/.canrc" in line and '"None"' not in line
