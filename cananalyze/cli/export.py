@@ -63,10 +63,17 @@ def run(args: argparse.Namespace) -> int:
         sinks.append(DbcSink(args.dbc))
     state = run_with_progress(source, decoder, sinks, opts, quiet=args.quiet)
     report_problems(source.problems)
+    empty = [s for s in sinks if getattr(s, "messages", None) == 0]  # a DBC of no message
+    for _ in empty:
+        print(
+            f"warning: {args.dbc}: DBC with no message: no PDO of a known device in this log "
+            "(name the devices with --device, --eds or --network)",
+            file=sys.stderr,
+        )
     if not args.quiet:
         dests = ", ".join(f"{kind} {getattr(args, kind)}" for kind in outputs)
         print(
             f"exported {state.frames:,} frames: decode and {dests} {time.perf_counter() - t0:.2f} s",
             file=sys.stderr,
         )
-    return 0
+    return 1 if empty and getattr(args, "strict", False) else 0

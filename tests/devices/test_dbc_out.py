@@ -12,7 +12,7 @@ import pytest
 
 import cananalyze
 from cananalyze.devices.catalog import builtin_keys
-from tests.conftest import real_file
+from tests.conftest import SAMPLES, real_file
 
 TMCM = "nigel-bruce-khan__ros_canopen-tmcm-1636/"
 
@@ -181,3 +181,26 @@ def test_export_dbc_carries_the_dbc_the_log_was_decoded_with(tmp_path):
     assert db.get_message_by_frame_id(0x1A5).name == "Drive"
     # node 5's own PDOs are there too
     assert db.get_message_by_frame_id(0x285).name == "node5_TPDO2"
+
+
+def test_a_dbc_of_no_message_is_a_warning(tmp_path):
+    """A log whose nodes no profile, EDS or network file names: the DBC has no message
+    (cantools reads none), which the user hears about; --strict makes it exit 1."""
+    log = real_file("calumroy__CANopen_socketCAN_Test/can_log_070825_brake_sensor_test1.log")
+    out = tmp_path / "none.dbc"
+    run = [sys.executable, "-m", "cananalyze", "export", str(log), "--dbc", str(out), "-q"]
+    r = subprocess.run(run, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0
+    assert len(cantools.database.load_file(str(out)).messages) == 0
+    assert f"warning: {out}: DBC with no message" in r.stderr
+    assert subprocess.run([*run, "--strict"], capture_output=True, timeout=120).returncode == 1
+    # a log with known devices: messages, no warning
+    r = subprocess.run(
+        [sys.executable, "-m", "cananalyze", "export", str(SAMPLES / "demo.log")]
+        + ["--dbc", str(out), "-q"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert r.returncode == 0 and "no message" not in r.stderr
+    assert len(cantools.database.load_file(str(out)).messages) > 0
