@@ -250,20 +250,26 @@ class Capture:
         return wide.arrow_table(rows, pdos, wide.schema(names, bool(buses)), buses).to_pandas()
 
     def signals_wide(self) -> pd.DataFrame:
-        """Time index, one column per `node/pdo/signal`; NaN where a PDO was not sent."""
+        """Time index, one column per `node/pdo/signal`; NaN where a PDO was not sent. A
+        log without times (every frame at one time: candump's screen output) is indexed
+        by `line` instead: one time would fold every value into one row."""
         import pandas as pd
 
+        fb = self.batch
+        untimed = len(fb) > 1 and float(fb.t.min()) == float(fb.t.max())
+        key = "line" if untimed else "t"
         if not self.series:
-            return pd.DataFrame(index=pd.Index([], name="t", dtype=float))
-        index = np.unique(np.concatenate([s.t for s in self.series]))
+            return pd.DataFrame(index=pd.Index([], name=key, dtype=float))
+        at = [fb.line[s.rows] if untimed else s.t for s in self.series]
+        index = np.unique(np.concatenate(at))
         cols: dict[str, np.ndarray] = {}
-        for s in self.series:
-            pos = np.searchsorted(index, s.t)
+        for s, when in zip(self.series, at, strict=True):
+            pos = np.searchsorted(index, when)
             for name, values in s.columns.items():
                 col = np.full(index.size, np.nan)
                 col[pos] = np.asarray(values, np.float64)  # same time twice: the last wins
                 cols[f"{s.key}/{name}"] = col
-        return pd.DataFrame(cols, index=pd.Index(index, name="t"))
+        return pd.DataFrame(cols, index=pd.Index(index, name=key))
 
     @cached_property
     def sdo(self) -> pd.DataFrame:
