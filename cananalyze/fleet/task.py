@@ -15,6 +15,7 @@ import contextlib
 import hashlib
 import json
 import os
+import re
 import resource
 import time
 import xml.etree.ElementTree as ET
@@ -31,8 +32,19 @@ from cananalyze.pipeline import Options
 from cananalyze.pipeline.sink import Sink
 
 # times at or after 2000-01-01 and before 2100 are wall-clock times; smaller ones count
-# from the logger's start (candump without -t a, relative ASC): the file's mtime dates those
+# from the logger's start (candump without -t a, relative ASC): the file's name dates
+# those when it holds a date (NAME_DATES), else the date is unknown (null). Never the
+# modification time: a copy made today would land under today.
 _EPOCH_FROM, _EPOCH_TO = 946_684_800.0, 4_102_444_800.0
+# Hive's partition of no value: DuckDB, pyarrow and Spark read its date as null (unknown)
+# and keep the column a date, where a word would make it text
+UNKNOWN_DATE = "__HIVE_DEFAULT_PARTITION__"
+# (pattern, groups as year, month, day): 2024-03-13 / 2024_03_13 / 20240313 anywhere in
+# the name; Sevcon DVT's can_DDMMYY_HHMMSS (can_180209_154604: 18 Feb 2009)
+NAME_DATES = (
+    (re.compile(r"(?<!\d)(20\d\d)[-_]?(0[1-9]|1[0-2])[-_]?(0[1-9]|[12]\d|3[01])(?!\d)"), (1, 2, 3)),
+    (re.compile(r"(?<!\d)(0[1-9]|[12]\d|3[01])(0[1-9]|1[0-2])(\d\d)_\d{6}(?!\d)"), (3, 2, 1)),
+)
 EXPORT = "export"  # the TableSink's folder inside the stage
 
 
@@ -140,13 +152,20 @@ def _one_line(exc: BaseException, path: str) -> str:
 
 
 def _date(t_first: float | None, path: str) -> tuple[str, str]:
+    """(partition date, where it came from: "log", "name" or "unknown")."""
     if t_first is not None and _EPOCH_FROM <= t_first < _EPOCH_TO:
         return datetime.fromtimestamp(t_first, UTC).strftime("%Y-%m-%d"), "log"
-    try:
-        mtime = os.stat(path).st_mtime
-    except OSError:
-        mtime = time.time()
-    return datetime.fromtimestamp(mtime, UTC).strftime("%Y-%m-%d"), "mtime"
+    name = os.path.basename(str(path))
+    for pattern, (y, m, d) in NAME_DATES:
+        for match in pattern.finditer(name):
+            year = int(match.group(y))
+            year += 2000 if year < 100 else 0
+            try:
+                day = datetime(year, int(match.group(m)), int(match.group(d)), tzinfo=UTC)
+            except ValueError:  # 31 February
+                continue
+            return day.strftime("%Y-%m-%d"), "name"
+    return UNKNOWN_DATE, "unknown"
 
 
 def _check_schema(path: Path, table: str) -> None:

@@ -23,7 +23,7 @@ from cananalyze.fleet import layout
 from cananalyze.fleet.orchestrate import run_fleet
 from cananalyze.fleet.schema import LINEAGE, TABLES
 from cananalyze.fleet.schema import schema as fleet_schema
-from cananalyze.fleet.task import LogTask, process
+from cananalyze.fleet.task import UNKNOWN_DATE, LogTask, process
 from cananalyze.outputs.tables.stream import TableSink
 from cananalyze.pipeline import Options, build_decoder, open_source, run
 
@@ -78,8 +78,13 @@ def fleet(tmp_path_factory):
     }
 
 
+# the date partition as a date, as docs/fleet.md tells pyarrow users (Hive's partition of
+# no value, an undated log's, reads as null)
+DATES = ds.partitioning(pa.schema([("date", pa.date32())]), flavor="hive")
+
+
 def _table(dataset: Path, name: str) -> pa.Table:
-    return ds.dataset(dataset / name, format="parquet", partitioning="hive").to_table()
+    return ds.dataset(dataset / name, format="parquet", partitioning=DATES).to_table()
 
 
 @pytest.mark.slow
@@ -129,8 +134,10 @@ def test_date_partition_is_the_logs_own_time(fleet):
     assert str(pcan1["date"]) == "2023-02-07" and pcan1["date_from"] == "log"
     brake = logs[str(real_file(REAL_LOGS[2]))]
     assert str(brake["date"]) == "2025-08-07"
-    undated = logs[str(real_file(REAL_LOGS[3]))]  # candump without timestamps
-    assert undated["date_from"] == "mtime"
+    undated = logs[str(real_file(REAL_LOGS[3]))]  # candump without timestamps, no date in
+    assert undated["date_from"] == "unknown"  # its name: never the copy's mtime (issue 44)
+    assert undated["date"] is None  # Hive's partition of no value: a null date
+    assert layout.part_path(fleet["dataset"], "frames", UNKNOWN_DATE, undated["hash"]).is_file()
     part = layout.part_path(fleet["dataset"], "frames", "2023-02-07", pcan1["hash"])
     assert part.is_file()
 
