@@ -567,3 +567,15 @@ def cananalyze_frames(log: Path, db) -> dict[float, float]:
         if "input1_value" in sig:
             out[round(msg.timestamp, 6)] = sig["input1_value"]
     return out
+
+
+def test_a_log_without_times_is_dated_by_its_name_not_its_mtime(tmp_path):
+    """Sevcon DVT dumps have no wall-clock times; can_230309_150427.txt is 23 March 2009
+    by its name, whatever the copy's modification time (issue 44)."""
+    log = real_file("isPointless__Sevcon/can_230309_150427.txt")
+    dataset = tmp_path / "ds"
+    result = run_fleet([str(log)], dataset, workers=1)
+    assert result.exit_code in (0, 1)
+    (row,) = _table(dataset, "logs").to_pylist()
+    assert str(row["date"]) == "2009-03-23" and row["date_from"] == "name"
+    assert layout.part_path(dataset, "frames", "2009-03-23", row["hash"]).is_file()
