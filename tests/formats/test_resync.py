@@ -144,7 +144,7 @@ def _kept_whole(data: bytes, lo: int, hi: int) -> tuple[set[int], int]:
     return kept, first
 
 
-@pytest.mark.parametrize("where", ["middle"])
+@pytest.mark.parametrize("where", ["middle", "container header"])
 def test_blf_zeroed_in_the_middle(written, tmp_path, where):
     path, keys = written
     data = path.read_bytes()
@@ -231,9 +231,9 @@ def _damaged_blfs(path, tmp_path) -> list:
     data = path.read_bytes()
     conts, _ = _layout(data)
     out = []
-    for k, lo in enumerate([len(data) // 2, conts[1][0] + conts[1][1] // 2]):
-        d = _zeroed(data, lo) if k < 1 else bytearray(data)
-        if k == 1:
+    for k, lo in enumerate([len(data) // 2, conts[2][0] - 100, conts[1][0] + conts[1][1] // 2]):
+        d = _zeroed(data, lo) if k < 2 else bytearray(data)
+        if k == 2:
             d[lo : lo + 16] = random.Random(k).randbytes(16)
         out.append(tmp_path / f"d{k}.blf")
         out[-1].write_bytes(bytes(d))

@@ -20,8 +20,9 @@ file cut inside a container yields the complete records and reports the rest.
 Damage never becomes a frame (docs/hostile-input.md): objects are believed only
 when their header, their time and the object after them say they are sound
 (`_Records`), a broken zlib container gives what it inflated to before the damage
-(`_salvage`, `_Inflated.trim`), and the walk resynchronises on the next `LOBJ`; each run
-of skipped bytes is one problem naming its offset.
+(`_salvage`, `_Inflated.trim`), and the walk resynchronises on the next `LOBJ`,
+also inside a plain container whose header was lost; each run of skipped bytes
+is one problem naming its offset.
 """
 
 from __future__ import annotations
@@ -1080,6 +1081,8 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     inflated = _Inflated(records)
     batches = _Cutter(ctx.batch_size)
 
+    resynced = False  # the object read next was found by looking for its signature
+
     def problem(where: str, text: str, upto: int | None = None) -> None:
         """A problem at the top level: what came before it (before ``upto`` in the
         buffer: the data of the container it is about) is walked and reported first;
@@ -1117,7 +1120,20 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
             what = "no BLF object (LOBJ)" if sig != b"LOBJ" else f"BLF object size {size} is absurd"
             problem(where, f"{what}: skipped {skipped} bytes to the next object")
             offset += skipped
+            resynced = True
             continue
+        if resynced and kind != LOG_CONTAINER:
+            # an object inside the data of a plain container whose header is lost: that
+            # data, up to the next container, is walked like a container's (it goes on
+            # into the next one's)
+            data = stream.read_to_container(base, MAX_CONTAINER)
+            inflated.add(data, offset)
+            offset += len(data)
+            if inflated.size >= PARSE_BYTES:
+                inflated.flush(batches)
+            yield from batches.full()
+            continue
+        resynced = False
         body = stream.read(size - 16)
         stream.read(size % 4)  # padding
         offset += size + size % 4
@@ -1167,6 +1183,29 @@ class _Pushback:
             return self._stream.read(n)
         head, self._back = self._back[:n], self._back[n:]
         return head + self._stream.read(n - len(head)) if len(head) < n else head
+
+    def read_to_container(self, head: bytes, limit: int) -> bytes:
+        """The bytes from ``head`` (read already; not a container's header) up to the next
+        container header (its signature, type LOG_CONTAINER and a size it may have), at
+        most ``limit`` of them; the rest is put back."""
+        buf = bytearray(head)
+        at = 1
+        while True:
+            at = buf.find(b"LOBJ", at)
+            while 0 <= at <= len(buf) - 16:
+                _, _, _, size, kind = _OBJ_BASE.unpack_from(buf, at)
+                if kind == LOG_CONTAINER and _CONTAINER.size + 16 <= size <= MAX_CONTAINER:
+                    self._back = bytes(buf[at:]) + self._back
+                    return bytes(buf[:at])
+                at = buf.find(b"LOBJ", at + 1)
+            at = max(len(buf) - 15, 1) if at < 0 else at  # a header may straddle the next read
+            if len(buf) >= limit:
+                self._back = bytes(buf[limit:]) + self._back
+                return bytes(buf[:limit])
+            more = self.read(1 << 16)
+            if not more:
+                return bytes(buf)
+            buf += more
 
     def skip_to(self, sig: bytes, consumed: bytes, start: int) -> int:
         """Drop bytes up to the next `sig` at or after `start` in `consumed` (bytes read
