@@ -257,7 +257,9 @@ def open_log(
         head, ended = _read_upto(stream, SNIFF_BYTES, pipe)
         bom = len(_BOM) if head.startswith(_BOM) else 0  # no part of the first line or 'date'
         head = head[bom:]
-        cr_only = b"\r" in head and b"\n" not in head  # classic Mac line ends
+        # classic Mac line ends; a binary log (NUL bytes in any pcap or BLF header) is
+        # never translated: a small capture with a 0x0D byte and no 0x0A was corrupted
+        cr_only = b"\r" in head and b"\n" not in head and b"\0" not in head
         if cr_only:
             head = head.replace(b"\r", b"\n")
         if fmt:
