@@ -178,7 +178,7 @@ class _At:
 # Why the walk skipped bytes, by the code the compiled walk reports it with: the first
 # reason of a run of skipped bytes (a, b, c: its numbers) goes into the run's problem.
 _GARBAGE, _BAD_SIZE, _BAD_TYPE, _BAD_HEADER, _BAD_RECORD, _BAD_TIME, _NO_NEXT, _CUT = range(1, 9)
-_OUT_OF_STEP = 9  # only in a broken container's data (`_Inflated.trim`)
+_OUT_OF_STEP, _OUT_OF_SHAPE = 9, 10  # only in a broken container's data (`_Inflated.trim`)
 _REASONS = {
     _GARBAGE: "bytes that are no BLF object",
     _BAD_SIZE: "an object size of {0} bytes",
@@ -189,6 +189,7 @@ _REASONS = {
     _NO_NEXT: "a type {0} object not followed by another",
     _CUT: "an object cut short by the end of the data",
     _OUT_OF_STEP: "a type {0} record at {1} s, {2} ms from the one before",
+    _OUT_OF_SHAPE: "a type {0} record whose fields are no CAN frame's",
 }
 _RUN_GAP = 16  # skipped bytes this close together (no object between them): one run
 MAX_WALK_PROBLEMS = 64  # runs of skipped bytes one compiled walk keeps; more: the Python walk
@@ -243,6 +244,20 @@ def _judge(hsize: int, hver: int, size: int, kind: int) -> tuple | None:
     elif hsize < 16 or hsize > MAX_OBJ_HEADER or hsize > size:
         return (_BAD_HEADER, kind, hver, hsize)
     return None
+
+
+def _frame_shaped(buf: bytes, body: int, kind: int) -> bool:
+    """Whether the fields of a CAN record (its body at ``body``) hold only values a CAN
+    frame can have: message flags of the known bits (Tx, NERR, wake-up, remote), a DLC
+    code under 16, at most 64 valid data bytes. Only asked of a broken container's data
+    (`_Inflated.trim`): a sound log is read as it is."""
+    if kind == CAN_FD_MESSAGE_64:
+        return buf[body + 1] < 16 and buf[body + 2] <= 64
+    if kind == CAN_ERROR_EXT:
+        return buf[body + 10] < 16  # its DLC (python-can reads it there too)
+    if buf[body + 2] & 0x1E or buf[body + 3] >= 16:
+        return False
+    return kind != CAN_FD_MESSAGE or buf[body + 14] <= 64
 
 
 def _merge(skips: list) -> list:
@@ -937,12 +952,14 @@ class _Inflated:
             if bad is None and pos + size > end:
                 break  # the end of the data (the walk reports an object cut short)
             if bad is None and kind in _WANTED:
-                flags, stamp = struct.unpack_from("<L4xq", buf, pos + 16)
+                flags, version, stamp = struct.unpack_from("<L2xHq", buf, pos + 16)
                 t = stamp * (1e-5 if flags == 1 else 1e-9)
                 if not rec.lo <= t <= rec.hi and rec.lo == rec.lo:
                     bad = (_BAD_TIME, kind, int(t), 0)
                 elif last is not None and not last - DAMAGED_BACK <= t <= last + DAMAGED_GAP:
                     bad = (_OUT_OF_STEP, kind, int(t), int((t - last) * 1000))
+                elif version or not _frame_shaped(buf, pos + hsize, kind):
+                    bad = (_OUT_OF_SHAPE, kind, 0, 0)
                 last = t
             if bad is not None:
                 if pos >= start:
