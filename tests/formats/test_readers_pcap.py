@@ -249,12 +249,14 @@ def test_absurd_record_length_is_bounded(tmp_path):
     path = tmp_path / "bad.pcap"
     path.write_bytes(good + bad + _pcap([_be_frame(0x182, b"")])[24:])
     fb = read_all(path)
-    assert fb.can_id.tolist() == [0x181] * 3  # what came before is kept
+    # what came before is kept, and the reader finds the record after the damage again
+    assert fb.can_id.tolist() == [0x181] * 3 + [0x182]
     r = subprocess.run(
         [sys.executable, "-m", "cananalyze", "decode", str(path)], capture_output=True, text=True
     )
     assert r.returncode == 0
     assert f"{path}:offset {len(good)}: pcap record of 2147483632 bytes is longer than" in r.stderr
+    assert "skipped 32 bytes to the next plausible record" in r.stderr
     strict = subprocess.run(
         [sys.executable, "-m", "cananalyze", "decode", "--strict", str(path)],
         capture_output=True,

@@ -28,7 +28,7 @@ import pytest
 from readers_util import run
 
 from cananalyze.core.frames import FLAG_ERR
-from cananalyze.formats.logs import blf
+from cananalyze.formats.logs import blf, pcap
 from cananalyze.formats.source import open_log
 
 SAMPLES = __import__("pathlib").Path(__file__).resolve().parents[2] / "samples"
@@ -253,3 +253,135 @@ def test_both_walks_agree_on_the_damage(written, tmp_path):
     data = (SAMPLES / "faults.blf").read_bytes()
     sample.write_bytes(_zeroed(data, len(data) // 2))
     _same(sample)
+
+
+# ----------------------------------------------------------------------- pcap, pcapng
+
+
+def _scapy():
+    return pytest.importorskip("scapy.all")
+
+
+def _packets(n: int = 3000, seed: int = 5) -> list:
+    """SocketCAN frames (link type 227) 1 ms apart: classic with 0-8 bytes, extended,
+    CAN FD with 24 (scapy writes a record of 8 + the data length)."""
+    from scapy.layers.can import CAN, CANFD
+
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n):
+        data = rng.integers(0, 256, int(rng.integers(0, 9)), dtype=np.uint8).tobytes()
+        if i % 7 == 3:
+            fd = rng.integers(0, 256, 24, dtype=np.uint8).tobytes()
+            p = CANFD(identifier=0x123, length=24, fd_flags="bit_rate_switch", data=fd)
+        elif i % 5 == 1:
+            ident = int(rng.integers(0x800, 0x1FFFFFFF))
+            p = CAN(identifier=ident, flags="extended", length=len(data), data=data)
+        else:
+            p = CAN(identifier=0x180 + i % 127, length=len(data), data=data)
+        p.time = 1_700_000_000 + i * 0.001
+        out.append(p)
+    return out
+
+
+@pytest.fixture(scope="module", params=["pcap", "pcapng"])
+def capture(request, tmp_path_factory):
+    """A capture scapy wrote, its frames as scapy reads them (keys, in file order), and
+    its records or blocks: (offset, size, is a packet)."""
+    scapy = _scapy()
+    path = tmp_path_factory.mktemp("resync") / f"c.{request.param}"
+    (scapy.wrpcap if request.param == "pcap" else scapy.wrpcapng)(str(path), _packets())
+    keys = [_key(float(p.time), int(p.identifier), bytes(p.data)) for p in scapy.rdpcap(str(path))]
+    data = path.read_bytes()
+    units = []
+    if request.param == "pcap":
+        pos = 24
+        while pos + 16 <= len(data):
+            size = 16 + struct.unpack_from("<I", data, pos + 8)[0]
+            units.append((pos, size, True))
+            pos += size
+    else:
+        pos = 0
+        while pos + 12 <= len(data):
+            kind, size = struct.unpack_from("<II", data, pos)
+            units.append((pos, size, kind == 6))
+            pos += size
+    assert sum(u[2] for u in units) == len(keys) == 3000
+    return path, keys, units
+
+
+def _read_capture(path):
+    batch, ctx, _ = run(pcap.read, path)
+    return set(_keys(batch)), ctx
+
+
+def _whole_packets(units, lo: int, hi: int) -> set[int]:
+    """The packets (by index) the damage of bytes [lo, hi) leaves whole, less the one
+    just before the damage."""
+    packets = [(pos, size) for pos, size, packet in units if packet]
+    whole = [pos + size <= lo or pos >= hi for pos, size in packets]
+    return {i for i, w in enumerate(whole) if w and (i + 1 == len(whole) or whole[i + 1])}
+
+
+def test_capture_zeroed_in_the_middle(capture, tmp_path):
+    path, keys, units = capture
+    data = path.read_bytes()
+    lo = len(data) // 2
+    damaged = tmp_path / ("d" + path.suffix)
+    damaged.write_bytes(_zeroed(data, lo))
+    got, ctx = _read_capture(damaged)
+    assert not got - set(keys)  # (a)
+    kept = _whole_packets(units, lo, lo + ZERO)
+    assert not [i for i in sorted(kept) if keys[i] not in got]  # (b)
+    assert len(kept) > 2500
+    start = max(pos for pos, _, _ in units if pos <= lo)
+    assert ctx.problems.count == 1
+    assert any(start - 100 <= at <= lo + ZERO for at in _offsets(ctx.problems))  # (c)
+
+
+@pytest.mark.parametrize("claim", ["huge", "7 more", "4 less"])
+def test_capture_length_corrupted(capture, tmp_path, claim):
+    """One record's (pcap) or enhanced packet block's (pcapng) length corrupted: the
+    rest of the file was lost (93 of 185, 467 of 933 frames read)."""
+    path, keys, units = capture
+    data = bytearray(path.read_bytes())
+    packets = [(pos, size) for pos, size, packet in units if packet]
+    k = len(packets) // 2
+    pos, size = packets[k]
+    at = pos + 8 if path.suffix == ".pcap" else pos + 4  # incl_len; the block's length
+    old = struct.unpack_from("<I", data, at)[0]
+    new = {"huge": 0x0FFFFFF0, "7 more": old + 7, "4 less": old - 4}[claim]
+    if path.suffix == ".pcapng" and claim == "7 more":
+        new = old + 8  # a multiple of 4: the trailing length tells
+    struct.pack_into("<I", data, at, new)
+    damaged = tmp_path / ("l" + path.suffix)
+    damaged.write_bytes(bytes(data))
+    got, ctx = _read_capture(damaged)
+    assert not got - set(keys)  # (a)
+    lost = [i for i in range(len(keys)) if keys[i] not in got]
+    assert set(lost) <= {k, k + 1}, lost  # (b): the damaged one (and the one it overlaps)
+    assert ctx.problems.count == 1, ctx.problems.shown
+    assert any(pos <= at <= pos + 2 * size for at in _offsets(ctx.problems))  # (c)
+    assert "skipped" in ctx.problems.shown[0].message
+
+
+@pytest.mark.parametrize("chunk", [61, 1000, 4099])
+def test_capture_read_in_small_chunks(capture, tmp_path, monkeypatch, chunk):
+    """Damage at any place relative to the reader's chunks (and its search's windows):
+    the same frames and problems as read in one go (a record or block judged with the
+    bytes after it, a search for the next one going on in the next chunk)."""
+    path, _, units = capture
+    data = path.read_bytes()
+    packets = [(pos, size) for pos, size, packet in units if packet]
+    pos, size = packets[len(packets) // 3]
+    d = bytearray(_zeroed(data, len(data) // 2, 700))
+    at = pos + 8 if path.suffix == ".pcap" else pos + 4
+    struct.pack_into("<I", d, at, 0x0FFFFFF0)
+    damaged = tmp_path / ("k" + path.suffix)
+    damaged.write_bytes(bytes(d))
+    ref, ref_ctx, _ = run(pcap.read, damaged)
+    monkeypatch.setattr(pcap, "CHUNK", chunk)
+    monkeypatch.setattr(pcap, "SCAN_WINDOW", chunk // 2 + 12)
+    got, ctx, _ = run(pcap.read, damaged)
+    assert _keys(got) == _keys(ref) and len(ref) > 2800
+    assert ctx.problems.shown == ref_ctx.problems.shown and ref_ctx.problems.count == 2
