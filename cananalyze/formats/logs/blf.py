@@ -424,16 +424,23 @@ class _Records:
         skips: list[tuple] = []  # (start, end, reason, a, b, c) in walk order
         nonext: dict[int, tuple] = {}  # CAN records followed by garbage, by their offset
         prev = (-1, -1, 0, False)  # the last object taken: start, end, kind, a CAN record
+
+        def garbage_after(at: int) -> None:
+            """Bytes that are no object start at ``at``: the object taken just before them
+            is not believed either (the damage may have begun inside it)."""
+            if at == prev[1]:
+                event = (prev[0], prev[1], _NO_NEXT, prev[2], 0, 0)
+                if prev[3]:
+                    nonext[prev[0]] = event  # its row is dropped in `_believed`
+                else:
+                    skips.append(event)
+
         unpack = _OBJ_BASE.unpack_from
         while pos + 16 <= end:
             if buf[pos : pos + 4] != b"LOBJ":
                 nxt = buf.find(b"LOBJ", pos, pos + 8)  # objects are padded to 4 bytes
                 if nxt < 0:
-                    if pos == prev[1]:  # the object before it ends in garbage: not believed
-                        if prev[3]:
-                            nonext[prev[0]] = (prev[0], prev[1], _NO_NEXT, prev[2], 0, 0)
-                        else:
-                            skips.append((prev[0], prev[1], _NO_NEXT, prev[2], 0, 0))
+                    garbage_after(pos)
                     nxt = buf.find(b"LOBJ", pos)
                     stop = nxt if nxt >= 0 else (end if final else end - 3)
                     skips.append((pos, stop, _GARBAGE, 0, 0, 0))
@@ -478,11 +485,7 @@ class _Records:
             if end - pos >= 4 and buf.find(b"LOBJ", pos, pos + 8) >= 0:
                 skips.append((pos, end, _CUT, 0, 0, 0))
             elif end - pos >= 4:
-                if pos == prev[1]:
-                    if prev[3]:
-                        nonext[prev[0]] = (prev[0], prev[1], _NO_NEXT, prev[2], 0, 0)
-                    else:
-                        skips.append((prev[0], prev[1], _NO_NEXT, prev[2], 0, 0))
+                garbage_after(pos)
                 skips.append((pos, end, _GARBAGE, 0, 0, 0))
             pos = end
         if offs:
