@@ -707,11 +707,23 @@ fail:
 #define BLF_FLAG_FD 0x08
 #define BLF_FLAG_BRS 0x10
 #define BLF_FLAG_ESI 0x20
-/* problem codes, as formats/logs/blf.py words them */
+/* why bytes were skipped, as formats/logs/blf.py words them (_REASONS) */
 #define BLF_GARBAGE 1
 #define BLF_BAD_SIZE 2
-#define BLF_UNREADABLE 3
-#define BLF_PROB_COLS 5
+#define BLF_BAD_TYPE 3
+#define BLF_BAD_HEADER 4
+#define BLF_BAD_RECORD 5
+#define BLF_BAD_TIME 6
+#define BLF_NO_NEXT 7
+#define BLF_CUT 8
+#define BLF_RUN_COLS 6
+#define BLF_RUN_GAP 16 /* skipped ranges closer than this (no object between): one run */
+#define BLF_LOG_CONTAINER 10
+#if defined(__GNUC__) || defined(__clang__)
+#define BLF_UNLIKELY(x) __builtin_expect(!!(x), 0)
+#else
+#define BLF_UNLIKELY(x) (x)
+#endif
 
 static const uint8_t DLC2LEN[16] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64};
 
@@ -754,25 +766,31 @@ static Py_ssize_t find_lobj(const unsigned char *buf, Py_ssize_t from, Py_ssize_
 }
 
 PyDoc_STRVAR(blf_records_doc,
-             "blf_records(buf, record, max_inner, start, t, can_id, flags, dlc, data, chan,\n"
-             "            line, long, probs) -> (ok, n, pos, record, n_long, n_probs)\n\n"
-             "formats/logs/blf.py's object walk over buf (inflated container bytes, the previous\n"
-             "tail first) into column buffers of at least len(buf) // 48 rows: t float64,\n"
-             "can_id uint32, flags, dlc uint8, data (n, 8) uint8, chan uint16 (the BLF\n"
-             "channel number), line int64 (record number). record: objects seen before buf.\n"
+             "blf_records(buf, record, limits, start, lo, hi, span, final, t, can_id, flags,\n"
+             "            dlc, data, chan, line, long, runs)\n"
+             "    -> (ok, n, pos, record, n_long, n_runs, lo, hi)\n\n"
+             "formats/logs/blf.py's object walk (_Records._parse_py) over buf (inflated\n"
+             "container bytes, the previous tail first) into column buffers of at least\n"
+             "len(buf) // 48 rows: t float64, can_id uint32, flags, dlc uint8, data (n, 8)\n"
+             "uint8, chan uint16 (the BLF channel number), line int64 (record number).\n"
+             "record: objects seen before buf. limits: (MAX_INNER, MAX_OBJECT_TYPE,\n"
+             "MAX_OBJ_HEADER, MAX_CAN_OBJECT). A CAN record is taken when its time from\n"
+             "the start lies in [lo, hi] (both nan: span around the first record's time) and\n"
+             "the next object's signature follows it; final: no bytes follow buf.\n"
              "long: int64 (len(buf) // 72, 4) of (row, payload offset, bytes stored, length)\n"
-             "for CAN FD rows over 8 bytes. probs: int64 (k, 5) of (record, code, a, b, c): code 1\n"
-             "garbage skipped (a bytes), 2 bad object size (a), 3 unreadable (kind, version,\n"
-             "size). pos: where the unparsed tail starts. ok 0: more than k problems\n"
-             "(hostile input): nothing is final, the Python walk takes the buffer.");
+             "for CAN FD rows over 8 bytes. runs: int64 (k, 6) of the runs of skipped bytes\n"
+             "(start, end, reason, a, b, c). pos: where the unwalked tail starts. ok 0: more\n"
+             "than k runs (hostile input): nothing is final, the Python walk takes the buffer.");
 
 static PyObject *blf_records(PyObject *self, PyObject *args) {
     PyObject *o[13];
-    long long record0, max_inner;
-    double start;
+    long long record0, max_inner, max_type, max_header, max_can;
+    double start, lo, hi, span;
+    int final;
     Bufs bs = {.n = 0};
-    if (!PyArg_ParseTuple(args, "OLLdOOOOOOOOO", &o[0], &record0, &max_inner, &start, &o[4],
-                          &o[5], &o[6], &o[7], &o[8], &o[9], &o[10], &o[11], &o[12]))
+    if (!PyArg_ParseTuple(args, "OL(LLLL)ddddpOOOOOOOOO", &o[0], &record0, &max_inner, &max_type,
+                          &max_header, &max_can, &start, &lo, &hi, &span, &final, &o[4], &o[5],
+                          &o[6], &o[7], &o[8], &o[9], &o[10], &o[11], &o[12]))
         return NULL;
     if (bufs_get(&bs, o[0], 0, -1, "buf") < 0) goto fail;
     /* a row's object holds a 32-byte header and a body of 16 or more: at most end / 48
@@ -780,7 +798,7 @@ static PyObject *blf_records(PyObject *self, PyObject *args) {
     Py_ssize_t end = bs.b[0].len, cap = end / 48;
     static const int width[13] = {0, 0, 0, 0, 8, 4, 1, 1, 8, 2, 8, 32, 0};
     static const char *what[13] = {"buf",  "", "",     "",     "t",    "can_id", "flags",
-                                   "dlc", "data", "chan", "line", "long",   "probs"};
+                                   "dlc", "data", "chan", "line", "long",   "runs"};
     for (int i = 4; i < 12; i++)
         if (bufs_get(&bs, o[i], 1, (i == 11 ? end / 72 : cap) * width[i], what[i]) < 0) goto fail;
     if (bufs_get(&bs, o[12], 1, -1, what[12]) < 0) goto fail;
@@ -789,29 +807,59 @@ static PyObject *blf_records(PyObject *self, PyObject *args) {
     uint32_t *can_id = bs.b[2].buf;
     uint8_t *flags = bs.b[3].buf, *dlc = bs.b[4].buf, *data = bs.b[5].buf;
     uint16_t *chan = bs.b[6].buf;
-    int64_t *line = bs.b[7].buf, *lng = bs.b[8].buf, *probs = bs.b[9].buf;
-    Py_ssize_t max_probs = bs.b[9].len / (8 * BLF_PROB_COLS);
-    Py_ssize_t pos = 0, n = 0, nl = 0, np_ = 0;
+    int64_t *line = bs.b[7].buf, *lng = bs.b[8].buf, *runs = bs.b[9].buf;
+    Py_ssize_t max_runs = bs.b[9].len / (8 * BLF_RUN_COLS);
+    /* an object is taken when its successor can be seen: pos + size <= lim */
+    Py_ssize_t lim = final ? end : end - 16;
+    Py_ssize_t pos = 0, n = 0, nl = 0, nr = 0;
     int64_t rec = record0;
     int ok = 1;
-#define BLF_PROBLEM(r, code, a, b, c)                                                              \
+    /* the last object taken: start, end, type, its row (-1: none, or refused for its time) */
+    Py_ssize_t prev_s = -1, prev_e = -1, prev_row = -1;
+    int64_t prev_kind = 0;
+    /* the open run of skipped bytes */
+    Py_ssize_t rs = -1, re = 0;
+    int64_t rw = 0, ra = 0, rb = 0, rc = 0;
+#define BLF_EMIT()                                                                                 \
     do {                                                                                           \
-        if (np_ >= max_probs) {                                                                    \
+        if (nr >= max_runs) {                                                                      \
             ok = 0;                                                                                \
             goto walked;                                                                           \
         }                                                                                          \
-        int64_t *pr = probs + BLF_PROB_COLS * np_++;                                               \
-        pr[0] = (r), pr[1] = (code), pr[2] = (a), pr[3] = (b), pr[4] = (c);                        \
+        int64_t *r_ = runs + BLF_RUN_COLS * nr++;                                                  \
+        r_[0] = rs, r_[1] = re, r_[2] = rw, r_[3] = ra, r_[4] = rb, r_[5] = rc;                   \
+    } while (0)
+#define BLF_SKIP(s, e, why, a, b, c)                                                               \
+    do {                                                                                           \
+        if (rs >= 0 && (s) - re < BLF_RUN_GAP) {                                                   \
+            re = (e);                                                                              \
+        } else {                                                                                   \
+            if (rs >= 0) BLF_EMIT();                                                               \
+            rs = (s), re = (e), rw = (why), ra = (a), rb = (b), rc = (c);                          \
+        }                                                                                          \
+    } while (0)
+/* garbage right after the last object taken: that object is not believed either */
+#define BLF_NOT_FOLLOWED()                                                                         \
+    do {                                                                                           \
+        if (pos == prev_e) {                                                                       \
+            if (prev_row >= 0) {                                                                   \
+                n--;                                                                               \
+                if (nl > 0 && lng[4 * (nl - 1)] == n) nl--;                                        \
+            }                                                                                      \
+            if (prev_row != -2) BLF_SKIP(prev_s, prev_e, BLF_NO_NEXT, prev_kind, 0, 0);          \
+        }                                                                                          \
     } while (0)
     Py_BEGIN_ALLOW_THREADS;
     while (pos + 16 <= end) {
         if (memcmp(buf + pos, "LOBJ", 4) != 0) {
             Py_ssize_t nxt = find_lobj(buf, pos, pos + 5, end); /* objects are padded to 4 */
             if (nxt < 0) {
+                BLF_NOT_FOLLOWED();
                 nxt = find_lobj(buf, pos, end, end);
-                BLF_PROBLEM(rec + 1, BLF_GARBAGE, (nxt >= 0 ? nxt : end) - pos, 0, 0);
+                Py_ssize_t stop = nxt >= 0 ? nxt : (final ? end : end - 3);
+                BLF_SKIP(pos, stop, BLF_GARBAGE, 0, 0, 0);
                 if (nxt < 0) {
-                    pos = end;
+                    pos = stop;
                     break;
                 }
             }
@@ -820,99 +868,141 @@ static PyObject *blf_records(PyObject *self, PyObject *args) {
         }
         const unsigned char *obj = buf + pos;
         int64_t hsize = rd16(obj + 4), hver = rd16(obj + 6), size = rd32(obj + 8);
-        uint32_t kind = rd32(obj + 12);
+        int64_t kind = rd32(obj + 12);
+        int64_t body = blf_body((uint32_t)kind);
+        int why = 0;
+        int64_t wa = 0, wb = 0, wc = 0;
         if (size < 16 || size > max_inner) { /* a claimed 60 MiB swallowed the containers after it */
+            why = BLF_BAD_SIZE, wa = size;
+        } else if (kind == 0 || kind > max_type || kind == BLF_LOG_CONTAINER) {
+            why = BLF_BAD_TYPE, wa = kind;
+        } else if (body) {
+            if ((hver != 1 && hver != 2) || hsize < 32 || hsize > max_header)
+                why = BLF_BAD_HEADER, wa = kind, wb = hver, wc = hsize;
+            else if (size < hsize + body || size > max_can)
+                why = BLF_BAD_RECORD, wa = kind, wb = size;
+        } else if (hsize < 16 || hsize > max_header || hsize > size) {
+            why = BLF_BAD_HEADER, wa = kind, wb = hver, wc = hsize;
+        }
+        if (BLF_UNLIKELY(why != 0)) {
             rec++;
-            BLF_PROBLEM(rec, BLF_BAD_SIZE, size, 0, 0);
+            BLF_SKIP(pos, pos + 4, why, wa, wb, wc);
             pos += 4;
             continue;
         }
-        if (pos + size > end) break; /* continues in the next container */
+        if (pos + size > lim) {
+            if (final) { /* continues beyond the data */
+                rec++;
+                BLF_SKIP(pos, end, BLF_CUT, 0, 0, 0);
+                pos = end;
+            }
+            break; /* continues in the next container */
+        }
         rec++;
-        int64_t body = blf_body(kind);
+        prev_s = pos, prev_e = pos + size, prev_kind = kind, prev_row = -1;
         if (body) {
             /* every read below is inside the object: the time ends at 32, the body fits */
-            if ((hver != 1 && hver != 2) || hsize < 32 || size < hsize + body) {
-                BLF_PROBLEM(rec, BLF_UNREADABLE, kind, hver, size);
-            } else {
-                const unsigned char *p = obj + hsize;
-                double stamp = (double)rd64(obj + 24);
-                t[n] = (rd32(obj + 16) == 1 ? stamp * 1e-5 : stamp * 1e-9) + start;
-                line[n] = rec;
-                uint8_t *d = data + 8 * n;
-                memset(d, 0, 8);
-                uint32_t raw;
-                uint8_t fl = 0;
-                if (kind == BLF_CAN_MESSAGE || kind == BLF_CAN_MESSAGE2) {
-                    uint8_t mf = p[2], len = p[3] < 8 ? p[3] : 8;
-                    raw = rd32(p + 4);
-                    chan[n] = (uint16_t)rd16(p);
-                    if (mf & 0x80)
-                        fl |= FLAG_RTR;
-                    else
-                        memcpy(d, p + 8, len);
-                    if (mf & 0x01) fl |= FLAG_TX;
-                    dlc[n] = len;
-                } else if (kind == BLF_CAN_ERROR_EXT) {
-                    uint8_t len = p[11] < 8 ? p[11] : 8;
-                    raw = rd32(p + 16);
-                    chan[n] = (uint16_t)rd16(p);
-                    fl |= FLAG_ERR;
-                    memcpy(d, p + 24, len);
-                    dlc[n] = len;
-                } else if (kind == BLF_CAN_FD_MESSAGE) {
-                    uint8_t mf = p[2], code = p[3] & 0x0F, fd = p[13];
-                    int64_t valid = p[14] < 64 ? p[14] : 64;
-                    int rtr = (mf & 0x80) != 0;
-                    raw = rd32(p + 4);
-                    chan[n] = (uint16_t)rd16(p);
-                    if (rtr) fl |= FLAG_RTR;
-                    if (mf & 0x01) fl |= FLAG_TX;
-                    if (fd & 0x1) fl |= BLF_FLAG_FD;
-                    if (fd & 0x2) fl |= BLF_FLAG_BRS;
-                    if (fd & 0x4) fl |= BLF_FLAG_ESI;
-                    dlc[n] = (uint8_t)(rtr && valid == 0 ? DLC2LEN[code] : valid);
-                    memcpy(d, p + 20, valid < 8 ? valid : 8);
-                    if (valid > 8) {
-                        int64_t *l = lng + 4 * nl++;
-                        l[0] = n, l[1] = p + 20 - buf, l[2] = valid, l[3] = valid;
-                    }
-                } else { /* CAN_FD_MESSAGE_64 */
-                    uint8_t code = p[1] & 0x0F, direction = p[34], ext_off = p[35];
-                    int64_t valid = p[2] < 64 ? p[2] : 64;
-                    uint32_t fd = rd32(p + 12);
-                    int rtr = (fd & 0x0010) != 0;
-                    /* python-can issue 1905: valid_bytes may exceed the bytes stored */
-                    int64_t room = (ext_off > 0 && ext_off < size ? ext_off : size) - hsize - 40;
-                    int64_t stored = valid < room ? valid : room;
-                    if (stored < 0) stored = 0;
-                    raw = rd32(p + 4);
-                    chan[n] = p[0];
-                    if (rtr) fl |= FLAG_RTR;
-                    if (direction) fl |= FLAG_TX;
-                    if (fd & 0x1000) fl |= BLF_FLAG_FD;
-                    if (fd & 0x2000) fl |= BLF_FLAG_BRS;
-                    if (fd & 0x4000) fl |= BLF_FLAG_ESI;
-                    dlc[n] = (uint8_t)(rtr && valid == 0 ? DLC2LEN[code] : valid);
-                    memcpy(d, p + 40, stored < 8 ? stored : 8);
-                    if (valid > 8) {
-                        int64_t *l = lng + 4 * nl++;
-                        l[0] = n, l[1] = p + 40 - buf, l[2] = stored, l[3] = valid;
-                    }
+            double stamp = (double)(int64_t)rd64(obj + 24);
+            double rel = rd32(obj + 16) == 1 ? stamp * 1e-5 : stamp * 1e-9;
+            if (BLF_UNLIKELY(!(rel >= lo && rel <= hi))) {
+                if (lo != lo) { /* nan: no file times, a range around the first record's */
+                    lo = rel - span;
+                    hi = rel + span;
+                } else {
+                    BLF_SKIP(pos, pos + size, BLF_BAD_TIME, kind, (int64_t)rel, 0);
+                    prev_row = -2; /* already skipped */
+                    pos += size;
+                    continue;
                 }
-                if (raw & 0x80000000u) fl |= FLAG_EXT;
-                can_id[n] = raw & 0x1FFFFFFFu;
-                flags[n] = fl;
-                n++;
             }
+            const unsigned char *p = obj + hsize;
+            t[n] = rel + start;
+            line[n] = rec;
+            uint8_t *d = data + 8 * n;
+            memset(d, 0, 8);
+            uint32_t raw;
+            uint8_t fl = 0;
+            if (kind == BLF_CAN_MESSAGE || kind == BLF_CAN_MESSAGE2) {
+                uint8_t mf = p[2], len = p[3] < 8 ? p[3] : 8;
+                raw = rd32(p + 4);
+                chan[n] = (uint16_t)rd16(p);
+                if (mf & 0x80)
+                    fl |= FLAG_RTR;
+                else
+                    memcpy(d, p + 8, len);
+                if (mf & 0x01) fl |= FLAG_TX;
+                dlc[n] = len;
+            } else if (kind == BLF_CAN_ERROR_EXT) {
+                uint8_t len = p[11] < 8 ? p[11] : 8;
+                raw = rd32(p + 16);
+                chan[n] = (uint16_t)rd16(p);
+                fl |= FLAG_ERR;
+                memcpy(d, p + 24, len);
+                dlc[n] = len;
+            } else if (kind == BLF_CAN_FD_MESSAGE) {
+                uint8_t mf = p[2], code = p[3] & 0x0F, fd = p[13];
+                int64_t valid = p[14] < 64 ? p[14] : 64;
+                int rtr = (mf & 0x80) != 0;
+                raw = rd32(p + 4);
+                chan[n] = (uint16_t)rd16(p);
+                if (rtr) fl |= FLAG_RTR;
+                if (mf & 0x01) fl |= FLAG_TX;
+                if (fd & 0x1) fl |= BLF_FLAG_FD;
+                if (fd & 0x2) fl |= BLF_FLAG_BRS;
+                if (fd & 0x4) fl |= BLF_FLAG_ESI;
+                dlc[n] = (uint8_t)(rtr && valid == 0 ? DLC2LEN[code] : valid);
+                memcpy(d, p + 20, valid < 8 ? valid : 8);
+                if (valid > 8) {
+                    int64_t *l = lng + 4 * nl++;
+                    l[0] = n, l[1] = p + 20 - buf, l[2] = valid, l[3] = valid;
+                }
+            } else { /* CAN_FD_MESSAGE_64 */
+                uint8_t code = p[1] & 0x0F, direction = p[34], ext_off = p[35];
+                int64_t valid = p[2] < 64 ? p[2] : 64;
+                uint32_t fd = rd32(p + 12);
+                int rtr = (fd & 0x0010) != 0;
+                /* python-can issue 1905: valid_bytes may exceed the bytes stored */
+                int64_t room = (ext_off > 0 && ext_off < size ? ext_off : size) - hsize - 40;
+                int64_t stored = valid < room ? valid : room;
+                if (stored < 0) stored = 0;
+                raw = rd32(p + 4);
+                chan[n] = p[0];
+                if (rtr) fl |= FLAG_RTR;
+                if (direction) fl |= FLAG_TX;
+                if (fd & 0x1000) fl |= BLF_FLAG_FD;
+                if (fd & 0x2000) fl |= BLF_FLAG_BRS;
+                if (fd & 0x4000) fl |= BLF_FLAG_ESI;
+                dlc[n] = (uint8_t)(rtr && valid == 0 ? DLC2LEN[code] : valid);
+                memcpy(d, p + 40, stored < 8 ? stored : 8);
+                if (valid > 8) {
+                    int64_t *l = lng + 4 * nl++;
+                    l[0] = n, l[1] = p + 40 - buf, l[2] = stored, l[3] = valid;
+                }
+            }
+            if (raw & 0x80000000u) fl |= FLAG_EXT;
+            can_id[n] = raw & 0x1FFFFFFFu;
+            flags[n] = fl;
+            prev_row = n++;
         }
         pos += size;
     }
+    if (final && pos < end) { /* less than an object header is left (under 4 bytes: padding) */
+        if (end - pos >= 4 && find_lobj(buf, pos, pos + 5, end) >= 0) {
+            BLF_SKIP(pos, end, BLF_CUT, 0, 0, 0);
+        } else if (end - pos >= 4) {
+            BLF_NOT_FOLLOWED();
+            BLF_SKIP(pos, end, BLF_GARBAGE, 0, 0, 0);
+        }
+        pos = end;
+    }
+    if (rs >= 0) BLF_EMIT();
 walked:
     Py_END_ALLOW_THREADS;
-#undef BLF_PROBLEM
+#undef BLF_EMIT
+#undef BLF_SKIP
+#undef BLF_NOT_FOLLOWED
     bufs_release(&bs);
-    return Py_BuildValue("(innLnn)", ok, n, pos, (long long)rec, nl, np_);
+    return Py_BuildValue("(innLnndd)", ok, n, pos, (long long)rec, nl, nr, lo, hi);
 fail:
     bufs_release(&bs);
     return NULL;

@@ -128,8 +128,13 @@ def test_garbage_between_records_is_skipped_and_counted(tmp_path):
     struct.pack_into("<Q", data, 16, len(data))  # the header's file size (else: "cut short?")
     data = bytes(data)
     batch, ctx, _ = run(blf.read, data)
-    assert len(batch) == 2 and batch.can_id[0] == batch.can_id[1]
-    assert ctx.problems.count == 1 and "garbage" in ctx.problems.shown[0].message
+    # the record before the junk is not believed either: its end may be the damage
+    assert len(batch) == 1 and batch.line.tolist() == [2]
+    assert ctx.problems.count == 1
+    assert ctx.problems.shown[0].message == (
+        "damaged BLF data from byte 0 of this container's data: skipped 56 bytes to the next"
+        " sound object (first: a type 1 object not followed by another)"
+    )
 
 
 def test_not_blf_is_a_problem():
@@ -243,10 +248,11 @@ def test_parsing_containers_together_changes_nothing(written, tmp_path, monkeypa
             assert (getattr(got, col) == getattr(ref, col)).all(), col
         assert ctx.problems.shown == ref_ctx.problems.shown
         assert ctx.problems.count == ref_ctx.problems.count
-    if written.name == "w6.blf":  # the zlib error, then the next container's broken record
+    if written.name == "w6.blf":  # the zlib error, then the record it broke off
         assert [p.message.split(" (")[0] for p in ref_ctx.problems.shown] == [
             "corrupt zlib data",
-            "garbage between BLF objects, skipped 16 bytes",
+            "damaged BLF data from byte 131056 of this container's data: skipped 16 bytes"
+            " to the next sound object",
         ]
 
 
@@ -333,7 +339,8 @@ def test_header_shorter_than_its_time_at_the_end_of_a_buffer(tmp_path):
         list(can.BLFReader(str(real_file("hardbyte__python-can/test_CanMessage.blf"))))
     )
     assert [p.message for p in ctx.problems.shown] == [
-        "BLF object type 1 with header v1 size 16 unreadable"
+        "damaged BLF data from byte 212 of this container's data: skipped 16 bytes to the next"
+        " sound object (first: a type 1 object with a v1 header of 0 bytes)"
     ]
 
 

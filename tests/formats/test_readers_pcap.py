@@ -249,18 +249,34 @@ def test_absurd_record_length_is_bounded(tmp_path):
     path = tmp_path / "bad.pcap"
     path.write_bytes(good + bad + _pcap([_be_frame(0x182, b"")])[24:])
     fb = read_all(path)
-    assert fb.can_id.tolist() == [0x181] * 3  # what came before is kept
+    # what came before is kept, and the reader finds the record after the damage again
+    assert fb.can_id.tolist() == [0x181] * 3 + [0x182]
     r = subprocess.run(
         [sys.executable, "-m", "cananalyze", "decode", str(path)], capture_output=True, text=True
     )
     assert r.returncode == 0
     assert f"{path}:offset {len(good)}: pcap record of 2147483632 bytes is longer than" in r.stderr
+    assert "skipped 32 bytes to the next plausible record" in r.stderr
     strict = subprocess.run(
         [sys.executable, "-m", "cananalyze", "decode", "--strict", str(path)],
         capture_output=True,
         text=True,
     )
     assert strict.returncode == 2 and "Traceback" not in strict.stderr
+
+
+def test_capture_with_a_cr_byte_and_no_lf_byte(tmp_path):
+    """The CR-only line ends of classic Mac text logs are turned into newlines; a small
+    capture whose bytes hold a 0x0D and no 0x0A was translated too (its record lengths
+    of 13 read as 10)."""
+    frames = [_be_frame(0x181, bytes(range(1, 6))), _be_frame(0x182, b"\x0d\x0d")]
+    data = _pcap([f[:13] for f in frames])
+    assert b"\r" in data and b"\n" not in data
+    path = tmp_path / "cr.pcap"
+    path.write_bytes(data)
+    fb = read_all(path)
+    assert fb.can_id.tolist() == [0x181, 0x182]
+    assert [fb.payload(0), fb.payload(1)] == [bytes(range(1, 6)), b"\x0d\x0d"]
 
 
 def test_cut_file_keeps_whole_records(tmp_path):

@@ -588,7 +588,7 @@ def test_blf_inner_object_claiming_60_mib(tmp_path):
     p.write_bytes(head + container(bad + rest) + container(bytes(inner[half:])))
     n, problems = _blf_read(p)
     assert n == 199, problems  # only the damaged record is lost
-    assert "bad size 62914560" in problems[0]
+    assert "object size of 62914560 bytes" in problems[0]
 
 
 # item 4: more channel names than a uint16 index holds

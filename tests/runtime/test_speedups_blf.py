@@ -39,10 +39,10 @@ def python_walks(monkeypatch) -> list[int]:
     calls: list[int] = []
     real = blf._Records._parse_py
 
-    def counted(self, buf):
+    def counted(self, buf, *args):
         if speedups.C is not None:
             calls.append(len(buf))
-        return real(self, buf)
+        return real(self, buf, *args)
 
     monkeypatch.setattr(blf._Records, "_parse_py", counted)
     return calls

@@ -10,8 +10,14 @@ found by one shift per run of records of one size (a capture of classic frames i
 all one size), the frame fields then read with numpy gathers.
 
 Every length read from the file is bounded before anything is allocated: a pcap
-record over MAX_RECORD or its snap length, a pcapng block over MAX_BLOCK, ends
-the read with one problem naming the offset; what came before is kept.
+record over MAX_RECORD or its snap length, a pcapng block over MAX_BLOCK, is not
+read. Damage never becomes a frame and does not end the read (docs/hostile-input.md):
+a pcap record is believed when its header is plausible (lengths it may have, a
+fraction under a second, a time close to the record before it) and so is the header
+after it; a pcapng block when its leading and trailing lengths agree. After one that
+is not, the reader looks for the next plausible record or block (`_PcapHeaders.scan`,
+`_pcapng_scan`) and goes on from there, with one problem naming the offset and the
+bytes skipped.
 """
 
 from __future__ import annotations
@@ -55,6 +61,14 @@ PACKET_OUTGOING = 4
 MAX_RECORD = 256 << 10  # a CAN packet is at most 92 bytes; other packets up to this are skipped
 MAX_BLOCK = 16 << 20  # pcapng blocks: interface descriptions and packets, never near this
 CHUNK = 8 << 20  # bytes read at a time
+# A pcap record is believed when its time is within TIME_STEP of the record before's, or
+# up to MAX_JUMP after it when the record after it is within TIME_STEP of it (the
+# capture's clock jumped); one found again after damage holds MIN_FOUND bytes or more
+# (a CAN frame's header), and is whole when the records before were.
+TIME_STEP = 86400  # s
+MAX_JUMP = 366 * 86400  # s
+MIN_FOUND = 8
+SCAN_WINDOW = 1 << 20  # bytes looked at in one go when looking for the next record or block
 
 _PCAP_MAGIC = {
     b"\xd4\xc3\xb2\xa1": ("<", 1e-6),
@@ -64,6 +78,10 @@ _PCAP_MAGIC = {
 }
 _SHB = 0x0A0D0D0A
 _IDB, _EPB, _SPB, _OPB = 1, 6, 3, 2
+# block types of the pcapng specification, and the shortest each can be
+_KNOWN_BLOCKS = (_SHB, _IDB, _OPB, _SPB, 4, 5, _EPB, 9, 10, 0x00000BAD, 0x40000BAD)
+_MIN_BLOCK = {_SHB: 28, _IDB: 20, _EPB: 32, _SPB: 16, _OPB: 32, 5: 24}
+_BYTE_ORDER = {b"\x4d\x3c\x2b\x1a": "<", b"\x1a\x2b\x3c\x4d": ">"}
 
 
 def sniff(head: bytes) -> bool:
@@ -200,6 +218,112 @@ def _uniform(
     return max(avail, 1)
 
 
+def _u32_each(b: np.ndarray, order: str) -> np.ndarray:
+    """The uint32 starting at each byte of ``b`` (len(b) - 3 of them), as int64."""
+    w = b.astype(np.int64)
+    n = len(b) - 3
+    if order == "<":
+        return w[:n] | w[1 : n + 1] << 8 | w[2 : n + 2] << 16 | w[3 : n + 3] << 24
+    return w[:n] << 24 | w[1 : n + 1] << 16 | w[2 : n + 2] << 8 | w[3 : n + 3]
+
+
+class _PcapHeaders:
+    """What a pcap record header must look like to be believed, and where the next one
+    is after damage."""
+
+    def __init__(self, order: str, limit: int, frac_max: int, link: int) -> None:
+        self.head = struct.Struct(order + "IIII")  # seconds, fraction, captured, on the wire
+        self.order = order
+        self.limit = limit
+        self.frac_max = frac_max
+        # where a CAN frame starts in a packet, its protocol field (cooked captures)
+        self.frame_at = {LINKTYPE_LINUX_SLL: 16, LINKTYPE_LINUX_SLL2: 20}.get(link, 0)
+        self.proto_at = {LINKTYPE_LINUX_SLL: 14, LINKTYPE_LINUX_SLL2: 0}.get(link)
+        self.whole = True  # the last record believed was captured whole
+
+    def _sane(self, frac: int, incl: int, orig: int) -> bool:
+        return incl <= self.limit and incl <= orig <= MAX_RECORD and frac < self.frac_max
+
+    def plausible(self, raw: bytes, p: int, prev: int | None, ended: bool) -> bool | None:
+        """Whether the record header at ``p`` is believed after a record of second
+        ``prev`` (None: none before it); None when that takes bytes not read yet."""
+        sec, frac, incl, orig = self.head.unpack_from(raw, p)
+        if not self._sane(frac, incl, orig):
+            return False
+        if prev is None or abs(sec - prev) <= TIME_STEP:
+            return True
+        if not 0 < sec - prev <= MAX_JUMP or incl < MIN_FOUND:
+            return False
+        return self._followed(raw, p, sec, incl, ended)  # the clock jumped ahead
+
+    def _followed(self, raw: bytes, p: int, sec: int, incl: int, ended: bool) -> bool | None:
+        """Whether a plausible record within TIME_STEP follows the one at ``p``."""
+        nxt = p + 16 + incl
+        if nxt + 16 > len(raw):
+            return False if ended else None
+        sec2, frac2, incl2, orig2 = self.head.unpack_from(raw, nxt)
+        return self._sane(frac2, incl2, orig2) and abs(sec2 - sec) <= TIME_STEP
+
+    def far(self, raw: bytes, p: int, prev: int) -> bool:
+        """Whether the time at ``p`` is far from ``prev``: the damage took the header's
+        time too, so the record before it may be damaged as well."""
+        return abs(self.head.unpack_from(raw, p)[0] - prev) > TIME_STEP
+
+    def why(self, raw: bytes, p: int, prev: int | None) -> str:
+        sec, frac, incl, orig = self.head.unpack_from(raw, p)
+        if incl > self.limit:
+            return f"pcap record of {incl} bytes is longer than its snap length {self.limit}"
+        if not incl <= orig <= MAX_RECORD:
+            return f"pcap record of {incl} bytes says it was {orig} bytes long"
+        if frac >= self.frac_max:
+            return f"pcap record's fraction of a second is {frac}"
+        return f"pcap record at {sec} s is far from the one before it at {prev} s"
+
+    def _candidate(self, raw: bytes, p: int, prev: int | None, ended: bool) -> bool | None:
+        """Whether a record found at ``p`` while resynchronising is believed: a CAN frame
+        (or a whole one, when the records before were) followed by a plausible record
+        or by the end of the file; None when that takes bytes not read yet."""
+        sec, frac, incl, orig = self.head.unpack_from(raw, p)
+        if (self.whole and incl != orig) or incl < self.frame_at + 8:
+            return False
+        if p + 16 + incl > len(raw):
+            return False if ended else None
+        if self.proto_at is not None:
+            proto = raw[p + 16 + self.proto_at] << 8 | raw[p + 17 + self.proto_at]
+            if proto not in (ETH_P_CAN, ETH_P_CANFD):
+                return False
+        if raw[p + 20 + self.frame_at] > incl - self.frame_at - 8:  # the frame's length byte
+            return False
+        if p + 16 + incl == len(raw) and ended:
+            return prev is None or abs(sec - prev) <= TIME_STEP
+        return self._followed(raw, p, sec, incl, ended)
+
+    def scan(
+        self, raw: bytes, buf: np.ndarray, start: int, prev: int | None, ended: bool
+    ) -> tuple[int | None, int]:
+        """(where the next believable record is from ``start``, or None; where to go on
+        looking when it is None: bytes from there may start one and need more read)."""
+        end = len(raw)
+        s = start
+        while s + 16 <= end:
+            e = min(s + SCAN_WINDOW, end - 15)
+            u = _u32_each(buf[s : e + 15], self.order)
+            m = e - s
+            sec, frac, incl, orig = u[:m], u[4 : m + 4], u[8 : m + 8], u[12 : m + 12]
+            ok = (incl >= MIN_FOUND) & (incl <= self.limit) & (orig >= incl)
+            ok &= (orig <= MAX_RECORD) & (frac < self.frac_max)
+            if prev is not None:
+                ok &= (sec - prev >= -TIME_STEP) & (sec - prev <= MAX_JUMP)
+            for c in (np.flatnonzero(ok) + s).tolist():
+                found = self._candidate(raw, c, prev, ended)
+                if found is None:
+                    return None, c
+                if found:
+                    return c, c
+            s = e
+        return None, max(s, start)
+
+
 def _read_pcap(stream: BinaryIO, ctx: ReadContext, head: bytes) -> Iterator[FrameBatch]:
     order, unit = _PCAP_MAGIC[head[:4]]
     if len(head) < 24:
@@ -215,10 +339,28 @@ def _read_pcap(stream: BinaryIO, ctx: ReadContext, head: bytes) -> Iterator[Fram
     frames = _Frames(ctx)
     chan0 = frames.channel("pcap")
     limit = min(max(snaplen, 0) or MAX_RECORD, MAX_RECORD)
+    hdr = _PcapHeaders(order, limit, 1_000_000 if unit == 1e-6 else 1_000_000_000, link)
+    dt = order + "u4"
     cutter = _Cutter(ctx.batch_size)
     rest = b""
     offset = 24  # file offset of rest[0]
     ended = False
+    prev: int | None = None  # the second of the last record believed
+    skip: tuple[int, str] | None = None  # resynchronising: (file offset skipped from, why)
+    judged = -1  # the position whose header was found plausible already
+
+    def skipped(to: int, where: str) -> None:
+        at, why = skip  # type: ignore[misc]
+        if not why:  # a record running past the end: the file is cut short (or its length)
+            if where != "to the next plausible record":
+                text = f"file ends inside a pcap record ({to - at} bytes)"
+                ctx.problems.add(ctx.source, f"offset {at}", text)
+                return
+            why = "pcap record runs past the end of the file"
+        ctx.problems.add(
+            ctx.source, f"offset {at}", f"{why} (corrupt file): skipped {to - at} bytes {where}"
+        )
+
     while not ended:
         data = stream.read(CHUNK)
         ended = not data
@@ -226,33 +368,69 @@ def _read_pcap(stream: BinaryIO, ctx: ReadContext, head: bytes) -> Iterator[Fram
         buf = np.frombuffer(raw, np.uint8)
         pos = 0
         while pos + 16 <= len(raw):
-            (incl,) = struct.unpack_from(order + "I", raw, pos + 8)
-            if incl > limit:
-                ctx.problems.add(
-                    ctx.source,
-                    f"offset {offset + pos}",
-                    f"pcap record of {incl} bytes is longer than its snap length {limit} "
-                    "(corrupt file): rest skipped",
-                )
-                ended, raw = True, raw[:pos]
+            if skip is not None:
+                found, pos = hdr.scan(raw, buf, pos, prev, ended)
+                if found is None:
+                    break  # none in these bytes: go on with the next ones
+                skipped(offset + found, "to the next plausible record")
+                skip, judged = None, found
+                prev = hdr.head.unpack_from(raw, found)[0]
+                continue
+            ok = True if pos == judged else hdr.plausible(raw, pos, prev, ended)
+            if ok is None:
                 break
+            incl = hdr.head.unpack_from(raw, pos)[2]
             size = 16 + incl
-            if pos + size > len(raw):
-                break
+            if not ok or pos + size > len(raw):
+                if ok and not ended:
+                    break
+                why = hdr.why(raw, pos, prev) if ok is False else ""  # "": past the end
+                skip = (offset + pos, why)
+                pos += 1
+                continue
             count = _uniform(buf, pos, size, order, 8, 16, None)
             rec = _run(buf, pos, count, size)
-            dt = order + "u4"
             t = _col(rec, 0, dt).astype(np.float64) + _col(rec, 4, dt) * unit
-            fb = frames.batch(rec[:, 16:], np.full(count, incl), t, link, chan0)
-            frames.record += count
-            if fb is not None:
-                cutter.add(fb)
-                ctx.frames += len(fb)
+            # each record's time within TIME_STEP of the one before's: two reductions;
+            # only when the run spans more, which record it is
+            if count > 1 and t.max() - t.min() > TIME_STEP:
+                good = np.ones(count, bool)
+                good[1:] = np.abs(np.diff(t)) <= TIME_STEP
+                count = int(np.argmin(good)) if not good.all() else count
+            # and the header after it: else the last record may hold the damage's start
+            nxt = pos + count * size
+            last = int(_col(rec, 0, dt)[count - 1])
+            follows = hdr.plausible(raw, nxt, last, ended) if nxt + 16 <= len(raw) else ended
+            later = follows is None or (follows is False and nxt + 16 > len(raw))
+            if later:
+                count -= 1  # judged with the bytes read next
+            elif not follows:
+                if hdr.far(raw, nxt, last):  # its time is damaged too: so may the record be
+                    count -= 1
+                    skip = (offset + pos + count * size, hdr.why(raw, nxt, last))
+                else:
+                    skip = (offset + nxt, hdr.why(raw, nxt, last))
+            judged = nxt if follows else -1
+            if count:
+                rec = rec[:count]
+                fb = frames.batch(rec[:, 16:], np.full(count, incl), t[:count], link, chan0)
+                frames.record += count
+                if fb is not None:
+                    cutter.add(fb)
+                    ctx.frames += len(fb)
+                prev = last
+                hdr.whole = bool(_col(rec, 12, dt)[count - 1] == incl)
             pos += count * size
+            if skip is not None:
+                pos = (skip[0] - offset) + 1
+            elif later:
+                break  # the record at pos is judged with more bytes
         yield from cutter.full()
         offset += pos
         rest = raw[pos:]
-    if rest:
+    if skip is not None:
+        skipped(offset + len(rest), "to the end of the file")
+    elif rest:
         ctx.problems.add(
             ctx.source, f"offset {offset}", f"file ends inside a pcap record ({len(rest)} bytes)"
         )
@@ -308,6 +486,42 @@ def _idb_options(body: bytes, order: str) -> tuple[float, str | None]:
     return tsres, name
 
 
+def _pcapng_scan(
+    raw: bytes, start: int, order: str, ended: bool, ifaces: int
+) -> tuple[int | None, int]:
+    """(where the next believable pcapng block is from ``start``, or None; where to go
+    on looking when it is None). Blocks start 4-aligned; one is believed when its type is
+    one of the specification's, its length one it may have and its trailing length the
+    same (an enhanced packet block's interface declared, when any is)."""
+    end = len(raw)
+    dt = np.dtype(order + "u4")
+    s = start
+    while end - s >= 12:
+        n = min(SCAN_WINDOW, end - s) // 4
+        w = np.frombuffer(raw, dt, count=n, offset=s)
+        kinds, sizes = w[:-1], w[1:]
+        ok = np.isin(kinds, _KNOWN_BLOCKS) & (sizes >= 12) & (sizes % 4 == 0)
+        ok &= sizes <= MAX_BLOCK
+        for k in np.flatnonzero(ok).tolist():
+            p = s + 4 * k
+            kind, size = int(kinds[k]), int(sizes[k])
+            if size < _MIN_BLOCK.get(kind, 12):
+                continue
+            if p + size > end:
+                if not ended:
+                    return None, p  # judged with the bytes read next
+                continue
+            if struct.unpack_from(order + "I", raw, p + size - 4)[0] != size:
+                continue
+            if kind == _SHB and raw[p + 8 : p + 12] not in _BYTE_ORDER:
+                continue
+            if kind == _EPB and ifaces and struct.unpack_from(order + "I", raw, p + 8)[0] >= ifaces:
+                continue
+            return p, p
+        s += 4 * (n - 1)
+    return None, s
+
+
 def _read_pcapng(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     ctx.format = "pcapng"
     ctx.absolute_time = True
@@ -319,6 +533,20 @@ def _read_pcapng(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     rest = b""
     offset = 0
     ended = False
+    skip: tuple[int, str] | None = None  # resynchronising: (file offset skipped from, why)
+
+    def skipped(to: int, where: str) -> None:
+        at, why = skip  # type: ignore[misc]
+        if not why:  # a block running past the end: the file is cut short (or its length)
+            if where != "to the next pcapng block":
+                text = f"file ends inside a pcapng block ({to - at} bytes)"
+                ctx.problems.add(ctx.source, f"offset {at}", text)
+                return
+            why = "pcapng block runs past the end of the file"
+        ctx.problems.add(
+            ctx.source, f"offset {at}", f"{why} (corrupt file): skipped {to - at} bytes {where}"
+        )
+
     while not ended:
         data = stream.read(CHUNK)
         ended = not data
@@ -326,32 +554,45 @@ def _read_pcapng(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
         buf = np.frombuffer(raw, np.uint8)
         pos = 0
         while pos + 12 <= len(raw):
+            if skip is not None:
+                found, pos = _pcapng_scan(raw, pos, order, ended, len(ifaces))
+                if found is None:
+                    break  # none in these bytes: go on with the next ones
+                skipped(offset + found, "to the next pcapng block")
+                skip = None
+                continue
             kind = struct.unpack_from(order + "I", raw, pos)[0]
+            why = None
             if kind == _SHB:
                 bom = raw[pos + 8 : pos + 12]
-                order = "<" if bom == b"\x4d\x3c\x2b\x1a" else ">"
-                if bom not in (b"\x4d\x3c\x2b\x1a", b"\x1a\x2b\x3c\x4d"):
-                    ctx.problems.add(
-                        ctx.source, f"offset {offset + pos}", "bad pcapng byte-order magic"
-                    )
-                    ended, raw = True, raw[:pos]
-                    break
+                if bom in _BYTE_ORDER:
+                    order = _BYTE_ORDER[bom]
+                else:
+                    why = "bad pcapng byte-order magic"
             size = struct.unpack_from(order + "I", raw, pos + 4)[0]
-            if size < 12 or size % 4 or size > MAX_BLOCK:
-                ctx.problems.add(
-                    ctx.source,
-                    f"offset {offset + pos}",
-                    f"pcapng block of {size} bytes is impossible (corrupt file): rest skipped",
-                )
-                ended, raw = True, raw[:pos]
-                break
-            if pos + size > len(raw):
-                break
+            if why is None and (size < _MIN_BLOCK.get(kind, 12) or size % 4 or size > MAX_BLOCK):
+                why = f"pcapng block of {size} bytes is impossible"
+            if why is None and pos + size > len(raw):
+                if not ended:
+                    break
+                why = ""  # runs past the end of the file
+            if why is None:
+                trailer = struct.unpack_from(order + "I", raw, pos + size - 4)[0]
+                if trailer != size:
+                    why = f"pcapng block of {size} bytes ends with a length of {trailer}"
+            if why is not None:
+                skip = (offset + pos, why)
+                pos += 4
+                continue
             if kind == _EPB:
                 count = _uniform(buf, pos, size, order, 4, 0, _EPB)
-                _epb_run(
-                    _run(buf, pos, count, size), order, ifaces, frames, cutter, ctx, warned_link
-                )
+                rec = _run(buf, pos, count, size)
+                if count > 1:  # each block's trailing length the same as its leading one
+                    bad = np.flatnonzero(_col(rec, size - 4, order + "u4") != size)
+                    if bad.size:
+                        count = int(bad[0])
+                        rec = rec[:count]
+                _epb_run(rec, order, ifaces, frames, cutter, ctx, warned_link)
                 pos += count * size
                 continue
             body = raw[pos + 8 : pos + size - 4]
@@ -371,7 +612,9 @@ def _read_pcapng(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
         yield from cutter.full()
         offset += pos
         rest = raw[pos:]
-    if rest:
+    if skip is not None:
+        skipped(offset + len(rest), "to the end of the file")
+    elif rest:
         ctx.problems.add(
             ctx.source, f"offset {offset}", f"file ends inside a pcapng block ({len(rest)} bytes)"
         )
