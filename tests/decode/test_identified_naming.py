@@ -84,3 +84,29 @@ def test_text_and_jsonl_name_them_too(tmp_path):
     recs = [json.loads(x) for x in lines.splitlines()]
     named = {(r["index"], r["subindex"]): r["name"] for r in recs if r.get("kind") == "sdo"}
     assert named[(0x1000, 0)] == "Device type" and named[(0x6041, 0)] == "Statusword"
+
+
+def test_tables_and_mcap_name_them_too(tmp_path):
+    """The Parquet sdo table (pyarrow) and the MCAP events (the mcap library's reader)
+    name the transfers after the 0x1000 read as the drive's EDS would."""
+    import pyarrow.parquet as pq
+    from mcap.reader import make_reader
+
+    log = _record(tmp_path)
+    out = tmp_path / "out"
+    subprocess.run(
+        [sys.executable, "-m", "cananalyze", "export", log]
+        + ["--parquet", str(out), "--mcap", str(tmp_path / "x.mcap"), "-q"],
+        check=True,
+        timeout=120,
+    )
+    sdo = pq.read_table(out / "sdo.parquet").to_pylist()
+    names = {(r["index"], r["subindex"]): r["name"] for r in sdo}
+    assert names[(0x6041, 0)] == "Statusword" and names[(0x6060, 0)] == "Modes of operation"
+    with open(tmp_path / "x.mcap", "rb") as f:
+        texts = [
+            json.loads(m.data)["message"]
+            for _, _, m in make_reader(f).iter_messages(topics=["/canopen/events"])
+        ]
+    assert any(t.startswith("SDO upload 0x6041:00 Statusword = 567") for t in texts)
+    assert any(t.startswith("SDO download 0x6060:00 Modes of operation = 1") for t in texts)
