@@ -70,6 +70,10 @@ class Checker:
         self.bus: str | None = None
         self.first_bus = True  # the one that tells a log without timestamps (once per log)
         self.others: list[Checker] = []  # the other buses' checkers (this one: the first's)
+        # (path, its `network:` section's settings or None) when the rules came from a rules
+        # file (checks/build.py): the pipeline's declarations take the section from here,
+        # so the file is read once (a 2 MB file costs seconds to parse)
+        self.rules_file: tuple[str, dict | None] | None = None
 
     def name_bus(self, name: str) -> None:
         """Several buses: this Checker judges bus `name`; what it found so far (before a
@@ -89,6 +93,7 @@ class Checker:
         def make() -> Checker:
             fresh = Checker(copy.deepcopy(rules), self.config, self.keep_findings)
             fresh.timing.with_stats = with_stats
+            fresh.rules_file = self.rules_file
             return fresh
 
         return make

@@ -96,6 +96,14 @@ def _number(doc: _Doc, keys: list, value, default, integral: bool) -> float | in
 def load_rules(path: str | Path) -> tuple[list[Rule], NetworkSpec | None]:
     """Rules to run (defaults + settings + assertions) and what the `network:` section
     declares, if there is one (checked here, so a bad value fails before the log is read)."""
+    rules, network = read_rules(path)
+    return rules, None if network is None else combine(network, source=str(path))
+
+
+def read_rules(path: str | Path) -> tuple[list[Rule], dict | None]:
+    """`load_rules`, with the `network:` section as its checked settings (netfile.combine's
+    input, as `rules_network` gives them), from one reading of the file: a pipeline takes
+    both from here (checks/build.py) instead of parsing the file again."""
     doc = _Doc(Path(path))
     data = doc.data
     for k in data:
@@ -191,8 +199,7 @@ def load_rules(path: str | Path) -> tuple[list[Rule], NetworkSpec | None]:
         if default_jitter is not None:
             kw.setdefault("jitter_ms", default_jitter)
         rules.append(_make(doc, keys, cls, kw))
-    network = _network(doc)
-    return rules, None if network is None else combine(network, source=str(doc.path))
+    return rules, _network(doc)
 
 
 def _make(doc: _Doc, keys: list, cls: type[Rule], kw: dict) -> Rule:
