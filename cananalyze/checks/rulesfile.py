@@ -7,6 +7,7 @@ schema, read by network.netfile like a `--network` file.
 
 from __future__ import annotations
 
+import functools
 import inspect
 from pathlib import Path
 
@@ -36,9 +37,16 @@ class _Doc:
         raise InputError(f"{self.lines.at(tuple(keys))}: {message}")
 
 
-def _check_params(doc: _Doc, keys: list, cls: type[Rule], params: dict) -> dict:
+@functools.cache
+def _signature(cls: type[Rule]) -> tuple[inspect.Signature, frozenset[str]]:
+    """A rule class's constructor and the settings it takes (asked once per class, not
+    once per assertion: a rules file may hold 50,000)."""
     sig = inspect.signature(cls.__init__)
-    allowed = {p for p in sig.parameters if p not in ("self", "kw")} | _COMMON
+    return sig, frozenset({p for p in sig.parameters if p not in ("self", "kw")} | _COMMON)
+
+
+def _check_params(doc: _Doc, keys: list, cls: type[Rule], params: dict) -> dict:
+    sig, allowed = _signature(cls)
     for k, v in params.items():
         if k not in allowed:
             doc.fail(

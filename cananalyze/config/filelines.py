@@ -37,10 +37,14 @@ class Lines:
             self._walk(yaml_node, ())
 
     def under(self, *keys) -> Lines:
-        """The same file seen from a sub-table (the rules file's `network:`)."""
+        """The same file seen from a sub-table (the rules file's `network:`). It keeps the
+        lines of that table and of the keys above it only: the settings read through it
+        keep it (a PDO's `_at`), not the lines of a rules file's 50,000 assertions."""
         view = Lines.__new__(Lines)
         view.__dict__.update(self.__dict__)
-        view.root = self.root + tuple(str(k) for k in keys)
+        view.root = root = self.root + tuple(str(k) for k in keys)
+        n = len(root)
+        view.map = {k: v for k, v in self.map.items() if k[:n] == root or root[: len(k)] == k}
         return view
 
     def _walk(self, root, where: tuple) -> None:
