@@ -15,13 +15,17 @@ def build_checker(rules_file: str | Path | None = None, rules: list[Rule] | None
     reads what the rules file's `network:` section declares (unknown otherwise).
     """
     from cananalyze.checks.model_config import ModelConfig
-    from cananalyze.checks.rulesfile import load_rules
+    from cananalyze.checks.rulesfile import read_rules
+    from cananalyze.config.netfile import combine
     from cananalyze.decode.model import NetworkModel
 
-    config = None
+    config = network = None
     if rules_file:
-        loaded, network = load_rules(rules_file)
+        loaded, network = read_rules(rules_file)
         rules = (rules or []) + loaded
         if network is not None:
-            config = ModelConfig(NetworkModel(network))
-    return Checker(rules, config)
+            config = ModelConfig(NetworkModel(combine(network, source=str(rules_file))))
+    checker = Checker(rules, config)
+    if rules_file:
+        checker.rules_file = (str(rules_file), network)
+    return checker

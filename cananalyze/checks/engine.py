@@ -45,6 +45,13 @@ class Checker:
 
             rules = default_rules()
         self.rules = rules
+        # the rules with findings since the last collection (Rule._tell), and where each
+        # stands in `rules`: a batch's findings are taken in rule order from those alone
+        self._emitted: list[Rule] = []
+        self._position = {id(r): k for k, r in enumerate(rules)}
+        for rule in rules:
+            rule._board = self._emitted
+        self._plans: dict[bool, tuple[list, list]] = {}  # timed or not: see _plan
         if config is None:  # nothing declared and no log followed: every value unknown
             from cananalyze.checks.model_config import ModelConfig
             from cananalyze.decode.model import NetworkModel
@@ -70,6 +77,10 @@ class Checker:
         self.bus: str | None = None
         self.first_bus = True  # the one that tells a log without timestamps (once per log)
         self.others: list[Checker] = []  # the other buses' checkers (this one: the first's)
+        # (path, its `network:` section's settings or None) when the rules came from a rules
+        # file (checks/build.py): the pipeline's declarations take the section from here,
+        # so the file is read once (a 2 MB file costs seconds to parse)
+        self.rules_file: tuple[str, dict | None] | None = None
 
     def name_bus(self, name: str) -> None:
         """Several buses: this Checker judges bus `name`; what it found so far (before a
@@ -83,12 +94,13 @@ class Checker:
     def pristine(self) -> Callable[[], Checker]:
         """A maker of Checkers with this one's rules as they are now (before any frame):
         another bus's, judged apart."""
-        rules = copy.deepcopy(self.rules)
+        rules = copy.deepcopy(self.rules, {id(self._emitted): []})  # not this one's board
         with_stats = self.timing.with_stats
 
         def make() -> Checker:
             fresh = Checker(copy.deepcopy(rules), self.config, self.keep_findings)
             fresh.timing.with_stats = with_stats
+            fresh.rules_file = self.rules_file
             return fresh
 
         return make
@@ -99,6 +111,33 @@ class Checker:
         if self.timed is False:
             return [r for r in self.rules if not r.timing]
         return self.rules
+
+    def _plan(self) -> tuple[list[Callable[[Context], None]], list[tuple[Rule, object]]]:
+        """How the active rules judge a batch: the processors to call in order, and per
+        rule the processor called at its place (None: none). A rule that does not
+        override `process` has none (judged at the end only); the rules of a class with
+        `together` share one processor, at the place of the first of them."""
+        key = self.timed is False
+        plan = self._plans.get(key)
+        if plan is None:
+            members: dict[type, list[Rule]] = {}
+            places: list[tuple[Rule, object]] = []
+            for rule in self.active:
+                kind = type(rule)
+                if kind.process is Rule.process:
+                    places.append((rule, None))
+                elif kind.together is None:
+                    places.append((rule, rule.process))
+                elif kind in members:
+                    members[kind].append(rule)
+                    places.append((rule, None))
+                else:
+                    members[kind] = [rule]
+                    places.append((rule, kind))
+            made = {kind: kind.together(group) for kind, group in members.items()}
+            places = [(r, made[step] if isinstance(step, type) else step) for r, step in places]
+            plan = self._plans[key] = ([step for _, step in places if step], places)
+        return plan
 
     def _context(self, batch: DecodedBatch, t_end: float | None = None) -> Context:
         if self.t0 is None and len(batch):
@@ -162,8 +201,8 @@ class Checker:
             self.nmt.update(ctx.batch, ctx)
             self.t_last = float(ctx.batch.frames.t[-1])
         self.timing.update(ctx)
-        for rule in self.active:
-            rule.process(ctx)
+        for step in self._plan()[0]:
+            step(ctx)
         self._collect(batch)
 
     def tick(self, batch: DecodedBatch, now: float) -> None:
@@ -177,10 +216,11 @@ class Checker:
         ctx = self._context(batch)
         ctx.t_bus = self.t_last
         if batch.records:
-            for rule in self.active:
-                rule.process(ctx)
+            for step in self._plan()[0]:
+                step(ctx)
         for rule in self.active:
-            rule.tick(ctx, now)
+            if type(rule).tick is not Rule.tick:  # (the base tick reports nothing)
+                rule.tick(ctx, now)
         self._collect(batch)
 
     def finish(self, batch: DecodedBatch) -> None:
@@ -188,8 +228,9 @@ class Checker:
         self.timing.update(ctx)
         for rule in self.rules:
             rule.ending = True
-        for rule in self.active:
-            rule.process(ctx)  # records that only the end completes (pending SDO timeouts)
+        for rule, step in self._plan()[1]:
+            if step is not None:
+                step(ctx)  # records that only the end completes (pending SDO timeouts)
             if not rule.elsewhere:
                 rule.finish(ctx)
             rule.close(self.t_last or 0.0)
@@ -200,8 +241,23 @@ class Checker:
         if self.findings_untimed is not None:
             parts.append(FindingColumns.of([self.findings_untimed]))
             self.findings_untimed = None
-        for rule in self.rules:
-            parts.extend(rule.take())
+        emitted, self._emitted[:] = list(self._emitted), []
+        if at_end or any(id(r) not in self._position for r in emitted):
+            rules = self.rules  # once per log: every rule (also one another Checker told)
+        else:
+            rules = sorted(emitted, key=lambda r: self._position[id(r)])
+        single: list[Finding] = []  # consecutive rules' one-by-one findings: one part
+        for rule in rules:
+            for part in rule.taken():
+                if isinstance(part, list):
+                    single += part
+                    continue
+                if single:
+                    parts.append(FindingColumns.of(single))
+                    single = []
+                parts.append(part)
+        if single:
+            parts.append(FindingColumns.of(single))
         new = FindingColumns.concat(parts)
         if not len(new):
             return

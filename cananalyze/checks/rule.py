@@ -154,6 +154,11 @@ class Rule:
     # several buses: an assertion whose subject another bus holds skips its `finish`
     # (`engine.whole_log`; such rules say where their subject is with `present(checker)`)
     elsewhere = False
+    # the Checker's list of its rules with findings to take (each told once per take), so
+    # a batch's findings are taken from those few, not asked of every rule: a rules file
+    # may hold 50,000 assertions (issue 38). A rule belongs to the last Checker given it.
+    _board: list[Rule] | None = None
+    _told = False
 
     def __init__(
         self,
@@ -188,7 +193,15 @@ class Rule:
         return period_ms + self.slack(period_ms)
 
     def process(self, ctx: Context) -> None:
-        """Check one batch; append to self.out."""
+        """Check one batch; append to self.out. (A rule that does not override it is
+        judged at the end only: the Checker does not call it per batch.)"""
+
+    # A subclass may define `together(rules) -> processor(ctx)`, a classmethod: one
+    # processor for all of a Checker's rules of that class, called per batch instead of
+    # each rule's `process` (at the place of the first of them), which must judge each
+    # rule as its `process` would (assert_heartbeat: a batch touches only the assertions
+    # on the nodes it carries, and identical assertions share one comparison).
+    together = None
 
     def tick(self, ctx: Context, now: float) -> None:
         """Live: the bus reached `now` (the latest frame's time); deadline rules report
@@ -260,6 +273,7 @@ class Rule:
                 at_end=self.ending,
             )
         )
+        self._tell()
 
     def emit_many(
         self,
@@ -306,6 +320,7 @@ class Rule:
         block.at_end[:] = self.ending if at_end is None else at_end
         self._flush()
         self._parts.append(block if keep is None else block.take(keep))
+        self._tell()
 
     def emit_rows(self, block: FindingColumns) -> None:
         """Findings built as columns by the rule itself (`FindingColumns.block`), which
@@ -313,6 +328,14 @@ class Rule:
         block.at_end[:] = self.ending
         self._flush()
         self._parts.append(block)
+        self._tell()
+
+    def _tell(self) -> None:
+        """Put this rule on its Checker's board of rules with findings to take."""
+        if not self._told:
+            self._told = True
+            if self._board is not None:
+                self._board.append(self)
 
     def _flush(self) -> None:
         if self.out:
@@ -339,11 +362,21 @@ class Rule:
                         at_end=True,
                     )
                 )
+                self._tell()
 
     def take(self) -> list[FindingColumns]:
         """What was found since the last take, in emission order."""
-        self._flush()
+        return [p if isinstance(p, FindingColumns) else FindingColumns.of(p) for p in self.taken()]
+
+    def taken(self) -> list[FindingColumns | list[Finding]]:
+        """`take`, with the findings emitted one by one since the last block left a list
+        of `Finding`s: the Checker makes one FindingColumns of many rules' lists (the
+        same columns as one per rule; 50,000 assertions each telling a silent node)."""
         out, self._parts = self._parts, []
+        if self.out:
+            out.append(self.out)
+            self.out = []
+        self._told = False
         return out
 
 

@@ -7,6 +7,7 @@ schema, read by network.netfile like a `--network` file.
 
 from __future__ import annotations
 
+import functools
 import inspect
 from pathlib import Path
 
@@ -36,9 +37,16 @@ class _Doc:
         raise InputError(f"{self.lines.at(tuple(keys))}: {message}")
 
 
-def _check_params(doc: _Doc, keys: list, cls: type[Rule], params: dict) -> dict:
+@functools.cache
+def _signature(cls: type[Rule]) -> tuple[inspect.Signature, frozenset[str]]:
+    """A rule class's constructor and the settings it takes (asked once per class, not
+    once per assertion: a rules file may hold 50,000)."""
     sig = inspect.signature(cls.__init__)
-    allowed = {p for p in sig.parameters if p not in ("self", "kw")} | _COMMON
+    return sig, frozenset({p for p in sig.parameters if p not in ("self", "kw")} | _COMMON)
+
+
+def _check_params(doc: _Doc, keys: list, cls: type[Rule], params: dict) -> dict:
+    sig, allowed = _signature(cls)
     for k, v in params.items():
         if k not in allowed:
             doc.fail(
@@ -96,6 +104,14 @@ def _number(doc: _Doc, keys: list, value, default, integral: bool) -> float | in
 def load_rules(path: str | Path) -> tuple[list[Rule], NetworkSpec | None]:
     """Rules to run (defaults + settings + assertions) and what the `network:` section
     declares, if there is one (checked here, so a bad value fails before the log is read)."""
+    rules, network = read_rules(path)
+    return rules, None if network is None else combine(network, source=str(path))
+
+
+def read_rules(path: str | Path) -> tuple[list[Rule], dict | None]:
+    """`load_rules`, with the `network:` section as its checked settings (netfile.combine's
+    input, as `rules_network` gives them), from one reading of the file: a pipeline takes
+    both from here (checks/build.py) instead of parsing the file again."""
     doc = _Doc(Path(path))
     data = doc.data
     for k in data:
@@ -191,8 +207,7 @@ def load_rules(path: str | Path) -> tuple[list[Rule], NetworkSpec | None]:
         if default_jitter is not None:
             kw.setdefault("jitter_ms", default_jitter)
         rules.append(_make(doc, keys, cls, kw))
-    network = _network(doc)
-    return rules, None if network is None else combine(network, source=str(doc.path))
+    return rules, _network(doc)
 
 
 def _make(doc: _Doc, keys: list, cls: type[Rule], kw: dict) -> Rule:

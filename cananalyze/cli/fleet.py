@@ -33,14 +33,15 @@ def run(args: argparse.Namespace) -> int:
     if args.workers is not None and args.scheduler:
         raise UsageError("fleet: --workers sizes a local cluster; leave it out with --scheduler")
     opts = options(args, checks=True)
+    checker = None
     if opts.rules:
         from cananalyze.pipeline import build_checker
 
-        build_checker(opts)  # a bad rules file fails here, not once per log
+        checker = build_checker(opts)  # a bad rules file fails here, not once per log
     if opts.network:
         from cananalyze.pipeline import network_spec
 
-        network_spec(opts)  # as a bad --network, --device or --eds
+        network_spec(opts, checker)  # as a bad --network, --device or --eds
     result = run_fleet(
         args.inputs,
         args.out,

@@ -284,20 +284,21 @@ def _bus_names(names: list[str | None], of_part: np.ndarray) -> np.ndarray:
     return table[of_part]
 
 
-def network_spec(opts: Options) -> NetworkSpec:
+def network_spec(opts: Options, checker: Checker | None = None) -> NetworkSpec:
     """The user's declarations, later sources winning key by key: the network file, then
     the rules file's `network:` section (the more specific document: one test's
     expectations of one installation), then --device/--eds (a node's device named last,
-    on the command line). docs/network-file.md, "Combining sources"."""
+    on the command line). docs/network-file.md, "Combining sources".
+
+    The section is the one `checker` read with its rules from the same file, if given:
+    the rules file is parsed once per run."""
     from cananalyze.config.netfile import combine, read_network_file
 
     sources = []
     if opts.network:
         sources.append(read_network_file(opts.network))
     if opts.rules:
-        from cananalyze.checks.rulesfile import rules_network
-
-        section = rules_network(opts.rules)
+        section = _rules_section(opts, checker)
         if section is not None:
             sources.append(section)
     spec = combine(*sources, source=str(opts.network) if opts.network else None)
@@ -313,6 +314,17 @@ def network_spec(opts: Options) -> NetworkSpec:
             ns = spec.node(node)
             ns.profile, ns.how = load_eds(file, node), "user --eds"
     return spec
+
+
+def _rules_section(opts: Options, checker: Checker | None) -> dict | None:
+    """The rules file's `network:` settings: as the checker read them with its rules, or
+    read here (no checker, or one whose rules came from elsewhere)."""
+    known = getattr(checker, "rules_file", None)
+    if known is not None and known[0] == str(opts.rules):
+        return known[1]
+    from cananalyze.checks.rulesfile import rules_network
+
+    return rules_network(opts.rules)
 
 
 def build_decoder(
@@ -339,7 +351,9 @@ def build_decoder(
         from cananalyze.devices.dbc import load_dbc
 
         dbc = load_dbc(opts.dbc)  # a bad DBC fails before the log is opened
-    spec = network_spec(opts)
+    if checker is None and (opts.checking or opts.timing):
+        checker = build_checker(opts, keep_findings)  # first: it reads the rules file
+    spec = network_spec(opts, checker)
     if dbc:  # the DBC's identifiers belong on the bus (the unknown-identifier rule)
         spec.known_cob_ids |= {i for i, _ in dbc.messages}
     model = NetworkModel(spec)
@@ -360,8 +374,6 @@ def build_decoder(
     decoder = Decoder([*processors, DriveTracker(model)])
     model.attach(decoder)
     decoder.network = model
-    if checker is None and (opts.checking or opts.timing):
-        checker = build_checker(opts, keep_findings)
     if checker is not None:
         from cananalyze.checks.model_config import ModelConfig
 

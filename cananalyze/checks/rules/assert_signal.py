@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from cananalyze.checks.rule import Context, Rule
@@ -23,11 +25,38 @@ class AssertSignal(Rule):
 
     def process(self, ctx: Context) -> None:
         for block in ctx.batch.signals:
-            if block.node != self.node or self.signal not in block.columns:
-                continue
-            self.seen = True
+            if block.node == self.node:
+                self._judge(ctx, block, {})
+
+    @classmethod
+    def together(cls, rules: list[AssertSignal]) -> Callable[[Context], None]:
+        """All of a Checker's signal assertions as one processor (`Rule.together`): a
+        block of decoded signals is shown only to the assertions on its node, and the
+        assertions of one signal with the same range share one comparison."""
+        by_node: dict[int, list[AssertSignal]] = {}
+        for r in rules:
+            by_node.setdefault(r.node, []).append(r)
+
+        def process(ctx: Context) -> None:
+            for block in ctx.batch.signals:
+                shared: dict = {}
+                for r in by_node.get(block.node, ()):
+                    r._judge(ctx, block, shared)
+
+        return process
+
+    def _judge(self, ctx: Context, block, shared: dict) -> None:
+        """Findings for one block of this node's signals; `shared`: the rows out of range
+        per (signal, min, max), for the block's other assertions."""
+        if self.signal not in block.columns:
+            return
+        self.seen = True
+        key = (self.signal, self.lo, self.hi)
+        if key not in shared:
             v = np.asarray(block.columns[self.signal], float)
-            bad = np.flatnonzero((v < self.lo) | (v > self.hi))
+            shared[key] = v, np.flatnonzero((v < self.lo) | (v > self.hi))
+        v, bad = shared[key]
+        if bad.size:
             for i in self.capped(bad, ctx.t[block.rows[bad]], self.node, block.cob_id).tolist():
                 row = int(block.rows[i])
                 self.emit(
