@@ -14,6 +14,11 @@ from cananalyze.protocol.sdo import object_text
 # timeouts of a smaller group are findings, once no further probe came for SCAN_QUIET_S.
 SCAN_MIN = 8
 SCAN_QUIET_S = 10.0
+# live, a timeout is not held longer than this past the last one of its object: a scanner
+# sends its probes in one burst (their timeouts come together), and an engineer watching
+# the bus hears of one unanswered read at once; a scan spread wider than this is reported
+# live as its timeouts (a file keeps SCAN_QUIET_S)
+LIVE_QUIET_S = 0.2
 
 
 class _Scan:
@@ -111,18 +116,19 @@ class SdoRule(Rule):
             del self._held[obj]
         return True
 
-    def _release(self, ctx: Context, before: float | None) -> None:
-        """Held timeouts that made no scan (their last before `before`; all at the end): findings."""
+    def _release(self, ctx: Context, before: float | None, quiet: float = SCAN_QUIET_S) -> None:
+        """Held timeouts that made no scan (their last `quiet` before `before`; all at the
+        end): findings."""
         for obj in list(self._held):
             held = self._held[obj]
-            if before is not None and held[-1][1].get("t", 0.0) >= before - SCAN_QUIET_S:
+            if before is not None and held[-1][1].get("t", 0.0) >= before - quiet:
                 continue
             del self._held[obj]
             for _, rec in held:
                 self._finding(ctx, 0, rec)
 
     def tick(self, ctx: Context, now: float) -> None:
-        self._release(ctx, now)
+        self._release(ctx, now, LIVE_QUIET_S)
 
     def finish(self, ctx: Context) -> None:
         self._release(ctx, None)
