@@ -201,7 +201,7 @@ def read_tree(path: str | Path, what: str) -> tuple[object, Lines]:
     loader = yaml_loader()
     try:
         _check_yaml_shape(text, path, what, loader)
-        composed, data = _compose_and_load(text, loader)
+        data, lines = _load_yaml(text, loader, path)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         at = f"{path}:{mark.line + 1}" if mark else str(path)
@@ -209,7 +209,7 @@ def read_tree(path: str | Path, what: str) -> tuple[object, Lines]:
         raise InputError(f"{at}: not valid YAML: {why}") from None
     except ValueError as exc:  # an integer of over 4300 digits (Python's own limit)
         raise InputError(f"{path}: {what}: {_first_line(exc)}") from None
-    return data, Lines(path, "", composed)
+    return data, lines
 
 
 def yaml_loader() -> type:
@@ -221,13 +221,15 @@ def yaml_loader() -> type:
     return getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
-def _compose_and_load(text: str, loader: type) -> tuple[object, object]:
-    """The document's node graph (for the lines) and its data, from one parse: the data is
-    constructed from the composed nodes (what `yaml.safe_load` does after composing)."""
+def _load_yaml(text: str, loader: type, path: Path) -> tuple[object, Lines]:
+    """The document's data and lines from one parse: the lines from the composed nodes
+    (before the constructor flattens their merge keys `<<` in place), then the data
+    constructed from those nodes (what `yaml.safe_load` does after composing)."""
     one = loader(text)
     try:
         node = one.get_single_node()
-        return node, (one.construct_document(node) if node is not None else None)
+        lines = Lines(path, "", node)
+        return (one.construct_document(node) if node is not None else None), lines
     finally:
         one.dispose()
 

@@ -108,3 +108,36 @@ def test_pycan_csv_bad_lines():
     assert not ctx.absolute_time
     with pytest.raises(InputError, match=r"p\.csv:line 3: "):
         run(pycan_csv.read, text, strict=True, source="p.csv")
+
+
+def test_pycan_csv_blank_lines_read_the_frames_python_can_reads(tmp_path):
+    """Issue 38 item 5: 150,000 blank lines (empty, CRLF, spaces) among 3000 frames are
+    skipped in bulk; python-can's CSVReader, which has no blank lines, reads the same
+    frames from the file without them, and each frame keeps the line it is on."""
+    plain = tmp_path / "plain.csv"
+    with can.CSVWriter(str(plain)) as w:
+        for m in _messages():
+            w.on_message_received(m)
+    rows = plain.read_bytes().splitlines(keepends=True)
+    blanks = [b"\n" * 200, b"\r\n", b" \t \n", b"\n"]
+    text = rows[0] + b"".join(r + blanks[i % 4] for i, r in enumerate(rows[1:]))
+    path = tmp_path / "blank.csv"
+    path.write_bytes(text)
+    batch, ctx, _ = run(pycan_csv.read, path, batch_size=1000)
+    assert ctx.problems.count == 0
+    assert_same_as_python_can(batch, list(can.CSVReader(str(plain))), channel_offset=None)
+    lines = text.split(b"\n")
+    assert text.count(b"\n") > 150_000
+    assert [lines[k - 1] for k in batch.line.tolist()] == [r.rstrip(b"\r\n") for r in rows[1:]]
+
+
+def test_pycan_csv_header_is_line_one():
+    """A blank first line is no header (as before blank lines were skipped in bulk)."""
+    header = b"timestamp,arbitration_id,extended,remote,error,dlc,data\n"
+    batch, ctx, _ = run(pycan_csv.read, b"\n" + header + b"1.5,0x123,0,0,0,2,AQI=\n")
+    assert len(batch) == 0
+    assert [(p.location, p.message) for p in ctx.problems.shown] == [
+        ("line 1", "not a python-can CSV header")
+    ]
+    batch, ctx, _ = run(pycan_csv.read, header + b"\n \n1.5,0x123,0,0,0,2,AQI=\n")
+    assert batch.line.tolist() == [4] and ctx.problems.count == 0

@@ -10,6 +10,7 @@ from __future__ import annotations
 import gzip
 import struct
 import zlib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -338,6 +339,35 @@ def test_absurdly_long_line_memory_bounded(name, tmp_path):
     assert n >= 2
     assert src.problems.count == 1
     assert peak < 48 << 20, f"peak {peak >> 20} MiB"  # the line is 128 MiB
+
+
+@pytest.mark.parametrize("key", sorted(TEXT_LOGS))
+def test_blank_lines_change_nothing_read(key, tmp_path):
+    """Issue 38 item 5: blank lines (empty, CR only, spaces and tabs, runs of hundreds)
+    after every line but the first of a real log of each text format, in its own line
+    ends: the same frames and problems, each frame at its line in the new file."""
+    data = real_file(TEXT_LOGS[key]).read_bytes()[:200_000]
+    data = data[: data.rfind(b"\r" if key == "canbusanalyzer" else b"\n") + 1]
+    end = b"\r" if key == "canbusanalyzer" else b"\n"
+    blanks = [end, end * 300, b"\r\n" if end == b"\n" else end]
+    if not key.startswith("candump"):  # (to candump, a line of spaces is a bad line)
+        blanks += [b" \t " + end, b"\x0b\x0c" + end]
+    out, where, line = [], [], 0
+    for i, row in enumerate(data.split(end)[:-1]):
+        line += 1
+        where.append(line)
+        out.append(row + end)
+        if i:
+            out.append(blanks[i % len(blanks)])
+            line += blanks[i % len(blanks)].count(end)
+    suffix = Path(TEXT_LOGS[key]).suffix
+    plain, src0 = _read(data, "plain" + suffix, tmp_path)
+    blank, src = _read(b"".join(out), "blank" + suffix, tmp_path)
+    assert src.ctx.format == src0.ctx.format and len(plain) > 0
+    assert [r[:-1] for r in _rows(blank)] == [r[:-1] for r in _rows(plain)]
+    assert blank.line.tolist() == [where[k - 1] for k in plain.line.tolist()]
+    said = lambda s: [(p.location, p.message) for p in s.ctx.problems.shown]  # noqa: E731
+    assert [m for _, m in said(src)] == [m for _, m in said(src0)]
 
 
 # ---- property tests: mutations of the real logs -------------------------------------------------

@@ -22,6 +22,7 @@ from generate import log_stem  # noqa: E402  (the name the scripts give their lo
 SMOKED = {
     "generate.py",
     "bench_check.py",
+    "bench_bounded.py",
     "bench_dbc.py",
     "bench_decode.py",
     "bench_fleet.py",
@@ -79,6 +80,32 @@ def test_bench_check(logs):
     assert re.fullmatch(rf"decode --summary +best CPU +{NUMBER} s +best wall +{NUMBER} s", lines[0])
     assert re.fullmatch(rf"check +best CPU +{NUMBER} s +best wall +{NUMBER} s", lines[1])
     assert re.fullmatch(rf"check overhead: [+-]{NUMBER} % CPU \(3000 frames, best of 1\)", lines[2])
+
+
+def test_bench_bounded_rules_and_blank_lines(tmp_path):
+    """A small rules file and every text format with and without blank lines: CPU and
+    peak RSS printed, the same frames read both ways."""
+    out = _run(
+        "bench_bounded.py",
+        *("--assertions", "300", "--frames", "300", "--blank", "0.2", "--repeat", "1"),
+        *("--out", str(tmp_path)),
+    ).stdout.splitlines()
+    assert out[0] == "CPU seconds (user+system), best of 1; peak RSS, largest"
+    assert re.fullmatch(
+        rf"rules: check samples/demo.log --rules FILE \(300 assertions, {NUMBER} MB\)", out[1]
+    )
+    for line, what in zip(out[2:4], ("no rules", "rules"), strict=True):
+        assert re.fullmatch(rf"  this  {what} +CPU +{NUMBER} s  peak RSS +{NUMBER} MB", line)
+    assert out[4].startswith("blank lines: 300 frames, with and without 0.2 MiB")
+    rows = out[5:]
+    assert [r.split()[1] for r in rows] == [
+        "candump", "asc", "trc", "pycan_csv", "gvret", "ixxat", "canbusanalyzer", "sevcon",
+    ]  # fmt: skip
+    for r in rows:
+        fmt = r.split()[1]
+        assert re.search(rf" 300 frames  CPU +{NUMBER} s, with blank lines +{NUMBER} s: ", r)
+        assert r.endswith(f"s/MiB  (same frames, {fmt}, 0 problems)"), r
+    assert not list(tmp_path.iterdir())  # the inputs are gone
 
 
 def test_bench_tables_compares_each_layout(logs, tmp_path):

@@ -34,7 +34,7 @@ from cananalyze.core.frames import (
     FrameBatch,
     concat,
 )
-from cananalyze.formats.logs._rows import MAX_LINE, RowSink
+from cananalyze.formats.logs._rows import MAX_LINE, RowSink, inked_lines
 from cananalyze.formats.logs.candump import CHUNK
 from cananalyze.formats.registry import LogFormat, ReadContext, register
 from cananalyze.runtime import speedups
@@ -292,13 +292,10 @@ def _chunks(stream: BinaryIO, parser: _LineParser) -> Iterator[FrameBatch]:
             chunk, carry = memoryview(data)[lo:size], b""
         first_line = line_base + 1
         C = speedups.C
-        if C is None:  # every line through the line parser, in order
-            text = bytes(chunk)
-            lines = text.decode("latin-1").split("\n")
-            if text.endswith(b"\n"):
-                lines.pop()
-            line_base += len(lines)
-            for i, raw in enumerate(lines):
+        if C is None:  # every line through the line parser, in order, but the blank ones
+            text = bytes(chunk).decode("latin-1")  # (nothing to it), skipped in bulk
+            line_base += text.count("\n") + (not text.endswith("\n"))
+            for i, raw in inked_lines(text):
                 parser.line(first_line + i, raw.rstrip("\r"))
             merged = sink.flush()
         else:
@@ -419,6 +416,7 @@ def _c_chunk(C, parser: _LineParser, chunk, starts, ends, first_line: int):
     fast = np.zeros(starts.size, bool) if bulk is None else bulk[0]
     # every other line, in order, through the line parser; note where the time base moves
     slow_idx = np.flatnonzero(~fast[head_end:]) + head_end
+    slow_idx = slow_idx[ends[slow_idx] > starts[slow_idx]]  # empty lines mean nothing to it
     state_at: list[tuple[int, float]] = [(-1, parser.start)]
     new_chans = _first_channels(bulk, parser) if bulk is not None else []
     nc = 0

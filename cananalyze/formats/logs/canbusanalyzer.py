@@ -59,7 +59,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     text = io.TextIOWrapper(stream, encoding="latin-1", newline=None)  # CR line ends
     declared = None
     rows = 0
-    for n, line in text_lines(text, ctx=ctx):
+    for n, line in text_lines(text, ctx=ctx, skip_blank=True):
         if n == 1:
             fields = [x.strip() for x in line.split("@")]
             if len(fields) > 5 and fields[5].isdecimal():

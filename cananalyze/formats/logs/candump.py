@@ -529,9 +529,11 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
         else:
             size = chunks.carry
         C = speedups.C
+        kept = None  # the lines the parse saw, when blank ones were left out of it
         if C is not None:
             text = memoryview(buf)[lo : lo + size]
             starts, ends, cols, slow = _c_lines(C, text, chans, bounds)
+            n_lines = starts.size
         else:
             # the text goes straight into one padded array: a single copy of the bytes
             text = arr = np.empty(size + PAD, np.uint8)
@@ -547,9 +549,13 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
             # strip '\r' before '\n'
             cr = (ends > starts) & (arr[np.maximum(ends - 1, 0)] == 13)
             ends = ends - cr
+            n_lines = starts.size
+            if not (ends > starts).all():  # empty lines: not parsed, a column row each
+                kept = np.flatnonzero(ends > starts)
+                starts, ends = starts[kept], ends[kept]
             cols, slow = _bulk_log_lines(arr, starts, ends, chans)
-        line_no = line_base + 1 + np.arange(starts.size, dtype=np.int64)
-        line_base += starts.size
+        line_no = line_base + 1 + (np.arange(n_lines, dtype=np.int64) if kept is None else kept)
+        line_base += n_lines
         nonblank = ends > starts
         slow &= nonblank
         good = ~slow & nonblank

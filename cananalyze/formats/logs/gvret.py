@@ -66,7 +66,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     sink = RowSink(ctx, epoch_times=True)
     col: dict[str, int] = {}
     first_data = 0
-    for n, line in text_lines(stream, ctx=ctx):
+    for n, line in text_lines(stream, ctx=ctx, skip_blank=True):
         if not line.strip():
             continue
         f = line.split(",")

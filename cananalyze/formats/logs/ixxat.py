@@ -83,7 +83,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     date = clock = None
     in_header = True
     shift: float | None = None  # start epoch - the first row's clock, once known
-    for n, line in text_lines(stream, ctx=ctx):
+    for n, line in text_lines(stream, ctx=ctx, skip_blank=True):
         if not line.strip():
             continue
         if in_header:

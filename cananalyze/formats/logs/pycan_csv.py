@@ -69,11 +69,11 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     sink = RowSink(ctx, epoch_times=True)
     chan = sink.channel("1")
     header = True
-    for n, line in text_lines(stream, ctx=ctx):
-        if header:
+    for n, line in text_lines(stream, ctx=ctx, skip_blank=True):
+        if header:  # line 1 (a blank line 1, skipped, is no header either)
             header = False
-            if line.strip() != HEADER:
-                ctx.problems.add(ctx.source, f"line {n}", "not a python-can CSV header")
+            if n != 1 or line.strip() != HEADER:
+                ctx.problems.add(ctx.source, "line 1", "not a python-can CSV header")
                 return
             continue
         if not line.strip():

@@ -60,7 +60,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     sink = RowSink(ctx)
     chan = sink.channel("1")
     last_t = 0.0
-    for n, line in text_lines(stream, ctx=ctx):
+    for n, line in text_lines(stream, ctx=ctx, skip_blank=True):
         s = line.strip()
         if not s:
             continue

@@ -99,7 +99,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     start = 0.0
     columns: dict[str, int] = {}
     in_header = True
-    for n, line in text_lines(stream, ctx=ctx):
+    for n, line in text_lines(stream, ctx=ctx, skip_blank=True):
         s = line.strip()
         if not s:
             continue
