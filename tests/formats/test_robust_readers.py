@@ -370,6 +370,21 @@ def test_blank_lines_change_nothing_read(key, tmp_path):
     assert [m for _, m in said(src)] == [m for _, m in said(src0)]
 
 
+@pytest.mark.parametrize("pure", [False, True], ids=["compiled", "pure"])
+def test_blank_lines_before_the_first_frame(pure, tmp_path, monkeypatch):
+    """Blank lines that open a candump log (a chunk of nothing but blank lines) read the
+    frames after them, on both paths; the pure path raised IndexError (CI, 2026-12-05)."""
+    from cananalyze.runtime import speedups
+
+    if pure:
+        monkeypatch.setattr(speedups, "C", None)
+    path = tmp_path / "lead.log"
+    path.write_bytes(b"\n\n(1.000000) can0 601#4000100000000000\n(1.001000) can0 581#4300100092010200\n")
+    got = read_all(path, fmt="candump")
+    assert got.line.tolist() == [3, 4]
+    assert got.can_id.tolist() == [0x601, 0x581]
+
+
 # ---- property tests: mutations of the real logs -------------------------------------------------
 
 MUTATION_LOGS = [

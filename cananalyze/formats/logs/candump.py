@@ -560,7 +560,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
         slow &= nonblank
         good = ~slow & nonblank
         parts: list[FrameBatch] = []
-        if good.all():  # the usual chunk: every line a frame, no copies
+        if good.size and good.all():  # the usual chunk: every line a frame, no copies
             parts.append(FrameBatch(*cols, line_no))
             if absolute is None:
                 absolute = bool(cols[0][0] > 1e8)
