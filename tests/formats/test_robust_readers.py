@@ -379,7 +379,9 @@ def test_blank_lines_before_the_first_frame(pure, tmp_path, monkeypatch):
     if pure:
         monkeypatch.setattr(speedups, "C", None)
     path = tmp_path / "lead.log"
-    path.write_bytes(b"\n\n(1.000000) can0 601#4000100000000000\n(1.001000) can0 581#4300100092010200\n")
+    path.write_bytes(
+        b"\n\n(1.000000) can0 601#4000100000000000\n(1.001000) can0 581#4300100092010200\n"
+    )
     got = read_all(path, fmt="candump")
     assert got.line.tolist() == [3, 4]
     assert got.can_id.tolist() == [0x601, 0x581]
