@@ -196,6 +196,81 @@ class StreamStats:
             "jitter": math.sqrt(max(self.m2, 0.0) / self.n),
         }
 
+    def merge(self, other: StreamStats) -> None:
+        """Add another stream's values (the report's per-node SDO latencies into one)."""
+        if other.n == 0:
+            return
+        self.add_moments(other.n, other.mean, other.m2, other.min, other.max)
+        if other._exact is not None:
+            self.add_values(np.concatenate(other._exact))
+            return
+        if self._exact is not None:  # the other is past EXACT values: so is the sum
+            mine, self._exact = self._exact, None
+            if mine:
+                self._histogram(np.concatenate(mine), None)
+        self._under = [self._under[0] + other._under[0], self._under[1] + other._under[1]]
+        count, total, lo, level = other._count, other._sum, other._lo, other._level
+        while self._level < level:
+            self._coarsen()
+        count, total, lo = _coarser(count, total, lo, self._level - level)
+        if count.size == 0:
+            return
+        count, total, lo = _coarser(count, total, lo, self._fit(lo, lo + count.size - 1))
+        at = lo - self._lo
+        self._count[at : at + count.size] += count
+        self._sum[at : at + count.size] += total
+
+    def bars(self, most: int = 150) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(left edge, width, count) in ms of the non-empty histogram bars, neighbouring
+        bins merged so that the range seen has at most `most` bars: the report's plot of
+        the same values whose quantiles `stats` gives. Values below 1 us share the bar
+        just below 1 us."""
+        if self._exact is not None:
+            v = np.concatenate(self._exact) if self._exact else np.zeros(0)
+            b = bins_of(v)
+            under = int((b < 0).sum())
+            b = b[b >= 0]
+            lo = int(b.min()) if b.size else 0
+            count = np.bincount(b - lo) if b.size else np.zeros(0, np.int64)
+            level = 0
+        else:
+            under, count, lo, level = self._under[0], self._count, self._lo, self._level
+        nz = np.flatnonzero(count)
+        lefts, widths, counts = [], [], []
+        if under:
+            lefts.append(np.array([_FLOOR / 2]))
+            widths.append(np.array([_FLOOR / 2]))
+            counts.append(np.array([under], np.int64))
+        if nz.size:
+            g = max(1, -(-(int(nz[-1]) - int(nz[0]) + 1) // most))
+            group = (nz - nz[0]) // g
+            merged = np.bincount(group, weights=count[nz]).astype(np.int64)
+            k = np.flatnonzero(merged)
+            first = lo + nz[0] + k * g  # bin numbers at `level`
+            scale = float(1 << level)
+            left = _FLOOR * np.exp(_LOG_R * first * scale)
+            right = _FLOOR * np.exp(_LOG_R * (first + g) * scale)
+            lefts.append(left)
+            widths.append(right - left)
+            counts.append(merged[k])
+        if not counts:
+            return np.zeros(0), np.zeros(0), np.zeros(0, np.int64)
+        return np.concatenate(lefts), np.concatenate(widths), np.concatenate(counts)
+
+
+def _coarser(count: np.ndarray, total: np.ndarray, lo: int, times: int) -> tuple:
+    """Bins `times` levels wider (neighbours merged), as `StreamStats._coarsen` does."""
+    for _ in range(times):
+        if count.size:
+            j = (lo + np.arange(count.size)) >> 1
+            first = int(j[0])
+            count = np.bincount(j - first, weights=count).astype(np.int64)
+            total = np.bincount(j - first, weights=total)
+            lo = first
+        else:
+            lo >>= 1
+    return count, total, lo
+
 
 def histogram_many(items: list[tuple[StreamStats, int, int]], v: np.ndarray, b: np.ndarray) -> None:
     """`add_values(v[a:e], b[a:e])` for many streams already in histogram mode, at once.

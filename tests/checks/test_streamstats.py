@@ -106,3 +106,75 @@ def test_histogram_many_equals_one_stream_at_a_time() -> None:
             assert (x._level, x._lo, x._under) == (y._level, y._lo, y._under)
             assert np.array_equal(x._count, y._count) and np.array_equal(x._sum, y._sum)
     assert one[3]._level > 0 and one[5]._under[0] > 0
+
+
+@pytest.mark.parametrize(
+    "sizes, spread",
+    [
+        ((10, 20), 1.0),
+        ((3000, 3000), 1.0),
+        ((5000, 100), 1.0),
+        ((100, 9000), 1.0),
+        ((20000, 30000), 1.5),
+    ],
+)
+def test_merged_streams_give_the_statistics_of_all_their_values(sizes, spread) -> None:
+    """`merge` (the report's SDO latency over every node): the same count, moments and
+    quantiles as one stream fed every value, in exact and histogram mode alike."""
+    rng = np.random.default_rng(sum(sizes))
+    a = rng.lognormal(3.0, spread, sizes[0])
+    b = rng.lognormal(3.0, spread, sizes[1])
+    b[:3] = 0.0  # below 1 us: the shared underflow bin
+    one, left, right = StreamStats(), StreamStats(), StreamStats()
+    for part in np.array_split(a, 3):
+        one.add(part)
+        left.add(part)
+    for part in np.array_split(b, 3):
+        one.add(part)
+        right.add(part)
+    left.merge(right)
+    want, got = one.stats(), left.stats()
+    assert got["count"] == want["count"] == sum(sizes)
+    for k in ("min", "max", "median", "p99", "mean", "jitter"):
+        assert got[k] == pytest.approx(want[k], rel=1e-9), k
+    if sum(sizes) <= EXACT:  # still exact: numpy's values
+        assert got["median"] == pytest.approx(np.median(np.concatenate((a, b))), rel=1e-12)
+
+
+def test_merging_a_narrow_stream_into_a_wide_one_aligns_the_bins() -> None:
+    """A stream coarsened by a wide spread merged with a fine one: every value counted,
+    quantiles within the wider bins' width of numpy's."""
+    rng = np.random.default_rng(5)
+    wide = np.concatenate((rng.uniform(0.01, 1e7, 6000), [1e-2, 1e7]))
+    narrow = rng.normal(100.0, 0.05, 9000)
+    w, n = StreamStats(), StreamStats()
+    w.add(wide)
+    n.add(narrow)
+    assert w._level > n._level  # the case: different bin widths
+    for first, second in ((w, n), (n, w)):
+        s = StreamStats()
+        s.merge(first)
+        s.merge(second)
+        allv = np.concatenate((wide, narrow))
+        assert s.n == allv.size and s.min == allv.min() and s.max == allv.max()
+        assert s.bars()[2].sum() == allv.size
+        assert s.quantile(0.5) == pytest.approx(np.median(allv), rel=0.01)
+
+
+def test_bars_count_every_value_in_at_most_the_bars_asked() -> None:
+    """The report's histogram of a stream: every value in one bar, the bar holding the
+    largest value ends past it, in exact and histogram mode."""
+    rng = np.random.default_rng(3)
+    for size in (500, 200_000):
+        v = rng.normal(100.0, 0.5, size)
+        v[:10] = 1600.0
+        v[10] = 0.0  # below 1 us
+        s = StreamStats()
+        for part in np.array_split(v, 7):
+            s.add(part)
+        left, width, count = s.bars(most=150)
+        assert count.sum() == v.size and count.size <= 151  # (+ the underflow bar)
+        assert (width > 0).all() and (np.diff(left) > 0).all()
+        assert left[-1] <= 1600.0 < left[-1] + width[-1]
+        assert left[0] < 1e-3  # the underflow bar below 1 us
+        assert s.stats()["median"] == pytest.approx(np.median(v), rel=0.001)

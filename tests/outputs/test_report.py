@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from conftest import SAMPLES, generated_log, real_file
 
-from cananalyze.outputs.report.accum import Envelope, LogHistogram, WindowSums
+from cananalyze.outputs.report.accum import Envelope, WindowSums
 
 PACKED = re.compile(r'<script type="text/plain" id="(\w+)">(.*?)</script>', re.S)
 
@@ -392,23 +392,6 @@ def test_envelope_keeps_every_extreme_in_fixed_memory():
     for b in (0, 77, int(k[123_456]), int(k.max())):
         sel = v[k == b]
         assert env.lo[b] == sel.min() and env.hi[b] == sel.max()
-
-
-def test_log_histogram_statistics_match_numpy():
-    rng = np.random.default_rng(3)
-    v = rng.normal(100.0, 0.5, 200_000)
-    v[:10] = 1600.0
-    h = LogHistogram()
-    for part in np.array_split(v, 7):
-        h.add(part)
-    assert h.count == v.size and h.min == v.min() and h.max == v.max()
-    assert h.mean == pytest.approx(v.mean(), rel=1e-12)
-    assert h.std == pytest.approx(v.std(), rel=1e-6)
-    for q in (0.01, 0.5, 0.99):
-        assert h.quantile(q) == pytest.approx(np.quantile(v, q), rel=0.002)
-    left, width, count = h.bars()
-    assert count.sum() == v.size and count.size <= 150
-    assert left[-1] <= 1600.0 < left[-1] + width[-1]
 
 
 def test_window_sums_peak_and_mean():

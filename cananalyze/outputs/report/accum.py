@@ -3,9 +3,9 @@
 An hour-long log has tens of millions of frames; the page may hold a few thousand
 points per plot. `Envelope` keeps min and max per time bucket (a pixel column of
 the plot), doubling the bucket width and merging neighbours when the log outgrows
-its buckets, so memory is fixed and no peak is lost. `LogHistogram` counts values
-in logarithmic bins (0.2 % wide) and keeps exact count, sum, sum of squares, min and
-max: every frame is counted, none is stored.
+its buckets, so memory is fixed and no peak is lost. Periods and latencies are
+counted by `checks.streamstats.StreamStats`, the computation `--summary` prints, so
+the page and the summary give the same numbers.
 """
 
 from __future__ import annotations
@@ -78,82 +78,6 @@ class Envelope:
         keep = np.ones(tt.size, bool)
         keep[1::2] = ~same  # a bucket with one value: one point
         return tt[keep], vv[keep]
-
-
-class LogHistogram:
-    """Positive values (periods, latencies in ms) in bins 0.2 % wide, with exact moments.
-
-    0.2 % of a 100 ms heartbeat is 0.2 ms: finer than the jitter a scheduler adds.
-    """
-
-    PER_DECADE = 1150  # 10 ** (1 / 1150) - 1 = 0.2 %
-    LOW = 1e-4  # ms: below this, the first bin
-    DECADES = 10
-
-    def __init__(self) -> None:
-        self.bins = np.zeros(self.PER_DECADE * self.DECADES + 1, np.int64)
-        self.count = 0
-        self.sum = 0.0
-        self.sumsq = 0.0
-        self.min = np.inf
-        self.max = -np.inf
-
-    def add(self, v: np.ndarray) -> None:
-        v = np.asarray(v, np.float64)
-        v = v[np.isfinite(v)]
-        if v.size == 0:
-            return
-        k = np.floor(np.log10(np.maximum(v, self.LOW) / self.LOW) * self.PER_DECADE)
-        k = np.clip(k, 0, self.bins.size - 1).astype(np.int64)
-        self.bins += np.bincount(k, minlength=self.bins.size)
-        self.count += v.size
-        self.sum += float(v.sum())
-        self.sumsq += float(np.square(v).sum())
-        self.min = min(self.min, float(v.min()))
-        self.max = max(self.max, float(v.max()))
-
-    def merge(self, other: LogHistogram) -> None:
-        self.bins += other.bins
-        self.count += other.count
-        self.sum += other.sum
-        self.sumsq += other.sumsq
-        self.min = min(self.min, other.min)
-        self.max = max(self.max, other.max)
-
-    @property
-    def mean(self) -> float:
-        return self.sum / self.count if self.count else float("nan")
-
-    @property
-    def std(self) -> float:
-        if self.count < 2:
-            return 0.0
-        var = max(self.sumsq / self.count - self.mean**2, 0.0)
-        return float(np.sqrt(var))
-
-    def quantile(self, q: float) -> float:
-        """The value at quantile q, to the bin's 0.2 % (the bin's geometric centre)."""
-        if not self.count:
-            return float("nan")
-        k = int(np.searchsorted(np.cumsum(self.bins), q * self.count, side="left"))
-        lo = self.LOW * 10 ** (k / self.PER_DECADE)
-        mid = lo * 10 ** (0.5 / self.PER_DECADE)
-        return float(min(max(mid, self.min), self.max))
-
-    def bars(self, most: int = 150) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(left edge, width, count) of the non-empty bars, neighbouring bins merged so
-        that the range seen has at most `most` bars (each stays visible)."""
-        nz = np.flatnonzero(self.bins)
-        if nz.size == 0:
-            return np.zeros(0), np.zeros(0), np.zeros(0, np.int64)
-        g = max(1, -(-(int(nz[-1]) - int(nz[0]) + 1) // most))
-        group = (nz - nz[0]) // g
-        counts = np.bincount(group, weights=self.bins[nz]).astype(np.int64)
-        k = np.flatnonzero(counts)
-        first = nz[0] + k * g
-        left = self.LOW * 10 ** (first / self.PER_DECADE)
-        right = self.LOW * 10 ** ((first + g) / self.PER_DECADE)
-        return left, right - left, counts[k]
 
 
 class WindowSums:

@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from cananalyze.outputs.report.accum import Envelope, LogHistogram
+from cananalyze.checks.streamstats import StreamStats
+from cananalyze.outputs.report.accum import Envelope
 from cananalyze.outputs.report.encode import Packed
 
 HEIGHT = 260
@@ -133,7 +134,7 @@ def period(
     return _fig(traces, f"{who} {kind} period", "time (s)", "period (ms)")
 
 
-def histogram(hist: LogHistogram, title: str, x: str, marks: list[float] | None = None) -> dict:
+def histogram(hist: StreamStats, title: str, x: str, marks: list[float] | None = None) -> dict:
     left, width, count = hist.bars()
     bars = {
         "type": "bar",
@@ -155,7 +156,7 @@ def histogram(hist: LogHistogram, title: str, x: str, marks: list[float] | None 
         }
         for m in marks or []
     ]
-    # a log axis: 0.2 % bins are equally wide, and a dropout shows beside the jitter
+    # a log axis: the log-scale bins are equally wide, and a dropout shows beside the jitter
     return _fig([bars], title, x, "count", shapes=shapes, bargap=0, xaxis={"type": "log"})
 
 

@@ -174,22 +174,23 @@ def nodes(s, figs: Figures) -> dict:
         cfg = configs[bus]  # that bus's configuration, as its checker judged
         for kind in ("heartbeat", "guarding"):
             g = s.errctl.get((kind, n) if bus is None else (kind, n, bus))
-            if g is None or g.hist.count == 0:
+            if g is None or g.hist.n == 0:
                 continue
             conf = _configured(cfg, kind, n, g) if cfg is not None else []
             h = g.hist
+            st = h.stats()  # the numbers `--summary` prints, from the same computation
             who = _node_name(n, bus)
             marks = sorted({v for _, v in conf})
             periods.append(
                 {
                     "kind": kind,
-                    "count": f"{h.count:,}",
-                    "min": _ms(h.min),
-                    "median": _ms(h.quantile(0.5)),
-                    "mean": _ms(h.mean),
-                    "p99": _ms(h.quantile(0.99)),
-                    "max": _ms(h.max),
-                    "std": _ms(h.std),
+                    "count": f"{h.n:,}",
+                    "min": _ms(st["min"]),
+                    "median": _ms(st["median"]),
+                    "mean": _ms(st["mean"]),
+                    "p99": _ms(st["p99"]),
+                    "max": _ms(st["max"]),
+                    "std": _ms(st["jitter"]),
                     "configured": (
                         "configured " + ", ".join(sorted({_ms(v, 0) for _, v in conf})) + " ms"
                         if conf
@@ -249,29 +250,30 @@ def _configured(cfg: ModelConfig, kind: str, node: int, g) -> list[tuple[float, 
 def sdo(s, figs: Figures) -> dict | None:
     if not s.sdo_count:
         return None
-    from cananalyze.outputs.report.accum import LogHistogram
+    from cananalyze.checks.streamstats import StreamStats
 
     rows = []
     for (bus, n), (ok, bad, h) in sorted(_sdo_by_bus(s).items()):
         who = s.who(bus, n) if s.several else n
-        if h is not None and h.count:
+        if h is not None and h.n:
+            st = h.stats()
             rows.append(
                 [
                     who,
                     ok + bad,
                     bad,
-                    _ms(h.min),
-                    _ms(h.quantile(0.5)),
-                    _ms(h.quantile(0.99)),
-                    _ms(h.max),
+                    _ms(st["min"]),
+                    _ms(st["median"]),
+                    _ms(st["p99"]),
+                    _ms(st["max"]),
                 ]
             )
         else:
             rows.append([who, ok + bad, bad, "-", "-", "-", "-"])
-    allh = LogHistogram()
+    allh = StreamStats()
     for h in s.sdo_latency.values():
         allh.merge(h)
-    latency = figs.add(plots.histogram(allh, "SDO latency", "latency (ms)")) if allh.count else None
+    latency = figs.add(plots.histogram(allh, "SDO latency", "latency (ms)")) if allh.n else None
     aborts = [
         [
             _rel(s, r.get("t")),
@@ -292,11 +294,11 @@ def sdo(s, figs: Figures) -> dict | None:
 def _sdo_by_bus(s) -> dict:
     """(bus, node) -> [ok, aborts, latency histogram]: the transfers counted before a
     second bus was seen (bus "") are the first bus's."""
-    from cananalyze.outputs.report.accum import LogHistogram
+    from cananalyze.checks.streamstats import StreamStats
 
     out: dict = {}
     for (bus, n), (ok, bad) in s.sdo_count.items():
-        item = out.setdefault((s.first_bus(bus), n), [0, 0, LogHistogram()])
+        item = out.setdefault((s.first_bus(bus), n), [0, 0, StreamStats()])
         item[0] += ok
         item[1] += bad
         h = s.sdo_latency.get((bus, n))
@@ -359,7 +361,7 @@ def pdos(s, figs: Figures) -> dict | None:
         node, name = s.pdo_node.get((bus, cob), (-1, "pdo"))
         model = s.network_of(bus)  # each bus its own PDO configuration
         cfg = configs[bus]
-        h = g.hist
+        st = g.hist.stats() if g.hist.n else dict.fromkeys(("min", "median", "max"), float("nan"))
         span = (g.last_t or 0) - (g.first_t or 0)
         rate = (g.count - 1) / span if span > 0 else float("nan")
         params = cfg.pdo_params(cob, g.last_t or 0.0) if cfg is not None else None
@@ -380,7 +382,7 @@ def pdos(s, figs: Figures) -> dict | None:
                 name,
                 f"{g.count:,}",
                 *(
-                    (_ms(rate), _ms(h.min), _ms(h.quantile(0.5)), _ms(h.max))
+                    (_ms(rate), _ms(st["min"]), _ms(st["median"]), _ms(st["max"]))
                     if s.timed  # a log without times has no rates nor gaps
                     else ("-", "-", "-", "-")
                 ),

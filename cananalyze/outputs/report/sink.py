@@ -13,13 +13,14 @@ from pathlib import Path
 
 import numpy as np
 
+from cananalyze.checks.streamstats import StreamStats
 from cananalyze.core.atomic import Staged, check_writable
 from cananalyze.core.finding import Finding
 from cananalyze.decode.drive_tracker import STATE
 from cananalyze.decode.events.columns import EMCY
 from cananalyze.decode.node_tally import NodeTally
 from cananalyze.outputs.busload import frame_bits
-from cananalyze.outputs.report.accum import Envelope, LogHistogram, WindowSums
+from cananalyze.outputs.report.accum import Envelope, WindowSums
 from cananalyze.pipeline.sink import Sink
 from cananalyze.protocol.services import Service
 
@@ -39,7 +40,8 @@ class Gaps:
     count: int = 0
     first_t: float | None = None
     last_t: float | None = None
-    hist: LogHistogram = field(default_factory=LogHistogram)
+    # the statistics `--summary` and `--timing` compute (one computation, issue 44 item 1)
+    hist: StreamStats = field(default_factory=StreamStats)
     over_time: Envelope = field(default_factory=Envelope)
 
     def add(self, t: np.ndarray) -> None:
@@ -50,7 +52,7 @@ class Gaps:
         prev = np.concatenate(([self.last], t[:-1])) if self.last is not None else t[:-1]
         at = t if self.last is not None else t[1:]
         gaps = (at - prev) * 1000.0
-        self.hist.add(gaps)
+        self.hist.add(gaps[np.isfinite(gaps)])
         self.over_time.add(at, gaps)
         self.last = self.last_t = float(t[-1])
         self.count += t.size
@@ -125,7 +127,7 @@ class ReportSink(Sink):
         self.pdo_node: dict[tuple[str, int], tuple[int, str]] = {}
         # SDO transfers by (bus, node): bus "" until the decoder split by bus (then
         # the first bus's, `first_bus`), a channel's name after
-        self.sdo_latency: dict[tuple[str, int], LogHistogram] = {}
+        self.sdo_latency: dict[tuple[str, int], StreamStats] = {}
         self.sdo_count: dict[tuple[str, int], list[int]] = {}  # -> [ok, abort]
         self.aborts: list[tuple[str, dict]] = []  # (bus, record)
         # t, line, bus, node, code, reg, text; the line orders a log without times
@@ -267,7 +269,8 @@ class ReportSink(Sink):
             if nd is None:
                 continue
             key = (buses[pos[0]], nd)
-            self.sdo_latency.setdefault(key, LogHistogram()).add(table.latency[pos])
+            lat = table.latency[pos]
+            self.sdo_latency.setdefault(key, StreamStats()).add(lat[np.isfinite(lat)])
             res = table.result[pos]
             ok_code = table.result_keys.index("ok") if "ok" in table.result_keys else -1
             ok = int((res == ok_code).sum())
