@@ -22,13 +22,13 @@ from collections.abc import Callable
 import numpy as np
 
 from cananalyze.checks.config import ConfigSource
-from cananalyze.checks.nmt_state import NmtStates
 from cananalyze.checks.rule import Context, GapState, Rule
 from cananalyze.checks.timing import Timing
 from cananalyze.core.finding import Finding
 from cananalyze.core.finding_columns import NONE, FindingColumns
 from cananalyze.core.frames import FrameBatch
 from cananalyze.core.records import DecodedBatch
+from cananalyze.decode.nmt_state import NmtStates
 
 UNTIMED = "timestamps"  # the rule name of the one "no timestamps" finding
 
@@ -313,11 +313,11 @@ class Checker:
     def timing_lines(self, t0: float | None) -> list[str]:
         """`check --timing`'s lines: this bus's, or each bus's under its name."""
         if not self.others:
-            return self.timing.lines(self.nmt, t0)
+            return self.timing.lines(self.nmt, t0, self.timed is not False)
         out: list[str] = []
         for c in (self, *self.others):
             out.append(f"{c.bus}:")
-            out += ["  " + line for line in c.timing.lines(c.nmt, t0)]
+            out += ["  " + line for line in c.timing.lines(c.nmt, t0, c.timed is not False)]
         return out
 
 

@@ -13,10 +13,10 @@ import numpy as np
 
 from cananalyze.checks.config import ConfigSource
 from cananalyze.checks.gaps import Gaps, grouped_gaps
-from cananalyze.checks.nmt_state import NmtStates
 from cananalyze.core.finding import Finding, rel_time
 from cananalyze.core.finding_columns import FindingColumns, Texts
 from cananalyze.core.records import DecodedBatch
+from cananalyze.decode.nmt_state import NmtStates
 from cananalyze.protocol.services import Service
 
 # Which rows each shared gap table covers, and its key column.

@@ -194,8 +194,13 @@ class Timing:
             out["nmt"] = nmt.timeline()
         return out
 
-    def lines(self, nmt=None, t0: float | None = None) -> list[str]:
+    def lines(self, nmt=None, t0: float | None = None, timed: bool = True) -> list[str]:
+        """`--timing`'s lines. A log without times (`timed` False; the checks' times are
+        then line numbers) has no periods, gaps nor latencies, and its states are told
+        by line."""
         r = self.report(nmt)
+        if not timed:
+            r["heartbeat"], r["pdo"], r["sync"], r["sdo_latency"] = {}, {}, None, {}
 
         def fmt(s: dict) -> str:
             if not s.get("count"):
@@ -206,6 +211,8 @@ class Timing:
             )
 
         out = []
+        if not timed:
+            out.append("periods, gaps and latencies: not known (the log has no timestamps)")
         if r["heartbeat"]:
             out.append("heartbeat period per node:")
             out += [f"  node {n:>3}: {fmt(s)}" for n, s in r["heartbeat"].items()]
@@ -242,7 +249,10 @@ class Timing:
         if r["error_frames"]:
             out.append(f"error frames: {r['error_frames']}")
         for node, changes in (r.get("nmt") or {}).items():
-            steps = ", ".join(f"{rel_time(t, t0)} {s} ({src})" for t, s, src in changes[:12])
+            steps = ", ".join(
+                f"{rel_time(t, t0) if timed else f'line {t:.0f}'} {s} ({src})"
+                for t, s, src in changes[:12]
+            )
             more = f", ... {len(changes) - 12} more" if len(changes) > 12 else ""
             out.append(f"NMT state node {node}: {steps}{more}")
         return out

@@ -330,8 +330,11 @@ class Summary:
             key=lambda k: (rank.get(k[0], len(rank)), str(k[0]), k[1] is None, k[1] or 0),
         )
 
-    def lines(self, bitrate: int | None = None, problems: int = 0) -> list[str]:
-        out = [f"frames: {self.frames}", f"duration: {self.duration:.6f} s"]
+    def lines(self, bitrate: int | None = None, problems: int = 0, timed: bool = True) -> list[str]:
+        """The summary's text; `timed` False: the log has no timestamps, so no duration,
+        bus load nor latency is known (none is printed as 0)."""
+        duration = f"{self.duration:.6f} s" if timed else "not known (the log has no timestamps)"
+        out = [f"frames: {self.frames}", f"duration: {duration}"]
         if bitrate and self.duration > 0:
             load = self.bits / (bitrate * self.duration) * 100
             out.append(f"bus load: {load:.1f} % at {bitrate} bit/s (nominal bits, no stuff bits)")
@@ -363,12 +366,14 @@ class Summary:
             out.append("SDO transactions per node:")
             for key in self._sdo_bus_keys():
                 results, lat = self.sdo_results_by_bus[key], self.sdo_latency_by_bus.get(key)
-                out.append(_sdo_line(f"{key[0]} node {key[1]}", results, lat))
+                out.append(_sdo_line(f"{key[0]} node {key[1]}", results, lat if timed else None))
         elif self.sdo_results:
             out.append("SDO transactions per node:")
             for node in sorted(self.sdo_results, key=lambda x: (x is None, x)):
                 lat = self.sdo_latency.get(node)
-                out.append(_sdo_line(f"node {node}", self.sdo_results[node], lat))
+                out.append(
+                    _sdo_line(f"node {node}", self.sdo_results[node], lat if timed else None)
+                )
         verdict = self.canopen_verdict()
         if verdict:
             out.append(verdict)
@@ -453,7 +458,8 @@ class SummarySink(Sink):
                     }
             print(json.dumps(rec, separators=(",", ":"), ensure_ascii=False), file=self.out)
             return
-        lines = self.summary.lines(bitrate, run.problems.count)
+        timed = checker is None or checker.timed is not False
+        lines = self.summary.lines(bitrate, run.problems.count, timed)
         lines += bus_device_lines(run.decoder.networks(), self.summary)
         if checker is not None:
             lines += checker.timing_lines(checker.t0)

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 from cananalyze.checks.gaps import grouped_gaps
-from cananalyze.checks.nmt_state import NmtStates
 from cananalyze.checks.rule import Context, GapState
 from cananalyze.checks.timing import Timing
 from cananalyze.core.frames import FrameBatch
 from cananalyze.core.records import DecodedBatch
+from cananalyze.decode.nmt_state import NmtStates
 from cananalyze.protocol.services import Service
 
 

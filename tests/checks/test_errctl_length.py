@@ -113,7 +113,7 @@ def test_wrong_length_frames_leave_node_state_and_heartbeat_alone(tmp_path):
     cap = cananalyze.load(log)
     states = cap.events[cap.events["kind"] == "nmt_state"]
     assert states["message"].tolist() == [
-        "node 5: NMT state bootup",
+        "node 5: NMT state pre-operational",  # after its boot-up (CiA 301 7.3.2.2)
         "node 5: NMT state operational",
     ]
     assert (cap.events["kind"] == "bootup").sum() == 1

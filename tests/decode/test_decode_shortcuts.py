@@ -14,7 +14,6 @@ import pytest
 from conftest import real_file
 
 from cananalyze.checks.gaps import grouped_gaps
-from cananalyze.checks.nmt_state import NmtStates
 from cananalyze.checks.rules.bootup import _SENT, _senders
 from cananalyze.checks.rules.drive_fault import DriveFaultRule
 from cananalyze.core.columns.order import stable_order
@@ -28,6 +27,7 @@ from cananalyze.core.frames import (
     FrameBatch,
 )
 from cananalyze.core.records import DecodedBatch
+from cananalyze.decode.nmt_state import NmtStates
 from cananalyze.decode.node_tally import NodeTally
 from cananalyze.formats.source import read_all
 from cananalyze.outputs.busload import bits_per_channel, frame_bits

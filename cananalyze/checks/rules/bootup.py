@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from cananalyze.checks.rule import Context, Rule
-from cananalyze.checks.senders import SENT as _SENT
-from cananalyze.checks.senders import senders as _senders
+from cananalyze.decode.senders import SENT as _SENT
+from cananalyze.decode.senders import senders as _senders
 from cananalyze.protocol.nmt import ALL_NODES, RESET_COMMUNICATION, RESET_NODE
 from cananalyze.protocol.services import Service
 

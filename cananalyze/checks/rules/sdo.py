@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from cananalyze.checks.rule import Context, Rule
-from cananalyze.checks.senders import senders
+from cananalyze.decode.senders import senders
 from cananalyze.protocol.sdo import object_text
 
 # A scan: unanswered reads of one object by at least this many node-IDs that never sent a

@@ -27,6 +27,7 @@ from cananalyze.core.records import DecodedBatch
 from cananalyze.decode.events import columns as ec
 from cananalyze.decode.events.columns import NO_NODE, EventColumns, Row, texts
 from cananalyze.decode.events.sdo_text import U64, sdo_head, sdo_message, sdo_messages, sdo_tail
+from cananalyze.decode.nmt_state import NmtStates
 from cananalyze.devices import cia402
 from cananalyze.protocol import emcy, nmt
 from cananalyze.protocol.fields import annotation, frame_fields
@@ -37,9 +38,11 @@ DEBUG, INFO, WARNING, ERROR, FATAL = 1, 2, 3, 4, 5
 LEVEL_NAMES = {DEBUG: "debug", INFO: "info", WARNING: "warning", ERROR: "error", FATAL: "fatal"}
 _LEVEL_BY_NAME = {v: k for k, v in LEVEL_NAMES.items()} | {"critical": FATAL, "warn": WARNING}
 
-_STATE_SERVICES = np.array((Service.HEARTBEAT, Service.BOOTUP, Service.GUARD_RESPONSE), np.uint8)
+_NMT_SERVICES = np.array(
+    (Service.HEARTBEAT, Service.BOOTUP, Service.GUARD_RESPONSE, Service.NMT), np.uint8
+)
 _EVENT_SERVICES = np.array([Service.NMT, Service.EMCY, Service.BOOTUP], np.uint8)
-_FRAME_SERVICES = np.union1d(_STATE_SERVICES, _EVENT_SERVICES).astype(np.uint8)
+_FRAME_SERVICES = np.union1d(_NMT_SERVICES, _EVENT_SERVICES).astype(np.uint8)
 
 
 @dataclass
@@ -59,7 +62,7 @@ class Event:
 class EventState:
     """What event building carries from batch to batch: each node's last NMT state."""
 
-    last_state: dict[int, str] = field(default_factory=dict)  # channel << 8 | node -> state
+    nmt: dict[int, NmtStates] = field(default_factory=dict)  # channel -> its nodes' states
     last_t: float = 0.0  # time of the last event: a frameless batch's findings default to it
 
 
@@ -439,44 +442,23 @@ def _frame_event_columns(batch: DecodedBatch, off: int, near: np.ndarray) -> Eve
     )
 
 
-def _stable_order(keys: np.ndarray) -> np.ndarray:
-    """np.argsort(keys, kind="stable"); as uint16 when the keys fit, which numpy sorts by
-    radix (several times faster than an int64 merge sort, the same order)."""
-    if keys.size and int(keys.min()) >= 0 and int(keys.max()) < 1 << 16:
-        keys = keys.astype(np.uint16)
-    return np.argsort(keys, kind="stable")
-
-
 def _state_changes(batch: DecodedBatch, off: int, state: EventState, near: np.ndarray) -> list[Row]:
-    """NMT state changes per node (heartbeat, boot-up, guarding); message = the state name.
-
-    Frames grouped by node (a stable sort keeps each node's frames in order), only
-    those whose state differs from the node's previous frame looked at in Python.
-    """
+    """NMT state changes per node, as `NmtStates` follows them (heartbeats, guard
+    responses, boot-ups and NMT commands: the states the checks judge by), one
+    `NmtStates` per bus (node 5 on can1 is another device than node 5 on can0);
+    message = the state name, row = the frame that made the change."""
     fb = batch.frames
-    rows = near[_any_of(batch.service[near], _STATE_SERVICES) & (fb.dlc[near] > 0)]
+    rows = near[_any_of(batch.service[near], _NMT_SERVICES)]
     if rows.size == 0:
         return []
-    # per bus and node (node 5 on can1 is another device than node 5 on can0)
-    nodes = batch.node[rows].astype(np.int64) | (fb.channel[rows].astype(np.int64) << 8)
-    order = _stable_order(nodes)
-    rows, nodes = rows[order], nodes[order]
-    code = fb.data[:, 0][rows] & nmt.STATE_MASK  # (a column, then the rows: ~2x [rows, 0])
-    change = np.ones(rows.size, bool)
-    change[1:] = (code[1:] != code[:-1]) | (nodes[1:] != nodes[:-1])
+    channel = fb.channel[rows]
     out: list[Row] = []
-    last = state.last_state
-    sel = rows[change]
-    for i, key, v, t in zip(
-        sel.tolist(),
-        nodes[change].tolist(),
-        code[change].tolist(),
-        fb.t[sel].tolist(),
-        strict=True,
-    ):
-        name = nmt.state_name(v)
-        if last.get(key) == name:
-            continue
-        last[key] = name
-        out.append(Row(t, "nmt_state", key & 0xFF, INFO, name, i + off))
+    buses = np.unique(channel).tolist()
+    for c in buses:
+        mine = rows if len(buses) == 1 else rows[channel == c]
+        follow = state.nmt.setdefault(int(c), NmtStates())
+        for row, t, node, v in follow.changes(batch, mine, c):
+            out.append(Row(t, "nmt_state", node, INFO, nmt.state_name(v), row + off))
+    if len(buses) > 1:
+        out.sort(key=lambda r: (r.t, r.row))  # several buses: as each bus's, time then file order
     return out
