@@ -172,7 +172,10 @@ SIGNALS = Table(
 
 EVENTS = Table(
     "events",
-    "NMT commands and states, boot-ups, EMCY, SDO transfers, drive states and findings, by time",
+    "NMT commands and states, boot-ups, EMCY, SDO transfers, drive states and findings, by "
+    "time. An `nmt_state` event is a change of a node's NMT state as the checks follow it: "
+    "reported by its heartbeat, guard response or boot-up (pre-operational), or commanded by "
+    "NMT, at the frame that made it, once the node has sent a frame of its own",
     (
         Column("t", "the event's time", pa.float64(), ("float64", "float64")),
         Column(
@@ -264,8 +267,14 @@ NODES = Table(
             Column(f"frames_{s}", f"its {s} frames (0 when none)", DECIDED, dataset=pa.int64())
             for s in SERVICE_NAMES
         ),
-        Column("last_state", "its last NMT state", DECIDED, dataset=pa.string()),
-        Column("last_state_t", "when it was reported", DECIDED, dataset=pa.float64()),
+        Column(
+            "last_state",
+            "its last NMT state: reported (heartbeat, guarding, boot-up) or commanded (NMT), "
+            "as the checks follow it",
+            DECIDED,
+            dataset=pa.string(),
+        ),
+        Column("last_state_t", "when it entered that state", DECIDED, dataset=pa.float64()),
         *(
             Column(
                 k,
