@@ -28,6 +28,27 @@ def report_problems(problems: ProblemLog, stream=None) -> None:
         print(f"warning: {problems.count} unreadable lines/records skipped", file=stream)
 
 
+def _value(text: str) -> object:
+    for conv in (int, float):
+        try:
+            return conv(text, 0) if conv is int else conv(text)
+        except ValueError:
+            pass
+    return {"true": True, "false": False}.get(text.lower(), text)
+
+
+def bus_options(items: list[str]) -> dict[str, object]:
+    """--bus-option KEY=VALUE items as python-can keywords (numbers and true/false typed),
+    for `live` and `simulate` alike: udp_multicast's port, an adapter's tty_baudrate."""
+    out = {}
+    for item in items:
+        key, sep, val = item.partition("=")
+        if not sep or not key.strip():
+            raise UsageError(f"--bus-option {item!r}: expected KEY=VALUE")
+        out[key.strip()] = _value(val.strip())
+    return out
+
+
 # every command that reads a DBC takes it as --dbc-in; those that write none also as --dbc
 DBC = {"dbc_in": ("--dbc",)}
 
