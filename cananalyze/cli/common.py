@@ -5,6 +5,7 @@ declared in `options.py`."""
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from typing import TYPE_CHECKING
 
@@ -47,6 +48,18 @@ def bus_options(items: list[str]) -> dict[str, object]:
             raise UsageError(f"--bus-option {item!r}: expected KEY=VALUE")
         out[key.strip()] = _value(val.strip())
     return out
+
+
+def require_display_for_viewer(instead: str, environ: dict[str, str] | None = None) -> None:
+    """Fail at once where `--rerun` cannot open its viewer: Linux with neither $DISPLAY nor
+    $WAYLAND_DISPLAY. The spawned viewer would die unseen and the stream wait for it (a
+    gRPC traceback after about 17 s); `instead` names what this command offers."""
+    env = os.environ if environ is None else environ
+    if sys.platform.startswith("linux") and not (env.get("DISPLAY") or env.get("WAYLAND_DISPLAY")):
+        raise UsageError(
+            f"--rerun: no display for a Rerun viewer ($DISPLAY and $WAYLAND_DISPLAY are unset); "
+            f"{instead}"
+        )
 
 
 # every command that reads a DBC takes it as --dbc-in; those that write none also as --dbc

@@ -17,7 +17,7 @@ import sys
 import time
 
 from cananalyze.cli import options as options_
-from cananalyze.cli.common import DBC, bus_options
+from cananalyze.cli.common import DBC, bus_options, require_display_for_viewer
 from cananalyze.core.errors import UsageError
 
 
@@ -66,6 +66,10 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--duration must be positive")
     if (args.junit or args.json) and not args.check:
         raise UsageError("--junit and --json report a check: give --check RULES too")
+    if args.rerun:
+        require_display_for_viewer(
+            "write the timelines with --rrd FILE and open it where a display is"
+        )
     extra = bus_options(args.bus_option)
     pairs = buses(args.interface, args.channel)
     where = " ".join(f"{i or ''} {c or ''}".strip() for i, c in pairs)
