@@ -1,15 +1,17 @@
-"""The real-time simulator on a bus that hands its own frames back (udp_multicast does):
-each frame reaches the simulated participants once, not once when sent and again as echo."""
+"""The real-time simulator sends each frame once: on a bus that hands its own frames back
+(udp_multicast does) they reach the simulated participants once, not again as echo; and an
+event run late (real time under load) does not send a TPDO twice."""
 
 from __future__ import annotations
 
+import heapq
 import threading
 
 import can
 from helpers.virtual_bus import unique_channel
 
 from cananalyze.core.frames import FLAG_RTR
-from cananalyze.sim.engine import OwnEcho, bus_echoes_own_frames
+from cananalyze.sim.engine import START, OwnEcho, Simulation, bus_echoes_own_frames
 from cananalyze.sim.session import build
 
 
@@ -67,3 +69,31 @@ def test_guard_requests_answered_once_on_an_echoing_bus():
     # strictly request, reply, request, reply: never two replies to one request
     kinds = [m.is_remote_frame for m in seen[first:] if m.arbitration_id == 0x707]
     assert all(a != b for a, b in zip(kinds, kinds[1:], strict=False))
+
+
+class _LateSimulation(Simulation):
+    """Offline, but every event runs `LAG` after its time, as in a loaded real-time loop
+    (there `now` is the clock when the loop gets to an event, not the event's time)."""
+
+    LAG = 0.004
+
+    def run(self, duration: float) -> None:
+        for p in self.participants:
+            p.start(self)
+        while self._queue and self._queue[0][0] <= duration:
+            t, _, fn = heapq.heappop(self._queue)
+            self.now = max(self.now, t + self.LAG)
+            fn()
+
+
+def test_a_late_scan_does_not_send_a_tpdo_its_inhibit_time_holds_back():
+    """A scan due just before the inhibit time ends, run just after it, sent the TPDO and
+    the send held back for that moment sent it again 0.3 ms later (seen in real time)."""
+    sim, _, _ = build(scenario="commissioning", duration=8.0)
+    sim.__class__ = _LateSimulation
+    sim.run(8.0)
+    # node 3's TPDO2 (0x283): inhibit time 100 ms from the configuration at ~0.4 s on
+    sent = [t for t, cob, _, _ in sim.rows if cob == 0x283 and t - START > 1.0]
+    gaps = [b - a for a, b in zip(sent, sent[1:], strict=False)]
+    assert len(sent) > 20
+    assert min(gaps) >= 0.1 - 1e-6, sorted(gaps)[:3]
