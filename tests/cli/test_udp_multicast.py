@@ -166,12 +166,19 @@ def test_simulate_to_live_across_processes_each_frame_once(tmp_path):
     recorded = [m for m in can.LogReader(str(recording)) if m.arbitration_id != PROBE]
     assert [_key(m) for m in recorded] == [_key(m) for m in seen]
 
-    # and `check` of that recording finds nothing wrong with the guarding
+    # and `check` of that recording finds nothing wrong with the guarding (doubled replies
+    # were 75 toggle-bit findings in 8 s) nor with SYNC counting (TPDOs every 2.5th SYNC).
+    # Only the master's schedule is timing, which a loaded machine may stretch: not judged.
     clean = tmp_path / "clean.log"
     with can.Logger(str(clean)) as log:
         for m in recorded:
             log(m)
     findings = tmp_path / "findings.json"
     assert main(["check", str(clean), "--json", str(findings)]) in (0, 1)
-    rules = [f["rule"] for f in json.loads(findings.read_text())]
-    assert "guarding" not in rules, rules
+    schedule = ("guard request period", "life time exceeded")
+    wrong = [
+        (f["rule"], f["message"])
+        for f in json.loads(findings.read_text())
+        if f["rule"] in ("guarding", "pdo_sync") and not f["message"].startswith(schedule)
+    ]
+    assert wrong == []
