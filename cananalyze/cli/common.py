@@ -5,6 +5,7 @@ declared in `options.py`."""
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from typing import TYPE_CHECKING
 
@@ -26,6 +27,39 @@ def report_problems(problems: ProblemLog, stream=None) -> None:
         print(f"warning: ... and {problems.count - len(problems.shown)} more", file=stream)
     if problems.count:
         print(f"warning: {problems.count} unreadable lines/records skipped", file=stream)
+
+
+def _value(text: str) -> object:
+    for conv in (int, float):
+        try:
+            return conv(text, 0) if conv is int else conv(text)
+        except ValueError:
+            pass
+    return {"true": True, "false": False}.get(text.lower(), text)
+
+
+def bus_options(items: list[str]) -> dict[str, object]:
+    """--bus-option KEY=VALUE items as python-can keywords (numbers and true/false typed),
+    for `live` and `simulate` alike: udp_multicast's port, an adapter's tty_baudrate."""
+    out = {}
+    for item in items:
+        key, sep, val = item.partition("=")
+        if not sep or not key.strip():
+            raise UsageError(f"--bus-option {item!r}: expected KEY=VALUE")
+        out[key.strip()] = _value(val.strip())
+    return out
+
+
+def require_display_for_viewer(instead: str, environ: dict[str, str] | None = None) -> None:
+    """Fail at once where `--rerun` cannot open its viewer: Linux with neither $DISPLAY nor
+    $WAYLAND_DISPLAY. The spawned viewer would die unseen and the stream wait for it (a
+    gRPC traceback after about 17 s); `instead` names what this command offers."""
+    env = os.environ if environ is None else environ
+    if sys.platform.startswith("linux") and not (env.get("DISPLAY") or env.get("WAYLAND_DISPLAY")):
+        raise UsageError(
+            f"--rerun: no display for a Rerun viewer ($DISPLAY and $WAYLAND_DISPLAY are unset); "
+            f"{instead}"
+        )
 
 
 # every command that reads a DBC takes it as --dbc-in; those that write none also as --dbc

@@ -7,7 +7,7 @@ import contextlib
 import sys
 
 from cananalyze.cli import options as options_
-from cananalyze.cli.common import DBC, options, report_problems
+from cananalyze.cli.common import DBC, options, report_problems, require_display_for_viewer
 from cananalyze.core.errors import UsageError
 
 # Readers, numpy and the decoder are imported in run(): `cananalyze --help` builds
@@ -31,6 +31,11 @@ def run(args: argparse.Namespace) -> int:
 
     if args.rerun and args.connect:
         raise UsageError("--rerun spawns a viewer, --connect uses a running one: give one of them")
+    if args.rerun:
+        require_display_for_viewer(
+            "stream to a viewer running elsewhere with --connect HOST:PORT, or write a file "
+            "with `cananalyze export LOG --rrd FILE`"
+        )
     opts = options(args, checks=bool(args.check), timing=bool(args.summary))
     checker = build_checker(opts) if opts.checking or opts.timing else None
     source = open_source(args.log, opts)  # a bad rules file has failed already

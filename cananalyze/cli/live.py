@@ -17,7 +17,7 @@ import sys
 import time
 
 from cananalyze.cli import options as options_
-from cananalyze.cli.common import DBC
+from cananalyze.cli.common import DBC, bus_options, require_display_for_viewer
 from cananalyze.core.errors import UsageError
 
 
@@ -33,25 +33,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     options_.add(p, "rerun", "rrd", "foxglove", "plain", "no_color", "time", "record", "duration")
     options_.add(p, "sdo_timeout")
     p.set_defaults(func=run, strict=False, input_format=None)
-
-
-def _value(text: str):
-    for conv in (int, float):
-        try:
-            return conv(text, 0) if conv is int else conv(text)
-        except ValueError:
-            pass
-    return {"true": True, "false": False}.get(text.lower(), text)
-
-
-def _bus_options(items: list[str]) -> dict:
-    out = {}
-    for item in items:
-        key, sep, val = item.partition("=")
-        if not sep or not key.strip():
-            raise UsageError(f"--bus-option {item!r}: expected KEY=VALUE")
-        out[key.strip()] = _value(val.strip())
-    return out
 
 
 def buses(interfaces: list[str] | None, channels: list[str] | None) -> list[tuple]:
@@ -85,7 +66,11 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--duration must be positive")
     if (args.junit or args.json) and not args.check:
         raise UsageError("--junit and --json report a check: give --check RULES too")
-    bus_options = _bus_options(args.bus_option)
+    if args.rerun:
+        require_display_for_viewer(
+            "write the timelines with --rrd FILE and open it where a display is"
+        )
+    extra = bus_options(args.bus_option)
     pairs = buses(args.interface, args.channel)
     where = " ".join(f"{i or ''} {c or ''}".strip() for i, c in pairs)
     # Frames are time-stamped on the reader thread as they are read; with the default 5 ms
@@ -140,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
     # the bus opens once every output is open (see LiveSource); one reader per bus
     parts = [
         LiveSource(
-            lambda i=i, c=c: open_bus(i, c, args.bitrate, filters, **bus_options),
+            lambda i=i, c=c: open_bus(i, c, args.bitrate, filters, **extra),
             name_of=lambda bus, c=c: _label(c, bus),
         )
         for i, c in pairs

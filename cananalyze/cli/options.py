@@ -286,7 +286,8 @@ FLAGS: dict[str, Flag] = {
             action="append",
             default=[],
             metavar="KEY=VALUE",
-            help="extra python-can interface argument (e.g. tty_baudrate=921600); repeatable",
+            help="extra python-can interface argument (e.g. tty_baudrate=921600, or port=43114 "
+            "for udp_multicast); repeatable",
         ),
     ),
     "live_check": Flag(
@@ -361,7 +362,10 @@ FLAGS: dict[str, Flag] = {
     ),
     "sim_interface": Flag(
         ("-i", "--interface"),
-        dict(help="python-can interface for real-time mode (e.g. socketcan, virtual)"),
+        dict(
+            help="python-can interface for real-time mode (e.g. socketcan; udp_multicast to "
+            "reach another process: virtual is in-process only)"
+        ),
     ),
     "sim_channel": Flag(
         ("-c", "--channel"), dict(help="python-can channel for real-time mode (e.g. can0)")

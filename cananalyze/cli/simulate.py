@@ -2,6 +2,8 @@
 
 With --to FILE the scenario runs on a simulated clock and is written as a log
 (suffix picks candump/ASC/BLF); with -i/-c it runs in real time on a python-can bus.
+python-can's virtual bus reaches only its own process: for `live` in another terminal
+use udp_multicast on a loopback-only group (docs/live.md, "Without hardware").
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ def add_parser(subparsers) -> None:
         description=__doc__.splitlines()[0],
     )
     options_.add(p, "network", "sim_interface", "sim_channel", "sim_to", "seed", "scenario")
-    options_.add(p, "duration", "bitrate", "no_master", duration=10.0)
+    options_.add(p, "duration", "bitrate", "no_master", "bus_option", duration=10.0)
     p.set_defaults(func=run)
 
 
@@ -39,6 +41,8 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("give either --to FILE or -i INTERFACE -c CHANNEL")
     if args.interface and not args.channel:
         raise UsageError("-i needs -c CHANNEL")
+    if args.to and args.bus_option:
+        raise UsageError("--bus-option is for the bus of -i/-c, not for --to FILE")
     if args.network:
         net = load_network(args.network)
         profiles, bitrate, config = net.profiles, net.bitrate, net.config
@@ -63,6 +67,9 @@ def run(args: argparse.Namespace) -> int:
         return 0
     import can
 
+    from cananalyze.cli.common import bus_options
+
+    extra = bus_options(args.bus_option)
     sim, _, _ = build(
         profiles,
         args.scenario,
@@ -73,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
         config=config,
     )
     try:
-        bus = can.Bus(interface=args.interface, channel=args.channel)
+        bus = can.Bus(interface=args.interface, channel=args.channel, **extra)
     except (can.CanError, ValueError, ImportError, OSError) as exc:
         raise InputError(f"cannot open {args.interface} channel {args.channel}: {exc}") from None
     try:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import heapq
 import itertools
 import time
+from collections import deque
 from collections.abc import Callable
 from typing import Protocol
 
@@ -31,6 +32,49 @@ def frame_seconds(dlc: int, bitrate: int) -> float:
     return (47 + 8 * dlc) * 1.2 / bitrate
 
 
+def bus_echoes_own_frames(bus: object) -> bool:
+    """Whether `bus.recv()` also returns the frames this process sent on `bus`.
+
+    python-can's udp_multicast bus does: IP multicast loopback is how two processes on one
+    host hear each other, and it hands the sender its own datagrams too (the bus's
+    `receive_own_messages=False` is not honoured). socketcan, virtual and the adapters
+    return only the others' frames unless asked to."""
+    return type(bus).__name__ == "UdpMulticastBus"
+
+
+class OwnEcho:
+    """The frames this process sent that its bus has not handed back yet.
+
+    The simulator delivers its frames to its own participants when it sends them; a bus
+    that echoes them would deliver each a second time (a guard request answered twice,
+    a SYNC counted twice). A received frame equal to one still awaited is that echo and
+    is dropped. Were another process to send an equal frame meanwhile, one of the two
+    is dropped either way: they cannot be told apart, and the count stays right. An echo
+    not back within `max_age` seconds is given up, so a lost one cannot swallow later
+    frames for long."""
+
+    def __init__(self, max_age: float = 2.0) -> None:
+        self.max_age = max_age
+        self._awaited: dict[tuple[int, int, bytes], deque[float]] = {}
+        self.dropped = 0
+
+    def sent(self, cob: int, data: bytes, flags: int, now: float) -> None:
+        self._awaited.setdefault((cob, flags, data), deque()).append(now)
+
+    def is_echo(self, cob: int, data: bytes, flags: int, now: float) -> bool:
+        """True (and forgotten) if this frame is the echo of one this process sent."""
+        key = (cob, flags, data)
+        times = self._awaited.get(key)
+        while times and now - times[0] > self.max_age:
+            times.popleft()
+        if not times:
+            self._awaited.pop(key, None)
+            return False
+        times.popleft()
+        self.dropped += 1
+        return True
+
+
 class Simulation:
     """Event queue plus bus; participants schedule callbacks and send frames."""
 
@@ -46,6 +90,7 @@ class Simulation:
         self.bus = None  # python-can bus in real-time mode
         self._t0 = 0.0
         self._stopped = False
+        self.echo: OwnEcho | None = None  # real time on a bus that echoes what we send
 
     def stop(self) -> None:
         """End a real-time run early (safe to call from another thread)."""
@@ -96,9 +141,14 @@ class Simulation:
         return from_rows(rows, channels=("can0",))
 
     # --- real time ------------------------------------------------------------------
-    def run_realtime(self, bus, duration: float) -> None:
-        """Run against a python-can bus until duration seconds have passed."""
+    def run_realtime(self, bus, duration: float, echoes: bool | None = None) -> None:
+        """Run against a python-can bus until duration seconds have passed.
+
+        `echoes`: the bus returns this process's own frames (default: asked of
+        `bus_echoes_own_frames`); those are dropped, each frame is delivered once."""
         self.bus = bus
+        if echoes if echoes is not None else bus_echoes_own_frames(bus):
+            self.echo = OwnEcho()
         self._t0 = time.monotonic()
         for p in self.participants:
             p.start(self)
@@ -115,8 +165,12 @@ class Simulation:
             if msg is None or msg.is_error_frame:
                 continue
             self.now = time.monotonic() - self._t0
-            flags = FLAG_RTR if msg.is_remote_frame else 0
+            flags = _flags(msg)
             data = b"" if msg.is_remote_frame else bytes(msg.data)
+            if self.echo is not None and self.echo.is_echo(
+                msg.arbitration_id, data, flags, self.now
+            ):
+                continue  # delivered when it was sent
             for p in self.participants:
                 p.on_frame(msg.arbitration_id, data, flags)
 
@@ -134,7 +188,22 @@ class Simulation:
         try:
             self.bus.send(msg)
         except can.CanError:
-            pass  # a full transmit queue drops the frame, as a real controller would
+            return  # a full transmit queue drops the frame, as a real controller would
+        if self.echo is not None:
+            self.echo.sent(cob, b"" if msg.is_remote_frame else data, _flags(msg), self.now)
 
 
-__all__ = ["FLAG_TX", "START", "Simulation", "Participant", "frame_seconds"]
+def _flags(msg) -> int:
+    """The flags a received frame is compared and delivered with (RTR, extended)."""
+    return (FLAG_RTR if msg.is_remote_frame else 0) | (FLAG_EXT if msg.is_extended_id else 0)
+
+
+__all__ = [
+    "FLAG_TX",
+    "START",
+    "OwnEcho",
+    "Participant",
+    "Simulation",
+    "bus_echoes_own_frames",
+    "frame_seconds",
+]

@@ -264,12 +264,14 @@ class SimNode:
     def _maybe_send(self, n: int, params) -> None:
         pdo = self.tpdos[n]
         payload = self.tpdo_payload(n)
-        if payload == pdo.last:
-            return
+        if payload == pdo.last or pdo.pending:
+            return  # unchanged, or a send is due when the inhibit time ends: it samples then
         ready = pdo.last_sent + params[4] + 1e-6 if params[4] else 0.0  # 1 us: clear of rounding
         if self.sim.now >= ready:
+            # in real time a scan due before `ready` can run after it: without the pending
+            # check above it sent here and the pending send again, 0.3 ms later
             self.send_tpdo(n)
-        elif not pdo.pending:  # inhibit time: send when it has passed
+        else:  # inhibit time: send when it has passed
             pdo.pending = True
             gen = self._gen
 

@@ -71,6 +71,8 @@ def test_errors_are_one_line(tmp_path, capsys):
         (["simulate", "--to", str(tmp_path / "a.log"), "--duration", "0"], "positive"),
         (["simulate", "--network", str(tmp_path / "none.toml"), "--to", "x.log"], "cannot read"),
         (["simulate", "--network", str(SAMPLES / "rules.yaml"), "--to", "x.log"], "rules.yaml"),
+        (["simulate", "--to", str(tmp_path / "a.log"), "--bus-option", "port=1"], "-i/-c"),
+        (["simulate", "-i", "virtual", "-c", "x", "--bus-option", "port"], "KEY=VALUE"),
     ]
     for args, text in cases:
         assert main(args) == 2
