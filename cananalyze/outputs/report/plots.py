@@ -86,11 +86,14 @@ def envelope_trace(
     resolution: float | None = None,
     buckets: int = PLOT_BUCKETS,
     stepped: bool = False,
+    gaps: bool = False,
 ) -> dict:
     """A min/max envelope as a line of at most `buckets` buckets; `resolution`: the
     value's finest meaningful step; `stepped`: drawn as steps (each value held until the
-    next), for integer values."""
+    next), for integer values; `gaps`: a pause in the series breaks its line."""
     t, v = env.points(buckets)
+    if gaps:
+        t, v = with_gaps(t, v)
     line = {"width": 1, "shape": "hv"} if stepped else {"width": 1}
     return {
         "type": "scatter",
@@ -102,11 +105,35 @@ def envelope_trace(
     }
 
 
+GAP = 3.0  # a pause over 3 times the series' usual spacing between points is a gap
+
+
+def with_gaps(t: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A NaN value (plotly's break in a line) between two points further apart than
+    GAP times the usual (median) spacing of the series' points: a signal that stopped
+    coming is not drawn as a slope (or a held step) across the time it was missing."""
+    at = np.unique(t)
+    if at.size < 3:
+        return t, v
+    step = np.diff(at)
+    usual = float(np.median(step))
+    far = at[1:][step > GAP * usual]  # the first point after each gap
+    if far.size == 0 or usual <= 0:
+        return t, v
+    cut = np.searchsorted(t, far)
+    t = np.insert(t, cut, t[cut - 1])
+    v = np.insert(v.astype(np.float64), cut, np.nan)
+    return t, v
+
+
 def bus_load(buses: dict, t0: float, bitrate: int | None) -> dict:
     scale = 100.0 / bitrate if bitrate else 1e-3
     unit = "% of bitrate" if bitrate else "kbit/s"
     most = _share(len(buses))
-    traces = [envelope_trace(b.load.load, t0, ch, scale, buckets=most) for ch, b in buses.items()]
+    traces = [  # a pause in traffic breaks the line: no slope across it
+        envelope_trace(b.load.load, t0, ch, scale, buckets=most, gaps=True)
+        for ch, b in buses.items()
+    ]
     return _fig(traces, "Bus load per channel (100 ms windows)", "time (s)", unit)
 
 
@@ -116,7 +143,11 @@ def period(
     """The heartbeat (or guarding) period over time, against the configured value; to
     the µs (the gaps between epoch time stamps carry float noise below it)."""
     half = PLOT_BUCKETS // 2  # drawn beside its histogram
-    traces = [envelope_trace(gaps.over_time, t0, "measured", resolution=US_MS, buckets=half)]
+    measured = envelope_trace(gaps.over_time, t0, "measured", resolution=US_MS, buckets=half)
+    # a period is drawn over the interval it measures (from the previous frame to this
+    # one): a dropout is a plateau at its length, not a slope towards it
+    measured["line"]["shape"] = "vh"
+    traces = [measured]
     if configured:
         xs = [round(t - t0, 6) for t, _ in configured] + [round((gaps.last_t or t0) - t0, 6)]
         ys = [v for _, v in configured] + [configured[-1][1]]
@@ -165,6 +196,7 @@ def state_timeline(
     t0: float,
     t_end: float,
     title: str = "NMT state per node",
+    x: str = "time (s)",
 ) -> dict:
     """One lane per node: each state (NMT, CiA 402 drive) from its change to the next.
     A lane is a node number, or its label ("can1 node 5" on a log of several buses)."""
@@ -192,10 +224,10 @@ def state_timeline(
         for state, rows in segs.items()
     ]
     h = max(HEIGHT, 60 + 28 * len(by_node))
-    return _fig(traces, title, "time (s)", "", barmode="overlay", height=h, showlegend=True)
+    return _fig(traces, title, x, "", barmode="overlay", height=h, showlegend=True)
 
 
-def signals(series: list, t0: float, title: str) -> dict:
+def signals(series: list, t0: float, title: str, x: str = "time (s)") -> dict:
     units = sorted({s.unit or "" for s in series})
     y = ", ".join(u for u in units if u) or "value"
     most = _share(len(series))
@@ -206,7 +238,8 @@ def signals(series: list, t0: float, title: str) -> dict:
             f"{s.name} ({s.unit})" if s.unit else s.name,
             buckets=most,
             stepped=s.stepped,
+            gaps=True,
         )
         for s in series
     ]
-    return _fig(traces, title, "time (s)", y)
+    return _fig(traces, title, x, y)

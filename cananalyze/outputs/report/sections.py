@@ -57,11 +57,13 @@ def verdict(s, figs: Figures) -> dict:
         counts[r.name] = counts.get(r.name, 0) + 1
     names = ", ".join(f"{n} ×{k}" if k > 1 else n for n, k in counts.items())
     dur = (s.t_last - s.t_first) if s.t_first is not None else 0.0
+    over = f"over {dur:.1f} s" if s.timed else "(the log has no timestamps)"
     text = (
         f"{len(rules)} rules: {len(failing)} violation(s), {len(s.findings) - len(failing)} "
-        f"note(s) in {s.frames:,} frames over {dur:.1f} s"
+        f"note(s) in {s.frames:,} frames {over}"
     )
-    load = figs.add(plots.bus_load(s.buses, s.t0, s.bitrate)) if s.buses else None
+    # a log without times has no load over time (every frame at one instant)
+    load = figs.add(plots.bus_load(s.buses, s.t0, s.bitrate)) if s.buses and s.timed else None
     return {
         "ok": not failing,
         "text": text,
@@ -81,8 +83,9 @@ def buses(s, figs: Figures) -> dict:
                 ch,
                 f"{b.frames:,}",
                 f"{b.errors:,}",
-                f"{b.load.mean * unit:.2f}{u}",
-                f"{b.load.peak * unit:.2f}{u}",
+                # a log without times has no load (its frames share one instant)
+                f"{b.load.mean * unit:.2f}{u}" if s.timed else "-",
+                f"{b.load.peak * unit:.2f}{u}" if s.timed else "-",
             ]
         )
     return {"rows": rows, "bitrate": s.bitrate}
@@ -158,7 +161,8 @@ def nodes(s, figs: Figures) -> dict:
     timeline = None
     if s.states:
         lanes = [(t, s.who(bus, n), state) for t, (bus, n), state in s.states]
-        timeline = figs.add(plots.state_timeline(lanes, s.t0, s.t_last or s.t0))
+        x0, x_end, x = s.axis()
+        timeline = figs.add(plots.state_timeline(lanes, x0, x_end, x=x))
     out = []
     for row in rows:
         n = row["node"]
@@ -174,7 +178,7 @@ def nodes(s, figs: Figures) -> dict:
         cfg = configs[bus]  # that bus's configuration, as its checker judged
         for kind in ("heartbeat", "guarding"):
             g = s.errctl.get((kind, n) if bus is None else (kind, n, bus))
-            if g is None or g.hist.n == 0:
+            if g is None or g.hist.n == 0 or not s.timed:  # no times: no periods
                 continue
             conf = _configured(cfg, kind, n, g) if cfg is not None else []
             h = g.hist
@@ -255,7 +259,7 @@ def sdo(s, figs: Figures) -> dict | None:
     rows = []
     for (bus, n), (ok, bad, h) in sorted(_sdo_by_bus(s).items()):
         who = s.who(bus, n) if s.several else n
-        if h is not None and h.n:
+        if h is not None and h.n and s.timed:
             st = h.stats()
             rows.append(
                 [
@@ -273,7 +277,9 @@ def sdo(s, figs: Figures) -> dict | None:
     allh = StreamStats()
     for h in s.sdo_latency.values():
         allh.merge(h)
-    latency = figs.add(plots.histogram(allh, "SDO latency", "latency (ms)")) if allh.n else None
+    latency = None
+    if allh.n and s.timed:  # a log without times has no latencies
+        latency = figs.add(plots.histogram(allh, "SDO latency", "latency (ms)"))
     aborts = [
         [
             _rel(s, r.get("t")),
@@ -415,7 +421,8 @@ def signals(s, figs: Figures) -> dict | None:
     out = []
     for (bus, node, pdo, cob), series in sorted(by_pdo.items()):
         title = f"{_node_name(node, bus if s.several else None)} {pdo.upper()} (0x{cob:03X})"
-        out.append(figs.add(plots.signals(series, s.t0, title)))
+        x0, _, x = s.axis()
+        out.append(figs.add(plots.signals(series, x0, title, x)))
     return {"plots": out, "dropped": s.series_dropped}
 
 
@@ -425,7 +432,8 @@ def drive_states(s, figs: Figures) -> dict | None:
     if not s.drive_states:
         return None
     lanes = [(t, s.who(bus, n), state) for t, (bus, n), state in s.drive_states]
-    fig = plots.state_timeline(lanes, s.t0, s.t_last or s.t0, "Drive state per node")
+    x0, x_end, x = s.axis()
+    fig = plots.state_timeline(lanes, x0, x_end, "Drive state per node", x)
     return {"plot": figs.add(fig)}
 
 

@@ -139,6 +139,7 @@ class ReportSink(Sink):
         self.series_dropped = 0
         self.frames = 0
         self.t_first: float | None = None
+        self.line_last = 0  # the last frame's line (the x axis of a log without times)
         self.t_last: float | None = None
         self.events_by_row: dict = {}
 
@@ -181,17 +182,20 @@ class ReportSink(Sink):
         self.findings.extend(batch.findings)
         off = self.run.rows if self.run else 0  # the states' row of the batch's first frame
         self.tally.add(batch, batch.states, off)
+        timed = self.timed  # a log without times places states and signals by line
         for s in batch.states:
             if len(self.states) < MAX_STATES:
-                self.states.append((s.t, (_bus_of(fb, s.row - off), s.node), s.message))
+                at = s.t if timed else self._line(fb, s.row - off, s.t)
+                self.states.append((at, (_bus_of(fb, s.row - off), s.node), s.message))
             else:
                 self.states_dropped += 1
         self._sdo(batch)
-        self._drive_states(batch)
+        self._drive_states(batch, timed)
         n = len(fb)
         if not n:
             return
         self.frames += n
+        self.line_last = max(self.line_last, int(fb.line.max()))
         t = fb.t
         lo, hi = float(t.min()), float(t.max())
         self.t_first = lo if self.t_first is None else min(self.t_first, lo)
@@ -227,7 +231,7 @@ class ReportSink(Sink):
                 )
         self._emcy(batch)
         for sb in batch.signals:
-            ts = t[sb.rows]
+            ts = t[sb.rows] if timed else fb.line[sb.rows].astype(np.float64)
             bus = _bus_of(fb, int(sb.rows[0])) if len(sb.rows) else ""  # a block: one bus's
             for name, values in sb.columns.items():
                 key = (bus, sb.node, sb.pdo, sb.cob_id, name)
@@ -287,7 +291,7 @@ class ReportSink(Sink):
         at = _record_buses(batch, np.array([k for k, _ in found], np.int64))
         self.aborts.extend(zip(at.tolist(), [r for _, r in found], strict=True))
 
-    def _drive_states(self, batch) -> None:
+    def _drive_states(self, batch, timed: bool) -> None:
         """CiA 402 drive states, drawn as the NMT lanes: a lane per bus and node (node 1
         on can0 and node 1 on can1 are two drives), a bar per state entered."""
         fb = batch.frames
@@ -296,7 +300,20 @@ class ReportSink(Sink):
                 continue
             if len(self.drive_states) >= MAX_STATES:
                 break
-            self.drive_states.append((c.t, (_bus_of(fb, c.row), c.node), c.name))
+            at = c.t if timed else self._line(fb, c.row, c.t)
+            self.drive_states.append((at, (_bus_of(fb, c.row), c.node), c.name))
+
+    @staticmethod
+    def _line(fb, row: int, default: float) -> float:
+        """The file line of the batch's row `row` (where a log without times places it)."""
+        return float(fb.line[row]) if 0 <= row < len(fb) else default
+
+    def axis(self) -> tuple[float, float, str]:
+        """(first, last, title) of the plots' x axis: seconds from the first frame, or on a
+        log without times the file's lines (every frame has one time: no time axis)."""
+        if self.timed:
+            return self.t0, self.t_last or self.t0, "time (s)"
+        return 0.0, float(self.line_last + 1), "line"
 
     def _emcy(self, batch) -> None:
         fb = batch.frames
