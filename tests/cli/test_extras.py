@@ -12,6 +12,7 @@ import os
 import subprocess
 import sys
 import textwrap
+import tomllib
 
 import pyarrow.parquet as pq
 import pytest
@@ -198,3 +199,23 @@ def test_need_keeps_a_broken_install_loud(tmp_path, monkeypatch):
     with pytest.raises(ImportError, match="bad build") as info:
         need("broken_extra_pkg", "fleet", "fleet")
     assert not isinstance(info.value, MissingExtra)
+
+
+def test_pyproject_extras():
+    """A plain install leaves the extras' packages out; [all] is every extra and [dev] is
+    [all] plus the test tools (so `.ci/run`'s `pip install -e ".[dev]"` runs every test)."""
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    extras = project["optional-dependencies"]
+
+    def names(reqs: list[str]) -> set[str]:
+        return {r.split(";")[0].split("[")[0].split(">")[0].split("=")[0].strip() for r in reqs}
+
+    assert names(extras["fleet"]) == {"dask", "bokeh", "duckdb"}
+    assert "dask[distributed]>=2024.1" in extras["fleet"]
+    assert names(extras["foxglove"]) == {"foxglove-sdk"}
+    assert extras["all"] == ["cananalyze[fleet,foxglove]"]
+    assert "cananalyze[all]" in extras["dev"]
+    plain = names(project["dependencies"])
+    for extra in ("fleet", "foxglove", "dev"):
+        assert not plain & names(extras[extra]), extra
+    assert {"pyarrow", "mcap", "rerun-sdk", "plotly", "jinja2", "rich"} <= plain
