@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import TextIO
 
 from cananalyze.core.errors import UsageError
+from cananalyze.core.extras import need
 from cananalyze.fleet import layout
 from cananalyze.fleet.inputs import expand, options_for
 from cananalyze.fleet.task import LogTask, process, record_failure
@@ -138,7 +139,9 @@ def run_fleet(
     stream: TextIO | None = None,
 ) -> FleetResult:
     """Decode every log the inputs name into `dataset`; the results (nothing raised for a
-    bad log). `stream`: where the dashboard line and the progress bar go."""
+    bad log). `stream`: where the dashboard line and the progress bar go. MissingExtra
+    without the fleet extra, before the dataset folder is made."""
+    need("distributed", "fleet", "fleet")
     t0 = time.perf_counter()
     opts = opts or Options(checks=True)
     if not opts.checking:
@@ -177,7 +180,7 @@ def run_fleet(
             client.wait_for_workers(len(cluster.workers))
         out.workers = sorted(client.scheduler_info().get("workers", {}))
         if stream is not None:
-            where = out.dashboard or "not running (needs bokeh)"
+            where = out.dashboard or 'not running (needs bokeh: pip install "cananalyze[fleet]")'
             print(f"fleet: {len(tasks)} logs, dashboard {where}", file=stream)
         from distributed import as_completed
 

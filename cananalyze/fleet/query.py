@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from cananalyze.core.errors import UsageError
+from cananalyze.core.extras import need
 from cananalyze.fleet.schema import TABLES
 
 
@@ -17,10 +18,9 @@ def connect(dataset: str | Path):
 
     `hive_partitioning` turns the `date=YYYY-MM-DD` folders into a DATE column `date`;
     `union_by_name` lets a dataset written by an older cananalyze (columns added since)
-    still be read whole.
+    still be read whole. MissingExtra without the fleet extra.
     """
-    import duckdb
-
+    duckdb = need("duckdb", "query", "fleet")
     root = Path(dataset)
     if not root.is_dir():
         raise UsageError(f"{root}: no such dataset folder")
@@ -42,8 +42,7 @@ def connect(dataset: str | Path):
 
 def query(dataset: str | Path, sql: str) -> tuple[list[str], list[tuple]]:
     """(column names, rows) of `sql` over the dataset's views; UsageError for bad SQL."""
-    import duckdb
-
+    duckdb = need("duckdb", "query", "fleet")
     con = connect(dataset)
     try:
         rel = con.execute(sql)

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from cananalyze.core.errors import UsageError
+from cananalyze.core.extras import need
 from cananalyze.decode.events.build import EventState, batch_events_of
 from cananalyze.decode.events.columns import NO_ROW
 from cananalyze.outputs.mcap.stream import batch_messages
@@ -58,6 +59,9 @@ class FoxgloveSink(Sink):
     needs_events = True
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, announce=None):
+        # foxglove-sdk is the foxglove extra: missing, the sink is not made (before any
+        # bus is opened) and the user reads which extra to install
+        self._foxglove = need("foxglove", "live --foxglove", "foxglove")
         self.host = host
         self.port = port
         self.announce = announce if announce is not None else sys.stderr
@@ -73,8 +77,7 @@ class FoxgloveSink(Sink):
 
     def open(self, run) -> None:
         super().open(run)
-        import foxglove
-
+        foxglove = self._foxglove
         # foxglove.Log's file, as export --mcap names it (a live source has no file)
         self._file = Path(str(getattr(run.source, "path", "") or "")).name
         self.context = foxglove.Context()
@@ -115,8 +118,7 @@ class FoxgloveSink(Sink):
         the log keeps its first schema, its documents carry their own field names)."""
         ch = self._channels.get(topic)
         if ch is None:
-            import foxglove
-
+            foxglove = self._foxglove
             sch = foxglove.Schema(
                 name=schema["title"], encoding="jsonschema", data=json.dumps(schema).encode()
             )
