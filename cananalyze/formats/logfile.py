@@ -191,6 +191,20 @@ class LogWriter:
             for msg in to_messages(batch):
                 self._writer.on_message_received(msg)
 
+    def flush(self) -> None:
+        """Everything written so far onto the file (the OS's), so that a process killed
+        after it (SIGKILL) leaves a readable file holding those frames: `live --record`
+        calls it every second."""
+        if self._file is not None:
+            self._file.flush()
+        elif self._writer is not None:
+            if self.format == "blf":
+                # python-can's BLFWriter keeps frames until a 128 KiB container is full and
+                # has no public flush: its _flush writes one container of what it holds
+                while self._writer._buffer_size:
+                    self._writer._flush()
+            self._writer.file.flush()
+
     def close(self) -> None:
         """Finish the file (idempotent); an ASC file's header date is its first frame's."""
         if self._file is not None:

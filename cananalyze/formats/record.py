@@ -59,6 +59,15 @@ class FrameRecorder:
             self._logger.write(fb)
         self.frames += len(fb)
 
+    def flush(self) -> None:
+        """The frames recorded so far onto the file: a recording killed after this
+        (SIGKILL) keeps them, readable (the candump, ASC and BLF text or containers, MCAP
+        chunks without the summary)."""
+        if self._mcap is not None:
+            self._mcap.flush()
+        elif self._logger is not None:
+            self._logger.flush()
+
     def close(self) -> None:
         """Finalise the file (idempotent)."""
         if self._mcap is not None:

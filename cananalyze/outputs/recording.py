@@ -3,16 +3,21 @@
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 
 from cananalyze.pipeline.sink import Sink
+
+FLUSH_SECONDS = 1.0  # a killed session (kill -9) loses at most this much of its recording
 
 
 class RecordSink(Sink):
     """Every frame of every batch (a recording is never filtered), through `FrameRecorder`.
 
     The recording is kept when the run ends in any way, an interface failure included:
-    it is what the bus said, however far it got.
+    it is what the bus said, however far it got. What it holds is put on the file every
+    `FLUSH_SECONDS`, so a session killed without a chance to close (SIGKILL, OOM killer)
+    leaves a readable file with every frame up to the last second.
     """
 
     def __init__(self, path: str | Path) -> None:
@@ -27,11 +32,19 @@ class RecordSink(Sink):
     def open(self, run) -> None:
         super().open(run)
         self.recorder = self._recorder_type(self.path)
+        self._flushed = time.monotonic()
 
     def write(self, batch) -> None:
         """The decoded batch: an .mcap recording keeps the service and node the decoder
         gave each frame (remaps included), as export writes them."""
         self.recorder.write(batch)
+        self.tick(time.monotonic())
+
+    def tick(self, now: float) -> None:
+        """Put what was recorded on the file once a second, also on a quiet bus."""
+        if self.recorder is not None and now - self._flushed >= FLUSH_SECONDS:
+            self.recorder.flush()
+            self._flushed = now
 
     def close(self) -> None:
         self._finish()
