@@ -127,14 +127,15 @@ def options(args: argparse.Namespace, **overrides) -> Options:
 
 def run_with_progress(source, decoder, sinks: list, opts: Options, quiet: bool = False):
     """`pipeline.run` with a progress bar on a terminal (unless quiet), and a warning when
-    the filters matched nothing."""
+    the filters matched nothing. The bar's sink goes first: it is cleared before any other
+    sink prints its results (outputs/progress.py)."""
     from cananalyze.pipeline import run, unmatched_filter
 
     sinks = list(sinks)
     if not quiet and sys.stderr.isatty():
         from cananalyze.outputs.progress import ProgressSink
 
-        sinks.append(ProgressSink(sys.stderr))
+        sinks.insert(0, ProgressSink(sys.stderr))
     state = run(source, decoder, sinks, opts)
     warning = unmatched_filter(state)
     if warning:

@@ -65,7 +65,10 @@ def _decode(args: argparse.Namespace, source, decoder, opts) -> None:
                 ) from None
         sinks = [_main_sink(args, out), *_timeline_sinks(args)]
         sinks[0].dest = args.output
-        quiet = args.quiet or not (args.output or not sys.stdout.isatty())
+        # no bar while lines go to the terminal as they are decoded; --summary prints at
+        # the end, after the bar is cleared
+        streaming = not args.output and not args.summary and sys.stdout.isatty()
+        quiet = args.quiet or streaming
         try:
             run_with_progress(source, decoder, sinks, opts, quiet=quiet)
         finally:

@@ -20,6 +20,11 @@ FLAG_FD = 0x08  # CAN FD frame
 FLAG_BRS = 0x10  # CAN FD bit-rate switch
 FLAG_ESI = 0x20  # CAN FD error state indicator
 FLAG_TX = 0x40  # sent by the logging node (direction flag of the log), else received
+# the data bytes were rebuilt by the reader from the log's text, not captured (Sevcon DVT
+# dumps give EMCY frames as decoded text only): text output marks the frame with
+# RECONSTRUCTED_MARK, JSONL with "reconstructed": true
+FLAG_RECONSTRUCTED = 0x80
+RECONSTRUCTED_MARK = "(reconstructed)"
 
 # FrameBatch.channel is a uint16 index into the channel names: a log naming more channels
 # than that (hostile, or a tool writing one name per frame) keeps every frame, the ones

@@ -85,33 +85,36 @@ def _dashboard(client) -> str | None:
 
 
 class _Progress:
-    """Logs done of all, frames decoded, failures: a rich bar on a terminal, else nothing."""
+    """Logs done of all, frames decoded, failures: on a terminal, the bar of
+    outputs/progress.py (after its delay; cleared before the results), else nothing."""
 
     def __init__(self, stream: TextIO | None, total: int) -> None:
         self.bar = None
+        self.frames = self.failed = 0
         if stream is None or not stream.isatty():
             return
-        from rich.console import Console
-        from rich.progress import (
-            BarColumn,
-            MofNCompleteColumn,
-            Progress,
-            TextColumn,
-            TimeRemainingColumn,
-        )
+        from cananalyze.outputs.progress import DelayedBar, terminal_bar
 
-        self.bar = Progress(
-            TextColumn("logs"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TextColumn("{task.fields[frames]:,} frames, {task.fields[failed]} failed"),
-            TimeRemainingColumn(),
-            console=Console(file=stream),
-            transient=True,
+        def columns() -> list:
+            from rich.progress import (
+                BarColumn,
+                MofNCompleteColumn,
+                TextColumn,
+                TimeRemainingColumn,
+            )
+
+            return [
+                TextColumn("logs"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TextColumn("{task.fields[frames]:,} frames, {task.fields[failed]} failed"),
+                TimeRemainingColumn(),
+            ]
+
+        self.bar = DelayedBar(
+            terminal_bar(stream, columns),
+            lambda bar: bar.add_task("logs", total=total, frames=0, failed=0),
         )
-        self.task = self.bar.add_task("logs", total=total, frames=0, failed=0)
-        self.bar.start()
-        self.frames = self.failed = 0
 
     def done(self, result: dict) -> None:
         if self.bar is None:
@@ -119,11 +122,11 @@ class _Progress:
         if not result.get("skipped"):
             self.frames += int(result.get("frames") or 0)
         self.failed += result.get("status") == "failed"
-        self.bar.update(self.task, advance=1, frames=self.frames, failed=self.failed)
+        self.bar.update(advance=1, frames=self.frames, failed=self.failed)
 
     def stop(self) -> None:
         if self.bar is not None:
-            self.bar.stop()
+            self.bar.clear()
 
 
 def run_fleet(

@@ -35,7 +35,8 @@ LEGACY_FRAME_SCHEMA_NAME = "cananalyze.CanFrame"  # live recordings before the s
 FLAGS_TEXT = (
     "FrameBatch FLAG_* bits: 1 ext (29-bit identifier), 2 rtr (remote request), "
     "4 err (error frame), 8 fd (CAN FD), 16 brs (FD bit-rate switch), "
-    "32 esi (FD error state indicator), 64 tx (sent by the logging node; else received)"
+    "32 esi (FD error state indicator), 64 tx (sent by the logging node; else received), "
+    "128 reconstructed (data bytes rebuilt from the log's text, not captured)"
 )
 # (name, JSON type, description), in the order the fields appear in every message
 FRAME_FIELDS: tuple[tuple[str, str, str], ...] = (

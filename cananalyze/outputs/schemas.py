@@ -132,7 +132,8 @@ FRAMES = Table(
         ),
         Column(
             "flags",
-            "bits: 1 29-bit, 2 remote, 4 error frame, 8 FD, 16 BRS, 32 ESI, 64 sent by the logger",
+            "bits: 1 29-bit, 2 remote, 4 error frame, 8 FD, 16 BRS, 32 ESI, 64 sent by the logger, "
+            "128 bytes reconstructed from the log's text",
             pa.uint8(),
             ("uint8", "uint8"),
             nullable=False,

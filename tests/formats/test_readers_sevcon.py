@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import json
+import re
+
 import numpy as np
 import pytest
 from conftest import real_file
 from readers_util import run
 
+from cananalyze.cli.main import main
 from cananalyze.core.errors import InputError
-from cananalyze.core.frames import FLAG_TX
+from cananalyze.core.frames import FLAG_RECONSTRUCTED, FLAG_TX, RECONSTRUCTED_MARK
 from cananalyze.formats.logs import sevcon
 
 # (file, lines counted as frames in SOURCES.md, EMCY lines with decoded text only)
@@ -51,6 +55,43 @@ def test_known_rows():
     assert emcy.payload(1) == bytes.fromhex("000000C545000000")
     tx = batch.flags & FLAG_TX != 0
     assert tx.sum() == 9 and set(batch.can_id[tx].tolist()) <= {0x601, 0x000}
+
+
+@pytest.mark.parametrize("name,listed,emcy", DUMPS)
+def test_rebuilt_emcy_frames_and_only_they_are_marked(name, listed, emcy, capsys):
+    """Issue 44 item 13: bytes rebuilt from DVT's text are not shown as captured. The
+    reader flags the EMCY frames it rebuilt (every one: no other frame lacks bytes), and
+    text and JSONL mark exactly those."""
+    path = real_file(f"isPointless__Sevcon/{name}")
+    batch, _, _ = run(sevcon.read, path)
+    rebuilt = (batch.flags & FLAG_RECONSTRUCTED) != 0
+    assert rebuilt.sum() == emcy
+    assert np.array_equal(rebuilt, batch.can_id == 0x81)
+    lines = batch.line[rebuilt].tolist()
+    text = path.read_text(encoding="latin-1").splitlines()
+    assert all(" EMCY " in text[n - 1] and "{" not in text[n - 1] for n in lines)
+
+    assert main(["decode", str(path), "--no-color"]) == 0
+    lines_out = capsys.readouterr().out.splitlines()
+    frame_line = re.compile(r"^\s*-?\d+\.\d{6}  \S+\s+[0-9A-F]{3,8}  \[\d\]  ")
+    out = [line for line in lines_out if frame_line.match(line)]
+    assert len(out) == listed
+    others = [line for line in lines_out if not frame_line.match(line)]  # SDO records
+    assert not any(RECONSTRUCTED_MARK in line for line in others)
+    marked = [i for i, line in enumerate(out) if RECONSTRUCTED_MARK in line]
+    assert marked == np.flatnonzero(rebuilt).tolist()
+    for i in marked:  # the mark just before the annotation, after the captured columns
+        assert f"emcy             1  {RECONSTRUCTED_MARK} EMCY" in out[i]
+
+    assert main(["decode", str(path), "--format", "jsonl"]) == 0
+    recs = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    frames = [r for r in recs if r["kind"] == "frame"]
+    assert len(frames) == listed
+    flagged = [i for i, r in enumerate(frames) if "reconstructed" in r]
+    assert flagged == np.flatnonzero(rebuilt).tolist()
+    assert all(
+        frames[i]["reconstructed"] is True and frames[i]["service"] == "emcy" for i in flagged
+    )
 
 
 BAD = b"""0x0080   547216 - d19.3 0 SYNC

@@ -59,7 +59,7 @@ MESSAGE_HEAD = 31  # opcode, length, channel id, sequence, log time, publish tim
 MAX_CHUNK = 1 << 30  # uncompressed bytes one chunk may claim (writers use 1-8 MiB)
 LOOSE_BYTES = 4 << 20  # Message records outside chunks gathered before they are parsed
 FRAME, LEGACY = 1, 2  # schema kinds
-MAX_FLAGS = 0x7F  # the seven FLAG_* bits
+MAX_FLAGS = 0xFF  # the eight FLAG_* bits
 _RECORD = struct.Struct("<BQ")
 _LEGACY_FLAGS = (
     ("extended", FLAG_EXT),

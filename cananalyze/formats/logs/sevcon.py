@@ -7,7 +7,8 @@ frame is rebuilt from what the line says, the CiA 301 error class as the error c
 (its class base: 0x3100 for "Mains Voltage"), the error register's generic bit set
 for every error (CiA 301 says it is) and clear for "Error Reset", and the Sevcon
 code in manufacturer bytes 3-4 (little-endian; the other bytes are not in the dump,
-so zero). A line whose class or code cannot be read stays a counted problem.
+so zero). Such a frame carries FLAG_RECONSTRUCTED: the outputs mark it, its bytes were
+not captured. A line whose class or code cannot be read stays a counted problem.
 
 Frames DVT sent itself are logged with time 0 (and a meaningless negative
 delta); they are marked FLAG_TX and given the time of the frame before them so
@@ -20,7 +21,7 @@ import re
 from collections.abc import Iterator
 from typing import BinaryIO
 
-from cananalyze.core.frames import FLAG_TX, FrameBatch
+from cananalyze.core.frames import FLAG_RECONSTRUCTED, FLAG_TX, FrameBatch
 from cananalyze.formats.logs._rows import RowSink, text_lines
 from cananalyze.formats.registry import LogFormat, ReadContext, register
 
@@ -77,6 +78,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
             continue
         ticks = int(m.group(2))
         rest = m.group(6).strip()
+        rebuilt = 0
         if rest.startswith("{"):
             if not rest.endswith("}"):
                 ctx.problems.add(ctx.source, f"line {n}", "data bytes without closing '}'")
@@ -92,6 +94,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
                 continue
         elif m.group(5) == "EMCY" and (emcy := _emcy(rest)) is not None:
             data = emcy
+            rebuilt = FLAG_RECONSTRUCTED
         elif rest:
             ctx.problems.add(
                 ctx.source, f"line {n}", f"{m.group(5)} shown as decoded text only, no raw bytes"
@@ -99,9 +102,9 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
             continue
         else:
             data = b""
-        flags = 0
+        flags = rebuilt
         if ticks == 0 and last_t > 0:
-            flags = FLAG_TX
+            flags |= FLAG_TX
             t = last_t
         else:
             t = last_t = ticks * 1e-4

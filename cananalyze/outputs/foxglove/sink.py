@@ -7,6 +7,13 @@ when its topic first appears; messages are sent only on channels a client subscr
 to (`has_sinks`), so a server nobody watches costs the JSON building alone.
 Binds to loopback unless the user names another address.
 
+Clients: foxglove-sdk's server accepts only the WebSocket subprotocol
+"foxglove.sdk.v1" (fixed in its Rust handshake, no option in the Python API through
+0.30); a client offering only the protocol's older name "foxglove.websocket.v1"
+(Lichtblick before its 2025-12 releases, foxglove_bridge-era clients) gets HTTP 400.
+The messages are the same under both names; `ACCEPTED_SUBPROTOCOLS` says what this
+server takes, and the announce line and docs/live.md tell the user.
+
 One call per message (foxglove-sdk has no batch call; the WebSocket protocol sends one
 message per data frame), made on the SDK's compiled channel (`Channel.base.log`): the
 Python wrapper's checks cost three times the send itself (1.2 of 1.6 µs per frame).
@@ -34,6 +41,10 @@ DEFAULT_PORT = 8765
 # messages queued per client before the server drops the oldest (the SDK's default, 1024,
 # is 30 ms of a saturated bus: a client that pauses a moment would lose frames); ~10 MB
 BACKLOG = 1 << 16
+# what a client must offer in Sec-WebSocket-Protocol (tests/outputs/test_foxglove_clients.py
+# checks the installed SDK against it); the old name alone is refused with HTTP 400
+ACCEPTED_SUBPROTOCOLS = ("foxglove.sdk.v1",)
+REFUSED_SUBPROTOCOLS = ("foxglove.websocket.v1",)
 
 
 def parse_address(text: str | None) -> tuple[str, int]:
@@ -107,7 +118,13 @@ class FoxgloveSink(Sink):
         self._channel(("frames",), FRAMES_TOPIC, FRAME_SCHEMA)
         self._channel(("events",), EVENTS_TOPIC, LOG_SCHEMA)
         if self.announce:
-            print(f"foxglove: serving ws://{self.host}:{self.port}", file=self.announce, flush=True)
+            print(
+                f"foxglove: serving ws://{self.host}:{self.port} to clients that speak "
+                f"{', '.join(ACCEPTED_SUBPROTOCOLS)} (Foxglove; Lichtblick from its 2025-12 "
+                f"releases); {', '.join(REFUSED_SUBPROTOCOLS)}-only clients are refused",
+                file=self.announce,
+                flush=True,
+            )
 
     @property
     def url(self) -> str:

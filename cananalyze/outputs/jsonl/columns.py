@@ -21,7 +21,7 @@ import json
 import numpy as np
 
 from cananalyze.core.columns import bytecols
-from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
+from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RECONSTRUCTED, FLAG_RTR
 from cananalyze.core.records import DecodedBatch
 from cananalyze.devices.words import fields_column
 from cananalyze.outputs.fields import row_fields
@@ -50,6 +50,7 @@ _FLAGS = [
     (FLAG_EXT, _padded_table([b"", b',"ext":true'])),
     (FLAG_ERR, _padded_table([b"", b',"error":true'])),
     (FLAG_FD, _padded_table([b"", b',"fd":true'])),
+    (FLAG_RECONSTRUCTED, _padded_table([b"", b',"reconstructed":true'])),
 ]
 
 

@@ -7,7 +7,7 @@ from typing import TextIO
 
 import numpy as np
 
-from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
+from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RECONSTRUCTED, FLAG_RTR
 from cananalyze.core.records import DecodedBatch
 from cananalyze.outputs.background import ByteSink
 from cananalyze.outputs.fields import row_fields
@@ -35,6 +35,8 @@ def frame_record(batch: DecodedBatch, i: int) -> dict:
         rec["error"] = True
     if fl & FLAG_FD:
         rec["fd"] = True
+    if fl & FLAG_RECONSTRUCTED:
+        rec["reconstructed"] = True
     rec["service"] = SERVICE_NAMES[int(batch.service[i])]
     node = int(batch.node[i])
     rec["node"] = None if node < 0 else node

@@ -28,7 +28,13 @@ from cananalyze.core.columns.bytecols import compact as _compact
 from cananalyze.core.columns.bytecols import digits as _digits
 from cananalyze.core.columns.bytecols import padded_table as _padded_table
 from cananalyze.core.columns.numtext import g6_text, value_text
-from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
+from cananalyze.core.frames import (
+    FLAG_ERR,
+    FLAG_EXT,
+    FLAG_RECONSTRUCTED,
+    FLAG_RTR,
+    RECONSTRUCTED_MARK,
+)
 from cananalyze.core.records import DecodedBatch
 from cananalyze.devices.words import word_column
 from cananalyze.outputs import colour
@@ -42,6 +48,9 @@ from cananalyze.protocol.fields import annotation, frame_fields
 from cananalyze.protocol.services import SERVICE_NAMES, Service
 
 _HEX3 = [f"{i:02X} " for i in range(256)]
+# before the annotation of a frame whose bytes the reader rebuilt from the log's text
+_MARK = RECONSTRUCTED_MARK + " "
+_MARK_COL = _padded_table([b"", _MARK.encode()])
 
 # ANSI colours per service group, only on a terminal.
 _COLOURS = colour.SERVICE
@@ -353,6 +362,9 @@ class TextWriter(Sink):
         ann_col = np.zeros((n, width), np.uint8)
         for rows, m in ann:
             ann_col[rows, : m.shape[1]] = m
+        rebuilt = (flags & FLAG_RECONSTRUCTED) != 0
+        if rebuilt.any():
+            parts.append(_MARK_COL[rebuilt.astype(np.intp)])
         parts.append(ann_col)
 
         if spliced:
@@ -619,6 +631,8 @@ def lines_per_row(
             svc = SERVICE_NAMES[services[i]]
             node = nodes[i]
             text = annotation(services[i], node, pdos[i], row_fields(batch, i), bool(fl & FLAG_RTR))
+            if fl & FLAG_RECONSTRUCTED:
+                text = _MARK + text
             ch = fb.channel_name(i)
             line = (
                 f"{rel[i]:12.6f}  {ch:<5} {ident:>8}  [{dlcs[i]}]  {data:<23}  "
