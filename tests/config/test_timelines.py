@@ -239,7 +239,7 @@ def test_rrd_round_trip(cap, files):
     } == set(r.rows)
     assert [v for _, v in r.values("/node/5/tpdo2/ch1", "Scalars:scalars")][:1] == [21.5]
     assert [v for _, v in r.values("/node/5/nmt", "StateChange:state")] == [
-        "bootup",
+        "pre-operational",  # after its boot-up (CiA 301)
         "operational",
     ]
     assert {row["TextLog:level"][0] for row in r.rows["/events"]} == {"INFO", "WARN", "ERROR"}

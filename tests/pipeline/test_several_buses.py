@@ -379,7 +379,10 @@ def test_events_carry_their_bus(tmp_path):
     ev = cap.events
     assert list(ev.columns) == [*_EVENT_COLUMNS, "bus"]
     got = [(b, n, m) for b, n, m, k in ev[["bus", "node", "message", "kind"]].values if k != "sdo"]
-    assert got[:2] == [("can0", 5, "node 5: boot-up"), ("can0", 5, "node 5: NMT state bootup")]
+    assert got[:2] == [
+        ("can0", 5, "node 5: boot-up"),
+        ("can0", 5, "node 5: NMT state pre-operational"),
+    ]
     assert ("can1", 5, "node 5: boot-up") in got and ("can1", None, "NMT start node 5") in [
         (b, None if pd.isna(n) else n, m) for b, n, m in got
     ]
@@ -456,7 +459,8 @@ def test_one_bus_events_have_no_bus_column(tmp_path):
     assert list(load(str(log)).events.columns) == _EVENT_COLUMNS
     parquet, rows = _export_events(log, tmp_path)
     assert pq.read_schema(tmp_path / "p" / "events.parquet").names == _EVENT_COLUMNS
-    assert list(rows[0]) == _EVENT_COLUMNS and len(rows) == len(parquet) == 3
+    # boot-up, pre-operational, the NMT start and the operational state it commands
+    assert list(rows[0]) == _EVENT_COLUMNS and len(rows) == len(parquet) == 4
 
 
 def test_fleet_events_bus_column(tmp_path):
@@ -669,13 +673,15 @@ def test_events_resorted_at_the_end_keep_their_bus(tmp_path, monkeypatch):
     events = pq.read_table(tmp_path / "out" / "events.parquet").to_pylist()
     channel = pq.read_table(tmp_path / "out" / "frames.parquet").column("channel").to_pylist()
     assert [e["t"] for e in events] == sorted(e["t"] for e in events)
-    assert [(e["bus"], e["message"]) for e in events[:6]] == [
+    assert [(e["bus"], e["message"]) for e in events[:8]] == [
         ("can0", "node 5: boot-up"),
-        ("can0", "node 5: NMT state bootup"),
+        ("can0", "node 5: NMT state pre-operational"),
         ("can0", "NMT start node 5"),
+        ("can0", "node 5: NMT state operational"),
         ("can1", "node 5: boot-up"),
-        ("can1", "node 5: NMT state bootup"),
+        ("can1", "node 5: NMT state pre-operational"),
         ("can1", "NMT start node 5"),
+        ("can1", "node 5: NMT state operational"),
     ]
     assert all(e["bus"] == channel[e["row"]] for e in events if e["row"] < len(channel))
 
