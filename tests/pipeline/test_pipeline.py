@@ -236,9 +236,12 @@ def test_check_is_coloured_on_a_terminal_unless_no_color():
 @pytest.mark.slow
 def test_progress_bar_on_a_terminal(tmp_path):
     log = generated_log(tmp_path, 300_000)
-    shown = _on_a_terminal(["export", log, "--parquet", tmp_path / "pq"], stream="stderr")
+    now = {"CANANALYZE_PROGRESS_DELAY": "0"}  # the bar from the start, however fast the run
+    shown = _on_a_terminal(["export", log, "--parquet", tmp_path / "pq"], env=now, stream="stderr")
     assert b"%" in shown and b"frames" in shown
-    quiet = _on_a_terminal(["export", log, "--parquet", tmp_path / "pq2", "-q"], stream="stderr")
+    quiet = _on_a_terminal(
+        ["export", log, "--parquet", tmp_path / "pq2", "-q"], env=now, stream="stderr"
+    )
     assert b"%" not in quiet
 
 
