@@ -78,6 +78,8 @@ def run(args: argparse.Namespace) -> int:
         prof = load_eds(args.key)
     else:
         raise UsageError(f"unknown device {args.key!r}: use one of {', '.join(device_keys())}")
+    # the DBC first: printing may end early (`| head` closes the pipe), the file must not
+    wrote = _write_dbc(args, prof) if args.dbc else None
     print(f"{prof.key}: {prof.name}")
     print(
         f"  vendor ID {_hex(prof.vendor_id)}  product {_hex(prof.product_code)}  "
@@ -106,16 +108,21 @@ def run(args: argparse.Namespace) -> int:
         print("Notes:")
         for note in prof.notes:
             print(f"  - {note}")
-    if args.dbc:
-        from cananalyze.core.atomic import check_writable
-        from cananalyze.outputs.dbc import pdo_database, write_dbc
-
-        check_writable(args.dbc)
-        drives = {args.node} if prof.family == 402 else set()
-        db = pdo_database(((args.node, pdo) for pdo in prof.pdos(args.node)), drives)
-        write_dbc(args.dbc, db)
-        print(f"wrote {len(db.messages)} PDOs of node {args.node} to {args.dbc}")
+    if wrote is not None:
+        print(wrote)
     return 0
+
+
+def _write_dbc(args, prof) -> str:
+    """Write the device's PDOs at --node as a DBC; the line that says so."""
+    from cananalyze.core.atomic import check_writable
+    from cananalyze.outputs.dbc import pdo_database, write_dbc
+
+    check_writable(args.dbc)
+    drives = {args.node} if prof.family == 402 else set()
+    db = pdo_database(((args.node, pdo) for pdo in prof.pdos(args.node)), drives)
+    write_dbc(args.dbc, db)
+    return f"wrote {len(db.messages)} PDOs of node {args.node} to {args.dbc}"
 
 
 def _cia402_summary() -> None:

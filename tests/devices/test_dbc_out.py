@@ -204,3 +204,26 @@ def test_a_dbc_of_no_message_is_a_warning(tmp_path):
     )
     assert r.returncode == 0 and "no message" not in r.stderr
     assert len(cantools.database.load_file(str(out)).messages) > 0
+
+
+def test_devices_dbc_written_when_the_reader_stops_early(tmp_path):
+    """Issue 44 item 6: `devices EDS --dbc out.dbc | head -1` wrote no DBC (it was written
+    after printing, and the closed pipe ended the run first). The DBC comes first now."""
+    import os
+
+    from tests.conftest import ROOT
+
+    eds = real_file("christiansandberg__canopen/sample.eds")
+    out = tmp_path / "out.dbc"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cananalyze", "devices", str(eds), "--dbc", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
+    assert proc.stdout.readline()  # what `head -1` reads
+    proc.stdout.close()  # and then it exits
+    proc.wait(timeout=120)
+    assert b"Traceback" not in proc.stderr.read()
+    db = cantools.database.load_file(str(out))
+    assert db.messages  # the EDS's default PDOs
