@@ -29,6 +29,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 STAGING = "_staging"
+SCRATCH = "dask-scratch"  # the local cluster's workers' scratch space: a stage of its own
 MANIFEST = "COMMIT.json"
 
 
@@ -108,7 +109,7 @@ def recover(dataset: Path) -> tuple[int, int]:
                 _apply(stage)
                 forward += 1
             except (OSError, ValueError, KeyError):  # no manifest, or not a whole one
-                back += 1
+                back += not stage.name.startswith(SCRATCH + ".")  # a scratch space: no log
             shutil.rmtree(stage, ignore_errors=True)
         finally:
             if lock is not None:

@@ -58,20 +58,29 @@ class FleetResult:
         return 1 if self.failed or self.violated else 0
 
 
-def _client(workers: int | None, scheduler: str | None):
-    """A distributed Client: the existing scheduler's, or a local cluster's on 127.0.0.1."""
+def _client(workers: int | None, scheduler: str | None, scratch: Path | None = None):
+    """A distributed Client: the existing scheduler's, or a local cluster's on 127.0.0.1,
+    whose workers' scratch space is `scratch` (in the dataset's staging: removed with it,
+    never a dask-scratch-space left in the temporary folder)."""
     from distributed import Client, LocalCluster
 
     if scheduler:
         return Client(scheduler), None
-    cluster = LocalCluster(
-        n_workers=workers or os.cpu_count() or 1,
-        threads_per_worker=1,
-        processes=True,
-        host="127.0.0.1",
-        dashboard_address="127.0.0.1:0",
-        silence_logs=logging.ERROR,
-    )
+    import dask
+
+    # the scheduler's and nannies' scratch too, not only the workers': set while the
+    # cluster starts, so the caller's own Dask configuration is left as it was
+    where = {"temporary-directory": str(scratch)} if scratch is not None else {}
+    with dask.config.set(where):
+        cluster = LocalCluster(
+            local_directory=str(scratch) if scratch is not None else None,
+            n_workers=workers or os.cpu_count() or 1,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address="127.0.0.1:0",
+            silence_logs=logging.ERROR,
+        )
     return Client(cluster), cluster
 
 
@@ -172,7 +181,13 @@ def run_fleet(
         )
         for p in logs
     ]
-    client, cluster = _client(workers, scheduler)
+    scratch = None if scheduler else layout.Stage(dataset, layout.SCRATCH)
+    try:
+        client, cluster = _client(workers, scheduler, scratch.dir if scratch else None)
+    except BaseException:
+        if scratch is not None:
+            scratch.close()
+        raise
     out = FleetResult([], recovered=recovered)
     by_path: dict[str, dict] = {}
     progress = None
@@ -205,6 +220,8 @@ def run_fleet(
         client.close()
         if cluster is not None:
             cluster.close()
+        if scratch is not None:
+            scratch.close()
     out.results = [by_path[t.path] for t in tasks if t.path in by_path]
     out.seconds = time.perf_counter() - t0
     if junit:

@@ -12,6 +12,7 @@ asked): the tables themselves never pass through the scheduler.
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import json
 import os
@@ -144,7 +145,14 @@ def recorded(dataset: Path, digest: str) -> dict | None:
     return None
 
 
-def _one_line(exc: BaseException, path: str) -> str:
+def _one_line(exc: BaseException, path: str, dataset: str | Path | None = None) -> str:
+    if isinstance(exc, OSError) and dataset is not None:
+        # a full disk (pyarrow's OSError names no file), or a write into the dataset: the
+        # staging's inner path says nothing to the user, the dataset does
+        where = str(exc.filename or "")
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT) or where.startswith(str(dataset)):
+            why = os.strerror(exc.errno) if exc.errno else (exc.strerror or str(exc))
+            return f"{path}: cannot write the dataset {dataset}: {why}"
     text = " ".join(str(exc).split()) or type(exc).__name__
     if not isinstance(exc, CananalyzeError):
         text = f"{type(exc).__name__}: {text}"  # not an input error we foresaw: say what
@@ -230,7 +238,13 @@ def process(task: LogTask) -> dict:
             result.update(old, skipped=True)
             result["source"], result["recorded_source"] = path, old.get("source")
             return result
-    stage = layout.Stage(dataset, digest)
+    try:
+        stage = layout.Stage(dataset, digest)
+    except OSError as exc:  # no room even for the staging folder: the log fails, in one line
+        row.update(status="failed", error=_one_line(exc, path, dataset))
+        result.update(row)
+        result.update(lineage, date=None, worker_pid=os.getpid())
+        return result
     try:
         sink = _Findings(keep=task.junit)
         state, rules = (
@@ -241,7 +255,12 @@ def process(task: LogTask) -> dict:
         row["seconds"] = time.perf_counter() - wall0
         row["cpu_seconds"] = time.process_time() - cpu0
         row["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-        _commit(stage, dataset, date, digest, parts, row, lineage)
+        try:
+            _commit(stage, dataset, date, digest, parts, row, lineage)
+        except OSError as exc:  # a full disk: this log fails, in one line, and the fleet goes on
+            stage.close()
+            row.update(status="failed", error=_one_line(exc, path, dataset))
+            _commit_failure(dataset, date, digest, row, lineage)
     except BaseException:
         stage.close()
         raise
@@ -273,7 +292,7 @@ def _decode(task: LogTask, stage: layout.Stage, lineage: dict, findings: _Findin
     except (KeyboardInterrupt, SystemExit):
         raise
     except BaseException as exc:  # noqa: BLE001 - one log's failure is a row, not the fleet's
-        row.update(status="failed", error=_one_line(exc, task.path))
+        row.update(status="failed", error=_one_line(exc, task.path, task.dataset))
         return None, []
     row["skipped_lines"] = source.problems.count
     row.update(frames=state.frames, t_first=state.t0, t_last=state.t_last)
@@ -295,7 +314,7 @@ def _parts(stage: layout.Stage, dataset: Path, date: str, digest: str, row: dict
     except (KeyboardInterrupt, SystemExit):
         raise
     except BaseException as exc:  # noqa: BLE001 - as a decode failure: no parts
-        row.update(status="failed", error=_one_line(exc, path))
+        row.update(status="failed", error=_one_line(exc, path, dataset))
         return []
     return parts
 
@@ -313,6 +332,19 @@ def _commit(stage, dataset: Path, date: str, digest: str, parts: list, row: dict
         if p not in final
     ]
     stage.commit(renames, removals)
+
+
+def _commit_failure(dataset: Path, date: str, digest: str, row: dict, lineage: dict) -> None:
+    """The failed log's row alone, if the disk still takes it (else none: a rerun tries
+    the log again, as any log without a row)."""
+    try:
+        stage = layout.Stage(dataset, digest)
+    except OSError:
+        return
+    try:
+        _commit(stage, dataset, date, digest, [], row, lineage)
+    except OSError:
+        stage.close()
 
 
 def record_failure(dataset: str | Path, path: str, error: str) -> dict:
