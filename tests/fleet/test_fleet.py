@@ -482,9 +482,11 @@ def test_export_of_a_log_without_frames_writes_empty_tables(tmp_path):
 
 
 @pytest.mark.slow
-def test_ctrl_c_then_a_rerun_finishes_the_fleet(tmp_path):
-    """SIGINT to a running `cananalyze fleet`: exit 130, no part without its log's row once
-    the next run has started, and the rerun completes every log exactly once."""
+@pytest.mark.parametrize("how, code", [("INT", 130), ("TERM", 143), ("KILL", -9)])
+def test_ctrl_c_then_a_rerun_finishes_the_fleet(tmp_path, how, code):
+    """SIGINT, SIGTERM or SIGKILL to a running `cananalyze fleet`: exit 130, 143 or killed,
+    no part without its log's row once the next run has started, the rerun completes
+    every log exactly once, and nothing is left in the staging folder."""
     import os
     import signal
     import subprocess
@@ -511,9 +513,9 @@ def test_ctrl_c_then_a_rerun_finishes_the_fleet(tmp_path):
     deadline = time.monotonic() + 120
     while not list(dataset.glob("logs/date=*/*.parquet")) and time.monotonic() < deadline:
         time.sleep(0.05)
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(getattr(signal, f"SIG{how}"))
     _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 130, err
+    assert proc.returncode == code, err
     first = len(list(dataset.glob("logs/date=*/*.parquet")))
     assert 0 < first < 24
     rerun = subprocess.run(cmd[:-1], env=env, capture_output=True, text=True, timeout=300)
