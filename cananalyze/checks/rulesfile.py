@@ -18,6 +18,7 @@ from cananalyze.config.netfile import combine, read_network
 from cananalyze.config.spec import NetworkSpec
 from cananalyze.core.errors import InputError
 from cananalyze.core.finding import SEVERITIES
+from cananalyze.core.text import printable
 
 _COMMON = {"enabled", "severity", "tolerance", "jitter_ms"}
 
@@ -211,6 +212,10 @@ def read_rules(path: str | Path) -> tuple[list[Rule], dict | None]:
 
 
 def _make(doc: _Doc, keys: list, cls: type[Rule], kw: dict) -> Rule:
+    # the file's texts (a signal's, a node's name) as a terminal may show them, and as the
+    # decoded names are (`core.text.printable`): a signal named with a control character
+    # in the network file and here is still one signal
+    kw = {k: printable(v) if isinstance(v, str) else v for k, v in kw.items()}
     try:
         return cls(**kw)
     except (TypeError, ValueError) as exc:

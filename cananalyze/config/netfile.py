@@ -17,6 +17,7 @@ from cananalyze.config.filelines import Lines, integer, read_tree
 from cananalyze.config.legacy_keys import translate
 from cananalyze.config.spec import NetworkSpec, NodeSpec
 from cananalyze.core.errors import InputError
+from cananalyze.core.text import printable
 from cananalyze.devices.builtin import load_builtin
 from cananalyze.devices.catalog import device_keys
 from cananalyze.devices.profile import load_eds
@@ -154,7 +155,7 @@ def _signals(raw, lines: Lines, where: tuple) -> dict:
             if k in spec:
                 if not isinstance(spec[k], str) or (k == "name" and not spec[k].strip()):
                     raise lines.error((*at, k), f"expected text, got {spec[k]!r}")
-                one[k] = spec[k]
+                one[k] = printable(spec[k])  # the file's text, as a terminal may show it
         for k in ("scale", "offset"):
             if k in spec:
                 one[k] = _number(spec[k], lines, (*at, k))
@@ -190,7 +191,7 @@ def _node(raw, node: int, base: Path, lines: Lines, where: tuple, how: str) -> d
     if "device" in raw or "eds" in raw:
         out["profile"] = _profile(raw, node, base, lines, where, how)
     if "name" in raw:
-        out["name"] = str(raw["name"])
+        out["name"] = printable(str(raw["name"]))
     for key, (_, high) in NODE_OBJECTS.items():
         if key in raw:
             out[key] = integer(raw[key], lines, (*where, key), 0, high)

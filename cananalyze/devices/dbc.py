@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from cananalyze.core.errors import InputError
+from cananalyze.core.text import printable
 
 
 @dataclass(frozen=True)
@@ -65,7 +66,7 @@ def _layout(sig) -> tuple[int, bool]:
 def _message(msg) -> DbcMessage:
     signals = []
     columnar = msg.length <= 8
-    mux_names = [s.name for s in msg.signals if s.is_multiplexer]
+    mux_names = [printable(s.name) for s in msg.signals if s.is_multiplexer]
     if len(mux_names) > 1:
         columnar = False  # nested multiplexing: cantools decides per frame
     needed = 0
@@ -76,11 +77,11 @@ def _message(msg) -> DbcMessage:
         # bytes reached: an Intel signal's top bit, a Motorola signal's LSB byte
         reach = (shift + sig.length + 7) // 8 if not big else 8 - max(shift, 0) // 8
         needed = max(needed, reach)
-        choices = {int(k): str(v) for k, v in (sig.choices or {}).items()}
+        choices = {int(k): printable(str(v)) for k, v in (sig.choices or {}).items()}
         mux = sig.multiplexer_ids
         signals.append(
             DbcSignal(
-                name=sig.name,
+                name=printable(sig.name),  # a DBC's texts, as a terminal may show them
                 shift=shift,
                 bits=sig.length,
                 big_endian=big,
@@ -88,7 +89,7 @@ def _message(msg) -> DbcMessage:
                 is_float=bool(sig.is_float),
                 scale=float(sig.scale),
                 offset=float(sig.offset),
-                unit=sig.unit or None,
+                unit=printable(sig.unit) if sig.unit else None,
                 choices=choices,
                 mux_ids=tuple(int(m) for m in mux) if mux else None,
             )
@@ -96,7 +97,7 @@ def _message(msg) -> DbcMessage:
     return DbcMessage(
         frame_id=int(msg.frame_id),
         extended=bool(msg.is_extended_frame),
-        name=msg.name,
+        name=printable(msg.name),
         length=int(msg.length),
         bytes_needed=min(needed, msg.length) if columnar else msg.length,
         signals=tuple(signals),
@@ -202,12 +203,15 @@ def decode_rows(msg: DbcMessage, payloads: list[bytes]) -> dict[str, np.ndarray]
     """The frames cantools decodes one by one (CAN FD, nested multiplexing): as columns."""
     names = [s.name for s in msg.signals]
     cols = {name: np.full(len(payloads), np.nan) for name in names}
+    # cantools' names are the file's; ours are printable (the same but control characters)
+    ours = dict(zip((s.name for s in msg.source.signals), names, strict=True))
     for i, data in enumerate(payloads):
         try:
             values = msg.source.decode(data, decode_choices=False, allow_truncated=True)
         except Exception:  # a frame cantools refuses stays NaN
             continue
         for name, v in values.items():
+            name = ours.get(name, name)
             if name in cols and isinstance(v, (int, float)):
                 cols[name][i] = v
     return cols

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from cananalyze.core.errors import InputError
+from cananalyze.core.text import printable
 
 
 @dataclass(frozen=True)
@@ -126,7 +127,7 @@ def object_info(od, index: int, subindex: int, node_id: int | None) -> ObjectInf
     return ObjectInfo(
         index=index,
         subindex=subindex,
-        name=var.name,
+        name=printable(var.name),  # an EDS's text: shown on terminals
         datatype=int(var.data_type or 0),
         default=effective_value(var, node_id),
         pdo_mappable=bool(var.pdo_mappable),

@@ -13,6 +13,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from cananalyze.core.text import printable, printable_or_none
 from cananalyze.devices.eds import ObjectInfo, effective_value, object_info, read_od, variable
 from cananalyze.devices.sidecar import Sidecar, load_sidecar
 from cananalyze.protocol.datatypes import DATA_TYPES, DUMMY_INDICES
@@ -182,13 +183,13 @@ def build_profile(path: Path, sidecar: Sidecar | None, node_id: int | None) -> D
 
     vendor = od_int(0x1018, 1) if od_int(0x1018, 1) else info.vendor_number
     product = od_int(0x1018, 2) if od_int(0x1018, 2) else info.product_number
-    return DeviceProfile(
-        key=sidecar.key if sidecar else path.stem,
-        name=(sidecar.name if sidecar else "") or info.product_name or path.stem,
+    return DeviceProfile(  # the file's texts and name, as a terminal may show them
+        key=printable(sidecar.key if sidecar else path.stem),
+        name=printable((sidecar.name if sidecar else "") or info.product_name or path.stem),
         vendor_id=vendor,
         product_code=product,
         device_type=od_int(0x1000, 0),
-        device_name=od_str(0x1008) or info.product_name,
+        device_name=printable_or_none(od_str(0x1008) or info.product_name),
         notes=list(sidecar.notes) if sidecar else [],
         source=str(path),
         od=od,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Protocol
 
@@ -10,6 +11,7 @@ import numpy as np
 from cananalyze.core.frames import MAX_BUSES, MAX_CHANNELS, OTHER_CHANNELS, FrameBatch
 from cananalyze.core.records import DecodedBatch
 from cananalyze.core.sdo_records import SdoRecords
+from cananalyze.core.text import printable
 from cananalyze.protocol.cobid import CobClassifier
 
 if TYPE_CHECKING:
@@ -26,6 +28,13 @@ class Processor(Protocol):
 
     def finish(self, batch: DecodedBatch) -> None:
         """End of log: emit what is still pending into `batch` (an empty batch)."""
+
+
+@functools.lru_cache(maxsize=64)
+def _printable_channels(channels: tuple[str, ...]) -> tuple[str, ...]:
+    """The interfaces' names as a terminal may show them (`core.text.printable`): a log's
+    channel column is the log writer's text. Every frame of every source passes here."""
+    return tuple(printable(c) for c in channels)
 
 
 class Decoder:
@@ -55,6 +64,7 @@ class Decoder:
         self._other: int | None = None  # the decoder the channels past MAX_BUSES share
 
     def decode(self, batch: FrameBatch) -> DecodedBatch:
+        batch.channels = _printable_channels(batch.channels)
         if self.spawn is not None and len(batch):
             ch = batch.channel
             if self.buses is None:
