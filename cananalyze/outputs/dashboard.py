@@ -414,15 +414,17 @@ class LiveView:
                 age.stylize("bold red")  # its heartbeat is overdue: the node may be gone
             state_style = _STATE_STYLE.get(st.state or "", "")
             emcy = ", ".join(st.emcy.values()) or "-"
+            # names from the log and files as Text: a str cell is rich markup, and a
+            # "[link=...]" in a channel's or device's name would become a terminal escape
             nodes.add_row(
-                *((bus or "-",) if several else ()),
+                *((Text(bus or "-"),) if several else ()),
                 str(n),
-                self.device(n, bus if several else None) or "-",
+                Text(self.device(n, bus if several else None) or "-"),
                 Text(st.state or "-", style=state_style),
                 age,
                 f"{period:.0f} ms" if period is not None else "-",
                 Text(emcy, style="bold red" if st.emcy else ""),
-                st.last_sdo or "-",
+                Text(st.last_sdo or "-"),
             )
 
         # one row per PDO, its signals side by side: a node with 8 inputs takes one line,
@@ -457,7 +459,7 @@ class LiveView:
                 if s.unit:
                     cells.append(f" {s.unit}")
             age = (now - max(s.t for s in values)) * 1e3
-            sigs.add_row(str(node), pdo, cells, f"{age:.0f} ms")
+            sigs.add_row(str(node), Text(pdo), cells, f"{age:.0f} ms")
         if len(shown) < len(rows):
             sigs.add_row("", "", Text(f"... {len(rows) - len(shown)} more PDOs", style="dim"), "")
         if not rows:

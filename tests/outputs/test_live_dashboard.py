@@ -126,3 +126,18 @@ def test_rate_and_load_follow_the_wall_clock():
     view.add(dec.decode(frames.take(slice(0, 0))), wall=102.0)
     view.add(dec.decode(frames.take(slice(0, 0))), wall=102.5)
     assert view.frame_rate() == 0.0
+
+
+def test_names_are_text_not_rich_markup():
+    """A device's name (network file, EDS) in rich markup: shown as written, not styled nor
+    made a terminal hyperlink (OSC 8), on a colour terminal (issue 38 item 1)."""
+    frames = read_all(SAMPLES / "demo.log")
+    dec = build_decoder(Options())
+    name = "[link=http://example.invalid]x[/link][bold red]n"
+    view = LiveView(bitrate=500_000, devices={10: name}, model=dec.network)
+    view.add(dec.decode(frames), wall=float(frames.t[-1]))
+    console = Console(record=True, width=200, force_terminal=True, color_system="truecolor")
+    console.print(view.render(wall=float(frames.t[-1]), height=60))
+    styled = console.export_text(styles=True, clear=False)
+    assert "\x1b]8;" not in styled  # no hyperlink escape
+    assert "[link=http://example.invalid]x[/link]" in console.export_text()  # as written
