@@ -148,14 +148,7 @@ class StreamStats:
     def _coarsen(self) -> None:
         """Merge neighbouring bins: level + 1."""
         self._level += 1
-        if self._count.size:
-            j = (self._lo + np.arange(self._count.size)) >> 1
-            lo = int(j[0])
-            self._count = np.bincount(j - lo, weights=self._count).astype(np.int64)
-            self._sum = np.bincount(j - lo, weights=self._sum)
-            self._lo = lo
-        else:
-            self._lo >>= 1
+        self._count, self._sum, self._lo = _coarser(self._count, self._sum, self._lo, 1)
 
     def _ranks(self, ranks: list[int]) -> list[float]:
         """Approximate value of the sorted stream at each 0-based rank (histogram mode)."""
@@ -259,7 +252,7 @@ class StreamStats:
 
 
 def _coarser(count: np.ndarray, total: np.ndarray, lo: int, times: int) -> tuple:
-    """Bins `times` levels wider (neighbours merged), as `StreamStats._coarsen` does."""
+    """Bins `times` levels wider, neighbours merged (`StreamStats._coarsen`, `merge`)."""
     for _ in range(times):
         if count.size:
             j = (lo + np.arange(count.size)) >> 1

@@ -324,6 +324,24 @@ class _PcapHeaders:
         return None, max(s, start)
 
 
+def _skipped(
+    ctx: ReadContext, skip: tuple[int, str], to: int, where: str, unit: str, resync: str
+) -> None:
+    """One warning for the bytes a resynchronising reader skipped, [skip's offset, to):
+    `unit` is a record or block, `resync` the `where` of a jump to the next plausible one.
+    No reason: a unit running past the end, the file cut short (or its length field)."""
+    at, why = skip
+    if not why:
+        if where != resync:
+            text = f"file ends inside a {unit} ({to - at} bytes)"
+            ctx.problems.add(ctx.source, f"offset {at}", text)
+            return
+        why = f"{unit} runs past the end of the file"
+    ctx.problems.add(
+        ctx.source, f"offset {at}", f"{why} (corrupt file): skipped {to - at} bytes {where}"
+    )
+
+
 def _read_pcap(stream: BinaryIO, ctx: ReadContext, head: bytes) -> Iterator[FrameBatch]:
     order, unit = _PCAP_MAGIC[head[:4]]
     if len(head) < 24:
@@ -350,16 +368,7 @@ def _read_pcap(stream: BinaryIO, ctx: ReadContext, head: bytes) -> Iterator[Fram
     judged = -1  # the position whose header was found plausible already
 
     def skipped(to: int, where: str) -> None:
-        at, why = skip  # type: ignore[misc]
-        if not why:  # a record running past the end: the file is cut short (or its length)
-            if where != "to the next plausible record":
-                text = f"file ends inside a pcap record ({to - at} bytes)"
-                ctx.problems.add(ctx.source, f"offset {at}", text)
-                return
-            why = "pcap record runs past the end of the file"
-        ctx.problems.add(
-            ctx.source, f"offset {at}", f"{why} (corrupt file): skipped {to - at} bytes {where}"
-        )
+        _skipped(ctx, skip, to, where, "pcap record", "to the next plausible record")
 
     while not ended:
         data = stream.read(CHUNK)
@@ -536,16 +545,7 @@ def _read_pcapng(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     skip: tuple[int, str] | None = None  # resynchronising: (file offset skipped from, why)
 
     def skipped(to: int, where: str) -> None:
-        at, why = skip  # type: ignore[misc]
-        if not why:  # a block running past the end: the file is cut short (or its length)
-            if where != "to the next pcapng block":
-                text = f"file ends inside a pcapng block ({to - at} bytes)"
-                ctx.problems.add(ctx.source, f"offset {at}", text)
-                return
-            why = "pcapng block runs past the end of the file"
-        ctx.problems.add(
-            ctx.source, f"offset {at}", f"{why} (corrupt file): skipped {to - at} bytes {where}"
-        )
+        _skipped(ctx, skip, to, where, "pcapng block", "to the next pcapng block")
 
     while not ended:
         data = stream.read(CHUNK)
