@@ -35,7 +35,7 @@ from cananalyze.pipeline import Options, Run, build_checker, build_decoder, open
 NETWORK = str(SAMPLES / "network.toml")
 DEVICES = {k: "dat7014" for k in range(1, 17)}  # the generator's 16 nodes
 DEMO_DEVICES = {3: "mcb560", 5: "dat7014"}
-TABLES = ("frames", "signals", "sdo", "events", "findings", "nodes")
+TABLES = ("frames", "signals", "sdo", "events", "findings", "nodes", "od")
 FILES = {"parquet": "pq", "csv": "csv", "mcap": "x.mcap", "rrd": "x.rrd"}
 # foxglove.LogLevel numbers of the events table's level names
 FOXGLOVE_LEVEL = {"debug": 1, "info": 2, "warning": 3, "error": 4, "fatal": 5}
@@ -246,7 +246,7 @@ def assert_wide_signals_is(cap: Capture, path: Path) -> None:
 
 
 def assert_parquet_tables(cap: Capture, folder: Path) -> None:
-    """The folder holds the six table files, each load()'s table (signals in its wide
+    """The folder holds the seven table files, each load()'s table (signals in its wide
     layout, whose long view is load()'s `signals`)."""
     assert sorted(p.name for p in folder.iterdir()) == sorted(f"{n}.parquet" for n in TABLES)
     for name in TABLES:

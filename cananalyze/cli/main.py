@@ -25,11 +25,12 @@ SUBCOMMANDS = [
     "live",
     "simulate",
     "devices",
+    "od",
     "fleet",
     "query",
 ]
 # Commands that read a whole log batch by batch: they get the allocator settings.
-BATCH_COMMANDS = {"decode", "check", "report", "export", "fleet"}
+BATCH_COMMANDS = {"decode", "check", "report", "export", "od", "fleet"}
 
 
 def build_parser() -> argparse.ArgumentParser:

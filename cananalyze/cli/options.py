@@ -207,6 +207,13 @@ FLAGS: dict[str, Flag] = {
         ("-o", "--output"),
         dict(metavar="FILE", help="write to FILE instead of stdout (report: the HTML file)"),
     ),
+    "dcf": Flag(
+        ("--dcf",),
+        dict(
+            metavar="DIR",
+            help="also write each node's configuration as a CiA 306 DCF in DIR (node<N>.dcf)",
+        ),
+    ),
     # --- timelines and tables ----------------------------------------------------
     "mcap": Flag(
         ("--mcap",),

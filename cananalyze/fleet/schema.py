@@ -25,7 +25,7 @@ LINEAGE = (("source", LABEL), ("hash", LABEL), ("version", LABEL))
 COLUMNS: dict[str, list[tuple[str, pa.DataType]]] = {
     name: table.dataset_columns() for name, table in schemas.TABLES.items()
 }
-TABLES = ("frames", "signals", "sdo", "events", "findings", "nodes", "logs")
+TABLES = tuple(name for name, table in schemas.TABLES.items() if table.in_dataset)
 
 
 def schema(table: str) -> pa.Schema:

@@ -21,6 +21,7 @@ from cananalyze.core.frames import FrameBatch, concat
 from cananalyze.core.records import DecodedBatch
 from cananalyze.decode.events.build import LEVEL_NAMES, Event, EventState, batch_events_of
 from cananalyze.decode.node_tally import NodeTally
+from cananalyze.decode.od_tally import OdTally
 from cananalyze.outputs import schemas
 from cananalyze.pipeline.sink import Sink
 from cananalyze.protocol.services import SERVICE_NAMES, Service
@@ -375,6 +376,18 @@ class Capture:
         import pandas as pd
 
         return pd.DataFrame.from_records(self.node_rows(), index="node")
+
+    @cached_property
+    def od(self) -> pd.DataFrame:
+        """Each node's objects as its successful SDO transfers showed them, per life
+        (boot-ups split it): last value, when and how set, how often, what it went through."""
+        import pandas as pd
+
+        tally = OdTally()
+        tally.add(DecodedBatch(self.batch, self.service, self.node, self.pdo, records=self.records))
+        rows = tally.rows()
+        names = list(rows[0]) if rows else list(schemas.OD.without("bus").names)
+        return pd.DataFrame.from_records(rows, columns=names)
 
     def node_rows(self) -> list[dict]:
         """Plain rows of the nodes table (also used by MCAP metadata, without pandas)."""

@@ -14,13 +14,14 @@ A dataset needs one type for every log, so each column also has its `dataset` ty
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import pyarrow as pa
 
 from cananalyze.core.finding import TABLE_COLUMNS
 from cananalyze.decode.events.build import LEVEL_NAMES
 from cananalyze.decode.node_tally import IDENTITY_KEYS
+from cananalyze.decode.od_tally import OD_COLUMNS
 from cananalyze.decode.sdo.transaction import SDO_TABLE_COLUMNS
 from cananalyze.protocol.services import SERVICE_NAMES
 
@@ -70,6 +71,7 @@ class Table:
     name: str
     doc: str
     columns: tuple[Column, ...]
+    in_dataset: bool = True  # a fleet's dataset has it (`od`: the single-log export only)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -79,7 +81,7 @@ class Table:
         return next(c for c in self.columns if c.name == name)
 
     def without(self, *names: str) -> Table:
-        return Table(self.name, self.doc, tuple(c for c in self.columns if c.name not in names))
+        return replace(self, columns=tuple(c for c in self.columns if c.name not in names))
 
     def export_fields(self) -> list[tuple[str, pa.DataType | None]]:
         """(name, Arrow type) as the export's writer takes them (None: Coded)."""
@@ -291,6 +293,36 @@ NODES = Table(
     ),
 )
 
+OD = Table(
+    "od",
+    "one row per object a node's successful SDO transfers showed, per life of the node "
+    "(`cananalyze od`)",
+    tuple(
+        Column(n, doc, DECIDED, dataset=t)
+        for n, t, doc in (
+            ("node", pa.int16(), "the node-ID"),
+            ("index", pa.int32(), "the object's index"),
+            ("subindex", pa.int16(), "its sub-index"),
+            ("life", pa.int32(), "the node's boot-ups seen before the value (0: none yet)"),
+            ("name", pa.string(), "the object's name (profile, EDS or CiA 301)"),
+            ("value", pa.string(), "its last value, as the text outputs print it"),
+            ("data", pa.string(), "the bytes of that value, hex"),
+            ("size", pa.int64(), "their count"),
+            ("words", pa.string(), "the value in words, where known"),
+            ("t", pa.float64(), "when the last transfer ended"),
+            ("set_by", pa.string(), "write (an SDO download) or read (an upload)"),
+            ("t_first", pa.float64(), "when the first transfer of it ended"),
+            ("transfers", pa.int64(), "successful transfers of it"),
+            ("changes", pa.int64(), "times its bytes changed"),
+            ("history", pa.string(), "the values it went through, oldest first"),
+        )
+    )
+    + (_bus("object"),),
+    in_dataset=False,
+)
+if OD.without("bus").names != OD_COLUMNS:  # the tally's rows, in its order
+    raise RuntimeError(f"od: the tally's columns are {OD_COLUMNS}")
+
 LOGS = Table(
     "logs",
     "a fleet dataset's one row per input log, with its status",
@@ -317,7 +349,7 @@ LOGS = Table(
 )
 
 TABLES: dict[str, Table] = {
-    t.name: t for t in (FRAMES, SIGNALS, SDO, EVENTS, FINDINGS, NODES, LOGS)
+    t.name: t for t in (FRAMES, SIGNALS, SDO, EVENTS, FINDINGS, NODES, OD, LOGS)
 }
 
 

@@ -18,7 +18,7 @@ import duckdb
 import pyarrow.parquet as pq
 import pytest
 from conftest import ROOT, SAMPLES
-from exported import NETWORK, assert_wide_signals_is, export, wide_signals_as_long
+from exported import NETWORK, TABLES, assert_wide_signals_is, export, wide_signals_as_long
 
 import cananalyze
 from cananalyze.devices.builtin import load_builtin
@@ -52,7 +52,7 @@ def test_remap_mid_log_new_columns_in_one_file(tmp_path, monkeypatch, row_group)
     out = export(log, tmp_path / "x", size=10, device=I7231D)["parquet"]  # batches of 10
     path = out / "signals.parquet"
     assert sorted(p.name for p in out.iterdir()) == sorted(
-        f"{n}.parquet" for n in ("frames", "signals", "sdo", "events", "findings", "nodes")
+        f"{n}.parquet" for n in TABLES
     )  # no part files left behind
     f = pq.ParquetFile(path)
     if row_group == 8:

@@ -41,6 +41,7 @@ from cananalyze.core.records import DecodedBatch
 from cananalyze.decode.events.build import LEVEL_NAMES, EventState, batch_events_of
 from cananalyze.decode.events.columns import KINDS, NO_NODE, NO_ROW, EventColumns
 from cananalyze.decode.node_tally import NodeTally, bus_profiles, node_profiles
+from cananalyze.decode.od_tally import OdTally
 from cananalyze.outputs import schemas
 from cananalyze.outputs.tables import pandas_like as pl
 from cananalyze.outputs.tables import sdo_chunks, wide
@@ -211,7 +212,7 @@ class TableSink(OutputSink):
         self.dir = _outdir(self.path)
         self._stack = contextlib.ExitStack()
         self.paths: dict[str, Path] = {}
-        for name in TABLES:
+        for name in self.tables:
             self.paths[name] = self._stack.enter_context(atomic_path(self.dir / f"{name}.{fmt}"))
         # signals.parquet one row per PDO frame, a column per signal (`wide`); CSV and a
         # fleet's dataset parts keep one row per value: a CSV header is fixed at its first
@@ -258,6 +259,7 @@ class TableSink(OutputSink):
         self._pending_events = EventColumns.empty()
         self._channels: tuple[str, ...] = ()
         self._nodes = NodeTally()
+        self._od = OdTally()
         self._sdo_stats = {c: pl.ColumnStats() for c in SDO_COLUMNS}
         self._sdo_spool = tempfile.TemporaryFile(dir=self.dir, prefix=".sdo-spool.")
         self._sdo_chunks = 0
@@ -296,6 +298,7 @@ class TableSink(OutputSink):
         self._findings.add(batch.findings)
         events, states = batch_events_of(batch, off, self._event_state)
         self._nodes.add(batch, states, off)
+        self._od.add(batch)
         self._add_events(events, float(fb.t[-1]) - HOLD if n else float("-inf"))
         self.offset += n
 
@@ -594,10 +597,12 @@ class TableSink(OutputSink):
                 self.rows["signals"] = self.wide.rows
             self.rows["sdo"] = self._write_sdo(sdo_done)
             self.rows["nodes"] = self._write_nodes()
+            if "od" in self.paths:
+                self.rows["od"] = self._write_od()
         except BaseException as exc:
             self.abort(type(exc), exc, exc.__traceback__)
             raise
-        return {name: self.rows[name] for name in TABLES}
+        return {name: self.rows[name] for name in self.tables}
 
     def abort(self, typ=None, exc=None, tb=None) -> None:
         """Drop every temporary file (a cut-off export leaves no table behind)."""
@@ -799,6 +804,17 @@ class TableSink(OutputSink):
 
         self._write_small("findings", tables(), schema)
         return n
+
+    @property
+    def tables(self) -> tuple[str, ...]:
+        """The files written: TABLES, and `od` but in a fleet's dataset parts."""
+        return TABLES if self.constants else (*TABLES, "od")
+
+    def _write_od(self) -> int:
+        rows = self._od.rows()
+        names = list(rows[0]) if rows else list(schemas.OD.without("bus").names)
+        out = [(c, *pl.column([r[c] for r in rows])) for c in names]
+        return self._small_table("od", out)
 
     def _write_nodes(self) -> int:
         run = self.run

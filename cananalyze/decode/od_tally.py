@@ -1,0 +1,246 @@
+"""Each node's object dictionary as the log showed it: the values of successful SDO transfers.
+
+A log shows much of a network's configuration: every SDO upload that answered and
+every download that was confirmed. This follows them batch by batch, per bus (the frame's
+channel), node, index and sub-index, in the order the transfers ended: the last value, when and how it
+was set (read or written), how often, and the values it went through. A boot-up of
+the node starts a new life (its objects are back to their defaults unless stored), so a
+value is kept per life: `life` counts the node's boot-ups before the transfer.
+
+`load().od`, the export's `od` table, `cananalyze od` and its DCFs all read `rows()`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cananalyze.core.records import DecodedBatch
+from cananalyze.protocol.services import Service
+
+HISTORY = 16  # values kept per object and life: the first ones and the last one
+OD_COLUMNS = (
+    "node",
+    "index",
+    "subindex",
+    "life",
+    "name",
+    "value",
+    "data",
+    "size",
+    "words",
+    "t",
+    "set_by",
+    "t_first",
+    "transfers",
+    "changes",
+    "history",
+)
+
+
+@dataclass
+class _Object:
+    """One object of one node in one life, as the transfers showed it."""
+
+    t_first: float
+    key: object  # the last transfer's bytes, comparable (`_data_keys`)
+    rec: dict | None = None  # the last transfer's record (built at the end of its batch)
+    transfers: int = 1
+    changes: int = 0
+    history: list = field(default_factory=list)  # the first values, as shown
+    more: bool = False  # more changes than the history keeps
+
+
+class OdTally:
+    """Per bus, node, life and object: what the successful SDO transfers showed.
+
+    A polled bus repeats the same reads: only the first transfer of an object, each
+    change while the history has room, and the last of each batch are read as records
+    (on the fast path's columns the others are compared by their bytes, not built)."""
+
+    def __init__(self) -> None:
+        self.objects: dict[tuple, _Object] = {}  # (bus, node, life, index, sub) -> object
+        self.lives: dict[tuple, int] = {}  # (bus, node) -> boot-ups seen so far
+        self.boot_t: dict[tuple, list[float]] = {}  # (bus, node) -> boot-up times
+        self.several = False  # frames of more than one channel seen: rows name their bus
+        self._first: str | None = None
+
+    def add(self, batch: DecodedBatch) -> None:
+        """One batch's boot-ups and successful SDO transfers, in row order (a transfer
+        ending on a boot-up's row is before it: the answer came first)."""
+        fb = batch.frames
+        if len(fb) and not self.several:
+            first = fb.channel_label(int(fb.channel[0]))
+            self._first = self._first or first
+            self.several = first != self._first or bool((fb.channel != fb.channel[0]).any())
+        boots = np.flatnonzero(batch.service == Service.BOOTUP)
+        recs = batch.records
+        at = np.zeros(0, np.int64)
+        if recs:
+            c = recs.cols
+            at = np.flatnonzero(c.ok & (c.node >= 0) & (c.index >= 0) & (c.subindex >= 0))
+        if not boots.size and not at.size:
+            return
+        top = int(fb.channel.max()) + 1 if len(fb) else 1
+        labels = [fb.channel_label(c) for c in range(top)]
+        boot_ch = fb.channel[boots].astype(np.int64) if len(fb) else boots
+        boot_node = batch.node[boots].astype(np.int64)
+        if at.size:
+            self._transfers(batch, at, labels, boots, boot_ch, boot_node)
+        for row, ch, node in zip(boots.tolist(), boot_ch.tolist(), boot_node.tolist(), strict=True):
+            key = (labels[ch], node)
+            self.lives[key] = self.lives.get(key, 0) + 1
+            self.boot_t.setdefault(key, []).append(float(fb.t[row]))
+
+    def _transfers(self, batch, at, labels, boots, boot_ch, boot_node) -> None:
+        """The batch's successful transfers, grouped by object with numpy: per group one
+        step here, the records read only for what is shown (first, changes, last)."""
+        fb, recs = batch.frames, batch.records
+        c = recs.cols
+        rows = np.asarray(recs.rows, np.int64)[at]
+        ch = np.zeros(len(at), np.int64)
+        inside = rows < len(fb)
+        ch[inside] = fb.channel[rows[inside]]
+        node, index, sub = c.node[at], c.index[at], c.subindex[at]
+        # each transfer's life: the node's before this batch, plus its boot-ups before it
+        pair = ch * 256 + node
+        uniq, inv = np.unique(pair, return_inverse=True)
+        before = [self.lives.get((labels[p // 256], int(p % 256)), 0) for p in uniq.tolist()]
+        life = np.asarray(before, np.int64)[inv]
+        for row, bch, bn in zip(boots.tolist(), boot_ch.tolist(), boot_node.tolist(), strict=True):
+            life[(ch == bch) & (node == bn) & (rows > row)] += 1
+        keys = _data_keys(recs, at)
+        codes = _codes(keys)
+        order = np.lexsort((np.arange(len(at)), sub, index, life, node, ch))
+        cols = (ch, node, life, index, sub)
+        s = [x[order] for x in cols]
+        new = np.ones(len(at), bool)
+        new[1:] = np.any([x[1:] != x[:-1] for x in s], axis=0)
+        starts = np.flatnonzero(new)
+        ends = np.append(starts[1:], len(at))
+        code = codes[order]
+        differs = np.zeros(len(at), bool)
+        differs[1:] = code[1:] != code[:-1]
+        t = c.t[at]
+        for lo, hi in zip(starts.tolist(), ends.tolist(), strict=True):
+            j0 = int(order[lo])
+            key = (labels[ch[j0]], int(node[j0]), int(life[j0]), int(index[j0]), int(sub[j0]))
+            changed = (np.flatnonzero(differs[lo + 1 : hi]) + lo + 1).tolist()
+            obj = self.objects.get(key)
+            if obj is None:
+                shown = _shown(recs.record(int(at[j0])))
+                obj = self.objects[key] = _Object(float(t[j0]), keys[j0], history=[shown])
+                obj.transfers = 0
+            elif keys[j0] != obj.key:
+                changed.insert(0, lo)
+            obj.transfers += hi - lo
+            obj.changes += len(changed)
+            room = max(0, HISTORY - 1 - len(obj.history))
+            for k in changed[:room]:
+                obj.history.append(_shown(recs.record(int(at[order[k]]))))
+            obj.more = obj.more or len(changed) > room
+            last = int(order[hi - 1])
+            obj.key = keys[last]
+            obj.rec = recs.record(int(at[last]))
+
+    def boot_times(self, bus: str | None, node: int) -> list[float]:
+        """The node's boot-up times (`bus` None: a log of one bus, whatever its channel)."""
+        if bus is not None:
+            return self.boot_t.get((bus, node), [])
+        return sorted(t for (_, n), ts in self.boot_t.items() if n == node for t in ts)
+
+    def rows(self) -> list[dict]:
+        """One dict per object and life (`OD_COLUMNS`, then `bus` on a log of several
+        buses), by bus, node, life, index and sub-index."""
+        out = []
+        for key in sorted(self.objects, key=lambda k: (str(k[0]), *k[1:])):
+            bus, node, life, index, sub = key
+            o = self.objects[key]
+            r = o.rec or {}
+            row = {
+                "node": node,
+                "index": index,
+                "subindex": sub,
+                "life": life,
+                "name": r.get("name"),
+                "value": _text(r.get("value")),
+                "data": r.get("data"),
+                "size": r.get("size"),
+                "words": r.get("words") or None,
+                "t": r.get("t"),
+                "set_by": "write" if r.get("direction") == "download" else "read",
+                "t_first": o.t_first,
+                "transfers": o.transfers,
+                "changes": o.changes,
+                "history": _history(o),
+            }
+            if self.several:
+                row["bus"] = bus
+            out.append(row)
+        return out
+
+
+def _text(value) -> str | None:
+    """A value as the text outputs print it (ints in decimal, bytes in hex)."""
+    if value is None:
+        return None
+    if isinstance(value, bytes | bytearray):
+        return value.hex()
+    if isinstance(value, float) and value.is_integer():
+        return repr(value)
+    return str(value)
+
+
+def _shown(rec: dict) -> str:
+    """A transfer's value as the history shows it: its bytes (0x...) when it has no
+    value of a known type."""
+    text = _text(rec.get("value"))
+    if text is None:
+        data = rec.get("data")
+        return f"0x{data}" if data else "-"
+    return text
+
+
+def _history(o: _Object) -> str:
+    """The values an object went through, oldest first ("0 -> 100 -> 250"); "..." where
+    more changes came than are kept, then the last."""
+    vals = list(o.history)
+    if o.more:
+        vals += ["...", _shown(o.rec or {})]
+    return " -> ".join(vals)
+
+
+def _codes(keys: list) -> np.ndarray:
+    """The data keys as int64 codes that are equal where the keys are (texts coded apart)."""
+    texts: dict[str, int] = {}
+    out = np.empty(len(keys), np.int64)
+    for j, k in enumerate(keys):
+        out[j] = k if isinstance(k, int) else -1 - texts.setdefault(k, len(texts))
+    return out
+
+
+def _data_keys(recs, at: np.ndarray) -> list:
+    """The bytes of each of these transfers as one comparable value, without building
+    the fast path's records: up to 4 bytes (every expedited value) as an int of the
+    bytes and their count, longer ones as their hex text."""
+    part, _ = recs.split()
+    fast: dict[int, int] = {}
+    if part is not None:
+        a = part.fields().arrays
+        n = a["data_len"].astype(np.int64)
+        raw = np.zeros((len(n), 4), np.int64)
+        raw[:, : min(4, a["raw"].shape[1])] = a["raw"][:, :4]
+        raw[np.arange(4) >= n[:, None]] = 0
+        packed = (raw << (8 * np.arange(4, dtype=np.int64))).sum(1) | (n << 32)
+        fast = dict(zip(part.at.tolist(), packed.tolist(), strict=True))
+    out: list = []
+    for k in at.tolist():
+        got = fast.get(k)
+        if got is None:
+            data = recs.record(k).get("data") or ""
+            raw_bytes = bytes.fromhex(data)
+            n = len(raw_bytes)
+            got = int.from_bytes(raw_bytes, "little") | (n << 32) if n <= 4 else data
+        out.append(got)
+    return out
