@@ -131,10 +131,15 @@ def load(
     DBC files (`--dbc`), whose messages join `signals`. The same
     pipeline as `cananalyze check` and `export`: the same findings and tables.
     """
-    from cananalyze.pipeline import build_checker, build_decoder, open_source, run
-
     dbc = () if dbc is None else (dbc,) if isinstance(dbc, (str, Path)) else tuple(dbc)
     opts = load_options(network, eds, device, strict, input_format, sdo_timeout, rules, dbc=dbc)
+    return load_with(path, opts)
+
+
+def load_with(path: str | Path, opts) -> Capture:
+    """load() with the pipeline's Options as the command line builds them (`diff`)."""
+    from cananalyze.pipeline import build_checker, build_decoder, open_source, run
+
     checker = build_checker(opts)  # a bad rules file fails before the log is opened
     source = open_source(path, opts)
     sink = CaptureSink(Capture)

@@ -26,6 +26,7 @@ SUBCOMMANDS = [
     "simulate",
     "devices",
     "od",
+    "diff",
     "fleet",
     "query",
 ]

@@ -214,6 +214,49 @@ FLAGS: dict[str, Flag] = {
             help="also write each node's configuration as a CiA 306 DCF in DIR (node<N>.dcf)",
         ),
     ),
+    # --- diff ---------------------------------------------------------------------
+    "reference": Flag(
+        ("reference",),
+        dict(
+            metavar="B",
+            help="the run to compare with: another log (same formats), or a DCF whose "
+            "ParameterValues are the expected configuration",
+        ),
+    ),
+    "tolerance": Flag(
+        ("--tolerance",),
+        dict(
+            type=float,
+            default=0.1,
+            metavar="FRACTION",
+            help="timings and PDO rates differ beyond this part of the larger (default 0.1)",
+        ),
+    ),
+    "tolerance_ms": Flag(
+        ("--tolerance-ms",),
+        dict(
+            type=float,
+            default=2.0,
+            metavar="MS",
+            help="and beyond this many ms (default 2: thread and bus jitter)",
+        ),
+    ),
+    "diff_json": Flag(
+        ("--json",),
+        dict(
+            dest="diff_json",
+            metavar="FILE",
+            help="also write the differences as JSON (- for stdout)",
+        ),
+    ),
+    "reference_node": Flag(
+        ("--ref-node",),
+        dict(
+            type=int,
+            metavar="N",
+            help="a DCF reference: the node it describes (default its NodeID)",
+        ),
+    ),
     # --- timelines and tables ----------------------------------------------------
     "mcap": Flag(
         ("--mcap",),
