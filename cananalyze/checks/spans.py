@@ -60,3 +60,14 @@ def _pdo_stretches(ctx, g):
             cfg = ctx.config.pdo_params(cob, at)
             if cfg is not None:
                 yield cob, cfg, np.arange(run.start, run.stop) + sl.start, ~across[run]
+
+
+def sync_before(srows: np.ndarray, st: np.ndarray, rows: np.ndarray, carried: float) -> tuple:
+    """(SYNCs of this batch before each row, time of the latest SYNC before each row): in
+    this batch, else `carried`, the last one of earlier batches (NaN: none yet). A live
+    batch often holds PDOs and no SYNC: never index an empty array."""
+    k = np.searchsorted(srows, rows)
+    last_t = np.full(k.size, carried)
+    if st.size:
+        last_t = np.where(k > 0, st[np.maximum(k - 1, 0)], last_t)
+    return k, last_t

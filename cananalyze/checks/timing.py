@@ -14,6 +14,7 @@ from collections import Counter
 import numpy as np
 
 from cananalyze.checks.rule import Context
+from cananalyze.checks.spans import pdo_stretches, sync_before
 from cananalyze.checks.spool import KeyedSpool
 from cananalyze.checks.streamstats import StreamStats, bins_of, histogram_many
 from cananalyze.core.finding import rel_time
@@ -39,6 +40,11 @@ class Timing:
         self.emcy: Counter = Counter()
         self.bootups: Counter = Counter()
         self.sdo_latency: dict[int | None, StreamStats] = {}
+        # synchronous PDOs (types 0-240) after the SYNC before each: per COB-ID, and what
+        # it is (node, direction, number, type) with the window 0x1007 at its last frame
+        self.sync_latency: dict[int, StreamStats] = {}
+        self.sync_pdo: dict[int, tuple] = {}
+        self._last_sync_t = np.nan
         self.sdo_results: Counter = Counter()
         self.error_frames = 0
 
@@ -58,8 +64,35 @@ class Timing:
         if boot.size:
             self.bootups.update(boot.tolist())
         self.error_frames += int(ctx.rows(Service.ERROR_FRAME).size)
+        self._sync_latency(ctx)  # few streams: kept in exports too (load().sync_latency)
         if b.records:
             self._sdo(b)
+
+    def _sync_latency(self, ctx: Context) -> None:
+        """Each synchronous PDO (transmission type 0-240 in force at its time, TPDO or
+        RPDO) after the latest SYNC before it, per COB-ID; the window 0x1007 in force at
+        its last frame beside it. The pdo_sync rule judges the same PDOs by the window."""
+        srows = ctx.rows(Service.SYNC)
+        st = ctx.batch.frames.t[srows]
+        g = ctx.gaps("pdo")
+        if g.key.size and ctx.timed:
+            for cob, (node, pdo), idx, _ in pdo_stretches(ctx, g):
+                if pdo.transmission_type > 240:
+                    continue
+                t = g.t[idx]
+                _, last_t = sync_before(srows, st, g.row[idx], self._last_sync_t)
+                late = (t - last_t) * 1000.0
+                late = late[~np.isnan(late)]
+                stats = self.sync_latency.get(cob)
+                if stats is None:
+                    stats = self.sync_latency[cob] = StreamStats()
+                if late.size:
+                    stats.add(late)
+                window = ctx.config.sync_window_us(float(t[-1]))
+                what = (node, pdo.direction, pdo.number, pdo.transmission_type)
+                self.sync_pdo[cob] = (*what, window / 1000 if window else None)
+        if st.size:
+            self._last_sync_t = float(st[-1])
 
     def _sdo(self, b) -> None:
         """Result counts and latency per node, from the batch's SDO records as columns."""
@@ -185,6 +218,15 @@ class Timing:
             out["pdo"][cob] = s
         if self.stats["sync"]:
             out["sync"] = self.stats["sync"][0].stats()
+        out["sync_latency"] = {}
+        for cob in sorted(self.sync_latency):
+            node, direction, number, ttype, window = self.sync_pdo[cob]
+            s = self.sync_latency[cob].stats()
+            s |= {"node": node, "pdo": f"{'t' if direction == 'tx' else 'r'}pdo{number}"}
+            s["type"] = ttype
+            s["window_ms"] = window
+            s["margin_ms"] = window - s["max"] if window and s.get("count") else None
+            out["sync_latency"][cob] = s
         out["sdo_latency"] = {n: st.stats() for n, st in self.sdo_latency.items()}
         out["sdo_results"] = dict(self.sdo_results)
         out["emcy"] = dict(self.emcy)
@@ -201,6 +243,7 @@ class Timing:
         r = self.report(nmt)
         if not timed:
             r["heartbeat"], r["pdo"], r["sync"], r["sdo_latency"] = {}, {}, None, {}
+            r["sync_latency"] = {}
 
         def fmt(s: dict) -> str:
             if not s.get("count"):
@@ -223,6 +266,16 @@ class Timing:
             for cob, s in r["pdo"].items():
                 rate = f" rate {s['rate_hz']:.2f} Hz" if s.get("rate_hz") else ""
                 out.append(f"  0x{cob:03X}:{rate} {fmt(s)}")
+        if r["sync_latency"]:
+            out.append("synchronous PDOs, latency after SYNC per COB-ID:")
+            for cob, s in r["sync_latency"].items():
+                window = (
+                    f"; window 0x1007 {s['window_ms']:g} ms, margin {s['margin_ms']:.2f} ms"
+                    if s["margin_ms"] is not None
+                    else ""
+                )
+                what = f"node {s['node']} {s['pdo'].upper()} type {s['type']}"
+                out.append(f"  0x{cob:03X} ({what}): {fmt(s)}{window}")
         if r["sdo_latency"]:
             out.append("SDO latency per node:")
             out += [

@@ -378,6 +378,24 @@ class Capture:
         return pd.DataFrame.from_records(self.node_rows(), index="node")
 
     @cached_property
+    def sync_latency(self) -> pd.DataFrame:
+        """Per synchronous PDO (transmission type 0-240): its latency after SYNC in ms
+        (count, min, median, mean, p99, max, jitter), the window 0x1007 in force at its
+        last frame and the margin left (window - max); `bus` on a log of several buses."""
+        import pandas as pd
+
+        checkers = [] if self.checker is None else [self.checker, *self.checker.others]
+        rows = []
+        for c in checkers:
+            for cob, s in c.timing.report()["sync_latency"].items():
+                row = {"cob_id": cob, **{k: s.get(k) for k in _SYNC_LATENCY}}
+                if len(checkers) > 1:
+                    row["bus"] = c.bus
+                rows.append(row)
+        bus = ["bus"] if len(checkers) > 1 else []
+        return pd.DataFrame.from_records(rows, columns=["cob_id", *_SYNC_LATENCY, *bus])
+
+    @cached_property
     def od(self) -> pd.DataFrame:
         """Each node's objects as its successful SDO transfers showed them, per life
         (boot-ups split it): last value, when and how set, how often, what it went through."""
@@ -401,6 +419,10 @@ class Capture:
         tally.add_states(self.state_changes)
         tally.add_identity(self.records)
         return tally.rows(self.profiles)
+
+
+_SYNC_LATENCY = ("node", "pdo", "type", "count", "min", "median", "mean", "p99", "max")
+_SYNC_LATENCY += ("jitter", "window_ms", "margin_ms")
 
 
 def _table(pd, table: schemas.Table, columns: dict):

@@ -115,6 +115,7 @@ def _required(name: str) -> list[str]:
         "fleet": ["log.log", "--out", "ds"],
         "live": [],
         "report": ["log.log", "-o", "r.html"],
+        "diff": ["a.log", "b.log"],
     }
     return required.get(name, ["log.log"])
 

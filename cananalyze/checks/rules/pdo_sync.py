@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from cananalyze.checks.rule import Context, Rule, ms
-from cananalyze.checks.spans import pdo_stretches, runs
+from cananalyze.checks.spans import pdo_stretches, runs, sync_before
 from cananalyze.protocol.services import Service
 
 
@@ -40,13 +40,8 @@ class PdoSyncRule(Rule):
                 n = pdo.transmission_type
                 self.subjects.add(node)
                 rows = g.row[idx]
-                k = np.searchsorted(srows, rows)  # SYNCs in this batch before each PDO
+                k, last_t = sync_before(srows, st, rows, self.last_sync_t)
                 no = self.sync_count + k
-                # the latest SYNC before each PDO: in this batch, else the one carried over
-                # (a live batch often holds PDOs and no SYNC: never index an empty array)
-                last_t = np.full(k.size, self.last_sync_t)
-                if st.size:
-                    last_t = np.where(k > 0, st[np.maximum(k - 1, 0)], last_t)
                 prev = np.empty_like(no)
                 prev[1:] = no[:-1]
                 prev[0] = self.last_sync_no.get(cob, -1)

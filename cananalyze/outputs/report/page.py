@@ -106,6 +106,7 @@ NAV = (
     ("sdo", "sdo", "SDO"),
     ("emcy", "emcy", "EMCY"),
     ("pdos", "pdo", "PDO"),
+    ("sync_latency", "sync", "SYNC"),
     ("signals", "signals", "Signals"),
     ("drive_states", "drive", "Drive states"),
 )

@@ -437,4 +437,36 @@ def drive_states(s, figs: Figures) -> dict | None:
     return {"plot": figs.add(fig)}
 
 
-SECTIONS = [verdict, buses, findings, nodes, sdo, emcy, pdos, signals, drive_states]
+def sync_latency(s, figs: Figures) -> dict | None:
+    """Synchronous PDOs after SYNC: the latency's figures per COB-ID beside the window
+    0x1007 and the margin left, and its histogram with the window marked."""
+    checker = s.run.checker
+    if checker is None or not s.timed:
+        return None
+    rows, figures = [], []
+    for c in (checker, *checker.others):
+        timing = c.timing
+        for cob, st in timing.report()["sync_latency"].items():
+            if not st.get("count"):
+                continue
+            who = s.who(c.bus if s.several else None, st["node"])
+            window = st["window_ms"]
+            rows.append(
+                [
+                    f"0x{cob:03X}",
+                    who.removeprefix("node "),
+                    st["pdo"].upper(),
+                    st["type"],
+                    f"{st['count']:,}",
+                    *(_ms(st[k], 3) for k in ("min", "median", "p99", "max", "jitter")),
+                    "-" if window is None else f"{window:g}",
+                    "-" if st["margin_ms"] is None else _ms(st["margin_ms"], 3),
+                ]
+            )
+            title = f"0x{cob:03X} ({who} {st['pdo'].upper()}) latency after SYNC"
+            marks = [window] if window else []
+            figures.append(figs.add(plots.histogram(timing.sync_latency[cob], title, "ms", marks)))
+    return {"rows": rows, "plots": figures} if rows else None
+
+
+SECTIONS = [verdict, buses, findings, nodes, sdo, emcy, pdos, sync_latency, signals, drive_states]

@@ -138,6 +138,16 @@ SECTIONS = """
   {{ " " }}or profile (EDS/DCF).</p></section>
 {% endmacro %}
 
+{% macro sync_latency(s) %}
+  <section id="sync"><h2>Synchronous PDOs after SYNC</h2>
+  {{ table(["COB-ID", "node", "PDO", "type", "frames", "min ms", "median ms", "p99 ms",
+            "max ms", "jitter ms", "window 0x1007 ms", "margin ms"], s.rows) }}
+  {% for p in s.plots %}{{ plot(p) }}{% endfor %}
+  <p class=small>Each synchronous PDO (transmission type 0-240) after the SYNC before it; the
+  {{ " " }}window is the one in force at its last frame (the pdo_sync rule judges each).</p>
+  </section>
+{% endmacro %}
+
 {% macro signals(s) %}
   <section id="signals"><h2>Signals per PDO</h2>
   {% for p in s.plots %}{{ plot(p) }}{% endfor %}
