@@ -19,8 +19,11 @@ than its DataBytes hold is left out, never made a frame.
 
 from __future__ import annotations
 
+import gc
 import io
 import shutil
+import struct
+import sys
 import tempfile
 import warnings
 from collections.abc import Iterator
@@ -121,8 +124,8 @@ class _Reader:
         self.ctx.problems.add(self.ctx.source, where, text)
 
     def groups(self) -> list[_Group]:
-        """The CAN bus-logging groups that hold records (any writer's: found by the
-        `<kind>.ID` channel, with or without a prefix before the kind)."""
+        """The CAN bus-logging groups, empty ones too (a log with no frames is no failure);
+        any writer's: found by the `<kind>.ID` channel, with or without a prefix."""
         found = []
         for gi, group in enumerate(self.mdf.groups):
             fields: dict[str, tuple[str, int]] = {}
@@ -137,8 +140,7 @@ class _Reader:
             cg = group.channel_group
             source = getattr(cg, "acq_source", None)
             name = (getattr(source, "name", "") or "") if source is not None else ""
-            if cg.cycles_nr:
-                found.append(_Group(gi, kinds.pop(), fields, int(cg.cycles_nr), str(name)))
+            found.append(_Group(gi, kinds.pop(), fields, int(cg.cycles_nr), str(name)))
         return found
 
     def chunk(self, g: _Group) -> _Rows | None:
@@ -348,8 +350,36 @@ def _bytes(samples, n: int) -> np.ndarray:
 
 
 def _say(exc: BaseException) -> str:
+    """asammdf's reason in one line; a struct error is a block cut short."""
+    if isinstance(exc, struct.error):
+        return f"a block ends before its fields do, the file is cut off or corrupt ({exc})"
     text = str(exc).strip().splitlines()
     return text[0][:200] if text else exc.__class__.__name__
+
+
+def _open(module, stream: BinaryIO):
+    """(asammdf's MDF, "") or (None, why not). A half-built MDF4's __del__ fails when
+    its constructor did: that is asammdf's tidying, not news, and is kept off stderr."""
+    hook = sys.unraisablehook
+
+    def quiet(unraisable) -> None:
+        if getattr(unraisable.object, "__module__", "").startswith("asammdf"):
+            return
+        hook(unraisable)
+
+    sys.unraisablehook = quiet
+    try:
+        why = ""
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                return module.MDF(stream), ""
+        except Exception as exc:  # MdfException, struct.error, ValueError, ... on damage
+            why = _say(exc)
+        return None, why
+    finally:
+        gc.collect()
+        sys.unraisablehook = hook
 
 
 @contextmanager
@@ -389,16 +419,9 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
     else:
         source = io.BufferedReader(_Prefixed(head, stream))  # type: ignore[arg-type]
     with _seekable(source, head) as seekable:
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                mdf = mdf_module.MDF(seekable)
-        except Exception as exc:  # MdfException, struct.error, ValueError, ... on damage
-            ctx.problems.add(
-                ctx.source,
-                "offset 0",
-                f"cannot read the MF4 file (cut off or corrupt?): {_say(exc)}",
-            )
+        mdf, why = _open(mdf_module, seekable)
+        if mdf is None:
+            ctx.problems.add(ctx.source, "offset 0", f"not a readable MF4 file: {why}")
             return
         try:
             reader = _Reader(mdf, ctx)
