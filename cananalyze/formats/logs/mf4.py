@@ -50,7 +50,7 @@ from cananalyze.formats.registry import LogFormat, ReadContext, register
 MAGICS = (b"MDF     ", b"UnFinMF ")
 KINDS = {"CAN_DataFrame": 0, "CAN_RemoteFrame": FLAG_RTR, "CAN_ErrorFrame": FLAG_ERR}
 FIELDS = ("ID", "IDE", "DLC", "DataLength", "DataBytes", "BusChannel", "Dir", "EDL", "BRS", "ESI")
-CHUNK = 1 << 18  # records of one group read at once (each up to ~100 bytes of columns)
+CHUNK = 1 << 16  # records of one group read at once: ~50 MB at its peak (64-byte DataBytes)
 ID_EXT_BIT = 0x80000000  # some writers mark a 29-bit identifier in ID's top bit
 ID_MASK = 0x1FFFFFFF
 FD_LENGTHS = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64], np.int64)
@@ -358,8 +358,10 @@ def _say(exc: BaseException) -> str:
 
 
 def _open(module, stream: BinaryIO):
-    """(asammdf's MDF, "") or (None, why not). A half-built MDF4's __del__ fails when
-    its constructor did: that is asammdf's tidying, not news, and is kept off stderr."""
+    """(asammdf's MDF, "") or (None, why not). Without its bus-logging pass (which reads
+    every group's BusChannel and ID at open, for DBC decoding: the file's size in memory).
+    A half-built MDF4's __del__ fails when its constructor did: that is asammdf's
+    tidying, not news, and is kept off stderr."""
     hook = sys.unraisablehook
 
     def quiet(unraisable) -> None:
@@ -373,7 +375,7 @@ def _open(module, stream: BinaryIO):
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                return module.MDF(stream), ""
+                return module.MDF(stream, process_bus_logging=False), ""
         except Exception as exc:  # MdfException, struct.error, ValueError, ... on damage
             why = _say(exc)
         return None, why
