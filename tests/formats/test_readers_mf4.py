@@ -273,6 +273,33 @@ def test_truncated_file_is_one_line_exit_2(tmp_path, traffic):
             read_all(path)
 
 
+def test_channel_outside_its_record_is_a_problem_not_a_crash(tmp_path, traffic):
+    """A corrupt byte offset (found by fuzzing: asammdf read past its buffers, a
+    segfault at the next garbage collection): that group is skipped with a problem, the
+    other groups are read."""
+    _, want = traffic
+    path = tmp_path / "x.mf4"
+    write_mf4(path, want, per_bus=True)
+    mdf = asammdf.MDF(str(path))
+    group = mdf.groups[1]
+    esi = next(c for c in group.channels if c.name == "CAN_DataFrame.ESI")
+    at, record = esi.address + 92, int(group.channel_group.samples_byte_nr)  # cn_byte_offset
+    mdf.close()
+    raw = bytearray(path.read_bytes())
+    assert int.from_bytes(raw[at : at + 4], "little") == esi.byte_offset
+    raw[at : at + 4] = (record + 83).to_bytes(4, "little")
+    bad = tmp_path / "bad.mf4"
+    bad.write_bytes(bytes(raw))
+    out = _cli("decode", str(bad), "--format", "jsonl")
+    assert out.returncode == 0 and "Traceback" not in out.stderr, out.stderr
+    assert "CAN_DataFrame.ESI ends at byte" in out.stderr and "corrupt" in out.stderr
+    got, ctx, _ = run(mf4.read, bad)
+    assert ctx.problems.count == 1
+    bus2 = [i for i in range(len(want)) if want.channel_name(i) == "can1"]
+    data2 = [i for i in bus2 if not want.flags[i] & (FLAG_RTR | FLAG_ERR)]
+    assert len(got) == len(want) - len(data2)  # group 1: the data frames of bus 2
+
+
 def test_file_bytes_unchanged(tmp_path, traffic):
     """Read as given, finalised or not: asammdf finalises an UnFinMF file by writing into
     what it reads, so that is a temporary copy, never the log."""

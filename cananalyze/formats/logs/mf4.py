@@ -138,6 +138,13 @@ class _Reader:
             if len(kinds) != 1 or "ID" not in fields:
                 continue
             cg = group.channel_group
+            outside = _outside(group.channels, int(cg.samples_byte_nr))
+            if outside:
+                self.problem(
+                    f"group {gi}",
+                    f"{outside}: the file is corrupt, its {cg.cycles_nr} records are skipped",
+                )
+                continue
             source = getattr(cg, "acq_source", None)
             name = (getattr(source, "name", "") or "") if source is not None else ""
             found.append(_Group(gi, kinds.pop(), fields, int(cg.cycles_nr), str(name)))
@@ -321,6 +328,23 @@ class _Reader:
             "an MF4 file without CAN bus logging (no CAN_DataFrame, CAN_RemoteFrame or "
             f"CAN_ErrorFrame records; its channels: {shown})"
         )
+
+
+def _outside(channels, record: int) -> str:
+    """The first channel whose bytes lie outside the group's record, described, or "".
+    asammdf reads such a channel past its buffers (a corrupt byte offset was a segfault)."""
+    for ch in channels:
+        kind = int(ch.channel_type)
+        if kind in (3, 6):  # virtual: no bytes in the record
+            continue
+        bits = 64 if kind == 1 else int(ch.bit_count)  # VLSD: an 8-byte offset in the record
+        end = int(ch.byte_offset) + (int(ch.bit_offset) + bits + 7) // 8
+        if end > record:
+            return (
+                f"channel {ch.name} ends at byte {end} of a {record}-byte record "
+                f"(byte offset {ch.byte_offset}, {bits} bits)"
+            )
+    return ""
 
 
 def _split(rows: _Rows, n: int) -> tuple[_Rows, list[_Rows]]:
