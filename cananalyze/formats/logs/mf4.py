@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import gc
 import io
+import logging
 import shutil
 import struct
 import sys
@@ -59,6 +60,10 @@ FD_LENGTHS = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64], n
 def sniff(head: bytes) -> bool:
     """MDF files start with "MDF     " (an unfinalised one "UnFinMF ") and the version."""
     return head[:8] in MAGICS and head[8:9].isdigit()
+
+
+class _Odd(ValueError):
+    """A field whose column is no CAN field (its type or shape), named in the message."""
 
 
 @dataclass
@@ -157,8 +162,7 @@ class _Reader:
         count = min(CHUNK, g.records - g.done)
         names = list(g.fields)
         try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
+            with _quiet():
                 signals = self.mdf.select(
                     [(None, g.index, g.fields[f][1]) for f in names],
                     record_offset=g.done,
@@ -174,7 +178,12 @@ class _Reader:
             return None
         cols = {f: s.samples for f, s in zip(names, signals, strict=True)}
         first = g.done
-        t = np.asarray(signals[0].timestamps, np.float64)
+        t = np.asarray(signals[0].timestamps)
+        if t.ndim != 1 or t.dtype.kind not in "iuf":
+            self.problem(f"group {g.index}", f"{g.kind} has no usable master (time) channel")
+            g.done = g.records
+            return None
+        t = t.astype(np.float64)
         n = min([len(t)] + [len(c) for c in cols.values()])
         g.done += count
         if n < count:
@@ -185,7 +194,16 @@ class _Reader:
             g.done = g.records
         if n == 0:
             return None
-        return self.frames(g, cols, t[:n], first, n)
+        try:
+            return self.frames(g, cols, t[:n], first, n)
+        except _Odd as exc:
+            self.problem(
+                f"group {g.index}",
+                f"{g.kind}.{exc}: the file is corrupt or not bus logging; "
+                f"its {g.records} records are skipped",
+            )
+            g.done = g.records
+            return None
 
     def frames(self, g: _Group, cols: dict, t: np.ndarray, first: int, n: int) -> _Rows:
         def col(name: str, default: int = 0) -> np.ndarray:
@@ -193,8 +211,12 @@ class _Reader:
             if c is None:
                 return np.full(n, default, np.int64)
             c = np.asarray(c[:n])
+            if c.ndim != 1 or c.dtype.kind not in "biufSU":
+                raise _Odd(f"{name} is {c.dtype} of shape {c.shape[1:]}, not a number a record")
             if c.dtype.kind in "SU":  # a Dir written as text ("Rx"/"Tx")
                 return (np.char.strip(c.astype("U")) == "Tx").astype(np.int64)
+            if c.dtype.kind == "f" and not np.isfinite(c).all():
+                raise _Odd(f"{name} holds values that are not numbers")
             return c.astype(np.int64)
 
         raw_id = col("ID")
@@ -218,15 +240,23 @@ class _Reader:
         else:
             length = col("DataLength") if "DataLength" in cols else from_dlc
             keep = (length >= 0) & (length <= min(64, payload.shape[1]))
-        bad = int(n - np.count_nonzero(keep))
-        line = np.arange(first + 1, first + n + 1, dtype=np.int64)
-        if bad:
+        timed = np.isfinite(t)
+        if not timed.all():
+            row = int(np.flatnonzero(~timed)[0])
+            self.problem(
+                f"group {g.index} record {first + row + 1}",
+                f"{int(n - timed.sum())} {g.kind} record(s) whose time is not a number left out",
+            )
+        if not keep.all():
             row = int(np.flatnonzero(~keep)[0])
             self.problem(
                 f"group {g.index} record {first + row + 1}",
-                f"{bad} {g.kind} record(s) with a DataLength beyond their DataBytes "
-                f"({int(length[row])} > {payload.shape[1]}) left out",
+                f"{int(n - keep.sum())} {g.kind} record(s) with a DataLength beyond their "
+                f"DataBytes ({int(length[row])} > {payload.shape[1]}) left out",
             )
+        keep &= timed
+        bad = int(n - np.count_nonzero(keep))
+        line = np.arange(first + 1, first + n + 1, dtype=np.int64)
         data = np.zeros((n, 8), np.uint8)
         width = min(8, payload.shape[1])
         if width and g.kind != "CAN_RemoteFrame":
@@ -381,6 +411,21 @@ def _say(exc: BaseException) -> str:
     return text[0][:200] if text else exc.__class__.__name__
 
 
+@contextmanager
+def _quiet():
+    """asammdf's warnings and log records kept off stderr while it reads: it logs what
+    it finds wrong with a damaged file (with an empty traceback) to its own handler,
+    and the reader reports the damage itself, once, as a problem."""
+    log = logging.getLogger("asammdf")
+    disabled, log.disabled = log.disabled, True
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            yield
+    finally:
+        log.disabled = disabled
+
+
 def _open(module, stream: BinaryIO):
     """(asammdf's MDF, "") or (None, why not). Without its bus-logging pass (which reads
     every group's BusChannel and ID at open, for DBC decoding: the file's size in memory).
@@ -397,8 +442,7 @@ def _open(module, stream: BinaryIO):
     try:
         why = ""
         try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
+            with _quiet():
                 return module.MDF(stream, process_bus_logging=False), ""
         except Exception as exc:  # MdfException, struct.error, ValueError, ... on damage
             why = _say(exc)
