@@ -215,8 +215,8 @@ class _Reader:
                 raise _Odd(f"{name} is {c.dtype} of shape {c.shape[1:]}, not a number a record")
             if c.dtype.kind in "SU":  # a Dir written as text ("Rx"/"Tx")
                 return (np.char.strip(c.astype("U")) == "Tx").astype(np.int64)
-            if c.dtype.kind == "f" and not np.isfinite(c).all():
-                raise _Odd(f"{name} holds values that are not numbers")
+            if c.dtype.kind == "f" and not (np.abs(c) < 2**32).all():  # NaN fails too
+                raise _Odd(f"{name} holds values that are no CAN field's")
             return c.astype(np.int64)
 
         raw_id = col("ID")
@@ -255,6 +255,7 @@ class _Reader:
                 f"DataBytes ({int(length[row])} > {payload.shape[1]}) left out",
             )
         keep &= timed
+        t = np.where(timed, t, 0.0)
         bad = int(n - np.count_nonzero(keep))
         line = np.arange(first + 1, first + n + 1, dtype=np.int64)
         data = np.zeros((n, 8), np.uint8)
