@@ -118,6 +118,8 @@ _COLUMNS = ("t", "can_id", "flags", "dlc", "data", "channel", "line")
 
 
 class _Reader:
+    """The bus-logging groups of one opened MDF, read a chunk at a time and merged."""
+
     def __init__(self, mdf, ctx: ReadContext) -> None:
         self.mdf = mdf
         self.ctx = ctx
