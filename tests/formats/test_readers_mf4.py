@@ -300,6 +300,24 @@ def test_channel_outside_its_record_is_a_problem_not_a_crash(tmp_path, traffic):
     assert len(got) == len(want) - len(data2)  # group 1: the data frames of bus 2
 
 
+def test_inflated_size_claim_is_bounded(tmp_path, traffic):
+    """A deflate block claiming 8 GiB inflated (asammdf would allocate what it claims):
+    refused with a problem, the other groups read."""
+    _, want = traffic
+    path = tmp_path / "x.mf4"
+    write_mf4(path, want, per_bus=True, compression=1)
+    raw = bytearray(path.read_bytes())
+    at = raw.find(b"##DZ")
+    assert at > 0
+    raw[at + 32 : at + 40] = (8 << 30).to_bytes(8, "little")  # dz_org_data_length
+    bad = tmp_path / "bad.mf4"
+    bad.write_bytes(bytes(raw))
+    got, ctx, _ = run(mf4.read, bad)
+    assert ctx.problems.count == 1
+    assert "claims 8,589,934,592 bytes inflated" in ctx.problems.shown[0].message
+    assert 0 < len(got) < len(want)
+
+
 def test_file_bytes_unchanged(tmp_path, traffic):
     """Read as given, finalised or not: asammdf finalises an UnFinMF file by writing into
     what it reads, so that is a temporary copy, never the log."""

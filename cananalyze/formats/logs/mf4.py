@@ -52,6 +52,8 @@ MAGICS = (b"MDF     ", b"UnFinMF ")
 KINDS = {"CAN_DataFrame": 0, "CAN_RemoteFrame": FLAG_RTR, "CAN_ErrorFrame": FLAG_ERR}
 FIELDS = ("ID", "IDE", "DLC", "DataLength", "DataBytes", "BusChannel", "Dir", "EDL", "BRS", "ESI")
 CHUNK = 1 << 16  # records of one group read at once: ~50 MB at its peak (64-byte DataBytes)
+# a compressed (DZ) block's inflated size: asammdf writes 4 MiB, loggers less
+MAX_INFLATED = 256 << 20
 ID_EXT_BIT = 0x80000000  # some writers mark a 29-bit identifier in ID's top bit
 ID_MASK = 0x1FFFFFFF
 FD_LENGTHS = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64], np.int64)
@@ -150,6 +152,14 @@ class _Reader:
                 self.problem(
                     f"group {gi}",
                     f"{outside}: the file is corrupt, its {cg.cycles_nr} records are skipped",
+                )
+                continue
+            big = max((int(b.original_size) for b in group.data_blocks if b.block_type), default=0)
+            if big > MAX_INFLATED:  # asammdf inflates a block whole, into what it claims
+                self.problem(
+                    f"group {gi}",
+                    f"a compressed data block claims {big:,} bytes inflated (more than "
+                    f"{MAX_INFLATED:,}): refused, its {cg.cycles_nr} records are skipped",
                 )
                 continue
             source = getattr(cg, "acq_source", None)
