@@ -1,5 +1,5 @@
-"""A plain install does what the project is for; the fleet, the live Foxglove server and the
-development tools are extras, and a command that needs a missing one says so in one line.
+"""A plain install does what the project is for; the fleet, the live Foxglove server, MF4
+input and the development tools are extras, and a command that needs a missing one says so in one line.
 
 The CLI runs in a subprocess whose `sitecustomize` blocks the named packages' imports (a
 meta-path finder raising ModuleNotFoundError, as if they were not installed), so the
@@ -25,6 +25,7 @@ SAMPLES = ROOT / "samples"
 # the import names each extra's packages give (pyproject.toml's optional-dependencies)
 FLEET = ("dask", "distributed", "bokeh", "duckdb")
 FOXGLOVE = ("foxglove",)
+MF4 = ("asammdf",)
 # [dev]'s own tools and test-only readers and writers: no plain command may need them
 DEV_TOOLS = (
     "pytest",
@@ -132,7 +133,19 @@ def test_live_foxglove_without_the_foxglove_extra(tmp_path):
     )
 
 
-PLAIN_BLOCKED = FLEET + FOXGLOVE + DEV_TOOLS
+def test_mf4_without_the_mf4_extra(tmp_path):
+    """The format is still told from the content; reading it names the extra."""
+    path = tmp_path / "x.mf4"
+    path.write_bytes(b"MDF     4.10    " + bytes(200))
+    out = blocked_cli(tmp_path, MF4, "decode", str(path))
+    assert out.returncode == 2
+    assert one_line(out) == (
+        "cananalyze: error: reading MF4 logs needs the mf4 extra (asammdf is not installed): "
+        'pip install "cananalyze[mf4]"'
+    )
+
+
+PLAIN_BLOCKED = FLEET + FOXGLOVE + MF4 + DEV_TOOLS
 
 
 def test_decode_and_check_without_any_extra(tmp_path):
@@ -213,9 +226,10 @@ def test_pyproject_extras():
     assert names(extras["fleet"]) == {"dask", "bokeh", "duckdb"}
     assert "dask[distributed]>=2024.1" in extras["fleet"]
     assert names(extras["foxglove"]) == {"foxglove-sdk"}
-    assert extras["all"] == ["cananalyze[fleet,foxglove]"]
+    assert names(extras["mf4"]) == {"asammdf"}
+    assert extras["all"] == ["cananalyze[fleet,foxglove,mf4]"]
     assert "cananalyze[all]" in extras["dev"]
     plain = names(project["dependencies"])
-    for extra in ("fleet", "foxglove", "dev"):
+    for extra in ("fleet", "foxglove", "mf4", "dev"):
         assert not plain & names(extras[extra]), extra
     assert {"pyarrow", "mcap", "rerun-sdk", "plotly", "jinja2", "rich"} <= plain

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
-
 import can
 from conftest import real_file
 from readers_util import assert_same_as_python_can, run
@@ -40,12 +38,9 @@ def test_sqlite_log_written_by_python_can(tmp_path):
     assert ctx.absolute_time and ctx.start_time == 1700000000
 
 
-def test_mf4_without_asammdf_is_one_problem(tmp_path):
-    fake = b"MDF     4.10    " + bytes(64)
-    batch, ctx, _ = run(pycan_fallback.read, fake, source="x.mf4")
-    if importlib.util.find_spec("asammdf") is None:
-        assert len(batch) == 0 and ctx.problems.count == 1
-        assert "MF4Reader" in ctx.problems.shown[0].message
+def test_mdf_is_not_claimed_here():
+    """MF4 is formats/logs/mf4.py's (columns through asammdf), not python-can's per Message."""
+    assert not pycan_fallback.sniff(b"MDF     4.10    " + bytes(64))
 
 
 def test_unknown_suffix_is_a_problem():
@@ -58,5 +53,5 @@ def test_suffixes_are_python_cans_other_readers():
 
     from cananalyze.formats.logs.pycan_fallback import PYCAN_ONLY_SUFFIXES
 
-    ours = (".asc", ".blf", ".trc", ".csv", ".log")
+    ours = (".asc", ".blf", ".trc", ".csv", ".log", ".mf4")
     assert set(PYCAN_ONLY_SUFFIXES) == {s for s in MESSAGE_READERS if s not in ours}

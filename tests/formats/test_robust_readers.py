@@ -430,10 +430,11 @@ def binary_seeds(tmp_path_factory) -> dict:
 
 
 @pytest.mark.parametrize(
-    "name", ["seed.pcap", "seed.pcapng", "sll2.pcapng", "seed.blf", "seed.mcap", "seed.log.gz"]
+    "name",
+    ["seed.pcap", "seed.pcapng", "sll2.pcapng", "seed.blf", "seed.mf4", "seed.mcap", "seed.log.gz"],
 )
 def test_mutated_binary_captures_never_crash(binary_seeds, name):
-    """The formats the real logs lack (pcap, pcapng, a cooked capture, MCAP, gzip), each
+    """The formats the real logs lack (pcap, pcapng, a cooked capture, MF4, MCAP, gzip), each
     from its own writer, mutated: a reader answers with frames or one InputError."""
     if name not in binary_seeds:
         pytest.skip(f"{name}: its writer is not installed")

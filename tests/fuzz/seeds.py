@@ -1,11 +1,13 @@
 """Seeds in the binary formats the real logs lack, each written by an independent writer:
-pcap and pcapng of SocketCAN and a Linux cooked capture (scapy), a BLF (python-can), an
-MCAP (the mcap library, through `cananalyze export --mcap`) and a gzip'd candump (gzip).
+pcap and pcapng of SocketCAN and a Linux cooked capture (scapy), a BLF and an MF4
+(python-can's writers, MF4 through asammdf), an MCAP (the mcap library, through
+`cananalyze export --mcap`) and a gzip'd candump (gzip).
 The CI's short fuzz run and the long campaigns mutate them with the real logs."""
 
 from __future__ import annotations
 
 import gzip
+import importlib.util
 import subprocess
 import sys
 from pathlib import Path
@@ -66,6 +68,19 @@ def write_seeds(folder: Path) -> list[Path]:
             for t, ident, data in frames:
                 w.on_message_received(can.Message(timestamp=t, arbitration_id=ident, data=data))
         made.append(folder / "seed.blf")
+        if importlib.util.find_spec("asammdf") is not None:
+            try:  # python-can's MF4 writer: without asammdf (or with asammdf imported
+                # before python-can, a circular import) NotImplementedError
+                w = can.MF4Writer(str(folder / "seed.mf4"))
+            except NotImplementedError:
+                w = None
+            if w is not None:
+                for k, (t, ident, data) in enumerate(frames):
+                    m = can.Message(t, arbitration_id=ident, data=data, channel=k % 2)
+                    m.is_extended_id = False
+                    w.on_message_received(m)
+                w.stop()
+                made.append(folder / "seed.mf4")
     head = "\n".join(DEMO.read_text().splitlines()[:60]) + "\n"
     (folder / "seed.log.gz").write_bytes(gzip.compress(head.encode()))
     made.append(folder / "seed.log.gz")

@@ -30,6 +30,7 @@ SMOKED = {
     "bench_live.py",
     "bench_report.py",
     "bench_pcap.py",
+    "bench_mf4.py",
     "bench_tables.py",
     "bench_precision.py",
     "mem_profile.py",
@@ -402,6 +403,14 @@ def test_bench_pcap_reads_every_frame():
     assert "read 3,000 frames (scapy: the first 500)" in out
     for side, count in (("pcap", "3,000"), ("candump", "3,000"), ("scapy rdpcap", "500")):
         assert re.search(rf"  {side} +wall +{NUMBER} s  cpu +{NUMBER} s .*\({count} frames\)", out)
+
+
+def test_bench_mf4_reads_every_frame(tmp_path):
+    pytest.importorskip("asammdf")
+    out = _run("bench_mf4.py", "3000", "--rounds", "1", "--out", str(tmp_path)).stdout
+    assert "3,000 frames generated, median of 1 rounds" in out
+    for name in ("candump", "blf", "mf4", "mf4 deflate"):
+        assert re.search(rf"^{name} +\d+ +3,000 +{NUMBER} +{NUMBER} +[\d,]+ +[\d,]+$", out, re.M)
 
 
 @pytest.mark.slow

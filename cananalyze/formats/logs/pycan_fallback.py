@@ -1,4 +1,4 @@
-"""Any log python-can can read (by suffix) that no fast reader here claims: MF4, SQLite, ...
+"""Any log python-can can read (by suffix) that no fast reader here claims: SQLite, ...
 
 This path is per message by necessity (python-can yields one Message at a
 time); it exists for coverage of rare formats, not for speed. Messages are
@@ -28,19 +28,17 @@ from cananalyze.formats.registry import LogFormat, ReadContext, register
 
 # python-can's MESSAGE_READERS less the formats read here (checked by a test), written
 # out so that importing the readers does not import python-can
-PYCAN_ONLY_SUFFIXES = (".db", ".mf4")
-_MAGIC = (b"MDF     ", b"SQLite format 3\x00")
+PYCAN_ONLY_SUFFIXES = (".db",)
+_MAGIC = (b"SQLite format 3\x00",)
 
 
 def sniff(head: bytes) -> bool:
-    """Formats only python-can reads: ASAM MDF4 and python-can's SQLite logs."""
+    """Formats only python-can reads: python-can's SQLite logs (MF4 is formats/logs/mf4.py)."""
     return head.startswith(_MAGIC)
 
 
 def _suffix(ctx: ReadContext, head: bytes) -> str:
     if head.startswith(_MAGIC[0]):
-        return ".mf4"
-    if head.startswith(_MAGIC[1]):
         return ".db"
     path = PurePath(ctx.source)
     suffixes = [s.lower() for s in path.suffixes]
@@ -109,7 +107,7 @@ def read(stream: BinaryIO, ctx: ReadContext) -> Iterator[FrameBatch]:
 FORMAT = register(
     LogFormat(
         name="pycan",
-        description="any other format python-can reads (MF4, SQLite, ...)",
+        description="any other format python-can reads (SQLite, ...)",
         sniff=sniff,
         read=read,
         suffixes=PYCAN_ONLY_SUFFIXES,
