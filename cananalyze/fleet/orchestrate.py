@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import logging
 import os
+import shutil
+import tempfile
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -56,6 +58,47 @@ class FleetResult:
     def exit_code(self) -> int:
         """0: every log decoded, no rule violated; 1: a log failed or had violations."""
         return 1 if self.failed or self.violated else 0
+
+
+def _make_dataset(dataset: layout.Dataset, options: dict | None) -> None:
+    """The dataset folder made (a URL's: its bucket must be there), or one-line UsageError."""
+    if isinstance(dataset, Path):
+        try:
+            dataset.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise UsageError(
+                f"{dataset}: cannot create the dataset folder ({exc.strerror})"
+            ) from None
+        return
+    from cananalyze.core import storage
+
+    fs, path = storage.filesystem(dataset, options)
+    try:
+        if fs.isfile(path):
+            raise UsageError(f"{dataset}: exists and is not a dataset folder")
+        fs.makedirs(path, exist_ok=True)  # object storage: the bucket, when it can
+    except OSError as exc:
+        raise UsageError(
+            f"{dataset}: cannot reach the dataset: {' '.join(str(exc).split())}"
+        ) from None
+
+
+def _scratch(dataset: layout.Dataset):
+    """The local cluster's scratch space: a stage of a local dataset (removed with it), or
+    a local temporary folder's when the dataset is at a URL."""
+    if isinstance(dataset, Path):
+        return layout.Stage(dataset, layout.SCRATCH)
+    return _TempScratch()
+
+
+class _TempScratch:
+    """A local temporary folder, removed whole when closed."""
+
+    def __init__(self) -> None:
+        self.dir = Path(tempfile.mkdtemp(prefix="cananalyze-fleet-"))
+
+    def close(self) -> None:
+        shutil.rmtree(self.dir, ignore_errors=True)
 
 
 def _client(workers: int | None, scheduler: str | None, scratch: Path | None = None):
@@ -149,39 +192,38 @@ def run_fleet(
     junit: str | None = None,
     compression: str = "snappy",
     stream: TextIO | None = None,
+    storage_options: dict | None = None,
 ) -> FleetResult:
     """Decode every log the inputs name into `dataset`; the results (nothing raised for a
-    bad log). `stream`: where the dashboard line and the progress bar go. MissingExtra
-    without the fleet extra, before the dataset folder is made."""
+    bad log). Inputs and the dataset may be URLs (s3://..., core/storage), reached with
+    `storage_options` (fsspec's) and the environment's credentials. `stream`: where the
+    dashboard line and the progress bar go. MissingExtra without the fleet extra, before
+    the dataset folder is made."""
     need("distributed", "fleet", "fleet")
     t0 = time.perf_counter()
     opts = opts or Options(checks=True)
     if not opts.checking:
         opts = replace(opts, checks=True)  # the findings table is a promise
-    dataset = Path(dataset)
-    if dataset.exists() and not dataset.is_dir():
+    if storage_options:
+        opts = replace(opts, storage_options=storage_options)
+    where = opts.storage_options
+    dataset = layout.root(dataset)
+    if isinstance(dataset, Path) and dataset.exists() and not dataset.is_dir():
         raise UsageError(f"{dataset}: exists and is not a directory")
-    logs = expand(inputs, dataset)
+    logs = expand(inputs, dataset, where)
     if not logs:
         raise UsageError(f"no log files in {' '.join(inputs)}")
     if workers is not None and workers < 1:
         raise UsageError(f"--workers must be 1 or more (got {workers})")
-    try:
-        dataset.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise UsageError(f"{dataset}: cannot create the dataset folder ({exc.strerror})") from None
+    _make_dataset(dataset, where)
     if junit:
         from cananalyze.core.atomic import check_writable
 
         check_writable(junit)
-    recovered = layout.recover(dataset)
-    tasks = [
-        LogTask(
-            str(p), str(dataset.resolve()), options_for(p, opts), force, bool(junit), compression
-        )
-        for p in logs
-    ]
-    scratch = None if scheduler else layout.Stage(dataset, layout.SCRATCH)
+    recovered = layout.recover(dataset, where)
+    root = str(dataset.resolve()) if isinstance(dataset, Path) else dataset.rstrip("/")
+    tasks = [LogTask(p, root, options_for(p, opts), force, bool(junit), compression) for p in logs]
+    scratch = None if scheduler else _scratch(dataset)
     try:
         client, cluster = _client(workers, scheduler, scratch.dir if scratch else None)
     except BaseException:
@@ -210,7 +252,7 @@ def run_fleet(
                 result = fut.result()
             except Exception as exc:  # noqa: BLE001 - a worker lost (memory, crash): that log fails
                 path = path_of[fut.key]
-                result = record_failure(dataset, path, f"{path}: worker failed: {exc}")
+                result = record_failure(dataset, path, f"{path}: worker failed: {exc}", where)
             by_path[result["source"]] = result
             progress.done(result)
             fut.release()

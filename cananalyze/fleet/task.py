@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cananalyze.core import storage
 from cananalyze.core.errors import CananalyzeError
 from cananalyze.core.version import __version__
 from cananalyze.fleet import layout, schema
@@ -87,9 +88,9 @@ class _Findings(Sink):
             self.findings.extend(found.findings())
 
 
-def content_hash(path: str | Path) -> str:
-    """sha256 of the file's bytes (as stored: a .gz is hashed compressed)."""
-    with open(path, "rb") as f:
+def content_hash(path: str | Path, storage_options: dict | None = None) -> str:
+    """sha256 of the file's bytes (as stored: a .gz is hashed compressed); a path or URL."""
+    with storage.open_binary(path, storage_options) as f:
         return hashlib.file_digest(f, "sha256").hexdigest()
 
 
@@ -133,13 +134,17 @@ _DECIDING = (
 )
 
 
-def recorded(dataset: Path, digest: str) -> dict | None:
+def recorded(dataset: layout.Dataset, digest: str, options: dict | None = None) -> dict | None:
     """The dataset's `logs` row for this content, or None."""
     import pyarrow.parquet as pq
 
-    for part in layout.existing_parts(dataset, "logs", digest):
+    for part in layout.existing_parts(dataset, "logs", digest, options):
         with contextlib.suppress(OSError, ValueError):
-            rows = pq.read_table(part).to_pylist()
+            if isinstance(part, str):
+                with layout.open_part(part, options) as f:
+                    rows = pq.read_table(f).to_pylist()
+            else:
+                rows = pq.read_table(part).to_pylist()
             if rows:
                 return rows[0]
     return None
@@ -215,11 +220,11 @@ def process(task: LogTask) -> dict:
 
     allocator.tune()
     wall0, cpu0 = time.perf_counter(), time.process_time()
-    path, dataset = task.path, Path(task.dataset)
+    path, dataset, where = task.path, layout.root(task.dataset), task.opts.storage_options
     row: dict = {"status": "ok", "error": None, "frames": 0, "findings": 0, "violations": 0}
     try:
-        row["size"] = os.path.getsize(path)
-        digest = content_hash(path)
+        row["size"] = storage.stat_of(path, where).size
+        digest = content_hash(path, where)
     except OSError as exc:
         digest = hashlib.sha256(f"unreadable:{path}".encode()).hexdigest()
         row.update(status="failed", error=f"{path}: cannot read ({exc.strerror or exc})")
@@ -227,7 +232,7 @@ def process(task: LogTask) -> dict:
     result = {"source": path, "hash": digest, "skipped": False, "first": {}, "junit": None}
     row["config"] = options_digest(task.opts)
     if row["status"] == "ok" and not task.force:
-        old = recorded(dataset, digest)
+        old = recorded(dataset, digest, where)
         # a failure is tried again: it may have been the machine's (a worker lost)
         if (
             old is not None
@@ -239,7 +244,7 @@ def process(task: LogTask) -> dict:
             result["source"], result["recorded_source"] = path, old.get("source")
             return result
     try:
-        stage = layout.Stage(dataset, digest)
+        stage = layout.stage(dataset, digest, where)
     except OSError as exc:  # no room even for the staging folder: the log fails, in one line
         row.update(status="failed", error=_one_line(exc, path, dataset))
         result.update(row)
@@ -256,11 +261,11 @@ def process(task: LogTask) -> dict:
         row["cpu_seconds"] = time.process_time() - cpu0
         row["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         try:
-            _commit(stage, dataset, date, digest, parts, row, lineage)
+            _commit(stage, dataset, date, digest, parts, row, lineage, where)
         except OSError as exc:  # a full disk: this log fails, in one line, and the fleet goes on
             stage.close()
             row.update(status="failed", error=_one_line(exc, path, dataset))
-            _commit_failure(dataset, date, digest, row, lineage)
+            _commit_failure(dataset, date, digest, row, lineage, where)
     except BaseException:
         stage.close()
         raise
@@ -300,7 +305,9 @@ def _decode(task: LogTask, stage: layout.Stage, lineage: dict, findings: _Findin
     return state, decoder.checker.rules if decoder.checker is not None else []
 
 
-def _parts(stage: layout.Stage, dataset: Path, date: str, digest: str, row: dict, path: str):
+def _parts(
+    stage: layout.Stage, dataset: layout.Dataset, date: str, digest: str, row: dict, path: str
+):
     """(staged file, final part path) of every table; none, with the row failed, when a
     table is not in the dataset's schema."""
     from cananalyze.outputs.tables.stream import TABLES
@@ -319,7 +326,16 @@ def _parts(stage: layout.Stage, dataset: Path, date: str, digest: str, row: dict
     return parts
 
 
-def _commit(stage, dataset: Path, date: str, digest: str, parts: list, row: dict, lineage: dict):
+def _commit(
+    stage,
+    dataset: layout.Dataset,
+    date: str,
+    digest: str,
+    parts: list,
+    row: dict,
+    lineage: dict,
+    options: dict | None = None,
+):
     """The logs row written last, the log's parts at other dates (an earlier run's) removed."""
     staged = stage.dir / "logs.parquet"
     _logs_part(staged, row, lineage)
@@ -328,39 +344,46 @@ def _commit(stage, dataset: Path, date: str, digest: str, parts: list, row: dict
     removals = [
         p
         for table in schema.TABLES
-        for p in layout.existing_parts(dataset, table, digest)
+        for p in layout.existing_parts(dataset, table, digest, options)
         if p not in final
     ]
     stage.commit(renames, removals)
 
 
-def _commit_failure(dataset: Path, date: str, digest: str, row: dict, lineage: dict) -> None:
+def _commit_failure(
+    dataset: layout.Dataset,
+    date: str,
+    digest: str,
+    row: dict,
+    lineage: dict,
+    options: dict | None = None,
+) -> None:
     """The failed log's row alone, if the disk still takes it (else none: a rerun tries
     the log again, as any log without a row)."""
     try:
-        stage = layout.Stage(dataset, digest)
+        stage = layout.stage(dataset, digest, options)
     except OSError:
         return
     try:
-        _commit(stage, dataset, date, digest, [], row, lineage)
+        _commit(stage, dataset, date, digest, [], row, lineage, options)
     except OSError:
         stage.close()
 
 
-def record_failure(dataset: str | Path, path: str, error: str) -> dict:
+def record_failure(dataset: str | Path, path: str, error: str, options: dict | None = None) -> dict:
     """A `logs` row of status failed written by the driver, for a log whose worker was lost
     (killed for memory, crashed): the rest of the fleet goes on."""
-    dataset = Path(dataset)
+    dataset = layout.root(dataset)
     try:
-        digest = content_hash(path)
+        digest = content_hash(path, options)
     except OSError:
         digest = hashlib.sha256(f"unreadable:{path}".encode()).hexdigest()
     lineage = {"source": path, "hash": digest, "version": __version__}
     date, date_from = _date(None, path)
     row = {"status": "failed", "error": error, "frames": 0, "date_from": date_from}
-    stage = layout.Stage(dataset, digest)
+    stage = layout.stage(dataset, digest, options)
     try:
-        _commit(stage, dataset, date, digest, [], row, lineage)
+        _commit(stage, dataset, date, digest, [], row, lineage, options)
     except BaseException:
         stage.close()
         raise
