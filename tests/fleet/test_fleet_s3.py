@@ -176,7 +176,7 @@ def test_without_s3fs_the_extra_is_named(monkeypatch):
     from cananalyze.core.extras import MissingExtra
 
     monkeypatch.setitem(sys.modules, "s3fs", None)
-    with pytest.raises(MissingExtra, match=r'cananalyze\[s3\]'):
+    with pytest.raises(MissingExtra, match=r"cananalyze\[s3\]"):
         storage.filesystem("s3://bucket/logs")
 
 
@@ -214,7 +214,9 @@ def test_a_killed_run_then_a_rerun_completes_the_bucket_dataset(s3, tmp_path):
     fs.invalidate_cache()
     first = len(fs.glob("bucket/kill/ds/logs/date=*/*.parquet"))
     assert 0 < first < n
-    rerun = subprocess.run(cmd[:-1], env=env, capture_output=True, text=True, timeout=600, cwd=tmp_path)
+    rerun = subprocess.run(
+        cmd[:-1], env=env, capture_output=True, text=True, timeout=600, cwd=tmp_path
+    )
     assert rerun.returncode == 1, rerun.stderr  # generated traffic breaks rules: exit 1
     assert f"({n - first} decoded, {first} already in the dataset)" in rerun.stderr
     fs.invalidate_cache()
