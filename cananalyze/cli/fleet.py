@@ -23,7 +23,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     options_.add(p, "inputs", "out", "device", "eds", "network", "dbc_in", extra_names=DBC)
     options_.add(p, "rules", "sdo_timeout", "strict", "workers", "scheduler", "force", "junit")
-    options_.add(p, "parquet_compression", "storage_options", "quiet")
+    options_.add(p, "parquet_compression", "storage_options", "task_timeout")
+    options_.add(p, "quiet")
     p.set_defaults(func=run)
 
 
@@ -54,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
         compression=args.parquet_compression,
         stream=None if args.quiet else sys.stderr,
         storage_options=parse_options(args.storage_options) or None,
+        task_timeout=args.task_timeout,
     )
     lines = summary_lines(result)
     if args.quiet:

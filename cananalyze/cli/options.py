@@ -338,6 +338,15 @@ FLAGS: dict[str, Flag] = {
     "force": Flag(
         ("--force",), dict(action="store_true", help="decode logs already in the dataset again")
     ),
+    "task_timeout": Flag(
+        ("--task-timeout",),
+        dict(
+            type=float,
+            default=3600.0,
+            metavar="S",
+            help="give a log up after S seconds: a failed row saying so (default 3600)",
+        ),
+    ),
     "dataset": Flag(("dataset",), dict(help="the dataset folder or URL (fleet --out)")),
     "storage_options": Flag(
         ("--storage-options",),

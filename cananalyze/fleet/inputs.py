@@ -58,8 +58,11 @@ def _is_log(name: str) -> bool:
     return not any(p.startswith(".") for p in parts) and Path(name).suffix.lower() not in NOT_LOGS
 
 
-def _expand_url(item: str, dataset: str | Path | None, options: dict | None) -> list[str]:
-    """The log files one URL input names: an object, a prefix (recursive) or a glob."""
+def _expand_url(
+    item: str, dataset: str | Path | None, options: dict | None, infos: dict
+) -> list[str]:
+    """The log files one URL input names: an object, a prefix (recursive) or a glob;
+    what the listing said of each goes into `infos` (size, time: no request per file)."""
     fs, path = storage.filesystem(item, options)
     skip = None
     if dataset is not None and storage.is_url(dataset):
@@ -71,33 +74,40 @@ def _expand_url(item: str, dataset: str | Path | None, options: dict | None) -> 
                 raise UsageError(f"{item}: no file matches")
         elif fs.isdir(path):
             base = path.rstrip("/") + "/"
-            found = fs.find(path, detail=True)
-            return sorted(
-                storage.url_of(fs, p)
-                for p, info in found.items()
-                if info.get("type") != "directory"
-                and _is_log(p[len(base) :])
-                and not (skip and p.startswith(skip))
-            )
+            matches = {
+                p: info
+                for p, info in fs.find(path, detail=True).items()
+                if _is_log(p[len(base) :]) and not (skip and p.startswith(skip))
+            }
         elif fs.isfile(path):
-            return [storage.url_of(fs, path)]
+            matches = {path: fs.info(path)}
         else:
             raise UsageError(f"{item}: no such file or folder")
     except (OSError, PermissionError) as exc:
         raise UsageError(f"{item}: cannot list: {' '.join(str(exc).split())}") from None
-    return sorted(storage.url_of(fs, p) for p, i in matches.items() if i.get("type") != "directory")
+    out = []
+    for p, info in matches.items():
+        if info.get("type") != "directory":
+            out.append(storage.url_of(fs, p))
+            infos[out[-1]] = info
+    return sorted(out)
 
 
 def expand(
-    inputs: list[str], dataset: str | Path | None = None, options: dict | None = None
+    inputs: list[str],
+    dataset: str | Path | None = None,
+    options: dict | None = None,
+    infos: dict | None = None,
 ) -> list[str]:
     """Every log file the inputs name (absolute paths, URLs as given), once each, sorted;
-    UsageError for one that is not there. `options`: fsspec's, for URL inputs."""
+    UsageError for one that is not there. `options`: fsspec's, for URL inputs; `infos`
+    gets what their listing said of each URL (core/storage.stat_of takes it)."""
     urls: set[str] = set()
     local_inputs = []
+    infos = {} if infos is None else infos
     for item in inputs:
         if storage.is_url(item):
-            urls.update(_expand_url(item, dataset, options))
+            urls.update(_expand_url(item, dataset, options, infos))
         else:
             local_inputs.append(item)
     local = [str(p) for p in _expand_local(local_inputs, dataset)]

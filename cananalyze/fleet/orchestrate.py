@@ -22,7 +22,7 @@ from cananalyze.core.errors import UsageError
 from cananalyze.core.extras import need
 from cananalyze.fleet import layout
 from cananalyze.fleet.inputs import expand, options_for
-from cananalyze.fleet.task import LogTask, process, record_failure
+from cananalyze.fleet.task import TASK_TIMEOUT, LogTask, record_failure, run_task
 from cananalyze.pipeline import Options
 
 
@@ -37,6 +37,7 @@ class FleetResult:
     workers: list[str] = field(default_factory=list)  # the workers' addresses at the start
     recovered: tuple[int, int] = (0, 0)
     notes: list[str] = field(default_factory=list)
+    refused: list[str] = field(default_factory=list)  # inputs left out, one line each
 
     @property
     def failed(self) -> list[dict]:
@@ -56,8 +57,30 @@ class FleetResult:
 
     @property
     def exit_code(self) -> int:
-        """0: every log decoded, no rule violated; 1: a log failed or had violations."""
-        return 1 if self.failed or self.violated else 0
+        """0: every log decoded, no rule violated; 1: a log failed, was refused or had
+        violations."""
+        return 1 if self.failed or self.violated or self.refused else 0
+
+
+def _regular_files(
+    logs: list[str], options: dict | None, infos: dict
+) -> tuple[list[str], list[str]]:
+    """(the logs that are regular files, a line for each input refused): a FIFO or a
+    device named on the command line would block its worker or never end."""
+    from cananalyze.core import storage
+
+    kept, refused = [], []
+    for log in logs:
+        try:
+            st = storage.stat_of(log, options, infos.get(log))
+        except OSError as exc:
+            refused.append(f"{log}: cannot read ({exc.strerror or exc})")
+            continue
+        if st.regular:
+            kept.append(log)
+        else:
+            refused.append(f"{log}: not a regular file (a {st.kind}), left out")
+    return kept, refused
 
 
 def _make_dataset(dataset: layout.Dataset, options: dict | None) -> None:
@@ -193,12 +216,15 @@ def run_fleet(
     compression: str = "snappy",
     stream: TextIO | None = None,
     storage_options: dict | None = None,
+    task_timeout: float | None = TASK_TIMEOUT,
 ) -> FleetResult:
     """Decode every log the inputs name into `dataset`; the results (nothing raised for a
     bad log). Inputs and the dataset may be URLs (s3://..., core/storage), reached with
     `storage_options` (fsspec's) and the environment's credentials. `stream`: where the
     dashboard line and the progress bar go. MissingExtra without the fleet extra, before
-    the dataset folder is made."""
+    the dataset folder is made. Inputs that are no regular files (a FIFO, a device) are
+    refused, one line each, and the rest go on; a log not done after `task_timeout`
+    seconds is a failed row."""
     need("distributed", "fleet", "fleet")
     t0 = time.perf_counter()
     opts = opts or Options(checks=True)
@@ -210,11 +236,14 @@ def run_fleet(
     dataset = layout.root(dataset)
     if isinstance(dataset, Path) and dataset.exists() and not dataset.is_dir():
         raise UsageError(f"{dataset}: exists and is not a directory")
-    logs = expand(inputs, dataset, where)
+    infos: dict = {}
+    logs, refused = _regular_files(expand(inputs, dataset, where, infos), where, infos)
     if not logs:
-        raise UsageError(f"no log files in {' '.join(inputs)}")
+        raise UsageError("; ".join(refused) or f"no log files in {' '.join(inputs)}")
     if workers is not None and workers < 1:
         raise UsageError(f"--workers must be 1 or more (got {workers})")
+    if task_timeout is not None and not task_timeout > 0:
+        raise UsageError(f"--task-timeout must be positive (got {task_timeout})")
     _make_dataset(dataset, where)
     if junit:
         from cananalyze.core.atomic import check_writable
@@ -222,7 +251,12 @@ def run_fleet(
         check_writable(junit)
     recovered = layout.recover(dataset, where)
     root = str(dataset.resolve()) if isinstance(dataset, Path) else dataset.rstrip("/")
-    tasks = [LogTask(p, root, options_for(p, opts), force, bool(junit), compression) for p in logs]
+    tasks = [
+        LogTask(
+            p, root, options_for(p, opts), force, bool(junit), compression, timeout=task_timeout
+        )
+        for p in logs
+    ]
     scratch = None if scheduler else _scratch(dataset)
     try:
         client, cluster = _client(workers, scheduler, scratch.dir if scratch else None)
@@ -230,7 +264,7 @@ def run_fleet(
         if scratch is not None:
             scratch.close()
         raise
-    out = FleetResult([], recovered=recovered)
+    out = FleetResult([], recovered=recovered, refused=refused)
     by_path: dict[str, dict] = {}
     progress = None
     try:
@@ -244,7 +278,7 @@ def run_fleet(
             print(f"fleet: {len(tasks)} logs, dashboard {where}", file=stream)
         from distributed import as_completed
 
-        futures = client.map(process, tasks, pure=False)
+        futures = client.map(run_task, tasks, pure=False)
         path_of = {f.key: t.path for f, t in zip(futures, tasks, strict=True)}
         progress = _Progress(stream, len(tasks))
         for fut in as_completed(futures):
@@ -310,6 +344,8 @@ def summary_lines(out: FleetResult) -> list[str]:
         lines.append(
             f"fleet: finished {out.recovered[0]} and undid {out.recovered[1]} interrupted commits"
         )
+    for line in out.refused:
+        lines.append(f"refused: {line}")
     for r in out.failed:
         lines.append(f"failed: {r.get('error') or r['source']}")
     for r in out.violated:

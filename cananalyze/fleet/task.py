@@ -61,19 +61,23 @@ class LogTask:
     junit: bool = False
     compression: str = "snappy"
     extra: dict = field(default_factory=dict)  # room for later per-log settings
+    timeout: float | None = None  # seconds before the log is given up (run_task)
 
 
 class _Findings(Sink):
     """Counts the run's findings; keeps the Finding objects only for a JUnit report."""
 
-    def __init__(self, keep: bool) -> None:
+    def __init__(self, keep: bool, cancel=None) -> None:
         self.keep = keep
+        self.cancel = cancel  # run_task's Event: the time is up
         self.findings: list = []
         self.total = 0
         self.failing = 0
         self.first: dict[str, str] = {}  # rule -> its first failing message
 
     def write(self, batch) -> None:
+        if self.cancel is not None and self.cancel.is_set():
+            raise _Cancelled
         found = batch.findings  # columns: a message is built only for each rule's first
         if not len(found):
             return
@@ -214,19 +218,81 @@ def _suite(path: str, rules, findings, error: str | None) -> str:
     return ET.tostring(suite, encoding="unicode")
 
 
-def process(task: LogTask) -> dict:
-    """Decode one log into the dataset; the result row (never raises for a bad log)."""
+TASK_TIMEOUT = 3600.0  # seconds: no healthy log takes this long (--task-timeout)
+
+
+class _Cancelled(BaseException):
+    """The task's time is up: the decode stops at its next batch and commits nothing."""
+
+
+def run_task(task: LogTask) -> dict:
+    """`process` with the task's time limit (`task.timeout`, --task-timeout): a log that
+    has not finished by then (an input that never ends, a read that hangs) becomes a
+    `failed` row saying so, and the worker goes on with the next log.
+
+    The log runs in a thread of its own, since a blocked read cannot be interrupted: when
+    the time is up the thread is told to stop at its next batch and never to commit; one
+    blocked for good stays parked until the worker process ends.
+    """
+    import threading
+
+    if not task.timeout:
+        return process(task)
+    cancel = threading.Event()
+    box: dict = {}
+
+    def work() -> None:
+        try:
+            box["result"] = process(task, cancel)
+        except BaseException as exc:  # noqa: BLE001 - handed to the calling thread
+            box["error"] = exc
+
+    thread = threading.Thread(target=work, name=f"cananalyze-log-{task.path}", daemon=True)
+    thread.start()
+    thread.join(task.timeout)
+    if thread.is_alive():
+        cancel.set()
+        error = f"{task.path}: no result after {task.timeout:g} s (--task-timeout): given up"
+        return record_failure(task.dataset, task.path, error, task.opts.storage_options, False)
+    if "error" in box:
+        raise box["error"]
+    return box["result"]
+
+
+def _path_digest(path: str) -> str:
+    """The part name of a log whose content was not hashed (unreadable, not a log)."""
+    return hashlib.sha256(f"unreadable:{path}".encode()).hexdigest()
+
+
+def process(task: LogTask, cancel=None) -> dict:
+    """Decode one log into the dataset; the result row (never raises for a bad log).
+
+    The log is opened (its format told from its head) before its content is hashed:
+    a file that is no log (a 20 GB file of zeros) is refused without being read whole.
+    `cancel` (a threading.Event, run_task's): once set, the decode stops and nothing
+    is committed.
+    """
+    from cananalyze.pipeline import open_source
     from cananalyze.runtime import allocator
 
     allocator.tune()
     wall0, cpu0 = time.perf_counter(), time.process_time()
     path, dataset, where = task.path, layout.root(task.dataset), task.opts.storage_options
     row: dict = {"status": "ok", "error": None, "frames": 0, "findings": 0, "violations": 0}
+    source = None
     try:
         row["size"] = storage.stat_of(path, where).size
-        digest = content_hash(path, where)
+        try:
+            source = open_source(path, task.opts)
+        except (KeyboardInterrupt, SystemExit):
+            raise
+        except BaseException as exc:  # noqa: BLE001 - not a log: a row, not hashed
+            digest = _path_digest(path)
+            row.update(status="failed", error=_one_line(exc, path, task.dataset))
+        else:
+            digest = content_hash(path, where)
     except OSError as exc:
-        digest = hashlib.sha256(f"unreadable:{path}".encode()).hexdigest()
+        digest = _path_digest(path)
         row.update(status="failed", error=f"{path}: cannot read ({exc.strerror or exc})")
     lineage = {"source": path, "hash": digest, "version": __version__}  # schema.LINEAGE's order
     result = {"source": path, "hash": digest, "skipped": False, "first": {}, "junit": None}
@@ -240,26 +306,31 @@ def process(task: LogTask) -> dict:
             and old.get("status") == "ok"
             and old.get("config") == row["config"]
         ):
+            source.close()
             result.update(old, skipped=True)
             result["source"], result["recorded_source"] = path, old.get("source")
             return result
     try:
         stage = layout.stage(dataset, digest, where)
     except OSError as exc:  # no room even for the staging folder: the log fails, in one line
+        if source is not None:
+            source.close()
         row.update(status="failed", error=_one_line(exc, path, dataset))
         result.update(row)
         result.update(lineage, date=None, worker_pid=os.getpid())
         return result
     try:
-        sink = _Findings(keep=task.junit)
+        sink = _Findings(keep=task.junit, cancel=cancel)
         state, rules = (
-            _decode(task, stage, lineage, sink, row) if row["status"] == "ok" else (None, [])
+            _decode(task, source, stage, lineage, sink, row) if source is not None else (None, [])
         )
         date, row["date_from"] = _date(state.t0 if state is not None else None, path)
         parts = _parts(stage, dataset, date, digest, row, path) if state is not None else []
         row["seconds"] = time.perf_counter() - wall0
         row["cpu_seconds"] = time.process_time() - cpu0
         row["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        if cancel is not None and cancel.is_set():
+            raise _Cancelled
         try:
             _commit(stage, dataset, date, digest, parts, row, lineage, where)
         except OSError as exc:  # a full disk: this log fails, in one line, and the fleet goes on
@@ -276,15 +347,16 @@ def process(task: LogTask) -> dict:
     return result
 
 
-def _decode(task: LogTask, stage: layout.Stage, lineage: dict, findings: _Findings, row: dict):
-    """`pipeline.run` into the export's TableSink in the stage, writing the dataset's schema;
-    (the Run, the rules) or (None, []) with the row marked failed."""
+def _decode(
+    task: LogTask, source, stage: layout.Stage, lineage: dict, findings: _Findings, row: dict
+):
+    """`pipeline.run` of the opened log into the export's TableSink in the stage, writing
+    the dataset's schema; (the Run, the rules) or (None, []) with the row marked failed."""
     from cananalyze.outputs.tables.stream import TableSink
-    from cananalyze.pipeline import build_decoder, open_source, run
+    from cananalyze.pipeline import build_decoder, run
     from cananalyze.runtime.gcpolicy import fewer_collections
 
     try:
-        source = open_source(task.path, task.opts)
         row["format"] = getattr(getattr(source, "fmt", None), "name", None)
         # the sinks take the findings from the batches: the checker keeps none
         decoder = build_decoder(task.opts, keep_findings=False)
@@ -294,9 +366,11 @@ def _decode(task: LogTask, stage: layout.Stage, lineage: dict, findings: _Findin
         )
         with fewer_collections():
             state = run(source, decoder, [tables, findings], task.opts)
-    except (KeyboardInterrupt, SystemExit):
+    except (KeyboardInterrupt, SystemExit, _Cancelled):
+        source.close()
         raise
     except BaseException as exc:  # noqa: BLE001 - one log's failure is a row, not the fleet's
+        source.close()
         row.update(status="failed", error=_one_line(exc, task.path, task.dataset))
         return None, []
     row["skipped_lines"] = source.problems.count
@@ -370,14 +444,17 @@ def _commit_failure(
         stage.close()
 
 
-def record_failure(dataset: str | Path, path: str, error: str, options: dict | None = None) -> dict:
+def record_failure(
+    dataset: str | Path, path: str, error: str, options: dict | None = None, hash_it: bool = True
+) -> dict:
     """A `logs` row of status failed written by the driver, for a log whose worker was lost
-    (killed for memory, crashed): the rest of the fleet goes on."""
+    (killed for memory, crashed): the rest of the fleet goes on. `hash_it` False: under
+    the path's digest, not the content's (a log that timed out may never end)."""
     dataset = layout.root(dataset)
     try:
-        digest = content_hash(path, options)
+        digest = content_hash(path, options) if hash_it else _path_digest(path)
     except OSError:
-        digest = hashlib.sha256(f"unreadable:{path}".encode()).hexdigest()
+        digest = _path_digest(path)
     lineage = {"source": path, "hash": digest, "version": __version__}
     date, date_from = _date(None, path)
     row = {"status": "failed", "error": error, "frames": 0, "date_from": date_from}
