@@ -14,6 +14,7 @@ import os
 import shutil
 import tempfile
 import time
+import uuid
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TextIO
@@ -22,7 +23,15 @@ from cananalyze.core.errors import UsageError
 from cananalyze.core.extras import need
 from cananalyze.fleet import layout
 from cananalyze.fleet.inputs import expand, options_for
-from cananalyze.fleet.task import TASK_TIMEOUT, LogTask, record_failure, run_task
+from cananalyze.fleet.task import (
+    TASK_TIMEOUT,
+    LogTask,
+    logs_rows,
+    options_digest,
+    record_failure,
+    run_task,
+    unchanged,
+)
 from cananalyze.pipeline import Options
 
 
@@ -64,9 +73,10 @@ class FleetResult:
 
 def _regular_files(
     logs: list[str], options: dict | None, infos: dict
-) -> tuple[list[str], list[str]]:
-    """(the logs that are regular files, a line for each input refused): a FIFO or a
-    device named on the command line would block its worker or never end."""
+) -> tuple[list[tuple[str, object]], list[str]]:
+    """([(log, its core/storage.Stat)] of the regular files, a line for each input
+    refused): a FIFO or a device named on the command line would block its worker or
+    never end."""
     from cananalyze.core import storage
 
     kept, refused = [], []
@@ -77,7 +87,7 @@ def _regular_files(
             refused.append(f"{log}: cannot read ({exc.strerror or exc})")
             continue
         if st.regular:
-            kept.append(log)
+            kept.append((log, st))
         else:
             refused.append(f"{log}: not a regular file (a {st.kind}), left out")
     return kept, refused
@@ -251,12 +261,64 @@ def run_fleet(
         check_writable(junit)
     recovered = layout.recover(dataset, where)
     root = str(dataset.resolve()) if isinstance(dataset, Path) else dataset.rstrip("/")
-    tasks = [
-        LogTask(
-            p, root, options_for(p, opts), force, bool(junit), compression, timeout=task_timeout
-        )
-        for p in logs
-    ]
+    run = uuid.uuid4().hex
+    out = FleetResult([], recovered=recovered, refused=refused)
+    by_path, tasks = _unchanged_logs(logs, dataset, opts, force)
+    for p, _ in logs:
+        if p not in by_path:
+            o = options_for(p, opts)
+            tasks.append(
+                LogTask(p, root, o, force, bool(junit), compression, timeout=task_timeout, run=run)
+            )
+    if tasks:
+        _on_cluster(tasks, by_path, out, dataset, workers, scheduler, stream, run)
+        _recount(by_path, tasks, layout.root(root), where, run)
+    else:
+        out.notes.append("nothing to decode (every log unchanged in the dataset): no cluster")
+    out.results = [by_path[p] for p, _ in logs if p in by_path]
+    out.seconds = time.perf_counter() - t0
+    if junit:
+        _write_junit(junit, out.results)
+    return out
+
+
+def _unchanged_logs(
+    logs: list[tuple[str, object]], dataset: layout.Dataset, opts: Options, force: bool
+) -> tuple[dict[str, dict], list]:
+    """({path: result} of the logs the dataset holds unchanged, []): decided from each
+    file's path, size and modification time and the configuration, before any file is
+    read; the rest go to the workers, which hash them."""
+    if force:
+        return {}, []
+    rows = logs_rows(dataset, opts.storage_options)
+    if not rows:
+        return {}, []
+    configs: dict[str, str] = {}  # a folder's network.toml is the only per-log option
+    done: dict[str, dict] = {}
+    for path, st in logs:
+        o = options_for(path, opts)
+        key = str(o.network)
+        if key not in configs:
+            configs[key] = options_digest(o)
+        old = unchanged(rows.get(path, []), st.size, st.mtime_ns, configs[key])
+        if old is not None:
+            done[path] = {**old, "source": path, "skipped": True, "first": {}, "junit": None}
+    return done, []
+
+
+def _on_cluster(
+    tasks: list[LogTask],
+    by_path: dict[str, dict],
+    out: FleetResult,
+    dataset: layout.Dataset,
+    workers: int | None,
+    scheduler: str | None,
+    stream: TextIO | None,
+    run: str,
+) -> None:
+    """The tasks run on the local cluster (started here, closed at the end) or the
+    scheduler's; each result into `by_path`, a lost worker's log a failed row."""
+    where = tasks[0].opts.storage_options
     scratch = None if scheduler else _scratch(dataset)
     try:
         client, cluster = _client(workers, scheduler, scratch.dir if scratch else None)
@@ -264,8 +326,6 @@ def run_fleet(
         if scratch is not None:
             scratch.close()
         raise
-    out = FleetResult([], recovered=recovered, refused=refused)
-    by_path: dict[str, dict] = {}
     progress = None
     try:
         out.dashboard = _dashboard(client)
@@ -274,8 +334,8 @@ def run_fleet(
             client.wait_for_workers(len(cluster.workers))
         out.workers = sorted(client.scheduler_info().get("workers", {}))
         if stream is not None:
-            where = out.dashboard or 'not running (needs bokeh: pip install "cananalyze[fleet]")'
-            print(f"fleet: {len(tasks)} logs, dashboard {where}", file=stream)
+            link = out.dashboard or 'not running (needs bokeh: pip install "cananalyze[fleet]")'
+            print(f"fleet: {len(tasks)} logs, dashboard {link}", file=stream)
         from distributed import as_completed
 
         futures = client.map(run_task, tasks, pure=False)
@@ -286,7 +346,8 @@ def run_fleet(
                 result = fut.result()
             except Exception as exc:  # noqa: BLE001 - a worker lost (memory, crash): that log fails
                 path = path_of[fut.key]
-                result = record_failure(dataset, path, f"{path}: worker failed: {exc}", where)
+                error = f"{path}: worker failed: {exc}"
+                result = record_failure(dataset, path, error, where, run=run)
             by_path[result["source"]] = result
             progress.done(result)
             fut.release()
@@ -298,11 +359,23 @@ def run_fleet(
             cluster.close()
         if scratch is not None:
             scratch.close()
-    out.results = [by_path[t.path] for t in tasks if t.path in by_path]
-    out.seconds = time.perf_counter() - t0
-    if junit:
-        _write_junit(junit, out.results)
-    return out
+
+
+def _recount(
+    by_path: dict[str, dict], tasks: list[LogTask], dataset, options: dict | None, run: str
+) -> None:
+    """The run's results as the dataset's own `logs` rows say: a log whose row this run
+    wrote was decoded (or failed) by it, even when Dask ran its task again after a lost
+    result and the second run found the first one's row ("already in the dataset")."""
+    rows = logs_rows(dataset, options)
+    for t in tasks:
+        mine = [r for r in rows.get(t.path, []) if r.get("run") == run]
+        result = by_path.get(t.path)
+        if not mine or result is None or not result.get("skipped"):
+            continue
+        row = mine[0]
+        keep = {k: result[k] for k in ("first", "junit") if k in result}
+        by_path[t.path] = {**row, **keep, "source": t.path, "skipped": False}
 
 
 def _write_junit(dest: str, results: list[dict]) -> None:
@@ -339,6 +412,7 @@ def summary_lines(out: FleetResult) -> list[str]:
         f"fleet: {len(out.results)} logs ({done} decoded, {len(out.skipped)} already in the "
         f"dataset), {out.frames:,} frames, {len(out.failed)} failed, "
         f"{len(out.violated)} with violations, {out.seconds:.1f} s"
+        + "".join(f"; {note}" for note in out.notes)
     ]
     if any(out.recovered):
         lines.append(

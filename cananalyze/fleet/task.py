@@ -62,6 +62,7 @@ class LogTask:
     compression: str = "snappy"
     extra: dict = field(default_factory=dict)  # room for later per-log settings
     timeout: float | None = None  # seconds before the log is given up (run_task)
+    run: str = ""  # the fleet run's id, in the logs row: what this run wrote, retries included
 
 
 class _Findings(Sink):
@@ -151,6 +152,56 @@ def recorded(dataset: layout.Dataset, digest: str, options: dict | None = None) 
                 rows = pq.read_table(part).to_pylist()
             if rows:
                 return rows[0]
+    return None
+
+
+def logs_rows(dataset: layout.Dataset, options: dict | None = None) -> dict[str, list[dict]]:
+    """Every `logs` row of the dataset by source, read once (the driver's skip key and the
+    run's counts); {} when there are none or they cannot be read (then every log is
+    hashed by its worker, as before: never a wrong skip)."""
+    import pyarrow.dataset as pads
+
+    filesystem = None
+    if isinstance(dataset, str):
+        from pyarrow.fs import FSSpecHandler, PyFileSystem
+
+        fs, base = storage.filesystem(dataset, options)
+        fs.invalidate_cache()
+        where = f"{base.rstrip('/')}/logs"
+        if not fs.isdir(where):
+            return {}
+        filesystem = PyFileSystem(FSSpecHandler(fs))
+    else:
+        where = str(dataset / "logs")
+        if not os.path.isdir(where):
+            return {}
+    try:
+        # the dataset's schema: parts written before a column was added read it as null
+        found = pads.dataset(where, filesystem=filesystem, schema=schema.schema("logs"))
+        rows = found.to_table().to_pylist()
+    except (OSError, ValueError):
+        return {}
+    out: dict[str, list[dict]] = {}
+    for row in rows:
+        out.setdefault(row["source"], []).append(row)
+    return out
+
+
+def unchanged(rows: list[dict], size: int | None, mtime_ns: int | None, config: str):
+    """The recorded row that lets a log be skipped without reading it: decoded ok by this
+    cananalyze under this configuration, from a file of this size and modification time
+    at this path. None: the worker hashes it."""
+    if mtime_ns is None:
+        return None
+    for row in rows:
+        if (
+            row.get("status") == "ok"
+            and row.get("version") == __version__
+            and row.get("config") == config
+            and row.get("size") == size
+            and row.get("mtime_ns") == mtime_ns
+        ):
+            return row
     return None
 
 
@@ -253,7 +304,8 @@ def run_task(task: LogTask) -> dict:
     if thread.is_alive():
         cancel.set()
         error = f"{task.path}: no result after {task.timeout:g} s (--task-timeout): given up"
-        return record_failure(task.dataset, task.path, error, task.opts.storage_options, False)
+        where = task.opts.storage_options
+        return record_failure(task.dataset, task.path, error, where, False, task.run)
     if "error" in box:
         raise box["error"]
     return box["result"]
@@ -279,9 +331,11 @@ def process(task: LogTask, cancel=None) -> dict:
     wall0, cpu0 = time.perf_counter(), time.process_time()
     path, dataset, where = task.path, layout.root(task.dataset), task.opts.storage_options
     row: dict = {"status": "ok", "error": None, "frames": 0, "findings": 0, "violations": 0}
+    row["run"] = task.run
     source = None
     try:
-        row["size"] = storage.stat_of(path, where).size
+        st = storage.stat_of(path, where)  # before reading: a later change shows next time
+        row["size"], row["mtime_ns"] = st.size, st.mtime_ns
         try:
             source = open_source(path, task.opts)
         except (KeyboardInterrupt, SystemExit):
@@ -410,7 +464,8 @@ def _commit(
     lineage: dict,
     options: dict | None = None,
 ):
-    """The logs row written last, the log's parts at other dates (an earlier run's) removed."""
+    """The logs row written last, the log's parts at other dates (an earlier run's) removed,
+    and the failed row its path had when it could not be read."""
     staged = stage.dir / "logs.parquet"
     _logs_part(staged, row, lineage)
     renames = [*parts, (staged, layout.part_path(dataset, "logs", date, digest))]
@@ -421,6 +476,9 @@ def _commit(
         for p in layout.existing_parts(dataset, table, digest, options)
         if p not in final
     ]
+    unread = _path_digest(lineage["source"])
+    if digest != unread:  # the row of an earlier run that failed before reading it: replaced
+        removals += layout.existing_parts(dataset, "logs", unread, options)
     stage.commit(renames, removals)
 
 
@@ -445,7 +503,12 @@ def _commit_failure(
 
 
 def record_failure(
-    dataset: str | Path, path: str, error: str, options: dict | None = None, hash_it: bool = True
+    dataset: str | Path,
+    path: str,
+    error: str,
+    options: dict | None = None,
+    hash_it: bool = True,
+    run: str = "",
 ) -> dict:
     """A `logs` row of status failed written by the driver, for a log whose worker was lost
     (killed for memory, crashed): the rest of the fleet goes on. `hash_it` False: under
@@ -457,7 +520,7 @@ def record_failure(
         digest = _path_digest(path)
     lineage = {"source": path, "hash": digest, "version": __version__}
     date, date_from = _date(None, path)
-    row = {"status": "failed", "error": error, "frames": 0, "date_from": date_from}
+    row = {"status": "failed", "error": error, "frames": 0, "date_from": date_from, "run": run}
     stage = layout.stage(dataset, digest, options)
     try:
         _commit(stage, dataset, date, digest, [], row, lineage, options)
