@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass, field
 
-from cananalyze.core.defaults import SDO_TIMEOUT
+from cananalyze.core.defaults import SDO_TIMEOUT, TASK_TIMEOUT
 
 
 @dataclass(frozen=True)
@@ -342,9 +342,9 @@ FLAGS: dict[str, Flag] = {
         ("--task-timeout",),
         dict(
             type=float,
-            default=3600.0,
+            default=TASK_TIMEOUT,
             metavar="S",
-            help="give a log up after S seconds: a failed row saying so (default 3600)",
+            help=f"give a log up after S seconds: a failed row saying so (default {TASK_TIMEOUT:g})",
         ),
     ),
     "dataset": Flag(("dataset",), dict(help="the dataset folder or URL (fleet --out)")),

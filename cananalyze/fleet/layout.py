@@ -68,6 +68,7 @@ def existing_parts(dataset: Dataset, table: str, digest: str, options: dict | No
 def glob_urls(pattern: str, options: dict | None = None) -> list[str]:
     """The URLs a glob over object storage matches, sorted."""
     fs, path = storage.filesystem(pattern, options)
+    fs.invalidate_cache()  # another process may have written since this one listed
     return sorted(storage.url_of(fs, p) for p in fs.glob(path))
 
 

@@ -19,12 +19,12 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TextIO
 
+from cananalyze.core.defaults import TASK_TIMEOUT
 from cananalyze.core.errors import UsageError
 from cananalyze.core.extras import need
 from cananalyze.fleet import layout
 from cananalyze.fleet.inputs import expand, options_for
 from cananalyze.fleet.task import (
-    TASK_TIMEOUT,
     LogTask,
     logs_rows,
     options_digest,

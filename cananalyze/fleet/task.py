@@ -269,9 +269,6 @@ def _suite(path: str, rules, findings, error: str | None) -> str:
     return ET.tostring(suite, encoding="unicode")
 
 
-TASK_TIMEOUT = 3600.0  # seconds: no healthy log takes this long (--task-timeout)
-
-
 class _Cancelled(BaseException):
     """The task's time is up: the decode stops at its next batch and commits nothing."""
 

@@ -153,6 +153,7 @@ def test_a_rerun_over_the_bucket_decodes_nothing(s3, fleet, capsys):
     assert rc == fleet["rc"]
     n = len(fleet["local"])
     assert f"(0 decoded, {n} already in the dataset)" in err, err
+    assert "no cluster" in err  # every object's size and time unchanged: none read
     s3["fs"].invalidate_cache()
     for name in TABLES:
         assert len(s3["fs"].glob(f"bucket/ds/{name}/date=*/part-*.parquet")) == n, name
