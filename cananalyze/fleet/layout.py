@@ -184,6 +184,7 @@ class RemoteStage:
     def commit(self, renames: list[tuple[Path, str]], removals: list[str]) -> None:
         """Upload the staged files, write the manifest last, then copy them into place."""
         try:
+            self.fs.makedirs(self.prefix, exist_ok=True)  # a folder where prefixes are folders
             moves = []
             for i, (src, dest) in enumerate(renames):
                 key = f"{self.prefix}/{i}-{src.name}"
@@ -216,6 +217,7 @@ def _apply_remote(fs, prefix: str) -> None:
             fs.rm_file(old)
     for src, dest in manifest["renames"]:
         if fs.exists(src):
+            fs.makedirs(fs._parent(dest), exist_ok=True)
             fs.copy(src, dest)
 
 

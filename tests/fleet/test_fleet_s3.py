@@ -230,3 +230,27 @@ def test_a_killed_run_then_a_rerun_completes_the_bucket_dataset(s3, tmp_path):
     assert frames.num_rows == n * 20_000
     assert sorted(Counter(frames.column("source").to_pylist()).values()) == [20_000] * n
     assert not list(tmp_path.glob("s3:*"))
+
+
+def test_file_urls_take_the_object_storage_path(tmp_path, monkeypatch, capsys):
+    """file:// goes through fsspec like s3:// (uploads, manifest, copies): the same
+    dataset as a local run, the staging prefix empty after it, a rerun that reads nothing."""
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    for name in SAMPLES:
+        (logs / name).write_bytes((ROOT / "samples" / name).read_bytes())
+    monkeypatch.chdir(tmp_path)
+    dataset = tmp_path / "ds"
+    args = ["fleet", f"file://{logs}", "--out", f"file://{dataset}", "--workers", "1"]
+    assert main(args) == 1  # the samples break rules on purpose
+    capsys.readouterr()
+    assert not list((dataset / "_staging").iterdir())
+    import pyarrow.dataset as ds
+
+    rows = ds.dataset(dataset / "logs", format="parquet").to_table().to_pylist()
+    assert {r["source"]: r["frames"] for r in rows} == {
+        f"file://{logs}/{n}": _python_can_frames(logs / n) for n in SAMPLES
+    }
+    assert main(args) == 1
+    assert "no cluster" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds", "logs"]
