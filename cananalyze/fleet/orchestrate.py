@@ -29,6 +29,7 @@ from cananalyze.fleet.task import (
     logs_rows,
     options_digest,
     record_failure,
+    recorded,
     run_task,
     unchanged,
 )
@@ -263,10 +264,11 @@ def run_fleet(
     root = str(dataset.resolve()) if isinstance(dataset, Path) else dataset.rstrip("/")
     run = uuid.uuid4().hex
     out = FleetResult([], recovered=recovered, refused=refused)
-    by_path, tasks = _unchanged_logs(logs, dataset, opts, force)
+    each = _OptionsByFolder(opts)
+    by_path, tasks = _unchanged_logs(logs, dataset, each, force)
     for p, _ in logs:
         if p not in by_path:
-            o = options_for(p, opts)
+            o = each(p)
             tasks.append(
                 LogTask(p, root, o, force, bool(junit), compression, timeout=task_timeout, run=run)
             )
@@ -282,25 +284,43 @@ def run_fleet(
     return out
 
 
+class _OptionsByFolder:
+    """`options_for` once per folder (a folder's network.toml is looked for once), and the
+    configuration digest once per distinct options."""
+
+    def __init__(self, opts: Options) -> None:
+        self.opts = opts
+        self._folders: dict[str, Options] = {}
+        self._digests: dict[str, str] = {}
+
+    def __call__(self, log: str) -> Options:
+        folder = log.rsplit("/", 1)[0]
+        if folder not in self._folders:
+            self._folders[folder] = options_for(log, self.opts)
+        return self._folders[folder]
+
+    def digest(self, log: str) -> str:
+        o = self(log)
+        key = str(o.network)  # the only option a folder changes
+        if key not in self._digests:
+            self._digests[key] = options_digest(o)
+        return self._digests[key]
+
+
 def _unchanged_logs(
-    logs: list[tuple[str, object]], dataset: layout.Dataset, opts: Options, force: bool
+    logs: list[tuple[str, object]], dataset: layout.Dataset, each: _OptionsByFolder, force: bool
 ) -> tuple[dict[str, dict], list]:
     """({path: result} of the logs the dataset holds unchanged, []): decided from each
     file's path, size and modification time and the configuration, before any file is
     read; the rest go to the workers, which hash them."""
     if force:
         return {}, []
-    rows = logs_rows(dataset, opts.storage_options)
+    rows = logs_rows(dataset, each.opts.storage_options)
     if not rows:
         return {}, []
-    configs: dict[str, str] = {}  # a folder's network.toml is the only per-log option
     done: dict[str, dict] = {}
     for path, st in logs:
-        o = options_for(path, opts)
-        key = str(o.network)
-        if key not in configs:
-            configs[key] = options_digest(o)
-        old = unchanged(rows.get(path, []), st.size, st.mtime_ns, configs[key])
+        old = unchanged(rows.get(path, []), st.size, st.mtime_ns, each.digest(path))
         if old is not None:
             done[path] = {**old, "source": path, "skipped": True, "first": {}, "junit": None}
     return done, []
@@ -366,16 +386,16 @@ def _recount(
 ) -> None:
     """The run's results as the dataset's own `logs` rows say: a log whose row this run
     wrote was decoded (or failed) by it, even when Dask ran its task again after a lost
-    result and the second run found the first one's row ("already in the dataset")."""
-    rows = logs_rows(dataset, options)
+    result and the second run found the first one's row ("already in the dataset").
+    Only a result that says "skipped" can be wrong so: only those rows are read."""
     for t in tasks:
-        mine = [r for r in rows.get(t.path, []) if r.get("run") == run]
         result = by_path.get(t.path)
-        if not mine or result is None or not result.get("skipped"):
+        if result is None or not result.get("skipped") or not result.get("hash"):
             continue
-        row = mine[0]
-        keep = {k: result[k] for k in ("first", "junit") if k in result}
-        by_path[t.path] = {**row, **keep, "source": t.path, "skipped": False}
+        row = recorded(dataset, result["hash"], options)
+        if row is not None and row.get("run") == run and row.get("source") == t.path:
+            keep = {k: result[k] for k in ("first", "junit") if k in result}
+            by_path[t.path] = {**row, **keep, "source": t.path, "skipped": False}
 
 
 def _write_junit(dest: str, results: list[dict]) -> None:

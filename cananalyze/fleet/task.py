@@ -155,6 +155,13 @@ def recorded(dataset: layout.Dataset, digest: str, options: dict | None = None) 
     return None
 
 
+# what a recorded row tells a rerun: its skip key, and the verdict a skipped log reports
+ROW_COLUMNS = (
+    *("source", "hash", "version", "config", "size", "mtime_ns", "run"),
+    *("status", "error", "frames", "findings", "violations", "skipped_lines", "format"),
+)
+
+
 def logs_rows(dataset: layout.Dataset, options: dict | None = None) -> dict[str, list[dict]]:
     """Every `logs` row of the dataset by source, read once (the driver's skip key and the
     run's counts); {} when there are none or they cannot be read (then every log is
@@ -178,7 +185,7 @@ def logs_rows(dataset: layout.Dataset, options: dict | None = None) -> dict[str,
     try:
         # the dataset's schema: parts written before a column was added read it as null
         found = pads.dataset(where, filesystem=filesystem, schema=schema.schema("logs"))
-        rows = found.to_table().to_pylist()
+        rows = found.to_table(columns=list(ROW_COLUMNS)).to_pylist()
     except (OSError, ValueError):
         return {}
     out: dict[str, list[dict]] = {}
