@@ -226,7 +226,9 @@ def test_a_killed_run_then_a_rerun_completes_the_bucket_dataset(s3, tmp_path):
     finished = re.search(r"finished (\d+) and undid \d+ interrupted", rerun.stderr)
     decoded, already = int(counts[1]), int(counts[2])
     assert decoded + already == n
-    assert already == first + (int(finished[1]) if finished else 0), rerun.stderr
+    # (a stage whose logs part was copied before the kill, its prefix not yet deleted, is
+    # finished again: counted in both)
+    assert first <= already <= first + (int(finished[1]) if finished else 0), rerun.stderr
     fs.invalidate_cache()
     assert not fs.exists("bucket/kill/ds/_staging") or not fs.ls("bucket/kill/ds/_staging")
     logs = _table(s3["endpoint"], "bucket/kill/ds", "logs").to_pylist()
