@@ -213,9 +213,10 @@ def test_pyproject_extras():
     assert names(extras["fleet"]) == {"dask", "bokeh", "duckdb"}
     assert "dask[distributed]>=2024.1" in extras["fleet"]
     assert names(extras["foxglove"]) == {"foxglove-sdk"}
-    assert extras["all"] == ["cananalyze[fleet,foxglove]"]
+    assert names(extras["s3"]) == {"s3fs"}  # fleet and query over s3:// (core/storage.py)
+    assert extras["all"] == ["cananalyze[fleet,foxglove,s3]"]
     assert "cananalyze[all]" in extras["dev"]
     plain = names(project["dependencies"])
-    for extra in ("fleet", "foxglove", "dev"):
+    for extra in ("fleet", "foxglove", "s3", "dev"):
         assert not plain & names(extras[extra]), extra
     assert {"pyarrow", "mcap", "rerun-sdk", "plotly", "jinja2", "rich"} <= plain
