@@ -265,12 +265,18 @@ def run_fleet(
     run = uuid.uuid4().hex
     out = FleetResult([], recovered=recovered, refused=refused)
     each = _OptionsByFolder(opts)
-    by_path, tasks = _unchanged_logs(logs, dataset, each, force)
+    by_path, earlier = _unchanged_logs(logs, dataset, each, force)
+    tasks = []
     for p, _ in logs:
         if p not in by_path:
-            o = each(p)
+            o, old = each(p), earlier.get(p, ())
             tasks.append(
-                LogTask(p, root, o, force, bool(junit), compression, timeout=task_timeout, run=run)
+                LogTask(
+                    *(p, root, o, force, bool(junit), compression),
+                    timeout=task_timeout,
+                    run=run,
+                    replaces=old,
+                )
             )
     if tasks:
         _on_cluster(tasks, by_path, out, dataset, workers, scheduler, stream, run)
@@ -309,21 +315,22 @@ class _OptionsByFolder:
 
 def _unchanged_logs(
     logs: list[tuple[str, object]], dataset: layout.Dataset, each: _OptionsByFolder, force: bool
-) -> tuple[dict[str, dict], list]:
-    """({path: result} of the logs the dataset holds unchanged, []): decided from each
-    file's path, size and modification time and the configuration, before any file is
-    read; the rest go to the workers, which hash them."""
-    if force:
-        return {}, []
+) -> tuple[dict[str, dict], dict[str, tuple[str, ...]]]:
+    """({path: result} of the logs the dataset holds unchanged, {path: digests of the rows
+    it holds for each other one}): decided from each file's path, size and modification
+    time and the configuration, before any file is read; the rest go to the workers,
+    which hash them (and replace those rows' parts when the content changed)."""
     rows = logs_rows(dataset, each.opts.storage_options)
-    if not rows:
-        return {}, []
     done: dict[str, dict] = {}
+    earlier: dict[str, tuple[str, ...]] = {}
     for path, st in logs:
-        old = unchanged(rows.get(path, []), st.size, st.mtime_ns, each.digest(path))
+        mine = rows.get(path, [])
+        old = None if force else unchanged(mine, st.size, st.mtime_ns, each.digest(path))
         if old is not None:
             done[path] = {**old, "source": path, "skipped": True, "first": {}, "junit": None}
-    return done, []
+        elif mine:
+            earlier[path] = tuple(sorted({r["hash"] for r in mine}))
+    return done, earlier
 
 
 def _on_cluster(

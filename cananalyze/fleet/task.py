@@ -63,6 +63,9 @@ class LogTask:
     extra: dict = field(default_factory=dict)  # room for later per-log settings
     timeout: float | None = None  # seconds before the log is given up (run_task)
     run: str = ""  # the fleet run's id, in the logs row: what this run wrote, retries included
+    # the digests of the rows the dataset holds for this path (its earlier content): their
+    # parts are removed when this log commits, so a changed file is never in it twice
+    replaces: tuple[str, ...] = ()
 
 
 class _Findings(Sink):
@@ -365,6 +368,8 @@ def process(task: LogTask, cancel=None) -> dict:
             and old.get("config") == row["config"]
         ):
             source.close()
+            if old.get("source") == path and old.get("mtime_ns") != row.get("mtime_ns"):
+                _restamp(dataset, digest, old, row, where)
             result.update(old, skipped=True)
             result["source"], result["recorded_source"] = path, old.get("source")
             return result
@@ -390,7 +395,8 @@ def process(task: LogTask, cancel=None) -> dict:
         if cancel is not None and cancel.is_set():
             raise _Cancelled
         try:
-            _commit(stage, dataset, date, digest, parts, row, lineage, where)
+            old = _still_mine(dataset, task.replaces, path, where)
+            _commit(stage, dataset, date, digest, parts, row, lineage, where, old)
         except OSError as exc:  # a full disk: this log fails, in one line, and the fleet goes on
             stage.close()
             row.update(status="failed", error=_one_line(exc, path, dataset))
@@ -403,6 +409,37 @@ def process(task: LogTask, cancel=None) -> dict:
     if task.junit:
         result["junit"] = _suite(path, rules, sink.findings, row["error"])
     return result
+
+
+def _still_mine(
+    dataset: layout.Dataset, digests: tuple[str, ...], path: str, options: dict | None
+) -> tuple[str, ...]:
+    """Of the digests the driver saw for this path, those whose row still names it (another
+    path with that same content may have written the row since: its parts stay)."""
+    return tuple(d for d in digests if (recorded(dataset, d, options) or {}).get("source") == path)
+
+
+def _restamp(
+    dataset: layout.Dataset, digest: str, old: dict, row: dict, options: dict | None
+) -> None:
+    """The recorded row of a file whose bytes are unchanged but whose modification time
+    is not (touched, copied back, or recorded before mtime_ns was): its `logs` part
+    rewritten with the new time, so the next rerun skips it without reading it again.
+    Nothing else changes (not its run: this run did not decode it). Best effort."""
+    parts = layout.existing_parts(dataset, "logs", digest, options)
+    if not parts:
+        return
+    try:
+        stage = layout.stage(dataset, digest, options)
+    except OSError:
+        return
+    try:
+        staged = stage.dir / "logs.parquet"
+        lineage = {c: old[c] for c, _ in schema.LINEAGE}
+        _logs_part(staged, {**old, "mtime_ns": row.get("mtime_ns"), "size": row["size"]}, lineage)
+        stage.commit([(staged, parts[0])], [])
+    except OSError:
+        stage.close()
 
 
 def _decode(
@@ -467,9 +504,11 @@ def _commit(
     row: dict,
     lineage: dict,
     options: dict | None = None,
+    replaces: tuple[str, ...] = (),
 ):
     """The logs row written last, the log's parts at other dates (an earlier run's) removed,
-    and the failed row its path had when it could not be read."""
+    and those of its path's earlier content (`replaces`: the digests of the rows the
+    dataset held for this path; the failed row it had when it could not be read)."""
     staged = stage.dir / "logs.parquet"
     _logs_part(staged, row, lineage)
     renames = [*parts, (staged, layout.part_path(dataset, "logs", date, digest))]
@@ -480,9 +519,9 @@ def _commit(
         for p in layout.existing_parts(dataset, table, digest, options)
         if p not in final
     ]
-    unread = _path_digest(lineage["source"])
-    if digest != unread:  # the row of an earlier run that failed before reading it: replaced
-        removals += layout.existing_parts(dataset, "logs", unread, options)
+    for old in {*replaces, _path_digest(lineage["source"])} - {digest}:
+        for table in schema.TABLES:
+            removals += layout.existing_parts(dataset, table, old, options)
     stage.commit(renames, removals)
 
 

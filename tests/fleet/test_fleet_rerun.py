@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import shutil
+from collections import Counter
 from pathlib import Path
 
 import pyarrow as pa
@@ -101,6 +102,17 @@ def test_only_new_or_changed_files_are_hashed_and_by_the_workers(tmp_path, logs,
     assert by_source[same]["skipped"] and by_source[touched]["skipped"]
     assert not by_source[changed]["skipped"] and by_source[changed]["frames"] == 186
     assert "(1 decoded, 2 already in the dataset)" in summary_lines(again)[0]
+    # the touched file's row has its new time now: the next rerun reads nothing at all
+    hashed.clear()
+    third = run_fleet(logs, dataset, scheduler=cluster)
+    assert hashed == [] and len(third.skipped) == 3 and "no cluster" in summary_lines(third)[0]
+    # one row per file, and the changed file's frames once: its old content's parts gone
+    rows = _logs(dataset)
+    assert sorted(r["source"] for r in rows) == sorted(logs)
+    frames = ds.dataset(dataset / "frames", format="parquet", partitioning=DATES).to_table()
+    per_source = Counter(frames.column("source").to_pylist())
+    assert per_source == {r["source"]: r["frames"] for r in rows}
+    assert per_source[changed] == 186
     # another configuration: nothing is unchanged, each log is hashed and decoded again
     hashed.clear()
     other = run_fleet(logs, dataset, Options(checks=True, sdo_timeout=0.5), scheduler=cluster)
