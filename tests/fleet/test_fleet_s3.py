@@ -145,6 +145,13 @@ def test_query_reads_the_bucket_dataset(s3, fleet, capsys, monkeypatch):
     assert main(["query", "s3://bucket/ds", sql, "--json", "--storage-options", opts]) == 0
     n = int(capsys.readouterr().out.split(":")[1].strip(" }\n"))
     assert n == sum(_python_can_frames(p) for p in fleet["local"].values())
+    # or fsspec's own variable, read when fsspec is imported: a fresh process
+    env = {k: v for k, v in os.environ.items() if k != "AWS_ENDPOINT_URL"}
+    env.update(FSSPEC_S3_ENDPOINT_URL=s3["endpoint"], PYTHONPATH=str(ROOT))
+    cmd = [sys.executable, "-m", "cananalyze", "query", "s3://bucket/ds", sql, "--csv"]
+    out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.splitlines() == ["n", str(n)]
     assert not Path("s3:").exists()
 
 
