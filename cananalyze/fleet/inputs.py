@@ -83,7 +83,7 @@ def _expand_url(
             matches = {path: fs.info(path)}
         else:
             raise UsageError(f"{item}: no such file or folder")
-    except (OSError, PermissionError) as exc:
+    except OSError as exc:
         raise UsageError(f"{item}: cannot list: {' '.join(str(exc).split())}") from None
     out = []
     for p, info in matches.items():
