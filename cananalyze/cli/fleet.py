@@ -15,7 +15,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "fleet",
         help="decode many logs in parallel (Dask) into one partitioned Parquet dataset",
         description="Decode every log the inputs name (files, folders searched recursively, "
-        "globs; any format, mixed) as `export --parquet` does, one Dask task per log, into "
+        "globs; local or fsspec URLs such as s3://bucket/logs; any format, mixed) as `export --parquet` does, one Dask task per log, into "
         "DATASET/<table>/date=YYYY-MM-DD/part-<hash>.parquet. Logs already in the dataset "
         "(same content, same cananalyze) are skipped. A network.toml beside logs is used for "
         "them instead of --network. Exit 0 when every log decoded and no rule was violated, "
@@ -23,11 +23,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     options_.add(p, "inputs", "out", "device", "eds", "network", "dbc_in", extra_names=DBC)
     options_.add(p, "rules", "sdo_timeout", "strict", "workers", "scheduler", "force", "junit")
-    options_.add(p, "parquet_compression", "quiet")
+    options_.add(p, "parquet_compression", "storage_options", "task_timeout")
+    options_.add(p, "quiet")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from cananalyze.core.storage import parse_options
     from cananalyze.fleet.orchestrate import run_fleet, summary_lines
 
     if args.workers is not None and args.scheduler:
@@ -52,6 +54,8 @@ def run(args: argparse.Namespace) -> int:
         junit=args.junit,
         compression=args.parquet_compression,
         stream=None if args.quiet else sys.stderr,
+        storage_options=parse_options(args.storage_options) or None,
+        task_timeout=args.task_timeout,
     )
     lines = summary_lines(result)
     if args.quiet:

@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass, field
 
-from cananalyze.core.defaults import SDO_TIMEOUT
+from cananalyze.core.defaults import SDO_TIMEOUT, TASK_TIMEOUT
 
 
 @dataclass(frozen=True)
@@ -369,7 +369,10 @@ FLAGS: dict[str, Flag] = {
         dict(type=float, metavar="S", help="stop after S seconds (simulate: default 10)"),
     ),
     # --- fleet and query ---------------------------------------------------------
-    "out": Flag(("--out",), dict(required=True, metavar="DATASET", help="the dataset folder")),
+    "out": Flag(
+        ("--out",),
+        dict(required=True, metavar="DATASET", help="the dataset folder, or a URL (s3://...)"),
+    ),
     "workers": Flag(
         ("--workers",),
         dict(type=int, metavar="N", help="local worker processes (default: the number of cores)"),
@@ -385,7 +388,24 @@ FLAGS: dict[str, Flag] = {
     "force": Flag(
         ("--force",), dict(action="store_true", help="decode logs already in the dataset again")
     ),
-    "dataset": Flag(("dataset",), dict(help="the dataset folder (fleet --out)")),
+    "task_timeout": Flag(
+        ("--task-timeout",),
+        dict(
+            type=float,
+            default=TASK_TIMEOUT,
+            metavar="S",
+            help=f"give a log up after S seconds: a failed row saying so (default {TASK_TIMEOUT:g})",
+        ),
+    ),
+    "dataset": Flag(("dataset",), dict(help="the dataset folder or URL (fleet --out)")),
+    "storage_options": Flag(
+        ("--storage-options",),
+        dict(
+            metavar="JSON",
+            help="fsspec options for s3:// and other URLs, e.g. "
+            '\'{"endpoint_url": "http://127.0.0.1:9000"}\' (credentials: also AWS_* variables)',
+        ),
+    ),
     "sql": Flag(
         ("sql",),
         dict(help='the statement, e.g. "SELECT status, count(*) FROM logs GROUP BY 1"'),

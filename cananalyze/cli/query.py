@@ -18,7 +18,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Run one SQL statement over a dataset written by `cananalyze fleet`. "
         "Each table is a view of its Parquet parts, with the partition column `date`.",
     )
-    options_.add(p, "dataset", "sql")
+    options_.add(p, "dataset", "sql", "storage_options")
     options_.add(p.add_mutually_exclusive_group(), "query_csv", "query_json")
     p.set_defaults(func=run)
 
@@ -54,9 +54,10 @@ def print_table(names: list[str], rows: list[tuple], out=None) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from cananalyze.core.storage import parse_options
     from cananalyze.fleet.query import query
 
-    names, rows = query(args.dataset, args.sql)
+    names, rows = query(args.dataset, args.sql, parse_options(args.storage_options) or None)
     if args.csv:
         w = csv.writer(sys.stdout, lineterminator="\n")
         w.writerow(names)

@@ -1,5 +1,6 @@
-"""The fleet's inputs: files, folders (recursive) and globs, into a sorted list of log files,
-each with the options for its folder (a `network.toml` beside the logs)."""
+"""The fleet's inputs: files, folders (recursive) and globs, local or at URLs (s3://...,
+core/storage), into a sorted list of log files, each with the options for its folder (a
+`network.toml` beside local logs)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import glob
 from dataclasses import replace
 from pathlib import Path
 
+from cananalyze.core import storage
 from cananalyze.core.errors import UsageError
 from cananalyze.pipeline import Options
 
@@ -51,9 +53,69 @@ def _in_folder(folder: Path, skip: Path | None) -> list[Path]:
     return out
 
 
-def expand(inputs: list[str], dataset: str | Path | None = None) -> list[Path]:
-    """Every log file the inputs name, once each, sorted; UsageError for one that is not there."""
-    skip = Path(dataset).resolve() if dataset is not None else None
+def _is_log(name: str) -> bool:
+    parts = name.split("/")
+    return not any(p.startswith(".") for p in parts) and Path(name).suffix.lower() not in NOT_LOGS
+
+
+def _expand_url(
+    item: str, dataset: str | Path | None, options: dict | None, infos: dict
+) -> list[str]:
+    """The log files one URL input names: an object, a prefix (recursive) or a glob;
+    what the listing said of each goes into `infos` (size, time: no request per file)."""
+    fs, path = storage.filesystem(item, options)
+    skip = None
+    if dataset is not None and storage.is_url(dataset):
+        skip = storage.filesystem(str(dataset), options)[1].rstrip("/") + "/"
+    try:
+        if any(c in path for c in "*?["):
+            matches = fs.glob(path, detail=True)
+            if not matches:
+                raise UsageError(f"{item}: no file matches")
+        elif fs.isdir(path):
+            base = path.rstrip("/") + "/"
+            matches = {
+                p: info
+                for p, info in fs.find(path, detail=True).items()
+                if _is_log(p[len(base) :]) and not (skip and p.startswith(skip))
+            }
+        elif fs.isfile(path):
+            matches = {path: fs.info(path)}
+        else:
+            raise UsageError(f"{item}: no such file or folder")
+    except OSError as exc:
+        raise UsageError(f"{item}: cannot list: {' '.join(str(exc).split())}") from None
+    out = []
+    for p, info in matches.items():
+        if info.get("type") != "directory":
+            out.append(storage.url_of(fs, p))
+            infos[out[-1]] = info
+    return sorted(out)
+
+
+def expand(
+    inputs: list[str],
+    dataset: str | Path | None = None,
+    options: dict | None = None,
+    infos: dict | None = None,
+) -> list[str]:
+    """Every log file the inputs name (absolute paths, URLs as given), once each, sorted;
+    UsageError for one that is not there. `options`: fsspec's, for URL inputs; `infos`
+    gets what their listing said of each URL (core/storage.stat_of takes it)."""
+    urls: set[str] = set()
+    local_inputs = []
+    infos = {} if infos is None else infos
+    for item in inputs:
+        if storage.is_url(item):
+            urls.update(_expand_url(item, dataset, options, infos))
+        else:
+            local_inputs.append(item)
+    local = [str(p) for p in _expand_local(local_inputs, dataset)]
+    return local + sorted(urls)
+
+
+def _expand_local(inputs: list[str], dataset: str | Path | None) -> list[Path]:
+    skip = Path(dataset).resolve() if dataset is not None and not storage.is_url(dataset) else None
     # the file itself -> the path it was found by (a link's folder is the one that counts)
     found: dict[Path, Path] = {}
     for item in inputs:
@@ -75,10 +137,13 @@ def expand(inputs: list[str], dataset: str | Path | None = None) -> list[Path]:
     return sorted(found.values())
 
 
-def options_for(log: Path, opts: Options) -> Options:
+def options_for(log: str | Path, opts: Options) -> Options:
     """The options for one log: its folder's network.toml, when there is one, takes the
-    place of --network (the folder's file describes that installation)."""
-    folder_file = log.parent / FOLDER_NETWORK
+    place of --network (the folder's file describes that installation). Not read beside
+    logs at URLs: give --network."""
+    if storage.is_url(log):
+        return opts
+    folder_file = Path(log).parent / FOLDER_NETWORK
     if folder_file.is_file():
         return replace(opts, network=folder_file)
     return opts

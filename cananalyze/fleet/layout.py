@@ -14,6 +14,14 @@ runs that decode the same log write the same part.
 
 The lock is `fcntl.flock`, which a local file system honours; on NFS give each
 run its own dataset or run one at a time.
+
+A dataset at a URL (`s3://bucket/ds`, core/storage) has no rename and no lock: the
+task writes its parts into a local temporary folder, uploads them under
+`DATASET/_staging/<name>/`, writes `COMMIT.json` there last (the copies and removals
+to make), then copies each part to its place (the `logs` part last) and deletes the
+staging prefix. A run's `recover` finishes (manifest there) or deletes (none) what an
+interrupted run left, as for a local dataset; with no lock to tell a live run's stage
+from a dead one, run one fleet at a time into an object-storage dataset.
 """
 
 from __future__ import annotations
@@ -24,29 +32,67 @@ import json
 import os
 import shutil
 import socket
+import tempfile
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
+
+from cananalyze.core import storage
 
 STAGING = "_staging"
 SCRATCH = "dask-scratch"  # the local cluster's workers' scratch space: a stage of its own
 MANIFEST = "COMMIT.json"
 
 
-def part_path(dataset: Path, table: str, date: str, digest: str) -> Path:
+Dataset = Path | str  # a local folder, or a URL (core/storage)
+
+
+def root(dataset: str | Path) -> Dataset:
+    """The dataset as the layout takes it: a URL stays text, anything else is a Path."""
+    return dataset if storage.is_url(dataset) else Path(dataset)
+
+
+def part_path(dataset: Dataset, table: str, date: str, digest: str):
+    if isinstance(dataset, str):
+        return f"{dataset.rstrip('/')}/{table}/date={date}/part-{digest}.parquet"
     return dataset / table / f"date={date}" / f"part-{digest}.parquet"
 
 
-def existing_parts(dataset: Path, table: str, digest: str) -> list[Path]:
+def existing_parts(dataset: Dataset, table: str, digest: str, options: dict | None = None):
     """A log's parts of `table` in any date partition (a rerun may date it differently)."""
+    if isinstance(dataset, str):
+        return glob_urls(f"{dataset.rstrip('/')}/{table}/date=*/part-{digest}.parquet", options)
     return sorted((dataset / table).glob(f"date=*/part-{digest}.parquet"))
+
+
+def glob_urls(pattern: str, options: dict | None = None) -> list[str]:
+    """The URLs a glob over object storage matches, sorted."""
+    fs, path = storage.filesystem(pattern, options)
+    fs.invalidate_cache()  # another process may have written since this one listed
+    return sorted(storage.url_of(fs, p) for p in fs.glob(path))
+
+
+def open_part(part: Dataset, options: dict | None = None):
+    """A part (path or URL) opened for pyarrow to read."""
+    return storage.open_binary(part, options)
+
+
+def stage(dataset: Dataset, digest: str, options: dict | None = None):
+    """A task's stage in this dataset: a locked folder in it, or a remote one's."""
+    if isinstance(dataset, str):
+        return RemoteStage(dataset, digest, options)
+    return Stage(dataset, digest)
+
+
+def _stage_name(digest: str) -> str:
+    return f"{digest[:16]}.{socket.gethostname()}.{os.getpid()}.{uuid.uuid4().hex[:8]}"
 
 
 class Stage:
     """One task's staging folder, locked while the task lives."""
 
     def __init__(self, dataset: Path, digest: str) -> None:
-        name = f"{digest[:16]}.{socket.gethostname()}.{os.getpid()}.{uuid.uuid4().hex[:8]}"
+        name = _stage_name(digest)
         self.dir = dataset / STAGING / name
         self.dir.mkdir(parents=True)
         self._lock = open(self.dir / ".lock", "w")  # noqa: SIM115 - held for the stage's life
@@ -88,11 +134,13 @@ def _apply(stage: Path) -> None:
             os.replace(src, dest)
 
 
-def recover(dataset: Path) -> tuple[int, int]:
+def recover(dataset: Dataset, options: dict | None = None) -> tuple[int, int]:
     """Finish or undo what interrupted runs left: (rolled forward, rolled back).
 
     Stages still locked belong to a live run (another `fleet` into this dataset).
     """
+    if isinstance(dataset, str):
+        return _recover_remote(dataset, options)
     forward = back = 0
     for stage in _stages(dataset):
         try:
@@ -121,3 +169,73 @@ def _stages(dataset: Path) -> Iterator[Path]:
     root = dataset / STAGING
     if root.is_dir():
         yield from sorted(p for p in root.iterdir() if p.is_dir())
+
+
+class RemoteStage:
+    """One task's stage for a dataset at a URL: a local temporary folder the tables are
+    written into, uploaded under `DATASET/_staging/<name>/` when committed."""
+
+    def __init__(self, dataset: str, digest: str, options: dict | None = None) -> None:
+        self.dataset, self.options = dataset.rstrip("/"), options
+        self.fs, base = storage.filesystem(self.dataset, options)
+        self.prefix = f"{base.rstrip('/')}/{STAGING}/{_stage_name(digest)}"
+        self.dir = Path(tempfile.mkdtemp(prefix="cananalyze-stage-"))
+
+    def commit(self, renames: list[tuple[Path, str]], removals: list[str]) -> None:
+        """Upload the staged files, write the manifest last, then copy them into place."""
+        try:
+            self.fs.makedirs(self.prefix, exist_ok=True)  # a folder where prefixes are folders
+            moves = []
+            for i, (src, dest) in enumerate(renames):
+                key = f"{self.prefix}/{i}-{src.name}"
+                self.fs.put_file(str(src), key)
+                moves.append([key, _strip(self.fs, dest)])
+            manifest = {"renames": moves, "removals": [_strip(self.fs, p) for p in removals]}
+            self.fs.pipe_file(f"{self.prefix}/{MANIFEST}", json.dumps(manifest).encode())
+            _apply_remote(self.fs, self.prefix)
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        """Drop the local folder and whatever was uploaded under the staging prefix."""
+        shutil.rmtree(self.dir, ignore_errors=True)
+        with contextlib.suppress(FileNotFoundError, OSError):
+            self.fs.rm(self.prefix, recursive=True)
+
+
+def _strip(fs, url: str) -> str:
+    return fs._strip_protocol(url) if storage.is_url(url) else url
+
+
+def _apply_remote(fs, prefix: str) -> None:
+    """A remote stage's COMMIT.json carried out (safe to repeat): copies, then removals of
+    the log's parts at other dates."""
+    manifest = json.loads(fs.cat_file(f"{prefix}/{MANIFEST}"))
+    manifest["renames"], manifest["removals"]  # noqa: B018 - both there before any change
+    for old in manifest["removals"]:
+        with contextlib.suppress(FileNotFoundError):
+            fs.rm_file(old)
+    for src, dest in manifest["renames"]:
+        if fs.exists(src):
+            fs.makedirs(fs._parent(dest), exist_ok=True)
+            fs.copy(src, dest)
+
+
+def _recover_remote(dataset: str, options: dict | None) -> tuple[int, int]:
+    fs, base = storage.filesystem(dataset, options)
+    where = f"{base.rstrip('/')}/{STAGING}"
+    forward = back = 0
+    try:
+        stages = sorted(fs.ls(where, detail=False))
+    except FileNotFoundError:
+        return 0, 0
+    for prefix in stages:
+        try:
+            _apply_remote(fs, prefix)
+            forward += 1
+        except (OSError, ValueError, KeyError):  # no manifest, or not a whole one
+            back += 1
+        with contextlib.suppress(FileNotFoundError, OSError):
+            fs.rm(prefix, recursive=True)
+    fs.invalidate_cache()
+    return forward, back

@@ -11,16 +11,28 @@ from __future__ import annotations
 
 import logging
 import os
+import shutil
+import tempfile
 import time
+import uuid
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TextIO
 
+from cananalyze.core.defaults import TASK_TIMEOUT
 from cananalyze.core.errors import UsageError
 from cananalyze.core.extras import need
 from cananalyze.fleet import layout
 from cananalyze.fleet.inputs import expand, options_for
-from cananalyze.fleet.task import LogTask, process, record_failure
+from cananalyze.fleet.task import (
+    LogTask,
+    logs_rows,
+    options_digest,
+    record_failure,
+    recorded,
+    run_task,
+    unchanged,
+)
 from cananalyze.pipeline import Options
 
 
@@ -35,6 +47,7 @@ class FleetResult:
     workers: list[str] = field(default_factory=list)  # the workers' addresses at the start
     recovered: tuple[int, int] = (0, 0)
     notes: list[str] = field(default_factory=list)
+    refused: list[str] = field(default_factory=list)  # inputs left out, one line each
 
     @property
     def failed(self) -> list[dict]:
@@ -54,8 +67,72 @@ class FleetResult:
 
     @property
     def exit_code(self) -> int:
-        """0: every log decoded, no rule violated; 1: a log failed or had violations."""
-        return 1 if self.failed or self.violated else 0
+        """0: every log decoded, no rule violated; 1: a log failed, was refused or had
+        violations."""
+        return 1 if self.failed or self.violated or self.refused else 0
+
+
+def _regular_files(
+    logs: list[str], options: dict | None, infos: dict
+) -> tuple[list[tuple[str, object]], list[str]]:
+    """([(log, its core/storage.Stat)] of the regular files, a line for each input
+    refused): a FIFO or a device named on the command line would block its worker or
+    never end."""
+    from cananalyze.core import storage
+
+    kept, refused = [], []
+    for log in logs:
+        try:
+            st = storage.stat_of(log, options, infos.get(log))
+        except OSError as exc:
+            refused.append(f"{log}: cannot read ({exc.strerror or exc})")
+            continue
+        if st.regular:
+            kept.append((log, st))
+        else:
+            refused.append(f"{log}: not a regular file (a {st.kind}), left out")
+    return kept, refused
+
+
+def _make_dataset(dataset: layout.Dataset, options: dict | None) -> None:
+    """The dataset folder made (a URL's: its bucket must be there), or one-line UsageError."""
+    if isinstance(dataset, Path):
+        try:
+            dataset.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise UsageError(
+                f"{dataset}: cannot create the dataset folder ({exc.strerror})"
+            ) from None
+        return
+    from cananalyze.core import storage
+
+    fs, path = storage.filesystem(dataset, options)
+    try:
+        if fs.isfile(path):
+            raise UsageError(f"{dataset}: exists and is not a dataset folder")
+        fs.makedirs(path, exist_ok=True)  # object storage: the bucket, when it can
+    except OSError as exc:
+        raise UsageError(
+            f"{dataset}: cannot reach the dataset: {' '.join(str(exc).split())}"
+        ) from None
+
+
+def _scratch(dataset: layout.Dataset):
+    """The local cluster's scratch space: a stage of a local dataset (removed with it), or
+    a local temporary folder's when the dataset is at a URL."""
+    if isinstance(dataset, Path):
+        return layout.Stage(dataset, layout.SCRATCH)
+    return _TempScratch()
+
+
+class _TempScratch:
+    """A local temporary folder, removed whole when closed."""
+
+    def __init__(self) -> None:
+        self.dir = Path(tempfile.mkdtemp(prefix="cananalyze-fleet-"))
+
+    def close(self) -> None:
+        shutil.rmtree(self.dir, ignore_errors=True)
 
 
 def _client(workers: int | None, scheduler: str | None, scratch: Path | None = None):
@@ -149,47 +226,133 @@ def run_fleet(
     junit: str | None = None,
     compression: str = "snappy",
     stream: TextIO | None = None,
+    storage_options: dict | None = None,
+    task_timeout: float | None = TASK_TIMEOUT,
 ) -> FleetResult:
     """Decode every log the inputs name into `dataset`; the results (nothing raised for a
-    bad log). `stream`: where the dashboard line and the progress bar go. MissingExtra
-    without the fleet extra, before the dataset folder is made."""
+    bad log). Inputs and the dataset may be URLs (s3://..., core/storage), reached with
+    `storage_options` (fsspec's) and the environment's credentials. `stream`: where the
+    dashboard line and the progress bar go. MissingExtra without the fleet extra, before
+    the dataset folder is made. Inputs that are no regular files (a FIFO, a device) are
+    refused, one line each, and the rest go on; a log not done after `task_timeout`
+    seconds is a failed row."""
     need("distributed", "fleet", "fleet")
     t0 = time.perf_counter()
     opts = opts or Options(checks=True)
     if not opts.checking:
         opts = replace(opts, checks=True)  # the findings table is a promise
-    dataset = Path(dataset)
-    if dataset.exists() and not dataset.is_dir():
+    if storage_options:
+        opts = replace(opts, storage_options=storage_options)
+    where = opts.storage_options
+    dataset = layout.root(dataset)
+    if isinstance(dataset, Path) and dataset.exists() and not dataset.is_dir():
         raise UsageError(f"{dataset}: exists and is not a directory")
-    logs = expand(inputs, dataset)
+    infos: dict = {}
+    logs, refused = _regular_files(expand(inputs, dataset, where, infos), where, infos)
     if not logs:
-        raise UsageError(f"no log files in {' '.join(inputs)}")
+        raise UsageError("; ".join(refused) or f"no log files in {' '.join(inputs)}")
     if workers is not None and workers < 1:
         raise UsageError(f"--workers must be 1 or more (got {workers})")
-    try:
-        dataset.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise UsageError(f"{dataset}: cannot create the dataset folder ({exc.strerror})") from None
+    if task_timeout is not None and not task_timeout > 0:
+        raise UsageError(f"--task-timeout must be positive (got {task_timeout})")
+    _make_dataset(dataset, where)
     if junit:
         from cananalyze.core.atomic import check_writable
 
         check_writable(junit)
-    recovered = layout.recover(dataset)
-    tasks = [
-        LogTask(
-            str(p), str(dataset.resolve()), options_for(p, opts), force, bool(junit), compression
-        )
-        for p in logs
-    ]
-    scratch = None if scheduler else layout.Stage(dataset, layout.SCRATCH)
+    recovered = layout.recover(dataset, where)
+    root = str(dataset.resolve()) if isinstance(dataset, Path) else dataset.rstrip("/")
+    run = uuid.uuid4().hex
+    out = FleetResult([], recovered=recovered, refused=refused)
+    each = _OptionsByFolder(opts)
+    by_path, earlier = _unchanged_logs(logs, dataset, each, force)
+    tasks = []
+    for p, _ in logs:
+        if p not in by_path:
+            o, old = each(p), earlier.get(p, ())
+            tasks.append(
+                LogTask(
+                    *(p, root, o, force, bool(junit), compression),
+                    timeout=task_timeout,
+                    run=run,
+                    replaces=old,
+                )
+            )
+    if tasks:
+        _on_cluster(tasks, by_path, out, dataset, workers, scheduler, stream, run)
+        _recount(by_path, tasks, layout.root(root), where, run)
+    else:
+        out.notes.append("nothing to decode (every log unchanged in the dataset): no cluster")
+    out.results = [by_path[p] for p, _ in logs if p in by_path]
+    out.seconds = time.perf_counter() - t0
+    if junit:
+        _write_junit(junit, out.results)
+    return out
+
+
+class _OptionsByFolder:
+    """`options_for` once per folder (a folder's network.toml is looked for once), and the
+    configuration digest once per distinct options."""
+
+    def __init__(self, opts: Options) -> None:
+        self.opts = opts
+        self._folders: dict[str, Options] = {}
+        self._digests: dict[str, str] = {}
+
+    def __call__(self, log: str) -> Options:
+        folder = log.rsplit("/", 1)[0]
+        if folder not in self._folders:
+            self._folders[folder] = options_for(log, self.opts)
+        return self._folders[folder]
+
+    def digest(self, log: str) -> str:
+        o = self(log)
+        key = str(o.network)  # the only option a folder changes
+        if key not in self._digests:
+            self._digests[key] = options_digest(o)
+        return self._digests[key]
+
+
+def _unchanged_logs(
+    logs: list[tuple[str, object]], dataset: layout.Dataset, each: _OptionsByFolder, force: bool
+) -> tuple[dict[str, dict], dict[str, tuple[str, ...]]]:
+    """({path: result} of the logs the dataset holds unchanged, {path: digests of the rows
+    it holds for each other one}): decided from each file's path, size and modification
+    time and the configuration, before any file is read; the rest go to the workers,
+    which hash them (and replace those rows' parts when the content changed)."""
+    rows = logs_rows(dataset, each.opts.storage_options)
+    done: dict[str, dict] = {}
+    earlier: dict[str, tuple[str, ...]] = {}
+    for path, st in logs:
+        mine = rows.get(path, [])
+        old = None if force else unchanged(mine, st.size, st.mtime_ns, each.digest(path))
+        if old is not None:
+            done[path] = {**old, "source": path, "skipped": True, "first": {}, "junit": None}
+        elif mine:
+            earlier[path] = tuple(sorted({r["hash"] for r in mine}))
+    return done, earlier
+
+
+def _on_cluster(
+    tasks: list[LogTask],
+    by_path: dict[str, dict],
+    out: FleetResult,
+    dataset: layout.Dataset,
+    workers: int | None,
+    scheduler: str | None,
+    stream: TextIO | None,
+    run: str,
+) -> None:
+    """The tasks run on the local cluster (started here, closed at the end) or the
+    scheduler's; each result into `by_path`, a lost worker's log a failed row."""
+    where = tasks[0].opts.storage_options
+    scratch = None if scheduler else _scratch(dataset)
     try:
         client, cluster = _client(workers, scheduler, scratch.dir if scratch else None)
     except BaseException:
         if scratch is not None:
             scratch.close()
         raise
-    out = FleetResult([], recovered=recovered)
-    by_path: dict[str, dict] = {}
     progress = None
     try:
         out.dashboard = _dashboard(client)
@@ -198,11 +361,11 @@ def run_fleet(
             client.wait_for_workers(len(cluster.workers))
         out.workers = sorted(client.scheduler_info().get("workers", {}))
         if stream is not None:
-            where = out.dashboard or 'not running (needs bokeh: pip install "cananalyze[fleet]")'
-            print(f"fleet: {len(tasks)} logs, dashboard {where}", file=stream)
+            link = out.dashboard or 'not running (needs bokeh: pip install "cananalyze[fleet]")'
+            print(f"fleet: {len(tasks)} logs, dashboard {link}", file=stream)
         from distributed import as_completed
 
-        futures = client.map(process, tasks, pure=False)
+        futures = client.map(run_task, tasks, pure=False)
         path_of = {f.key: t.path for f, t in zip(futures, tasks, strict=True)}
         progress = _Progress(stream, len(tasks))
         for fut in as_completed(futures):
@@ -210,7 +373,8 @@ def run_fleet(
                 result = fut.result()
             except Exception as exc:  # noqa: BLE001 - a worker lost (memory, crash): that log fails
                 path = path_of[fut.key]
-                result = record_failure(dataset, path, f"{path}: worker failed: {exc}")
+                error = f"{path}: worker failed: {exc}"
+                result = record_failure(dataset, path, error, where, run=run)
             by_path[result["source"]] = result
             progress.done(result)
             fut.release()
@@ -222,11 +386,23 @@ def run_fleet(
             cluster.close()
         if scratch is not None:
             scratch.close()
-    out.results = [by_path[t.path] for t in tasks if t.path in by_path]
-    out.seconds = time.perf_counter() - t0
-    if junit:
-        _write_junit(junit, out.results)
-    return out
+
+
+def _recount(
+    by_path: dict[str, dict], tasks: list[LogTask], dataset, options: dict | None, run: str
+) -> None:
+    """The run's results as the dataset's own `logs` rows say: a log whose row this run
+    wrote was decoded (or failed) by it, even when Dask ran its task again after a lost
+    result and the second run found the first one's row ("already in the dataset").
+    Only a result that says "skipped" can be wrong so: only those rows are read."""
+    for t in tasks:
+        result = by_path.get(t.path)
+        if result is None or not result.get("skipped") or not result.get("hash"):
+            continue
+        row = recorded(dataset, result["hash"], options)
+        if row is not None and row.get("run") == run and row.get("source") == t.path:
+            keep = {k: result[k] for k in ("first", "junit") if k in result}
+            by_path[t.path] = {**row, **keep, "source": t.path, "skipped": False}
 
 
 def _write_junit(dest: str, results: list[dict]) -> None:
@@ -263,11 +439,14 @@ def summary_lines(out: FleetResult) -> list[str]:
         f"fleet: {len(out.results)} logs ({done} decoded, {len(out.skipped)} already in the "
         f"dataset), {out.frames:,} frames, {len(out.failed)} failed, "
         f"{len(out.violated)} with violations, {out.seconds:.1f} s"
+        + "".join(f"; {note}" for note in out.notes)
     ]
     if any(out.recovered):
         lines.append(
             f"fleet: finished {out.recovered[0]} and undid {out.recovered[1]} interrupted commits"
         )
+    for line in out.refused:
+        lines.append(f"refused: {line}")
     for r in out.failed:
         lines.append(f"failed: {r.get('error') or r['source']}")
     for r in out.violated:

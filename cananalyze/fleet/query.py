@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from cananalyze.core import storage
 from cananalyze.core.errors import UsageError
 from cananalyze.core.extras import need
 from cananalyze.fleet.schema import TABLES
@@ -13,23 +14,44 @@ def _sql_text(value: str) -> str:
     return "'" + value.replace("'", "''") + "'"
 
 
-def connect(dataset: str | Path):
+def connect(dataset: str | Path, storage_options: dict | None = None):
     """An in-memory DuckDB connection with a view per table the dataset holds.
 
     `hive_partitioning` turns the `date=YYYY-MM-DD` folders into a DATE column `date`;
     `union_by_name` lets a dataset written by an older cananalyze (columns added since)
-    still be read whole. MissingExtra without the fleet extra.
+    still be read whole. A dataset at a URL is read through its fsspec file system,
+    registered into DuckDB (no httpfs extension to download). MissingExtra without the
+    fleet extra.
     """
     duckdb = need("duckdb", "query", "fleet")
-    root = Path(dataset)
-    if not root.is_dir():
-        raise UsageError(f"{root}: no such dataset folder")
     con = duckdb.connect()
+    if storage.is_url(dataset):
+        fs, base = storage.filesystem(str(dataset), storage_options)
+        fs.invalidate_cache()
+        root = str(dataset).rstrip("/")
+        if not fs.isdir(base):
+            raise UsageError(f"{root}: no such dataset")
+        con.register_filesystem(fs)
+
+        def parts(table: str) -> str | None:
+            found = fs.glob(f"{base.rstrip('/')}/{table}/date=*/part-*.parquet")
+            return f"{root}/{table}/date=*/part-*.parquet" if found else None
+    else:
+        root = Path(dataset)
+        if not root.is_dir():
+            raise UsageError(f"{root}: no such dataset folder")
+
+        def parts(table: str) -> str | None:
+            if not any((root / table).glob("date=*/part-*.parquet")):
+                return None
+            return str(root / table / "date=*" / "part-*.parquet")
+
     made = []
     for table in TABLES:
-        if not any((root / table).glob("date=*/part-*.parquet")):
+        found = parts(table)
+        if found is None:
             continue
-        pattern = _sql_text(str(root / table / "date=*" / "part-*.parquet"))
+        pattern = _sql_text(found)
         con.execute(
             f"CREATE VIEW {table} AS SELECT * FROM read_parquet({pattern}, "
             "hive_partitioning = true, union_by_name = true)"
@@ -40,10 +62,12 @@ def connect(dataset: str | Path):
     return con
 
 
-def query(dataset: str | Path, sql: str) -> tuple[list[str], list[tuple]]:
+def query(
+    dataset: str | Path, sql: str, storage_options: dict | None = None
+) -> tuple[list[str], list[tuple]]:
     """(column names, rows) of `sql` over the dataset's views; UsageError for bad SQL."""
     duckdb = need("duckdb", "query", "fleet")
-    con = connect(dataset)
+    con = connect(dataset, storage_options)
     try:
         rel = con.execute(sql)
         names = [d[0] for d in rel.description or []]

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cananalyze.core import storage
 from cananalyze.core.errors import CananalyzeError
 from cananalyze.core.version import __version__
 from cananalyze.fleet import layout, schema
@@ -60,19 +61,27 @@ class LogTask:
     junit: bool = False
     compression: str = "snappy"
     extra: dict = field(default_factory=dict)  # room for later per-log settings
+    timeout: float | None = None  # seconds before the log is given up (run_task)
+    run: str = ""  # the fleet run's id, in the logs row: what this run wrote, retries included
+    # the digests of the rows the dataset holds for this path (its earlier content): their
+    # parts are removed when this log commits, so a changed file is never in it twice
+    replaces: tuple[str, ...] = ()
 
 
 class _Findings(Sink):
     """Counts the run's findings; keeps the Finding objects only for a JUnit report."""
 
-    def __init__(self, keep: bool) -> None:
+    def __init__(self, keep: bool, cancel=None) -> None:
         self.keep = keep
+        self.cancel = cancel  # run_task's Event: the time is up
         self.findings: list = []
         self.total = 0
         self.failing = 0
         self.first: dict[str, str] = {}  # rule -> its first failing message
 
     def write(self, batch) -> None:
+        if self.cancel is not None and self.cancel.is_set():
+            raise _Cancelled
         found = batch.findings  # columns: a message is built only for each rule's first
         if not len(found):
             return
@@ -87,9 +96,9 @@ class _Findings(Sink):
             self.findings.extend(found.findings())
 
 
-def content_hash(path: str | Path) -> str:
-    """sha256 of the file's bytes (as stored: a .gz is hashed compressed)."""
-    with open(path, "rb") as f:
+def content_hash(path: str | Path, storage_options: dict | None = None) -> str:
+    """sha256 of the file's bytes (as stored: a .gz is hashed compressed); a path or URL."""
+    with storage.open_binary(path, storage_options) as f:
         return hashlib.file_digest(f, "sha256").hexdigest()
 
 
@@ -133,15 +142,76 @@ _DECIDING = (
 )
 
 
-def recorded(dataset: Path, digest: str) -> dict | None:
+def recorded(dataset: layout.Dataset, digest: str, options: dict | None = None) -> dict | None:
     """The dataset's `logs` row for this content, or None."""
     import pyarrow.parquet as pq
 
-    for part in layout.existing_parts(dataset, "logs", digest):
+    for part in layout.existing_parts(dataset, "logs", digest, options):
         with contextlib.suppress(OSError, ValueError):
-            rows = pq.read_table(part).to_pylist()
+            if isinstance(part, str):
+                with layout.open_part(part, options) as f:
+                    rows = pq.read_table(f).to_pylist()
+            else:
+                rows = pq.read_table(part).to_pylist()
             if rows:
                 return rows[0]
+    return None
+
+
+# what a recorded row tells a rerun: its skip key, and the verdict a skipped log reports
+ROW_COLUMNS = (
+    *("source", "hash", "version", "config", "size", "mtime_ns", "run"),
+    *("status", "error", "frames", "findings", "violations", "skipped_lines", "format"),
+)
+
+
+def logs_rows(dataset: layout.Dataset, options: dict | None = None) -> dict[str, list[dict]]:
+    """Every `logs` row of the dataset by source, read once (the driver's skip key and the
+    run's counts); {} when there are none or they cannot be read (then every log is
+    hashed by its worker, as before: never a wrong skip)."""
+    import pyarrow.dataset as pads
+
+    filesystem = None
+    if isinstance(dataset, str):
+        from pyarrow.fs import FSSpecHandler, PyFileSystem
+
+        fs, base = storage.filesystem(dataset, options)
+        fs.invalidate_cache()
+        where = f"{base.rstrip('/')}/logs"
+        if not fs.isdir(where):
+            return {}
+        filesystem = PyFileSystem(FSSpecHandler(fs))
+    else:
+        where = str(dataset / "logs")
+        if not os.path.isdir(where):
+            return {}
+    try:
+        # the dataset's schema: parts written before a column was added read it as null
+        found = pads.dataset(where, filesystem=filesystem, schema=schema.schema("logs"))
+        rows = found.to_table(columns=list(ROW_COLUMNS)).to_pylist()
+    except (OSError, ValueError):
+        return {}
+    out: dict[str, list[dict]] = {}
+    for row in rows:
+        out.setdefault(row["source"], []).append(row)
+    return out
+
+
+def unchanged(rows: list[dict], size: int | None, mtime_ns: int | None, config: str):
+    """The recorded row that lets a log be skipped without reading it: decoded ok by this
+    cananalyze under this configuration, from a file of this size and modification time
+    at this path. None: the worker hashes it."""
+    if mtime_ns is None:
+        return None
+    for row in rows:
+        if (
+            row.get("status") == "ok"
+            and row.get("version") == __version__
+            and row.get("config") == config
+            and row.get("size") == size
+            and row.get("mtime_ns") == mtime_ns
+        ):
+            return row
     return None
 
 
@@ -209,25 +279,87 @@ def _suite(path: str, rules, findings, error: str | None) -> str:
     return ET.tostring(suite, encoding="unicode")
 
 
-def process(task: LogTask) -> dict:
-    """Decode one log into the dataset; the result row (never raises for a bad log)."""
+class _Cancelled(BaseException):
+    """The task's time is up: the decode stops at its next batch and commits nothing."""
+
+
+def run_task(task: LogTask) -> dict:
+    """`process` with the task's time limit (`task.timeout`, --task-timeout): a log that
+    has not finished by then (an input that never ends, a read that hangs) becomes a
+    `failed` row saying so, and the worker goes on with the next log.
+
+    The log runs in a thread of its own, since a blocked read cannot be interrupted: when
+    the time is up the thread is told to stop at its next batch and never to commit; one
+    blocked for good stays parked until the worker process ends.
+    """
+    import threading
+
+    if not task.timeout:
+        return process(task)
+    cancel = threading.Event()
+    box: dict = {}
+
+    def work() -> None:
+        try:
+            box["result"] = process(task, cancel)
+        except BaseException as exc:  # noqa: BLE001 - handed to the calling thread
+            box["error"] = exc
+
+    thread = threading.Thread(target=work, name=f"cananalyze-log-{task.path}", daemon=True)
+    thread.start()
+    thread.join(task.timeout)
+    if thread.is_alive():
+        cancel.set()
+        error = f"{task.path}: no result after {task.timeout:g} s (--task-timeout): given up"
+        where = task.opts.storage_options
+        return record_failure(task.dataset, task.path, error, where, False, task.run)
+    if "error" in box:
+        raise box["error"]
+    return box["result"]
+
+
+def _path_digest(path: str) -> str:
+    """The part name of a log whose content was not hashed (unreadable, not a log)."""
+    return hashlib.sha256(f"unreadable:{path}".encode()).hexdigest()
+
+
+def process(task: LogTask, cancel=None) -> dict:
+    """Decode one log into the dataset; the result row (never raises for a bad log).
+
+    The log is opened (its format told from its head) before its content is hashed:
+    a file that is no log (a 20 GB file of zeros) is refused without being read whole.
+    `cancel` (a threading.Event, run_task's): once set, the decode stops and nothing
+    is committed.
+    """
+    from cananalyze.pipeline import open_source
     from cananalyze.runtime import allocator
 
     allocator.tune()
     wall0, cpu0 = time.perf_counter(), time.process_time()
-    path, dataset = task.path, Path(task.dataset)
+    path, dataset, where = task.path, layout.root(task.dataset), task.opts.storage_options
     row: dict = {"status": "ok", "error": None, "frames": 0, "findings": 0, "violations": 0}
+    row["run"] = task.run
+    source = None
     try:
-        row["size"] = os.path.getsize(path)
-        digest = content_hash(path)
+        st = storage.stat_of(path, where)  # before reading: a later change shows next time
+        row["size"], row["mtime_ns"] = st.size, st.mtime_ns
+        try:
+            source = open_source(path, task.opts)
+        except (KeyboardInterrupt, SystemExit):
+            raise
+        except BaseException as exc:  # noqa: BLE001 - not a log: a row, not hashed
+            digest = _path_digest(path)
+            row.update(status="failed", error=_one_line(exc, path, task.dataset))
+        else:
+            digest = content_hash(path, where)
     except OSError as exc:
-        digest = hashlib.sha256(f"unreadable:{path}".encode()).hexdigest()
+        digest = _path_digest(path)
         row.update(status="failed", error=f"{path}: cannot read ({exc.strerror or exc})")
     lineage = {"source": path, "hash": digest, "version": __version__}  # schema.LINEAGE's order
     result = {"source": path, "hash": digest, "skipped": False, "first": {}, "junit": None}
     row["config"] = options_digest(task.opts)
     if row["status"] == "ok" and not task.force:
-        old = recorded(dataset, digest)
+        old = recorded(dataset, digest, where)
         # a failure is tried again: it may have been the machine's (a worker lost)
         if (
             old is not None
@@ -235,32 +367,40 @@ def process(task: LogTask) -> dict:
             and old.get("status") == "ok"
             and old.get("config") == row["config"]
         ):
+            source.close()
+            if old.get("source") == path and old.get("mtime_ns") != row.get("mtime_ns"):
+                _restamp(dataset, digest, old, row, where)
             result.update(old, skipped=True)
             result["source"], result["recorded_source"] = path, old.get("source")
             return result
     try:
-        stage = layout.Stage(dataset, digest)
+        stage = layout.stage(dataset, digest, where)
     except OSError as exc:  # no room even for the staging folder: the log fails, in one line
+        if source is not None:
+            source.close()
         row.update(status="failed", error=_one_line(exc, path, dataset))
         result.update(row)
         result.update(lineage, date=None, worker_pid=os.getpid())
         return result
     try:
-        sink = _Findings(keep=task.junit)
+        sink = _Findings(keep=task.junit, cancel=cancel)
         state, rules = (
-            _decode(task, stage, lineage, sink, row) if row["status"] == "ok" else (None, [])
+            _decode(task, source, stage, lineage, sink, row) if source is not None else (None, [])
         )
         date, row["date_from"] = _date(state.t0 if state is not None else None, path)
         parts = _parts(stage, dataset, date, digest, row, path) if state is not None else []
         row["seconds"] = time.perf_counter() - wall0
         row["cpu_seconds"] = time.process_time() - cpu0
         row["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        if cancel is not None and cancel.is_set():
+            raise _Cancelled
         try:
-            _commit(stage, dataset, date, digest, parts, row, lineage)
+            old = _still_mine(dataset, task.replaces, path, where)
+            _commit(stage, dataset, date, digest, parts, row, lineage, where, old)
         except OSError as exc:  # a full disk: this log fails, in one line, and the fleet goes on
             stage.close()
             row.update(status="failed", error=_one_line(exc, path, dataset))
-            _commit_failure(dataset, date, digest, row, lineage)
+            _commit_failure(dataset, date, digest, row, lineage, where)
     except BaseException:
         stage.close()
         raise
@@ -271,15 +411,47 @@ def process(task: LogTask) -> dict:
     return result
 
 
-def _decode(task: LogTask, stage: layout.Stage, lineage: dict, findings: _Findings, row: dict):
-    """`pipeline.run` into the export's TableSink in the stage, writing the dataset's schema;
-    (the Run, the rules) or (None, []) with the row marked failed."""
+def _still_mine(
+    dataset: layout.Dataset, digests: tuple[str, ...], path: str, options: dict | None
+) -> tuple[str, ...]:
+    """Of the digests the driver saw for this path, those whose row still names it (another
+    path with that same content may have written the row since: its parts stay)."""
+    return tuple(d for d in digests if (recorded(dataset, d, options) or {}).get("source") == path)
+
+
+def _restamp(
+    dataset: layout.Dataset, digest: str, old: dict, row: dict, options: dict | None
+) -> None:
+    """The recorded row of a file whose bytes are unchanged but whose modification time
+    is not (touched, copied back, or recorded before mtime_ns was): its `logs` part
+    rewritten with the new time, so the next rerun skips it without reading it again.
+    Nothing else changes (not its run: this run did not decode it). Best effort."""
+    parts = layout.existing_parts(dataset, "logs", digest, options)
+    if not parts:
+        return
+    try:
+        stage = layout.stage(dataset, digest, options)
+    except OSError:
+        return
+    try:
+        staged = stage.dir / "logs.parquet"
+        lineage = {c: old[c] for c, _ in schema.LINEAGE}
+        _logs_part(staged, {**old, "mtime_ns": row.get("mtime_ns"), "size": row["size"]}, lineage)
+        stage.commit([(staged, parts[0])], [])
+    except OSError:
+        stage.close()
+
+
+def _decode(
+    task: LogTask, source, stage: layout.Stage, lineage: dict, findings: _Findings, row: dict
+):
+    """`pipeline.run` of the opened log into the export's TableSink in the stage, writing
+    the dataset's schema; (the Run, the rules) or (None, []) with the row marked failed."""
     from cananalyze.outputs.tables.stream import TableSink
-    from cananalyze.pipeline import build_decoder, open_source, run
+    from cananalyze.pipeline import build_decoder, run
     from cananalyze.runtime.gcpolicy import fewer_collections
 
     try:
-        source = open_source(task.path, task.opts)
         row["format"] = getattr(getattr(source, "fmt", None), "name", None)
         # the sinks take the findings from the batches: the checker keeps none
         decoder = build_decoder(task.opts, keep_findings=False)
@@ -289,9 +461,11 @@ def _decode(task: LogTask, stage: layout.Stage, lineage: dict, findings: _Findin
         )
         with fewer_collections():
             state = run(source, decoder, [tables, findings], task.opts)
-    except (KeyboardInterrupt, SystemExit):
+    except (KeyboardInterrupt, SystemExit, _Cancelled):
+        source.close()
         raise
     except BaseException as exc:  # noqa: BLE001 - one log's failure is a row, not the fleet's
+        source.close()
         row.update(status="failed", error=_one_line(exc, task.path, task.dataset))
         return None, []
     row["skipped_lines"] = source.problems.count
@@ -300,7 +474,9 @@ def _decode(task: LogTask, stage: layout.Stage, lineage: dict, findings: _Findin
     return state, decoder.checker.rules if decoder.checker is not None else []
 
 
-def _parts(stage: layout.Stage, dataset: Path, date: str, digest: str, row: dict, path: str):
+def _parts(
+    stage: layout.Stage, dataset: layout.Dataset, date: str, digest: str, row: dict, path: str
+):
     """(staged file, final part path) of every table; none, with the row failed, when a
     table is not in the dataset's schema."""
     from cananalyze.outputs.tables.stream import TABLES
@@ -319,8 +495,20 @@ def _parts(stage: layout.Stage, dataset: Path, date: str, digest: str, row: dict
     return parts
 
 
-def _commit(stage, dataset: Path, date: str, digest: str, parts: list, row: dict, lineage: dict):
-    """The logs row written last, the log's parts at other dates (an earlier run's) removed."""
+def _commit(
+    stage,
+    dataset: layout.Dataset,
+    date: str,
+    digest: str,
+    parts: list,
+    row: dict,
+    lineage: dict,
+    options: dict | None = None,
+    replaces: tuple[str, ...] = (),
+):
+    """The logs row written last, the log's parts at other dates (an earlier run's) removed,
+    and those of its path's earlier content (`replaces`: the digests of the rows the
+    dataset held for this path; the failed row it had when it could not be read)."""
     staged = stage.dir / "logs.parquet"
     _logs_part(staged, row, lineage)
     renames = [*parts, (staged, layout.part_path(dataset, "logs", date, digest))]
@@ -328,39 +516,57 @@ def _commit(stage, dataset: Path, date: str, digest: str, parts: list, row: dict
     removals = [
         p
         for table in schema.TABLES
-        for p in layout.existing_parts(dataset, table, digest)
+        for p in layout.existing_parts(dataset, table, digest, options)
         if p not in final
     ]
+    for old in {*replaces, _path_digest(lineage["source"])} - {digest}:
+        for table in schema.TABLES:
+            removals += layout.existing_parts(dataset, table, old, options)
     stage.commit(renames, removals)
 
 
-def _commit_failure(dataset: Path, date: str, digest: str, row: dict, lineage: dict) -> None:
+def _commit_failure(
+    dataset: layout.Dataset,
+    date: str,
+    digest: str,
+    row: dict,
+    lineage: dict,
+    options: dict | None = None,
+) -> None:
     """The failed log's row alone, if the disk still takes it (else none: a rerun tries
     the log again, as any log without a row)."""
     try:
-        stage = layout.Stage(dataset, digest)
+        stage = layout.stage(dataset, digest, options)
     except OSError:
         return
     try:
-        _commit(stage, dataset, date, digest, [], row, lineage)
+        _commit(stage, dataset, date, digest, [], row, lineage, options)
     except OSError:
         stage.close()
 
 
-def record_failure(dataset: str | Path, path: str, error: str) -> dict:
+def record_failure(
+    dataset: str | Path,
+    path: str,
+    error: str,
+    options: dict | None = None,
+    hash_it: bool = True,
+    run: str = "",
+) -> dict:
     """A `logs` row of status failed written by the driver, for a log whose worker was lost
-    (killed for memory, crashed): the rest of the fleet goes on."""
-    dataset = Path(dataset)
+    (killed for memory, crashed): the rest of the fleet goes on. `hash_it` False: under
+    the path's digest, not the content's (a log that timed out may never end)."""
+    dataset = layout.root(dataset)
     try:
-        digest = content_hash(path)
+        digest = content_hash(path, options) if hash_it else _path_digest(path)
     except OSError:
-        digest = hashlib.sha256(f"unreadable:{path}".encode()).hexdigest()
+        digest = _path_digest(path)
     lineage = {"source": path, "hash": digest, "version": __version__}
     date, date_from = _date(None, path)
-    row = {"status": "failed", "error": error, "frames": 0, "date_from": date_from}
-    stage = layout.Stage(dataset, digest)
+    row = {"status": "failed", "error": error, "frames": 0, "date_from": date_from, "run": run}
+    stage = layout.stage(dataset, digest, options)
     try:
-        _commit(stage, dataset, date, digest, [], row, lineage)
+        _commit(stage, dataset, date, digest, [], row, lineage, options)
     except BaseException:
         stage.close()
         raise

@@ -19,7 +19,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO
 
-from cananalyze.core.errors import InputError, ProblemLog
+from cananalyze.core import storage
+from cananalyze.core.errors import InputError, ProblemLog, UsageError
 from cananalyze.core.frames import FrameBatch
 from cananalyze.formats import logs, registry
 from cananalyze.formats.registry import DEFAULT_BATCH, LogFormat, ReadContext
@@ -273,9 +274,11 @@ def open_log(
     batch_size: int = DEFAULT_BATCH,
     fmt: str | None = None,
     problems: ProblemLog | None = None,
+    storage_options: dict | None = None,
 ) -> LogSource:
-    """Open a log for batch reading; raises InputError with a one-line reason."""
-    name = str(path)
+    """Open a log (a path, "-" for stdin, or an fsspec URL: core/storage) for batch
+    reading; raises InputError with a one-line reason."""
+    name = path if storage.is_url(path) else str(path)
     closers: list = []
     try:
         if name == "-":
@@ -283,8 +286,10 @@ def open_log(
                 raise InputError("-: standard input is closed, nothing to read")
             raw: BinaryIO = sys.stdin.buffer
         else:
-            raw = open(name, "rb")  # noqa: SIM115 - closed by LogSource
+            raw = storage.open_binary(name, storage_options)
             closers.append(raw)
+    except UsageError as exc:  # an unknown protocol, a missing extra: this log's reason
+        raise InputError(str(exc)) from None
     except FileNotFoundError:
         raise InputError(f"{name}: no such file") from None
     except IsADirectoryError:
@@ -298,7 +303,7 @@ def open_log(
         gz = _TolerantGzip(stream)
         closers.append(gz)
         stream = io.BufferedReader(gz, buffer_size=SNIFF_BYTES)  # type: ignore[assignment]
-    pipe = stream is raw and not _regular(raw)
+    pipe = stream is raw and not storage.is_url(name) and not _regular(raw)
     try:
         head, ended = _read_upto(stream, SNIFF_BYTES, pipe)
         if gz is not None and gz.error and not head:  # not "the file is empty"
@@ -336,7 +341,9 @@ def open_log(
         stream = io.BufferedReader(_Replay(head, stream, cr_only), buffer_size=SNIFF_BYTES)  # type: ignore[assignment]
     ctx = ReadContext(source=name, problems=problems or ProblemLog(), batch_size=batch_size)
     size = None
-    if name != "-":
+    if storage.is_url(name):
+        size = getattr(raw, "size", None)  # fsspec's files know theirs
+    elif name != "-":
         try:
             st = os.fstat(raw.fileno())
             size = st.st_size if stat.S_ISREG(st.st_mode) else None

@@ -344,6 +344,12 @@ LOGS = Table(
             ("findings", pa.int64(), "findings of the checks"),
             ("violations", pa.int64(), "of which errors"),
             ("config", pa.string(), "SHA-256 of the options and the files they name"),
+            (
+                "mtime_ns",
+                pa.int64(),
+                "the file's modification time (ns) as read: a rerun's skip key",
+            ),
+            ("run", pa.string(), "the fleet run that wrote the row (its id): the run's counts"),
         )
     ),
 )

@@ -40,6 +40,8 @@ class Options:
     t_to: float | None = None
     time: str = "rel"
     dbc: tuple[str | Path, ...] = ()  # DBC files: their messages decoded as signals (--dbc)
+    # how to reach logs given as URLs (s3://...): fsspec's options (fleet --storage-options)
+    storage_options: dict | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.dbc, (str, Path)):

@@ -41,7 +41,9 @@ def open_source(log: str | Path | object, opts: Options | None = None) -> Source
     if isinstance(log, (str, Path)):
         from cananalyze.formats.source import open_log
 
-        return open_log(log, strict=opts.strict, fmt=opts.input_format)
+        return open_log(
+            log, strict=opts.strict, fmt=opts.input_format, storage_options=opts.storage_options
+        )
     if isinstance(log, FrameBatch):
         return MemorySource(log)
     from cananalyze.formats.live import LiveSource

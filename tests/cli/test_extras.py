@@ -227,9 +227,10 @@ def test_pyproject_extras():
     assert "dask[distributed]>=2024.1" in extras["fleet"]
     assert names(extras["foxglove"]) == {"foxglove-sdk"}
     assert names(extras["mf4"]) == {"asammdf"}
-    assert extras["all"] == ["cananalyze[fleet,foxglove,mf4]"]
+    assert names(extras["s3"]) == {"s3fs"}  # fleet and query over s3:// (core/storage.py)
+    assert extras["all"] == ["cananalyze[fleet,foxglove,mf4,s3]"]
     assert "cananalyze[all]" in extras["dev"]
     plain = names(project["dependencies"])
-    for extra in ("fleet", "foxglove", "mf4", "dev"):
+    for extra in ("fleet", "foxglove", "mf4", "s3", "dev"):
         assert not plain & names(extras[extra]), extra
     assert {"pyarrow", "mcap", "rerun-sdk", "plotly", "jinja2", "rich"} <= plain

@@ -1,0 +1,272 @@
+"""`cananalyze fleet` and `query` over object storage: logs in a bucket, the dataset in a
+bucket, on moto's S3 server bound to 127.0.0.1 (no other address), read back with
+pyarrow's own S3 client and counted against python-can."""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+import socket
+import subprocess
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import pytest
+from conftest import real_file
+
+pytest.importorskip("s3fs")
+moto_server = pytest.importorskip("moto.server")
+
+from cananalyze.cli.main import main  # noqa: E402
+from cananalyze.fleet.schema import TABLES  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+SAMPLES = ["demo.log", "demo.blf", "faults.asc"]
+REAL = [
+    "calumroy__CANopen_socketCAN_Test/can_log_070825_brake_sensor_test2.log",
+    "hilch__canopen-message-interpreter/pcan1.trc",
+    "hardbyte__python-can/test_CanMessage.blf",
+]
+CREDENTIALS = {
+    "AWS_ACCESS_KEY_ID": "testing",
+    "AWS_SECRET_ACCESS_KEY": "testing",
+    "AWS_DEFAULT_REGION": "us-east-1",
+}
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def s3():
+    """moto's S3 on 127.0.0.1, the AWS variables pointing at it, a bucket; stopped at the end."""
+    logging.getLogger("werkzeug").setLevel(logging.ERROR)  # no line per request
+    port = _free_port()
+    server = moto_server.ThreadedMotoServer(ip_address="127.0.0.1", port=port, verbose=False)
+    server.start()
+    endpoint = f"http://127.0.0.1:{port}"
+    with pytest.MonkeyPatch.context() as mp:
+        for k, v in {**CREDENTIALS, "AWS_ENDPOINT_URL": endpoint}.items():
+            mp.setenv(k, v)
+        import s3fs
+
+        fs = s3fs.S3FileSystem(endpoint_url=endpoint)
+        fs.mkdir("bucket")
+        try:
+            yield {"fs": fs, "endpoint": endpoint, "port": port}
+        finally:
+            server.stop()
+
+
+def _arrow_fs(endpoint: str):
+    """pyarrow's own S3 client (not fsspec's): the independent reader."""
+    from pyarrow.fs import S3FileSystem
+
+    return S3FileSystem(
+        access_key="testing",
+        secret_key="testing",
+        endpoint_override=endpoint.removeprefix("http://"),
+        scheme="http",
+        region="us-east-1",
+    )
+
+
+def _table(endpoint: str, dataset: str, name: str):
+    import pyarrow.dataset as ds
+
+    return ds.dataset(
+        f"{dataset}/{name}", filesystem=_arrow_fs(endpoint), format="parquet", partitioning="hive"
+    ).to_table()
+
+
+def _python_can_frames(path: Path) -> int:
+    import can
+
+    return sum(1 for _ in can.LogReader(str(path)))
+
+
+@pytest.fixture(scope="module")
+def fleet(s3, tmp_path_factory):
+    """Samples and real logs uploaded to s3://bucket/logs, one fleet run into s3://bucket/ds
+    through the CLI, from a working folder that must stay empty."""
+    local = {f"samples/{n}": ROOT / "samples" / n for n in SAMPLES}
+    for r in REAL:
+        try:
+            local[f"real/{Path(r).name}"] = real_file(r)
+        except pytest.skip.Exception:
+            continue  # the real data is not here: the samples still run
+    fs = s3["fs"]
+    for key, path in local.items():
+        fs.put_file(str(path), f"bucket/logs/{key}")
+    fs.pipe_file("bucket/logs/notes.md", b"not a log, passed over in a folder\n")
+    cwd = tmp_path_factory.mktemp("cwd")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.chdir(cwd)
+        rc = main(["fleet", "s3://bucket/logs", "--out", "s3://bucket/ds", "--workers", "2", "-q"])
+    fs.invalidate_cache()
+    return {"rc": rc, "local": local, "cwd": cwd}
+
+
+def test_fleet_writes_every_log_into_the_bucket(s3, fleet):
+    assert fleet["rc"] in (0, 1)  # the samples break rules on purpose: 1
+    assert not list(fleet["cwd"].iterdir())  # no local ./s3:/bucket/ds
+    assert not Path("s3:").exists()
+    logs = _table(s3["endpoint"], "bucket/ds", "logs").to_pylist()
+    expected = {f"s3://bucket/logs/{k}" for k in fleet["local"]}
+    assert {r["source"] for r in logs} == expected and len(logs) == len(expected)
+    assert all(r["status"] == "ok" for r in logs)
+    frames = _table(s3["endpoint"], "bucket/ds", "frames")
+    per_log = Counter(frames.column("source").to_pylist())
+    for key, path in fleet["local"].items():
+        assert per_log[f"s3://bucket/logs/{key}"] == _python_can_frames(path), key
+    for r in logs:
+        assert r["frames"] == per_log[r["source"]]
+    assert not s3["fs"].exists("bucket/ds/_staging") or not s3["fs"].ls("bucket/ds/_staging")
+
+
+def test_query_reads_the_bucket_dataset(s3, fleet, capsys, monkeypatch):
+    sql = "SELECT source, frames FROM logs ORDER BY source"
+    assert main(["query", "s3://bucket/ds", sql, "--csv"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == "source,frames" and len(lines) == 1 + len(fleet["local"])
+    got = dict(line.rsplit(",", 1) for line in lines[1:])
+    for key, path in fleet["local"].items():
+        assert int(got[f"s3://bucket/logs/{key}"]) == _python_can_frames(path)
+    # the endpoint given as a storage option instead of the environment
+    monkeypatch.delenv("AWS_ENDPOINT_URL")
+    opts = f'{{"endpoint_url": "{s3["endpoint"]}"}}'
+    sql = "SELECT count(*) AS n FROM frames WHERE date IS NOT NULL OR date IS NULL"
+    assert main(["query", "s3://bucket/ds", sql, "--json", "--storage-options", opts]) == 0
+    n = int(capsys.readouterr().out.split(":")[1].strip(" }\n"))
+    assert n == sum(_python_can_frames(p) for p in fleet["local"].values())
+    # or fsspec's own variable, read when fsspec is imported: a fresh process
+    env = {k: v for k, v in os.environ.items() if k != "AWS_ENDPOINT_URL"}
+    env.update(FSSPEC_S3_ENDPOINT_URL=s3["endpoint"], PYTHONPATH=str(ROOT))
+    cmd = [sys.executable, "-m", "cananalyze", "query", "s3://bucket/ds", sql, "--csv"]
+    out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.splitlines() == ["n", str(n)]
+    assert not Path("s3:").exists()
+
+
+def test_a_rerun_over_the_bucket_decodes_nothing(s3, fleet, capsys):
+    rc = main(["fleet", "s3://bucket/logs", "--out", "s3://bucket/ds", "--workers", "1"])
+    err = capsys.readouterr().err
+    assert rc == fleet["rc"]
+    n = len(fleet["local"])
+    assert f"(0 decoded, {n} already in the dataset)" in err, err
+    assert "no cluster" in err  # every object's size and time unchanged: none read
+    s3["fs"].invalidate_cache()
+    for name in TABLES:
+        assert len(s3["fs"].glob(f"bucket/ds/{name}/date=*/part-*.parquet")) == n, name
+
+
+def test_bad_urls_and_options_are_one_line(s3, tmp_path, capsys):
+    out = str(tmp_path / "ds")
+    assert main(["fleet", "nope://bucket/logs", "--out", out]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "unknown protocol 'nope'" in err[0]
+    assert main(["fleet", "s3://bucket/none", "--out", out]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "s3://bucket/none: no such file or folder" in err[0]
+    assert main(["query", "s3://bucket/ds", "SELECT 1", "--storage-options", "{oops"]) == 2
+    assert "--storage-options: not JSON" in capsys.readouterr().err
+    assert not (tmp_path / "ds").exists()
+
+
+def test_without_s3fs_the_extra_is_named(monkeypatch):
+    from cananalyze.core import storage
+    from cananalyze.core.extras import MissingExtra
+
+    monkeypatch.setitem(sys.modules, "s3fs", None)
+    with pytest.raises(MissingExtra, match=r"cananalyze\[s3\]"):
+        storage.filesystem("s3://bucket/logs")
+
+
+@pytest.mark.slow
+def test_a_killed_run_then_a_rerun_completes_the_bucket_dataset(s3, tmp_path):
+    """SIGKILL of `cananalyze fleet` once some logs are published in the bucket, then a
+    rerun: every log once, no duplicate rows, nothing left under _staging."""
+    import signal
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        from generate import generate
+    finally:
+        sys.path.pop(0)
+    from cananalyze.formats.logfile import write_log
+
+    fs = s3["fs"]
+    n = 16
+    for i in range(n):
+        path = tmp_path / f"run{i:02d}.log"
+        write_log(generate(20_000, seed=i + 1), path)
+        fs.put_file(str(path), f"bucket/kill/logs/{path.name}")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    cmd = [sys.executable, "-m", "cananalyze", "fleet", "s3://bucket/kill/logs"]
+    cmd += ["--out", "s3://bucket/kill/ds", "--workers", "2", "-q"]
+    proc = subprocess.Popen(cmd, env=env, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    deadline = time.monotonic() + 180
+    while time.monotonic() < deadline:
+        fs.invalidate_cache()
+        if fs.glob("bucket/kill/ds/logs/date=*/*.parquet"):
+            break
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.communicate(timeout=60)
+    fs.invalidate_cache()
+    first = len(fs.glob("bucket/kill/ds/logs/date=*/*.parquet"))
+    assert 0 < first < n
+    rerun = subprocess.run(
+        cmd[:-1], env=env, capture_output=True, text=True, timeout=600, cwd=tmp_path
+    )
+    assert rerun.returncode == 1, rerun.stderr  # generated traffic breaks rules: exit 1
+    # a commit cut after its manifest is finished by the rerun (on S3 the copies take a
+    # while: the kill often lands there), and that log counts as already in the dataset
+    counts = re.search(r"\((\d+) decoded, (\d+) already in the dataset\)", rerun.stderr)
+    finished = re.search(r"finished (\d+) and undid \d+ interrupted", rerun.stderr)
+    decoded, already = int(counts[1]), int(counts[2])
+    assert decoded + already == n
+    # (a stage whose logs part was copied before the kill, its prefix not yet deleted, is
+    # finished again: counted in both)
+    assert first <= already <= first + (int(finished[1]) if finished else 0), rerun.stderr
+    fs.invalidate_cache()
+    assert not fs.exists("bucket/kill/ds/_staging") or not fs.ls("bucket/kill/ds/_staging")
+    logs = _table(s3["endpoint"], "bucket/kill/ds", "logs").to_pylist()
+    assert sorted(r["source"] for r in logs) == [
+        f"s3://bucket/kill/logs/run{i:02d}.log" for i in range(n)
+    ]
+    frames = _table(s3["endpoint"], "bucket/kill/ds", "frames")
+    assert frames.num_rows == n * 20_000
+    assert sorted(Counter(frames.column("source").to_pylist()).values()) == [20_000] * n
+    assert not list(tmp_path.glob("s3:*"))
+
+
+def test_file_urls_take_the_object_storage_path(tmp_path, monkeypatch, capsys):
+    """file:// goes through fsspec like s3:// (uploads, manifest, copies): the same
+    dataset as a local run, the staging prefix empty after it, a rerun that reads nothing."""
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    for name in SAMPLES:
+        (logs / name).write_bytes((ROOT / "samples" / name).read_bytes())
+    monkeypatch.chdir(tmp_path)
+    dataset = tmp_path / "ds"
+    args = ["fleet", f"file://{logs}", "--out", f"file://{dataset}", "--workers", "1"]
+    assert main(args) == 1  # the samples break rules on purpose
+    capsys.readouterr()
+    assert not list((dataset / "_staging").iterdir())
+    import pyarrow.dataset as ds
+
+    rows = ds.dataset(dataset / "logs", format="parquet").to_table().to_pylist()
+    assert {r["source"]: r["frames"] for r in rows} == {
+        f"file://{logs}/{n}": _python_can_frames(logs / n) for n in SAMPLES
+    }
+    assert main(args) == 1
+    assert "no cluster" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds", "logs"]
