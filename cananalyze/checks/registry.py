@@ -16,6 +16,7 @@ from cananalyze.checks.rules.errctl_length import ErrctlLengthRule
 from cananalyze.checks.rules.error_frames import ErrorFrameRule
 from cananalyze.checks.rules.guarding import GuardingRule
 from cananalyze.checks.rules.heartbeat import HeartbeatRule
+from cananalyze.checks.rules.lss import LssRule
 from cananalyze.checks.rules.pdo_async import PdoAsyncRule
 from cananalyze.checks.rules.pdo_length import PdoLengthRule
 from cananalyze.checks.rules.pdo_state import PdoStateRule
@@ -43,6 +44,7 @@ RULES: dict[str, type[Rule]] = {
         EmcyRule,
         SdoRule,
         ErrorFrameRule,
+        LssRule,
         DriveTransitionRule,
         DriveFaultRule,
         DriveCommandRule,

@@ -20,6 +20,8 @@ from cananalyze.core.errors import ProblemLog
 from cananalyze.core.frames import FrameBatch, concat
 from cananalyze.core.records import DecodedBatch
 from cananalyze.decode.events.build import LEVEL_NAMES, Event, EventState, batch_events_of
+from cananalyze.decode.lss import PARTS as LSS_PARTS
+from cananalyze.decode.lss import LssFollower
 from cananalyze.decode.node_tally import NodeTally
 from cananalyze.decode.od_tally import OdTally
 from cananalyze.outputs import schemas
@@ -394,6 +396,32 @@ class Capture:
                 rows.append(row)
         bus = ["bus"] if len(checkers) > 1 else []
         return pd.DataFrame.from_records(rows, columns=["cob_id", *_SYNC_LATENCY, *bus])
+
+    @cached_property
+    def _lss(self) -> tuple[list, list[dict]]:
+        """(LSS events, assignments) of the whole log (decode/lss)."""
+        follower = LssFollower()
+        batch = DecodedBatch(self.batch, self.service, self.node, self.pdo)
+        events = follower.add(batch) + follower.finish()
+        return events, follower.assignments
+
+    @cached_property
+    def lss(self) -> pd.DataFrame:
+        """LSS (CiA 305) steps: fastscans with the identity found, selective and global
+        switches, configure node-ID / bit timing, store, inquiries; each with its result."""
+        import pandas as pd
+
+        cols = ["t", "step", "result", *LSS_PARTS, "node_id", "detail"]
+        return pd.DataFrame.from_records([e.as_row() for e in self._lss[0]], columns=cols)
+
+    @cached_property
+    def lss_assignments(self) -> pd.DataFrame:
+        """Which identity (vendor, product, revision, serial) got which node-ID by LSS,
+        when, and whether the store that followed succeeded."""
+        import pandas as pd
+
+        cols = ["t", *LSS_PARTS, "node_id", "stored"]
+        return pd.DataFrame.from_records(self._lss[1], columns=cols)
 
     @cached_property
     def od(self) -> pd.DataFrame:

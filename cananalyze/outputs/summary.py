@@ -15,15 +15,17 @@ from cananalyze.checks.streamstats import StreamStats
 from cananalyze.core.columns.order import first_seen_codes
 from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from cananalyze.core.records import DecodedBatch
+from cananalyze.decode.lss import LssFollower, identity_text
 from cananalyze.outputs.busload import bits_per_channel
 from cananalyze.pipeline.sink import Sink
-from cananalyze.protocol import nmt
+from cananalyze.protocol import lss, nmt
 from cananalyze.protocol.services import SERVICE_NAMES, Service
 
 N_SVC = len(SERVICE_NAMES)
 # byte -> is an NMT state (toggle bit ignored) / an NMT command: lookups, not np.isin per batch
 _IS_STATE = np.isin(np.arange(256) & nmt.STATE_MASK, list(nmt.STATES))
 _IS_COMMAND = np.isin(np.arange(256), list(nmt.COMMANDS))
+_IS_LSS = np.isin(np.arange(256), list(lss.COMMANDS))
 
 
 def _ids(per_id: np.ndarray, most: int = 6) -> str:
@@ -69,6 +71,9 @@ class Summary:
     node_service_by_bus: dict = field(default_factory=dict)  # bus -> (128, N_SVC) counts
     sdo_results_by_bus: dict = field(default_factory=dict)  # (bus, node) -> {result: count}
     sdo_latency_by_bus: dict = field(default_factory=dict)  # (bus, node) -> StreamStats
+    lss: LssFollower = field(default_factory=LssFollower)  # CiA 305 sequences
+    lss_steps: int = 0
+    lss_good: int = 0  # LSS master frames with a known command: CANopen evidence
 
     def add(self, batch: DecodedBatch) -> None:
         n = len(batch)
@@ -105,6 +110,8 @@ class Summary:
             entry[1] += int(per_bits[c])
         self._nodes_by_channel(batch, present, per[N_SVC:].reshape(128, N_SVC))
         self._evidence(batch)
+        if self.by_service[Service.LSS_MASTER]:
+            self.lss_steps += len(self.lss.add(batch))
         if len(self.ids_seen) < 4096:
             ids = fb.can_id[(fb.flags & FLAG_EXT) == 0]
             if ids.size and ids.max() < 2048:  # 11-bit: a bincount, no sort
@@ -201,6 +208,8 @@ class Summary:
         self.ec_frames += int(ec.size)
         state_ok = _IS_STATE[fb.data[ec, 0]]  # the byte tables only for the rows concerned
         self.ec_bad += np.bincount(ids[ec[(fb.dlc[ec] != 1) | ~state_ok]], minlength=2048)
+        lss_rows = np.flatnonzero(data_frame & (svc == Service.LSS_MASTER) & (fb.dlc == 8))
+        self.lss_good += int(_IS_LSS[fb.data[lss_rows, 0]].sum())
         nmt = np.flatnonzero(data_frame & (svc == Service.NMT) & (fb.dlc == 2))
         self.nmt_good += int((_IS_COMMAND[fb.data[nmt, 0]] & (fb.data[nmt, 1] < 128)).sum())
 
@@ -245,6 +254,7 @@ class Summary:
                 "are protocol errors."
             )
         good = (self.ec_frames - ec_bad) + (self.sdo_frames - sdo_bad) + self.nmt_good
+        good += self.lss_good
         other = int(self.by_service[Service.OTHER]) + int(self.by_service[Service.ERROR_FRAME])
         if not out and other / n > 0.5 and good == 0:
             out.append(
@@ -302,6 +312,9 @@ class Summary:
                 entry = _sdo_entry(self.sdo_results_by_bus[key], self.sdo_latency_by_bus.get(key))
                 by_bus.setdefault(bus, {})[str(node)] = entry
             several["sdo_by_bus"] = by_bus
+        self.lss_steps += len(self.lss.finish())
+        if self.lss_steps:  # CiA 305: who got which node-ID (load().lss has every step)
+            several["lss_assignments"] = list(self.lss.assignments)
         return {
             "kind": "summary",
             "frames": self.frames,
@@ -374,9 +387,22 @@ class Summary:
                 out.append(
                     _sdo_line(f"node {node}", self.sdo_results[node], lat if timed else None)
                 )
+        out += self.lss_lines()
         verdict = self.canopen_verdict()
         if verdict:
             out.append(verdict)
+        return out
+
+    def lss_lines(self) -> list[str]:
+        """LSS (CiA 305): the steps seen, and who got which node-ID."""
+        self.lss_steps += len(self.lss.finish())
+        steps = self.lss_steps
+        if not steps:
+            return []
+        out = [f"LSS: {steps} steps (load().lss lists them)"]
+        for a in self.lss.assignments:
+            stored = " (stored)" if a["stored"] else " (not stored)"
+            out.append(f"LSS: node-ID {a['node_id']} given to {identity_text(a)}{stored}")
         return out
 
 
