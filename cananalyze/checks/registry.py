@@ -7,6 +7,7 @@ from cananalyze.checks.rules.assert_boot import AssertOperational
 from cananalyze.checks.rules.assert_heartbeat import AssertHeartbeat
 from cananalyze.checks.rules.assert_pdo_rate import AssertPdoRate
 from cananalyze.checks.rules.assert_signal import AssertSignal
+from cananalyze.checks.rules.boot import BootRule
 from cananalyze.checks.rules.bootup import BootupRule
 from cananalyze.checks.rules.drive_command import DriveCommandRule
 from cananalyze.checks.rules.drive_fault import DriveFaultRule
@@ -45,6 +46,7 @@ RULES: dict[str, type[Rule]] = {
         SdoRule,
         ErrorFrameRule,
         LssRule,
+        BootRule,
         DriveTransitionRule,
         DriveFaultRule,
         DriveCommandRule,

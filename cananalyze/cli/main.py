@@ -26,12 +26,13 @@ SUBCOMMANDS = [
     "simulate",
     "devices",
     "od",
+    "boot",
     "diff",
     "fleet",
     "query",
 ]
 # Commands that read a whole log batch by batch: they get the allocator settings.
-BATCH_COMMANDS = {"decode", "check", "report", "export", "od", "fleet"}
+BATCH_COMMANDS = {"decode", "check", "report", "export", "od", "boot", "fleet"}
 
 
 def build_parser() -> argparse.ArgumentParser:

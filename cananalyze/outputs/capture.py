@@ -19,6 +19,7 @@ import numpy as np
 from cananalyze.core.errors import ProblemLog
 from cananalyze.core.frames import FrameBatch, concat
 from cananalyze.core.records import DecodedBatch
+from cananalyze.decode.boot import BootFollower, declared_identity
 from cananalyze.decode.events.build import LEVEL_NAMES, Event, EventState, batch_events_of
 from cananalyze.decode.lss import PARTS as LSS_PARTS
 from cananalyze.decode.lss import LssFollower
@@ -396,6 +397,31 @@ class Capture:
                 rows.append(row)
         bus = ["bus"] if len(checkers) > 1 else []
         return pd.DataFrame.from_records(rows, columns=["cob_id", *_SYNC_LATENCY, *bus])
+
+    @cached_property
+    def boot(self) -> pd.DataFrame:
+        """Each node's boot stories (a row per life): stopped or operational, the step it
+        stopped at and its CiA 302-2 error status, the steps (decode/boot)."""
+        import pandas as pd
+
+        follower = BootFollower()
+        follower.add(
+            DecodedBatch(self.batch, self.service, self.node, self.pdo, records=self.records)
+        )
+        config = self.config
+        model = getattr(config, "model", None)
+        hb = config.heartbeat_ms if config is not None and len(self.batch) and self._timed else None
+        t_end = float(self.batch.t[-1]) if len(self.batch) else None
+        stories = follower.stories(
+            lambda n: declared_identity(model, n), hb, t_end, timed=self._timed
+        )
+        cols = ["node", "life", "t_boot", "result", "stopped_at", "status", "status_text"]
+        cols += ["verdict", "steps"]
+        return pd.DataFrame.from_records([s.as_row() for s in stories], columns=cols)
+
+    @property
+    def _timed(self) -> bool:
+        return self.checker is None or self.checker.timed is not False
 
     @cached_property
     def _lss(self) -> tuple[list, list[dict]]:
