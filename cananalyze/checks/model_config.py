@@ -66,6 +66,45 @@ class ModelConfig:
                 return self.origin(consumer, 0x1016, sub, t, t0)
         return "0x1016"
 
+    def configured_nodes(self) -> list[int]:
+        """Nodes whose configuration anything says: declared, or shown by the log."""
+        return sorted((set(self.model.nodes) | self.model.timeline.nodes()) - {EVERY_NODE})
+
+    def raw(self, node: int, index: int, sub: int, t: float) -> int | None:
+        """An object's value in force at t as it stands (a COB-ID word with its flag bits),
+        a profile's 0 included; None: nothing says. Assumed CiA 4xx defaults are not
+        values: the generic profile guesses a device it never saw."""
+        k = self.model.known(node, index, sub, t)
+        if k is None:
+            return None
+        if k.source == "profile":
+            cfg = self.model.nodes.get(node)
+            if cfg is not None and cfg.profile is not None and cfg.profile.generic:
+                return None
+        return k.value
+
+    def value_time(self, node: int, index: int, sub: int, t: float) -> float | None:
+        """When the log showed the value in force at t (None: a declared or default one)."""
+        entry = self.model.timeline.last(node, index, sub, t)
+        return None if entry is None else entry[0]
+
+    def pdo_numbers(self, node: int) -> list[tuple[int, int]]:
+        """(communication index, mapping index) of every PDO of a node that the user, the
+        log or the node's profile says anything of."""
+        out = set()
+        cfg = self.model.nodes.get(node)
+        if cfg is not None:
+            for direction, number in cfg.pdos:
+                base = 0x1800 if direction == "tx" else 0x1400
+                out.add(base + number - 1)
+        for n, index, _ in self.model._file:
+            if n == node and 0x1400 <= index <= 0x1BFF and (index & 0x1FF) < 0x200:
+                out.add(index & ~0x200)
+        for n, index, _ in self.model.timeline.objects():
+            if n == node and 0x1400 <= index <= 0x1BFF and (index & 0x1FF) < 0x200:
+                out.add(index & ~0x200)
+        return [(c, c + 0x200) for c in sorted(out)]
+
     def heartbeat_ms(self, node: int, t: float) -> float | None:
         v = self._value(node, 0x1017, 0, t)
         return None if v is None else float(v)

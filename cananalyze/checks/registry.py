@@ -8,6 +8,7 @@ from cananalyze.checks.rules.assert_heartbeat import AssertHeartbeat
 from cananalyze.checks.rules.assert_pdo_rate import AssertPdoRate
 from cananalyze.checks.rules.assert_signal import AssertSignal
 from cananalyze.checks.rules.bootup import BootupRule
+from cananalyze.checks.rules.consistency import ConsistencyRule
 from cananalyze.checks.rules.drive_command import DriveCommandRule
 from cananalyze.checks.rules.drive_fault import DriveFaultRule
 from cananalyze.checks.rules.drive_transition import DriveTransitionRule
@@ -40,6 +41,7 @@ RULES: dict[str, type[Rule]] = {
         PdoLengthRule,
         PdoValidRule,
         UnknownCobIdRule,
+        ConsistencyRule,
         EmcyRule,
         SdoRule,
         ErrorFrameRule,

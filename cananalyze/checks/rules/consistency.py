@@ -1,0 +1,332 @@
+"""Does the network's configuration contradict itself? (issue 40 item 4)
+
+Judged on the configuration in force at each moment (the values the log's SDO
+transfers showed, over the user's declarations and the profiles' defaults), at the
+start and again at every change of a communication object or reset. A contradiction
+is reported once, when it began (the moment the later of its values took effect); a
+change that resolves it ends it, and one that brings it back reports it anew:
+
+- two producers on one COB-ID (TPDOs, EMCY, SYNC, TIME), or an EMCY COB-ID that is
+  also an RPDO's: both transmit at once sooner or later (CANopenNode #72, EMCY 0x8150);
+- a TPDO's mapped length against an RPDO on its COB-ID (EMCY 0x8210 shorter, 0x8220
+  longer);
+- a heartbeat consumer time (0x1016) not longer than the producer time (0x1017) it
+  watches, by the rules' tolerance and jitter floor (CiA 301: consumer > producer);
+- two SYNC producers (0x1005 bit 30) or two TIME producers (0x1012 bit 30);
+- at the end: a consumer entry watching a node that sent no heartbeat in the whole log,
+  though the entry was in force for three consumer times of traffic.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from cananalyze.checks.rule import Context, Rule
+from cananalyze.protocol.pdo_map import COB_ID_INVALID, split_cob_id
+from cananalyze.protocol.services import Service
+
+PRODUCES = 0x40000000  # bit 30 of 0x1005 (generates SYNC) and 0x1012 (produces TIME)
+WATCH_PERIODS = 3  # consumer times of traffic a never-heard producer must have had
+
+_WHY_COB = (
+    "Two nodes configured to send on one COB-ID: you will not notice until both transmit at "
+    "once, then frames collide or one is taken for the other (EMCY 0x8150); give each its "
+    "own COB-ID."
+)
+_WHY_LEN = (
+    "An RPDO takes the frames of the TPDO on its COB-ID: a frame shorter than its mapping is "
+    "not processed (EMCY 0x8210), a longer one may be refused (0x8220); map the same length "
+    "on both sides."
+)
+_WHY_HB = (
+    "CiA 301 asks for a consumer time longer than the producer time it watches: one at or "
+    "under it expires on a heartbeat that is merely on time, with a little jitter."
+)
+_WHY_SILENT = (
+    "A consumer watches a node that never sent a heartbeat: the node is absent, its 0x1017 "
+    "is 0 or the entry names the wrong node-ID (CiA 301 monitors from the first heartbeat, "
+    "so the consumer never notices)."
+)
+_WHY_PRODUCER = (
+    "One SYNC (TIME) producer per network: two send interleaved or colliding SYNC (TIME) "
+    "frames and synchronous PDOs follow both; clear bit 30 of 0x1005 (0x1012) on one."
+)
+
+
+class Claim(NamedTuple):
+    """One object that claims a COB-ID: who, what, and where its value came from."""
+
+    node: int
+    what: str  # "TPDO1", "RPDO2", "EMCY", "SYNC producer", "TIME producer"
+    index: int
+    sub: int
+    produces: bool
+
+    def key(self) -> tuple[int, int, int]:
+        return self.node, self.index, self.sub
+
+
+class Found(NamedTuple):
+    """A contradiction in force at one moment, ready to be told."""
+
+    severity: str
+    node: int | None
+    cob_id: int | None
+    message: str
+    measured: object
+    expected: object
+    why: str
+    basis: str
+
+
+class ConsistencyRule(Rule):
+    name = "consistency"
+    severity = "error"
+    why = _WHY_COB
+
+    def __init__(self, **kw) -> None:
+        super().__init__(**kw)
+        self.active: dict[tuple, Found] = {}  # the contradictions in force
+        self.done: float | None = None  # configuration judged up to this time
+        self.heard: set[int] = set()  # nodes that sent a heartbeat
+        # (consumer, producer, consumer ms) -> start of the stretch it is in force
+        self.watching: dict[tuple[int, int, float], float] = {}
+        self.stretches: list[tuple[int, int, float, float, float]] = []  # + start, end
+
+    def process(self, ctx: Context) -> None:
+        if len(ctx.batch) == 0:
+            return
+        rows = ctx.rows(Service.HEARTBEAT)
+        if rows.size:
+            self.heard.update(np.unique(ctx.batch.node[rows]).tolist())
+        self._judge_until(ctx, float(ctx.t[-1]))
+
+    def finish(self, ctx: Context) -> None:
+        end = ctx.t_end if ctx.t_end is not None else self.done
+        if end is None:
+            return
+        self._judge_until(ctx, end)
+        for (consumer, producer, limit), start in self.watching.items():
+            self.stretches.append((consumer, producer, limit, start, end))
+        self.watching = {}
+        told: set[tuple[int, int]] = set()
+        for consumer, producer, limit, start, stop in self.stretches:
+            if producer in self.heard or (consumer, producer) in told:
+                continue
+            if stop - start < WATCH_PERIODS * limit / 1000.0:
+                continue
+            told.add((consumer, producer))
+            self._silent(ctx, consumer, producer, limit, start, stop)
+
+    def _silent(self, ctx, consumer: int, producer: int, limit: float, start, stop) -> None:
+        """A consumer entry whose producer sent no heartbeat in the whole log."""
+        period = ctx.config.heartbeat_ms(producer, start)
+        off = " (its 0x1017 is 0)" if period == 0 else ""
+        self.emit(
+            start,
+            consumer,
+            0x700 + producer,
+            f"node {consumer}'s heartbeat consumer watches node {producer} ({limit:g} ms) but "
+            f"node {producer} sent no heartbeat in the whole log{off}; the entry was in force "
+            f"{ctx.rel(start)}..{ctx.rel(stop)}",
+            0,
+            limit,
+            why=_WHY_SILENT,
+            severity="warning",
+            basis=ctx.config.consumer_origin(consumer, producer, start, ctx.t0),
+        )
+
+    def _judge_until(self, ctx: Context, until: float) -> None:
+        """Judge the configuration at the first frame, then at each change up to `until`."""
+        points = ctx.config.changes(None, 0x1005, 0x1BFF)
+        if self.done is None:
+            self.done = ctx.t_first
+            self._judge(ctx, ctx.t_first)
+        for t in points[(points > self.done) & (points <= until)].tolist():
+            self._judge(ctx, t)
+        self.done = max(self.done, until)
+
+    def _judge(self, ctx: Context, t: float) -> None:
+        """The contradictions in force at t: the new ones told, the resolved ones ended."""
+        now: dict[tuple, Found] = {}
+        claims, producers = self._claims(ctx, t)
+        self._collisions(ctx, t, claims, now)
+        self._lengths(ctx, t, claims, now)
+        self._producers(ctx, t, producers, now)
+        self._heartbeats(ctx, t, now)
+        for key, f in now.items():
+            if key in self.active:
+                continue
+            if f.node is not None:
+                self.subjects.add(f.node)
+            self.emit(
+                t,
+                f.node,
+                f.cob_id,
+                f.message,
+                f.measured,
+                f.expected,
+                why=f.why,
+                severity=f.severity,
+                basis=f.basis,
+            )
+        self.active = now
+
+    def _claims(self, ctx: Context, t: float):
+        """COB-ID (with its 29-bit flag) -> the objects that claim it at t; and the SYNC
+        and TIME producers."""
+        cfg = ctx.config
+        claims: dict[tuple[int, bool], list[Claim]] = {}
+        producers: dict[str, list[Claim]] = {"SYNC": [], "TIME": []}
+
+        def claim(value: int, c: Claim) -> None:
+            cob, valid = split_cob_id(value)
+            if valid and cob:
+                claims.setdefault((cob, bool(value & 0x20000000)), []).append(c)
+
+        for node in cfg.configured_nodes():
+            for comm, _ in cfg.pdo_numbers(node):
+                value = cfg.raw(node, comm, 1, t)
+                if value is not None:
+                    tx = comm >= 0x1800
+                    number = (comm & 0x1FF) + 1
+                    claim(value, Claim(node, f"{'T' if tx else 'R'}PDO{number}", comm, 1, tx))
+            emcy = cfg.raw(node, 0x1014, 0, t)
+            if emcy is not None:
+                claim(emcy, Claim(node, "EMCY", 0x1014, 0, True))
+            for index, what in ((0x1005, "SYNC"), (0x1012, "TIME")):
+                value = cfg.raw(node, index, 0, t)
+                if value is not None and value & PRODUCES:
+                    c = Claim(node, f"{what} producer", index, 0, True)
+                    producers[what].append(c)
+                    claim(value & ~COB_ID_INVALID & ~PRODUCES, c)
+        return claims, producers
+
+    def _told(self, ctx: Context, claims: list[Claim], t: float) -> tuple[int, str, str]:
+        """(the node whose value came last, the claims named with their objects, and
+        where each value came from)."""
+        cfg = ctx.config
+        latest = max(claims, key=lambda c: cfg.value_time(c.node, c.index, c.sub, t) or -np.inf)
+        names = ", ".join(f"node {c.node}'s {c.what}" for c in claims)
+        basis = "; ".join(cfg.origin(c.node, c.index, c.sub, t, ctx.t0) for c in claims)
+        return latest.node, names, basis
+
+    def _collisions(self, ctx: Context, t: float, claims, now: dict) -> None:
+        for (cob, ext), on in sorted(claims.items()):
+            producers = [c for c in on if c.produces]
+            whats = {c.what for c in producers}
+            clash = len(producers) > 1 and whats not in ({"SYNC producer"}, {"TIME producer"})
+            if "EMCY" in whats and any(not c.produces for c in on):
+                clash, producers = True, on  # an RPDO would take EMCY frames as data
+            if not clash:
+                continue
+            node, names, basis = self._told(ctx, producers, t)
+            ident = f"0x{cob:08X} (29-bit)" if ext else f"0x{cob:03X}"
+            now[("cob", cob, ext, frozenset(c.key() for c in producers))] = Found(
+                "error",
+                node,
+                cob,
+                f"COB-ID {ident} claimed by {names}",
+                len(producers),
+                1,
+                _WHY_COB,
+                basis,
+            )
+
+    def _length(self, ctx: Context, node: int, mapping: int, t: float) -> int | None:
+        """Mapped bytes of a PDO at t (None: a count or an entry not known, or a count of
+        0: CiA 301's remapping clears it while the entries are written)."""
+        count = ctx.config.raw(node, mapping, 0, t)
+        if not count or count > 64:
+            return None
+        bits = 0
+        for sub in range(1, count + 1):
+            word = ctx.config.raw(node, mapping, sub, t)
+            if word is None:
+                return None
+            bits += word & 0xFF
+        return (bits + 7) // 8
+
+    def _lengths(self, ctx: Context, t: float, claims, now: dict) -> None:
+        for (cob, _), on in sorted(claims.items()):
+            tpdos = [c for c in on if c.what.startswith("TPDO")]
+            rpdos = [c for c in on if c.what.startswith("RPDO")]
+            if len(tpdos) != 1 or not rpdos:  # several producers: a collision already
+                continue
+            tx = tpdos[0]
+            sent = self._length(ctx, tx.node, tx.index + 0x200, t)
+            if sent is None:
+                continue
+            for rx in rpdos:
+                if rx.node == tx.node:
+                    continue
+                taken = self._length(ctx, rx.node, rx.index + 0x200, t)
+                if taken is None or taken == sent:
+                    continue
+                node, names, basis = self._told(ctx, [tx, rx], t)
+                basis += "".join(
+                    f"; {ctx.config.origin(c.node, c.index + 0x200, 0, t, ctx.t0)}"
+                    for c in (tx, rx)
+                )
+                mapped = f"0x{tx.index + 0x200:04X}, 0x{rx.index + 0x200:04X}"
+                now[("len", cob, tx.key(), rx.key(), sent, taken)] = Found(
+                    "error" if sent < taken else "warning",
+                    node,
+                    cob,
+                    f"COB-ID 0x{cob:03X}: node {tx.node}'s {tx.what} maps {sent} byte(s), node "
+                    f"{rx.node}'s {rx.what} that takes it maps {taken} (mappings {mapped})",
+                    sent,
+                    taken,
+                    _WHY_LEN,
+                    basis,
+                )
+
+    def _producers(self, ctx: Context, t: float, producers, now: dict) -> None:
+        for what, on in producers.items():
+            if len(on) < 2:
+                continue
+            node, names, basis = self._told(ctx, on, t)
+            now[(what, frozenset(c.key() for c in on))] = Found(
+                "warning",
+                node,
+                None,
+                f"{len(on)} {what} producers: {names} ({'0x1005' if what == 'SYNC' else '0x1012'} "
+                "bit 30 set on each)",
+                len(on),
+                1,
+                _WHY_PRODUCER,
+                basis,
+            )
+
+    def _heartbeats(self, ctx: Context, t: float, now: dict) -> None:
+        cfg = ctx.config
+        watching: dict[tuple[int, int, float], float] = {}
+        for consumer in cfg.configured_nodes():
+            for producer, limit in cfg.heartbeat_consumers(consumer, t).items():
+                key = (consumer, producer, limit)
+                watching[key] = self.watching.get(key, t)
+                period = cfg.heartbeat_ms(producer, t)
+                if not period or limit >= self.late(period):
+                    continue
+                basis = (
+                    f"{cfg.consumer_origin(consumer, producer, t, ctx.t0)}; "
+                    f"{cfg.origin(producer, 0x1017, 0, t, ctx.t0)}"
+                )
+                now[("hb", consumer, producer, limit, period)] = Found(
+                    "warning",
+                    consumer,
+                    0x700 + producer,
+                    f"node {consumer}'s heartbeat consumer time for node {producer} is {limit:g} "
+                    f"ms, node {producer}'s producer time is {period:g} ms: the consumer "
+                    f"expires on a heartbeat on time (wants more than {self.late(period):g} ms)",
+                    limit,
+                    round(self.late(period), 3),
+                    _WHY_HB,
+                    basis,
+                )
+        for key, start in self.watching.items():
+            if key not in watching:
+                self.stretches.append((*key, start, t))
+        self.watching = watching
