@@ -5,8 +5,11 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
+import pytest
 import yaml
+from conftest import REAL, real_file
 
+import cananalyze
 from cananalyze.checks.engine import Checker
 from cananalyze.checks.rules.consistency import ConsistencyRule
 from cananalyze.core.frames import from_rows
@@ -55,14 +58,17 @@ def test_two_tpdos_on_one_cob_id_found_once_with_their_origins_and_ended():
     assert "0x1801:1 written at +2.001 s" in f.basis
 
 
-def test_a_resolved_collision_that_comes_back_is_told_again():
+def test_a_resolved_collision_back_with_the_same_objects_is_the_one_told():
     rows = heartbeats([5, 6], 8.0)
     rows += write(1.0, 5, 0x1800, 1, 0x190)
     rows += write(2.0, 6, 0x1800, 1, 0x190)
     rows += write(3.0, 6, 0x1800, 1, 0x191)  # resolved
-    rows += write(5.0, 6, 0x1800, 1, 0x190)  # back
+    rows += write(4.0, 6, 0x1800, 1, 0x190)  # the same again (a master reconfiguring)
+    rows += [(4.5, 0x000, b"\x81\x06")]  # node 6 reset: its TPDO1 back to nothing known
+    rows += write(5.0, 6, 0x1802, 1, 0x190)  # back, with another object: a new one
     found = run(rows)
     assert [round(f.t, 3) for f in found] == [2.001, 5.001]
+    assert "node 6's TPDO3" in found[1].message
 
 
 def test_distinct_cob_ids_and_a_tpdo_with_its_rpdo_are_consistent():
@@ -176,3 +182,68 @@ def test_tpdo_and_rpdo_of_one_length_are_consistent():
     rows += write(1.3, 6, 0x1600, 1, 0x60400010)
     rows += write(2.0, 6, 0x1400, 1, 0x185)
     assert run(rows, {"nodes": {5: {"tpdo": {1: {"cob_id": 0x185}}}}}) == []
+
+
+# --- no false alarm: the bundled samples and the real logs ---------------------------
+SAMPLES = Path(__file__).resolve().parents[2] / "samples"
+_NOT_LOGS = {".eds", ".dcf", ".md", ".dbc", ".xdd", ".xdc", ".yml", ".yaml", ".py", ".csv"}
+REAL_LOGS = sorted(
+    str(p.relative_to(REAL))
+    for p in (REAL.rglob("*") if REAL.exists() else ())
+    if p.is_file() and p.suffix.lower() not in _NOT_LOGS and "EDS_Info" not in p.name
+)
+# real logs with the device descriptions they came with (node -> EDS/DCF)
+PAIRED = {
+    "nigel-bruce-khan__ros_canopen-tmcm-1636/candump.txt": {
+        1: "nigel-bruce-khan__ros_canopen-tmcm-1636/TMCM-1636-CANopen.dcf"
+    },
+    "jclinton830__canopen_test/candump.txt": {
+        12: "jclinton830__canopen_test/roboteq_motor_controllers_v80.eds"
+    },
+    "SeonilChoi__CANOPEN-SDK/log2.txt": {11: "SeonilChoi__CANOPEN-SDK/ZeroErr_Driver_V1.5.eds"},
+    "calumroy__CANopen_socketCAN_Test/can_log_070825_brake_sensor_test1.log": {
+        127: "calumroy__CANopen_socketCAN_Test/EDS-23123-1.01.eds"
+    },
+}
+
+
+def _consistency(path, **kw):
+    f = cananalyze.load(path, **kw).findings
+    return f[f.rule == "consistency"]
+
+
+@pytest.mark.parametrize("name", ["commissioning", "faults", "demo"])
+def test_samples_give_no_consistency_finding(name):
+    """The bundled network configures heartbeats and PDOs by SDO: nothing contradicts."""
+    found = _consistency(
+        SAMPLES / f"{name}.log", network=SAMPLES / "network.toml", rules=SAMPLES / "rules.yaml"
+    )
+    assert len(found) == 0
+
+
+@pytest.mark.parametrize("name", REAL_LOGS)
+def test_real_logs_give_no_consistency_finding(name):
+    """None of the real logs shows a configuration that contradicts itself (pcan1-3 and
+    ixxat1 write 0x1016/0x1017 and TPDOs by SDO; node 1, watched, sends its heartbeat)."""
+    assert len(_consistency(real_file(name))) == 0
+
+
+@pytest.mark.parametrize("name", sorted(PAIRED))
+def test_real_logs_with_their_device_descriptions_give_no_consistency_finding(name):
+    eds = {node: real_file(path) for node, path in PAIRED[name].items()}
+    assert len(_consistency(real_file(name), eds=eds)) == 0
+
+
+def test_real_consumer_entries_judged_against_a_declared_producer_time(tmp_path):
+    """pcan1's master writes 0x1016:1 = node 1, 4200 ms to nodes 15, 90 and 40 (node 15
+    again after each of its boot-ups); declared at 5000 ms, node 1's heartbeat would be
+    watched too tightly: one finding per consumer, from its first write."""
+    log = real_file("hilch__canopen-message-interpreter/pcan1.trc")
+    net = tmp_path / "net.toml"
+    net.write_text("[nodes.1]\nheartbeat_ms = 5000\n")
+    found = _consistency(log, network=net)
+    assert list(found.node) == [15, 90, 40]
+    assert set(found.cob_id) == {0x701} and set(found.severity) == {"warning"}
+    assert set(found.measured) == {4200} and set(found.expected) == {5500}
+    assert all(b.startswith("0x1016:1 written at") for b in found.basis)
+    assert all(b.endswith("0x1017 in the network file") for b in found.basis)

@@ -4,7 +4,9 @@ Judged on the configuration in force at each moment (the values the log's SDO
 transfers showed, over the user's declarations and the profiles' defaults), at the
 start and again at every change of a communication object or reset. A contradiction
 is reported once, when it began (the moment the later of its values took effect); a
-change that resolves it ends it, and one that brings it back reports it anew:
+change that resolves it ends it. One that brings it back with other objects or values
+is a new one, reported; the same objects with the same values are the one already told
+(a master that configures a rebooting node again each time would repeat it per boot):
 
 - two producers on one COB-ID (TPDOs, EMCY, SYNC, TIME), or an EMCY COB-ID that is
   also an RPDO's: both transmit at once sooner or later (CANopenNode #72, EMCY 0x8150);
@@ -92,6 +94,7 @@ class ConsistencyRule(Rule):
     def __init__(self, **kw) -> None:
         super().__init__(**kw)
         self.active: dict[tuple, Found] = {}  # the contradictions in force
+        self.told: set[tuple] = set()  # every contradiction reported (objects and values)
         self.done: float | None = None  # configuration judged up to this time
         self.heard: set[int] = set()  # nodes that sent a heartbeat
         # (consumer, producer, consumer ms) -> start of the stretch it is in force
@@ -162,8 +165,9 @@ class ConsistencyRule(Rule):
         self._producers(ctx, t, producers, now)
         self._heartbeats(ctx, t, now)
         for key, f in now.items():
-            if key in self.active:
+            if key in self.active or key in self.told:
                 continue
+            self.told.add(key)
             if f.node is not None:
                 self.subjects.add(f.node)
             self.emit(
