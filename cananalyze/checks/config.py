@@ -30,6 +30,10 @@ class ConfigSource(Protocol):
     def pdo_numbers(self, node: int) -> list[tuple[int, int]]:
         """(communication, mapping) indices of the PDOs anything says something of."""
 
+    def points_from(self, k: int) -> list[tuple[float, int, int]]:
+        """(t, node, index) points where an answer may change, from the k-th on (index
+        -1: all of the node, node 0: every node); the list only grows."""
+
     def heartbeat_ms(self, node: int, t: float) -> float | None:
         """Producer heartbeat time 0x1017 (0 = disabled, None = unknown)."""
 

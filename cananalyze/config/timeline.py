@@ -101,10 +101,6 @@ class Timeline:
         """Nodes the log showed a value of."""
         return {n for n, _, _ in self._values}
 
-    def objects(self) -> list[tuple[int, int, int]]:
-        """(node, index, subindex) of every object the log showed a value of."""
-        return list(self._values)
-
     def since_reset(self, node: int) -> list[ConfigChange]:
         """What the log changed on a node and still holds (replayed on a new profile)."""
         return self._since_reset.get(node, [])

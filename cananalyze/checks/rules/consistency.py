@@ -26,6 +26,7 @@ from typing import NamedTuple
 import numpy as np
 
 from cananalyze.checks.rule import Context, Rule
+from cananalyze.config.timeline import EVERY_NODE
 from cananalyze.protocol.pdo_map import COB_ID_INVALID, split_cob_id
 from cananalyze.protocol.services import Service
 
@@ -83,6 +84,16 @@ class Found(NamedTuple):
     basis: str
 
 
+class View(NamedTuple):
+    """What one node's configuration claims at one moment."""
+
+    claims: list[tuple[tuple[int, bool], Claim]]  # (COB-ID, 29-bit) -> the object
+    producers: dict[str, Claim]  # "SYNC" / "TIME": the 0x1005 / 0x1012 that sets bit 30
+    lengths: dict[int, int | None]  # valid PDO's communication index -> mapped bytes
+    consumers: dict[int, float]  # 0x1016: producer -> consumer time (ms)
+    period: float | None  # 0x1017 (ms)
+
+
 class ConsistencyRule(Rule):
     name = "consistency"
     severity = "error"
@@ -100,6 +111,10 @@ class ConsistencyRule(Rule):
         # (consumer, producer, consumer ms) -> start of the stretch it is in force
         self.watching: dict[tuple[int, int, float], float] = {}
         self.stretches: list[tuple[int, int, float, float, float]] = []  # + start, end
+        self._view: dict[int, View] = {}  # node -> its configuration when last read
+        self._cursor = 0  # the configuration's change points taken so far
+        self._pending: list[tuple[float, int, int]] = []  # ... in time order
+        self._taken = 0  # ... of which the first this many are judged
 
     def process(self, ctx: Context) -> None:
         if len(ctx.batch) == 0:
@@ -158,12 +173,21 @@ class ConsistencyRule(Rule):
 
     def _judge(self, ctx: Context, t: float) -> None:
         """The contradictions in force at t: the new ones told, the resolved ones ended."""
+        views = self._views(ctx, t)
+        if views is None:
+            return  # no node's configuration changed: nor did its contradictions
+        claims: dict[tuple[int, bool], list[Claim]] = {}
+        producers: dict[str, list[Claim]] = {"SYNC": [], "TIME": []}
+        for view in views.values():
+            for cob, c in view.claims:
+                claims.setdefault(cob, []).append(c)
+            for what, c in view.producers.items():
+                producers[what].append(c)
         now: dict[tuple, Found] = {}
-        claims, producers = self._claims(ctx, t)
         self._collisions(ctx, t, claims, now)
-        self._lengths(ctx, t, claims, now)
+        self._lengths(ctx, t, claims, views, now)
         self._producers(ctx, t, producers, now)
-        self._heartbeats(ctx, t, now)
+        self._heartbeats(ctx, t, views, now)
         for key, f in now.items():
             if key in self.active or key in self.told:
                 continue
@@ -183,35 +207,66 @@ class ConsistencyRule(Rule):
             )
         self.active = now
 
-    def _claims(self, ctx: Context, t: float):
-        """COB-ID (with its 29-bit flag) -> the objects that claim it at t; and the SYNC
-        and TIME producers."""
-        cfg = ctx.config
-        claims: dict[tuple[int, bool], list[Claim]] = {}
-        producers: dict[str, list[Claim]] = {"SYNC": [], "TIME": []}
+    def _views(self, ctx: Context, t: float) -> dict[int, View] | None:
+        """Every configured node's view at t: those whose configuration may have changed
+        since they were read (a change point at or before t) read again, the others kept
+        (a log of thousands of SDO writes reads one node per write, not all of them).
+        None: no view changed since the last judgement."""
+        fresh = ctx.config.points_from(self._cursor)
+        self._cursor += len(fresh)
+        if fresh:
+            self._pending = sorted(self._pending[self._taken :] + fresh)
+            self._taken = 0
+        dirty = set()
+        pending, k = self._pending, self._taken
+        while k < len(pending) and pending[k][0] <= t:
+            dirty.add(pending[k][1])
+            k += 1
+        self._taken = k
+        first = not self._view
+        if first or EVERY_NODE in dirty:
+            dirty = set(ctx.config.configured_nodes()) | set(self._view)
+        changed = first
+        for node in dirty - {EVERY_NODE}:
+            view = self._read(ctx, node, t)
+            if self._view.get(node) != view:
+                self._view[node] = view
+                changed = True
+        return self._view if changed else None
 
-        def claim(value: int, c: Claim) -> None:
+    def _read(self, ctx: Context, node: int, t: float) -> View:
+        """What a node's configuration at t claims: COB-IDs, SYNC/TIME production, PDO
+        lengths, heartbeat consumer entries and producer time."""
+        cfg = ctx.config
+        claims: list[tuple[tuple[int, bool], Claim]] = []
+        producers: dict[str, Claim] = {}
+        lengths: dict[int, int | None] = {}
+
+        def claim(value: int, c: Claim) -> bool:
             cob, valid = split_cob_id(value)
             if valid and cob:
-                claims.setdefault((cob, bool(value & 0x20000000)), []).append(c)
+                claims.append(((cob, bool(value & 0x20000000)), c))
+            return valid and bool(cob)
 
-        for node in cfg.configured_nodes():
-            for comm, _ in cfg.pdo_numbers(node):
-                value = cfg.raw(node, comm, 1, t)
-                if value is not None:
-                    tx = comm >= 0x1800
-                    number = (comm & 0x1FF) + 1
-                    claim(value, Claim(node, f"{'T' if tx else 'R'}PDO{number}", comm, 1, tx))
-            emcy = cfg.raw(node, 0x1014, 0, t)
-            if emcy is not None:
-                claim(emcy, Claim(node, "EMCY", 0x1014, 0, True))
-            for index, what in ((0x1005, "SYNC"), (0x1012, "TIME")):
-                value = cfg.raw(node, index, 0, t)
-                if value is not None and value & PRODUCES:
-                    c = Claim(node, f"{what} producer", index, 0, True)
-                    producers[what].append(c)
-                    claim(value & ~COB_ID_INVALID & ~PRODUCES, c)
-        return claims, producers
+        for comm, mapping in cfg.pdo_numbers(node):
+            value = cfg.raw(node, comm, 1, t)
+            if value is None:
+                continue
+            tx = comm >= 0x1800
+            number = (comm & 0x1FF) + 1
+            if claim(value, Claim(node, f"{'T' if tx else 'R'}PDO{number}", comm, 1, tx)):
+                lengths[comm] = self._length(ctx, node, mapping, t)
+        emcy = cfg.raw(node, 0x1014, 0, t)
+        if emcy is not None:
+            claim(emcy, Claim(node, "EMCY", 0x1014, 0, True))
+        for index, what in ((0x1005, "SYNC"), (0x1012, "TIME")):
+            value = cfg.raw(node, index, 0, t)
+            if value is not None and value & PRODUCES:
+                c = Claim(node, f"{what} producer", index, 0, True)
+                producers[what] = c
+                claim(value & ~COB_ID_INVALID & ~PRODUCES, c)
+        consumers = cfg.heartbeat_consumers(node, t)
+        return View(claims, producers, lengths, consumers, cfg.heartbeat_ms(node, t))
 
     def _told(self, ctx: Context, claims: list[Claim], t: float) -> tuple[int, str, str]:
         """(the node whose value came last, the claims named with their objects, and
@@ -258,20 +313,20 @@ class ConsistencyRule(Rule):
             bits += word & 0xFF
         return (bits + 7) // 8
 
-    def _lengths(self, ctx: Context, t: float, claims, now: dict) -> None:
+    def _lengths(self, ctx: Context, t: float, claims, views, now: dict) -> None:
         for (cob, _), on in sorted(claims.items()):
             tpdos = [c for c in on if c.what.startswith("TPDO")]
             rpdos = [c for c in on if c.what.startswith("RPDO")]
             if len(tpdos) != 1 or not rpdos:  # several producers: a collision already
                 continue
             tx = tpdos[0]
-            sent = self._length(ctx, tx.node, tx.index + 0x200, t)
+            sent = views[tx.node].lengths.get(tx.index)
             if sent is None:
                 continue
             for rx in rpdos:
                 if rx.node == tx.node:
                     continue
-                taken = self._length(ctx, rx.node, rx.index + 0x200, t)
+                taken = views[rx.node].lengths.get(rx.index)
                 if taken is None or taken == sent:
                     continue
                 node, names, basis = self._told(ctx, [tx, rx], t)
@@ -309,14 +364,15 @@ class ConsistencyRule(Rule):
                 basis,
             )
 
-    def _heartbeats(self, ctx: Context, t: float, now: dict) -> None:
+    def _heartbeats(self, ctx: Context, t: float, views, now: dict) -> None:
         cfg = ctx.config
         watching: dict[tuple[int, int, float], float] = {}
-        for consumer in cfg.configured_nodes():
-            for producer, limit in cfg.heartbeat_consumers(consumer, t).items():
+        for consumer, view in views.items():
+            for producer, limit in view.consumers.items():
                 key = (consumer, producer, limit)
                 watching[key] = self.watching.get(key, t)
-                period = cfg.heartbeat_ms(producer, t)
+                seen = views.get(producer)
+                period = seen.period if seen is not None else cfg.heartbeat_ms(producer, t)
                 if not period or limit >= self.late(period):
                     continue
                 basis = (
