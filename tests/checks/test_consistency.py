@@ -80,6 +80,28 @@ def test_distinct_cob_ids_and_a_tpdo_with_its_rpdo_are_consistent():
     assert run(rows) == []
 
 
+def test_a_tpdo_on_a_node_on_the_bus_predefined_cob_id_seen_on_the_wire():
+    """Node 5 is on the bus (its heartbeat) and nothing moves its TPDO1 from 0x185 (CiA
+    301's predefined connection set): node 6's TPDO2 configured on 0x185 collides."""
+    rows = heartbeats([5], 4.0, period=0.1)
+    rows = [r for r in rows if r[0] >= 0.5]  # node 5 shows itself at +0.500 s
+    rows += heartbeats([6], 4.0)
+    rows += write(0.2, 6, 0x1801, 1, 0x185)
+    (f,) = run(rows)
+    assert f.severity == "warning" and f.cob_id == 0x185 and f.node == 6
+    assert abs(f.t - 0.5) < 1e-6  # when node 5 showed itself: the later of the two
+    assert "node 6's TPDO2 is node 5's TPDO1 in the predefined connection set" in f.message
+    assert f.basis == "0x1801:1 written at +0.201 s; node 5's TPDO1 0x185: CiA 301 predefined"
+
+
+def test_a_predefined_cob_id_moved_away_or_of_a_node_not_on_the_bus_is_no_collision():
+    rows = heartbeats([5, 6], 4.0)
+    rows += write(0.2, 5, 0x1800, 1, 0x1A5)  # node 5's TPDO1 moved away
+    rows += write(0.3, 6, 0x1801, 1, 0x185)
+    rows += write(0.4, 6, 0x1802, 1, 0x189)  # node 9's TPDO1, but node 9 is not on the bus
+    assert run(rows) == []
+
+
 def test_emcy_cob_id_on_another_nodes_emcy_and_on_an_rpdo():
     rows = heartbeats([5, 6, 7], 4.0)
     rows += write(0.5, 5, 0x1014, 0, 0x85)

@@ -10,6 +10,8 @@ is a new one, reported; the same objects with the same values are the one alread
 
 - two producers on one COB-ID (TPDOs, EMCY, SYNC, TIME), or an EMCY COB-ID that is
   also an RPDO's: both transmit at once sooner or later (CANopenNode #72, EMCY 0x8150);
+  and, seen on the wire, a node's TPDO or EMCY configured on the predefined COB-ID of
+  another node that is on the bus and whose own PDO nothing moves elsewhere;
 - a TPDO's mapped length against an RPDO on its COB-ID (EMCY 0x8210 shorter, 0x8220
   longer);
 - a heartbeat consumer time (0x1016) not longer than the producer time (0x1017) it
@@ -92,6 +94,7 @@ class View(NamedTuple):
     lengths: dict[int, int | None]  # valid PDO's communication index -> mapped bytes
     consumers: dict[int, float]  # 0x1016: producer -> consumer time (ms)
     period: float | None  # 0x1017 (ms)
+    said: frozenset[int]  # the COB-ID objects (0x1800.., 0x1014) anything gives a value for
 
 
 class ConsistencyRule(Rule):
@@ -108,6 +111,7 @@ class ConsistencyRule(Rule):
         self.told: set[tuple] = set()  # every contradiction reported (objects and values)
         self.done: float | None = None  # configuration judged up to this time
         self.heard: set[int] = set()  # nodes that sent a heartbeat
+        self.on_bus: dict[int, float] = {}  # node -> its first heartbeat or boot-up
         # (consumer, producer, consumer ms) -> start of the stretch it is in force
         self.watching: dict[tuple[int, int, float], float] = {}
         self.stretches: list[tuple[int, int, float, float, float]] = []  # + start, end
@@ -122,7 +126,14 @@ class ConsistencyRule(Rule):
         rows = ctx.rows(Service.HEARTBEAT)
         if rows.size:
             self.heard.update(np.unique(ctx.batch.node[rows]).tolist())
-        self._judge_until(ctx, float(ctx.t[-1]))
+        rows = ctx.rows(Service.HEARTBEAT, Service.BOOTUP)
+        nodes, first = np.unique(ctx.batch.node[rows], return_index=True)
+        arrived = []
+        for node, row in zip(nodes.tolist(), rows[first].tolist(), strict=True):
+            if node not in self.on_bus and 1 <= node <= 127:
+                self.on_bus[node] = float(ctx.t[row])
+                arrived.append(self.on_bus[node])
+        self._judge_until(ctx, float(ctx.t[-1]), arrived)
 
     def finish(self, ctx: Context) -> None:
         end = ctx.t_end if ctx.t_end is not None else self.done
@@ -161,21 +172,27 @@ class ConsistencyRule(Rule):
             basis=ctx.config.consumer_origin(consumer, producer, start, ctx.t0),
         )
 
-    def _judge_until(self, ctx: Context, until: float) -> None:
-        """Judge the configuration at the first frame, then at each change up to `until`."""
+    def _judge_until(self, ctx: Context, until: float, arrived=()) -> None:
+        """Judge the configuration at the first frame, then at each change up to `until`,
+        and when a node first shows itself on the bus (`arrived`: those times)."""
         points = ctx.config.changes(None, 0x1005, 0x1BFF)
         if self.done is None:
             self.done = ctx.t_first
-            self._judge(ctx, ctx.t_first)
-        for t in points[(points > self.done) & (points <= until)].tolist():
-            self._judge(ctx, t)
+            self._judge(ctx, ctx.t_first, wire=True)
+        times = set(points[(points > self.done) & (points <= until)].tolist())
+        wire = {t for t in arrived if self.done < t <= until}
+        for t in sorted(times | wire):
+            self._judge(ctx, t, wire=t in wire)
         self.done = max(self.done, until)
 
-    def _judge(self, ctx: Context, t: float) -> None:
-        """The contradictions in force at t: the new ones told, the resolved ones ended."""
+    def _judge(self, ctx: Context, t: float, wire: bool = False) -> None:
+        """The contradictions in force at t: the new ones told, the resolved ones ended
+        (`wire`: a node showed itself on the bus at t)."""
         views = self._views(ctx, t)
         if views is None:
-            return  # no node's configuration changed: nor did its contradictions
+            if not wire:
+                return  # no node's configuration changed: nor did its contradictions
+            views = self._view
         claims: dict[tuple[int, bool], list[Claim]] = {}
         producers: dict[str, list[Claim]] = {"SYNC": [], "TIME": []}
         for view in views.values():
@@ -185,6 +202,7 @@ class ConsistencyRule(Rule):
                 producers[what].append(c)
         now: dict[tuple, Found] = {}
         self._collisions(ctx, t, claims, now)
+        self._predefined(ctx, t, claims, views, now)
         self._lengths(ctx, t, claims, views, now)
         self._producers(ctx, t, producers, now)
         self._heartbeats(ctx, t, views, now)
@@ -241,6 +259,7 @@ class ConsistencyRule(Rule):
         claims: list[tuple[tuple[int, bool], Claim]] = []
         producers: dict[str, Claim] = {}
         lengths: dict[int, int | None] = {}
+        said: set[int] = set()
 
         def claim(value: int, c: Claim) -> bool:
             cob, valid = split_cob_id(value)
@@ -252,12 +271,14 @@ class ConsistencyRule(Rule):
             value = cfg.raw(node, comm, 1, t)
             if value is None:
                 continue
+            said.add(comm)
             tx = comm >= 0x1800
             number = (comm & 0x1FF) + 1
             if claim(value, Claim(node, f"{'T' if tx else 'R'}PDO{number}", comm, 1, tx)):
                 lengths[comm] = self._length(ctx, node, mapping, t)
         emcy = cfg.raw(node, 0x1014, 0, t)
         if emcy is not None:
+            said.add(0x1014)
             claim(emcy, Claim(node, "EMCY", 0x1014, 0, True))
         for index, what in ((0x1005, "SYNC"), (0x1012, "TIME")):
             value = cfg.raw(node, index, 0, t)
@@ -266,7 +287,8 @@ class ConsistencyRule(Rule):
                 producers[what] = c
                 claim(value & ~COB_ID_INVALID & ~PRODUCES, c)
         consumers = cfg.heartbeat_consumers(node, t)
-        return View(claims, producers, lengths, consumers, cfg.heartbeat_ms(node, t))
+        period = cfg.heartbeat_ms(node, t)
+        return View(claims, producers, lengths, consumers, period, frozenset(said))
 
     def _told(self, ctx: Context, claims: list[Claim], t: float) -> tuple[int, str, str]:
         """(the node whose value came last, the claims named with their objects, and
@@ -298,6 +320,35 @@ class ConsistencyRule(Rule):
                 _WHY_COB,
                 basis,
             )
+
+    def _predefined(self, ctx: Context, t: float, claims, views, now: dict) -> None:
+        """Seen on the wire: a COB-ID another node produces on in CiA 301's predefined
+        connection set (TPDO1-4, EMCY), configured as this node's, while that node is on
+        the bus (its heartbeat or boot-up) and nothing moves its own elsewhere."""
+        for owner, since in self.on_bus.items():
+            if since > t:
+                continue
+            view = views.get(owner)
+            said = view.said if view is not None else frozenset()
+            defaults = [(0x80 + owner, 0x1014, "EMCY")]
+            defaults += [(0x80 + 0x100 * n + owner, 0x17FF + n, f"TPDO{n}") for n in range(1, 5)]
+            for cob, index, what in defaults:
+                others = [c for c in claims.get((cob, False), ()) if c.produces and c.node != owner]
+                if index in said or not others:
+                    continue
+                node, names, basis = self._told(ctx, others, t)
+                now[("wire", cob, owner, frozenset(c.key() for c in others))] = Found(
+                    "warning",
+                    node,
+                    cob,
+                    f"COB-ID 0x{cob:03X} claimed by {names} is node {owner}'s {what} in the "
+                    f"predefined connection set, and node {owner} is on the bus (from "
+                    f"{ctx.rel(since)}) with nothing that moves its {what} elsewhere",
+                    2,
+                    1,
+                    _WHY_COB,
+                    f"{basis}; node {owner}'s {what} 0x{cob:03X}: CiA 301 predefined",
+                )
 
     def _length(self, ctx: Context, node: int, mapping: int, t: float) -> int | None:
         """Mapped bytes of a PDO at t (None: a count or an entry not known, or a count of
