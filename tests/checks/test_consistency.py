@@ -13,6 +13,7 @@ import cananalyze
 from cananalyze.checks.engine import Checker
 from cananalyze.checks.rules.consistency import ConsistencyRule
 from cananalyze.core.frames import from_rows
+from cananalyze.formats.logfile import write_log
 from cananalyze.pipeline import Options, build_decoder
 
 
@@ -226,6 +227,12 @@ PAIRED = {
     "calumroy__CANopen_socketCAN_Test/can_log_070825_brake_sensor_test1.log": {
         127: "calumroy__CANopen_socketCAN_Test/EDS-23123-1.01.eds"
     },
+    **{
+        f"isPointless__Sevcon/{log}": {
+            1: "isPointless__Sevcon/ME1302 80V Size4 6000RPM FW SN0058-28.dcf"
+        }
+        for log in ("can_180209_154604.txt", "can_280109_111603.txt", "can_310309_094758.txt")
+    },
 }
 
 
@@ -289,3 +296,23 @@ def test_each_change_reads_only_the_node_it_changed(monkeypatch):
     # the first judgement reads the 20 nodes (the batch's writes are known by then); then
     # one read per write
     assert len(reads) == 20 + len(writes)
+
+
+def test_a_real_dcf_that_puts_three_tpdos_on_one_cob_id(tmp_path):
+    """OreSat's battery.dcf gives TPDO1, 5 and 9 all 0x40000180+$NODEID (valid): a node
+    described by it produces three PDOs on one COB-ID, told from the first frame on, with
+    the profile named as where the values came from."""
+    dcf = real_file("oresat__CANopen-monitor/battery.dcf")
+    rows = heartbeats([5], 2.0)
+    log = tmp_path / "hb.log"
+    write_log(from_rows(rows), log)
+    found = _consistency(log, eds={5: dcf})
+    assert list(found.cob_id) == [0x185, 0x285, 0x385, 0x485]
+    assert set(found.severity) == {"error"} and set(found.t_rel) == {0.0}
+    assert (
+        found.message.iloc[0]
+        == "COB-ID 0x185 claimed by node 5's TPDO1, node 5's TPDO5, node 5's TPDO9"
+    )
+    assert found.basis.iloc[0] == (
+        "0x1800:1 profile default; 0x1804:1 profile default; 0x1808:1 profile default"
+    )

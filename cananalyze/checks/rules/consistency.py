@@ -36,9 +36,9 @@ PRODUCES = 0x40000000  # bit 30 of 0x1005 (generates SYNC) and 0x1012 (produces 
 WATCH_PERIODS = 3  # consumer times of traffic a never-heard producer must have had
 
 _WHY_COB = (
-    "Two nodes configured to send on one COB-ID: you will not notice until both transmit at "
-    "once, then frames collide or one is taken for the other (EMCY 0x8150); give each its "
-    "own COB-ID."
+    "Two producers configured on one COB-ID (two nodes, or two objects of one): you will not "
+    "notice until both transmit at once, then frames collide or one is taken for the other "
+    "(EMCY 0x8150); give each its own COB-ID."
 )
 _WHY_LEN = (
     "An RPDO takes the frames of the TPDO on its COB-ID: a frame shorter than its mapping is "
