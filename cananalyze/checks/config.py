@@ -18,6 +18,22 @@ from cananalyze.protocol.pdo_map import PdoConfig
 
 
 class ConfigSource(Protocol):
+    def configured_nodes(self) -> list[int]:
+        """Nodes whose configuration anything says (declared, or shown by the log)."""
+
+    def raw(self, node: int, index: int, sub: int, t: float) -> int | None:
+        """An object's value in force at t with its flag bits (None: nothing says)."""
+
+    def value_time(self, node: int, index: int, sub: int, t: float) -> float | None:
+        """When the log showed the value in force at t (None: declared or a default)."""
+
+    def pdo_numbers(self, node: int) -> list[tuple[int, int]]:
+        """(communication, mapping) indices of the PDOs anything says something of."""
+
+    def points_from(self, k: int) -> list[tuple[float, int, int]]:
+        """(t, node, index) points where an answer may change, from the k-th on (index
+        -1: all of the node, node 0: every node); the list only grows."""
+
     def heartbeat_ms(self, node: int, t: float) -> float | None:
         """Producer heartbeat time 0x1017 (0 = disabled, None = unknown)."""
 

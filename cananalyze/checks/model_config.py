@@ -26,6 +26,8 @@ class ModelConfig:
     def __init__(self, model: NetworkModel) -> None:
         self.model = model
         self._changes: dict[tuple, tuple[int, np.ndarray]] = {}
+        self._pdos: dict[int, set[int]] | None = None  # node -> PDO communication indices
+        self._pdos_seen = 0  # of the timeline's history
 
     def _value(self, node: int, index: int, sub: int, t: float) -> int | None:
         k = self.model.known(node, index, sub, t)
@@ -65,6 +67,54 @@ class ModelConfig:
             if ((self._value(consumer, 0x1016, sub, t) or 0) >> 16) & 0x7F == producer:
                 return self.origin(consumer, 0x1016, sub, t, t0)
         return "0x1016"
+
+    def configured_nodes(self) -> list[int]:
+        """Nodes whose configuration anything says: declared, or shown by the log."""
+        return sorted((set(self.model.nodes) | self.model.timeline.nodes()) - {EVERY_NODE})
+
+    def raw(self, node: int, index: int, sub: int, t: float) -> int | None:
+        """An object's value in force at t as it stands (a COB-ID word with its flag bits),
+        a profile's 0 included; None: nothing says. Assumed CiA 4xx defaults are not
+        values: the generic profile guesses a device it never saw."""
+        k = self.model.known(node, index, sub, t)
+        if k is None:
+            return None
+        if k.source == "profile":
+            cfg = self.model.nodes.get(node)
+            if cfg is not None and cfg.profile is not None and cfg.profile.generic:
+                return None
+        return k.value
+
+    def value_time(self, node: int, index: int, sub: int, t: float) -> float | None:
+        """When the log showed the value in force at t (None: a declared or default one)."""
+        entry = self.model.timeline.last(node, index, sub, t)
+        return None if entry is None else entry[0]
+
+    def pdo_numbers(self, node: int) -> list[tuple[int, int]]:
+        """(communication index, mapping index) of every PDO of a node that the user, the
+        log or the node's profile says anything of (the log's, followed as it grows)."""
+        if self._pdos is None:
+            self._pdos = {}
+            for n, index, _ in self.model._file:
+                self._add_pdo(n, index)
+        history = self.model.timeline.history
+        for change in history[self._pdos_seen :]:
+            self._add_pdo(change.node, change.object[0])
+        self._pdos_seen = len(history)
+        out = set(self._pdos.get(node, ()))
+        cfg = self.model.nodes.get(node)
+        if cfg is not None:
+            out.update((0x1800 if d == "tx" else 0x1400) + n - 1 for d, n in cfg.pdos)
+        return [(c, c + 0x200) for c in sorted(out)]
+
+    def _add_pdo(self, node: int, index: int) -> None:
+        if 0x1400 <= index <= 0x1BFF:
+            self._pdos.setdefault(node, set()).add(index & ~0x200)  # type: ignore[union-attr]
+
+    def points_from(self, k: int) -> list[tuple[float, int, int]]:
+        """The (t, node, index) points at which an answer may have changed, from the k-th
+        on (index -1: everything of the node; node 0: every node); the list only grows."""
+        return self.model.points[k:]
 
     def heartbeat_ms(self, node: int, t: float) -> float | None:
         v = self._value(node, 0x1017, 0, t)

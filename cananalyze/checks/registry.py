@@ -9,6 +9,7 @@ from cananalyze.checks.rules.assert_pdo_rate import AssertPdoRate
 from cananalyze.checks.rules.assert_signal import AssertSignal
 from cananalyze.checks.rules.boot import BootRule
 from cananalyze.checks.rules.bootup import BootupRule
+from cananalyze.checks.rules.consistency import ConsistencyRule
 from cananalyze.checks.rules.drive_command import DriveCommandRule
 from cananalyze.checks.rules.drive_fault import DriveFaultRule
 from cananalyze.checks.rules.drive_transition import DriveTransitionRule
@@ -42,6 +43,7 @@ RULES: dict[str, type[Rule]] = {
         PdoLengthRule,
         PdoValidRule,
         UnknownCobIdRule,
+        ConsistencyRule,
         EmcyRule,
         SdoRule,
         ErrorFrameRule,
