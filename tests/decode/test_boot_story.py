@@ -61,11 +61,14 @@ def _record(path, *, write_read_only=False, start=True) -> None:
             master.nmt.state = "OPERATIONAL"
             deadline = time.monotonic() + 10
             while time.monotonic() < deadline:  # until the node reports operational
-                frames += drain(recorder)
-                if any(m.arbitration_id == 0x705 and m.data[:1] == b"\x05" for m in frames):
-                    break
+                m = recorder.recv(timeout=0.1)
+                if m is not None:
+                    frames.append(m)
+                    if m.arbitration_id == 0x705 and m.data[:1] == b"\x05":
+                        break
         else:
             time.sleep(NO_START_S + 0.2)  # heartbeats, pre-operational, long enough to judge
+        drive.nmt.stop_heartbeat()  # else the recorder never falls quiet
         frames += drain(recorder)
     finally:
         drive.nmt.stop_heartbeat()
