@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 
@@ -27,7 +28,8 @@ def test_screenshots_script_draws_the_reports(tmp_path):
         cwd=ROOT,
     )
     assert done.returncode == 0, done.stderr
-    assert "report-faults.html: FAIL 26 rules: 16 violation(s)" in done.stderr
+    # the count of rules grows with the checks; the violations of the faulty sample do not
+    assert re.search(r"report-faults\.html: FAIL \d+ rules: 16 violation\(s\)", done.stderr)
     names = {p.name for p in tmp_path.glob("*.png")}
     assert {"report-faults.png", "report-faults-nodes.png"} <= names
     for name in names:
