@@ -160,36 +160,33 @@ class BootFollower:
             s = self.current[node] = Story(node, life, t)
             s.steps.append((t, "boot-up", "seen", ""))
         elif svc == Service.HEARTBEAT:
-            s = self._story(node, t)
-            if s.t_error_control is None:
-                s.t_error_control = t
-                s.steps.append((t, "error control", "heartbeat", ""))
-            if (fb.data[row, 0] & nmt.STATE_MASK) == nmt.OPERATIONAL and not s.operational:
-                s.operational = True
-                if s.t_boot is None and s.t_start is None:
-                    s.status = "L"
-                s.t_start = s.t_start or t
-                s.steps.append((t, "operational", "reported", ""))
+            self._reported(self._story(node, t), t, "heartbeat", int(fb.data[row, 0]))
         elif svc == Service.GUARD_REQUEST:
             self._story(node, t).guard_requests += 1
         elif svc == Service.GUARD_RESPONSE:
             s = self._story(node, t)
             s.guard_answers += 1
-            if s.t_error_control is None:
-                s.t_error_control = t
-                s.steps.append((t, "error control", "guarding", ""))
-            if (fb.data[row, 0] & nmt.STATE_MASK) == nmt.OPERATIONAL and not s.operational:
-                s.operational = True
-                if s.t_boot is None and s.t_start is None:
-                    s.status = "L"
-                s.t_start = s.t_start or t
-                s.steps.append((t, "operational", "reported", ""))
+            self._reported(s, t, "guarding", int(fb.data[row, 0]))
         elif svc == Service.NMT and fb.dlc[row] >= 2 and fb.data[row, 0] == nmt.START:
             target = int(fb.data[row, 1])
             for n, s in self.current.items():
                 if (target in (0, n)) and s.t_start is None:
                     s.t_start = t
                     s.steps.append((t, "NMT start", "sent", "to all" if target == 0 else ""))
+
+    @staticmethod
+    def _reported(s: Story, t: float, via: str, byte: int) -> None:
+        """A state the node reported (heartbeat or guard answer): error control has
+        started; operational ends its boot (L when no boot-up or start came before)."""
+        if s.t_error_control is None:
+            s.t_error_control = t
+            s.steps.append((t, "error control", via, ""))
+        if (byte & nmt.STATE_MASK) == nmt.OPERATIONAL and not s.operational:
+            s.operational = True
+            if s.t_boot is None and s.t_start is None:
+                s.status = "L"
+            s.t_start = s.t_start or t
+            s.steps.append((t, "operational", "reported", ""))
 
     def _sdo(self, rec: dict) -> None:
         node = rec.get("node")
