@@ -36,6 +36,14 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+# The command line's allocator (runtime.allocator), set before pyarrow is imported: Arrow's
+# default pool, mimalloc, reserves 1 GiB of address space on first use (pyarrow 26: VmSize
+# +1,050 MB on the first cast), which RLIMIT_AS counts as if it were memory; every log case's
+# first Arrow allocation then failed in the child, though the case needs a few MB.
+from cananalyze.runtime import allocator  # noqa: E402
+
+allocator.tune()
+
 from tests.fuzz import targets  # noqa: E402
 from tests.fuzz.campaign import _logs, _suffix, mutate_bytes, mutate_tokens  # noqa: E402
 from tests.fuzz.harness import run_log  # noqa: E402
