@@ -1,5 +1,5 @@
 import sys
 
-from cananalyze.cli.main import main
+from cananalyze.cli.main import program
 
-sys.exit(main())
+sys.exit(program())

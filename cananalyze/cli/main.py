@@ -13,7 +13,7 @@ import sys
 
 from cananalyze.cli import options as options_
 from cananalyze.core.errors import CananalyzeError
-from cananalyze.runtime import allocator
+from cananalyze.runtime import allocator, imports
 from cananalyze.runtime.gcpolicy import fewer_collections
 
 # One module per sub-command, each with add_parser(subparsers) and run(args) -> int.
@@ -66,6 +66,13 @@ def _terminate(signum, frame) -> None:
         signal.setitimer(signal.ITIMER_REAL, 0.05)
         return
     raise Terminated
+
+
+def program() -> int:
+    """The `cananalyze` program (console script, `python -m cananalyze`): `main` plus what
+    only a process of its own may change (python-can imported without asammdf)."""
+    imports.install()
+    return main()
 
 
 def main(argv: list[str] | None = None) -> int:
