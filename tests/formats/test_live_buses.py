@@ -32,12 +32,22 @@ def _wait_listeners(channel: str, n: int, timeout: float = 10.0) -> None:
     raise AssertionError(f"nobody listens on {channel}")
 
 
-def _send(channel: str, frames: list[can.Message], start: threading.Event) -> threading.Thread:
+def _send(
+    channel: str,
+    frames: list[can.Message],
+    start: threading.Event,
+    more: threading.Event | None = None,
+) -> threading.Thread:
+    """Send `frames` once `start` is set; with `more`, the first frame, then the rest
+    once `more` is set."""
+
     def go():
         with can.Bus(interface="virtual", channel=channel, receive_own_messages=False) as bus:
             _wait_listeners(channel, 2)
             start.wait(10)
-            for m in frames:
+            for k, m in enumerate(frames):
+                if k == 1 and more is not None:
+                    more.wait(20)
                 bus.send(m)
                 time.sleep(0.0005)
 
@@ -196,7 +206,15 @@ def test_two_buses_live_in_foxglove_apart():
             for k in range(n)
         ]
 
-    senders = [_send(a, tpdo2(5, 300), start), _send(b, tpdo2(5, 200), start)]
+    # one PDO per bus first (it advertises the bus's signal topic), the rest once the
+    # client has subscribed to both: else, on a loaded machine, every PDO could pass
+    # before the subscription and the topic stay empty
+    more = threading.Event()
+    topics = {on_bus(a, "/node/5/tpdo2"), on_bus(b, "/node/5/tpdo2")}
+    senders = [
+        _send(a, tpdo2(5, 300), start, more),
+        _send(b, tpdo2(5, 200), start, more),
+    ]
     parts = [
         LiveSource(lambda c=c: can.Bus(interface="virtual", channel=c), channel_name=c)
         for c in (a, b)
@@ -223,6 +241,8 @@ def test_two_buses_live_in_foxglove_apart():
     def stop():  # once the client has every frame (the server stops with the run)
         if time.monotonic() > deadline:
             return True
+        if box and topics <= box[0].topics_subscribed():
+            more.set()
         sent = all(not s.is_alive() for s in senders) and source.received >= 500
         return sent and len(box[0].messages.get("/can/frames", [])) >= 500
 
