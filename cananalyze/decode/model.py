@@ -29,10 +29,12 @@ from cananalyze.core.frames import FLAG_ERR, FLAG_EXT
 from cananalyze.core.records import DecodedBatch
 from cananalyze.decode.node_tally import IDENTITY
 from cananalyze.devices.builtin import identify
+from cananalyze.protocol import srdo as srdo_layout
 from cananalyze.protocol.cobid import NO_NODE, CobClassifier
 from cananalyze.protocol.comm_objects import comm_object
 from cananalyze.protocol.pdo_map import PdoConfig, split_cob_id
 from cananalyze.protocol.services import Service
+from cananalyze.protocol.srdo import SrdoConfig
 
 NOT_VALID = (
     "is not valid (COB-ID bit 31 set)"  # PdoBinding.problem; the pdo_not_valid rule looks for it
@@ -106,6 +108,11 @@ class NetworkModel:
         self.binding_log: list[dict[int, PdoBinding]] = []
         # Bindings in force within the current batch: (first row, bindings), ascending.
         self.segments: list[tuple[int, dict[int, PdoBinding]]] = [(0, {})]
+        # SRDOs in force: COB-ID -> (its SRDO, whether it is the inverted frame's), and the
+        # same after every change (times ascending), for the rows and the rule's judgement
+        self.srdo_bindings: dict[int, tuple[SrdoConfig, bool]] = {}
+        self.srdo_times: list[float] = []
+        self.srdo_log: list[dict[int, tuple[SrdoConfig, bool]]] = []
         self.classifier: CobClassifier | None = None
         self._assigned: dict[int, tuple[int, int, int]] = {}
         # (node, index, subindex) -> object_info answer; cleared when a node's profile changes
@@ -253,6 +260,16 @@ class NetworkModel:
         """The PDO a COB-ID carried at time t (the bindings after every change up to t)."""
         k = bisect.bisect_right(self.binding_times, t) - 1
         return self.binding_log[max(k, 0)].get(cob_id) if self.binding_log else None
+
+    def srdo_at(self, cob_id: int, t: float) -> tuple[SrdoConfig, bool] | None:
+        """The SRDO a COB-ID carried at time t, and whether as its inverted frame."""
+        k = bisect.bisect_right(self.srdo_times, t) - 1
+        return self.srdo_log[max(k, 0)].get(cob_id) if self.srdo_log else None
+
+    def srdo_log_index(self, t: np.ndarray) -> np.ndarray:
+        """Per time: the index in `srdo_log` of the SRDO bindings in force."""
+        k = np.searchsorted(np.asarray(self.srdo_times, np.float64), t, side="right") - 1
+        return np.maximum(k, 0)
 
     def binding(self, cob_id: int) -> PdoBinding | None:
         return self.bindings.get(cob_id)
@@ -461,6 +478,26 @@ class NetworkModel:
             self.bindings = valid
             self.binding_times.append(t)
             self.binding_log.append(valid)
+        self._rebind_srdo(t)
+
+    def _rebind_srdo(self, t: float) -> None:
+        """The SRDOs in force: each in-use SRDO's two COB-IDs, the producer's parameters
+        first (a consumer's, with the same COB-IDs, only where no producer's are known)."""
+        found: dict[int, tuple[SrdoConfig, bool]] = {}
+        configs = [
+            c
+            for node, cfg in sorted(self.nodes.items())
+            for _, state in sorted(cfg.srdos.items())
+            if (c := cfg.srdo_config(state)) is not None
+        ]
+        configs.sort(key=lambda c: c.direction != 1)  # producers first, stable
+        for c in configs:
+            found.setdefault(c.cob_normal, (c, False))
+            found.setdefault(c.cob_inverted, (c, True))
+        if found != self.srdo_bindings or not self.srdo_log:
+            self.srdo_bindings = found
+            self.srdo_times.append(t)
+            self.srdo_log.append(found)
 
     def _wanted(self) -> dict[int, tuple[int, int, int]]:
         out: dict[int, tuple[int, int, int]] = {}
@@ -474,6 +511,10 @@ class NetworkModel:
         for cob, b in self.bindings.items():
             if b.problem is None:
                 out[cob] = (Service.TPDO if b.kind == "tpdo" else Service.RPDO, b.node, b.number)
+        for cob, (c, inverted) in self.srdo_bindings.items():
+            out[cob] = (Service.SRDO_INVERTED if inverted else Service.SRDO, c.node, c.number)
+        if self.srdo_bindings:  # a safety bus: 0x001 is its global fail-safe command
+            out[srdo_layout.GFC_COB_ID] = (Service.GFC, NO_NODE, 0)
         return out
 
     def _sync_classifier(self) -> set[int]:
