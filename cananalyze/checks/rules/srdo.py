@@ -161,12 +161,19 @@ class SrdoRule(Rule):
 
     @staticmethod
     def _sending(ctx: Context, config, t0: float, t1: float) -> bool:
-        """Whether the producer may send SRDOs at both ends of a gap (a consumer's
-        parameters alone do not say which node produces: then it may)."""
+        """Whether the producer may send SRDOs throughout a gap: operational (or its state
+        never seen) at its start and in every state it entered before its end. A
+        consumer's parameters alone do not say which node produces: then it may."""
         if config.direction != 1:
             return True
-        state = ctx.nmt.state_at(config.node, np.array([t0, t1]))
-        return bool(np.isin(state, _SENDING).all())
+        node = config.node
+        steady = ctx.nmt.steady_state(node, t0, t1)
+        if steady is not None:
+            return steady in _SENDING
+        states = [int(ctx.nmt.state_at(node, np.array([t0]))[0])]
+        changes = zip(ctx.nmt.times.get(node, ()), ctx.nmt.states.get(node, ()), strict=True)
+        states += [int(s) for t, s in changes if t0 < t <= t1]
+        return all(s in _SENDING for s in states)
 
     @staticmethod
     def _basis(ctx: Context, config, sub: int, t: float) -> str:

@@ -1,0 +1,243 @@
+"""SRDO (CiA 304) end to end: configured by SDO writes that python-canopen's SDO client makes
+(over python-can's virtual bus, the frames re-timed here: no wall-clock timing), the pairs
+encoded as CANopenNode does, decoded and judged by the `srdo` rule.
+
+The reference encoding is CANopenNode's 304/CO_SRDO.c (commit 9b8beed8): the mapping's odd
+sub-indices fill the normal frame and the even ones the inverted frame (line 541,
+`plain_inverted = i % 2`), and a consumer requires every byte of the inverted frame to be
+the bit inversion of the normal frame's (lines 887-894); the inverted frame is due within
+SRVT of the normal one (line 875) and the next pair within SCT (lines 880 and 970).
+SRDO 1 of node 5 uses the default COB-IDs 0x0FF + 2 * 5 = 0x109 and 0x10A (CO_SRDO.c
+lines 467-473, 301/CO_driver.h line 401).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import can
+import canopen
+import pytest
+from canopen.objectdictionary import UNSIGNED8, UNSIGNED16, UNSIGNED32, ODRecord
+
+import cananalyze
+from tests.helpers.virtual_bus import drain, patient_client, unique_channel, variable
+
+ROOT = Path(__file__).resolve().parents[2]
+NODE = 5
+NORMAL, INVERTED = 0x109, 0x10A
+SCT_MS, SRVT_MS = 20, 10
+
+# SRDO1 of node 5 produced (direction 1), SCT 20 ms, SRVT 10 ms, default COB-IDs, one
+# UNSIGNED16 and its inverted copy mapped (0x2000:01 normal, 0x2001:01 inverted)
+CONFIG = [
+    (0x1301, 1, 1, 1),
+    (0x1301, 2, SCT_MS, 2),
+    (0x1301, 3, SRVT_MS, 1),
+    (0x1301, 5, NORMAL, 4),
+    (0x1301, 6, INVERTED, 4),
+    (0x1381, 0, 0, 1),
+    (0x1381, 1, 0x20000110, 4),
+    (0x1381, 2, 0x20010110, 4),
+    (0x1381, 0, 2, 1),
+    (0x13FE, 0, 0xA5, 1),  # configuration valid (CO_SRDO_VALID_MAGIC)
+]
+
+
+def _od() -> canopen.ObjectDictionary:
+    od = canopen.ObjectDictionary()
+    comm = ODRecord("SRDO1 communication parameter", 0x1301)
+    comm.add_member(variable(0x1301, 0, "Highest sub-index", UNSIGNED8, "ro", 6))
+    comm.add_member(variable(0x1301, 1, "Information direction", UNSIGNED8, "rw", 0))
+    comm.add_member(variable(0x1301, 2, "Refresh time", UNSIGNED16, "rw", 0))
+    comm.add_member(variable(0x1301, 3, "Validation time", UNSIGNED8, "rw", 0))
+    comm.add_member(variable(0x1301, 4, "Transmission type", UNSIGNED8, "rw", 254))
+    comm.add_member(variable(0x1301, 5, "COB-ID normal", UNSIGNED32, "rw", 0xFF))
+    comm.add_member(variable(0x1301, 6, "COB-ID inverted", UNSIGNED32, "rw", 0x100))
+    od.add_object(comm)
+    mapping = ODRecord("SRDO1 mapping parameter", 0x1381)
+    mapping.add_member(variable(0x1381, 0, "Number of entries", UNSIGNED8, "rw", 0))
+    for sub in (1, 2):
+        mapping.add_member(variable(0x1381, sub, f"Entry {sub}", UNSIGNED32, "rw", 0))
+    od.add_object(mapping)
+    od.add_object(variable(0x13FE, 0, "Configuration valid", UNSIGNED8, "rw", 0))
+    return od
+
+
+def _sdo_writes(writes: list[tuple[int, int, int, int]]) -> list[list[tuple[int, bytes]]]:
+    """python-canopen's SDO client writes each (index, sub, value, size) to node 5: the
+    request and response of each write, in order."""
+    channel = unique_channel("srdo")
+    server, client = canopen.Network(), canopen.Network()
+    server.connect(interface="virtual", channel=channel)
+    client.connect(interface="virtual", channel=channel)
+    recorder = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+    try:
+        local = canopen.LocalNode(NODE, _od())
+        remote = patient_client(NODE)
+        server.add_node(local)
+        client.add_node(remote)
+        for index, sub, value, size in writes:
+            remote.sdo.download(index, sub, value.to_bytes(size, "little"))
+        frames = drain(recorder)
+    finally:
+        client.disconnect()
+        server.disconnect()
+        recorder.shutdown()
+    out = [(m.arbitration_id, bytes(m.data)) for m in frames]
+    assert len(out) == 2 * len(writes)  # expedited: one request, one response each
+    return [out[k : k + 2] for k in range(0, len(out), 2)]
+
+
+@pytest.fixture(scope="module")
+def config_frames() -> list[tuple[int, bytes]]:
+    return [f for write in _sdo_writes(CONFIG) for f in write]
+
+
+def srdo_pair(value: int) -> tuple[bytes, bytes]:
+    """An UNSIGNED16 as CANopenNode sends it: normal, then the inverted copy."""
+    normal = value.to_bytes(2, "little")
+    return normal, bytes(b ^ 0xFF for b in normal)
+
+
+def _log(tmp_path: Path, rows: list[tuple[float, int, bytes]]) -> Path:
+    path = tmp_path / "srdo.log"
+    lines = [f"({t:.6f}) can0 {cid:03X}#{data.hex().upper()}" for t, cid, data in sorted(rows)]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _stream(config_frames, pairs: int = 10, start: float = 1.0, period: float = 0.020):
+    """The configuration at 0.1 s (1 ms a frame), NMT start of node 5, then `pairs` SRDO
+    pairs every `period` s, each inverted frame 0.5 ms after its normal one."""
+    rows = [(0.1 + 0.001 * k, cid, data) for k, (cid, data) in enumerate(config_frames)]
+    rows.append((0.5, 0x000, bytes([0x01, NODE])))
+    for k in range(pairs):
+        normal, inverted = srdo_pair(0x1234 + k)
+        t = start + k * period
+        rows += [(t, NORMAL, normal), (t + 0.0005, INVERTED, inverted)]
+    return rows
+
+
+def _findings(log: Path, rule: str = "srdo"):
+    f = cananalyze.load(log).findings
+    return f[f.rule == rule].reset_index(drop=True)
+
+
+def test_healthy_stream_is_decoded_once_per_pair_and_has_no_finding(tmp_path, config_frames):
+    cap = cananalyze.load(_log(tmp_path, _stream(config_frames)))
+    assert cap.findings.empty, cap.findings.to_dict("records")  # no srdo, no unknown_cob_id
+    s = cap.signals
+    assert set(s.pdo) == {"srdo1"} and set(s.cob_id) == {NORMAL}  # the normal frame only
+    assert list(s.signal.unique()) == ["obj_2000_01"]
+    assert list(s.value) == [0x1234 + k for k in range(10)]
+    assert set(s.node) == {NODE}
+    frames = cap.frames
+    services = frames.set_index("can_id").service.astype(str)
+    assert set(services.loc[NORMAL]) == {"srdo"} and set(services.loc[INVERTED]) == {
+        "srdo_inverted"
+    }
+
+
+def test_corrupted_inverted_frame_is_one_finding(tmp_path, config_frames):
+    rows = _stream(config_frames)
+    k = next(i for i, r in enumerate(rows) if r[1] == INVERTED and r[0] > 1.05)
+    t, cid, data = rows[k]
+    rows[k] = (t, cid, bytes([data[0] ^ 0x01, data[1]]))  # one bit not inverted
+    f = _findings(_log(tmp_path, rows))
+    assert len(f) == 1, f.to_dict("records")
+    assert f.severity[0] == "error" and f.node[0] == NODE and f.cob_id[0] == INVERTED
+    assert "is not the bit inversion of the normal frame" in f.message[0]
+    assert f.t[0] == pytest.approx(t)
+
+
+def test_late_inverted_frame_is_one_finding(tmp_path, config_frames):
+    rows = _stream(config_frames)
+    k = next(i for i, r in enumerate(rows) if r[1] == INVERTED and r[0] > 1.05)
+    t, cid, data = rows[k]
+    rows[k] = (t - 0.0005 + 0.015, cid, data)  # 15 ms after its normal frame, SRVT 10 ms
+    f = _findings(_log(tmp_path, rows))
+    assert len(f) == 1, f.to_dict("records")
+    assert "validation time SRVT 10 ms" in f.message[0]
+    assert f.measured[0] == 15.0 and f.expected[0] == SRVT_MS
+    assert f["basis"][0].startswith("0x1301:3 written at")
+
+
+def test_missed_refresh_is_one_finding(tmp_path, config_frames):
+    rows = [r for r in _stream(config_frames) if not 1.099 < r[0] < 1.101]  # pair 5 lost
+    assert len(rows) == len(_stream(config_frames)) - 2
+    f = _findings(_log(tmp_path, rows))
+    assert len(f) == 1, f.to_dict("records")
+    assert "refresh time SCT 20 ms" in f.message[0]
+    assert f.measured[0] == 40.0 and f.t[0] == pytest.approx(1.08)
+
+
+def test_missing_inverted_frame_is_one_finding(tmp_path, config_frames):
+    rows = [r for r in _stream(config_frames) if r[:2] != (1.1005, INVERTED)]
+    f = _findings(_log(tmp_path, rows))
+    assert len(f) == 1, f.to_dict("records")
+    assert "without its inverted frame" in f.message[0] and f.t[0] == pytest.approx(1.1)
+
+
+def test_gfc_is_reported_as_information(tmp_path, config_frames):
+    rows = _stream(config_frames) + [(1.5, 0x001, b"")]
+    f = _findings(_log(tmp_path, rows))
+    assert len(f) == 1 and f.severity[0] == "info"
+    assert f.message[0] == "global fail-safe command (GFC)" and f.cob_id[0] == 1
+
+
+def test_refresh_judged_by_the_sct_in_force(tmp_path, config_frames):
+    """Pairs every 40 ms: too slow for SCT 20 ms, on time once 0x1301:2 says 50 ms."""
+    (raise_sct,) = _sdo_writes([(0x1301, 2, 50, 2)])
+    rows = _stream(config_frames, pairs=4, period=0.040)  # 1.00-1.12 under SCT 20 ms
+    rows += [(1.13, cid, data) for cid, data in raise_sct[:1]]
+    rows += [(1.131, cid, data) for cid, data in raise_sct[1:]]
+    for k in range(4, 10):  # 1.16-1.36 under SCT 50 ms
+        normal, inverted = srdo_pair(k)
+        rows += [(1.0 + 0.04 * k, NORMAL, normal), (1.0005 + 0.04 * k, INVERTED, inverted)]
+    f = _findings(_log(tmp_path, rows))
+    assert list(f.t.round(3)) == [1.0, 1.04, 1.08], f.to_dict("records")  # before the write
+    assert set(f.expected) == {SCT_MS}
+
+
+def test_no_refresh_finding_while_the_producer_is_stopped(tmp_path, config_frames):
+    rows = [r for r in _stream(config_frames) if not 1.079 < r[0] < 1.141]  # 4 pairs gap
+    rows += [(1.065, 0x000, bytes([0x02, NODE])), (1.13, 0x000, bytes([0x01, NODE]))]
+    assert _findings(_log(tmp_path, rows)).empty
+
+
+def test_a_log_starting_between_the_two_frames_says_nothing(tmp_path, config_frames):
+    rows = _stream(config_frames)
+    rows.append((0.9995, INVERTED, srdo_pair(0)[1]))  # the pair's normal frame is not logged
+    assert _findings(_log(tmp_path, rows)).empty
+
+
+def test_srdo_identifiers_unknown_only_while_no_srdo_is_configured(tmp_path, config_frames):
+    rows = [r for r in _stream(config_frames) if r[1] in (NORMAL, INVERTED)]
+    f = _findings(_log(tmp_path, rows), "unknown_cob_id")
+    assert set(f.cob_id) == {NORMAL, INVERTED}
+    assert _findings(_log(tmp_path, _stream(config_frames)), "unknown_cob_id").empty
+
+
+def test_text_and_jsonl_name_the_pair(tmp_path, config_frames):
+    log = _log(tmp_path, _stream(config_frames, pairs=2) + [(1.5, 0x001, b"")])
+    run = [sys.executable, "-m", "cananalyze", "decode", str(log)]
+    text = subprocess.run(run, capture_output=True, text=True, check=True, cwd=ROOT).stdout
+    assert "srdo             5  SRDO1 normal  obj_2000_01=4660" in text
+    assert "srdo_inverted    5  SRDO1 inverted" in text
+    assert "GFC global fail-safe command" in text
+    assert "SRDO1 communication: Refresh time SCT (ms)" in text  # the SDO write named
+    out = subprocess.run(
+        [*run, "--format", "jsonl"], capture_output=True, text=True, check=True, cwd=ROOT
+    ).stdout
+    frames = [r for r in map(json.loads, out.splitlines()) if r.get("kind") == "frame"]
+    normal = [r for r in frames if r["can_id"] == NORMAL]
+    assert [r["signals"] for r in normal] == [{"obj_2000_01": 0x1234}, {"obj_2000_01": 0x1235}]
+    assert {r["service"] for r in normal} == {"srdo"} and {r["pdo"] for r in normal} == {1}
+    inverted = [r for r in frames if r["can_id"] == INVERTED]
+    assert {r["service"] for r in inverted} == {"srdo_inverted"}
+    assert all("signals" not in r for r in inverted)
+    assert [r["service"] for r in frames if r["can_id"] == 1] == ["gfc"]
