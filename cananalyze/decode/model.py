@@ -25,7 +25,7 @@ import numpy as np
 from cananalyze.config.node_config import TOUCHES_COB_IDS, NodeConfig
 from cananalyze.config.spec import NetworkSpec
 from cananalyze.config.timeline import ConfigChange, Timeline
-from cananalyze.core.frames import FLAG_ERR, FLAG_EXT
+from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from cananalyze.core.records import DecodedBatch
 from cananalyze.decode.node_tally import IDENTITY
 from cananalyze.devices.builtin import identify
@@ -97,6 +97,8 @@ class NetworkModel:
         self.nodes: dict[int, NodeConfig] = {}
         self.timeline = Timeline()  # the values the log showed, and the resets
         self._early: dict[int, tuple[dict, set[int] | None]] = {}  # identify_now's, by id
+        # nodes whose SRDO 1 the log showed on its default COB-IDs (`_seen_srdos`)
+        self._seen_srdo: set[int] = set()
         self._file = {
             (node, index, sub): value
             for node, ns in self.spec.nodes.items()
@@ -134,7 +136,21 @@ class NetworkModel:
                 cfg.pdo(direction, number).length = length  # type: ignore[arg-type]
             cfg.sdo_channels = list(ns.sdo_channels)
             cfg.signals = ns.signals
+        if node in self._seen_srdo:
+            self._adopt_seen_srdo(cfg)
         return cfg
+
+    @staticmethod
+    def _adopt_seen_srdo(cfg: NodeConfig) -> bool:
+        """A node's SRDO 1 as a pair on its default COB-IDs shows it: produced, its times
+        not known (not judged), unless something configured it (False then)."""
+        state = cfg.srdo(1)
+        cobs = srdo_layout.default_cob_ids(cfg.node)
+        if cobs is None or state.direction or state.cob_normal is not None:
+            return False
+        state.direction = 1
+        state.cob_normal, state.cob_inverted = cobs
+        return True
 
     # --- wiring ------------------------------------------------------------------
     def bind(self, classifier: CobClassifier) -> None:
@@ -316,6 +332,49 @@ class NetworkModel:
                 self.segments.append((start, self.bindings))
             if changed and start < n:
                 self._reclassify(batch, start, changed)
+        self._seen_srdos(batch)
+
+    def _seen_srdos(self, batch: DecodedBatch) -> None:
+        """SRDOs nothing configured, known by their pattern: a frame on a node's default
+        SRDO 1 COB-ID (0x0FF + 2 * node-ID) whose next frame on 0x101-0x180 is on the next
+        COB-ID with the same length and every byte inverted (protocol/srdo.py). From the
+        first frame of the batch on either COB-ID on, both are that SRDO's (and 0x001 the
+        GFC): not unknown identifiers, and judged by the `srdo` rule (the inversion; its
+        times are not known). Frames no COB-ID table names are the only ones looked at."""
+        svc = batch.service
+        other = np.flatnonzero(svc == Service.OTHER)
+        if other.size < 2:
+            return
+        fb = batch.frames
+        ids = fb.can_id[other]
+        near = (ids >= srdo_layout.FIRST_COB) & (ids <= srdo_layout.LAST_COB)
+        near &= (fb.flags[other] & (FLAG_EXT | FLAG_ERR | FLAG_RTR)) == 0
+        rows = other[near]
+        if rows.size < 2:
+            return
+        ids = fb.can_id[rows].astype(np.int64)
+        a, b = rows[:-1], rows[1:]
+        dlc = fb.dlc[a]
+        pair = (ids[:-1] % 2 == 1) & (ids[1:] == ids[:-1] + 1) & (fb.dlc[b] == dlc) & (dlc > 0)
+        k = np.flatnonzero(pair)
+        if k.size == 0:
+            return
+        k = k[~srdo_layout.not_inverted(fb.data[a[k], :8], fb.data[b[k], :8], dlc[k])]
+        first = len(batch)
+        for cob in np.unique(ids[:-1][k]).tolist():
+            node = srdo_layout.default_owner(cob)
+            if node is None or node in self._seen_srdo:
+                continue
+            self._seen_srdo.add(node)
+            if self._adopt_seen_srdo(self.config_at(node)):
+                first = min(first, int(rows[np.flatnonzero((ids == cob) | (ids == cob + 1))[0]]))
+        if first == len(batch):
+            return
+        t = float(fb.t[first])
+        self._rebind(max(t, self.srdo_times[-1]) if self.srdo_times else t)
+        changed = self._sync_classifier()
+        if changed:
+            self._reclassify(batch, first, changed)
 
     def finish(self, batch: DecodedBatch) -> None:
         self.segments = [(0, self.bindings)]

@@ -215,11 +215,32 @@ def test_a_log_starting_between_the_two_frames_says_nothing(tmp_path, config_fra
     assert _findings(_log(tmp_path, rows)).empty
 
 
-def test_srdo_identifiers_unknown_only_while_no_srdo_is_configured(tmp_path, config_frames):
+def test_srdo_known_by_its_pattern_on_the_default_cob_ids(tmp_path, config_frames):
+    """Nothing configures the SRDO: a pair on node 5's default COB-IDs, the second frame
+    the bit inversion of the first, makes both (and 0x001, the GFC) known; the inversion
+    is judged from then on, the times (not known) are not."""
     rows = [r for r in _stream(config_frames) if r[1] in (NORMAL, INVERTED)]
+    rows.append((1.5, 0x001, b""))
+    k = next(i for i, r in enumerate(rows) if r[1] == INVERTED and r[0] > 1.05)
+    t, cid, data = rows[k]
+    rows[k] = (t, cid, bytes([data[0], data[1] ^ 0x80]))
+    del rows[-5:-3]  # a pair lost: the SCT is not known, nothing said
+    cap = cananalyze.load(_log(tmp_path, rows))
+    f = cap.findings
+    assert list(f.rule) == ["srdo", "srdo"], f.to_dict("records")
+    assert "is not the bit inversion" in f.message[0] and f.t[0] == pytest.approx(t)
+    assert f.severity[1] == "info" and "GFC" in f.message[1]
+    services = cap.frames.set_index("can_id").service.astype(str)
+    assert set(services.loc[NORMAL]) == {"srdo"} and set(services.loc[INVERTED]) == {
+        "srdo_inverted"
+    }
+    assert cap.signals.empty  # the mapping is not known
+
+
+def test_srdo_identifiers_without_the_pattern_stay_unknown(tmp_path):
+    rows = [(1.0 + 0.02 * k, NORMAL + (k % 2), bytes([k, 2 * k])) for k in range(6)]
     f = _findings(_log(tmp_path, rows), "unknown_cob_id")
     assert set(f.cob_id) == {NORMAL, INVERTED}
-    assert _findings(_log(tmp_path, _stream(config_frames)), "unknown_cob_id").empty
 
 
 def test_text_and_jsonl_name_the_pair(tmp_path, config_frames):
