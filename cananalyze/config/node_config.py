@@ -14,6 +14,7 @@ from typing import Literal
 from cananalyze.devices.profile import DeviceProfile
 from cananalyze.protocol import srdo as srdo_layout
 from cananalyze.protocol.datatypes import DUMMY_INDICES
+from cananalyze.protocol.mpdo import MODES as MPDO_MODES
 from cananalyze.protocol.pdo_map import (
     COB_ID_INVALID,
     MapEntry,
@@ -256,7 +257,8 @@ class NodeConfig:
         A mapping with an entry not known yet (a master reads 0x1A0x:0, then each entry,
         while the PDO runs) is not known at all: a part of it would be a wrong length."""
         mapping: list[MapEntry] = []
-        for sub in range(1, state.count + 1):
+        mpdo = MPDO_MODES.get(state.count)
+        for sub in range(1, 0 if mpdo else state.count + 1):
             word = state.words.get(sub)
             if word is None:
                 mapping = []
@@ -276,6 +278,7 @@ class NodeConfig:
             mapping,
             state.length,
             assumed=state.assumed,
+            mpdo=mpdo,
         )
 
     def apply(self, index: int, sub: int, value: int) -> str | None:

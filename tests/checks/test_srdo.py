@@ -18,13 +18,12 @@ import subprocess
 import sys
 from pathlib import Path
 
-import can
 import canopen
 import pytest
 from canopen.objectdictionary import UNSIGNED8, UNSIGNED16, UNSIGNED32, ODRecord
 
 import cananalyze
-from tests.helpers.virtual_bus import drain, patient_client, unique_channel, variable
+from tests.helpers.virtual_bus import sdo_download_frames, variable
 
 ROOT = Path(__file__).resolve().parents[2]
 NODE = 5
@@ -68,28 +67,8 @@ def _od() -> canopen.ObjectDictionary:
 
 
 def _sdo_writes(writes: list[tuple[int, int, int, int]]) -> list[list[tuple[int, bytes]]]:
-    """python-canopen's SDO client writes each (index, sub, value, size) to node 5: the
-    request and response of each write, in order."""
-    channel = unique_channel("srdo")
-    server, client = canopen.Network(), canopen.Network()
-    server.connect(interface="virtual", channel=channel)
-    client.connect(interface="virtual", channel=channel)
-    recorder = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
-    try:
-        local = canopen.LocalNode(NODE, _od())
-        remote = patient_client(NODE)
-        server.add_node(local)
-        client.add_node(remote)
-        for index, sub, value, size in writes:
-            remote.sdo.download(index, sub, value.to_bytes(size, "little"))
-        frames = drain(recorder)
-    finally:
-        client.disconnect()
-        server.disconnect()
-        recorder.shutdown()
-    out = [(m.arbitration_id, bytes(m.data)) for m in frames]
-    assert len(out) == 2 * len(writes)  # expedited: one request, one response each
-    return [out[k : k + 2] for k in range(0, len(out), 2)]
+    """python-canopen's SDO client writes each (index, sub, value, size) to node 5."""
+    return sdo_download_frames(NODE, _od(), writes)
 
 
 @pytest.fixture(scope="module")
