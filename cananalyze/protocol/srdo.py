@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cananalyze.protocol.crc import crc16
 from cananalyze.protocol.pdo import signals_text
 from cananalyze.protocol.pdo_map import MapEntry
 
@@ -140,6 +141,31 @@ def effective_cob_ids(node: int, number: int, normal: int, inverted: int) -> tup
     if number == 1 and (normal, inverted) == default and node <= MAX_DEFAULT_NODE:
         return normal + 2 * node, inverted + 2 * node
     return normal, inverted
+
+
+def signature(
+    node: int,
+    number: int,
+    direction: int,
+    sct: int,
+    srvt: int,
+    cob_normal: int,
+    cob_inverted: int,
+    words: list[int],
+) -> int:
+    """The CRC signature (0x13FF:number) of an SRDO's parameters, as CO_SRDO_config computes
+    it (CO_SRDO.c lines 507-533): CRC-16 CCITT from 0 over the direction (1 byte), SCT (2),
+    SRVT (1), the COB-IDs in use (4 each), the number of entries (1), then each entry's
+    sub-index (1) and value (4), every value little-endian."""
+    normal, inverted = effective_cob_ids(node, number, cob_normal, cob_inverted)
+    data = bytearray([direction & 0xFF])
+    data += (sct & 0xFFFF).to_bytes(2, "little") + bytes([srvt & 0xFF])
+    data += normal.to_bytes(4, "little") + inverted.to_bytes(4, "little")
+    data.append(len(words) & 0xFF)
+    for sub, word in enumerate(words, 1):
+        data.append(sub)
+        data += (word & 0xFFFFFFFF).to_bytes(4, "little")
+    return crc16(bytes(data))
 
 
 def not_inverted(normal: np.ndarray, inverted: np.ndarray, length: np.ndarray) -> np.ndarray:

@@ -13,6 +13,7 @@ lines 467-473, 301/CO_driver.h line 401).
 
 from __future__ import annotations
 
+import binascii
 import json
 import subprocess
 import sys
@@ -63,6 +64,10 @@ def _od() -> canopen.ObjectDictionary:
         mapping.add_member(variable(0x1381, sub, f"Entry {sub}", UNSIGNED32, "rw", 0))
     od.add_object(mapping)
     od.add_object(variable(0x13FE, 0, "Configuration valid", UNSIGNED8, "rw", 0))
+    crc = ODRecord("Safety configuration checksum", 0x13FF)
+    crc.add_member(variable(0x13FF, 0, "Highest sub-index", UNSIGNED8, "ro", 1))
+    crc.add_member(variable(0x13FF, 1, "SRDO1", UNSIGNED16, "rw", 0))
+    od.add_object(crc)
     return od
 
 
@@ -241,3 +246,31 @@ def test_text_and_jsonl_name_the_pair(tmp_path, config_frames):
     assert {r["service"] for r in inverted} == {"srdo_inverted"}
     assert all("signals" not in r for r in inverted)
     assert [r["service"] for r in frames if r["can_id"] == 1] == ["gfc"]
+
+
+def _signature() -> int:
+    """CONFIG's CRC as CO_SRDO_config computes it (CO_SRDO.c lines 512-527: direction, SCT,
+    SRVT, both COB-IDs, the count, then each entry's sub-index and value, little-endian),
+    with the standard library's CRC-CCITT (binascii.crc_hqx), not cananalyze's."""
+    data = bytes([1]) + SCT_MS.to_bytes(2, "little") + bytes([SRVT_MS])
+    data += NORMAL.to_bytes(4, "little") + INVERTED.to_bytes(4, "little") + bytes([2])
+    data += bytes([1]) + (0x20000110).to_bytes(4, "little")
+    data += bytes([2]) + (0x20010110).to_bytes(4, "little")
+    return binascii.crc_hqx(data, 0)
+
+
+@pytest.mark.parametrize("wrong", [False, True])
+def test_configuration_signature_is_checked_when_made_valid(tmp_path, wrong):
+    crc = _signature() ^ (0x0100 if wrong else 0)
+    writes = _sdo_writes([*CONFIG[:-1], (0x13FF, 1, crc, 2), CONFIG[-1]])
+    rows = _stream([f for w in writes for f in w], pairs=3)
+    f = _findings(_log(tmp_path, rows))
+    if not wrong:
+        assert f.empty, f.to_dict("records")
+        return
+    assert len(f) == 1, f.to_dict("records")
+    assert f.message[0] == (
+        f"SRDO1 configuration signature 0x13FF:1 is 0x{crc:04X}, its parameters give "
+        f"0x{_signature():04X}: the node will not run it"
+    )
+    assert f["basis"][0].startswith("0x13FF:1 written at")

@@ -9,7 +9,10 @@ Judged as a consumer judges them (CANopenNode 304/CO_SRDO.c `CO_SRDO_process`, l
   when the next normal frame comes first;
 - the next normal frame follows within SCT (0x1301+:2) while the producer may send
   (operational, or its state never seen: CiA 304 sends SRDOs only when operational);
-- a global fail-safe command (COB-ID 0x001) is reported as information.
+- a global fail-safe command (COB-ID 0x001) is reported as information;
+- when the log writes 0x13FE (configuration valid) = 0xA5, each SRDO's CRC signature in
+  0x13FF is the one its parameters in force give (CO_SRDO_config's check, CO_SRDO.c
+  lines 507-533), where the log, the network file or the profile gives every value.
 
 Each is judged with the SRDO's parameters in force at the frame (the network model's SRDO
 log: SDO writes to 0x1301-0x1340 / 0x1381-0x13C0, the network file, the device's EDS);
@@ -23,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from cananalyze.checks.rule import Context, Rule, ms
+from cananalyze.protocol import srdo as layout
 from cananalyze.protocol.nmt import OPERATIONAL
 from cananalyze.protocol.services import Service
 from cananalyze.protocol.srdo import not_inverted
@@ -49,6 +53,7 @@ class SrdoRule(Rule):
     def process(self, ctx: Context) -> None:
         b = ctx.batch
         fb = b.frames
+        self._signatures(ctx)
         for row in ctx.rows(Service.GFC).tolist():
             self.emit(
                 fb.t[row],
@@ -158,6 +163,51 @@ class SrdoRule(Rule):
                 bytes(b ^ 0xFF for b in data[:length]).hex(" ").upper(),
                 row=row,
             )
+
+    def _signatures(self, ctx: Context) -> None:
+        """At each write of 0x13FE = 0xA5: every in-use SRDO's 0x13FF against its parameters."""
+        recs = ctx.batch.records
+        if not recs:
+            return
+        c = recs.cols
+        at = np.flatnonzero(c.ok & ~c.upload & (c.index == layout.CONFIG_VALID) & (c.node >= 0))
+        for i in at.tolist():
+            node, t = int(c.node[i]), float(c.t[i])
+            if ctx.config.raw(node, layout.CONFIG_VALID, 0, t) != layout.VALID_MAGIC:
+                continue
+            for number in range(1, layout.COUNT + 1):
+                self._signature(ctx, node, number, t, int(c.row[i]))
+
+    def _signature(self, ctx: Context, node: int, number: int, t: float, row: int) -> None:
+        comm, mapping = layout.COMM_BASE + number - 1, layout.MAP_BASE + number - 1
+        direction = ctx.config.raw(node, comm, layout.SUB_DIRECTION, t)
+        if direction not in (1, 2):
+            return
+        subs = (layout.SUB_SCT, layout.SUB_SRVT, layout.SUB_NORMAL, layout.SUB_INVERTED)
+        values = [ctx.config.raw(node, comm, sub, t) for sub in subs]
+        count = ctx.config.raw(node, mapping, 0, t)
+        stored = ctx.config.raw(node, layout.CRC_INDEX, number, t)
+        if None in values or count is None or stored is None or count > 16:
+            return
+        words = [ctx.config.raw(node, mapping, sub, t) for sub in range(1, count + 1)]
+        if None in words:
+            return
+        sct, srvt, normal, inverted = values
+        want = layout.signature(node, number, direction, sct, srvt, normal, inverted, words)  # type: ignore[arg-type]
+        if want == stored:
+            return
+        self.subjects.add(node)
+        self.emit(
+            t,
+            node,
+            None,
+            f"SRDO{number} configuration signature 0x13FF:{number} is 0x{stored:04X}, its "
+            f"parameters give 0x{want:04X}: the node will not run it",
+            f"0x{stored:04X}",
+            f"0x{want:04X}",
+            row=row,
+            basis=ctx.config.origin(node, layout.CRC_INDEX, number, t, ctx.t0),
+        )
 
     @staticmethod
     def _sending(ctx: Context, config, t0: float, t1: float) -> bool:
