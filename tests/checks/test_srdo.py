@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import binascii
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -274,3 +275,47 @@ def test_configuration_signature_is_checked_when_made_valid(tmp_path, wrong):
         f"0x{_signature():04X}: the node will not run it"
     )
     assert f["basis"][0].startswith("0x13FF:1 written at")
+
+
+NETWORK = """
+[nodes.5.srdo.1]                 # the default COB-IDs of node 5's SRDO 1: 0x109, 0x10A
+direction = "tx"
+sct_ms = 20
+srvt_ms = 10
+mapping = ["2000:01/16", "2001:01/16"]
+"""
+
+
+def test_srdo_declared_in_the_network_file(tmp_path, config_frames):
+    """No SDO in the log: the network file's SRDO decodes and is judged from the start."""
+    (tmp_path / "net.toml").write_text(NETWORK)
+    rows = [r for r in _stream(config_frames) if r[1] in (NORMAL, INVERTED, 0x000)]
+    rows = [r for r in rows if not 1.099 < r[0] < 1.101]  # pair 5 lost
+    cap = cananalyze.load(_log(tmp_path, rows), network=tmp_path / "net.toml")
+    f = cap.findings
+    assert list(f.rule) == ["srdo"], f.to_dict("records")
+    assert "refresh time SCT 20 ms" in f.message[0]
+    assert f["basis"][0] == "0x1301:2 in the network file"
+    assert list(cap.signals.value) == [0x1234 + k for k in range(10) if k != 5]
+
+
+@pytest.mark.parametrize(
+    ("text", "error"),
+    [
+        ("[nodes.5.srdo.1]\ncob_id = 0x10A\n", "an SRDO's normal COB-ID is odd, 0x101-0x17F"),
+        ("[nodes.5.srdo.2]\nsct_ms = 20\n", "srdo 2 needs a cob_id"),
+        ('[nodes.5.srdo.1]\nmapping = ["2000:01/16"]\n', "an even number of entries"),
+        ('[nodes.5.srdo.1]\ndirection = "up"\n', "expected tx or rx"),
+    ],
+)
+def test_network_file_srdo_errors_name_the_key(tmp_path, text, error):
+    (tmp_path / "net.toml").write_text(text)
+    log = _log(tmp_path, [(1.0, NORMAL, b"\x00")])
+    done = subprocess.run(
+        [sys.executable, "-m", "cananalyze", "check", str(log), "--network", "net.toml"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
+    assert done.returncode == 2 and error in done.stderr and "net.toml:" in done.stderr
