@@ -319,3 +319,26 @@ def test_network_file_srdo_errors_name_the_key(tmp_path, text, error):
         env={**os.environ, "PYTHONPATH": str(ROOT)},
     )
     assert done.returncode == 2 and error in done.stderr and "net.toml:" in done.stderr
+
+
+def test_live_tick_reports_an_overdue_pair_once(tmp_path):
+    """Live: the decoder's tick at the bus's clock (no wall clock here) reports a pair
+    overdue by SCT once; the pair that ends the silence is not reported again."""
+    from cananalyze.core.frames import from_rows
+    from cananalyze.pipeline import Options, build_decoder
+
+    (tmp_path / "net.toml").write_text(NETWORK)
+    decoder = build_decoder(Options(network=str(tmp_path / "net.toml"), checks=True))
+    rows = []
+    for k in range(3):
+        normal, inverted = srdo_pair(k)
+        rows += [(1.0 + 0.02 * k, NORMAL, normal), (1.0005 + 0.02 * k, INVERTED, inverted)]
+    decoder.decode(from_rows(rows))
+    assert decoder.tick(1.05) is None  # 10 ms after the last pair: on time
+    late = decoder.tick(1.07)  # 30 ms: past SCT 20 ms + the 2 ms jitter floor
+    found = [f for f in late.findings.findings() if f.rule == "srdo"]
+    assert len(found) == 1 and "no pair since" in found[0].message
+    assert decoder.tick(1.2) is None
+    normal, inverted = srdo_pair(9)
+    out = decoder.decode(from_rows([(1.3, NORMAL, normal), (1.3005, INVERTED, inverted)]))
+    assert not [f for f in out.findings.findings() if f.rule == "srdo"]

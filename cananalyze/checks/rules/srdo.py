@@ -29,7 +29,7 @@ from cananalyze.checks.rule import Context, Rule, ms
 from cananalyze.protocol import srdo as layout
 from cananalyze.protocol.nmt import OPERATIONAL
 from cananalyze.protocol.services import Service
-from cananalyze.protocol.srdo import not_inverted
+from cananalyze.protocol.srdo import SrdoConfig, not_inverted
 
 _SENDING = (OPERATIONAL, -1)
 
@@ -49,6 +49,10 @@ class SrdoRule(Rule):
         # (t, data, dlc, row, cob), and the time of the last normal frame
         self.pending: dict[tuple[int, int], tuple[float, np.ndarray, int, int, int]] = {}
         self.last_normal: dict[tuple[int, int], float] = {}
+        self.last_config: dict[
+            tuple[int, int], SrdoConfig
+        ] = {}  # the SRDO at its last normal frame
+        self.reported: set[tuple[tuple[int, int], float]] = set()  # silences tick() reported
 
     def process(self, ctx: Context) -> None:
         b = ctx.batch
@@ -102,7 +106,14 @@ class SrdoRule(Rule):
                 basis=self._basis(ctx, config, 3, waiting[0]),
             )
         last = self.last_normal.get(key)
-        if ctx.timed and last is not None and config.sct and self._sending(ctx, config, last, t):
+        told = last is not None and (key, last) in self.reported
+        if (
+            ctx.timed
+            and last is not None
+            and config.sct
+            and not told
+            and self._sending(ctx, config, last, t)
+        ):
             gap = t - last
             if gap * 1000.0 > self.late(config.sct):
                 self.emit(
@@ -116,7 +127,30 @@ class SrdoRule(Rule):
                     basis=self._basis(ctx, config, 2, t),
                 )
         self.last_normal[key] = t
+        self.last_config[key] = config
         self.pending[key] = (t, fb.data[row].copy(), int(fb.dlc[row]), row, cob)
+
+    def tick(self, ctx: Context, now: float) -> None:
+        """Live: an SRDO whose next pair is overdue by its SCT while its producer may send,
+        reported once (the pair that ends the silence is not reported again)."""
+        for key, last in sorted(self.last_normal.items()):
+            config = self.last_config[key]
+            sct = config.sct
+            if not sct or (key, last) in self.reported or (now - last) * 1000 <= self.late(sct):
+                continue
+            if not self._sending(ctx, config, last, now):
+                continue
+            self.reported.add((key, last))
+            self.emit(
+                now,
+                config.node,
+                config.cob_normal,
+                f"SRDO{key[1]}: no pair since {ctx.rel(last)} ({ms(now - last)} ms so far), "
+                f"refresh time SCT {sct} ms" + self.quiet(ctx, last + self.late(sct) / 1000.0),
+                ms(now - last),
+                sct,
+                basis=self._basis(ctx, config, 2, last),
+            )
 
     def _inverted(self, ctx: Context, key, config, t: float, row: int, cob: int) -> None:
         fb = ctx.batch.frames
