@@ -107,9 +107,17 @@ class PdoDecoder:
             at = group[key == k]
             dam, node = bool(k >> 40), (k >> 32) & 0x7F
             index, sub = (k >> 8) & 0xFFFF, k & 0xFF
-            entry = self._mpdo_entry(node if node else binding.node, index, sub)
+            note = mpdo.fields(dam, node, index, sub)
+            targets = [] if dam else self._dispatch(node, index, sub, float(fb.t[at[0]]))
+            if targets:
+                note["dispatched"] = [{"node": c, "index": i, "subindex": j} for c, i, j in targets]
+            if len(targets) == 1:  # the value as the consumer's object it becomes
+                owner, index, sub = targets[0]
+            else:
+                owner = node if node else binding.node
+            entry = self._mpdo_entry(owner, index, sub)
             out = decode_pdo(None, fb.dlc[at], [_MPDO_HEAD, entry], words=self._words[1][at])
-            batch.row_notes.append((at, {"mpdo": mpdo.fields(dam, node, index, sub)}))
+            batch.row_notes.append((at, {"mpdo": note}))
             batch.signals.append(
                 SignalBlock(
                     rows=at,
@@ -122,6 +130,33 @@ class PdoDecoder:
                     objects={n: (index, sub) for n in out.values},
                 )
             )
+
+    def _dispatch(
+        self, producer: int, index: int, sub: int, t: float
+    ) -> list[tuple[int, int, int]]:
+        """The consumers' objects a SAM frame's object is dispatched to at t: (node, index,
+        sub-index) of every object dispatching list entry (0x1FD0-0x1FFF, within its count
+        where known) the log, the network file or a profile gives that names it."""
+        model = self.model
+        out = []
+        for node in sorted(model.nodes):
+            for lst in range(mpdo.DISPATCH_FIRST, mpdo.DISPATCH_LAST + 1):
+                subs = model.subindices(node, lst)
+                if not subs:
+                    continue
+                count = model.known(node, lst, 0, t)
+                for s in subs:
+                    if count is not None and s > count.value:
+                        continue
+                    entry = model.known(node, lst, s, t)
+                    hit = (
+                        None
+                        if entry is None
+                        else mpdo.dispatched(entry.value, producer, index, sub)
+                    )
+                    if hit is not None:
+                        out.append((node, *hit))
+        return out
 
     def _mpdo_entry(self, node: int, index: int, sub: int) -> MapEntry:
         """How an MPDO's value shows: the object as the node's profile (else CiA 301's

@@ -13,9 +13,13 @@ The reference encoding is Lely's lely-core (github.com/lely-industries/lely-core
 620d1858): `CO_PDO_MAP_SAM_MPDO 0xfe` and `CO_PDO_MAP_DAM_MPDO 0xff` (include/lely/co/pdo.h
 lines 52 and 58); a DAM frame `data[0] = id | 0x80`, a SAM frame `data[0] = id` (the
 producer's own node-ID), then the index little-endian, the sub-index and 4 bytes of value,
-`len = CAN_MAX_LEN` (src/co/tpdo.c lines 710-715 and 773-776). The object scanner
-(0x1FA0-0x1FCF) and dispatcher (0x1FD0-0x1FFF) lists are not followed: a SAM frame names
-the producer's object, not the consumer's it is dispatched to.
+`len = CAN_MAX_LEN` (src/co/tpdo.c lines 710-715 and 773-776). A consumer's object dispatching
+list (0x1FD0-0x1FFF, UNSIGNED64 entries) says where a SAM frame's value goes: bits 0-7 the
+producer's node-ID, 8-15 its first sub-index, 16-31 its index, 32-39 the consumer's first
+sub-index, 40-55 its index, 56-63 the block size (sub-indices in a row, 0 as 1): as Lely's
+`co_dev_map_sam_mpdo` reads it (src/co/pdo.c lines 243-291; it takes the block size from
+bit 54, CiA 301 from bit 56: here bit 56). The object scanner list (0x1FA0-0x1FCF) only
+says what a producer may send and is not followed.
 """
 
 from __future__ import annotations
@@ -30,6 +34,19 @@ FRAME_BYTES = 8
 VALUE_BYTE = 4  # the value starts here
 VALUE_BITS = 32
 ADDRESS_DAM = 0x80  # byte 0, bit 7
+DISPATCH_FIRST, DISPATCH_LAST = 0x1FD0, 0x1FFF  # object dispatching lists (a consumer's)
+
+
+def dispatched(entry: int, producer: int, index: int, subindex: int) -> tuple[int, int] | None:
+    """The consumer's (index, sub-index) a dispatching list entry gives a SAM frame's object
+    of `producer`, else None."""
+    if not entry or entry & 0xFF != producer or (entry >> 16) & 0xFFFF != index:
+        return None
+    first = (entry >> 8) & 0xFF
+    block = max((entry >> 56) & 0xFF, 1)
+    if not first <= subindex < first + block:
+        return None
+    return (entry >> 40) & 0xFFFF, ((entry >> 32) & 0xFF) + subindex - first
 
 
 class MpdoColumns(NamedTuple):
@@ -60,9 +77,14 @@ def fields(dam: bool, node: int, index: int, subindex: int) -> dict:
 
 
 def text(fields: dict) -> str:
-    """'MPDO to node 6 0x6200:01' / 'MPDO to all nodes ...' / 'MPDO from node 5 ...'."""
+    """'MPDO to node 6 0x6200:01' / 'MPDO to all nodes ...' / 'MPDO from node 5 0x2000:01
+    -> node 6 0x6200:01' (a SAM frame and the consumers' objects it is dispatched to)."""
     obj = f"0x{fields['index']:04X}:{fields['subindex']:02X}"
     if fields["mode"] == "dam":
         who = fields["destination"]
         return f"MPDO to {'all nodes' if who == 0 else f'node {who}'} {obj}"
-    return f"MPDO from node {fields['producer']} {obj}"
+    to = "".join(
+        f" -> node {d['node']} 0x{d['index']:04X}:{d['subindex']:02X}"
+        for d in fields.get("dispatched", ())
+    )
+    return f"MPDO from node {fields['producer']} {obj}{to}"

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import canopen
 import pytest
-from canopen.objectdictionary import UNSIGNED8, UNSIGNED32, ODRecord
+from canopen.objectdictionary import UNSIGNED8, UNSIGNED32, UNSIGNED64, ODRecord
 
 import cananalyze
 from tests.helpers.virtual_bus import sdo_download_frames, variable
@@ -99,3 +99,33 @@ def test_mpdo_in_text_and_jsonl(log):
     ]
     assert frames[2]["signals"] == {"obj_1017_00": 1000}
     assert "pdo_problem" in frames[4] and "signals" not in frames[4]
+
+
+def test_sam_value_dispatched_to_the_consumer_object(tmp_path):
+    """Node 6's object dispatching list (0x1FD0:1, written in the log) takes node 5's
+    0x2000:01..02 into its 0x6200:01..02 (a block of 2): a SAM frame's value is named and
+    typed as node 6's object (its CiA 401 profile), and the text says where it went."""
+    od = canopen.ObjectDictionary()
+    lst = ODRecord("Object dispatching list 1", 0x1FD0)
+    lst.add_member(variable(0x1FD0, 0, "Number of entries", UNSIGNED8, "rw", 1))
+    lst.add_member(variable(0x1FD0, 1, "Entry 1", UNSIGNED64, "rw", 0))
+    od.add_object(lst)
+    # block 2 | consumer 0x6200:01 | producer 0x2000:01 of node 5 (CiA 301 / lely's layout)
+    entry = (2 << 56) | (0x6200 << 40) | (0x01 << 32) | (0x2000 << 16) | (0x01 << 8) | PRODUCER
+    (frames,) = sdo_download_frames(6, od, [(0x1FD0, 1, entry, 8)], expedited=False)
+    (count,) = sdo_download_frames(PRODUCER, _od(), [(0x1A01, 0, 0xFE, 1)])
+    rows = [(0.1 + 0.001 * k, cid, data) for k, (cid, data) in enumerate(frames + count)]
+    rows += [
+        (1.0, 0x285, sam(PRODUCER, 0x2000, 2, b"\x81")),  # 0x2000:02 -> node 6's 0x6200:02
+        (1.1, 0x285, sam(PRODUCER, 0x2000, 3, b"\x07")),  # past the block: not dispatched
+    ]
+    log = tmp_path / "sam.log"
+    text = [f"({t:.6f}) can0 {cid:03X}#{data.hex().upper()}" for t, cid, data in rows]
+    log.write_text("\n".join(text) + "\n")
+    cap = cananalyze.load(log, device={6: "cia401"})
+    got = list(zip(cap.signals.t.round(3), cap.signals.signal, cap.signals.value, strict=True))
+    assert got == [(1.0, "digital_outputs_9_16", 0x81), (1.1, "obj_2000_03", 7)]
+    run = [sys.executable, "-m", "cananalyze", "decode", str(log), "--device", "6=cia401"]
+    out = subprocess.run(run, capture_output=True, text=True, check=True, cwd=ROOT).stdout
+    assert "TPDO2 MPDO from node 5 0x2000:02 -> node 6 0x6200:02  digital_outputs_9_16=129" in out
+    assert "TPDO2 MPDO from node 5 0x2000:03  obj_2000_03=7" in out
