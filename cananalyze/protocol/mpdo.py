@@ -34,7 +34,21 @@ FRAME_BYTES = 8
 VALUE_BYTE = 4  # the value starts here
 VALUE_BITS = 32
 ADDRESS_DAM = 0x80  # byte 0, bit 7
+SCANNER_FIRST, SCANNER_LAST = 0x1FA0, 0x1FCF  # object scanner lists (a SAM producer's)
 DISPATCH_FIRST, DISPATCH_LAST = 0x1FD0, 0x1FFF  # object dispatching lists (a consumer's)
+
+
+def object_name(index: int, subindex: int) -> tuple[str, int] | None:
+    """(name, data type) of a scanner or dispatching list entry, else None."""
+    for first, last, name in (
+        (SCANNER_FIRST, SCANNER_LAST, "Object scanner list"),
+        (DISPATCH_FIRST, DISPATCH_LAST, "Object dispatching list"),
+    ):
+        if first <= index <= last:
+            if subindex == 0:
+                return f"{name} {index - first + 1}: number of entries", 0x05
+            return f"{name} {index - first + 1}: entry {subindex}", 0x1B  # UNSIGNED64
+    return None
 
 
 def dispatched(entry: int, producer: int, index: int, subindex: int) -> tuple[int, int] | None:

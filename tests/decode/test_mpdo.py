@@ -129,3 +129,4 @@ def test_sam_value_dispatched_to_the_consumer_object(tmp_path):
     out = subprocess.run(run, capture_output=True, text=True, check=True, cwd=ROOT).stdout
     assert "TPDO2 MPDO from node 5 0x2000:02 -> node 6 0x6200:02  digital_outputs_9_16=129" in out
     assert "TPDO2 MPDO from node 5 0x2000:03  obj_2000_03=7" in out
+    assert "SDO write 0x1FD0:01 Object dispatching list 1: entry 1" in out
