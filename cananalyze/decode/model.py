@@ -340,7 +340,8 @@ class NetworkModel:
         COB-ID with the same length and every byte inverted (protocol/srdo.py). From the
         first frame of the batch on either COB-ID on, both are that SRDO's (and 0x001 the
         GFC): not unknown identifiers, and judged by the `srdo` rule (the inversion; its
-        times are not known). Frames no COB-ID table names are the only ones looked at."""
+        times are not known). Frames no COB-ID table names are the only ones looked at,
+        and not on an identifier the network file or a DBC declares."""
         svc = batch.service
         other = np.flatnonzero(svc == Service.OTHER)
         if other.size < 2:
@@ -349,6 +350,9 @@ class NetworkModel:
         ids = fb.can_id[other]
         near = (ids >= srdo_layout.FIRST_COB) & (ids <= srdo_layout.LAST_COB)
         near &= (fb.flags[other] & (FLAG_EXT | FLAG_ERR | FLAG_RTR)) == 0
+        if self.spec.known_cob_ids:  # the user's (or a DBC's) identifiers are not SRDOs
+            declared = np.fromiter(self.spec.known_cob_ids, np.int64, len(self.spec.known_cob_ids))
+            near &= ~np.isin(ids, declared)
         rows = other[near]
         if rows.size < 2:
             return

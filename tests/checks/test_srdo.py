@@ -342,3 +342,12 @@ def test_live_tick_reports_an_overdue_pair_once(tmp_path):
     normal, inverted = srdo_pair(9)
     out = decoder.decode(from_rows([(1.3, NORMAL, normal), (1.3005, INVERTED, inverted)]))
     assert not [f for f in out.findings.findings() if f.rule == "srdo"]
+
+
+def test_declared_identifiers_are_not_taken_for_an_srdo(tmp_path, config_frames):
+    """known_cob_ids in the network file: the pair pattern there is that traffic, not SRDO."""
+    (tmp_path / "net.toml").write_text(f"known_cob_ids = [{NORMAL}, {INVERTED}]\n")
+    rows = [r for r in _stream(config_frames) if r[1] in (NORMAL, INVERTED)]
+    cap = cananalyze.load(_log(tmp_path, rows), network=tmp_path / "net.toml")
+    assert cap.findings.empty and cap.signals.empty
+    assert set(cap.frames.service.astype(str)) == {"other"}
