@@ -351,3 +351,24 @@ def test_declared_identifiers_are_not_taken_for_an_srdo(tmp_path, config_frames)
     cap = cananalyze.load(_log(tmp_path, rows), network=tmp_path / "net.toml")
     assert cap.findings.empty and cap.signals.empty
     assert set(cap.frames.service.astype(str)) == {"other"}
+
+
+def test_srdo_from_the_eds(tmp_path):
+    """The SRDO in node 5's EDS (written by python-canopen's export_od), its COB-IDs the
+    stored defaults 0x0FF/0x100 that CANopenNode adds 2 x node-ID to (CO_SRDO.c lines
+    467-473): 0x109/0x10A on node 5. No SDO in the log."""
+    from canopen.objectdictionary import export_od
+
+    od = _od()
+    od[0x1301][1].default, od[0x1301][2].default, od[0x1301][3].default = 1, SCT_MS, SRVT_MS
+    od[0x1381][0].default = 2
+    od[0x1381][1].default, od[0x1381][2].default = 0x20000110, 0x20010110
+    eds = tmp_path / "srdo.eds"
+    export_od(od, str(eds), doc_type="eds")
+    rows = [r for r in _stream([]) if r[1] in (NORMAL, INVERTED)]
+    rows = [r for r in rows if not 1.099 < r[0] < 1.101]  # pair 5 lost
+    cap = cananalyze.load(_log(tmp_path, rows), eds={NODE: str(eds)})
+    assert list(cap.signals.value) == [0x1234 + k for k in range(10) if k != 5]
+    f = cap.findings
+    assert list(f.rule) == ["srdo"] and "refresh time SCT 20 ms" in f.message[0]
+    assert f["basis"][0] == "0x1301:2 profile default"
