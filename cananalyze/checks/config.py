@@ -15,6 +15,7 @@ from typing import Protocol
 import numpy as np
 
 from cananalyze.protocol.pdo_map import PdoConfig
+from cananalyze.protocol.srdo import SrdoConfig
 
 
 class ConfigSource(Protocol):
@@ -51,6 +52,9 @@ class ConfigSource(Protocol):
 
     def pdo_params(self, cob_id: int, t: float) -> tuple[int, PdoConfig] | None:
         """(node, PdoConfig) of the PDO using this COB-ID."""
+
+    def srdo_params(self, cob_id: int, t: float) -> tuple[SrdoConfig, bool] | None:
+        """The SRDO using this COB-ID at t, and whether as its inverted frame."""
 
     def emcy_inhibit_100us(self, node: int, t: float) -> float | None:
         """EMCY inhibit time 0x1015, in 100 us (0 = none)."""

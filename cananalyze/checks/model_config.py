@@ -20,6 +20,7 @@ from cananalyze.config.timeline import EVERY_NODE
 from cananalyze.core.finding import rel_time
 from cananalyze.decode.model import NetworkModel
 from cananalyze.protocol.pdo_map import PdoConfig
+from cananalyze.protocol.srdo import SrdoConfig
 
 
 class ModelConfig:
@@ -150,6 +151,9 @@ class ModelConfig:
     def pdo_params(self, cob_id: int, t: float) -> tuple[int, PdoConfig] | None:
         b = self.model.binding_at(cob_id, t)
         return None if b is None else (b.node, b.config)
+
+    def srdo_params(self, cob_id: int, t: float) -> tuple[SrdoConfig, bool] | None:
+        return self.model.srdo_at(cob_id, t)
 
     def emcy_inhibit_100us(self, node: int, t: float) -> float | None:
         v = self._value(node, 0x1015, 0, t)

@@ -25,6 +25,7 @@ from cananalyze.checks.rules.pdo_state import PdoStateRule
 from cananalyze.checks.rules.pdo_sync import PdoSyncRule
 from cananalyze.checks.rules.pdo_valid import PdoValidRule
 from cananalyze.checks.rules.sdo import SdoRule
+from cananalyze.checks.rules.srdo import SrdoRule
 from cananalyze.checks.rules.sync import SyncRule
 from cananalyze.checks.rules.unknown_cobid import UnknownCobIdRule
 
@@ -44,6 +45,7 @@ RULES: dict[str, type[Rule]] = {
         PdoValidRule,
         UnknownCobIdRule,
         ConsistencyRule,
+        SrdoRule,
         EmcyRule,
         SdoRule,
         ErrorFrameRule,

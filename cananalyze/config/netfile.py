@@ -21,6 +21,7 @@ from cananalyze.core.text import printable
 from cananalyze.devices.builtin import load_builtin
 from cananalyze.devices.catalog import device_keys
 from cananalyze.devices.profile import load_eds
+from cananalyze.protocol import srdo as srdo_layout
 from cananalyze.protocol.pdo_map import COB_ID_INVALID
 
 TOP_KEYS = {"bitrate", "nodes", "sync", "known_cob_ids"}
@@ -37,7 +38,15 @@ NODE_KEYS = {
     "rpdo",
     "sdo_channels",
     "signals",
+    "srdo",
 }
+# [nodes.N.srdo.K] (CiA 304, protocol/srdo.py): key -> (communication sub-index, highest value)
+SRDO_OBJECTS = {
+    "sct_ms": (srdo_layout.SUB_SCT, 0xFFFF),
+    "srvt_ms": (srdo_layout.SUB_SRVT, 0xFF),
+}
+SRDO_KEYS = {"direction", "cob_id", "mapping", *SRDO_OBJECTS}
+SRDO_DIRECTIONS = {"tx": 1, "rx": 2}
 SIGNAL_KEYS = {"name", "unit", "scale", "offset"}
 PDO_KEYS = {
     "cob_id",
@@ -132,6 +141,44 @@ def _pdo(raw, lines: Lines, where: tuple) -> dict:
     return out
 
 
+def _srdo(raw, lines: Lines, where: tuple, number: int, node: int) -> dict:
+    """One SRDO's parameters: direction, SCT, SRVT, the normal COB-ID (the inverted one is
+    the next: CANopenNode's CO_SRDO_config requires it) and the mapping, whose entries
+    alternate between the normal and the inverted frame's objects."""
+    raw = _table(raw, lines, where, "of SRDO parameters")
+    _known(raw, SRDO_KEYS, lines, where, "SRDO parameter")
+    direction = raw.get("direction", "tx")
+    if direction not in SRDO_DIRECTIONS:
+        raise lines.error((*where, "direction"), f"expected tx or rx, got {direction!r}")
+    out: dict = {"direction": SRDO_DIRECTIONS[direction]}
+    for key, (_, high) in SRDO_OBJECTS.items():
+        if key in raw:
+            out[key] = integer(raw[key], lines, (*where, key), 0, high)
+    default = srdo_layout.default_cob_ids(node) if number == 1 else None
+    if "cob_id" in raw:
+        cob = integer(raw["cob_id"], lines, (*where, "cob_id"), 1, 0x7FF)
+        if not (srdo_layout.FIRST_COB <= cob < srdo_layout.LAST_COB and cob % 2):
+            raise lines.error(
+                (*where, "cob_id"), f"0x{cob:03X}: an SRDO's normal COB-ID is odd, 0x101-0x17F"
+            )
+        out["cob_id"] = cob
+    elif default is not None:
+        out["cob_id"] = default[0]
+    else:
+        raise lines.error(where, f"srdo {number} needs a cob_id (only SRDO 1 has a default)")
+    if "mapping" in raw:
+        entries = raw["mapping"]
+        if not isinstance(entries, list) or len(entries) % 2 or len(entries) > 16:
+            raise lines.error(
+                (*where, "mapping"),
+                "expected a list of an even number of entries (at most 16), normal then inverted",
+            )
+        out["mapping"] = [
+            _map_word(v, lines, (*where, "mapping", str(i))) for i, v in enumerate(entries)
+        ]
+    return out
+
+
 def _number(value, lines: Lines, where: tuple) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise lines.error(where, f"expected a number, got {value!r}")
@@ -211,6 +258,12 @@ def _node(raw, node: int, base: Path, lines: Lines, where: tuple, how: str) -> d
             w = (*where, direction)
             table = _table(raw[direction], lines, w, "keyed by PDO number")
             out[direction] = _keyed(table, lines, w, 1, 512, lambda v, at, _: _pdo(v, lines, at))
+    if "srdo" in raw:
+        w = (*where, "srdo")
+        table = _table(raw["srdo"], lines, w, "keyed by SRDO number")
+        out["srdo"] = _keyed(
+            table, lines, w, 1, srdo_layout.COUNT, lambda v, at, k: _srdo(v, lines, at, k, node)
+        )
     if "signals" in raw:
         out["signals"] = _signals(raw["signals"], lines, (*where, "signals"))
     if "sdo_channels" in raw:
@@ -321,6 +374,19 @@ def _node_spec(node: int, raw: dict) -> NodeSpec:
             spec.writes += _pdo_writes(params, direction, number, node, profile)
             if "length" in params:
                 spec.pdo_lengths[("tx" if direction == "tpdo" else "rx", number)] = params["length"]
+    for number, params in sorted(raw.get("srdo", {}).items()):
+        comm = srdo_layout.COMM_BASE + number - 1
+        mapping = srdo_layout.MAP_BASE + number - 1
+        spec.writes.append((comm, srdo_layout.SUB_DIRECTION, params["direction"]))
+        for key, (sub, _) in SRDO_OBJECTS.items():
+            if key in params:
+                spec.writes.append((comm, sub, params[key]))
+        spec.writes.append((comm, srdo_layout.SUB_NORMAL, params["cob_id"]))
+        spec.writes.append((comm, srdo_layout.SUB_INVERTED, params["cob_id"] + 1))
+        if "mapping" in params:
+            words = params["mapping"]
+            spec.writes += [(mapping, i + 1, w) for i, w in enumerate(words)]
+            spec.writes.append((mapping, 0, len(words)))
     spec.sdo_channels = list(raw.get("sdo_channels", ()))
     for key, one in raw.get("signals", {}).items():
         index, sub = (int(x, 16) for x in key.split(":"))

@@ -12,7 +12,9 @@ from dataclasses import dataclass, field, replace
 from typing import Literal
 
 from cananalyze.devices.profile import DeviceProfile
+from cananalyze.protocol import srdo as srdo_layout
 from cananalyze.protocol.datatypes import DUMMY_INDICES
+from cananalyze.protocol.mpdo import MODES as MPDO_MODES
 from cananalyze.protocol.pdo_map import (
     COB_ID_INVALID,
     MapEntry,
@@ -40,7 +42,37 @@ _UINT_BY_BITS = {
 UNKNOWN_TYPE = 255
 
 # Which part of the model a write touched: the model re-binds COB-IDs for these.
-TOUCHES_COB_IDS = {"pdo", "emcy", "sync", "context"}
+TOUCHES_COB_IDS = {"pdo", "emcy", "sync", "context", "srdo"}
+
+
+@dataclass
+class SrdoState:
+    """Raw communication and mapping parameters of one SRDO (protocol/srdo.py's layout)."""
+
+    number: int
+    direction: int = 0  # sub 1: 0 not used (until a write or the profile says)
+    sct: int = 0  # sub 2, ms
+    srvt: int = 0  # sub 3, ms
+    cob_normal: int | None = None  # sub 5
+    cob_inverted: int | None = None  # sub 6
+    count: int = 0
+    words: dict[int, int] = field(default_factory=dict)  # mapping sub-index -> 0xIIIISSLL
+
+    def set(self, sub: int, value: int) -> bool:
+        """Follow one communication parameter value; False for a sub-index not followed."""
+        if sub == srdo_layout.SUB_DIRECTION:
+            self.direction = value
+        elif sub == srdo_layout.SUB_SCT:
+            self.sct = value
+        elif sub == srdo_layout.SUB_SRVT:
+            self.srvt = value
+        elif sub == srdo_layout.SUB_NORMAL:
+            self.cob_normal = value
+        elif sub == srdo_layout.SUB_INVERTED:
+            self.cob_inverted = value
+        else:
+            return False
+        return True
 
 
 @dataclass
@@ -113,6 +145,7 @@ class NodeConfig:
     emcy_cob_raw: int | None = None  # 0x1014
     context: dict[tuple[int, int], int] = field(default_factory=dict)  # unit-changing objects
     sdo_channels: list[tuple[int, int]] = field(default_factory=list)  # (request, response) COB-IDs
+    srdos: dict[int, SrdoState] = field(default_factory=dict)  # SRDO number -> parameters
     # the network file's `signals`: (index, subindex) -> name, unit, scale, offset
     signals: dict[tuple[int, int], dict] = field(default_factory=dict)
 
@@ -145,6 +178,20 @@ class NodeConfig:
                     if isinstance(word, int):
                         state.words[sub] = word
                 cfg.pdos[(direction, n + 1)] = state
+        for k in range(srdo_layout.COUNT):
+            comm = srdo_layout.COMM_BASE + k
+            if profile.value(comm, srdo_layout.SUB_DIRECTION, node) is None:
+                continue
+            state = cfg.srdo(k + 1)
+            for sub in srdo_layout.COMM:
+                value = profile.value(comm, sub, node)
+                if isinstance(value, int):
+                    state.set(sub, value)
+            state.count = int(profile.value(srdo_layout.MAP_BASE + k, 0, node) or 0)
+            for sub in range(1, 17):
+                word = profile.value(srdo_layout.MAP_BASE + k, sub, node)
+                if isinstance(word, int):
+                    state.words[sub] = word
         for attr, index in (("sync_cob_raw", 0x1005), ("emcy_cob_raw", 0x1014)):
             value = profile.value(index, 0, node)
             if isinstance(value, int):
@@ -166,13 +213,52 @@ class NodeConfig:
             self.pdos[(direction, number)] = state
         return state
 
+    def srdo(self, number: int) -> SrdoState:
+        state = self.srdos.get(number)
+        if state is None:
+            state = self.srdos[number] = SrdoState(number)
+        return state
+
+    def srdo_config(self, state: SrdoState) -> srdo_layout.SrdoConfig | None:
+        """The decoder's view of one SRDO, None while it is not in use or its COB-IDs are not
+        known. The mapping: the normal frame's objects (odd sub-indices), none while an
+        entry is not known; the data length of each frame from it."""
+        if state.direction not in (1, 2):
+            return None
+        if state.cob_normal is None or state.cob_inverted is None:
+            return None
+        normal, inverted = srdo_layout.effective_cob_ids(
+            self.node, state.number, state.cob_normal, state.cob_inverted
+        )
+        mapping: list[MapEntry] = []
+        length: int | None = None
+        words = [state.words.get(sub) for sub in range(1, state.count + 1)]
+        if state.count and None not in words:
+            for word in words[0::2]:
+                mapping.extend(entries_for(self.profile, word, self.context))  # type: ignore[arg-type]
+            length = (sum(e.bits for e in mapping) + 7) // 8
+            if self.signals:
+                mapping = [_shown_as(e, self.signals.get((e.index, e.subindex))) for e in mapping]
+        return srdo_layout.SrdoConfig(
+            self.node,
+            state.number,
+            state.direction,
+            state.sct,
+            state.srvt,
+            normal,
+            inverted,
+            tuple(mapping),
+            length,
+        )
+
     def pdo_config(self, state: PdoState) -> PdoConfig:
         """The decoder's view of one PDO: mapping entries with names and units in force.
 
         A mapping with an entry not known yet (a master reads 0x1A0x:0, then each entry,
         while the PDO runs) is not known at all: a part of it would be a wrong length."""
         mapping: list[MapEntry] = []
-        for sub in range(1, state.count + 1):
+        mpdo = MPDO_MODES.get(state.count)
+        for sub in range(1, 0 if mpdo else state.count + 1):
             word = state.words.get(sub)
             if word is None:
                 mapping = []
@@ -192,6 +278,7 @@ class NodeConfig:
             mapping,
             state.length,
             assumed=state.assumed,
+            mpdo=mpdo,
         )
 
     def apply(self, index: int, sub: int, value: int) -> str | None:
@@ -220,6 +307,17 @@ class NodeConfig:
                 state.words[sub] = value
                 state.assumed = False
             return "pdo"
+        number = srdo_layout.comm_number(index)
+        if number is not None:
+            return "srdo" if self.srdo(number).set(sub, value) else None
+        number = srdo_layout.map_number(index)
+        if number is not None:
+            state = self.srdo(number)
+            if sub == 0:
+                state.count = value
+            else:
+                state.words[sub] = value
+            return "srdo"
         if (index, sub) in self.context_objects():
             self.context[(index, sub)] = value
             return "context"

@@ -25,14 +25,16 @@ import numpy as np
 from cananalyze.config.node_config import TOUCHES_COB_IDS, NodeConfig
 from cananalyze.config.spec import NetworkSpec
 from cananalyze.config.timeline import ConfigChange, Timeline
-from cananalyze.core.frames import FLAG_ERR, FLAG_EXT
+from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from cananalyze.core.records import DecodedBatch
 from cananalyze.decode.node_tally import IDENTITY
 from cananalyze.devices.builtin import identify
+from cananalyze.protocol import srdo as srdo_layout
 from cananalyze.protocol.cobid import NO_NODE, CobClassifier
 from cananalyze.protocol.comm_objects import comm_object
 from cananalyze.protocol.pdo_map import PdoConfig, split_cob_id
 from cananalyze.protocol.services import Service
+from cananalyze.protocol.srdo import SrdoConfig
 
 NOT_VALID = (
     "is not valid (COB-ID bit 31 set)"  # PdoBinding.problem; the pdo_not_valid rule looks for it
@@ -95,6 +97,8 @@ class NetworkModel:
         self.nodes: dict[int, NodeConfig] = {}
         self.timeline = Timeline()  # the values the log showed, and the resets
         self._early: dict[int, tuple[dict, set[int] | None]] = {}  # identify_now's, by id
+        # nodes whose SRDO 1 the log showed on its default COB-IDs (`_seen_srdos`)
+        self._seen_srdo: set[int] = set()
         self._file = {
             (node, index, sub): value
             for node, ns in self.spec.nodes.items()
@@ -106,6 +110,11 @@ class NetworkModel:
         self.binding_log: list[dict[int, PdoBinding]] = []
         # Bindings in force within the current batch: (first row, bindings), ascending.
         self.segments: list[tuple[int, dict[int, PdoBinding]]] = [(0, {})]
+        # SRDOs in force: COB-ID -> (its SRDO, whether it is the inverted frame's), and the
+        # same after every change (times ascending), for the rows and the rule's judgement
+        self.srdo_bindings: dict[int, tuple[SrdoConfig, bool]] = {}
+        self.srdo_times: list[float] = []
+        self.srdo_log: list[dict[int, tuple[SrdoConfig, bool]]] = []
         self.classifier: CobClassifier | None = None
         self._assigned: dict[int, tuple[int, int, int]] = {}
         # (node, index, subindex) -> object_info answer; cleared when a node's profile changes
@@ -127,7 +136,21 @@ class NetworkModel:
                 cfg.pdo(direction, number).length = length  # type: ignore[arg-type]
             cfg.sdo_channels = list(ns.sdo_channels)
             cfg.signals = ns.signals
+        if node in self._seen_srdo:
+            self._adopt_seen_srdo(cfg)
         return cfg
+
+    @staticmethod
+    def _adopt_seen_srdo(cfg: NodeConfig) -> bool:
+        """A node's SRDO 1 as a pair on its default COB-IDs shows it: produced, its times
+        not known (not judged), unless something configured it (False then)."""
+        state = cfg.srdo(1)
+        cobs = srdo_layout.default_cob_ids(cfg.node)
+        if cobs is None or state.direction or state.cob_normal is not None:
+            return False
+        state.direction = 1
+        state.cob_normal, state.cob_inverted = cobs
+        return True
 
     # --- wiring ------------------------------------------------------------------
     def bind(self, classifier: CobClassifier) -> None:
@@ -254,6 +277,16 @@ class NetworkModel:
         k = bisect.bisect_right(self.binding_times, t) - 1
         return self.binding_log[max(k, 0)].get(cob_id) if self.binding_log else None
 
+    def srdo_at(self, cob_id: int, t: float) -> tuple[SrdoConfig, bool] | None:
+        """The SRDO a COB-ID carried at time t, and whether as its inverted frame."""
+        k = bisect.bisect_right(self.srdo_times, t) - 1
+        return self.srdo_log[max(k, 0)].get(cob_id) if self.srdo_log else None
+
+    def srdo_log_index(self, t: np.ndarray) -> np.ndarray:
+        """Per time: the index in `srdo_log` of the SRDO bindings in force."""
+        k = np.searchsorted(np.asarray(self.srdo_times, np.float64), t, side="right") - 1
+        return np.maximum(k, 0)
+
     def binding(self, cob_id: int) -> PdoBinding | None:
         return self.bindings.get(cob_id)
 
@@ -299,6 +332,53 @@ class NetworkModel:
                 self.segments.append((start, self.bindings))
             if changed and start < n:
                 self._reclassify(batch, start, changed)
+        self._seen_srdos(batch)
+
+    def _seen_srdos(self, batch: DecodedBatch) -> None:
+        """SRDOs nothing configured, known by their pattern: a frame on a node's default
+        SRDO 1 COB-ID (0x0FF + 2 * node-ID) whose next frame on 0x101-0x180 is on the next
+        COB-ID with the same length and every byte inverted (protocol/srdo.py). From the
+        first frame of the batch on either COB-ID on, both are that SRDO's (and 0x001 the
+        GFC): not unknown identifiers, and judged by the `srdo` rule (the inversion; its
+        times are not known). Frames no COB-ID table names are the only ones looked at,
+        and not on an identifier the network file or a DBC declares."""
+        svc = batch.service
+        other = np.flatnonzero(svc == Service.OTHER)
+        if other.size < 2:
+            return
+        fb = batch.frames
+        ids = fb.can_id[other]
+        near = (ids >= srdo_layout.FIRST_COB) & (ids <= srdo_layout.LAST_COB)
+        near &= (fb.flags[other] & (FLAG_EXT | FLAG_ERR | FLAG_RTR)) == 0
+        if self.spec.known_cob_ids:  # the user's (or a DBC's) identifiers are not SRDOs
+            declared = np.fromiter(self.spec.known_cob_ids, np.int64, len(self.spec.known_cob_ids))
+            near &= ~np.isin(ids, declared)
+        rows = other[near]
+        if rows.size < 2:
+            return
+        ids = fb.can_id[rows].astype(np.int64)
+        a, b = rows[:-1], rows[1:]
+        dlc = fb.dlc[a]
+        pair = (ids[:-1] % 2 == 1) & (ids[1:] == ids[:-1] + 1) & (fb.dlc[b] == dlc) & (dlc > 0)
+        k = np.flatnonzero(pair)
+        if k.size == 0:
+            return
+        k = k[~srdo_layout.not_inverted(fb.data[a[k], :8], fb.data[b[k], :8], dlc[k])]
+        first = len(batch)
+        for cob in np.unique(ids[:-1][k]).tolist():
+            node = srdo_layout.default_owner(cob)
+            if node is None or node in self._seen_srdo:
+                continue
+            self._seen_srdo.add(node)
+            if self._adopt_seen_srdo(self.config_at(node)):
+                first = min(first, int(rows[np.flatnonzero((ids == cob) | (ids == cob + 1))[0]]))
+        if first == len(batch):
+            return
+        t = float(fb.t[first])
+        self._rebind(max(t, self.srdo_times[-1]) if self.srdo_times else t)
+        changed = self._sync_classifier()
+        if changed:
+            self._reclassify(batch, first, changed)
 
     def finish(self, batch: DecodedBatch) -> None:
         self.segments = [(0, self.bindings)]
@@ -461,6 +541,26 @@ class NetworkModel:
             self.bindings = valid
             self.binding_times.append(t)
             self.binding_log.append(valid)
+        self._rebind_srdo(t)
+
+    def _rebind_srdo(self, t: float) -> None:
+        """The SRDOs in force: each in-use SRDO's two COB-IDs, the producer's parameters
+        first (a consumer's, with the same COB-IDs, only where no producer's are known)."""
+        found: dict[int, tuple[SrdoConfig, bool]] = {}
+        configs = [
+            c
+            for node, cfg in sorted(self.nodes.items())
+            for _, state in sorted(cfg.srdos.items())
+            if (c := cfg.srdo_config(state)) is not None
+        ]
+        configs.sort(key=lambda c: c.direction != 1)  # producers first, stable
+        for c in configs:
+            found.setdefault(c.cob_normal, (c, False))
+            found.setdefault(c.cob_inverted, (c, True))
+        if found != self.srdo_bindings or not self.srdo_log:
+            self.srdo_bindings = found
+            self.srdo_times.append(t)
+            self.srdo_log.append(found)
 
     def _wanted(self) -> dict[int, tuple[int, int, int]]:
         out: dict[int, tuple[int, int, int]] = {}
@@ -474,6 +574,10 @@ class NetworkModel:
         for cob, b in self.bindings.items():
             if b.problem is None:
                 out[cob] = (Service.TPDO if b.kind == "tpdo" else Service.RPDO, b.node, b.number)
+        for cob, (c, inverted) in self.srdo_bindings.items():
+            out[cob] = (Service.SRDO_INVERTED if inverted else Service.SRDO, c.node, c.number)
+        if self.srdo_bindings:  # a safety bus: 0x001 is its global fail-safe command
+            out[srdo_layout.GFC_COB_ID] = (Service.GFC, NO_NODE, 0)
         return out
 
     def _sync_classifier(self) -> set[int]:

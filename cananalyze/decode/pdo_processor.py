@@ -11,13 +11,20 @@ from __future__ import annotations
 
 import numpy as np
 
+from cananalyze.config.node_config import entries_for
 from cananalyze.core.columns.order import stable_order
 from cananalyze.core.frames import FLAG_RTR
 from cananalyze.core.records import DecodedBatch, SignalBlock
 from cananalyze.decode.model import NetworkModel
 from cananalyze.devices.words import WORDED
+from cananalyze.protocol import mpdo
+from cananalyze.protocol.datatypes import DATA_TYPES
 from cananalyze.protocol.pdo import decode_pdo, words_of
+from cananalyze.protocol.pdo_map import MapEntry
 from cananalyze.protocol.services import Service
+
+# an MPDO's first 4 bytes (address, index, sub-index) as a dummy UNSIGNED32 entry
+_MPDO_HEAD = MapEntry(0x0007, 0, 32, "mpdo_head", 0x07)
 
 
 class PdoDecoder:
@@ -68,11 +75,104 @@ class PdoDecoder:
             if binding is None:
                 continue
             group = rows[order[a:b]]
-            if binding.config.assumed and binding.config.mapping:
+            if binding.config.mpdo:
+                self._decode_mpdo(batch, group, binding)
+            elif binding.config.assumed and binding.config.mapping:
                 self._decode_assumed(batch, group, binding)
             else:
                 self._decode_group(batch, group, binding)
         self._words = None  # not kept past the batch
+
+    def _decode_mpdo(self, batch: DecodedBatch, group: np.ndarray, binding) -> None:
+        """MPDO frames (protocol/mpdo.py): one signal block per address and object, its
+        value named and typed by the object's node (the destination of a DAM frame, the
+        producer of a SAM one; the PDO's node for a DAM frame to all nodes)."""
+        fb = batch.frames
+        name = f"{binding.kind.upper()}{binding.number}"
+        dlc = fb.dlc[group]
+        short = dlc < mpdo.FRAME_BYTES
+        if short.any():
+            have = ",".join(map(str, sorted(set(dlc[short].tolist()))))
+            what = f"DLC {have} shorter than the 8 bytes of an MPDO ({name}): not decoded"
+            batch.row_notes.append((group[short], {"pdo_problem": what}))
+            group = group[~short]
+        if group.size == 0:
+            return
+        if self._words is None or self._words[0] is not fb:
+            self._words = (fb, words_of(fb.data))
+        cols = mpdo.split(fb.data[group])
+        key = (cols.dam.astype(np.int64) << 40) | (cols.node.astype(np.int64) << 32)
+        key |= (cols.index << 8) | cols.subindex
+        for k in np.unique(key).tolist():
+            at = group[key == k]
+            dam, node = bool(k >> 40), (k >> 32) & 0x7F
+            index, sub = (k >> 8) & 0xFFFF, k & 0xFF
+            note = mpdo.fields(dam, node, index, sub)
+            targets = [] if dam else self._dispatch(node, index, sub, float(fb.t[at[0]]))
+            if targets:
+                note["dispatched"] = [{"node": c, "index": i, "subindex": j} for c, i, j in targets]
+            if len(targets) == 1:  # the value as the consumer's object it becomes
+                owner, index, sub = targets[0]
+            else:
+                owner = node if node else binding.node
+            entry = self._mpdo_entry(owner, index, sub)
+            out = decode_pdo(None, fb.dlc[at], [_MPDO_HEAD, entry], words=self._words[1][at])
+            batch.row_notes.append((at, {"mpdo": note}))
+            batch.signals.append(
+                SignalBlock(
+                    rows=at,
+                    node=binding.node,
+                    pdo=f"{binding.kind}{binding.number}",
+                    cob_id=int(fb.can_id[at[0]]),
+                    columns=dict(out.values),
+                    units={n: entry.unit for n in out.values},
+                    mapped_bytes=mpdo.FRAME_BYTES,
+                    objects={n: (index, sub) for n in out.values},
+                )
+            )
+
+    def _dispatch(
+        self, producer: int, index: int, sub: int, t: float
+    ) -> list[tuple[int, int, int]]:
+        """The consumers' objects a SAM frame's object is dispatched to at t: (node, index,
+        sub-index) of every object dispatching list entry (0x1FD0-0x1FFF, within its count
+        where known) the log, the network file or a profile gives that names it."""
+        model = self.model
+        out = []
+        for node in sorted(model.nodes):
+            for lst in range(mpdo.DISPATCH_FIRST, mpdo.DISPATCH_LAST + 1):
+                subs = model.subindices(node, lst)
+                if not subs:
+                    continue
+                count = model.known(node, lst, 0, t)
+                for s in subs:
+                    if count is not None and s > count.value:
+                        continue
+                    entry = model.known(node, lst, s, t)
+                    hit = (
+                        None
+                        if entry is None
+                        else mpdo.dispatched(entry.value, producer, index, sub)
+                    )
+                    if hit is not None:
+                        out.append((node, *hit))
+        return out
+
+    def _mpdo_entry(self, node: int, index: int, sub: int) -> MapEntry:
+        """How an MPDO's value shows: the object as the node's profile (else CiA 301's
+        common objects) names and types it, at most the frame's 32 bits; else UNSIGNED32."""
+        info = self.model.object_info(node, index, sub)
+        dtype = DATA_TYPES.get(info[1]) if info is not None else None
+        if dtype is not None and 0 < dtype.bits <= mpdo.VALUE_BITS:
+            bits, code = dtype.bits, dtype.code
+        else:
+            bits, code = mpdo.VALUE_BITS, 0x07  # UNSIGNED32: the bytes as they are
+        cfg = self.model.nodes.get(node)
+        if cfg is not None and cfg.profile is not None:
+            found = entries_for(cfg.profile, (index << 16) | (sub << 8) | bits, cfg.context)
+            if len(found) == 1:
+                return found[0]
+        return MapEntry(index, sub, bits, f"obj_{index:04x}_{sub:02x}", code)
 
     def _decode_assumed(self, batch: DecodedBatch, group: np.ndarray, binding) -> None:
         """A profile's default mapping: each frame decoded by the entries its length holds

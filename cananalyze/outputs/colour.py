@@ -27,6 +27,9 @@ SERVICE = {
     "lss_slave": "\033[35m",
     "error_frame": "\033[1;31m",
     "errctl_invalid": "\033[33m",  # malformed: noticed, not alarming
+    "srdo": "\033[1;36m",
+    "srdo_inverted": "\033[2;36m",
+    "gfc": "\033[1;31m",
     "other": "\033[2m",
 }
 SEVERITY = {"error": "\033[1;31m", "warning": "\033[33m", "info": "\033[2m"}

@@ -149,7 +149,12 @@ FRAMES = Table(
             nullable=False,
         ),
         Column("node", "the node-ID (null: none)", pa.int16(), ("int16", "Int16")),
-        Column("pdo", "the PDO number (null: not a PDO)", pa.int8(), ("int8", "Int8")),
+        Column(
+            "pdo",
+            "the PDO number, or the SRDO number of an srdo/srdo_inverted frame (null: neither)",
+            pa.int8(),
+            ("int8", "Int8"),
+        ),
     ),
 )
 
@@ -159,7 +164,12 @@ SIGNALS = Table(
     (
         Column("t", "the frame's time", pa.float64(), ("float64", "float64")),
         Column("node", "the node-ID", pa.int16(), ("int16", "int16")),
-        Column("pdo", "tpdoN / rpdoN, or the DBC message's name", CODED, ("categorical", "")),
+        Column(
+            "pdo",
+            "tpdoN / rpdoN / srdoN (an SRDO pair's normal frame), or the DBC message's name",
+            CODED,
+            ("categorical", ""),
+        ),
         Column("cob_id", "the frame's COB-ID", pa.uint32(), ("uint32", "uint32")),
         Column("signal", "the signal's name", CODED, ("categorical", "")),
         Column(

@@ -354,6 +354,7 @@ def build_decoder(
     from cananalyze.decode.pdo_processor import PdoDecoder
     from cananalyze.decode.sdo.processor import SdoProcessor
     from cananalyze.decode.sdo.tracker import SdoTracker
+    from cananalyze.decode.srdo_processor import SrdoDecoder
 
     opts = opts or Options()
     dbc = None
@@ -376,6 +377,7 @@ def build_decoder(
         model,
         PdoDecoder(model, skip),
         EmcyDecoder(model),
+        SrdoDecoder(model, skip),
     ]
     if dbc:
         from cananalyze.decode.dbc_processor import DbcDecoder

@@ -6,6 +6,9 @@ a read of 0x1018:01 is a vendor-ID on every CANopen device.
 
 from __future__ import annotations
 
+from cananalyze.protocol.mpdo import object_name as mpdo_object
+from cananalyze.protocol.srdo import object_name as srdo_object
+
 U8, U16, U32, VSTR = 0x05, 0x06, 0x07, 0x09
 
 # index -> (name, {subindex: (name, type)} or the type of every subindex >= 1)
@@ -87,4 +90,4 @@ def comm_object(index: int, subindex: int) -> tuple[str, int] | None:
             if subindex == 0:
                 return f"{label}{index - base + 1} mapping: number of entries", U8
             return f"{label}{index - base + 1} mapping: entry {subindex}", U32
-    return None
+    return srdo_object(index, subindex) or mpdo_object(index, subindex)  # 0x13xx, 0x1FA0+

@@ -10,7 +10,7 @@ row, for the rows it prints.
 
 from __future__ import annotations
 
-from cananalyze.protocol import emcy, error_frame, lss, nmt, pdo, sdo, sync
+from cananalyze.protocol import emcy, error_frame, lss, nmt, pdo, sdo, srdo, sync
 from cananalyze.protocol import time as time_of_day
 from cananalyze.protocol.services import Service
 
@@ -70,6 +70,10 @@ def annotation(service: int, node: int, pdo_number: int, fields: dict, rtr: bool
         return lss.text(fields, master=s is Service.LSS_MASTER)
     if s is Service.ERROR_FRAME:
         return error_frame.text(fields)
+    if s in (Service.SRDO, Service.SRDO_INVERTED):
+        return srdo.annotation(pdo_number, s is Service.SRDO_INVERTED, fields)
+    if s is Service.GFC:
+        return srdo.GFC_TEXT
     if fields.get("message"):  # a DBC message on an identifier CANopen does not use
         return f"{fields['message']}  {pdo.signals_text(fields)}"
     return fields.get("label", "not CANopen (predefined connection set)")

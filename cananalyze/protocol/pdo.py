@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cananalyze.protocol.datatypes import DATA_TYPES, DUMMY_INDICES
+from cananalyze.protocol.mpdo import text as mpdo_text
 from cananalyze.protocol.pdo_map import MapEntry
 
 
@@ -126,6 +127,8 @@ def decode_pdo(
 def annotation(tpdo: bool, number: int, rtr: bool, fields: dict) -> str:
     """'TPDO2  ch1=21.5 degC ch3=20.9 degC': a PDO frame, its decoded signals, its problem."""
     text = f"{'TPDO' if tpdo else 'RPDO'}{number}" + (" remote request" if rtr else "")
+    if fields.get("mpdo"):
+        text += " " + mpdo_text(fields["mpdo"])
     signals = fields.get("signals")
     if signals:
         text += "  " + signals_text(fields)

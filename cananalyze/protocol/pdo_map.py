@@ -44,6 +44,8 @@ class PdoConfig:
     # the mapping is a CiA 4xx profile's default, not the device's (devices/generic.py):
     # decoded as far as a frame reaches, its length not judged
     assumed: bool = False
+    # an MPDO (protocol/mpdo.py): "sam" or "dam" when the mapping's count is 0xFE / 0xFF
+    mpdo: str | None = None
 
     @property
     def bits(self) -> int:
@@ -55,6 +57,8 @@ class PdoConfig:
         else None (not known: nothing to check)."""
         if self.assumed:
             return None
+        if self.mpdo:
+            return 8  # CiA 301: every MPDO frame has 8 bytes (protocol/mpdo.py)
         if self.mapping:
             return (self.bits + 7) // 8
         return self.length

@@ -29,6 +29,11 @@ class Service(IntEnum):
     # a data frame on 0x701-0x77F that is not 1 byte: not a heartbeat, boot-up or guard
     # response (CiA 301), so it says nothing about any node's state
     ERRCTL_INVALID = 16
+    # CiA 304 (protocol/srdo.py): an SRDO's normal and inverted frames (the SRDO number in
+    # the classifier's `pdo` column), and the global fail-safe command on 0x001
+    SRDO = 17
+    SRDO_INVERTED = 18
+    GFC = 19
 
     @property
     def label(self) -> str:
@@ -53,6 +58,9 @@ SERVICE_NAMES: tuple[str, ...] = (
     "lss_slave",
     "error_frame",
     "errctl_invalid",
+    "srdo",
+    "srdo_inverted",
+    "gfc",
 )
 
 SERVICE_BY_NAME: dict[str, Service] = {name: Service(i) for i, name in enumerate(SERVICE_NAMES)}
@@ -70,6 +78,7 @@ SERVICE_GROUPS: dict[str, tuple[Service, ...]] = {
     ),
     "guard": (Service.GUARD_REQUEST, Service.GUARD_RESPONSE),
     "lss": (Service.LSS_MASTER, Service.LSS_SLAVE),
+    "safety": (Service.SRDO, Service.SRDO_INVERTED, Service.GFC),
 }
 
 

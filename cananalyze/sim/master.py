@@ -16,9 +16,9 @@ from dataclasses import dataclass, field
 from cananalyze.core.defaults import SDO_TIMEOUT
 from cananalyze.core.frames import FLAG_ERR, FLAG_RTR, FLAG_TX
 from cananalyze.protocol import sdo
+from cananalyze.protocol.crc import crc16
 from cananalyze.protocol.sdo import block_byte, initiate_byte, segment_byte
 from cananalyze.protocol.sync import next_counter
-from cananalyze.sim.crc import crc16
 from cananalyze.sim.engine import Simulation
 
 

@@ -13,6 +13,7 @@ import struct
 from dataclasses import dataclass, field
 
 from cananalyze.protocol import sdo
+from cananalyze.protocol.crc import crc16
 from cananalyze.protocol.sdo import (
     ABORT_BLOCK_SIZE,
     ABORT_COMMAND,
@@ -23,7 +24,6 @@ from cananalyze.protocol.sdo import (
     initiate_byte,
     segment_byte,
 )
-from cananalyze.sim.crc import crc16
 from cananalyze.sim.dictionary import Dictionary, SdoAbort
 
 BLOCK_SIZE = sdo.MAX_BLKSIZE  # segments per block the server accepts in block downloads

@@ -70,3 +70,36 @@ def od_info(od: canopen.ObjectDictionary):
         return obj.name, obj.data_type
 
     return info
+
+
+def sdo_download_frames(
+    node_id: int,
+    od: canopen.ObjectDictionary,
+    writes: list[tuple[int, int, int, int]],
+    expedited: bool = True,
+) -> list[list[tuple[int, bytes]]]:
+    """python-canopen's SDO client writes each (index, sub, value, size) to a LocalNode with
+    `od` over a virtual bus: each write's (COB-ID, data) frames, request and response (an
+    expedited download: two; `expedited=False`: every frame of all writes, as one list).
+    Untimed: the caller gives the times."""
+    channel = unique_channel("download")
+    server, client = canopen.Network(), canopen.Network()
+    server.connect(interface="virtual", channel=channel)
+    client.connect(interface="virtual", channel=channel)
+    recorder = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+    try:
+        server.add_node(canopen.LocalNode(node_id, od))
+        remote = patient_client(node_id)
+        client.add_node(remote)
+        for index, sub, value, size in writes:
+            remote.sdo.download(index, sub, value.to_bytes(size, "little"))
+        frames = drain(recorder)
+    finally:
+        client.disconnect()
+        server.disconnect()
+        recorder.shutdown()
+    out = [(m.arbitration_id, bytes(m.data)) for m in frames]
+    if not expedited:
+        return [out]
+    assert len(out) == 2 * len(writes)  # expedited: one request, one response each
+    return [out[k : k + 2] for k in range(0, len(out), 2)]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import struct
 
 from cananalyze.devices.builtin import load_builtin
-from cananalyze.sim.crc import crc16
+from cananalyze.protocol.crc import crc16
 from cananalyze.sim.dictionary import Dictionary
 from cananalyze.sim.sdo_server import SdoServer
 

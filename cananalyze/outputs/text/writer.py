@@ -74,6 +74,9 @@ _KEYED[
         Service.LSS_MASTER,
         Service.LSS_SLAVE,  # (not ERROR_FRAME: its classes are in the identifier)
         Service.ERRCTL_INVALID,
+        Service.SRDO,
+        Service.SRDO_INVERTED,
+        Service.GFC,
     ]
 ] = True
 _BYTE_MATTERS = np.zeros(256, bool)  # the first data byte changes the text
@@ -550,6 +553,8 @@ def _signal_text(
         return None  # NULs are the padding: such text goes the per-row way
     if int(svc[0]) in (Service.TPDO, Service.RPDO):
         lead = f"{'TPDO' if int(svc[0]) == Service.TPDO else 'RPDO'}{int(pdo[0])}  "
+    elif int(svc[0]) == Service.SRDO:
+        lead = f"SRDO{int(pdo[0])} normal  "
     else:
         lead = f"{sb.pdo}  "  # a DBC message on an identifier CANopen does not use
     for j, (name, col) in enumerate(sb.columns.items()):

@@ -1,4 +1,5 @@
-"""CRC-16 of SDO block transfers (CiA 301 7.2.4.3.16: CCITT polynomial 0x1021, initial 0).
+"""CRC-16 CCITT (polynomial 0x1021, initial 0): SDO block transfers (CiA 301 7.2.4.3.16) and
+SRDO configuration signatures (CiA 304: CANopenNode's 301/crc16-ccitt.c, used by 304/CO_SRDO.c).
 
 Hand-written because it is six lines; canopen keeps its own copy private.
 """
