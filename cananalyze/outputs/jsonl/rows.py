@@ -46,6 +46,17 @@ def frame_record(batch: DecodedBatch, i: int) -> dict:
     return rec
 
 
+def commissioning_lines(batch: DecodedBatch) -> bytes:
+    """The batch's boot stories and LSS steps (`kind` "boot", "lss"), after its other
+    lines: an LSS step in the batch whose frame ended it, each boot story at the end of
+    the log (it is judged there). A log of several buses names each one's `bus`."""
+    lines = [
+        dumps(c.record if c.bus is None else {**c.record, "bus": c.bus})
+        for c in batch.commissioning
+    ]
+    return ("\n".join(lines) + "\n").encode("utf-8") if lines else b""
+
+
 class JsonlWriter(Sink):
     """JSON lines of decoded batches: as columns where it can (`jsonl_columns`), else
     row by row; with `background`, finished and written by a worker thread
@@ -63,6 +74,8 @@ class JsonlWriter(Sink):
             rendered = render(batch, mask)
             if rendered is not None:
                 self._sink.put(rendered)
+                if batch.commissioning:
+                    self._sink.put(commissioning_lines(batch))
                 return
         by_row: dict[int, list[dict]] = {}
         records = batch.records_and_findings()
@@ -82,6 +95,8 @@ class JsonlWriter(Sink):
                 lines.append(dumps(rec))
         if lines:
             self._sink.put(("\n".join(lines) + "\n").encode("utf-8"))
+        if batch.commissioning:
+            self._sink.put(commissioning_lines(batch))
 
     def close(self) -> None:
         """Wait for the worker, if any; re-raise its error here."""
