@@ -419,6 +419,57 @@ class Capture:
         cols += ["verdict", "steps"]
         return pd.DataFrame.from_records([s.as_row() for s in stories], columns=cols)
 
+    def _bitrate(self, bitrate: int | None) -> int | None:
+        """The bitrate given, else the network file's (`bitrate = ...`)."""
+        if bitrate:
+            return bitrate
+        model = getattr(self.config, "model", None)
+        return getattr(getattr(model, "spec", None), "bitrate", None)
+
+    def bus_load_per_node(self, bitrate: int | None = None) -> pd.DataFrame:
+        """Per node (and `bus` on a log of several): the frames it sent itself (heartbeat,
+        TPDO, EMCY, SDO response, guard response, boot-up), their nominal bits, and its
+        mean share of the bus in percent at `bitrate` (else the network file's; NaN
+        without one or without times), as `decode --summary` prints it."""
+        import pandas as pd
+
+        from cananalyze.decode.senders import SENT
+        from cananalyze.outputs.busload import bits_per_node
+
+        fb, rate = self.batch, self._bitrate(bitrate)
+        span = float(fb.t[-1] - fb.t[0]) if len(fb) else 0.0
+        channels = np.unique(fb.channel).tolist() if len(fb) else []
+        rows = []
+        for c in channels:
+            mine = fb.channel == c
+            frames, bits = bits_per_node(
+                fb.flags[mine], fb.dlc[mine], self.node[mine], SENT[self.service[mine]]
+            )
+            for n in np.flatnonzero(frames).tolist():
+                share = bits[n] / (rate * span) * 100 if rate and span > 0 else float("nan")
+                row = {"node": n, "frames": int(frames[n]), "bits": int(bits[n])}
+                row["load_percent"] = share
+                if len(channels) > 1:
+                    row["bus"] = fb.channel_label(c)
+                rows.append(row)
+        cols = ["node", "frames", "bits", "load_percent", *(["bus"] if len(channels) > 1 else [])]
+        return pd.DataFrame.from_records(rows, columns=cols)
+
+    def longest_burst(self, bitrate: int | None = None) -> dict:
+        """Per bus: the longest run of frames back to back ({frames, t_start, t_end}) at
+        `bitrate` (else the network file's); {} without one or without times."""
+        from cananalyze.outputs.busload import Bursts, bits_by_channel
+
+        rate = self._bitrate(bitrate)
+        if not rate or not self._timed:
+            return {}
+        out = {}
+        for name, (t, bits) in bits_by_channel(self.batch).items():
+            burst = Bursts(rate)
+            burst.add(t, bits)
+            out[name] = burst.record()
+        return out
+
     @property
     def _timed(self) -> bool:
         return self.checker is None or self.checker.timed is not False
