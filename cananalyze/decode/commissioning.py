@@ -21,6 +21,9 @@ from cananalyze.core.records import DecodedBatch
 from cananalyze.decode.boot import BootFollower, Story, declared_identity
 from cananalyze.decode.events.build import ERROR, INFO, WARNING
 from cananalyze.decode.lss import LssEvent, LssFollower, identity_text
+from cananalyze.protocol import lss as lss_protocol
+
+CONFIGURE_NODE_ID = lss_protocol.command_name(0x11)
 
 
 class Commissioned(NamedTuple):
@@ -36,6 +39,9 @@ class Commissioned(NamedTuple):
     record: dict
     item: Any  # Story or LssEvent
     bus: str | None = None  # several buses: which one
+    # an LSS node-ID assignment the step made (`LssFollower.assignments`' own dict: its
+    # `stored` turns true when a store succeeds later)
+    assignment: dict | None = None
 
 
 def lss_message(ev: LssEvent) -> str:
@@ -101,15 +107,21 @@ class Commissioning:
         if t.size:
             self.t_last = float(t[-1])
         self.boot.add(batch)
-        self._lss(batch, self.lss.add(batch))
+        known = len(self.lss.assignments)
+        self._lss(batch, self.lss.add(batch), known)
 
-    def _lss(self, batch: DecodedBatch, events: list[LssEvent]) -> None:
+    def _lss(self, batch: DecodedBatch, events: list[LssEvent], known: int) -> None:
         self.lss_events += events
-        batch.commissioning.extend(map(lss_item, events))
+        made = iter(self.lss.assignments[known:])  # one per configure node-ID answered ok
+        for ev in events:
+            item = lss_item(ev)
+            if ev.step == CONFIGURE_NODE_ID and ev.result == "ok":
+                item = item._replace(assignment=next(made, None))
+            batch.commissioning.append(item)
 
     def finish(self, batch: DecodedBatch) -> None:
-        end = len(batch)
-        self._lss(batch, [dataclasses.replace(ev, row=end) for ev in self.lss.finish()])
+        end, known = len(batch), len(self.lss.assignments)
+        self._lss(batch, [dataclasses.replace(ev, row=end) for ev in self.lss.finish()], known)
         timed = self.timed is not False
         model = self.model
         self.stories = self.boot.stories(

@@ -15,7 +15,7 @@ from cananalyze.checks.streamstats import StreamStats
 from cananalyze.core.columns.order import first_seen_codes
 from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from cananalyze.core.records import DecodedBatch
-from cananalyze.decode.lss import LssFollower, identity_text
+from cananalyze.decode.lss import identity_text
 from cananalyze.decode.senders import SENT
 from cananalyze.outputs.busload import Bursts, bits_per_channel, bits_per_node, frame_bits
 from cananalyze.pipeline.sink import Sink
@@ -72,7 +72,9 @@ class Summary:
     node_service_by_bus: dict = field(default_factory=dict)  # bus -> (128, N_SVC) counts
     sdo_results_by_bus: dict = field(default_factory=dict)  # (bus, node) -> {result: count}
     sdo_latency_by_bus: dict = field(default_factory=dict)  # (bus, node) -> StreamStats
-    lss: LssFollower = field(default_factory=LssFollower)  # CiA 305 sequences
+    # CiA 305 steps and assignments, as the decoder's one follower made them
+    # (decode/commissioning: `DecodedBatch.commissioning`)
+    lss_assignments: list = field(default_factory=list)
     lss_steps: int = 0
     lss_good: int = 0  # LSS master frames with a known command: CANopen evidence
     # frames and nominal bits each node sent itself (decode/senders), per channel name
@@ -90,6 +92,11 @@ class Summary:
             self._several()
         if batch.records:
             self._sdo(batch)
+        for c in batch.commissioning:
+            if c.kind == "lss":
+                self.lss_steps += 1
+                if c.assignment is not None:
+                    self.lss_assignments.append(c.assignment)
         if n == 0:
             return
         fb = batch.frames
@@ -118,8 +125,6 @@ class Summary:
         self._nodes_by_channel(batch, present, per[N_SVC:].reshape(128, N_SVC))
         self._node_load(batch, present)
         self._evidence(batch)
-        if self.by_service[Service.LSS_MASTER]:
-            self.lss_steps += len(self.lss.add(batch))
         if len(self.ids_seen) < 4096:
             ids = fb.can_id[(fb.flags & FLAG_EXT) == 0]
             if ids.size and ids.max() < 2048:  # 11-bit: a bincount, no sort
@@ -390,9 +395,8 @@ class Summary:
             bursts = {name: b.record() for name, b in self.bursts.items()}
             several["bus_load_percent_per_node"] = per if many else next(iter(per.values()))
             several["longest_burst"] = bursts if many else next(iter(bursts.values()), None)
-        self.lss_steps += len(self.lss.finish())
         if self.lss_steps:  # CiA 305: who got which node-ID (load().lss has every step)
-            several["lss_assignments"] = list(self.lss.assignments)
+            several["lss_assignments"] = list(self.lss_assignments)
         return {
             "kind": "summary",
             "frames": self.frames,
@@ -474,12 +478,11 @@ class Summary:
 
     def lss_lines(self) -> list[str]:
         """LSS (CiA 305): the steps seen, and who got which node-ID."""
-        self.lss_steps += len(self.lss.finish())
         steps = self.lss_steps
         if not steps:
             return []
         out = [f"LSS: {steps} steps (load().lss lists them)"]
-        for a in self.lss.assignments:
+        for a in self.lss_assignments:
             stored = " (stored)" if a["stored"] else " (not stored)"
             out.append(f"LSS: node-ID {a['node_id']} given to {identity_text(a)}{stored}")
         return out

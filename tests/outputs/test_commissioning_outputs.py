@@ -242,3 +242,24 @@ def test_a_log_without_boot_up_or_lss_gets_none(tmp_path):
     assert not tree.xpath('//section[@id="boot"]') and not tree.xpath('//section[@id="lss"]')
     cap = cananalyze.load(str(log))
     assert not cap.events["kind"].isin(["boot", "lss"]).any()
+
+
+def test_summary_counts_the_lss_steps_of_the_one_follower(files):
+    out = cli("decode", str(files["log"]), "--summary").stdout.splitlines()
+    assert [x for x in out if x.startswith("LSS")] == [
+        "LSS: 5 steps (load().lss lists them)",
+        "LSS: node-ID 10 given to vendor 0x00000099, product 0x00000001, revision 0x00000002, "
+        "serial 0x00000003 (stored)",
+    ]
+    rec = json.loads(cli("decode", str(files["log"]), "--summary", "--format", "jsonl").stdout)
+    assert rec["lss_assignments"] == [
+        {
+            "t": pytest.approx(1000.511),
+            "vendor_id": 0x99,
+            "product_code": 1,
+            "revision": 2,
+            "serial": 3,
+            "node_id": 10,
+            "stored": True,
+        }
+    ]
