@@ -77,6 +77,9 @@ class Capture:
     # a log of several buses: each record's bus (None: made before a second bus was seen,
     # the first bus's); None on a log of one bus
     record_bus: list | None = None
+    # (bus, decode.commissioning.Commissioning) of each bus when the log was decoded here:
+    # the run's boot stories and LSS steps (`boot`, `lss`), not followed a second time
+    commissioning: list = field(default_factory=list)
 
     def __len__(self) -> int:
         return len(self.batch)
@@ -404,6 +407,16 @@ class Capture:
         stopped at and its CiA 302-2 error status, the steps (decode/boot)."""
         import pandas as pd
 
+        cols = ["node", "life", "t_boot", "result", "stopped_at", "status", "status_text"]
+        cols += ["verdict", "steps"]
+        if self.commissioning:  # the run's own stories
+            several = len(self.commissioning) > 1
+            rows = [
+                s.as_row() | ({"bus": bus} if several else {})
+                for bus, c in self.commissioning
+                for s in c.stories
+            ]
+            return pd.DataFrame.from_records(rows, columns=cols + (["bus"] if several else []))
         follower = BootFollower()
         follower.add(
             DecodedBatch(self.batch, self.service, self.node, self.pdo, records=self.records)
@@ -415,8 +428,6 @@ class Capture:
         stories = follower.stories(
             lambda n: declared_identity(model, n), hb, t_end, timed=self._timed
         )
-        cols = ["node", "life", "t_boot", "result", "stopped_at", "status", "status_text"]
-        cols += ["verdict", "steps"]
         return pd.DataFrame.from_records([s.as_row() for s in stories], columns=cols)
 
     def _bitrate(self, bitrate: int | None) -> int | None:
@@ -476,7 +487,10 @@ class Capture:
 
     @cached_property
     def _lss(self) -> tuple[list, list[dict]]:
-        """(LSS events, assignments) of the whole log (decode/lss)."""
+        """(LSS events, assignments) of the whole log (decode/lss): the run's own."""
+        if self.commissioning:
+            events = [e for _, c in self.commissioning for e in c.lss_events]
+            return events, [a for _, c in self.commissioning for a in c.assignments]
         follower = LssFollower()
         batch = DecodedBatch(self.batch, self.service, self.node, self.pdo)
         events = follower.add(batch) + follower.finish()
@@ -710,3 +724,6 @@ class CaptureSink(Sink):
         self.capture.bus_profiles = bus_profiles(run.decoder)
         self.capture.checker = run.checker
         self.capture.options = run.options
+        from cananalyze.decode.commissioning import Commissioning
+
+        self.capture.commissioning = run.decoder.processors_of(Commissioning)

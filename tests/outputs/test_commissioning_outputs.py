@@ -263,3 +263,21 @@ def test_summary_counts_the_lss_steps_of_the_one_follower(files):
             "stored": True,
         }
     ]
+
+
+@pytest.mark.parametrize("which", ["made", "sample"])
+def test_load_reads_the_run_s_stories_and_they_are_what_following_again_gives(files, which):
+    from pandas.testing import assert_frame_equal
+
+    log, net = (
+        (files["log"], files["net"])
+        if which == "made"
+        else (ROOT / "samples" / "commissioning.log", ROOT / "samples" / "network.toml")
+    )
+    cap = cananalyze.load(str(log), network=str(net))
+    assert cap.commissioning  # the run's producer, kept
+    again = cananalyze.load(str(log), network=str(net))
+    again.commissioning = []  # a Capture without it follows the log itself
+    for table in ("boot", "lss", "lss_assignments"):
+        assert_frame_equal(getattr(cap, table), getattr(again, table))
+    assert len(cap.boot) == (3 if which == "made" else 4)
