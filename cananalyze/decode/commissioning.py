@@ -13,7 +13,6 @@ without boot-up or LSS frames gets none, so its outputs stay as they were.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
@@ -82,6 +81,26 @@ def boot_item(s: Story) -> Commissioned:
     return Commissioned(s.t_boot or 0.0, "boot", s.node, boot_level(s), message, None, record, s)
 
 
+class _Placed(LssFollower):
+    """An LssFollower whose steps name the frame that ended them: the answer, the command
+    itself, or the next master frame for a command nobody answered (the command may be in
+    a batch already written: the outputs place a step where it became known, whatever the
+    batches)."""
+
+    at = -1  # the LSS frame being read (a row of the batch)
+
+    def _master(self, t: float, row: int, data: bytes) -> None:
+        self.at = row
+        super()._master(t, row, data)
+
+    def _slave(self, t: float, row: int, data: bytes) -> None:
+        self.at = row
+        super()._slave(t, row, data)
+
+    def _emit(self, t, row, *rest, **kw) -> None:
+        super()._emit(t, self.at, *rest, **kw)
+
+
 class Commissioning:
     """The decoder's processor of boot stories and LSS sequences (see the module)."""
 
@@ -89,7 +108,7 @@ class Commissioning:
         self.model = model
         self.heartbeat_ms = heartbeat_ms  # (node, t) -> the 0x1017 in force, or None
         self.boot = BootFollower()
-        self.lss = LssFollower()
+        self.lss = _Placed()
         self.lss_events: list[LssEvent] = []
         self.stories: list[Story] = []
         self.timed: bool | None = None  # as the checker decides: from the first 2 frames
@@ -120,8 +139,8 @@ class Commissioning:
             batch.commissioning.append(item)
 
     def finish(self, batch: DecodedBatch) -> None:
-        end, known = len(batch), len(self.lss.assignments)
-        self._lss(batch, [dataclasses.replace(ev, row=end) for ev in self.lss.finish()], known)
+        self.lss.at = len(batch)  # what only the end completes: at the end
+        self._lss(batch, self.lss.finish(), len(self.lss.assignments))
         timed = self.timed is not False
         model = self.model
         self.stories = self.boot.stories(

@@ -281,3 +281,67 @@ def test_load_reads_the_run_s_stories_and_they_are_what_following_again_gives(fi
     for table in ("boot", "lss", "lss_assignments"):
         assert_frame_equal(getattr(cap, table), getattr(again, table))
     assert len(cap.boot) == (3 if which == "made" else 4)
+
+
+def _cut(files, size: int) -> tuple[list[str], list[tuple]]:
+    """JSON lines (frames, each followed by the records at its row) and the boot and LSS
+    events of the log decoded in batches of `size` frames (live sniffing feeds 1)."""
+    from cananalyze.decode.events.build import EventState, batch_events
+    from cananalyze.formats.source import read_all
+    from cananalyze.outputs.jsonl.encode import dumps
+    from cananalyze.outputs.jsonl.records import jsonl_records
+    from cananalyze.outputs.jsonl.rows import frame_record
+    from cananalyze.pipeline import Options, build_decoder
+
+    decoder = build_decoder(Options(network=files["net"]))
+    fb = read_all(files["log"])
+    lines, events, state, off = [], [], EventState(), 0
+    batches = [decoder.decode(fb.take(slice(a, a + size))) for a in range(0, len(fb), size)]
+    for batch in [*batches, decoder.finish()]:
+        by_row: dict[int, list[dict]] = {}
+        for row, rec in jsonl_records(batch):
+            by_row.setdefault(row, []).append(rec)
+        for i in range(len(batch) + 1):
+            if i < len(batch):
+                lines.append(dumps(frame_record(batch, i)))
+            lines.extend(dumps(r) for r in by_row.get(i, ()))
+        evs, _ = batch_events(batch, off, state)
+        events += [tuple(e) for e in evs if e.kind in ("boot", "lss")]
+        off += len(batch)
+    return lines, events
+
+
+def test_where_the_batches_are_cut_changes_nothing(files):
+    whole = _cut(files, 1 << 20)
+    assert sum('"kind":"lss"' in x for x in whole[0]) == 5 and len(whole[1]) == 8
+    # each LSS step right after the frame that ended it (its event names that row)
+    at = [k for k, x in enumerate(whole[0]) if '"kind":"lss"' in x]
+    assert [json.loads(whole[0][k - 1])["t"] for k in at] == pytest.approx(
+        [1000.504, 1000.511, 1000.521, 1000.531, 1000.54]
+    )
+    for size in (1, 3, 8):
+        assert _cut(files, size) == whole, size
+
+
+def test_an_unanswered_command_of_an_earlier_batch_ends_in_this_one(tmp_path):
+    frames = [
+        (0.0, "7E5#4099000000000000"),
+        (0.001, "7E5#4101000000000000"),
+        (0.002, "7E5#4202000000000000"),
+        (0.003, "7E5#4303000000000000"),  # no slave answers
+        (0.5, "705#05"),
+        (0.6, "7E5#0400000000000000"),  # the next command: the selective switch had none
+    ]
+    log = _write_log(tmp_path / "u.log", frames)
+    files = {"log": log, "net": None}
+    lines, events = _cut(files, 4)  # the command ends batch 1, its end is in batch 2
+    assert _cut(files, 1 << 20) == (lines, events)
+    first = events[0]
+    assert first[1:5] == (
+        "lss",
+        None,
+        3,
+        "LSS switch state selective: no answer "
+        "(vendor 0x00000099, product 0x00000001, revision 0x00000002, "
+        "serial 0x00000003)",
+    )

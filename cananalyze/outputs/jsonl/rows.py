@@ -12,6 +12,7 @@ from cananalyze.core.records import DecodedBatch
 from cananalyze.outputs.background import ByteSink
 from cananalyze.outputs.fields import row_fields
 from cananalyze.outputs.jsonl.encode import clean_fields, dumps
+from cananalyze.outputs.jsonl.records import jsonl_records
 from cananalyze.pipeline.sink import Sink
 from cananalyze.protocol.services import SERVICE_NAMES
 
@@ -46,17 +47,6 @@ def frame_record(batch: DecodedBatch, i: int) -> dict:
     return rec
 
 
-def commissioning_lines(batch: DecodedBatch) -> bytes:
-    """The batch's boot stories and LSS steps (`kind` "boot", "lss"), after its other
-    lines: an LSS step in the batch whose frame ended it, each boot story at the end of
-    the log (it is judged there). A log of several buses names each one's `bus`."""
-    lines = [
-        dumps(c.record if c.bus is None else {**c.record, "bus": c.bus})
-        for c in batch.commissioning
-    ]
-    return ("\n".join(lines) + "\n").encode("utf-8") if lines else b""
-
-
 class JsonlWriter(Sink):
     """JSON lines of decoded batches: as columns where it can (`jsonl_columns`), else
     row by row; with `background`, finished and written by a worker thread
@@ -74,11 +64,9 @@ class JsonlWriter(Sink):
             rendered = render(batch, mask)
             if rendered is not None:
                 self._sink.put(rendered)
-                if batch.commissioning:
-                    self._sink.put(commissioning_lines(batch))
                 return
         by_row: dict[int, list[dict]] = {}
-        records = batch.records_and_findings()
+        records = jsonl_records(batch)
         for row, rec in records:
             by_row.setdefault(row, []).append(rec)
         rows = range(len(batch)) if mask is None else np.flatnonzero(mask).tolist()
@@ -95,8 +83,6 @@ class JsonlWriter(Sink):
                 lines.append(dumps(rec))
         if lines:
             self._sink.put(("\n".join(lines) + "\n").encode("utf-8"))
-        if batch.commissioning:
-            self._sink.put(commissioning_lines(batch))
 
     def close(self) -> None:
         """Wait for the worker, if any; re-raise its error here."""
