@@ -345,3 +345,34 @@ def test_an_unanswered_command_of_an_earlier_batch_ends_in_this_one(tmp_path):
         "(vendor 0x00000099, product 0x00000001, revision 0x00000002, "
         "serial 0x00000003)",
     )
+
+
+def test_report_with_node_filter_and_without_times(files, tmp_path):
+    out = tmp_path / "n7.html"
+    cli("report", str(files["log"]), "--node", "7", "-o", str(out), "-q")
+    tree = lxml_html.fromstring(out.read_text())
+    heads = [h.text_content() for h in _section(tree, "boot").xpath(".//h3")]
+    assert heads == ["Node 7: boot-up 1 at +0.020 s"]
+    assert not tree.xpath('//section[@id="lss"]')  # LSS steps belong to no node
+    # candump's screen output (no times): the steps in order, no time told
+    untimed = tmp_path / "untimed.log"
+    text = []
+    for _, f in sorted(FRAMES):
+        cob, data = f.split("#")
+        octets = [data[k : k + 2] for k in range(0, len(data), 2)]
+        text.append(f"  vcan0  {cob}   [{len(octets)}]  {' '.join(octets)}\n")
+    untimed.write_text("".join(text))
+    out = tmp_path / "untimed.html"
+    cli("report", str(untimed), "-o", str(out), "-q")
+    tree = lxml_html.fromstring(out.read_text())
+    boot = _section(tree, "boot")
+    assert [h.text_content() for h in boot.xpath(".//h3")] == [
+        "Node 5: boot-up 1",
+        "Node 6 (cia401): boot-up 1",  # identified by its device type read
+        "Node 7: boot-up 1",
+    ]
+    n5 = _rows(boot.xpath(".//table")[0])
+    assert [r[:2] for r in n5[1:]] == [["-", "boot-up"], ["-", "configuration 0x6060:00"]]
+    assert "J: configuration download failed" in boot.text_content()
+    assigned = _rows(_section(tree, "lss").xpath(".//table")[0])
+    assert assigned[1][0] == "-" and assigned[1][-2:] == ["10", "yes"]

@@ -486,22 +486,23 @@ def boot(s, figs: Figures) -> dict | None:
     from cananalyze.decode.boot import STATUS
 
     out = []
+    nodes = s.run.options.nodes  # --node: those nodes' stories only
     for bus, c in _commissioning(s):
         bus = bus if s.several else None
         profiles = _profiles(s.network_of(bus))
         for story in c.stories:
-            if story.t_boot is None:
+            if story.t_boot is None or (nodes is not None and story.node not in nodes):
                 continue
             name = _node_name(story.node, bus)
             device = profiles.get(story.node)
             letter = story.status
-            steps = [[_rel(s, t), step, result, detail] for t, step, result, detail in story.steps]
+            steps = [[_when(s, t), step, result, detail] for t, step, result, detail in story.steps]
             out.append(
                 {
                     "id": f"boot-{_node_id(story.node, bus)}-{story.life}",
                     "name": name + (f" ({device})" if device else ""),
                     "life": story.life,
-                    "at": _rel(s, story.t_boot),
+                    "at": f" at {_rel(s, story.t_boot)}" if s.timed else "",  # no times: none
                     "result": story.result,
                     "verdict": story.verdict,
                     "stopped_at": story.stopped_at or "-",
@@ -511,6 +512,11 @@ def boot(s, figs: Figures) -> dict | None:
                 }
             )
     return {"stories": out} if out else None
+
+
+def _when(s, t: float | None) -> str:
+    """A time from the log's start; "-" in a log without times (every frame has one)."""
+    return _rel(s, t) if s.timed else "-"
 
 
 def _profiles(model) -> dict[int, str]:
@@ -531,13 +537,15 @@ def lss(s, figs: Figures) -> dict | None:
     from cananalyze.decode.lss import PARTS, identity_text
 
     steps, assigned = [], []
+    if s.run.options.nodes is not None:  # --node: LSS steps belong to no node
+        return None
     for bus, c in _commissioning(s):
         where = [bus] if s.several else []
         for ev in c.lss_events:
             steps.append(
                 [
                     *where,
-                    _rel(s, ev.t),
+                    _when(s, ev.t),
                     ev.step,
                     ev.result,
                     identity_text(ev.identity) or "-",
@@ -549,7 +557,7 @@ def lss(s, figs: Figures) -> dict | None:
             assigned.append(
                 [
                     *where,
-                    _rel(s, a["t"]),
+                    _when(s, a["t"]),
                     *(_hex(a.get(p)) for p in PARTS),
                     "-" if a.get("node_id") is None else a["node_id"],
                     "yes" if a.get("stored") else "no",

@@ -113,7 +113,7 @@ SECTIONS = """
 {% macro boot(s) %}
   <section id="boot"><h2>Boot-up (CiA 302-2)</h2>
   {% for b in s.stories %}
-    <div class="boot" id="{{ b.id }}"><h3>{{ b.name }}: boot-up {{ b.life }} at {{ b.at }}</h3>
+    <div class="boot" id="{{ b.id }}"><h3>{{ b.name }}: boot-up {{ b.life }}{{ b.at }}</h3>
     <p>Result: <b>{{ b.result }}</b>; stopped at: {{ b.stopped_at }};
     {{ " " }}CiA 302-2 error status: {{ b.status }}; configuration: {{ b.writes }}.</p>
     {{ table(["time", "step", "result", "detail"], b.steps) }}
