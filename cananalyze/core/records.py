@@ -88,6 +88,8 @@ class DecodedBatch:
     events: object = None  # events.columns.EventColumns, built once by the pipeline
     states: list = field(default_factory=list)  # NMT state changes (events.columns.Row)
     drive: list = field(default_factory=list)  # CiA 402 changes (network.drive_tracker)
+    # boot stories and LSS steps completed in this batch (decode/commissioning.Commissioned)
+    commissioning: list = field(default_factory=list)
     # several buses (else None): the bus of the whole batch (one bus's decoder), or of
     # each channel index (a frame row's bus is its channel's) and of each record (object
     # arrays: a batch merged from several)
@@ -169,6 +171,11 @@ class DecodedBatch:
             for c in self.drive
             if keep_record({"kind": "drive", "node": c.node, "t": c.t})
         ]
+        commissioning = [
+            c._replace(row=None if c.row is None else int(pos[min(max(c.row, 0), len(self))]))
+            for c in self.commissioning
+            if keep_record(c.record)
+        ]
         return DecodedBatch(
             frames,
             self.service[rows],
@@ -180,6 +187,7 @@ class DecodedBatch:
             row_notes,
             findings,
             drive=drive,
+            commissioning=commissioning,
             bus=self.bus,
             channel_bus=self.channel_bus,
             record_bus=None

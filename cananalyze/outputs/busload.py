@@ -100,3 +100,60 @@ def load_windows(
     if bitrate:
         return starts, per_s / bitrate * 100.0
     return starts, per_s
+
+
+def bits_per_node(flags: np.ndarray, dlc: np.ndarray, node: np.ndarray, sent: np.ndarray):
+    """(frames, nominal bits) per node-ID 0..127 of the frames each node sent itself
+    (`sent`: a row mask, decode/senders.SENT of its service), int64 arrays of 128."""
+    keep = sent & (node >= 0) & (node < 128)
+    at = node[keep].astype(np.intp)
+    frames = np.bincount(at, minlength=128)
+    bits = np.bincount(at, weights=frame_bits(flags[keep], dlc[keep]), minlength=128)
+    return frames, bits.astype(np.int64)
+
+
+# back to back: a frame that ends within its own time on the wire (nominal bits, up to a
+# fifth more for stuff bits) plus a timestamp's jitter after the one before it ended
+STUFF = 1.2
+JITTER_S = 50e-6
+
+
+class Bursts:
+    """The longest run of frames back to back on one bus (no idle bus between them),
+    followed batch by batch: `add(t, bits)` with each frame's end time and nominal bits."""
+
+    def __init__(self, bitrate: int) -> None:
+        self.bitrate = bitrate
+        self.last_t: float | None = None
+        self.run = 0  # frames in the burst that ends at the last frame
+        self.start: float | None = None  # its first frame's time
+        self.longest = 0
+        self.t_start: float | None = None
+        self.t_end: float | None = None
+
+    def add(self, t: np.ndarray, bits: np.ndarray) -> None:
+        n = t.size
+        if n == 0:
+            return
+        prev = np.empty(n)
+        prev[0] = -np.inf if self.last_t is None else self.last_t
+        prev[1:] = t[:-1]
+        joins = (t - prev) <= bits / self.bitrate * STUFF + JITTER_S
+        idx = np.arange(n)
+        cut = np.maximum.accumulate(np.where(joins, -1, idx))  # the burst's first row
+        run = np.where(cut >= 0, idx - cut + 1, self.run + idx + 1)
+        k = int(np.argmax(run))
+        starts = t[np.maximum(cut, 0)]
+        if int(run[k]) > self.longest:
+            self.longest = int(run[k])
+            self.t_start = float(starts[k]) if cut[k] >= 0 else self.start
+            self.t_end = float(t[k])
+        self.start = float(starts[-1]) if cut[-1] >= 0 else self.start
+        self.run = int(run[-1])
+        self.last_t = float(t[-1])
+
+    def record(self) -> dict | None:
+        """{frames, t_start, t_end} of the longest burst (None: no frame)."""
+        if not self.longest:
+            return None
+        return {"frames": self.longest, "t_start": self.t_start, "t_end": self.t_end}

@@ -77,6 +77,9 @@ class Capture:
     # a log of several buses: each record's bus (None: made before a second bus was seen,
     # the first bus's); None on a log of one bus
     record_bus: list | None = None
+    # (bus, decode.commissioning.Commissioning) of each bus when the log was decoded here:
+    # the run's boot stories and LSS steps (`boot`, `lss`), not followed a second time
+    commissioning: list = field(default_factory=list)
 
     def __len__(self) -> int:
         return len(self.batch)
@@ -404,6 +407,16 @@ class Capture:
         stopped at and its CiA 302-2 error status, the steps (decode/boot)."""
         import pandas as pd
 
+        cols = ["node", "life", "t_boot", "result", "stopped_at", "status", "status_text"]
+        cols += ["verdict", "steps"]
+        if self.commissioning:  # the run's own stories
+            several = len(self.commissioning) > 1
+            rows = [
+                s.as_row() | ({"bus": bus} if several else {})
+                for bus, c in self.commissioning
+                for s in c.stories
+            ]
+            return pd.DataFrame.from_records(rows, columns=cols + (["bus"] if several else []))
         follower = BootFollower()
         follower.add(
             DecodedBatch(self.batch, self.service, self.node, self.pdo, records=self.records)
@@ -415,9 +428,58 @@ class Capture:
         stories = follower.stories(
             lambda n: declared_identity(model, n), hb, t_end, timed=self._timed
         )
-        cols = ["node", "life", "t_boot", "result", "stopped_at", "status", "status_text"]
-        cols += ["verdict", "steps"]
         return pd.DataFrame.from_records([s.as_row() for s in stories], columns=cols)
+
+    def _bitrate(self, bitrate: int | None) -> int | None:
+        """The bitrate given, else the network file's (`bitrate = ...`)."""
+        if bitrate:
+            return bitrate
+        model = getattr(self.config, "model", None)
+        return getattr(getattr(model, "spec", None), "bitrate", None)
+
+    def bus_load_per_node(self, bitrate: int | None = None) -> pd.DataFrame:
+        """Per node (and `bus` on a log of several): the frames it sent itself (heartbeat,
+        TPDO, EMCY, SDO response, guard response, boot-up), their nominal bits, and its
+        mean share of the bus in percent at `bitrate` (else the network file's; NaN
+        without one or without times), as `decode --summary` prints it."""
+        import pandas as pd
+
+        from cananalyze.decode.senders import SENT
+        from cananalyze.outputs.busload import bits_per_node
+
+        fb, rate = self.batch, self._bitrate(bitrate)
+        span = float(fb.t[-1] - fb.t[0]) if len(fb) else 0.0
+        channels = np.unique(fb.channel).tolist() if len(fb) else []
+        rows = []
+        for c in channels:
+            mine = fb.channel == c
+            frames, bits = bits_per_node(
+                fb.flags[mine], fb.dlc[mine], self.node[mine], SENT[self.service[mine]]
+            )
+            for n in np.flatnonzero(frames).tolist():
+                share = bits[n] / (rate * span) * 100 if rate and span > 0 else float("nan")
+                row = {"node": n, "frames": int(frames[n]), "bits": int(bits[n])}
+                row["load_percent"] = share
+                if len(channels) > 1:
+                    row["bus"] = fb.channel_label(c)
+                rows.append(row)
+        cols = ["node", "frames", "bits", "load_percent", *(["bus"] if len(channels) > 1 else [])]
+        return pd.DataFrame.from_records(rows, columns=cols)
+
+    def longest_burst(self, bitrate: int | None = None) -> dict:
+        """Per bus: the longest run of frames back to back ({frames, t_start, t_end}) at
+        `bitrate` (else the network file's); {} without one or without times."""
+        from cananalyze.outputs.busload import Bursts, bits_by_channel
+
+        rate = self._bitrate(bitrate)
+        if not rate or not self._timed:
+            return {}
+        out = {}
+        for name, (t, bits) in bits_by_channel(self.batch).items():
+            burst = Bursts(rate)
+            burst.add(t, bits)
+            out[name] = burst.record()
+        return out
 
     @property
     def _timed(self) -> bool:
@@ -425,7 +487,10 @@ class Capture:
 
     @cached_property
     def _lss(self) -> tuple[list, list[dict]]:
-        """(LSS events, assignments) of the whole log (decode/lss)."""
+        """(LSS events, assignments) of the whole log (decode/lss): the run's own."""
+        if self.commissioning:
+            events = [e for _, c in self.commissioning for e in c.lss_events]
+            return events, [a for _, c in self.commissioning for a in c.assignments]
         follower = LssFollower()
         batch = DecodedBatch(self.batch, self.service, self.node, self.pdo)
         events = follower.add(batch) + follower.finish()
@@ -659,3 +724,6 @@ class CaptureSink(Sink):
         self.capture.bus_profiles = bus_profiles(run.decoder)
         self.capture.checker = run.checker
         self.capture.options = run.options
+        from cananalyze.decode.commissioning import Commissioning
+
+        self.capture.commissioning = run.decoder.processors_of(Commissioning)

@@ -185,10 +185,13 @@ SIGNALS = Table(
 
 EVENTS = Table(
     "events",
-    "NMT commands and states, boot-ups, EMCY, SDO transfers, drive states and findings, by "
-    "time. An `nmt_state` event is a change of a node's NMT state as the checks follow it: "
-    "reported by its heartbeat, guard response or boot-up (pre-operational), or commanded by "
-    "NMT, at the frame that made it, once the node has sent a frame of its own",
+    "NMT commands and states, boot-ups, EMCY, SDO transfers, drive states, LSS steps, boot "
+    "stories and findings, by time. An `nmt_state` event is a change of a node's NMT state as "
+    "the checks follow it: reported by its heartbeat, guard response or boot-up "
+    "(pre-operational), or commanded by NMT, at the frame that made it, once the node has sent "
+    "a frame of its own. An `lss` event is a CiA 305 step with its result, at the frame that "
+    "ended it; a `boot` event a node's boot story (CiA 302-2) at its boot-up, judged at the "
+    "end of the log (no row)",
     (
         Column("t", "the event's time", pa.float64(), ("float64", "float64")),
         Column(

@@ -123,6 +123,16 @@ class Decoder:
                 return dec
         return self
 
+    def processors_of(self, kind: type) -> list[tuple[str | None, Processor]]:
+        """(bus name, processor) of every bus's processors of type `kind` (bus None on a
+        log of one bus): what a sink reads of a producer at the end of the run."""
+        return [
+            (dec.bus, p)
+            for dec in self._decoders or [self]
+            for p in dec.processors
+            if isinstance(p, kind)
+        ]
+
     def networks(self) -> dict[str | None, NetworkModel | None]:
         """Each bus's network model by bus name ({None: the one} on a log of one bus): a
         device identified by its 0x1018 read on can1 is in can1's model only."""
@@ -236,6 +246,10 @@ def merge_buses(
             out.signals.append(sb)
         out.row_notes.extend((rows[r], note) for r, note in part.row_notes)
         out.drive.extend(c._replace(row=int(at[c.row]), bus=part.bus) for c in part.drive)
+        out.commissioning.extend(
+            c._replace(row=None if c.row is None else int(at[c.row]), bus=part.bus)
+            for c in part.commissioning
+        )
         if len(part.findings):
             f = part.findings
             f.row = at[np.clip(f.row, 0, len(rows))]
@@ -283,6 +297,7 @@ def merge_ends(parts: list[DecodedBatch]) -> DecodedBatch:
     out.record_bus = _bus_names([p.bus for p in parts], of_part)
     out.bus = None
     out.drive = [c._replace(bus=p.bus) for p in parts for c in p.drive]
+    out.commissioning = [c._replace(bus=p.bus) for p in parts for c in p.commissioning]
     out.findings = FindingColumns.concat([p.findings for p in parts]).sort()
     return out
 
@@ -383,13 +398,20 @@ def build_decoder(
         from cananalyze.decode.dbc_processor import DbcDecoder
 
         processors.insert(3, DbcDecoder(dbc))
-    decoder = Decoder([*processors, DriveTracker(model)])
+    from cananalyze.checks.model_config import ModelConfig
+    from cananalyze.decode.commissioning import Commissioning
+
+    # boot stories and LSS steps (the event log's, JSONL's and the report's); a story is
+    # judged against the heartbeat time in force as the checks see it
+    config = ModelConfig(model)
+    commissioning = Commissioning(
+        model, lambda n, t: (checker.config if checker is not None else config).heartbeat_ms(n, t)
+    )
+    decoder = Decoder([*processors, DriveTracker(model), commissioning])
     model.attach(decoder)
     decoder.network = model
     if checker is not None:
-        from cananalyze.checks.model_config import ModelConfig
-
-        checker.config = ModelConfig(model)  # the model holds every declaration and the log
+        checker.config = config  # the model holds every declaration and the log
         decoder.processors.append(checker)
         decoder.checker = checker
     decoder.spawn = _spawner(opts, checker)

@@ -3,7 +3,8 @@ per-row route says: `sdo_event`/`finding_event` over the records as dicts, `fram
 + `annotation` for every EMCY/NMT/boot-up frame, a plain loop of CiA 301's NMT state
 machine for the state changes.
 Checked on real logs with EMCY/NMT/boot-up traffic, the samples, and generated traffic
-with repeated and distinct EMCY payloads, malformed frames, aborts, NMT and boot-ups."""
+with repeated and distinct EMCY payloads, malformed frames, aborts, NMT and boot-ups; the
+boot stories and LSS steps of the decoder's commissioning processor come last, as they are."""
 
 from __future__ import annotations
 
@@ -96,6 +97,9 @@ def _reference(batch, off: int, state: dict) -> tuple[list[Row], list[Row]]:
     for ev in states:
         level = WARNING if ev.message == "stopped" else INFO
         events.append(ev._replace(level=level, message=f"node {ev.node}: NMT state {ev.message}"))
+    for c in batch.commissioning:  # LSS steps and boot stories (decode/commissioning), last
+        row = None if c.row is None else c.row + off
+        events.append(Row(c.t, c.kind, c.node, c.level, c.message, row))
     if events:
         state["t"] = events[-1].t
     elif n:

@@ -459,8 +459,9 @@ def test_one_bus_events_have_no_bus_column(tmp_path):
     assert list(load(str(log)).events.columns) == _EVENT_COLUMNS
     parquet, rows = _export_events(log, tmp_path)
     assert pq.read_schema(tmp_path / "p" / "events.parquet").names == _EVENT_COLUMNS
-    # boot-up, pre-operational, the NMT start and the operational state it commands
-    assert list(rows[0]) == _EVENT_COLUMNS and len(rows) == len(parquet) == 4
+    # boot-up, pre-operational, the NMT start and the operational state it commands, and
+    # node 5's boot story (decode/commissioning)
+    assert list(rows[0]) == _EVENT_COLUMNS and len(rows) == len(parquet) == 5
 
 
 def test_fleet_events_bus_column(tmp_path):
@@ -673,17 +674,28 @@ def test_events_resorted_at_the_end_keep_their_bus(tmp_path, monkeypatch):
     events = pq.read_table(tmp_path / "out" / "events.parquet").to_pylist()
     channel = pq.read_table(tmp_path / "out" / "frames.parquet").column("channel").to_pylist()
     assert [e["t"] for e in events] == sorted(e["t"] for e in events)
-    assert [(e["bus"], e["message"]) for e in events[:8]] == [
+    # each bus's boot story at its boot-up's time, after that time's events with a row
+    assert [(e["bus"], e["message"]) for e in events[:10]] == [
         ("can0", "node 5: boot-up"),
         ("can0", "node 5: NMT state pre-operational"),
+        ("can0", "node 5: boot-up 1: operational"),
         ("can0", "NMT start node 5"),
         ("can0", "node 5: NMT state operational"),
         ("can1", "node 5: boot-up"),
         ("can1", "node 5: NMT state pre-operational"),
+        # (it beats "stopped" after its start: started, not operational)
+        (
+            "can1",
+            "node 5: boot-up 1: started (NMT start sent; no heartbeat or guard answer tells its state)",
+        ),
         ("can1", "NMT start node 5"),
         ("can1", "node 5: NMT state operational"),
     ]
-    assert all(e["bus"] == channel[e["row"]] for e in events if e["row"] < len(channel))
+    assert all(
+        e["bus"] == channel[e["row"]]
+        for e in events
+        if e["row"] is not None and e["row"] < len(channel)
+    )
 
 
 # --- the summary's frames and SDO transfers per bus and node ----------------------------

@@ -329,6 +329,13 @@ def batch_event_columns(
         if several:
             drive.bus = batch.row_buses(drive.row - offset)
         events = EventColumns.concat([events, drive])
+    if batch.commissioning:  # boot stories and LSS steps (decode/commissioning)
+        done = EventColumns.from_rows(
+            [c[:5] + (None if c.row is None else c.row + offset,) for c in batch.commissioning]
+        )
+        if several:
+            done.bus = np.array([c.bus for c in batch.commissioning], object)
+        events = EventColumns.concat([events, done])
     if len(events):
         state.last_t = float(events.t[-1])
     return events, states

@@ -26,6 +26,7 @@ from cananalyze.core.records import DecodedBatch
 from cananalyze.devices.words import fields_column
 from cananalyze.outputs.fields import row_fields
 from cananalyze.outputs.jsonl.encode import clean, clean_fields, dumps
+from cananalyze.outputs.jsonl.records import jsonl_records
 from cananalyze.outputs.jsonl.sdo import pair_fields
 from cananalyze.outputs.text.sdo import fast_pairs
 from cananalyze.outputs.text.writer import _KEYED, Rendered, _key_groups, _padded_table
@@ -63,7 +64,7 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
     sel = np.arange(len(fb)) if mask is None else np.flatnonzero(mask)
     n = sel.size
     pairs = fast_pairs(batch) if mask is None else None  # before anything reads the notes
-    records = batch.records_and_findings()
+    records = jsonl_records(batch)
     by_row: dict[int, list[dict]] = {}
     for row, rec in records:
         by_row.setdefault(row, []).append(rec)

@@ -12,6 +12,7 @@ from cananalyze.core.records import DecodedBatch
 from cananalyze.outputs.background import ByteSink
 from cananalyze.outputs.fields import row_fields
 from cananalyze.outputs.jsonl.encode import clean_fields, dumps
+from cananalyze.outputs.jsonl.records import jsonl_records
 from cananalyze.pipeline.sink import Sink
 from cananalyze.protocol.services import SERVICE_NAMES
 
@@ -65,7 +66,7 @@ class JsonlWriter(Sink):
                 self._sink.put(rendered)
                 return
         by_row: dict[int, list[dict]] = {}
-        records = batch.records_and_findings()
+        records = jsonl_records(batch)
         for row, rec in records:
             by_row.setdefault(row, []).append(rec)
         rows = range(len(batch)) if mask is None else np.flatnonzero(mask).tolist()

@@ -103,6 +103,8 @@ NAV = (
     ("findings", "findings", "Findings"),
     ("buses", "buses", "Buses"),
     ("nodes", "nodes", "Nodes"),
+    ("boot", "boot", "Boot"),
+    ("lss", "lss", "LSS"),
     ("sdo", "sdo", "SDO"),
     ("emcy", "emcy", "EMCY"),
     ("pdos", "pdo", "PDO"),

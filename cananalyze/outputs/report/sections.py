@@ -469,4 +469,119 @@ def sync_latency(s, figs: Figures) -> dict | None:
     return {"rows": rows, "plots": figures} if rows else None
 
 
-SECTIONS = [verdict, buses, findings, nodes, sdo, emcy, pdos, sync_latency, signals, drive_states]
+def _commissioning(s) -> list:
+    """(bus, the run's `decode.commissioning.Commissioning`) of each bus: the one producer
+    of boot stories and LSS steps (the event log and JSONL read the same)."""
+    from cananalyze.decode.commissioning import Commissioning
+
+    run = s.run
+    if run is None or run.decoder is None:
+        return []
+    return run.decoder.processors_of(Commissioning)
+
+
+def boot(s, figs: Figures) -> dict | None:
+    """Each node's boot stories (CiA 302-2, decode/boot): its steps, where it stopped and
+    the boot error status in words; only nodes whose boot-up the log holds."""
+    from cananalyze.decode.boot import STATUS
+
+    out = []
+    nodes = s.run.options.nodes  # --node: those nodes' stories only
+    for bus, c in _commissioning(s):
+        bus = bus if s.several else None
+        profiles = _profiles(s.network_of(bus))
+        for story in c.stories:
+            if story.t_boot is None or (nodes is not None and story.node not in nodes):
+                continue
+            name = _node_name(story.node, bus)
+            device = profiles.get(story.node)
+            letter = story.status
+            steps = [[_when(s, t), step, result, detail] for t, step, result, detail in story.steps]
+            out.append(
+                {
+                    "id": f"boot-{_node_id(story.node, bus)}-{story.life}",
+                    "name": name + (f" ({device})" if device else ""),
+                    "life": story.life,
+                    "at": f" at {_rel(s, story.t_boot)}" if s.timed else "",  # no times: none
+                    "result": story.result,
+                    "verdict": story.verdict,
+                    "stopped_at": story.stopped_at or "-",
+                    "status": f"{letter}: {STATUS[letter]}" if letter in STATUS else "-",
+                    "steps": steps,
+                    "writes": f"{story.writes} writes ok, {len(story.aborts)} aborted",
+                }
+            )
+    return {"stories": out} if out else None
+
+
+def _when(s, t: float | None) -> str:
+    """A time from the log's start; "-" in a log without times (every frame has one)."""
+    return _rel(s, t) if s.timed else "-"
+
+
+def _profiles(model) -> dict[int, str]:
+    from cananalyze.decode.node_tally import node_profiles
+
+    if model is None:
+        return {}
+    return {n: str(p) for n, (p, _) in node_profiles(model).items()}
+
+
+def _hex(v) -> str:
+    return "-" if v is None else f"0x{v:08X}" if isinstance(v, int) else str(v)
+
+
+def lss(s, figs: Figures) -> dict | None:
+    """LSS (CiA 305) steps with their results, and which identity got which node-ID when
+    (decode/lss, as `load().lss` and `load().lss_assignments`)."""
+    from cananalyze.decode.lss import PARTS, identity_text
+
+    steps, assigned = [], []
+    if s.run.options.nodes is not None:  # --node: LSS steps belong to no node
+        return None
+    for bus, c in _commissioning(s):
+        where = [bus] if s.several else []
+        for ev in c.lss_events:
+            steps.append(
+                [
+                    *where,
+                    _when(s, ev.t),
+                    ev.step,
+                    ev.result,
+                    identity_text(ev.identity) or "-",
+                    "-" if ev.node_id is None else ev.node_id,
+                    ev.detail or "-",
+                ]
+            )
+        for a in c.assignments:
+            assigned.append(
+                [
+                    *where,
+                    _when(s, a["t"]),
+                    *(_hex(a.get(p)) for p in PARTS),
+                    "-" if a.get("node_id") is None else a["node_id"],
+                    "yes" if a.get("stored") else "no",
+                ]
+            )
+    if not steps:
+        return None
+    bus = ["bus"] if s.several else []
+    return {
+        "steps_head": [*bus, "time", "step", "result", "identity", "node-ID", "detail"],
+        "steps": steps,
+        "assigned_head": [
+            *bus,
+            "time",
+            "vendor-ID",
+            "product code",
+            "revision",
+            "serial",
+            "node-ID",
+            "stored",
+        ],
+        "assigned": assigned,
+    }
+
+
+SECTIONS = [verdict, buses, findings, nodes, boot, lss, sdo, emcy, pdos, sync_latency]
+SECTIONS += [signals, drive_states]

@@ -110,6 +110,29 @@ SECTIONS = """
   </section>
 {% endmacro %}
 
+{% macro boot(s) %}
+  <section id="boot"><h2>Boot-up (CiA 302-2)</h2>
+  {% for b in s.stories %}
+    <div class="boot" id="{{ b.id }}"><h3>{{ b.name }}: boot-up {{ b.life }}{{ b.at }}</h3>
+    <p>Result: <b>{{ b.result }}</b>; stopped at: {{ b.stopped_at }};
+    {{ " " }}CiA 302-2 error status: {{ b.status }}; configuration: {{ b.writes }}.</p>
+    {{ table(["time", "step", "result", "detail"], b.steps) }}
+    <p>{{ b.verdict }}</p></div>
+  {% endfor %}
+  <p class=small>Each node's boot as a CiA 302-2 master runs it, from the log; the identity
+  {{ " " }}read is compared with the device declared (--device, --eds, the network file).</p>
+  </section>
+{% endmacro %}
+
+{% macro lss(s) %}
+  <section id="lss"><h2>LSS (CiA 305)</h2>
+  {% if s.assigned %}
+    <h3>Node-IDs assigned</h3>{{ table(s.assigned_head, s.assigned) }}
+  {% else %}<p>No node-ID was assigned.</p>{% endif %}
+  <h3>Steps</h3>{{ table(s.steps_head, s.steps) }}
+  </section>
+{% endmacro %}
+
 {% macro sdo(s) %}
   <section id="sdo"><h2>SDO transfers</h2>
   {{ table(["node", "transfers", "aborts", "min ms", "median ms", "p99 ms", "max ms"], s.rows) }}

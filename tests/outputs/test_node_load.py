@@ -1,0 +1,88 @@
+"""Bus load per node and the longest burst (issue 40 item 3), in `decode --summary` (text and
+JSON) and `load()`, against bits counted by hand: at 125 kbit/s a heartbeat (1 byte) is
+47 + 8 = 55 nominal bits, an 8-byte PDO 47 + 64 = 111 bits, 888 us on the wire."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from conftest import ROOT
+
+import cananalyze
+
+RATE = 125_000
+WIRE_8 = 111 / RATE  # an 8-byte frame's time on the wire
+
+
+def _log(path: Path) -> Path:
+    frames = [(0.1 * k, "705#05") for k in range(21)]
+    frames += [(0.1 * k + 0.05, "706#05") for k in range(21)]
+    # five PDOs back to back from +1.02 s: each ends one frame time after the one before
+    burst = ["185", "186", "185", "186", "185"]
+    frames += [(1.02 + k * WIRE_8, f"{cob}#{k:02X}00000000000000") for k, cob in enumerate(burst)]
+    # a pair 1 ms apart (idle bus between): no burst
+    frames += [(1.5, "185#0100000000000000"), (1.501 + WIRE_8, "186#0100000000000000")]
+    path.write_text("".join(f"({100 + t:.6f}) can0 {f}\n" for t, f in sorted(frames)))
+    return path
+
+
+# frames each node sent, bits by hand, over the log's 2.05 s
+NODE5 = (21 + 4, 21 * 55 + 4 * 111)
+NODE6 = (21 + 3, 21 * 55 + 3 * 111)
+SPAN = 2.05
+
+
+def _share(bits: int) -> float:
+    return bits / (RATE * SPAN) * 100
+
+
+def _summary(log: Path, *extra: str) -> str:
+    r = subprocess.run(
+        [sys.executable, "-m", "cananalyze", "decode", str(log), "--summary", *extra],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=ROOT,
+    )
+    assert r.returncode == 0, r.stderr
+    return r.stdout
+
+
+def test_summary_text_has_each_node_s_load_and_the_longest_burst(tmp_path):
+    out = _summary(_log(tmp_path / "b.log"), "--bitrate", str(RATE)).splitlines()
+    at = out.index("bus load per node (frames it sent, nominal bits):")
+    assert out[at + 1].split() == ["node", "5", f"{_share(NODE5[1]):.2f}", "%"]
+    assert out[at + 2].split() == ["node", "6", f"{_share(NODE6[1]):.2f}", "%"]
+    burst = [x for x in out if x.startswith("longest burst")]
+    assert burst == ["longest burst: 5 frames back to back, +1.020000 s to +1.023552 s (3.552 ms)"]
+
+
+def test_summary_json_and_load_agree_with_the_bits_by_hand(tmp_path):
+    log = _log(tmp_path / "b.log")
+    rec = json.loads(_summary(log, "--bitrate", str(RATE), "--format", "jsonl"))
+    assert rec["bus_load_percent_per_node"] == {
+        "5": round(_share(NODE5[1]), 3),
+        "6": round(_share(NODE6[1]), 3),
+    }
+    assert rec["longest_burst"]["frames"] == 5
+    assert rec["longest_burst"]["t_start"] == pytest.approx(101.02)
+    cap = cananalyze.load(str(log))
+    df = cap.bus_load_per_node(RATE)
+    assert df[["node", "frames", "bits"]].values.tolist() == [[5, *NODE5], [6, *NODE6]]
+    assert df["load_percent"].tolist() == pytest.approx([_share(NODE5[1]), _share(NODE6[1])])
+    assert cap.bus_load_per_node()["load_percent"].isna().all()  # no bitrate: not known
+    burst = cap.longest_burst(RATE)["can0"]
+    assert burst["frames"] == 5
+    assert burst["t_end"] - burst["t_start"] == pytest.approx(4 * WIRE_8, abs=2e-6)
+    assert cap.longest_burst() == {}
+
+
+def test_without_a_bitrate_the_summary_is_as_before(tmp_path):
+    out = _summary(_log(tmp_path / "b.log"))
+    assert "bus load per node" not in out and "longest burst" not in out
+    rec = json.loads(_summary(_log(tmp_path / "b.log"), "--format", "jsonl"))
+    assert "bus_load_percent_per_node" not in rec and "longest_burst" not in rec
