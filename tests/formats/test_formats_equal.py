@@ -29,7 +29,7 @@ def _records(name: str) -> list[dict]:
     recs = _jsonl(name)
     t0 = recs[0]["t"]
     for r in recs:
-        for key in ("t", "t_start"):
+        for key in ("t", "t_start", "t_boot"):
             if r.get(key) is not None:
                 r[key] = round(r[key] - t0, 6)
         r.pop("channel", None)  # candump names interfaces ("can0"), Vector numbers them ("1")
@@ -42,7 +42,7 @@ def test_candump_asc_blf_identical():
     base = _records(FORMATS[0])
     assert len(base) > 185  # every frame plus the SDO transaction records
     kinds = {r["kind"] for r in base}
-    assert kinds == {"frame", "sdo"}
+    assert kinds == {"frame", "sdo", "boot"}  # a boot story per node, at the end
     for other in FORMATS[1:]:
         assert _records(other) == base, other
 

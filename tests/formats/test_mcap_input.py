@@ -160,9 +160,10 @@ def same_records(got: list[dict], want: list[dict], tol: float = 5e-10) -> None:
     """decode --format jsonl records equal; `t` to the ns an MCAP log time keeps."""
     assert len(got) == len(want)
     for g, w in zip(got, want, strict=True):
-        if "t" in w:
-            assert g.pop("t") == pytest.approx(w["t"], abs=tol, rel=0)
-            w = {k: v for k, v in w.items() if k != "t"}
+        for key in ("t", "t_boot"):  # a frame's or record's time, a boot story's boot-up
+            if key in w:
+                assert g.pop(key) == pytest.approx(w[key], abs=tol, rel=0)
+                w = {k: v for k, v in w.items() if k != key}
         assert g == w
 
 
