@@ -314,7 +314,8 @@ def _variable(obj: Element, params: dict, node_id: int | None, name: str, index,
     if param is not None:
         described = _child(param, "description")
         if described is not None and described.text:
-            var.description = described.text
+            # one line: a DCF written from this dictionary keeps it as one INI value
+            var.description = " ".join(described.text.split())
     return var
 
 
