@@ -117,7 +117,7 @@ def parse(path: Path) -> Element:
             f"{path}: refused: the XML declares a DTD or entities (<!DOCTYPE>, <!ENTITY>), "
             "which an XDD/XDC never needs"
         ) from None
-    except ParseError as exc:
+    except (ParseError, LookupError) as exc:  # LookupError: an unknown declared encoding
         raise InputError(f"{path}: not a valid XDD/XDC: XML {exc}") from None
     if root is None:
         raise InputError(f"{path}: not a valid XDD/XDC: no XML element")
@@ -267,6 +267,8 @@ def _variable(obj: Element, params: dict, node_id: int | None, name: str, index,
 
     if obj.get("dataType"):
         var.data_type = int(obj.get("dataType"), 16)
+        if not 0 < var.data_type <= 0x1B:  # as import_od: an unknown type is read as DOMAIN
+            var.data_type = DOMAIN
     else:
         kids = list(param) if param is not None else []
         iec = next((_local(c) for c in kids if _local(c) in IEC_TYPES), None)

@@ -221,8 +221,13 @@ DEEP = (
             "XML mismatched",
         ),
         ("other.xdd", "<html><body/></html>", "root element is <html>"),
+        (
+            "encoding.xdd",
+            '<?xml version="1.0" encoding="FFFFFFFF"?><ISO15745ProfileContainer/>',
+            "unknown encoding",
+        ),
     ],
-    ids=["billion-laughs", "external-entity", "deep-nesting", "broken", "not-cia311"],
+    ids=["billion-laughs", "external-entity", "deep-nesting", "broken", "not-cia311", "encoding"],
 )
 def test_hostile_xml_is_refused_in_one_line(tmp_path, name, content, says):
     log = tmp_path / "bus.log"
