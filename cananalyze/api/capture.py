@@ -125,7 +125,7 @@ def load(
     """Decode and check a log into a Capture (DataFrames `frames`, `signals`, `sdo`,
     `events`, `findings`; `heartbeat(node)`; `assert_*` methods for pytest).
 
-    eds / device map node-IDs to EDS/DCF files / built-in profile keys
+    eds / device map node-IDs to EDS/DCF/XDD/XDC files / built-in profile keys
     ({5: "dat7014"}), as `--eds 5=FILE` / `--device 5=KEY` do on the command line;
     network and rules are the files `--network` and `check --rules` take; dbc one or more
     DBC files (`--dbc`), whose messages join `signals`. The same

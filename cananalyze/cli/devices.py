@@ -17,7 +17,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "devices",
         help="list built-in device profiles, or show one (PDOs, notes)",
         description="Without KEY: list the built-in device profiles and the CiA profiles "
-        "(cia402 drives, cia401 I/O). With KEY (or an EDS/DCF path): show its default PDOs "
+        "(cia402 drives, cia401 I/O). With KEY (or an EDS/DCF/XDD/XDC path): show its default PDOs "
         "for --node and the notes on manual quirks; for a CiA 402 drive also its states, "
         "commands and modes as cananalyze names them. --dbc OUT.dbc writes those PDOs as a "
         "DBC file (cantools) with their scaling, units and signedness. A user's EDS picks up "
@@ -53,6 +53,7 @@ def _hex(value: int | None, width: int = 8) -> str:
 def run(args: argparse.Namespace) -> int:
     from cananalyze.devices.builtin import builtin_profiles, load_builtin
     from cananalyze.devices.catalog import PROFILE_KEYS, device_keys
+    from cananalyze.devices.eds import DEVICE_SUFFIXES
     from cananalyze.devices.profile import load_eds
 
     if not args.key:
@@ -74,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--node {args.node}: node ID must be 1..127")
     if args.key in device_keys():
         prof = load_builtin(args.key)
-    elif Path(args.key).suffix.lower() in (".eds", ".dcf"):
+    elif Path(args.key).suffix.lower() in DEVICE_SUFFIXES:
         prof = load_eds(args.key)
     else:
         raise UsageError(f"unknown device {args.key!r}: use one of {', '.join(device_keys())}")

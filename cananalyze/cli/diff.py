@@ -18,7 +18,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Compare two logs of a network, node by node, at the level an engineer "
         "judges a run: configuration objects, identity, PDO layout and rates, heartbeat and "
         "SYNC timing (within a tolerance), NMT and drive state sequences, EMCY codes and "
-        "findings by rule. B may be a DCF: then only the configuration is compared. Exit 0 "
+        "findings by rule. B may be a DCF (or an XDC): then only the configuration is compared. Exit 0 "
         "when the same within tolerances, 1 when different, 2 on bad input.",
     )
     options_.add(p, *options_.INPUT, "reference", "rules", extra_names=DBC)
@@ -30,11 +30,12 @@ def run(args: argparse.Namespace) -> int:
     from cananalyze.api import diff
     from cananalyze.api.capture import load_with
     from cananalyze.core.text import printable
+    from cananalyze.devices.eds import DEVICE_SUFFIXES
 
     opts = options(args, checks=True)
     a = load_with(args.log, opts)
     report_problems(a.problems)
-    if args.reference.lower().endswith((".dcf", ".eds")):
+    if args.reference.lower().endswith(DEVICE_SUFFIXES):
         found = diff.compare_reference(a, args.reference, args.ref_node)
         note = f"{diff.unseen(a, args.reference, args.ref_node)} objects of B not shown by A"
     else:

@@ -85,7 +85,7 @@ FLAGS: dict[str, Flag] = {
             action="append",
             default=[],
             metavar="NODE=FILE",
-            help="node NODE is described by this EDS/DCF file; repeatable",
+            help="node NODE is described by this EDS/DCF or XDD/XDC (CiA 311) file; repeatable",
         ),
     ),
     "network": Flag(
@@ -219,8 +219,8 @@ FLAGS: dict[str, Flag] = {
         ("reference",),
         dict(
             metavar="B",
-            help="the run to compare with: another log (same formats), or a DCF whose "
-            "ParameterValues are the expected configuration",
+            help="the run to compare with: another log (same formats), or a DCF (an XDC) whose "
+            "ParameterValues (actualValues) are the expected configuration",
         ),
     ),
     "tolerance": Flag(
@@ -254,7 +254,7 @@ FLAGS: dict[str, Flag] = {
         dict(
             type=int,
             metavar="N",
-            help="a DCF reference: the node it describes (default its NodeID)",
+            help="a DCF/XDC reference: the node it describes (default its NodeID)",
         ),
     ),
     # --- timelines and tables ----------------------------------------------------
@@ -414,7 +414,7 @@ FLAGS: dict[str, Flag] = {
     "query_json": Flag(("--json",), dict(action="store_true", help="one JSON object per row")),
     # --- devices -----------------------------------------------------------------
     "profile_key": Flag(
-        ("key",), dict(nargs="?", help="profile key (e.g. dat7130) or an EDS/DCF file")
+        ("key",), dict(nargs="?", help="profile key (e.g. dat7130) or an EDS/DCF/XDD/XDC file")
     ),
     "profile_node": Flag(
         ("--node",), dict(type=int, default=1, help="node ID for $NODEID defaults (1)")

@@ -1,8 +1,10 @@
-"""Reading EDS/DCF files through `canopen.objectdictionary.import_od`.
+"""Reading EDS/DCF files through `canopen.objectdictionary.import_od`, and XDD/XDC.
 
 canopen parses CiA 306 well (compact sub-objects, $NODEID, DCF ParameterValue);
 this module only turns its exceptions into one-line InputErrors and answers the
 few questions the profile asks: an object's description and its effective value.
+CiA 311 XDD/XDC files (XML) are read by `xdd.py` into the same ObjectDictionary, here,
+the one place a device file is loaded.
 """
 
 from __future__ import annotations
@@ -29,15 +31,28 @@ class ObjectInfo:
     pdo_mappable: bool = False
 
 
+DEVICE_SUFFIXES = (".eds", ".dcf", ".xdd", ".xdc")
+
+
 def read_od(path: str | Path, node_id: int | None = None):
-    """canopen ObjectDictionary of an EDS/DCF, or InputError naming the file and the problem."""
+    """canopen ObjectDictionary of an EDS/DCF/XDD/XDC, or InputError naming the file and
+    the problem. XML content (a CiA 311 XDD/XDC) is read as such whatever the suffix."""
     from canopen.objectdictionary import import_od
+
+    from cananalyze.devices.xdd import looks_like_xml, read_xdd
 
     path = Path(path)
     if not path.is_file():
-        raise InputError(f"{path}: no such EDS/DCF file")
-    if path.suffix.lower() not in (".eds", ".dcf"):
-        raise InputError(f"{path}: not an EDS or DCF file (expected .eds or .dcf)")
+        raise InputError(f"{path}: no such EDS/DCF/XDD/XDC file")
+    if path.suffix.lower() not in DEVICE_SUFFIXES:
+        raise InputError(
+            f"{path}: not an EDS, DCF, XDD or XDC file (expected .eds, .dcf, .xdd or .xdc)"
+        )
+    if path.suffix.lower() in (".xdd", ".xdc") or looks_like_xml(path):
+        od = read_xdd(path, node_id)
+        if len(od) == 0:
+            raise InputError(f"{path}: XDD/XDC holds no objects")
+        return od
     # canopen logs warnings for every odd entry of vendor files; they are not ours to show.
     logger = logging.getLogger("canopen.objectdictionary.eds")
     level = logger.level

@@ -16,7 +16,7 @@ TIME_MODES = ("rel", "abs")
 class Options:
     """What a run is asked to do, whichever door it came through (CLI, `load()`, fleet).
 
-    Devices: `devices` maps node-IDs to built-in profile keys, `eds` to EDS/DCF files,
+    Devices: `devices` maps node-IDs to built-in profile keys, `eds` to EDS/DCF/XDD/XDC files,
     on top of the `network` file. `rules` adds the rules file's assertions to the
     CANopen rules, which run when `checks` is set (or a rules file is given).
     Filters (`nodes`, `services`, `t_from`/`t_to` in seconds after the log's first

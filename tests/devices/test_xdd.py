@@ -1,0 +1,278 @@
+"""CiA 311 XDD/XDC device files read wherever an EDS/DCF is: a real XDD against the same
+device's EDS (tests/data/xdd, CANopenDemo), an XDC's actualValue as a DCF's ParameterValue,
+`--eds NODE=x.xdd` end to end, and hostile XML refused in one line."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+
+import pytest
+from canopen.objectdictionary import import_od
+from conftest import ROOT
+
+from cananalyze.cli.main import main
+from cananalyze.core.errors import InputError
+from cananalyze.devices import xdd
+from cananalyze.devices.eds import read_od
+from cananalyze.devices.profile import load_eds
+
+DATA = ROOT / "tests" / "data" / "xdd"
+XDD = DATA / "demoDevice.xdd"
+EDS = DATA / "demoDevice.eds"
+
+
+def variables(od) -> dict:
+    out = {}
+    for obj in od.values():
+        for var in obj.subindices.values() if hasattr(obj, "subindices") else [obj]:
+            out[(var.index, var.subindex)] = var
+    return out
+
+
+def no_default_as_none(value):
+    """An EDS's empty `DefaultValue=` is '' (b'' for a DOMAIN); an XDD leaves it out."""
+    return None if value in ("", b"") else value
+
+
+def cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "cananalyze", *args], capture_output=True, cwd=ROOT
+    )
+
+
+def test_real_xdd_has_the_objects_of_the_same_devices_eds():
+    from_xdd = variables(read_od(XDD, 5))
+    from_eds = variables(read_od(EDS, 5))
+    independent = variables(import_od(str(EDS), 5))
+    assert len(from_xdd) == 288  # 0x1280, disabled in the project (CO_disabled), left out
+    assert set(from_xdd) == set(from_eds) == set(independent)
+    for key, x in from_xdd.items():
+        for eds in (from_eds[key], independent[key]):
+            where = f"0x{key[0]:04X}:{key[1]:02X}"
+            assert x.name == eds.name, where
+            assert x.data_type == eds.data_type, where
+            assert x.access_type == eds.access_type, where
+            assert x.pdo_mappable == eds.pdo_mappable, where
+            assert (x.min, x.max) == (eds.min, eds.max), where
+            assert no_default_as_none(x.default) == no_default_as_none(eds.default), where
+    # a few read off the XML by eye: parameter elements through uniqueIDRef
+    assert from_xdd[(0x1000, 0)].default == 0x000F0191 and from_xdd[(0x1000, 0)].data_type == 7
+    assert from_xdd[(0x1400, 1)].default_raw == "$NODEID+0x00000200"
+    assert from_xdd[(0x1400, 1)].default == 0x205 and from_xdd[(0x1400, 1)].relative
+    assert from_xdd[(0x1A00, 1)].default == 0x60000108
+    assert from_xdd[(0x2121, 3)].default == bytes.fromhex("C83DBB")  # BITSTRING: OCTET_STRING
+    assert from_xdd[(0x2122, 0)].data_type == 0x0F  # BITSTRING without a default: DOMAIN
+    assert from_xdd[(0x1017, 0)].access_type == "rw" and from_xdd[(0x1000, 0)].access_type == "ro"
+
+
+def test_real_xdd_profile_is_the_eds_profile():
+    a, b = load_eds(XDD), load_eds(EDS)
+    for p in (a, b):
+        identity = (p.vendor_id, p.product_code, p.device_type, p.device_name, p.name)
+        assert identity == (0, 1, 0x000F0191, "Demo device", "Demo device")
+    assert a.pdos(5) == b.pdos(5) and len(a.pdos(5)) == 8
+    tx1 = next(p for p in a.pdos(5) if p.direction == "tx" and p.number == 1)
+    assert tx1.cob_id == 0x185
+    assert [(e.index, e.subindex, e.bits) for e in tx1.mapping][:2] == [
+        (0x6000, 1, 8),
+        (0x6000, 2, 8),
+    ]
+    info_a, info_b = read_od(XDD).device_information, read_od(EDS).device_information
+    assert info_a.allowed_baudrates == info_b.allowed_baudrates
+    assert (info_a.nr_of_RXPDO, info_a.nr_of_TXPDO) == (info_b.nr_of_RXPDO, info_b.nr_of_TXPDO)
+
+
+def _configured(tmp_path):
+    """(XDC, DCF) of the demo device configured alike: node 9, heartbeat 250 ms (the
+    object's actualValue attribute), TPDO1's first entry 0x62000108 (the parameter's
+    actualValue element), written from the real XDD and EDS."""
+    text = XDD.read_text(encoding="utf-8")
+    text = text.replace(
+        '<CANopenObject index="1017" name="Producer heartbeat time" objectType="7" ',
+        '<CANopenObject index="1017" name="Producer heartbeat time" objectType="7" '
+        'actualValue="250" ',
+    )
+    text = re.sub(
+        r'(<q1:parameter uniqueID="UID_SUB_1A0001"[^>]*>.*?<q1:defaultValue value="[^"]*" />)',
+        r'\1<q1:actualValue value="0x62000108" />',
+        text,
+        count=1,
+        flags=re.S,
+    )
+    text = text.replace(
+        "<CANopenMasterFeatures />",
+        '<CANopenMasterFeatures /><deviceCommissioning nodeID="9" nodeName="demo" '
+        'actualBaudRate="250 Kbps" />',
+    )
+    assert text.count("actualValue") == 2 and "deviceCommissioning" in text
+    xdc = tmp_path / "demo.xdc"
+    xdc.write_text(text, encoding="utf-8")
+    eds = EDS.read_text(encoding="utf-8")
+    eds = eds.replace("[1017]\n", "[1017]\nParameterValue=250\n", 1)
+    eds = eds.replace("[1A00sub1]\n", "[1A00sub1]\nParameterValue=0x62000108\n", 1)
+    eds += "\n[DeviceComissioning]\nNodeID=9\nBaudrate=250\n"
+    dcf = tmp_path / "demo.dcf"
+    dcf.write_text(eds, encoding="utf-8")
+    return xdc, dcf
+
+
+def test_xdc_actual_value_is_the_configured_value(tmp_path):
+    xdc, dcf = _configured(tmp_path)
+    od = read_od(xdc)
+    assert od.node_id == 9 and od.bitrate == 250_000
+    assert od[0x1017].value == 250 and od[0x1017].default == 0
+    assert od[0x1A00][1].value == 0x62000108 and od[0x1A00][1].default == 0x60000108
+    assert od[0x1400][1].default == 0x209  # $NODEID is the XDC's node
+    prof, ref = load_eds(xdc), load_eds(dcf)
+    assert prof.node_id == ref.node_id == 9
+    assert prof.value(0x1017, 0) == ref.value(0x1017, 0) == 250
+    assert prof.object(0x1017).default == ref.object(0x1017).default == 250
+    assert prof.pdos(9) == ref.pdos(9)
+    tx1 = next(p for p in prof.pdos(9) if p.direction == "tx" and p.number == 1)
+    assert (tx1.cob_id, tx1.mapping[0].index) == (0x189, 0x6200)
+    # as with a DCF, an explicit node ID wins over the file's
+    assert read_od(xdc, 3).node_id == 3 and read_od(xdc, 3)[0x1400][1].default == 0x203
+
+
+LOG = (
+    "(1.000000) can0 605#2310210178563412\n"  # write 0x2110:01 = 0x12345678
+    "(1.001000) can0 585#6010210100000000\n"
+    "(1.100000) can0 605#4020210200000000\n"  # read 0x2120:02
+    "(1.101000) can0 585#4320210278563412\n"
+)
+
+
+def test_decode_names_sdo_transfers_from_the_xdd(tmp_path):
+    log = tmp_path / "bus.log"
+    log.write_text(LOG)
+
+    def transfers(*extra: str) -> tuple[list[dict], str]:
+        out = cli("decode", str(log), "--format", "jsonl", *extra)
+        assert out.returncode == 0, out.stderr.decode()
+        text = out.stdout.decode()
+        return [r for r in map(json.loads, text.splitlines()) if r["kind"] == "sdo"], text
+
+    bare, _ = transfers()
+    named, text = transfers("--eds", f"5={XDD}")
+    [(w, r)] = [tuple(named)]
+    assert (w["index"], w["subindex"], w["name"], w["value"]) == (0x2110, 1, "int32", 0x12345678)
+    assert (r["index"], r["subindex"], r["name"]) == (0x2120, 2, "U64")
+    assert all(t["name"] not in ("int32", "U64") for t in bare)
+    assert transfers("--eds", f"5={EDS}")[1] == text  # the same as the device's EDS gives
+    shown = cli("decode", str(log), "--no-color", "--eds", f"5={XDD}").stdout.decode()
+    assert "SDO write 0x2110:01 int32 expedited -> ok: 305419896 (0x12345678)" in shown
+
+
+def test_xdd_in_network_file_and_devices(tmp_path, capsys):
+    log = tmp_path / "bus.log"
+    log.write_text(LOG)
+    net = tmp_path / "net.toml"
+    net.write_text(f'[nodes.5]\neds = "{XDD.as_posix()}"\n')
+    assert main(["decode", str(log), "--network", str(net), "--format", "jsonl"]) == 0
+    names = [json.loads(x).get("name") for x in capsys.readouterr().out.splitlines()]
+    assert "int32" in names and "U64" in names
+    assert main(["devices", str(XDD), "--node", "5"]) == 0
+    shown = capsys.readouterr().out
+    assert "Demo device" in shown and "TPDO1 COB-ID 0x185" in shown
+
+
+BILLION_LAUGHS = """<?xml version="1.0"?>
+<!DOCTYPE lolz [
+ <!ENTITY lol "lol">
+ <!ENTITY lol2 "&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;">
+ <!ENTITY lol3 "&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;">
+ <!ENTITY lol4 "&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;">
+ <!ENTITY lol5 "&lol4;&lol4;&lol4;&lol4;&lol4;&lol4;&lol4;&lol4;&lol4;&lol4;">
+ <!ENTITY lol6 "&lol5;&lol5;&lol5;&lol5;&lol5;&lol5;&lol5;&lol5;&lol5;&lol5;">
+ <!ENTITY lol7 "&lol6;&lol6;&lol6;&lol6;&lol6;&lol6;&lol6;&lol6;&lol6;&lol6;">
+ <!ENTITY lol8 "&lol7;&lol7;&lol7;&lol7;&lol7;&lol7;&lol7;&lol7;&lol7;&lol7;">
+ <!ENTITY lol9 "&lol8;&lol8;&lol8;&lol8;&lol8;&lol8;&lol8;&lol8;&lol8;&lol8;">
+]>
+<ISO15745ProfileContainer><CANopenObjectList>
+<CANopenObject index="1008" name="&lol9;" objectType="7" dataType="0009"/>
+</CANopenObjectList></ISO15745ProfileContainer>
+"""
+EXTERNAL = """<?xml version="1.0"?>
+<!DOCTYPE x [<!ENTITY x SYSTEM "file:///etc/passwd">]>
+<ISO15745ProfileContainer><CANopenObjectList>
+<CANopenObject index="1008" name="&x;" objectType="7" dataType="0009"/>
+</CANopenObjectList></ISO15745ProfileContainer>
+"""
+DEEP = (
+    "<ISO15745ProfileContainer>"
+    + "<a>" * 100_000
+    + "</a>" * 100_000
+    + "</ISO15745ProfileContainer>"
+)
+
+
+@pytest.mark.parametrize(
+    ("name", "content", "says"),
+    [
+        ("laughs.xdd", BILLION_LAUGHS, "DTD or entities"),
+        ("external.xdc", EXTERNAL, "DTD or entities"),
+        ("deep.xdd", DEEP, "nested more than 64 deep"),
+        (
+            "broken.xdd",
+            "<ISO15745ProfileContainer><a></ISO15745ProfileContainer>",
+            "XML mismatched",
+        ),
+        ("other.xdd", "<html><body/></html>", "root element is <html>"),
+        (
+            "encoding.xdd",
+            '<?xml version="1.0" encoding="FFFFFFFF"?><ISO15745ProfileContainer/>',
+            "unknown encoding",
+        ),
+    ],
+    ids=["billion-laughs", "external-entity", "deep-nesting", "broken", "not-cia311", "encoding"],
+)
+def test_hostile_xml_is_refused_in_one_line(tmp_path, name, content, says):
+    log = tmp_path / "bus.log"
+    log.write_text(LOG)
+    bad = tmp_path / name
+    bad.write_text(content)
+    out = cli("decode", str(log), "--eds", f"5={bad}")
+    err = out.stderr.decode()
+    assert out.returncode == 2, err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert name in err and says in err
+
+
+def test_xml_size_is_bounded_and_content_picks_the_reader(tmp_path, monkeypatch):
+    monkeypatch.setattr(xdd, "MAX_BYTES", 1000)
+    big = tmp_path / "big.xdd"
+    big.write_text("<ISO15745ProfileContainer>" + " " * 2000 + "</ISO15745ProfileContainer>")
+    with pytest.raises(InputError, match=r"big\.xdd: refused: an XDD/XDC larger than"):
+        read_od(big)
+    monkeypatch.undo()
+    # an XDD saved with the wrong suffix is still read as XML, and an EDS as an EDS
+    renamed = tmp_path / "demo.eds"
+    renamed.write_bytes(XDD.read_bytes())
+    assert len(variables(read_od(renamed, 5))) == 288
+    notes = tmp_path / "notes.xml"
+    notes.write_text("<ISO15745ProfileContainer/>")
+    with pytest.raises(InputError, match="not an EDS, DCF, XDD or XDC"):
+        read_od(notes)
+
+
+def test_xdc_is_a_configuration_reference_and_a_dcf_base_as_a_dcf_is(tmp_path):
+    xdc, dcf = _configured(tmp_path)
+    log = tmp_path / "cfg.log"
+    log.write_text(  # node 9's heartbeat written to 100 ms; the XDC/DCF configure 250 ms
+        "(1.000000) can0 609#2B17100064000000\n(1.001000) can0 589#6017100000000000\n"
+    )
+    against = {}
+    for ref in (xdc, dcf):
+        out = cli("diff", str(log), str(ref))
+        assert out.returncode == 1, out.stderr.decode()
+        against[ref.suffix] = out.stdout.decode().replace(str(ref), "B")
+    assert "0x1017:00 Producer heartbeat time: 100 -> 250" in against[".xdc"]
+    assert against[".xdc"] == against[".dcf"]
+    out = cli("od", str(log), "--eds", f"9={xdc}", "--dcf", str(tmp_path / "dcf"))
+    assert out.returncode == 0, out.stderr.decode()
+    written = import_od(str(tmp_path / "dcf" / "node9.dcf"))
+    assert written.node_id == 9 and written[0x1017].value == 100
+    assert written[0x1000].description.startswith("* bit 16-31: Additional information")
