@@ -12,7 +12,7 @@ import sys
 import tomllib
 from pathlib import Path
 
-from cananalyze.core.errors import InputError
+from cananalyze.core.errors import InputError, read_bounded
 
 # (file, old key) pairs already warned about: one warning per key per file and process
 _warned: set[tuple[str, str]] = set()
@@ -170,13 +170,7 @@ def read_tree(path: str | Path, what: str) -> tuple[object, Lines]:
     does not parse, is not UTF-8, or passes a limit above. `what` names the file in
     messages ("network file", "rules file")."""
     path = Path(path)
-    try:
-        with open(path, "rb") as f:
-            raw = f.read(MAX_BYTES + 1)
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read {what}: {exc.strerror or exc}") from None
-    if len(raw) > MAX_BYTES:
-        raise InputError(f"{path}: {what} is larger than {MAX_BYTES >> 20} MiB")
+    raw = read_bounded(path, MAX_BYTES, what)
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:

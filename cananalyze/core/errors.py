@@ -22,6 +22,22 @@ class UsageError(CananalyzeError):
     """Bad command-line arguments or option values."""
 
 
+def read_bounded(path, limit: int, what: str, too_big: str = "") -> bytes:
+    """A whole configuration or device file, read only up to `limit` bytes: a file (or
+    /dev/zero) larger than that is refused in one line, never read whole. `what` names
+    it in the messages ("network file"); `too_big`, the refusal's words, if not
+    "<what> is larger than N MiB"."""
+    try:
+        with open(path, "rb") as f:
+            data = f.read(limit + 1)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read {what}: {exc.strerror or exc}") from None
+    if len(data) > limit:
+        said = too_big or f"{what} is larger than"
+        raise InputError(f"{path}: {said} {limit >> 20} MiB")
+    return data
+
+
 @dataclass(frozen=True)
 class Problem:
     source: str

@@ -24,7 +24,7 @@ import re
 from pathlib import Path
 from xml.etree.ElementTree import Element, ParseError
 
-from cananalyze.core.errors import InputError
+from cananalyze.core.errors import InputError, read_bounded
 
 MAX_BYTES = 32 << 20  # the largest vendor XDDs are a few MiB; /dev/zero stops here
 MAX_DEPTH = 64  # CiA 311 files nest about 10 deep; a 100k-deep file is refused early
@@ -93,13 +93,7 @@ def parse(path: Path) -> Element:
     from defusedxml import DTDForbidden, EntitiesForbidden, ExternalReferenceForbidden
     from defusedxml.ElementTree import iterparse
 
-    try:
-        with open(path, "rb") as f:
-            data = f.read(MAX_BYTES + 1)
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    if len(data) > MAX_BYTES:
-        raise InputError(f"{path}: refused: an XDD/XDC larger than {MAX_BYTES >> 20} MiB")
+    data = read_bounded(path, MAX_BYTES, "XDD/XDC", "refused: an XDD/XDC larger than")
     root = None
     depth = 0
     try:

@@ -57,8 +57,8 @@ def test_walkthrough_executes(kernel_env):
         if cell.cell_type == "code"
         for out in cell.outputs
     )
-    # 19 events plus two findings (the demo's SDO abort and EMCY): load() runs the checks
-    # 21 events and the boot story of each of the sample's 3 nodes (kind `boot`)
+    # 19 events, two findings (the demo's SDO abort and EMCY: load() runs the checks) and
+    # the boot story of each of the sample's 3 nodes (kind `boot`)
     assert "185 frames, 24 events, 7 SDO transactions" in text
     assert "Object does not exist in the object dictionary" in text  # the SDO table
     assert "operational" in text  # nodes table
