@@ -136,17 +136,30 @@ def test_bench_tables_compares_each_layout(logs, tmp_path):
 
 @pytest.mark.slow
 def test_bench_fleet(tmp_path):
-    """Four logs on 1 and 2 real local workers: every run complete, every figure printed."""
-    out = _run("bench_fleet.py", "5", "1500", "--repeats", "1", "--out", str(tmp_path), timeout=300)
+    """Five logs of two sizes on one real local worker, into a folder and into moto's S3 on
+    127.0.0.1, each run followed by a rerun: every run complete, every figure printed."""
+    pytest.importorskip("moto.server")
+    pytest.importorskip("s3fs")
+    out = _run(
+        "bench_fleet.py",
+        *("5", "500,1500", "--workers", "1", "--repeats", "1", "--out", str(tmp_path)),
+        timeout=420,
+    )
     lines = out.stdout.splitlines()
     assert lines[0].startswith(
-        "fleet: 5 logs x 1,500 frames = 7,500 frames (3 candump, 1 ASC, 1 BLF)"
+        "fleet: 5 logs of 500/1,500 frames = 4,500 frames (3 candump, 1 ASC, 1 BLF)"
     )
-    for w in (1, 2):
-        run = next(line for line in lines if line.startswith(f"run 1 workers={w}:"))
+    for storage in ("local", "s3"):
+        run = next(line for line in lines if line.startswith(f"run 1 {storage} workers=1:"))
         assert re.search(rf"wall {NUMBER} s, CPU {NUMBER} s \(user\+sys", run), run
-        assert re.search(rf"peak worker RSS {NUMBER} MB, dataset {NUMBER} MB in 5 date", run), run
-    assert re.fullmatch(rf"speed-up 2 vs 1 workers: {NUMBER}x wall", lines[-1])
+        assert re.search(rf"a task -?{NUMBER} ms \+ -?{NUMBER} us a frame", run), run
+        assert re.search(rf"dataset {NUMBER} MB in 5 date partitions; rerun wall {NUMBER} s", run)
+        median = next(line for line in lines if line.startswith(f"median {storage} workers=1"))
+        assert re.search(rf"dataset {NUMBER} bytes a frame", median), median
+    s3 = lines[-1]
+    assert s3.startswith("median s3 workers=1 (1 runs)"), s3
+    # every log is read (one GET each at least) and its seven parts put
+    assert re.search(r"requests a log [\d.]+ \(.*GET [1-9][\d.]*.*PUT [1-9]", s3), s3
 
 
 @pytest.mark.slow
