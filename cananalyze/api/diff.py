@@ -38,21 +38,32 @@ class Difference:
 
     @property
     def text(self) -> str:
-        def shown(v) -> str:
-            if v is None:
-                return "(none)"
-            if isinstance(v, float):
-                return f"{v:.6g}"
-            if isinstance(v, list | tuple):
-                return ", ".join(map(str, v)) or "(none)"
-            return str(v)
-
         if self.section == "nodes":
             return "seen in A only" if self.a else "seen in B only"
         return f"{self.section}: {self.item}: {shown(self.a)} -> {shown(self.b)}"
 
+    @property
+    def cells(self) -> tuple[str, str, str, str, str]:
+        """(who, section, item, A, B) as text: a table's row (the report's Differences)."""
+        bus, _, node = self.node.rpartition("/")
+        who = self.node if self.node == NETWORK else f"{bus} node {node}".lstrip()
+        if self.section == "nodes":
+            return who, "nodes", self.text, "seen" if self.a else "-", "seen" if self.b else "-"
+        return who, self.section, self.item, shown(self.a), shown(self.b)
+
     def as_dict(self) -> dict:
         return asdict(self)
+
+
+def shown(v) -> str:
+    """A compared value as the differences print it."""
+    if v is None:
+        return "(none)"
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    if isinstance(v, list | tuple):
+        return ", ".join(map(str, v)) or "(none)"
+    return str(v)
 
 
 def _node_key(bus, node) -> str:
@@ -272,3 +283,37 @@ def unseen(cap, path: str | Path, node: int | None) -> int:
         zip(od[od["node"] == node]["index"], od[od["node"] == node]["subindex"], strict=True)
     )
     return sum(1 for k in ref if k not in seen)
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """What `diff A B` and `report A --against B` show: the differences, a note (how
+    many objects of a DCF the log never showed) and B's unreadable lines (a log)."""
+
+    differences: list[Difference]
+    note: str = ""
+    problems: Any = None  # B's Problems when B is a log
+    reference: str = ""
+    kind: str = "log"  # "log" or "dcf": what B was
+
+
+def against(
+    a,
+    reference: str | Path,
+    opts,
+    tolerance: float = 0.1,
+    floor_ms: float = 2.0,
+    ref_node: int | None = None,
+) -> Comparison:
+    """A decoded log compared with B: a DCF/XDD/XDC (by its suffix, configuration only)
+    or another log decoded with the same `opts`."""
+    from cananalyze.api.capture import load_with
+    from cananalyze.devices.eds import DEVICE_SUFFIXES
+
+    if str(reference).lower().endswith(DEVICE_SUFFIXES):
+        found = compare_reference(a, reference, ref_node)
+        note = f"{unseen(a, reference, ref_node)} objects of B not shown by A"
+        return Comparison(found, note, None, str(reference), "dcf")
+    b = load_with(reference, opts)
+    found = compare(facts(a), facts(b), tolerance, floor_ms)
+    return Comparison(found, "", b.problems, str(reference), "log")
