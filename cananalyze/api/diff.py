@@ -97,7 +97,7 @@ def facts(cap) -> dict[str, dict[str, dict]]:
                 v = int(v)  # a number column with gaps is float in pandas
             if v is not None and not (isinstance(v, float) and np.isnan(v)):
                 _put(out, key, "identity", field, v)
-    od = cap.od
+    od = _configuration(cap)
     if len(od):
         last = od.groupby(["bus", "node"] if "bus" in od else "node")["life"].transform("max")
         for r in od[od["life"] == last].to_dict("records"):
@@ -118,6 +118,13 @@ def facts(cap) -> dict[str, dict[str, dict]]:
         key = NETWORK if node == -1 else str(int(node))
         _put(out, key, "findings", f"{rule} {severity}", int(n))
     return out
+
+
+def _configuration(cap):
+    """The od rows SDO transfers showed: PDO-mapped values are process data, which two
+    runs differ in by nature."""
+    od = cap.od
+    return od[od["set_by"] != "pdo"] if len(od) else od
 
 
 def _item(r: dict) -> str:
@@ -260,7 +267,7 @@ def compare_reference(cap, path: str | Path, node: int | None) -> list[Differenc
     give (a DCF lists far more objects than a log shows: those the log did not show are
     counted by `unseen`, not differences)."""
     node, ref = reference(path, node)
-    od = cap.od
+    od = _configuration(cap)
     mine = od[od["node"] == node]
     if len(mine):
         mine = mine[mine["life"] == mine["life"].max()]
@@ -278,7 +285,7 @@ def compare_reference(cap, path: str | Path, node: int | None) -> list[Differenc
 def unseen(cap, path: str | Path, node: int | None) -> int:
     """How many of the DCF's ParameterValues the log never showed."""
     node, ref = reference(path, node)
-    od = cap.od
+    od = _configuration(cap)
     seen = set(
         zip(od[od["node"] == node]["index"], od[od["node"] == node]["subindex"], strict=True)
     )

@@ -4,8 +4,9 @@ and one CiA 306 DCF per node.
 The rows are `OdTally`'s (the export's `od` table and `load().od` are the same rows).
 A DCF is the node's device description (its profile's object dictionary: EDS, DCF or
 built-in device; CiA 301's objects where none is known) with a `ParameterValue` for
-every object the node's last life showed, written by canopen's `export_od` so that
-canopen and `--eds` read it back. Objects the log never showed have no ParameterValue:
+every object the node's last life's SDO transfers showed (PDO-mapped values are process
+data, not configuration: the text and JSON lines only), written by canopen's `export_od` so
+that canopen and `--eds` read it back. Objects the log never showed have no ParameterValue:
 their DefaultValue applies, and the file's comments say so.
 """
 
@@ -88,7 +89,7 @@ def text(rows: list[dict], tally: OdTally, t0: float, profiles: dict) -> str:
     set, and the values it went through when it changed. Every text from the log or an
     EDS is printable (a terminal shows it, never obeys it)."""
     if not rows:
-        return "no successful SDO transfer in the log: no object values to show\n"
+        return "no successful SDO transfer nor mapped PDO in the log: no object values to show\n"
     out: list[str] = []
     last = None
     width = max(len(printable(r["name"] or "")) for r in rows)
@@ -106,13 +107,13 @@ def text(rows: list[dict], tally: OdTally, t0: float, profiles: dict) -> str:
         shown = r["value"] if r["value"] is not None else (f"0x{r['data']}" if r["data"] else "-")
         value = printable(shown)
         words = f" ({printable(r['words'])})" if r["words"] else ""
-        how = "written" if r["set_by"] == "write" else "read"
+        how = {"write": "written", "pdo": "by PDO"}.get(r["set_by"], "read")
         line = (
             f"  0x{r['index']:04X}:{r['subindex']:02X}  {printable(r['name'] or ''):<{width}}"
             f"  = {value}{words}  {how} at {r['t'] - t0:.3f} s"
         )
         if r["transfers"] > 1:
-            line += f", {r['transfers']} transfers"
+            line += f", {r['transfers']} {'frames' if r['set_by'] == 'pdo' else 'transfers'}"
         if r["changes"]:
             line += f", changed {r['changes']}x: {printable(r['history'])}"
         out.append(line)
@@ -124,6 +125,7 @@ def write_dcfs(folder: Path, rows: list[dict], ods: dict, source: str) -> list[P
     its last life; the paths written."""
     from canopen.objectdictionary import ObjectDictionary, export_od
 
+    rows = [r for r in rows if r["set_by"] != "pdo"]  # process data: no configuration
     last: dict[tuple, int] = {}
     for r in rows:
         k = (r.get("bus"), r["node"])

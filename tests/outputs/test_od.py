@@ -21,7 +21,7 @@ import pytest
 
 import cananalyze
 from cananalyze.devices.profile import load_eds
-from tests.conftest import REAL, real_file
+from tests.conftest import REAL, SAMPLES, real_file
 from tests.helpers.virtual_bus import drain, patient_client, unique_channel
 
 SLAVE_EDS = "ros-industrial__ros2_canopen/cia402_slave.eds"
@@ -222,6 +222,7 @@ def test_real_logs_dcfs_round_trip(path, tmp_path):
     rows = cap.od.to_dict("records")
     if not rows:
         pytest.skip("no successful SDO transfer")
+    sdo_rows = [r for r in rows if r["set_by"] != "pdo"]  # PDO values: in no DCF
     run = _od_run(str(path), "--dcf", str(tmp_path), "-q", "--format", "jsonl")
     assert run.returncode == 0, run.stderr
     shown = [json.loads(x) for x in run.stdout.splitlines()]
@@ -229,13 +230,13 @@ def test_real_logs_dcfs_round_trip(path, tmp_path):
         (r["node"], r["index"], r["subindex"], r["life"], r["data"]) for r in rows
     ]
     last = {}
-    for r in rows:
+    for r in sdo_rows:
         k = (r.get("bus"), r["node"])
         last[k] = max(last.get(k, 0), r["life"])
     for (bus, node), life in last.items():
         name = f"node{node}.dcf" if bus is None else f"{bus}-node{node}.dcf"
         od = canopen.import_od(str(tmp_path / name))
-        for r in rows:
+        for r in sdo_rows:
             if (r.get("bus"), r["node"], r["life"]) != (bus, node, life):
                 continue
             obj = od[r["index"]]
@@ -317,3 +318,46 @@ def test_polled_objects_counted_across_batches_and_paths(tmp_path, monkeypatch, 
     assert shown[:3] == [f"0x{(7 * i).to_bytes(4, 'little').hex()}" for i in (1, 2, 3)]
     assert shown[-2:] == ["...", f"0x{pos['data']}"] and pos["value"] is None
     assert len(shown) == 17  # the first 15, "...", the last
+
+
+def test_pdo_mapped_objects_last_values(tmp_path):
+    """commissioning.log remaps node 5's TPDO2 (0x285) by SDO to 0x6401:01 and 0x6401:03
+    (0x1A01): the od rows of those two objects are the last 0x285 frame's two INT16s
+    (python-can reads the log) in the DAT 7014's 0.1 degC, by PDO, the frames counted;
+    0x6401:02, in no PDO, has no row. The DCF holds no PDO value (process data) and the
+    export's table and load().od have the same rows."""
+    log = str(SAMPLES / "commissioning.log")
+    net = ("--network", str(SAMPLES / "network.toml"))
+    run = _od_run(log, *net, "--format", "jsonl", "--dcf", str(tmp_path / "dcf"), "-q")
+    assert run.returncode == 0, run.stderr
+    rows = [json.loads(x) for x in run.stdout.splitlines()]
+    mine = {(r["index"], r["subindex"]): r for r in rows if r["node"] == 5}
+    frames = [m for m in can.CanutilsLogReader(log) if m.arbitration_id == 0x285]
+    last = frames[-1]
+    pdo = {k: r for k, r in mine.items() if r["set_by"] == "pdo"}
+    assert set(pdo) == {(0x6401, 1), (0x6401, 3)}
+    for sub, at in ((1, 0), (3, 2)):
+        r = pdo[(0x6401, sub)]
+        raw = int.from_bytes(last.data[at : at + 2], "little", signed=True)
+        assert float(r["value"]) == pytest.approx(raw * 0.1)
+        assert r["words"] == f"{r['value']} °C"
+        assert r["t"] == pytest.approx(last.timestamp)
+        assert r["t_first"] == pytest.approx(frames[0].timestamp)
+        assert r["transfers"] == len(frames)
+        assert r["data"] is None and r["name"] == f"ch{sub}"
+        values = [int.from_bytes(m.data[at : at + 2], "little", signed=True) for m in frames]
+        assert r["changes"] == sum(a != b for a, b in zip(values, values[1:], strict=False))
+    text = _od_run(log, *net).stdout
+    line = next(x for x in text.splitlines() if x.startswith("  0x6401:01") and "ch1" in x)
+    assert "by PDO at" in line and f"{len(frames)} frames" in line
+    od = canopen.import_od(str(tmp_path / "dcf" / "node5.dcf"))
+    assert od[0x1017].value == 100  # an SDO write: configuration
+    assert od[0x6401][1].value is None  # a PDO value: none
+    out = tmp_path / "tables"
+    subprocess.run(
+        [sys.executable, "-m", "cananalyze", "export", log, *net, "--parquet", str(out), "-q"],
+        check=True,
+    )
+    assert pq.read_table(out / "od.parquet").to_pylist() == rows
+    frame = cananalyze.load(log, network=net[1]).od
+    assert frame.astype(object).where(frame.notna(), None).to_dict("records") == rows
