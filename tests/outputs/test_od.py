@@ -21,7 +21,7 @@ import pytest
 
 import cananalyze
 from cananalyze.devices.profile import load_eds
-from tests.conftest import REAL, SAMPLES, real_file
+from tests.conftest import REAL, ROOT, SAMPLES, real_file
 from tests.helpers.virtual_bus import drain, patient_client, unique_channel
 
 SLAVE_EDS = "ros-industrial__ros2_canopen/cia402_slave.eds"
@@ -361,3 +361,48 @@ def test_pdo_mapped_objects_last_values(tmp_path):
     assert pq.read_table(out / "od.parquet").to_pylist() == rows
     frame = cananalyze.load(log, network=net[1]).od
     assert frame.astype(object).where(frame.notna(), None).to_dict("records") == rows
+
+
+ROOT_EDS = ROOT / "decoders" / "dat7130.eds"
+
+
+def _given_dcf(path) -> None:
+    """The DAT 7130's EDS as a DCF: ParameterValues for 0x1017 (500 ms), 0x1800:05 (an
+    event timer of 1000 ms) and 0x1016:01 (node 5 consumed at 100 ms)."""
+    text = ROOT_EDS.read_text()
+    for section, value in (("1017", "500"), ("1800sub5", "0x03E8"), ("1016sub1", "0x00050064")):
+        at = text.index("PDOMapping=", text.index(f"[{section}]\n"))
+        text = text[:at] + f"ParameterValue={value}\n" + text[at:]
+    path.write_text(text)
+
+
+def test_dcf_keeps_a_given_dcfs_values_of_objects_not_seen(tmp_path):
+    """Node 6 described by a DCF; the log writes 0x1017 only. The DCF written: 0x1017 the
+    log's, the given DCF's other ParameterValues kept (named in the comments as not
+    seen), objects the given DCF set nothing for without one (DefaultValue applies)."""
+    given = tmp_path / "given.dcf"
+    _given_dcf(given)
+    log = tmp_path / "hb.log"
+    log.write_text(
+        "(1000.000000) can0 706#00\n"
+        "(1000.100000) can0 606#2B171000E8030000\n"
+        "(1000.101000) can0 586#6017100000000000\n"
+    )
+    for desc in (given, ROOT_EDS):
+        out = tmp_path / desc.suffix[1:]
+        run = _od_run(str(log), "--eds", f"6={desc}", "--dcf", str(out), "-q")
+        assert run.returncode == 0, run.stderr
+        od = canopen.import_od(str(out / "node6.dcf"))
+        assert od[0x1017].value == 1000  # the log's
+        assert od[0x1800][3].value is None and od[0x1800][3].default == 0
+        ini = configparser.RawConfigParser()
+        ini.optionxform = str
+        ini.read(out / "node6.dcf")
+        valued = {s for s in ini.sections() if ini.has_option(s, "ParameterValue")}
+        if desc == given:
+            assert od[0x1800][5].value == 1000 and od[0x1016][1].value == 0x00050064
+            assert valued == {"1017", "1800sub5", "1016sub1"}
+            assert "Not seen in the log" in od.comments
+            assert od.comments.splitlines()[3].split() == ["1016sub1", "1800sub5"]
+        else:  # an EDS: nothing but the log's
+            assert valued == {"1017"} and "Not seen" not in od.comments
