@@ -11,7 +11,7 @@ import pytest
 from conftest import ROOT, SAMPLES
 
 from tests.outputs.test_report import cli, parse, table_with
-from tests.outputs.test_report_injection import P1, _assert_inert
+from tests.outputs.test_report_injection import P1, _assert_inert, _in_chromium
 
 NETWORK = SAMPLES / "network.toml"
 
@@ -59,27 +59,39 @@ def test_a_log_against_itself_has_no_differences(tmp_path):
     assert 'id="differences"' in text and "no differences." in text
 
 
-def test_a_hostile_object_name_stays_text(tmp_path):
+@pytest.fixture(scope="module")
+def hostile_page(tmp_path_factory) -> tuple[Path, str, list]:
     """Node 5's heartbeat time written (1000 ms), its EDS naming 0x1017 with a script; B a
-    DCF of that EDS giving 250 ms: the difference's item carries the name, escaped."""
+    DCF of that EDS giving 250 ms: the difference's item carries the name."""
+    tmp = tmp_path_factory.mktemp("against")
     eds_text = (ROOT / "decoders" / "dat7130.eds").read_text()
     eds_text = eds_text.replace("ParameterName=Producer heartbeat time", f"ParameterName={P1}")
-    eds = tmp_path / "payload.eds"
+    eds = tmp / "payload.eds"
     eds.write_text(eds_text)
-    dcf = tmp_path / "payload.dcf"
+    dcf = tmp / "payload.dcf"
     head, sep, tail = eds_text.partition("[1017]")
     dcf.write_text(head + sep + tail.replace("PDOMapping=0", "ParameterValue=250\nPDOMapping=0", 1))
-    log = tmp_path / "hb.log"
+    log = tmp / "hb.log"
     log.write_text(
         "(1000.000000) can0 705#00\n"
         "(1000.100000) can0 605#2B171000E8030000\n"
         "(1000.101000) can0 585#6017100000000000\n"
         "(1000.200000) can0 705#05\n"
     )
-    text, rows = _report(tmp_path, log, dcf, "--eds", f"5={eds}", "--ref-node", "5")
+    text, rows = _report(tmp, log, dcf, "--eds", f"5={eds}", "--ref-node", "5")
+    return tmp / "report.html", text, rows
+
+
+def test_a_hostile_object_name_stays_text(hostile_page):
+    page, text, rows = hostile_page
     assert rows == [["node 5", "configuration", f"0x1017:00 {P1}", "1000", "250"]]
     assert P1 not in text  # only as entities in the HTML
-    _assert_inert(tmp_path / "report.html", [f"0x1017:00 {P1}"])
+    _assert_inert(page, [f"0x1017:00 {P1}"])
+
+
+@pytest.mark.slow
+def test_a_hostile_object_name_inert_in_chromium(hostile_page):
+    _in_chromium(hostile_page[0], [f"0x1017:00 {P1}"])
 
 
 def test_against_needs_a_file_not_stdin(tmp_path):
