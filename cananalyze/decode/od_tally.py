@@ -10,8 +10,9 @@ value is kept per life: `life` counts the node's boot-ups before the transfer.
 PDO-mapped objects (issue 41): where a PDO's mapping is known (the log's 0x1600/0x1A00
 writes, the network file, the device's profile), each mapped object's last value in each
 life is a row too, named and decoded by the mapping, `set_by` "pdo", its frames counted
-as `transfers`. Process data, not configuration: an object an SDO transfer showed in that
-life keeps the SDO's row (what a DCF holds, what `diff` compares).
+as `transfers`. An object both an SDO transfer and a PDO showed in a life has the row of
+the later (by frame, so on a log without times too): its last value. PDO rows are process
+data, not configuration: no DCF holds them and `diff` does not compare them.
 
 `load().od`, the export's `od` table, `cananalyze od` and its DCFs all read `rows()`.
 """
@@ -57,6 +58,7 @@ class _Object:
     changes: int = 0
     history: list = field(default_factory=list)  # the first values, as shown
     more: bool = False  # more changes than the history keeps
+    row: int = -1  # the last transfer's frame, counted from the log's first
 
 
 @dataclass
@@ -72,6 +74,7 @@ class _Mapped:
     changes: int = 0
     history: list = field(default_factory=list)
     more: bool = False
+    row: int = -1  # the last frame's, counted from the log's first
 
 
 class OdTally:
@@ -87,12 +90,16 @@ class OdTally:
         self.lives: dict[tuple, int] = {}  # (bus, node) -> boot-ups seen so far
         self.boot_t: dict[tuple, list[float]] = {}  # (bus, node) -> boot-up times
         self.several = False  # frames of more than one channel seen: rows name their bus
+        self.offset = 0  # frames of the batches before (orders SDO and PDO of a log untimed)
+        self._off = 0
         self._first: str | None = None
 
     def add(self, batch: DecodedBatch) -> None:
         """One batch's boot-ups and successful SDO transfers, in row order (a transfer
         ending on a boot-up's row is before it: the answer came first)."""
         fb = batch.frames
+        self._off = self.offset
+        self.offset += len(fb)
         if len(fb) and not self.several:
             first = fb.channel_label(int(fb.channel[0]))
             self._first = self._first or first
@@ -169,6 +176,7 @@ class OdTally:
             last = int(order[hi - 1])
             obj.key = keys[last]
             obj.rec = recs.record(int(at[last]))
+            obj.row = int(rows[last]) + self._off
 
     def _mapped(self, fb, blocks, labels, boots, boot_ch, boot_node) -> None:
         """The batch's PDO blocks' mapped objects: per life, the last value, the frames
@@ -197,6 +205,7 @@ class OdTally:
                 order = np.argsort(rows, kind="stable")
                 rows, values = rows[order], values[order]
             self._update(key, fb.t[rows], values, got[0][2], got[0][3])
+            self.mapped[key].row = int(rows[-1]) + self._off
 
     def _update(self, key: tuple, t: np.ndarray, values: np.ndarray, name: str, units) -> None:
         m = self.mapped.get(key)
@@ -228,8 +237,9 @@ class OdTally:
         for key in sorted(keys, key=lambda k: (str(k[0]), *k[1:])):
             bus, node, life, index, sub = key
             o = self.objects.get(key)
-            if o is None:
-                out.append(self._mapped_row(key))
+            m = self.mapped.get(key)
+            if o is None or (m is not None and m.row > o.row):
+                out.append(self._mapped_row(key))  # the later of an SDO's and a PDO's
                 continue
             r = o.rec or {}
             row = {

@@ -406,3 +406,29 @@ def test_dcf_keeps_a_given_dcfs_values_of_objects_not_seen(tmp_path):
             assert od.comments.splitlines()[3].split() == ["1016sub1", "1800sub5"]
         else:  # an EDS: nothing but the log's
             assert valued == {"1017"} and "Not seen" not in od.comments
+
+
+def test_pdo_values_of_a_real_log_mapped_by_its_own_sdo_writes():
+    """ZeroErr eRob node 11 (a real candump without times): the log maps TPDO1 (0x18B) to
+    0x6041 (16 bit) and 0x6064 (32 bit) by SDO, and reads 0x6064 once before its 586 PDOs.
+    The rows are the last 0x18B frame's values (its bytes read here from the text), the
+    PDO's row replacing the earlier SDO read: the object's last value, on a log whose
+    frames all have one time (ordered by frame)."""
+    log = real_file("SeonilChoi__CANOPEN-SDK/log2.txt")
+    frames = []
+    for line in log.read_text().splitlines():
+        parts = line.split()
+        if len(parts) >= 3 and parts[1] == "18B":
+            frames.append(bytes.fromhex("".join(parts[3:])))
+    run = _od_run(str(log), "--format", "jsonl")
+    assert run.returncode == 0, run.stderr
+    rows = {(r["index"], r["subindex"]): r for r in map(json.loads, run.stdout.splitlines())}
+    status, position = rows[(0x6041, 0)], rows[(0x6064, 0)]
+    assert status["set_by"] == position["set_by"] == "pdo"
+    assert status["transfers"] == position["transfers"] == len(frames) == 586
+    assert int(status["value"]) == int.from_bytes(frames[-1][0:2], "little")
+    assert int(position["value"]) == int.from_bytes(frames[-1][2:6], "little")
+    positions = [int.from_bytes(f[2:6], "little") for f in frames]
+    assert position["changes"] == sum(
+        a != b for a, b in zip(positions, positions[1:], strict=False)
+    )
