@@ -12,6 +12,9 @@ child), so a blow-up or a hang is counted, not suffered, whatever the machine's 
 - config: network YAML/TOML and rules files mutated, plus hostile shapes (alias bombs,
   deep nesting, huge files), through the one reader;
 - eds: an EDS mutated, through canopen's import (read_od);
+- xdd: an XDD (tests/data/xdd) mutated byte- or token-wise, or a hostile XML shape
+  (entity expansion, external entity, deep nesting, a huge attribute), through the XDD
+  reader and the device profile built from it, as .xdd, .xdc or .eds (content decides);
 - export: a mutated log exported to Parquet, CSV and MCAP: no hidden file may remain.
 
 Prints counts per category: cases, crashes, hangs, memory blow-ups, lost frames,
@@ -48,7 +51,7 @@ from tests.fuzz import targets  # noqa: E402
 from tests.fuzz.campaign import _logs, _suffix, mutate_bytes, mutate_tokens  # noqa: E402
 from tests.fuzz.harness import run_log  # noqa: E402
 
-KINDS = ["log", "log", "log", "junk", "config", "eds", "export"]
+KINDS = ["log", "log", "log", "junk", "config", "eds", "xdd", "export"]
 HOSTILE_CONFIG = [
     b"a0: &a0 [x, x, x, x, x, x, x, x, x]\n"
     + b"".join(f"a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * 9)}]\n".encode() for i in range(1, 10)),
@@ -90,6 +93,17 @@ def _case(kind: str, rng: random.Random, logs, cache) -> tuple[str, bytes, str]:
         return f"config:{which}", blob, ""
     if kind == "eds":
         return "eds", mutate_bytes(rng, targets.GOOD_EDS), rng.choice([".eds", ".dcf"])
+    if kind == "xdd":
+        suffix = rng.choice([".xdd", ".xdc", ".eds"])
+        if rng.random() < 0.1:
+            return "xdd", rng.choice(targets.HOSTILE_XML), suffix
+        seed = cache.setdefault(p := rng.choice(targets.XDD_SEEDS), p.read_bytes())
+        pick = rng.random()
+        if pick < 0.6:  # well-formed: the reader's meaning, not only the XML parser
+            blob = targets.mutate_xml(rng, seed)
+        else:
+            blob = mutate_tokens(rng, seed) if pick < 0.7 else mutate_bytes(rng, seed)
+        return "xdd", blob, suffix
     p = rng.choice([q for q in logs if q.stat().st_size < 300_000])
     return "export", mutate_bytes(rng, cache[p]), _suffix(p)
 
@@ -107,6 +121,8 @@ def _run(what: str, blob: bytes, suffix: str) -> str:
         targets.load_config(blob, what[7:])
     elif what == "eds":
         targets.load_eds(blob, suffix)
+    elif what == "xdd":
+        targets.load_xdd(blob, suffix)
     else:
         with tempfile.TemporaryDirectory() as out:
             left = targets.export_leaves_nothing(blob, suffix, Path(out))
@@ -169,7 +185,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--memory", type=int, default=1024, help="MB per case (RLIMIT_AS)")
     ap.add_argument("--timeout", type=float, default=20, help="CPU seconds per case")
     ap.add_argument("--out", default=str(Path(tempfile.gettempdir()) / "cananalyze-fuzz"))
+    ap.add_argument(
+        "--kind",
+        action="append",
+        choices=sorted(set(KINDS)),
+        help="only these kinds of case (repeatable; default all, logs weighted 3)",
+    )
     a = ap.parse_args(argv)
+    kinds = a.kind or KINDS
     rng = random.Random(a.seed)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -181,7 +204,7 @@ def main(argv: list[str] | None = None) -> int:
     distinct: dict[tuple[str, str], int] = {}
     cpu0, t0 = _cpu(), time.time()
     while time.time() - t0 < a.seconds:
-        kind = rng.choice(KINDS)
+        kind = rng.choice(kinds)
         what, blob, suffix = _case(kind, rng, logs, cache)
         cases[kind] += 1
         cat, detail = _fork(what, blob, suffix, a.memory, a.timeout)
@@ -221,6 +244,8 @@ def _warm() -> None:
     import yaml  # noqa: F401
 
     import cananalyze.checks.rulesfile  # noqa: F401
+    import cananalyze.devices.profile  # noqa: F401
+    import cananalyze.devices.xdd  # noqa: F401
     import cananalyze.outputs.mcap.sink  # noqa: F401
     import cananalyze.outputs.tables.stream  # noqa: F401
     import cananalyze.pipeline  # noqa: F401

@@ -38,21 +38,32 @@ class Difference:
 
     @property
     def text(self) -> str:
-        def shown(v) -> str:
-            if v is None:
-                return "(none)"
-            if isinstance(v, float):
-                return f"{v:.6g}"
-            if isinstance(v, list | tuple):
-                return ", ".join(map(str, v)) or "(none)"
-            return str(v)
-
         if self.section == "nodes":
             return "seen in A only" if self.a else "seen in B only"
         return f"{self.section}: {self.item}: {shown(self.a)} -> {shown(self.b)}"
 
+    @property
+    def cells(self) -> tuple[str, str, str, str, str]:
+        """(who, section, item, A, B) as text: a table's row (the report's Differences)."""
+        bus, _, node = self.node.rpartition("/")
+        who = self.node if self.node == NETWORK else f"{bus} node {node}".lstrip()
+        if self.section == "nodes":
+            return who, "nodes", self.text, "seen" if self.a else "-", "seen" if self.b else "-"
+        return who, self.section, self.item, shown(self.a), shown(self.b)
+
     def as_dict(self) -> dict:
         return asdict(self)
+
+
+def shown(v) -> str:
+    """A compared value as the differences print it."""
+    if v is None:
+        return "(none)"
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    if isinstance(v, list | tuple):
+        return ", ".join(map(str, v)) or "(none)"
+    return str(v)
 
 
 def _node_key(bus, node) -> str:
@@ -86,7 +97,7 @@ def facts(cap) -> dict[str, dict[str, dict]]:
                 v = int(v)  # a number column with gaps is float in pandas
             if v is not None and not (isinstance(v, float) and np.isnan(v)):
                 _put(out, key, "identity", field, v)
-    od = cap.od
+    od = _configuration(cap)
     if len(od):
         last = od.groupby(["bus", "node"] if "bus" in od else "node")["life"].transform("max")
         for r in od[od["life"] == last].to_dict("records"):
@@ -107,6 +118,13 @@ def facts(cap) -> dict[str, dict[str, dict]]:
         key = NETWORK if node == -1 else str(int(node))
         _put(out, key, "findings", f"{rule} {severity}", int(n))
     return out
+
+
+def _configuration(cap):
+    """The od rows SDO transfers showed: PDO-mapped values are process data, which two
+    runs differ in by nature."""
+    od = cap.od
+    return od[od["set_by"] != "pdo"] if len(od) else od
 
 
 def _item(r: dict) -> str:
@@ -249,7 +267,7 @@ def compare_reference(cap, path: str | Path, node: int | None) -> list[Differenc
     give (a DCF lists far more objects than a log shows: those the log did not show are
     counted by `unseen`, not differences)."""
     node, ref = reference(path, node)
-    od = cap.od
+    od = _configuration(cap)
     mine = od[od["node"] == node]
     if len(mine):
         mine = mine[mine["life"] == mine["life"].max()]
@@ -267,8 +285,42 @@ def compare_reference(cap, path: str | Path, node: int | None) -> list[Differenc
 def unseen(cap, path: str | Path, node: int | None) -> int:
     """How many of the DCF's ParameterValues the log never showed."""
     node, ref = reference(path, node)
-    od = cap.od
+    od = _configuration(cap)
     seen = set(
         zip(od[od["node"] == node]["index"], od[od["node"] == node]["subindex"], strict=True)
     )
     return sum(1 for k in ref if k not in seen)
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """What `diff A B` and `report A --against B` show: the differences, a note (how
+    many objects of a DCF the log never showed) and B's unreadable lines (a log)."""
+
+    differences: list[Difference]
+    note: str = ""
+    problems: Any = None  # B's Problems when B is a log
+    reference: str = ""
+    kind: str = "log"  # "log" or "dcf": what B was
+
+
+def against(
+    a,
+    reference: str | Path,
+    opts,
+    tolerance: float = 0.1,
+    floor_ms: float = 2.0,
+    ref_node: int | None = None,
+) -> Comparison:
+    """A decoded log compared with B: a DCF/XDD/XDC (by its suffix, configuration only)
+    or another log decoded with the same `opts`."""
+    from cananalyze.api.capture import load_with
+    from cananalyze.devices.eds import DEVICE_SUFFIXES
+
+    if str(reference).lower().endswith(DEVICE_SUFFIXES):
+        found = compare_reference(a, reference, ref_node)
+        note = f"{unseen(a, reference, ref_node)} objects of B not shown by A"
+        return Comparison(found, note, None, str(reference), "dcf")
+    b = load_with(reference, opts)
+    found = compare(facts(a), facts(b), tolerance, floor_ms)
+    return Comparison(found, "", b.problems, str(reference), "log")

@@ -30,20 +30,14 @@ def run(args: argparse.Namespace) -> int:
     from cananalyze.api import diff
     from cananalyze.api.capture import load_with
     from cananalyze.core.text import printable
-    from cananalyze.devices.eds import DEVICE_SUFFIXES
 
     opts = options(args, checks=True)
     a = load_with(args.log, opts)
     report_problems(a.problems)
-    if args.reference.lower().endswith(DEVICE_SUFFIXES):
-        found = diff.compare_reference(a, args.reference, args.ref_node)
-        note = f"{diff.unseen(a, args.reference, args.ref_node)} objects of B not shown by A"
-    else:
-        b = load_with(args.reference, opts)
-        report_problems(b.problems)
-        fa, fb = diff.facts(a), diff.facts(b)
-        found = diff.compare(fa, fb, args.tolerance, args.tolerance_ms)
-        note = ""
+    c = diff.against(a, args.reference, opts, args.tolerance, args.tolerance_ms, args.ref_node)
+    if c.problems is not None:
+        report_problems(c.problems)
+    found, note = c.differences, c.note
     if args.diff_json:
         doc = {
             "a": str(args.log),

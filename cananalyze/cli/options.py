@@ -223,6 +223,14 @@ FLAGS: dict[str, Flag] = {
             "ParameterValues (actualValues) are the expected configuration",
         ),
     ),
+    "against": Flag(
+        ("--against",),
+        dict(
+            metavar="B",
+            help="also compare the log with B as `diff LOG B` does (a log, or a DCF/XDC): a "
+            "Differences section",
+        ),
+    ),
     "tolerance": Flag(
         ("--tolerance",),
         dict(

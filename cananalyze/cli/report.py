@@ -21,6 +21,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     options_.add(p, *options_.INPUT, extra_names=DBC)
     options_.add(p, "output", "rules", "bitrate", "title", required=("output",))
     options_.add(p, *options_.FILTERS, "quiet")
+    options_.add(p, "against", "tolerance", "tolerance_ms", "reference_node")
     p.set_defaults(func=run)
 
 
@@ -32,10 +33,11 @@ def run(args: argparse.Namespace) -> int:
 
     opts = options(args, checks=True)
     checker = build_checker(opts)  # a bad rules file fails before the log is read
+    differences = _against(args) if args.against else None
     source = open_source(args.log, opts)
     decoder = build_decoder(opts, checker)
     verdict = FindingsSink(quiet=True)
-    page = ReportSink(args.output, bitrate=args.bitrate, title=args.title)
+    page = ReportSink(args.output, bitrate=args.bitrate, title=args.title, differences=differences)
     try:
         run_with_progress(source, decoder, [verdict, page], opts, quiet=args.quiet)
     finally:
@@ -46,3 +48,20 @@ def run(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     return verdict.exit_code
+
+
+def _against(args: argparse.Namespace):
+    """`diff LOG B`'s comparison (api/diff.py), of the whole log as `diff` reads it (the
+    filters choose what the page shows, not what is compared): LOG is read once more."""
+    from cananalyze.api import diff
+    from cananalyze.api.capture import load_with
+    from cananalyze.core.errors import UsageError
+
+    if args.log == "-":
+        raise UsageError("--against: the log is read twice, so it must be a file, not stdin")
+    opts = options(args, checks=True, nodes=None, services=None, t_from=None, t_to=None)
+    a = load_with(args.log, opts)
+    c = diff.against(a, args.against, opts, args.tolerance, args.tolerance_ms, args.ref_node)
+    if c.problems is not None:
+        report_problems(c.problems)
+    return c

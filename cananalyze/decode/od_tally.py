@@ -7,6 +7,13 @@ was set (read or written), how often, and the values it went through. A boot-up 
 the node starts a new life (its objects are back to their defaults unless stored), so a
 value is kept per life: `life` counts the node's boot-ups before the transfer.
 
+PDO-mapped objects (issue 41): where a PDO's mapping is known (the log's 0x1600/0x1A00
+writes, the network file, the device's profile), each mapped object's last value in each
+life is a row too, named and decoded by the mapping, `set_by` "pdo", its frames counted
+as `transfers`. An object both an SDO transfer and a PDO showed in a life has the row of
+the later (by frame, so on a log without times too): its last value. PDO rows are process
+data, not configuration: no DCF holds them and `diff` does not compare them.
+
 `load().od`, the export's `od` table, `cananalyze od` and its DCFs all read `rows()`.
 """
 
@@ -16,6 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cananalyze.core.columns.numtext import scalar_text
 from cananalyze.core.records import DecodedBatch
 from cananalyze.protocol.services import Service
 
@@ -50,6 +58,23 @@ class _Object:
     changes: int = 0
     history: list = field(default_factory=list)  # the first values, as shown
     more: bool = False  # more changes than the history keeps
+    row: int = -1  # the last transfer's frame, counted from the log's first
+
+
+@dataclass
+class _Mapped:
+    """One PDO-mapped object of one node in one life, as the PDO frames carried it."""
+
+    name: str
+    t_first: float
+    t: float
+    last: object  # the last value (a Python scalar)
+    unit: str | None
+    frames: int = 0
+    changes: int = 0
+    history: list = field(default_factory=list)
+    more: bool = False
+    row: int = -1  # the last frame's, counted from the log's first
 
 
 class OdTally:
@@ -61,15 +86,20 @@ class OdTally:
 
     def __init__(self) -> None:
         self.objects: dict[tuple, _Object] = {}  # (bus, node, life, index, sub) -> object
+        self.mapped: dict[tuple, _Mapped] = {}  # the same keys -> a PDO-mapped object
         self.lives: dict[tuple, int] = {}  # (bus, node) -> boot-ups seen so far
         self.boot_t: dict[tuple, list[float]] = {}  # (bus, node) -> boot-up times
         self.several = False  # frames of more than one channel seen: rows name their bus
+        self.offset = 0  # frames of the batches before (orders SDO and PDO of a log untimed)
+        self._off = 0
         self._first: str | None = None
 
     def add(self, batch: DecodedBatch) -> None:
         """One batch's boot-ups and successful SDO transfers, in row order (a transfer
         ending on a boot-up's row is before it: the answer came first)."""
         fb = batch.frames
+        self._off = self.offset
+        self.offset += len(fb)
         if len(fb) and not self.several:
             first = fb.channel_label(int(fb.channel[0]))
             self._first = self._first or first
@@ -80,7 +110,8 @@ class OdTally:
         if recs:
             c = recs.cols
             at = np.flatnonzero(c.ok & (c.node >= 0) & (c.index >= 0) & (c.subindex >= 0))
-        if not boots.size and not at.size:
+        blocks = [b for b in batch.signals if b.objects and len(b.rows) and "pdo" in b.pdo]
+        if not boots.size and not at.size and not blocks:
             return
         top = int(fb.channel.max()) + 1 if len(fb) else 1
         labels = [fb.channel_label(c) for c in range(top)]
@@ -88,6 +119,8 @@ class OdTally:
         boot_node = batch.node[boots].astype(np.int64)
         if at.size:
             self._transfers(batch, at, labels, boots, boot_ch, boot_node)
+        if blocks:
+            self._mapped(fb, blocks, labels, boots, boot_ch, boot_node)
         for row, ch, node in zip(boots.tolist(), boot_ch.tolist(), boot_node.tolist(), strict=True):
             key = (labels[ch], node)
             self.lives[key] = self.lives.get(key, 0) + 1
@@ -143,6 +176,52 @@ class OdTally:
             last = int(order[hi - 1])
             obj.key = keys[last]
             obj.rec = recs.record(int(at[last]))
+            obj.row = int(rows[last]) + self._off
+
+    def _mapped(self, fb, blocks, labels, boots, boot_ch, boot_node) -> None:
+        """The batch's PDO blocks' mapped objects: per life, the last value, the frames
+        and the changes, in row order (an object two PDOs carry, or a mapping changed
+        within the batch, comes in several blocks)."""
+        parts: dict[tuple, list] = {}
+        for blk in blocks:
+            rows = np.asarray(blk.rows, np.int64)
+            ch = int(fb.channel[rows[0]])
+            bus, node = labels[ch], int(blk.node)
+            life = np.full(rows.size, self.lives.get((bus, node), 0), np.int64)
+            for row, bch, bn in zip(
+                boots.tolist(), boot_ch.tolist(), boot_node.tolist(), strict=True
+            ):
+                if bch == ch and bn == node:
+                    life[rows > row] += 1
+            for lv in np.unique(life).tolist():
+                sel = life == lv
+                for name, (index, sub) in blk.objects.items():
+                    got = (rows[sel], np.asarray(blk.columns[name])[sel], name, blk.units)
+                    parts.setdefault((bus, node, lv, index, sub), []).append(got)
+        for key, got in parts.items():
+            rows = np.concatenate([g[0] for g in got])
+            values = np.concatenate([g[1] for g in got])
+            if len(got) > 1:
+                order = np.argsort(rows, kind="stable")
+                rows, values = rows[order], values[order]
+            self._update(key, fb.t[rows], values, got[0][2], got[0][3])
+            self.mapped[key].row = int(rows[-1]) + self._off
+
+    def _update(self, key: tuple, t: np.ndarray, values: np.ndarray, name: str, units) -> None:
+        m = self.mapped.get(key)
+        if m is None:
+            first = _scalar(values[0])
+            m = self.mapped[key] = _Mapped(name, float(t[0]), float(t[0]), first, units.get(name))
+            m.history.append(scalar_text(first))
+        changed = np.flatnonzero(values[1:] != values[:-1]) + 1
+        if m.frames and _scalar(values[0]) != m.last:
+            changed = np.r_[0, changed]
+        room = max(0, HISTORY - 1 - len(m.history))
+        m.history += [scalar_text(_scalar(values[k])) for k in changed[:room].tolist()]
+        m.more = m.more or changed.size > room
+        m.changes += int(changed.size)
+        m.frames += int(values.size)
+        m.last, m.t = _scalar(values[-1]), float(t[-1])
 
     def boot_times(self, bus: str | None, node: int) -> list[float]:
         """The node's boot-up times (`bus` None: a log of one bus, whatever its channel)."""
@@ -154,9 +233,14 @@ class OdTally:
         """One dict per object and life (`OD_COLUMNS`, then `bus` on a log of several
         buses), by bus, node, life, index and sub-index."""
         out = []
-        for key in sorted(self.objects, key=lambda k: (str(k[0]), *k[1:])):
+        keys = set(self.objects) | set(self.mapped)
+        for key in sorted(keys, key=lambda k: (str(k[0]), *k[1:])):
             bus, node, life, index, sub = key
-            o = self.objects[key]
+            o = self.objects.get(key)
+            m = self.mapped.get(key)
+            if o is None or (m is not None and m.row > o.row):
+                out.append(self._mapped_row(key))  # the later of an SDO's and a PDO's
+                continue
             r = o.rec or {}
             row = {
                 "node": node,
@@ -179,6 +263,39 @@ class OdTally:
                 row["bus"] = bus
             out.append(row)
         return out
+
+    def _mapped_row(self, key: tuple) -> dict:
+        """A PDO-mapped object's row: no bytes (the frame's are the PDO's), the value in
+        the mapping's unit as words."""
+        bus, node, life, index, sub = key
+        m = self.mapped[key]
+        value = scalar_text(m.last)
+        vals = list(m.history) + (["...", value] if m.more else [])
+        row = {
+            "node": node,
+            "index": index,
+            "subindex": sub,
+            "life": life,
+            "name": m.name,
+            "value": value,
+            "data": None,
+            "size": None,
+            "words": f"{value} {m.unit}" if m.unit else None,
+            "t": m.t,
+            "set_by": "pdo",
+            "t_first": m.t_first,
+            "transfers": m.frames,
+            "changes": m.changes,
+            "history": " -> ".join(vals),
+        }
+        if self.several:
+            row["bus"] = bus
+        return row
+
+
+def _scalar(v):
+    """A numpy value as a Python one."""
+    return v.item() if hasattr(v, "item") else v
 
 
 def _text(value) -> str | None:

@@ -45,6 +45,7 @@ class SignalSeries:
     columns: dict[str, np.ndarray]
     units: dict[str, str | None]
     bus: str | None = None  # a log of several buses: which one (node 5 on can1 is its own)
+    objects: dict[str, tuple[int, int]] = field(default_factory=dict)  # signal -> (index, sub)
 
     @property
     def key(self) -> str:
@@ -358,13 +359,20 @@ class Capture:
         # to the microsecond: epoch-second floats carry sub-us noise into every gap
         return {k: round(v, 3) if isinstance(v, float) else v for k, v in stats(np.diff(t)).items()}
 
-    def decoded(self) -> list[DecodedBatch]:
-        """The whole capture as one DecodedBatch again, for rules run after the fact."""
+    def _blocks(self) -> list:
+        """The signal series as blocks of the whole capture (their mapped objects too)."""
         from cananalyze.core.records import SignalBlock
 
-        blocks = [
-            SignalBlock(s.rows, s.node, s.pdo, s.cob_id, s.columns, s.units) for s in self.series
+        return [
+            SignalBlock(
+                s.rows, s.node, s.pdo, s.cob_id, s.columns, s.units, objects=dict(s.objects)
+            )
+            for s in self.series
         ]
+
+    def decoded(self) -> list[DecodedBatch]:
+        """The whole capture as one DecodedBatch again, for rules run after the fact."""
+        blocks = self._blocks()
         return [
             DecodedBatch(
                 self.batch, self.service, self.node, self.pdo, records=self.records, signals=blocks
@@ -517,11 +525,21 @@ class Capture:
     @cached_property
     def od(self) -> pd.DataFrame:
         """Each node's objects as its successful SDO transfers showed them, per life
-        (boot-ups split it): last value, when and how set, how often, what it went through."""
+        (boot-ups split it): last value, when and how set, how often, what it went through;
+        PDO-mapped objects' last values too (`set_by` "pdo")."""
         import pandas as pd
 
         tally = OdTally()
-        tally.add(DecodedBatch(self.batch, self.service, self.node, self.pdo, records=self.records))
+        tally.add(
+            DecodedBatch(
+                self.batch,
+                self.service,
+                self.node,
+                self.pdo,
+                records=self.records,
+                signals=self._blocks(),
+            )
+        )
         rows = tally.rows()
         names = list(rows[0]) if rows else list(schemas.OD.without("bus").names)
         return pd.DataFrame.from_records(rows, columns=names)
@@ -677,6 +695,7 @@ class Collector:
                     columns={k: np.concatenate([x[2].columns[k] for x in parts]) for k in names},
                     units=dict(blk.units),
                     bus=bus if self._several_signals else None,
+                    objects={k: v for x in parts for k, v in x[2].objects.items()},
                 )
             )
         self.states.sort(key=lambda e: e.t)

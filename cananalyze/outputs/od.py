@@ -4,9 +4,11 @@ and one CiA 306 DCF per node.
 The rows are `OdTally`'s (the export's `od` table and `load().od` are the same rows).
 A DCF is the node's device description (its profile's object dictionary: EDS, DCF or
 built-in device; CiA 301's objects where none is known) with a `ParameterValue` for
-every object the node's last life showed, written by canopen's `export_od` so that
-canopen and `--eds` read it back. Objects the log never showed have no ParameterValue:
-their DefaultValue applies, and the file's comments say so.
+every object the node's last life's SDO transfers showed (PDO-mapped values are process
+data, not configuration: the text and JSON lines only), written by canopen's `export_od` so
+that canopen and `--eds` read it back. Objects the log never showed keep what the given
+description says: a DCF's (an XDC's) ParameterValue, else no ParameterValue, so that their
+DefaultValue applies; the file's comments name those kept as given (not seen).
 """
 
 from __future__ import annotations
@@ -88,7 +90,7 @@ def text(rows: list[dict], tally: OdTally, t0: float, profiles: dict) -> str:
     set, and the values it went through when it changed. Every text from the log or an
     EDS is printable (a terminal shows it, never obeys it)."""
     if not rows:
-        return "no successful SDO transfer in the log: no object values to show\n"
+        return "no successful SDO transfer nor mapped PDO in the log: no object values to show\n"
     out: list[str] = []
     last = None
     width = max(len(printable(r["name"] or "")) for r in rows)
@@ -106,13 +108,13 @@ def text(rows: list[dict], tally: OdTally, t0: float, profiles: dict) -> str:
         shown = r["value"] if r["value"] is not None else (f"0x{r['data']}" if r["data"] else "-")
         value = printable(shown)
         words = f" ({printable(r['words'])})" if r["words"] else ""
-        how = "written" if r["set_by"] == "write" else "read"
+        how = {"write": "written", "pdo": "by PDO"}.get(r["set_by"], "read")
         line = (
             f"  0x{r['index']:04X}:{r['subindex']:02X}  {printable(r['name'] or ''):<{width}}"
             f"  = {value}{words}  {how} at {r['t'] - t0:.3f} s"
         )
         if r["transfers"] > 1:
-            line += f", {r['transfers']} transfers"
+            line += f", {r['transfers']} {'frames' if r['set_by'] == 'pdo' else 'transfers'}"
         if r["changes"]:
             line += f", changed {r['changes']}x: {printable(r['history'])}"
         out.append(line)
@@ -124,6 +126,7 @@ def write_dcfs(folder: Path, rows: list[dict], ods: dict, source: str) -> list[P
     its last life; the paths written."""
     from canopen.objectdictionary import ObjectDictionary, export_od
 
+    rows = [r for r in rows if r["set_by"] != "pdo"]  # process data: no configuration
     last: dict[tuple, int] = {}
     for r in rows:
         k = (r.get("bus"), r["node"])
@@ -138,15 +141,12 @@ def write_dcfs(folder: Path, rows: list[dict], ods: dict, source: str) -> list[P
     for (bus, node), objs in by_node.items():
         base = ods.get((bus, node)) or ods.get((None, node))
         od = copy.deepcopy(base) if base is not None else ObjectDictionary()
-        _clear_values(od)
         od.node_id = node
+        shown = {(r["index"], r["subindex"]) for r in objs}
+        given = [v for v in _variables(od) if v.value is not None and _key(v) not in shown]
         records = {r["index"] for r in objs if r["subindex"] > 0}
         seen = [_set(od, r, r["index"] in records) for r in objs]
-        od.comments = (
-            f"Configuration of node {node} as the log {Path(source).name} showed it "
-            f"(cananalyze od).\nParameterValue: {sum(seen)} objects seen in the log; "
-            "objects without one were not seen (DefaultValue applies)."
-        )
+        od.comments = _comments(node, source, sum(seen), given)
         name = f"node{node}.dcf" if bus is None else f"{_safe(str(bus))}-node{node}.dcf"
         path = folder / name
         tmp = path.with_suffix(".dcf.tmp")
@@ -169,12 +169,32 @@ def _variables(od) -> Iterable:
             yield obj
 
 
-def _clear_values(od) -> None:
-    """No ParameterValue but for what the log shows (a DCF given as --eds had its own)."""
-    for var in _variables(od):
-        var.value = None
-        if hasattr(var, "value_raw"):
-            var.value_raw = None
+def _key(var) -> tuple[int, int]:
+    return var.index, var.subindex
+
+
+def _section(var) -> str:
+    """The variable's DCF section name, as export_od writes it ("1017", "1800sub5")."""
+    from canopen.objectdictionary import ODArray, ODRecord
+
+    if isinstance(getattr(var, "parent", None), ODArray | ODRecord):
+        return f"{var.index:04X}sub{var.subindex:X}"
+    return f"{var.index:04X}"
+
+
+def _comments(node: int, source: str, seen: int, given: list) -> str:
+    """The DCF's [Comments]: which ParameterValues are the log's and which the given
+    description's (objects the log did not show), by their DCF section names."""
+    lines = [
+        f"Configuration of node {node} as the log {Path(source).name} showed it (cananalyze od).",
+        f"ParameterValue: {seen} objects seen in the log.",
+    ]
+    if given:
+        lines.append(f"Not seen in the log, ParameterValue as the given DCF says ({len(given)}):")
+        names = [_section(v) for v in given]
+        lines += [" ".join(names[k : k + 10]) for k in range(0, len(names), 10)]
+    lines.append("Objects without a ParameterValue were not seen (DefaultValue applies).")
+    return "\n".join(lines)
 
 
 def _set(od, r: dict, record: bool) -> bool:
@@ -198,6 +218,8 @@ def _set(od, r: dict, record: bool) -> bool:
                 rec = cod.ODRecord(f"Object 0x{r['index']:04X}", r["index"])
                 od.add_object(rec)
             rec.add_member(var)
+    if getattr(var, "value_raw", None) is not None:
+        var.value_raw = None  # a given DCF's text, which export_od would write instead
     try:
         var.value = var.decode_raw(raw)
     except Exception:  # noqa: BLE001 - bytes that do not fit the declared type: kept raw

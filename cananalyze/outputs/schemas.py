@@ -308,8 +308,8 @@ NODES = Table(
 
 OD = Table(
     "od",
-    "one row per object a node's successful SDO transfers showed, per life of the node "
-    "(`cananalyze od`)",
+    "one row per object a node's successful SDO transfers showed, or a PDO it had mapped "
+    "carried, per life of the node (`cananalyze od`)",
     tuple(
         Column(n, doc, DECIDED, dataset=t)
         for n, t, doc in (
@@ -319,14 +319,18 @@ OD = Table(
             ("life", pa.int32(), "the node's boot-ups seen before the value (0: none yet)"),
             ("name", pa.string(), "the object's name (profile, EDS or CiA 301)"),
             ("value", pa.string(), "its last value, as the text outputs print it"),
-            ("data", pa.string(), "the bytes of that value, hex"),
+            ("data", pa.string(), "the bytes of that value, hex (none for pdo)"),
             ("size", pa.int64(), "their count"),
             ("words", pa.string(), "the value in words, where known"),
-            ("t", pa.float64(), "when the last transfer ended"),
-            ("set_by", pa.string(), "write (an SDO download) or read (an upload)"),
-            ("t_first", pa.float64(), "when the first transfer of it ended"),
-            ("transfers", pa.int64(), "successful transfers of it"),
-            ("changes", pa.int64(), "times its bytes changed"),
+            ("t", pa.float64(), "when the last transfer (or PDO frame) ended"),
+            (
+                "set_by",
+                pa.string(),
+                "write (an SDO download), read (an upload) or pdo (a PDO mapping it)",
+            ),
+            ("t_first", pa.float64(), "when the first transfer (or PDO frame) of it ended"),
+            ("transfers", pa.int64(), "successful transfers of it (pdo: frames carrying it)"),
+            ("changes", pa.int64(), "times its value changed"),
             ("history", pa.string(), "the values it went through, oldest first"),
         )
     )

@@ -1,5 +1,6 @@
 """Fuzz targets beyond the log readers (harness.run_log): configuration files, EDS/DCF,
-junk mixed into good frames, and exports that must leave no temporary file.
+XDD/XDC (CiA 311 XML), junk mixed into good frames, and exports that must leave no
+temporary file.
 
 Each target returns normally or raises InputError (the project's own input error);
 anything else is a crash. Shared by the CI property tests (tests/test_fuzz_targets.py)
@@ -10,6 +11,7 @@ from __future__ import annotations
 
 import os
 import random
+import re
 import tempfile
 from pathlib import Path
 
@@ -114,6 +116,90 @@ def load_config(data: bytes, kind: str) -> None:
             load_rules(path)
         else:
             load_network(path)
+    except InputError as exc:
+        _one_line(exc)
+    finally:
+        os.unlink(path)
+
+
+XDD_SEEDS = sorted((Path(__file__).resolve().parents[1] / "data" / "xdd").glob("*.xd[dc]"))
+# XML shapes a parser must refuse in one line, not suffer: entity expansion (billion
+# laughs), an external entity, nesting beyond the reader's limit, a huge attribute
+_LAUGHS = b'<?xml version="1.0"?><!DOCTYPE x [<!ENTITY a "aaaaaaaaaa">' + b"".join(
+    f'<!ENTITY {chr(98 + i)} "{("&" + chr(97 + i) + ";") * 10}">'.encode() for i in range(9)
+)
+HOSTILE_XML = [
+    _LAUGHS + b']><ISO15745ProfileContainer name="&j;"/>',
+    b'<?xml version="1.0"?><!DOCTYPE x [<!ENTITY e SYSTEM "file:///etc/passwd">]>'
+    b'<ISO15745ProfileContainer name="&e;"/>',
+    b"<ISO15745ProfileContainer>"
+    + b"<a>" * 100_000
+    + b"</a>" * 100_000
+    + b"</ISO15745ProfileContainer>",
+    b'<ISO15745ProfileContainer><CANopenObjectList><CANopenObject index="1008" name="'
+    + b"x" * 2_000_000
+    + b'" objectType="7" dataType="0009"/></CANopenObjectList></ISO15745ProfileContainer>',
+    b'<?xml version="1.0" encoding="FFFFFFFF"?><ISO15745ProfileContainer/>',
+    b"\xef\xbb\xbf<ISO15745ProfileContainer><CANopenObjectList>"
+    b'<CANopenObject index="zz" subNumber="-1" objectType="9"/></CANopenObjectList>'
+    b"</ISO15745ProfileContainer>",
+]
+
+
+_ATTR = re.compile(rb'([A-Za-z_:][\w:.-]*)="([^"<&]*)"')
+_EMPTY_ELEMENT = re.compile(rb"<[A-Za-z][^<>]*/>")
+_ODD_VALUES = [
+    b"",
+    b"0",
+    b"-1",
+    b"FFFF",
+    b"0x",
+    b"1e999",
+    b"zz",
+    b"9" * 60,
+    b"&lt;&amp;",
+    b"$NODEID+0x180",
+    b"7",
+    b"9",
+    b"0009",
+    b"000F",
+    b"0x80000000",
+    b"true",
+]
+
+
+def mutate_xml(rng: random.Random, data: bytes) -> bytes:
+    """Well-formed XML still: attribute values replaced (odd numbers, types, names) and
+    empty elements (objects, sub-objects, parameters) dropped or repeated, so that the
+    reader's meaning of the document is what gets tested, not the XML parser alone."""
+    out = bytearray(data)
+    for _ in range(rng.randint(1, 6)):
+        if rng.random() < 0.7:
+            spots = list(_ATTR.finditer(out))
+            if not spots:
+                break
+            m = rng.choice(spots)
+            other = rng.choice(spots).group(2)
+            value = rng.choice([*_ODD_VALUES, other, b"%X" % rng.randrange(1 << 32)])
+            out[m.start(2) : m.end(2)] = value
+        else:
+            spots = list(_EMPTY_ELEMENT.finditer(out))
+            if not spots:
+                break
+            m = rng.choice(spots)
+            elem = bytes(out[m.start() : m.end()])
+            out[m.start() : m.end()] = b"" if rng.random() < 0.5 else elem * rng.randint(2, 40)
+    return bytes(out)
+
+
+def load_xdd(data: bytes, suffix: str = ".xdd") -> None:
+    """An XDD/XDC through the reader (read_od: XML by suffix or content) and the device
+    profile built from it (PDO mappings, names, units), as --eds reads one."""
+    from cananalyze.devices.profile import load_eds as load_profile
+
+    path = _tmp(data, suffix)
+    try:
+        load_profile(path, 3)
     except InputError as exc:
         _one_line(exc)
     finally:

@@ -21,7 +21,7 @@ import pytest
 
 import cananalyze
 from cananalyze.devices.profile import load_eds
-from tests.conftest import REAL, real_file
+from tests.conftest import REAL, ROOT, SAMPLES, real_file
 from tests.helpers.virtual_bus import drain, patient_client, unique_channel
 
 SLAVE_EDS = "ros-industrial__ros2_canopen/cia402_slave.eds"
@@ -219,23 +219,24 @@ def test_real_logs_dcfs_round_trip(path, tmp_path):
         cap = cananalyze.load(str(path))
     except cananalyze.CananalyzeError:
         pytest.skip("not a log cananalyze reads")
-    rows = cap.od.to_dict("records")
+    frame = cap.od
+    rows = frame.astype(object).where(frame.notna(), None).to_dict("records")  # PDO: no data
     if not rows:
         pytest.skip("no successful SDO transfer")
+    sdo_rows = [r for r in rows if r["set_by"] != "pdo"]  # PDO values: in no DCF
     run = _od_run(str(path), "--dcf", str(tmp_path), "-q", "--format", "jsonl")
     assert run.returncode == 0, run.stderr
     shown = [json.loads(x) for x in run.stdout.splitlines()]
-    assert [(r["node"], r["index"], r["subindex"], r["life"], r["data"]) for r in shown] == [
-        (r["node"], r["index"], r["subindex"], r["life"], r["data"]) for r in rows
-    ]
+    cols = ("node", "index", "subindex", "life", "data", "value", "set_by", "transfers")
+    assert [tuple(r[c] for c in cols) for r in shown] == [tuple(r[c] for c in cols) for r in rows]
     last = {}
-    for r in rows:
+    for r in sdo_rows:
         k = (r.get("bus"), r["node"])
         last[k] = max(last.get(k, 0), r["life"])
     for (bus, node), life in last.items():
         name = f"node{node}.dcf" if bus is None else f"{bus}-node{node}.dcf"
         od = canopen.import_od(str(tmp_path / name))
-        for r in rows:
+        for r in sdo_rows:
             if (r.get("bus"), r["node"], r["life"]) != (bus, node, life):
                 continue
             obj = od[r["index"]]
@@ -317,3 +318,117 @@ def test_polled_objects_counted_across_batches_and_paths(tmp_path, monkeypatch, 
     assert shown[:3] == [f"0x{(7 * i).to_bytes(4, 'little').hex()}" for i in (1, 2, 3)]
     assert shown[-2:] == ["...", f"0x{pos['data']}"] and pos["value"] is None
     assert len(shown) == 17  # the first 15, "...", the last
+
+
+def test_pdo_mapped_objects_last_values(tmp_path):
+    """commissioning.log remaps node 5's TPDO2 (0x285) by SDO to 0x6401:01 and 0x6401:03
+    (0x1A01): the od rows of those two objects are the last 0x285 frame's two INT16s
+    (python-can reads the log) in the DAT 7014's 0.1 degC, by PDO, the frames counted;
+    0x6401:02, in no PDO, has no row. The DCF holds no PDO value (process data) and the
+    export's table and load().od have the same rows."""
+    log = str(SAMPLES / "commissioning.log")
+    net = ("--network", str(SAMPLES / "network.toml"))
+    run = _od_run(log, *net, "--format", "jsonl", "--dcf", str(tmp_path / "dcf"), "-q")
+    assert run.returncode == 0, run.stderr
+    rows = [json.loads(x) for x in run.stdout.splitlines()]
+    mine = {(r["index"], r["subindex"]): r for r in rows if r["node"] == 5}
+    frames = [m for m in can.CanutilsLogReader(log) if m.arbitration_id == 0x285]
+    last = frames[-1]
+    pdo = {k: r for k, r in mine.items() if r["set_by"] == "pdo"}
+    assert set(pdo) == {(0x6401, 1), (0x6401, 3)}
+    for sub, at in ((1, 0), (3, 2)):
+        r = pdo[(0x6401, sub)]
+        raw = int.from_bytes(last.data[at : at + 2], "little", signed=True)
+        assert float(r["value"]) == pytest.approx(raw * 0.1)
+        assert r["words"] == f"{r['value']} °C"
+        assert r["t"] == pytest.approx(last.timestamp)
+        assert r["t_first"] == pytest.approx(frames[0].timestamp)
+        assert r["transfers"] == len(frames)
+        assert r["data"] is None and r["name"] == f"ch{sub}"
+        values = [int.from_bytes(m.data[at : at + 2], "little", signed=True) for m in frames]
+        assert r["changes"] == sum(a != b for a, b in zip(values, values[1:], strict=False))
+    text = _od_run(log, *net).stdout
+    line = next(x for x in text.splitlines() if x.startswith("  0x6401:01") and "ch1" in x)
+    assert "by PDO at" in line and f"{len(frames)} frames" in line
+    od = canopen.import_od(str(tmp_path / "dcf" / "node5.dcf"))
+    assert od[0x1017].value == 100  # an SDO write: configuration
+    assert od[0x6401][1].value is None  # a PDO value: none
+    out = tmp_path / "tables"
+    subprocess.run(
+        [sys.executable, "-m", "cananalyze", "export", log, *net, "--parquet", str(out), "-q"],
+        check=True,
+    )
+    assert pq.read_table(out / "od.parquet").to_pylist() == rows
+    frame = cananalyze.load(log, network=net[1]).od
+    assert frame.astype(object).where(frame.notna(), None).to_dict("records") == rows
+
+
+ROOT_EDS = ROOT / "decoders" / "dat7130.eds"
+
+
+def _given_dcf(path) -> None:
+    """The DAT 7130's EDS as a DCF: ParameterValues for 0x1017 (500 ms), 0x1800:05 (an
+    event timer of 1000 ms) and 0x1016:01 (node 5 consumed at 100 ms)."""
+    text = ROOT_EDS.read_text()
+    for section, value in (("1017", "500"), ("1800sub5", "0x03E8"), ("1016sub1", "0x00050064")):
+        at = text.index("PDOMapping=", text.index(f"[{section}]\n"))
+        text = text[:at] + f"ParameterValue={value}\n" + text[at:]
+    path.write_text(text)
+
+
+def test_dcf_keeps_a_given_dcfs_values_of_objects_not_seen(tmp_path):
+    """Node 6 described by a DCF; the log writes 0x1017 only. The DCF written: 0x1017 the
+    log's, the given DCF's other ParameterValues kept (named in the comments as not
+    seen), objects the given DCF set nothing for without one (DefaultValue applies)."""
+    given = tmp_path / "given.dcf"
+    _given_dcf(given)
+    log = tmp_path / "hb.log"
+    log.write_text(
+        "(1000.000000) can0 706#00\n"
+        "(1000.100000) can0 606#2B171000E8030000\n"
+        "(1000.101000) can0 586#6017100000000000\n"
+    )
+    for desc in (given, ROOT_EDS):
+        out = tmp_path / desc.suffix[1:]
+        run = _od_run(str(log), "--eds", f"6={desc}", "--dcf", str(out), "-q")
+        assert run.returncode == 0, run.stderr
+        od = canopen.import_od(str(out / "node6.dcf"))
+        assert od[0x1017].value == 1000  # the log's
+        assert od[0x1800][3].value is None and od[0x1800][3].default == 0
+        ini = configparser.RawConfigParser()
+        ini.optionxform = str
+        ini.read(out / "node6.dcf")
+        valued = {s for s in ini.sections() if ini.has_option(s, "ParameterValue")}
+        if desc == given:
+            assert od[0x1800][5].value == 1000 and od[0x1016][1].value == 0x00050064
+            assert valued == {"1017", "1800sub5", "1016sub1"}
+            assert "Not seen in the log" in od.comments
+            assert od.comments.splitlines()[3].split() == ["1016sub1", "1800sub5"]
+        else:  # an EDS: nothing but the log's
+            assert valued == {"1017"} and "Not seen" not in od.comments
+
+
+def test_pdo_values_of_a_real_log_mapped_by_its_own_sdo_writes():
+    """ZeroErr eRob node 11 (a real candump without times): the log maps TPDO1 (0x18B) to
+    0x6041 (16 bit) and 0x6064 (32 bit) by SDO, and reads 0x6064 once before its 586 PDOs.
+    The rows are the last 0x18B frame's values (its bytes read here from the text), the
+    PDO's row replacing the earlier SDO read: the object's last value, on a log whose
+    frames all have one time (ordered by frame)."""
+    log = real_file("SeonilChoi__CANOPEN-SDK/log2.txt")
+    frames = []
+    for line in log.read_text().splitlines():
+        parts = line.split()
+        if len(parts) >= 3 and parts[1] == "18B":
+            frames.append(bytes.fromhex("".join(parts[3:])))
+    run = _od_run(str(log), "--format", "jsonl")
+    assert run.returncode == 0, run.stderr
+    rows = {(r["index"], r["subindex"]): r for r in map(json.loads, run.stdout.splitlines())}
+    status, position = rows[(0x6041, 0)], rows[(0x6064, 0)]
+    assert status["set_by"] == position["set_by"] == "pdo"
+    assert status["transfers"] == position["transfers"] == len(frames) == 586
+    assert int(status["value"]) == int.from_bytes(frames[-1][0:2], "little")
+    assert int(position["value"]) == int.from_bytes(frames[-1][2:6], "little")
+    positions = [int.from_bytes(f[2:6], "little") for f in frames]
+    assert position["changes"] == sum(
+        a != b for a, b in zip(positions, positions[1:], strict=False)
+    )

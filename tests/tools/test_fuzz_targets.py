@@ -1,5 +1,5 @@
 """The fuzz targets of tests/fuzz/targets.py, a short derandomized run in CI (issue 24):
-configuration and EDS loaders give InputError or a result, never another exception;
+configuration, EDS and XDD/XDC loaders give InputError or a result, never another exception;
 junk between good candump frames never costs a good frame; an export of damaged input
 leaves no hidden file. `CANANALYZE_FUZZ=N` multiplies the budget with fresh inputs."""
 
@@ -9,6 +9,7 @@ import random
 import time
 import tracemalloc
 
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -52,6 +53,26 @@ def test_mutated_configuration_files(kind, data):
 @given(mutated(targets.GOOD_EDS, max_ops=6), st.sampled_from([".eds", ".dcf"]))
 def test_mutated_eds(blob, suffix):
     _bounded(targets.load_eds, blob, suffix)
+
+
+def test_good_xdd_loads():
+    assert targets.XDD_SEEDS
+    for seed in targets.XDD_SEEDS:
+        targets.load_xdd(seed.read_bytes(), seed.suffix)  # no error at all
+
+
+@fuzz_settings(20)
+@given(st.integers(0, 2**32 - 1), st.sampled_from([".xdd", ".xdc", ".eds"]))
+def test_mutated_xdd(seed, suffix):
+    """Well-formed XDDs whose attributes and elements are changed: the reader's meaning."""
+    rng = random.Random(seed)
+    blob = targets.mutate_xml(rng, rng.choice(targets.XDD_SEEDS).read_bytes())
+    _bounded(targets.load_xdd, blob, suffix, seconds=10.0)
+
+
+@pytest.mark.parametrize("k", range(len(targets.HOSTILE_XML)))
+def test_hostile_xml_refused_in_bounds(k):
+    _bounded(targets.load_xdd, targets.HOSTILE_XML[k], ".xdd")
 
 
 @fuzz_settings(40)

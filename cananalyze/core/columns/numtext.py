@@ -99,10 +99,12 @@ def value_text(values: np.ndarray) -> np.ndarray:
     if kind in "iu":
         return int_text(values)
 
-    def one(v) -> str:
-        return f"{v:.6g}" if isinstance(v, float) else str(v)
+    return _python_text(values, scalar_text)
 
-    return _python_text(values, one)
+
+def scalar_text(v) -> str:
+    """One signal value as the text output prints it (the od table's PDO values too)."""
+    return f"{v:.6g}" if isinstance(v, float) else str(v)
 
 
 def _python_text(values: np.ndarray, fmt) -> np.ndarray:

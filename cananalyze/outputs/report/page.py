@@ -102,6 +102,7 @@ def plotly_js_packed() -> str:
 NAV = (
     ("findings", "findings", "Findings"),
     ("buses", "buses", "Buses"),
+    ("differences", "differences", "Differences"),
     ("nodes", "nodes", "Nodes"),
     ("boot", "boot", "Boot"),
     ("lss", "lss", "LSS"),

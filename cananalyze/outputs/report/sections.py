@@ -135,6 +135,26 @@ def findings(s, figs: Figures) -> dict:
     return {"groups": out}
 
 
+def differences(s, figs: Figures) -> dict | None:
+    """`report --against B`: what `diff LOG B` names, a row each; with --node, those
+    nodes' (and the network's) only."""
+    c = s.differences
+    if c is None:
+        return None
+    nodes = s.run.options.nodes
+    found = [
+        d
+        for d in c.differences
+        if nodes is None or d.node == "network" or int(d.node.rpartition("/")[2]) in nodes
+    ]
+    return {
+        "reference": c.reference,
+        "kind": c.kind,
+        "rows": [list(d.cells) for d in found],
+        "note": c.note,
+    }
+
+
 def _node_name(n: int, bus: str | None) -> str:
     return f"Node {n}" if bus is None else f"{bus} node {n}"
 
@@ -583,5 +603,6 @@ def lss(s, figs: Figures) -> dict | None:
     }
 
 
-SECTIONS = [verdict, buses, findings, nodes, boot, lss, sdo, emcy, pdos, sync_latency]
+SECTIONS = [verdict, buses, findings, differences, nodes, boot, lss, sdo, emcy, pdos]
+SECTIONS += [sync_latency]
 SECTIONS += [signals, drive_states]

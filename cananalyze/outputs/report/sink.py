@@ -109,10 +109,19 @@ class ReportSink(Sink):
 
     needs_events = True
 
-    def __init__(self, path: str | Path, bitrate: int | None = None, title: str | None = None):
+    def __init__(
+        self,
+        path: str | Path,
+        bitrate: int | None = None,
+        title: str | None = None,
+        differences=None,
+    ):
         self.path = Path(path)
         self.bitrate = bitrate
         self.title = title
+        # `report --against B`: the api's Comparison (differences with `cells`, a note),
+        # made before this run; None: no Differences section
+        self.differences = differences
         self._staged: Staged | None = None  # the page, written at finish, in place at commit
         self.findings: list[Finding] = []
         self.tally = NodeTally()

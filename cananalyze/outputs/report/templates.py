@@ -89,6 +89,18 @@ SECTIONS = """
   {% endif %}
 {% endmacro %}
 
+{% macro differences(s) %}
+  <section id="differences"><h2>Differences</h2>
+  <p>Compared with {{ s.reference }}
+  {{ " (a DCF: configuration only)" if s.kind == "dcf" else " (another log)" }},
+  {{ " " }}as <code>cananalyze diff</code> compares:
+  {% if s.rows %}{{ " " }}{{ s.rows | length }} difference(s).{% else %}
+  {{ " " }}no differences.{% endif %}</p>
+  {% if s.rows %}{{ table(["node", "section", "item", "this log", "B"], s.rows) }}{% endif %}
+  {% if s.note %}<p class=small>{{ s.note }}</p>{% endif %}
+  </section>
+{% endmacro %}
+
 {% macro nodes(s) %}
   <section id="nodes"><h2>Nodes</h2>
   {% if s.timeline %}{{ plot(s.timeline) }}{% endif %}
