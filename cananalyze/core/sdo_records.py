@@ -13,10 +13,227 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from cananalyze.core.columns.order import first_seen_codes
+
+# The columns of the `sdo` table (Capture.sdo, sdo.parquet), in order: the record's
+# keys less `kind` and the tracker's extras (frames, cob_ids).
+SDO_TABLE_COLUMNS = (
+    "t_start",
+    "t",
+    "latency_ms",
+    "node",
+    "direction",
+    "protocol",
+    "index",
+    "subindex",
+    "size",
+    "data",
+    "value",
+    "name",
+    "result",
+    "abort_code",
+    "abort_text",
+    "detail",
+    "words",
+)
+RECORD_COLUMNS = SDO_TABLE_COLUMNS
+
+# the fields every ok expedited pair has alike, and the arrays that hold the others
+OK_CONSTANTS = {
+    "protocol": "expedited",
+    "result": "ok",
+    "abort_code": None,
+    "abort_text": None,
+    "detail": None,
+}
+NUMBER_FIELDS = ("t_start", "t", "latency_ms", "node", "index", "subindex", "size")
+OBJECT_FIELDS = ("value", "name", "words")
+_FLOATS = ("t_start", "t", "latency_ms")
+HEX2 = np.array([f"{i:02x}" for i in range(256)], "S2")  # byte -> its hex text
+
+
+def hex_texts(raw: np.ndarray, length: np.ndarray) -> list[str]:
+    """The hex text of each row's first `length` bytes (0..4), as a list, column-wise.
+
+    Byte pairs past the length are emptied, so each row's 8 bytes read as one
+    text whose trailing NULs numpy drops.
+    """
+    m = len(raw)
+    pairs = HEX2[raw]  # (m, 4) of 2-character byte texts
+    pairs[np.arange(raw.shape[1]) >= np.asarray(length)[:, None]] = b""
+    return pairs.view(f"S{2 * raw.shape[1]}").reshape(m).astype(f"U{2 * raw.shape[1]}").tolist()
+
+
+@dataclass
+class RecordColumns:
+    """Every SDO transfer of a batch as columns: the one record type every output reads.
+
+    An ok expedited pair (most transfers of a polled bus) is columns only: `arrays`
+    holds NUMBER_FIELDS (float64 times and latency, int64 others), `upload` (bool:
+    the direction), OBJECT_FIELDS (object arrays), `raw` and `data_len` (the data
+    bytes and how many are used, for the hex `data`), `name_code` into `name_labels`
+    and, when every decoded value is an int, `value_int` and `value_none` (where
+    `value` is None); its other fields are `OK_CONSTANTS`. A transfer the columns do
+    not express (an aborted pair; any the tracker made: segmented, block, timed out)
+    is `held` as its record dict (position -> record), which wins over the arrays at
+    its position. Every output reads these columns and words the held ones by the
+    record, so there is one route from the decoder to each output.
+    """
+
+    arrays: dict[str, np.ndarray]
+    held: dict[int, dict]  # position -> record
+    name_labels: list  # the distinct names (or None): `name` is name_labels[name_code]
+
+    def __len__(self) -> int:
+        return len(self.arrays["t"])
+
+    @classmethod
+    def empty(cls) -> RecordColumns:
+        floats = {c: np.zeros(0, np.float64) for c in _FLOATS}
+        ints = {c: np.zeros(0, np.int64) for c in NUMBER_FIELDS if c not in floats}
+        objects = {c: np.empty(0, object) for c in OBJECT_FIELDS}
+        extra = {
+            "upload": np.zeros(0, bool),
+            "raw": np.zeros((0, 4), np.uint8),
+            "data_len": np.zeros(0, np.int64),
+            "name_code": np.zeros(0, np.int64),
+            "value_int": np.zeros(0, np.int64),
+            "value_none": np.zeros(0, bool),
+        }
+        return cls(floats | ints | objects | extra, {}, [None])
+
+    @classmethod
+    def of_records(cls, recs: list[dict]) -> RecordColumns:
+        """Record dicts (the tracker's: a few per batch) as held rows; the arrays carry
+        what readers that go by column alone take (times, node, object, direction)."""
+        m = len(recs)
+        if m == 0:
+            return cls.empty()
+
+        def floats(key: str, none: float) -> np.ndarray:
+            vals = [r.get(key) for r in recs]
+            return np.array([none if not isinstance(v, int | float) else v for v in vals], float)
+
+        def objects(key: str) -> np.ndarray:
+            out = np.empty(m, object)
+            out[:] = [r.get(key) for r in recs]
+            return out
+
+        arrays = {
+            "t_start": floats("t_start", np.nan),
+            "t": floats("t", 0.0),
+            "latency_ms": floats("latency_ms", np.nan),
+            **{c: np.array([_int(r.get(c)) for r in recs], np.int64) for c in NUMBER_FIELDS[3:]},
+            "upload": np.array([r.get("direction") == "upload" for r in recs], bool),
+            **{c: objects(c) for c in OBJECT_FIELDS},
+            "raw": np.zeros((m, 4), np.uint8),
+            "data_len": np.zeros(m, np.int64),
+            "name_code": np.zeros(m, np.int64),
+            "value_int": np.zeros(m, np.int64),
+            "value_none": np.ones(m, bool),
+        }
+        return cls(arrays, dict(enumerate(recs)), [None])
+
+    @classmethod
+    def concat(cls, parts: list[RecordColumns]) -> RecordColumns:
+        parts = [p for p in parts if len(p)]
+        if len(parts) <= 1:
+            return parts[0] if parts else cls.empty()
+        keys = set.intersection(*(set(p.arrays) for p in parts))  # value_int: all or none
+        labels: list = []
+        held: dict[int, dict] = {}
+        codes, start = [], 0
+        for p in parts:
+            codes.append(p.arrays["name_code"] + len(labels))
+            labels += p.name_labels
+            held.update((start + k, rec) for k, rec in p.held.items())
+            start += len(p)
+        arrays = {k: np.concatenate([p.arrays[k] for p in parts]) for k in keys}
+        arrays["name_code"] = np.concatenate(codes)
+        return cls(arrays, held, labels)
+
+    def take(self, at: np.ndarray) -> RecordColumns:
+        """The transfers at positions `at` (each once), in that order."""
+        at = np.asarray(at, np.int64)
+        new = np.full(len(self), -1, np.int64)
+        new[at] = np.arange(at.size)
+        held = {int(new[k]): rec for k, rec in self.held.items() if new[k] >= 0}
+        return RecordColumns({k: v[at] for k, v in self.arrays.items()}, held, self.name_labels)
+
+    @cached_property
+    def columns(self) -> dict[str, list]:
+        """One list per RECORD_COLUMNS key, values as in the records."""
+        a = self.arrays
+        m = len(self)
+        columns: dict[str, list] = {c: a[c].tolist() for c in NUMBER_FIELDS + OBJECT_FIELDS}
+        columns["data"] = hex_texts(a["raw"], a["data_len"])
+        columns["direction"] = np.where(a["upload"], "upload", "download").tolist()
+        for c, v in OK_CONSTANTS.items():
+            columns[c] = [v] * m
+        for k, rec in self.held.items():
+            for c in RECORD_COLUMNS:
+                columns[c][k] = rec.get(c)
+        return {c: columns[c] for c in RECORD_COLUMNS}
+
+    def record(self, j: int) -> dict:
+        """The j-th record's table fields (and kind), without the lists."""
+        if j in self.held:
+            return self.held[j]
+        a = self.arrays
+        rec = {"kind": "sdo"} | {c: a[c][j].item() for c in NUMBER_FIELDS}
+        rec |= {c: a[c][j] for c in OBJECT_FIELDS} | OK_CONSTANTS
+        rec["data"] = a["raw"][j, : a["data_len"][j]].tobytes().hex()
+        rec["direction"] = "upload" if a["upload"][j] else "download"
+        return rec
+
+    def records(self) -> list[dict]:
+        c = self.columns
+        out = [
+            {
+                "kind": "sdo",
+                "t_start": x,
+                "t": y,
+                "latency_ms": lat,
+                "node": nd,
+                "direction": dr,
+                "protocol": "expedited",
+                "index": i,
+                "subindex": s,
+                "size": n,
+                "data": h,
+                "value": v,
+                "name": nm,
+                "result": "ok",
+                "abort_code": None,
+                "abort_text": None,
+                "detail": None,
+                "words": w,
+                "frames": 2,
+                "cob_ids": [0x600 + nd, 0x580 + nd],
+            }
+            for x, y, lat, nd, dr, i, s, n, h, v, nm, w in zip(
+                c["t_start"],
+                c["t"],
+                c["latency_ms"],
+                c["node"],
+                c["direction"],
+                c["index"],
+                c["subindex"],
+                c["size"],
+                c["data"],
+                c["value"],
+                c["name"],
+                c["words"],
+                strict=True,
+            )
+        ]
+        for k, rec in self.held.items():
+            out[k] = rec
+        return out
 
 
 @dataclass
@@ -114,16 +331,16 @@ class SdoTable:
 
 @dataclass
 class FastPart:
-    """A run of fast-path transfers: their columns, and their dicts built when asked.
+    """A run of fast-path transfers: their first-pass columns, and the rest when asked.
 
-    `build(js)` builds the dicts of some (js: positions in this part), `fields()` all
-    of them as columns (`RecordColumns`, which the columnar writers read).
+    `fields()` builds every field of all of them (`RecordColumns`), `build(js)` the
+    dicts of a few (js: positions in this part) for readers that pick one or two.
     """
 
     at: np.ndarray  # int64 position of each in the SdoRecords, ascending
     cols: SdoColumns
     build: Callable[[np.ndarray], list[dict]]
-    fields: Callable[[], object] | None = None
+    fields: Callable[[], RecordColumns]
 
 
 class SdoRecords:
@@ -136,6 +353,7 @@ class SdoRecords:
         self._fast: list[FastPart] = []
         self._cols: SdoColumns | None = None
         self._table: SdoTable | None = None
+        self._fields: RecordColumns | None = None
         for row, rec in pairs:
             self.append(row, rec)
 
@@ -143,13 +361,13 @@ class SdoRecords:
     def append(self, row: int, record: dict) -> None:
         self._dicts[len(self._rows)] = record
         self._rows.append(row)
-        self._cols = self._table = None
+        self._cols = self._table = self._fields = None
 
     def reserve(self, k: int) -> int:
         """k positions for fast transfers still to come (`defer`); returns the first."""
         first = len(self._rows)
         self._rows.extend([-1] * k)
-        self._cols = self._table = None
+        self._cols = self._table = self._fields = None
         return first
 
     def defer(self, part: FastPart) -> None:
@@ -157,7 +375,7 @@ class SdoRecords:
         for k, r in zip(part.at.tolist(), part.cols.row.tolist(), strict=True):
             self._rows[k] = r
         self._fast.append(part)
-        self._cols = self._table = None
+        self._cols = self._table = self._fields = None
 
     # --- reading -------------------------------------------------------------------
     def __len__(self) -> int:
@@ -239,16 +457,30 @@ class SdoRecords:
     def __reduce__(self):
         return (SdoRecords, (list(self),))
 
-    def split(self) -> tuple[FastPart | None, list[int]]:
-        """(the fast transfers, the other positions) when the fast ones are one part with
-        its columns (a batch of one bus as the processor made it): the columnar writers
-        take that part whole and read the others one by one. Else (None, every position)."""
-        part = self._fast[0] if len(self._fast) == 1 else None
-        if part is None or part.fields is None:
-            return None, list(range(len(self._rows)))
-        rest = np.ones(len(self._rows), bool)
-        rest[part.at] = False
-        return part, np.flatnonzero(rest).tolist()
+    def fast_part(self) -> FastPart | None:
+        """The fast path's pairs when they are one part (a batch of one bus as the
+        processor made it): the text outputs word their frames' roles from its columns."""
+        return self._fast[0] if len(self._fast) == 1 else None
+
+    def fields(self) -> RecordColumns:
+        """Every transfer's fields as columns, by position: what every output reads.
+
+        Built once, when first asked (`decode --summary` and `check` never ask): the
+        fast parts' columns, and the tracker's records held as they are.
+        """
+        if self._fields is None:
+            d = sorted(self._dicts)
+            parts = [RecordColumns.of_records([self._dicts[k] for k in d])]
+            at = [np.asarray(d, np.int64)]
+            for p in self._fast:
+                parts.append(p.fields())
+                at.append(p.at)
+            fields = RecordColumns.concat(parts)
+            pos = np.concatenate(at)
+            if (pos[1:] < pos[:-1]).any():
+                fields = fields.take(np.argsort(pos, kind="stable"))
+            self._fields = fields
+        return self._fields
 
     def table(self) -> SdoTable:
         """Node and result codes of every transfer (summary, timing, the report read it)."""
@@ -315,7 +547,9 @@ class SdoRecords:
                 cols.req_row = np.where(
                     cols.req_row >= 0, at[np.clip(cols.req_row, 0, at.size - 1)], -1
                 )
-                out._fast.append(FastPart(mapped[o], cols, _reordered(fp.build, o)))
+                out._fast.append(
+                    FastPart(mapped[o], cols, _reordered(fp.build, o), _taken(fp.fields, o))
+                )
         return out, part[order]
 
 
@@ -338,3 +572,8 @@ def _reordered(build: Callable, o: np.ndarray) -> Callable:
         return build(o if js is None else o[js])
 
     return reordered
+
+
+def _taken(fields: Callable[[], RecordColumns], o: np.ndarray) -> Callable[[], RecordColumns]:
+    """`fields` of a part whose transfers were put in the order `o`."""
+    return lambda: fields().take(o)

@@ -338,24 +338,21 @@ def _codes(keys: list) -> np.ndarray:
 
 
 def _data_keys(recs, at: np.ndarray) -> list:
-    """The bytes of each of these transfers as one comparable value, without building
-    the fast path's records: up to 4 bytes (every expedited value) as an int of the
+    """The bytes of each of these transfers as one comparable value, from the records'
+    columns (the held ones' dicts): up to 4 bytes (every expedited value) as an int of the
     bytes and their count, longer ones as their hex text."""
-    part, _ = recs.split()
-    fast: dict[int, int] = {}
-    if part is not None:
-        a = part.fields().arrays
-        n = a["data_len"].astype(np.int64)
-        raw = np.zeros((len(n), 4), np.int64)
-        raw[:, : min(4, a["raw"].shape[1])] = a["raw"][:, :4]
-        raw[np.arange(4) >= n[:, None]] = 0
-        packed = (raw << (8 * np.arange(4, dtype=np.int64))).sum(1) | (n << 32)
-        fast = dict(zip(part.at.tolist(), packed.tolist(), strict=True))
+    f = recs.fields()
+    a = f.arrays
+    n = a["data_len"].astype(np.int64)
+    raw = np.zeros((len(n), 4), np.int64)
+    raw[:, : min(4, a["raw"].shape[1])] = a["raw"][:, :4]
+    raw[np.arange(4) >= n[:, None]] = 0
+    packed = ((raw << (8 * np.arange(4, dtype=np.int64))).sum(1) | (n << 32)).tolist()
     out: list = []
     for k in at.tolist():
-        got = fast.get(k)
-        if got is None:
-            data = recs.record(k).get("data") or ""
+        got = packed[k]
+        if k in f.held:
+            data = f.held[k].get("data") or ""
             raw_bytes = bytes.fromhex(data)
             n = len(raw_bytes)
             got = int.from_bytes(raw_bytes, "little") | (n << 32) if n <= 4 else data

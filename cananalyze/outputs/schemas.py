@@ -19,10 +19,10 @@ from dataclasses import dataclass, replace
 import pyarrow as pa
 
 from cananalyze.core.finding import TABLE_COLUMNS
+from cananalyze.core.sdo_records import SDO_TABLE_COLUMNS
 from cananalyze.decode.events.build import LEVEL_NAMES
 from cananalyze.decode.node_tally import IDENTITY_KEYS
 from cananalyze.decode.od_tally import OD_COLUMNS
-from cananalyze.decode.sdo.transaction import SDO_TABLE_COLUMNS
 from cananalyze.protocol.services import SERVICE_NAMES
 
 LABEL = pa.dictionary(pa.int32(), pa.string())  # a dataset's categories: one type for every part

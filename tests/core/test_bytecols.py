@@ -115,7 +115,7 @@ def test_sdo_messages_equal_the_per_record_text() -> None:
             assert all(any(p in x for x in want) for p in (" = -", "(0x", " = 0 ok", " data "))
         else:  # no object known: every value is data
             assert all(" = " not in x for x in want) and any(" data " in x for x in want)
-        assert fields.aborted
+        assert fields.held
 
 
 def test_joined_rows_with_a_separator_inside_a_text() -> None:

@@ -10,7 +10,13 @@ import pickle
 
 import numpy as np
 
-from cananalyze.core.sdo_records import FastPart, SdoColumns, SdoRecords
+from cananalyze.core.sdo_records import FastPart, RecordColumns, SdoColumns, SdoRecords
+
+
+def _part(at, rows: list[int], built: list) -> FastPart:
+    """A fast part at positions `at`; its fields are the built dicts, held."""
+    cols, build = _fast(rows, built)
+    return FastPart(np.asarray(at), cols, build, lambda: RecordColumns.of_records(build(None)))
 
 
 def _fast(rows: list[int], built: list) -> tuple[SdoColumns, object]:
@@ -50,8 +56,7 @@ def _records() -> tuple[SdoRecords, list]:
     first = recs.reserve(2)
     recs.append(6, {"kind": "sdo", "node": None, "index": 0x1017, "result": "ok", "t": 0.6})
     last = recs.reserve(1)
-    cols, build = _fast([3, 5, 9], built)
-    recs.defer(FastPart(np.array([first, first + 1, last]), cols, build))
+    recs.defer(_part([first, first + 1, last], [3, 5, 9], built))
     return recs, built
 
 
@@ -83,10 +88,13 @@ def test_one_read_builds_one_and_keeps_it() -> None:
     assert [r.get("index") for _, r in everything] == [None, 0x2000, 0x2001, 0x1017, 0x2002]
 
 
-def test_split_take_and_pickle() -> None:
+def test_fields_take_and_pickle() -> None:
     recs, built = _records()
-    part, others = recs.split()
-    assert part is None and others == list(range(5))  # no columns to write from: read all
+    assert recs.fast_part() is not None
+    f = recs.fields()  # every transfer by position: the tracker's and the fast ones
+    assert [f.record(k).get("index") for k in range(5)] == [None, 0x2000, 0x2001, 0x1017, 0x2002]
+    assert f.columns["result"] == ["timeout", "ok", "ok", "ok", "abort"]
+    assert f.arrays["t"].tolist()[3] == 0.6 and recs.fields() is f
     kept = recs.take([1, 3], [10, 11])
     assert list(kept) == [(10, recs.record(1)), (11, recs.record(3))]
     back = pickle.loads(pickle.dumps(recs))
@@ -97,9 +105,9 @@ def test_merge_puts_parts_in_row_order_unbuilt() -> None:
     a, built_a = _records()  # rows 0 3 5 6 9
     b = SdoRecords([(1, {"kind": "sdo", "node": 9, "result": "ok"})])
     pos = b.reserve(1)
-    cols, build_b = _fast([4], built_b := [])
-    cols.ok[:] = True
-    b.defer(FastPart(np.array([pos]), cols, build_b))
+    part = _part([pos], [4], built_b := [])
+    part.cols.ok[:] = True
+    b.defer(part)
     # part a's rows 0..9 sit at batch rows 2x; part b's rows 0..4 at 2x+1
     merged, of = SdoRecords.merge([(np.arange(11) * 2, a), (np.arange(6) * 2 + 1, b)])
     assert merged.rows == [0, 3, 6, 9, 10, 12, 18]
@@ -111,3 +119,6 @@ def test_merge_puts_parts_in_row_order_unbuilt() -> None:
     assert merged.record(3) == {"kind": "sdo", "node": 7, "index": 0x2000, "result": "abort"}
     assert built_b == [[0]]
     assert [r["node"] for _, r in merged] == [3, 9, 7, 7, 7, None, 7]
+    f = merged.fields()  # the parts' columns in the merged order
+    assert [f.record(k).get("node") for k in range(7)] == [3, 9, 7, 7, 7, None, 7]
+    assert merged.fast_part() is None  # two parts: the roles are read from the notes

@@ -325,7 +325,7 @@ def test_sdo_written_as_chunks_come_is_the_file_written_at_close(
 
 
 def test_hex_texts_as_bytes_hex():
-    from cananalyze.decode.sdo.fastpath import hex_texts
+    from cananalyze.core.sdo_records import hex_texts
 
     rng = np.random.default_rng(1)
     raw = rng.integers(0, 256, (500, 4), dtype=np.uint8)
@@ -380,7 +380,7 @@ def test_tracker_only_chunks_of_every_kind_as_capture(tmp_path, fmt):
     load()'s Capture builds), through pandas' own Parquet file of it; CSV cell by cell."""
     from exported import assert_csv_is, assert_parquet_is
 
-    from cananalyze.decode.sdo.transaction import SDO_TABLE_COLUMNS
+    from cananalyze.core.sdo_records import SDO_TABLE_COLUMNS
     from cananalyze.outputs.tables.stream import TableSink as StreamTables
 
     gone = _sdo()

@@ -1,6 +1,6 @@
-"""The fast path's SDO records read as columns (`RecordColumns`, `SdoRecords.split`)
-give the same SDO table and events as the dicts: the export and the Capture take the columns,
-a plain records list (what a filter leaves) takes the dicts."""
+"""The batch's SDO records as columns (`RecordColumns`, `SdoRecords.fields`) give the
+same SDO table and events whether the fast path made them (columns) or they are held as
+the dicts the tracker and `pair_outputs` make (a plain records list, as a filter leaves)."""
 
 from __future__ import annotations
 
@@ -11,9 +11,8 @@ from conftest import SAMPLES, generated_log, real_file
 from exported import DEVICES, assert_parquet_is, assert_same_table_files, decoded_batches
 
 from cananalyze.core.errors import ProblemLog
-from cananalyze.core.sdo_records import SdoRecords
+from cananalyze.core.sdo_records import RECORD_COLUMNS, SdoRecords
 from cananalyze.decode.events.build import EventState, batch_events
-from cananalyze.decode.sdo.fastpath import RECORD_COLUMNS
 from cananalyze.outputs.capture import Collector
 from cananalyze.outputs.tables.stream import SDO_COLUMNS
 from cananalyze.outputs.tables.stream import TableSink as StreamTables
@@ -52,7 +51,7 @@ def test_events_same_from_columns_and_dicts(tmp_path, which, size):
     for b1, b2 in zip(
         decoded_batches(log, size, **kw), decoded_batches(log, size, **kw), strict=True
     ):
-        fast += b1.records.split()[0] is not None
+        fast += b1.records.fast_part() is not None
         e1 = batch_events(b1, off, s1)
         e2 = batch_events(_as_dicts(b2), off, s2)
         assert e1 == e2
@@ -89,17 +88,17 @@ def test_aborted_pairs_and_record_columns_agree():
     for batch in decoded_batches(
         SAMPLES / "faults.log", None, network=str(SAMPLES / "network.toml")
     ):
-        part, _ = batch.records.split()
+        part = batch.records.fast_part()
         if part is None:
             continue
         fields = part.fields()
-        aborted += len(fields.aborted)
+        aborted += len(fields.held)
         built = [batch.records[int(k)][1] for k in part.at]
         assert built == fields.records()
         for j, rec in enumerate(built):
             assert {c: rec[c] for c in RECORD_COLUMNS} == {
                 c: fields.columns[c][j] for c in RECORD_COLUMNS
             }
-        for j, rec in fields.aborted.items():
+        for j, rec in fields.held.items():
             assert rec["result"] == "abort" and fields.columns["result"][j] == "abort"
     assert aborted  # faults.log has server aborts answered on the fast path

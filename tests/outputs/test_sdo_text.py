@@ -22,7 +22,7 @@ from cananalyze.decode.sdo.fastpath import pair_notes
 from cananalyze.formats.source import read_all
 from cananalyze.outputs.text import writer as text_module
 from cananalyze.outputs.text.records import format_record
-from cananalyze.outputs.text.sdo import fast_pairs, pair_text
+from cananalyze.outputs.text.sdo import fast_pairs, pair_roles, record_lines
 from cananalyze.outputs.text.writer import TextWriter
 from cananalyze.pipeline import Options, build_decoder
 
@@ -64,15 +64,20 @@ def _batch(log: Path, *devices: str):
 def _assert_pair_texts(batch) -> int:
     pairs = fast_pairs(batch)
     assert pairs is not None
-    fields, fast, _ = pairs
-    pt = pair_text(batch.frames, fields, fast, b"\n")
+    fields, fast = pairs
+    _, _, req_role, resp_role = pair_roles(batch.frames, fields, fast, b"\n")
     m = len(fields)
     req_notes, resp_notes = pair_notes(batch.frames, fast.cols.req_row, fast.cols.row)
-    for matrix, notes in ((pt.req_role, req_notes), (pt.resp_role, resp_notes)):
+    for matrix, notes in ((req_role, req_notes), (resp_role, resp_notes)):
         blob, ends = bytecols.compact([matrix], m, with_ends=True)
         assert bytecols.split_rows(blob, ends) == ["SDO " + n["role"] + "\n" for n in notes]
-    records = fields.records()
-    assert pt.lines == [("    └─ " + format_record(r) + "\n").encode() for r in records]
+    # every record of the batch (the tracker's too), as format_record words its dict
+    every = batch.records.fields()
+    want = [("    └─ " + format_record(r) + "\n").encode() for _, r in batch.records]
+    assert record_lines(every) == want
+    assert record_lines(fields) == [
+        ("    └─ " + format_record(r) + "\n").encode() for r in fields.records()
+    ]
     return m
 
 
@@ -81,8 +86,8 @@ def test_crafted_pairs_as_the_per_pair_texts(tmp_path, back):
     batch = _batch(_log(tmp_path, PAIRS, back), "1=dat7014")
     assert _assert_pair_texts(batch) == len(PAIRS)
     fields = fast_pairs(batch)[0]
-    assert "value_int" in fields.arrays and len(fields.aborted) == 1
-    lines = pair_text(batch.frames, fields, fast_pairs(batch)[1], b"\n").lines
+    assert "value_int" in fields.arrays and len(fields.held) == 1
+    lines = record_lines(fields)
     assert b"0x1018:01 Vendor-ID expedited -> ok: 305419896 (0x12345678) (4 bytes)" in lines[0]
     assert b": -1000 (0xFFFFFFFFFFFFFC18) (2 bytes)" in lines[7]
     assert b"node 2 SDO read 0x2000:00 expedited -> ok: data 91010000 (4 bytes)" in lines[9]
@@ -111,7 +116,7 @@ def test_rows_with_other_records_too(tmp_path, monkeypatch, color):
     with another row's note written)."""
     batches = [_batch(_log(tmp_path, PAIRS), "1=dat7014") for _ in range(2)]
     for batch in batches:
-        fast = batch.records.split()[0]
+        fast = batch.records.fast_part()
         batch.add_record(
             int(fast.cols.row[0]), {"kind": "finding", "rule": "r1", "message": "late"}
         )
@@ -151,5 +156,5 @@ def test_notes_read_before_rendering_take_the_other_path(tmp_path):
     batch = _batch(_log(tmp_path, PAIRS), "1=dat7014")
     assert len(batch.notes) > 0
     assert fast_pairs(batch) is None
-    cols = batch.records.split()[0].cols
+    cols = batch.records.fast_part().cols
     assert np.all(cols.req_row < cols.row)

@@ -98,7 +98,7 @@ def sdo_event(row: int, r: dict) -> Row:
 
 
 def sdo_event_columns(fields, rows: np.ndarray) -> EventColumns:
-    """`sdo_event` of each fast-path record as columns, from its fields (`RecordColumns`).
+    """`sdo_event` of each record as columns, from its fields (`RecordColumns`).
 
     When every value decoded is an integer (the usual case) the texts are built as
     byte columns (`sdo_messages`). Otherwise the head ("SDO upload 0x1018:01 name")
@@ -112,7 +112,7 @@ def sdo_event_columns(fields, rows: np.ndarray) -> EventColumns:
         t = np.array(a["t"], np.float64)
         node = a["node"].astype(np.int16)
         ok = np.ones(n, bool)
-        for k, rec in fields.aborted.items():
+        for k, rec in fields.held.items():
             t[k] = rec.get("t", t[k])
             node[k] = NO_NODE if rec.get("node") is None else rec["node"]
             ok[k] = rec.get("result") == "ok"
@@ -177,46 +177,6 @@ def _finding_fields(r: dict, t: float, row: int) -> tuple:
     return float(get("t", t)), "finding", get("node"), lvl, str(text), row
 
 
-def _record_event_columns(pairs, fb, offset: int, last_t: float) -> tuple[EventColumns, list]:
-    """Events of the records read one by one (findings, SDO records off the fast path)
-    as columns, gathered field by field (no tuple per event), and their record slots."""
-    n = len(fb)
-    at: list[int] = []
-    t: list[float] = []
-    is_sdo: list[bool] = []
-    node: list = []
-    level: list[int] = []
-    message: list[str] = []
-    rows: list[int] = []
-    t_of = fb.t
-    for k, (row, rec) in pairs:
-        kind = rec.get("kind")
-        if kind == "sdo":
-            ev = sdo_event(row + offset, rec)
-        elif kind == "finding":
-            ev = _finding_fields(rec, float(t_of[row]) if 0 <= row < n else last_t, row + offset)
-        else:
-            continue
-        at.append(k)
-        t.append(ev[0])
-        is_sdo.append(kind == "sdo")
-        node.append(ev[2])
-        level.append(ev[3])
-        message.append(ev[4])
-        rows.append(ev[5])
-    if not at:
-        return EventColumns.empty(), at
-    events = EventColumns(
-        np.array(t, np.float64),
-        np.where(np.array(is_sdo, bool), ec.SDO, ec.FINDING).astype(np.uint8),
-        _int_column(node, np.int16, NO_NODE),
-        np.array(level, np.int8),
-        texts(message),
-        np.array(rows, np.int64),
-    )
-    return events, at
-
-
 def finding_event_columns(found, offset: int) -> EventColumns:
     """A batch's findings (`FindingColumns`) as events: "[rule] message" at the finding's
     time, its level from the severity."""
@@ -277,23 +237,19 @@ def batch_event_columns(
     """
     fb = batch.frames
     n = len(fb)
-    last_t = float(fb.t[-1]) if n else state.last_t
-    part, others = batch.records.split()
-    records = batch.records
-    pairs = ((k, records[k]) for k in others)
     several = batch.several
-    events, at = _record_event_columns(pairs, fb, offset, last_t)
-    if several:
-        events.bus = batch.record_buses(np.asarray(at, np.int64))
-    if part is not None:
-        fast_events = sdo_event_columns(part.fields(), part.cols.row + offset)
+    records = batch.records
+    events = EventColumns.empty()
+    if records:
+        fields = records.fields()
+        events = sdo_event_columns(fields, np.asarray(records.rows, np.int64) + offset)
+        other = [k for k, rec in fields.held.items() if rec.get("kind") != "sdo"]
+        at = np.arange(len(fields), dtype=np.int64)
+        if other:  # (hand-made records of another kind: no event)
+            at = np.delete(at, sorted(other))
+            events = events.take(at)
         if several:
-            fast_events.bus = batch.record_buses(part.at)
-        if at:
-            order = np.argsort(np.concatenate((np.asarray(at, np.int64), part.at)), kind="stable")
-            events = EventColumns.concat([events, fast_events]).take(order)
-        else:
-            events = fast_events
+            events.bus = batch.record_buses(at)
     if len(batch.findings):  # after every record, as the Checker adds them last
         found = finding_event_columns(batch.findings, offset)
         if several:

@@ -110,7 +110,7 @@ def sdo_messages(fields) -> list[str] | None:
         parts += [_OPEN_HEX[wide.astype(np.intp)], hx, close_hex]
     parts.append(bytecols.repeat(b" ok", n))
     messages = bytecols.joined_rows(parts, n)
-    for k, rec in fields.aborted.items():  # aborted pairs keep their own record
+    for k, rec in fields.held.items():  # held records (aborted, the tracker's) word their own
         messages[k] = sdo_message(
             rec.get("direction"),
             rec.get("index"),

@@ -18,15 +18,13 @@ processor decides (see `SdoProcessor`).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 
 import numpy as np
 
 from cananalyze.core.frames import FLAG_TX
 from cananalyze.core.records import DecodedBatch
-from cananalyze.core.sdo_records import SdoColumns
+from cananalyze.core.sdo_records import RecordColumns, SdoColumns, hex_texts
 from cananalyze.decode.sdo.tracker import ObjectInfo
-from cananalyze.decode.sdo.transaction import SDO_TABLE_COLUMNS
 from cananalyze.decode.sdo.words import sdo_words
 from cananalyze.devices.words import WORDED
 from cananalyze.protocol import sdo
@@ -49,7 +47,6 @@ for _b in _DOWNLOAD_REQ + _UPLOAD_RESP:
 # command byte -> is one of them (a lookup: np.isin sorts its arguments on every call)
 _IS_DOWNLOAD_REQ = np.isin(np.arange(256), _DOWNLOAD_REQ)
 _IS_UPLOAD_RESP = np.isin(np.arange(256), _UPLOAD_RESP)
-HEX2 = np.array([f"{i:02x}" for i in range(256)], "S2")  # byte -> its hex text
 
 
 @dataclass
@@ -130,18 +127,6 @@ def _rows(data: np.ndarray, at: np.ndarray) -> np.ndarray:
     return np.take(data, at, axis=0)
 
 
-def hex_texts(raw: np.ndarray, length: np.ndarray) -> list[str]:
-    """The hex text of each row's first `length` bytes (0..4), as a list, column-wise.
-
-    Byte pairs past the length are emptied, so each row's 8 bytes read as one
-    text whose trailing NULs numpy drops.
-    """
-    m = len(raw)
-    pairs = HEX2[raw]  # (m, 4) of 2-character byte texts
-    pairs[np.arange(raw.shape[1]) >= np.asarray(length)[:, None]] = b""
-    return pairs.view(f"S{2 * raw.shape[1]}").reshape(m).astype(f"U{2 * raw.shape[1]}").tolist()
-
-
 def py_round(v: np.ndarray, ndigits: int) -> np.ndarray:
     """Python's round(x, ndigits) of each value, as numpy where it provably agrees.
 
@@ -184,114 +169,6 @@ def pair_columns(fb, a: np.ndarray, b: np.ndarray) -> SdoColumns:
     )
 
 
-RECORD_COLUMNS = SDO_TABLE_COLUMNS
-
-
-# the fields every ok expedited pair has alike, and the arrays that hold the others
-OK_CONSTANTS = {
-    "protocol": "expedited",
-    "result": "ok",
-    "abort_code": None,
-    "abort_text": None,
-    "detail": None,
-}
-NUMBER_FIELDS = ("t_start", "t", "latency_ms", "node", "index", "subindex", "size")
-OBJECT_FIELDS = ("value", "name", "words")
-
-
-@dataclass
-class RecordColumns:
-    """Every field of the fast path's records as columns, numbers as numpy arrays.
-
-    `arrays` holds NUMBER_FIELDS (float64 times and latency, int64 others), `upload`
-    (bool: the direction), OBJECT_FIELDS (object arrays), `raw` and `data_len` (the
-    data bytes and how many are used, for the hex `data`), `name_code` into
-    `name_labels` and, when every decoded value is an int, `value_int` and
-    `value_none` (where `value` is None); all as an ok transfer has them; the other fields are `OK_CONSTANTS`. Aborted pairs (rare) keep the
-    dict `pair_outputs` made (`aborted`, position -> record), which wins. The export
-    takes the arrays as they are; `columns` (lists, aborted fields patched in, for
-    readers that go value by value) and `records()` are built when asked.
-    """
-
-    arrays: dict[str, np.ndarray]
-    aborted: dict[int, dict]  # position -> record
-    name_labels: list  # the distinct names (or None): `name` is name_labels[name_code]
-
-    def __len__(self) -> int:
-        return len(self.arrays["t"])
-
-    @cached_property
-    def columns(self) -> dict[str, list]:
-        """One list per RECORD_COLUMNS key, values as in the records."""
-        a = self.arrays
-        m = len(self)
-        columns: dict[str, list] = {c: a[c].tolist() for c in NUMBER_FIELDS + OBJECT_FIELDS}
-        columns["data"] = hex_texts(a["raw"], a["data_len"])
-        columns["direction"] = np.where(a["upload"], "upload", "download").tolist()
-        for c, v in OK_CONSTANTS.items():
-            columns[c] = [v] * m
-        for k, rec in self.aborted.items():
-            for c in RECORD_COLUMNS:
-                columns[c][k] = rec[c]
-        return {c: columns[c] for c in RECORD_COLUMNS}
-
-    def record(self, j: int) -> dict:
-        """The j-th record's table fields (and kind), without the lists."""
-        if j in self.aborted:
-            return self.aborted[j]
-        a = self.arrays
-        rec = {"kind": "sdo"} | {c: a[c][j].item() for c in NUMBER_FIELDS}
-        rec |= {c: a[c][j] for c in OBJECT_FIELDS} | OK_CONSTANTS
-        rec["data"] = a["raw"][j, : a["data_len"][j]].tobytes().hex()
-        rec["direction"] = "upload" if a["upload"][j] else "download"
-        return rec
-
-    def records(self) -> list[dict]:
-        c = self.columns
-        out = [
-            {
-                "kind": "sdo",
-                "t_start": x,
-                "t": y,
-                "latency_ms": lat,
-                "node": nd,
-                "direction": dr,
-                "protocol": "expedited",
-                "index": i,
-                "subindex": s,
-                "size": n,
-                "data": h,
-                "value": v,
-                "name": nm,
-                "result": "ok",
-                "abort_code": None,
-                "abort_text": None,
-                "detail": None,
-                "words": w,
-                "frames": 2,
-                "cob_ids": [0x600 + nd, 0x580 + nd],
-            }
-            for x, y, lat, nd, dr, i, s, n, h, v, nm, w in zip(
-                c["t_start"],
-                c["t"],
-                c["latency_ms"],
-                c["node"],
-                c["direction"],
-                c["index"],
-                c["subindex"],
-                c["size"],
-                c["data"],
-                c["value"],
-                c["name"],
-                c["words"],
-                strict=True,
-            )
-        ]
-        for k, rec in self.aborted.items():
-            out[k] = rec
-        return out
-
-
 def pair_records(
     fb,
     a: np.ndarray,
@@ -318,16 +195,7 @@ def pair_record_columns(
     """
     m = len(a)
     if m == 0:
-        floats = {c: np.zeros(0, np.float64) for c in ("t_start", "t", "latency_ms")}
-        ints = {c: np.zeros(0, np.int64) for c in NUMBER_FIELDS if c not in floats}
-        objects = {c: np.empty(0, object) for c in OBJECT_FIELDS}
-        extra = {
-            "upload": np.zeros(0, bool),
-            "raw": np.zeros((0, 4), np.uint8),
-            "data_len": np.zeros(0, np.int64),
-            "name_code": np.zeros(0, np.int64),
-        }
-        return RecordColumns(floats | ints | objects | extra, {}, [None])
+        return RecordColumns.empty()
     da, db = _rows(fb.data, a), _rows(fb.data, b)
     upload = da[:, 0] == _UPLOAD_REQ
     aborted = db[:, 0] == _ABORT

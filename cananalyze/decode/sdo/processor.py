@@ -18,7 +18,7 @@ import numpy as np
 
 from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from cananalyze.core.records import DecodedBatch
-from cananalyze.core.sdo_records import FastPart
+from cananalyze.core.sdo_records import FastPart, RecordColumns
 from cananalyze.decode.node_tally import IDENTITY, IDENTITY_INDEX
 from cananalyze.decode.sdo import fastpath
 from cananalyze.decode.sdo.lazynotes import LazyNotes
@@ -305,9 +305,9 @@ class SdoProcessor:
                     known[key] = info(node, index, sub)
                 return known[key]
 
-        memo: list[fastpath.RecordColumns] = []
+        memo: list[RecordColumns] = []
 
-        def columns() -> fastpath.RecordColumns:
+        def columns() -> RecordColumns:
             """All the records' fields, built once (the export reads them, the dicts too)."""
             if not memo:
                 memo.append(fastpath.pair_record_columns(fb, a, b, lookup, latency))

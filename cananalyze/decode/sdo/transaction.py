@@ -4,28 +4,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-# The columns of the `sdo` table (Capture.sdo, sdo.parquet), in order: the record's
-# keys less `kind` and the tracker's extras (frames, cob_ids).
-SDO_TABLE_COLUMNS = (
-    "t_start",
-    "t",
-    "latency_ms",
-    "node",
-    "direction",
-    "protocol",
-    "index",
-    "subindex",
-    "size",
-    "data",
-    "value",
-    "name",
-    "result",
-    "abort_code",
-    "abort_text",
-    "detail",
-    "words",
-)
-
 
 @dataclass
 class FrameRole:

@@ -19,7 +19,7 @@ import numpy as np
 
 from cananalyze.core.columns import bytecols
 from cananalyze.decode.sdo.fastpath import pair_outputs
-from cananalyze.outputs.text.sdo import pair_text
+from cananalyze.outputs.text.sdo import pair_roles
 from cananalyze.protocol.sdo import fields as sdo_fields
 
 _EXPEDITED = ("expedited", "size_indicated", "n", "size", "sdo_data")
@@ -29,14 +29,14 @@ def pair_fields(fb, fields, fast, fields_text) -> list[tuple[np.ndarray, list[by
     """(batch rows, their fields text) for the fast pairs' frames, request and answer
     rows, a group per command byte; `fields_text` is how the writer words a fields
     dict (the check compares with it)."""
-    pt = pair_text(fb, fields, fast, b"")
+    _, _, req_role, resp_role = pair_roles(fb, fields, fast, b"")
     a = fields.arrays
     ok = np.ones(len(fields), bool)
-    ok[list(fields.aborted)] = False
+    ok[list(fields.held)] = False
     out = []
     for is_req, rows, roles in (
-        (True, fast.cols.req_row, pt.req_role[:, 4:]),  # without "SDO "
-        (False, fast.cols.row, pt.resp_role[:, 4:]),
+        (True, fast.cols.req_row, req_role[:, 4:]),  # without "SDO "
+        (False, fast.cols.row, resp_role[:, 4:]),
     ):
         b0 = fb.data[rows, 0]
         for code in np.unique(b0[ok]).tolist():

@@ -28,7 +28,7 @@ import pyarrow as pa
 
 from cananalyze.core.columns import arrow_build as ab
 from cananalyze.core.columns.hexcols import hex_payload_buffers
-from cananalyze.decode.sdo.fastpath import NUMBER_FIELDS, OK_CONSTANTS, RecordColumns
+from cananalyze.core.sdo_records import NUMBER_FIELDS, OK_CONSTANTS, RecordColumns
 from cananalyze.outputs.tables import pandas_like as pl
 
 _EXACT = 2**53  # ints below this in magnitude print as float the way they print as int

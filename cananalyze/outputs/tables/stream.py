@@ -502,34 +502,24 @@ class TableSink(OutputSink):
     def _add_records(self, batch: DecodedBatch) -> None:
         """SDO rows and findings of a batch.
 
-        The fast path's records are taken as columns (`SdoRecords.split`), the other
-        records read one by one. Here only the column statistics are taken
-        in; merging by record slot, spooling and writing (`sdo_chunks`) are numpy
-        work for the writer thread.
+        Every transfer comes as the batch's one record type (`SdoRecords.fields`): the
+        columns as they are, the held records (aborted pairs, the tracker's) one by
+        one. Here only the column statistics are taken in; merging by record slot,
+        spooling and writing (`sdo_chunks`) are numpy work for the writer thread.
         """
         records = batch.records
         if not records:
             return
-        part, others = records.split()
-        sdo = [(k, records.record(k)) for k in others]
-        pieces: dict = {}
+        fields = records.fields()
+        held = sorted(fields.held)
+        sdo = [(k, fields.held[k]) for k in held]
+        keep = None
+        slots = np.arange(len(fields), dtype=np.int64)  # each row's record slot, as merged
         order = None
-        slots = np.array(others, np.int64)  # each row's record slot, as merged
-        if part is not None:
-            fields = part.fields()
-            keep = None
-            if fields.aborted:  # (rare) read as the dicts they are
-                gone = sorted(fields.aborted)
-                sdo.extend((int(part.at[j]), fields.aborted[j]) for j in gone)
-                slots = np.array([k for k, _ in sdo], np.int64)
-                keep = np.delete(np.arange(len(part.at)), gone)
-            pieces = sdo_chunks.fast_pieces(fields, keep)
-            if sdo:
-                slots = np.concatenate((slots, part.at if keep is None else part.at[keep]))
-                order = np.argsort(slots, kind="stable")
-                slots = slots[order]
-            else:
-                slots = part.at
+        if held:
+            keep = np.delete(slots, held)
+            order = np.argsort(np.concatenate((np.array(held, np.int64), keep)), kind="stable")
+        pieces = sdo_chunks.fast_pieces(fields, keep) if len(held) < len(fields) else {}
         bus = None  # a log of several buses: each row's (None: the first bus's)
         if batch.several:
             self._sdo_bus = True

@@ -1,19 +1,18 @@
-"""The text output's lines of the SDO fast path's pairs, built as byte columns.
+"""The text output's SDO words built as byte columns: every transfer's record line,
+and the frame roles of the fast path's pairs.
 
 A polled bus puts an expedited request and its answer on a few percent of its
 frames (290k pairs in 10M generated frames). Written one by one, their frame
-notes (which only the text outputs read) and record lines were a third of
-`decode -o`'s decoding thread. Here the request's and the answer's
-"SDO <role>" text and each record's "    └─ <record>" line come from the pairs'
-columns (`RecordColumns`) in a few numpy passes. `pair_outputs` and
-`format_record` stay the definitions: the pairs they word differently (an
-abort, a value that is not an integer, a negative latency) are still worded by
-them, and a test compares every text with theirs.
+notes and record lines were a third of `decode -o`'s decoding thread. Here each
+record's "    └─ <record>" line comes from the batch's one record type
+(`RecordColumns`) in a few numpy passes, and the fast pairs' "SDO <role>" texts
+from the same columns. `format_record` stays the definition: the records the
+columns do not express (held: aborted, the tracker's), a value that is not an
+integer, a negative latency are worded by it, and a test compares every text
+with it.
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -33,23 +32,12 @@ _OPEN_HEX = bytecols.padded_table([b"", b" (0x"])
 _DASH = bytecols.padded_table([b"", b"-"])
 
 
-@dataclass
-class PairText:
-    """The texts of one batch's fast pairs, in pair order."""
-
-    req: np.ndarray  # batch row of each request
-    resp: np.ndarray  # batch row of its answer
-    req_role: np.ndarray  # (m, w) uint8: "SDO <request role>" + end, NUL-padded
-    resp_role: np.ndarray  # (m, w) uint8: "SDO <answer role>" + end, NUL-padded
-    lines: list[bytes]  # "    └─ <record line>\n" of each pair's record
-
-
 def fast_pairs(batch: DecodedBatch) -> tuple | None:
-    """(records' fields, the fast part, other record positions) of the batch's fast pairs,
-    when their frame notes are still unwritten and only theirs are: then no one has read
-    or changed them, and they are what `pair_notes` would write. Else None (the caller
-    reads notes and records as they are)."""
-    part, others = batch.records.split()
+    """(fields, the fast part) of the batch's fast pairs when their frame notes are
+    still unwritten and only theirs are: then no one has read or changed them, and
+    they are what `pair_notes` would write, so their texts come from the columns.
+    Else None (the caller reads the notes as they are)."""
+    part = batch.records.fast_part()
     notes = batch.notes
     if part is None or not isinstance(notes, LazyNotes):
         return None
@@ -59,11 +47,15 @@ def fast_pairs(batch: DecodedBatch) -> tuple | None:
         pending, np.unique(np.concatenate((cols.req_row, cols.row)))
     ):
         return None
-    return part.fields(), part, others
+    return part.fields(), part
 
 
-def pair_text(fb, fields, fast, end: bytes) -> PairText:
-    """Texts of the fast pairs `fast` (a FastPart) with their records' `fields`."""
+def pair_roles(
+    fb, fields, fast, end: bytes
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(request rows, answer rows, "SDO <request role>" + end, "SDO <answer role>" + end)
+    of the fast pairs `fast` (a FastPart) with their `fields`; the roles as (m, w) uint8
+    rows, NUL-padded."""
     a = fields.arrays
     m = len(fields)
     req, resp = fast.cols.req_row, fast.cols.row
@@ -80,19 +72,20 @@ def pair_text(fb, fields, fast, end: bytes) -> PairText:
     resp_parts = [_RESP_ROLE[(~upload).astype(np.intp)], *where]
     resp_parts += [_EQUALS[upload.astype(np.intp)], bytecols.hex_bytes(a["raw"], shown), endm]
     req_role, resp_role = _matrix(req_parts, m), _matrix(resp_parts, m)
-    lines = _record_lines(fields, m)
-    for j in sorted(fields.aborted):  # aborted pairs: the roles pair_outputs gives them
+    for j in sorted(fields.held):  # aborted pairs: the roles pair_outputs gives them
         rq, rs, _, _ = pair_outputs(fb, int(req[j]), int(resp[j]), int(a["node"][j]), None)
         req_role = _put(req_role, j, ("SDO " + rq["role"]).encode() + end)
         resp_role = _put(resp_role, j, ("SDO " + rs["role"]).encode() + end)
-    return PairText(req, resp, req_role, resp_role, lines)
+    return req, resp, req_role, resp_role
 
 
-def _record_lines(fields, m: int) -> list[bytes]:
-    """ "    └─ " + format_record(record) + "\\n" of every record, columnar where it can be."""
+def record_lines(fields) -> list[bytes]:
+    """ "    └─ " + format_record(record) + "\n" of every record (`RecordColumns`, all of a
+    batch's transfers), columnar where it can be, the held records by `format_record`."""
+    m = len(fields)
     a = fields.arrays
     by_python = np.zeros(m, bool)
-    by_python[list(fields.aborted)] = True
+    by_python[list(fields.held)] = True
     if "value_int" not in a:  # some value is a float, bool or text: record by record
         by_python[:] = True
     by_python |= a["words"] != None  # noqa: E711 (elementwise): worded values are rare

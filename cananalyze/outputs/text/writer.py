@@ -41,7 +41,7 @@ from cananalyze.outputs import colour
 from cananalyze.outputs.background import ByteSink
 from cananalyze.outputs.fields import row_fields
 from cananalyze.outputs.text.records import format_alone, format_record
-from cananalyze.outputs.text.sdo import fast_pairs, pair_text
+from cananalyze.outputs.text.sdo import fast_pairs, pair_roles, record_lines
 from cananalyze.pipeline.sink import Sink
 from cananalyze.protocol import emcy as emcy_text
 from cananalyze.protocol.fields import annotation, frame_fields
@@ -200,27 +200,30 @@ class TextWriter(Sink):
         fb = batch.frames
         sel = np.arange(len(fb)) if mask is None else np.flatnonzero(mask)
         n = sel.size
-        # the SDO fast path's pairs as columns (sdo_text): their notes and records unbuilt
+        # the SDO fast path's pairs: their frame notes unwritten, worded from columns
         pairs = fast_pairs(batch) if mask is None else None
-        if pairs is None:
-            listed = enumerate(batch.records)
-        else:  # the other records only, read without building the pairs' dicts
-            listed = ((k, batch.records[k]) for k in pairs[2])
+        # every record's line from the batch's one record type, then the findings'
+        recs = batch.records
+        lines = record_lines(recs.fields()) if recs else []
+        listed = zip(recs.rows, lines, range(len(lines)), strict=True)
         if len(batch.findings):  # after the records, in their slots' order
-            found = enumerate(batch.findings.pairs(), len(batch.records))
+            found = (
+                (row, ("    └─ " + format_record(rec) + "\n").encode(), rec)
+                for row, rec in batch.findings.pairs()
+            )
             listed = itertools.chain(listed, found)
-        by_row: dict[int, list[dict]] = {}
-        slot_of: dict[int, list[int]] = {}  # each by_row record's slot in batch.records
-        records = []
-        for k, (row, rec) in listed:
-            by_row.setdefault(row, []).append(rec)
-            slot_of.setdefault(row, []).append(k)
+        by_row: dict[int, list[bytes]] = {}
+        records = []  # (row, the record or its position in batch.records)
+        for row, line, rec in listed:
+            by_row.setdefault(row, []).append(line)
             records.append((row, rec))
         shown = np.zeros(len(fb), bool)
         shown[sel] = True
         nrows = len(fb)
         tail_lines = [
-            format_alone(rec, t0) for row, rec in records if not (0 <= row < nrows and shown[row])
+            format_alone(recs.record(rec) if type(rec) is int else rec, t0)
+            for row, rec in records
+            if not (0 <= row < nrows and shown[row])
         ]
         if n == 0:
             return ("\n".join(tail_lines) + "\n").encode() if tail_lines else b""
@@ -333,9 +336,10 @@ class TextWriter(Sink):
         if emcy.size:
             ann.append(_emcy_text(data[emcy], dlc[emcy], emcy, endb))
             done[emcy] = True
-        extra: dict[int, bytes] = {}  # row -> record lines spliced in after its line
         if pairs is not None:
-            extra = self._pair_texts(pairs, fb, endb, ann, done, by_row, slot_of)
+            self._pair_texts(pairs, fb, endb, ann, done)
+        # rows whose own text is in a column already: their record lines spliced in after it
+        extra = {i: b"".join(by_row[int(sel[i])]) for i in np.flatnonzero(with_records & done)}
         # every other row without records: its text from Python, scattered in
         spliced: dict[int, bytes] = {}
         per_row = np.flatnonzero(~done & ~with_records)
@@ -393,37 +397,20 @@ class TextWriter(Sink):
                 text = annotation(
                     int(svc[i]), int(node[i]), int(pdo[i]), row_fields(batch, row), rtr_i
                 )
-            text += end + "".join("    └─ " + format_record(rec) + "\n" for rec in by_row[row])
-            inserts.append(text.encode())
+            inserts.append((text + end).encode() + b"".join(by_row[row]))
         tail = ("\n".join(tail_lines) + "\n").encode() if tail_lines else b""
         return Rendered(parts, n, slow, inserts, tail)
 
     @staticmethod
-    def _pair_texts(pairs, fb, endb, ann, done, by_row, slot_of) -> dict[int, bytes]:
+    def _pair_texts(pairs, fb, endb, ann, done) -> None:
         """The fast pairs' rows: "SDO <role>" into the annotation column (`ann`, marked
-        `done`); returns the record lines to splice in after each answer's line, every
-        record of the row in record order where the row holds others too."""
-        fields, fast, _ = pairs
-        pt = pair_text(fb, fields, fast, endb)
-        ann.append((pt.req, pt.req_role))
-        ann.append((pt.resp, pt.resp_role))
-        done[pt.req] = True
-        done[pt.resp] = True
-        resp = pt.resp.tolist()
-        extra = dict(zip(resp, pt.lines, strict=True))
-        mixed = [r for r in (*pt.req.tolist(), *resp) if r in by_row]
-        if mixed:
-            j_of = {r: j for j, r in enumerate(resp)}
-            slots = fast.at.tolist()
-            for row in mixed:
-                lines = [
-                    (k, ("    └─ " + format_record(rec) + "\n").encode())
-                    for k, rec in zip(slot_of[row], by_row[row], strict=True)
-                ]
-                if row in j_of:
-                    lines.append((slots[j_of[row]], extra[row]))
-                extra[row] = b"".join(line for _, line in sorted(lines))
-        return extra
+        `done`), worded from their columns."""
+        fields, fast = pairs
+        req, resp, req_role, resp_role = pair_roles(fb, fields, fast, endb)
+        ann.append((req, req_role))
+        ann.append((resp, resp_role))
+        done[req] = True
+        done[resp] = True
 
 
 class Rendered:
