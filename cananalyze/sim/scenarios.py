@@ -301,7 +301,8 @@ def commissioning_faults(nodes: Nodes, duration: float):
         writes = [*_supervision(one)]
         writes += [_write(node, 0x1006, 0, u32(int(SYNC_PERIOD * 1e6)))]
         writes += [_write(node, 0x1007, 0, u32(SYNC_WINDOW_US))]
-        if node is slave.node and mcb and mcb[0].tpdo_params(2):
+        collide = node is slave.node and node.profile.key == "dat7014"
+        if collide and mcb and mcb[0].tpdo_params(2):
             writes += [*_remap_dat7014(node, cob=mcb[0].tpdo_params(2)[0])]  # the collision
         else:
             writes += [*_configure(one)]
