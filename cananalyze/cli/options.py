@@ -35,6 +35,13 @@ def _devices_help() -> str:
     )
 
 
+def _scenarios_help() -> str:
+    """--scenario's help: the simulator's scenarios, by name (sim/scenario_names)."""
+    from cananalyze.sim.scenario_names import SCENARIO_NAMES
+
+    return f"what the master does: {', '.join(SCENARIO_NAMES)} (default steady)"
+
+
 _COMPRESSIONS = ["snappy", "zstd", "lz4", "none"]
 
 
@@ -455,7 +462,7 @@ FLAGS: dict[str, Flag] = {
         ("--scenario",),
         dict(
             default="steady",
-            help="what the master does: steady, commissioning or faults (default steady)",
+            help=_scenarios_help,
         ),
     ),
     "no_master": Flag(

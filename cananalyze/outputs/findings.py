@@ -20,6 +20,7 @@ from cananalyze.core.finding_columns import FindingColumns
 from cananalyze.outputs import colour
 from cananalyze.outputs.findings_json import findings_json_parts
 from cananalyze.outputs.junit import format_rows, junit_xml_parts
+from cananalyze.outputs.node_load import NodeLoad, run_bitrate
 from cananalyze.pipeline.sink import Sink
 
 TERMINAL_CAP = 20  # findings printed per rule and node/COB-ID; the files hold every one
@@ -87,9 +88,11 @@ class FindingsSink(Sink):
         self.findings = FindingColumns()  # every finding, by time (at close)
         self._sorted = False  # findings is every part, sorted, its live rows read again
         self._staged: list[Staged] = []  # JUnit/JSON written, waiting for the commit
+        self.load = NodeLoad()  # --timing: bus load per node, as `decode --summary`'s
 
     def open(self, run) -> None:
         super().open(run)
+        self.load.bitrate = run_bitrate(run)
         if self.junit or self.json_file:
             from cananalyze.core.atomic import check_writable
 
@@ -98,6 +101,8 @@ class FindingsSink(Sink):
                     check_writable(dest)
 
     def write(self, batch) -> None:
+        if self.timing:
+            self.load.add(batch)
         if len(batch.findings):
             self._parts.append(batch.findings)
             self._sorted = False
@@ -162,7 +167,9 @@ class FindingsSink(Sink):
                     print("no timestamps: the times below are line numbers, no rates", file=out)
                     print("\n".join(checker.timing_lines(0.0)), file=out)
                 else:
-                    print("\n".join(checker.timing_lines(checker.t0)), file=out)
+                    lines = checker.timing_lines(checker.t0)
+                    lines += self.load.lines(self.load.bitrate, timed=True)
+                    print("\n".join(lines), file=out)
             failing = int(findings.fails.sum())
             names = ", ".join(r.name for r in rules)
             verdict = (

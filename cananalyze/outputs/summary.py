@@ -16,8 +16,8 @@ from cananalyze.core.columns.order import first_seen_codes
 from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from cananalyze.core.records import DecodedBatch
 from cananalyze.decode.lss import identity_text
-from cananalyze.decode.senders import SENT
-from cananalyze.outputs.busload import Bursts, bits_per_channel, bits_per_node, frame_bits
+from cananalyze.outputs.busload import bits_per_channel
+from cananalyze.outputs.node_load import NodeLoad, run_bitrate
 from cananalyze.pipeline.sink import Sink
 from cananalyze.protocol import lss, nmt
 from cananalyze.protocol.services import SERVICE_NAMES, Service
@@ -77,12 +77,9 @@ class Summary:
     lss_assignments: list = field(default_factory=list)
     lss_steps: int = 0
     lss_good: int = 0  # LSS master frames with a known command: CANopen evidence
-    # frames and nominal bits each node sent itself (decode/senders), per channel name
-    node_sent: dict = field(default_factory=dict)  # channel -> (frames[128], bits[128])
-    # the longest run of frames back to back per channel; only with a bitrate (`bitrate`,
-    # set before the first batch: a frame's time on the wire depends on it)
-    bitrate: int | None = None
-    bursts: dict = field(default_factory=dict)  # channel name -> busload.Bursts
+    # bus load per node and the longest burst per channel (node_load; its `bitrate` set
+    # before the first batch: a frame's time on the wire depends on it)
+    load: NodeLoad = field(default_factory=NodeLoad)
 
     def add(self, batch: DecodedBatch) -> None:
         n = len(batch)
@@ -123,7 +120,7 @@ class Summary:
             entry[0] += int(per_frames[c])
             entry[1] += int(per_bits[c])
         self._nodes_by_channel(batch, present, per[N_SVC:].reshape(128, N_SVC))
-        self._node_load(batch, present)
+        self.load.add(batch, present)
         self._evidence(batch)
         if len(self.ids_seen) < 4096:
             ids = fb.can_id[(fb.flags & FLAG_EXT) == 0]
@@ -132,66 +129,6 @@ class Summary:
             else:
                 ids = np.unique(ids)
             self.ids_seen.update(ids.tolist())
-
-    def _node_load(self, batch: DecodedBatch, present: list[int]) -> None:
-        """Bits each node sent, and with a bitrate the bursts, per channel."""
-        fb = batch.frames
-        sent = SENT[batch.service]
-        bits = frame_bits(fb.flags, fb.dlc) if self.bitrate else None
-        for c in present:
-            mine = fb.channel == c if len(present) > 1 else slice(None)
-            name = fb.channel_label(c)
-            frames, nbits = bits_per_node(
-                fb.flags[mine], fb.dlc[mine], batch.node[mine], sent[mine]
-            )
-            got = self.node_sent.get(name)
-            self.node_sent[name] = (
-                (frames, nbits) if got is None else (got[0] + frames, got[1] + nbits)
-            )
-            if bits is not None:
-                burst = self.bursts.get(name)
-                if burst is None:
-                    burst = self.bursts[name] = Bursts(self.bitrate)
-                burst.add(fb.t[mine], bits[mine])
-
-    def node_load(self, bitrate: int | None) -> dict:
-        """channel -> {node: mean bus load in percent of the frames it sent}; {} without a
-        bitrate or a duration."""
-        if not bitrate or self.duration <= 0:
-            return {}
-        per = bitrate * self.duration / 100
-        return {
-            name: {int(n): float(bits[n]) / per for n in np.flatnonzero(frames).tolist()}
-            for name, (frames, bits) in self.node_sent.items()
-        }
-
-    def load_lines(self, bitrate: int | None, timed: bool) -> list[str]:
-        """Bus load per node and the longest burst (with a bitrate and times only)."""
-        if not timed:
-            return []
-        out = []
-        loads = self.node_load(bitrate)
-        several = len(loads) > 1
-        rows = [
-            (f"{name} node {n}" if several else f"node {n}", v)
-            for name, per in loads.items()
-            for n, v in per.items()
-        ]
-        if rows:
-            out.append("bus load per node (frames it sent, nominal bits):")
-            out += [f"  {who:<15} {v:>9.2f} %" for who, v in rows]
-        t0 = self.t_first or 0.0
-        for name, burst in self.bursts.items():
-            rec = burst.record()
-            if rec is None or self.duration <= 0:
-                continue
-            on = f" on {name}" if several else ""
-            out.append(
-                f"longest burst{on}: {rec['frames']} frames back to back, "
-                f"{rec['t_start'] - t0:+.6f} s to {rec['t_end'] - t0:+.6f} s "
-                f"({(rec['t_end'] - rec['t_start']) * 1000:.3f} ms)"
-            )
-        return out
 
     def _several(self) -> None:
         """A second bus, before its batch is counted: what was counted so far is the
@@ -385,14 +322,14 @@ class Summary:
                 entry = _sdo_entry(self.sdo_results_by_bus[key], self.sdo_latency_by_bus.get(key))
                 by_bus.setdefault(bus, {})[str(node)] = entry
             several["sdo_by_bus"] = by_bus
-        loads = self.node_load(bitrate)
+        loads = self.load.shares(bitrate)
         if loads:  # with a bitrate: each node's share, the longest burst (per bus: several)
             many = len(loads) > 1
             per = {
                 name: {str(n): round(v, 3) for n, v in nodes.items()}
                 for name, nodes in loads.items()
             }
-            bursts = {name: b.record() for name, b in self.bursts.items()}
+            bursts = {name: b.record() for name, b in self.load.bursts.items()}
             several["bus_load_percent_per_node"] = per if many else next(iter(per.values()))
             several["longest_burst"] = bursts if many else next(iter(bursts.values()), None)
         if self.lss_steps:  # CiA 305: who got which node-ID (load().lss has every step)
@@ -469,7 +406,7 @@ class Summary:
                 out.append(
                     _sdo_line(f"node {node}", self.sdo_results[node], lat if timed else None)
                 )
-        out += self.load_lines(bitrate, timed)
+        out += self.load.lines(bitrate, timed)
         out += self.lss_lines()
         verdict = self.canopen_verdict()
         if verdict:
@@ -546,19 +483,14 @@ class SummarySink(Sink):
 
     def open(self, run) -> None:
         super().open(run)
-        model = run.network  # --bitrate wins; else the network file's `bitrate`
-        self.summary.bitrate = run.options.bitrate or (
-            model.spec.bitrate if model is not None else None
-        )
+        self.summary.load.bitrate = run_bitrate(run)
 
     def write(self, batch: DecodedBatch) -> None:
         self.summary.add(batch)
 
     def close(self) -> None:
         run = self.run
-        # --bitrate wins; else the network file's `bitrate`
-        model = run.network
-        bitrate = run.options.bitrate or (model.spec.bitrate if model is not None else None)
+        bitrate = run_bitrate(run)
         checker = run.checker
         if self.fmt == "jsonl":
             import json

@@ -31,6 +31,17 @@ COMMANDS: dict[int, str] = {
 }
 
 
+MASTER_COB, SLAVE_COB = 0x7E5, 0x7E4  # CiA 305: the LSS master's and the slaves' COB-IDs
+CODES: dict[str, int] = {name: cs for cs, name in COMMANDS.items()}
+# switch state global modes (byte 1)
+WAITING, CONFIGURATION = 0, 1
+# the four switch state selective commands, vendor-ID to serial-number, in order
+SELECTIVE = tuple(
+    CODES[f"switch state selective: {p}"]
+    for p in ("vendor-ID", "product-code", "revision-number", "serial-number")
+)
+
+
 def command_name(cs: int) -> str:
     return COMMANDS.get(cs, f"unknown 0x{cs:02X}")
 

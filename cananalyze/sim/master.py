@@ -9,6 +9,7 @@ scenario reads like the commissioning procedure it stands for.
 
 from __future__ import annotations
 
+import random
 import struct
 from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
@@ -58,6 +59,9 @@ class Write:
 class Sync:
     period: float  # seconds; 0 stops the producer
     counter: int = 0  # > 0: SYNC with a counter byte overflowing at this value
+    # seconds: each SYNC comes up to this much early or late (a fault); a Sync of the
+    # period and counter already produced changes only the jitter, keeping the phase
+    jitter: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -117,9 +121,14 @@ class Master:
     """The network master; frames it sends carry the log's TX direction flag."""
 
     def __init__(
-        self, script: Script | None = None, sdo_timeout: float = SDO_TIMEOUT, blksize: int = 16
+        self,
+        script: Script | None = None,
+        sdo_timeout: float = SDO_TIMEOUT,
+        blksize: int = 16,
+        rng: random.Random | None = None,
     ):
         self.script = script
+        self.rng = rng or random.Random(0)  # SYNC jitter: deterministic per seed
         self.sdo_timeout = sdo_timeout
         self.blksize = blksize
         self.sim: Simulation | None = None
@@ -127,6 +136,9 @@ class Master:
         self.results: list[tuple[Read | Write, object]] = []
         self._sync_token = 0
         self._sync_count = 0
+        self._sync_due = 0.0  # when the next SYNC is due without jitter
+        self._sync_jitter = 0.0
+        self._sync_running: tuple[float, int] | None = None  # (period, counter) producing
         self._guards: dict[int, int] = {}
         self._token = 0
 
@@ -159,8 +171,13 @@ class Master:
             if isinstance(cmd, Nmt):
                 self.send(0x000, bytes([cmd.command, cmd.node]))
             elif isinstance(cmd, Sync):
+                self._sync_jitter = cmd.jitter
+                if cmd.period > 0 and self._sync_running == (cmd.period, cmd.counter):
+                    continue  # the producer running: only its jitter changes, its phase stays
                 self._sync_token += 1
+                self._sync_running = (cmd.period, cmd.counter) if cmd.period > 0 else None
                 if cmd.period > 0:
+                    self._sync_due = self.sim.now
                     self._sync(self._sync_token, cmd.period, cmd.counter)
             elif isinstance(cmd, Guard):
                 self._guards[cmd.node] = self._guards.get(cmd.node, 0) + 1
@@ -181,7 +198,13 @@ class Master:
             self.send(0x080, bytes([self._sync_count]))
         else:
             self.send(0x080)
-        self.sim.after(period, lambda: self._sync(token, period, counter))
+        j = self._sync_jitter
+        if j:  # around the nominal grid, so the mean period stays `period`
+            self._sync_due += period
+            at = max(self._sync_due + self.rng.uniform(-j, j), self.sim.now)
+        else:  # a period after this one
+            at = self._sync_due = self.sim.now + period
+        self.sim.at(at, lambda: self._sync(token, period, counter))
 
     def _guard(self, node: int, token: int, period: float) -> None:
         if token != self._guards.get(node):

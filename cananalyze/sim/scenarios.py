@@ -7,12 +7,29 @@ emergencies) apply to the nodes of that device and are skipped otherwise.
 
 from __future__ import annotations
 
+import random
 from collections.abc import Callable
 
 from cananalyze.core.frames import FLAG_ERR, FLAG_EXT
-from cananalyze.protocol import nmt
-from cananalyze.sim.master import Do, Guard, Nmt, Read, Send, Sync, Until, Wait, Write, u8, u16, u32
+from cananalyze.protocol import lss, nmt, sdo
+from cananalyze.sim.lss_slave import LssSlave
+from cananalyze.sim.master import (
+    Do,
+    Guard,
+    Nmt,
+    Read,
+    SdoError,
+    Send,
+    Sync,
+    Until,
+    Wait,
+    Write,
+    u8,
+    u16,
+    u32,
+)
 from cananalyze.sim.node import SimNode, i7231d_emcy, mcb560_emcy
+from cananalyze.sim.scenario_names import SCENARIO_NAMES
 from cananalyze.sim.waveforms import Override
 
 Nodes = dict[int, SimNode]
@@ -52,9 +69,9 @@ def _guarding(nodes: Nodes):
             yield Guard(nid, HEARTBEAT_MS / 1000)
 
 
-def _remap_dat7014(node: SimNode):
+def _remap_dat7014(node: SimNode, cob: int | None = None):
     """TPDO2 remap: only channels 1 and 3, sent on every 5th SYNC (CiA 301 remap procedure)."""
-    nid, cob = node.node_id, 0x280 + node.node_id
+    nid, cob = node.node_id, cob or 0x280 + node.node_id
     yield Write(nid, 0x1801, 1, u32(0x80000000 | cob))  # disable the PDO
     yield Write(nid, 0x1A01, 0, u8(0))  # disable the mapping
     yield Write(nid, 0x1A01, 1, u32(0x64010110))
@@ -199,7 +216,112 @@ def faults(nodes: Nodes, duration: float):
     yield Until(duration)
 
 
-SCENARIOS = {"steady": steady, "commissioning": commissioning, "faults": faults}
+LSS_SERIAL = 0x00012345  # the serial number of the unconfigured device LSS configures
+SYNC_WINDOW_US = 20_000  # 0x1007 the master writes where it configures 0x1006
+JITTER = (4.0, 6.0, 0.03)  # SYNC jitter: from, to (s), up to +-30 ms
+
+
+def _lss_assign(nodes: Nodes, slave: LssSlave, node_id: int):
+    """Switch selective by the identity, configure node-ID, store, back to waiting."""
+
+    def join() -> None:
+        sim = next(iter(nodes.values())).sim
+        sim.add(slave)
+        slave.start(sim)
+
+    yield Do(join)
+    for cs, value in zip(lss.SELECTIVE, slave.identity, strict=True):
+        yield Send(lss.MASTER_COB, (bytes([cs]) + u32(value)).ljust(8, b"\x00"))
+        yield Wait(0.005)
+    for data in (
+        bytes([lss.CODES["configure node-ID"], node_id]),
+        bytes([lss.CODES["store configuration"]]),
+        bytes([lss.CODES["switch state global"], lss.WAITING]),
+    ):
+        yield Send(lss.MASTER_COB, data.ljust(8, b"\x00"))
+        yield Wait(0.01)
+    yield Do(lambda: nodes.__setitem__(node_id, slave.node))
+
+
+def _identity_ok(node: SimNode):
+    """Read vendor-ID and product code and compare them with the node's declared device,
+    as a CiA 302-2 master does (0x1F85, 0x1F86); False stops the node's boot."""
+    ok = True
+    for sub, want in ((1, node.profile.vendor_id), (2, node.profile.product_code)):
+        if not node.od.has(0x1018, sub):
+            continue
+        got = yield Read(node.node_id, 0x1018, sub)
+        if isinstance(got, SdoError) or (want and int.from_bytes(got, "little") != want):
+            ok = False
+    return ok
+
+
+def _configured(node: SimNode, writes):
+    """Carry out a node's configuration writes; False at the first abort (boot stopped)."""
+    for cmd in writes:
+        if cmd is None:
+            continue
+        if isinstance((yield cmd), SdoError):
+            return False
+    return True
+
+
+def commissioning_faults(nodes: Nodes, duration: float):
+    """Commissioning with one fault of each kind that `cananalyze boot`, the LSS table,
+    SYNC timing and `consistency` should find (docs/simulator.md): an LSS master gives an
+    unconfigured DAT 7014 a node-ID; the master checks identities and stops the boot of a
+    DAT 7014 whose product code differs from its declared one; a DAT 7130 aborts a
+    configuration write, so it is not started either; the I-7231D is configured but never
+    started; the LSS node's TPDO2 is put on the MCB-560's TPDO2 COB-ID; SYNC jitters."""
+    dat14, dat30, gw, mcb = (_of(nodes, k) for k in ("dat7014", "dat7130", "i7231d", "mcb560"))
+    wrong, refusing = dat14[:1], dat30[:1]
+    forgotten = gw[:1]
+
+    def inject() -> None:
+        for node in wrong:  # another product than the one declared for the node
+            node.od.config.append((0x1018, 2, (node.profile.product_code or 0) + 1))
+        for node in refusing:  # counters 1-2 cannot be synchronous acyclic on this one
+            node.sdo.abort_codes[(0x1801, 2)] = sdo.ABORT_VALUE_RANGE
+
+    yield Do(inject)  # before the nodes boot
+    yield Wait(0.4)
+    profile = (dat14 or list(nodes.values()))[0].profile
+    lss_id = next(n for n in range(10, 128) if n not in nodes)
+    rng = random.Random(next(iter(nodes.values())).rng.getrandbits(32))
+    slave = LssSlave(profile, LSS_SERIAL, rng)
+    yield from _lss_assign(nodes, slave, lss_id)
+    yield Wait(0.4)  # the new node boots
+    good = []
+    for _, node in sorted(nodes.items()):
+        if (yield from _identity_ok(node)):
+            good.append(node)
+    started = []
+    for node in good:
+        one = {node.node_id: node}
+        writes = [*_supervision(one)]
+        writes += [_write(node, 0x1006, 0, u32(int(SYNC_PERIOD * 1e6)))]
+        writes += [_write(node, 0x1007, 0, u32(SYNC_WINDOW_US))]
+        collide = node is slave.node and node.profile.key == "dat7014"
+        if collide and mcb and mcb[0].tpdo_params(2):
+            writes += [*_remap_dat7014(node, cob=mcb[0].tpdo_params(2)[0])]  # the collision
+        else:
+            writes += [*_configure(one)]
+        if (yield from _configured(node, writes)) and node not in forgotten:
+            started.append(node)
+    yield Wait(0.05)
+    for node in started:
+        yield Nmt(nmt.START, node.node_id)
+    yield Sync(SYNC_PERIOD)
+    yield from _guarding({n.node_id: n for n in good})
+    yield Until(JITTER[0])
+    yield Sync(SYNC_PERIOD, jitter=JITTER[2])
+    yield Until(JITTER[1])
+    yield Sync(SYNC_PERIOD)
+    yield Until(duration)
+
+
+# each name is the script of the same name ("-" for "_")
+SCENARIOS = {name: globals()[name.replace("-", "_")] for name in SCENARIO_NAMES}
 
 
 def script(name: str, nodes: Nodes, duration: float):

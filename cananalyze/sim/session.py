@@ -36,7 +36,9 @@ def build(
         )
         for nid, prof in sorted(profiles.items())
     }
-    m = sim.add(Master(script(scenario, nodes, duration))) if master else None
+    # the master's rng (SYNC jitter) apart from the nodes' (seed * 1000 + node-ID, 1-127)
+    rng = random.Random(seed * 1000)
+    m = sim.add(Master(script(scenario, nodes, duration), rng=rng)) if master else None
     return sim, nodes, m
 
 

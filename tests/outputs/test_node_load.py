@@ -1,5 +1,5 @@
 """Bus load per node and the longest burst (issue 40 item 3), in `decode --summary` (text and
-JSON) and `load()`, against bits counted by hand: at 125 kbit/s a heartbeat (1 byte) is
+JSON), `check --timing` and `load()`, against bits counted by hand: at 125 kbit/s a heartbeat (1 byte) is
 47 + 8 = 55 nominal bits, an 8-byte PDO 47 + 64 = 111 bits, 888 us on the wire."""
 
 from __future__ import annotations
@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from html.parser import HTMLParser
 from pathlib import Path
 
 import pytest
@@ -41,14 +42,18 @@ def _share(bits: int) -> float:
 
 
 def _summary(log: Path, *extra: str) -> str:
+    return _cli("decode", str(log), "--summary", *extra)
+
+
+def _cli(*args: str, ok: tuple[int, ...] = (0,)) -> str:
     r = subprocess.run(
-        [sys.executable, "-m", "cananalyze", "decode", str(log), "--summary", *extra],
+        [sys.executable, "-m", "cananalyze", *args],
         capture_output=True,
         text=True,
         timeout=300,
         cwd=ROOT,
     )
-    assert r.returncode == 0, r.stderr
+    assert r.returncode in ok, r.stderr
     return r.stdout
 
 
@@ -86,3 +91,77 @@ def test_without_a_bitrate_the_summary_is_as_before(tmp_path):
     assert "bus load per node" not in out and "longest burst" not in out
     rec = json.loads(_summary(_log(tmp_path / "b.log"), "--format", "jsonl"))
     assert "bus_load_percent_per_node" not in rec and "longest_burst" not in rec
+
+
+def _load_lines(out: list[str]) -> list[str]:
+    at = out.index("bus load per node (frames it sent, nominal bits):")
+    return out[at : at + 4]
+
+
+def test_check_timing_has_the_summary_s_node_load_and_burst(tmp_path):
+    log = _log(tmp_path / "b.log")
+    out = _cli("check", str(log), "--timing", "--bitrate", str(RATE), "--no-color", ok=(0, 1))
+    lines = _load_lines(out.splitlines())
+    assert lines[1].split() == ["node", "5", f"{_share(NODE5[1]):.2f}", "%"]
+    assert lines[2].split() == ["node", "6", f"{_share(NODE6[1]):.2f}", "%"]
+    assert lines[3] == "longest burst: 5 frames back to back, +1.020000 s to +1.023552 s (3.552 ms)"
+    summary = _summary(log, "--bitrate", str(RATE)).splitlines()
+    assert _load_lines(summary) == lines
+    # the network file's bitrate when none is given; none at all: no load, as the summary
+    net = tmp_path / "net.toml"
+    net.write_text(f"bitrate = {RATE}\n")
+    out = _cli("check", str(log), "--timing", "--network", str(net), "--no-color", ok=(0, 1))
+    assert _load_lines(out.splitlines()) == lines
+    out = _cli("check", str(log), "--timing", "--no-color", ok=(0, 1))
+    assert "SYNC" in out or "heartbeat" in out  # the timing is printed
+    assert "bus load per node" not in out and "longest burst" not in out
+    out = _cli("check", str(log), "--bitrate", str(RATE), "--no-color", ok=(0, 1))
+    assert "bus load per node" not in out  # only with --timing
+
+
+class _Tables(HTMLParser):
+    """Every <table> of a page as rows of cell texts (the standard library's parser)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.tables: list[list[list[str]]] = []
+        self._row: list[str] | None = None
+        self._cell: list[str] | None = None
+
+    def handle_starttag(self, tag, attrs):
+        if tag == "table":
+            self.tables.append([])
+        elif tag == "tr":
+            self._row = []
+        elif tag in ("td", "th"):
+            self._cell = []
+
+    def handle_endtag(self, tag):
+        if tag in ("td", "th") and self._cell is not None:
+            self._row.append("".join(self._cell).strip())
+            self._cell = None
+        elif tag == "tr" and self._row is not None:
+            self.tables[-1].append(self._row)
+            self._row = None
+
+    def handle_data(self, data):
+        if self._cell is not None:
+            self._cell.append(data)
+
+
+def _node_table(page: Path) -> list[list[str]] | None:
+    parser = _Tables()
+    parser.feed(page.read_text())
+    return next((t for t in parser.tables if t and t[0][0] == "node" and "mean load" in t[0]), None)
+
+
+def test_report_has_each_node_s_load(tmp_path):
+    log, page = _log(tmp_path / "b.log"), tmp_path / "b.html"
+    _cli("report", str(log), "-o", str(page), "--bitrate", str(RATE), "-q", ok=(0, 1))
+    assert _node_table(page) == [
+        ["node", "frames it sent", "mean load"],
+        ["node 5", str(NODE5[0]), f"{_share(NODE5[1]):.2f}%"],
+        ["node 6", str(NODE6[0]), f"{_share(NODE6[1]):.2f}%"],
+    ]
+    _cli("report", str(log), "-o", str(page), "-q", ok=(0, 1))
+    assert _node_table(page) is None  # no bitrate: no share

@@ -88,7 +88,12 @@ def buses(s, figs: Figures) -> dict:
                 f"{b.load.peak * unit:.2f}{u}" if s.timed else "-",
             ]
         )
-    return {"rows": rows, "bitrate": s.bitrate}
+    nodes = []  # each node's share (node_load: the frames it sent, as the summary's)
+    shares = s.load.shares(s.bitrate) if s.timed else {}
+    for ch, (frames, _) in s.load.sent.items():
+        for n, share in shares.get(ch, {}).items():
+            nodes.append([s.who(ch, n), f"{int(frames[n]):,}", f"{share:.2f}%"])
+    return {"rows": rows, "bitrate": s.bitrate, "nodes": nodes}
 
 
 # findings listed per node and rule: all are counted, `check --json`/JUnit hold every one.

@@ -1,0 +1,104 @@
+"""Bus load per node and the longest burst, followed batch by batch: `decode --summary`
+and `check --timing` print the same figures from this one computation (busload's bits).
+
+A node's load is the nominal bits of the frames it sent itself (decode/senders: its
+heartbeat, TPDOs, EMCY, SDO responses, guard answers, boot-up) over the log's duration,
+in percent of the bitrate: a lower bound, as busload explains.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cananalyze.core.records import DecodedBatch
+from cananalyze.decode.senders import SENT
+from cananalyze.outputs.busload import Bursts, bits_per_node, frame_bits
+
+
+def run_bitrate(run) -> int | None:
+    """The run's bitrate: --bitrate, else the network file's `bitrate`, else None."""
+    model = run.network
+    return run.options.bitrate or (model.spec.bitrate if model is not None else None)
+
+
+@dataclass
+class NodeLoad:
+    # set before the first batch: a frame's time on the wire (bursts) depends on it
+    bitrate: int | None = None
+    sent: dict = field(default_factory=dict)  # channel name -> (frames[128], bits[128])
+    bursts: dict = field(default_factory=dict)  # channel name -> busload.Bursts
+    t_first: float | None = None
+    t_last: float | None = None
+
+    @property
+    def duration(self) -> float:
+        if self.t_first is None or self.t_last is None:
+            return 0.0
+        return self.t_last - self.t_first
+
+    def add(self, batch: DecodedBatch, present: list[int] | None = None) -> None:
+        """Count a batch; `present`: its channel indexes, when the caller has them."""
+        fb = batch.frames
+        if not len(fb):
+            return
+        t = fb.t
+        self.t_first = float(t[0]) if self.t_first is None else min(self.t_first, float(t[0]))
+        self.t_last = float(t[-1]) if self.t_last is None else max(self.t_last, float(t[-1]))
+        if present is None:
+            present = np.unique(fb.channel).tolist()
+        sent = SENT[batch.service]
+        bits = frame_bits(fb.flags, fb.dlc) if self.bitrate else None
+        for c in present:
+            mine = fb.channel == c if len(present) > 1 else slice(None)
+            name = fb.channel_label(c)
+            frames, nbits = bits_per_node(
+                fb.flags[mine], fb.dlc[mine], batch.node[mine], sent[mine]
+            )
+            got = self.sent.get(name)
+            self.sent[name] = (frames, nbits) if got is None else (got[0] + frames, got[1] + nbits)
+            if bits is not None:
+                burst = self.bursts.get(name)
+                if burst is None:
+                    burst = self.bursts[name] = Bursts(self.bitrate)
+                burst.add(fb.t[mine], bits[mine])
+
+    def shares(self, bitrate: int | None) -> dict:
+        """channel -> {node: mean bus load in percent of the frames it sent}; {} without a
+        bitrate or a duration."""
+        if not bitrate or self.duration <= 0:
+            return {}
+        per = bitrate * self.duration / 100
+        return {
+            name: {int(n): float(bits[n]) / per for n in np.flatnonzero(frames).tolist()}
+            for name, (frames, bits) in self.sent.items()
+        }
+
+    def lines(self, bitrate: int | None, timed: bool) -> list[str]:
+        """Bus load per node and the longest burst (with a bitrate and times only)."""
+        if not timed:
+            return []
+        out = []
+        loads = self.shares(bitrate)
+        several = len(loads) > 1
+        rows = [
+            (f"{name} node {n}" if several else f"node {n}", v)
+            for name, per in loads.items()
+            for n, v in per.items()
+        ]
+        if rows:
+            out.append("bus load per node (frames it sent, nominal bits):")
+            out += [f"  {who:<15} {v:>9.2f} %" for who, v in rows]
+        t0 = self.t_first or 0.0
+        for name, burst in self.bursts.items():
+            rec = burst.record()
+            if rec is None or self.duration <= 0:
+                continue
+            on = f" on {name}" if several else ""
+            out.append(
+                f"longest burst{on}: {rec['frames']} frames back to back, "
+                f"{rec['t_start'] - t0:+.6f} s to {rec['t_end'] - t0:+.6f} s "
+                f"({(rec['t_end'] - rec['t_start']) * 1000:.3f} ms)"
+            )
+        return out
