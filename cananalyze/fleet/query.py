@@ -7,7 +7,7 @@ from pathlib import Path
 from cananalyze.core import storage
 from cananalyze.core.errors import UsageError
 from cananalyze.core.extras import need
-from cananalyze.fleet.schema import TABLES
+from cananalyze.fleet.schema import TABLES, duckdb_hive_types
 
 
 def _sql_text(value: str) -> str:
@@ -17,7 +17,9 @@ def _sql_text(value: str) -> str:
 def connect(dataset: str | Path, storage_options: dict | None = None):
     """An in-memory DuckDB connection with a view per table the dataset holds.
 
-    `hive_partitioning` turns the `date=YYYY-MM-DD` folders into a DATE column `date`;
+    `hive_partitioning` turns the `date=YYYY-MM-DD` folders into a column `date`, typed
+    as the dataset declares it (`hive_types`: a DATE, also when every folder is the
+    partition of no value);
     `union_by_name` lets a dataset written by an older cananalyze (columns added since)
     still be read whole. A dataset at a URL is read through its fsspec file system,
     registered into DuckDB (no httpfs extension to download). MissingExtra without the
@@ -54,7 +56,8 @@ def connect(dataset: str | Path, storage_options: dict | None = None):
         pattern = _sql_text(found)
         con.execute(
             f"CREATE VIEW {table} AS SELECT * FROM read_parquet({pattern}, "
-            "hive_partitioning = true, union_by_name = true)"
+            f"hive_partitioning = true, hive_types = {duckdb_hive_types()}, "
+            "union_by_name = true)"
         )
         made.append(table)
     if not made:

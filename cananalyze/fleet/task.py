@@ -187,7 +187,12 @@ def logs_rows(dataset: layout.Dataset, options: dict | None = None) -> dict[str,
             return {}
     try:
         # the dataset's schema: parts written before a column was added read it as null
-        found = pads.dataset(where, filesystem=filesystem, schema=schema.schema("logs"))
+        found = pads.dataset(
+            where,
+            filesystem=filesystem,
+            schema=schema.dataset_schema("logs"),
+            partitioning=schema.partitioning(),
+        )
         rows = found.to_table(columns=list(ROW_COLUMNS)).to_pylist()
     except (OSError, ValueError):
         return {}
