@@ -22,7 +22,7 @@ from typing import TextIO
 from cananalyze.core.defaults import TASK_TIMEOUT
 from cananalyze.core.errors import UsageError
 from cananalyze.core.extras import need
-from cananalyze.fleet import layout
+from cananalyze.fleet import compact, layout
 from cananalyze.fleet.inputs import expand, options_for
 from cananalyze.fleet.task import (
     LogTask,
@@ -281,6 +281,9 @@ def run_fleet(
     if tasks:
         _on_cluster(tasks, by_path, out, dataset, workers, scheduler, stream, run)
         _recount(by_path, tasks, layout.root(root), where, run)
+        if isinstance(dataset, Path):  # rows this run replaced, out of compacted files
+            with compact.locked(dataset):
+                compact.reconcile(dataset, compression)
     else:
         out.notes.append("nothing to decode (every log unchanged in the dataset): no cluster")
     out.results = [by_path[p] for p, _ in logs if p in by_path]

@@ -143,7 +143,8 @@ _DECIDING = (
 
 
 def recorded(dataset: layout.Dataset, digest: str, options: dict | None = None) -> dict | None:
-    """The dataset's `logs` row for this content, or None."""
+    """The dataset's `logs` row for this content (its own part, or a compacted file's), or
+    None."""
     import pyarrow.parquet as pq
 
     for part in layout.existing_parts(dataset, "logs", digest, options):
@@ -155,6 +156,10 @@ def recorded(dataset: layout.Dataset, digest: str, options: dict | None = None) 
                 rows = pq.read_table(part).to_pylist()
             if rows:
                 return rows[0]
+    if isinstance(dataset, Path):  # compacted (`fleet compact`): the row is in a shared file
+        from cananalyze.fleet.compact import compacted_row
+
+        return compacted_row(dataset, digest)
     return None
 
 

@@ -5,18 +5,31 @@ DuckDB directly, not through cananalyze's readers."""
 
 from __future__ import annotations
 
+import os
 import shutil
+from collections import Counter
 from pathlib import Path
 
 import duckdb
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.dataset as ds
+import pyarrow.parquet as pq
 import pytest
+from conftest import REAL
 
-from cananalyze.fleet import query, schema
+from cananalyze.cli.main import main
+from cananalyze.fleet import orchestrate, query, schema, task
 from cananalyze.fleet.orchestrate import run_fleet
 
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
+# real logs read where they are (when the shared data is there): other loggers' files
+REAL_LOGS = (
+    "calumroy__CANopen_socketCAN_Test/can_log_070825_brake_sensor_test2.log",
+    "RoboTrainerAID__za_experimental/candump.log",
+    "hardbyte__python-can/test_CanMessage.asc",
+)
+TIME = {"frames": "t", "signals": "t", "sdo": "t", "events": "t", "findings": "t"}
 
 
 def _undated(src: Path, dest: Path) -> None:
@@ -33,7 +46,8 @@ def logs(tmp_path_factory) -> list[str]:
     for p in sorted(SAMPLES.glob("*.log")) + sorted(SAMPLES.glob("*.asc")):
         shutil.copy(p, folder / p.name)
     _undated(SAMPLES / "demo.log", folder / "undated.log")
-    return sorted(str(p) for p in folder.iterdir())
+    real = [str(REAL / r) for r in REAL_LOGS if (REAL / r).is_file()]
+    return sorted(str(p) for p in folder.iterdir()) + real
 
 
 @pytest.fixture(scope="module")
@@ -48,7 +62,7 @@ def test_pyarrow_reads_the_date_partition_as_a_date(dataset):
     found = ds.dataset(dataset / "frames", format="parquet", partitioning=schema.partitioning())
     assert found.schema.field("date").type == pa.date32()
     dates = set(found.to_table(columns=["date"]).column("date").to_pylist())
-    assert None in dates and len(dates) == 2  # the samples' day, and the undated log's null
+    assert None in dates and len(dates) >= 2  # the logs' days, and the undated log's null
     assert schema.dataset_schema("frames").field("date").type == pa.date32()
 
 
@@ -68,3 +82,130 @@ def test_duckdb_in_query_reads_the_date_partition_as_a_date(dataset, logs, tmp_p
     for table in schema.TABLES:
         types = {r[0]: r[1] for r in con.execute(f"DESCRIBE {table}").fetchall()}
         assert types["date"] == "DATE", table
+
+
+def _files(dataset: Path, table: str) -> list[Path]:
+    return sorted((dataset / table).glob("date=*/*.parquet"))
+
+
+def _duckdb_counts(dataset: Path, table: str) -> Counter:
+    """Rows per (date, log) of a table, as DuckDB reads the folder on its own."""
+    glob = str(dataset / table / "date=*" / "*.parquet")
+    rows = duckdb.sql(
+        f"SELECT date, hash, count(*) FROM read_parquet('{glob}', hive_partitioning = true, "
+        "union_by_name = true) GROUP BY ALL"
+    ).fetchall()
+    return Counter({(str(d), h): n for d, h, n in rows})
+
+
+def _pyarrow_counts(dataset: Path, table: str) -> Counter:
+    dates = ds.partitioning(pa.schema([("date", pa.date32())]), flavor="hive")
+    t = ds.dataset(dataset / table, format="parquet", partitioning=dates).to_table(
+        columns=["date", "hash", "source"]
+    )
+    return Counter(
+        zip(t["date"].to_pylist(), t["hash"].to_pylist(), t["source"].to_pylist(), strict=True)
+    )
+
+
+def _compact(dataset: Path, *extra: str) -> None:
+    assert main(["fleet", "compact", str(dataset), "-q", *extra]) == 0
+
+
+def test_compact_keeps_every_row_and_its_lineage_in_fewer_time_ordered_files(dataset, tmp_path):
+    copy = tmp_path / "ds"
+    shutil.copytree(dataset, copy)
+    before = {t: (_duckdb_counts(copy, t), _pyarrow_counts(copy, t)) for t in schema.TABLES}
+    files = {t: len(_files(copy, t)) for t in schema.TABLES}
+    _compact(copy)
+    for table in schema.TABLES:
+        assert (_duckdb_counts(copy, table), _pyarrow_counts(copy, table)) == before[table], table
+        found = _files(copy, table)
+        partitions = {p.parent for p in found}
+        assert len(found) == len(partitions) < files[table], table  # one file a partition
+        for part in found:  # a partition of one part before keeps it as it was
+            if part.name.startswith("part-compact-") and table in TIME:
+                t = pq.read_table(part, columns=[TIME[table]])[TIME[table]].drop_null()
+                assert pc.all(pc.greater_equal(t[1:], t[:-1])).as_py() in (True, None), part
+    assert not [p for p in (copy / "_staging").iterdir() if p.is_dir()]
+    # a small target: several files a partition, each still time-ordered, rows kept
+    small = tmp_path / "small"
+    shutil.copytree(dataset, small)
+    _compact(small, "--target-size", "20KB")
+    assert _duckdb_counts(small, "frames") == before["frames"][0]
+    assert len(_files(small, "frames")) > len({p.parent for p in _files(small, "frames")})
+
+
+@pytest.fixture
+def cluster():
+    """A cluster in this process (threads): what the workers call can be watched."""
+    from distributed import LocalCluster
+
+    with LocalCluster(
+        n_workers=1,
+        threads_per_worker=1,
+        processes=False,
+        protocol="tcp://",
+        host="127.0.0.1",
+        dashboard_address=None,
+    ) as c:
+        yield c.scheduler_address
+
+
+def test_reruns_after_compact_skip_and_replace_by_rows_not_file_names(
+    tmp_path, cluster, monkeypatch
+):
+    folder = tmp_path / "logs"
+    folder.mkdir()
+    for name in ("demo.log", "faults.log", "commissioning.log", "demo.asc"):
+        shutil.copy(SAMPLES / name, folder / name)
+    logs = sorted(str(p) for p in folder.iterdir())
+    dataset = tmp_path / "ds"
+    assert not run_fleet(logs, dataset, scheduler=cluster).failed
+    _compact(dataset)
+    assert all(len(_files(dataset, t)) == 1 for t in schema.TABLES)
+    frames = _pyarrow_counts(dataset, "frames")
+
+    # nothing changed: every log skipped from the compacted logs rows, no cluster
+    real_client = orchestrate._client
+    monkeypatch.setattr(orchestrate, "_client", lambda *a, **k: pytest.fail("a cluster"))
+    again = run_fleet(logs, dataset, scheduler=cluster)
+    assert len(again.skipped) == 4 and again.frames == 0
+    monkeypatch.setattr(orchestrate, "_client", real_client)
+
+    # touched, not changed: hashed by the worker, found in the compacted file, skipped
+    os.utime(logs[0], ns=(1, 1))
+    touched = run_fleet(logs, dataset, scheduler=cluster)
+    assert len(touched.skipped) == 4 and touched.frames == 0
+    assert _pyarrow_counts(dataset, "frames") == frames
+
+    # a changed log: exactly its new rows, its old ones gone from the compacted file
+    changed = folder / "demo.log"
+    changed.write_text("".join(open(SAMPLES / "faults.log").readlines()[:150]))
+    run = run_fleet(logs, dataset, scheduler=cluster)
+    assert len(run.skipped) == 3 and run.frames == 150
+    new_hash = task.content_hash(changed)
+    for table in schema.TABLES:
+        counts = _duckdb_counts(dataset, table)
+        by_source = Counter()
+        for (_, h, src), n in _pyarrow_counts(dataset, table).items():
+            by_source[src, h] += n
+        hashes = {h for (src, h) in by_source if src == str(changed)}
+        assert hashes <= {new_hash}, table  # the old content's rows: none
+        assert sum(counts.values()) == sum(by_source.values())
+    rows = duckdb.sql(
+        f"SELECT source, hash, frames FROM read_parquet('{dataset}/logs/date=*/*.parquet')"
+    ).fetchall()
+    assert sorted(r[0] for r in rows) == logs  # one row a log
+    assert (str(changed), new_hash, 150) in rows
+    assert (
+        sum(n for (_, h, _), n in _pyarrow_counts(dataset, "frames").items() if h == new_hash)
+        == 150
+    )
+
+    # --force: every log decoded again, no row twice, the compacted files emptied away
+    forced = run_fleet(logs, dataset, scheduler=cluster, force=True)
+    assert not forced.skipped
+    assert all(n == 1 for n in _pyarrow_counts(dataset, "logs").values())
+    assert not list(dataset.glob("*/date=*/part-compact-*.parquet"))
+    assert sum(_duckdb_counts(dataset, "frames").values()) == sum(frames.values()) - 185 + 150

@@ -1,0 +1,273 @@
+"""`fleet compact`: a dataset's small parts rewritten into files near a target size, for
+the query engines that pay per file (a log's seven parts are kilobytes each).
+
+Per table and date partition, the parts under the target size (a log's
+`part-<hash>.parquet`, or an earlier compaction's `part-compact-<id>.parquet` not yet
+full) are read together, sorted by time (then by log) and written as one file of row
+groups in time order. Every row keeps its lineage columns (`source`, `hash`,
+`version`); the file's footer also lists the hashes it holds (`cananalyze.hashes`), so
+finding a log's rows reads footers, not the files.
+
+Publishing goes through a stage like a fleet task's (layout.Stage): the new file is
+renamed into place, then its inputs are removed (each only if it is still the file
+that was read: a part a fleet run replaced meanwhile stays). A reader listing between
+the two sees those logs twice, told apart by nothing but the file; a crash between them
+is finished by the next `fleet` or `compact` (the stage's COMMIT.json).
+
+A rerun decides from rows, not file names: the driver reads the `logs` rows of every
+file; a worker looks a hash up in the loose `logs` part, else in the compacted files
+whose footer lists it. When a fleet run commits a log whose rows are also in a
+compacted file (`--force`, a changed configuration, a changed file at the same path),
+`reconcile` rewrites that file without them, in place (one rename: readers see the old
+file or the new one): a loose part is always newer than a compacted copy of the same
+hash, and a loose `logs` row for a path retires that path's other hashes.
+
+Compaction, the reconcile and each other's removals hold one lock
+(`_staging/compact.lock`), so they never interleave; a fleet run's tasks do not take it.
+Local datasets only: object storage has no rename to publish with.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import json
+import uuid
+from collections.abc import Iterator
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import pyarrow as pa
+
+from cananalyze.core.defaults import COMPACT_TARGET_SIZE
+from cananalyze.fleet import layout, schema
+
+COMPACTED = "part-compact-"  # a compacted file's name: part-compact-<id>.parquet
+HASHES = b"cananalyze.hashes"  # footer key: the JSON list of the log hashes in the file
+LOCK = "compact.lock"  # in _staging: a file, never taken for a stage (those are folders)
+
+
+@dataclass
+class CompactResult:
+    """What a compaction did: the part files before and after, their sizes (bytes)."""
+
+    sizes_before: list[int]
+    sizes_after: list[int]
+    merged: int = 0  # files written by merging
+    reconciled: int = 0  # compacted files rewritten without rows a later commit replaced
+
+
+def is_compacted(path: Path) -> bool:
+    return path.name.startswith(COMPACTED)
+
+
+def order(table: str) -> list[tuple[str, str]]:
+    """A table's sort keys in a compacted file: its time, then the log (ties stay apart)."""
+    names = [c for c, _ in schema.COLUMNS[table]]
+    time = next((c for c in ("t", "t_first") if c in names), None)
+    keys = ([time] if time else []) + ["hash"] + (["node"] if "node" in names and not time else [])
+    return [(k, "ascending") for k in keys]
+
+
+def _parts(dataset: Path, table: str, compacted: bool | None = None) -> list[Path]:
+    found = sorted((dataset / table).glob("date=*/part-*.parquet"))
+    return [p for p in found if compacted is None or is_compacted(p) == compacted]
+
+
+def _digest(part: Path) -> str:
+    return part.name[len("part-") : -len(".parquet")]
+
+
+@lru_cache(maxsize=4096)
+def _footer_hashes(path: str, ino: int, mtime_ns: int) -> frozenset[str]:
+    import pyarrow.parquet as pq
+
+    meta = pq.read_schema(path).metadata or {}
+    return frozenset(json.loads(meta.get(HASHES, b"[]")))
+
+
+def hashes_of(part: Path) -> frozenset[str]:
+    """The log hashes a compacted file holds, from its footer (each version read once)."""
+    st = part.stat()
+    return _footer_hashes(str(part), st.st_ino, st.st_mtime_ns)
+
+
+def compacted_row(dataset: Path, digest: str) -> dict | None:
+    """The `logs` row of this content in a compacted file, or None."""
+    import pyarrow.compute as pc
+    import pyarrow.parquet as pq
+
+    for part in _parts(dataset, "logs", compacted=True):
+        with contextlib.suppress(OSError, ValueError):
+            if digest in hashes_of(part):
+                found = pq.read_table(part)
+                rows = found.filter(pc.equal(found["hash"].cast(pa.string()), digest))
+                if rows.num_rows:
+                    return rows.to_pylist()[0]
+    return None
+
+
+@contextlib.contextmanager
+def locked(dataset: Path) -> Iterator[None]:
+    """The dataset's compaction lock, held (waits for a compaction or reconcile running)."""
+    where = dataset / layout.STAGING
+    where.mkdir(parents=True, exist_ok=True)
+    with open(where / LOCK, "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        yield
+
+
+def _read(parts: list[Path], table: str) -> pa.Table:
+    """Parts of one table as one table of the dataset's schema (a part written before a
+    column was added reads it as null), each label column one dictionary."""
+    import pyarrow.dataset as pads
+
+    found = pads.dataset([str(p) for p in parts], format="parquet", schema=schema.schema(table))
+    return found.to_table().combine_chunks().unify_dictionaries()
+
+
+def _write(data: pa.Table, table: str, dest: Path, compression: str) -> None:
+    """Rows in time order, in row groups of the export's size; the hashes in the footer."""
+    import pyarrow.compute as pc
+    import pyarrow.parquet as pq
+
+    from cananalyze.outputs.tables.writer import ROW_GROUP
+
+    keys = order(table)
+    plain = {  # labels by their text (Arrow sorts no dictionary column)
+        k: data[k].cast(data[k].type.value_type)
+        if pa.types.is_dictionary(data[k].type)
+        else data[k]
+        for k, _ in keys
+    }
+    data = data.take(pc.sort_indices(pa.table(plain), sort_keys=keys))
+    hashes = sorted(pc.unique(data["hash"].cast(pa.string())).to_pylist())
+    meta = {**(data.schema.metadata or {}), HASHES: json.dumps(hashes).encode()}
+    pq.write_table(
+        data.replace_schema_metadata(meta), dest, row_group_size=ROW_GROUP, compression=compression
+    )
+
+
+def _publish(
+    dataset: Path, staged_from, dest: Path, after: list[tuple[Path, int]], removals=()
+) -> None:
+    stage = layout.Stage(dataset, "compact")
+    try:
+        staged = stage.dir / "part.parquet"
+        staged_from(staged)
+        stage.commit([(staged, dest)] if staged.exists() else [], list(removals), after)
+    except BaseException:
+        stage.close()
+        raise
+
+
+def _merge(dataset: Path, table: str, parts: list[Path], compression: str) -> None:
+    """`parts` (one partition's) into one new compacted file, then removed."""
+    after = [(p, p.stat().st_ino) for p in parts]  # before reading: a later swap is seen
+    data = _read(parts, table)
+    dest = parts[0].parent / f"{COMPACTED}{uuid.uuid4().hex[:16]}.parquet"
+    _publish(dataset, lambda staged: _write(data, table, staged, compression), dest, after)
+
+
+def _bins(parts: list[Path], target: int) -> Iterator[list[Path]]:
+    """Consecutive groups of parts whose sizes add up to about `target` (a part over it:
+    alone), largest first so full files come out full."""
+    sized = sorted(((p.stat().st_size, p) for p in parts), key=lambda sp: (-sp[0], sp[1]))
+    current: list[Path] = []
+    total = 0
+    for size, part in sized:
+        if current and total + size > target:
+            yield current
+            current, total = [], 0
+        current.append(part)
+        total += size
+    if current:
+        yield current
+
+
+def reconcile(dataset: Path, compression: str = "snappy") -> int:
+    """Compacted files rewritten without the rows a later commit replaced; how many.
+
+    Call with `locked` held. Stale in a compacted file of a table: a hash that also has
+    a loose part in that table (decoded again: `--force`, a changed configuration, a
+    rerun dated otherwise), and a hash whose path has a loose `logs` row of another hash
+    (the file changed)."""
+    import pyarrow.compute as pc
+    import pyarrow.parquet as pq
+
+    compacted = {t: _parts(dataset, t, compacted=True) for t in schema.TABLES}
+    if not any(compacted.values()):
+        return 0
+    loose = {t: {_digest(p) for p in _parts(dataset, t, compacted=False)} for t in schema.TABLES}
+    retired: set[str] = set()
+    if compacted["logs"] and loose["logs"]:
+        newer: dict[str, set[str]] = {}
+        for row in (
+            _read(_parts(dataset, "logs", compacted=False), "logs")
+            .select(["source", "hash"])
+            .to_pylist()
+        ):
+            newer.setdefault(row["source"], set()).add(row["hash"])
+        for part in compacted["logs"]:
+            for row in pq.read_table(part, columns=["source", "hash"]).to_pylist():
+                if row["source"] in newer and row["hash"] not in newer[row["source"]]:
+                    retired.add(row["hash"])
+    rewritten = 0
+    for table, parts in compacted.items():
+        for part in parts:
+            drop = hashes_of(part) & (loose[table] | retired)
+            if not drop:
+                continue
+            ino = part.stat().st_ino
+            data = _read([part], table)
+            keep = data.filter(pc.invert(pc.is_in(data["hash"].cast(pa.string()), pa.array(drop))))
+            if keep.num_rows:
+                _publish(dataset, lambda s, k=keep, t=table: _write(k, t, s, compression), part, [])
+            else:
+                _publish(dataset, lambda s: None, part, [(part, ino)])
+            rewritten += 1
+    return rewritten
+
+
+def compact(
+    dataset: str | Path, target_size: int = COMPACT_TARGET_SIZE, compression: str = "snappy"
+) -> CompactResult:
+    """Every table's partitions compacted (see the module's docstring); UsageError for a
+    URL or a folder that is no fleet dataset."""
+    from cananalyze.core.errors import UsageError
+
+    if isinstance(layout.root(dataset), str):
+        raise UsageError(f"{dataset}: compact works on a local dataset only (not a URL yet)")
+    dataset = Path(dataset)
+    if not (dataset / "logs").is_dir():
+        raise UsageError(f"{dataset}: not a fleet dataset (no logs table in it)")
+    if target_size <= 0:
+        raise UsageError(f"--target-size must be positive (got {target_size})")
+    with locked(dataset):
+        layout.recover(dataset)
+        out = CompactResult(_sizes(dataset), [])
+        out.reconciled = reconcile(dataset, compression)
+        for table in schema.TABLES:
+            for partition in sorted((dataset / table).glob("date=*")):
+                small = [
+                    p for p in partition.glob("part-*.parquet") if p.stat().st_size < target_size
+                ]
+                for group in _bins(small, target_size):
+                    if len(group) > 1:
+                        _merge(dataset, table, group, compression)
+                        out.merged += 1
+        out.sizes_after = _sizes(dataset)
+    return out
+
+
+def _sizes(dataset: Path) -> list[int]:
+    return [p.stat().st_size for t in schema.TABLES for p in _parts(dataset, t)]
+
+
+def median(sizes: list[int]) -> float:
+    s = sorted(sizes)
+    if not s:
+        return 0.0
+    mid = len(s) // 2
+    return float(s[mid]) if len(s) % 2 else (s[mid - 1] + s[mid]) / 2
