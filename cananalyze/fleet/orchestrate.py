@@ -281,11 +281,11 @@ def run_fleet(
     if tasks:
         _on_cluster(tasks, by_path, out, dataset, workers, scheduler, stream, run)
         _recount(by_path, tasks, layout.root(root), where, run)
-        if isinstance(dataset, Path):  # rows this run replaced, out of compacted files
-            with compact.locked(dataset):
-                compact.reconcile(dataset, compression)
     else:
         out.notes.append("nothing to decode (every log unchanged in the dataset): no cluster")
+    if isinstance(dataset, Path):  # rows this run (or one cut short) replaced, out of
+        with compact.locked(dataset):  # compacted files (fleet/compact.py)
+            compact.reconcile(dataset, compression)
     out.results = [by_path[p] for p, _ in logs if p in by_path]
     out.seconds = time.perf_counter() - t0
     if junit:
