@@ -190,9 +190,10 @@ def reconcile(dataset: Path, compression: str = "snappy") -> int:
     """Compacted files rewritten without the rows a later commit replaced; how many.
 
     Call with `locked` held. Stale in a compacted file of a table: a hash that also has
-    a loose part in that table (decoded again: `--force`, a changed configuration, a
-    rerun dated otherwise), and a hash whose path has a loose `logs` row of another hash
-    (the file changed)."""
+    a loose part in that table or in `logs` (decoded again: `--force`, a changed
+    configuration, a rerun dated otherwise; a failed redo writes its `logs` part only,
+    and its old rows go as a fleet commit removes a log's old parts), and a hash whose
+    path has a loose `logs` row of another hash (the file changed)."""
     import pyarrow.compute as pc
     import pyarrow.parquet as pq
 
@@ -216,7 +217,7 @@ def reconcile(dataset: Path, compression: str = "snappy") -> int:
     rewritten = 0
     for table, parts in compacted.items():
         for part in parts:
-            drop = hashes_of(part) & (loose[table] | retired)
+            drop = hashes_of(part) & (loose[table] | loose["logs"] | retired)
             if not drop:
                 continue
             ino = part.stat().st_ino
