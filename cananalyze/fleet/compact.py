@@ -22,8 +22,9 @@ compacted file (`--force`, a changed configuration, a changed file at the same p
 file or the new one): a loose part is always newer than a compacted copy of the same
 hash, and a loose `logs` row for a path retires that path's other hashes.
 
-Compaction, the reconcile and each other's removals hold one lock
-(`_staging/compact.lock`), so they never interleave; a fleet run's tasks do not take it.
+Compaction and the reconcile hold one lock (`_staging/compact.lock`), so they never
+interleave; a fleet run's tasks do not take it. Each publish also waits for the
+`cananalyze query` runs reading the dataset (`reading`: `_staging/publish.lock`).
 Local datasets only: object storage has no rename to publish with.
 """
 
@@ -46,6 +47,7 @@ from cananalyze.fleet import layout, schema
 COMPACTED = "part-compact-"  # a compacted file's name: part-compact-<id>.parquet
 HASHES = b"cananalyze.hashes"  # footer key: the JSON list of the log hashes in the file
 LOCK = "compact.lock"  # in _staging: a file, never taken for a stage (those are folders)
+PUBLISH = "publish.lock"  # taken shared by `query` while it reads, alone by each publish
 
 
 @dataclass
@@ -109,12 +111,32 @@ def compacted_row(dataset: Path, digest: str) -> dict | None:
 
 
 @contextlib.contextmanager
-def locked(dataset: Path) -> Iterator[None]:
-    """The dataset's compaction lock, held (waits for a compaction or reconcile running)."""
+def _flock(dataset: Path, name: str, how: int) -> Iterator[None]:
     where = dataset / layout.STAGING
     where.mkdir(parents=True, exist_ok=True)
-    with open(where / LOCK, "a") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
+    with open(where / name, "a") as lock:
+        fcntl.flock(lock, how)
+        yield
+
+
+def locked(dataset: Path):
+    """The dataset's compaction lock, held (waits for a compaction or reconcile running)."""
+    return _flock(dataset, LOCK, fcntl.LOCK_EX)
+
+
+@contextlib.contextmanager
+def reading(dataset: Path) -> Iterator[None]:
+    """Held by `cananalyze query` while it lists and reads the parts: a compaction's
+    publish (its file in, its inputs out) waits for it, so the query sees each row once
+    and no part goes from under it. A folder without `_staging` (no fleet wrote it) is
+    left untouched, and one it cannot write the lock into (read-only) read without it."""
+    try:
+        lock = open(dataset / layout.STAGING / PUBLISH, "a")  # noqa: SIM115 - closed below
+    except OSError:
+        yield
+        return
+    with lock:
+        fcntl.flock(lock, fcntl.LOCK_SH)
         yield
 
 
@@ -156,7 +178,8 @@ def _publish(
     try:
         staged = stage.dir / "part.parquet"
         staged_from(staged)
-        stage.commit([(staged, dest)] if staged.exists() else [], list(removals), after)
+        with _flock(dataset, PUBLISH, fcntl.LOCK_EX):  # no `query` reading meanwhile
+            stage.commit([(staged, dest)] if staged.exists() else [], list(removals), after)
     except BaseException:
         stage.close()
         raise

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 from cananalyze.core import storage
 from cananalyze.core.errors import UsageError
 from cananalyze.core.extras import need
+from cananalyze.fleet.compact import reading
+from cananalyze.fleet.layout import STAGING
 from cananalyze.fleet.schema import TABLES, duckdb_hive_types
 
 
@@ -70,13 +73,15 @@ def query(
 ) -> tuple[list[str], list[tuple]]:
     """(column names, rows) of `sql` over the dataset's views; UsageError for bad SQL."""
     duckdb = need("duckdb", "query", "fleet")
-    con = connect(dataset, storage_options)
-    try:
-        rel = con.execute(sql)
-        names = [d[0] for d in rel.description or []]
-        return names, rel.fetchall()
-    except duckdb.Error as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise UsageError(f"query: {first}") from None
-    finally:
-        con.close()
+    local = not storage.is_url(dataset) and (Path(dataset) / STAGING).is_dir()
+    with reading(Path(dataset)) if local else contextlib.nullcontext():  # no compaction
+        con = connect(dataset, storage_options)  # publishes while the parts are read
+        try:
+            rel = con.execute(sql)
+            names = [d[0] for d in rel.description or []]
+            return names, rel.fetchall()
+        except duckdb.Error as exc:
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise UsageError(f"query: {first}") from None
+        finally:
+            con.close()

@@ -221,3 +221,24 @@ def test_compact_refuses_what_it_cannot_compact_in_one_line(tmp_path, capsys):
     assert f"cananalyze: error: {tmp_path}: not a fleet dataset (no logs table in it)" in err
     assert "cananalyze: error: s3://bucket/ds: compact works on a local dataset only" in err[1]
     assert "not a size: 'lots'" in err[-1] and "Traceback" not in "".join(err)
+
+
+def test_a_compaction_publishes_only_between_queries(dataset, tmp_path):
+    """`query` holds the publish lock shared while it reads: a compaction's rename and
+    removals wait for it (no row seen twice, no part removed under it)."""
+    import threading
+
+    from cananalyze.fleet import compact
+
+    copy = tmp_path / "ds"
+    shutil.copytree(dataset, copy)
+    before = len(_files(copy, "frames"))
+    done = threading.Event()
+    with compact.reading(copy):
+        worker = threading.Thread(target=lambda: (compact.compact(copy), done.set()))
+        worker.start()
+        # only a broken lock can fail this: a slow machine just finishes later
+        assert not done.wait(1.0)
+        assert len(_files(copy, "frames")) == before
+    worker.join()
+    assert done.is_set() and len(_files(copy, "frames")) < before
