@@ -401,6 +401,14 @@ FLAGS: dict[str, Flag] = {
             "(its workers must see the same paths)",
         ),
     ),
+    "compact": Flag(
+        ("--compact",),
+        dict(
+            action="store_true",
+            help="at the end, compact the days this run wrote (as `fleet compact`, "
+            "--target-size; a local dataset only)",
+        ),
+    ),
     "force": Flag(
         ("--force",), dict(action="store_true", help="decode logs already in the dataset again")
     ),

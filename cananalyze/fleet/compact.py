@@ -73,7 +73,9 @@ def order(table: str) -> list[tuple[str, str]]:
 
 
 def _parts(dataset: Path, table: str, compacted: bool | None = None) -> list[Path]:
-    found = sorted((dataset / table).glob("date=*/part-*.parquet"))
+    """A table's part files: all, only the compacted ones, or only a log's own."""
+    prefix = COMPACTED if compacted else "part-"  # the compacted: a glob of their own
+    found = sorted((dataset / table).glob(f"date=*/{prefix}*.parquet"))
     return [p for p in found if compacted is None or is_compacted(p) == compacted]
 
 
@@ -255,10 +257,14 @@ def reconcile(dataset: Path, compression: str = "snappy") -> int:
 
 
 def compact(
-    dataset: str | Path, target_size: int = COMPACT_TARGET_SIZE, compression: str = "snappy"
+    dataset: str | Path,
+    target_size: int = COMPACT_TARGET_SIZE,
+    compression: str = "snappy",
+    dates: set[str] | None = None,
 ) -> CompactResult:
-    """Every table's partitions compacted (see the module's docstring); UsageError for a
-    URL or a folder that is no fleet dataset."""
+    """Every table's partitions compacted (see the module's docstring), or only those of
+    `dates` (`fleet --compact`: the days a run wrote); UsageError for a URL or a folder
+    that is no fleet dataset."""
     from cananalyze.core.errors import UsageError
 
     if isinstance(layout.root(dataset), str):
@@ -274,6 +280,8 @@ def compact(
         out.reconciled = reconcile(dataset, compression)
         for table in schema.TABLES:
             for partition in sorted((dataset / table).glob("date=*")):
+                if dates is not None and partition.name.removeprefix("date=") not in dates:
+                    continue
                 small = [
                     p for p in partition.glob("part-*.parquet") if p.stat().st_size < target_size
                 ]

@@ -228,6 +228,7 @@ def run_fleet(
     stream: TextIO | None = None,
     storage_options: dict | None = None,
     task_timeout: float | None = TASK_TIMEOUT,
+    compact_to: int | None = None,
 ) -> FleetResult:
     """Decode every log the inputs name into `dataset`; the results (nothing raised for a
     bad log). Inputs and the dataset may be URLs (s3://..., core/storage), reached with
@@ -235,7 +236,8 @@ def run_fleet(
     dashboard line and the progress bar go. MissingExtra without the fleet extra, before
     the dataset folder is made. Inputs that are no regular files (a FIFO, a device) are
     refused, one line each, and the rest go on; a log not done after `task_timeout`
-    seconds is a failed row."""
+    seconds is a failed row. `compact_to` (bytes): the date partitions this run wrote are
+    compacted at its end (fleet/compact.py), a local dataset's only."""
     need("distributed", "fleet", "fleet")
     t0 = time.perf_counter()
     opts = opts or Options(checks=True)
@@ -253,6 +255,8 @@ def run_fleet(
         raise UsageError("; ".join(refused) or f"no log files in {' '.join(inputs)}")
     if workers is not None and workers < 1:
         raise UsageError(f"--workers must be 1 or more (got {workers})")
+    if compact_to and not isinstance(dataset, Path):
+        raise UsageError(f"{dataset}: --compact works on a local dataset only (not a URL yet)")
     if task_timeout is not None and not task_timeout > 0:
         raise UsageError(f"--task-timeout must be positive (got {task_timeout})")
     _make_dataset(dataset, where)
@@ -286,6 +290,14 @@ def run_fleet(
     if isinstance(dataset, Path):  # rows this run (or one cut short) replaced, out of
         with compact.locked(dataset):  # compacted files (fleet/compact.py)
             compact.reconcile(dataset, compression)
+    if compact_to:
+        dates = {r["date"] for r in by_path.values() if not r.get("skipped") and r.get("date")}
+        if dates:
+            done = compact.compact(dataset, compact_to, compression, dates)
+            out.notes.append(
+                f"compacted: {len(done.sizes_before)} files in the dataset, now "
+                f"{len(done.sizes_after)}"
+            )
     out.results = [by_path[p] for p, _ in logs if p in by_path]
     out.seconds = time.perf_counter() - t0
     if junit:

@@ -242,3 +242,27 @@ def test_a_compaction_publishes_only_between_queries(dataset, tmp_path):
         assert len(_files(copy, "frames")) == before
     worker.join()
     assert done.is_set() and len(_files(copy, "frames")) < before
+
+
+def test_fleet_compact_flag_compacts_the_days_a_run_wrote(tmp_path, capsys):
+    folder = tmp_path / "logs"
+    folder.mkdir()
+    for name in ("demo.log", "faults.log", "demo.asc"):
+        shutil.copy(SAMPLES / name, folder / name)
+    _undated(SAMPLES / "faults.log", tmp_path / "undated.log")  # not in this run
+    dataset = tmp_path / "ds"
+    assert main(["fleet", str(tmp_path / "undated.log"), "--out", str(dataset), "-q"]) == 1
+    base = ["fleet", str(folder), "--out", str(dataset), "--workers", "1", "--compact"]
+    assert main(base) == 1  # the samples break rules: exit 1, as without --compact
+    err = capsys.readouterr().err
+    assert "compacted: 28 files in the dataset, now 14" in err  # the undated log's 7 kept
+    undated = dataset / "frames" / "date=__HIVE_DEFAULT_PARTITION__"
+    assert [p.name.startswith("part-") for p in undated.iterdir()] == [True]  # not this run's
+    for table in schema.TABLES:
+        (day,) = (dataset / table).glob("date=2026-*/*.parquet")
+        assert day.name.startswith("part-compact-")
+    shutil.copy(SAMPLES / "commissioning.log", folder / "commissioning.log")
+    assert main(base) == 1
+    counts = _duckdb_counts(dataset, "logs")
+    assert len(counts) == 5 and set(counts.values()) == {1}
+    assert len(list((dataset / "frames").glob("date=2026-*/*.parquet"))) == 1
