@@ -177,14 +177,18 @@ def _publish(
     dataset: Path, staged_from, dest: Path, after: list[tuple[Path, int]], removals=()
 ) -> None:
     stage = layout.Stage(dataset, "compact")
+    staged = stage.dir / "part.parquet"
     try:
-        staged = stage.dir / "part.parquet"
         staged_from(staged)
-        with _flock(dataset, PUBLISH, fcntl.LOCK_EX):  # no `query` reading meanwhile
-            stage.commit([(staged, dest)] if staged.exists() else [], list(removals), after)
     except BaseException:
         stage.close()
         raise
+    with _flock(dataset, PUBLISH, fcntl.LOCK_EX):  # no `query` reading meanwhile
+        try:
+            stage.commit([(staged, dest)] if staged.exists() else [], list(removals), after)
+        except BaseException:
+            stage.release()  # cut short: its COMMIT.json is finished by the next recover
+            raise
 
 
 def _merge(dataset: Path, table: str, parts: list[Path], compression: str) -> None:
@@ -215,26 +219,30 @@ def reconcile(dataset: Path, compression: str = "snappy") -> int:
     """Compacted files rewritten without the rows a later commit replaced; how many.
 
     Call with `locked` held. Stale in a compacted file of a table: a hash that also has
-    a loose part in that table or in `logs` (decoded again: `--force`, a changed
-    configuration, a rerun dated otherwise; a failed redo writes its `logs` part only,
-    and its old rows go as a fleet commit removes a log's old parts), and a hash whose
-    path has a loose `logs` row of another hash (the file changed)."""
+    a loose part in that table (decoded again: `--force`, a changed configuration, a
+    rerun dated otherwise); in every table, a hash whose loose `logs` row failed (a
+    failed redo writes its `logs` part only: its old rows go, as a fleet commit removes
+    a log's old parts) and a hash whose path has a loose `logs` row of another hash
+    (the file changed). Not a hash with only a loose `logs` part: a compaction merges a
+    table's parts by size, so a log's `logs` part may stay loose beside its merged rows."""
     import pyarrow.compute as pc
     import pyarrow.parquet as pq
 
+    # first a compaction cut short between its new file and its inputs' removal is
+    # finished: else its inputs, loose parts, would make its new file's rows stale
+    layout.recover(dataset)
     compacted = {t: _parts(dataset, t, compacted=True) for t in schema.TABLES}
     if not any(compacted.values()):
         return 0
     loose = {t: {_digest(p) for p in _parts(dataset, t, compacted=False)} for t in schema.TABLES}
     retired: set[str] = set()
-    if compacted["logs"] and loose["logs"]:
+    if loose["logs"]:
         newer: dict[str, set[str]] = {}
-        for row in (
-            _read(_parts(dataset, "logs", compacted=False), "logs")
-            .select(["source", "hash"])
-            .to_pylist()
-        ):
+        rows = _read(_parts(dataset, "logs", compacted=False), "logs")
+        for row in rows.select(["source", "hash", "status"]).to_pylist():
             newer.setdefault(row["source"], set()).add(row["hash"])
+            if row["status"] != "ok":
+                retired.add(row["hash"])
         for part in compacted["logs"]:
             for row in pq.read_table(part, columns=["source", "hash"]).to_pylist():
                 if row["source"] in newer and row["hash"] not in newer[row["source"]]:
@@ -242,7 +250,7 @@ def reconcile(dataset: Path, compression: str = "snappy") -> int:
     rewritten = 0
     for table, parts in compacted.items():
         for part in parts:
-            drop = hashes_of(part) & (loose[table] | loose["logs"] | retired)
+            drop = hashes_of(part) & (loose[table] | retired)
             if not drop:
                 continue
             ino = part.stat().st_ino
@@ -275,7 +283,7 @@ def compact(
     if target_size <= 0:
         raise UsageError(f"--target-size must be positive (got {target_size})")
     with locked(dataset):
-        layout.recover(dataset)
+        layout.recover(dataset)  # before the sizes: a stage finished is no file of ours
         out = CompactResult(_sizes(dataset), [])
         out.reconciled = reconcile(dataset, compression)
         for table in schema.TABLES:

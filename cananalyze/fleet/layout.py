@@ -127,6 +127,11 @@ class Stage:
             shutil.rmtree(self.dir)
         self._lock.close()
 
+    def release(self) -> None:
+        """Unlock the stage and leave it, as a dead process would: a commit cut short is
+        then finished by the next `recover` (its COMMIT.json), also in this process."""
+        self._lock.close()
+
 
 def _apply(stage: Path) -> None:
     """Carry out a stage's COMMIT.json; safe to repeat (a crash during it, then a rerun).

@@ -19,7 +19,7 @@ import pytest
 from conftest import REAL
 
 from cananalyze.cli.main import main
-from cananalyze.fleet import orchestrate, query, schema, task
+from cananalyze.fleet import compact, orchestrate, query, schema, task
 from cananalyze.fleet.orchestrate import run_fleet
 
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
@@ -134,6 +134,13 @@ def test_compact_keeps_every_row_and_its_lineage_in_fewer_time_ordered_files(dat
     _compact(small, "--target-size", "20KB")
     assert _duckdb_counts(small, "frames") == before["frames"][0]
     assert len(_files(small, "frames")) > len({p.parent for p in _files(small, "frames")})
+    # tables merge by size, so a log's logs part may stay loose beside its merged rows:
+    # a run's reconcile (and another compaction) must keep them
+    with compact.locked(small):
+        compact.reconcile(small)
+    _compact(small, "--target-size", "20KB")
+    for table in schema.TABLES:
+        assert _duckdb_counts(small, table) == before[table][0], table
 
 
 @pytest.fixture
@@ -228,8 +235,6 @@ def test_a_compaction_publishes_only_between_queries(dataset, tmp_path):
     removals wait for it (no row seen twice, no part removed under it)."""
     import threading
 
-    from cananalyze.fleet import compact
-
     copy = tmp_path / "ds"
     shutil.copytree(dataset, copy)
     before = len(_files(copy, "frames"))
@@ -266,3 +271,32 @@ def test_fleet_compact_flag_compacts_the_days_a_run_wrote(tmp_path, capsys):
     counts = _duckdb_counts(dataset, "logs")
     assert len(counts) == 5 and set(counts.values()) == {1}
     assert len(list((dataset / "frames").glob("date=2026-*/*.parquet"))) == 1
+
+
+@pytest.mark.parametrize("then", ["compact", "fleet"])
+def test_a_compaction_cut_between_publish_and_removals_is_finished(
+    dataset, logs, tmp_path, monkeypatch, then
+):
+    """Killed after its new file is in place, before its inputs are gone: the rows are
+    there twice until the next `compact` or `fleet` finishes the stage's manifest (never
+    the reconcile first, which would take the new file's rows for stale)."""
+    from cananalyze.fleet import layout
+
+    copy = tmp_path / "ds"
+    shutil.copytree(dataset, copy)
+    before = _duckdb_counts(copy, "frames")
+
+    def killed(path, *a, **k):
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as m:
+        m.setattr(layout.os, "unlink", killed)
+        with pytest.raises(KeyboardInterrupt):
+            compact.compact(copy)
+    assert sum(_duckdb_counts(copy, "frames").values()) > sum(before.values())  # the crash
+    if then == "compact":
+        compact.compact(copy)
+    else:
+        with compact.locked(copy):
+            compact.reconcile(copy)  # what every fleet run does at its end
+    assert _duckdb_counts(copy, "frames") == before
