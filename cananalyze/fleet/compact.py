@@ -222,9 +222,10 @@ def reconcile(dataset: Path, compression: str = "snappy") -> int:
     a loose part in that table (decoded again: `--force`, a changed configuration, a
     rerun dated otherwise); in every table, a hash whose loose `logs` row failed (a
     failed redo writes its `logs` part only: its old rows go, as a fleet commit removes
-    a log's old parts) and a hash whose path has a loose `logs` row of another hash
-    (the file changed). Not a hash with only a loose `logs` part: a compaction merges a
-    table's parts by size, so a log's `logs` part may stay loose beside its merged rows."""
+    a log's old parts), a hash whose path has a loose `logs` row of another hash (the
+    file changed), and a hash with no `logs` row at all. Not a hash with only a loose
+    `logs` part: a compaction merges a table's parts by size, so a log's `logs` part may
+    stay loose beside its merged rows."""
     import pyarrow.compute as pc
     import pyarrow.parquet as pq
 
@@ -247,10 +248,14 @@ def reconcile(dataset: Path, compression: str = "snappy") -> int:
             for row in pq.read_table(part, columns=["source", "hash"]).to_pylist():
                 if row["source"] in newer and row["hash"] not in newer[row["source"]]:
                     retired.add(row["hash"])
+    # and rows of no log: a changed file's old rows a compaction read as the run that
+    # replaced them removed their parts (no logs row left to retire them by)
+    logged = loose["logs"].union(*(hashes_of(p) for p in compacted["logs"]))
     rewritten = 0
     for table, parts in compacted.items():
         for part in parts:
-            drop = hashes_of(part) & (loose[table] | retired)
+            held = hashes_of(part)
+            drop = held & (loose[table] | retired) | (held - logged)
             if not drop:
                 continue
             ino = part.stat().st_ino

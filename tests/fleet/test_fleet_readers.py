@@ -5,6 +5,7 @@ DuckDB directly, not through cananalyze's readers."""
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 from collections import Counter
@@ -300,3 +301,24 @@ def test_a_compaction_cut_between_publish_and_removals_is_finished(
         with compact.locked(copy):
             compact.reconcile(copy)  # what every fleet run does at its end
     assert _duckdb_counts(copy, "frames") == before
+
+
+def test_reconcile_drops_compacted_rows_of_no_log(dataset, tmp_path):
+    """A changed file's old rows merged by a compaction while the run that replaced them
+    removed their parts: no logs row names them any more, and the next reconcile drops
+    them (and nothing else)."""
+    copy = tmp_path / "ds"
+    shutil.copytree(dataset, copy)
+    _compact(copy)
+    before = _duckdb_counts(copy, "frames")
+    (logs_file,) = [p for p in _files(copy, "logs") if "2026-01-01" in str(p)]
+    rows = pq.read_table(logs_file)
+    gone = rows["hash"][0].as_py()
+    kept = rows.filter(pc.not_equal(rows["hash"].cast(pa.string()), gone))
+    listed = sorted(set(kept["hash"].cast(pa.string()).to_pylist()))
+    meta = {**rows.schema.metadata, compact.HASHES: json.dumps(listed).encode()}
+    pq.write_table(kept.replace_schema_metadata(meta), logs_file)  # as a compaction writes
+    with compact.locked(copy):
+        assert compact.reconcile(copy) >= 5  # the data tables' files of that day
+    after = _duckdb_counts(copy, "frames")
+    assert after == Counter({k: n for k, n in before.items() if k[1] != gone})
