@@ -215,6 +215,12 @@ def _bins(parts: list[Path], target: int) -> Iterator[list[Path]]:
         yield current
 
 
+def _logged(dataset: Path) -> set[str]:
+    """Every hash a `logs` row names: loose parts' names, compacted files' footers."""
+    found = {_digest(p) for p in _parts(dataset, "logs", compacted=False)}
+    return found.union(*(hashes_of(p) for p in _parts(dataset, "logs", compacted=True)))
+
+
 def reconcile(dataset: Path, compression: str = "snappy") -> int:
     """Compacted files rewritten without the rows a later commit replaced; how many.
 
@@ -250,7 +256,7 @@ def reconcile(dataset: Path, compression: str = "snappy") -> int:
                     retired.add(row["hash"])
     # and rows of no log: a changed file's old rows a compaction read as the run that
     # replaced them removed their parts (no logs row left to retire them by)
-    logged = loose["logs"].union(*(hashes_of(p) for p in compacted["logs"]))
+    logged = _logged(dataset)
     rewritten = 0
     for table, parts in compacted.items():
         for part in parts:
@@ -291,12 +297,17 @@ def compact(
         layout.recover(dataset)  # before the sizes: a stage finished is no file of ours
         out = CompactResult(_sizes(dataset), [])
         out.reconciled = reconcile(dataset, compression)
+        logged = _logged(dataset)
         for table in schema.TABLES:
             for partition in sorted((dataset / table).glob("date=*")):
                 if dates is not None and partition.name.removeprefix("date=") not in dates:
                     continue
                 small = [
-                    p for p in partition.glob("part-*.parquet") if p.stat().st_size < target_size
+                    p
+                    for p in partition.glob("part-*.parquet")
+                    if p.stat().st_size < target_size
+                    # a log's part without its logs row: a commit under way, left to it
+                    and (is_compacted(p) or table == "logs" or _digest(p) in logged)
                 ]
                 for group in _bins(small, target_size):
                     if len(group) > 1:
