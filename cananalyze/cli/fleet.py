@@ -24,7 +24,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     options_.add(p, "inputs", "out", "device", "eds", "network", "dbc_in", extra_names=DBC)
     options_.add(p, "rules", "sdo_timeout", "strict", "workers", "scheduler", "force", "junit")
     options_.add(p, "parquet_compression", "storage_options", "task_timeout")
-    options_.add(p, "compact", "target_size", "quiet")
+    options_.add(p, "batch", "compact", "target_size", "quiet")
     p.set_defaults(func=run)
     c = sub.add_parser(
         "fleet-compact",
@@ -67,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
         storage_options=parse_options(args.storage_options) or None,
         task_timeout=args.task_timeout,
         compact_to=args.target_size if args.compact else None,
+        batch=args.batch,
     )
     lines = summary_lines(result)
     if args.quiet:

@@ -401,6 +401,16 @@ FLAGS: dict[str, Flag] = {
             "(its workers must see the same paths)",
         ),
     ),
+    "batch": Flag(
+        ("--batch",),
+        dict(
+            type=int,
+            default=1,
+            metavar="N",
+            help="decode small logs (under 16 MB) N to a task, their parts merged into "
+            "shared files (default 1: a task and seven parts a log; a local dataset only)",
+        ),
+    ),
     "compact": Flag(
         ("--compact",),
         dict(

@@ -199,6 +199,24 @@ def _merge(dataset: Path, table: str, parts: list[Path], compression: str) -> No
     _publish(dataset, lambda staged: _write(data, table, staged, compression), dest, after)
 
 
+def merge_logs(dataset: Path, digests: set[str], compression: str = "snappy") -> int:
+    """The parts of these logs (a fleet batch's, just committed one by one) merged, per
+    table and date, into shared files: several logs a file from the start. How many
+    files were written. Under the compaction lock, as any merge."""
+    written = 0
+    with locked(dataset):
+        for table in schema.TABLES:
+            by_partition: dict[Path, list[Path]] = {}
+            for digest in sorted(digests):
+                for part in layout.existing_parts(dataset, table, digest):
+                    by_partition.setdefault(part.parent, []).append(part)
+            for parts in by_partition.values():
+                if len(parts) > 1:
+                    _merge(dataset, table, parts, compression)
+                    written += 1
+    return written
+
+
 def _bins(parts: list[Path], target: int) -> Iterator[list[Path]]:
     """Consecutive groups of parts whose sizes add up to about `target` (a part over it:
     alone), largest first so full files come out full."""

@@ -328,6 +328,22 @@ def run_task(task: LogTask) -> dict:
     return box["result"]
 
 
+def run_batch(tasks: list[LogTask]) -> list[dict]:
+    """Several small logs in one Dask task (`fleet --batch N`): each decoded and committed
+    as `run_task` does, then the parts of those it wrote merged per table and date into
+    shared files (compact.merge_logs; a local dataset's only). A merge that cannot be made
+    (a full disk) leaves the logs' own parts: the dataset is whole either way."""
+    results = [run_task(t) for t in tasks]
+    dataset = layout.root(tasks[0].dataset)
+    written = {r["hash"] for r in results if not r.get("skipped") and r.get("hash")}
+    if isinstance(dataset, Path) and len(written) > 1:
+        from cananalyze.fleet.compact import merge_logs
+
+        with contextlib.suppress(OSError):
+            merge_logs(dataset, written, tasks[0].compression)
+    return results
+
+
 def _path_digest(path: str) -> str:
     """The part name of a log whose content was not hashed (unreadable, not a log)."""
     return hashlib.sha256(f"unreadable:{path}".encode()).hexdigest()

@@ -322,3 +322,35 @@ def test_reconcile_drops_compacted_rows_of_no_log(dataset, tmp_path):
         assert compact.reconcile(copy) >= 5  # the data tables' files of that day
     after = _duckdb_counts(copy, "frames")
     assert after == Counter({k: n for k, n in before.items() if k[1] != gone})
+
+
+def test_batched_small_logs_share_parts_with_the_same_rows(dataset, logs, tmp_path, cluster):
+    """`--batch 4`: the small logs go four to a task and share their parts; every table
+    holds the rows the one-log-a-task run wrote, a rerun skips them all, and a changed log
+    of a batch leaves exactly its new rows."""
+    batched = tmp_path / "batched"
+    assert not run_fleet(logs, batched, scheduler=cluster, batch=4).failed
+    for table in schema.TABLES:
+        assert _duckdb_counts(batched, table) == _duckdb_counts(dataset, table), table
+        assert len(_files(batched, table)) < len(_files(dataset, table))
+    assert any(p.name.startswith("part-compact-") for p in _files(batched, "frames"))
+    again = run_fleet(logs, batched, scheduler=cluster, batch=4)
+    assert len(again.skipped) == len(logs)
+
+    folder = tmp_path / "logs"
+    folder.mkdir()
+    for name in ("demo.log", "faults.log", "commissioning.log"):
+        shutil.copy(SAMPLES / name, folder / name)
+    mine = sorted(str(p) for p in folder.iterdir())
+    ds_ = tmp_path / "ds"
+    run_fleet(mine, ds_, scheduler=cluster, batch=4)
+    assert len(_files(ds_, "frames")) == 1
+    changed = folder / "demo.log"
+    changed.write_text("".join(open(SAMPLES / "faults.log").readlines()[:150]))
+    assert run_fleet(mine, ds_, scheduler=cluster, batch=4).frames == 150
+    new = task.content_hash(changed)
+    for table in schema.TABLES:
+        by = _pyarrow_counts(ds_, table)
+        assert {h for (_, h, s) in by if s == str(changed)} <= {new}, table
+    assert sum(n for (_, h, _), n in _pyarrow_counts(ds_, "frames").items() if h == new) == 150
+    assert len(_pyarrow_counts(ds_, "logs")) == 3
