@@ -22,9 +22,9 @@ compacted file (`--force`, a changed configuration, a changed file at the same p
 file or the new one): a loose part is always newer than a compacted copy of the same
 hash, and a loose `logs` row for a path retires that path's other hashes.
 
-Compaction and the reconcile hold one lock (`_staging/compact.lock`), so they never
-interleave; a fleet run's tasks do not take it. Each publish also waits for the
-`cananalyze query` runs reading the dataset (`reading`: `_staging/publish.lock`).
+Compaction and the reconcile hold one lock (`flock` on the `_staging` folder), so they
+never interleave; a fleet run's tasks do not take it. Each publish also waits for the
+`cananalyze query` runs reading the dataset (`reading`: `flock` on its folder, shared).
 Local datasets only: object storage has no rename to publish with.
 """
 
@@ -33,6 +33,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import json
+import os
 import uuid
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -46,8 +47,6 @@ from cananalyze.fleet import layout, schema
 
 COMPACTED = "part-compact-"  # a compacted file's name: part-compact-<id>.parquet
 HASHES = b"cananalyze.hashes"  # footer key: the JSON list of the log hashes in the file
-LOCK = "compact.lock"  # in _staging: a file, never taken for a stage (those are folders)
-PUBLISH = "publish.lock"  # taken shared by `query` while it reads, alone by each publish
 
 
 @dataclass
@@ -113,33 +112,39 @@ def compacted_row(dataset: Path, digest: str) -> dict | None:
 
 
 @contextlib.contextmanager
-def _flock(dataset: Path, name: str, how: int) -> Iterator[None]:
-    where = dataset / layout.STAGING
-    where.mkdir(parents=True, exist_ok=True)
-    with open(where / name, "a") as lock:
-        fcntl.flock(lock, how)
+def _flock(folder: Path, how: int) -> Iterator[None]:
+    """`flock` on a folder itself: no lock file is left in the dataset."""
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, how)
         yield
+    finally:
+        os.close(fd)
 
 
 def locked(dataset: Path):
-    """The dataset's compaction lock, held (waits for a compaction or reconcile running)."""
-    return _flock(dataset, LOCK, fcntl.LOCK_EX)
+    """The dataset's compaction lock (on its `_staging` folder), held: waits for a
+    compaction or reconcile running."""
+    (dataset / layout.STAGING).mkdir(parents=True, exist_ok=True)
+    return _flock(dataset / layout.STAGING, fcntl.LOCK_EX)
 
 
 @contextlib.contextmanager
 def reading(dataset: Path) -> Iterator[None]:
-    """Held by `cananalyze query` while it lists and reads the parts: a compaction's
-    publish (its file in, its inputs out) waits for it, so the query sees each row once
-    and no part goes from under it. A folder without `_staging` (no fleet wrote it) is
-    left untouched, and one it cannot write the lock into (read-only) read without it."""
+    """Held by `cananalyze query` while it lists and reads the parts (a shared lock on the
+    dataset's folder): a compaction's publish (its file in, its inputs out) takes it
+    alone, so the query sees each row once and no part goes from under it. Read-only
+    datasets too: nothing is written."""
     try:
-        lock = open(dataset / layout.STAGING / PUBLISH, "a")  # noqa: SIM115 - closed below
-    except OSError:
+        fd = os.open(dataset, os.O_RDONLY)
+    except OSError:  # a folder that cannot be opened: read without it
         yield
         return
-    with lock:
-        fcntl.flock(lock, fcntl.LOCK_SH)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH)
         yield
+    finally:
+        os.close(fd)
 
 
 def _read(parts: list[Path], table: str) -> pa.Table:
@@ -183,7 +188,7 @@ def _publish(
     except BaseException:
         stage.close()
         raise
-    with _flock(dataset, PUBLISH, fcntl.LOCK_EX):  # no `query` reading meanwhile
+    with _flock(dataset, fcntl.LOCK_EX):  # no `query` reading meanwhile (`reading`)
         try:
             stage.commit([(staged, dest)] if staged.exists() else [], list(removals), after)
         except BaseException:

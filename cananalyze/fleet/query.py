@@ -9,7 +9,6 @@ from cananalyze.core import storage
 from cananalyze.core.errors import UsageError
 from cananalyze.core.extras import need
 from cananalyze.fleet.compact import reading
-from cananalyze.fleet.layout import STAGING
 from cananalyze.fleet.schema import TABLES, duckdb_hive_types
 
 
@@ -73,7 +72,7 @@ def query(
 ) -> tuple[list[str], list[tuple]]:
     """(column names, rows) of `sql` over the dataset's views; UsageError for bad SQL."""
     duckdb = need("duckdb", "query", "fleet")
-    local = not storage.is_url(dataset) and (Path(dataset) / STAGING).is_dir()
+    local = not storage.is_url(dataset) and Path(dataset).is_dir()
     with reading(Path(dataset)) if local else contextlib.nullcontext():  # no compaction
         con = connect(dataset, storage_options)  # publishes while the parts are read
         try:
