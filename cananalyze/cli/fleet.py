@@ -24,8 +24,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     options_.add(p, "inputs", "out", "device", "eds", "network", "dbc_in", extra_names=DBC)
     options_.add(p, "rules", "sdo_timeout", "strict", "workers", "scheduler", "force", "junit")
     options_.add(p, "parquet_compression", "storage_options", "task_timeout")
-    options_.add(p, "quiet")
+    options_.add(p, "batch", "compact", "target_size", "quiet")
     p.set_defaults(func=run)
+    c = sub.add_parser(
+        "fleet-compact",
+        help="(cananalyze fleet compact DATASET) rewrite a dataset's small parts into large files",
+        description="Rewrite each table's date partitions of a fleet dataset: the parts "
+        "smaller than --target-size become files near that size, rows in time order, each "
+        "row keeping its log's lineage. Readers see whole files throughout; a rerun of "
+        "`fleet` still skips the logs in it. Local datasets only.",
+    )
+    options_.add(c, "dataset", "target_size", "parquet_compression", "quiet")
+    c.set_defaults(func=run_compact)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -56,6 +66,8 @@ def run(args: argparse.Namespace) -> int:
         stream=None if args.quiet else sys.stderr,
         storage_options=parse_options(args.storage_options) or None,
         task_timeout=args.task_timeout,
+        compact_to=args.target_size if args.compact else None,
+        batch=args.batch,
     )
     lines = summary_lines(result)
     if args.quiet:
@@ -63,3 +75,18 @@ def run(args: argparse.Namespace) -> int:
     for line in lines:
         print(line, file=sys.stderr)
     return result.exit_code
+
+
+def run_compact(args: argparse.Namespace) -> int:
+    from cananalyze.fleet.compact import compact, median
+
+    out = compact(args.dataset, args.target_size, args.parquet_compression)
+    if not args.quiet:
+        before, after = out.sizes_before, out.sizes_after
+        print(
+            f"compact: {len(before)} files (median {median(before) / 1024:,.1f} KB) -> "
+            f"{len(after)} files (median {median(after) / 1024:,.1f} KB), {out.merged} written"
+            + (f", {out.reconciled} rewritten without replaced logs" if out.reconciled else ""),
+            file=sys.stderr,
+        )
+    return 0

@@ -35,6 +35,19 @@ SUBCOMMANDS = [
 BATCH_COMMANDS = {"decode", "check", "report", "export", "od", "boot", "fleet"}
 
 
+# `cananalyze fleet compact DATASET`: `fleet` takes inputs as positionals, so its second
+# word is read as an input unless turned into the command of its own here (a log named
+# `compact` stays an input when `--out` is given)
+NESTED = {("fleet", "compact"): "fleet-compact"}
+
+
+def _nested(argv: list[str]) -> list[str]:
+    command = NESTED.get(tuple(argv[:2]))
+    if command is None or any(a == "--out" or a.startswith("--out=") for a in argv):
+        return argv
+    return [command, *argv[2:]]
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="cananalyze",
@@ -90,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
 def _main(argv: list[str] | None) -> int:
     try:
         parser = build_parser()
-        args = parser.parse_args(argv)
+        args = parser.parse_args(_nested(sys.argv[1:] if argv is None else list(argv)))
         if not getattr(args, "func", None):
             parser.print_help()
             return 2

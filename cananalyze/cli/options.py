@@ -16,7 +16,23 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass, field
 
-from cananalyze.core.defaults import SDO_TIMEOUT, TASK_TIMEOUT
+from cananalyze.core.defaults import COMPACT_TARGET_SIZE, SDO_TIMEOUT, TASK_TIMEOUT
+
+_UNITS = {"": 1, "B": 1, "K": 1 << 10, "KB": 1 << 10, "M": 1 << 20, "MB": 1 << 20}
+_UNITS |= {"G": 1 << 30, "GB": 1 << 30}
+
+
+def byte_size(text: str) -> int:
+    """`128MB`, `64M`, `1GB`, `500000`: a size in bytes (binary units, as `du -h`)."""
+    t = text.strip().upper().replace("IB", "B")
+    number = t.rstrip("KMGB")
+    try:
+        n = float(number) * _UNITS[t[len(number) :].strip()]
+    except (KeyError, ValueError):
+        raise argparse.ArgumentTypeError(f"not a size: {text!r} (e.g. 128MB)") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"not a size: {text!r} (must be positive)")
+    return int(n)
 
 
 @dataclass(frozen=True)
@@ -400,6 +416,24 @@ FLAGS: dict[str, Flag] = {
             "(its workers must see the same paths)",
         ),
     ),
+    "batch": Flag(
+        ("--batch",),
+        dict(
+            type=int,
+            default=1,
+            metavar="N",
+            help="decode small logs (under 16 MB) N to a task, their parts merged into "
+            "shared files (default 1: a task and seven parts a log; a local dataset only)",
+        ),
+    ),
+    "compact": Flag(
+        ("--compact",),
+        dict(
+            action="store_true",
+            help="at the end, compact the days this run wrote (as `fleet compact`, "
+            "--target-size; a local dataset only)",
+        ),
+    ),
     "force": Flag(
         ("--force",), dict(action="store_true", help="decode logs already in the dataset again")
     ),
@@ -413,6 +447,16 @@ FLAGS: dict[str, Flag] = {
         ),
     ),
     "dataset": Flag(("dataset",), dict(help="the dataset folder or URL (fleet --out)")),
+    "target_size": Flag(
+        ("--target-size",),
+        dict(
+            type=byte_size,
+            default=COMPACT_TARGET_SIZE,
+            metavar="SIZE",
+            help="the compacted files' size, e.g. 64MB (default "
+            f"{COMPACT_TARGET_SIZE >> 20}MB; parts already this big stay as they are)",
+        ),
+    ),
     "storage_options": Flag(
         ("--storage-options",),
         dict(

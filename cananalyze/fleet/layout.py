@@ -98,11 +98,19 @@ class Stage:
         self._lock = open(self.dir / ".lock", "w")  # noqa: SIM115 - held for the stage's life
         fcntl.flock(self._lock, fcntl.LOCK_EX)
 
-    def commit(self, renames: list[tuple[Path, Path]], removals: list[Path]) -> None:
-        """Make the renames (src in the stage -> final path) and removals, then drop the stage."""
+    def commit(
+        self,
+        renames: list[tuple[Path, Path]],
+        removals: list[Path],
+        after: list[tuple[Path, int]] = (),
+    ) -> None:
+        """Make the removals and renames (src in the stage -> final path), then remove the
+        files `after` names (path, inode when read: one replaced since is kept), then drop
+        the stage. `after`: a compaction's inputs, gone only once their rows are published."""
         manifest = {
             "renames": [[str(s), str(d)] for s, d in renames],
             "removals": [str(p) for p in removals],
+            "after": [[str(p), ino] for p, ino in after],
         }
         # not fsynced: a process that dies (crash, Ctrl-C, kill) leaves the page cache to
         # the next run; after a power cut an unreadable manifest is rolled back, and parts
@@ -119,6 +127,11 @@ class Stage:
             shutil.rmtree(self.dir)
         self._lock.close()
 
+    def release(self) -> None:
+        """Unlock the stage and leave it, as a dead process would: a commit cut short is
+        then finished by the next `recover` (its COMMIT.json), also in this process."""
+        self._lock.close()
+
 
 def _apply(stage: Path) -> None:
     """Carry out a stage's COMMIT.json; safe to repeat (a crash during it, then a rerun).
@@ -132,6 +145,10 @@ def _apply(stage: Path) -> None:
         if os.path.exists(src):
             os.makedirs(os.path.dirname(dest), exist_ok=True)
             os.replace(src, dest)
+    for old, ino in manifest.get("after", ()):
+        with contextlib.suppress(FileNotFoundError):
+            if os.stat(old).st_ino == ino:  # else a commit replaced it since: a newer part
+                os.unlink(old)
 
 
 def recover(dataset: Dataset, options: dict | None = None) -> tuple[int, int]:

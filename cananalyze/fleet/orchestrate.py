@@ -22,7 +22,7 @@ from typing import TextIO
 from cananalyze.core.defaults import TASK_TIMEOUT
 from cananalyze.core.errors import UsageError
 from cananalyze.core.extras import need
-from cananalyze.fleet import layout
+from cananalyze.fleet import compact, layout
 from cananalyze.fleet.inputs import expand, options_for
 from cananalyze.fleet.task import (
     LogTask,
@@ -30,6 +30,7 @@ from cananalyze.fleet.task import (
     options_digest,
     record_failure,
     recorded,
+    run_batch,
     run_task,
     unchanged,
 )
@@ -228,6 +229,8 @@ def run_fleet(
     stream: TextIO | None = None,
     storage_options: dict | None = None,
     task_timeout: float | None = TASK_TIMEOUT,
+    compact_to: int | None = None,
+    batch: int = 1,
 ) -> FleetResult:
     """Decode every log the inputs name into `dataset`; the results (nothing raised for a
     bad log). Inputs and the dataset may be URLs (s3://..., core/storage), reached with
@@ -235,7 +238,10 @@ def run_fleet(
     dashboard line and the progress bar go. MissingExtra without the fleet extra, before
     the dataset folder is made. Inputs that are no regular files (a FIFO, a device) are
     refused, one line each, and the rest go on; a log not done after `task_timeout`
-    seconds is a failed row."""
+    seconds is a failed row. `compact_to` (bytes): the date partitions this run wrote are
+    compacted at its end (fleet/compact.py), a local dataset's only. `batch` > 1: logs
+    under BATCH_SMALL bytes go `batch` to a task, their parts merged into shared files
+    (task.run_batch)."""
     need("distributed", "fleet", "fleet")
     t0 = time.perf_counter()
     opts = opts or Options(checks=True)
@@ -253,6 +259,12 @@ def run_fleet(
         raise UsageError("; ".join(refused) or f"no log files in {' '.join(inputs)}")
     if workers is not None and workers < 1:
         raise UsageError(f"--workers must be 1 or more (got {workers})")
+    if batch < 1:
+        raise UsageError(f"--batch must be 1 or more (got {batch})")
+    if batch > 1 and not isinstance(dataset, Path):
+        raise UsageError(f"{dataset}: --batch works on a local dataset only (not a URL yet)")
+    if compact_to and not isinstance(dataset, Path):
+        raise UsageError(f"{dataset}: --compact works on a local dataset only (not a URL yet)")
     if task_timeout is not None and not task_timeout > 0:
         raise UsageError(f"--task-timeout must be positive (got {task_timeout})")
     _make_dataset(dataset, where)
@@ -279,10 +291,23 @@ def run_fleet(
                 )
             )
     if tasks:
-        _on_cluster(tasks, by_path, out, dataset, workers, scheduler, stream, run)
+        sizes = {p: getattr(st, "size", 0) or 0 for p, st in logs}
+        groups = _batches(tasks, sizes, batch)
+        _on_cluster(groups, by_path, out, dataset, workers, scheduler, stream, run)
         _recount(by_path, tasks, layout.root(root), where, run)
     else:
         out.notes.append("nothing to decode (every log unchanged in the dataset): no cluster")
+    if isinstance(dataset, Path):  # rows this run (or one cut short) replaced, out of
+        with compact.locked(dataset):  # compacted files (fleet/compact.py)
+            compact.reconcile(dataset, compression)
+    if compact_to:
+        dates = {r["date"] for r in by_path.values() if not r.get("skipped") and r.get("date")}
+        if dates:
+            done = compact.compact(dataset, compact_to, compression, dates)
+            out.notes.append(
+                f"compacted: {len(done.sizes_before)} files in the dataset, now "
+                f"{len(done.sizes_after)}"
+            )
     out.results = [by_path[p] for p, _ in logs if p in by_path]
     out.seconds = time.perf_counter() - t0
     if junit:
@@ -333,8 +358,22 @@ def _unchanged_logs(
     return done, earlier
 
 
+# a log this small is batched with others by `fleet --batch N`: its seven parts would
+# be kilobytes each (the median log's are 6 KB); a bigger one is a task and a part alone
+BATCH_SMALL = 16 << 20
+
+
+def _batches(tasks: list[LogTask], sizes: dict[str, int], batch: int) -> list[list[LogTask]]:
+    """The tasks as Dask tasks: each alone, or (batch > 1) the small logs `batch` at a time."""
+    if batch <= 1:
+        return [[t] for t in tasks]
+    small = [t for t in tasks if sizes.get(t.path, 0) < BATCH_SMALL]
+    out = [[t] for t in tasks if sizes.get(t.path, 0) >= BATCH_SMALL]
+    return out + [small[i : i + batch] for i in range(0, len(small), batch)]
+
+
 def _on_cluster(
-    tasks: list[LogTask],
+    groups: list[list[LogTask]],
     by_path: dict[str, dict],
     out: FleetResult,
     dataset: layout.Dataset,
@@ -345,6 +384,7 @@ def _on_cluster(
 ) -> None:
     """The tasks run on the local cluster (started here, closed at the end) or the
     scheduler's; each result into `by_path`, a lost worker's log a failed row."""
+    tasks = [t for g in groups for t in g]
     where = tasks[0].opts.storage_options
     scratch = None if scheduler else _scratch(dataset)
     try:
@@ -365,18 +405,21 @@ def _on_cluster(
             print(f"fleet: {len(tasks)} logs, dashboard {link}", file=stream)
         from distributed import as_completed
 
-        futures = client.map(run_task, tasks, pure=False)
-        path_of = {f.key: t.path for f, t in zip(futures, tasks, strict=True)}
+        if all(len(g) == 1 for g in groups):
+            futures = client.map(run_task, [g[0] for g in groups], pure=False)
+        else:
+            futures = client.map(run_batch, groups, pure=False)
+        paths_of = {f.key: [t.path for t in g] for f, g in zip(futures, groups, strict=True)}
         progress = _Progress(stream, len(tasks))
         for fut in as_completed(futures):
             try:
-                result = fut.result()
-            except Exception as exc:  # noqa: BLE001 - a worker lost (memory, crash): that log fails
-                path = path_of[fut.key]
-                error = f"{path}: worker failed: {exc}"
-                result = record_failure(dataset, path, error, where, run=run)
-            by_path[result["source"]] = result
-            progress.done(result)
+                results = fut.result()
+                results = results if isinstance(results, list) else [results]
+            except Exception as exc:  # noqa: BLE001 - a worker lost (memory, crash): its logs fail
+                results = [_lost(dataset, p, exc, where, run) for p in paths_of[fut.key]]
+            for result in results:
+                by_path[result["source"]] = result
+                progress.done(result)
             fut.release()
     finally:
         if progress is not None:
@@ -386,6 +429,20 @@ def _on_cluster(
             cluster.close()
         if scratch is not None:
             scratch.close()
+
+
+def _lost(dataset: layout.Dataset, path: str, exc: BaseException, where, run: str) -> dict:
+    """A log whose task's worker was lost: failed, unless this run's row for it is there
+    (a batch's worker lost after committing some of its logs keeps them)."""
+    from cananalyze.fleet.task import content_hash
+
+    try:
+        row = recorded(dataset, content_hash(path, where), where)
+    except OSError:
+        row = None
+    if row is not None and row.get("run") == run and row.get("source") == path:
+        return {**row, "skipped": False, "first": {}, "junit": None}
+    return record_failure(dataset, path, f"{path}: worker failed: {exc}", where, run=run)
 
 
 def _recount(

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 from cananalyze.core import storage
 from cananalyze.core.errors import UsageError
 from cananalyze.core.extras import need
-from cananalyze.fleet.schema import TABLES
+from cananalyze.fleet.compact import reading
+from cananalyze.fleet.schema import TABLES, duckdb_hive_types
 
 
 def _sql_text(value: str) -> str:
@@ -17,7 +19,9 @@ def _sql_text(value: str) -> str:
 def connect(dataset: str | Path, storage_options: dict | None = None):
     """An in-memory DuckDB connection with a view per table the dataset holds.
 
-    `hive_partitioning` turns the `date=YYYY-MM-DD` folders into a DATE column `date`;
+    `hive_partitioning` turns the `date=YYYY-MM-DD` folders into a column `date`, typed
+    as the dataset declares it (`hive_types`: a DATE, also when every folder is the
+    partition of no value);
     `union_by_name` lets a dataset written by an older cananalyze (columns added since)
     still be read whole. A dataset at a URL is read through its fsspec file system,
     registered into DuckDB (no httpfs extension to download). MissingExtra without the
@@ -54,7 +58,8 @@ def connect(dataset: str | Path, storage_options: dict | None = None):
         pattern = _sql_text(found)
         con.execute(
             f"CREATE VIEW {table} AS SELECT * FROM read_parquet({pattern}, "
-            "hive_partitioning = true, union_by_name = true)"
+            f"hive_partitioning = true, hive_types = {duckdb_hive_types()}, "
+            "union_by_name = true)"
         )
         made.append(table)
     if not made:
@@ -67,13 +72,15 @@ def query(
 ) -> tuple[list[str], list[tuple]]:
     """(column names, rows) of `sql` over the dataset's views; UsageError for bad SQL."""
     duckdb = need("duckdb", "query", "fleet")
-    con = connect(dataset, storage_options)
-    try:
-        rel = con.execute(sql)
-        names = [d[0] for d in rel.description or []]
-        return names, rel.fetchall()
-    except duckdb.Error as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise UsageError(f"query: {first}") from None
-    finally:
-        con.close()
+    local = not storage.is_url(dataset) and Path(dataset).is_dir()
+    with reading(Path(dataset)) if local else contextlib.nullcontext():  # no compaction
+        con = connect(dataset, storage_options)  # publishes while the parts are read
+        try:
+            rel = con.execute(sql)
+            names = [d[0] for d in rel.description or []]
+            return names, rel.fetchall()
+        except duckdb.Error as exc:
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise UsageError(f"query: {first}") from None
+        finally:
+            con.close()

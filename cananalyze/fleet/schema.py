@@ -27,12 +27,36 @@ COLUMNS: dict[str, list[tuple[str, pa.DataType]]] = {
 }
 TABLES = tuple(name for name, table in schemas.TABLES.items() if table.in_dataset)
 
+# the hive partition column, typed: every reader told it is a date (pyarrow's "hive"
+# partitioning reads `date=2024-03-13` as text, and DuckDB guesses text for a table whose
+# only folder is `date=__HIVE_DEFAULT_PARTITION__`); Hive's partition of no value is null
+PARTITION = pa.schema([pa.field("date", pa.date32())])
+# the DuckDB type of each partition column (`read_parquet(..., hive_types = {...})`)
+_DUCKDB_TYPES = {pa.date32(): "DATE"}
+
 
 def schema(table: str) -> pa.Schema:
     """The part files' schema (the hive partition column `date` is in the path only)."""
     return pa.schema(
         [pa.field(n, t) for n, t in COLUMNS[table]] + [pa.field(n, t) for n, t in LINEAGE]
     )
+
+
+def dataset_schema(table: str) -> pa.Schema:
+    """A table as a reader of the dataset sees it: the part files' columns, then `date`."""
+    return pa.schema([*schema(table), *PARTITION])
+
+
+def partitioning():
+    """The dataset's partitioning for `pyarrow.dataset` (`date` a date32)."""
+    import pyarrow.dataset as pads
+
+    return pads.partitioning(PARTITION, flavor="hive")
+
+
+def duckdb_hive_types() -> str:
+    """The partition columns' types as DuckDB's `hive_types` argument: `{'date': DATE}`."""
+    return "{" + ", ".join(f"'{f.name}': {_DUCKDB_TYPES[f.type]}" for f in PARTITION) + "}"
 
 
 def _cast(col: pa.ChunkedArray | pa.Array, typ: pa.DataType, n: int) -> pa.Array:

@@ -143,7 +143,8 @@ _DECIDING = (
 
 
 def recorded(dataset: layout.Dataset, digest: str, options: dict | None = None) -> dict | None:
-    """The dataset's `logs` row for this content, or None."""
+    """The dataset's `logs` row for this content (its own part, or a compacted file's), or
+    None."""
     import pyarrow.parquet as pq
 
     for part in layout.existing_parts(dataset, "logs", digest, options):
@@ -155,6 +156,10 @@ def recorded(dataset: layout.Dataset, digest: str, options: dict | None = None) 
                 rows = pq.read_table(part).to_pylist()
             if rows:
                 return rows[0]
+    if isinstance(dataset, Path):  # compacted (`fleet compact`): the row is in a shared file
+        from cananalyze.fleet.compact import compacted_row
+
+        return compacted_row(dataset, digest)
     return None
 
 
@@ -187,7 +192,12 @@ def logs_rows(dataset: layout.Dataset, options: dict | None = None) -> dict[str,
             return {}
     try:
         # the dataset's schema: parts written before a column was added read it as null
-        found = pads.dataset(where, filesystem=filesystem, schema=schema.schema("logs"))
+        found = pads.dataset(
+            where,
+            filesystem=filesystem,
+            schema=schema.dataset_schema("logs"),
+            partitioning=schema.partitioning(),
+        )
         rows = found.to_table(columns=list(ROW_COLUMNS)).to_pylist()
     except (OSError, ValueError):
         return {}
@@ -316,6 +326,22 @@ def run_task(task: LogTask) -> dict:
     if "error" in box:
         raise box["error"]
     return box["result"]
+
+
+def run_batch(tasks: list[LogTask]) -> list[dict]:
+    """Several small logs in one Dask task (`fleet --batch N`): each decoded and committed
+    as `run_task` does, then the parts of those it wrote merged per table and date into
+    shared files (compact.merge_logs; a local dataset's only). A merge that cannot be made
+    (a full disk) leaves the logs' own parts: the dataset is whole either way."""
+    results = [run_task(t) for t in tasks]
+    dataset = layout.root(tasks[0].dataset)
+    written = {r["hash"] for r in results if not r.get("skipped") and r.get("hash")}
+    if isinstance(dataset, Path) and len(written) > 1:
+        from cananalyze.fleet.compact import merge_logs
+
+        with contextlib.suppress(OSError):
+            merge_logs(dataset, written, tasks[0].compression)
+    return results
 
 
 def _path_digest(path: str) -> str:

@@ -1,0 +1,352 @@
+"""`fleet compact`: a dataset's small parts rewritten into files near a target size, for
+the query engines that pay per file (a log's seven parts are kilobytes each).
+
+Per table and date partition, the parts under the target size (a log's
+`part-<hash>.parquet`, or an earlier compaction's `part-compact-<id>.parquet` not yet
+full) are read together, sorted by time (then by log) and written as one file of row
+groups in time order. Every row keeps its lineage columns (`source`, `hash`,
+`version`); the file's footer also lists the hashes it holds (`cananalyze.hashes`), so
+finding a log's rows reads footers, not the files.
+
+Publishing goes through a stage like a fleet task's (layout.Stage): the new file is
+renamed into place, then its inputs are removed (each only if it is still the file
+that was read: a part a fleet run replaced meanwhile stays). A reader listing between
+the two sees those logs twice, told apart by nothing but the file; a crash between them
+is finished by the next `fleet` or `compact` (the stage's COMMIT.json).
+
+A rerun decides from rows, not file names: the driver reads the `logs` rows of every
+file; a worker looks a hash up in the loose `logs` part, else in the compacted files
+whose footer lists it. When a fleet run commits a log whose rows are also in a
+compacted file (`--force`, a changed configuration, a changed file at the same path),
+`reconcile` rewrites that file without them, in place (one rename: readers see the old
+file or the new one): a loose part is always newer than a compacted copy of the same
+hash, and a loose `logs` row for a path retires that path's other hashes.
+
+Compaction and the reconcile hold one lock (`flock` on the `_staging` folder), so they
+never interleave; a fleet run's tasks do not take it. Each publish also waits for the
+`cananalyze query` runs reading the dataset (`reading`: `flock` on its folder, shared).
+Local datasets only: object storage has no rename to publish with.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import json
+import os
+import uuid
+from collections.abc import Iterator
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import pyarrow as pa
+
+from cananalyze.core.defaults import COMPACT_TARGET_SIZE
+from cananalyze.fleet import layout, schema
+
+COMPACTED = "part-compact-"  # a compacted file's name: part-compact-<id>.parquet
+HASHES = b"cananalyze.hashes"  # footer key: the JSON list of the log hashes in the file
+
+
+@dataclass
+class CompactResult:
+    """What a compaction did: the part files before and after, their sizes (bytes)."""
+
+    sizes_before: list[int]
+    sizes_after: list[int]
+    merged: int = 0  # files written by merging
+    reconciled: int = 0  # compacted files rewritten without rows a later commit replaced
+
+
+def is_compacted(path: Path) -> bool:
+    return path.name.startswith(COMPACTED)
+
+
+def order(table: str) -> list[tuple[str, str]]:
+    """A table's sort keys in a compacted file: its time, then the log (ties stay apart)."""
+    names = [c for c, _ in schema.COLUMNS[table]]
+    time = next((c for c in ("t", "t_first") if c in names), None)
+    keys = ([time] if time else []) + ["hash"] + (["node"] if "node" in names and not time else [])
+    return [(k, "ascending") for k in keys]
+
+
+def _parts(dataset: Path, table: str, compacted: bool | None = None) -> list[Path]:
+    """A table's part files: all, only the compacted ones, or only a log's own."""
+    prefix = COMPACTED if compacted else "part-"  # the compacted: a glob of their own
+    found = sorted((dataset / table).glob(f"date=*/{prefix}*.parquet"))
+    return [p for p in found if compacted is None or is_compacted(p) == compacted]
+
+
+def _digest(part: Path) -> str:
+    return part.name[len("part-") : -len(".parquet")]
+
+
+@lru_cache(maxsize=4096)
+def _footer_hashes(path: str, ino: int, mtime_ns: int) -> frozenset[str]:
+    import pyarrow.parquet as pq
+
+    meta = pq.read_schema(path).metadata or {}
+    return frozenset(json.loads(meta.get(HASHES, b"[]")))
+
+
+def hashes_of(part: Path) -> frozenset[str]:
+    """The log hashes a compacted file holds, from its footer (each version read once)."""
+    st = part.stat()
+    return _footer_hashes(str(part), st.st_ino, st.st_mtime_ns)
+
+
+def compacted_row(dataset: Path, digest: str) -> dict | None:
+    """The `logs` row of this content in a compacted file, or None."""
+    import pyarrow.compute as pc
+    import pyarrow.parquet as pq
+
+    for part in _parts(dataset, "logs", compacted=True):
+        with contextlib.suppress(OSError, ValueError):
+            if digest in hashes_of(part):
+                found = pq.read_table(part)
+                rows = found.filter(pc.equal(found["hash"].cast(pa.string()), digest))
+                if rows.num_rows:
+                    return rows.to_pylist()[0]
+    return None
+
+
+@contextlib.contextmanager
+def _flock(folder: Path, how: int) -> Iterator[None]:
+    """`flock` on a folder itself: no lock file is left in the dataset."""
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, how)
+        yield
+    finally:
+        os.close(fd)
+
+
+def locked(dataset: Path):
+    """The dataset's compaction lock (on its `_staging` folder), held: waits for a
+    compaction or reconcile running."""
+    (dataset / layout.STAGING).mkdir(parents=True, exist_ok=True)
+    return _flock(dataset / layout.STAGING, fcntl.LOCK_EX)
+
+
+@contextlib.contextmanager
+def reading(dataset: Path) -> Iterator[None]:
+    """Held by `cananalyze query` while it lists and reads the parts (a shared lock on the
+    dataset's folder): a compaction's publish (its file in, its inputs out) takes it
+    alone, so the query sees each row once and no part goes from under it. Read-only
+    datasets too: nothing is written."""
+    try:
+        fd = os.open(dataset, os.O_RDONLY)
+    except OSError:  # a folder that cannot be opened: read without it
+        yield
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH)
+        yield
+    finally:
+        os.close(fd)
+
+
+def _read(parts: list[Path], table: str) -> pa.Table:
+    """Parts of one table as one table of the dataset's schema (a part written before a
+    column was added reads it as null), each label column one dictionary."""
+    import pyarrow.dataset as pads
+
+    found = pads.dataset([str(p) for p in parts], format="parquet", schema=schema.schema(table))
+    return found.to_table().combine_chunks().unify_dictionaries()
+
+
+def _write(data: pa.Table, table: str, dest: Path, compression: str) -> None:
+    """Rows in time order, in row groups of the export's size; the hashes in the footer."""
+    import pyarrow.compute as pc
+    import pyarrow.parquet as pq
+
+    from cananalyze.outputs.tables.writer import ROW_GROUP
+
+    keys = order(table)
+    plain = {  # labels by their text (Arrow sorts no dictionary column)
+        k: data[k].cast(data[k].type.value_type)
+        if pa.types.is_dictionary(data[k].type)
+        else data[k]
+        for k, _ in keys
+    }
+    data = data.take(pc.sort_indices(pa.table(plain), sort_keys=keys))
+    hashes = sorted(pc.unique(data["hash"].cast(pa.string())).to_pylist())
+    meta = {**(data.schema.metadata or {}), HASHES: json.dumps(hashes).encode()}
+    pq.write_table(
+        data.replace_schema_metadata(meta), dest, row_group_size=ROW_GROUP, compression=compression
+    )
+
+
+def _publish(
+    dataset: Path, staged_from, dest: Path, after: list[tuple[Path, int]], removals=()
+) -> None:
+    stage = layout.Stage(dataset, "compact")
+    staged = stage.dir / "part.parquet"
+    try:
+        staged_from(staged)
+    except BaseException:
+        stage.close()
+        raise
+    with _flock(dataset, fcntl.LOCK_EX):  # no `query` reading meanwhile (`reading`)
+        try:
+            stage.commit([(staged, dest)] if staged.exists() else [], list(removals), after)
+        except BaseException:
+            stage.release()  # cut short: its COMMIT.json is finished by the next recover
+            raise
+
+
+def _merge(dataset: Path, table: str, parts: list[Path], compression: str) -> None:
+    """`parts` (one partition's) into one new compacted file, then removed."""
+    after = [(p, p.stat().st_ino) for p in parts]  # before reading: a later swap is seen
+    data = _read(parts, table)
+    dest = parts[0].parent / f"{COMPACTED}{uuid.uuid4().hex[:16]}.parquet"
+    _publish(dataset, lambda staged: _write(data, table, staged, compression), dest, after)
+
+
+def merge_logs(dataset: Path, digests: set[str], compression: str = "snappy") -> int:
+    """The parts of these logs (a fleet batch's, just committed one by one) merged, per
+    table and date, into shared files: several logs a file from the start. How many
+    files were written. Under the compaction lock, as any merge."""
+    written = 0
+    with locked(dataset):
+        for table in schema.TABLES:
+            by_partition: dict[Path, list[Path]] = {}
+            for digest in sorted(digests):
+                for part in layout.existing_parts(dataset, table, digest):
+                    by_partition.setdefault(part.parent, []).append(part)
+            for parts in by_partition.values():
+                if len(parts) > 1:
+                    _merge(dataset, table, parts, compression)
+                    written += 1
+    return written
+
+
+def _bins(parts: list[Path], target: int) -> Iterator[list[Path]]:
+    """Consecutive groups of parts whose sizes add up to about `target` (a part over it:
+    alone), largest first so full files come out full."""
+    sized = sorted(((p.stat().st_size, p) for p in parts), key=lambda sp: (-sp[0], sp[1]))
+    current: list[Path] = []
+    total = 0
+    for size, part in sized:
+        if current and total + size > target:
+            yield current
+            current, total = [], 0
+        current.append(part)
+        total += size
+    if current:
+        yield current
+
+
+def _logged(dataset: Path) -> set[str]:
+    """Every hash a `logs` row names: loose parts' names, compacted files' footers."""
+    found = {_digest(p) for p in _parts(dataset, "logs", compacted=False)}
+    return found.union(*(hashes_of(p) for p in _parts(dataset, "logs", compacted=True)))
+
+
+def reconcile(dataset: Path, compression: str = "snappy") -> int:
+    """Compacted files rewritten without the rows a later commit replaced; how many.
+
+    Call with `locked` held. Stale in a compacted file of a table: a hash that also has
+    a loose part in that table (decoded again: `--force`, a changed configuration, a
+    rerun dated otherwise); in every table, a hash whose loose `logs` row failed (a
+    failed redo writes its `logs` part only: its old rows go, as a fleet commit removes
+    a log's old parts), a hash whose path has a loose `logs` row of another hash (the
+    file changed), and a hash with no `logs` row at all. Not a hash with only a loose
+    `logs` part: a compaction merges a table's parts by size, so a log's `logs` part may
+    stay loose beside its merged rows."""
+    import pyarrow.compute as pc
+    import pyarrow.parquet as pq
+
+    # first a compaction cut short between its new file and its inputs' removal is
+    # finished: else its inputs, loose parts, would make its new file's rows stale
+    layout.recover(dataset)
+    compacted = {t: _parts(dataset, t, compacted=True) for t in schema.TABLES}
+    if not any(compacted.values()):
+        return 0
+    loose = {t: {_digest(p) for p in _parts(dataset, t, compacted=False)} for t in schema.TABLES}
+    retired: set[str] = set()
+    if loose["logs"]:
+        newer: dict[str, set[str]] = {}
+        rows = _read(_parts(dataset, "logs", compacted=False), "logs")
+        for row in rows.select(["source", "hash", "status"]).to_pylist():
+            newer.setdefault(row["source"], set()).add(row["hash"])
+            if row["status"] != "ok":
+                retired.add(row["hash"])
+        for part in compacted["logs"]:
+            for row in pq.read_table(part, columns=["source", "hash"]).to_pylist():
+                if row["source"] in newer and row["hash"] not in newer[row["source"]]:
+                    retired.add(row["hash"])
+    # and rows of no log: a changed file's old rows a compaction read as the run that
+    # replaced them removed their parts (no logs row left to retire them by)
+    logged = _logged(dataset)
+    rewritten = 0
+    for table, parts in compacted.items():
+        for part in parts:
+            held = hashes_of(part)
+            drop = held & (loose[table] | retired) | (held - logged)
+            if not drop:
+                continue
+            ino = part.stat().st_ino
+            data = _read([part], table)
+            keep = data.filter(pc.invert(pc.is_in(data["hash"].cast(pa.string()), pa.array(drop))))
+            if keep.num_rows:
+                _publish(dataset, lambda s, k=keep, t=table: _write(k, t, s, compression), part, [])
+            else:
+                _publish(dataset, lambda s: None, part, [(part, ino)])
+            rewritten += 1
+    return rewritten
+
+
+def compact(
+    dataset: str | Path,
+    target_size: int = COMPACT_TARGET_SIZE,
+    compression: str = "snappy",
+    dates: set[str] | None = None,
+) -> CompactResult:
+    """Every table's partitions compacted (see the module's docstring), or only those of
+    `dates` (`fleet --compact`: the days a run wrote); UsageError for a URL or a folder
+    that is no fleet dataset."""
+    from cananalyze.core.errors import UsageError
+
+    if isinstance(layout.root(dataset), str):
+        raise UsageError(f"{dataset}: compact works on a local dataset only (not a URL yet)")
+    dataset = Path(dataset)
+    if not (dataset / "logs").is_dir():
+        raise UsageError(f"{dataset}: not a fleet dataset (no logs table in it)")
+    if target_size <= 0:
+        raise UsageError(f"--target-size must be positive (got {target_size})")
+    with locked(dataset):
+        layout.recover(dataset)  # before the sizes: a stage finished is no file of ours
+        out = CompactResult(_sizes(dataset), [])
+        out.reconciled = reconcile(dataset, compression)
+        logged = _logged(dataset)
+        for table in schema.TABLES:
+            for partition in sorted((dataset / table).glob("date=*")):
+                if dates is not None and partition.name.removeprefix("date=") not in dates:
+                    continue
+                small = [
+                    p
+                    for p in partition.glob("part-*.parquet")
+                    if p.stat().st_size < target_size
+                    # a log's part without its logs row: a commit under way, left to it
+                    and (is_compacted(p) or table == "logs" or _digest(p) in logged)
+                ]
+                for group in _bins(small, target_size):
+                    if len(group) > 1:
+                        _merge(dataset, table, group, compression)
+                        out.merged += 1
+        out.sizes_after = _sizes(dataset)
+    return out
+
+
+def _sizes(dataset: Path) -> list[int]:
+    return [p.stat().st_size for t in schema.TABLES for p in _parts(dataset, t)]
+
+
+def median(sizes: list[int]) -> float:
+    s = sorted(sizes)
+    if not s:
+        return 0.0
+    mid = len(s) // 2
+    return float(s[mid]) if len(s) % 2 else (s[mid - 1] + s[mid]) / 2
