@@ -215,6 +215,8 @@ def compare(
         fa, fb_ = a.get(key, {}), b.get(key, {})
         for section in sections:
             sa, sb = fa.get(section, {}), fb_.get(section, {})
+            if section == "configuration":
+                sa, sb = _by_object(sa, sb), _by_object(sb, sa)
             for item in sorted(set(sa) | set(sb)):
                 va, vb = sa.get(item), sb.get(item)
                 if section == "identity" and (va is None or vb is None):
@@ -222,6 +224,18 @@ def compare(
                 if not _same(section, item, va, vb, tolerance, floor_ms):
                     out.append(Difference(key, section, item, va, vb))
     return out
+
+
+def _by_object(mine: dict, theirs: dict) -> dict:
+    """Configuration items keyed by object as both runs name it: one run may name
+    0x1800:03 by the node's profile, the other (device unknown there) generically; the
+    object is the same, so its name is taken from whichever run has the longer one."""
+    names: dict[str, str] = {}
+    for item in (*mine, *theirs):
+        obj = item.split(" ", 1)[0]
+        if len(item) > len(names.get(obj, "")):
+            names[obj] = item
+    return {names[item.split(" ", 1)[0]]: v for item, v in mine.items()}
 
 
 def _order(key: str):
@@ -237,6 +251,9 @@ def _same(section: str, item: str, a, b, tolerance: float, floor_ms: float) -> b
     if section in TIMED and isinstance(a, int | float) and isinstance(b, int | float):
         floor = floor_ms if item.endswith(" ms") else 0.01 * max(abs(a), abs(b))
         return abs(a - b) <= max(tolerance * max(abs(a), abs(b)), floor)
+    if section == "configuration" and isinstance(a, str) and isinstance(b, str):
+        # the value, not its words: a run that knows the device words it more fully
+        return a.split(" (", 1)[0] == b.split(" (", 1)[0]
     return a == b
 
 

@@ -76,6 +76,19 @@ def test_each_injected_fault_is_named():
     assert not any(section == "identity" for _, section, _ in got)
 
 
+def test_an_object_named_apart_in_two_runs_is_one_item():
+    """Without a network file the healthy run names node 5's objects by its profile (its
+    identity is read) and the faulty one generically: the same object and value are no
+    difference, and an object is never listed twice."""
+    rc, doc = _json(SAMPLES / "commissioning.log", SAMPLES / "faults.log")
+    conf = [(d["node"], d["item"].split()[0]) for d in doc["differences"]]
+    conf = [
+        c for c, d in zip(conf, doc["differences"], strict=True) if d["section"] == "configuration"
+    ]
+    assert conf and len(conf) == len(set(conf))
+    assert ("5", "0x1A01:01") not in conf and ("3", "0x1800:03") not in conf
+
+
 def test_text_groups_by_node(tmp_path):
     run = _diff(SAMPLES / "commissioning.log", SAMPLES / "faults.log", "--network", NETWORK)
     assert run.returncode == 1
