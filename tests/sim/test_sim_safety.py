@@ -28,6 +28,9 @@ NORMAL, INVERTED = 0x109, 0x10A
 SAM_COB, DAM_COB = 0x387, 0x487
 # node 7's scanner list: 0x6401:01..02 (block 2 << 24 | index << 8 | first sub-index)
 SCANNER = (2 << 24) | (0x6401 << 8) | 0x01
+# node 6's dispatching list: node 7's 0x6401:02 into its own 0x6200:01 (block 1 << 56 |
+# consumer index << 40 | its sub-index << 32 | producer's index << 16 | sub << 8 | node-ID)
+DISPATCH = (1 << 56) | (0x6200 << 40) | (1 << 32) | (0x6401 << 16) | (2 << 8) | 7
 NETWORK = f"""
 [nodes.5]
 device = "dat7014"
@@ -36,6 +39,10 @@ device = "dat7014"
 sct_ms = {SCT_MS}
 srvt_ms = {SRVT_MS}
 mapping = ["2000:01/16", "2001:01/16"]
+
+[nodes.6]
+device = "dat7130"
+object_dispatching_list = [0x{DISPATCH:016X}]
 
 [nodes.7]
 device = "i7231d"
@@ -114,9 +121,16 @@ def test_healthy_run_decodes_srdo_and_mpdo_without_srdo_findings(net):
     assert set(volts.signal) == {"ai0_i7012"} and set(volts.unit) == {"V"}
     ratio = volts.value.to_numpy() / [r for r, f in zip(raw, first, strict=True) if f]
     assert ratio.min() == pytest.approx(ratio.max(), rel=1e-5)  # float32 values
-    # 0x6401:02 is not in the profile: the frame counter, as sent
+    # 0x6401:02 (not in node 7's profile: the frame counter, as sent) goes to node 6's
+    # 0x6200:01 by its dispatching list: named as that object (not node 7's 0x6401:02)
     other = [r for r, f in zip(raw, first, strict=True) if not f]
-    assert list(got[[not f for f in first]].value.astype(int)) == other
+    second = got[[not f for f in first]]
+    assert list(second.value.astype(int)) == other
+    assert set(second.signal) == {"obj_6200_01"}
+    run = [sys.executable, "-m", "cananalyze", "decode", str(log), "--network", str(net)]
+    text = subprocess.run(run, capture_output=True, text=True, check=True, cwd=ROOT).stdout
+    assert "TPDO3 MPDO from node 7 0x6401:02 -> node 6 0x6200:01  obj_6200_01=" in text
+    assert "TPDO4 MPDO to all nodes 0x6200:01" in text and "SRDO1 inverted" in text
     # DAM: to every node (0x80 | 0), the object of the mapping's entry 1
     dam = [bytes(m.data) for m in msgs if m.arbitration_id == DAM_COB]
     assert dam and {d[:4] for d in dam} == {bytes([0x80, 0x00, 0x62, 0x01])}
