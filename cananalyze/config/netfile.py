@@ -42,6 +42,7 @@ NODE_KEYS = {
     "signals",
     "srdo",
     *("object_scanner_list", "object_dispatching_list"),
+    "gfc",
 }
 # node setting -> the MPDO object list it fills (protocol/mpdo.py LISTS): the node's first
 # list of that kind (0x1FA0 / 0x1FD0), sub 1.. the entries, sub 0 their number
@@ -255,6 +256,10 @@ def _node(raw, node: int, base: Path, lines: Lines, where: tuple, how: str) -> d
         out["profile"] = _profile(raw, node, base, lines, where, how)
     if "name" in raw:
         out["name"] = printable(str(raw["name"]))
+    if "gfc" in raw:  # CiA 304 GFC parameter (0x1300): true = 1, the node may send GFC
+        if not isinstance(raw["gfc"], bool):
+            raise lines.error((*where, "gfc"), f"expected true or false, got {raw['gfc']!r}")
+        out["gfc"] = raw["gfc"]
     for key, (_, high) in NODE_OBJECTS.items():
         if key in raw:
             out[key] = integer(raw[key], lines, (*where, key), 0, high)
@@ -390,6 +395,8 @@ def _node_spec(node: int, raw: dict) -> NodeSpec:
     for key, (index, _) in NODE_OBJECTS.items():
         if key in raw:
             spec.writes.append((index, 0, raw[key]))
+    if "gfc" in raw:
+        spec.writes.append((srdo_layout.GFC_PARAMETER, 0, int(raw["gfc"])))
     consumers = sorted(raw.get("heartbeat_consumer", {}).items())
     spec.writes += [(0x1016, i + 1, p << 16 | ms) for i, (p, ms) in enumerate(consumers)]
     for direction in ("tpdo", "rpdo"):

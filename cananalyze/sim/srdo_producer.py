@@ -7,7 +7,8 @@ operational, its normal frame (the odd mapping entries' objects) and, within SRV
 bit-inverted copy on the next COB-ID (CO_SRDO.c line 541 and lines 887-894), every
 `REFRESH` of its SCT. A mapped object the node's dictionary lacks carries the pair counter.
 Scenarios switch on faults by windows (Faults.srdo_not_inverted, Faults.srdo_late): the
-first pair in each window has the fault.
+first pair in each window has the fault; after a pair not inverted, a node whose GFC
+parameter (0x1300) is 1 sends GFC, as CANopenNode's `CO_GFCsend` does when valid.
 """
 
 from __future__ import annotations
@@ -105,8 +106,10 @@ def _pair(node: SimNode, gen: int, srdo: Produced, k: int) -> None:
         return
     normal = _payload(node, srdo, k)
     inverted = bytes(b ^ 0xFF for b in normal)
+    gfc = False
     if normal and _fault(node.faults.srdo_not_inverted, node.sim.now):
         inverted = bytes([inverted[0] ^ 0x01]) + inverted[1:]  # one bit not inverted
+        gfc = node.od.get(layout.GFC_PARAMETER, 0) == 1  # the application's GFC, if valid
     delay = INVERTED_DELAY + node.rng.uniform(0, INVERTED_DELAY)
     if _fault(node.faults.srdo_late, node.sim.now):
         delay = srdo.srvt + LATE_BY
@@ -115,6 +118,8 @@ def _pair(node: SimNode, gen: int, srdo: Produced, k: int) -> None:
     def second() -> None:
         if gen == node.generation and node.state == OPERATIONAL:
             node.sim.send(node, srdo.inverted, inverted)
+            if gfc:
+                node.sim.send(node, layout.GFC_COB_ID, b"")
 
     node.sim.after(delay, second)
     node.sim.after(REFRESH * srdo.sct, lambda: _pair(node, gen, srdo, k + 1))

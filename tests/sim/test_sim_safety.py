@@ -34,6 +34,7 @@ DISPATCH = (1 << 56) | (0x6200 << 40) | (1 << 32) | (0x6401 << 16) | (2 << 8) | 
 NETWORK = f"""
 [nodes.5]
 device = "dat7014"
+gfc = true
 
 [nodes.5.srdo.1]
 sct_ms = {SCT_MS}
@@ -104,6 +105,7 @@ def test_healthy_run_decodes_srdo_and_mpdo_without_srdo_findings(net):
     srdo = s[s.pdo == "srdo1"]
     assert set(srdo.node) == {5} and set(srdo.cob_id) == {NORMAL}
     msgs = _frames(log)
+    assert not [m for m in msgs if m.arbitration_id == 0x001]  # GFC valid, but no fault
     sent = [struct.unpack("<H", bytes(m.data))[0] for m in msgs if m.arbitration_id == NORMAL]
     assert list(srdo.value) == sent and sent[:3] == [0, 1, 2]  # the producer's pair counter
     # SAM: node 7's scanner list objects in turn, each value the frame's bytes 4-5
@@ -147,10 +149,24 @@ def test_same_seed_same_log(net, tmp_path):
 
 
 def test_fault_variant_gives_the_srdo_findings(net):
+    """One pair not inverted, then (GFC valid on node 5: `gfc = true`, 0x1300 = 1) a GFC
+    with no data, as CANopenNode's CO_GFCsend sends it; one inverted frame past SRVT."""
     log = _simulate(net, "safety-faults")
     f = cananalyze.load(log, network=net).findings
     f = f[f.rule == "srdo"].reset_index(drop=True)
-    assert len(f) == 2, f.to_dict("records")
+    assert list(f.severity) == ["error", "info", "error"], f.to_dict("records")
     assert "not the bit inversion" in f.message[0]
-    assert f"validation time SRVT {SRVT_MS} ms" in f.message[1]
-    assert f.measured[1] > SRVT_MS
+    assert f.message[1] == "global fail-safe command (GFC)" and f.cob_id[1] == 0x001
+    assert 0 < f.t[1] - f.t[0] < 0.001
+    assert f"validation time SRVT {SRVT_MS} ms" in f.message[2]
+    assert f.measured[2] > SRVT_MS
+    gfc = [m for m in _frames(log) if m.arbitration_id == 0x001]
+    assert len(gfc) == 1 and gfc[0].dlc == 0
+
+
+def test_no_gfc_unless_valid(net, tmp_path):
+    other = tmp_path / "net.toml"
+    other.write_text(NETWORK.replace("gfc = true", "gfc = false"))
+    log = _simulate(other, "safety-faults")
+    f = cananalyze.load(log, network=other).findings
+    assert list(f[f.rule == "srdo"].severity) == ["error", "error"]
