@@ -21,7 +21,9 @@ from cananalyze.core.text import printable
 from cananalyze.devices.builtin import load_builtin
 from cananalyze.devices.catalog import device_keys
 from cananalyze.devices.profile import load_eds
+from cananalyze.protocol import mpdo as mpdo_layout
 from cananalyze.protocol import srdo as srdo_layout
+from cananalyze.protocol.datatypes import DATA_TYPES
 from cananalyze.protocol.pdo_map import COB_ID_INVALID
 
 TOP_KEYS = {"bitrate", "nodes", "sync", "known_cob_ids"}
@@ -39,7 +41,17 @@ NODE_KEYS = {
     "sdo_channels",
     "signals",
     "srdo",
+    *("object_scanner_list", "object_dispatching_list"),
+    "gfc",
 }
+# node setting -> the MPDO object list it fills (protocol/mpdo.py LISTS): the node's first
+# list of that kind (0x1FA0 / 0x1FD0), sub 1.. the entries, sub 0 their number
+MPDO_LISTS = {
+    "object_scanner_list": mpdo_layout.SCANNER,
+    "object_dispatching_list": mpdo_layout.DISPATCHER,
+}
+# a PDO's `mpdo`: its mapping's number of entries (0xFE SAM, 0xFF DAM)
+MPDO_MODES = {name: count for count, name in mpdo_layout.MODES.items()}
 # [nodes.N.srdo.K] (CiA 304, protocol/srdo.py): key -> (communication sub-index, highest value)
 SRDO_OBJECTS = {
     "sct_ms": (srdo_layout.SUB_SCT, 0xFFFF),
@@ -56,6 +68,7 @@ PDO_KEYS = {
     "event_timer",
     "mapping",
     "length",
+    "mpdo",
 }
 # node setting -> (object, highest value): each becomes a write of that object's sub 0
 NODE_OBJECTS = {
@@ -128,6 +141,10 @@ def _pdo(raw, lines: Lines, where: tuple) -> dict:
             out[key] = integer(raw[key], lines, (*where, key), 0, high)
     if "length" in raw:
         out["length"] = integer(raw["length"], lines, (*where, "length"), 0, 8)
+    if "mpdo" in raw:
+        if raw["mpdo"] not in MPDO_MODES:
+            raise lines.error((*where, "mpdo"), f'expected "sam" or "dam", got {raw["mpdo"]!r}')
+        out["mpdo"] = raw["mpdo"]
     if "mapping" in raw:
         entries = raw["mapping"]
         if not isinstance(entries, list):
@@ -239,6 +256,10 @@ def _node(raw, node: int, base: Path, lines: Lines, where: tuple, how: str) -> d
         out["profile"] = _profile(raw, node, base, lines, where, how)
     if "name" in raw:
         out["name"] = printable(str(raw["name"]))
+    if "gfc" in raw:  # CiA 304 GFC parameter (0x1300): true = 1, the node may send GFC
+        if not isinstance(raw["gfc"], bool):
+            raise lines.error((*where, "gfc"), f"expected true or false, got {raw['gfc']!r}")
+        out["gfc"] = raw["gfc"]
     for key, (_, high) in NODE_OBJECTS.items():
         if key in raw:
             out[key] = integer(raw[key], lines, (*where, key), 0, high)
@@ -264,6 +285,13 @@ def _node(raw, node: int, base: Path, lines: Lines, where: tuple, how: str) -> d
         out["srdo"] = _keyed(
             table, lines, w, 1, srdo_layout.COUNT, lambda v, at, k: _srdo(v, lines, at, k, node)
         )
+    for key, kind in MPDO_LISTS.items():
+        if key in raw:
+            w = (*where, key)
+            if not isinstance(raw[key], list) or len(raw[key]) > 254:
+                raise lines.error(w, "expected a list of at most 254 entries (integers)")
+            high = (1 << DATA_TYPES[mpdo_layout.LISTS[kind].data_type].bits) - 1
+            out[key] = [integer(v, lines, (*w, str(i)), 0, high) for i, v in enumerate(raw[key])]
     if "signals" in raw:
         out["signals"] = _signals(raw["signals"], lines, (*where, "signals"))
     if "sdo_channels" in raw:
@@ -367,6 +395,8 @@ def _node_spec(node: int, raw: dict) -> NodeSpec:
     for key, (index, _) in NODE_OBJECTS.items():
         if key in raw:
             spec.writes.append((index, 0, raw[key]))
+    if "gfc" in raw:
+        spec.writes.append((srdo_layout.GFC_PARAMETER, 0, int(raw["gfc"])))
     consumers = sorted(raw.get("heartbeat_consumer", {}).items())
     spec.writes += [(0x1016, i + 1, p << 16 | ms) for i, (p, ms) in enumerate(consumers)]
     for direction in ("tpdo", "rpdo"):
@@ -387,6 +417,11 @@ def _node_spec(node: int, raw: dict) -> NodeSpec:
             words = params["mapping"]
             spec.writes += [(mapping, i + 1, w) for i, w in enumerate(words)]
             spec.writes.append((mapping, 0, len(words)))
+    for key, kind in MPDO_LISTS.items():
+        if key in raw:
+            first = mpdo_layout.LISTS[kind].first
+            spec.writes += [(first, i + 1, e) for i, e in enumerate(raw[key])]
+            spec.writes.append((first, 0, len(raw[key])))
     spec.sdo_channels = list(raw.get("sdo_channels", ()))
     for key, one in raw.get("signals", {}).items():
         index, sub = (int(x, 16) for x in key.split(":"))
@@ -420,6 +455,8 @@ def _pdo_writes(params: dict, direction: str, number: int, node: int, profile):
         writes.append((mapping, 0, 0))
         writes += [(mapping, i + 1, w) for i, w in enumerate(words)]
         writes.append((mapping, 0, len(words)))
+    if "mpdo" in params:  # after the entries: the count says the PDO is an MPDO
+        writes.append((mapping, 0, MPDO_MODES[params["mpdo"]]))
     return writes
 
 

@@ -108,7 +108,12 @@ class PdoDecoder:
             dam, node = bool(k >> 40), (k >> 32) & 0x7F
             index, sub = (k >> 8) & 0xFFFF, k & 0xFF
             note = mpdo.fields(dam, node, index, sub)
-            targets = [] if dam else self._dispatch(node, index, sub, float(fb.t[at[0]]))
+            t0 = float(fb.t[at[0]])
+            targets = [] if dam else self._dispatch(node, index, sub, t0)
+            if not dam:
+                scanner = self._entries(node, mpdo.SCANNER, t0)
+                if scanner:  # the producer's list is known: does it let it send this?
+                    note["scanned"] = any(mpdo.scanned(e, index, sub) for e in scanner)
             if targets:
                 note["dispatched"] = [{"node": c, "index": i, "subindex": j} for c, i, j in targets]
             if len(targets) == 1:  # the value as the consumer's object it becomes
@@ -131,31 +136,37 @@ class PdoDecoder:
                 )
             )
 
+    def _entries(self, node: int, kind: str, t: float) -> list[int]:
+        """The entries at t of a node's MPDO object lists of one kind (mpdo.LISTS: the scanner
+        or the dispatching lists), within each list's count where known, from the log, the
+        network file or the node's profile."""
+        model = self.model
+        lst = mpdo.LISTS[kind]
+        out = []
+        for index in range(lst.first, lst.last + 1):
+            subs = model.subindices(node, index)
+            if not subs:
+                continue
+            count = model.known(node, index, 0, t)
+            for s in subs:
+                if count is not None and s > count.value:
+                    continue
+                entry = model.known(node, index, s, t)
+                if entry is not None and entry.value:
+                    out.append(entry.value)
+        return out
+
     def _dispatch(
         self, producer: int, index: int, sub: int, t: float
     ) -> list[tuple[int, int, int]]:
         """The consumers' objects a SAM frame's object is dispatched to at t: (node, index,
-        sub-index) of every object dispatching list entry (0x1FD0-0x1FFF, within its count
-        where known) the log, the network file or a profile gives that names it."""
-        model = self.model
+        sub-index) of every object dispatching list entry that names it."""
         out = []
-        for node in sorted(model.nodes):
-            for lst in range(mpdo.DISPATCH_FIRST, mpdo.DISPATCH_LAST + 1):
-                subs = model.subindices(node, lst)
-                if not subs:
-                    continue
-                count = model.known(node, lst, 0, t)
-                for s in subs:
-                    if count is not None and s > count.value:
-                        continue
-                    entry = model.known(node, lst, s, t)
-                    hit = (
-                        None
-                        if entry is None
-                        else mpdo.dispatched(entry.value, producer, index, sub)
-                    )
-                    if hit is not None:
-                        out.append((node, *hit))
+        for node in sorted(self.model.nodes):
+            for entry in self._entries(node, mpdo.DISPATCHER, t):
+                hit = mpdo.dispatched(entry, producer, index, sub)
+                if hit is not None:
+                    out.append((node, *hit))
         return out
 
     def _mpdo_entry(self, node: int, index: int, sub: int) -> MapEntry:

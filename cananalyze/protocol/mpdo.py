@@ -18,8 +18,10 @@ list (0x1FD0-0x1FFF, UNSIGNED64 entries) says where a SAM frame's value goes: bi
 producer's node-ID, 8-15 its first sub-index, 16-31 its index, 32-39 the consumer's first
 sub-index, 40-55 its index, 56-63 the block size (sub-indices in a row, 0 as 1): as Lely's
 `co_dev_map_sam_mpdo` reads it (src/co/pdo.c lines 243-291; it takes the block size from
-bit 54, CiA 301 from bit 56: here bit 56). The object scanner list (0x1FA0-0x1FCF) only
-says what a producer may send and is not followed.
+bit 54, CiA 301 from bit 56: here bit 56). A SAM producer's object scanner list
+(0x1FA0-0x1FCF, UNSIGNED32 entries; CiA 301 v4.2.0 7.5.2, objects 1FA0h-1FCFh) says which
+of its objects it may send: bits 0-7 the first sub-index, 8-23 the index, 24-31 the block
+size. Both layouts are the table LISTS.
 """
 
 from __future__ import annotations
@@ -34,33 +36,82 @@ FRAME_BYTES = 8
 VALUE_BYTE = 4  # the value starts here
 VALUE_BITS = 32
 ADDRESS_DAM = 0x80  # byte 0, bit 7
-SCANNER_FIRST, SCANNER_LAST = 0x1FA0, 0x1FCF  # object scanner lists (a SAM producer's)
-DISPATCH_FIRST, DISPATCH_LAST = 0x1FD0, 0x1FFF  # object dispatching lists (a consumer's)
+
+
+class ListLayout(NamedTuple):
+    """One kind of MPDO object list: its indices, entry type and entry fields."""
+
+    name: str
+    first: int
+    last: int
+    data_type: int  # of entries 1..
+    fields: dict[str, tuple[int, int]]  # field -> (first bit, bits)
+
+
+SCANNER, DISPATCHER = "scanner", "dispatcher"
+LISTS = {
+    SCANNER: ListLayout(
+        "Object scanner list",
+        0x1FA0,
+        0x1FCF,
+        0x07,  # UNSIGNED32
+        {"subindex": (0, 8), "index": (8, 16), "block": (24, 8)},
+    ),
+    DISPATCHER: ListLayout(
+        "Object dispatching list",
+        0x1FD0,
+        0x1FFF,
+        0x1B,  # UNSIGNED64
+        {
+            "producer": (0, 8),
+            "producer_subindex": (8, 8),
+            "producer_index": (16, 16),
+            "subindex": (32, 8),
+            "index": (40, 16),
+            "block": (56, 8),
+        },
+    ),
+}
+SCANNER_FIRST, SCANNER_LAST = LISTS[SCANNER].first, LISTS[SCANNER].last
+DISPATCH_FIRST, DISPATCH_LAST = LISTS[DISPATCHER].first, LISTS[DISPATCHER].last
 
 
 def object_name(index: int, subindex: int) -> tuple[str, int] | None:
     """(name, data type) of a scanner or dispatching list entry, else None."""
-    for first, last, name in (
-        (SCANNER_FIRST, SCANNER_LAST, "Object scanner list"),
-        (DISPATCH_FIRST, DISPATCH_LAST, "Object dispatching list"),
-    ):
-        if first <= index <= last:
+    for lst in LISTS.values():
+        if lst.first <= index <= lst.last:
             if subindex == 0:
-                return f"{name} {index - first + 1}: number of entries", 0x05
-            return f"{name} {index - first + 1}: entry {subindex}", 0x1B  # UNSIGNED64
+                return f"{lst.name} {index - lst.first + 1}: number of entries", 0x05
+            return f"{lst.name} {index - lst.first + 1}: entry {subindex}", lst.data_type
     return None
+
+
+def entry_fields(kind: str, entry: int) -> dict[str, int]:
+    """The fields of one list entry (LISTS[kind]); a block size of 0 reads as 1."""
+    out = {f: (entry >> at) & ((1 << bits) - 1) for f, (at, bits) in LISTS[kind].fields.items()}
+    out["block"] = max(out["block"], 1)
+    return out
+
+
+def _within(first: int, block: int, subindex: int) -> bool:
+    return first <= subindex < first + block
+
+
+def scanned(entry: int, index: int, subindex: int) -> bool:
+    """Whether an object scanner list entry lets its node send (index, sub-index)."""
+    f = entry_fields(SCANNER, entry)
+    return bool(entry) and f["index"] == index and _within(f["subindex"], f["block"], subindex)
 
 
 def dispatched(entry: int, producer: int, index: int, subindex: int) -> tuple[int, int] | None:
     """The consumer's (index, sub-index) a dispatching list entry gives a SAM frame's object
     of `producer`, else None."""
-    if not entry or entry & 0xFF != producer or (entry >> 16) & 0xFFFF != index:
+    f = entry_fields(DISPATCHER, entry)
+    if not entry or f["producer"] != producer or f["producer_index"] != index:
         return None
-    first = (entry >> 8) & 0xFF
-    block = max((entry >> 56) & 0xFF, 1)
-    if not first <= subindex < first + block:
+    if not _within(f["producer_subindex"], f["block"], subindex):
         return None
-    return (entry >> 40) & 0xFFFF, ((entry >> 32) & 0xFF) + subindex - first
+    return f["index"], f["subindex"] + subindex - f["producer_subindex"]
 
 
 class MpdoColumns(NamedTuple):
@@ -92,7 +143,8 @@ def fields(dam: bool, node: int, index: int, subindex: int) -> dict:
 
 def text(fields: dict) -> str:
     """'MPDO to node 6 0x6200:01' / 'MPDO to all nodes ...' / 'MPDO from node 5 0x2000:01
-    -> node 6 0x6200:01' (a SAM frame and the consumers' objects it is dispatched to)."""
+    -> node 6 0x6200:01' (a SAM frame and the consumers' objects it is dispatched to; marked
+    when the producer's object scanner list is known and does not hold the object)."""
     obj = f"0x{fields['index']:04X}:{fields['subindex']:02X}"
     if fields["mode"] == "dam":
         who = fields["destination"]
@@ -101,4 +153,7 @@ def text(fields: dict) -> str:
         f" -> node {d['node']} 0x{d['index']:04X}:{d['subindex']:02X}"
         for d in fields.get("dispatched", ())
     )
-    return f"MPDO from node {fields['producer']} {obj}{to}"
+    text = f"MPDO from node {fields['producer']} {obj}{to}"
+    if fields.get("scanned") is False:
+        text += f"  [not in node {fields['producer']}'s object scanner list]"
+    return text

@@ -23,6 +23,8 @@ The reference is CANopenNode's implementation, `304/CO_SRDO.c` and `304/CO_SRDO.
 - Timing as a consumer checks it (`CO_SRDO_process`, CO_SRDO.c lines 866-983): the
   inverted frame must arrive within SRVT of the normal one, and the next pair within SCT
   (the producer sends the normal frame every SCT, lines 836-842).
+- 0x1300 the GFC parameter (u8): a producer sends GFC only when it is 1 (`CO_GFCsend`,
+  304/CO_GFC.c: `if (*GFC->valid == 0x01)`).
 - GFC, the global fail-safe command: COB-ID 0x001 (`CO_CAN_ID_GFC`, 301/CO_driver.h line
   397), no data (CiA 304).
 """
@@ -46,6 +48,7 @@ CONFIG_VALID = 0x13FE
 VALID_MAGIC = 0xA5
 CRC_INDEX = 0x13FF
 GFC_COB_ID = 0x001
+GFC_PARAMETER = 0x1300  # u8, 1: GFC valid (sent)
 DEFAULT_NORMAL = 0x0FF  # + 2 * node-ID
 DEFAULT_INVERTED = 0x100  # + 2 * node-ID
 MAX_DEFAULT_NODE = 64
@@ -91,7 +94,7 @@ def default_owner(normal: int) -> int | None:
 
 
 def object_name(index: int, subindex: int) -> tuple[str, int] | None:
-    """(name, data type) of an SRDO object (0x1301-0x13FF), else None."""
+    """(name, data type) of an SRDO object (0x1300-0x13FF), else None."""
     n = comm_number(index)
     if n is not None:
         if subindex in COMM:
@@ -104,6 +107,8 @@ def object_name(index: int, subindex: int) -> tuple[str, int] | None:
             return f"SRDO{n} mapping: number of entries", U8
         kind = "normal" if subindex % 2 else "inverted"
         return f"SRDO{n} mapping: entry {subindex} ({kind})", U32
+    if index == GFC_PARAMETER and subindex == 0:
+        return "GFC parameter", U8
     if index == CONFIG_VALID and subindex == 0:
         return "SRDO configuration valid", U8
     if index == CRC_INDEX:

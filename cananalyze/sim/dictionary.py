@@ -64,7 +64,31 @@ class Dictionary:
         for index, subindex, value in self.config:
             if communication_only and not 0x1000 <= index < 0x2000:
                 continue
+            if (index, subindex) not in self.vars:
+                self._declare(index, subindex)
             self.set(index, subindex, value)
+
+    def _declare(self, index: int, subindex: int) -> None:
+        """A stored parameter the profile lacks (a network file's SRDO or MPDO lists on a
+        device whose EDS has none, or a DAM-MPDO's mapping entry on a PDO the EDS maps
+        nothing in), typed as the analyser types them (protocol/srdo.py, protocol/mpdo.py,
+        protocol/comm_objects.py); other objects the profile lacks stay absent, as before."""
+        import canopen.objectdictionary as cod
+
+        from cananalyze.protocol import mpdo, srdo
+        from cananalyze.protocol.comm_objects import comm_object
+
+        found = srdo.object_name(index, subindex) or mpdo.object_name(index, subindex)
+        is_mapping = 0x1600 <= index < 0x1800 or 0x1A00 <= index < 0x1C00
+        if found is None and is_mapping and index in self.indices:
+            found = comm_object(index, subindex)
+        if found is None:
+            return
+        var = cod.ODVariable(found[0], index, subindex)
+        var.data_type, var.access_type = found[1], "rw"
+        self.indices.add(index)
+        self.vars[(index, subindex)] = var
+        self.values[(index, subindex)] = bytes(var.encode_raw(0))
 
     def _default(self, var) -> bytes:
         value = self.profile.value(var.index, var.subindex, self.node_id)

@@ -17,6 +17,7 @@ from cananalyze.devices.profile import DeviceProfile
 from cananalyze.protocol import nmt
 from cananalyze.protocol.emcy import register_for
 from cananalyze.protocol.nmt import BOOTUP, OPERATIONAL, PRE_OPERATIONAL, STOPPED
+from cananalyze.sim import mpdo_producer, srdo_producer
 from cananalyze.sim.dictionary import Dictionary
 from cananalyze.sim.engine import Simulation
 from cananalyze.sim.sdo_server import SdoServer
@@ -35,6 +36,7 @@ class Tpdo:
     pending: bool = False
     timer_token: int = 0
     snapshot: bytes | None = None  # type 252: data sampled at the last SYNC
+    mpdo_sent: int = 0  # an MPDO's frames so far: the next carries the next object
 
 
 @dataclass
@@ -44,6 +46,8 @@ class Faults:
     heartbeat_off: list[tuple[float, float]] = field(default_factory=list)
     sdo_mute: list[tuple[float, float]] = field(default_factory=list)
     timer_stall: list[tuple[float, float]] = field(default_factory=list)
+    srdo_not_inverted: list[tuple[float, float]] = field(default_factory=list)
+    srdo_late: list[tuple[float, float]] = field(default_factory=list)  # past SRVT
 
     @staticmethod
     def inside(windows: list[tuple[float, float]], t: float) -> bool:
@@ -81,6 +85,11 @@ class SimNode:
         self._rpdo_pending: dict[int, bytes] = {}  # synchronous RPDOs wait for the next SYNC
         self._guard_token = 0
         self.life_guard_emcy = life_guard_emcy_for(profile.key)
+
+    @property
+    def generation(self) -> int:
+        """Bumped on every reset and PDO restart: events of an older one are dropped."""
+        return self._gen
 
     # --- life cycle ---------------------------------------------------------------------
     def start(self, sim: Simulation) -> None:
@@ -217,8 +226,12 @@ class SimNode:
         )
 
     def tpdo_payload(self, n: int) -> bytes:
-        """The mapped objects of TPDO n, packed little-endian bit by bit (CiA 301 7.4.7)."""
+        """The mapped objects of TPDO n, packed little-endian bit by bit (CiA 301 7.4.7);
+        an MPDO's next frame (mpdo_producer)."""
         base = 0x1A00 + n - 1
+        if mpdo_producer.mode(self.od, n) is not None:
+            pdo = self.tpdos.get(n)
+            return mpdo_producer.frame(self.od, self.node_id, n, pdo.mpdo_sent if pdo else 0)
         acc = bits = 0
         for sub in range(1, self.od.get(base, 0) + 1):
             word = self.od.get(base, sub)
@@ -249,6 +262,7 @@ class SimNode:
             self.tpdos[n] = Tpdo(n)
             if params[1] and params[3] >= 254 and params[5] > 0:
                 self._arm_timer(n, params[5])
+        srdo_producer.start(self)
         self.sim.after(0.0, lambda: self._scan(gen))
 
     def _scan(self, gen: int) -> None:
@@ -257,8 +271,8 @@ class SimNode:
         self._sample_inputs()
         for n in self.tpdos:
             params = self.tpdo_params(n)
-            if params and params[1] and params[3] >= 254:
-                self._maybe_send(n, params)
+            if params and params[1] and params[3] >= 254 and not self._mpdo(n):
+                self._maybe_send(n, params)  # an MPDO's objects take turns: by its timer only
         self.sim.after(SCAN_PERIOD, lambda: self._scan(gen))
 
     def _maybe_send(self, n: int, params) -> None:
@@ -290,11 +304,18 @@ class SimNode:
         pdo = self.tpdos.setdefault(n, Tpdo(n))
         self._sample_inputs()
         payload = self.tpdo_payload(n)
+        if self._mpdo(n):
+            if not payload:
+                return  # no object to send
+            pdo.mpdo_sent += 1
         pdo.last = payload
         # the inhibit time runs from when the frame really went out (the bus may have been busy)
         pdo.last_sent = self.sim.send(self, params[0], payload)
         if params[3] >= 254 and params[5] > 0:
             self._arm_timer(n, params[5])
+
+    def _mpdo(self, n: int) -> bool:
+        return mpdo_producer.mode(self.od, n) is not None
 
     def _arm_timer(self, n: int, period: float) -> None:
         pdo = self.tpdos[n]

@@ -6,4 +6,11 @@ can list them without importing the simulator and numpy.
 
 from __future__ import annotations
 
-SCENARIO_NAMES = ("steady", "commissioning", "faults", "commissioning-faults")
+SCENARIO_NAMES = (
+    "steady",
+    "commissioning",
+    "faults",
+    "commissioning-faults",
+    "safety",
+    "safety-faults",
+)

@@ -320,6 +320,30 @@ def commissioning_faults(nodes: Nodes, duration: float):
     yield Until(duration)
 
 
+# safety-faults: (start, end) s of each SRDO fault: the first pair in it has it
+SRDO_FAULTS = {"srdo_not_inverted": (2.0, 3.0), "srdo_late": (3.0, 4.0)}
+
+
+def safety(nodes: Nodes, duration: float):
+    """Steady operation of a network file's safety and multiplexed traffic: the nodes'
+    SRDOs (`[nodes.N.srdo.K]`) and MPDOs (a TPDO's `mpdo`, `object_scanner_list`) run on
+    their own once started (sim/srdo_producer.py, sim/mpdo_producer.py)."""
+    yield from steady(nodes, duration)
+
+
+def safety_faults(nodes: Nodes, duration: float):
+    """`safety` with, from SRDO_FAULTS, one SRDO pair whose inverted frame is not the bit
+    inversion (at 2 s) and one whose inverted frame comes past SRVT (at 3 s)."""
+
+    def inject() -> None:
+        for node in nodes.values():
+            for fault, window in SRDO_FAULTS.items():
+                getattr(node.faults, fault).append(window)
+
+    yield Do(inject)
+    yield from steady(nodes, duration)
+
+
 # each name is the script of the same name ("-" for "_")
 SCENARIOS = {name: globals()[name.replace("-", "_")] for name in SCENARIO_NAMES}
 

@@ -372,3 +372,24 @@ def test_srdo_from_the_eds(tmp_path):
     f = cap.findings
     assert list(f.rule) == ["srdo"] and "refresh time SCT 20 ms" in f.message[0]
     assert f["basis"][0] == "0x1301:2 profile default"
+
+
+def test_a_log_ending_inside_the_windows_says_nothing(tmp_path, config_frames):
+    """The last pair's SCT window, and the last normal frame's SRVT window, run past the
+    end of the log: what comes after is not in it, so neither is a finding (the API and
+    `check --json`, read back with json)."""
+    rows = _stream(config_frames)
+    rows.append((rows[-1][0] + 0.019, NORMAL, srdo_pair(0x99)[0]))  # inverted not logged
+    rows.append((rows[-1][0] + 0.004, 0x705, bytes([0x05])))  # the log ends 4 ms later
+    log = _log(tmp_path, rows)
+    assert _findings(log).empty
+    out = tmp_path / "findings.json"
+    run = [sys.executable, "-m", "cananalyze", "check", str(log), "--json", str(out)]
+    done = subprocess.run(run, capture_output=True, text=True, cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    assert json.loads(out.read_text()) == []
+    # the same log with the last pair's inverted frame corrupted: that pair is judged
+    k = max(i for i, r in enumerate(rows) if r[1] == INVERTED)
+    rows[k] = (rows[k][0], INVERTED, b"\x00\x00")
+    f = _findings(_log(tmp_path, rows))
+    assert len(f) == 1 and "is not the bit inversion" in f.message[0]

@@ -130,3 +130,81 @@ def test_sam_value_dispatched_to_the_consumer_object(tmp_path):
     assert "TPDO2 MPDO from node 5 0x2000:02 -> node 6 0x6200:02  digital_outputs_9_16=129" in out
     assert "TPDO2 MPDO from node 5 0x2000:03  obj_2000_03=7" in out
     assert "SDO write 0x1FD0:01 Object dispatching list 1: entry 1" in out
+
+
+# node 5's object scanner list 1, entry 1 (CiA 301 v4.2.0 7.5.2, objects 1FA0h-1FCFh,
+# UNSIGNED32): block size 2 (bits 24-31) | index 0x2000 (bits 8-23) | first sub-index 1 (0-7)
+SCANNER_ENTRY = (2 << 24) | (0x2000 << 8) | 0x01
+
+
+def _scanner_log(tmp_path: Path, config: list) -> Path:
+    rows = [(0.1 + 0.001 * k, cid, data) for k, (cid, data) in enumerate(config)]
+    rows += [
+        (1.0, 0x285, sam(PRODUCER, 0x2000, 2, b"\x81")),  # within the scanner list's block
+        (1.1, 0x285, sam(PRODUCER, 0x2000, 3, b"\x07")),  # past it: not the node's to send
+    ]
+    log = tmp_path / "scan.log"
+    text = [f"({t:.6f}) can0 {cid:03X}#{data.hex().upper()}" for t, cid, data in rows]
+    log.write_text("\n".join(text) + "\n")
+    return log
+
+
+def _sam_frames(log: Path, *extra: str) -> list[dict]:
+    run = [sys.executable, "-m", "cananalyze", "decode", str(log), "--format", "jsonl", *extra]
+    out = subprocess.run(run, capture_output=True, text=True, check=True, cwd=ROOT).stdout
+    return [r for r in map(json.loads, out.splitlines()) if r.get("service") == "tpdo"]
+
+
+def test_sam_object_checked_against_the_producers_scanner_list_from_the_log(tmp_path):
+    """The scanner list written by python-canopen's SDO client (segmented: UNSIGNED32 as 4
+    bytes expedited would do too) says node 5 may send 0x2000:01..02: a SAM frame of
+    0x2000:03 is marked, in JSONL (`mpdo.scanned`) and the text."""
+    od = _od()
+    lst = ODRecord("Object scanner list 1", 0x1FA0)
+    lst.add_member(variable(0x1FA0, 0, "Number of entries", UNSIGNED8, "rw", 1))
+    lst.add_member(variable(0x1FA0, 1, "Entry 1", UNSIGNED32, "rw", 0))
+    od.add_object(lst)
+    writes = sdo_download_frames(
+        PRODUCER, od, [(0x1FA0, 1, SCANNER_ENTRY, 4), (0x1FA0, 0, 1, 1), (0x1A01, 0, 0xFE, 1)]
+    )
+    log = _scanner_log(tmp_path, sum(writes, []))
+    frames = _sam_frames(log)
+    assert [f["mpdo"].get("scanned") for f in frames] == [True, False]
+    run = [sys.executable, "-m", "cananalyze", "decode", str(log)]
+    out = subprocess.run(run, capture_output=True, text=True, check=True, cwd=ROOT).stdout
+    assert "MPDO from node 5 0x2000:02  obj_2000_02=129" in out
+    assert "MPDO from node 5 0x2000:03  [not in node 5's object scanner list]" in out
+    assert "SDO write 0x1FA0:01 Object scanner list 1: entry 1" in out
+
+
+def test_scanner_list_and_sam_mode_from_the_network_file(tmp_path):
+    """The network file's `object_scanner_list` and a TPDO's `mpdo = "sam"` (no SDO in the
+    log) configure the same; without a scanner list nothing is marked."""
+    net = tmp_path / "net.toml"
+    net.write_text(
+        f"[nodes.{PRODUCER}]\nobject_scanner_list = [0x{SCANNER_ENTRY:08X}]\n"
+        f'[nodes.{PRODUCER}.tpdo.2]\nmpdo = "sam"\n'
+    )
+    log = _scanner_log(tmp_path, [])
+    frames = _sam_frames(log, "--network", str(net))
+    assert [f["mpdo"].get("scanned") for f in frames] == [True, False]
+    assert [f["signals"] for f in frames] == [{"obj_2000_02": 0x81}, {"obj_2000_03": 7}]
+    net.write_text(f'[nodes.{PRODUCER}.tpdo.2]\nmpdo = "sam"\n')
+    assert [f["mpdo"].get("scanned") for f in _sam_frames(log, "--network", str(net))] == [
+        None,
+        None,
+    ]
+
+
+def test_network_file_mpdo_errors_name_the_file(tmp_path):
+    net = tmp_path / "net.toml"
+    log = _scanner_log(tmp_path, [])
+    for text, what in (
+        (f'[nodes.{PRODUCER}.tpdo.2]\nmpdo = "both"\n', "mpdo"),
+        (f"[nodes.{PRODUCER}]\nobject_scanner_list = [0x1FFFFFFFF]\n", "object_scanner_list"),
+    ):
+        net.write_text(text)
+        run = [sys.executable, "-m", "cananalyze", "decode", str(log), "--network", str(net)]
+        done = subprocess.run(run, capture_output=True, text=True, cwd=ROOT)
+        assert done.returncode != 0 and "Traceback" not in done.stderr
+        assert str(net) in done.stderr and what in done.stderr
