@@ -19,7 +19,7 @@ import numpy as np
 from cananalyze.config.timeline import EVERY_NODE
 from cananalyze.core.finding import rel_time
 from cananalyze.decode.model import NetworkModel
-from cananalyze.protocol.pdo_map import PdoConfig
+from cananalyze.protocol.pdo_map import PdoConfig, split_cob_id
 from cananalyze.protocol.srdo import SrdoConfig
 
 
@@ -107,6 +107,17 @@ class ModelConfig:
         if cfg is not None:
             out.update((0x1800 if d == "tx" else 0x1400) + n - 1 for d, n in cfg.pdos)
         return [(c, c + 0x200) for c in sorted(out)]
+
+    def pdo_cob_ids(self, node: int, t: float) -> list[tuple[int, int, int, bool]]:
+        """(communication index, mapping index, COB-ID word, valid) of each PDO of a node
+        whose COB-ID anything gives at t: who produces (TPDO) or consumes (RPDO) which
+        COB-ID, as the consistency rule and the report's network page read it."""
+        out = []
+        for comm, mapping in self.pdo_numbers(node):
+            value = self.raw(node, comm, 1, t)
+            if value is not None:
+                out.append((comm, mapping, value, split_cob_id(value)[1]))
+        return out
 
     def _add_pdo(self, node: int, index: int) -> None:
         if 0x1400 <= index <= 0x1BFF:

@@ -36,7 +36,11 @@ BOLD = "<b>B</b><br>"  # plotly's own markup: in a figure's text it must stay te
 TAGS = {"html", "head", "meta", "title", "style", "script", "body", "h1", "h2", "h3", "p"}
 TAGS |= {"nav", "a", "section", "div", "b", "table", "thead", "tbody", "tr", "th", "td"}
 TAGS |= {"details", "summary", "ul", "li", "code"}
+TAGS |= {"svg", "defs", "marker", "path", "line", "circle", "text"}  # the network page
 ATTRS = {"lang", "charset", "type", "id", "class", "href"}
+ATTRS |= {"width", "height", "viewbox", "role", "aria-label", "refx", "refy", "markerwidth"}
+ATTRS |= {"markerheight", "orient", "d", "fill", "x1", "y1", "x2", "y2", "marker-end"}
+ATTRS |= {"x", "y", "cx", "cy", "r"}
 SCRIPTS = 3  # plotly.js and the figures (both packed text), the loader
 
 

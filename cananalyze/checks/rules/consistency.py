@@ -267,10 +267,7 @@ class ConsistencyRule(Rule):
                 claims.append(((cob, bool(value & 0x20000000)), c))
             return valid and bool(cob)
 
-        for comm, mapping in cfg.pdo_numbers(node):
-            value = cfg.raw(node, comm, 1, t)
-            if value is None:
-                continue
+        for comm, mapping, value, _ in cfg.pdo_cob_ids(node, t):
             said.add(comm)
             tx = comm >= 0x1800
             number = (comm & 0x1FF) + 1

@@ -31,7 +31,7 @@ h3{font-size:15px;margin:16px 0 4px}
 .verdict{font-size:18px;padding:10px 14px;border-radius:6px;margin:8px 0}
 .verdict.pass{background:#e3f5e1;border:1px solid #2ca02c}
 .verdict.fail{background:#fde4e1;border:1px solid #d62728}
-.small{font-size:12px;color:#666}.warn{color:#a15c00}
+.small{font-size:12px;color:#666}.net line{stroke:#557;stroke-width:1.5}.net line.hb{stroke:#999;stroke-dasharray:5 4}.net line.red{stroke:#c00;stroke-width:2.5}.net circle{fill:#fff;stroke:#335;stroke-width:2}.net circle.red{stroke:#c00;fill:#fdd}.net circle.other{stroke:#999;stroke-dasharray:3 3}.net text{font-size:11px;text-anchor:middle}.warn{color:#a15c00}
 table{border-collapse:collapse;font-size:13px;margin:6px 0}
 td,th{border:1px solid #ddd;padding:3px 7px;text-align:left}th{background:#f5f5f5}
 details.finding{margin:4px 0;padding:4px 8px;border-left:4px solid #999;font-size:13px}
@@ -109,6 +109,7 @@ NAV = (
     ("sdo", "sdo", "SDO"),
     ("emcy", "emcy", "EMCY"),
     ("pdos", "pdo", "PDO"),
+    ("network", "network", "Network"),
     ("sync_latency", "sync", "SYNC"),
     ("signals", "signals", "Signals"),
     ("drive_states", "drive", "Drive states"),

@@ -10,6 +10,7 @@ show what was measured beside what was configured.
 from __future__ import annotations
 
 import hashlib
+import math
 import re
 from collections import defaultdict
 from typing import NamedTuple
@@ -608,6 +609,118 @@ def lss(s, figs: Figures) -> dict | None:
     }
 
 
+MAX_NET_NODES = 48  # a picture beyond that is unreadable; the table lists every relation
+OTHER = -1  # the network page's circle for a producer or consumer no configuration names
+
+
+def network(s, figs: Figures) -> dict | None:
+    """The network page: per bus, who produces which PDO and who consumes it, and who
+    watches whose heartbeat, as the configuration in force at the end of the log says
+    (the log's SDO writes, the network file, the profiles: `ModelConfig`, as the checks
+    read it); what the `consistency` rule found contradictory is drawn in red."""
+    configs = _Configs(s)
+    t = s.t_last or 0.0
+    out, rows = [], []
+    for bus in sorted(s.buses) if s.several else [""]:
+        cfg = configs[bus]
+        if cfg is None:
+            continue
+        red_cob, red_node = set(), set()
+        for f in s.findings:
+            if f.rule == "consistency" and (not s.several or (f.bus or "") == bus):
+                if f.cob_id is not None:
+                    red_cob.add(f.cob_id)
+                if f.node is not None:
+                    red_node.add(f.node)
+        producers: dict[int, list[int]] = defaultdict(list)
+        consumers: dict[int, list[int]] = defaultdict(list)
+        watches: list[tuple[int, int, float]] = []  # (producer, consumer, ms)
+        nodes = set()
+        for node in cfg.configured_nodes():
+            for comm, _, value, valid in cfg.pdo_cob_ids(node, t):
+                cob = value & 0x1FFFFFFF if value & 0x20000000 else value & 0x7FF
+                if valid and cob:
+                    (producers if comm >= 0x1800 else consumers)[cob].append(node)
+                    nodes.add(node)
+            for producer, ms in cfg.heartbeat_consumers(node, t).items():
+                watches.append((producer, node, ms))
+                nodes.update((producer, node))
+        if not nodes:
+            continue
+        who = [n for n in sorted(nodes)][:MAX_NET_NODES]
+        size = 360 if len(who) <= 12 else 520
+        r = size / 2 - 40
+        at = {
+            n: (
+                round(size / 2 + r * math.sin(2 * math.pi * k / len(who)), 1),
+                round(size / 2 - r * math.cos(2 * math.pi * k / len(who)), 1),
+            )
+            for k, n in enumerate(who)
+        }
+        at[OTHER] = (size / 2, size / 2)
+        edges: list[dict] = []
+
+        b = [bus] if s.several else []
+        for cob in sorted(set(producers) | set(consumers)):
+            red = cob in red_cob
+            cls = "pdo red" if red else "pdo"
+            # a side the configuration does not name (the master, a node not declared):
+            # the "other" circle in the middle
+            for p in producers.get(cob) or [OTHER]:
+                for c in consumers.get(cob) or [OTHER]:
+                    edges += _edge(at, p, c, f"0x{cob:03X}", cls)
+            rows.append(
+                [
+                    *b,
+                    "PDO",
+                    ", ".join(map(str, producers.get(cob, []))) or "-",
+                    ", ".join(map(str, consumers.get(cob, []))) or "-",
+                    f"0x{cob:03X}",
+                    "contradiction (consistency)" if red else "",
+                ]
+            )
+        for producer, consumer, ms in sorted(watches):
+            red = consumer in red_node and producer in red_node
+            edges += _edge(at, producer, consumer, f"{ms:g} ms", "hb red" if red else "hb")
+            rows.append([*b, "heartbeat watch", str(producer), str(consumer), "-", ""])
+        out.append(
+            {
+                "label": bus,
+                "size": size,
+                "edges": edges,
+                "nodes": [
+                    {"x": at[n][0], "y": at[n][1], "label": str(n), "cls": "red" * (n in red_node)}
+                    for n in who
+                ]
+                + [{"x": size / 2, "y": size / 2, "label": "other", "cls": "other"}],
+            }
+        )
+    if not out:
+        return None
+    head = (["bus"] if s.several else []) + ["relation", "from", "to", "COB-ID", "note"]
+    return {"buses": out, "head": head, "rows": rows}
+
+
+def _edge(at: dict, a: int, b: int, label: str, cls: str) -> list[dict]:
+    """An arrow from node a's circle to node b's (none when either is not drawn)."""
+    if a not in at or b not in at or a == b:
+        return []
+    (x1, y1), (x2, y2) = at[a], at[b]
+    k = 20 / (math.hypot(x2 - x1, y2 - y1) or 1.0)  # from circle edge to circle edge
+    return [
+        {
+            "x1": round(x1 + (x2 - x1) * k, 1),
+            "y1": round(y1 + (y2 - y1) * k, 1),
+            "x2": round(x2 - (x2 - x1) * k, 1),
+            "y2": round(y2 - (y2 - y1) * k, 1),
+            "lx": round((x1 + x2) / 2, 1),
+            "ly": round((y1 + y2) / 2 - 3, 1),
+            "label": label,
+            "cls": cls,
+        }
+    ]
+
+
 SECTIONS = [verdict, buses, findings, differences, nodes, boot, lss, sdo, emcy, pdos]
-SECTIONS += [sync_latency]
+SECTIONS += [network, sync_latency]
 SECTIONS += [signals, drive_states]

@@ -175,6 +175,32 @@ SECTIONS = """
   {{ " " }}or profile (EDS/DCF).</p></section>
 {% endmacro %}
 
+{% macro network(s) %}
+  <section id="network"><h2>Network</h2>
+  {% for b in s.buses %}
+    {% if b.label %}<h3>{{ b.label }}</h3>{% endif %}
+    <svg class=net width="{{ b.size }}" height="{{ b.size }}" viewBox="0 0 {{ b.size }} {{ b.size }}" role=img aria-label="who produces and consumes which PDO, who watches whose heartbeat">
+    <defs><marker id="arrow{{ loop.index }}" viewBox="0 0 10 10" refX="10" refY="5" markerWidth="7" markerHeight="7" orient="auto"><path d="M0 0L10 5L0 10z" fill="#557"/></marker></defs>
+    {% set arrow = "url(#arrow" ~ loop.index ~ ")" %}
+    {% for e in b.edges %}
+      <line x1="{{ e.x1 }}" y1="{{ e.y1 }}" x2="{{ e.x2 }}" y2="{{ e.y2 }}" class="{{ e.cls }}" marker-end="{{ arrow }}"/>
+      <text x="{{ e.lx }}" y="{{ e.ly }}">{{ e.label }}</text>
+    {% endfor %}
+    {% for n in b.nodes %}
+      <circle cx="{{ n.x }}" cy="{{ n.y }}" r="18" class="{{ n.cls }}"/>
+      <text x="{{ n.x }}" y="{{ n.y + 4 }}">{{ n.label }}</text>
+    {% endfor %}
+    </svg>
+  {% endfor %}
+  {{ table(s.head, s.rows) }}
+  <p class=small>The configuration in force at the end of the log (SDO writes in the log, the
+  {{ " " }}network file, the profiles): solid arrows from a PDO's producer to each consumer,
+  {{ " " }}dashed ones from a heartbeat producer to the node that watches it (0x1016); "other":
+  {{ " " }}a producer or consumer no configuration names (often the master); red:
+  {{ " " }}what the consistency rule found contradictory.</p>
+  </section>
+{% endmacro %}
+
 {% macro sync_latency(s) %}
   <section id="sync"><h2>Synchronous PDOs after SYNC</h2>
   {{ table(["COB-ID", "node", "PDO", "type", "frames", "min ms", "median ms", "p99 ms",
