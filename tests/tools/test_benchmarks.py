@@ -76,6 +76,43 @@ def logs(tmp_path_factory) -> Path:
     return out
 
 
+DEVICES = [a for k in range(1, 17) for a in ("--device", f"{k}=dat7014")]
+
+
+def _check(log: Path, json_out: Path) -> tuple[int, list]:
+    """`check` as bench_decode runs it (16 devices): its exit code and its findings, read
+    back from --json with the json module."""
+    import json
+
+    done = subprocess.run(
+        [sys.executable, "-m", "cananalyze", "check", str(log), *DEVICES, "--json", str(json_out)],
+        capture_output=True, text=True, cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode in (0, 1), done.stderr
+    return done.returncode, json.loads(json_out.read_text())
+
+
+def test_generated_healthy_bus_passes_check_and_faulty_bus_does_not(tmp_path):
+    """The benchmarks' bus is a bus users have: `check` exits 0 with no finding on it,
+    though it carries EMCYs (each saying "no error", read back by python-can); the
+    --faults bus, for the checks' cost, gives findings of several rules."""
+    import can
+
+    healthy, faulty = tmp_path / "healthy", tmp_path / "faulty"
+    _run("generate.py", "10000", str(healthy), ".log")
+    _run("generate.py", "10000", str(faulty), ".log", "--faults")
+    emcy = [
+        m
+        for m in can.LogReader(str(healthy.with_suffix(".log")))
+        if 0x81 <= m.arbitration_id <= 0x90
+    ]
+    assert len(emcy) > 20 and all(bytes(m.data[:3]) == bytes(3) for m in emcy)
+    code, found = _check(healthy.with_suffix(".log"), tmp_path / "h.json")
+    assert code == 0 and found == []
+    code, found = _check(faulty.with_suffix(".log"), tmp_path / "f.json")
+    assert code == 1 and len({f["rule"] for f in found}) >= 3, found[:3]
+
+
 def test_bench_check(logs):
     lines = _run("bench_check.py", "3000", "1", "--out", str(logs)).stdout.splitlines()
     assert re.fullmatch(rf"decode --summary +best CPU +{NUMBER} s +best wall +{NUMBER} s", lines[0])
