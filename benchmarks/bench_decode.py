@@ -12,7 +12,9 @@ machine (wall time swings by a third with its load), so the targets are CPU
 ratios, and every ratio's two sides run in the same rounds, one after the other
 (per format: export, decode --summary, the reader alone, python-can's `LogReader`
 iterating the same file, canopen-lens's C++ core on the candump log; on the first,
-check too). Wall figures follow, each with the 1-minute load average when its
+check too, which must exit 0: the generator's bus is healthy). The checks' cost where
+they find something is measured on the generator's faulty bus (`--faults`): check
+over decode --summary on that log. Wall figures follow, each with the 1-minute load average when its
 best run started. The headline command is the issue's "decoded tables written as
 Parquet": `cananalyze export LOG --parquet DIR --device N=dat7014 (N=1..16) -q`, so
 PDOs are decoded into signals. canopen-lens (`pip install -e ".[bench]"`) parses
@@ -160,17 +162,18 @@ def measured(cmd: list[str], repeat: int, ok: tuple[int, ...] = (0,)) -> Run:
     return run
 
 
-def ensure(out: Path, n: int, suffixes: list[str], made: list[Path]) -> Path:
-    """The generator's n-frame logs, generated when missing (the time it took is printed)."""
-    stem = log_stem(out, n)
+def ensure(out: Path, n: int, suffixes: list[str], made: list[Path], faults: bool = False) -> Path:
+    """The generator's n-frame logs, generated when missing (the time it took is printed);
+    `faults`: its faulty bus's."""
+    stem = log_stem(out, n, faults)
     missing = [s for s in suffixes if not stem.with_suffix(s).exists()]
     if missing:
         t = time.perf_counter()
-        print(f"generating {n:,} frames as {','.join(missing)} in {out} ...", flush=True)
+        bus = "faulty bus " if faults else ""
+        print(f"generating {n:,} frames ({bus}{','.join(missing)}) in {out} ...", flush=True)
+        argv = [sys.executable, str(HERE / "generate.py"), str(n), str(stem), ",".join(missing)]
         subprocess.run(
-            [sys.executable, str(HERE / "generate.py"), str(n), str(stem), ",".join(missing)],
-            check=True,
-            stdout=subprocess.DEVNULL,
+            argv + (["--faults"] if faults else []), check=True, stdout=subprocess.DEVNULL
         )
         made += [stem.with_suffix(s) for s in missing]
         print(f"  took {time.perf_counter() - t:.1f} s", flush=True)
@@ -281,10 +284,14 @@ def main(argv: list[str]) -> int:
     return 0
 
 
-def commands(stem: Path, formats: list[str], tmp: Path, timeline_log: Path) -> list[tuple]:
+def commands(
+    stem: Path, formats: list[str], tmp: Path, timeline_log: Path, faulty_log: Path
+) -> list[tuple]:
     """Every figure's command: (label, command line, exit codes that are fine, file or
     folder the run leaves behind). The headline exports, decode --summary, the reader
-    alone and check per format, the text outputs, the timeline exports, start-up."""
+    alone and check per format (check on the healthy bus must exit 0; on the faulty bus,
+    `faulty_log`, beside its own decode --summary, it exits 1), the text outputs, the
+    timeline exports, start-up."""
     out = []
     pq = tmp / "pq"
     for k, suffix in enumerate(formats):
@@ -295,7 +302,11 @@ def commands(stem: Path, formats: list[str], tmp: Path, timeline_log: Path) -> l
         out.append((f"decode --summary {suffix}", summary, (0,), None))
         out.append((f"read only {suffix}", [sys.executable, "-c", READER, log], (0,), None))
         if k == 0:  # check's overhead over the same decode
-            out.append((f"check {suffix}", CLI + ["check", log, *DEVICES], (0, 1), None))
+            out.append((f"check {suffix}", CLI + ["check", log, *DEVICES], (0,), None))
+    bad = str(faulty_log)
+    summary = CLI + ["decode", bad, "--summary", *DEVICES]
+    out.append(("decode --summary (faulty bus .log)", summary, (0,), None))
+    out.append(("check (faulty bus .log)", CLI + ["check", bad, *DEVICES], (1,), None))
     log = str(stem.with_suffix(formats[0]))
     dest = tmp / "out.txt"
     for devices, fmt, what in (
@@ -360,9 +371,11 @@ def compare(args, n: int, formats: list[str], made: list[Path]) -> list[str]:
         _compile(tree)
     stem = ensure(args.out, n, formats, made)
     timeline_log = ensure(args.out, n, [".log"], made).with_suffix(".log")
+    faulty_log = ensure(args.out, n, [".log"], made, faults=True).with_suffix(".log")
     pairs = []
     with tempfile.TemporaryDirectory(dir=args.out) as tmp:
-        for label, argv, ok, leaves in commands(stem, formats, Path(tmp), timeline_log):
+        every = commands(stem, formats, Path(tmp), timeline_log, faulty_log)
+        for label, argv, ok, leaves in every:
             if args.only and args.only not in label:
                 continue
             mine = Run(argv, ok, ROOT, strict=False, after=_remove(leaves))
@@ -405,8 +418,10 @@ def measure(args, n: int, formats: list[str], made: list[Path]) -> list[tuple[st
     with tempfile.TemporaryDirectory(dir=args.out) as tmp:
         pq = Path(tmp) / "pq"
         timeline_log = ensure(args.out, n, [".log"], made).with_suffix(".log")
+        faulty_log = ensure(args.out, n, [".log"], made, faults=True).with_suffix(".log")
         # the same commands --against runs, by label
-        cmd = {c[0]: (c[1], c[2]) for c in commands(stem, formats, Path(tmp), timeline_log)}
+        every = commands(stem, formats, Path(tmp), timeline_log, faulty_log)
+        cmd = {c[0]: (c[1], c[2]) for c in every}
         for k, suffix in enumerate(formats):
             log = stem.with_suffix(suffix)
             f = {
@@ -424,6 +439,13 @@ def measure(args, n: int, formats: list[str], made: list[Path]) -> list[tuple[st
             rounds([run for run in f.values() if run is not None], args.repeat)
             shutil.rmtree(pq, ignore_errors=True)
             per_format[suffix] = f
+        # the checks' cost where they find something: the faulty bus, check over its decode
+        print("faulty bus: decode --summary, check ...", flush=True)
+        faulty = {
+            "summary": Run(*cmd["decode --summary (faulty bus .log)"]),
+            "check": Run(*cmd["check (faulty bus .log)"]),
+        }
+        rounds(list(faulty.values()), args.repeat)
         print("text output ...", flush=True)
         text_runs = []
         for what in ("no devices", "16 devices", "no devices, jsonl"):
@@ -458,7 +480,7 @@ def measure(args, n: int, formats: list[str], made: list[Path]) -> list[tuple[st
                 flat.append((size, run))
         help_run = measured(cmd["cananalyze --help"][0], max(5, args.repeat))
     return (
-        cpu_rows(per_format, formats)
+        cpu_rows(per_format, formats, faulty)
         + wall_rows(per_format, formats, n, text_runs, timelines)
         + memory_rows(per_format, flat, n, args.flat)
         + [("cananalyze --help", f"{help_run.wall:.3f} s", "< 0.3 s", mark(help_run.wall < 0.3))]
@@ -482,8 +504,10 @@ def _per_round(pycan: Run, export: Run, suffix: str) -> tuple[str, str, str, str
     return (name, f"{mid:5.1f}x median ({got[0]:.1f}x-{got[-1]:.1f}x, {len(got)} rounds)", "", "")
 
 
-def cpu_rows(per_format: dict, formats: list[str]) -> list[tuple[str, str, str, str]]:
-    """1. CPU seconds (user + system): the issue's targets are these ratios."""
+def cpu_rows(per_format: dict, formats: list[str], faulty: dict) -> list[tuple[str, str, str, str]]:
+    """1. CPU seconds (user + system): the issue's targets are these ratios. check's
+    overhead on the healthy bus (the target) and on the faulty one (`faulty`: its
+    decode --summary and check runs)."""
     rows = [(f"{HEADING}CPU seconds (user + system), both sides in the same rounds", "", "", "")]
     for suffix, f in per_format.items():
         pc, export = f["pycan"], f["export"]
@@ -538,6 +562,16 @@ def cpu_rows(per_format: dict, formats: list[str]) -> list[tuple[str, str, str, 
             f"{100 * over:+5.1f} %  ({check.cpu:.2f} s vs {base.cpu:.2f} s)",
             "<= +25 %",
             mark(over <= 0.25),
+        )
+    )
+    check, base = faulty["check"], faulty["summary"]
+    over = check.cpu / base.cpu - 1
+    rows.append(
+        (
+            "check vs decode --summary (faulty bus .log), cpu",
+            f"{100 * over:+5.1f} %  ({check.cpu:.2f} s vs {base.cpu:.2f} s)",
+            "(reference)",
+            "",
         )
     )
     return rows

@@ -10,7 +10,7 @@ what python-can's ASCWriter writes, which takes ~14 s per 1M frames), BLF by
 python-can (~8 s per 1M frames).
 
     python benchmarks/generate.py 1000000 benchmarks/out/bench_1m   # .log .asc .blf
-    python benchmarks/generate.py 1000000 benchmarks/out/faulty_1m .log --faults
+    python benchmarks/generate.py 1000000 benchmarks/out/faulty_1m .log --faults  # for check
 """
 
 from __future__ import annotations
@@ -38,9 +38,10 @@ START = 1767225600.0
 VERSION = 3
 
 
-def log_stem(out: Path, n: int) -> Path:
-    """Where the benchmarks keep the n-frame logs (suffix added per format)."""
-    return out / f"bench_v{VERSION}_{n}"
+def log_stem(out: Path, n: int, faults: bool = False) -> Path:
+    """Where the benchmarks keep the n-frame logs (suffix added per format); `faults`:
+    those of the faulty bus."""
+    return out / f"{'faulty' if faults else 'bench'}_v{VERSION}_{n}"
 
 
 def generate(n: int, seed: int = 1, faults: bool = False) -> FrameBatch:

@@ -218,6 +218,7 @@ def test_bench_decode_prints_every_figure(logs):
         "python-can LogReader / read only .log, cpu",
         "python-can timed on",
         "check vs decode --summary (.log), cpu",
+        "check vs decode --summary (faulty bus .log), cpu",
         "-- wall seconds, the 1-minute load average beside",
         "export --parquet .log frames/s",
         "python-can LogReader / export --parquet .log, wall",
@@ -257,6 +258,10 @@ def test_bench_decode_prints_every_figure(logs):
         capture_output=True, text=True, check=True, cwd=ROOT,
     ).stdout  # fmt: skip
     assert f"({text.count(chr(10)):,} lines," in out
+    # check exits 0 on the healthy bus (a run that exits 1 ends the benchmark), 1 on the
+    # faulty one, whose overhead is measured too
+    faulty = next(line for line in table if "(faulty bus .log), cpu" in line)
+    assert re.search(rf"[+-]{NUMBER} %  \({NUMBER} s vs {NUMBER} s\) +\(reference\) *$", faulty)
     assert not list(logs.glob("tmp*"))  # its temporary outputs are gone
 
 
@@ -285,14 +290,16 @@ def test_bench_decode_against_another_tree(logs, tmp_path):
     spec = importlib.util.spec_from_file_location("bench_decode", BENCH / "bench_decode.py")
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
-    every = bench.commands(
-        log_stem(logs, 3000), [".log"], tmp_path, log_stem(logs, 3000).with_suffix(".log")
-    )
+    stem = log_stem(logs, 3000)
+    faulty = log_stem(logs, 3000, faults=True).with_suffix(".log")
+    every = bench.commands(stem, [".log"], tmp_path, stem.with_suffix(".log"), faulty)
     assert [c[0] for c in every] == [
         "export --parquet .log",
         "decode --summary .log",
         "read only .log",
         "check .log",
+        "decode --summary (faulty bus .log)",
+        "check (faulty bus .log)",
         "decode -o FILE (.log, no devices)",
         "decode -o FILE (.log, 16 devices)",
         "decode -o FILE (.log, no devices, jsonl)",
@@ -394,7 +401,7 @@ def test_bench_report_prints_cpu_wall_and_page_size(logs):
     lines = out.stdout.splitlines()
     assert len(lines) == 8
     for k, (bus, log) in enumerate(
-        (("healthy", log_stem(logs, 3000)), ("faulty", logs / "faulty_3000"))
+        (("healthy", log_stem(logs, 3000)), ("faulty", log_stem(logs, 3000, faults=True)))
     ):
         head, check, report, tail = lines[4 * k : 4 * k + 4]
         assert re.fullmatch(
