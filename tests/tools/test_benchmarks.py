@@ -358,6 +358,23 @@ def test_bench_live_keeps_every_frame(tmp_path):
     assert recorded == kept and (tmp_path / "r.rrd").stat().st_size > 0
 
 
+@pytest.mark.slow
+def test_bench_live_decodes_pdos_by_default():
+    """No option: nodes 1..16 are the DAT 7014, so PDOs are decoded as users run live;
+    --no-devices: frames only, none decoded."""
+    for extra, devices in (
+        ((), "1..16=dat7014 (default); network none"),
+        (("--no-devices",), "none; network none"),
+    ):
+        out = _run("bench_live.py", "--seconds", "1", "--rate", "2000", *extra).stdout
+        got = dict(line.split(None, 1) for line in out.splitlines())
+        assert got["devices"] == devices and got["dropped"] == "0"
+        decoded = int(got["decoded"].split()[0])
+        kept = int(got["kept"].split()[0])
+        assert got["decoded"].endswith(f"({kept} frames kept)")
+        assert (0 < decoded < kept) if not extra else decoded == 0, got["decoded"]
+
+
 def test_mem_profile_runs_the_command_and_reports_peaks(tmp_path):
     out = tmp_path / "pq"
     done = _run(
