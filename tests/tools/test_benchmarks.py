@@ -238,7 +238,7 @@ def test_bench_decode_prints_every_figure(logs):
     ]
     cpu = rf"{NUMBER}x  \({NUMBER} s / {NUMBER} s\)"
     ratio = next(line for line in table if "export --parquet .log, cpu" in line)
-    assert re.search(rf"  {cpu} +>= 9x +(ok|BELOW)$", ratio), ratio
+    assert re.search(rf"  {cpu} +>= 12x +(ok|BELOW)$", ratio), ratio
     # one round: its own ratio is the best-of ratio (the same two runs)
     per = next(line for line in table if line.strip().startswith("per round"))
     x = r"(\d+\.\d)x"
@@ -320,16 +320,28 @@ def test_bench_decode_against_a_folder_without_cananalyze(tmp_path):
 
 @pytest.mark.slow
 def test_bench_floor_table_for_every_format(logs):
-    """The library-only CPU of an export and the floor it sets, per input format."""
+    """The library-only CPU of an export (its floor) per input format, beside the export's
+    and python-can's CPU, each judged against its target."""
     lines = _run(
         "bench_floor.py", "--size", "3000", "--repeat", "1", "--out", str(logs)
     ).stdout.splitlines()
     assert any(line.startswith("  Parquet encoding of the exported tables:") for line in lines)
-    rows = {line.split()[0]: line.split() for line in lines if line[:1] == "."}
+    assert any(line.endswith("best of 1); python-can: whole file") for line in lines)
+    rows = {line.split()[0]: line for line in lines if line[:1] == "."}
     assert set(rows) == {".log", ".blf", ".asc"}
-    for cells in rows.values():
-        read, total, floor = float(cells[1]), float(cells[2]), float(cells[3].rstrip("s"))
-        assert 0 <= read < total and abs(floor - total / 2) < 0.01
+    for suffix, target in ((".log", 12), (".blf", 8), (".asc", 15)):
+        m = re.fullmatch(
+            rf"\{suffix} +({NUMBER}) +({NUMBER}) +({NUMBER})  +({NUMBER})x <= 1\.25x (ok|BELOW) +"
+            rf"({NUMBER}) +({NUMBER})x >= {target}x (ok|BELOW)",
+            rows[suffix],
+        )
+        assert m, rows[suffix]
+        read, floor, export, over = (float(m.group(k)) for k in (1, 3, 5, 7))
+        pycan, ahead = float(m.group(10)), float(m.group(12))
+        assert 0 <= read < floor and export > 0 and pycan > 0
+        assert over == pytest.approx(export / floor, abs=0.01)
+        assert ahead == pytest.approx(pycan / export, abs=0.1)
+        assert (m.group(9) == "ok") == (over <= 1.25) and (m.group(14) == "ok") == (ahead >= target)
     assert not list(logs.glob("tmp*"))  # the exported tables are cleaned up
 
 
