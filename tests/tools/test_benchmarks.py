@@ -214,6 +214,7 @@ def test_bench_decode_prints_every_figure(logs):
         "python-can LogReader / export --parquet .log, cpu",
         "per round, export --parquet .log",
         "canopen-lens / export --parquet .log, cpu",
+        *(["user + system, canopen-lens vs export"] if lens else []),
         "python-can LogReader / decode --summary .log, cpu",
         "python-can LogReader / read only .log, cpu",
         "python-can timed on",
@@ -248,6 +249,8 @@ def test_bench_decode_prints_every_figure(logs):
     lens_row = next(line for line in table if line.startswith("canopen-lens / export"))
     if lens:  # canopen-lens parsed and analysed the same log (a run that read nothing fails)
         assert re.search(rf"  {cpu} +> 1x +(ok|BELOW)$", lens_row), lens_row
+        apart = next(line for line in table if "canopen-lens vs export" in line)
+        assert re.search(rf"{NUMBER} \+ {NUMBER} s vs {NUMBER} \+ {NUMBER} s", apart), apart
     else:
         assert "not installed" in lens_row
     export = next(line for line in table if line.startswith("export --parquet .log frames/s"))
