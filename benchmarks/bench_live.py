@@ -12,7 +12,11 @@ queues), and the latency from a frame's send time to the end of its batch in the
 sink. The load average is printed: compare CPU seconds, wall time follows the machine.
 
     python benchmarks/bench_live.py [--rate 32000] [--seconds 10] [--network FILE]
-        [--device N=KEY] [--check RULES] [--plain] [--record FILE] [--rrd FILE] [--foxglove]
+        [--device N=KEY | --no-devices] [--check RULES] [--plain] [--record FILE]
+        [--rrd FILE] [--foxglove]
+
+Without --network or --device, nodes 1..16 are the DAT 7014 (as bench_decode's): PDOs
+are decoded into signals, as users run live; --no-devices: frames only.
 
 --foxglove serves the decode on 127.0.0.1 (an ephemeral port) to a Foxglove WebSocket
 client in another process, subscribed to every topic, which counts what it receives.
@@ -43,6 +47,9 @@ from cananalyze.pipeline.sink import Sink  # noqa: E402
 
 CHANNEL = "bench-live"
 DRAIN = 10.0  # s after the last send a loaded machine gets to finish the queued frames
+# the device bench_decode gives its 16 nodes (--device N=dat7014): half the producer's 32
+# nodes' PDOs decoded into signals, the others' frames only
+DEFAULT_DEVICES = [f"{k}=dat7014" for k in range(1, 17)]
 
 
 def producer(channel: str, rate: float, seconds: float, sent: list[int]) -> None:
@@ -163,7 +170,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rate", type=float, default=32_000, help="frames/s to offer (default 32000)")
     ap.add_argument("--seconds", type=float, default=10.0, help="how long to send (default 10)")
     ap.add_argument("--network", help="network file for the decoder (PDO decoding of its nodes)")
-    ap.add_argument("--device", action="append", default=[], metavar="N=KEY", help="as live's")
+    ap.add_argument(
+        "--device",
+        action="append",
+        default=[],
+        metavar="N=KEY",
+        help="as live's (default, without --network: " + " ".join(DEFAULT_DEVICES[:2]) + " ...)",
+    )
+    ap.add_argument(
+        "--no-devices", action="store_true", help="no default devices: frames only, no PDO decoded"
+    )
     ap.add_argument("--check", metavar="RULES", help="also run the rules of this rules file")
     ap.add_argument("--plain", action="store_true", help="also the decoded lines (to /dev/null)")
     ap.add_argument("--record", metavar="FILE", help="also record the raw frames (as live does)")
@@ -173,6 +189,8 @@ def main(argv: list[str] | None = None) -> int:
         "--foxglove", action="store_true", help="also serve the decode to a Foxglove client"
     )
     args = ap.parse_args(argv)
+    if not (args.device or args.network or args.no_devices):
+        args.device = DEFAULT_DEVICES  # PDOs decoded, as users run live
 
     from cananalyze.outputs.dashboard import DashboardSink
     from cananalyze.outputs.findings import FindingsSink
@@ -270,6 +288,8 @@ def main(argv: list[str] | None = None) -> int:
     offered = sent[0]
     names = ", ".join(type(s).__name__ for s in sinks[:-1])
     print(f"sinks    {names}")
+    devices = "1..16=dat7014 (default)" if args.device == DEFAULT_DEVICES else " ".join(args.device)
+    print(f"devices  {devices or 'none'}; network {args.network or 'none'}")
     print(
         f"offered  {offered} frames in {args.seconds:.1f} s = {offered / args.seconds:,.0f} frames/s"
     )
@@ -293,7 +313,7 @@ def main(argv: list[str] | None = None) -> int:
         f"latency  send -> last sink: median {np.median(latency):.1f} ms, "
         f"p99 {np.percentile(latency, 99):.1f} ms, max {latency.max():.1f} ms"
     )
-    print(f"decoded  {measure.signals} PDO frames into signal values")
+    print(f"decoded  {measure.signals} PDO frames into signal values ({kept} frames kept)")
     if report is not None:
         print(f"check    {len(report.findings)} findings")
     return 0 if offered == kept else 1

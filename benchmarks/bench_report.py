@@ -45,8 +45,8 @@ def run(cmd: list[str], tree: Path) -> tuple[float, float, float]:
 
 def the_log(out: Path, n: int, bus: str) -> Path:
     """The n-frame log of this bus, generated once: the healthy one under the generator's
-    versioned name (the one bench_decode reads), the faulty one as faulty_N.log."""
-    stem = log_stem(out, n) if bus == "healthy" else out / f"faulty_{n}"
+    versioned names (the ones bench_decode reads)."""
+    stem = log_stem(out, n, faults=bus == "faulty")
     log = stem.with_suffix(".log")
     if not log.exists():
         flags = ["--faults"] if bus == "faulty" else []
