@@ -519,7 +519,7 @@ def test_ctrl_c_then_a_rerun_finishes_the_fleet(tmp_path, how, code):
     first = len(list(dataset.glob("logs/date=*/*.parquet")))
     assert 0 < first < 24
     rerun = subprocess.run(cmd[:-1], env=env, capture_output=True, text=True, timeout=300)
-    assert rerun.returncode == 1, rerun.stderr  # generated traffic breaks rules: exit 1
+    assert rerun.returncode == 0, rerun.stderr  # the benchmark bus is healthy: no violation
     assert f"({24 - first} decoded, {first} already in the dataset)" in rerun.stderr
     assert not any((dataset / layout.STAGING).iterdir())
     rows = _table(dataset, "logs").to_pylist()

@@ -226,7 +226,7 @@ def test_a_killed_run_then_a_rerun_completes_the_bucket_dataset(s3, tmp_path):
     rerun = subprocess.run(
         cmd[:-1], env=env, capture_output=True, text=True, timeout=600, cwd=tmp_path
     )
-    assert rerun.returncode == 1, rerun.stderr  # generated traffic breaks rules: exit 1
+    assert rerun.returncode == 0, rerun.stderr  # the benchmark bus is healthy: no violation
     # a commit cut after its manifest is finished by the rerun (on S3 the copies take a
     # while: the kill often lands there), and that log counts as already in the dataset
     counts = re.search(r"\((\d+) decoded, (\d+) already in the dataset\)", rerun.stderr)
