@@ -116,7 +116,15 @@ def spark(tmp_path_factory):
     try:
         yield session
     finally:
+        from pyspark import SparkContext
+
+        gateway = SparkContext._gateway
         session.stop()
+        if gateway is not None:  # the JVM too: it would outlive the module in this process
+            gateway.shutdown()
+            gateway.proc.kill()
+            gateway.proc.wait()
+            SparkContext._gateway = SparkContext._jvm = None
 
 
 @pytest.fixture(scope="module")
