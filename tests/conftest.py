@@ -49,3 +49,19 @@ def seed_file(name: str) -> Path:
     if not path.exists():
         pytest.skip(f"seed manual not available: {path}")
     return path
+
+
+@pytest.fixture
+def cluster():
+    """A Dask cluster in this process (threads), for the fleet tests: what the workers call can be watched."""
+    from distributed import LocalCluster
+
+    with LocalCluster(
+        n_workers=1,
+        threads_per_worker=1,
+        processes=False,
+        protocol="tcp://",
+        host="127.0.0.1",
+        dashboard_address=None,
+    ) as c:
+        yield c.scheduler_address

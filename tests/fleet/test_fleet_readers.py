@@ -144,22 +144,6 @@ def test_compact_keeps_every_row_and_its_lineage_in_fewer_time_ordered_files(dat
         assert _duckdb_counts(small, table) == before[table][0], table
 
 
-@pytest.fixture
-def cluster():
-    """A cluster in this process (threads): what the workers call can be watched."""
-    from distributed import LocalCluster
-
-    with LocalCluster(
-        n_workers=1,
-        threads_per_worker=1,
-        processes=False,
-        protocol="tcp://",
-        host="127.0.0.1",
-        dashboard_address=None,
-    ) as c:
-        yield c.scheduler_address
-
-
 def test_reruns_after_compact_skip_and_replace_by_rows_not_file_names(
     tmp_path, cluster, monkeypatch
 ):

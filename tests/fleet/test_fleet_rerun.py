@@ -36,22 +36,6 @@ def logs(tmp_path) -> list[str]:
 
 
 @pytest.fixture
-def cluster():
-    """A cluster in this process (threads): what the workers call can be watched."""
-    from distributed import LocalCluster
-
-    with LocalCluster(
-        n_workers=1,
-        threads_per_worker=1,
-        processes=False,
-        protocol="tcp://",
-        host="127.0.0.1",
-        dashboard_address=None,
-    ) as c:
-        yield c.scheduler_address
-
-
-@pytest.fixture
 def hashed(monkeypatch) -> list[str]:
     """Every file whose content is hashed, by whom (worker threads share this process)."""
     seen: list[str] = []

@@ -7,13 +7,13 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-from html.parser import HTMLParser
 from pathlib import Path
 
 import pytest
 from conftest import ROOT
 
 import cananalyze
+from tests.outputs.test_report import parse
 
 RATE = 125_000
 WIRE_8 = 111 / RATE  # an 8-byte frame's time on the wire
@@ -119,40 +119,9 @@ def test_check_timing_has_the_summary_s_node_load_and_burst(tmp_path):
     assert "bus load per node" not in out  # only with --timing
 
 
-class _Tables(HTMLParser):
-    """Every <table> of a page as rows of cell texts (the standard library's parser)."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.tables: list[list[list[str]]] = []
-        self._row: list[str] | None = None
-        self._cell: list[str] | None = None
-
-    def handle_starttag(self, tag, attrs):
-        if tag == "table":
-            self.tables.append([])
-        elif tag == "tr":
-            self._row = []
-        elif tag in ("td", "th"):
-            self._cell = []
-
-    def handle_endtag(self, tag):
-        if tag in ("td", "th") and self._cell is not None:
-            self._row.append("".join(self._cell).strip())
-            self._cell = None
-        elif tag == "tr" and self._row is not None:
-            self.tables[-1].append(self._row)
-            self._row = None
-
-    def handle_data(self, data):
-        if self._cell is not None:
-            self._cell.append(data)
-
-
 def _node_table(page: Path) -> list[list[str]] | None:
-    parser = _Tables()
-    parser.feed(page.read_text())
-    return next((t for t in parser.tables if t and t[0][0] == "node" and "mean load" in t[0]), None)
+    _, tables, _ = parse(page)  # the report tests' reader (html.parser)
+    return next((t for t in tables.tables if t and t[0][0] == "node" and "mean load" in t[0]), None)
 
 
 def test_report_has_each_node_s_load(tmp_path):
