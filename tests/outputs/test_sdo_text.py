@@ -1,5 +1,6 @@
-"""The SDO fast path's text lines built from columns (outputs/text/sdo) are the ones
-`pair_notes` and `format_record` write, and a batch renders the same with and without them.
+"""The SDO fast path's text lines built from columns (decode/sdo/roles, outputs/text/sdo)
+are the ones the tracker and `format_record` write, and a batch renders the same with and
+without them.
 
 The pairs are crafted to reach every branch: uploads and downloads (with and without
 a size), values of one digit, wide and negative, an object the profile does not
@@ -18,11 +19,12 @@ import pytest
 from conftest import SAMPLES, real_file
 
 from cananalyze.core.columns import bytecols
-from cananalyze.decode.sdo.fastpath import pair_notes
+from cananalyze.decode.sdo.processor import SdoProcessor
+from cananalyze.decode.sdo.roles import pair_roles
 from cananalyze.formats.source import read_all
 from cananalyze.outputs.text import writer as text_module
 from cananalyze.outputs.text.records import format_record
-from cananalyze.outputs.text.sdo import fast_pairs, pair_roles, record_lines
+from cananalyze.outputs.text.sdo import fast_pairs, record_lines
 from cananalyze.outputs.text.writer import TextWriter
 from cananalyze.pipeline import Options, build_decoder
 
@@ -56,21 +58,31 @@ def _log(tmp_path: Path, pairs, back: bool = False) -> Path:
     return path
 
 
-def _batch(log: Path, *devices: str):
+def _batch(log: Path, *devices: str, fast: bool = True):
+    """The log decoded as one batch; `fast=False`: every SDO frame through the tracker."""
     pairs = (d.split("=") for d in devices)
-    return build_decoder(Options(devices={int(n): k for n, k in pairs})).decode(read_all(log))
+    decoder = build_decoder(Options(devices={int(n): k for n, k in pairs}))
+    for proc in decoder.processors:
+        if isinstance(proc, SdoProcessor):
+            proc.fast = fast
+    return decoder.decode(read_all(log))
 
 
-def _assert_pair_texts(batch) -> int:
+def _assert_pair_texts(batch, log: Path) -> int:
     pairs = fast_pairs(batch)
     assert pairs is not None
     fields, fast = pairs
-    _, _, req_role, resp_role = pair_roles(batch.frames, fields, fast, b"\n")
+    req, resp = fast.cols.req_row, fast.cols.row
+    req_role, resp_role = pair_roles(batch.frames, fields, req, resp, b"\n")
     m = len(fields)
-    req_notes, resp_notes = pair_notes(batch.frames, fast.cols.req_row, fast.cols.row)
-    for matrix, notes in ((req_role, req_notes), (resp_role, resp_notes)):
+    tracked = _batch(log, "1=dat7014", fast=False).notes  # the tracker's words for each frame
+    for matrix, rows in ((req_role, req), (resp_role, resp)):
         blob, ends = bytecols.compact([matrix], m, with_ends=True)
-        assert bytecols.split_rows(blob, ends) == ["SDO " + n["role"] + "\n" for n in notes]
+        want = ["SDO " + tracked[r]["role"] + "\n" for r in rows.tolist()]
+        assert bytecols.split_rows(blob, ends) == want
+    # the notes dict, once read, holds the tracker's notes for those frames
+    for r in np.concatenate((req, resp)).tolist():
+        assert batch.notes[r] == tracked[r]
     # every record of the batch (the tracker's too), as format_record words its dict
     every = batch.records.fields()
     want = [("    └─ " + format_record(r) + "\n").encode() for _, r in batch.records]
@@ -83,9 +95,10 @@ def _assert_pair_texts(batch) -> int:
 
 @pytest.mark.parametrize("back", [False, True])
 def test_crafted_pairs_as_the_per_pair_texts(tmp_path, back):
-    batch = _batch(_log(tmp_path, PAIRS, back), "1=dat7014")
-    assert _assert_pair_texts(batch) == len(PAIRS)
+    log = _log(tmp_path, PAIRS, back)
+    batch = _batch(log, "1=dat7014")
     fields = fast_pairs(batch)[0]
+    assert _assert_pair_texts(batch, log) == len(PAIRS)
     assert "value_int" in fields.arrays and len(fields.held) == 1
     lines = record_lines(fields)
     assert b"0x1018:01 Vendor-ID expedited -> ok: 305419896 (0x12345678) (4 bytes)" in lines[0]
@@ -95,9 +108,10 @@ def test_crafted_pairs_as_the_per_pair_texts(tmp_path, back):
 
 
 def test_a_text_value_sends_the_batch_record_by_record(tmp_path):
-    batch = _batch(_log(tmp_path, [*PAIRS, STRING]), "1=dat7014")
+    log = _log(tmp_path, [*PAIRS, STRING])
+    batch = _batch(log, "1=dat7014")
     assert "value_int" not in fast_pairs(batch)[0].arrays
-    assert _assert_pair_texts(batch) == len(PAIRS) + 1
+    assert _assert_pair_texts(batch, log) == len(PAIRS) + 1
 
 
 def _render(batch, pairs: bool, color: bool, monkeypatch) -> str:

@@ -23,7 +23,7 @@ import numpy as np
 
 from cananalyze.core.frames import FLAG_TX
 from cananalyze.core.records import DecodedBatch
-from cananalyze.core.sdo_records import RecordColumns, SdoColumns, hex_texts
+from cananalyze.core.sdo_records import RecordColumns, SdoColumns
 from cananalyze.decode.sdo.tracker import ObjectInfo
 from cananalyze.decode.sdo.words import sdo_words
 from cananalyze.devices.words import WORDED
@@ -297,67 +297,6 @@ def _words_column(node, index, sub, values, names, raw, data_len, object_info) -
     ]
     out[at] = np.array(texts + [None], object)[:-1][inv.reshape(-1)]
     return out
-
-
-def pair_notes(fb, a: np.ndarray, b: np.ndarray) -> tuple[list[dict], list[dict]]:
-    """Request and answer notes of taken pairs (for the text/JSONL outputs, built when read)."""
-    da, db = _rows(fb.data, a), _rows(fb.data, b)
-    upload = da[:, 0] == _UPLOAD_REQ
-    aborted = db[:, 0] == _ABORT
-    length = np.where(upload, _EXP_LEN[db[:, 0]], _EXP_LEN[da[:, 0]]).astype(np.int64)
-    raw = np.ascontiguousarray(np.where(upload[:, None], db[:, 4:8], da[:, 4:8]))
-    data = hex_texts(raw, np.where(aborted, 0, length))
-    index = (da[:, 1].astype(np.int64) | (da[:, 2].astype(np.int64) << 8)).tolist()
-    sub = da[:, 3].tolist()
-    sized = (da[:, 0] & sdo.SIZE_INDICATED).tolist()
-    node = (fb.can_id[a].astype(np.int64) - 0x600).tolist()
-    req_notes: list[dict] = []
-    resp_notes: list[dict] = []
-    for k, (up, ab, n, i, s) in enumerate(
-        zip(upload.tolist(), aborted.tolist(), length.tolist(), index, sub, strict=True)
-    ):
-        if ab:
-            rq, rs, _, _ = pair_outputs(fb, int(a[k]), int(b[k]), node[k], None)
-            req_notes.append(rq)
-            resp_notes.append(rs)
-            continue
-        where = " " + sdo.object_text(i, s)
-        if up:
-            req_notes.append(
-                {
-                    "role": f"upload request{where}",
-                    "command": "initiate_upload_request",
-                    "index": i,
-                    "subindex": s,
-                }
-            )
-            resp_notes.append(
-                {
-                    "role": f"expedited upload response{where} = {data[k]}",
-                    "command": "initiate_upload_response",
-                    "index": i,
-                    "subindex": s,
-                }
-            )
-        else:
-            size = f", {n} bytes" if sized[k] else ""
-            req_notes.append(
-                {
-                    "role": f"expedited download request{where}{size}",
-                    "command": "initiate_download_request",
-                    "index": i,
-                    "subindex": s,
-                }
-            )
-            resp_notes.append(
-                {
-                    "role": f"download response{where}",
-                    "command": "initiate_download_response",
-                    "index": i,
-                    "subindex": s,
-                }
-            )
-    return req_notes, resp_notes
 
 
 _STRAY_COMMAND = {

@@ -20,7 +20,7 @@ from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from cananalyze.core.records import DecodedBatch
 from cananalyze.core.sdo_records import FastPart, RecordColumns
 from cananalyze.decode.node_tally import IDENTITY, IDENTITY_INDEX
-from cananalyze.decode.sdo import fastpath
+from cananalyze.decode.sdo import fastpath, roles
 from cananalyze.decode.sdo.lazynotes import LazyNotes
 from cananalyze.decode.sdo.tracker import SdoTracker
 from cananalyze.protocol import sdo
@@ -321,7 +321,7 @@ class SdoProcessor:
         batch.records.defer(FastPart(slots, cols, build, columns))
 
         def write_notes(notes: dict) -> None:
-            req, resp = fastpath.pair_notes(fb, a, b)
+            req, resp = roles.pair_notes(fb, columns(), a, b)
             for ra, rb, na, nb in zip(a.tolist(), b.tolist(), req, resp, strict=True):
                 LazyNotes.write(notes, ra, na)
                 LazyNotes.write(notes, rb, nb)

@@ -19,7 +19,7 @@ import numpy as np
 
 from cananalyze.core.columns import bytecols
 from cananalyze.decode.sdo.fastpath import pair_outputs
-from cananalyze.outputs.text.sdo import pair_roles
+from cananalyze.decode.sdo.roles import pair_roles
 from cananalyze.protocol.sdo import fields as sdo_fields
 
 _EXPEDITED = ("expedited", "size_indicated", "n", "size", "sdo_data")
@@ -29,7 +29,7 @@ def pair_fields(fb, fields, fast, fields_text) -> list[tuple[np.ndarray, list[by
     """(batch rows, their fields text) for the fast pairs' frames, request and answer
     rows, a group per command byte; `fields_text` is how the writer words a fields
     dict (the check compares with it)."""
-    _, _, req_role, resp_role = pair_roles(fb, fields, fast, b"")
+    req_role, resp_role = pair_roles(fb, fields, fast.cols.req_row, fast.cols.row, b"")
     a = fields.arrays
     ok = np.ones(len(fields), bool)
     ok[list(fields.held)] = False

@@ -1,15 +1,13 @@
-"""The text output's SDO words built as byte columns: every transfer's record line,
-and the frame roles of the fast path's pairs.
+"""The text output's SDO record lines built as byte columns.
 
 A polled bus puts an expedited request and its answer on a few percent of its
-frames (290k pairs in 10M generated frames). Written one by one, their frame
-notes and record lines were a third of `decode -o`'s decoding thread. Here each
-record's "    └─ <record>" line comes from the batch's one record type
-(`RecordColumns`) in a few numpy passes, and the fast pairs' "SDO <role>" texts
-from the same columns. `format_record` stays the definition: the records the
-columns do not express (held: aborted, the tracker's), a value that is not an
-integer, a negative latency are worded by it, and a test compares every text
-with it.
+frames (290k pairs in 10M generated frames). Written one by one, their record
+lines were a third of `decode -o`'s decoding thread. Here each record's
+"    └─ <record>" line comes from the batch's one record type (`RecordColumns`) in a
+few numpy passes (the pairs' frame roles: `decode/sdo/roles`). `format_record`
+stays the definition: the records the columns do not express (held: aborted, the
+tracker's), a value that is not an integer, a negative latency are worded by it,
+and a test compares every text with it.
 """
 
 from __future__ import annotations
@@ -18,15 +16,11 @@ import numpy as np
 
 from cananalyze.core.columns import bytecols
 from cananalyze.core.records import DecodedBatch
-from cananalyze.decode.sdo.fastpath import pair_outputs, py_round
+from cananalyze.decode.sdo.fastpath import py_round
 from cananalyze.decode.sdo.lazynotes import LazyNotes
 from cananalyze.outputs.text.records import format_record
-from cananalyze.protocol.sdo import SIZE_INDICATED, object_columns, object_text
+from cananalyze.protocol.sdo import object_text
 
-_REQ_ROLE = bytecols.padded_table([b"SDO upload request ", b"SDO expedited download request "])
-_RESP_ROLE = bytecols.padded_table([b"SDO expedited upload response ", b"SDO download response "])
-_EQUALS = bytecols.padded_table([b"", b" = "])
-_BYTES = bytecols.padded_table([b"", b", ", b" bytes"])
 _VALUE = bytecols.padded_table([b"", b"data "])
 _OPEN_HEX = bytecols.padded_table([b"", b" (0x"])
 _DASH = bytecols.padded_table([b"", b"-"])
@@ -48,35 +42,6 @@ def fast_pairs(batch: DecodedBatch) -> tuple | None:
     ):
         return None
     return part.fields(), part
-
-
-def pair_roles(
-    fb, fields, fast, end: bytes
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(request rows, answer rows, "SDO <request role>" + end, "SDO <answer role>" + end)
-    of the fast pairs `fast` (a FastPart) with their `fields`; the roles as (m, w) uint8
-    rows, NUL-padded."""
-    a = fields.arrays
-    m = len(fields)
-    req, resp = fast.cols.req_row, fast.cols.row
-    upload = a["upload"]
-    where = [object_columns(a["index"], a["subindex"])]  # "0x1018:01"
-    endm = bytecols.repeat(end, m)
-    # request: "upload request 0x..:ss" / "expedited download request 0x..:ss[, n bytes]"
-    sized = ~upload & ((fb.data[req, 0] & SIZE_INDICATED) != 0)
-    size_digit = np.where(sized, 48 + a["size"] % 10, bytecols.PAD).astype(np.uint8)[:, None]
-    req_parts = [_REQ_ROLE[(~upload).astype(np.intp)], *where]
-    req_parts += [_BYTES[sized.astype(np.intp)], size_digit, _BYTES[2 * sized], endm]
-    # answer: "expedited upload response 0x..:ss = <hex>" / "download response 0x..:ss"
-    shown = np.where(upload, a["data_len"], 0)
-    resp_parts = [_RESP_ROLE[(~upload).astype(np.intp)], *where]
-    resp_parts += [_EQUALS[upload.astype(np.intp)], bytecols.hex_bytes(a["raw"], shown), endm]
-    req_role, resp_role = _matrix(req_parts, m), _matrix(resp_parts, m)
-    for j in sorted(fields.held):  # aborted pairs: the roles pair_outputs gives them
-        rq, rs, _, _ = pair_outputs(fb, int(req[j]), int(resp[j]), int(a["node"][j]), None)
-        req_role = _put(req_role, j, ("SDO " + rq["role"]).encode() + end)
-        resp_role = _put(resp_role, j, ("SDO " + rs["role"]).encode() + end)
-    return req, resp, req_role, resp_role
 
 
 def record_lines(fields) -> list[bytes]:
@@ -151,19 +116,3 @@ def _columnar_lines(fields, tenths: np.ndarray, m: int) -> list[bytes]:
     ]
     parts += [bytecols.repeat(b" ms\n", m)]
     return bytecols.row_bytes(*bytecols.compact(parts, m, with_ends=True))
-
-
-def _matrix(parts: list[np.ndarray], m: int) -> np.ndarray:
-    """The parts side by side (their NULs are dropped when the output is compacted)."""
-    return np.concatenate([np.broadcast_to(p, (m, p.shape[1])) for p in parts], axis=1)
-
-
-def _put(matrix: np.ndarray, j: int, text: bytes) -> np.ndarray:
-    """matrix with row j replaced by `text` (widened when it is longer)."""
-    if len(text) > matrix.shape[1]:
-        wider = np.zeros((matrix.shape[0], len(text)), np.uint8)
-        wider[:, : matrix.shape[1]] = matrix
-        matrix = wider
-    matrix[j] = bytecols.PAD
-    matrix[j, : len(text)] = np.frombuffer(text, np.uint8)
-    return matrix

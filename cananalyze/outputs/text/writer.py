@@ -36,12 +36,13 @@ from cananalyze.core.frames import (
     RECONSTRUCTED_MARK,
 )
 from cananalyze.core.records import DecodedBatch
+from cananalyze.decode.sdo.roles import pair_roles
 from cananalyze.devices.words import word_column
 from cananalyze.outputs import colour
 from cananalyze.outputs.background import ByteSink
 from cananalyze.outputs.fields import row_fields
 from cananalyze.outputs.text.records import format_alone, format_record
-from cananalyze.outputs.text.sdo import fast_pairs, pair_roles, record_lines
+from cananalyze.outputs.text.sdo import fast_pairs, record_lines
 from cananalyze.pipeline.sink import Sink
 from cananalyze.protocol import emcy as emcy_text
 from cananalyze.protocol.fields import annotation, frame_fields
@@ -406,7 +407,8 @@ class TextWriter(Sink):
         """The fast pairs' rows: "SDO <role>" into the annotation column (`ann`, marked
         `done`), worded from their columns."""
         fields, fast = pairs
-        req, resp, req_role, resp_role = pair_roles(fb, fields, fast, endb)
+        req, resp = fast.cols.req_row, fast.cols.row
+        req_role, resp_role = pair_roles(fb, fields, req, resp, endb)
         ann.append((req, req_role))
         ann.append((resp, resp_role))
         done[req] = True
