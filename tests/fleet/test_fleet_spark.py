@@ -9,6 +9,7 @@ name, unknown)."""
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
@@ -101,6 +102,10 @@ def spark(tmp_path_factory):
     from pyspark.sql import SparkSession
 
     scratch = tmp_path_factory.mktemp("spark")
+    # the JVM's own address too: without it Spark looks up the machine's interfaces and
+    # names a non-loopback one ("using 192.0.2.2 instead"); tests talk on 127.0.0.1 only
+    local_ip = os.environ.get("SPARK_LOCAL_IP")
+    os.environ["SPARK_LOCAL_IP"] = "127.0.0.1"
     session = (
         SparkSession.builder.master("local[1]")
         .appName("cananalyze-fleet-test")
@@ -125,6 +130,10 @@ def spark(tmp_path_factory):
             gateway.proc.kill()
             gateway.proc.wait()
             SparkContext._gateway = SparkContext._jvm = None
+        if local_ip is None:
+            os.environ.pop("SPARK_LOCAL_IP", None)
+        else:
+            os.environ["SPARK_LOCAL_IP"] = local_ip
 
 
 @pytest.fixture(scope="module")
