@@ -11,6 +11,7 @@ import logging
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import can
 import canopen
@@ -179,3 +180,53 @@ def test_the_samples_boot(log):
 
     boot = cananalyze.load(SAMPLES / log, network=SAMPLES / "network.toml").boot
     assert boot["result"].tolist() == ["operational"] * 4
+
+
+DOCS = Path(__file__).resolve().parents[2] / "docs" / "decoding.md"
+
+
+def _docs_block(command: str) -> list[str]:
+    """The lines docs/decoding.md shows for `$ <command>` (its "..." lines are cuts)."""
+    text = DOCS.read_text(encoding="utf-8")
+    block = text.split(f"$ {command}\n", 1)[1].split("```", 1)[0]
+    return [line for line in block.splitlines() if line.strip() != "..."]
+
+
+def _cananalyze(*args: str) -> list[str]:
+    run = subprocess.run(
+        [sys.executable, "-m", "cananalyze", *args], capture_output=True, text=True, timeout=120
+    )
+    assert run.returncode in (0, 1), run.stderr
+    return run.stdout.splitlines()
+
+
+def test_the_docs_real_trace_story_is_the_output():
+    """docs/decoding.md's pcan1.trc boot stories are what `boot` prints, line for line and
+    in order (the docs cut lines, never change them)."""
+    out = _cananalyze("boot", str(real_file("hilch__canopen-message-interpreter/pcan1.trc")))
+    shown = _docs_block("cananalyze boot pcan1.trc")
+    assert len(shown) > 10
+    at = 0
+    for line in shown:
+        at = out.index(line, at) + 1  # ValueError: the docs show a line boot does not print
+
+
+def test_the_docs_simulated_faults_are_the_output(tmp_path):
+    """docs/decoding.md's commissioning-faults examples (identity mismatch, LSS assignment)
+    are what `boot` and `decode --summary` print on the simulator's log."""
+    log = tmp_path / "cf.log"
+    network = str(Path(__file__).resolve().parents[2] / "samples" / "network.toml")
+    _cananalyze("simulate", "--scenario", "commissioning-faults", "--to", str(log))
+    for command, args in (
+        ("cananalyze boot cf.log --network samples/network.toml", ("boot",)),
+        (
+            "cananalyze decode cf.log --network samples/network.toml --summary",
+            ("decode", "--summary"),
+        ),
+    ):
+        out = _cananalyze(*args[:1], str(log), "--network", network, *args[1:])
+        shown = _docs_block(command)
+        assert shown
+        at = 0
+        for line in shown:
+            at = out.index(line, at) + 1
