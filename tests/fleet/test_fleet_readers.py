@@ -234,6 +234,7 @@ def test_a_compaction_publishes_only_between_queries(dataset, tmp_path):
     assert done.is_set() and len(_files(copy, "frames")) < before
 
 
+@pytest.mark.slow  # a fleet run, then compaction, end to end
 def test_fleet_compact_flag_compacts_the_days_a_run_wrote(tmp_path, capsys):
     folder = tmp_path / "logs"
     folder.mkdir()

@@ -431,7 +431,16 @@ def binary_seeds(tmp_path_factory) -> dict:
 
 @pytest.mark.parametrize(
     "name",
-    ["seed.pcap", "seed.pcapng", "sll2.pcapng", "seed.blf", "seed.mf4", "seed.mcap", "seed.log.gz"],
+    [
+        "seed.pcap",
+        "seed.pcapng",
+        "sll2.pcapng",
+        "seed.blf",
+        # asammdf parses each mutated file for about 0.25 s: 80 of them go to the slow run
+        pytest.param("seed.mf4", marks=pytest.mark.slow),
+        "seed.mcap",
+        "seed.log.gz",
+    ],
 )
 def test_mutated_binary_captures_never_crash(binary_seeds, name):
     """The formats the real logs lack (pcap, pcapng, a cooked capture, MF4, MCAP, gzip), each

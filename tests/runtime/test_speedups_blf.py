@@ -297,6 +297,7 @@ _HEADERS = st.builds(
 )
 
 
+@pytest.mark.slow  # 150 fuzzed containers per mode
 @settings(
     max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
 )

@@ -120,6 +120,7 @@ def test_bench_check(logs):
     assert re.fullmatch(rf"check overhead: [+-]{NUMBER} % CPU \(3000 frames, best of 1\)", lines[2])
 
 
+@pytest.mark.slow  # a benchmark run end to end
 def test_bench_bounded_rules_and_blank_lines(tmp_path):
     """A small rules file and every text format with and without blank lines: CPU and
     peak RSS printed, the same frames read both ways."""
@@ -495,6 +496,7 @@ def test_bench_pcap_reads_every_frame():
         assert re.search(rf"  {side} +wall +{NUMBER} s  cpu +{NUMBER} s .*\({count} frames\)", out)
 
 
+@pytest.mark.slow  # a benchmark run end to end
 def test_bench_mf4_reads_every_frame(tmp_path):
     pytest.importorskip("asammdf")
     out = _run("bench_mf4.py", "3000", "--rounds", "1", "--out", str(tmp_path)).stdout
