@@ -1,6 +1,6 @@
 """FrameRecorder: the raw frames of a live session, saved as candump, ASC, BLF or MCAP.
 
-Log formats go through `logfile.LogWriter`, the one writer table `write_log` uses too
+Log formats go through `logfile.LogWriter`, the writer each format's module registers
 (candump as candump -l writes it; ASC and BLF by python-can's writers). MCAP has no python-can writer: the
 frames go on the `/can/frames` topic in the export's `cananalyze.Frame` schema,
 built column-wise by the export's own payload builder and written as chunked,
@@ -21,7 +21,7 @@ import numpy as np
 from cananalyze.core.errors import UsageError
 from cananalyze.core.frames import FrameBatch, concat
 from cananalyze.core.records import DecodedBatch
-from cananalyze.formats.logfile import WRITTEN, LogWriter
+from cananalyze.formats.logfile import WRITTEN, LogWriter, written_names
 
 
 class FrameRecorder:
@@ -31,7 +31,7 @@ class FrameRecorder:
     def check_suffix(path: str | Path) -> None:
         suffix = Path(path).suffix.lower()
         if suffix != ".mcap" and suffix not in WRITTEN:
-            raise UsageError(f"--record {path}: use a .log (candump), .asc, .blf or .mcap file")
+            raise UsageError(f"--record {path}: use a {written_names('.mcap')} file")
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)

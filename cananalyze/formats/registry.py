@@ -1,14 +1,17 @@
-"""The table of log formats: how to recognise each from its first bytes, and its reader.
+"""The table of log formats: how to recognise each from its first bytes, its reader, and
+its writer where we write it.
 
-One module per format registers one LogFormat here (python-can's LogReader facade,
-but choosing by content first and by suffix only as a tie-breaker).
+One module per format registers one LogFormat here (python-can's `can/io/<format>.py`
+and its LogReader/Logger facades, but choosing by content first and by suffix only as a
+tie-breaker).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import BinaryIO
+from pathlib import Path
+from typing import BinaryIO, Protocol
 
 from cananalyze.core.errors import ProblemLog
 from cananalyze.core.frames import FrameBatch
@@ -34,6 +37,15 @@ class ReadContext:
 Reader = Callable[[BinaryIO, ReadContext], Iterator[FrameBatch]]
 
 
+class FrameWriter(Protocol):
+    """A log file being written: batches appended, `flush` puts what was written on the
+    file (a process killed after it leaves those frames readable), `close` finishes it."""
+
+    def write(self, batch: FrameBatch) -> None: ...
+    def flush(self) -> None: ...
+    def close(self) -> None: ...
+
+
 @dataclass(frozen=True)
 class LogFormat:
     name: str  # "candump", "asc", "blf", "trc", ...
@@ -45,6 +57,9 @@ class LogFormat:
     # a text format's CR-only line ends are made newlines; a binary format's bytes are never
     # touched (0x0D is just a byte in a pcap's microseconds or a BLF's payload)
     text: bool = True
+    # where we write the format: the suffix it is written with and the writer's factory
+    write_suffix: str = ""
+    writer: Callable[[Path], FrameWriter] | None = None
 
 
 FORMATS: list[LogFormat] = []

@@ -92,7 +92,7 @@ def replay(adapter: SlcanAdapter, log_path: str, timed: bool = True) -> int:
     """
     import can
 
-    from cananalyze.formats.logfile import to_messages
+    from cananalyze.formats.logs._pycan_writer import to_messages
     from cananalyze.formats.source import read_all
 
     reader = to_messages(read_all(log_path))

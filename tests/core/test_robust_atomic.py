@@ -11,6 +11,7 @@ from cananalyze.cli.main import main
 from cananalyze.core.atomic import atomic_path, atomic_write
 from cananalyze.core.frames import from_rows
 from cananalyze.formats import logfile
+from cananalyze.formats.logs import _pycan_writer, candump
 from cananalyze.formats.source import read_all
 
 SAMPLE = os.path.join(os.path.dirname(__file__), "..", "..", "samples", "demo.log")
@@ -107,8 +108,8 @@ def test_write_log_is_atomic(suffix, tmp_path, monkeypatch):
     def broken(*a, **k):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(logfile, "candump_bytes", broken)
-    monkeypatch.setattr(logfile, "to_messages", broken)
+    monkeypatch.setattr(candump, "candump_bytes", broken)
+    monkeypatch.setattr(_pycan_writer, "to_messages", broken)
     with pytest.raises(OSError):
         logfile.write_log(batch, target)
     assert target.read_bytes() == first and _leftovers(tmp_path) == []

@@ -13,7 +13,7 @@ from conftest import SAMPLES
 
 from cananalyze.core.frames import FLAG_TX, concat
 from cananalyze.formats.live import HwFilter, LiveError, LiveSource, open_bus
-from cananalyze.formats.logfile import to_messages
+from cananalyze.formats.logs._pycan_writer import to_messages
 from cananalyze.formats.source import read_all
 from cananalyze.outputs.fields import row_fields
 from cananalyze.pipeline import Decoder

@@ -43,8 +43,9 @@ from cananalyze.core.frames import (
     set_row,
 )
 from cananalyze.formats.live import LiveSource
-from cananalyze.formats.logfile import to_messages, write_log
+from cananalyze.formats.logfile import write_log
 from cananalyze.formats.logs import mcap as mcap_in
+from cananalyze.formats.logs._pycan_writer import to_messages
 from cananalyze.formats.mcap_bulk import BulkMcapWriter
 from cananalyze.formats.mcap_frames import (
     FRAME_FIELDS,

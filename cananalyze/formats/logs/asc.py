@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterator
+from datetime import datetime
+from pathlib import Path
 from typing import BinaryIO
 
 import numpy as np
@@ -34,6 +36,7 @@ from cananalyze.core.frames import (
     FrameBatch,
     concat,
 )
+from cananalyze.formats.logs._pycan_writer import PycanWriter
 from cananalyze.formats.logs._rows import MAX_LINE, RowSink, inked_lines
 from cananalyze.formats.logs.candump import CHUNK
 from cananalyze.formats.registry import LogFormat, ReadContext, register
@@ -531,6 +534,33 @@ def _fd_frame(tok: list[str], base: int, t: float, n: int, sink: RowSink) -> boo
     return sink.add(t, can_id, flags, length, data, chan, n)
 
 
+class AscWriter(PycanWriter):
+    """python-can's ASCWriter, the reference for the format; the header's date is the
+    first frame's, not the wall clock's, so written files are reproducible."""
+
+    def __init__(self, path: Path) -> None:
+        import can
+
+        super().__init__(path, can.ASCWriter)
+
+    def close(self) -> None:
+        open_ = self._writer is not None
+        super().close()
+        if open_ and self.start is not None:
+            _set_asc_date(self.path, self.start)
+
+
+def _set_asc_date(path: Path, start: float) -> None:
+    """python-can stamps the ASC `date` line with the wall clock; use the log's start."""
+    import can
+
+    lines = path.read_text(encoding="ascii").split("\n")
+    if lines and lines[0].startswith("date "):
+        stamp = can.ASCWriter._format_header_datetime(can.ASCWriter, datetime.fromtimestamp(start))  # type: ignore[arg-type]
+        lines[0] = f"date {stamp}"
+        path.write_text("\n".join(lines), encoding="ascii")
+
+
 FORMAT = register(
     LogFormat(
         name="asc",
@@ -539,6 +569,8 @@ FORMAT = register(
         read=read,
         suffixes=(".asc",),
         priority=31,
+        write_suffix=".asc",
+        writer=AscWriter,
     )
 )
 

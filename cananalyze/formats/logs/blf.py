@@ -35,6 +35,7 @@ import math
 import struct
 import zlib
 from collections.abc import Iterator
+from pathlib import Path
 from typing import BinaryIO
 
 import numpy as np
@@ -50,6 +51,7 @@ from cananalyze.core.frames import (
     FrameBatch,
     channel_index,
 )
+from cananalyze.formats.logs._pycan_writer import PycanWriter
 from cananalyze.formats.registry import LogFormat, ReadContext, register
 from cananalyze.runtime import speedups
 
@@ -1245,6 +1247,23 @@ class _Pushback:
             buf += more
 
 
+class BlfWriter(PycanWriter):
+    """python-can's BLFWriter, the reference for the format."""
+
+    def __init__(self, path: Path) -> None:
+        import can
+
+        super().__init__(path, can.BLFWriter)
+
+    def flush(self) -> None:
+        # python-can's BLFWriter keeps frames until a 128 KiB container is full and has no
+        # public flush: its _flush writes one container of what it holds
+        if self._writer is not None:
+            while self._writer._buffer_size:
+                self._writer._flush()
+        super().flush()
+
+
 FORMAT = register(
     LogFormat(
         name="blf",
@@ -1254,5 +1273,7 @@ FORMAT = register(
         suffixes=(".blf",),
         priority=11,
         text=False,
+        write_suffix=".blf",
+        writer=BlfWriter,
     )
 )
