@@ -65,6 +65,33 @@ def existing_parts(dataset: Dataset, table: str, digest: str, options: dict | No
     return sorted((dataset / table).glob(f"date=*/part-{digest}.parquet"))
 
 
+def parts_at(dataset: Dataset, table: str, digest: str, dates) -> list:
+    """A log's parts of `table` at these dates (those its `logs` rows name): where its
+    earlier parts are, without listing a folder (on object storage a LIST a date folder
+    a table, per commit). Local: those there; at a URL: every name (removing an object
+    that is not there is no error, and costs what a lookup would)."""
+    found = [part_path(dataset, table, d, digest) for d in sorted(set(dates))]
+    return found if isinstance(dataset, str) else [p for p in found if p.exists()]
+
+
+def row_date(value) -> str:
+    """A `logs` row's `date` (a date, or None for the unknown one) as its folder names it."""
+    if value is None:
+        from cananalyze.fleet.task import UNKNOWN_DATE
+
+        return UNKNOWN_DATE
+    return value if isinstance(value, str) else value.isoformat()
+
+
+# object stores: no folders to make, a prefix is gone with its last object
+_FLAT = {"s3", "s3a", "gs", "gcs", "abfs", "abfss", "az", "adl", "oss", "r2"}
+
+
+def flat(fs) -> bool:
+    protocols = fs.protocol if isinstance(fs.protocol, tuple | list) else (fs.protocol,)
+    return any(p in _FLAT for p in protocols)
+
+
 def glob_urls(pattern: str, options: dict | None = None) -> list[str]:
     """The URLs a glob over object storage matches, sorted."""
     fs, path = storage.filesystem(pattern, options)
@@ -190,24 +217,32 @@ def _stages(dataset: Path) -> Iterator[Path]:
 
 class RemoteStage:
     """One task's stage for a dataset at a URL: a local temporary folder the tables are
-    written into, uploaded under `DATASET/_staging/<name>/` when committed."""
+    written into, uploaded under `DATASET/_staging/<name>/` when committed.
+
+    Its requests: one PUT an uploaded part and one for COMMIT.json, a server-side copy
+    and one bulk delete (the old parts at other dates, then the stage's own objects: no
+    LIST, no HEAD); a file:// dataset's stage folder is removed whole."""
 
     def __init__(self, dataset: str, digest: str, options: dict | None = None) -> None:
         self.dataset, self.options = dataset.rstrip("/"), options
         self.fs, base = storage.filesystem(self.dataset, options)
         self.prefix = f"{base.rstrip('/')}/{STAGING}/{_stage_name(digest)}"
         self.dir = Path(tempfile.mkdtemp(prefix="cananalyze-stage-"))
+        self._keys: list[str] = []  # what was (or may have been) uploaded under the prefix
 
     def commit(self, renames: list[tuple[Path, str]], removals: list[str]) -> None:
         """Upload the staged files, write the manifest last, then copy them into place."""
         try:
-            self.fs.makedirs(self.prefix, exist_ok=True)  # a folder where prefixes are folders
+            if not flat(self.fs):
+                self.fs.makedirs(self.prefix, exist_ok=True)  # a folder where prefixes are
             moves = []
             for i, (src, dest) in enumerate(renames):
                 key = f"{self.prefix}/{i}-{src.name}"
+                self._keys.append(key)
                 self.fs.put_file(str(src), key)
                 moves.append([key, _strip(self.fs, dest)])
             manifest = {"renames": moves, "removals": [_strip(self.fs, p) for p in removals]}
+            self._keys.append(f"{self.prefix}/{MANIFEST}")
             self.fs.pipe_file(f"{self.prefix}/{MANIFEST}", json.dumps(manifest).encode())
             _apply_remote(self.fs, self.prefix)
         finally:
@@ -217,7 +252,11 @@ class RemoteStage:
         """Drop the local folder and whatever was uploaded under the staging prefix."""
         shutil.rmtree(self.dir, ignore_errors=True)
         with contextlib.suppress(FileNotFoundError, OSError):
-            self.fs.rm(self.prefix, recursive=True)
+            if not flat(self.fs):
+                self.fs.rm(self.prefix, recursive=True)
+            elif self._keys:  # the manifest last in the list: one bulk delete
+                self.fs.rm(self._keys)
+        self._keys = []
 
 
 def _strip(fs, url: str) -> str:
@@ -225,17 +264,28 @@ def _strip(fs, url: str) -> str:
 
 
 def _apply_remote(fs, prefix: str) -> None:
-    """A remote stage's COMMIT.json carried out (safe to repeat): copies, then removals of
-    the log's parts at other dates."""
+    """A remote stage's COMMIT.json carried out (safe to repeat): removals (the log's
+    parts at other dates), then copies (a source already gone: done by an earlier try)."""
     manifest = json.loads(fs.cat_file(f"{prefix}/{MANIFEST}"))
     manifest["renames"], manifest["removals"]  # noqa: B018 - both there before any change
-    for old in manifest["removals"]:
+    if manifest["removals"]:
+        with contextlib.suppress(FileNotFoundError):
+            if flat(fs):
+                fs.rm(list(manifest["removals"]))  # one bulk delete
+            else:
+                for old in manifest["removals"]:
+                    with contextlib.suppress(FileNotFoundError):
+                        fs.rm_file(old)
+    for src, dest in manifest["renames"]:
+        with contextlib.suppress(FileNotFoundError):
+            if not flat(fs):
+                if not fs.exists(src):
+                    continue
+                fs.makedirs(fs._parent(dest), exist_ok=True)
+            fs.cp_file(src, dest)  # server-side
+    for old in manifest.get("after", ()):  # a compaction's inputs, once its file is in
         with contextlib.suppress(FileNotFoundError):
             fs.rm_file(old)
-    for src, dest in manifest["renames"]:
-        if fs.exists(src):
-            fs.makedirs(fs._parent(dest), exist_ok=True)
-            fs.copy(src, dest)
 
 
 def _recover_remote(dataset: str, options: dict | None) -> tuple[int, int]:

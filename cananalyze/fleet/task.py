@@ -66,6 +66,11 @@ class LogTask:
     # the digests of the rows the dataset holds for this path (its earlier content): their
     # parts are removed when this log commits, so a changed file is never in it twice
     replaces: tuple[str, ...] = ()
+    # the dates this log's earlier parts can be at (the driver's: those of the rows of
+    # this path and of any content of this file's `size`): its parts there are named, not
+    # listed (fleet/layout.parts_at). None: not known; every date folder is listed
+    known: tuple[str, ...] | None = None
+    size: int | None = None
 
 
 class _Findings(Sink):
@@ -142,12 +147,24 @@ _DECIDING = (
 )
 
 
-def recorded(dataset: layout.Dataset, digest: str, options: dict | None = None) -> dict | None:
+def _parts_of(
+    dataset: layout.Dataset, table: str, digest: str, options: dict | None, dates
+) -> list:
+    """A log's parts of `table`: at these `dates` (a task's `known`), or (None: not known)
+    found by a glob over every date folder."""
+    if dates is None:
+        return layout.existing_parts(dataset, table, digest, options)
+    return layout.parts_at(dataset, table, digest, dates)
+
+
+def recorded(
+    dataset: layout.Dataset, digest: str, options: dict | None = None, dates=None
+) -> dict | None:
     """The dataset's `logs` row for this content (its own part, or a compacted file's), or
-    None."""
+    None. `dates`: the partitions its rows are known to be in (no listing), else all."""
     import pyarrow.parquet as pq
 
-    for part in layout.existing_parts(dataset, "logs", digest, options):
+    for part in _parts_of(dataset, "logs", digest, options, dates):
         with contextlib.suppress(OSError, ValueError):
             if isinstance(part, str):
                 with layout.open_part(part, options) as f:
@@ -167,13 +184,15 @@ def recorded(dataset: layout.Dataset, digest: str, options: dict | None = None) 
 ROW_COLUMNS = (
     *("source", "hash", "version", "config", "size", "mtime_ns", "run"),
     *("status", "error", "frames", "findings", "violations", "skipped_lines", "format"),
+    "date",
 )
 
 
-def logs_rows(dataset: layout.Dataset, options: dict | None = None) -> dict[str, list[dict]]:
-    """Every `logs` row of the dataset by source, read once (the driver's skip key and the
-    run's counts); {} when there are none or they cannot be read (then every log is
-    hashed by its worker, as before: never a wrong skip)."""
+def logs_rows(dataset: layout.Dataset, options: dict | None = None) -> dict[str, list[dict]] | None:
+    """Every `logs` row of the dataset by source, read once (the driver's skip key, where
+    the workers find a log's earlier parts, the run's counts), `date` as its folder names
+    it; {} when there are none, None when they cannot be read (then every log is hashed
+    and looked up by its worker: never a wrong skip)."""
     import pyarrow.dataset as pads
 
     filesystem = None
@@ -200,9 +219,10 @@ def logs_rows(dataset: layout.Dataset, options: dict | None = None) -> dict[str,
         )
         rows = found.to_table(columns=list(ROW_COLUMNS)).to_pylist()
     except (OSError, ValueError):
-        return {}
+        return None
     out: dict[str, list[dict]] = {}
     for row in rows:
+        row["date"] = layout.row_date(row["date"])
         out.setdefault(row["source"], []).append(row)
     return out
 
@@ -384,8 +404,9 @@ def process(task: LogTask, cancel=None) -> dict:
     lineage = {"source": path, "hash": digest, "version": __version__}  # schema.LINEAGE's order
     result = {"source": path, "hash": digest, "skipped": False, "first": {}, "junit": None}
     row["config"] = options_digest(task.opts)
+    known = task.known if row.get("size") == task.size else None  # else changed since
     if row["status"] == "ok" and not task.force:
-        old = recorded(dataset, digest, where)
+        old = recorded(dataset, digest, where, known)
         # a failure is tried again: it may have been the machine's (a worker lost)
         if (
             old is not None
@@ -395,7 +416,7 @@ def process(task: LogTask, cancel=None) -> dict:
         ):
             source.close()
             if old.get("source") == path and old.get("mtime_ns") != row.get("mtime_ns"):
-                _restamp(dataset, digest, old, row, where)
+                _restamp(dataset, digest, old, row, where, known)
             result.update(old, skipped=True)
             result["source"], result["recorded_source"] = path, old.get("source")
             return result
@@ -421,12 +442,12 @@ def process(task: LogTask, cancel=None) -> dict:
         if cancel is not None and cancel.is_set():
             raise _Cancelled
         try:
-            old = _still_mine(dataset, task.replaces, path, where)
-            _commit(stage, dataset, date, digest, parts, row, lineage, where, old)
+            old = _still_mine(dataset, task.replaces, path, where, known)
+            _commit(stage, dataset, date, digest, parts, row, lineage, where, old, known)
         except OSError as exc:  # a full disk: this log fails, in one line, and the fleet goes on
             stage.close()
             row.update(status="failed", error=_one_line(exc, path, dataset))
-            _commit_failure(dataset, date, digest, row, lineage, where)
+            _commit_failure(dataset, date, digest, row, lineage, where, known)
     except BaseException:
         stage.close()
         raise
@@ -438,21 +459,30 @@ def process(task: LogTask, cancel=None) -> dict:
 
 
 def _still_mine(
-    dataset: layout.Dataset, digests: tuple[str, ...], path: str, options: dict | None
+    dataset: layout.Dataset,
+    digests: tuple[str, ...],
+    path: str,
+    options: dict | None,
+    known: tuple[str, ...] | None = None,
 ) -> tuple[str, ...]:
     """Of the digests the driver saw for this path, those whose row still names it (another
     path with that same content may have written the row since: its parts stay)."""
-    return tuple(d for d in digests if (recorded(dataset, d, options) or {}).get("source") == path)
+    return tuple(
+        d for d in digests if (recorded(dataset, d, options, known) or {}).get("source") == path
+    )
 
 
 def _restamp(
-    dataset: layout.Dataset, digest: str, old: dict, row: dict, options: dict | None
+    dataset: layout.Dataset, digest: str, old: dict, row: dict, options: dict | None, dates=None
 ) -> None:
     """The recorded row of a file whose bytes are unchanged but whose modification time
     is not (touched, copied back, or recorded before mtime_ns was): its `logs` part
     rewritten with the new time, so the next rerun skips it without reading it again.
     Nothing else changes (not its run: this run did not decode it). Best effort."""
-    parts = layout.existing_parts(dataset, "logs", digest, options)
+    parts = _parts_of(dataset, "logs", digest, options, dates)
+    if isinstance(dataset, str) and dates is not None:  # named, not listed: those there
+        fs = storage.filesystem(dataset, options)[0]
+        parts = [p for p in parts if fs.exists(p)]
     if not parts:
         return
     try:
@@ -531,10 +561,12 @@ def _commit(
     lineage: dict,
     options: dict | None = None,
     replaces: tuple[str, ...] = (),
+    known: tuple[str, ...] | None = None,
 ):
     """The logs row written last, the log's parts at other dates (an earlier run's) removed,
     and those of its path's earlier content (`replaces`: the digests of the rows the
-    dataset held for this path; the failed row it had when it could not be read)."""
+    dataset held for this path; the failed row it had when it could not be read). Where
+    those can be: at the dates `known` (the driver's), else at any date (listed)."""
     staged = stage.dir / "logs.parquet"
     _logs_part(staged, row, lineage)
     renames = [*parts, (staged, layout.part_path(dataset, "logs", date, digest))]
@@ -542,12 +574,12 @@ def _commit(
     removals = [
         p
         for table in schema.TABLES
-        for p in layout.existing_parts(dataset, table, digest, options)
+        for p in _parts_of(dataset, table, digest, options, known)
         if p not in final
     ]
-    for old in {*replaces, _path_digest(lineage["source"])} - {digest}:
+    for old in sorted({*replaces, _path_digest(lineage["source"])} - {digest}):
         for table in schema.TABLES:
-            removals += layout.existing_parts(dataset, table, old, options)
+            removals += _parts_of(dataset, table, old, options, known)
     stage.commit(renames, removals)
 
 
@@ -558,6 +590,7 @@ def _commit_failure(
     row: dict,
     lineage: dict,
     options: dict | None = None,
+    known: tuple[str, ...] | None = None,
 ) -> None:
     """The failed log's row alone, if the disk still takes it (else none: a rerun tries
     the log again, as any log without a row)."""
@@ -566,7 +599,7 @@ def _commit_failure(
     except OSError:
         return
     try:
-        _commit(stage, dataset, date, digest, [], row, lineage, options)
+        _commit(stage, dataset, date, digest, [], row, lineage, options, known=known)
     except OSError:
         stage.close()
 

@@ -270,3 +270,65 @@ def test_file_urls_take_the_object_storage_path(tmp_path, monkeypatch, capsys):
     assert main(args) == 1
     assert "no cluster" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ds", "logs"]
+
+
+class _Requests(logging.Handler):
+    """The S3 server's requests counted by kind (werkzeug logs one line a request), LIST
+    apart from the other GETs."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.INFO)
+        self.counts: Counter[str] = Counter()
+
+    def emit(self, record: logging.LogRecord) -> None:
+        line = str(record.args[0]) if isinstance(record.args, tuple) and record.args else ""
+        method, _, rest = re.sub(r"\x1b\[[0-9;]*m", "", line).partition(" ")
+        listing = method == "GET" and ("list-type=" in rest or "?prefix=" in rest)
+        self.counts["LIST" if listing else method] += 1
+
+
+@pytest.fixture
+def requests():
+    """Every request the S3 server serves meanwhile, counted (the workers' too)."""
+    log = logging.getLogger("werkzeug")
+    counter = _Requests()
+    level, propagate = log.level, log.propagate
+    log.setLevel(logging.INFO)
+    log.propagate = False
+    log.addHandler(counter)
+    try:
+        yield counter.counts
+    finally:
+        log.removeHandler(counter)
+        log.setLevel(level)
+        log.propagate = propagate
+
+
+def test_a_commit_lists_no_date_folders(s3, requests, capsys):
+    """A log's commit finds its earlier parts from the `logs` rows the driver read once,
+    not by a glob over every `date=` folder of every table: the LISTs of a run into a
+    dataset of 40 date folders a table are those of a run into an empty one."""
+    fs = s3["fs"]
+    for name in ("demo.log", "faults.asc"):
+        fs.put_file(str(ROOT / "samples" / name), f"bucket/lists/logs/{name}")
+    lists = {}
+    for folders in (0, 40):
+        ds = f"bucket/lists/ds{folders}"
+        # other days' parts (never read by a run: only the logs table is)
+        fs.pipe(
+            {
+                f"{ds}/{t}/date=2020-01-{d + 1:02d}/part-{d:064x}.parquet": b"x"
+                for t in TABLES
+                if t != "logs"
+                for d in range(folders)
+            }
+        )
+        requests.clear()
+        args = ["fleet", "s3://bucket/lists/logs", "--out", f"s3://{ds}", "--workers", "1"]
+        assert main(args) == 1  # the samples break rules on purpose
+        lists[folders] = requests["LIST"]
+        assert "(2 decoded, 0 already" in capsys.readouterr().err
+        fs.invalidate_cache()
+        assert len(fs.glob(f"{ds}/frames/date=*/*.parquet")) == folders + 2
+    assert lists[40] == lists[0], lists
+    assert lists[0] <= 8, lists  # the inputs, the logs table, the dataset: not per log
