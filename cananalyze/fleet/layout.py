@@ -230,8 +230,11 @@ class RemoteStage:
         self.dir = Path(tempfile.mkdtemp(prefix="cananalyze-stage-"))
         self._keys: list[str] = []  # what was (or may have been) uploaded under the prefix
 
-    def commit(self, renames: list[tuple[Path, str]], removals: list[str]) -> None:
-        """Upload the staged files, write the manifest last, then copy them into place."""
+    def commit(
+        self, renames: list[tuple[Path, str]], removals: list[str], after: list[str] = ()
+    ) -> None:
+        """Upload the staged files, write the manifest last, then copy them into place.
+        `after`: objects deleted once the copies are made (a compaction's inputs)."""
         try:
             if not flat(self.fs):
                 self.fs.makedirs(self.prefix, exist_ok=True)  # a folder where prefixes are
@@ -242,6 +245,8 @@ class RemoteStage:
                 self.fs.put_file(str(src), key)
                 moves.append([key, _strip(self.fs, dest)])
             manifest = {"renames": moves, "removals": [_strip(self.fs, p) for p in removals]}
+            if after:
+                manifest["after"] = [_strip(self.fs, p) for p in after]
             self._keys.append(f"{self.prefix}/{MANIFEST}")
             self.fs.pipe_file(f"{self.prefix}/{MANIFEST}", json.dumps(manifest).encode())
             _apply_remote(self.fs, self.prefix)
@@ -283,9 +288,20 @@ def _apply_remote(fs, prefix: str) -> None:
                     continue
                 fs.makedirs(fs._parent(dest), exist_ok=True)
             fs.cp_file(src, dest)  # server-side
-    for old in manifest.get("after", ()):  # a compaction's inputs, once its file is in
-        with contextlib.suppress(FileNotFoundError):
-            fs.rm_file(old)
+    _delete_after(fs, list(manifest.get("after", ())))
+
+
+def _delete_after(fs, after: list[str]) -> None:
+    """A compaction's inputs deleted, once its file is in place (one bulk delete)."""
+    if not after:
+        return
+    with contextlib.suppress(FileNotFoundError):
+        if flat(fs):
+            fs.rm(after)
+        else:
+            for old in after:
+                with contextlib.suppress(FileNotFoundError):
+                    fs.rm_file(old)
 
 
 def _recover_remote(dataset: str, options: dict | None) -> tuple[int, int]:

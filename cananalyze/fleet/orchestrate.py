@@ -261,10 +261,6 @@ def run_fleet(
         raise UsageError(f"--workers must be 1 or more (got {workers})")
     if batch < 1:
         raise UsageError(f"--batch must be 1 or more (got {batch})")
-    if batch > 1 and not isinstance(dataset, Path):
-        raise UsageError(f"{dataset}: --batch works on a local dataset only (not a URL yet)")
-    if compact_to and not isinstance(dataset, Path):
-        raise UsageError(f"{dataset}: --compact works on a local dataset only (not a URL yet)")
     if task_timeout is not None and not task_timeout > 0:
         raise UsageError(f"--task-timeout must be positive (got {task_timeout})")
     _make_dataset(dataset, where)
@@ -302,10 +298,16 @@ def run_fleet(
     if isinstance(dataset, Path):  # rows this run (or one cut short) replaced, out of
         with compact.locked(dataset):  # compacted files (fleet/compact.py)
             compact.reconcile(dataset, compression)
+    elif tasks and (
+        force or any(t.replaces or t.known is None or t.known for t in tasks) or recovered[0]
+    ):
+        # at a URL only when a log this run wrote may have rows in a compacted file (its
+        # path or content of its size was recorded): else a listing of the whole dataset
+        compact.reconcile_remote(dataset, compression, where)
     if compact_to:
         dates = {r["date"] for r in by_path.values() if not r.get("skipped") and r.get("date")}
         if dates:
-            done = compact.compact(dataset, compact_to, compression, dates)
+            done = compact.compact(dataset, compact_to, compression, dates, where)
             out.notes.append(
                 f"compacted: {len(done.sizes_before)} files in the dataset, now "
                 f"{len(done.sizes_after)}"

@@ -361,6 +361,18 @@ def run_batch(tasks: list[LogTask]) -> list[dict]:
 
         with contextlib.suppress(OSError):
             merge_logs(dataset, written, tasks[0].compression)
+    elif len(written) > 1:  # at a URL: the parts named from each log's date
+        from cananalyze.fleet.compact import merge_remote_logs
+
+        dated = {
+            r["hash"]: (r["date"], r.get("status") == "ok")
+            for r in results
+            if not r.get("skipped") and r.get("hash") and r.get("date")
+        }
+        with contextlib.suppress(OSError):
+            merge_remote_logs(
+                str(dataset), dated, tasks[0].compression, tasks[0].opts.storage_options
+            )
     return results
 
 

@@ -332,3 +332,119 @@ def test_a_commit_lists_no_date_folders(s3, requests, capsys):
         assert len(fs.glob(f"{ds}/frames/date=*/*.parquet")) == folders + 2
     assert lists[40] == lists[0], lists
     assert lists[0] <= 8, lists  # the inputs, the logs table, the dataset: not per log
+
+
+def _generated(tmp_path: Path, n: int, frames: int = 2000, seed: int = 1) -> list[Path]:
+    """`n` generated candump logs of one day (benchmarks/generate.py's bus)."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        from generate import generate
+    finally:
+        sys.path.pop(0)
+    from cananalyze.formats.logfile import write_log
+
+    out = []
+    for i in range(n):
+        path = tmp_path / f"gen{seed + i:02d}.log"
+        write_log(generate(frames, seed=seed + i), path)
+        out.append(path)
+    return out
+
+
+def _counts(dataset: str, table: str) -> Counter:
+    """Rows of `table` by (source, hash), as `cananalyze query` reads them."""
+    from cananalyze.fleet.query import query
+
+    _, rows = query(
+        dataset, f"SELECT source::VARCHAR, hash::VARCHAR, count(*) FROM {table} GROUP BY ALL"
+    )
+    return Counter({(s, h): n for s, h, n in rows})
+
+
+def _keys(fs, prefix: str) -> list[str]:
+    fs.invalidate_cache()
+    return sorted(k for k in fs.find(prefix) if k.endswith(".parquet"))
+
+
+def test_compact_on_the_bucket_keeps_every_row_once_for_a_reader_meanwhile(
+    s3, tmp_path, monkeypatch, capsys
+):
+    """`fleet compact s3://...`: each table's day becomes one time-ordered file, every row
+    and its lineage kept; a `query` run at the worst moment (the new file copied in, its
+    inputs not yet deleted) sees every row once; a rerun skips every log from the
+    compacted rows, and a changed log's old rows leave the compacted files."""
+    from cananalyze.fleet import layout
+
+    fs = s3["fs"]
+    for path in _generated(tmp_path, 4):
+        fs.put_file(str(path), f"bucket/c/logs/{path.name}")
+    ds = "s3://bucket/c/ds"
+    run = ["fleet", "s3://bucket/c/logs", "--out", ds, "--workers", "1"]
+    assert main([*run, "-q"]) == 0
+    before = {t: _counts(ds, t) for t in TABLES}
+    assert len(before["logs"]) == 4
+    assert len(_keys(fs, "bucket/c/ds/frames")) == 4
+
+    seen = []
+    deleted = layout._delete_after
+
+    def reader_first(fs_, after):  # what a reader sees just before the inputs go
+        if after:
+            table = after[0].split("/c/ds/")[1].split("/")[0]
+            raw = len(_keys(fs, f"bucket/c/ds/{table}"))  # a plain listing: both copies
+            seen.append((table, raw, _counts(ds, table)))
+        deleted(fs_, after)
+
+    monkeypatch.setattr(layout, "_delete_after", reader_first)
+    assert main(["fleet", "compact", ds]) == 0
+    monkeypatch.undo()
+    assert "compact: 28 files" in capsys.readouterr().err
+    assert {t for t, _, _ in seen} == set(TABLES)
+    for table, raw, counted in seen:
+        assert raw == 4 + 1, table  # the inputs and the new file, listed together
+        assert counted == before[table], table  # yet `query` reads each row once
+    for table in TABLES:
+        (key,) = _keys(fs, f"bucket/c/ds/{table}")
+        assert key.split("/")[-1].startswith("part-compact-"), key
+        assert _counts(ds, table) == before[table], table
+    assert not _keys(fs, "bucket/c/ds/_staging")
+    import pyarrow.parquet as pq
+
+    with fs.open(_keys(fs, "bucket/c/ds/frames")[0]) as f:
+        t = pq.read_table(f, columns=["t"]).column("t").to_numpy()
+    assert (t[1:] >= t[:-1]).all()  # rows in time order
+
+    assert main(run) == 0
+    err = capsys.readouterr().err
+    assert "(0 decoded, 4 already in the dataset)" in err and "no cluster" in err, err
+    # a changed log: its new rows in, its old ones out of the compacted files
+    (tmp_path / "x").mkdir()
+    (changed,) = _generated(tmp_path / "x", 1, frames=700, seed=9)
+    fs.put_file(str(changed), "bucket/c/logs/gen01.log")
+    assert main([*run, "-q"]) == 0
+    after = _counts(ds, "frames")
+    mine = {h: n for (s, h), n in after.items() if s == "s3://bucket/c/logs/gen01.log"}
+    assert list(mine.values()) == [700], after
+    assert {k: n for k, n in after.items() if k[0] != "s3://bucket/c/logs/gen01.log"} == {
+        k: n for k, n in before["frames"].items() if k[0] != "s3://bucket/c/logs/gen01.log"
+    }
+    assert len(_counts(ds, "logs")) == 4
+
+
+def test_batch_on_the_bucket_shares_parts(s3, tmp_path, capsys):
+    """`--batch 4` into a bucket: the four small logs of one day share one file a table,
+    with the rows a one-log-a-task run writes; a rerun skips them all."""
+    fs = s3["fs"]
+    for path in _generated(tmp_path, 4, seed=21):
+        fs.put_file(str(path), f"bucket/b/logs/{path.name}")
+    common = ["fleet", "s3://bucket/b/logs", "--workers", "1", "-q"]
+    assert main([*common, "--out", "s3://bucket/b/one"]) == 0
+    assert main([*common, "--out", "s3://bucket/b/batched", "--batch", "4"]) == 0
+    for table in TABLES:
+        assert _counts("s3://bucket/b/batched", table) == _counts("s3://bucket/b/one", table)
+        (key,) = _keys(fs, f"bucket/b/batched/{table}")
+        assert key.split("/")[-1].startswith("part-compact-"), key
+    assert not _keys(fs, "bucket/b/batched/_staging")
+    capsys.readouterr()
+    assert main([*common[:-1], "--out", "s3://bucket/b/batched", "--batch", "4"]) == 0
+    assert "(0 decoded, 4 already in the dataset)" in capsys.readouterr().err
