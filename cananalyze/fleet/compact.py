@@ -25,7 +25,8 @@ hash, and a loose `logs` row for a path retires that path's other hashes.
 Compaction and the reconcile hold one lock (`flock` on the `_staging` folder), so they
 never interleave; a fleet run's tasks do not take it. Each publish also waits for the
 `cananalyze query` runs reading the dataset (`reading`: `flock` on its folder, shared).
-Local datasets only: object storage has no rename to publish with.
+A dataset at a URL: see the section at the end (a remote stage's copy, then a bulk
+delete; `visible` is how a reader sees each row once meanwhile).
 """
 
 from __future__ import annotations

@@ -19,7 +19,8 @@ A dataset at a URL (`s3://bucket/ds`, core/storage) has no rename and no lock: t
 task writes its parts into a local temporary folder, uploads them under
 `DATASET/_staging/<name>/`, writes `COMMIT.json` there last (the copies and removals
 to make), then copies each part to its place (the `logs` part last) and deletes the
-staging prefix. A run's `recover` finishes (manifest there) or deletes (none) what an
+staged objects (one bulk delete). Where a log's earlier parts are comes from the
+`logs` rows the driver read (`parts_at`), not from a listing of every date folder. A run's `recover` finishes (manifest there) or deletes (none) what an
 interrupted run left, as for a local dataset; with no lock to tell a live run's stage
 from a dead one, run one fleet at a time into an object-storage dataset.
 """

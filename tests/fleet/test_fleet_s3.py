@@ -177,6 +177,9 @@ def test_bad_urls_and_options_are_one_line(s3, tmp_path, capsys):
     assert len(err) == 1 and "s3://bucket/none: no such file or folder" in err[0]
     assert main(["query", "s3://bucket/ds", "SELECT 1", "--storage-options", "{oops"]) == 2
     assert "--storage-options: not JSON" in capsys.readouterr().err
+    assert main(["fleet", "compact", "s3://bucket/none"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["cananalyze: error: s3://bucket/none: not a fleet dataset (no logs table in it)"]
     assert not (tmp_path / "ds").exists()
 
 
