@@ -484,7 +484,7 @@ def _recount(
         result = by_path.get(t.path)
         if result is None or not result.get("skipped") or not result.get("hash"):
             continue
-        row = recorded(dataset, result["hash"], options)
+        row = recorded(dataset, result["hash"], options, t.known)  # where the worker looked
         if row is not None and row.get("run") == run and row.get("source") == t.path:
             keep = {k: result[k] for k in ("first", "junit") if k in result}
             by_path[t.path] = {**row, **keep, "source": t.path, "skipped": False}

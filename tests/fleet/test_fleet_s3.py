@@ -451,3 +451,32 @@ def test_batch_on_the_bucket_shares_parts(s3, tmp_path, capsys):
     capsys.readouterr()
     assert main([*common[:-1], "--out", "s3://bucket/b/batched", "--batch", "4"]) == 0
     assert "(0 decoded, 4 already in the dataset)" in capsys.readouterr().err
+
+
+def test_a_rerun_reads_each_logs_file_with_one_request(s3, fleet, requests, capsys):
+    """The driver's one read of the `logs` table at a URL: a listing, then one GET a file
+    (fetched concurrently), no HEAD a file; nothing else read, no cluster."""
+    requests.clear()
+    assert main(["fleet", "s3://bucket/logs", "--out", "s3://bucket/ds", "--workers", "1"]) in (
+        0,
+        1,
+    )
+    assert "no cluster" in capsys.readouterr().err
+    n = len(fleet["local"])
+    assert requests["GET"] == n, dict(requests)  # the logs parts; the inputs only listed
+    assert requests["HEAD"] <= 3 and requests["LIST"] <= 8, dict(requests)
+
+
+def test_logs_rows_at_a_url_read_an_older_part_s_missing_columns_as_null(tmp_path):
+    """A `logs` part written before a column was added: that column null, the rest read."""
+    import pyarrow.parquet as pq
+
+    from cananalyze.fleet.task import logs_rows
+
+    logs = tmp_path / "logs" / "date=2024-03-13"
+    logs.mkdir(parents=True)
+    row = {"source": ["/x.log"], "hash": ["ab"], "status": ["ok"], "frames": [5]}
+    pq.write_table(__import__("pyarrow").table(row), logs / "part-ab.parquet")
+    (got,) = logs_rows(f"file://{tmp_path}")["/x.log"]
+    assert got["hash"] == "ab" and got["frames"] == 5 and got["date"] == "2024-03-13"
+    assert got["mtime_ns"] is None and got["config"] is None
