@@ -221,9 +221,9 @@ def logs_rows(dataset: layout.Dataset, options: dict | None = None) -> dict[str,
 def _remote_logs_rows(dataset: str, options: dict | None, chunk: int = 1000) -> list[dict] | None:
     """The `logs` rows of a dataset at a URL: one listing of the table, then each file
     fetched whole by concurrent GETs (`fs.cat`, a chunk of files at a time): one request
-    a file, where `pyarrow.dataset` over fsspec made three (size, footer, data), one
-    after another. A file deleted since the listing (a compaction's input) is passed
-    over: its logs are hashed by their workers, never wrongly skipped."""
+    a file, as `pyarrow.dataset` over fsspec made, but not one file after another. A
+    file deleted since the listing (a compaction's input) is passed over: its logs are
+    hashed by their workers, never wrongly skipped."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
