@@ -205,12 +205,61 @@ def _merge(dataset: Path, table: str, parts: list[Path], compression: str) -> No
     _publish(dataset, lambda staged: _write(data, table, staged, compression), dest, after)
 
 
-def merge_logs(dataset: Path, digests: set[str], compression: str = "snappy") -> int:
+def _stale(data: pa.Table, fresh: set[str], old: dict[str, set[str]]):
+    """The rows of `data` that a batch's commits replaced: those of a hash it wrote again
+    (`fresh`), and those of a path's earlier content (`old`: {path: its earlier hashes})."""
+    import pyarrow.compute as pc
+
+    hashes = data["hash"].cast(pa.string())
+    mask = pc.is_in(hashes, pa.array(sorted(fresh), pa.string()))
+    pairs = sorted(f"{path}\0{h}" for path, hs in old.items() for h in hs)
+    if pairs:
+        keys = pc.binary_join_element_wise(data["source"].cast(pa.string()), hashes, "\0")
+        mask = pc.or_(mask, pc.is_in(keys, pa.array(pairs, pa.string())))
+    return mask
+
+
+def retire(
+    dataset: Path, fresh: set[str], old: dict[str, set[str]], compression: str = "snappy"
+) -> int:
+    """Before a batch's parts are merged: the earlier copies of its logs' rows dropped from
+    the compacted files (a hash decoded again, a changed path's old content). Once merged,
+    the new rows are in a compacted file too, and nothing would tell the two copies apart
+    (the reconcile's rules are about loose parts). Files rewritten; `locked` held."""
+    import pyarrow.compute as pc
+
+    candidates = set(fresh).union(*old.values())
+    rewritten = 0
+    for table in schema.TABLES:
+        for part in _parts(dataset, table, compacted=True):
+            if not hashes_of(part) & candidates:
+                continue
+            ino = part.stat().st_ino
+            data = _read([part], table)
+            keep = data.filter(pc.invert(_stale(data, fresh, old)))
+            if keep.num_rows == data.num_rows:
+                continue
+            if keep.num_rows:
+                _publish(dataset, lambda s, k=keep, t=table: _write(k, t, s, compression), part, [])
+            else:
+                _publish(dataset, lambda s: None, part, [(part, ino)])
+            rewritten += 1
+    return rewritten
+
+
+def merge_logs(
+    dataset: Path,
+    digests: set[str],
+    compression: str = "snappy",
+    old: dict[str, set[str]] | None = None,
+) -> int:
     """The parts of these logs (a fleet batch's, just committed one by one) merged, per
     table and date, into shared files: several logs a file from the start. How many
-    files were written. Under the compaction lock, as any merge."""
+    files were written. Under the compaction lock, as any merge; first the earlier
+    copies of those logs' rows leave the compacted files (`retire`)."""
     written = 0
     with locked(dataset):
+        retire(dataset, digests, old or {}, compression)
         for table in schema.TABLES:
             by_partition: dict[Path, list[Path]] = {}
             for digest in sorted(digests):
@@ -506,6 +555,40 @@ def reconcile_remote(dataset: str, compression: str = "snappy", options: dict | 
     return _remote_reconcile(_Remote(dataset, options), compression)
 
 
+def _remote_retire(
+    r: _Remote, fresh: set[str], old: dict[str, set[str]], compression: str, dates
+) -> int:
+    import pyarrow.compute as pc
+
+    if dates is None:
+        keys = [k for k in r.parts() if _name(k).startswith(COMPACTED)]
+    else:
+        keys = []
+        for table in schema.TABLES:
+            for date in sorted(dates):
+                with contextlib.suppress(FileNotFoundError):
+                    folder = f"{r.base}/{table}/date={date}"
+                    keys += [
+                        k for k in r.fs.ls(folder, detail=False) if _name(k).startswith(COMPACTED)
+                    ]
+    candidates = set(fresh).union(*old.values())
+    rewritten = 0
+    for key in sorted(keys):
+        if not r.hashes_of(key) & candidates:
+            continue
+        table = r.table(key)
+        data = r.read([key], table)
+        keep = data.filter(pc.invert(_stale(data, fresh, old)))
+        if keep.num_rows == data.num_rows:
+            continue
+        if keep.num_rows:
+            r.publish(lambda s, k=keep, t=table: _write(k, t, s, compression), key)
+        else:
+            r.publish(lambda s: None, None, [key])
+        rewritten += 1
+    return rewritten
+
+
 def _remote_reconcile(r: _Remote, compression: str = "snappy") -> int:
     """`reconcile` for a dataset at a URL: the same rows dropped, the same way."""
     import pyarrow.compute as pc
@@ -604,12 +687,21 @@ def _sized_bins(sized: list[tuple[int, str]], target: int) -> Iterator[list[str]
 
 
 def merge_remote_logs(
-    dataset: str, logs: dict[str, tuple[str, bool]], compression: str, options: dict | None
+    dataset: str,
+    logs: dict[str, tuple[str, bool]],
+    compression: str,
+    options: dict | None,
+    old: dict[str, set[str]] | None = None,
+    earlier: set[str] | None = None,
 ) -> int:
     """`merge_logs` at a URL: {digest: (date, decoded ok)} of a batch's logs just committed;
     their parts named from their dates (every table's for a log decoded, the `logs` part
-    alone for a failed one: no listing), merged per table and date. Files written."""
+    alone for a failed one: no listing), merged per table and date. Files written. First
+    `retire` in the compacted files of the `earlier` dates (where the tasks' earlier
+    rows can be: their `known`; None: every date), each date folder listed once."""
     r = _Remote(dataset, options)
+    if earlier is None or earlier:
+        _remote_retire(r, set(logs), old or {}, compression, earlier)
     written = 0
     for table in schema.TABLES:
         by_date: dict[str, list[str]] = {}

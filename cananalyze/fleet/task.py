@@ -397,11 +397,14 @@ def run_batch(tasks: list[LogTask]) -> list[dict]:
     results = [run_task(t) for t in tasks]
     dataset = layout.root(tasks[0].dataset)
     written = {r["hash"] for r in results if not r.get("skipped") and r.get("hash")}
+    # each written log's path's earlier content (the driver's): its compacted rows go too
+    mine = {r["source"] for r in results if not r.get("skipped") and r.get("hash")}
+    old = {t.path: set(t.replaces) for t in tasks if t.path in mine and t.replaces}
     if isinstance(dataset, Path) and len(written) > 1:
         from cananalyze.fleet.compact import merge_logs
 
         with contextlib.suppress(OSError):
-            merge_logs(dataset, written, tasks[0].compression)
+            merge_logs(dataset, written, tasks[0].compression, old)
     elif len(written) > 1:  # at a URL: the parts named from each log's date
         from cananalyze.fleet.compact import merge_remote_logs
 
@@ -411,8 +414,15 @@ def run_batch(tasks: list[LogTask]) -> list[dict]:
             if not r.get("skipped") and r.get("hash") and r.get("date")
         }
         with contextlib.suppress(OSError):
+            earlier = (
+                None
+                if any(t.known is None for t in tasks)
+                else {d for t in tasks if t.path in mine for d in t.known}
+            )
             merge_remote_logs(
-                str(dataset), dated, tasks[0].compression, tasks[0].opts.storage_options
+                *(str(dataset), dated, tasks[0].compression, tasks[0].opts.storage_options),
+                old=old,
+                earlier=earlier,
             )
     return results
 

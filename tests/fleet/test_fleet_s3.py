@@ -451,6 +451,10 @@ def test_batch_on_the_bucket_shares_parts(s3, tmp_path, capsys):
     capsys.readouterr()
     assert main([*common[:-1], "--out", "s3://bucket/b/batched", "--batch", "4"]) == 0
     assert "(0 decoded, 4 already in the dataset)" in capsys.readouterr().err
+    # decoded again, batched again: the earlier copies leave the shared files first
+    assert main([*common, "--out", "s3://bucket/b/batched", "--batch", "4", "--force"]) == 0
+    for table in TABLES:
+        assert _counts("s3://bucket/b/batched", table) == _counts("s3://bucket/b/one", table)
 
 
 def test_a_rerun_reads_each_logs_file_with_one_request(s3, fleet, requests, capsys):
