@@ -43,6 +43,9 @@ from cananalyze.core import storage
 STAGING = "_staging"
 SCRATCH = "dask-scratch"  # the local cluster's workers' scratch space: a stage of its own
 MANIFEST = "COMMIT.json"
+# Hive's partition of no value: DuckDB, pyarrow and Spark read its date as null (unknown)
+# and keep the column a date, where a word would make it text
+UNKNOWN_DATE = "__HIVE_DEFAULT_PARTITION__"
 
 
 Dataset = Path | str  # a local folder, or a URL (core/storage)
@@ -78,8 +81,6 @@ def parts_at(dataset: Dataset, table: str, digest: str, dates) -> list:
 def row_date(value) -> str:
     """A `logs` row's `date` (a date, or None for the unknown one) as its folder names it."""
     if value is None:
-        from cananalyze.fleet.task import UNKNOWN_DATE
-
         return UNKNOWN_DATE
     return value if isinstance(value, str) else value.isoformat()
 

@@ -38,9 +38,7 @@ from cananalyze.pipeline.sink import Sink
 # those when it holds a date (NAME_DATES), else the date is unknown (null). Never the
 # modification time: a copy made today would land under today.
 _EPOCH_FROM, _EPOCH_TO = 946_684_800.0, 4_102_444_800.0
-# Hive's partition of no value: DuckDB, pyarrow and Spark read its date as null (unknown)
-# and keep the column a date, where a word would make it text
-UNKNOWN_DATE = "__HIVE_DEFAULT_PARTITION__"
+UNKNOWN_DATE = layout.UNKNOWN_DATE  # Hive's partition of no value (fleet/layout.py)
 # (pattern, groups as year, month, day): 2024-03-13 / 2024_03_13 / 20240313 anywhere in
 # the name; Sevcon DVT's can_DDMMYY_HHMMSS (can_180209_154604: 18 Feb 2009)
 NAME_DATES = (
