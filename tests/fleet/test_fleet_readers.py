@@ -338,6 +338,7 @@ def test_batched_small_logs_share_parts_with_the_same_rows(dataset, logs, tmp_pa
     assert len(_pyarrow_counts(ds_, "logs")) == 3
 
 
+@pytest.mark.slow  # three batched fleet runs, end to end
 def test_a_batch_decoded_again_leaves_no_earlier_copy_in_the_shared_files(tmp_path, cluster):
     """`--batch` merges a batch's parts into shared files: a batch decoded again (`--force`,
     or files changed) must first drop its logs' earlier rows from the shared files the

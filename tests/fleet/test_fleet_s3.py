@@ -369,6 +369,7 @@ def _keys(fs, prefix: str) -> list[str]:
     return sorted(k for k in fs.find(prefix) if k.endswith(".parquet"))
 
 
+@pytest.mark.slow  # fleet runs and a compaction, end to end
 def test_compact_on_the_bucket_keeps_every_row_once_for_a_reader_meanwhile(
     s3, tmp_path, monkeypatch, capsys
 ):
@@ -434,6 +435,7 @@ def test_compact_on_the_bucket_keeps_every_row_once_for_a_reader_meanwhile(
     assert len(_counts(ds, "logs")) == 4
 
 
+@pytest.mark.slow  # three fleet runs into a bucket, end to end
 def test_batch_on_the_bucket_shares_parts(s3, tmp_path, capsys):
     """`--batch 4` into a bucket: the four small logs of one day share one file a table,
     with the rows a one-log-a-task run writes; a rerun skips them all."""
