@@ -32,9 +32,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Rewrite each table's date partitions of a fleet dataset: the parts "
         "smaller than --target-size become files near that size, rows in time order, each "
         "row keeping its log's lineage. Readers see whole files throughout; a rerun of "
-        "`fleet` still skips the logs in it. Local datasets only.",
+        "`fleet` still skips the logs in it. DATASET may be a URL (s3://bucket/ds).",
     )
-    options_.add(c, "dataset", "target_size", "parquet_compression", "quiet")
+    options_.add(c, "dataset", "target_size", "parquet_compression", "storage_options", "quiet")
     c.set_defaults(func=run_compact)
 
 
@@ -78,9 +78,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def run_compact(args: argparse.Namespace) -> int:
+    from cananalyze.core.storage import parse_options
     from cananalyze.fleet.compact import compact, median
 
-    out = compact(args.dataset, args.target_size, args.parquet_compression)
+    where = parse_options(args.storage_options) or None
+    out = compact(args.dataset, args.target_size, args.parquet_compression, options=where)
     if not args.quiet:
         before, after = out.sizes_before, out.sizes_after
         print(

@@ -423,15 +423,14 @@ FLAGS: dict[str, Flag] = {
             default=1,
             metavar="N",
             help="decode small logs (under 16 MB) N to a task, their parts merged into "
-            "shared files (default 1: a task and seven parts a log; a local dataset only)",
+            "shared files (default 1: a task and seven parts a log)",
         ),
     ),
     "compact": Flag(
         ("--compact",),
         dict(
             action="store_true",
-            help="at the end, compact the days this run wrote (as `fleet compact`, "
-            "--target-size; a local dataset only)",
+            help="at the end, compact the days this run wrote (as `fleet compact`, --target-size)",
         ),
     ),
     "force": Flag(

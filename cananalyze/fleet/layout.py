@@ -19,7 +19,8 @@ A dataset at a URL (`s3://bucket/ds`, core/storage) has no rename and no lock: t
 task writes its parts into a local temporary folder, uploads them under
 `DATASET/_staging/<name>/`, writes `COMMIT.json` there last (the copies and removals
 to make), then copies each part to its place (the `logs` part last) and deletes the
-staging prefix. A run's `recover` finishes (manifest there) or deletes (none) what an
+staged objects (one bulk delete). Where a log's earlier parts are comes from the
+`logs` rows the driver read (`parts_at`), not from a listing of every date folder. A run's `recover` finishes (manifest there) or deletes (none) what an
 interrupted run left, as for a local dataset; with no lock to tell a live run's stage
 from a dead one, run one fleet at a time into an object-storage dataset.
 """
@@ -42,6 +43,9 @@ from cananalyze.core import storage
 STAGING = "_staging"
 SCRATCH = "dask-scratch"  # the local cluster's workers' scratch space: a stage of its own
 MANIFEST = "COMMIT.json"
+# Hive's partition of no value: DuckDB, pyarrow and Spark read its date as null (unknown)
+# and keep the column a date, where a word would make it text
+UNKNOWN_DATE = "__HIVE_DEFAULT_PARTITION__"
 
 
 Dataset = Path | str  # a local folder, or a URL (core/storage)
@@ -63,6 +67,31 @@ def existing_parts(dataset: Dataset, table: str, digest: str, options: dict | No
     if isinstance(dataset, str):
         return glob_urls(f"{dataset.rstrip('/')}/{table}/date=*/part-{digest}.parquet", options)
     return sorted((dataset / table).glob(f"date=*/part-{digest}.parquet"))
+
+
+def parts_at(dataset: Dataset, table: str, digest: str, dates) -> list:
+    """A log's parts of `table` at these dates (those its `logs` rows name): where its
+    earlier parts are, without listing a folder (on object storage a LIST a date folder
+    a table, per commit). Local: those there; at a URL: every name (removing an object
+    that is not there is no error, and costs what a lookup would)."""
+    found = [part_path(dataset, table, d, digest) for d in sorted(set(dates))]
+    return found if isinstance(dataset, str) else [p for p in found if p.exists()]
+
+
+def row_date(value) -> str:
+    """A `logs` row's `date` (a date, or None for the unknown one) as its folder names it."""
+    if value is None:
+        return UNKNOWN_DATE
+    return value if isinstance(value, str) else value.isoformat()
+
+
+# object stores: no folders to make, a prefix is gone with its last object
+_FLAT = {"s3", "s3a", "gs", "gcs", "abfs", "abfss", "az", "adl", "oss", "r2"}
+
+
+def flat(fs) -> bool:
+    protocols = fs.protocol if isinstance(fs.protocol, tuple | list) else (fs.protocol,)
+    return any(p in _FLAT for p in protocols)
 
 
 def glob_urls(pattern: str, options: dict | None = None) -> list[str]:
@@ -190,24 +219,37 @@ def _stages(dataset: Path) -> Iterator[Path]:
 
 class RemoteStage:
     """One task's stage for a dataset at a URL: a local temporary folder the tables are
-    written into, uploaded under `DATASET/_staging/<name>/` when committed."""
+    written into, uploaded under `DATASET/_staging/<name>/` when committed.
+
+    Its requests: one PUT an uploaded part and one for COMMIT.json, a server-side copy
+    and one bulk delete (the old parts at other dates, then the stage's own objects: no
+    LIST, no HEAD); a file:// dataset's stage folder is removed whole."""
 
     def __init__(self, dataset: str, digest: str, options: dict | None = None) -> None:
         self.dataset, self.options = dataset.rstrip("/"), options
         self.fs, base = storage.filesystem(self.dataset, options)
         self.prefix = f"{base.rstrip('/')}/{STAGING}/{_stage_name(digest)}"
         self.dir = Path(tempfile.mkdtemp(prefix="cananalyze-stage-"))
+        self._keys: list[str] = []  # what was (or may have been) uploaded under the prefix
 
-    def commit(self, renames: list[tuple[Path, str]], removals: list[str]) -> None:
-        """Upload the staged files, write the manifest last, then copy them into place."""
+    def commit(
+        self, renames: list[tuple[Path, str]], removals: list[str], after: list[str] = ()
+    ) -> None:
+        """Upload the staged files, write the manifest last, then copy them into place.
+        `after`: objects deleted once the copies are made (a compaction's inputs)."""
         try:
-            self.fs.makedirs(self.prefix, exist_ok=True)  # a folder where prefixes are folders
+            if not flat(self.fs):
+                self.fs.makedirs(self.prefix, exist_ok=True)  # a folder where prefixes are
             moves = []
             for i, (src, dest) in enumerate(renames):
                 key = f"{self.prefix}/{i}-{src.name}"
+                self._keys.append(key)
                 self.fs.put_file(str(src), key)
                 moves.append([key, _strip(self.fs, dest)])
             manifest = {"renames": moves, "removals": [_strip(self.fs, p) for p in removals]}
+            if after:
+                manifest["after"] = [_strip(self.fs, p) for p in after]
+            self._keys.append(f"{self.prefix}/{MANIFEST}")
             self.fs.pipe_file(f"{self.prefix}/{MANIFEST}", json.dumps(manifest).encode())
             _apply_remote(self.fs, self.prefix)
         finally:
@@ -217,7 +259,11 @@ class RemoteStage:
         """Drop the local folder and whatever was uploaded under the staging prefix."""
         shutil.rmtree(self.dir, ignore_errors=True)
         with contextlib.suppress(FileNotFoundError, OSError):
-            self.fs.rm(self.prefix, recursive=True)
+            if not flat(self.fs):
+                self.fs.rm(self.prefix, recursive=True)
+            elif self._keys:  # the manifest last in the list: one bulk delete
+                self.fs.rm(self._keys)
+        self._keys = []
 
 
 def _strip(fs, url: str) -> str:
@@ -225,17 +271,39 @@ def _strip(fs, url: str) -> str:
 
 
 def _apply_remote(fs, prefix: str) -> None:
-    """A remote stage's COMMIT.json carried out (safe to repeat): copies, then removals of
-    the log's parts at other dates."""
+    """A remote stage's COMMIT.json carried out (safe to repeat): removals (the log's
+    parts at other dates), then copies (a source already gone: done by an earlier try)."""
     manifest = json.loads(fs.cat_file(f"{prefix}/{MANIFEST}"))
     manifest["renames"], manifest["removals"]  # noqa: B018 - both there before any change
-    for old in manifest["removals"]:
+    if manifest["removals"]:
         with contextlib.suppress(FileNotFoundError):
-            fs.rm_file(old)
+            if flat(fs):
+                fs.rm(list(manifest["removals"]))  # one bulk delete
+            else:
+                for old in manifest["removals"]:
+                    with contextlib.suppress(FileNotFoundError):
+                        fs.rm_file(old)
     for src, dest in manifest["renames"]:
-        if fs.exists(src):
-            fs.makedirs(fs._parent(dest), exist_ok=True)
-            fs.copy(src, dest)
+        with contextlib.suppress(FileNotFoundError):
+            if not flat(fs):
+                if not fs.exists(src):
+                    continue
+                fs.makedirs(fs._parent(dest), exist_ok=True)
+            fs.cp_file(src, dest)  # server-side
+    _delete_after(fs, list(manifest.get("after", ())))
+
+
+def _delete_after(fs, after: list[str]) -> None:
+    """A compaction's inputs deleted, once its file is in place (one bulk delete)."""
+    if not after:
+        return
+    with contextlib.suppress(FileNotFoundError):
+        if flat(fs):
+            fs.rm(after)
+        else:
+            for old in after:
+                with contextlib.suppress(FileNotFoundError):
+                    fs.rm_file(old)
 
 
 def _recover_remote(dataset: str, options: dict | None) -> tuple[int, int]:

@@ -261,10 +261,6 @@ def run_fleet(
         raise UsageError(f"--workers must be 1 or more (got {workers})")
     if batch < 1:
         raise UsageError(f"--batch must be 1 or more (got {batch})")
-    if batch > 1 and not isinstance(dataset, Path):
-        raise UsageError(f"{dataset}: --batch works on a local dataset only (not a URL yet)")
-    if compact_to and not isinstance(dataset, Path):
-        raise UsageError(f"{dataset}: --compact works on a local dataset only (not a URL yet)")
     if task_timeout is not None and not task_timeout > 0:
         raise UsageError(f"--task-timeout must be positive (got {task_timeout})")
     _make_dataset(dataset, where)
@@ -277,9 +273,9 @@ def run_fleet(
     run = uuid.uuid4().hex
     out = FleetResult([], recovered=recovered, refused=refused)
     each = _OptionsByFolder(opts)
-    by_path, earlier = _unchanged_logs(logs, dataset, each, force)
+    by_path, earlier, known = _unchanged_logs(logs, dataset, each, force)
     tasks = []
-    for p, _ in logs:
+    for p, st in logs:
         if p not in by_path:
             o, old = each(p), earlier.get(p, ())
             tasks.append(
@@ -288,6 +284,8 @@ def run_fleet(
                     timeout=task_timeout,
                     run=run,
                     replaces=old,
+                    known=known(p, st.size),
+                    size=st.size,
                 )
             )
     if tasks:
@@ -300,10 +298,16 @@ def run_fleet(
     if isinstance(dataset, Path):  # rows this run (or one cut short) replaced, out of
         with compact.locked(dataset):  # compacted files (fleet/compact.py)
             compact.reconcile(dataset, compression)
+    elif tasks and (
+        force or any(t.replaces or t.known is None or t.known for t in tasks) or recovered[0]
+    ):
+        # at a URL only when a log this run wrote may have rows in a compacted file (its
+        # path or content of its size was recorded): else a listing of the whole dataset
+        compact.reconcile_remote(dataset, compression, where)
     if compact_to:
         dates = {r["date"] for r in by_path.values() if not r.get("skipped") and r.get("date")}
         if dates:
-            done = compact.compact(dataset, compact_to, compression, dates)
+            done = compact.compact(dataset, compact_to, compression, dates, where)
             out.notes.append(
                 f"compacted: {len(done.sizes_before)} files in the dataset, now "
                 f"{len(done.sizes_after)}"
@@ -340,12 +344,36 @@ class _OptionsByFolder:
 
 def _unchanged_logs(
     logs: list[tuple[str, object]], dataset: layout.Dataset, each: _OptionsByFolder, force: bool
-) -> tuple[dict[str, dict], dict[str, tuple[str, ...]]]:
+):
     """({path: result} of the logs the dataset holds unchanged, {path: digests of the rows
-    it holds for each other one}): decided from each file's path, size and modification
-    time and the configuration, before any file is read; the rest go to the workers,
-    which hash them (and replace those rows' parts when the content changed)."""
+    it holds for each other one}, known(path, size): the rows a worker needs to find that
+    log's earlier parts): decided from each file's path, size and modification time and
+    the configuration, before any file is read; the rest go to the workers, which hash
+    them (and replace those rows' parts when the content changed).
+
+    `known` gives a task the dates its earlier parts can be at: those of its path's rows
+    and of the rows of any content of its size (the content it will hash, if recorded,
+    is among them). The worker then names the parts it replaces at those dates instead
+    of listing every date folder of every table (on object storage, LISTs per commit
+    that grew with the dataset). None when the `logs` table could not be read, or an ok
+    row has no size (written before sizes were recorded): the worker lists instead."""
     rows = logs_rows(dataset, each.opts.storage_options)
+    by_size: dict[int, set[str]] = {}
+    exact = rows is not None
+    for mine in (rows or {}).values():
+        for row in mine:
+            if row.get("size") is not None:
+                by_size.setdefault(row["size"], set()).add(row["date"])
+            elif row.get("status") == "ok":
+                exact = False
+
+    def known(path: str, size: int | None) -> tuple[str, ...] | None:
+        if not exact or size is None:
+            return None
+        mine = {r["date"] for r in rows.get(path, ())}
+        return tuple(sorted(mine | by_size.get(size, set())))
+
+    rows = rows or {}
     done: dict[str, dict] = {}
     earlier: dict[str, tuple[str, ...]] = {}
     for path, st in logs:
@@ -355,7 +383,7 @@ def _unchanged_logs(
             done[path] = {**old, "source": path, "skipped": True, "first": {}, "junit": None}
         elif mine:
             earlier[path] = tuple(sorted({r["hash"] for r in mine}))
-    return done, earlier
+    return done, earlier, known
 
 
 # a log this small is batched with others by `fleet --batch N`: its seven parts would
@@ -456,7 +484,7 @@ def _recount(
         result = by_path.get(t.path)
         if result is None or not result.get("skipped") or not result.get("hash"):
             continue
-        row = recorded(dataset, result["hash"], options)
+        row = recorded(dataset, result["hash"], options, t.known)  # where the worker looked
         if row is not None and row.get("run") == run and row.get("source") == t.path:
             keep = {k: result[k] for k in ("first", "junit") if k in result}
             by_path[t.path] = {**row, **keep, "source": t.path, "skipped": False}

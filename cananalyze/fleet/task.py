@@ -38,9 +38,7 @@ from cananalyze.pipeline.sink import Sink
 # those when it holds a date (NAME_DATES), else the date is unknown (null). Never the
 # modification time: a copy made today would land under today.
 _EPOCH_FROM, _EPOCH_TO = 946_684_800.0, 4_102_444_800.0
-# Hive's partition of no value: DuckDB, pyarrow and Spark read its date as null (unknown)
-# and keep the column a date, where a word would make it text
-UNKNOWN_DATE = "__HIVE_DEFAULT_PARTITION__"
+UNKNOWN_DATE = layout.UNKNOWN_DATE  # Hive's partition of no value (fleet/layout.py)
 # (pattern, groups as year, month, day): 2024-03-13 / 2024_03_13 / 20240313 anywhere in
 # the name; Sevcon DVT's can_DDMMYY_HHMMSS (can_180209_154604: 18 Feb 2009)
 NAME_DATES = (
@@ -66,6 +64,11 @@ class LogTask:
     # the digests of the rows the dataset holds for this path (its earlier content): their
     # parts are removed when this log commits, so a changed file is never in it twice
     replaces: tuple[str, ...] = ()
+    # the dates this log's earlier parts can be at (the driver's: those of the rows of
+    # this path and of any content of this file's `size`): its parts there are named, not
+    # listed (fleet/layout.parts_at). None: not known; every date folder is listed
+    known: tuple[str, ...] | None = None
+    size: int | None = None
 
 
 class _Findings(Sink):
@@ -142,12 +145,24 @@ _DECIDING = (
 )
 
 
-def recorded(dataset: layout.Dataset, digest: str, options: dict | None = None) -> dict | None:
+def _parts_of(
+    dataset: layout.Dataset, table: str, digest: str, options: dict | None, dates
+) -> list:
+    """A log's parts of `table`: at these `dates` (a task's `known`), or (None: not known)
+    found by a glob over every date folder."""
+    if dates is None:
+        return layout.existing_parts(dataset, table, digest, options)
+    return layout.parts_at(dataset, table, digest, dates)
+
+
+def recorded(
+    dataset: layout.Dataset, digest: str, options: dict | None = None, dates=None
+) -> dict | None:
     """The dataset's `logs` row for this content (its own part, or a compacted file's), or
-    None."""
+    None. `dates`: the partitions its rows are known to be in (no listing), else all."""
     import pyarrow.parquet as pq
 
-    for part in layout.existing_parts(dataset, "logs", digest, options):
+    for part in _parts_of(dataset, "logs", digest, options, dates):
         with contextlib.suppress(OSError, ValueError):
             if isinstance(part, str):
                 with layout.open_part(part, options) as f:
@@ -167,44 +182,88 @@ def recorded(dataset: layout.Dataset, digest: str, options: dict | None = None) 
 ROW_COLUMNS = (
     *("source", "hash", "version", "config", "size", "mtime_ns", "run"),
     *("status", "error", "frames", "findings", "violations", "skipped_lines", "format"),
+    "date",
 )
 
 
-def logs_rows(dataset: layout.Dataset, options: dict | None = None) -> dict[str, list[dict]]:
-    """Every `logs` row of the dataset by source, read once (the driver's skip key and the
-    run's counts); {} when there are none or they cannot be read (then every log is
-    hashed by its worker, as before: never a wrong skip)."""
+def logs_rows(dataset: layout.Dataset, options: dict | None = None) -> dict[str, list[dict]] | None:
+    """Every `logs` row of the dataset by source, read once (the driver's skip key, where
+    the workers find a log's earlier parts, the run's counts), `date` as its folder names
+    it; {} when there are none, None when they cannot be read (then every log is hashed
+    and looked up by its worker: never a wrong skip)."""
     import pyarrow.dataset as pads
 
-    filesystem = None
     if isinstance(dataset, str):
-        from pyarrow.fs import FSSpecHandler, PyFileSystem
-
-        fs, base = storage.filesystem(dataset, options)
-        fs.invalidate_cache()
-        where = f"{base.rstrip('/')}/logs"
-        if not fs.isdir(where):
-            return {}
-        filesystem = PyFileSystem(FSSpecHandler(fs))
+        rows = _remote_logs_rows(dataset, options)
+        if rows is None:
+            return None
     else:
         where = str(dataset / "logs")
         if not os.path.isdir(where):
             return {}
-    try:
-        # the dataset's schema: parts written before a column was added read it as null
-        found = pads.dataset(
-            where,
-            filesystem=filesystem,
-            schema=schema.dataset_schema("logs"),
-            partitioning=schema.partitioning(),
-        )
-        rows = found.to_table(columns=list(ROW_COLUMNS)).to_pylist()
-    except (OSError, ValueError):
-        return {}
+        try:
+            # the dataset's schema: parts written before a column was added read it as null
+            found = pads.dataset(
+                where, schema=schema.dataset_schema("logs"), partitioning=schema.partitioning()
+            )
+            rows = found.to_table(columns=list(ROW_COLUMNS)).to_pylist()
+        except (OSError, ValueError):
+            return None
     out: dict[str, list[dict]] = {}
     for row in rows:
+        row["date"] = layout.row_date(row["date"])
         out.setdefault(row["source"], []).append(row)
     return out
+
+
+def _remote_logs_rows(dataset: str, options: dict | None, chunk: int = 1000) -> list[dict] | None:
+    """The `logs` rows of a dataset at a URL: one listing of the table, then each file
+    fetched whole by concurrent GETs (`fs.cat`, a chunk of files at a time): one request
+    a file, as `pyarrow.dataset` over fsspec made, but not one file after another. A
+    file deleted since the listing (a compaction's input) is passed over: its logs are
+    hashed by their workers, never wrongly skipped."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    fs, base = storage.filesystem(dataset, options)
+    fs.invalidate_cache()
+    where = f"{base.rstrip('/')}/logs/"
+    try:
+        keys = sorted(k for k in fs.find(where) if k.endswith(".parquet") and "/date=" in k)
+    except FileNotFoundError:
+        return []
+    except OSError:
+        return None
+    want = schema.schema("logs")
+    columns = [c for c in ROW_COLUMNS if c != "date"]
+    rows: list[dict] = []
+    try:
+        for i in range(0, len(keys), chunk):
+            blobs = fs.cat(keys[i : i + chunk], on_error="omit")
+            for key, blob in blobs.items():
+                if not isinstance(blob, bytes | bytearray):
+                    continue
+                table = pq.read_table(pa.BufferReader(blob))
+                have = set(table.column_names)
+                date = layout.row_date(key.split("/date=", 1)[1].split("/", 1)[0])
+                n = table.num_rows
+                cols = {
+                    c: _as(table[c], want.field(c).type)
+                    if c in have
+                    else pa.nulls(n, want.field(c).type)
+                    for c in columns
+                }
+                for row in pa.table(cols).to_pylist():
+                    row["date"] = date
+                    rows.append(row)
+    except (OSError, ValueError):
+        return None
+    return rows
+
+
+def _as(column, typ):
+    """A column as the dataset's schema types it (a part written before a type changed)."""
+    return column if column.type == typ else column.cast(typ)
 
 
 def unchanged(rows: list[dict], size: int | None, mtime_ns: int | None, config: str):
@@ -336,11 +395,33 @@ def run_batch(tasks: list[LogTask]) -> list[dict]:
     results = [run_task(t) for t in tasks]
     dataset = layout.root(tasks[0].dataset)
     written = {r["hash"] for r in results if not r.get("skipped") and r.get("hash")}
+    # each written log's path's earlier content (the driver's): its compacted rows go too
+    mine = {r["source"] for r in results if not r.get("skipped") and r.get("hash")}
+    old = {t.path: set(t.replaces) for t in tasks if t.path in mine and t.replaces}
     if isinstance(dataset, Path) and len(written) > 1:
         from cananalyze.fleet.compact import merge_logs
 
         with contextlib.suppress(OSError):
-            merge_logs(dataset, written, tasks[0].compression)
+            merge_logs(dataset, written, tasks[0].compression, old)
+    elif len(written) > 1:  # at a URL: the parts named from each log's date
+        from cananalyze.fleet.compact import merge_remote_logs
+
+        dated = {
+            r["hash"]: (r["date"], r.get("status") == "ok")
+            for r in results
+            if not r.get("skipped") and r.get("hash") and r.get("date")
+        }
+        with contextlib.suppress(OSError):
+            earlier = (
+                None
+                if any(t.known is None for t in tasks)
+                else {d for t in tasks if t.path in mine for d in t.known}
+            )
+            merge_remote_logs(
+                *(str(dataset), dated, tasks[0].compression, tasks[0].opts.storage_options),
+                old=old,
+                earlier=earlier,
+            )
     return results
 
 
@@ -384,8 +465,9 @@ def process(task: LogTask, cancel=None) -> dict:
     lineage = {"source": path, "hash": digest, "version": __version__}  # schema.LINEAGE's order
     result = {"source": path, "hash": digest, "skipped": False, "first": {}, "junit": None}
     row["config"] = options_digest(task.opts)
+    known = task.known if row.get("size") == task.size else None  # else changed since
     if row["status"] == "ok" and not task.force:
-        old = recorded(dataset, digest, where)
+        old = recorded(dataset, digest, where, known)
         # a failure is tried again: it may have been the machine's (a worker lost)
         if (
             old is not None
@@ -395,7 +477,7 @@ def process(task: LogTask, cancel=None) -> dict:
         ):
             source.close()
             if old.get("source") == path and old.get("mtime_ns") != row.get("mtime_ns"):
-                _restamp(dataset, digest, old, row, where)
+                _restamp(dataset, digest, old, row, where, known)
             result.update(old, skipped=True)
             result["source"], result["recorded_source"] = path, old.get("source")
             return result
@@ -421,12 +503,12 @@ def process(task: LogTask, cancel=None) -> dict:
         if cancel is not None and cancel.is_set():
             raise _Cancelled
         try:
-            old = _still_mine(dataset, task.replaces, path, where)
-            _commit(stage, dataset, date, digest, parts, row, lineage, where, old)
+            old = _still_mine(dataset, task.replaces, path, where, known)
+            _commit(stage, dataset, date, digest, parts, row, lineage, where, old, known)
         except OSError as exc:  # a full disk: this log fails, in one line, and the fleet goes on
             stage.close()
             row.update(status="failed", error=_one_line(exc, path, dataset))
-            _commit_failure(dataset, date, digest, row, lineage, where)
+            _commit_failure(dataset, date, digest, row, lineage, where, known)
     except BaseException:
         stage.close()
         raise
@@ -438,21 +520,30 @@ def process(task: LogTask, cancel=None) -> dict:
 
 
 def _still_mine(
-    dataset: layout.Dataset, digests: tuple[str, ...], path: str, options: dict | None
+    dataset: layout.Dataset,
+    digests: tuple[str, ...],
+    path: str,
+    options: dict | None,
+    known: tuple[str, ...] | None = None,
 ) -> tuple[str, ...]:
     """Of the digests the driver saw for this path, those whose row still names it (another
     path with that same content may have written the row since: its parts stay)."""
-    return tuple(d for d in digests if (recorded(dataset, d, options) or {}).get("source") == path)
+    return tuple(
+        d for d in digests if (recorded(dataset, d, options, known) or {}).get("source") == path
+    )
 
 
 def _restamp(
-    dataset: layout.Dataset, digest: str, old: dict, row: dict, options: dict | None
+    dataset: layout.Dataset, digest: str, old: dict, row: dict, options: dict | None, dates=None
 ) -> None:
     """The recorded row of a file whose bytes are unchanged but whose modification time
     is not (touched, copied back, or recorded before mtime_ns was): its `logs` part
     rewritten with the new time, so the next rerun skips it without reading it again.
     Nothing else changes (not its run: this run did not decode it). Best effort."""
-    parts = layout.existing_parts(dataset, "logs", digest, options)
+    parts = _parts_of(dataset, "logs", digest, options, dates)
+    if isinstance(dataset, str) and dates is not None:  # named, not listed: those there
+        fs = storage.filesystem(dataset, options)[0]
+        parts = [p for p in parts if fs.exists(p)]
     if not parts:
         return
     try:
@@ -531,10 +622,12 @@ def _commit(
     lineage: dict,
     options: dict | None = None,
     replaces: tuple[str, ...] = (),
+    known: tuple[str, ...] | None = None,
 ):
     """The logs row written last, the log's parts at other dates (an earlier run's) removed,
     and those of its path's earlier content (`replaces`: the digests of the rows the
-    dataset held for this path; the failed row it had when it could not be read)."""
+    dataset held for this path; the failed row it had when it could not be read). Where
+    those can be: at the dates `known` (the driver's), else at any date (listed)."""
     staged = stage.dir / "logs.parquet"
     _logs_part(staged, row, lineage)
     renames = [*parts, (staged, layout.part_path(dataset, "logs", date, digest))]
@@ -542,12 +635,12 @@ def _commit(
     removals = [
         p
         for table in schema.TABLES
-        for p in layout.existing_parts(dataset, table, digest, options)
+        for p in _parts_of(dataset, table, digest, options, known)
         if p not in final
     ]
-    for old in {*replaces, _path_digest(lineage["source"])} - {digest}:
+    for old in sorted({*replaces, _path_digest(lineage["source"])} - {digest}):
         for table in schema.TABLES:
-            removals += layout.existing_parts(dataset, table, old, options)
+            removals += _parts_of(dataset, table, old, options, known)
     stage.commit(renames, removals)
 
 
@@ -558,6 +651,7 @@ def _commit_failure(
     row: dict,
     lineage: dict,
     options: dict | None = None,
+    known: tuple[str, ...] | None = None,
 ) -> None:
     """The failed log's row alone, if the disk still takes it (else none: a rerun tries
     the log again, as any log without a row)."""
@@ -566,7 +660,7 @@ def _commit_failure(
     except OSError:
         return
     try:
-        _commit(stage, dataset, date, digest, [], row, lineage, options)
+        _commit(stage, dataset, date, digest, [], row, lineage, options, known=known)
     except OSError:
         stage.close()
 

@@ -205,13 +205,11 @@ def test_reruns_after_compact_skip_and_replace_by_rows_not_file_names(
 
 def test_compact_refuses_what_it_cannot_compact_in_one_line(tmp_path, capsys):
     assert main(["fleet", "compact", str(tmp_path)]) == 2
-    assert main(["fleet", "compact", "s3://bucket/ds"]) == 2
     with pytest.raises(SystemExit) as exit_:
         main(["fleet", "compact", str(tmp_path), "--target-size", "lots"])
     assert exit_.value.code == 2
     err = capsys.readouterr().err.splitlines()
     assert f"cananalyze: error: {tmp_path}: not a fleet dataset (no logs table in it)" in err
-    assert "cananalyze: error: s3://bucket/ds: compact works on a local dataset only" in err[1]
     assert "not a size: 'lots'" in err[-1] and "Traceback" not in "".join(err)
 
 
@@ -338,4 +336,34 @@ def test_batched_small_logs_share_parts_with_the_same_rows(dataset, logs, tmp_pa
         by = _pyarrow_counts(ds_, table)
         assert {h for (_, h, s) in by if s == str(changed)} <= {new}, table
     assert sum(n for (_, h, _), n in _pyarrow_counts(ds_, "frames").items() if h == new) == 150
+    assert len(_pyarrow_counts(ds_, "logs")) == 3
+
+
+@pytest.mark.slow  # three batched fleet runs, end to end
+def test_a_batch_decoded_again_leaves_no_earlier_copy_in_the_shared_files(tmp_path, cluster):
+    """`--batch` merges a batch's parts into shared files: a batch decoded again (`--force`,
+    or files changed) must first drop its logs' earlier rows from the shared files the
+    last batch wrote; once the new rows are merged too, nothing tells the copies apart."""
+    folder = tmp_path / "logs"
+    folder.mkdir()
+    for name in ("demo.log", "faults.log", "commissioning.log"):
+        shutil.copy(SAMPLES / name, folder / name)
+    mine = sorted(str(p) for p in folder.iterdir())
+    ds_ = tmp_path / "ds"
+    run_fleet(mine, ds_, scheduler=cluster, batch=4)
+    first = {t: _pyarrow_counts(ds_, t) for t in schema.TABLES}
+    assert run_fleet(mine, ds_, scheduler=cluster, batch=4, force=True).skipped == []
+    for table in schema.TABLES:
+        assert _pyarrow_counts(ds_, table) == first[table], table
+    # two of the three files changed: their old content's rows go, the new ones come in
+    lines = open(SAMPLES / "faults.log").readlines()
+    (folder / "demo.log").write_text("".join(lines[:150]))
+    (folder / "commissioning.log").write_text("".join(lines[:90]))
+    assert run_fleet(mine, ds_, scheduler=cluster, batch=4).frames == 240
+    frames = _pyarrow_counts(ds_, "frames")
+    by_source = Counter()
+    for (_, _, source), n in frames.items():
+        by_source[source] += n
+    assert by_source[str(folder / "demo.log")] == 150
+    assert by_source[str(folder / "commissioning.log")] == 90
     assert len(_pyarrow_counts(ds_, "logs")) == 3

@@ -177,6 +177,9 @@ def test_bad_urls_and_options_are_one_line(s3, tmp_path, capsys):
     assert len(err) == 1 and "s3://bucket/none: no such file or folder" in err[0]
     assert main(["query", "s3://bucket/ds", "SELECT 1", "--storage-options", "{oops"]) == 2
     assert "--storage-options: not JSON" in capsys.readouterr().err
+    assert main(["fleet", "compact", "s3://bucket/none"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["cananalyze: error: s3://bucket/none: not a fleet dataset (no logs table in it)"]
     assert not (tmp_path / "ds").exists()
 
 
@@ -270,3 +273,216 @@ def test_file_urls_take_the_object_storage_path(tmp_path, monkeypatch, capsys):
     assert main(args) == 1
     assert "no cluster" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ds", "logs"]
+
+
+class _Requests(logging.Handler):
+    """The S3 server's requests counted by kind (werkzeug logs one line a request), LIST
+    apart from the other GETs."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.INFO)
+        self.counts: Counter[str] = Counter()
+
+    def emit(self, record: logging.LogRecord) -> None:
+        line = str(record.args[0]) if isinstance(record.args, tuple) and record.args else ""
+        method, _, rest = re.sub(r"\x1b\[[0-9;]*m", "", line).partition(" ")
+        listing = method == "GET" and ("list-type=" in rest or "?prefix=" in rest)
+        self.counts["LIST" if listing else method] += 1
+
+
+@pytest.fixture
+def requests():
+    """Every request the S3 server serves meanwhile, counted (the workers' too)."""
+    log = logging.getLogger("werkzeug")
+    counter = _Requests()
+    level, propagate = log.level, log.propagate
+    log.setLevel(logging.INFO)
+    log.propagate = False
+    log.addHandler(counter)
+    try:
+        yield counter.counts
+    finally:
+        log.removeHandler(counter)
+        log.setLevel(level)
+        log.propagate = propagate
+
+
+def test_a_commit_lists_no_date_folders(s3, requests, capsys):
+    """A log's commit finds its earlier parts from the `logs` rows the driver read once,
+    not by a glob over every `date=` folder of every table: the LISTs of a run into a
+    dataset of 40 date folders a table are those of a run into an empty one."""
+    fs = s3["fs"]
+    for name in ("demo.log", "faults.asc"):
+        fs.put_file(str(ROOT / "samples" / name), f"bucket/lists/logs/{name}")
+    lists = {}
+    for folders in (0, 40):
+        ds = f"bucket/lists/ds{folders}"
+        # other days' parts (never read by a run: only the logs table is)
+        fs.pipe(
+            {
+                f"{ds}/{t}/date=2020-01-{d + 1:02d}/part-{d:064x}.parquet": b"x"
+                for t in TABLES
+                if t != "logs"
+                for d in range(folders)
+            }
+        )
+        requests.clear()
+        args = ["fleet", "s3://bucket/lists/logs", "--out", f"s3://{ds}", "--workers", "1"]
+        assert main(args) == 1  # the samples break rules on purpose
+        lists[folders] = requests["LIST"]
+        assert "(2 decoded, 0 already" in capsys.readouterr().err
+        fs.invalidate_cache()
+        assert len(fs.glob(f"{ds}/frames/date=*/*.parquet")) == folders + 2
+    assert lists[40] == lists[0], lists
+    assert lists[0] <= 8, lists  # the inputs, the logs table, the dataset: not per log
+
+
+def _generated(tmp_path: Path, n: int, frames: int = 2000, seed: int = 1) -> list[Path]:
+    """`n` generated candump logs of one day (benchmarks/generate.py's bus)."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        from generate import generate
+    finally:
+        sys.path.pop(0)
+    from cananalyze.formats.logfile import write_log
+
+    out = []
+    for i in range(n):
+        path = tmp_path / f"gen{seed + i:02d}.log"
+        write_log(generate(frames, seed=seed + i), path)
+        out.append(path)
+    return out
+
+
+def _counts(dataset: str, table: str) -> Counter:
+    """Rows of `table` by (source, hash), as `cananalyze query` reads them."""
+    from cananalyze.fleet.query import query
+
+    _, rows = query(
+        dataset, f"SELECT source::VARCHAR, hash::VARCHAR, count(*) FROM {table} GROUP BY ALL"
+    )
+    return Counter({(s, h): n for s, h, n in rows})
+
+
+def _keys(fs, prefix: str) -> list[str]:
+    fs.invalidate_cache()
+    return sorted(k for k in fs.find(prefix) if k.endswith(".parquet"))
+
+
+@pytest.mark.slow  # fleet runs and a compaction, end to end
+def test_compact_on_the_bucket_keeps_every_row_once_for_a_reader_meanwhile(
+    s3, tmp_path, monkeypatch, capsys
+):
+    """`fleet compact s3://...`: each table's day becomes one time-ordered file, every row
+    and its lineage kept; a `query` run at the worst moment (the new file copied in, its
+    inputs not yet deleted) sees every row once; a rerun skips every log from the
+    compacted rows, and a changed log's old rows leave the compacted files."""
+    from cananalyze.fleet import layout
+
+    fs = s3["fs"]
+    for path in _generated(tmp_path, 4):
+        fs.put_file(str(path), f"bucket/c/logs/{path.name}")
+    ds = "s3://bucket/c/ds"
+    run = ["fleet", "s3://bucket/c/logs", "--out", ds, "--workers", "1"]
+    assert main([*run, "-q"]) == 0
+    before = {t: _counts(ds, t) for t in TABLES}
+    assert len(before["logs"]) == 4
+    assert len(_keys(fs, "bucket/c/ds/frames")) == 4
+
+    seen = []
+    deleted = layout._delete_after
+
+    def reader_first(fs_, after):  # what a reader sees just before the inputs go
+        if after:
+            table = after[0].split("/c/ds/")[1].split("/")[0]
+            raw = len(_keys(fs, f"bucket/c/ds/{table}"))  # a plain listing: both copies
+            seen.append((table, raw, _counts(ds, table)))
+        deleted(fs_, after)
+
+    monkeypatch.setattr(layout, "_delete_after", reader_first)
+    assert main(["fleet", "compact", ds]) == 0
+    monkeypatch.undo()
+    assert "compact: 28 files" in capsys.readouterr().err
+    assert {t for t, _, _ in seen} == set(TABLES)
+    for table, raw, counted in seen:
+        assert raw == 4 + 1, table  # the inputs and the new file, listed together
+        assert counted == before[table], table  # yet `query` reads each row once
+    for table in TABLES:
+        (key,) = _keys(fs, f"bucket/c/ds/{table}")
+        assert key.split("/")[-1].startswith("part-compact-"), key
+        assert _counts(ds, table) == before[table], table
+    assert not _keys(fs, "bucket/c/ds/_staging")
+    import pyarrow.parquet as pq
+
+    with fs.open(_keys(fs, "bucket/c/ds/frames")[0]) as f:
+        t = pq.read_table(f, columns=["t"]).column("t").to_numpy()
+    assert (t[1:] >= t[:-1]).all()  # rows in time order
+
+    assert main(run) == 0
+    err = capsys.readouterr().err
+    assert "(0 decoded, 4 already in the dataset)" in err and "no cluster" in err, err
+    # a changed log: its new rows in, its old ones out of the compacted files
+    (tmp_path / "x").mkdir()
+    (changed,) = _generated(tmp_path / "x", 1, frames=700, seed=9)
+    fs.put_file(str(changed), "bucket/c/logs/gen01.log")
+    assert main([*run, "-q"]) == 0
+    after = _counts(ds, "frames")
+    mine = {h: n for (s, h), n in after.items() if s == "s3://bucket/c/logs/gen01.log"}
+    assert list(mine.values()) == [700], after
+    assert {k: n for k, n in after.items() if k[0] != "s3://bucket/c/logs/gen01.log"} == {
+        k: n for k, n in before["frames"].items() if k[0] != "s3://bucket/c/logs/gen01.log"
+    }
+    assert len(_counts(ds, "logs")) == 4
+
+
+@pytest.mark.slow  # three fleet runs into a bucket, end to end
+def test_batch_on_the_bucket_shares_parts(s3, tmp_path, capsys):
+    """`--batch 4` into a bucket: the four small logs of one day share one file a table,
+    with the rows a one-log-a-task run writes; a rerun skips them all."""
+    fs = s3["fs"]
+    for path in _generated(tmp_path, 4, seed=21):
+        fs.put_file(str(path), f"bucket/b/logs/{path.name}")
+    common = ["fleet", "s3://bucket/b/logs", "--workers", "1", "-q"]
+    assert main([*common, "--out", "s3://bucket/b/one"]) == 0
+    assert main([*common, "--out", "s3://bucket/b/batched", "--batch", "4"]) == 0
+    for table in TABLES:
+        assert _counts("s3://bucket/b/batched", table) == _counts("s3://bucket/b/one", table)
+        (key,) = _keys(fs, f"bucket/b/batched/{table}")
+        assert key.split("/")[-1].startswith("part-compact-"), key
+    assert not _keys(fs, "bucket/b/batched/_staging")
+    capsys.readouterr()
+    assert main([*common[:-1], "--out", "s3://bucket/b/batched", "--batch", "4"]) == 0
+    assert "(0 decoded, 4 already in the dataset)" in capsys.readouterr().err
+    # decoded again, batched again: the earlier copies leave the shared files first
+    assert main([*common, "--out", "s3://bucket/b/batched", "--batch", "4", "--force"]) == 0
+    for table in TABLES:
+        assert _counts("s3://bucket/b/batched", table) == _counts("s3://bucket/b/one", table)
+
+
+def test_a_rerun_reads_each_logs_file_with_one_request(s3, fleet, requests, capsys):
+    """The driver's one read of the `logs` table at a URL: a listing, then one GET a file
+    (fetched concurrently), no HEAD a file; nothing else read, no cluster."""
+    requests.clear()
+    assert main(["fleet", "s3://bucket/logs", "--out", "s3://bucket/ds", "--workers", "1"]) in (
+        0,
+        1,
+    )
+    assert "no cluster" in capsys.readouterr().err
+    n = len(fleet["local"])
+    assert requests["GET"] == n, dict(requests)  # the logs parts; the inputs only listed
+    assert requests["HEAD"] <= 3 and requests["LIST"] <= 8, dict(requests)
+
+
+def test_logs_rows_at_a_url_read_an_older_part_s_missing_columns_as_null(tmp_path):
+    """A `logs` part written before a column was added: that column null, the rest read."""
+    import pyarrow.parquet as pq
+
+    from cananalyze.fleet.task import logs_rows
+
+    logs = tmp_path / "logs" / "date=2024-03-13"
+    logs.mkdir(parents=True)
+    row = {"source": ["/x.log"], "hash": ["ab"], "status": ["ok"], "frames": [5]}
+    pq.write_table(__import__("pyarrow").table(row), logs / "part-ab.parquet")
+    (got,) = logs_rows(f"file://{tmp_path}")["/x.log"]
+    assert got["hash"] == "ab" and got["frames"] == 5 and got["date"] == "2024-03-13"
+    assert got["mtime_ns"] is None and got["config"] is None

@@ -26,6 +26,7 @@ SMOKED = {
     "bench_dbc.py",
     "bench_decode.py",
     "bench_fleet.py",
+    "bench_rerun_s3.py",
     "bench_floor.py",
     "bench_live.py",
     "bench_report.py",
@@ -198,6 +199,22 @@ def test_bench_fleet(tmp_path):
     assert s3.startswith("median s3 workers=1 (1 runs)"), s3
     # every log is read (one GET each at least) and its seven parts put
     assert re.search(r"requests a log [\d.]+ \(.*GET [1-9][\d.]*.*PUT [1-9]", s3), s3
+
+
+@pytest.mark.slow
+def test_bench_rerun_s3():
+    """Twenty logs already in a bucket dataset of moto's S3 on 127.0.0.1: the rerun reads
+    one GET a loose `logs` part, then one GET in all after `fleet compact`."""
+    pytest.importorskip("moto.server")
+    pytest.importorskip("s3fs")
+    lines = _run("bench_rerun_s3.py", "20", timeout=300).stdout.splitlines()
+    assert lines[0].startswith("rerun: 20 logs of "), lines
+    loose, compacted = (
+        next(x for x in lines if x.startswith(f"rerun {k}:")) for k in ("loose", "compacted")
+    )
+    assert re.search(rf"wall {NUMBER} s, CPU {NUMBER} s, requests GET 20 ", loose), loose
+    assert re.search(r"requests GET 1 ", compacted) and "no cluster" in compacted, compacted
+    assert any(x.startswith("compact: ") and "1 written" in x for x in lines), lines
 
 
 @pytest.mark.slow
