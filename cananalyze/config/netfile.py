@@ -26,7 +26,7 @@ from cananalyze.protocol import srdo as srdo_layout
 from cananalyze.protocol.datatypes import DATA_TYPES
 from cananalyze.protocol.pdo_map import COB_ID_INVALID
 
-TOP_KEYS = {"bitrate", "nodes", "sync", "known_cob_ids"}
+TOP_KEYS = {"bitrate", "canopen_fd", "nodes", "sync", "known_cob_ids"}
 NODE_KEYS = {
     "device",
     "eds",
@@ -43,6 +43,7 @@ NODE_KEYS = {
     "srdo",
     *("object_scanner_list", "object_dispatching_list"),
     "gfc",
+    "canopen_fd",
 }
 # node setting -> the MPDO object list it fills (protocol/mpdo.py LISTS): the node's first
 # list of that kind (0x1FA0 / 0x1FD0), sub 1.. the entries, sub 0 their number
@@ -260,6 +261,8 @@ def _node(raw, node: int, base: Path, lines: Lines, where: tuple, how: str) -> d
         if not isinstance(raw["gfc"], bool):
             raise lines.error((*where, "gfc"), f"expected true or false, got {raw['gfc']!r}")
         out["gfc"] = raw["gfc"]
+    if "canopen_fd" in raw:  # CiA 1301: its SDO COB-IDs carry USDO frames
+        out["canopen_fd"] = _flag(raw["canopen_fd"], lines, (*where, "canopen_fd"))
     for key, (_, high) in NODE_OBJECTS.items():
         if key in raw:
             out[key] = integer(raw[key], lines, (*where, key), 0, high)
@@ -325,6 +328,12 @@ def _keyed(table: dict, lines: Lines, where: tuple, low: int, high: int, read) -
     return out
 
 
+def _flag(value, lines: Lines, where: tuple) -> bool:
+    if not isinstance(value, bool):
+        raise lines.error(where, f"expected true or false, got {value!r}")
+    return value
+
+
 def read_network(data, lines: Lines, base: Path, how: str = "network file") -> dict:
     """Check one source's network tree; its settings as a normalised table (see combine).
 
@@ -339,6 +348,8 @@ def read_network(data, lines: Lines, base: Path, how: str = "network file") -> d
     out: dict = {}
     if "bitrate" in data:
         out["bitrate"] = integer(data["bitrate"], lines, ("bitrate",), 1, 8_000_000)
+    if "canopen_fd" in data:  # CiA 1301: every node's SDO COB-IDs carry USDO frames
+        out["canopen_fd"] = _flag(data["canopen_fd"], lines, ("canopen_fd",))
     if "sync" in data:
         sync = _table(data["sync"], lines, ("sync",), "with period_us and window_us")
         _known(sync, set(SYNC_OBJECTS), lines, ("sync",), "sync setting")
@@ -381,6 +392,7 @@ def combine(*settings: dict, source: str | None = None) -> NetworkSpec:
     for s in settings:
         tree = _merge(tree, s)
     spec = NetworkSpec(source=source, bitrate=tree.get("bitrate"))
+    spec.canopen_fd = bool(tree.get("canopen_fd", False))
     spec.known_cob_ids = set(tree.get("known_cob_ids", ()))
     spec.bus_writes = [(SYNC_OBJECTS[k], 0, v) for k, v in sorted(tree.get("sync", {}).items())]
     for node, raw in sorted(tree.get("nodes", {}).items()):
@@ -392,6 +404,7 @@ def _node_spec(node: int, raw: dict) -> NodeSpec:
     profile, how = raw.get("profile", (None, "network file"))
     spec = NodeSpec(profile=profile, how=how if profile is not None else "unknown")
     spec.name = raw.get("name")
+    spec.canopen_fd = bool(raw.get("canopen_fd", False))
     for key, (index, _) in NODE_OBJECTS.items():
         if key in raw:
             spec.writes.append((index, 0, raw[key]))

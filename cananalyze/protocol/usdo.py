@@ -246,10 +246,10 @@ def fields(data: bytes) -> dict:
 
 def _invalid(data: bytes) -> str:
     if len(data) < HEAD:
-        return f"USDO frame with {len(data)} data bytes (at least {HEAD})"
+        return f"frame with {len(data)} data bytes (at least {HEAD})"
     if command_of(data[1]) is None:
-        return f"unknown USDO command specifier 0x{data[1]:02X}"
-    return f"USDO {COMMANDS[data[1] & 0x7F].name} frame too short ({len(data)} bytes)"
+        return f"unknown command specifier 0x{data[1]:02X}"
+    return f"{COMMANDS[data[1] & 0x7F].name} frame too short ({len(data)} bytes)"
 
 
 def annotation(f: dict) -> str:
