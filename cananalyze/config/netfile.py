@@ -125,7 +125,9 @@ def _map_word(value, lines: Lines, where: tuple) -> int:
     return word
 
 
-def _pdo(raw, lines: Lines, where: tuple) -> dict:
+def _pdo(raw, lines: Lines, where: tuple, fd: bool = False) -> dict:
+    """One PDO's parameters; `fd`: of a CANopen FD node (CiA 1301), up to 64 bytes."""
+    most = 512 if fd else 64
     raw = _table(raw, lines, where, "of PDO parameters")
     _known(raw, PDO_KEYS, lines, where, "PDO parameter")
     out: dict = {"_at": (lines, where)}  # for the one check left to combine(): a cob_id
@@ -141,7 +143,7 @@ def _pdo(raw, lines: Lines, where: tuple) -> dict:
         if key in raw:
             out[key] = integer(raw[key], lines, (*where, key), 0, high)
     if "length" in raw:
-        out["length"] = integer(raw["length"], lines, (*where, "length"), 0, 8)
+        out["length"] = integer(raw["length"], lines, (*where, "length"), 0, most // 8)
     if "mpdo" in raw:
         if raw["mpdo"] not in MPDO_MODES:
             raise lines.error((*where, "mpdo"), f'expected "sam" or "dam", got {raw["mpdo"]!r}')
@@ -151,9 +153,10 @@ def _pdo(raw, lines: Lines, where: tuple) -> dict:
         if not isinstance(entries, list):
             raise lines.error((*where, "mapping"), "expected a list of mapping entries")
         words = [_map_word(v, lines, (*where, "mapping", str(i))) for i, v in enumerate(entries)]
-        if sum(w & 0xFF for w in words) > 64:
+        if sum(w & 0xFF for w in words) > most:
+            holds = "512 (CANopen FD)" if fd else "64 (512 on a CANopen FD node: canopen_fd)"
             raise lines.error(
-                (*where, "mapping"), f"maps {sum(w & 0xFF for w in words)} bits; a PDO holds 64"
+                (*where, "mapping"), f"maps {sum(w & 0xFF for w in words)} bits; a PDO holds {holds}"
             )
         out["mapping"] = words
     return out
@@ -249,7 +252,9 @@ def _profile(raw: dict, node: int, base: Path, lines: Lines, where: tuple, how: 
         raise lines.error((*where, "eds"), str(exc)) from None
 
 
-def _node(raw, node: int, base: Path, lines: Lines, where: tuple, how: str) -> dict:
+def _node(
+    raw, node: int, base: Path, lines: Lines, where: tuple, how: str, network_fd: bool = False
+) -> dict:
     raw = _table(raw, lines, where, "of node settings")
     _known(raw, NODE_KEYS, lines, where, "node setting")
     out: dict = {}
@@ -281,7 +286,10 @@ def _node(raw, node: int, base: Path, lines: Lines, where: tuple, how: str) -> d
         if direction in raw:
             w = (*where, direction)
             table = _table(raw[direction], lines, w, "keyed by PDO number")
-            out[direction] = _keyed(table, lines, w, 1, 512, lambda v, at, _: _pdo(v, lines, at))
+            fd = bool(out.get("canopen_fd") or network_fd)  # CiA 1301: 64-byte PDOs
+            out[direction] = _keyed(
+                table, lines, w, 1, 512, lambda v, at, _, fd=fd: _pdo(v, lines, at, fd)
+            )
     if "srdo" in raw:
         w = (*where, "srdo")
         table = _table(raw["srdo"], lines, w, "keyed by SRDO number")
@@ -369,7 +377,7 @@ def read_network(data, lines: Lines, base: Path, how: str = "network file") -> d
             ("nodes",),
             1,
             127,
-            lambda v, at, node: _node(v, node, base, lines, at, how),
+            lambda v, at, node: _node(v, node, base, lines, at, how, bool(out.get("canopen_fd"))),
         )
     return out
 

@@ -187,3 +187,46 @@ def test_nodes_marked_canopen_fd_read_unflagged_frames_as_usdo():
     assert [r["protocol"] for r in out.sdo] != [("usdo")]
     assert [f.get("fd") for f in out.frames] == [None, None]  # no FD flag (FLAG_FD) logged
     assert FLAG_FD
+
+
+def test_a_canopen_fd_network_has_64_byte_pdos_and_fd_emcy(tmp_path):
+    import subprocess
+    import sys
+
+    net = tmp_path / "fd.toml"
+    words = ", ".join(f'"0x2000{k:02X}40"' for k in range(1, 9))  # 8 x 64 bits = 512
+    net.write_text(f"canopen_fd = true\n[nodes.5.tpdo.1]\nmapping = [{words}]\n")
+    log = tmp_path / "pdo.log"
+    log.write_text(
+        "(1.000000) can0 705#05\n"
+        "(1.010000) can0 085##01023000000000000000000\n"  # EMCY in an 11-byte FD frame
+        f"(1.020000) can0 185##0{bytes(range(64)).hex()}\n"
+    )
+    run = subprocess.run(
+        [sys.executable, "-m", "cananalyze", "decode", str(log), "--network", str(net),
+         "--format", "jsonl", "--signals"],
+        capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    values = [json.loads(x)["value"] for x in run.stdout.splitlines()]
+    assert values == [int.from_bytes(bytes(range(8 * k, 8 * k + 8)), "little") for k in range(8)]
+    text = subprocess.run(
+        [sys.executable, "-m", "cananalyze", "decode", str(log), "--network", str(net)],
+        capture_output=True, text=True, check=True,
+    ).stdout  # fmt: skip
+    assert "EMCY 0x2310" in text and "shorter" not in text
+
+
+def test_the_network_file_keeps_64_bit_pdos_on_a_classic_node(tmp_path):
+    import subprocess
+    import sys
+
+    net = tmp_path / "cc.toml"
+    words = ", ".join(f'"0x2000{k:02X}40"' for k in range(1, 3))
+    net.write_text(f"[nodes.5.tpdo.1]\nmapping = [{words}]\n")
+    log = tmp_path / "x.log"
+    log.write_text("(1.000000) can0 705#05\n")
+    run = subprocess.run(
+        [sys.executable, "-m", "cananalyze", "decode", str(log), "--network", str(net)],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    assert run.returncode != 0 and "512 on a CANopen FD node" in run.stderr

@@ -98,15 +98,16 @@ class SdoProcessor:
             (cob & 0x780 == 0x580) | (cob & 0x780 == 0x600)
         )
 
-    def _feed_usdo(self, batch: DecodedBatch) -> None:
-        """The USDO frames of this batch through the USDO tracker, in time order."""
+    def _feed_usdo(self, batch: DecodedBatch, row: int) -> None:
+        """One USDO frame through the USDO tracker (its note: the frame's role)."""
         fb = batch.frames
-        for row in self._usdo_rows.tolist():
-            note = self.usdo.feed(
-                float(fb.t[row]), int(fb.can_id[row]), fb.payload(row), self._offset + row
-            )
-            batch.notes.setdefault(row, {}).update(note)
-            self._emit_usdo(batch)
+        self.tracker.advance(float(fb.t[row]))  # the SDO's time-outs before it, in order
+        self._emit(batch)
+        note = self.usdo.feed(
+            float(fb.t[row]), int(fb.can_id[row]), fb.payload(row), self._offset + row
+        )
+        batch.notes.setdefault(row, {}).update(note)
+        self._emit_usdo(batch)
 
     def _emit_usdo(self, batch: DecodedBatch) -> None:
         n = len(batch)
@@ -122,8 +123,15 @@ class SdoProcessor:
         self._usdo_rows = None
         rows = self._rows(batch)
         if self._usdo_rows is not None:
-            self._feed_usdo(batch)
-        if self.fast and len(rows) > 1 and not self._may_learn(batch, rows):
+            # USDO frames (CANopen FD) in this batch: every SDO-channel frame one at a time,
+            # in order, so the two trackers' records come in the order they ended
+            usdo_rows = set(self._usdo_rows.tolist())
+            for row in sorted(usdo_rows.union(rows.tolist())):
+                if row in usdo_rows:
+                    self._feed_usdo(batch, row)
+                else:
+                    self._feed(batch, row)
+        elif self.fast and len(rows) > 1 and not self._may_learn(batch, rows):
             self._cur_rows_arr = rows
             self._process_fast(batch, rows)
             self._fill(batch)
@@ -168,6 +176,9 @@ class SdoProcessor:
 
     def _feed(self, batch: DecodedBatch, row: int) -> None:
         fb = batch.frames
+        if self.usdo._pending:  # the USDO's time-outs before this frame, in order
+            self.usdo.advance(float(fb.t[row]))
+            self._emit_usdo(batch)
         role = self.tracker.feed(
             float(fb.t[row]), int(fb.can_id[row]), fb.payload(row), self._offset + row
         )
