@@ -100,16 +100,6 @@ def _service_set(text: str | None) -> frozenset[int] | None:
         raise UsageError(f"--service: {exc}") from None
 
 
-def _fd_nodes(text: str | None) -> frozenset[int] | bool:
-    """--fd: the whole network (no value, or `all`) or the nodes it lists are CANopen FD."""
-    if text is None:
-        return frozenset()
-    if text.strip().lower() == "all":
-        return True
-    nodes = _node_set(text)
-    return frozenset(nodes or ())
-
-
 def options(args: argparse.Namespace, **overrides) -> Options:
     """The pipeline's Options from parsed arguments (only the ones the command has)."""
     from cananalyze.pipeline import Options
@@ -121,7 +111,7 @@ def options(args: argparse.Namespace, **overrides) -> Options:
         eds=_node_assignments(get("eds"), "--eds"),
         rules=get("rules"),
         sdo_timeout=get("sdo_timeout", SDO_TIMEOUT),
-        fd=_fd_nodes(get("fd")),
+        fd=bool(get("fd", False)),
         strict=bool(get("strict", False)),
         input_format=get("input_format"),
         bitrate=get("bitrate"),

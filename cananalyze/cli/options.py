@@ -100,11 +100,10 @@ FLAGS: dict[str, Flag] = {
     "fd": Flag(
         ("--fd",),
         dict(
-            nargs="?",
-            const="all",
-            metavar="N[,N]",
-            help="the network (or nodes N) is CANopen FD (CiA 1301): every frame on the SDO "
-            "COB-IDs is a USDO one, FD flag or not (FD frames there always are)",
+            action="store_true",
+            help="the network is CANopen FD (CiA 1301): every frame on the SDO COB-IDs is a "
+            "USDO one, FD flag or not (FD frames there always are; one node: the network "
+            "file's canopen_fd)",
         ),
     ),
     # --- what the user knows about the nodes and the bus -------------------------

@@ -387,12 +387,10 @@ def build_decoder(
     for node, request, response in model.sdo_channels:
         tracker.add_channel(node, request, response)
     skip = dbc.standard_ids if dbc else set()  # the DBC's layout wins over the profile's
-    fd: frozenset[int] | bool = opts.fd
-    if fd is not True:  # --fd and the network file's canopen_fd keys together
-        if spec.canopen_fd:
-            fd = True
-        else:
-            fd = frozenset(fd) | {n for n, ns in spec.nodes.items() if ns.canopen_fd}
+    # CANopen FD (USDO on the SDO COB-IDs): --fd and the network file's canopen_fd keys
+    fd: frozenset[int] | bool = True
+    if opts.fd is not True and not spec.canopen_fd:
+        fd = frozenset(opts.fd or ()) | {n for n, ns in spec.nodes.items() if ns.canopen_fd}
     processors = [
         SdoProcessor(tracker, identifier=model, fd_nodes=fd),
         model,

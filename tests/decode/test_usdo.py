@@ -179,9 +179,12 @@ def test_nodes_marked_canopen_fd_read_unflagged_frames_as_usdo():
     # a log whose format lost the FD flag: the frames the marked nodes send (a USDO COB-ID
     # names its sender: client 0x10's requests, server 5's answers) are USDO
     # (8-byte frames: a classic frame holds no more)
-    out = decode_log(ABORTED, fd_rows=set(), fd="5,16")
+    net = "[nodes.5]\ncanopen_fd = true\n[nodes.16]\ncanopen_fd = true\n"
+    out = decode_log(ABORTED, fd_rows=set(), network=net)
     assert [(r["protocol"], r["abort_code"]) for r in out.sdo] == [("usdo", 0x33)]
-    out = decode_log(ABORTED, fd_rows=set(), fd="all")  # the whole network
+    out = decode_log(ABORTED, fd_rows=set(), network="canopen_fd = true\n")
+    assert [(r["protocol"], r["abort_code"]) for r in out.sdo] == [("usdo", 0x33)]
+    out = decode_log(ABORTED, fd_rows=set(), fd=True)  # --fd: the whole network
     assert [(r["protocol"], r["abort_code"]) for r in out.sdo] == [("usdo", 0x33)]
     out = decode_log(ABORTED, fd_rows=set())  # unmarked: classic SDO (and nonsense)
     assert [r["protocol"] for r in out.sdo] != [("usdo")]

@@ -36,11 +36,15 @@ def candump(frames, fd_rows=None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def decode_log(frames, fd_rows=None, fd: str | None = None) -> Decoded:
+def decode_log(frames, fd_rows=None, fd: bool = False, network: str | None = None) -> Decoded:
+    """Decode `frames` (see candump); `fd`: with --fd, `network`: this network file (TOML)."""
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / "usdo.log"
         log.write_text(candump(frames, fd_rows))
-        extra = [] if fd is None else [f"--fd={fd}"]
+        extra = ["--fd"] if fd else []
+        if network is not None:
+            (Path(tmp) / "net.toml").write_text(network)
+            extra += ["--network", str(Path(tmp) / "net.toml")]
         out = []
         for fmt in ("text", "jsonl"):
             proc = subprocess.run(
