@@ -156,7 +156,8 @@ def _pdo(raw, lines: Lines, where: tuple, fd: bool = False) -> dict:
         if sum(w & 0xFF for w in words) > most:
             holds = "512 (CANopen FD)" if fd else "64 (512 on a CANopen FD node: canopen_fd)"
             raise lines.error(
-                (*where, "mapping"), f"maps {sum(w & 0xFF for w in words)} bits; a PDO holds {holds}"
+                (*where, "mapping"),
+                f"maps {sum(w & 0xFF for w in words)} bits; a PDO holds {holds}",
             )
         out["mapping"] = words
     return out

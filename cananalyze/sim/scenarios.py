@@ -344,8 +344,6 @@ def safety_faults(nodes: Nodes, duration: float):
     yield from steady(nodes, duration)
 
 
-
-
 # fd: the USDO client's node-ID (CiA 1301: its COB-ID 0x600 + it) and the data type codes
 USDO_CLIENT = 0x7F
 _VISIBLE_STRING, _UNSIGNED16, _UNSIGNED32, _DOMAIN = 0x09, 0x06, 0x07, 0x0F

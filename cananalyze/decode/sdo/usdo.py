@@ -118,9 +118,14 @@ class UsdoTracker:
             )
             xfer.notes.append(problem)
             return note | {"role": problem, "usdo_problem": problem}
-        if index is not None and xfer.index is not None and (index, subindex) != (
-            xfer.index,
-            xfer.subindex,
+        if (
+            index is not None
+            and xfer.index is not None
+            and (index, subindex)
+            != (
+                xfer.index,
+                xfer.subindex,
+            )
         ):
             xfer.notes.append(f"answer names{_mux(index, subindex)}")
         if cmd.protocol and xfer.protocol is None:
@@ -228,7 +233,12 @@ class UsdoTracker:
     # -- records ----------------------------------------------------------------
 
     def _finish(
-        self, xfer: UsdoTransfer, t: float, result: str, code: int | None = None, ref: int | None = -1
+        self,
+        xfer: UsdoTransfer,
+        t: float,
+        result: str,
+        code: int | None = None,
+        ref: int | None = -1,
     ) -> None:
         self._pending.pop((xfer.client, xfer.server, xfer.session), None)
         if result == "ok" and xfer.total is not None and xfer.total != len(xfer.data):
@@ -263,7 +273,11 @@ class UsdoTracker:
             "session": xfer.session,
         }
         if xfer.index is not None:
-            known = self.object_info(xfer.server, xfer.index, xfer.subindex or 0) if self.object_info else None
+            known = (
+                self.object_info(xfer.server, xfer.index, xfer.subindex or 0)
+                if self.object_info
+                else None
+            )
             datatype = xfer.datatype
             if known is not None:
                 rec["name"], datatype = known
