@@ -7,7 +7,9 @@ CAN FD frames of up to 64 bytes. Unlike the SDO, the COB-ID's node-ID is the
 a node-ID, or 0 for every server: broadcast), so one client can talk to every
 server on its own COB-ID; byte 2 (session ID) tells a client's transfers apart.
 
-References (third-party, cited; read, not copied):
+References (third-party, cited; read, not copied). go-canopen (angelodlfrtr/go-canopen:
+sdo.go, sdo_reader.go, sdo_writer.go) and CANopenNode (301/CO_SDO*.c) implement only the
+classic SDO, so the references are:
   * the command specifier values and the one-byte abort codes are those of
     emtas/emotas' CANopen FD stack header `ico_usdo.h` ($Id: ico_usdo.h 16986
     2017-02-27), as published in the public code index (file id 44359093029),
