@@ -116,6 +116,7 @@ class SdoProcessor:
             if not 0 <= row < n:
                 row = n - 1
             batch.add_record(row, rec)
+            self._identify(row, rec)
 
     def process(self, batch: DecodedBatch) -> None:
         fb = batch.frames
@@ -439,10 +440,14 @@ class SdoProcessor:
                 row = n - 1  # completed by time passing (timeout) or at the end: after this batch
             rec = tx.to_record()
             batch.add_record(row, rec)
-            if (
-                self.identifier is not None
-                and rec["direction"] == "upload"
-                and rec["result"] == "ok"
-                and (rec["index"], rec["subindex"]) in IDENTITY
-            ):
-                self.identifier.identify_now(row, rec)
+            self._identify(row, rec)
+
+    def _identify(self, row: int, rec: dict) -> None:
+        """An identity read (SDO or USDO) names the node's device from that transfer on."""
+        if (
+            self.identifier is not None
+            and rec["direction"] == "upload"
+            and rec["result"] == "ok"
+            and (rec["index"], rec["subindex"]) in IDENTITY
+        ):
+            self.identifier.identify_now(row, rec)
