@@ -233,3 +233,19 @@ def test_the_network_file_keeps_64_bit_pdos_on_a_classic_node(tmp_path):
         capture_output=True, text=True,
     )  # fmt: skip
     assert run.returncode != 0 and "512 on a CANopen FD node" in run.stderr
+
+
+def test_canopen_fd_in_the_network_file_is_true_or_false(tmp_path):
+    import subprocess
+    import sys
+
+    net = tmp_path / "bad.toml"
+    net.write_text('[nodes.5]\ncanopen_fd = "yes"\n')
+    log = tmp_path / "x.log"
+    log.write_text("(1.000000) can0 705#05\n")
+    run = subprocess.run(
+        [sys.executable, "-m", "cananalyze", "decode", str(log), "--network", str(net)],
+        capture_output=True,
+        text=True,
+    )
+    assert run.returncode == 2 and "nodes.5.canopen_fd: expected true or false" in run.stderr
