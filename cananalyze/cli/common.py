@@ -111,6 +111,7 @@ def options(args: argparse.Namespace, **overrides) -> Options:
         eds=_node_assignments(get("eds"), "--eds"),
         rules=get("rules"),
         sdo_timeout=get("sdo_timeout", SDO_TIMEOUT),
+        fd=bool(get("fd", False)),
         strict=bool(get("strict", False)),
         input_format=get("input_format"),
         bitrate=get("bitrate"),

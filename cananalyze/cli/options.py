@@ -97,6 +97,15 @@ FLAGS: dict[str, Flag] = {
             help=f"an SDO request unanswered this long is a timeout (default {SDO_TIMEOUT:g} s)",
         ),
     ),
+    "fd": Flag(
+        ("--fd",),
+        dict(
+            action="store_true",
+            help="the network is CANopen FD (CiA 1301): every frame on the SDO COB-IDs is a "
+            "USDO one, FD flag or not (FD frames there always are; one node: the network "
+            "file's canopen_fd)",
+        ),
+    ),
     # --- what the user knows about the nodes and the bus -------------------------
     "device": Flag(
         ("--device",),
@@ -518,7 +527,9 @@ FLAGS: dict[str, Flag] = {
 }
 
 # Groups several commands take together
-INPUT = ("log", "strict", "input_format", "sdo_timeout", "device", "eds", "network", "dbc_in")
+INPUT = (
+    "log", "strict", "input_format", "sdo_timeout", "fd", "device", "eds", "network", "dbc_in"
+)  # fmt: skip
 FILTERS = ("node", "service", "from", "to")
 
 

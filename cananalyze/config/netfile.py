@@ -26,7 +26,7 @@ from cananalyze.protocol import srdo as srdo_layout
 from cananalyze.protocol.datatypes import DATA_TYPES
 from cananalyze.protocol.pdo_map import COB_ID_INVALID
 
-TOP_KEYS = {"bitrate", "nodes", "sync", "known_cob_ids"}
+TOP_KEYS = {"bitrate", "canopen_fd", "nodes", "sync", "known_cob_ids"}
 NODE_KEYS = {
     "device",
     "eds",
@@ -43,6 +43,7 @@ NODE_KEYS = {
     "srdo",
     *("object_scanner_list", "object_dispatching_list"),
     "gfc",
+    "canopen_fd",
 }
 # node setting -> the MPDO object list it fills (protocol/mpdo.py LISTS): the node's first
 # list of that kind (0x1FA0 / 0x1FD0), sub 1.. the entries, sub 0 their number
@@ -124,7 +125,9 @@ def _map_word(value, lines: Lines, where: tuple) -> int:
     return word
 
 
-def _pdo(raw, lines: Lines, where: tuple) -> dict:
+def _pdo(raw, lines: Lines, where: tuple, fd: bool = False) -> dict:
+    """One PDO's parameters; `fd`: of a CANopen FD node (CiA 1301), up to 64 bytes."""
+    most = 512 if fd else 64
     raw = _table(raw, lines, where, "of PDO parameters")
     _known(raw, PDO_KEYS, lines, where, "PDO parameter")
     out: dict = {"_at": (lines, where)}  # for the one check left to combine(): a cob_id
@@ -140,7 +143,7 @@ def _pdo(raw, lines: Lines, where: tuple) -> dict:
         if key in raw:
             out[key] = integer(raw[key], lines, (*where, key), 0, high)
     if "length" in raw:
-        out["length"] = integer(raw["length"], lines, (*where, "length"), 0, 8)
+        out["length"] = integer(raw["length"], lines, (*where, "length"), 0, most // 8)
     if "mpdo" in raw:
         if raw["mpdo"] not in MPDO_MODES:
             raise lines.error((*where, "mpdo"), f'expected "sam" or "dam", got {raw["mpdo"]!r}')
@@ -150,9 +153,11 @@ def _pdo(raw, lines: Lines, where: tuple) -> dict:
         if not isinstance(entries, list):
             raise lines.error((*where, "mapping"), "expected a list of mapping entries")
         words = [_map_word(v, lines, (*where, "mapping", str(i))) for i, v in enumerate(entries)]
-        if sum(w & 0xFF for w in words) > 64:
+        if sum(w & 0xFF for w in words) > most:
+            holds = "512 (CANopen FD)" if fd else "64 (512 on a CANopen FD node: canopen_fd)"
             raise lines.error(
-                (*where, "mapping"), f"maps {sum(w & 0xFF for w in words)} bits; a PDO holds 64"
+                (*where, "mapping"),
+                f"maps {sum(w & 0xFF for w in words)} bits; a PDO holds {holds}",
             )
         out["mapping"] = words
     return out
@@ -248,7 +253,9 @@ def _profile(raw: dict, node: int, base: Path, lines: Lines, where: tuple, how: 
         raise lines.error((*where, "eds"), str(exc)) from None
 
 
-def _node(raw, node: int, base: Path, lines: Lines, where: tuple, how: str) -> dict:
+def _node(
+    raw, node: int, base: Path, lines: Lines, where: tuple, how: str, network_fd: bool = False
+) -> dict:
     raw = _table(raw, lines, where, "of node settings")
     _known(raw, NODE_KEYS, lines, where, "node setting")
     out: dict = {}
@@ -260,6 +267,8 @@ def _node(raw, node: int, base: Path, lines: Lines, where: tuple, how: str) -> d
         if not isinstance(raw["gfc"], bool):
             raise lines.error((*where, "gfc"), f"expected true or false, got {raw['gfc']!r}")
         out["gfc"] = raw["gfc"]
+    if "canopen_fd" in raw:  # CiA 1301: its SDO COB-IDs carry USDO frames
+        out["canopen_fd"] = _flag(raw["canopen_fd"], lines, (*where, "canopen_fd"))
     for key, (_, high) in NODE_OBJECTS.items():
         if key in raw:
             out[key] = integer(raw[key], lines, (*where, key), 0, high)
@@ -278,7 +287,10 @@ def _node(raw, node: int, base: Path, lines: Lines, where: tuple, how: str) -> d
         if direction in raw:
             w = (*where, direction)
             table = _table(raw[direction], lines, w, "keyed by PDO number")
-            out[direction] = _keyed(table, lines, w, 1, 512, lambda v, at, _: _pdo(v, lines, at))
+            fd = bool(out.get("canopen_fd") or network_fd)  # CiA 1301: 64-byte PDOs
+            out[direction] = _keyed(
+                table, lines, w, 1, 512, lambda v, at, _, fd=fd: _pdo(v, lines, at, fd)
+            )
     if "srdo" in raw:
         w = (*where, "srdo")
         table = _table(raw["srdo"], lines, w, "keyed by SRDO number")
@@ -325,6 +337,12 @@ def _keyed(table: dict, lines: Lines, where: tuple, low: int, high: int, read) -
     return out
 
 
+def _flag(value, lines: Lines, where: tuple) -> bool:
+    if not isinstance(value, bool):
+        raise lines.error(where, f"expected true or false, got {value!r}")
+    return value
+
+
 def read_network(data, lines: Lines, base: Path, how: str = "network file") -> dict:
     """Check one source's network tree; its settings as a normalised table (see combine).
 
@@ -339,6 +357,8 @@ def read_network(data, lines: Lines, base: Path, how: str = "network file") -> d
     out: dict = {}
     if "bitrate" in data:
         out["bitrate"] = integer(data["bitrate"], lines, ("bitrate",), 1, 8_000_000)
+    if "canopen_fd" in data:  # CiA 1301: every node's SDO COB-IDs carry USDO frames
+        out["canopen_fd"] = _flag(data["canopen_fd"], lines, ("canopen_fd",))
     if "sync" in data:
         sync = _table(data["sync"], lines, ("sync",), "with period_us and window_us")
         _known(sync, set(SYNC_OBJECTS), lines, ("sync",), "sync setting")
@@ -358,7 +378,7 @@ def read_network(data, lines: Lines, base: Path, how: str = "network file") -> d
             ("nodes",),
             1,
             127,
-            lambda v, at, node: _node(v, node, base, lines, at, how),
+            lambda v, at, node: _node(v, node, base, lines, at, how, bool(out.get("canopen_fd"))),
         )
     return out
 
@@ -381,6 +401,7 @@ def combine(*settings: dict, source: str | None = None) -> NetworkSpec:
     for s in settings:
         tree = _merge(tree, s)
     spec = NetworkSpec(source=source, bitrate=tree.get("bitrate"))
+    spec.canopen_fd = bool(tree.get("canopen_fd", False))
     spec.known_cob_ids = set(tree.get("known_cob_ids", ()))
     spec.bus_writes = [(SYNC_OBJECTS[k], 0, v) for k, v in sorted(tree.get("sync", {}).items())]
     for node, raw in sorted(tree.get("nodes", {}).items()):
@@ -392,6 +413,7 @@ def _node_spec(node: int, raw: dict) -> NodeSpec:
     profile, how = raw.get("profile", (None, "network file"))
     spec = NodeSpec(profile=profile, how=how if profile is not None else "unknown")
     spec.name = raw.get("name")
+    spec.canopen_fd = bool(raw.get("canopen_fd", False))
     for key, (index, _) in NODE_OBJECTS.items():
         if key in raw:
             spec.writes.append((index, 0, raw[key]))

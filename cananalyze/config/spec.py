@@ -22,6 +22,7 @@ class NodeSpec:
     # expected length in bytes of a PDO ("tx"/"rx", number) while its mapping is unknown
     pdo_lengths: dict[tuple[str, int], int] = field(default_factory=dict)
     name: str | None = None  # the file's label for the node (not used by the analysis)
+    canopen_fd: bool = False  # CiA 1301: its SDO COB-IDs carry USDO frames
     # (index, subindex) -> {name, unit, scale, offset}: how to show a mapped object
     signals: dict[tuple[int, int], dict] = field(default_factory=dict)
 
@@ -34,6 +35,7 @@ class NetworkSpec:
     # objects of the bus as a whole: SYNC period 0x1006 and window 0x1007 from [sync]
     bus_writes: list[tuple[int, int, int]] = field(default_factory=list)
     known_cob_ids: set[int] = field(default_factory=set)  # expected non-CANopen identifiers
+    canopen_fd: bool = False  # CiA 1301: the whole network is CANopen FD (USDO, no SDO)
 
     def node(self, node_id: int) -> NodeSpec:
         return self.nodes.setdefault(node_id, NodeSpec())

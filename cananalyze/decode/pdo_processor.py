@@ -19,7 +19,7 @@ from cananalyze.decode.model import NetworkModel
 from cananalyze.devices.words import WORDED
 from cananalyze.protocol import mpdo
 from cananalyze.protocol.datatypes import DATA_TYPES
-from cananalyze.protocol.pdo import decode_pdo, words_of
+from cananalyze.protocol.pdo import decode_pdo, long_payloads, words_of
 from cananalyze.protocol.pdo_map import MapEntry
 from cananalyze.protocol.services import Service
 
@@ -242,7 +242,10 @@ class PdoDecoder:
         if self._words is None or self._words[0] is not fb:
             self._words = (fb, words_of(fb.data))  # once per batch
         dlc = fb.dlc[group]
-        cols = decode_pdo(None, dlc, mapping, words=self._words[1][group])
+        if sum(e.bits for e in mapping) > 64:  # CANopen FD: up to 64 bytes (512 bits)
+            cols = decode_pdo(None, dlc, mapping, long=long_payloads(fb, group))
+        else:
+            cols = decode_pdo(None, dlc, mapping, words=self._words[1][group])
         ok = ~cols.short
         for mask, what in (
             (

@@ -387,8 +387,12 @@ def build_decoder(
     for node, request, response in model.sdo_channels:
         tracker.add_channel(node, request, response)
     skip = dbc.standard_ids if dbc else set()  # the DBC's layout wins over the profile's
+    # CANopen FD (USDO on the SDO COB-IDs): --fd and the network file's canopen_fd keys
+    fd: frozenset[int] | bool = True
+    if opts.fd is not True and not spec.canopen_fd:
+        fd = frozenset(opts.fd or ()) | {n for n, ns in spec.nodes.items() if ns.canopen_fd}
     processors = [
-        SdoProcessor(tracker, identifier=model),
+        SdoProcessor(tracker, identifier=model, fd_nodes=fd),
         model,
         PdoDecoder(model, skip),
         EmcyDecoder(model),

@@ -31,6 +31,9 @@ class Options:
     checks: bool = False
     timing: bool = False
     sdo_timeout: float = SDO_TIMEOUT
+    # CiA 1301 (--fd): the network (True) or these nodes are CANopen FD: their SDO COB-IDs
+    # carry USDO frames (docs/decoding.md); the network file's `canopen_fd` keys add to it
+    fd: frozenset[int] | bool = frozenset()
     strict: bool = False
     input_format: str | None = None
     bitrate: int | None = None

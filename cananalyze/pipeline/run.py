@@ -30,7 +30,7 @@ class _Filter:
         labels = {SERVICE_NAMES[s] for s in opts.services or ()}
         # records pass the service filter when their own services are asked for
         self.record_services = {
-            "sdo": bool(labels & {"sdo_request", "sdo_response"}),
+            "sdo": bool(labels & {"sdo_request", "sdo_response", "usdo_request", "usdo_response"}),
             "signal": bool(labels & {"tpdo", "rpdo"}),
         }
 

@@ -10,7 +10,7 @@ row, for the rows it prints.
 
 from __future__ import annotations
 
-from cananalyze.protocol import emcy, error_frame, lss, nmt, pdo, sdo, srdo, sync
+from cananalyze.protocol import emcy, error_frame, lss, nmt, pdo, sdo, srdo, sync, usdo
 from cananalyze.protocol import time as time_of_day
 from cananalyze.protocol.services import Service
 
@@ -36,6 +36,8 @@ def frame_fields(service: int, data: bytes, rtr: bool = False, can_id: int = 0) 
         return nmt.errctl_invalid_fields(data)
     if s in (Service.SDO_REQUEST, Service.SDO_RESPONSE):
         return sdo.fields(data, s is Service.SDO_REQUEST)
+    if s in (Service.USDO_REQUEST, Service.USDO_RESPONSE):
+        return usdo.fields(data)
     if s in (Service.LSS_MASTER, Service.LSS_SLAVE):
         return lss.fields(data)
     return {}
@@ -56,6 +58,8 @@ def annotation(service: int, node: int, pdo_number: int, fields: dict, rtr: bool
         return pdo.annotation(s is Service.TPDO, pdo_number, rtr, fields)
     if s in (Service.SDO_REQUEST, Service.SDO_RESPONSE):
         return sdo.annotation(fields)
+    if s in (Service.USDO_REQUEST, Service.USDO_RESPONSE):
+        return usdo.annotation(fields)
     if s is Service.HEARTBEAT:
         return nmt.heartbeat_text(fields)
     if s is Service.BOOTUP:

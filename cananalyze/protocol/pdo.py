@@ -40,6 +40,31 @@ def _words(data: np.ndarray) -> np.ndarray:
     return block.view("<u8").reshape(-1)
 
 
+def _window(long: np.ndarray, offset: int) -> np.ndarray:
+    """(n, 64) uint8 payloads -> n little-endian uint64 words of the 64 bits from bit
+    `offset` (a CANopen FD PDO's entry, anywhere in its up to 512 bits)."""
+    start, shift = offset // 8, offset % 8
+    block = np.zeros((long.shape[0], 9), np.uint8)
+    part = long[:, start : start + 9]
+    block[:, : part.shape[1]] = part
+    lo = np.ascontiguousarray(block[:, :8]).view("<u8").reshape(-1)
+    if not shift:
+        return lo
+    hi = block[:, 8].astype(np.uint64)
+    return (lo >> np.uint64(shift)) | (hi << np.uint64(64 - shift))
+
+
+def long_payloads(fb, rows: np.ndarray) -> np.ndarray:
+    """(len(rows), 64) uint8: the rows' whole payloads (CAN FD), zero padded."""
+    out = np.zeros((len(rows), 64), np.uint8)
+    out[:, :8] = fb.data[rows]
+    for j, row in enumerate(rows.tolist()):
+        extra = fb.long_data.get(row)
+        if extra is not None:
+            out[j, : len(extra)] = np.frombuffer(extra, np.uint8)
+    return out
+
+
 def _extract(words: np.ndarray, offset: int, bits: int) -> np.ndarray:
     raw = words >> np.uint64(offset)
     if bits < 64:
@@ -80,26 +105,29 @@ def decode_pdo(
     dlc: np.ndarray,
     mapping: list[MapEntry],
     words: np.ndarray | None = None,
+    long: np.ndarray | None = None,
 ) -> PdoColumns:
     """Decode every mapped signal of n PDO frames at once.
 
-    data: (n, 8) uint8 (or `words`: their `words_of`); dlc: n byte counts; mapping:
+    data: (n, 8) uint8 (or `words`: their `words_of`; or `long`: (n, 64) uint8, the whole
+    payloads, for a CANopen FD mapping of more than 64 bits); dlc: n byte counts; mapping:
     in PDO order (dummy entries, index 1..7, take space but give no column). Scaled
     signals come out as float64 (value * scale + offset); integers as int64/uint64,
     booleans as bool.
     """
-    n = int(data.shape[0]) if words is None else int(words.shape[0])
+    n = int((data if words is None and long is None else words if long is None else long).shape[0])
     dlc = np.asarray(dlc).astype(np.int64, copy=False)
     total = sum(e.bits for e in mapping)
     needed = (total + 7) // 8
     short = dlc < needed
     extra = dlc > needed
     out = PdoColumns(short=short, extra=extra, bytes_needed=needed)
-    if total > 64:
-        # Classic CAN PDOs carry at most 64 bits; a longer mapping cannot be in 8 bytes.
+    if total > 64 and long is None:
+        # Classic CAN PDOs carry at most 64 bits; a longer mapping (CANopen FD: up to 512)
+        # is decoded from the frames' whole payloads (`long`) only
         out.short = np.ones(n, bool)
         return out
-    if words is None:
+    if words is None and long is None:
         words = _words(data) if n else np.zeros(0, np.uint64)
     any_short = bool(short.any())
     offset = 0
@@ -107,7 +135,11 @@ def decode_pdo(
         if entry.index in DUMMY_INDICES or entry.bits == 0:
             offset += entry.bits
             continue
-        col = _column(_extract(words, offset, entry.bits), entry)
+        if long is not None:
+            raw = _extract(_window(long, offset), 0, entry.bits)
+        else:
+            raw = _extract(words, offset, entry.bits)
+        col = _column(raw, entry)
         offset += entry.bits
         if entry.scale is not None or entry.offset:
             scale = 1.0 if entry.scale is None else entry.scale

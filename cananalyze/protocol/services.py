@@ -34,6 +34,10 @@ class Service(IntEnum):
     SRDO = 17
     SRDO_INVERTED = 18
     GFC = 19
+    # CiA 1301 (protocol/usdo.py): a CAN FD frame on an SDO COB-ID of a CANopen FD
+    # network, what a USDO client (0x600 + its node-ID) or server (0x580 + its) sends
+    USDO_REQUEST = 20
+    USDO_RESPONSE = 21
 
     @property
     def label(self) -> str:
@@ -61,6 +65,8 @@ SERVICE_NAMES: tuple[str, ...] = (
     "srdo",
     "srdo_inverted",
     "gfc",
+    "usdo_request",
+    "usdo_response",
 )
 
 SERVICE_BY_NAME: dict[str, Service] = {name: Service(i) for i, name in enumerate(SERVICE_NAMES)}
@@ -68,7 +74,8 @@ SERVICE_BY_NAME: dict[str, Service] = {name: Service(i) for i, name in enumerate
 # Friendly groupings accepted by `--service` filters.
 SERVICE_GROUPS: dict[str, tuple[Service, ...]] = {
     "pdo": (Service.TPDO, Service.RPDO),
-    "sdo": (Service.SDO_REQUEST, Service.SDO_RESPONSE),
+    "sdo": (Service.SDO_REQUEST, Service.SDO_RESPONSE, Service.USDO_REQUEST, Service.USDO_RESPONSE),
+    "usdo": (Service.USDO_REQUEST, Service.USDO_RESPONSE),
     "errctl": (
         Service.HEARTBEAT,
         Service.BOOTUP,

@@ -1,6 +1,7 @@
 """Regenerate the scenario samples: python -m cananalyze.sim.samples samples/
 
-Writes commissioning.{log,asc,blf} and faults.{log,asc,blf} from the simulator
+Writes commissioning.{log,asc,blf}, faults.{log,asc,blf} and fd.{log,asc,blf} (CANopen FD:
+USDO) from the simulator
 (seed 0, the four seed devices at nodes 3, 5, 6, 7) and the demo sample. The
 output is byte-for-byte reproducible; a test compares it with the committed files.
 """
@@ -10,7 +11,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-SAMPLES = {"commissioning": 12.0, "faults": 10.0}  # scenario -> seconds
+SAMPLES = {"commissioning": 12.0, "faults": 10.0, "fd": 3.0}  # scenario -> seconds
 SEED = 0
 
 

@@ -13,4 +13,5 @@ SCENARIO_NAMES = (
     "commissioning-faults",
     "safety",
     "safety-faults",
+    "fd",
 )

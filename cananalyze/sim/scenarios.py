@@ -344,6 +344,100 @@ def safety_faults(nodes: Nodes, duration: float):
     yield from steady(nodes, duration)
 
 
+# fd: the USDO client's node-ID (CiA 1301: its COB-ID 0x600 + it) and the data type codes
+USDO_CLIENT = 0x7F
+_VISIBLE_STRING, _UNSIGNED16, _UNSIGNED32, _DOMAIN = 0x09, 0x06, 0x07, 0x0F
+USDO_DOMAIN = 0x2F00
+
+
+def _usdo(nodes: Nodes):
+    """CiA 1301 USDO traffic (CAN FD frames, encoded by protocol/usdo.py's table) between a
+    client (node USDO_CLIENT) and every simulated node, the servers' answers from their
+    object dictionaries: an expedited read (0x1018:01) and write (0x1017), a segmented
+    read (0x1008), a bulk write of 150 bytes (USDO_DOMAIN), and on the first node a read
+    of an object it does not have (0x5FFF:00: abort 0x33)."""
+    from cananalyze.core.frames import FLAG_BRS, FLAG_FD
+    from cananalyze.protocol import usdo
+
+    fd = FLAG_FD | FLAG_BRS
+    c = USDO_CLIENT
+
+    def client(n: int, cs: int, session: int, **f) -> Send:
+        return Send(usdo.CLIENT_BASE + c, usdo.encode(cs, n, session, **f), fd)
+
+    def server(n: int, cs: int, session: int, **f) -> Send:
+        return Send(usdo.SERVER_BASE + n, usdo.encode(cs, c, session, **f), fd)
+
+    def abort(n: int, session: int, index: int, sub: int, code: int) -> Send:
+        return server(n, usdo.ABORT, session, index=index, subindex=sub, abort_code=code)
+
+    gap = 0.001
+    for k, node in enumerate(sorted(nodes.values(), key=lambda x: x.node_id)):
+        n, od, s = node.node_id, node.od, 4 * k + 1
+        mux = dict(index=0x1018, subindex=1)
+        yield client(n, 0x11, s, **mux)
+        yield Wait(gap)
+        if od.has(0x1018, 1):
+            yield server(n, 0x31, s, **mux, datatype=_UNSIGNED32, data=od.read(0x1018, 1))
+        else:
+            yield abort(n, s, 0x1018, 1, 0x33)
+        yield Wait(gap)
+        mux = dict(index=0x1017, subindex=0)
+        value = u16(od.get(0x1017, 0, 0))  # its own value: the write changes nothing
+        yield client(n, 0x01, s + 1, **mux, datatype=_UNSIGNED16, data=value)
+        yield Wait(gap)
+        yield server(n, 0x21, s + 1, **mux)
+        yield Wait(gap)
+        # segmented read of the device name, 56 bytes a segment
+        mux = dict(index=0x1008, subindex=0)
+        yield client(n, 0x11, s + 2, **mux)
+        yield Wait(gap)
+        if not od.has(0x1008, 0):
+            yield abort(n, s + 2, 0x1008, 0, 0x33)
+        else:
+            name = od.read(0x1008, 0)
+            yield server(n, 0x32, s + 2, **mux, datatype=_VISIBLE_STRING, total=len(name))
+            parts = [name[i : i + usdo.SEGMENT_MAX] for i in range(0, len(name), usdo.SEGMENT_MAX)]
+            for i, part in enumerate(parts or [b""]):
+                yield Wait(gap)
+                yield client(n, 0x13, s + 2, counter=i)
+                yield Wait(gap)
+                last = i == len(parts or [b""]) - 1
+                yield server(n, 0x34 if last else 0x33, s + 2, counter=i, data=part)
+        yield Wait(gap)
+        # bulk write: segments back to back, one answer at the end (the server keeps
+        # nothing: a manufacturer DOMAIN the simulated devices do not declare)
+        blob = bytes((7 * i + n) & 0xFF for i in range(150))
+        mux = dict(index=USDO_DOMAIN, subindex=0)
+        yield client(n, 0x06, s + 3, **mux, datatype=_DOMAIN, total=len(blob))
+        yield Wait(gap)
+        yield server(n, 0x26, s + 3, **mux)
+        parts = [blob[i : i + usdo.SEGMENT_MAX] for i in range(0, len(blob), usdo.SEGMENT_MAX)]
+        for i, part in enumerate(parts):
+            yield Wait(gap / 4)
+            yield client(n, 0x08 if i == len(parts) - 1 else 0x07, s + 3, counter=i, data=part)
+        yield Wait(gap)
+        yield server(n, 0x28, s + 3, counter=len(parts) - 1)
+        yield Wait(gap)
+        if k == 0:  # one read of an object the device does not have: an abort
+            yield client(n, 0x11, 0xFF, index=0x5FFF, subindex=0)
+            yield Wait(gap)
+            yield abort(n, 0xFF, 0x5FFF, 0, 0x33)
+            yield Wait(gap)
+
+
+def fd(nodes: Nodes, duration: float):
+    """A CANopen FD network (CiA 1301): steady operation with USDO transfers (expedited,
+    segmented, bulk, an abort) from 1 s on (`_usdo`)."""
+    yield Wait(0.4)
+    yield from _supervision(nodes)
+    yield Nmt(nmt.START)
+    yield Sync(SYNC_PERIOD)
+    yield Until(1.0)
+    yield from _usdo(nodes)
+    yield from _run_outputs(nodes, 1.5, duration)
+
+
 # each name is the script of the same name ("-" for "_")
 SCENARIOS = {name: globals()[name.replace("-", "_")] for name in SCENARIO_NAMES}
 

@@ -200,17 +200,21 @@ class SdoRule(Rule):
             return  # the usual case: nothing to format
         obj = object_text(rec.get("index", 0), rec.get("subindex", 0))
         what = f"{rec.get('direction') or 'transfer'} {obj}"
+        # CiA 1301's USDO (protocol usdo_*): the same rule, its one-byte abort codes
+        usdo = str(rec.get("protocol") or "").startswith("usdo")
+        svc = "USDO" if usdo else "SDO"
         if result and result != "ok":
             detail = rec.get("abort_text") or rec.get("detail") or ""
             if rec.get("direction") is None and rec.get("abort_text") and rec.get("detail"):
                 detail += f" [{rec['detail']}]"  # which COB-ID, and that its start is not here
             code = rec.get("abort_code")
-            measured = f"0x{code:08X}" if isinstance(code, int) else result
+            width = 2 if usdo else 8
+            measured = f"0x{code:0{width}X}" if isinstance(code, int) else result
             self.emit(
                 rec.get("t", 0.0),
                 node,
                 None,
-                f"SDO {what} {result}: {detail}".rstrip(": "),
+                f"{svc} {what} {result}: {detail}".rstrip(": "),
                 measured,
                 "ok",
                 row=row,
@@ -220,7 +224,7 @@ class SdoRule(Rule):
                 rec.get("t", 0.0),
                 node,
                 None,
-                f"SDO {what} took {lat:g} ms",
+                f"{svc} {what} took {lat:g} ms",
                 lat,
                 self.max_latency,
                 row=row,

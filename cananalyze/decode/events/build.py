@@ -26,7 +26,13 @@ from cananalyze.core.frames import FLAG_RTR
 from cananalyze.core.records import DecodedBatch
 from cananalyze.decode.events import columns as ec
 from cananalyze.decode.events.columns import NO_NODE, EventColumns, Row, texts
-from cananalyze.decode.events.sdo_text import U64, sdo_head, sdo_message, sdo_messages, sdo_tail
+from cananalyze.decode.events.sdo_text import (
+    U64,
+    record_message,
+    sdo_head,
+    sdo_messages,
+    sdo_tail,
+)
 from cananalyze.decode.nmt_state import NmtStates
 from cananalyze.devices import cia402
 from cananalyze.protocol import emcy, nmt
@@ -82,17 +88,7 @@ class EventBuilder:
 def sdo_event(row: int, r: dict) -> Row:
     get = r.get
     result = get("result", "?")
-    text = sdo_message(
-        get("direction"),
-        get("index"),
-        get("subindex"),
-        get("name"),
-        result,
-        get("value"),
-        get("data"),
-        get("abort_text"),
-        get("detail"),
-    )
+    text = record_message(r)
     level = INFO if result == "ok" else WARNING
     return Row(float(get("t", 0.0)), "sdo", get("node"), level, text, row)
 

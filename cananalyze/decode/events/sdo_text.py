@@ -111,15 +111,23 @@ def sdo_messages(fields) -> list[str] | None:
     parts.append(bytecols.repeat(b" ok", n))
     messages = bytecols.joined_rows(parts, n)
     for k, rec in fields.held.items():  # held records (aborted, the tracker's) word their own
-        messages[k] = sdo_message(
-            rec.get("direction"),
-            rec.get("index"),
-            rec.get("subindex"),
-            rec.get("name"),
-            rec.get("result", "?"),
-            rec.get("value"),
-            rec.get("data"),
-            rec.get("abort_text"),
-            rec.get("detail"),
-        )
+        messages[k] = record_message(rec)
     return messages
+
+
+def record_message(rec: dict) -> str:
+    """The event text of one SDO record dict; a CANopen FD USDO transfer's says USDO."""
+    text = sdo_message(
+        rec.get("direction"),
+        rec.get("index"),
+        rec.get("subindex"),
+        rec.get("name"),
+        rec.get("result", "?"),
+        rec.get("value"),
+        rec.get("data"),
+        rec.get("abort_text"),
+        rec.get("detail"),
+    )
+    if str(rec.get("protocol") or "").startswith("usdo"):
+        text = "U" + text
+    return text

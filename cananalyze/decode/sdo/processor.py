@@ -16,13 +16,14 @@ from typing import Protocol
 
 import numpy as np
 
-from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
+from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR
 from cananalyze.core.records import DecodedBatch
 from cananalyze.core.sdo_records import FastPart, RecordColumns
 from cananalyze.decode.node_tally import IDENTITY, IDENTITY_INDEX
 from cananalyze.decode.sdo import fastpath, roles
 from cananalyze.decode.sdo.lazynotes import LazyNotes
 from cananalyze.decode.sdo.tracker import SdoTracker
+from cananalyze.decode.sdo.usdo import UsdoTracker
 from cananalyze.protocol import sdo
 from cananalyze.protocol.services import Service
 
@@ -43,8 +44,14 @@ class SdoProcessor:
         tracker: SdoTracker | None = None,
         fast: bool = True,
         identifier: Identifier | None = None,
+        usdo: UsdoTracker | None = None,
+        fd_nodes: frozenset[int] | bool = frozenset(),
     ) -> None:
         self.tracker = tracker or SdoTracker()
+        # CiA 1301 (CANopen FD): FD frames on the SDO COB-IDs are USDO, and every frame on
+        # those of a node (or, `fd_nodes` True, of the whole network) marked CANopen FD
+        self.usdo = usdo or UsdoTracker(self.tracker.timeout, self.tracker.object_info)
+        self.fd_nodes = fd_nodes
         self.fast = fast
         # told of each identity read as it ends, so that the transfers after it are named
         self.identifier = identifier
@@ -65,13 +72,67 @@ class SdoProcessor:
                 batch.node[row] = node
                 batch.pdo[row] = 0
             is_sdo |= on_extra
-        return np.flatnonzero(is_sdo & ((batch.frames.flags & FLAG_RTR) == 0))
+        rows = np.flatnonzero(is_sdo & ((batch.frames.flags & FLAG_RTR) == 0))
+        if not len(rows):
+            return rows
+        fd = (batch.frames.flags[rows] & FLAG_FD) != 0
+        if self.fd_nodes:
+            fd |= self._fd_marked(batch, rows)
+        if fd.any():
+            self._usdo_rows = rows[fd]
+            for row in self._usdo_rows.tolist():
+                resp = (int(batch.frames.can_id[row]) & 0x780) == 0x580
+                batch.service[row] = Service.USDO_RESPONSE if resp else Service.USDO_REQUEST
+                dest = int(batch.frames.data[row, 0])
+                if not resp and 1 <= dest <= 127:  # a frame's node: the server, as for the SDO
+                    batch.node[row] = dest
+            rows = rows[~fd]
+        return rows
+
+    def _fd_marked(self, batch: DecodedBatch, rows: np.ndarray) -> np.ndarray:
+        """Rows on the SDO COB-IDs of the nodes marked CANopen FD (all of them: True)."""
+        if self.fd_nodes is True:
+            return np.ones(len(rows), bool)
+        cob = batch.frames.can_id[rows]
+        return np.isin(cob & 0x7F, np.fromiter(self.fd_nodes, np.uint32)) & (
+            (cob & 0x780 == 0x580) | (cob & 0x780 == 0x600)
+        )
+
+    def _feed_usdo(self, batch: DecodedBatch, row: int) -> None:
+        """One USDO frame through the USDO tracker (its note: the frame's role)."""
+        fb = batch.frames
+        self.tracker.advance(float(fb.t[row]))  # the SDO's time-outs before it, in order
+        self._emit(batch)
+        note = self.usdo.feed(
+            float(fb.t[row]), int(fb.can_id[row]), fb.payload(row), self._offset + row
+        )
+        batch.notes.setdefault(row, {}).update(note)
+        self._emit_usdo(batch)
+
+    def _emit_usdo(self, batch: DecodedBatch) -> None:
+        n = len(batch)
+        for ref, rec in self.usdo.pop_completed():
+            row = -1 if ref is None else ref - self._offset
+            if not 0 <= row < n:
+                row = n - 1
+            batch.add_record(row, rec)
+            self._identify(row, rec)
 
     def process(self, batch: DecodedBatch) -> None:
         fb = batch.frames
         n = len(fb)
+        self._usdo_rows = None
         rows = self._rows(batch)
-        if self.fast and len(rows) > 1 and not self._may_learn(batch, rows):
+        if self._usdo_rows is not None:
+            # USDO frames (CANopen FD) in this batch: every SDO-channel frame one at a time,
+            # in order, so the two trackers' records come in the order they ended
+            usdo_rows = set(self._usdo_rows.tolist())
+            for row in sorted(usdo_rows.union(rows.tolist())):
+                if row in usdo_rows:
+                    self._feed_usdo(batch, row)
+                else:
+                    self._feed(batch, row)
+        elif self.fast and len(rows) > 1 and not self._may_learn(batch, rows):
             self._cur_rows_arr = rows
             self._process_fast(batch, rows)
             self._fill(batch)
@@ -82,6 +143,9 @@ class SdoProcessor:
         if n:
             self.tracker.advance(float(fb.t[-1]))
             self._emit(batch)
+            if self.usdo._pending:
+                self.usdo.advance(float(fb.t[-1]))
+                self._emit_usdo(batch)
         self._offset += n
 
     def _may_learn(self, batch: DecodedBatch, rows: np.ndarray) -> bool:
@@ -113,6 +177,9 @@ class SdoProcessor:
 
     def _feed(self, batch: DecodedBatch, row: int) -> None:
         fb = batch.frames
+        if self.usdo._pending:  # the USDO's time-outs before this frame, in order
+            self.usdo.advance(float(fb.t[row]))
+            self._emit_usdo(batch)
         role = self.tracker.feed(
             float(fb.t[row]), int(fb.can_id[row]), fb.payload(row), self._offset + row
         )
@@ -337,6 +404,8 @@ class SdoProcessor:
         (the bus's clock) end as timeouts into `batch` (a zero-row one) while the bus is quiet."""
         self.tracker.advance(now)
         self._emit(batch)
+        self.usdo.advance(now)
+        self._emit_usdo(batch)
 
     def _fill_strays(self, batch: DecodedBatch) -> None:
         """Notes of the stray responses taken in this batch, written when read."""
@@ -359,6 +428,8 @@ class SdoProcessor:
     def finish(self, batch: DecodedBatch) -> None:
         self.tracker.finish()
         self._emit(batch)
+        self.usdo.finish()
+        self._emit_usdo(batch)
 
     def _emit(self, batch: DecodedBatch) -> None:
         n = len(batch)
@@ -369,10 +440,14 @@ class SdoProcessor:
                 row = n - 1  # completed by time passing (timeout) or at the end: after this batch
             rec = tx.to_record()
             batch.add_record(row, rec)
-            if (
-                self.identifier is not None
-                and rec["direction"] == "upload"
-                and rec["result"] == "ok"
-                and (rec["index"], rec["subindex"]) in IDENTITY
-            ):
-                self.identifier.identify_now(row, rec)
+            self._identify(row, rec)
+
+    def _identify(self, row: int, rec: dict) -> None:
+        """An identity read (SDO or USDO) names the node's device from that transfer on."""
+        if (
+            self.identifier is not None
+            and rec["direction"] == "upload"
+            and rec["result"] == "ok"
+            and (rec["index"], rec["subindex"]) in IDENTITY
+        ):
+            self.identifier.identify_now(row, rec)

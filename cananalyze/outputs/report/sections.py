@@ -315,7 +315,7 @@ def sdo(s, figs: Figures) -> dict | None:
             str(r.get("direction") or ""),
             f"0x{r.get('index', 0):04X}:{r.get('subindex', 0):02X}",
             str(r.get("name") or ""),
-            f"0x{r['abort_code']:08X}" if isinstance(r.get("abort_code"), int) else "-",
+            _abort_code(r),
             str(r.get("abort_text") or r.get("result") or ""),
         ]
         for bus, r in s.aborts
@@ -724,3 +724,12 @@ def _edge(at: dict, a: int, b: int, label: str, cls: str) -> list[dict]:
 SECTIONS = [verdict, buses, findings, differences, nodes, boot, lss, sdo, emcy, pdos]
 SECTIONS += [network, sync_latency]
 SECTIONS += [signals, drive_states]
+
+
+def _abort_code(r: dict) -> str:
+    """An abort code as hex: 8 digits (SDO), 2 for CANopen FD's one-byte USDO codes."""
+    code = r.get("abort_code")
+    if not isinstance(code, int):
+        return "-"
+    width = 2 if str(r.get("protocol") or "").startswith("usdo") else 8
+    return f"0x{code:0{width}X}"

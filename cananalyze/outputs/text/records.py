@@ -16,8 +16,13 @@ def format_record(rec: dict) -> str:
         what = _VERB.get(rec.get("direction"), "transfer")  # an abort alone: no direction
         obj = object_text(rec["index"], rec["subindex"]) if rec.get("index") is not None else "?"
         name = f" {rec['name']}" if rec.get("name") else ""
-        proto = f" {rec['protocol']}" if rec.get("protocol") else ""  # unknown when aborted at once
-        line = f"node {rec.get('node')} SDO {what} {obj}{name}{proto} -> {rec.get('result')}"
+        protocol = rec.get("protocol") or ""
+        usdo = protocol.startswith("usdo")  # CiA 1301 (CANopen FD): usdo_expedited ...
+        if usdo:
+            protocol = protocol[5:]
+        proto = f" {protocol}" if protocol else ""  # unknown when aborted at once
+        svc = "USDO" if usdo else "SDO"
+        line = f"node {rec.get('node')} {svc} {what} {obj}{name}{proto} -> {rec.get('result')}"
         if rec.get("result") == "ok":
             value = rec.get("value")
             if value is None:
@@ -32,11 +37,14 @@ def format_record(rec: dict) -> str:
                 line += f" ({rec['words']})"
             line += f" ({rec.get('size')} bytes)"
         elif rec.get("abort_code") is not None:
-            line += f": 0x{rec['abort_code']:08X} {rec.get('abort_text')}"
+            width = 2 if usdo else 8  # a USDO abort code is one byte
+            line += f": 0x{rec['abort_code']:0{width}X} {rec.get('abort_text')}"
         if rec.get("detail"):
             line += f" [{rec['detail']}]"
         if rec.get("latency_ms") is not None:
             line += f", latency {rec['latency_ms']:.1f} ms"
+        if usdo and rec.get("client") is not None:
+            line += f" (client {rec['client']}, session {rec.get('session')})"
         return line
     if kind == "finding":
         return f"{rec.get('severity', 'warning').upper()} {rec.get('rule')}: {rec.get('message')}"
