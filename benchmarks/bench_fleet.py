@@ -32,6 +32,7 @@ import socket
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from collections import Counter
 from pathlib import Path
@@ -129,14 +130,16 @@ def run_fleet(logs: str, dataset: str, workers: int, env: dict) -> tuple[float, 
     cmd += ["--workers", str(workers), "-q"]
     env = {**os.environ, **env}
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")
+    env.setdefault("PYTHONFAULTHANDLER", "1")  # a fatal error's traceback, onto stderr
     t = time.perf_counter()
-    proc = subprocess.Popen(
-        cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
-    )
-    _, status, usage = os.wait4(proc.pid, 0)
-    wall = time.perf_counter() - t
-    if os.waitstatus_to_exitcode(status) not in (0, 1):
-        raise SystemExit(f"failed ({status}): {' '.join(cmd)}")
+    with tempfile.TemporaryFile() as err:  # kept: a failure shows its last lines
+        proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=err)
+        _, status, usage = os.wait4(proc.pid, 0)
+        wall = time.perf_counter() - t
+        if os.waitstatus_to_exitcode(status) not in (0, 1):
+            err.seek(0)
+            tail = err.read().decode("utf-8", "replace").splitlines()[-25:]
+            raise SystemExit(f"failed ({status}): {' '.join(cmd)}\n" + "\n".join(tail))
     return usage.ru_utime + usage.ru_stime, wall
 
 
