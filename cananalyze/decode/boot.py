@@ -124,10 +124,19 @@ class BootFollower:
             first = np.unique(node[beats], return_index=True)[1]
             keep = np.zeros(beats.size, bool)
             keep[first] = True
-            keep |= state == nmt.OPERATIONAL
+            # a node's life: the boot-ups of the node before the beat, in this batch
+            life = np.zeros(beats.size, np.int64)
             for r in np.flatnonzero(svc == Service.BOOTUP).tolist():  # the first after each
-                after = np.flatnonzero((beats > r) & (node[beats] == node[r]))
+                later = (beats > r) & (node[beats] == node[r])
+                after = np.flatnonzero(later)
                 keep[after[:1]] = True
+                life += later
+            # operational reports: only the first of each node's life in this batch (once
+            # a story is operational, a later report changes nothing in it)
+            op = np.flatnonzero(state == nmt.OPERATIONAL)
+            if op.size:
+                key = node[beats[op]].astype(np.int64) * (int(life.max()) + 1) + life[op]
+                keep[op[np.unique(key, return_index=True)[1]]] = True
             rows = np.union1d(rows, beats[keep])
         events = [(int(r), 0) for r in rows.tolist()]
         recs = batch.records
