@@ -113,6 +113,7 @@ class Run:
         self.user = self.system = float("inf")  # the best CPU run's, apart
         self.mb = 0.0
         self.cpus: list[float] = []  # every round's, in order (per-round ratios)
+        self.walls: list[float] = []  # every round's wall, in order (medians)
         self.load = 0.0  # 1-minute load average when the best wall run started
         self.failed: int | None = None
 
@@ -140,6 +141,7 @@ class Run:
             return
         cpu = usage.ru_utime + usage.ru_stime
         wall, cpu = self.scaled(printed, wall, cpu)
+        self.walls.append(wall)
         if wall < self.wall:
             self.wall, self.load = wall, load
         if cpu < self.cpu:
@@ -414,6 +416,22 @@ def compare(args, n: int, formats: list[str], made: list[Path]) -> list[str]:
         else:
             ratio = f"{'-':>21}"
         out.append(f"{label:<{width}}  {cell(mine)}  {cell(theirs)}  {ratio}")
+    # the same figures as medians of the rounds (best-of above: the machine's quietest)
+    med = statistics.median
+    out += [
+        "",
+        f"medians of {args.repeat} rounds:",
+        f"{'':<{width}}  {'this tree':>17}  {'other tree':>17}  {'this / other':>14}",
+        f"{'':<{width}}  {'cpu':>8} {'wall':>8}  {'cpu':>8} {'wall':>8}  {'cpu':>6} {'wall':>7}",
+    ]
+    for label, mine, theirs in pairs:
+        if mine.failed is not None or theirs.failed is not None or not mine.cpus:
+            continue
+        a, b = (med(mine.cpus), med(mine.walls)), (med(theirs.cpus), med(theirs.walls))
+        out.append(
+            f"{label:<{width}}  {a[0]:7.2f}s {a[1]:7.2f}s  {b[0]:7.2f}s {b[1]:7.2f}s  "
+            f"{a[0] / b[0]:5.2f}x {a[1] / b[1]:6.2f}x"
+        )
     return out
 
 

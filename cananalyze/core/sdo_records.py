@@ -179,6 +179,36 @@ class RecordColumns:
                 columns[c][k] = rec.get(c)
         return {c: columns[c] for c in RECORD_COLUMNS}
 
+    def full_record(self, j: int) -> dict:
+        """The j-th record as `records()` makes it, key for key (without building the
+        others' dicts)."""
+        if j in self.held:
+            return self.held[j]
+        c = self.columns
+        nd = c["node"][j]
+        return {
+            "kind": "sdo",
+            "t_start": c["t_start"][j],
+            "t": c["t"][j],
+            "latency_ms": c["latency_ms"][j],
+            "node": nd,
+            "direction": c["direction"][j],
+            "protocol": "expedited",
+            "index": c["index"][j],
+            "subindex": c["subindex"][j],
+            "size": c["size"][j],
+            "data": c["data"][j],
+            "value": c["value"][j],
+            "name": c["name"][j],
+            "result": "ok",
+            "abort_code": None,
+            "abort_text": None,
+            "detail": None,
+            "words": c["words"][j],
+            "frames": 2,
+            "cob_ids": [0x600 + nd, 0x580 + nd],
+        }
+
     def record(self, j: int) -> dict:
         """The j-th record's table fields (and kind), without the lists."""
         if j in self.held:
@@ -410,6 +440,10 @@ class SdoRecords:
         rec = self._dicts.get(k)
         if rec is None:
             rec = self._built.get(k)
+        if rec is None and self._fields is not None and 0 <= k < len(self._fields):
+            # every field already built as columns (an export's tables): read it there,
+            # not through a build of this one transfer
+            rec = self._built[k] = self._fields.full_record(k)
         if rec is None:
             for p in self._fast:
                 j = int(np.searchsorted(p.at, k))

@@ -109,34 +109,17 @@ class BootFollower:
         fb = batch.frames
         if len(fb):
             self.t_last = float(fb.t[-1])
-        svc, node = batch.service, batch.node
-        wanted = (
-            (svc == Service.BOOTUP)
-            | (svc == Service.NMT)
-            | (svc == Service.GUARD_REQUEST)
-            | (svc == Service.GUARD_RESPONSE)
-        )
-        rows = np.flatnonzero(wanted)
-        # heartbeats: only a node's first after a boot-up, and operational reports
-        beats = np.flatnonzero(svc == Service.HEARTBEAT)
-        if beats.size:
-            state = fb.data[beats, 0] & nmt.STATE_MASK
-            first = np.unique(node[beats], return_index=True)[1]
-            keep = np.zeros(beats.size, bool)
-            keep[first] = True
-            keep |= state == nmt.OPERATIONAL
-            for r in np.flatnonzero(svc == Service.BOOTUP).tolist():  # the first after each
-                after = np.flatnonzero((beats > r) & (node[beats] == node[r]))
-                keep[after[:1]] = True
-            rows = np.union1d(rows, beats[keep])
-        events = [(int(r), 0) for r in rows.tolist()]
         recs = batch.records
-        if recs:
-            c = recs.cols
-            idx = np.isin(c.index, (0x1000, 0x1018)) & c.upload
-            pick = np.flatnonzero((~c.ok | ~c.upload | idx) & (c.node >= 0) & (c.index >= 0))
-            events += [(recs.rows[int(k)], 1 + int(k)) for k in pick.tolist()]
-        for row, what in sorted(events):
+        # the rows a story reads depend on the batch alone: a run's two followers (the
+        # commissioning processor's and the boot rule's) pick them once
+        seen = batch.__dict__.get("_boot_events")
+        n_recs = len(recs) if recs else 0
+        if seen is not None and seen[0] == n_recs:
+            events = seen[1]
+        else:
+            events = _events(batch)
+            batch.__dict__["_boot_events"] = (n_recs, events)
+        for row, what in events:
             if what:
                 self._sdo(recs.record(what - 1))
             else:
@@ -225,6 +208,50 @@ class BootFollower:
             _judge(s, expected(s.node) if expected else None, heartbeat_ms, end if timed else None)
             out.append(s)
         return sorted(out, key=lambda s: (s.node, s.life))
+
+
+def _events(batch: DecodedBatch) -> list[tuple[int, int]]:
+    """(row, 0) of the frames a boot story reads and (row, 1 + position) of the SDO
+    records, in row order: boot-ups, NMT commands, guarding, a node's first heartbeat
+    (and its first after each boot-up) and its first operational one in each life."""
+    fb = batch.frames
+    svc, node = batch.service, batch.node
+    wanted = (
+        (svc == Service.BOOTUP)
+        | (svc == Service.NMT)
+        | (svc == Service.GUARD_REQUEST)
+        | (svc == Service.GUARD_RESPONSE)
+    )
+    rows = np.flatnonzero(wanted)
+    # heartbeats: only a node's first after a boot-up, and operational reports
+    beats = np.flatnonzero(svc == Service.HEARTBEAT)
+    if beats.size:
+        state = fb.data[beats, 0] & nmt.STATE_MASK
+        first = np.unique(node[beats], return_index=True)[1]
+        keep = np.zeros(beats.size, bool)
+        keep[first] = True
+        # a node's life: the boot-ups of the node before the beat, in this batch
+        life = np.zeros(beats.size, np.int64)
+        for r in np.flatnonzero(svc == Service.BOOTUP).tolist():  # the first after each
+            later = (beats > r) & (node[beats] == node[r])
+            after = np.flatnonzero(later)
+            keep[after[:1]] = True
+            life += later
+        # operational reports: only the first of each node's life in this batch (once
+        # a story is operational, a later report changes nothing in it)
+        op = np.flatnonzero(state == nmt.OPERATIONAL)
+        if op.size:
+            key = node[beats[op]].astype(np.int64) * (int(life.max()) + 1) + life[op]
+            keep[op[np.unique(key, return_index=True)[1]]] = True
+        rows = np.union1d(rows, beats[keep])
+    events = [(int(r), 0) for r in rows.tolist()]
+    recs = batch.records
+    if recs:
+        c = recs.cols
+        idx = np.isin(c.index, (0x1000, 0x1018)) & c.upload
+        pick = np.flatnonzero((~c.ok | ~c.upload | idx) & (c.node >= 0) & (c.index >= 0))
+        events += [(recs.rows[int(k)], 1 + int(k)) for k in pick.tolist()]
+    return sorted(events)
 
 
 def declared_identity(model, node: int) -> dict | None:

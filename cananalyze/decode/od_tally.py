@@ -143,8 +143,8 @@ class OdTally:
         life = np.asarray(before, np.int64)[inv]
         for row, bch, bn in zip(boots.tolist(), boot_ch.tolist(), boot_node.tolist(), strict=True):
             life[(ch == bch) & (node == bn) & (rows > row)] += 1
-        keys = _data_keys(recs, at)
-        codes = _codes(keys)
+        keys, texts = _data_keys(recs, at)
+        codes = _codes(keys, texts)
         order = np.lexsort((np.arange(len(at)), sub, index, life, node, ch))
         cols = (ch, node, life, index, sub)
         s = [x[order] for x in cols]
@@ -163,9 +163,11 @@ class OdTally:
             obj = self.objects.get(key)
             if obj is None:
                 shown = _shown(recs.record(int(at[j0])))
-                obj = self.objects[key] = _Object(float(t[j0]), keys[j0], history=[shown])
+                obj = self.objects[key] = _Object(
+                    float(t[j0]), _key(keys, texts, j0), history=[shown]
+                )
                 obj.transfers = 0
-            elif keys[j0] != obj.key:
+            elif _key(keys, texts, j0) != obj.key:
                 changed.insert(0, lo)
             obj.transfers += hi - lo
             obj.changes += len(changed)
@@ -174,7 +176,7 @@ class OdTally:
                 obj.history.append(_shown(recs.record(int(at[order[k]]))))
             obj.more = obj.more or len(changed) > room
             last = int(order[hi - 1])
-            obj.key = keys[last]
+            obj.key = _key(keys, texts, last)
             obj.rec = recs.record(int(at[last]))
             obj.row = int(rows[last]) + self._off
 
@@ -183,16 +185,26 @@ class OdTally:
         and the changes, in row order (an object two PDOs carry, or a mapping changed
         within the batch, comes in several blocks)."""
         parts: dict[tuple, list] = {}
+        boot_list, boot_ch_list = boots.tolist(), boot_ch.tolist()
+        boot_node_list = boot_node.tolist()
         for blk in blocks:
             rows = np.asarray(blk.rows, np.int64)
             ch = int(fb.channel[rows[0]])
             bus, node = labels[ch], int(blk.node)
-            life = np.full(rows.size, self.lives.get((bus, node), 0), np.int64)
-            for row, bch, bn in zip(
-                boots.tolist(), boot_ch.tolist(), boot_node.tolist(), strict=True
-            ):
-                if bch == ch and bn == node:
-                    life[rows > row] += 1
+            before = self.lives.get((bus, node), 0)
+            mine = [
+                row
+                for row, bch, bn in zip(boot_list, boot_ch_list, boot_node_list, strict=True)
+                if bch == ch and bn == node
+            ]
+            if not mine:  # no boot-up of the node in the batch: one life, every row
+                for name, (index, sub) in blk.objects.items():
+                    got = (rows, np.asarray(blk.columns[name]), name, blk.units)
+                    parts.setdefault((bus, node, before, index, sub), []).append(got)
+                continue
+            life = np.full(rows.size, before, np.int64)
+            for row in mine:
+                life[rows > row] += 1
             for lv in np.unique(life).tolist():
                 sel = life == lv
                 for name, (index, sub) in blk.objects.items():
@@ -328,33 +340,43 @@ def _history(o: _Object) -> str:
     return " -> ".join(vals)
 
 
-def _codes(keys: list) -> np.ndarray:
+def _codes(keys: np.ndarray, texts: dict[int, str]) -> np.ndarray:
     """The data keys as int64 codes that are equal where the keys are (texts coded apart)."""
-    texts: dict[str, int] = {}
-    out = np.empty(len(keys), np.int64)
-    for j, k in enumerate(keys):
-        out[j] = k if isinstance(k, int) else -1 - texts.setdefault(k, len(texts))
+    if not texts:
+        return keys
+    out = keys.copy()
+    coded: dict[str, int] = {}
+    for j, k in texts.items():  # in the transfers' order, as the codes were always given
+        out[j] = -1 - coded.setdefault(k, len(coded))
     return out
 
 
-def _data_keys(recs, at: np.ndarray) -> list:
+def _data_keys(recs, at: np.ndarray) -> tuple[np.ndarray, dict[int, str]]:
     """The bytes of each of these transfers as one comparable value, from the records'
     columns (the held ones' dicts): up to 4 bytes (every expedited value) as an int of the
-    bytes and their count, longer ones as their hex text."""
+    bytes and their count, longer ones as their hex text. As columns: the ints (int64),
+    and the texts by position in `at` (`_key` reads one back)."""
     f = recs.fields()
     a = f.arrays
-    n = a["data_len"].astype(np.int64)
+    n = a["data_len"].astype(np.int64)[at]
     raw = np.zeros((len(n), 4), np.int64)
-    raw[:, : min(4, a["raw"].shape[1])] = a["raw"][:, :4]
+    raw[:, : min(4, a["raw"].shape[1])] = a["raw"][at, :4]
     raw[np.arange(4) >= n[:, None]] = 0
-    packed = ((raw << (8 * np.arange(4, dtype=np.int64))).sum(1) | (n << 32)).tolist()
-    out: list = []
-    for k in at.tolist():
-        got = packed[k]
-        if k in f.held:
-            data = f.held[k].get("data") or ""
-            raw_bytes = bytes.fromhex(data)
-            n = len(raw_bytes)
-            got = int.from_bytes(raw_bytes, "little") | (n << 32) if n <= 4 else data
-        out.append(got)
-    return out
+    keys = (raw << (8 * np.arange(4, dtype=np.int64))).sum(1) | (n << 32)
+    texts: dict[int, str] = {}
+    if f.held:
+        for j, k in enumerate(at.tolist()):
+            if k in f.held:
+                data = f.held[k].get("data") or ""
+                raw_bytes = bytes.fromhex(data)
+                if len(raw_bytes) <= 4:
+                    keys[j] = int.from_bytes(raw_bytes, "little") | (len(raw_bytes) << 32)
+                else:
+                    texts[j] = data
+    return keys, texts
+
+
+def _key(keys: np.ndarray, texts: dict[int, str], j: int):
+    """One transfer's data key (`_data_keys`) as a Python value."""
+    got = texts.get(j)
+    return int(keys[j]) if got is None else got
