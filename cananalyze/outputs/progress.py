@@ -18,7 +18,6 @@ from __future__ import annotations
 import math
 import os
 import threading
-import time
 from collections.abc import Callable, Mapping
 from typing import TextIO
 
@@ -65,7 +64,6 @@ class DelayedBar:
         self._drawn = False
         self._timer: threading.Timer | None = None
         self.delay = progress_delay() if delay is None else delay
-        self.started_at = time.monotonic()
         if self.delay <= 0:
             self._start()
         else:  # a timer: the bar appears on time even when updates are far apart

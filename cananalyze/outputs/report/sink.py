@@ -151,7 +151,6 @@ class ReportSink(Sink):
         self.t_first: float | None = None
         self.line_last = 0  # the last frame's line (the x axis of a log without times)
         self.t_last: float | None = None
-        self.events_by_row: dict = {}
         self.load = NodeLoad()  # bus load per node, as `decode --summary` counts it
 
     @property
