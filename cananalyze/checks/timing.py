@@ -82,6 +82,10 @@ class Timing:
                 t = g.t[idx]
                 _, last_t = sync_before(srows, st, g.row[idx], self._last_sync_t)
                 late = (t - last_t) * 1000.0
+                b = ctx.batch  # each frame's latency, for the frames table
+                if b.sync_latency is None:
+                    b.sync_latency = np.full(len(b), np.nan)
+                b.sync_latency[g.row[idx]] = late
                 late = late[~np.isnan(late)]
                 stats = self.sync_latency.get(cob)
                 if stats is None:

@@ -90,6 +90,9 @@ class DecodedBatch:
     drive: list = field(default_factory=list)  # CiA 402 changes (network.drive_tracker)
     # boot stories and LSS steps completed in this batch (decode/commissioning.Commissioned)
     commissioning: list = field(default_factory=list)
+    # each row's time after the SYNC before it, in ms, for synchronous PDOs (transmission
+    # type 0-240 in force); NaN elsewhere; None: no such row (the checks' timing fills it)
+    sync_latency: np.ndarray | None = None
     # several buses (else None): the bus of the whole batch (one bus's decoder), or of
     # each channel index (a frame row's bus is its channel's) and of each record (object
     # arrays: a batch merged from several)
@@ -188,6 +191,7 @@ class DecodedBatch:
             findings,
             drive=drive,
             commissioning=commissioning,
+            sync_latency=None if self.sync_latency is None else self.sync_latency[rows],
             bus=self.bus,
             channel_bus=self.channel_bus,
             record_bus=None

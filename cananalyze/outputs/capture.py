@@ -81,6 +81,9 @@ class Capture:
     # (bus, decode.commissioning.Commissioning) of each bus when the log was decoded here:
     # the run's boot stories and LSS steps (`boot`, `lss`), not followed a second time
     commissioning: list = field(default_factory=list)
+    # each frame's time after the SYNC before it (ms) for synchronous PDOs, NaN elsewhere;
+    # None: no such frame (the frames table's sync_latency_ms)
+    sync_late: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.batch)
@@ -128,6 +131,9 @@ class Capture:
                 ),
                 "node": pd.arrays.IntegerArray(self.node.astype(np.int16), self.node < 0),
                 "pdo": pd.arrays.IntegerArray(self.pdo.astype(np.int8), self.pdo == 0),
+                "sync_latency_ms": np.full(len(fb), np.nan)
+                if self.sync_late is None
+                else self.sync_late,
             },
         )
 
@@ -642,7 +648,7 @@ class Collector:
         off = self.offset
         if len(fb):
             self._frames.append(fb)
-            self._cols.append((batch.service, batch.node, batch.pdo))
+            self._cols.append((batch.service, batch.node, batch.pdo, batch.sync_latency))
             if self._first_bus is None:
                 self._first_bus = fb.channel_label(int(fb.channel[0]))
         for blk in batch.signals:
@@ -676,7 +682,13 @@ class Collector:
             service = np.concatenate([c[0] for c in self._cols])
             node = np.concatenate([c[1] for c in self._cols])
             pdo = np.concatenate([c[2] for c in self._cols])
+            sync = None
+            if any(c[3] is not None for c in self._cols):
+                sync = np.concatenate(
+                    [np.full(len(c[0]), np.nan) if c[3] is None else c[3] for c in self._cols]
+                )
         else:
+            sync = None
             service = np.zeros(0, np.uint8)
             node = np.zeros(0, np.int16)
             pdo = np.zeros(0, np.uint8)
@@ -714,6 +726,7 @@ class Collector:
             profiles or {},
             drive_changes=self.drive,
             record_bus=self.record_bus,
+            sync_late=sync,
         )
 
 

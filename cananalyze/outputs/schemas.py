@@ -155,6 +155,14 @@ FRAMES = Table(
             pa.int8(),
             ("int8", "Int8"),
         ),
+        Column(
+            "sync_latency_ms",
+            "a synchronous PDO's (transmission type 0-240 in force) time after the SYNC before "
+            "it, in ms, as `check --timing` sums it up per COB-ID (null: not a synchronous PDO, "
+            "no SYNC before it, a log without times, or the checks off)",
+            pa.float64(),
+            ("float64", "float64"),
+        ),
     ),
 )
 

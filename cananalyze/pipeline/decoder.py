@@ -245,6 +245,10 @@ def merge_buses(
             sb.rows = rows[sb.rows]
             out.signals.append(sb)
         out.row_notes.extend((rows[r], note) for r, note in part.row_notes)
+        if part.sync_latency is not None:
+            if out.sync_latency is None:
+                out.sync_latency = np.full(n, np.nan)
+            out.sync_latency[rows] = part.sync_latency
         out.drive.extend(c._replace(row=int(at[c.row]), bus=part.bus) for c in part.drive)
         out.commissioning.extend(
             c._replace(row=None if c.row is None else int(at[c.row]), bus=part.bus)

@@ -139,7 +139,7 @@ FRAMES_CSV = dataclasses.replace(
 )
 
 
-def _frames_columns(fb: FrameBatch, service, node, pdo, text: bool = False) -> dict:
+def _frames_columns(fb: FrameBatch, service, node, pdo, sync_latency, text: bool = False) -> dict:
     """Built on the writer thread (the payload column is the largest of the frames table);
     `text`: the payloads as hex (CSV), else bytes."""
     channels = list(fb.channels) or ["can0"]
@@ -154,6 +154,9 @@ def _frames_columns(fb: FrameBatch, service, node, pdo, text: bool = False) -> d
         "service": ab.dictionary(service, _SERVICES, pa.int8()),
         "node": ab.numeric(node.astype(np.int16, copy=False), node < 0),
         "pdo": ab.numeric(pdo.view(np.int8), pdo == 0),
+        "sync_latency_ms": pa.nulls(len(fb), pa.float64())
+        if sync_latency is None
+        else ab.numeric(sync_latency, np.isnan(sync_latency)),
     }
 
 
@@ -288,7 +291,8 @@ class TableSink(OutputSink):
             if len(fb.channels) > len(self._channels):
                 self._channels = tuple(fb.channels)
             frames = self.sinks["frames"]
-            args = (fb, batch.service, batch.node, batch.pdo, self.fmt == "csv")
+            args = (fb, batch.service, batch.node, batch.pdo, batch.sync_latency)
+            args += (self.fmt == "csv",)
             self.frames_writer.put(lambda: frames.add(_frames_columns(*args)))
         if batch.signals and self.wide is not None:
             self._add_wide(batch)
