@@ -295,10 +295,10 @@ def test_bench_decode_against_another_tree(logs, tmp_path):
         *("--size", "3000", "--formats", ".log", "--repeat", "1", "--only", "export"),
         *("--out", str(logs), "--against", str(ROOT)),
     ).stdout
-    rows = out[out.index("this / other") :].splitlines()[2:]
+    best, medians = out[out.index("this / other") :].split("\n\n", 1)
     cell = rf" +{NUMBER}s +{NUMBER}s +{NUMBER}M"  # CPU, wall, peak RSS
     labels = []
-    for row in rows:
+    for row in best.splitlines()[2:]:
         m = re.fullmatch(rf"(.+?){cell}{cell} +{NUMBER}x +{NUMBER}x +{NUMBER}x", row)
         assert m, row
         labels.append(m.group(1).strip())
@@ -307,6 +307,12 @@ def test_bench_decode_against_another_tree(logs, tmp_path):
         "export --mcap (.log, 16 devices)",
         "export --rrd (.log, 16 devices)",
     ]
+    # then the medians of the rounds: CPU and wall of each side, and their ratios
+    assert medians.startswith("medians of 1 rounds:"), medians
+    cell = rf" +{NUMBER}s +{NUMBER}s"
+    rows = [r for r in medians.splitlines()[3:] if r.strip()]
+    got = [re.fullmatch(rf"(.+?){cell}{cell} +{NUMBER}x +{NUMBER}x", r) for r in rows]
+    assert all(got) and [m.group(1).strip() for m in got] == labels, rows
     assert f"other tree (--against): {ROOT}" in out
     spec = importlib.util.spec_from_file_location("bench_decode", BENCH / "bench_decode.py")
     bench = importlib.util.module_from_spec(spec)
