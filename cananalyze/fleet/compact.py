@@ -239,10 +239,7 @@ def retire(
             keep = data.filter(pc.invert(_stale(data, fresh, old)))
             if keep.num_rows == data.num_rows:
                 continue
-            if keep.num_rows:
-                _publish(dataset, lambda s, k=keep, t=table: _write(k, t, s, compression), part, [])
-            else:
-                _publish(dataset, lambda s: None, part, [(part, ino)])
+            _rewrite(dataset, part, ino, keep, table, compression)
             rewritten += 1
     return rewritten
 
@@ -340,12 +337,18 @@ def reconcile(dataset: Path, compression: str = "snappy") -> int:
             ino = part.stat().st_ino
             data = _read([part], table)
             keep = data.filter(pc.invert(pc.is_in(data["hash"].cast(pa.string()), pa.array(drop))))
-            if keep.num_rows:
-                _publish(dataset, lambda s, k=keep, t=table: _write(k, t, s, compression), part, [])
-            else:
-                _publish(dataset, lambda s: None, part, [(part, ino)])
+            _rewrite(dataset, part, ino, keep, table, compression)
             rewritten += 1
     return rewritten
+
+
+def _rewrite(dataset: Path, part: Path, ino: int, keep, table: str, compression: str) -> None:
+    """`part` (inode `ino` when it was read) replaced by the rows of it that stay, or
+    removed when none stay, by the same commit protocol as the rest of the dataset."""
+    if keep.num_rows:
+        _publish(dataset, lambda s: _write(keep, table, s, compression), part, [])
+    else:
+        _publish(dataset, lambda s: None, part, [(part, ino)])
 
 
 def compact(
