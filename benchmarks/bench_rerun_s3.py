@@ -17,13 +17,11 @@ import hashlib
 import io
 import logging
 import os
-import re
 import socket
 import subprocess
 import sys
 import tempfile
 import time
-from collections import Counter
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -33,18 +31,7 @@ sys.path.insert(0, str(HERE))
 
 BUCKET = "rerun"
 
-
-class Requests(logging.Handler):
-    def __init__(self) -> None:
-        super().__init__(logging.INFO)
-        self.counts: Counter[str] = Counter()
-
-    def emit(self, record: logging.LogRecord) -> None:
-        line = str(record.args[0]) if isinstance(record.args, tuple) and record.args else ""
-        method, _, rest = re.sub(r"\x1b\[[0-9;]*m", "", line).partition(" ")
-        if method in ("GET", "HEAD", "PUT", "POST", "DELETE"):
-            listing = method == "GET" and ("list-type=" in rest or "?prefix=" in rest)
-            self.counts["LIST" if listing else method] += 1
+from bench_fleet import Requests  # noqa: E402 - the S3 server's requests, counted by method
 
 
 def run(args: list[str], requests: Requests, errors: Path) -> tuple[float, float, dict, str]:
