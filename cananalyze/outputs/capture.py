@@ -458,24 +458,21 @@ class Capture:
         without one or without times), as `decode --summary` prints it."""
         import pandas as pd
 
-        from cananalyze.decode.senders import SENT
-        from cananalyze.outputs.busload import bits_per_node
+        from cananalyze.outputs.node_load import NodeLoad
 
         fb, rate = self.batch, self._bitrate(bitrate)
-        span = float(fb.t[-1] - fb.t[0]) if len(fb) else 0.0
-        channels = np.unique(fb.channel).tolist() if len(fb) else []
+        load = NodeLoad()  # the computation --summary and --timing print
+        if len(fb):
+            load.add(DecodedBatch(fb, self.service, self.node, self.pdo))
+        shares = load.shares(rate)
+        channels = list(load.sent)
         rows = []
-        for c in channels:
-            mine = fb.channel == c
-            frames, bits = bits_per_node(
-                fb.flags[mine], fb.dlc[mine], self.node[mine], SENT[self.service[mine]]
-            )
+        for name, (frames, bits) in load.sent.items():
             for n in np.flatnonzero(frames).tolist():
-                share = bits[n] / (rate * span) * 100 if rate and span > 0 else float("nan")
                 row = {"node": n, "frames": int(frames[n]), "bits": int(bits[n])}
-                row["load_percent"] = share
+                row["load_percent"] = shares.get(name, {}).get(n, float("nan"))
                 if len(channels) > 1:
-                    row["bus"] = fb.channel_label(c)
+                    row["bus"] = name
                 rows.append(row)
         cols = ["node", "frames", "bits", "load_percent", *(["bus"] if len(channels) > 1 else [])]
         return pd.DataFrame.from_records(rows, columns=cols)
