@@ -40,6 +40,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 import pyarrow as pa
 
@@ -272,17 +273,7 @@ def merge_logs(
 def _bins(parts: list[Path], target: int) -> Iterator[list[Path]]:
     """Consecutive groups of parts whose sizes add up to about `target` (a part over it:
     alone), largest first so full files come out full."""
-    sized = sorted(((p.stat().st_size, p) for p in parts), key=lambda sp: (-sp[0], sp[1]))
-    current: list[Path] = []
-    total = 0
-    for size, part in sized:
-        if current and total + size > target:
-            yield current
-            current, total = [], 0
-        current.append(part)
-        total += size
-    if current:
-        yield current
+    return _sized_bins([(p.stat().st_size, p) for p in parts], target)
 
 
 def _logged(dataset: Path) -> set[str]:
@@ -675,9 +666,10 @@ def _remote_compact(
     return out
 
 
-def _sized_bins(sized: list[tuple[int, str]], target: int) -> Iterator[list[str]]:
-    """`_bins` of (size, key) pairs."""
-    current: list[str] = []
+def _sized_bins(sized: list[tuple[int, Any]], target: int) -> Iterator[list]:
+    """The keys of (size, key) pairs in consecutive groups whose sizes add up to about
+    `target` (one over it: alone), largest first; keys (paths, object names) break ties."""
+    current: list = []
     total = 0
     for size, key in sorted(sized, key=lambda sp: (-sp[0], sp[1])):
         if current and total + size > target:
