@@ -43,9 +43,9 @@ RERUN_LEVEL = {"debug": "DEBUG", "info": "INFO", "warning": "WARN", "error": "ER
 RERUN_LEVEL["fatal"] = "CRITICAL"
 
 
-def demo_capture(path: Path = SAMPLES / "demo.log") -> Capture:
-    """load() of a demo log with the demo's devices declared."""
-    return cananalyze.load(path, device=DEMO_DEVICES)
+def demo_capture(path: Path = SAMPLES / "demo.log", **options) -> Capture:
+    """load() of a demo log with the demo's devices declared (and `options`)."""
+    return cananalyze.load(path, device=DEMO_DEVICES, **options)
 
 
 # --- running an export ---------------------------------------------------------------
@@ -583,7 +583,7 @@ def _rrd_times(t) -> list[int]:
 def assert_rrd_is(cap: Capture, path: Path, bitrate: int | None = None) -> Rrd:
     """The .rrd holds load()'s log: a series per signal with its values, the NMT lanes,
     the event log with levels, the bus load, and a layout naming every PDO."""
-    from cananalyze.outputs.busload import frame_bits, load_series
+    from cananalyze.protocol.busload import frame_bits, load_series
 
     r = read_rrd(path)
     expected = {}

@@ -121,6 +121,7 @@ def load(
     sdo_timeout: float = SDO_TIMEOUT,
     rules: str | Path | None = None,
     dbc: str | Path | list[str | Path] | None = None,
+    bitrate: int | None = None,
 ) -> Capture:
     """Decode and check a log into a Capture (DataFrames `frames`, `signals`, `sdo`,
     `events`, `findings`; `heartbeat(node)`; `assert_*` methods for pytest).
@@ -128,11 +129,14 @@ def load(
     eds / device map node-IDs to EDS/DCF/XDD/XDC files / built-in profile keys
     ({5: "dat7014"}), as `--eds 5=FILE` / `--device 5=KEY` do on the command line;
     network and rules are the files `--network` and `check --rules` take; dbc one or more
-    DBC files (`--dbc`), whose messages join `signals`. The same
+    DBC files (`--dbc`), whose messages join `signals`; bitrate the bus's (`--bitrate`,
+    else the network file's): the nodes' share of the bus and the longest burst. The same
     pipeline as `cananalyze check` and `export`: the same findings and tables.
     """
     dbc = () if dbc is None else (dbc,) if isinstance(dbc, (str, Path)) else tuple(dbc)
-    opts = load_options(network, eds, device, strict, input_format, sdo_timeout, rules, dbc=dbc)
+    opts = load_options(
+        network, eds, device, strict, input_format, sdo_timeout, rules, dbc=dbc, bitrate=bitrate
+    )
     return load_with(path, opts)
 
 

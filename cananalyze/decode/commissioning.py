@@ -1,4 +1,5 @@
-"""Boot stories and LSS sequences as the outputs' events: the one producer of both for a run.
+"""Boot stories, LSS sequences and the longest burst as the outputs' events: the one
+producer of them for a run.
 
 A decoder processor: it follows every batch with a `BootFollower` and an `LssFollower`
 (decode/boot, decode/lss) and puts on the batch (`DecodedBatch.commissioning`) what
@@ -9,6 +10,11 @@ HTML report reads the finished follower (`stories`, `lss_events`, `assignments`)
 
 A node seen only operational (no boot-up in the log) has a story but no event: a log
 without boot-up or LSS frames gets none, so its outputs stay as they were.
+
+With a bitrate (--bitrate or the network file's) and times, the bus's longest burst
+(frames back to back, protocol/busload.Bursts, as `decode --summary` prints it) is one
+more event at the end of the log (kind `burst`, at its first frame's time), so the
+events table, JSONL and the MCAP event log carry it; each bus's decoder has its own.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from cananalyze.decode.boot import BootFollower, Story, declared_identity
 from cananalyze.decode.events.build import ERROR, INFO, WARNING
 from cananalyze.decode.lss import LssEvent, LssFollower, identity_text
 from cananalyze.protocol import lss as lss_protocol
+from cananalyze.protocol.busload import Bursts, frame_bits
 
 CONFIGURE_NODE_ID = lss_protocol.command_name(0x11)
 
@@ -30,13 +37,13 @@ class Commissioned(NamedTuple):
     the JSON record of it (`record`) and the story or step itself (`item`)."""
 
     t: float
-    kind: str  # "boot" or "lss"
+    kind: str  # "boot", "lss" or "burst"
     node: int | None
     level: int
     message: str
     row: int | None  # the frame that ended it, in the batch (None: a boot story)
     record: dict
-    item: Any  # Story or LssEvent
+    item: Any  # Story, LssEvent or the burst's record
     bus: str | None = None  # several buses: which one
     # an LSS node-ID assignment the step made (`LssFollower.assignments`' own dict: its
     # `stored` turns true when a store succeeds later)
@@ -81,6 +88,15 @@ def boot_item(s: Story) -> Commissioned:
     return Commissioned(s.t_boot or 0.0, "boot", s.node, boot_level(s), message, None, record, s)
 
 
+def burst_item(rec: dict) -> Commissioned:
+    """The longest burst ({frames, t_start, t_end}) as an event, in `decode --summary`'s
+    words."""
+    ms = (rec["t_end"] - rec["t_start"]) * 1000
+    message = f"longest burst: {rec['frames']} frames back to back ({ms:.3f} ms)"
+    record = {"kind": "burst", **rec, "ms": round(ms, 6)}
+    return Commissioned(rec["t_start"], "burst", None, INFO, message, None, record, rec)
+
+
 class _Placed(LssFollower):
     """An LssFollower whose steps name the frame that ended them: the answer, the command
     itself, or the next master frame for a command nobody answered (the command may be in
@@ -104,8 +120,11 @@ class _Placed(LssFollower):
 class Commissioning:
     """The decoder's processor of boot stories and LSS sequences (see the module)."""
 
-    def __init__(self, model, heartbeat_ms: Callable | None = None) -> None:
+    def __init__(
+        self, model, heartbeat_ms: Callable | None = None, bitrate: int | None = None
+    ) -> None:
         self.model = model
+        self.bursts = Bursts(bitrate) if bitrate else None
         self.heartbeat_ms = heartbeat_ms  # (node, t) -> the 0x1017 in force, or None
         self.boot = BootFollower()
         self.lss = _Placed()
@@ -125,6 +144,9 @@ class Commissioning:
             self.timed = bool(t.max() > t.min())
         if t.size:
             self.t_last = float(t[-1])
+            if self.bursts is not None:
+                fb = batch.frames
+                self.bursts.add(t, frame_bits(fb.flags, fb.dlc))
         self.boot.add(batch)
         known = len(self.lss.assignments)
         self._lss(batch, self.lss.add(batch), known)
@@ -150,3 +172,6 @@ class Commissioning:
             timed=timed,
         )
         batch.commissioning.extend(boot_item(s) for s in self.stories if s.t_boot is not None)
+        rec = self.bursts.record() if self.bursts is not None and self.timed else None
+        if rec is not None:
+            batch.commissioning.append(burst_item(rec))

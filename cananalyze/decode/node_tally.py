@@ -1,8 +1,9 @@
 """What the nodes table says of each node, gathered batch by batch.
 
-Frames per service, the last NMT state reported and the identity objects the
+Frames per service, the last NMT state reported, the identity objects the
 node answered to SDO uploads (0x1000, 0x1008, 0x1018), matched to a device
-profile when none was given. The Capture tallies a whole log at once; the
+profile when none was given, and the nominal bits of the frames it sent itself
+with its share of the bus (node_load: the figures `decode --summary` prints). The Capture tallies a whole log at once; the
 streaming exports (Parquet/CSV tables, MCAP's nodes.json) one batch at a time,
 so memory does not grow with the log.
 """
@@ -16,6 +17,7 @@ import numpy as np
 
 from cananalyze.core.frames import MAX_BUSES, MAX_CHANNELS, OTHER_CHANNELS
 from cananalyze.core.records import DecodedBatch, sender_counts
+from cananalyze.decode.node_load import NodeLoad
 from cananalyze.protocol.services import SERVICE_NAMES
 
 IDENTITY = {
@@ -44,11 +46,13 @@ class NodeTally:
         self.buses: dict[str, NodeTally] | None = None
         self._channel: int | None = None  # the one channel seen so far
         self._names: tuple[str, ...] = ()
+        self.load = NodeLoad()  # bits each node sent, per bus (the top tally's only)
 
     def add(self, batch: DecodedBatch, states: Iterable, offset: int | None = None) -> None:
         """One decoded batch and its NMT state changes (`Row`s or `Event`s); `offset`: the
         row number of the batch's first frame in the states' rows (several buses)."""
         fb = batch.frames
+        self.load.add(batch)
         if self.buses is None and len(fb):
             if self._channel is None:
                 self._channel, self._names = int(fb.channel[0]), fb.channels
@@ -129,14 +133,29 @@ class NodeTally:
         self,
         profiles: dict[int, tuple[str, str]],
         by_bus: dict[str, dict[int, tuple[str, str]]] | None = None,
+        bitrate: int | None = None,
     ) -> list[dict]:
         """One dict per node seen: frames, frames_<service> for every service seen,
-        last_state(_t), identity, profile and how it was identified; with several
-        buses, one per bus and node, `bus` first, each bus's profiles from `by_bus`
-        (its own network model) where given."""
+        last_state(_t), identity, profile and how it was identified, the bits it sent and
+        its share of the bus at `bitrate` (None without one or without times); with
+        several buses, one per bus and node, `bus` first, each bus's profiles from
+        `by_bus` (its own network model) where given."""
+        rows = self._rows(profiles, by_bus)
+        sent, shares = self.load.sent, self.load.shares(bitrate)
+        one = next(iter(sent)) if len(sent) == 1 else None
+        for row in rows:
+            bus = row.get("bus", one)
+            got = sent.get(bus)
+            row["bits"] = int(got[1][row["node"]]) if got is not None else 0
+            row["bus_load_percent"] = shares.get(bus, {}).get(row["node"])
+        return rows
+
+    def _rows(self, profiles: dict, by_bus: dict | None) -> list[dict]:
         if self.buses is not None:
             by_bus = by_bus or {}
-            parts = [(name, t.rows(by_bus.get(name, profiles))) for name, t in self.buses.items()]
+            parts = [
+                (name, t._rows(by_bus.get(name, profiles), None)) for name, t in self.buses.items()
+            ]
             seen = [k for _, rows in parts for r in rows for k in r]
             services = [k for k in dict.fromkeys(seen) if k.startswith("frames_")]
             out = []

@@ -445,9 +445,9 @@ class Capture:
         return pd.DataFrame.from_records([s.as_row() for s in stories], columns=cols)
 
     def _bitrate(self, bitrate: int | None) -> int | None:
-        """The bitrate given, else the network file's (`bitrate = ...`)."""
-        if bitrate:
-            return bitrate
+        """The bitrate given, else the run's (`load(bitrate=)`), else the network file's."""
+        if bitrate or getattr(self.options, "bitrate", None):
+            return bitrate or self.options.bitrate
         model = getattr(self.config, "model", None)
         return getattr(getattr(model, "spec", None), "bitrate", None)
 
@@ -458,7 +458,7 @@ class Capture:
         without one or without times), as `decode --summary` prints it."""
         import pandas as pd
 
-        from cananalyze.outputs.node_load import NodeLoad
+        from cananalyze.decode.node_load import NodeLoad
 
         fb, rate = self.batch, self._bitrate(bitrate)
         load = NodeLoad()  # the computation --summary and --timing print
@@ -480,7 +480,7 @@ class Capture:
     def longest_burst(self, bitrate: int | None = None) -> dict:
         """Per bus: the longest run of frames back to back ({frames, t_start, t_end}) at
         `bitrate` (else the network file's); {} without one or without times."""
-        from cananalyze.outputs.busload import Bursts, bits_by_channel
+        from cananalyze.protocol.busload import Bursts, bits_by_channel
 
         rate = self._bitrate(bitrate)
         if not rate or not self._timed:
@@ -550,15 +550,16 @@ class Capture:
     def node_rows(self) -> list[dict]:
         """Plain rows of the nodes table (also used by MCAP metadata, without pandas)."""
         tally = NodeTally()
-        fb = self.batch
+        fb, rate = self.batch, self._bitrate(None)
         if len(fb) and (fb.channel != fb.channel[0]).any():  # several buses: one row each
             decoded = DecodedBatch(fb, self.service, self.node, self.pdo, records=self.records)
             tally.add(decoded, self.state_changes, 0)
-            return tally.rows(self.profiles, self.bus_profiles)
+            return tally.rows(self.profiles, self.bus_profiles, rate)
+        tally.load.add(DecodedBatch(fb, self.service, self.node, self.pdo))
         tally.add_frames(self.service, self.node)
         tally.add_states(self.state_changes)
         tally.add_identity(self.records)
-        return tally.rows(self.profiles)
+        return tally.rows(self.profiles, bitrate=rate)
 
 
 _SYNC_LATENCY = ("node", "pdo", "type", "count", "min", "median", "mean", "p99", "max")

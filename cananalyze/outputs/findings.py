@@ -17,10 +17,10 @@ from cananalyze.core.atomic import Staged
 from cananalyze.core.columns.order import first_seen_codes
 from cananalyze.core.finding import Finding
 from cananalyze.core.finding_columns import FindingColumns
+from cananalyze.decode.node_load import NodeLoad, run_bitrate
 from cananalyze.outputs import colour
 from cananalyze.outputs.findings_json import findings_json_parts
 from cananalyze.outputs.junit import format_rows, junit_xml_parts
-from cananalyze.outputs.node_load import NodeLoad, run_bitrate
 from cananalyze.pipeline.sink import Sink
 
 TERMINAL_CAP = 20  # findings printed per rule and node/COB-ID; the files hold every one

@@ -199,7 +199,8 @@ EVENTS = Table(
     "(pre-operational), or commanded by NMT, at the frame that made it, once the node has sent "
     "a frame of its own. An `lss` event is a CiA 305 step with its result, at the frame that "
     "ended it; a `boot` event a node's boot story (CiA 302-2) at its boot-up, judged at the "
-    "end of the log (no row)",
+    "end of the log (no row); a `burst` event the bus's longest run of frames back to back, "
+    "at its first frame (with a bitrate and times; no row)",
     (
         Column("t", "the event's time", pa.float64(), ("float64", "float64")),
         Column(
@@ -310,6 +311,20 @@ NODES = Table(
         ),
         Column("profile", "the device profile it was decoded with", DECIDED, dataset=pa.string()),
         Column("identified_by", "how that profile was chosen", DECIDED, dataset=pa.string()),
+        Column(
+            "bits",
+            "nominal bits of the frames it sent itself (heartbeat, TPDO, EMCY, SDO response, "
+            "guard response, boot-up), stuff bits left out",
+            DECIDED,
+            dataset=pa.int64(),
+        ),
+        Column(
+            "bus_load_percent",
+            "those bits over the log's duration, in percent of the bitrate (--bitrate or the "
+            "network file's; null without one or without times): its mean share of the bus",
+            DECIDED,
+            dataset=pa.float64(),
+        ),
         _bus("node"),
     ),
 )

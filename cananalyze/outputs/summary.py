@@ -16,10 +16,10 @@ from cananalyze.core.columns.order import first_seen_codes
 from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_RTR
 from cananalyze.core.records import DecodedBatch
 from cananalyze.decode.lss import identity_text
-from cananalyze.outputs.busload import bits_per_channel
-from cananalyze.outputs.node_load import NodeLoad, run_bitrate
+from cananalyze.decode.node_load import NodeLoad, run_bitrate
 from cananalyze.pipeline.sink import Sink
 from cananalyze.protocol import lss, nmt
+from cananalyze.protocol.busload import bits_per_channel
 from cananalyze.protocol.services import SERVICE_NAMES, Service
 
 N_SVC = len(SERVICE_NAMES)
@@ -95,6 +95,7 @@ class Summary:
                 if c.assignment is not None:
                     self.lss_assignments.append(c.assignment)
         if n == 0:
+            self.load.add(batch)  # the decoder's longest burst, on the log's last batch
             return
         fb = batch.frames
         self.frames += n
@@ -329,7 +330,7 @@ class Summary:
                 name: {str(n): round(v, 3) for n, v in nodes.items()}
                 for name, nodes in loads.items()
             }
-            bursts = {name: b.record() for name, b in self.load.bursts.items()}
+            bursts = dict(self.load.bursts)
             several["bus_load_percent_per_node"] = per if many else next(iter(per.values()))
             several["longest_burst"] = bursts if many else next(iter(bursts.values()), None)
         if self.lss_steps:  # CiA 305: who got which node-ID (load().lss has every step)

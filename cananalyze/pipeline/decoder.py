@@ -413,7 +413,9 @@ def build_decoder(
     # judged against the heartbeat time in force as the checks see it
     config = ModelConfig(model)
     commissioning = Commissioning(
-        model, lambda n, t: (checker.config if checker is not None else config).heartbeat_ms(n, t)
+        model,
+        lambda n, t: (checker.config if checker is not None else config).heartbeat_ms(n, t),
+        opts.bitrate or spec.bitrate,  # the longest burst's event (a frame's time on the wire)
     )
     decoder = Decoder([*processors, DriveTracker(model), commissioning])
     model.attach(decoder)

@@ -38,7 +38,7 @@ DEMO = SAMPLES / "demo.log"
 
 @pytest.fixture(scope="module")
 def cap():
-    return demo_capture(DEMO)
+    return demo_capture(DEMO, bitrate=250000)  # the options `files` exports with
 
 
 def _demo_lines() -> list[tuple[float, int, str]]:
@@ -314,7 +314,7 @@ def test_blueprint_puts_many_nodes_in_a_grid(tmp_path):
 def test_bus_load_of_steady_traffic_is_flat_to_the_end():
     """A frame every 10 ms: every window, the log's short tail included, shows the
     same load (the tail once showed a spike: a few ms ending on a frame, scaled up)."""
-    from cananalyze.outputs.busload import load_series
+    from cananalyze.protocol.busload import load_series
 
     t = 100.0 + np.arange(101) * 0.01  # the last frame opens a 0.1 s window on its own
     starts, load = load_series(t, np.full(t.size, 111), 0.1, 250000)
@@ -325,7 +325,7 @@ def test_bus_load_of_steady_traffic_is_flat_to_the_end():
 def test_bus_load_windows_start_where_their_frames_are_when_times_go_back():
     """A frame logged 0.15 s before the first one (a log's times going back) opens the
     window 9.8 s, not one labelled 10.0 s that holds frames of 9.85 s."""
-    from cananalyze.outputs.busload import load_series
+    from cananalyze.protocol.busload import load_series
 
     t = np.array([10.0, 10.05, 9.85, 10.28])
     starts, load = load_series(t, np.full(t.size, 100), 0.1)

@@ -30,7 +30,7 @@ from cananalyze.core.records import DecodedBatch
 from cananalyze.decode.nmt_state import NmtStates
 from cananalyze.decode.node_tally import NodeTally
 from cananalyze.formats.source import read_all
-from cananalyze.outputs.busload import bits_per_channel, frame_bits
+from cananalyze.protocol.busload import bits_per_channel, frame_bits
 from cananalyze.protocol.services import SERVICE_NAMES, Service
 from cananalyze.runtime import speedups
 

@@ -134,3 +134,97 @@ def test_report_has_each_node_s_load(tmp_path):
     ]
     _cli("report", str(log), "-o", str(page), "-q", ok=(0, 1))
     assert _node_table(page) is None  # no bitrate: no share
+
+
+def _export(log: Path, out: Path, *extra: str) -> None:
+    _cli(
+        "export", str(log), "--parquet", str(out / "pq"), "--csv", str(out / "csv"),
+        "--mcap", str(out / "b.mcap"), *extra, ok=(0, 1),
+    )  # fmt: skip
+
+
+def test_the_tables_carry_each_node_s_load_and_the_longest_burst(tmp_path):
+    """Issue 40 item 3 in the tables: the nodes table's `bits` and `bus_load_percent` and a
+    `burst` event, read back by pyarrow, DuckDB and the mcap library."""
+    import duckdb
+    import pyarrow.parquet as pq
+    from exported import read_mcap
+
+    log = _log(tmp_path / "b.log")
+    _export(log, tmp_path, "--bitrate", str(RATE))
+    want = {5: (NODE5[1], _share(NODE5[1])), 6: (NODE6[1], _share(NODE6[1]))}
+    nodes = pq.read_table(tmp_path / "pq" / "nodes.parquet").to_pylist()
+    got = {r["node"]: (r["bits"], r["bus_load_percent"]) for r in nodes}
+    assert got == {n: (b, pytest.approx(p)) for n, (b, p) in want.items()}
+    csv = duckdb.sql(
+        f"select node, bits, bus_load_percent from read_csv('{tmp_path / 'csv' / 'nodes.csv'}')"
+    ).fetchall()
+    assert {n: (b, p) for n, b, p in csv} == got
+    meta = json.loads(read_mcap(tmp_path / "b.mcap").attachments["nodes.json"])
+    assert {r["node"]: (r["bits"], r["bus_load_percent"]) for r in meta} == got
+    # the longest burst: one event at its first frame, in the summary's words
+    events = duckdb.sql(
+        f"select t, node, level, message, row from '{tmp_path / 'pq' / 'events.parquet'}' "
+        "where kind = 'burst'"
+    ).fetchall()
+    assert events == [
+        (
+            pytest.approx(101.02),
+            None,
+            "info",
+            "longest burst: 5 frames back to back (3.552 ms)",
+            None,
+        )
+    ]
+    mcap_events = [
+        json.loads(d) for _, _, d in read_mcap(tmp_path / "b.mcap").messages["/canopen/events"]
+    ]
+    # Foxglove's Log schema: a bus-wide event is named by its kind
+    assert [e["message"] for e in mcap_events if e["name"] == "burst"] == [events[0][3]]
+    # load() says the same
+    cap = cananalyze.load(str(log), bitrate=RATE)
+    assert cap.nodes[["bits", "bus_load_percent"]].to_dict("index") == {
+        n: {"bits": b, "bus_load_percent": pytest.approx(p)} for n, (b, p) in want.items()
+    }
+    assert cap.events[cap.events.kind == "burst"].message.tolist() == [events[0][3]]
+
+
+def test_without_a_bitrate_the_tables_have_the_bits_but_no_share_and_no_burst(tmp_path):
+    import pyarrow.parquet as pq
+
+    log = _log(tmp_path / "b.log")
+    _export(log, tmp_path)
+    nodes = pq.read_table(tmp_path / "pq" / "nodes.parquet").to_pylist()
+    assert [(r["node"], r["bits"], r["bus_load_percent"]) for r in nodes] == [
+        (5, NODE5[1], None),
+        (6, NODE6[1], None),
+    ]
+    kinds = pq.read_table(tmp_path / "pq" / "events.parquet").column("kind").to_pylist()
+    assert "burst" not in kinds
+    lines = _cli("decode", str(log), "--format", "jsonl").splitlines()
+    assert not [x for x in lines if '"kind":"burst"' in x]
+    lines = _cli("decode", str(log), "--format", "jsonl", "--bitrate", str(RATE)).splitlines()
+    burst = [json.loads(x) for x in lines if '"kind":"burst"' in x]
+    assert burst == [
+        {"kind": "burst", "frames": 5, "t_start": 101.02, "t_end": 101.023552, "ms": 3.552}
+    ]
+
+
+def test_the_docs_tables_example_is_the_output():
+    """docs/decoding.md's nodes table and burst event on samples/commissioning.log are what
+    load() gives (the page's `>>>` lines run here)."""
+    docs = (ROOT / "docs" / "decoding.md").read_text(encoding="utf-8")
+    block = docs.split('>>> cap = cananalyze.load("samples/commissioning.log"', 1)[1]
+    block = block.split("```", 1)[0].splitlines()[1:]
+    cap = cananalyze.load(
+        str(ROOT / "samples" / "commissioning.log"), network=str(ROOT / "samples" / "network.toml")
+    )
+    table = cap.nodes[["frames", "bits", "bus_load_percent"]].round(2).to_string()
+    burst = repr(cap.events.query("kind == 'burst'").message.tolist())
+    assert block == [
+        '>>> cap.nodes[["frames", "bits", "bus_load_percent"]].round(2)',
+        *table.splitlines(),
+        """>>> cap.events.query("kind == 'burst'").message.tolist()""",
+        burst,
+    ]
+    assert burst == "['longest burst: 6 frames back to back (0.948 ms)']"

@@ -23,9 +23,9 @@ from exported import (
 )
 
 import cananalyze
-from cananalyze.outputs.busload import load_series
 from cananalyze.outputs.rerun import stream as rerun_stream
 from cananalyze.outputs.rerun.stream import StreamRrd, _LoadWindows
+from cananalyze.protocol.busload import load_series
 
 
 def _stream(log: Path, out: Path, size: int | None = None, bitrate=None, **kw) -> dict:
@@ -39,7 +39,7 @@ def _stream(log: Path, out: Path, size: int | None = None, bitrate=None, **kw) -
 def _as_load(tmp_path: Path, log: Path, size: int | None = None, bitrate=None, **kw):
     """Export the log as .rrd; it must hold load()'s log of the same options."""
     out = export(log, tmp_path, ("rrd",), size, bitrate, **kw)["rrd"]
-    return assert_rrd_is(load_cut(log, size, **kw), out, bitrate)
+    return assert_rrd_is(load_cut(log, size, bitrate=bitrate, **kw), out, bitrate)
 
 
 @pytest.mark.parametrize("name", ["demo.log", "faults.log", "commissioning.log", "faults.blf"])
@@ -110,7 +110,7 @@ def test_cli_export_rrd_is_load(tmp_path):
         cwd=ROOT,
     )
     assert r.returncode == 0, r.stderr
-    cap = cananalyze.load(log, network=NETWORK)
+    cap = cananalyze.load(log, network=NETWORK, bitrate=125000)
     rec = assert_rrd_is(cap, tmp_path / "e.rrd", bitrate=125000)
     texts = [row["TextLog:text"][0] for row in rec.rows["/events"]]
     assert sum(t.startswith("[") for t in texts) == len(cap.findings) > 0

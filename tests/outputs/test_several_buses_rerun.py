@@ -17,7 +17,7 @@ from exported import decoded_batches, read_rrd
 
 from cananalyze import load
 from cananalyze.cli.main import main
-from cananalyze.outputs.busload import frame_bits, load_series
+from cananalyze.protocol.busload import frame_bits, load_series
 from tests.decode.test_several_buses_drives import DEVICE, _log
 
 BITRATE = 250_000

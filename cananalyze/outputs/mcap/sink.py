@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from cananalyze.decode.node_load import run_bitrate
 from cananalyze.decode.node_tally import node_profiles
 from cananalyze.outputs.mcap.stream import StreamMcap
 from cananalyze.pipeline.sink import Sink
@@ -37,6 +38,7 @@ class McapSink(Sink):
 
     def finish(self) -> None:
         self.stream.profiles = node_profiles(self.run.network)
+        self.stream.bitrate = run_bitrate(self.run)
         self.counts = self.stream.finish(self.run.problems.count)
 
     def commit(self) -> None:

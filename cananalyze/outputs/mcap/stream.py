@@ -157,6 +157,7 @@ class StreamMcap:
         self.source = str(source)
         self.network = network or ""
         self.profiles = profiles or {}
+        self.bitrate: int | None = None  # the nodes' share of the bus (nodes.json)
         self._stack = contextlib.ExitStack()
         tmp = self._stack.enter_context(atomic_path(path))
         f = self._stack.enter_context(open(tmp, "wb"))
@@ -266,7 +267,7 @@ class StreamMcap:
         """close() but the rename."""
         try:
             self._writer.join()
-            nodes = self._nodes.rows(self.profiles)
+            nodes = self._nodes.rows(self.profiles, bitrate=self.bitrate)
             write_metadata(self.w, self.source, self.network, self.offset, skipped, nodes)
             self.w.finish()
         except BaseException as exc:

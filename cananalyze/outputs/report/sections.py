@@ -90,8 +90,9 @@ def buses(s, figs: Figures) -> dict:
             ]
         )
     nodes = []  # each node's share (node_load: the frames it sent, as the summary's)
-    shares = s.load.shares(s.bitrate) if s.timed else {}
-    for ch, (frames, _) in s.load.sent.items():
+    load = s.tally.load  # the nodes table's figures
+    shares = load.shares(s.bitrate) if s.timed else {}
+    for ch, (frames, _) in load.sent.items():
         for n, share in shares.get(ch, {}).items():
             nodes.append([s.who(ch, n), f"{int(frames[n]):,}", f"{share:.2f}%"])
     return {"rows": rows, "bitrate": s.bitrate, "nodes": nodes}
@@ -181,7 +182,9 @@ def nodes(s, figs: Figures) -> dict:
 
     model = s.run.network
     rows = s.tally.rows(
-        node_profiles(model) if model is not None else {}, bus_profiles(s.run.decoder)
+        node_profiles(model) if model is not None else {},
+        bus_profiles(s.run.decoder),
+        s.bitrate if s.timed else None,
     )
     configs = _Configs(s)
     timeline = None

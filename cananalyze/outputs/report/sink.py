@@ -19,10 +19,9 @@ from cananalyze.core.finding import Finding
 from cananalyze.decode.drive_tracker import STATE
 from cananalyze.decode.events.columns import EMCY
 from cananalyze.decode.node_tally import NodeTally
-from cananalyze.outputs.busload import frame_bits
-from cananalyze.outputs.node_load import NodeLoad
 from cananalyze.outputs.report.accum import Envelope, WindowSums
 from cananalyze.pipeline.sink import Sink
+from cananalyze.protocol.busload import frame_bits
 from cananalyze.protocol.services import Service
 
 MAX_STATES = 20_000  # NMT state changes kept for the timelines (a reset loop makes many)
@@ -151,7 +150,6 @@ class ReportSink(Sink):
         self.t_first: float | None = None
         self.line_last = 0  # the last frame's line (the x axis of a log without times)
         self.t_last: float | None = None
-        self.load = NodeLoad()  # bus load per node, as `decode --summary` counts it
 
     @property
     def several(self) -> bool:
@@ -185,7 +183,6 @@ class ReportSink(Sink):
     def open(self, run) -> None:
         super().open(run)
         check_writable(self.path)
-        self.load.bitrate = self.bitrate
 
     # --- per batch ------------------------------------------------------------------
     def write(self, batch) -> None:
@@ -202,7 +199,6 @@ class ReportSink(Sink):
                 self.states_dropped += 1
         self._sdo(batch)
         self._drive_states(batch, timed)
-        self.load.add(batch)
         n = len(fb)
         if not n:
             return

@@ -19,7 +19,6 @@ import numpy as np
 
 from cananalyze.core.errors import ProblemLog, UsageError
 from cananalyze.core.records import DecodedBatch
-from cananalyze.outputs.busload import bits_by_channel
 from cananalyze.outputs.capture import Collector
 from cananalyze.outputs.rerun.send import (
     LOAD_WINDOW,
@@ -29,6 +28,7 @@ from cananalyze.outputs.rerun.send import (
     send_load,
     send_parts,
 )
+from cananalyze.protocol.busload import bits_by_channel
 
 
 class RerunLive:

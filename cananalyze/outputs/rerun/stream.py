@@ -24,7 +24,6 @@ from cananalyze.core.atomic import atomic_path
 from cananalyze.core.errors import ProblemLog
 from cananalyze.core.records import DecodedBatch
 from cananalyze.decode.events.build import EventState
-from cananalyze.outputs.busload import bits_by_channel, load_windows
 from cananalyze.outputs.capture import Collector
 from cananalyze.outputs.rerun.send import (
     LOAD_WINDOW,
@@ -36,6 +35,7 @@ from cananalyze.outputs.rerun.send import (
     send_load,
     send_parts,
 )
+from cananalyze.protocol.busload import bits_by_channel, load_windows
 
 
 class StreamRrd:

@@ -40,6 +40,7 @@ from cananalyze.core.frames import FrameBatch
 from cananalyze.core.records import DecodedBatch
 from cananalyze.decode.events.build import LEVEL_NAMES, EventState, batch_events_of
 from cananalyze.decode.events.columns import KINDS, NO_NODE, NO_ROW, EventColumns
+from cananalyze.decode.node_load import run_bitrate
 from cananalyze.decode.node_tally import NodeTally, bus_profiles, node_profiles
 from cananalyze.decode.od_tally import OdTally
 from cananalyze.outputs import schemas
@@ -815,7 +816,9 @@ class TableSink(OutputSink):
         if run is None:
             rows = self._nodes.rows(self.profiles)
         else:
-            rows = self._nodes.rows(node_profiles(run.network), bus_profiles(run.decoder))
+            rows = self._nodes.rows(
+                node_profiles(run.network), bus_profiles(run.decoder), run_bitrate(run)
+            )
         names = list(rows[0]) if rows else ["node"]
         others = [c for c in names if c != "node"]
         # Parquet keeps the index last (to_parquet), CSV first (reset_index)

@@ -1,5 +1,8 @@
-"""Bus load per node and the longest burst, followed batch by batch: `decode --summary`
-and `check --timing` print the same figures from this one computation (busload's bits).
+"""Bus load per node and the longest burst, followed batch by batch: `decode --summary`,
+`check --timing`, the report and the nodes table (`NodeTally`) take the same figures from
+this one computation (protocol/busload's bits). The longest burst is the decoder's
+(decode/commissioning follows it once, for the events table too): read here from the
+batch that carries it.
 
 A node's load is the nominal bits of the frames it sent itself (decode/senders: its
 heartbeat, TPDOs, EMCY, SDO responses, guard answers, boot-up) over the log's duration,
@@ -14,7 +17,7 @@ import numpy as np
 
 from cananalyze.core.records import DecodedBatch
 from cananalyze.decode.senders import SENT
-from cananalyze.outputs.busload import Bursts, bits_per_node, frame_bits
+from cananalyze.protocol.busload import bits_per_node
 
 
 def run_bitrate(run) -> int | None:
@@ -25,10 +28,11 @@ def run_bitrate(run) -> int | None:
 
 @dataclass
 class NodeLoad:
-    # set before the first batch: a frame's time on the wire (bursts) depends on it
-    bitrate: int | None = None
+    bitrate: int | None = None  # the run's (the decoder followed the bursts at it)
     sent: dict = field(default_factory=dict)  # channel name -> (frames[128], bits[128])
-    bursts: dict = field(default_factory=dict)  # channel name -> busload.Bursts
+    # channel name -> the longest burst {frames, t_start, t_end} (the decoder's event)
+    bursts: dict = field(default_factory=dict)
+    first: str | None = None  # the first frame's channel name (a log of one bus)
     t_first: float | None = None
     t_last: float | None = None
 
@@ -41,15 +45,21 @@ class NodeLoad:
     def add(self, batch: DecodedBatch, present: list[int] | None = None) -> None:
         """Count a batch; `present`: its channel indexes, when the caller has them."""
         fb = batch.frames
+        for c in batch.commissioning:
+            if c.kind == "burst":
+                self.bursts[c.bus or self.first or "can0"] = c.item
         if not len(fb):
             return
-        t = fb.t
-        self.t_first = float(t[0]) if self.t_first is None else min(self.t_first, float(t[0]))
-        self.t_last = float(t[-1]) if self.t_last is None else max(self.t_last, float(t[-1]))
-        if present is None:
-            present = np.unique(fb.channel).tolist()
+        if self.first is None:
+            self.first = fb.channel_label(int(fb.channel[0]))
+        # the span of the times, whatever their order (a log whose times go back)
+        lo, hi = float(fb.t.min()), float(fb.t.max())
+        self.t_first = lo if self.t_first is None else min(self.t_first, lo)
+        self.t_last = hi if self.t_last is None else max(self.t_last, hi)
+        if present is None:  # one channel: no sort of the batch's channels
+            one = len(fb.channels) <= 1 or not (fb.channel != fb.channel[0]).any()
+            present = [int(fb.channel[0])] if one else np.unique(fb.channel).tolist()
         sent = SENT[batch.service]
-        bits = frame_bits(fb.flags, fb.dlc) if self.bitrate else None
         for c in present:
             mine = fb.channel == c if len(present) > 1 else slice(None)
             name = fb.channel_label(c)
@@ -58,11 +68,6 @@ class NodeLoad:
             )
             got = self.sent.get(name)
             self.sent[name] = (frames, nbits) if got is None else (got[0] + frames, got[1] + nbits)
-            if bits is not None:
-                burst = self.bursts.get(name)
-                if burst is None:
-                    burst = self.bursts[name] = Bursts(self.bitrate)
-                burst.add(fb.t[mine], bits[mine])
 
     def shares(self, bitrate: int | None) -> dict:
         """channel -> {node: mean bus load in percent of the frames it sent}; {} without a
@@ -91,9 +96,8 @@ class NodeLoad:
             out.append("bus load per node (frames it sent, nominal bits):")
             out += [f"  {who:<15} {v:>9.2f} %" for who, v in rows]
         t0 = self.t_first or 0.0
-        for name, burst in self.bursts.items():
-            rec = burst.record()
-            if rec is None or self.duration <= 0:
+        for name, rec in self.bursts.items():
+            if self.duration <= 0:
                 continue
             on = f" on {name}" if several else ""
             out.append(

@@ -108,7 +108,9 @@ def bits_per_node(flags: np.ndarray, dlc: np.ndarray, node: np.ndarray, sent: np
     keep = sent & (node >= 0) & (node < 128)
     at = node[keep].astype(np.intp)
     frames = np.bincount(at, minlength=128)
-    bits = np.bincount(at, weights=frame_bits(flags[keep], dlc[keep]), minlength=128)
+    shape = (flags[keep] & _SHAPE_FLAGS).astype(np.intp) << 8
+    shape |= dlc[keep]
+    bits = np.bincount(at, weights=_BITS_OF_SHAPE[shape], minlength=128)
     return frames, bits.astype(np.int64)
 
 
