@@ -132,8 +132,16 @@ def test_report_has_each_node_s_load(tmp_path):
         ["node 5", str(NODE5[0]), f"{_share(NODE5[1]):.2f}%"],
         ["node 6", str(NODE6[0]), f"{_share(NODE6[1]):.2f}%"],
     ]
+    _, tables, _ = parse(page)
+    burst = next(t for t in tables.tables if t and t[0][0] == "channel" and "length" in t[0])
+    assert burst == [  # the summary's "longest burst" line
+        ["channel", "frames back to back", "from", "length"],
+        ["can0", "5", "+1.020000 s", "3.552 ms"],
+    ]
     _cli("report", str(log), "-o", str(page), "-q", ok=(0, 1))
     assert _node_table(page) is None  # no bitrate: no share
+    _, tables, _ = parse(page)
+    assert not [t for t in tables.tables if t and "frames back to back" in t[0]]
 
 
 def _export(log: Path, out: Path, *extra: str) -> None:

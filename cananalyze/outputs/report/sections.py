@@ -95,7 +95,17 @@ def buses(s, figs: Figures) -> dict:
     for ch, (frames, _) in load.sent.items():
         for n, share in shares.get(ch, {}).items():
             nodes.append([s.who(ch, n), f"{int(frames[n]):,}", f"{share:.2f}%"])
-    return {"rows": rows, "bitrate": s.bitrate, "nodes": nodes}
+    bursts = [  # the decoder's longest burst per bus (with a bitrate and times)
+        [
+            ch,
+            f"{rec['frames']:,}",
+            f"{rec['t_start'] - s.t0:+.6f} s",
+            f"{(rec['t_end'] - rec['t_start']) * 1000:.3f} ms",
+        ]
+        for ch, rec in load.bursts.items()
+        if s.timed
+    ]
+    return {"rows": rows, "bitrate": s.bitrate, "nodes": nodes, "bursts": bursts}
 
 
 # findings listed per node and rule: all are counted, `check --json`/JUnit hold every one.

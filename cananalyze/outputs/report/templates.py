@@ -65,6 +65,8 @@ SECTIONS = """
   {{ table(["channel", "frames", "error frames", "mean load", "peak load (100 ms)"], s.rows) }}
   {% if s.nodes %}<h3>Bus load per node</h3>
   {{ table(["node", "frames it sent", "mean load"], s.nodes) }}{% endif %}
+  {% if s.bursts %}<h3>Longest burst</h3>
+  {{ table(["channel", "frames back to back", "from", "length"], s.bursts) }}{% endif %}
   {% if not s.bitrate %}<p class=small>Give --bitrate for the load in percent.</p>{% endif %}
   <p class=small>Nominal bits without stuff bits: a lower bound.</p></section>
 {% endmacro %}
