@@ -31,7 +31,8 @@ class ObjectInfo:
     pdo_mappable: bool = False
 
 
-DEVICE_SUFFIXES = (".eds", ".dcf", ".xdd", ".xdc")
+# .xpd: CANopenEditor's project file, an XDD with CANopenNode's own properties added
+DEVICE_SUFFIXES = (".eds", ".dcf", ".xdd", ".xdc", ".xpd")
 
 
 def read_od(path: str | Path, node_id: int | None = None):
@@ -46,9 +47,9 @@ def read_od(path: str | Path, node_id: int | None = None):
         raise InputError(f"{path}: no such EDS/DCF/XDD/XDC file")
     if path.suffix.lower() not in DEVICE_SUFFIXES:
         raise InputError(
-            f"{path}: not an EDS, DCF, XDD or XDC file (expected .eds, .dcf, .xdd or .xdc)"
+            f"{path}: not an EDS, DCF, XDD or XDC file (expected .eds, .dcf, .xdd, .xdc or .xpd)"
         )
-    if path.suffix.lower() in (".xdd", ".xdc") or looks_like_xml(path):
+    if path.suffix.lower() in (".xdd", ".xdc", ".xpd") or looks_like_xml(path):
         od = read_xdd(path, node_id)
         if len(od) == 0:
             raise InputError(f"{path}: XDD/XDC holds no objects")

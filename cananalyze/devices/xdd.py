@@ -167,10 +167,10 @@ def _build(root: Element, node_id: int | None, path: Path):
     if commissioning is not None:
         if node_id is None:
             node_id = _int(commissioning.get("nodeID") or commissioning.get("NodeID"))
+            if node_id is not None and not 1 <= node_id <= 127:
+                node_id = None  # vendor tools write nodeID="0" for a device not commissioned
         od.node_id = node_id
-        rate = re.match(r"\s*(\d+)", commissioning.get("actualBaudRate") or "")
-        if rate:
-            od.bitrate = int(rate.group(1)) * 1000
+        od.bitrate = _bitrate(commissioning.get("actualBaudRate"))
     _device_information(od, root)
 
     for obj in _children(object_list, "CANopenObject"):
@@ -199,6 +199,21 @@ def _build(root: Element, node_id: int | None, path: Path):
             var.access_type = "const"
             od.add_object(var)
     return od
+
+
+def _bitrate(text: str | None) -> int | None:
+    """bit/s of an `actualBaudRate`: CiA 311 writes "250 Kbps", FAULHABER Motion Manager a
+    bare kbit/s number ("125"), maxon's EPOS Studio bit/s ("1000000"); "auto-baudRate" and
+    anything else is no rate."""
+    m = re.fullmatch(r"\s*(\d+)\s*([kKmM]?)(?:bps|bit/s|Bd|baud)?\s*", text or "")
+    if not m:
+        return None
+    value, unit = int(m.group(1)), m.group(2).lower()
+    if unit == "m":
+        return value * 1_000_000
+    if unit == "k" or value < 10_000:  # CAN's lowest rate is 10 kbit/s = 10000 bit/s
+        return value * 1000
+    return value
 
 
 def _disabled(param: Element | None) -> bool:
