@@ -40,7 +40,7 @@ def read_od(path: str | Path, node_id: int | None = None):
     the problem. XML content (a CiA 311 XDD/XDC) is read as such whatever the suffix."""
     from canopen.objectdictionary import import_od
 
-    from cananalyze.devices.xdd import looks_like_xml, read_xdd
+    from cananalyze.devices.xdd import looks_like_xml, read_xdd, signed_hex
 
     path = Path(path)
     if not path.is_file():
@@ -69,6 +69,12 @@ def read_od(path: str | Path, node_id: int | None = None):
         logger.setLevel(level)
     if len(od) == 0:
         raise InputError(f"{path}: EDS/DCF holds no objects")
+    for entry in od.values():
+        for var in entry.subindices.values() if hasattr(entry, "subindices") else [entry]:
+            for raw_attr, attr in (("default_raw", "default"), ("value_raw", "value")):
+                raw, number = getattr(var, raw_attr, None), getattr(var, attr, None)
+                if isinstance(raw, str) and type(number) is int:
+                    setattr(var, attr, signed_hex(var.data_type, raw, number))
     return od
 
 

@@ -330,8 +330,23 @@ def _variable(obj: Element, params: dict, node_id: int | None, name: str, index,
     return var
 
 
+def signed_hex(data_type: int, raw: str, number: int) -> int:
+    """A signed object's value written in hex is its bit pattern, as a log's bytes are:
+    maxon's EPOS3 XDC gives one INTEGER32 defaultValue="-2147483648" and
+    actualValue="0x80000000", and a DCF's ParameterValue=0xFFFF of an INTEGER16 is -1.
+    canopen's import_od reads such values as the unsigned number; this reads them signed."""
+    from canopen.objectdictionary import ODVariable
+    from canopen.objectdictionary.datatypes import SIGNED_TYPES
+
+    if data_type not in SIGNED_TYPES or not raw.strip().upper().startswith("0X"):
+        return number
+    bits = 8 * ODVariable.STRUCT_TYPES[data_type].size
+    return number - (1 << bits) if (1 << (bits - 1)) <= number < (1 << bits) else number
+
+
 def _convert(node_id: int | None, data_type: int, value: str):
-    """A value string as canopen's EDS reader converts a DefaultValue/ParameterValue."""
+    """A value string as canopen's EDS reader converts a DefaultValue/ParameterValue, and
+    a signed type's hex value as the bit pattern it is (`signed_hex`)."""
     if data_type in (OCTET_STRING, DOMAIN):
         return bytes.fromhex(value)
     if data_type in (0x09, 0x0B):
@@ -344,4 +359,4 @@ def _convert(node_id: int | None, data_type: int, value: str):
             raise ValueError("$NODEID without a node ID")
         rest = re.sub(r"\+?\$NODEID\+?", "", text)
         return (int(rest, 0) if rest else 0) + node_id
-    return int(text, 0)
+    return signed_hex(data_type, text, int(text, 0))

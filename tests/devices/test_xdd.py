@@ -392,3 +392,106 @@ def test_vendor_commissioning_shapes(tmp_path, node, rate, want_node, want_rate)
     od = read_od(xdc)
     assert (od.node_id, od.bitrate) == (want_node, want_rate)
     assert od[0x1000].value == 0x191
+
+
+# maxon's EPOS3 XDC (not shipped, see the README) describes objects in attributes with
+# two-digit data types, empty defaults, PDOmapping="TPDO"/"RPDO" and signed values in hex.
+EPOS3_SHAPES = """
+<CANopenObject index="2004" name="SerialNumber" objectType="7" dataType="1B" accessType="ro"
+  defaultValue="" PDOmapping="no" objFlags="0001" actualValue="0x0000602095000659"/>
+<CANopenObject index="6041" name="Statusword" objectType="7" dataType="06" accessType="ro"
+  defaultValue="" PDOmapping="TPDO" objFlags="0003"/>
+<CANopenObject index="6040" name="Controlword" objectType="7" dataType="06" accessType="rw"
+  defaultValue="" PDOmapping="RPDO" objFlags="0001" actualValue="0x0000"/>
+<CANopenObject index="607D" name="Software Position Limit" objectType="9" subNumber="3">
+  <CANopenSubObject subIndex="00" name="Number of Entries" objectType="7" dataType="05"
+    accessType="ro" defaultValue="" PDOmapping="no" objFlags="0003"/>
+  <CANopenSubObject subIndex="01" name="Min Position Limit" objectType="7" dataType="04"
+    accessType="rw" defaultValue="-2147483648" PDOmapping="no" actualValue="0x80000000"/>
+  <CANopenSubObject subIndex="02" name="Max Position Limit" objectType="7" dataType="04"
+    accessType="rw" defaultValue="2147483647" PDOmapping="no" actualValue="0x7FFFFFFF"/>
+</CANopenObject>
+<CANopenObject index="60E3" name="Supported Homing Methods" objectType="9" subNumber="2">
+  <CANopenSubObject subIndex="00" name="Highest Sub-Index Supported" objectType="7"
+    dataType="05" accessType="ro" defaultValue="" PDOmapping="no" actualValue="0x01"/>
+  <CANopenSubObject subIndex="01" name="1st Supported Homing Method" objectType="7"
+    dataType="03" accessType="ro" defaultValue="-1" PDOmapping="no" actualValue="0xFFFF"/>
+</CANopenObject>
+"""
+SIGNED_DCF = """[DeviceInfo]
+VendorName=x
+VendorNumber=0xFB
+ProductName=x
+ProductNumber=0
+[MandatoryObjects]
+SupportedObjects=1
+1=0x1000
+[1000]
+ParameterName=Device Type
+ObjectType=0x7
+DataType=0x0007
+AccessType=ro
+DefaultValue=0x00020192
+PDOMapping=0
+[OptionalObjects]
+SupportedObjects=1
+1=0x607D
+[607D]
+ParameterName=Software Position Limit
+ObjectType=0x9
+SubNumber=3
+[607Dsub0]
+ParameterName=Number of Entries
+ObjectType=0x7
+DataType=0x0005
+AccessType=ro
+DefaultValue=2
+PDOMapping=0
+[607Dsub1]
+ParameterName=Min Position Limit
+ObjectType=0x7
+DataType=0x0004
+AccessType=rw
+DefaultValue=-2147483648
+ParameterValue=0x80000000
+PDOMapping=0
+[607Dsub2]
+ParameterName=Max Position Limit
+ObjectType=0x7
+DataType=0x0004
+AccessType=rw
+DefaultValue=2147483647
+ParameterValue=0x7FFFFFFF
+PDOMapping=0
+[DeviceComissioning]
+NodeID=5
+"""
+
+
+def test_vendor_object_shapes_and_signed_hex_values(tmp_path):
+    text = XDC_MINIMAL.read_text(encoding="utf-8")
+    text = text.replace("</CANopenObjectList>", EPOS3_SHAPES + "</CANopenObjectList>", 1)
+    xdc = tmp_path / "epos3_like.xdc"
+    xdc.write_text(text, encoding="utf-8")
+    od = read_od(xdc)
+    assert od[0x2004].data_type == 0x1B and od[0x2004].value == 0x602095000659
+    assert od[0x2004].default is None  # defaultValue="": no default, as an empty EDS one
+    assert od[0x6041].pdo_mappable and od[0x6040].pdo_mappable  # "TPDO"/"RPDO": mappable
+    assert od[0x607D][0].default is None
+    assert (od[0x607D][1].default, od[0x607D][1].value) == (-(2**31), -(2**31))
+    assert (od[0x607D][2].default, od[0x607D][2].value) == (2**31 - 1, 2**31 - 1)
+    assert (od[0x60E3][1].default, od[0x60E3][1].value) == (-1, -1)
+    # the DCF saying the same is read the same (canopen alone reads 0x80000000 as 2**31)
+    dcf = tmp_path / "signed.dcf"
+    dcf.write_text(SIGNED_DCF, encoding="utf-8")
+    assert import_od(str(dcf))[0x607D][1].value == 2**31
+    ref = read_od(dcf)
+    assert (ref[0x607D][1].default, ref[0x607D][1].value) == (-(2**31), -(2**31))
+    assert ref[0x607D][2].value == od[0x607D][2].value
+    # a log showing the limit as the drive sends it (bytes 00 00 00 80) is the XDC's value
+    log = tmp_path / "limit.log"
+    log.write_text("(1.0) can0 605#40" + "7D6001" + "00000000\n(1.001) can0 585#437D600100000080\n")
+    for ref_file in (xdc, dcf):
+        out = cli("diff", str(log), str(ref_file))
+        assert out.returncode == 0, out.stdout.decode() + out.stderr.decode()
+        assert "same within tolerances" in out.stdout.decode()
