@@ -253,8 +253,9 @@ def _device_information(od, root: Element) -> None:
         for key, attr in (("nrOfRxPDO", "nr_of_RXPDO"), ("nrOfTxPDO", "nr_of_TXPDO")):
             if _int(features.get(key)) is not None:
                 setattr(info, attr, _int(features.get(key)))
-        if features.get("layerSettingServiceSlave") is not None:
-            info.LSS_supported = features.get("layerSettingServiceSlave") in ("true", "1")
+        # the schema's default is "false", as an EDS's LSS_Supported=0 (Elcom's e-RIO XDD
+        # leaves the attribute out where its EDS says 0)
+        info.LSS_supported = features.get("layerSettingServiceSlave", "false") in ("true", "1")
 
 
 def _param_value(param: Element | None, tag: str) -> str | None:

@@ -495,3 +495,69 @@ def test_vendor_object_shapes_and_signed_hex_values(tmp_path):
         out = cli("diff", str(log), str(ref_file))
         assert out.returncode == 0, out.stdout.decode() + out.stderr.decode()
         assert "same within tolerances" in out.stdout.decode()
+
+
+# A product's own description: Elcom AS's e-RIO 8xx I/O module (vendor 0x046A), XDD and
+# EDS saved by its developer with CANopenEditor on 2023-06-21 and 2023-07-04. Between the
+# two the EDS gained 0x2002 and a second 8-bit input 0x6000:02, mapped into TPDO1; the
+# rest of the dictionary must agree.
+ERIO_XDD = DATA / "e-RIO_8xx.xdd"
+ERIO_EDS = DATA / "e-RIO_8xx.eds"
+
+
+def test_real_product_xdd_agrees_with_its_eds_but_for_the_later_edits():
+    from_xdd = variables(read_od(ERIO_XDD, 5))
+    from_eds = variables(read_od(ERIO_EDS, 5))
+    independent = variables(import_od(str(ERIO_EDS), 5))
+    assert set(from_eds) == set(independent)
+    added = {(0x2002, 0), (0x2002, 1), (0x2002, 2), (0x2002, 3), (0x6000, 2)}
+    assert set(from_eds) - set(from_xdd) == added and set(from_xdd) <= set(from_eds)
+    assert len(from_xdd) == 146
+    edited = {
+        (0x1A00, 0): ("default", 1, 2),  # TPDO1: one mapped object, then two
+        (0x1A00, 2): ("default", 0, 0x60000208),
+        (0x6000, 0): ("default", 1, 2),  # highest sub-index of the inputs
+        (0x6000, 1): ("name", "Digital Inputs", "Digital Inputs 1-8"),
+    }
+    differences = {}
+    for key, x in from_xdd.items():
+        for ref in (from_eds[key], independent[key]):
+            for attr in ("name", "data_type", "access_type", "pdo_mappable", "min", "max"):
+                if getattr(x, attr) != getattr(ref, attr):
+                    differences[key] = (attr, getattr(x, attr), getattr(ref, attr))
+            if no_default_as_none(x.default) != no_default_as_none(ref.default):
+                differences[key] = ("default", x.default, ref.default)
+    assert differences == edited
+    a, b = load_eds(ERIO_XDD), load_eds(ERIO_EDS)
+    identity = (0x046A, 800850, 0x000F0191, "e-RIO 8xx", "e-RIO 8xx")
+    for p in (a, b):
+        assert (p.vendor_id, p.product_code, p.device_type, p.device_name, p.name) == identity
+    tx1_x, tx1_e = (
+        [p for p in prof.pdos(5) if (p.direction, p.number) == ("tx", 1)] for prof in (a, b)
+    )
+    assert [(e.index, e.subindex, e.bits) for e in tx1_x[0].mapping] == [(0x6000, 1, 8)]
+    assert [(e.index, e.subindex, e.bits) for e in tx1_e[0].mapping] == [
+        (0x6000, 1, 8),
+        (0x6000, 2, 8),
+    ]
+    others = lambda prof: [p for p in prof.pdos(5) if (p.direction, p.number) != ("tx", 1)]  # noqa: E731
+    assert others(a) == others(b) and len(others(a)) == 3
+    info_x, info_e = read_od(ERIO_XDD).device_information, read_od(ERIO_EDS).device_information
+    for attr in ("allowed_baudrates", "nr_of_RXPDO", "nr_of_TXPDO", "LSS_supported", "vendor_name"):
+        assert getattr(info_x, attr) == getattr(info_e, attr), attr
+    assert info_x.allowed_baudrates == {125_000, 250_000, 500_000} and not info_x.LSS_supported
+
+
+def test_real_product_xdd_decodes_its_pdos_as_its_eds(tmp_path):
+    log = tmp_path / "erio.log"
+    log.write_text(  # TPDO2 of node 5: four 16-bit analogue inputs (0x6401:01..04)
+        "(1.000000) can0 285#E803D007B80BA00F\n"
+    )
+    shown = {}
+    for ref in (ERIO_XDD, ERIO_EDS):
+        out = cli("decode", str(log), "--format", "jsonl", "--eds", f"5={ref}")
+        assert out.returncode == 0, out.stderr.decode()
+        shown[ref.suffix] = out.stdout.decode()
+    assert shown[".xdd"] == shown[".eds"]
+    signals = json.loads(shown[".xdd"].splitlines()[0])["signals"]
+    assert signals == {f"analog_input_{i}": 1000 * i for i in range(1, 5)}
