@@ -59,7 +59,13 @@ def read_od(path: str | Path, node_id: int | None = None):
     level = logger.level
     logger.setLevel(logging.ERROR)
     try:
-        od = import_od(str(path), node_id)
+        try:
+            od = import_od(str(path), node_id)
+        except ValueError:
+            # canopen stops at an empty number in [DeviceInfo] (CANopenNode's DS301 profile
+            # EDS ships `VendorNumber=`); read it again without the empty entries, which
+            # canopen then passes over as absent. Any other fault fails again, below.
+            od = _without_empty_device_info(path, node_id)
     except (ConfigParserError, UnicodeDecodeError) as exc:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise InputError(f"{path}: not a valid EDS/DCF: {msg}") from None
@@ -76,6 +82,23 @@ def read_od(path: str | Path, node_id: int | None = None):
                 if isinstance(raw, str) and type(number) is int:
                     setattr(var, attr, signed_hex(var.data_type, raw, number))
     return od
+
+
+def _without_empty_device_info(path: Path, node_id: int | None):
+    import io
+
+    from canopen.objectdictionary.eds import import_eds
+
+    lines, section = [], ""
+    with open(path) as f:  # as canopen opens it
+        for line in f:
+            stripped = line.strip()
+            if stripped.startswith("["):
+                section = stripped.lower()
+            elif section == "[deviceinfo]" and re.fullmatch(r"[^=;]+=\s*", stripped):
+                continue
+            lines.append(line)
+    return import_eds(io.StringIO("".join(lines)), node_id)
 
 
 _NODEID = re.compile(r"\+?\$NODEID\+?", re.IGNORECASE)

@@ -288,11 +288,11 @@ XDC_MINIMAL = DATA / "minimal.xdc"
 
 
 def _readable_eds(tmp_path):
-    """The DS301 EDS with its empty `VendorNumber=`/`ProductNumber=` given 0: canopen's
-    import_od (and so cananalyze's EDS path) stops at an empty DeviceInfo number, so the
-    file as CANopenNode ships it is refused (a one-line InputError, asserted here)."""
-    with pytest.raises(InputError, match=r"DS301_profile\.eds: not a valid EDS/DCF"):
-        read_od(XPD_EDS)
+    """The DS301 EDS with its empty `VendorNumber=`/`ProductNumber=` given 0, for canopen's
+    import_od, which stops at an empty DeviceInfo number (cananalyze reads the file as
+    CANopenNode ships it, passing over the empty entries)."""
+    with pytest.raises(ValueError, match="invalid literal for int"):
+        import_od(str(XPD_EDS))
     text = XPD_EDS.read_text(encoding="utf-8")
     assert text.count("\nVendorNumber=\n") == 1 and text.count("\nProductNumber=\n") == 1
     text = text.replace("\nVendorNumber=\n", "\nVendorNumber=0\n")
@@ -305,7 +305,8 @@ def _readable_eds(tmp_path):
 def test_real_xpd_has_the_objects_of_the_eds_exported_from_it(tmp_path):
     eds = _readable_eds(tmp_path)
     from_xpd = variables(read_od(XPD, 5))
-    from_eds = variables(read_od(eds, 5))
+    from_eds = variables(read_od(XPD_EDS, 5))  # as shipped
+    assert variables(read_od(eds, 5)).keys() == from_eds.keys()
     independent = variables(import_od(str(eds), 5))
     assert len(from_xpd) == 176  # objects marked CO_disabled in the project left out, as the EDS
     assert set(from_xpd) == set(from_eds) == set(independent)
@@ -321,11 +322,12 @@ def test_real_xpd_has_the_objects_of_the_eds_exported_from_it(tmp_path):
             assert x.relative == ref.relative, where
     assert from_xpd[(0x1014, 0)].default_raw.upper() == "$NODEID+0X80"
     assert from_xpd[(0x1014, 0)].default == 0x85
-    a, b = load_eds(XPD), load_eds(eds)
+    a, b = load_eds(XPD), load_eds(XPD_EDS)
     assert (a.device_type, a.device_name, a.name) == (b.device_type, b.device_name, b.name)
+    assert read_od(XPD_EDS).device_information.vendor_number is None  # left out, not 0
     assert a.pdos(5) == b.pdos(5) and len(a.pdos(5)) == 8
     assert {p.cob_id for p in a.pdos(5) if p.direction == "tx"} == {0x185, 0x285, 0x385, 0x485}
-    info_a, info_b = read_od(XPD).device_information, read_od(eds).device_information
+    info_a, info_b = read_od(XPD).device_information, read_od(XPD_EDS).device_information
     assert info_a.allowed_baudrates == info_b.allowed_baudrates
     assert (info_a.nr_of_RXPDO, info_a.nr_of_TXPDO) == (info_b.nr_of_RXPDO, info_b.nr_of_TXPDO)
     assert info_a.LSS_supported is info_b.LSS_supported is True
@@ -561,3 +563,20 @@ def test_real_product_xdd_decodes_its_pdos_as_its_eds(tmp_path):
     assert shown[".xdd"] == shown[".eds"]
     signals = json.loads(shown[".xdd"].splitlines()[0])["signals"]
     assert signals == {f"analog_input_{i}": 1000 * i for i in range(1, 5)}
+
+
+def test_eds_with_empty_device_info_numbers_is_read_and_a_bad_one_refused(tmp_path):
+    """An empty [DeviceInfo] number (CANopenNode's DS301 EDS) is passed over; a number that
+    is not one (the e-RIO's older DCF wrote `ProductNumber=e-RIO 8xx`) is still refused in
+    one line naming the file."""
+    text = XPD_EDS.read_text(encoding="utf-8")
+    assert len(variables(read_od(XPD_EDS, 5))) == 176
+    bad = tmp_path / "bad.eds"
+    bad.write_text(text.replace("\nProductNumber=\n", "\nProductNumber=e-RIO 8xx\n"))
+    with pytest.raises(InputError, match=r"bad\.eds: not a valid EDS/DCF: ValueError"):
+        read_od(bad)
+    log = tmp_path / "bus.log"
+    log.write_text(LOG)
+    out = cli("decode", str(log), "--eds", f"5={bad}")
+    err = out.stderr.decode()
+    assert out.returncode == 2 and len(err.strip().splitlines()) == 1 and "bad.eds" in err
