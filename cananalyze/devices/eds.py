@@ -31,7 +31,8 @@ class ObjectInfo:
     pdo_mappable: bool = False
 
 
-DEVICE_SUFFIXES = (".eds", ".dcf", ".xdd", ".xdc")
+# .xpd: CANopenEditor's project file, an XDD with CANopenNode's own properties added
+DEVICE_SUFFIXES = (".eds", ".dcf", ".xdd", ".xdc", ".xpd")
 
 
 def read_od(path: str | Path, node_id: int | None = None):
@@ -39,16 +40,16 @@ def read_od(path: str | Path, node_id: int | None = None):
     the problem. XML content (a CiA 311 XDD/XDC) is read as such whatever the suffix."""
     from canopen.objectdictionary import import_od
 
-    from cananalyze.devices.xdd import looks_like_xml, read_xdd
+    from cananalyze.devices.xdd import looks_like_xml, read_xdd, signed_hex
 
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such EDS/DCF/XDD/XDC file")
     if path.suffix.lower() not in DEVICE_SUFFIXES:
         raise InputError(
-            f"{path}: not an EDS, DCF, XDD or XDC file (expected .eds, .dcf, .xdd or .xdc)"
+            f"{path}: not an EDS, DCF, XDD or XDC file (expected .eds, .dcf, .xdd, .xdc or .xpd)"
         )
-    if path.suffix.lower() in (".xdd", ".xdc") or looks_like_xml(path):
+    if path.suffix.lower() in (".xdd", ".xdc", ".xpd") or looks_like_xml(path):
         od = read_xdd(path, node_id)
         if len(od) == 0:
             raise InputError(f"{path}: XDD/XDC holds no objects")
@@ -58,7 +59,13 @@ def read_od(path: str | Path, node_id: int | None = None):
     level = logger.level
     logger.setLevel(logging.ERROR)
     try:
-        od = import_od(str(path), node_id)
+        try:
+            od = import_od(str(path), node_id)
+        except ValueError:
+            # canopen stops at an empty number in [DeviceInfo] (CANopenNode's DS301 profile
+            # EDS ships `VendorNumber=`); read it again without the empty entries, which
+            # canopen then passes over as absent. Any other fault fails again, below.
+            od = _without_empty_device_info(path, node_id)
     except (ConfigParserError, UnicodeDecodeError) as exc:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise InputError(f"{path}: not a valid EDS/DCF: {msg}") from None
@@ -68,7 +75,30 @@ def read_od(path: str | Path, node_id: int | None = None):
         logger.setLevel(level)
     if len(od) == 0:
         raise InputError(f"{path}: EDS/DCF holds no objects")
+    for entry in od.values():
+        for var in entry.subindices.values() if hasattr(entry, "subindices") else [entry]:
+            for raw_attr, attr in (("default_raw", "default"), ("value_raw", "value")):
+                raw, number = getattr(var, raw_attr, None), getattr(var, attr, None)
+                if isinstance(raw, str) and type(number) is int:
+                    setattr(var, attr, signed_hex(var.data_type, raw, number))
     return od
+
+
+def _without_empty_device_info(path: Path, node_id: int | None):
+    import io
+
+    from canopen.objectdictionary.eds import import_eds
+
+    lines, section = [], ""
+    with open(path) as f:  # as canopen opens it
+        for line in f:
+            stripped = line.strip()
+            if stripped.startswith("["):
+                section = stripped.lower()
+            elif section == "[deviceinfo]" and re.fullmatch(r"[^=;]+=\s*", stripped):
+                continue
+            lines.append(line)
+    return import_eds(io.StringIO("".join(lines)), node_id)
 
 
 _NODEID = re.compile(r"\+?\$NODEID\+?", re.IGNORECASE)

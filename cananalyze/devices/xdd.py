@@ -167,10 +167,10 @@ def _build(root: Element, node_id: int | None, path: Path):
     if commissioning is not None:
         if node_id is None:
             node_id = _int(commissioning.get("nodeID") or commissioning.get("NodeID"))
+            if node_id is not None and not 1 <= node_id <= 127:
+                node_id = None  # vendor tools write nodeID="0" for a device not commissioned
         od.node_id = node_id
-        rate = re.match(r"\s*(\d+)", commissioning.get("actualBaudRate") or "")
-        if rate:
-            od.bitrate = int(rate.group(1)) * 1000
+        od.bitrate = _bitrate(commissioning.get("actualBaudRate"))
     _device_information(od, root)
 
     for obj in _children(object_list, "CANopenObject"):
@@ -199,6 +199,21 @@ def _build(root: Element, node_id: int | None, path: Path):
             var.access_type = "const"
             od.add_object(var)
     return od
+
+
+def _bitrate(text: str | None) -> int | None:
+    """bit/s of an `actualBaudRate`: CiA 311 writes "250 Kbps", FAULHABER Motion Manager a
+    bare kbit/s number ("125"), maxon's EPOS Studio bit/s ("1000000"); "auto-baudRate" and
+    anything else is no rate."""
+    m = re.fullmatch(r"\s*(\d+)\s*([kKmM]?)(?:bps|bit/s|Bd|baud)?\s*", text or "")
+    if not m:
+        return None
+    value, unit = int(m.group(1)), m.group(2).lower()
+    if unit == "m":
+        return value * 1_000_000
+    if unit == "k" or value < 10_000:  # CAN's lowest rate is 10 kbit/s = 10000 bit/s
+        return value * 1000
+    return value
 
 
 def _disabled(param: Element | None) -> bool:
@@ -238,8 +253,9 @@ def _device_information(od, root: Element) -> None:
         for key, attr in (("nrOfRxPDO", "nr_of_RXPDO"), ("nrOfTxPDO", "nr_of_TXPDO")):
             if _int(features.get(key)) is not None:
                 setattr(info, attr, _int(features.get(key)))
-        if features.get("layerSettingServiceSlave") is not None:
-            info.LSS_supported = features.get("layerSettingServiceSlave") in ("true", "1")
+        # the schema's default is "false", as an EDS's LSS_Supported=0 (Elcom's e-RIO XDD
+        # leaves the attribute out where its EDS says 0)
+        info.LSS_supported = features.get("layerSettingServiceSlave", "false") in ("true", "1")
 
 
 def _param_value(param: Element | None, tag: str) -> str | None:
@@ -315,8 +331,23 @@ def _variable(obj: Element, params: dict, node_id: int | None, name: str, index,
     return var
 
 
+def signed_hex(data_type: int, raw: str, number: int) -> int:
+    """A signed object's value written in hex is its bit pattern, as a log's bytes are:
+    maxon's EPOS3 XDC gives one INTEGER32 defaultValue="-2147483648" and
+    actualValue="0x80000000", and a DCF's ParameterValue=0xFFFF of an INTEGER16 is -1.
+    canopen's import_od reads such values as the unsigned number; this reads them signed."""
+    from canopen.objectdictionary import ODVariable
+    from canopen.objectdictionary.datatypes import SIGNED_TYPES
+
+    if data_type not in SIGNED_TYPES or not raw.strip().upper().startswith("0X"):
+        return number
+    bits = 8 * ODVariable.STRUCT_TYPES[data_type].size
+    return number - (1 << bits) if (1 << (bits - 1)) <= number < (1 << bits) else number
+
+
 def _convert(node_id: int | None, data_type: int, value: str):
-    """A value string as canopen's EDS reader converts a DefaultValue/ParameterValue."""
+    """A value string as canopen's EDS reader converts a DefaultValue/ParameterValue, and
+    a signed type's hex value as the bit pattern it is (`signed_hex`)."""
     if data_type in (OCTET_STRING, DOMAIN):
         return bytes.fromhex(value)
     if data_type in (0x09, 0x0B):
@@ -329,4 +360,4 @@ def _convert(node_id: int | None, data_type: int, value: str):
             raise ValueError("$NODEID without a node ID")
         rest = re.sub(r"\+?\$NODEID\+?", "", text)
         return (int(rest, 0) if rest else 0) + node_id
-    return int(text, 0)
+    return signed_hex(data_type, text, int(text, 0))

@@ -20,6 +20,7 @@ NOT_LOGS = {
     ".dcf",
     ".xdd",
     ".xdc",
+    ".xpd",
     ".dbc",
     ".sym",
     ".arxml",
