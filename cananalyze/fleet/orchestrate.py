@@ -312,6 +312,8 @@ def run_fleet(
                 f"compacted: {len(done.sizes_before)} files in the dataset, now "
                 f"{len(done.sizes_after)}"
             )
+    if tasks:  # the parts this run wrote into the `logs` index: the next rerun reads none
+        logs_rows(dataset, where)
     out.results = [by_path[p] for p, _ in logs if p in by_path]
     out.seconds = time.perf_counter() - t0
     if junit:
