@@ -80,21 +80,24 @@ def logs_rows(dataset: layout.Dataset, options: dict | None = None) -> list[dict
     have = set(index[TAG].to_pylist()) if index is not None else set()
     tags = {f"{rel}|{ident}": rel for rel, ident in listed.items()}
     fresh_tags = {t: rel for t, rel in tags.items() if t not in have}
-    fresh = _read_parts(dataset, store, fresh_tags)
-    if fresh is None:
+    try:
+        fresh = _read_parts(dataset, store, fresh_tags) if fresh_tags else None
+    except (OSError, ValueError):  # a local part gone since the listing too: hashed
         return None
     kept = index
-    if index is not None:
+    if index is not None and not have <= tags.keys():  # parts gone: their rows go
         import pyarrow.compute as pc
 
+        # (only then: pa.array of Python values makes pyarrow import pandas, ~0.5 s)
         kept = index.filter(pc.is_in(index[TAG], value_set=pa.array(list(tags), pa.string())))
     parts = [t for t in (kept, fresh) if t is not None and t.num_rows]
-    table = pa.concat_tables(parts).combine_chunks() if parts else _want().empty_table()
+    if not parts:
+        return []  # (no empty_table(): pyarrow imports pandas for it, ~0.5 s)
+    table = pa.concat_tables(parts).combine_chunks() if len(parts) > 1 else parts[0]
     if fresh_tags or (index is None) or kept.num_rows != index.num_rows:
         with contextlib.suppress(OSError, ValueError):  # a read-only dataset: read again next time
             _write_index(dataset, store, table)
-    rows = table.drop_columns([TAG]).to_pylist()
-    return rows
+    return table.drop_columns([TAG]).to_pylist()
 
 
 def _listed_local(dataset: Path) -> dict[str, str] | None:
@@ -190,11 +193,10 @@ def _write_index(dataset: layout.Dataset, store, table: pa.Table) -> None:
 
 
 def _read_parts(dataset: layout.Dataset, store, tags: dict[str, str]) -> pa.Table | None:
-    """The rows of these parts ({tag: rel}), each with its tag and date; None when one
-    cannot be read. A part deleted since the listing (a compaction's input) is passed
-    over: its logs are hashed by their workers, never wrongly skipped."""
-    if not tags:
-        return _want().empty_table()
+    """The rows of these parts ({tag: rel}), each with its tag and date (None: no rows);
+    OSError or ValueError when one cannot be read. An object deleted since the listing
+    (a compaction's input) is passed over: its logs are hashed by their workers, never
+    wrongly skipped."""
     want = _want()
     logs = _plain()
     by_rel = {rel: t for t, rel in tags.items()}
@@ -211,40 +213,37 @@ def _read_parts(dataset: layout.Dataset, store, tags: dict[str, str]) -> pa.Tabl
         cols += [pa.array([date] * n, pa.string()), pa.array([by_rel[rel]] * n, pa.string())]
         tables.append(pa.Table.from_arrays(cols, schema=want))
 
-    try:
-        if store is None:
-            import pyarrow.dataset as pads
+    if store is None:
+        import pyarrow.dataset as pads
 
-            root = Path(dataset) / "logs"
-            paths = [str(root / rel) for rel in by_rel]
-            found = pads.dataset(paths, schema=logs, format="parquet")
-            scan = found.scanner(columns=list(ROW_COLUMNS))
-            batches, rels = [], []
-            for tagged in scan.scan_batches():  # one threaded scan, each batch's file told
-                batches.append(tagged.record_batch)
-                rel = os.path.relpath(tagged.fragment.path, root)
-                rels += [rel] * tagged.record_batch.num_rows
-            if rels:
-                found = pa.Table.from_batches(batches)
-                dates = [rel.split("/", 1)[0][len("date=") :] for rel in rels]
-                found = found.append_column(want.field("date"), pa.array(dates, pa.string()))
-                tag = pa.array([by_rel[rel] for rel in rels], pa.string())
-                tables.append(found.append_column(want.field(TAG), tag))
-        else:
-            import pyarrow.parquet as pq
+        root = Path(dataset) / "logs"
+        paths = [str(root / rel) for rel in by_rel]
+        found = pads.dataset(paths, schema=logs, format="parquet")
+        scan = found.scanner(columns=list(ROW_COLUMNS))
+        batches, rels = [], []
+        for tagged in scan.scan_batches():  # one threaded scan, each batch's file told
+            batches.append(tagged.record_batch)
+            rel = os.path.relpath(tagged.fragment.path, root)
+            rels += [rel] * tagged.record_batch.num_rows
+        if rels:
+            found = pa.Table.from_batches(batches)
+            dates = [rel.split("/", 1)[0][len("date=") :] for rel in rels]
+            found = found.append_column(want.field("date"), pa.array(dates, pa.string()))
+            tag = pa.array([by_rel[rel] for rel in rels], pa.string())
+            tables.append(found.append_column(want.field(TAG), tag))
+    else:
+        import pyarrow.parquet as pq
 
-            fs, base = store
-            keys = {f"{base}/logs/{rel}": rel for rel in by_rel}
-            names = sorted(keys)
-            for i in range(0, len(names), 1000):  # concurrent GETs, a chunk at a time
-                blobs = fs.cat(names[i : i + 1000], on_error="omit")
-                for key, blob in blobs.items():
-                    if isinstance(blob, bytes | bytearray):
-                        add(keys[key], pq.read_table(pa.BufferReader(blob)))
-    except (OSError, ValueError):  # a local part gone since the listing too: hashed
-        return None
+        fs, base = store
+        keys = {f"{base}/logs/{rel}": rel for rel in by_rel}
+        names = sorted(keys)
+        for i in range(0, len(names), 1000):  # concurrent GETs, a chunk at a time
+            blobs = fs.cat(names[i : i + 1000], on_error="omit")
+            for key, blob in blobs.items():
+                if isinstance(blob, bytes | bytearray):
+                    add(keys[key], pq.read_table(pa.BufferReader(blob)))
     if not tables:
-        return want.empty_table()
+        return None
     return pa.concat_tables(tables).combine_chunks()
 
 
