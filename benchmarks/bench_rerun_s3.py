@@ -44,6 +44,7 @@ sys.path.insert(0, str(HERE))
 
 BUCKET = "rerun"
 INDEX = "_index/logs.parquet"  # the dataset's index of its `logs` rows (fleet/logsindex)
+STATES = ("no-index", "loose", "compacted")
 FORMAT = 2  # of the local logs and dataset kept in --out: made again when it changes
 
 from bench_fleet import Requests  # noqa: E402 - the S3 server's requests, counted by method
@@ -52,7 +53,9 @@ from bench_fleet import Requests  # noqa: E402 - the S3 server's requests, count
 def run(
     args: list[str], requests: Requests | None, errors: Path, tree: Path = ROOT
 ) -> tuple[float, float, float, dict, str]:
-    """(wall, CPU of the process tree, peak RSS in MB, requests, stderr) of one
+    """(wall, CPU of the process tree, peak RSS in MB (a local run's only: next to the S3
+    server, a child starts with this process's size, which its peak keeps), requests,
+    stderr) of one
     `cananalyze` process run from `tree`; its stderr goes to a file (a pipe read after
     the end would fill and block it)."""
     env = {**os.environ, "PYTHONPATH": str(tree) + os.pathsep + os.environ.get("PYTHONPATH", "")}
@@ -268,9 +271,15 @@ def main(argv: list[str]) -> None:
     ap.add_argument("--repeats", type=int, default=1, help="runs of each rerun; medians (1)")
     ap.add_argument("--against", type=Path, help="another source tree, run interleaved")
     ap.add_argument("--out", type=Path, help="where the local logs and dataset are kept")
+    ap.add_argument("--states", default=",".join(STATES), help=f"of {', '.join(STATES)} (all)")
+    ap.add_argument(
+        "--against-states", help="the states --against runs in (default: all of --states)"
+    )
     args = ap.parse_args(argv)
     n = args.logs
     trees = {"this": ROOT} | ({"against": args.against.resolve()} if args.against else {})
+    states = args.states.split(",")
+    against = (args.against_states or args.states).split(",")
     work = Path(tempfile.mkdtemp(prefix="bench-rerun-"))
     errors = work / "stderr.txt"
     try:
@@ -279,6 +288,8 @@ def main(argv: list[str]) -> None:
                 logs, ds = make_local(args.out or work / "local", n, errors)
                 _measure(
                     *(n, "local", str(logs), str(ds), None, trees, args.repeats, errors),
+                    states,
+                    against,
                     lambda ds: (Path(ds) / INDEX).unlink(missing_ok=True),
                 )
             else:
@@ -287,6 +298,8 @@ def main(argv: list[str]) -> None:
                     print(f"s3 listing: {s3.listing()}", flush=True)
                     _measure(
                         *(n, "s3", s3.logs, s3.ds, s3.requests, trees, args.repeats, errors),
+                        states,
+                        against,
                         s3.drop_index,
                     )
                     print(f"s3 listing: {s3.listing()}", flush=True)
@@ -306,6 +319,8 @@ def _measure(
     trees: dict[str, Path],
     repeats: int,
     errors: Path,
+    states: list[str],
+    against: list[str],
     drop_index,
 ) -> None:
     """The reruns over the loose `logs` parts without the dataset's index of them (each
@@ -313,7 +328,9 @@ def _measure(
     an unmeasured first run: the steady state of hourly reruns), then `fleet compact` and
     the reruns again (the index made again first: the compaction rewrote the parts)."""
     label = storage if len(trees) == 1 else None
-    for state in ("no-index", "loose", "compacted"):
+    everyone = trees
+    for state in (s for s in STATES if s in states):
+        trees = everyone if state in against else {"this": everyone["this"]}
         if state == "compacted" and requests is None:
             ds = str(compacted(Path(ds), errors))
         elif state == "compacted":
@@ -330,7 +347,7 @@ def _measure(
             req = f", requests {_requests(counts)}" if requests is not None else ""
             print(
                 f"rerun {storage} {state} 0 (writes the index, not counted): wall {wall:.2f} s, "
-                f"CPU {cpu:.2f} s, peak RSS {rss:.0f} MB{req}",
+                f"CPU {cpu:.2f} s{_rss(rss, requests)}{req}",
                 flush=True,
             )
         figs: dict[str, list] = {name: [] for name in trees}
@@ -347,8 +364,8 @@ def _measure(
                 req = f", requests {_requests(counts)}" if requests is not None else ""
                 who = f"rerun {label or storage + ' ' + name}"
                 print(
-                    f"{who} {state} {r + 1}: wall {wall:.2f} s, CPU {cpu:.2f} s, peak RSS "
-                    f"{rss:.0f} MB{req}; load average {load:.1f}; {summary}",
+                    f"{who} {state} {r + 1}: wall {wall:.2f} s, CPU {cpu:.2f} s"
+                    f"{_rss(rss, requests)}{req}; load average {load:.1f}; {summary}",
                     flush=True,
                 )
         for name, runs in figs.items():
@@ -356,7 +373,7 @@ def _measure(
             who = storage if label else f"{storage} {name}"
             print(
                 f"median rerun {who} {state} ({len(runs)} runs): wall {wall:.2f} s, CPU "
-                f"{cpu:.2f} s, peak RSS {rss:.0f} MB",
+                f"{cpu:.2f} s{_rss(rss, requests)}",
                 flush=True,
             )
         if len(trees) == 2:
@@ -366,6 +383,10 @@ def _measure(
                 f"{a[1] / b[1]:.2f}",
                 flush=True,
             )
+
+
+def _rss(mb: float, requests: Requests | None) -> str:
+    return f", peak RSS {mb:.0f} MB" if requests is None else ""
 
 
 def _requests(counts: dict) -> str:
