@@ -35,3 +35,16 @@ def need(module: str, feature: str, extra: str) -> ModuleType:
         return importlib.import_module(module)
     except ModuleNotFoundError as exc:
         raise MissingExtra(feature, extra, exc.name or module) from None
+
+
+def need_installed(module: str, feature: str, extra: str) -> None:
+    """As `need`, without importing `module` (found by its spec): for a command that may
+    end before it uses it (a fleet rerun with nothing to decode starts no cluster)."""
+    import importlib.util
+
+    try:
+        found = importlib.util.find_spec(module) is not None
+    except ModuleNotFoundError as exc:
+        raise MissingExtra(feature, extra, exc.name or module) from None
+    if not found:
+        raise MissingExtra(feature, extra, module)

@@ -110,11 +110,12 @@ _KINDS = (
 )
 
 
-def stat_of(name: str | Path, options: dict | None = None, info: dict | None = None) -> Stat:
+def stat_of(name: str | Path, options: dict | None = None, info=None) -> Stat:
     """Size, modification time (ns) and kind of a path or URL (`info`: fsspec's, when
-    a listing already gave it). OSError when it is not there."""
+    a listing already gave it; for a path, its `os.stat` when a folder's walk made it).
+    OSError when it is not there."""
     if not is_url(name):
-        st = os.stat(name)
+        st = info if isinstance(info, os.stat_result) else os.stat(name)
         if stat.S_ISREG(st.st_mode):
             return Stat(st.st_size, st.st_mtime_ns, True)
         kind = next((k for test, k in _KINDS if test(st.st_mode)), "special file")
@@ -124,10 +125,10 @@ def stat_of(name: str | Path, options: dict | None = None, info: dict | None = N
         info = fs.info(path)
     if info.get("type") == "directory":
         return Stat(None, None, False, "directory")
-    return Stat(int(info.get("size") or 0), _mtime_ns(info), True)
+    return Stat(int(info.get("size") or 0), listed_mtime_ns(info), True)
 
 
-def _mtime_ns(info: dict) -> int | None:
+def listed_mtime_ns(info: dict) -> int | None:
     """fsspec back ends name the modification time differently (s3: LastModified)."""
     for key in ("LastModified", "mtime", "last_modified", "updated", "created"):
         value = info.get(key)

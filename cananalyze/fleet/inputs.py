@@ -5,8 +5,10 @@ core/storage), into a sorted list of log files, each with the options for its fo
 from __future__ import annotations
 
 import glob
+import os
 from dataclasses import replace
 from pathlib import Path
+from stat import S_ISREG
 
 from cananalyze.core import storage
 from cananalyze.core.errors import UsageError
@@ -42,15 +44,43 @@ NOT_LOGS = {
 }
 
 
-def _in_folder(folder: Path, skip: Path | None) -> list[Path]:
+def _in_folder(folder: Path, skip: Path | None, stats: dict) -> list[tuple[Path, Path]]:
+    """(the path as found, the file itself) of each log under `folder`: regular files,
+    recursively (symbolic links to folders not followed), hidden names, the descriptions
+    (NOT_LOGS) and the dataset left out. One `scandir` a folder and one `stat` a file,
+    kept in `stats` (the rerun's skip key needs nothing else of it); the file itself is
+    its folder's real path and its name, resolved alone only when it is a link."""
     out = []
-    for p in folder.rglob("*"):
-        if not p.is_file() or any(part.startswith(".") for part in p.relative_to(folder).parts):
-            continue
-        if skip is not None and p.resolve().is_relative_to(skip):
+    start = folder.absolute()
+    stack = [(str(start), os.path.realpath(start))]
+    while stack:
+        top, real = stack.pop()
+        if skip is not None and Path(real).is_relative_to(skip):
             continue  # the dataset inside an input folder
-        if p.suffix.lower() not in NOT_LOGS:
-            out.append(p)
+        try:
+            with os.scandir(top) as found:
+                entries = list(found)
+        except PermissionError:
+            continue
+        for e in entries:
+            if e.name.startswith("."):
+                continue
+            if e.is_dir(follow_symlinks=False):
+                stack.append((e.path, os.path.join(real, e.name)))
+                continue
+            if os.path.splitext(e.name)[1].lower() in NOT_LOGS:
+                continue
+            try:
+                st = e.stat()
+            except OSError:
+                continue  # a broken link
+            if not S_ISREG(st.st_mode):
+                continue
+            itself = os.path.realpath(e.path) if e.is_symlink() else os.path.join(real, e.name)
+            if skip is not None and Path(itself).is_relative_to(skip):
+                continue
+            out.append((Path(e.path), Path(itself)))
+            stats[e.path] = st
     return out
 
 
@@ -102,7 +132,8 @@ def expand(
 ) -> list[str]:
     """Every log file the inputs name (absolute paths, URLs as given), once each, sorted;
     UsageError for one that is not there. `options`: fsspec's, for URL inputs; `infos`
-    gets what their listing said of each URL (core/storage.stat_of takes it)."""
+    gets what their listing said of each URL, and the `os.stat` of each file found in a
+    local folder (core/storage.stat_of takes both)."""
     urls: set[str] = set()
     local_inputs = []
     infos = {} if infos is None else infos
@@ -111,11 +142,11 @@ def expand(
             urls.update(_expand_url(item, dataset, options, infos))
         else:
             local_inputs.append(item)
-    local = [str(p) for p in _expand_local(local_inputs, dataset)]
+    local = [str(p) for p in _expand_local(local_inputs, dataset, infos)]
     return local + sorted(urls)
 
 
-def _expand_local(inputs: list[str], dataset: str | Path | None) -> list[Path]:
+def _expand_local(inputs: list[str], dataset: str | Path | None, stats: dict) -> list[Path]:
     skip = Path(dataset).resolve() if dataset is not None and not storage.is_url(dataset) else None
     # the file itself -> the path it was found by (a link's folder is the one that counts)
     found: dict[Path, Path] = {}
@@ -128,13 +159,13 @@ def _expand_local(inputs: list[str], dataset: str | Path | None) -> list[Path]:
             matches = [Path(item)]
         for m in matches:
             if m.is_dir():
-                files = _in_folder(m, skip)
+                files = _in_folder(m, skip, stats)
             elif m.is_file() or m.exists():
-                files = [m]
+                files = [(m.absolute(), m.resolve())]
             else:
                 raise UsageError(f"{m}: no such file or folder")
-            for f in files:
-                found.setdefault(f.resolve(), f.absolute())
+            for f, itself in files:
+                found.setdefault(itself, f)
     return sorted(found.values())
 
 

@@ -21,7 +21,7 @@ from typing import TextIO
 
 from cananalyze.core.defaults import TASK_TIMEOUT
 from cananalyze.core.errors import UsageError
-from cananalyze.core.extras import need
+from cananalyze.core.extras import need_installed
 from cananalyze.fleet import compact, layout
 from cananalyze.fleet.inputs import expand, options_for
 from cananalyze.fleet.task import (
@@ -242,7 +242,7 @@ def run_fleet(
     compacted at its end (fleet/compact.py), a local dataset's only. `batch` > 1: logs
     under BATCH_SMALL bytes go `batch` to a task, their parts merged into shared files
     (task.run_batch)."""
-    need("distributed", "fleet", "fleet")
+    need_installed("distributed", "fleet", "fleet")  # imported only when a cluster starts
     t0 = time.perf_counter()
     opts = opts or Options(checks=True)
     if not opts.checking:
@@ -312,6 +312,8 @@ def run_fleet(
                 f"compacted: {len(done.sizes_before)} files in the dataset, now "
                 f"{len(done.sizes_after)}"
             )
+    if tasks:  # the parts this run wrote into the `logs` index: the next rerun reads none
+        logs_rows(dataset, where)
     out.results = [by_path[p] for p, _ in logs if p in by_path]
     out.seconds = time.perf_counter() - t0
     if junit:

@@ -178,92 +178,22 @@ def recorded(
     return None
 
 
-# what a recorded row tells a rerun: its skip key, and the verdict a skipped log reports
-ROW_COLUMNS = (
-    *("source", "hash", "version", "config", "size", "mtime_ns", "run"),
-    *("status", "error", "frames", "findings", "violations", "skipped_lines", "format"),
-    "date",
-)
-
-
 def logs_rows(dataset: layout.Dataset, options: dict | None = None) -> dict[str, list[dict]] | None:
     """Every `logs` row of the dataset by source, read once (the driver's skip key, where
     the workers find a log's earlier parts, the run's counts), `date` as its folder names
     it; {} when there are none, None when they cannot be read (then every log is hashed
-    and looked up by its worker: never a wrong skip)."""
-    import pyarrow.dataset as pads
+    and looked up by its worker: never a wrong skip). Through the dataset's index of its
+    `logs` parts (fleet/logsindex): only the parts it does not hold yet are read."""
+    from cananalyze.fleet.logsindex import logs_rows as rows_of
 
-    if isinstance(dataset, str):
-        rows = _remote_logs_rows(dataset, options)
-        if rows is None:
-            return None
-    else:
-        where = str(dataset / "logs")
-        if not os.path.isdir(where):
-            return {}
-        try:
-            # the dataset's schema: parts written before a column was added read it as null
-            found = pads.dataset(
-                where, schema=schema.dataset_schema("logs"), partitioning=schema.partitioning()
-            )
-            rows = found.to_table(columns=list(ROW_COLUMNS)).to_pylist()
-        except (OSError, ValueError):
-            return None
+    rows = rows_of(dataset, options)
+    if rows is None:
+        return None
     out: dict[str, list[dict]] = {}
     for row in rows:
         row["date"] = layout.row_date(row["date"])
         out.setdefault(row["source"], []).append(row)
     return out
-
-
-def _remote_logs_rows(dataset: str, options: dict | None, chunk: int = 1000) -> list[dict] | None:
-    """The `logs` rows of a dataset at a URL: one listing of the table, then each file
-    fetched whole by concurrent GETs (`fs.cat`, a chunk of files at a time): one request
-    a file, as `pyarrow.dataset` over fsspec made, but not one file after another. A
-    file deleted since the listing (a compaction's input) is passed over: its logs are
-    hashed by their workers, never wrongly skipped."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    fs, base = storage.filesystem(dataset, options)
-    fs.invalidate_cache()
-    where = f"{base.rstrip('/')}/logs/"
-    try:
-        keys = sorted(k for k in fs.find(where) if k.endswith(".parquet") and "/date=" in k)
-    except FileNotFoundError:
-        return []
-    except OSError:
-        return None
-    want = schema.schema("logs")
-    columns = [c for c in ROW_COLUMNS if c != "date"]
-    rows: list[dict] = []
-    try:
-        for i in range(0, len(keys), chunk):
-            blobs = fs.cat(keys[i : i + chunk], on_error="omit")
-            for key, blob in blobs.items():
-                if not isinstance(blob, bytes | bytearray):
-                    continue
-                table = pq.read_table(pa.BufferReader(blob))
-                have = set(table.column_names)
-                date = layout.row_date(key.split("/date=", 1)[1].split("/", 1)[0])
-                n = table.num_rows
-                cols = {
-                    c: _as(table[c], want.field(c).type)
-                    if c in have
-                    else pa.nulls(n, want.field(c).type)
-                    for c in columns
-                }
-                for row in pa.table(cols).to_pylist():
-                    row["date"] = date
-                    rows.append(row)
-    except (OSError, ValueError):
-        return None
-    return rows
-
-
-def _as(column, typ):
-    """A column as the dataset's schema types it (a part written before a type changed)."""
-    return column if column.type == typ else column.cast(typ)
 
 
 def unchanged(rows: list[dict], size: int | None, mtime_ns: int | None, config: str):

@@ -120,3 +120,97 @@ def test_a_task_dask_runs_twice_is_counted_as_decoded_once(tmp_path, logs, clust
     assert not result.skipped and result.frames == row["frames"] > 0
     assert "(1 decoded, 0 already in the dataset)" in summary_lines(result)[0]
     assert f"{row['frames']:,} frames" in summary_lines(result)[0]
+
+
+@pytest.fixture
+def parts_read(monkeypatch) -> list[str]:
+    """Every `logs` part the driver reads itself (fleet/logsindex: the index holds the rest)."""
+    from cananalyze.fleet import logsindex
+
+    seen: list[str] = []
+    real = logsindex._read_parts
+
+    def counting(dataset, store, tags):
+        seen.extend(sorted(tags.values()))
+        return real(dataset, store, tags)
+
+    monkeypatch.setattr(logsindex, "_read_parts", counting)
+    return seen
+
+
+@pytest.fixture
+def opened() -> list[str]:
+    """Every file Python opens from now on (an audit hook: the readers, hashing, pyarrow's
+    Python-side opens), for the test's own filtering."""
+    import sys
+
+    seen: list[str] = []
+    active = [True]
+
+    def hook(event, args):
+        if active[0] and event == "open" and isinstance(args[0], str | bytes | os.PathLike):
+            seen.append(os.fsdecode(args[0]))
+
+    sys.addaudithook(hook)  # hooks cannot be removed: switched off after the test
+    yield seen
+    active[0] = False
+
+
+def test_a_rerun_with_nothing_to_do_reads_no_log_and_no_logs_part(
+    tmp_path, logs, cluster, hashed, parts_read, opened, monkeypatch
+):
+    """The run that decoded the logs leaves their `logs` rows in the dataset's index; a
+    rerun with nothing to do then reads the index alone: no input opened or hashed, no
+    `logs` part read, no cluster. A new log: the run reads its part once, at its end."""
+    dataset = tmp_path / "ds"
+    run_fleet(logs[:2], dataset, scheduler=cluster)
+    assert (dataset / "_index" / "logs.parquet").is_file()
+    parts_read.clear()
+    hashed.clear()
+    opened.clear()
+
+    def no_cluster(*a, **k):
+        raise AssertionError("a cluster was started for a rerun with nothing to do")
+
+    with monkeypatch.context() as m:
+        m.setattr(orchestrate, "_client", no_cluster)
+        again = run_fleet(logs[:2], dataset, scheduler=cluster)
+    assert (
+        len(again.skipped) == 2
+        and again.scheduler is None
+        and "no cluster" in (summary_lines(again)[0])
+    )
+    assert parts_read == [] and hashed == []
+    assert not [p for p in opened if p in logs or "/logs/date=" in p], opened
+    # a third log: decoded, and its `logs` part read once by the run that wrote it
+    third = run_fleet(logs, dataset, scheduler=cluster)
+    assert [r["source"] for r in third.results if not r["skipped"]] == [logs[2]]
+    assert logs[2] in opened  # the hook sees a log read (hashed, decoded)
+    (part,) = parts_read
+    assert part.startswith("date=") and part.endswith(".parquet")
+    parts_read.clear()
+    assert len(run_fleet(logs, dataset, scheduler=cluster).skipped) == 3 and parts_read == []
+
+
+def test_the_index_is_never_trusted_over_the_parts(tmp_path, logs, cluster, parts_read):
+    """A stale index (each part rewritten since: another configuration decoded the logs
+    again) or a broken one: its rows are not taken, the parts are read, the rerun
+    decodes what the dataset's own rows say it must."""
+    dataset = tmp_path / "ds"
+    index = dataset / "_index" / "logs.parquet"
+    run_fleet(logs, dataset, scheduler=cluster)
+    stale = index.read_bytes()  # rows saying: decoded under the default configuration
+    other = Options(checks=True, sdo_timeout=0.5)
+    assert not run_fleet(logs, dataset, other, scheduler=cluster).skipped
+    index.write_bytes(stale)
+    parts_read.clear()
+    # the parts are the other configuration's: under the default one, every log again
+    again = run_fleet(logs, dataset, scheduler=cluster)
+    assert not again.skipped and len(parts_read) >= 3
+    assert len(_logs(dataset)) == 3
+    index.write_bytes(b"not parquet")
+    parts_read.clear()
+    rerun = run_fleet(logs, dataset, scheduler=cluster)
+    assert len(rerun.skipped) == 3 and len(parts_read) == 3
+    parts_read.clear()
+    assert len(run_fleet(logs, dataset, scheduler=cluster).skipped) == 3 and parts_read == []

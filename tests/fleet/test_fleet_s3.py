@@ -334,7 +334,8 @@ def test_a_commit_lists_no_date_folders(s3, requests, capsys):
         fs.invalidate_cache()
         assert len(fs.glob(f"{ds}/frames/date=*/*.parquet")) == folders + 2
     assert lists[40] == lists[0], lists
-    assert lists[0] <= 8, lists  # the inputs, the logs table, the dataset: not per log
+    # the inputs, the logs table (before, and after to update its index), the dataset: not per log
+    assert lists[0] <= 9, lists
 
 
 def _generated(tmp_path: Path, n: int, frames: int = 2000, seed: int = 1) -> list[Path]:
@@ -459,18 +460,26 @@ def test_batch_on_the_bucket_shares_parts(s3, tmp_path, capsys):
         assert _counts("s3://bucket/b/batched", table) == _counts("s3://bucket/b/one", table)
 
 
-def test_a_rerun_reads_each_logs_file_with_one_request(s3, fleet, requests, capsys):
-    """The driver's one read of the `logs` table at a URL: a listing, then one GET a file
-    (fetched concurrently), no HEAD a file; nothing else read, no cluster."""
+def test_a_rerun_reads_the_logs_index_with_one_request(s3, fleet, requests, capsys):
+    """The driver's one read of the `logs` table at a URL: its listing and one GET, the
+    index the run that wrote the parts left (fleet/logsindex); no HEAD a file, nothing
+    else read, no cluster. Without the index: one GET a `logs` part (fetched
+    concurrently), and one PUT writing the index again for the next rerun."""
+    rerun = ["fleet", "s3://bucket/logs", "--out", "s3://bucket/ds", "--workers", "1"]
     requests.clear()
-    assert main(["fleet", "s3://bucket/logs", "--out", "s3://bucket/ds", "--workers", "1"]) in (
-        0,
-        1,
-    )
+    assert main(rerun) in (0, 1)
     assert "no cluster" in capsys.readouterr().err
     n = len(fleet["local"])
-    assert requests["GET"] == n, dict(requests)  # the logs parts; the inputs only listed
+    assert requests["GET"] == 1 and "PUT" not in requests, dict(requests)
     assert requests["HEAD"] <= 3 and requests["LIST"] <= 8, dict(requests)
+    s3["fs"].rm("bucket/ds/_index/logs.parquet")
+    requests.clear()
+    assert main(rerun) in (0, 1)
+    assert f"(0 decoded, {n} already in the dataset)" in capsys.readouterr().err
+    assert requests["GET"] in (n, n + 1) and requests["PUT"] == 1, dict(requests)
+    requests.clear()
+    assert main(rerun) in (0, 1)
+    assert requests["GET"] == 1 and "PUT" not in requests, dict(requests)
 
 
 def test_logs_rows_at_a_url_read_an_older_part_s_missing_columns_as_null(tmp_path):

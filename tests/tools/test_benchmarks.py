@@ -202,19 +202,32 @@ def test_bench_fleet(tmp_path):
 
 
 @pytest.mark.slow
-def test_bench_rerun_s3():
-    """Twenty logs already in a bucket dataset of moto's S3 on 127.0.0.1: the rerun reads
-    one GET a loose `logs` part, then one GET in all after `fleet compact`."""
+def test_bench_rerun_s3(tmp_path):
+    """Twenty logs already in a bucket dataset of moto's S3 on 127.0.0.1 and in a local
+    one: without the dataset's `logs` index the rerun reads one GET a loose `logs` part
+    (and writes the index: one PUT), with it one GET in all, loose or after `fleet
+    compact`; no cluster either way."""
     pytest.importorskip("moto.server")
     pytest.importorskip("s3fs")
-    lines = _run("bench_rerun_s3.py", "20", timeout=300).stdout.splitlines()
-    assert lines[0].startswith("rerun: 20 logs of "), lines
-    loose, compacted = (
-        next(x for x in lines if x.startswith(f"rerun {k}:")) for k in ("loose", "compacted")
+    out = _run(
+        "bench_rerun_s3.py", "20", "--storage", "s3,local", "--out", str(tmp_path), timeout=300
     )
-    assert re.search(rf"wall {NUMBER} s, CPU {NUMBER} s, requests GET 20 ", loose), loose
-    assert re.search(r"requests GET 1 ", compacted) and "no cluster" in compacted, compacted
-    assert any(x.startswith("compact: ") and "1 written" in x for x in lines), lines
+    lines = out.stdout.splitlines()
+    assert lines[0].startswith("s3: 20 logs of "), lines
+    s3 = {k: next(x for x in lines if x.startswith(f"rerun s3 {k} 1:")) for k in STATES}
+    assert re.search(rf"wall {NUMBER} s, CPU {NUMBER} s, .*requests GET 2[01] ", s3["no-index"])
+    assert "PUT 1" in s3["no-index"], s3
+    for state in ("loose", "compacted"):
+        assert re.search(r"requests GET 1 ", s3[state]) and "PUT" not in s3[state], s3
+    assert all("no cluster" in x for x in s3.values()), s3
+    assert any(x.startswith("compact s3: ") and "1 written" in x for x in lines), lines
+    assert any(x.startswith("s3 listing: 20 keys in 1 LIST pages") for x in lines), lines
+    for k in STATES:
+        line = next(x for x in lines if x.startswith(f"median rerun local {k} (1 runs):"))
+        assert re.search(rf"wall {NUMBER} s, CPU {NUMBER} s, peak RSS {NUMBER} MB", line), line
+
+
+STATES = ("no-index", "loose", "compacted")
 
 
 @pytest.mark.slow
