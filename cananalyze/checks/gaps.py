@@ -7,6 +7,7 @@ computes it once per batch with one stable sort, never a Python loop per frame.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -22,9 +23,13 @@ class Gaps:
     row: np.ndarray  # batch row of each frame
     starts: np.ndarray  # index of the first element of each key group
 
-    @property
+    @cached_property
     def gap(self) -> np.ndarray:
-        return self.t - self.prev
+        """t - prev, computed once for every rule and the timing that read it (read-only:
+        shared)."""
+        gap = self.t - self.prev
+        gap.flags.writeable = False
+        return gap
 
     def groups(self):
         """(key, slice) per key present in the batch: a loop over keys, not frames."""

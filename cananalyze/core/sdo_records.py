@@ -402,8 +402,12 @@ class SdoRecords:
 
     def defer(self, part: FastPart) -> None:
         """The reserved positions `part.at` are `part`'s transfers."""
-        for k, r in zip(part.at.tolist(), part.cols.row.tolist(), strict=True):
-            self._rows[k] = r
+        at, rows = part.at, part.cols.row.tolist()
+        if len(rows) == at.size and at.size and int(at[-1]) - int(at[0]) + 1 == at.size:  # one run
+            self._rows[int(at[0]) : int(at[-1]) + 1] = rows
+        else:
+            for k, r in zip(at.tolist(), rows, strict=True):
+                self._rows[k] = r
         self._fast.append(part)
         self._cols = self._table = self._fields = None
 

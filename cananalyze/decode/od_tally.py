@@ -211,19 +211,24 @@ class OdTally:
                     got = (rows[sel], np.asarray(blk.columns[name])[sel], name, blk.units)
                     parts.setdefault((bus, node, lv, index, sub), []).append(got)
         for key, got in parts.items():
-            rows = np.concatenate([g[0] for g in got])
-            values = np.concatenate([g[1] for g in got])
-            if len(got) > 1:
+            if len(got) == 1:  # the usual case: one block, its rows already ascending
+                rows, values = got[0][0], got[0][1]
+            else:
+                rows = np.concatenate([g[0] for g in got])
+                values = np.concatenate([g[1] for g in got])
                 order = np.argsort(rows, kind="stable")
                 rows, values = rows[order], values[order]
-            self._update(key, fb.t[rows], values, got[0][2], got[0][3])
+            # only the first and last times are read: two lookups, not a gather of every row
+            t = (float(fb.t[rows[0]]), float(fb.t[rows[-1]]))
+            self._update(key, t, values, got[0][2], got[0][3])
             self.mapped[key].row = int(rows[-1]) + self._off
 
-    def _update(self, key: tuple, t: np.ndarray, values: np.ndarray, name: str, units) -> None:
+    def _update(self, key: tuple, t: tuple, values: np.ndarray, name: str, units) -> None:
+        """`t`: the first and last row's times."""
         m = self.mapped.get(key)
         if m is None:
             first = _scalar(values[0])
-            m = self.mapped[key] = _Mapped(name, float(t[0]), float(t[0]), first, units.get(name))
+            m = self.mapped[key] = _Mapped(name, t[0], t[0], first, units.get(name))
             m.history.append(scalar_text(first))
         changed = np.flatnonzero(values[1:] != values[:-1]) + 1
         if m.frames and _scalar(values[0]) != m.last:
@@ -233,7 +238,7 @@ class OdTally:
         m.more = m.more or changed.size > room
         m.changes += int(changed.size)
         m.frames += int(values.size)
-        m.last, m.t = _scalar(values[-1]), float(t[-1])
+        m.last, m.t = _scalar(values[-1]), t[1]
 
     def boot_times(self, bus: str | None, node: int) -> list[float]:
         """The node's boot-up times (`bus` None: a log of one bus, whatever its channel)."""

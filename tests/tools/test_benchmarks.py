@@ -35,6 +35,7 @@ SMOKED = {
     "bench_tables.py",
     "bench_precision.py",
     "mem_profile.py",
+    "thread_cpu.py",
     "fuzz_campaign.py",
 }
 NUMBER = r"\d+(\.\d+)?"
@@ -441,6 +442,20 @@ def test_mem_profile_runs_the_command_and_reports_peaks(tmp_path):
     assert 20 < peak < 2000
     if sys.platform.startswith("linux") and hasattr(ctypes.CDLL(None), "mallinfo2"):
         assert "malloc in use: max" in last  # glibc 2.33+
+
+
+def test_thread_cpu_medians_per_thread_for_both_trees(tmp_path):
+    out = tmp_path / "pq"
+    args = ("export", str(SAMPLES / "faults.log"), "--parquet", str(out), *DEVICES[:2], "-q")
+    done = _run("thread_cpu.py", "--repeat", "2", "--against", str(ROOT), "--", *args)
+    assert pq.read_table(out / "frames.parquet").num_rows == 933  # the command itself ran
+    rows = {line.split()[0]: line.split()[1:] for line in done.stdout.splitlines()[3:]}
+    for name in ("main", "cananalyze-reader", "table-writer", "process"):
+        assert name in rows, done.stdout
+    main, other, ratio = rows["main"]
+    assert re.fullmatch(NUMBER + "s", main) and re.fullmatch(NUMBER + "s", other)
+    assert 0 < float(main[:-1]) <= float(rows["process"][-3][:-1]) + 0.05
+    assert re.fullmatch(NUMBER + "x", ratio)
 
 
 def test_arrow_column_waits_for_a_whole_pyarrow(monkeypatch):
