@@ -91,7 +91,10 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
         bytecols.hex_bytes(data, shown_bytes),
         bytecols.repeat(b'"', n),
     ]
-    parts += [table[((flags & flag) != 0).astype(np.intp)] for flag, table in _FLAGS]
+    seen = int(np.bitwise_or.reduce(flags)) if n else 0  # a flag no row has: no column
+    parts += [
+        table[((flags & flag) != 0).astype(np.intp)] for flag, table in _FLAGS if seen & flag
+    ]
     parts += [
         bytecols.repeat(b',"service":', n),
         _SERVICE[svc],
