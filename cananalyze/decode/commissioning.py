@@ -125,6 +125,7 @@ class Commissioning:
     ) -> None:
         self.model = model
         self.bursts = Bursts(bitrate) if bitrate else None
+        self.span: tuple[float, float] | None = None  # the log's earliest and latest time
         self.heartbeat_ms = heartbeat_ms  # (node, t) -> the 0x1017 in force, or None
         self.boot = BootFollower()
         self.lss = _Placed()
@@ -147,6 +148,9 @@ class Commissioning:
             if self.bursts is not None:
                 fb = batch.frames
                 self.bursts.add(t, frame_bits(fb.flags, fb.dlc))
+                lo, hi = float(t.min()), float(t.max())
+                span = self.span
+                self.span = (lo, hi) if span is None else (min(span[0], lo), max(span[1], hi))
         self.boot.add(batch)
         known = len(self.lss.assignments)
         self._lss(batch, self.lss.add(batch), known)
@@ -172,6 +176,9 @@ class Commissioning:
             timed=timed,
         )
         batch.commissioning.extend(boot_item(s) for s in self.stories if s.t_boot is not None)
-        rec = self.bursts.record() if self.bursts is not None and self.timed else None
+        # as the summary judged it: a log with times (decided as the checks decide, so a
+        # frame at a time, as live feeds them, is judged like one batch) and a duration
+        spread = self.span is not None and self.span[1] > self.span[0]
+        rec = self.bursts.record() if self.bursts is not None and timed and spread else None
         if rec is not None:
             batch.commissioning.append(burst_item(rec))
