@@ -94,23 +94,30 @@ class Requests(logging.Handler):
             self.counts["LIST" if listing else method] += 1
 
 
+def start_s3():
+    """(moto's S3 server started on a free port of 127.0.0.1, its `Requests` counter, its
+    endpoint URL)."""
+    from moto.server import ThreadedMotoServer
+
+    requests = Requests()
+    log = logging.getLogger("werkzeug")
+    log.setLevel(logging.INFO)
+    log.addHandler(requests)
+    log.propagate = False
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    server = ThreadedMotoServer(ip_address="127.0.0.1", port=port, verbose=False)
+    server.start()
+    return server, requests, f"http://127.0.0.1:{port}"
+
+
 class S3:
     """moto's S3 server on 127.0.0.1 with one bucket, the logs uploaded under `logs/`."""
 
     def __init__(self, folder: Path) -> None:
-        from moto.server import ThreadedMotoServer
-
-        self.requests = Requests()
-        log = logging.getLogger("werkzeug")
-        log.setLevel(logging.INFO)
-        log.addHandler(self.requests)
-        log.propagate = False
-        with socket.socket() as s:
-            s.bind(("127.0.0.1", 0))
-            port = s.getsockname()[1]
-        self.server = ThreadedMotoServer(ip_address="127.0.0.1", port=port, verbose=False)
-        self.server.start()
-        self.env = {**CREDENTIALS, "AWS_ENDPOINT_URL": f"http://127.0.0.1:{port}"}
+        self.server, self.requests, url = start_s3()
+        self.env = {**CREDENTIALS, "AWS_ENDPOINT_URL": url}
         import s3fs
 
         self.fs = s3fs.S3FileSystem(

@@ -26,10 +26,8 @@ import argparse
 import contextlib
 import hashlib
 import io
-import logging
 import os
 import shutil
-import socket
 import statistics
 import subprocess
 import sys
@@ -47,7 +45,7 @@ INDEX = "_index/logs.parquet"  # the dataset's index of its `logs` rows (fleet/l
 STATES = ("no-index", "loose", "compacted")
 FORMAT = 2  # of the local logs and dataset kept in --out: made again when it changes
 
-from bench_fleet import Requests  # noqa: E402 - the S3 server's requests, counted by method
+from bench_fleet import CREDENTIALS, Requests, start_s3  # noqa: E402 - moto's S3, its requests counted
 
 
 def run(
@@ -184,26 +182,11 @@ class S3:
     def __init__(self, n: int, work: Path, errors: Path) -> None:
         import pyarrow.parquet as pq
         import s3fs
-        from moto.server import ThreadedMotoServer
 
         from cananalyze.core import storage
 
-        self.requests = Requests()
-        log = logging.getLogger("werkzeug")
-        log.setLevel(logging.INFO)
-        log.addHandler(self.requests)
-        log.propagate = False
-        with socket.socket() as s:
-            s.bind(("127.0.0.1", 0))
-            port = s.getsockname()[1]
-        self.server = ThreadedMotoServer(ip_address="127.0.0.1", port=port, verbose=False)
-        self.server.start()
-        os.environ.update(
-            AWS_ACCESS_KEY_ID="testing",
-            AWS_SECRET_ACCESS_KEY="testing",
-            AWS_DEFAULT_REGION="us-east-1",
-            AWS_ENDPOINT_URL=f"http://127.0.0.1:{port}",
-        )
+        self.server, self.requests, url = start_s3()
+        os.environ.update(CREDENTIALS, AWS_ENDPOINT_URL=url)
         self.fs = fs = s3fs.S3FileSystem(endpoint_url=os.environ["AWS_ENDPOINT_URL"])
         fs.mkdir(BUCKET)
         data, one = _one_log(work, self.requests, errors)

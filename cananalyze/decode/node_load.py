@@ -28,7 +28,6 @@ def run_bitrate(run) -> int | None:
 
 @dataclass
 class NodeLoad:
-    bitrate: int | None = None  # the run's (the decoder followed the bursts at it)
     sent: dict = field(default_factory=dict)  # channel name -> (frames[128], bits[128])
     # channel name -> the longest burst {frames, t_start, t_end} (the decoder's event)
     bursts: dict = field(default_factory=dict)

@@ -89,10 +89,11 @@ class FindingsSink(Sink):
         self._sorted = False  # findings is every part, sorted, its live rows read again
         self._staged: list[Staged] = []  # JUnit/JSON written, waiting for the commit
         self.load = NodeLoad()  # --timing: bus load per node, as `decode --summary`'s
+        self.bitrate: int | None = None  # the run's (open)
 
     def open(self, run) -> None:
         super().open(run)
-        self.load.bitrate = run_bitrate(run)
+        self.bitrate = run_bitrate(run)
         if self.junit or self.json_file:
             from cananalyze.core.atomic import check_writable
 
@@ -168,7 +169,7 @@ class FindingsSink(Sink):
                     print("\n".join(checker.timing_lines(0.0)), file=out)
                 else:
                     lines = checker.timing_lines(checker.t0)
-                    lines += self.load.lines(self.load.bitrate, timed=True)
+                    lines += self.load.lines(self.bitrate, timed=True)
                     print("\n".join(lines), file=out)
             failing = int(findings.fails.sum())
             names = ", ".join(r.name for r in rules)

@@ -482,10 +482,6 @@ class SummarySink(Sink):
         self.fmt = fmt
         self.summary = Summary()
 
-    def open(self, run) -> None:
-        super().open(run)
-        self.summary.load.bitrate = run_bitrate(run)
-
     def write(self, batch: DecodedBatch) -> None:
         self.summary.add(batch)
 

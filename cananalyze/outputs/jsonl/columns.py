@@ -91,10 +91,8 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
         bytecols.hex_bytes(data, shown_bytes),
         bytecols.repeat(b'"', n),
     ]
-    seen = int(np.bitwise_or.reduce(flags)) if n else 0  # a flag no row has: no column
-    parts += [
-        table[((flags & flag) != 0).astype(np.intp)] for flag, table in _FLAGS if seen & flag
-    ]
+    seen = int(np.bitwise_or.reduce(flags))  # a flag no row has: no column
+    parts += [table[((flags & flag) != 0).astype(np.intp)] for flag, table in _FLAGS if seen & flag]
     parts += [
         bytecols.repeat(b',"service":', n),
         _SERVICE[svc],

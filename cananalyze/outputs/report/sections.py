@@ -192,9 +192,7 @@ def nodes(s, figs: Figures) -> dict:
 
     model = s.run.network
     rows = s.tally.rows(
-        node_profiles(model) if model is not None else {},
-        bus_profiles(s.run.decoder),
-        s.bitrate if s.timed else None,
+        node_profiles(model) if model is not None else {}, bus_profiles(s.run.decoder)
     )
     configs = _Configs(s)
     timeline = None
