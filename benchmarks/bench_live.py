@@ -126,8 +126,8 @@ class Measure(Sink):
 
 
 # A Foxglove WebSocket client (its own process: it must not share this one's GIL) that
-# subscribes to every advertised channel and, when the server goes away, prints the
-# messages it got per topic.
+# subscribes to every advertised channel and, at the server's end message (or when the
+# server goes away), prints the messages it got per topic.
 CLIENT = r"""
 import json, struct, sys
 from websockets.sync.client import connect
@@ -151,6 +151,8 @@ with connect(sys.argv[1], subprotocols=["foxglove.sdk.v1", "foxglove.websocket.v
             elif m[0] == 1:
                 topic = chan[subs[struct.unpack_from("<I", m, 1)[0]]]
                 counts[topic] = counts.get(topic, 0) + 1
+                if topic == sys.argv[2]:  # the server's last message: all is here
+                    break
     except ConnectionClosed:
         pass
 print(json.dumps(counts), flush=True)
@@ -221,7 +223,7 @@ def main(argv: list[str] | None = None) -> int:
         sinks.append(TextWriter(devnull, flush=True))
     client = fox = None
     if args.foxglove:
-        from cananalyze.outputs.foxglove.sink import FoxgloveSink
+        from cananalyze.outputs.foxglove.sink import END_TOPIC, FoxgloveSink
 
         fox = FoxgloveSink(port=0, announce=False)
         sinks.append(fox)
@@ -241,7 +243,9 @@ def main(argv: list[str] | None = None) -> int:
         nonlocal client
         if fox is not None:  # the client subscribes before the traffic starts
             client = subprocess.Popen(
-                [sys.executable, "-c", CLIENT, fox.url], stdout=subprocess.PIPE, text=True
+                [sys.executable, "-c", CLIENT, fox.url, END_TOPIC],
+                stdout=subprocess.PIPE,
+                text=True,
             )
             assert client.stdout.readline().strip() == "connected"
             deadline = time.monotonic() + 10

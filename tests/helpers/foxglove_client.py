@@ -17,6 +17,9 @@ import struct
 import threading
 import time
 
+# cananalyze's server sends this topic's message last, then waits for its clients to go
+from cananalyze.outputs.foxglove.sink import END_TOPIC
+
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 MESSAGE_DATA = 0x01
 
@@ -74,6 +77,8 @@ class FoxgloveClient:
                         sub, t = struct.unpack_from("<IQ", msg, 1)
                         topic = self.channels[self.subscribed[sub]]["topic"]
                         self.messages.setdefault(topic, []).append((t, json.loads(msg[13:])))
+                        if topic == END_TOPIC:  # the server's last: every message is here
+                            break
         except BaseException as exc:  # noqa: BLE001 - kept for the test to report
             self.error = exc
             self._ready.set()

@@ -16,7 +16,7 @@ from helpers.foxglove_client import FoxgloveClient
 from cananalyze.core.errors import ProblemLog, UsageError
 from cananalyze.core.frames import FrameBatch
 from cananalyze.formats.source import read_all
-from cananalyze.outputs.foxglove.sink import FoxgloveSink, parse_address
+from cananalyze.outputs.foxglove.sink import END_TOPIC, FoxgloveSink, parse_address
 from cananalyze.outputs.mcap.sink import McapSink
 from cananalyze.pipeline import Options, build_decoder, run
 
@@ -79,6 +79,12 @@ def test_client_receives_what_export_mcap_writes(tmp_path):
     # every topic advertised by the end of the first half, message for message
     topics = client.topics_subscribed()
     assert {"/can/frames", "/canopen/events", "/node/5/tpdo2", "/node/3/tpdo2"} <= topics
+    # live only: the server's last message, after which the client left with everything
+    (end,) = client.messages.pop(END_TOPIC)
+    assert end[1]["message"] == f"live decode ended: {fox.sent - 1} messages served"
+    assert end[0] == int(round(fb.t[-1] * 1e9))  # on the log's clock, as every message
+    assert fox.sent == sum(map(len, client.messages.values())) + 1
+    topics.discard(END_TOPIC)
     key = lambda tm: (tm[0], json.dumps(tm[1], sort_keys=True))  # noqa: E731
     for topic in topics:
         got = sorted(map(key, client.messages.get(topic, [])))

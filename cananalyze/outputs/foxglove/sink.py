@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +46,12 @@ BACKLOG = 1 << 16
 # checks the installed SDK against it); the old name alone is refused with HTTP 400
 ACCEPTED_SUBPROTOCOLS = ("foxglove.sdk.v1",)
 REFUSED_SUBPROTOCOLS = ("foxglove.websocket.v1",)
+# live only (not in export --mcap, where the file's end says it): the last message a
+# stopping server sends; it follows every other message in a client's queue
+END_TOPIC = "/cananalyze/end"
+# seconds a stopping server waits for subscribed clients to leave (a client that leaves
+# on END_TOPIC's message goes at once, one that does not, such as Foxglove, costs this)
+LINGER = 2.0
 
 
 def parse_address(text: str | None) -> tuple[str, int]:
@@ -83,6 +90,7 @@ class FoxgloveSink(Sink):
         self._offset = 0
         self._buses = False  # several buses seen: decoded topics per bus (as export --mcap)
         self._file = ""
+        self._last_ns = 0  # the last frame's time: the end message's log time
         self.sent = 0  # messages handed to the server (for subscribed channels)
         self.served = 0  # batches served
 
@@ -117,6 +125,7 @@ class FoxgloveSink(Sink):
 
         self._channel(("frames",), FRAMES_TOPIC, FRAME_SCHEMA)
         self._channel(("events",), EVENTS_TOPIC, LOG_SCHEMA)
+        self._channel(("end",), END_TOPIC, LOG_SCHEMA)
         if self.announce:
             print(
                 f"foxglove: serving ws://{self.host}:{self.port} to clients that speak "
@@ -154,6 +163,8 @@ class FoxgloveSink(Sink):
             ok = (events.row != NO_ROW) & (local >= 0) & (local < len(fb))
             lines[ok] = fb.line[local[ok]]
         self._offset += len(fb)
+        if len(fb):
+            self._last_ns = int(round(float(fb.t[-1]) * 1e9))
         self._buses = self._buses or len(fb.channels) > 1
         blocks = [(b.node, b.pdo, b.cob_id, b.rows, b.columns, b.units) for b in batch.signals]
         for key, topic, schema, ns, payload in batch_messages(
@@ -193,8 +204,33 @@ class FoxgloveSink(Sink):
         self._stop()
 
     def _stop(self) -> None:
-        if self.server is not None:
-            for ch in self._channels.values():
-                ch.close()
-            self.server.stop()
-            self.server = None
+        """Hand the clients the last messages, then stop the server.
+
+        foxglove-sdk has no flush: stopping sends each client Close without draining its
+        queue (`connected_client/poller.rs`), so messages logged just before, such as the
+        longest burst that only the end of a run knows, were lost. One queue per client
+        is first in first out, so a client that has END_TOPIC's message has every message
+        before it; the server waits (at most LINGER s) until its subscribed clients left.
+        """
+        if self.server is None:
+            return
+        end = self._channels.get(END_TOPIC)
+        if end is not None and end.has_sinks():
+            now = self._last_ns or time.time_ns()
+            doc = {
+                "timestamp": {"sec": now // 1_000_000_000, "nsec": now % 1_000_000_000},
+                "level": 2,
+                "message": f"live decode ended: {self.sent} messages served",
+                "name": "cananalyze",
+                "file": self._file,
+                "line": 0,
+            }
+            end.base.log(json.dumps(doc).encode(), now)
+            self.sent += 1
+        deadline = time.monotonic() + LINGER
+        while time.monotonic() < deadline and any(c.has_sinks() for c in self._channels.values()):
+            time.sleep(0.01)
+        for ch in self._channels.values():
+            ch.close()
+        self.server.stop()
+        self.server = None
