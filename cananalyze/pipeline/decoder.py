@@ -299,10 +299,10 @@ def merge_ends(parts: list[DecodedBatch]) -> DecodedBatch:
     out.records = SdoRecords([r for p in parts for r in p.records])
     of_part = np.repeat(np.arange(len(parts)), [len(p.records) for p in parts])
     out.record_bus = _bus_names([p.bus for p in parts], of_part)
-    out.bus = None
     out.drive = [c._replace(bus=p.bus) for p in parts for c in p.drive]
     out.commissioning = [c._replace(bus=p.bus) for p in parts for c in p.commissioning]
     out.findings = FindingColumns.concat([p.findings for p in parts]).sort()
+    out.bus = None  # last: `out` is the first bus's part, whose name its items take above
     return out
 
 

@@ -5,6 +5,7 @@ Every test here fails when one decoder takes every bus (their traffic merged).""
 
 from __future__ import annotations
 
+import collections
 import json
 import threading
 import time
@@ -1003,6 +1004,28 @@ def test_jsonl_sdo_records_say_which_bus(tmp_path, capsys):
     recs = [json.loads(ln) for ln in capsys.readouterr().out.splitlines()]
     assert [r for r in recs if r["kind"] == "sdo" and "bus" in r] == []
     assert len([r for r in recs if r["kind"] == "sdo"]) == 3
+
+
+def test_end_of_log_records_say_which_bus(tmp_path, capsys):
+    """The boot stories and longest burst that only the end of the log completes: on a
+    log of the commissioning sample's traffic on can0, then again on can1, each JSON line
+    and each event names its bus, the first bus's too (they were merged under no bus)."""
+    from conftest import SAMPLES
+
+    from cananalyze.cli.main import main
+
+    with can.LogReader(str(SAMPLES / "commissioning.log")) as reader:
+        frames = [(m.timestamp, f"{m.arbitration_id:03X}#{m.data.hex().upper()}") for m in reader]
+    lines = [(t + shift, ch, f) for shift, ch in ((0, "can0"), (1000, "can1")) for t, f in frames]
+    log = _log(tmp_path, lines)
+    main(["decode", str(log), "--format", "jsonl", "--bitrate", "500000"])
+    recs = [json.loads(ln) for ln in capsys.readouterr().out.splitlines()]
+    for kind in ("boot", "burst"):
+        got = collections.Counter(r.get("bus") for r in recs if r["kind"] == kind)
+        assert set(got) == {"can0", "can1"} and got["can0"] == got["can1"] > 0, (kind, got)
+    ev = load(str(log), bitrate=500000).events
+    boots = ev[ev.kind.isin(["boot", "burst"])]
+    assert boots.bus.notna().all() and set(boots.bus) == {"can0", "can1"}
 
 
 # --- load()'s assert_* helpers judge each bus on its own ---------------------------------
