@@ -508,16 +508,20 @@ def test_live_recording_on_a_virtual_bus(tmp_path, monkeypatch, capsysbinary):
                 tx.send(msg)
                 if k % 10 == 0:
                     time.sleep(0.002)
-            time.sleep(0.3)
+            # stopped once every frame is through (not after a fixed pause: a loaded
+            # machine can keep the reader from the virtual bus's queue for longer)
+            deadline = time.monotonic() + 60
+            while sum(map(len, seen)) < len(sent) and time.monotonic() < deadline:
+                time.sleep(0.01)
         finally:
             tx.shutdown()
             source.stop()
 
     rec_path = tmp_path / "live.mcap"
     recorder = FrameRecorder(rec_path)
+    seen = []
     th = threading.Thread(target=pump)
     th.start()
-    seen = []
     try:
         for fb in source.batches():
             if len(fb):
