@@ -104,13 +104,26 @@ def load_windows(
 
 def bits_per_node(flags: np.ndarray, dlc: np.ndarray, node: np.ndarray, sent: np.ndarray):
     """(frames, nominal bits) per node-ID 0..127 of the frames each node sent itself
-    (`sent`: a row mask, decode/senders.SENT of its service), int64 arrays of 128."""
-    keep = sent & (node >= 0) & (node < 128)
-    at = node[keep].astype(np.intp)
-    frames = np.bincount(at, minlength=128)
-    shape = (flags[keep] & _SHAPE_FLAGS).astype(np.intp) << 8
-    shape |= dlc[keep]
-    bits = np.bincount(at, weights=_BITS_OF_SHAPE[shape], minlength=128)
+    (`sent`: a row mask, decode/senders.SENT of its service), int64 arrays of 128.
+
+    Every row goes to a bin (a frame no node sent, bin 0, dropped), not a masked copy
+    of the rows; classic standard frames, nearly all of a CANopen bus, in one integer
+    bincount of (node, length): a third of the masked-copy version's CPU."""
+    if node.size and not (int(node.min()) >= -1 and int(node.max()) <= 127):
+        keep = (node >= -1) & (node <= 127)  # not a node-ID: not counted
+        flags, dlc, node, sent = flags[keep], dlc[keep], node[keep], sent[keep]
+    at = node.astype(np.intp)
+    at += 1
+    at *= sent
+    if not (flags & _SHAPE_FLAGS).any() and int(dlc.max(initial=0)) < 16:
+        at <<= 4
+        at |= dlc
+        counts = np.bincount(at, minlength=129 * 16).reshape(129, 16)[1:]
+        return counts.sum(axis=1), counts @ _BITS_OF_SHAPE[:16]
+    frames = np.bincount(at, minlength=129)[1:]
+    shape = (flags & _SHAPE_FLAGS).astype(np.intp) << 8
+    shape |= dlc
+    bits = np.bincount(at, weights=_BITS_OF_SHAPE[shape], minlength=129)[1:]
     return frames, bits.astype(np.int64)
 
 
