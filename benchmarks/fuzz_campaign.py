@@ -24,10 +24,12 @@ leftover files; the first input of each distinct failure is saved to --out.
 from __future__ import annotations
 
 import argparse
+import atexit
 import os
 import random
 import resource
 import select
+import shutil
 import signal
 import sys
 import tempfile
@@ -192,6 +194,9 @@ def main(argv: list[str] | None = None) -> int:
         help="only these kinds of case (repeatable; default all, logs weighted 3)",
     )
     a = ap.parse_args(argv)
+    if "CANANALYZE_CACHE" not in os.environ:  # the device files' facts: not the user's cache
+        os.environ["CANANALYZE_CACHE"] = tempfile.mkdtemp(prefix="cananalyze-fuzz-cache-")
+        atexit.register(shutil.rmtree, os.environ["CANANALYZE_CACHE"], True)
     kinds = a.kind or KINDS
     rng = random.Random(a.seed)
     out = Path(a.out)

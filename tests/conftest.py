@@ -2,11 +2,21 @@
 
 from __future__ import annotations
 
+import atexit
+import os
+import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
+
+# device files' parsed facts (devices/od_facts.py) cached in a folder of the run's own, not
+# the user's ~/.cache; inherited by the commands the tests start
+if "CANANALYZE_CACHE" not in os.environ:
+    os.environ["CANANALYZE_CACHE"] = tempfile.mkdtemp(prefix="cananalyze-test-cache-")
+    atexit.register(shutil.rmtree, os.environ["CANANALYZE_CACHE"], True)
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared"

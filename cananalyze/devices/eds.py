@@ -166,7 +166,11 @@ def variable(od, index: int, subindex: int):
 
 
 def object_info(od, index: int, subindex: int, node_id: int | None) -> ObjectInfo | None:
-    var = variable(od, index, subindex)
+    return info_of(variable(od, index, subindex), index, subindex, node_id)
+
+
+def info_of(var, index: int, subindex: int, node_id: int | None) -> ObjectInfo | None:
+    """ObjectInfo of a canopen ODVariable (or `od_facts.Var`: the same attributes)."""
     if var is None:
         return None
     return ObjectInfo(

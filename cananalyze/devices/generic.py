@@ -10,9 +10,10 @@ a frame is decoded as far as it reaches and its length is not judged against a g
 
 from __future__ import annotations
 
-from functools import cache
+from functools import cache, partial
 
 from cananalyze.devices.family import FAMILIES, KEYS
+from cananalyze.devices.od_facts import OdFacts, Var
 from cananalyze.devices.profile import DeviceProfile, signal_name
 from cananalyze.devices.sidecar import Sidecar, SignalSpec
 
@@ -20,59 +21,44 @@ NAMES = {402: "CiA 402 drive (profile defaults)", 401: "CiA 401 generic I/O (pro
 U8, U16, U32 = 0x05, 0x06, 0x07
 
 
-def _var(name: str, index: int, sub: int, datatype: int, raw: str | None):
-    from canopen.objectdictionary import ODVariable
-
-    var = ODVariable(name, index, sub)
-    var.data_type = datatype
-    var.access_type = "rw"
-    if raw is not None:
-        var.default_raw = raw
-        if "$NODEID" not in raw:
-            var.default = int(raw, 0)
-    return var
+def _var(name: str, index: int, sub: int, datatype: int, raw: str | None) -> tuple:
+    """(sub-index, Var) as canopen reads such an entry from an EDS (DefaultValue=raw)."""
+    default = int(raw, 0) if raw is not None and "$NODEID" not in raw else None
+    return sub, Var(name, datatype, False, None, raw, None, default)
 
 
-def _record(name: str, index: int, subs: list):
-    from canopen.objectdictionary import ODRecord
-
-    rec = ODRecord(name, index)
-    for var in subs:
-        rec.add_member(var)
-    return rec
-
-
-@cache
-def generic_profile(profile: int) -> DeviceProfile:
-    """The profile for device type `profile` (402, 401), built once."""
-    from canopen.objectdictionary import ObjectDictionary
-
+def _objects(profile: int) -> dict[int, tuple[str, str, dict]]:
+    """{index: (kind, name, {sub: Var})}: the profile's objects and its default PDOs, the
+    one source of both its facts and its canopen dictionary."""
     table = FAMILIES[profile]
-    od = ObjectDictionary()
-    od.add_object(_var("Device type", 0x1000, 0, U32, f"0x{profile:08X}"))
+    out = {
+        0x1000: (
+            "var",
+            "Device type",
+            dict([_var("Device type", 0x1000, 0, U32, f"0x{profile:08X}")]),
+        )
+    }
     by_index: dict[int, list] = {}
     for (index, sub), (name, datatype, _) in table.OBJECTS.items():
         by_index.setdefault(index, []).append(_var(name, index, sub, datatype, None))
     for index, subs in sorted(by_index.items()):
-        if len(subs) == 1 and subs[0].subindex == 0:
-            od.add_object(subs[0])
+        if len(subs) == 1 and subs[0][0] == 0:
+            out[index] = ("var", subs[0][1].name, dict(subs))
         else:
-            count = max(v.subindex for v in subs)
-            od.add_object(
-                _record(subs[0].name, index, [_var("count", index, 0, U8, str(count)), *subs])
-            )
+            count = max(sub for sub, _ in subs)
+            members = [_var("count", index, 0, U8, str(count)), *subs]
+            out[index] = ("record", subs[0][1].name, dict(members))
     for (direction, number), entries in sorted(table.DEFAULT_PDOS.items()):
         comm = (0x1800 if direction == "tx" else 0x1400) + number - 1
         cob = (0x180 if direction == "tx" else 0x200) + 0x100 * (number - 1)
-        od.add_object(
-            _record(
-                f"{direction.upper()}PDO{number} communication parameter",
-                comm,
-                [
-                    _var("count", comm, 0, U8, "5"),
-                    _var("COB-ID", comm, 1, U32, f"$NODEID+0x{cob:X}"),
-                ],
-            )
+        members = [
+            _var("count", comm, 0, U8, "5"),
+            _var("COB-ID", comm, 1, U32, f"$NODEID+0x{cob:X}"),
+        ]
+        out[comm] = (
+            "record",
+            f"{direction.upper()}PDO{number} communication parameter",
+            dict(members),
         )
         mapping = comm + 0x200
         words = []
@@ -81,13 +67,48 @@ def generic_profile(profile: int) -> DeviceProfile:
                 table.OBJECTS[(index, sub)][1]
             ]
             words.append(_var(f"entry {k}", mapping, k, U32, f"0x{index:04X}{sub:02X}{bits:02X}"))
-        od.add_object(
-            _record(
-                f"{direction.upper()}PDO{number} mapping parameter",
-                mapping,
-                [_var("count", mapping, 0, U8, str(len(words))), *words],
-            )
+        members = [_var("count", mapping, 0, U8, str(len(words))), *words]
+        out[mapping] = (
+            "record",
+            f"{direction.upper()}PDO{number} mapping parameter",
+            dict(members),
         )
+    return out
+
+
+def _dictionary(profile: int):
+    """The objects as canopen's ObjectDictionary (the simulator and DCF output read it)."""
+    from canopen.objectdictionary import ObjectDictionary, ODRecord, ODVariable
+
+    def variable(index: int, sub: int, v: Var):
+        var = ODVariable(v.name, index, sub)
+        var.data_type = v.data_type
+        var.access_type = "rw"
+        if v.default_raw is not None:
+            var.default_raw = v.default_raw
+            if v.default is not None:
+                var.default = v.default
+        return var
+
+    od = ObjectDictionary()
+    for index, (kind, name, subs) in _objects(profile).items():
+        if kind == "var":
+            od.add_object(variable(index, 0, subs[0]))
+        else:
+            rec = ODRecord(name, index)
+            for sub, v in subs.items():
+                rec.add_member(variable(index, sub, v))
+            od.add_object(rec)
+    return od
+
+
+@cache
+def generic_profile(profile: int) -> DeviceProfile:
+    """The profile for device type `profile` (402, 401), built once; canopen's dictionary
+    of it only when something asks for the whole dictionary."""
+    table = FAMILIES[profile]
+    objects = {index: (kind, subs) for index, (kind, _, subs) in _objects(profile).items()}
+    info = {"vendor_number": None, "product_number": None, "product_name": None}
     key = next(k for k, v in KEYS.items() if v == profile)
     sidecar = Sidecar(
         key=key,
@@ -109,7 +130,8 @@ def generic_profile(profile: int) -> DeviceProfile:
             "is given; PDO mappings are the standard's defaults until the log shows the real ones"
         ],
         source=f"CiA {profile} tables (cananalyze/devices/cia{profile}.py)",
-        od=od,
+        facts=OdFacts(objects, info, None),
+        load_od=partial(_dictionary, profile),
         sidecar=sidecar,
         generic=True,
     )

@@ -10,11 +10,14 @@ objects against the built-ins.
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 from cananalyze.core.text import printable, printable_or_none
-from cananalyze.devices.eds import ObjectInfo, effective_value, object_info, read_od, variable
+from cananalyze.devices.eds import ObjectInfo, effective_value, info_of, read_od, variable
+from cananalyze.devices.od_facts import UNSURE, OdFacts, load_facts
 from cananalyze.devices.sidecar import Sidecar, load_sidecar
 from cananalyze.protocol.datatypes import DATA_TYPES, DUMMY_INDICES
 from cananalyze.protocol.pdo_map import MapEntry, PdoConfig, split_cob_id, split_mapping_word
@@ -38,10 +41,21 @@ class DeviceProfile:
     device_name: str | None
     notes: list[str]
     source: str
-    od: object = field(repr=False)
+    # what decoding asks of the dictionary, without canopen (`od_facts`)
+    facts: OdFacts = field(repr=False)
     sidecar: Sidecar | None = field(default=None, repr=False)
     node_id: int | None = None  # from a DCF's [DeviceComissioning], if any
     generic: bool = False  # a CiA 4xx profile's defaults, not a device's own dictionary
+    # canopen's ObjectDictionary of the file: parsed already, or when first asked (`od`)
+    parsed: object = field(default=None, repr=False, compare=False)
+    load_od: Callable[[], object] | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def od(self):
+        """canopen's ObjectDictionary (the simulator, DCF output and `diff` read it whole)."""
+        if self.parsed is None:
+            self.parsed = self.load_od()
+        return self.parsed
 
     @property
     def family(self) -> int | None:
@@ -51,12 +65,17 @@ class DeviceProfile:
         return family(self.device_type)
 
     # --- object dictionary -------------------------------------------------
+    def _variable(self, index: int, subindex: int):
+        """The facts' variable, or canopen's where the facts are not sure."""
+        var = self.facts.variable(index, subindex)
+        return variable(self.od, index, subindex) if var is UNSURE else var
+
     def object(self, index: int, subindex: int = 0) -> ObjectInfo | None:
-        return object_info(self.od, index, subindex, self.node_id)
+        return info_of(self._variable(index, subindex), index, subindex, self.node_id)
 
     def value(self, index: int, subindex: int, node_id: int | None = None):
         """Effective value (DCF value, else default) with $NODEID resolved for node_id."""
-        var = variable(self.od, index, subindex)
+        var = self._variable(index, subindex)
         if var is None:
             return None
         return effective_value(var, node_id if node_id is not None else self.node_id)
@@ -127,7 +146,7 @@ class DeviceProfile:
         out: list[PdoConfig] = []
         for direction, comm_base, map_base in (("rx", 0x1400, 0x1600), ("tx", 0x1800, 0x1A00)):
             for n in range(512):
-                if variable(self.od, comm_base + n, 1) is None:
+                if self._variable(comm_base + n, 1) is None:
                     continue
                 cob_raw = self.value(comm_base + n, 1, node)
                 if cob_raw is None:
@@ -168,33 +187,42 @@ def _int_or(value, default: int) -> int:
 
 
 def build_profile(path: Path, sidecar: Sidecar | None, node_id: int | None) -> DeviceProfile:
-    od = read_od(path, node_id)
-    info = od.device_information
+    facts, od = load_facts(path, node_id, read_od)
+    parse = partial(read_od, path, node_id)
+
+    def fact(index: int, sub: int):
+        nonlocal od
+        var = facts.variable(index, sub)
+        if var is UNSURE:
+            od = od if od is not None else parse()
+            var = variable(od, index, sub)
+        return effective_value(var, None) if var is not None else None
 
     def od_int(index: int, sub: int) -> int | None:
-        var = variable(od, index, sub)
-        value = effective_value(var, None) if var is not None else None
+        value = fact(index, sub)
         return value if isinstance(value, int) else None
 
     def od_str(index: int) -> str | None:
-        var = variable(od, index, 0)
-        value = effective_value(var, None) if var is not None else None
+        value = fact(index, 0)
         return value if isinstance(value, str) and value else None
 
-    vendor = od_int(0x1018, 1) if od_int(0x1018, 1) else info.vendor_number
-    product = od_int(0x1018, 2) if od_int(0x1018, 2) else info.product_number
+    info = facts.info
+    vendor = od_int(0x1018, 1) if od_int(0x1018, 1) else info["vendor_number"]
+    product = od_int(0x1018, 2) if od_int(0x1018, 2) else info["product_number"]
     return DeviceProfile(  # the file's texts and name, as a terminal may show them
         key=printable(sidecar.key if sidecar else path.stem),
-        name=printable((sidecar.name if sidecar else "") or info.product_name or path.stem),
+        name=printable((sidecar.name if sidecar else "") or info["product_name"] or path.stem),
         vendor_id=vendor,
         product_code=product,
         device_type=od_int(0x1000, 0),
-        device_name=printable_or_none(od_str(0x1008) or info.product_name),
+        device_name=printable_or_none(od_str(0x1008) or info["product_name"]),
         notes=list(sidecar.notes) if sidecar else [],
         source=str(path),
-        od=od,
+        facts=facts,
         sidecar=sidecar,
-        node_id=getattr(od, "node_id", None) or node_id,
+        node_id=facts.node_id or node_id,
+        parsed=od,
+        load_od=parse,
     )
 
 
