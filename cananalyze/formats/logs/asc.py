@@ -59,13 +59,37 @@ def sniff(head: bytes) -> bool:
     return bool(_HEADER_RE.search(head[:8192])) or len(_FRAME_RE.findall(head)) >= 2
 
 
-def _date(text: str) -> float | None:
-    from can.io.asc import ASCReader  # python-can costs ~70 ms to import: only for headers
+# The header date as python-can's ASCReader._datetime_to_timestamp reads it (English and
+# German month names, 12- or 24-hour clock, with or without milliseconds, local time),
+# restated: importing python-can for it cost every ASC read 70-80 ms, and 0.5 s in a
+# library process, where python-can also imports asammdf. tests/formats/test_asc_date.py
+# holds it to python-can's own answer.
+_MONTHS = {
+    **{m: k for k, m in enumerate("Jan Feb Mar Apr May Jun Jul Aug Sep Oct Nov Dec".split(), 1)},
+    "Mär": 3,
+    "Mai": 5,
+    "Okt": 10,
+    "Dez": 12,
+}
+_DATE_FORMATS = (
+    "%m %d %I:%M:%S.%f %p %Y",
+    "%m %d %I:%M:%S %p %Y",
+    "%m %d %H:%M:%S.%f %Y",
+    "%m %d %H:%M:%S %Y",
+)
 
-    try:
-        return ASCReader._datetime_to_timestamp(text.strip())
-    except ValueError:
-        return None
+
+def _date(text: str) -> float | None:
+    """Seconds since the epoch of a `date` line's text after the weekday, or None."""
+    text = text.strip()
+    for name, number in _MONTHS.items():
+        text = text.replace(name, f"{number:02d}")
+    for form in _DATE_FORMATS:
+        try:
+            return datetime.strptime(text, form).timestamp()
+        except ValueError:
+            continue
+    return None
 
 
 def _payload(tokens: list[str], n: int, base: int) -> bytes:
