@@ -295,9 +295,9 @@ def merge_ends(parts: list[DecodedBatch]) -> DecodedBatch:
         return parts[0]
     from cananalyze.core.finding_columns import FindingColumns
 
-    out = parts[0]
-    out.records = SdoRecords([r for p in parts for r in p.records])
+    out = parts[0]  # its own records, bus and items are read below before it is overwritten
     of_part = np.repeat(np.arange(len(parts)), [len(p.records) for p in parts])
+    out.records = SdoRecords([r for p in parts for r in p.records])
     out.record_bus = _bus_names([p.bus for p in parts], of_part)
     out.drive = [c._replace(bus=p.bus) for p in parts for c in p.drive]
     out.commissioning = [c._replace(bus=p.bus) for p in parts for c in p.commissioning]

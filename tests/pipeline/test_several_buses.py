@@ -1028,6 +1028,27 @@ def test_end_of_log_records_say_which_bus(tmp_path, capsys):
     assert boots.bus.notna().all() and set(boots.bus) == {"can0", "can1"}
 
 
+def test_requests_unanswered_at_the_end_keep_their_bus(tmp_path, capsys):
+    """An SDO request each bus leaves unanswered at the end of the log: each timeout is
+    its own bus's (the end's records were counted after the first bus's were replaced by
+    all of them, and the last one took the first bus's name)."""
+    from cananalyze.cli.main import main
+
+    lines = [(1.0, "can0", "605#4000100000000000"), (1.1, "can0", "585#4300100092010000")]
+    lines += [(2.0, "can0", "605#4018100100000000"), (2.5, "can1", "62A#4008100000000000")]
+    log = _log(tmp_path, lines)
+    sdo = load(str(log)).sdo
+    assert list(zip(sdo.bus, sdo.node, sdo.result, strict=True)) == [
+        ("can0", 5, "ok"),
+        ("can0", 5, "timeout"),
+        ("can1", 42, "timeout"),
+    ]
+    main(["decode", str(log), "--format", "jsonl"])
+    recs = [json.loads(ln) for ln in capsys.readouterr().out.splitlines()]
+    got = [(r["bus"], r["node"], r["result"]) for r in recs if r["kind"] == "sdo"]
+    assert got == [("can0", 5, "ok"), ("can0", 5, "timeout"), ("can1", 42, "timeout")]
+
+
 # --- load()'s assert_* helpers judge each bus on its own ---------------------------------
 
 
