@@ -146,8 +146,19 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
             spliced.update((row, text) for row, text, ok in taken if ok)
             done[rows[free]] = True
     slow = np.flatnonzero(~done)  # notes, EMCY, NMT, other SDO...: their fields by Python
-    for i, row in zip(slow.tolist(), sel[slow].tolist(), strict=True):
-        spliced[i] = _fields_text(row_fields(batch, row))
+    # a row with no notes and no signals has the fields of its frame alone: one text per
+    # distinct frame (a node's repeated EMCY "no error", its NMT commands)
+    alone = (plain & (in_block < 0))[slow].tolist()
+    memo: dict[tuple, bytes] = {}
+    for i, row, bare in zip(slow.tolist(), sel[slow].tolist(), alone, strict=True):
+        if not bare:
+            spliced[i] = _fields_text(row_fields(batch, row))
+            continue
+        key = (int(svc[i]), int(fb.can_id[row]), bool(rtr[i]), fb.payload(row))
+        text = memo.get(key)
+        if text is None:
+            text = memo[key] = _fields_text(row_fields(batch, row))
+        spliced[i] = text
     width = max(m.shape[1] for _, m in fields_col)
     fields_m = np.zeros((n, width), np.uint8)
     for rows, m in fields_col:
