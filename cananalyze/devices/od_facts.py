@@ -17,6 +17,7 @@ fails to parse is not cached, a damaged or foreign cache entry is parsed again, 
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import importlib.util
 import json
@@ -179,9 +180,10 @@ def _entry(path: Path, node_id: int | None) -> Path | None:
     return folder / f"od-{key.hexdigest()[:40]}.json"
 
 
+@functools.cache
 def _readers() -> str:
     """The code that makes the facts: canopen's EDS reader and ours, by size and time
-    (an upgrade or an edit of either parses the files again)."""
+    (an upgrade or an edit of either parses the files again); once per process."""
     files = [Path(__file__).with_name("eds.py"), Path(__file__).with_name("xdd.py")]
     spec = importlib.util.find_spec("canopen")  # found, not imported
     if spec is not None and spec.origin:

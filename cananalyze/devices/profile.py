@@ -188,42 +188,40 @@ def _int_or(value, default: int) -> int:
 
 def build_profile(path: Path, sidecar: Sidecar | None, node_id: int | None) -> DeviceProfile:
     facts, od = load_facts(path, node_id, read_od)
-    parse = partial(read_od, path, node_id)
-
-    def fact(index: int, sub: int):
-        nonlocal od
-        var = facts.variable(index, sub)
-        if var is UNSURE:
-            od = od if od is not None else parse()
-            var = variable(od, index, sub)
-        return effective_value(var, None) if var is not None else None
-
-    def od_int(index: int, sub: int) -> int | None:
-        value = fact(index, sub)
-        return value if isinstance(value, int) else None
-
-    def od_str(index: int) -> str | None:
-        value = fact(index, 0)
-        return value if isinstance(value, str) and value else None
-
     info = facts.info
-    vendor = od_int(0x1018, 1) if od_int(0x1018, 1) else info["vendor_number"]
-    product = od_int(0x1018, 2) if od_int(0x1018, 2) else info["product_number"]
-    return DeviceProfile(  # the file's texts and name, as a terminal may show them
+    prof = DeviceProfile(  # the file's texts and name, as a terminal may show them
         key=printable(sidecar.key if sidecar else path.stem),
         name=printable((sidecar.name if sidecar else "") or info["product_name"] or path.stem),
-        vendor_id=vendor,
-        product_code=product,
-        device_type=od_int(0x1000, 0),
-        device_name=printable_or_none(od_str(0x1008) or info["product_name"]),
+        vendor_id=None,
+        product_code=None,
+        device_type=None,
+        device_name=None,
         notes=list(sidecar.notes) if sidecar else [],
         source=str(path),
         facts=facts,
         sidecar=sidecar,
         node_id=facts.node_id or node_id,
         parsed=od,
-        load_od=parse,
+        load_od=partial(read_od, path, node_id),
     )
+
+    def od_value(index: int, sub: int):  # as the file says it, $NODEID unresolved
+        var = prof._variable(index, sub)
+        return effective_value(var, None) if var is not None else None
+
+    def od_int(index: int, sub: int) -> int | None:
+        value = od_value(index, sub)
+        return value if isinstance(value, int) else None
+
+    def od_str(index: int) -> str | None:
+        value = od_value(index, 0)
+        return value if isinstance(value, str) and value else None
+
+    prof.vendor_id = od_int(0x1018, 1) or info["vendor_number"]
+    prof.product_code = od_int(0x1018, 2) or info["product_number"]
+    prof.device_type = od_int(0x1000, 0)
+    prof.device_name = printable_or_none(od_str(0x1008) or info["product_name"])
+    return prof
 
 
 def load_eds(path: str | Path, node_id: int | None = None) -> DeviceProfile:
