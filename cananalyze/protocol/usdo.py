@@ -7,26 +7,26 @@ CAN FD frames of up to 64 bytes. Unlike the SDO, the COB-ID's node-ID is the
 a node-ID, or 0 for every server: broadcast), so one client can talk to every
 server on its own COB-ID; byte 2 (session ID) tells a client's transfers apart.
 
-References (third-party, cited; read, not copied). go-canopen (angelodlfrtr/go-canopen:
-sdo.go, sdo_reader.go, sdo_writer.go) and CANopenNode (301/CO_SDO*.c) implement only the
-classic SDO, so the references are:
-  * the command specifier values and the one-byte abort codes are those of
-    emtas/emotas' CANopen FD stack header `ico_usdo.h` ($Id: ico_usdo.h 16986
-    2017-02-27), as published in the public code index (file id 44359093029),
-    and its `ico_usdoserver.h` (file id 35776154010);
-  * the field order of an expedited frame (destination address, command
-    specifier, session ID, index, sub-index, then the data's type and size, then
-    the data) is CiA's own (can-cia.org, "Universal Service Data Object (USDO)",
-    figure 2: the expedited download), and its 56 data bytes after 8 bytes of
-    protocol information emotas' ("USDO – Universal Service Data Object",
-    embedded-communication.com/en/canopen/usdo).
+References (third-party, cited; read, not copied; go-canopen and CANopenNode
+implement only the classic SDO):
+  * Embedded Systems Academy's USDO codec, github.com/em-sa/SOFA-CANopenFD
+    (Apache-2.0), `variants/canopen_fd/common/fbsec_co_fd_usdo.{h,c}` V3.1 of
+    2026-07-20 and `shared/fbsec_abort.h`, which cite CiA 1301 v1.1 Tables 22,
+    31 and 32: the byte layouts of the expedited, segmented and abort frames
+    (sub-index in byte 3, the index in bytes 4-5, byte-aligned as CiA's USDO page
+    says; segments with their counter in byte 3 and 60 data bytes from byte 4;
+    the last segment with its byte count in byte 3), the abort frame (7Fh, its
+    one-byte code in byte 6) and the codes 15h and 21h. tests/fixtures/usdo holds
+    frames that codec encoded;
+  * emtas/emotas' CANopen FD stack header `ico_usdo.h` ($Id: ico_usdo.h 16986
+    2017-02-27; public code index file ids 44359093029 and 35776154010): every
+    command specifier value, the remote (routed) variants, and the other one-byte
+    abort codes.
 
-Neither reference spells out the segmented and bulk frames byte by byte. Their
-layouts below follow the expedited frame's rules (the same 3-byte head, index
-and sub-index where an initiate frame names the object, byte-aligned fields,
-data from byte 8); they are marked `assumed` so a reader knows which rows a
-copy of CiA 1301 should confirm, and a correction is an edit of this table
-only (the decoder and the simulator both read it).
+Neither spells out the bulk frames (emotas lists their command specifiers only):
+their layouts follow the segmented ones and are marked `assumed`, so a reader
+knows which rows a copy of CiA 1301 should confirm, and a correction is an edit
+of this table only (the decoder and the simulator both read it).
 """
 
 from __future__ import annotations
@@ -38,10 +38,9 @@ CLIENT_BASE = 0x600  # + the client's node-ID: what a client sends
 SERVER_BASE = 0x580  # + the server's node-ID: what a server sends
 BROADCAST = 0  # destination address: every server
 HEAD = 3  # destination address, command specifier, session ID
-DATA_AT = 8  # where the data starts in a data-carrying frame
 MAX_FRAME = 64
-EXPEDITED_MAX = MAX_FRAME - DATA_AT  # 56 data bytes in one expedited frame
-SEGMENT_MAX = MAX_FRAME - DATA_AT  # data bytes in one segment (segmented and bulk)
+EXPEDITED_MAX = MAX_FRAME - 8  # 56 data bytes in one expedited frame (data from byte 8)
+SEGMENT_MAX = MAX_FRAME - 4  # 60 data bytes in one segment (data from byte 4)
 REMOTE = 0x80  # bit 7 of the command specifier: the remote (routed) variant
 
 
@@ -72,40 +71,48 @@ COMMANDS: dict[int, Command] = {
     0x21: Command("download expedited response", "server", "download", "expedited", "last", "mux"),
     0x11: Command("upload request", "client", "upload", None, "init", "mux"),
     0x31: Command("upload expedited response", "server", "upload", "expedited", "last", "expedited"),
-    0x02: Command("download segmented initiate", "client", "download", "segmented", "init", "initiate", True),
-    0x03: Command("download segment", "client", "download", "segmented", "segment", "segment", True),
-    0x04: Command("download last segment", "client", "download", "segmented", "last", "segment", True),
-    0x22: Command("download segmented initiate response", "server", "download", "segmented", "ack", "mux", True),
-    0x23: Command("download segment response", "server", "download", "segmented", "ack", "counter", True),
-    0x24: Command("download last segment response", "server", "download", "segmented", "end", "counter", True),
-    0x32: Command("upload segmented initiate response", "server", "upload", "segmented", "init", "initiate", True),
-    0x13: Command("upload segment request", "client", "upload", "segmented", "ack", "counter", True),
-    0x33: Command("upload segment", "server", "upload", "segmented", "segment", "segment", True),
-    0x34: Command("upload last segment", "server", "upload", "segmented", "last", "segment", True),
+    0x02: Command("download segmented initiate", "client", "download", "segmented", "init", "initiate"),
+    0x03: Command("download segment", "client", "download", "segmented", "segment", "segment"),
+    0x04: Command("download last segment", "client", "download", "segmented", "last", "last"),
+    0x22: Command("download segmented initiate response", "server", "download", "segmented", "ack", "mux"),
+    0x23: Command("download segment response", "server", "download", "segmented", "ack", "counter"),
+    0x24: Command("download last segment response", "server", "download", "segmented", "end", "head"),
+    0x32: Command("upload segmented initiate response", "server", "upload", "segmented", "init", "initiate"),
+    0x13: Command("upload segment request", "client", "upload", "segmented", "ack", "counter"),
+    0x33: Command("upload segment", "server", "upload", "segmented", "segment", "segment"),
+    0x34: Command("upload last segment", "server", "upload", "segmented", "last", "last"),
     0x06: Command("download bulk initiate", "client", "download", "bulk", "init", "initiate", True),
     0x07: Command("download bulk segment", "client", "download", "bulk", "segment", "segment", True),
-    0x08: Command("download bulk last segment", "client", "download", "bulk", "last", "segment", True),
+    0x08: Command("download bulk last segment", "client", "download", "bulk", "last", "last", True),
     0x26: Command("download bulk initiate response", "server", "download", "bulk", "ack", "mux", True),
-    0x28: Command("download bulk last response", "server", "download", "bulk", "end", "counter", True),
+    0x28: Command("download bulk last response", "server", "download", "bulk", "end", "head", True),
     0x7F: Command("abort", "either", None, None, "abort", "abort"),
 }  # fmt: skip
 ABORT = 0x7F
 ABORT_REMOTE = 0xFF
 
 # Frame layouts: field -> (offset, size in bytes), little-endian unsigned. Every
-# layout starts with HEAD; a data-carrying one has its data from DATA_AT, `size`
-# bytes of it (expedited and segment frames), padded to the FD frame length.
+# layout starts with HEAD. The multiplexer is the sub-index then the index, so the
+# index sits on an even offset (CiA 1301 "considered the byte-alignment").
 _HEAD = {"destination": (0, 1), "command": (1, 1), "session": (2, 1)}
-_MUX = {"index": (3, 2), "subindex": (5, 1)}
+_MUX = {"subindex": (3, 1), "index": (4, 2)}
 LAYOUTS: dict[str, dict[str, tuple[int, int]]] = {
-    "mux": _HEAD | _MUX,  # names the object, carries nothing else
+    "head": _HEAD,  # the last segment's answer: 3 bytes
+    "mux": _HEAD | _MUX,  # names the object, carries nothing else (6 bytes)
     "expedited": _HEAD | _MUX | {"datatype": (6, 1), "size": (7, 1)},  # + data
-    "initiate": _HEAD | _MUX | {"datatype": (6, 1), "total": (DATA_AT, 4)},  # no data
-    "segment": _HEAD | {"counter": (3, 1), "size": (7, 1)},  # + data
-    "counter": _HEAD | {"counter": (3, 1)},  # a segment's answer
-    "abort": _HEAD | _MUX | {"abort_code": (6, 1)},
+    "initiate": _HEAD | _MUX | {"datatype": (6, 1), "total": (8, 4)},  # byte 7 reserved
+    "segment": _HEAD | {"counter": (3, 1)},  # + data: the rest of the frame
+    "last": _HEAD | {"size": (3, 1)},  # + data: `size` bytes
+    "counter": _HEAD | {"counter": (3, 1)},  # a segment's answer, or an upload's ask
+    "abort": _HEAD | _MUX | {"abort_code": (6, 1)},  # 7 bytes
 }
-CARRIES_DATA = frozenset({"expedited", "segment"})
+# Where a data-carrying layout's data starts, and the field that gives its size
+# (None: the data runs to the end of the frame, a full segment).
+DATA: dict[str, tuple[int, str | None]] = {
+    "expedited": (8, "size"),
+    "segment": (4, None),
+    "last": (4, "size"),
+}
 
 # One-byte USDO abort codes and their text (the values of `ico_usdo.h`'s USDO_ABORT_T;
 # the texts CiA 1301's meaning of each, in this project's words).
@@ -115,7 +122,7 @@ ABORT_CODES: dict[int, str] = {
     0x12: "USDO time-out",
     0x13: "Unknown command specifier",
     0x14: "Invalid value in the counter byte (segmented protocol)",
-    0x15: "CRC error",
+    0x15: "Incorrect data size (segmented transfer)",  # CiA 1301 v1.1 (emotas' 2017 draft: CRC error)
     0x16: "Out of memory",
     0x17: "General parameter incompatibility",
     0x18: "General internal incompatibility in the device",
@@ -126,6 +133,7 @@ ABORT_CODES: dict[int, str] = {
     0x1D: "Source node unknown",
     0x1E: "Unexpected CAN DLC",
     0x1F: "Unexpected multiplexer",
+    0x21: "USDO session ID wrong or unknown",  # CiA 1301 v1.1 (EmSA's fbsec_abort.h)
     0x30: "Unsupported access to an object",
     0x31: "Attempt to read a write-only object",
     0x32: "Attempt to write a read-only object",
@@ -179,45 +187,52 @@ def parse(data: bytes) -> dict | None:
     remote = bool(cs & REMOTE)
     out: dict = {"cmd": cmd, "remote": remote}
     layout = _HEAD if remote else LAYOUTS[cmd.layout]
-    need = max(o + s for o, s in layout.values())
-    if len(data) < need:
+    if len(data) < _end(layout):
         return None
     for name, (o, s) in layout.items():
         out[name] = int.from_bytes(data[o : o + s], "little")
-    if not remote and cmd.layout in CARRIES_DATA:
-        size = out["size"]
-        if DATA_AT + size > len(data):
+    if not remote and cmd.layout in DATA:
+        at, size_field = DATA[cmd.layout]
+        end = len(data) if size_field is None else at + out[size_field]
+        if end > len(data):
             return None
-        out["data"] = bytes(data[DATA_AT : DATA_AT + size])
+        out["data"] = bytes(data[at:end])
     return out
 
 
+def _end(layout: dict[str, tuple[int, int]]) -> int:
+    return max(o + s for o, s in layout.values())
+
+
 def fd_length(n: int) -> int:
-    """The CAN FD frame length (8, 12, 16, 20, 24, 32, 48, 64) that holds `n` bytes."""
+    """The CAN FD frame length that holds `n` bytes: `n` itself up to 8, else 12, 16,
+    20, 24, 32, 48 or 64 (a sender pads the rest with zeros)."""
     for size in (8, 12, 16, 20, 24, 32, 48, 64):
         if n <= size:
-            return size
+            return n if size == 8 else size
     raise ValueError(f"{n} bytes do not fit a CAN FD frame")
 
 
 def encode(cs: int, destination: int, session: int, **fields) -> bytes:
     """One USDO frame: the layout of `cs` filled from `fields` (`data`: the data bytes,
-    `size` taken from it), padded with zeros to the CAN FD length that holds it."""
+    its size field taken from it), padded with zeros to the CAN FD length that holds it."""
     cmd = command_of(cs)
     if cmd is None:
         raise ValueError(f"unknown USDO command specifier 0x{cs:02X}")
     layout = LAYOUTS[cmd.layout]
     data = bytes(fields.pop("data", b""))
-    if cmd.layout in CARRIES_DATA:
-        fields["size"] = len(data)
+    end = _end(layout)
+    if cmd.layout in DATA:
+        at, size_field = DATA[cmd.layout]
+        if size_field is not None:
+            fields[size_field] = len(data)
+        end = at + len(data)
     values = {"destination": destination, "command": cs, "session": session} | fields
-    end = max(o + s for o, s in layout.values())
-    if cmd.layout in CARRIES_DATA:
-        end = DATA_AT + len(data)
     buf = bytearray(fd_length(end))
     for name, (o, s) in layout.items():
         buf[o : o + s] = int(values.get(name, 0)).to_bytes(s, "little")
-    buf[DATA_AT : DATA_AT + len(data)] = data if cmd.layout in CARRIES_DATA else b""
+    if cmd.layout in DATA:
+        buf[DATA[cmd.layout][0] : end] = data
     return bytes(buf)
 
 

@@ -388,7 +388,7 @@ def _usdo(nodes: Nodes):
         yield Wait(gap)
         yield server(n, 0x21, s + 1, **mux)
         yield Wait(gap)
-        # segmented read of the device name, 56 bytes a segment
+        # segmented read of the device name, 60 bytes a segment
         mux = dict(index=0x1008, subindex=0)
         yield client(n, 0x11, s + 2, **mux)
         yield Wait(gap)

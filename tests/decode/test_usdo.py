@@ -1,25 +1,22 @@
 """USDO (CiA 1301, CANopen FD) transfers in the SDO table: expedited, segmented, bulk, aborts.
 
-The frames are written byte by byte here, not by protocol/usdo.py's encoder, from
-the references that module cites:
-  * command specifiers and one-byte abort codes: emtas/emotas' CANopen FD stack,
-    `ico_usdo.h` ($Id: ico_usdo.h 16986 2017-02-27; CO_USDO_CCS_DL_EXP_LOCAL 0x01,
-    CO_USDO_SCS_DL_EXP_LOCAL 0x21, CO_USDO_CCS_UP_EXP_LOCAL 0x11,
-    CO_USDO_SCS_UP_EXP_LOCAL 0x31, CO_USDO_CCS_DL_SEG_LOCAL_INIT/CONT/LAST
-    0x02/0x03/0x04, CO_USDO_SCS_DL_SEG_LOCAL_* 0x22/0x23/0x24, CO_USDO_SCS_UP_SEG_LOCAL_*
-    0x32/0x33/0x34, CO_USDO_CCS_UP_SEG_LOCAL_CONT 0x13, bulk 0x06/0x07/0x08 and
-    0x26/0x28, CO_USDO_CS_ABORT_LOCAL 0x7F; USDO_ABORT_OBJECT_DICTIONARY 0x33,
-    USDO_ABORT_SERVER_BUSY 0x70);
-  * the expedited frame's field order (destination address, command specifier,
-    session ID, index, sub-index, data type, size, data from byte 8): CiA's USDO
-    page, figure 2 (expedited download), and emotas' 56 data bytes after 8 of
-    protocol information.
-The segmented and bulk byte layouts are the module's `assumed` ones (see its text).
+Two sources of frames, neither protocol/usdo.py's encoder:
+  * tests/data/usdo_emsa.log: every frame built by Embedded Systems Academy's USDO
+    codec (github.com/em-sa/SOFA-CANopenFD, `fbsec_co_fd_usdo.c` V3.1, which cites
+    CiA 1301 v1.1 Tables 22, 31 and 32), by tests/data/usdo_emsa_frames.c;
+  * frames written byte by byte below, from the layouts that codec documents
+    (destination, command specifier, session ID, sub-index, index in bytes 4-5,
+    data type, size, data from byte 8; a segment's counter in byte 3 and its data
+    from byte 4; the last segment's byte count in byte 3; the abort's one-byte
+    code in byte 6) and emtas' `ico_usdo.h` command specifiers (bulk 0x06/0x07/
+    0x08 and 0x26/0x28, whose layouts are the module's `assumed` ones).
 """
 
 from __future__ import annotations
 
 import json
+
+from conftest import ROOT
 
 from cananalyze.core.frames import FLAG_FD
 from cananalyze.protocol import usdo
@@ -35,18 +32,18 @@ def h(text: str) -> bytes:
 
 # expedited download: 0x2000:01 := 1000 (UNSIGNED32 = data type 0x07), session 1
 EXP_DL = [
-    (REQ, h("05 01 01 0020 01 07 04 e8030000")),  # 12 bytes: an FD length
-    (RESP, h("10 21 01 0020 01 00 00")),  # padded to 8
+    (REQ, h("05 01 01 01 0020 07 04 e8030000")),  # 12 bytes: an FD length
+    (RESP, h("10 21 01 01 0020")),  # 6 bytes
 ]
 # expedited upload: 0x1017:00 = 500 (UNSIGNED16 = 0x06), session 2
 EXP_UL = [
-    (REQ, h("05 11 02 1710 00 00 00")),
-    (RESP, h("10 31 02 1710 00 06 02 f401 0000")),
+    (REQ, h("05 11 02 00 1710")),
+    (RESP, h("10 31 02 00 1710 06 02 f401 0000")),  # 10 bytes, padded to 12
 ]
 # upload of 0x2001:00 aborted by the server: 0x33 (object does not exist), session 3
 ABORTED = [
-    (REQ, h("05 11 03 0120 00 00 00")),
-    (RESP, h("10 7f 03 0120 00 33 00")),
+    (REQ, h("05 11 03 00 0120")),
+    (RESP, h("10 7f 03 00 0120 33")),
 ]
 
 
@@ -63,6 +60,55 @@ def test_the_encoder_writes_the_reference_bytes():
                         data=(1000).to_bytes(4, "little"))  # fmt: skip
     assert frame == EXP_DL[0][1]
     assert usdo.encode(0x21, CLIENT, 1, index=0x2000, subindex=1) == EXP_DL[1][1]
+
+
+def _decode_file(path):
+    import subprocess
+    import sys
+
+    run = subprocess.run(
+        [sys.executable, "-m", "cananalyze", "decode", str(path), "--format", "jsonl"],
+        capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    return [json.loads(x) for x in run.stdout.splitlines()]
+
+
+def test_frames_from_the_emsa_codec_are_the_transfers_it_encoded():
+    """tests/data/usdo_emsa.log: what tests/data/usdo_emsa_frames.c asked EmSA's codec
+    to encode, transfer by transfer (client 1; servers 5 and 6)."""
+    rows = _decode_file(ROOT / "tests" / "data" / "usdo_emsa.log")
+    frames = [r for r in rows if r["kind"] == "frame"]
+    assert len(frames) == 30 and {f["service"] for f in frames} == {"usdo_request", "usdo_response"}
+    assert not [f for f in frames if "usdo_problem" in f or f["command"] == "invalid"]
+    body = bytes(range(256))
+    got = [(r["node"], r["direction"], r["protocol"], r["index"], r["subindex"], r["session"],
+            r["result"], r["data"], r["abort_code"]) for r in rows if r["kind"] == "sdo"]  # fmt: skip
+    assert got == [
+        (5, "download", "usdo_expedited", 0x2010, 0, 1, "ok", "deadbeef", None),
+        (5, "upload", "usdo_expedited", 0x1008, 0, 2, "ok", b"SOFA-FD".hex(), None),
+        (5, "download", "usdo_segmented", 0x2020, 1, 3, "ok", body[:150].hex(), None),
+        (5, "upload", "usdo_segmented", 0x2030, 2, 4, "ok", body[:130].hex(), None),
+        (6, "upload", "usdo_segmented", 0x2040, 0, 6, "ok", body[:120].hex(), None),
+        (6, "upload", "usdo", 0x6000, 1, 5, "abort", None, 0x33),
+    ]
+    assert {r["client"] for r in rows if r["kind"] == "sdo"} == {1}
+    # each initiate and expedited frame names its object; segments name none
+    named = {(f["usdo_cs"], f.get("index"), f.get("subindex")) for f in frames}
+    assert (0x02, 0x2020, 1) in named and (0x32, 0x2030, 2) in named and (0x7F, 0x6000, 1) in named
+    assert {(c, i) for c, i, _ in named if c in (0x03, 0x13, 0x23, 0x24, 0x33, 0x34)} == {
+        (c, None) for c in (0x03, 0x13, 0x23, 0x24, 0x33, 0x34)}  # fmt: skip
+
+
+def test_the_encoder_writes_what_the_emsa_codec_writes():
+    """protocol/usdo.py's encoder (the simulator's) against the EmSA-encoded frames."""
+    lines = (ROOT / "tests" / "data" / "usdo_emsa.log").read_text().splitlines()
+    for line in lines:
+        cob, data = line.split()[2].split("##")
+        frame = bytes.fromhex(data[1:])
+        f = usdo.parse(frame)
+        fields = {k: v for k, v in f.items()
+                  if k not in ("cmd", "remote", "destination", "command", "session", "size")}  # fmt: skip
+        assert usdo.encode(f["command"], f["destination"], f["session"], **fields) == frame, line
 
 
 def test_expedited_download_and_upload_are_sdo_table_rows():
@@ -101,12 +147,12 @@ def test_an_abort_has_its_text():
 def test_segmented_upload_reassembles():
     blob = bytes(range(100))
     frames = [
-        (REQ, h("05 11 04 0810 00 00 00")),
-        (RESP, h("10 32 04 0810 00 09 00") + (100).to_bytes(4, "little")),  # total 100
-        (REQ, h("05 13 04 00 00000000")),
-        (RESP, h("10 33 04 00 000000 38") + blob[:56]),  # 64 bytes
-        (REQ, h("05 13 04 01 00000000")),
-        (RESP, h("10 34 04 01 000000 2c") + blob[56:] + bytes(12)),  # 44 bytes, padded to 64
+        (REQ, h("05 11 04 00 0810")),
+        (RESP, h("10 32 04 00 0810 09 00") + (100).to_bytes(4, "little")),  # total 100
+        (REQ, h("05 13 04 00")),
+        (RESP, h("10 33 04 00") + blob[:60]),  # 64 bytes
+        (REQ, h("05 13 04 01")),
+        (RESP, h("10 34 04 28") + blob[60:] + bytes(4)),  # 40 bytes: 44, padded to 48
     ]
     (rec,) = decode_log(frames).sdo
     assert (rec["protocol"], rec["result"], rec["size"]) == ("usdo_segmented", "ok", 100)
@@ -116,19 +162,19 @@ def test_segmented_upload_reassembles():
 def test_segmented_download_and_bulk_download():
     blob = bytes(range(200, 256)) + bytes(range(30))
     seg = [
-        (REQ, h("05 02 05 0020 02 0a 00") + len(blob).to_bytes(4, "little")),
-        (RESP, h("10 22 05 0020 02 00 00")),
-        (REQ, h("05 03 05 00 000000 38") + blob[:56]),
-        (RESP, h("10 23 05 00 00000000")),
-        (REQ, h("05 04 05 01 000000 1e") + blob[56:] + bytes(2)),  # 38 -> 48
-        (RESP, h("10 24 05 01 00000000")),
+        (REQ, h("05 02 05 02 0020 0a 00") + len(blob).to_bytes(4, "little")),
+        (RESP, h("10 22 05 02 0020")),
+        (REQ, h("05 03 05 00") + blob[:60]),
+        (RESP, h("10 23 05 00")),
+        (REQ, h("05 04 05 1a") + blob[60:] + bytes(2)),  # 26 bytes: 30, padded to 32
+        (RESP, h("10 24 05")),
     ]
     bulk = [
-        (REQ, h("05 06 06 0020 03 0a 00") + len(blob).to_bytes(4, "little")),
-        (RESP, h("10 26 06 0020 03 00 00")),
-        (REQ, h("05 07 06 00 000000 38") + blob[:56]),  # no answer per segment
-        (REQ, h("05 08 06 01 000000 1e") + blob[56:] + bytes(2)),
-        (RESP, h("10 28 06 01 00000000")),
+        (REQ, h("05 06 06 03 0020 0a 00") + len(blob).to_bytes(4, "little")),
+        (RESP, h("10 26 06 03 0020")),
+        (REQ, h("05 07 06 00") + blob[:60]),  # no answer per segment
+        (REQ, h("05 08 06 1a") + blob[60:] + bytes(2)),
+        (RESP, h("10 28 06")),
     ]
     a, b = decode_log(seg + bulk).sdo
     assert (a["protocol"], a["result"], a["data"]) == ("usdo_segmented", "ok", blob.hex())
@@ -138,12 +184,12 @@ def test_segmented_download_and_bulk_download():
 
 def test_a_short_transfer_is_a_protocol_error_and_a_silent_one_a_timeout():
     short = [
-        (REQ, h("05 02 07 0020 02 0a 00") + (100).to_bytes(4, "little")),
-        (RESP, h("10 22 07 0020 02 00 00")),
-        (REQ, h("05 04 07 00 000000 04 01020304")),
-        (RESP, h("10 24 07 00 00000000")),
+        (REQ, h("05 02 07 02 0020 0a 00") + (100).to_bytes(4, "little")),
+        (RESP, h("10 22 07 02 0020")),
+        (REQ, h("05 04 07 04 01020304")),
+        (RESP, h("10 24 07")),
     ]
-    silent = [(REQ, h("05 11 08 0010 00 00 00"))]
+    silent = [(REQ, h("05 11 08 00 0010"))]
     a, b = decode_log(short + silent).sdo
     assert a["result"] == "protocol_error" and "size announced 100, assembled 4" in a["detail"]
     assert b["result"] == "timeout"
@@ -151,9 +197,9 @@ def test_a_short_transfer_is_a_protocol_error_and_a_silent_one_a_timeout():
 
 def test_broadcast_each_server_answers_for_itself():
     frames = [
-        (REQ, h("00 11 09 1810 01 00 00")),  # to every server: 0x1018:01
-        (0x585, h("10 31 09 1810 01 07 04 78563412")),
-        (0x586, h("10 31 09 1810 01 07 04 21436587")),
+        (REQ, h("00 11 09 01 1810")),  # to every server: 0x1018:01
+        (0x585, h("10 31 09 01 1810 07 04 78563412")),
+        (0x586, h("10 31 09 01 1810 07 04 21436587")),
     ]
     recs = decode_log(frames).sdo
     assert [(r["node"], r["value"]) for r in recs] == [(5, 0x12345678), (6, 0x87654321)]

@@ -1,8 +1,8 @@
 """The USDO tracker alone (decode/sdo/usdo.py): how transfers end when the log misbehaves.
 
-Frames as in test_usdo.py (the layouts protocol/usdo.py takes from emtas' `ico_usdo.h`
-and CiA's USDO page); built with the table's encoder, which test_usdo.py checks against
-bytes written out by hand."""
+Frames as in test_usdo.py (the layouts protocol/usdo.py takes from EmSA's CiA 1301 codec
+and emtas' `ico_usdo.h`); built with the table's encoder, which test_usdo.py checks against
+the frames EmSA's codec wrote and bytes written out by hand."""
 
 from __future__ import annotations
 
@@ -55,11 +55,13 @@ def test_a_segment_counter_gap_is_noted():
         req(0x11, 1, index=0x1008, subindex=0),
         resp(0x32, 1, index=0x1008, subindex=0, datatype=9, total=6),
         resp(0x33, 1, counter=0, data=b"abc"),
-        resp(0x34, 1, counter=2, data=b"def"),
+        resp(0x33, 1, counter=2, data=b"de"),
+        resp(0x34, 1, data=b"f"),
     ])  # fmt: skip
     assert recs[0]["result"] == "ok" and recs[0]["value"] == "abcdef"
     assert "segment counter 2 after 0" in recs[0]["detail"]
     assert notes[3]["usdo_problem"] == "segment counter 2 after 0"
+    assert "usdo_problem" not in notes[4]  # the last segment's byte 3 is its size
 
 
 def test_a_lone_abort_and_an_answer_without_request():
