@@ -179,46 +179,36 @@ class RecordColumns:
                 columns[c][k] = rec.get(c)
         return {c: columns[c] for c in RECORD_COLUMNS}
 
-    def full_record(self, j: int) -> dict:
-        """The j-th record as `records()` makes it, key for key (without building the
-        others' dicts)."""
+    def record(self, j: int) -> dict:
+        """The j-th record as `records()` makes it, key for key, read from the arrays: a
+        reader of a few records (the OD tally's last transfer of each object) does not
+        build every record's lists for them."""
         if j in self.held:
             return self.held[j]
-        c = self.columns
-        nd = c["node"][j]
+        a = self.arrays
+        nd = int(a["node"][j])
         return {
             "kind": "sdo",
-            "t_start": c["t_start"][j],
-            "t": c["t"][j],
-            "latency_ms": c["latency_ms"][j],
+            "t_start": a["t_start"][j].item(),
+            "t": a["t"][j].item(),
+            "latency_ms": a["latency_ms"][j].item(),
             "node": nd,
-            "direction": c["direction"][j],
+            "direction": "upload" if a["upload"][j] else "download",
             "protocol": "expedited",
-            "index": c["index"][j],
-            "subindex": c["subindex"][j],
-            "size": c["size"][j],
-            "data": c["data"][j],
-            "value": c["value"][j],
-            "name": c["name"][j],
+            "index": a["index"][j].item(),
+            "subindex": a["subindex"][j].item(),
+            "size": a["size"][j].item(),
+            "data": a["raw"][j, : a["data_len"][j]].tobytes().hex(),
+            "value": a["value"][j],
+            "name": a["name"][j],
             "result": "ok",
             "abort_code": None,
             "abort_text": None,
             "detail": None,
-            "words": c["words"][j],
+            "words": a["words"][j],
             "frames": 2,
             "cob_ids": [0x600 + nd, 0x580 + nd],
         }
-
-    def record(self, j: int) -> dict:
-        """The j-th record's table fields (and kind), without the lists."""
-        if j in self.held:
-            return self.held[j]
-        a = self.arrays
-        rec = {"kind": "sdo"} | {c: a[c][j].item() for c in NUMBER_FIELDS}
-        rec |= {c: a[c][j] for c in OBJECT_FIELDS} | OK_CONSTANTS
-        rec["data"] = a["raw"][j, : a["data_len"][j]].tobytes().hex()
-        rec["direction"] = "upload" if a["upload"][j] else "download"
-        return rec
 
     def records(self) -> list[dict]:
         c = self.columns
@@ -447,7 +437,7 @@ class SdoRecords:
         if rec is None and self._fields is not None and 0 <= k < len(self._fields):
             # every field already built as columns (an export's tables): read it there,
             # not through a build of this one transfer
-            rec = self._built[k] = self._fields.full_record(k)
+            rec = self._built[k] = self._fields.record(k)
         if rec is None:
             for p in self._fast:
                 j = int(np.searchsorted(p.at, k))

@@ -11,7 +11,7 @@ from conftest import SAMPLES, generated_log, real_file
 from exported import DEVICES, assert_parquet_is, assert_same_table_files, decoded_batches
 
 from cananalyze.core.errors import ProblemLog
-from cananalyze.core.sdo_records import RECORD_COLUMNS, SdoRecords
+from cananalyze.core.sdo_records import RECORD_COLUMNS, RecordColumns, SdoRecords
 from cananalyze.decode.events.build import EventState, batch_events
 from cananalyze.outputs.capture import Collector
 from cananalyze.outputs.tables.stream import SDO_COLUMNS
@@ -102,3 +102,26 @@ def test_aborted_pairs_and_record_columns_agree():
         for j, rec in fields.held.items():
             assert rec["result"] == "abort" and fields.columns["result"][j] == "abort"
     assert aborted  # faults.log has server aborts answered on the fast path
+
+
+@pytest.mark.parametrize("which", ["generated", "faults"])
+def test_one_record_read_from_the_arrays_is_the_built_one(tmp_path, which):
+    """`record` before the columns' lists exist (the OD tally reads a few records a
+    batch) gives the fast part's own dict, key for key and type for type."""
+    log, kw = _cases(tmp_path, which)
+    read = 0
+    for batch in decoded_batches(log, 997, **kw):
+        part = batch.records.fast_part()
+        if part is None:
+            continue
+        built = [batch.records[int(k)][1] for k in part.at]
+        f = part.fields()
+        fields = RecordColumns(f.arrays, f.held, f.name_labels)  # its lists not built yet
+        one = [fields.record(j) for j in range(len(fields))]
+        assert "columns" not in fields.__dict__
+        assert one == built
+        assert [[type(v) for v in r.values()] for r in one] == [
+            [type(v) for v in r.values()] for r in built]  # fmt: skip
+        assert [list(r) for r in one] == [list(r) for r in built]
+        read += len(one)
+    assert read
