@@ -316,8 +316,9 @@ class Checker:
             return self.timing.lines(self.nmt, t0, self.timed is not False)
         out: list[str] = []
         for c in (self, *self.others):
-            out.append(f"{c.bus}:")
-            out += ["  " + line for line in c.timing.lines(c.nmt, t0, c.timed is not False)]
+            lines = c.timing.lines(c.nmt, t0, c.timed is not False)
+            if lines:  # a bus with nothing timed (no CANopen on it) gets no empty heading
+                out += [f"{c.bus}:", *("  " + line for line in lines)]
         return out
 
 

@@ -400,3 +400,34 @@ def test_real_mf4_files_if_any():
     for path in files:
         got, ctx, _ = run(mf4.read, path)
         assert_same_as_python_can(got, list(can.MF4Reader(str(path))), channel_offset=0)
+
+
+@pytest.mark.parametrize(
+    "name, per_bus",
+    [
+        ("00000001-63BEF5CD.MF4", {"1": 1011, "2": 3013}),
+        ("00000001-60B621D9.MF4", {"1": 1403, "2": 412}),
+    ],
+)
+def test_canedge_files_read_as_python_can_reads_them(name, per_bus):
+    """CANedge's own files (tests/data/canedge, CSS Electronics' examples): the newer layout
+    has BusChannel, IDE, Dir and EDL as virtual channels, a constant per group by its
+    conversion; read raw they were the record's index (bus "0", "1", ... one per frame,
+    every identifier extended)."""
+    path = ROOT / "tests" / "data" / "canedge" / name
+    got, ctx, _ = run(mf4.read, path)
+    assert ctx.problems.count == 0  # its empty FD groups are nothing skipped
+    assert_same_as_python_can(got, list(can.MF4Reader(str(path))), channel_offset=0)
+    names = [got.channel_name(i) for i in range(len(got))]
+    assert {b: names.count(b) for b in set(names)} == per_bus
+
+
+def test_canedge_summary_names_both_buses_and_no_empty_bus_heading():
+    """`decode --summary` of a two-bus log with no CANopen on it: the frames per channel,
+    and no bus heading without timing lines under it (it printed "2:" and "1:" alone)."""
+    out = _cli("decode", str(ROOT / "tests/data/canedge/00000001-63BEF5CD.MF4"), "--summary")
+    lines = out.stdout.splitlines()
+    at = lines.index("frames per channel:")
+    assert lines[at + 1].split() == ["1", "1011"] and lines[at + 2].split() == ["2", "3013"]
+    assert not [x for x in lines if x.rstrip(":").isdigit()]
+    assert "skipped" not in out.stdout and out.stderr == ""

@@ -147,7 +147,9 @@ class _Reader:
             if len(kinds) != 1 or "ID" not in fields:
                 continue
             cg = group.channel_group
-            outside = _outside(group.channels, int(cg.samples_byte_nr))
+            # a group with no records has none to read or lose (CANedge writes every
+            # bus's groups, its FD ones with their data in a VLSD group, empty or not)
+            outside = _outside(group.channels, int(cg.samples_byte_nr)) if cg.cycles_nr else ""
             if outside:
                 self.problem(
                     f"group {gi}",
@@ -188,7 +190,7 @@ class _Reader:
             )
             g.done = g.records
             return None
-        cols = {f: s.samples for f, s in zip(names, signals, strict=True)}
+        cols = {f: _values(f, s) for f, s in zip(names, signals, strict=True)}
         first = g.done
         t = np.asarray(signals[0].timestamps)
         if t.ndim != 1 or t.dtype.kind not in "iuf":
@@ -388,6 +390,19 @@ def _outside(channels, record: int) -> str:
                 f"(byte offset {ch.byte_offset}, {bits} bits)"
             )
     return ""
+
+
+def _values(name: str, signal) -> np.ndarray:
+    """A field's values: the raw ones, through the channel's numeric conversion where it
+    has one. CANedge (firmware 01.07 on) writes BusChannel, IDE, Dir and EDL as virtual
+    channels (no bytes in the record; the raw value is the record's index) whose linear
+    conversion gives the constant of their group (CAN2_Rx: BusChannel 2, Dir 0), and
+    DataLength as DLC's bits through a value table (DLC 9 -> 12 bytes). The ID and the
+    data bytes stay raw; a value-to-text conversion is not applied (its numbers are kept)."""
+    if name in ("ID", "DataBytes") or getattr(signal, "conversion", None) is None:
+        return signal.samples
+    with _quiet():
+        return signal.physical(ignore_value2text_conversions=True).samples
 
 
 def _split(rows: _Rows, n: int) -> tuple[_Rows, list[_Rows]]:
