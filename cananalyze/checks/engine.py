@@ -87,7 +87,7 @@ class Checker:
         second bus was seen) is that bus's."""
         self.bus = name
         for found in self._found:
-            found.bus[:] = name
+            found.bus[found.rule != UNTIMED] = name  # "no timestamps" is the whole log's
         if self._found:
             self._sync_objects(self.findings)
 
@@ -274,7 +274,7 @@ class Checker:
         if at_end:
             new.row[:] = 0  # the end batch has no rows: after every frame
         if self.bus is not None:
-            new.bus[:] = self.bus
+            new.bus[new.rule != UNTIMED] = self.bus  # "no timestamps" is the whole log's
         self._sync_objects(new)
         new = new.sort()
         batch.findings = FindingColumns.concat([batch.findings, new])

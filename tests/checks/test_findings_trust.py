@@ -184,6 +184,28 @@ def test_untimed_real_log_says_so_once_and_skips_timing():
     )
 
 
+def test_untimed_log_of_two_buses_says_so_for_the_log_not_a_bus(tmp_path):
+    """A screen-format candump of can0 and can1 without times: one "no timestamps" note,
+    naming no bus (it is the whole log's), beside findings that each name their bus."""
+    rows = [("can0", 0x705, b"\x7f"), ("can0", 0x185, b"\x01\x02")]  # PDO, pre-operational
+    rows += [("can1", 0x706, b"\x7f"), ("can1", 0x186, b"\x01\x02")]
+    log = tmp_path / "two.txt"
+    log.write_text("".join(
+        f"  {bus}  {cid:03X}   [{len(d)}]  {' '.join(f'{b:02X}' for b in d)}\n"
+        for bus, cid, d in rows))  # fmt: skip
+    found = cananalyze.check(log)
+    assert [(f.rule, f.bus) for f in found if f.rule == "timestamps"] == [("timestamps", None)]
+    assert {(f.rule, f.bus) for f in found if f.rule != "timestamps"} == {
+        ("pdo_not_operational", "can0"), ("pdo_not_operational", "can1")}  # fmt: skip
+    subprocess.run(
+        [sys.executable, "-m", "cananalyze", "check", str(log), "--json", str(tmp_path / "f.json")],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    got = json.loads((tmp_path / "f.json").read_text())
+    assert [x.get("bus") for x in got if x["rule"] == "timestamps"] == [None]
+    assert sorted(x.get("bus") for x in got if x["rule"] != "timestamps") == ["can0", "can1"]
+
+
 def test_untimed_log_keeps_order_based_rules_in_line_order(tmp_path):
     """All at t = 0: a PDO before the node is started, a boot-up with no reset, an SDO
     abort are still found, at their lines; the final "stop all" judges nothing before it."""
