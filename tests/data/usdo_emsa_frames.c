@@ -28,6 +28,24 @@ static void emit(int ok, const fbsec_co_fd_frame_t *f) {
   t += 0.001;
 }
 
+/* A segmented upload from `server` to client 1 as SOFA's server answers one
+ * (server_seg_upload_serve): full segments while more than 60 bytes remain, then
+ * the end segment with the rest. */
+static void upload(uint8_t server, uint8_t session, uint16_t index, uint8_t sub,
+                   const uint8_t *body, unsigned total) {
+  fbsec_co_fd_frame_t f;
+  unsigned ctr, sent = 0;
+  emit(fbsec_co_fd_usdo_encode_upload_req(&f, 1, server, session, index, sub, NULL, 0), &f);
+  emit(fbsec_co_fd_usdo_encode_upload_init_resp(&f, server, 1, session, index, sub, total), &f);
+  for (ctr = 0; total - sent > 60; ctr++, sent += 60) {
+    emit(fbsec_co_fd_usdo_encode_upload_seg_req(&f, 1, server, session, ctr), &f);
+    emit(fbsec_co_fd_usdo_encode_upload_seg_resp(&f, server, 1, session, ctr, body + sent), &f);
+  }
+  emit(fbsec_co_fd_usdo_encode_upload_seg_req(&f, 1, server, session, ctr), &f);
+  emit(fbsec_co_fd_usdo_encode_upload_end_resp(&f, server, 1, session, body + sent,
+                                               (uint16_t)(total - sent)), &f);
+}
+
 int main(void) {
   fbsec_co_fd_frame_t f;
   uint8_t body[256];
@@ -52,23 +70,9 @@ int main(void) {
   emit(fbsec_co_fd_usdo_encode_download_end_req(&f, 1, 5, 3, body + 120, 30), &f);
   emit(fbsec_co_fd_usdo_encode_download_end_resp(&f, 5, 1, 3), &f);
   /* 4. segmented upload of 130 bytes, session 4, 0x2030:02 */
-  emit(fbsec_co_fd_usdo_encode_upload_req(&f, 1, 5, 4, 0x2030, 2, NULL, 0), &f);
-  emit(fbsec_co_fd_usdo_encode_upload_init_resp(&f, 5, 1, 4, 0x2030, 2, 130), &f);
-  for (ctr = 0; ctr < 2; ctr++) {
-    emit(fbsec_co_fd_usdo_encode_upload_seg_req(&f, 1, 5, 4, ctr), &f);
-    emit(fbsec_co_fd_usdo_encode_upload_seg_resp(&f, 5, 1, 4, ctr, body + 60 * ctr), &f);
-  }
-  emit(fbsec_co_fd_usdo_encode_upload_seg_req(&f, 1, 5, 4, 2), &f);
-  emit(fbsec_co_fd_usdo_encode_upload_end_resp(&f, 5, 1, 4, body + 120, 10), &f);
-  /* 5. segmented upload of exactly 120 bytes: the end segment carries none */
-  emit(fbsec_co_fd_usdo_encode_upload_req(&f, 1, 6, 6, 0x2040, 0, NULL, 0), &f);
-  emit(fbsec_co_fd_usdo_encode_upload_init_resp(&f, 6, 1, 6, 0x2040, 0, 120), &f);
-  for (ctr = 0; ctr < 2; ctr++) {
-    emit(fbsec_co_fd_usdo_encode_upload_seg_req(&f, 1, 6, 6, ctr), &f);
-    emit(fbsec_co_fd_usdo_encode_upload_seg_resp(&f, 6, 1, 6, ctr, body + 60 * ctr), &f);
-  }
-  emit(fbsec_co_fd_usdo_encode_upload_seg_req(&f, 1, 6, 6, 2), &f);
-  emit(fbsec_co_fd_usdo_encode_upload_end_resp(&f, 6, 1, 6, NULL, 0), &f);
+  upload(5, 4, 0x2030, 2, body, 130);
+  /* 5. segmented upload of exactly 120 bytes: one full segment, a full end segment */
+  upload(6, 6, 0x2040, 0, body, 120);
   /* 6. an upload the server aborts: 0x6000:01 does not exist (abort code 33h) */
   emit(fbsec_co_fd_usdo_encode_upload_req(&f, 1, 6, 5, 0x6000, 1, NULL, 0), &f);
   emit(fbsec_co_fd_usdo_encode_abort(&f, 6, 1, 5, 0x6000, 1, FBSEC_ABORT_NO_OBJECT), &f);

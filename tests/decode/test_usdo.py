@@ -78,7 +78,7 @@ def test_frames_from_the_emsa_codec_are_the_transfers_it_encoded():
     to encode, transfer by transfer (client 1; servers 5 and 6)."""
     rows = _decode_file(ROOT / "tests" / "data" / "usdo_emsa.log")
     frames = [r for r in rows if r["kind"] == "frame"]
-    assert len(frames) == 30 and {f["service"] for f in frames} == {"usdo_request", "usdo_response"}
+    assert len(frames) == 28 and {f["service"] for f in frames} == {"usdo_request", "usdo_response"}
     assert not [f for f in frames if "usdo_problem" in f or f["command"] == "invalid"]
     body = bytes(range(256))
     got = [(r["node"], r["direction"], r["protocol"], r["index"], r["subindex"], r["session"],

@@ -91,3 +91,17 @@ def test_the_log_ending_mid_transfer():
         resp(0x32, 1, index=0x1008, subindex=0, datatype=9, total=100),
     ])  # fmt: skip
     assert recs[0]["result"] == "protocol_error" and "log ended mid-transfer" in recs[0]["detail"]
+
+
+def test_an_empty_last_segment_ends_an_upload():
+    """CiA 1301's last segment may carry 0 bytes (EmSA's codec: n 0..60), after full ones."""
+    body = bytes(range(120))
+    recs, notes = run([
+        req(0x11, 2, index=0x2040, subindex=0),
+        resp(0x32, 2, index=0x2040, subindex=0, datatype=0x0F, total=120),
+        req(0x13, 2, counter=0), resp(0x33, 2, counter=0, data=body[:60]),
+        req(0x13, 2, counter=1), resp(0x33, 2, counter=1, data=body[60:]),
+        req(0x13, 2, counter=2), resp(0x34, 2, data=b""),
+    ])  # fmt: skip
+    assert [(r["result"], r["size"], r["data"]) for r in recs] == [("ok", 120, body.hex())]
+    assert not [n for n in notes if "usdo_problem" in n]
