@@ -435,8 +435,8 @@ class SdoRecords:
         if rec is None:
             rec = self._built.get(k)
         if rec is None and self._fields is not None and 0 <= k < len(self._fields):
-            # every field already built as columns (an export's tables): read it there,
-            # not through a build of this one transfer
+            # the part's fields are columns already (an export's tables): read this
+            # transfer from their arrays, not through a build of it
             rec = self._built[k] = self._fields.record(k)
         if rec is None:
             for p in self._fast:

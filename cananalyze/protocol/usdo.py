@@ -16,8 +16,8 @@ implement only the classic SDO):
     (sub-index in byte 3, the index in bytes 4-5, byte-aligned as CiA's USDO page
     says; segments with their counter in byte 3 and 60 data bytes from byte 4;
     the last segment with its byte count in byte 3), the abort frame (7Fh, its
-    one-byte code in byte 6) and the codes 15h and 21h. tests/fixtures/usdo holds
-    frames that codec encoded;
+    one-byte code in byte 6) and the codes 15h and 21h. tests/data/usdo_emsa.log
+    holds frames that codec encoded;
   * emtas/emotas' CANopen FD stack header `ico_usdo.h` ($Id: ico_usdo.h 16986
     2017-02-27; public code index file ids 44359093029 and 35776154010): every
     command specifier value, the remote (routed) variants, and the other one-byte

@@ -431,3 +431,17 @@ def test_canedge_summary_names_both_buses_and_no_empty_bus_heading():
     assert lines[at + 1].split() == ["1", "1011"] and lines[at + 2].split() == ["2", "3013"]
     assert not [x for x in lines if x.rstrip(":").isdigit()]
     assert "skipped" not in out.stdout and out.stderr == ""
+
+
+def test_a_conversion_that_fails_is_a_problem_not_a_traceback(monkeypatch):
+    """A damaged conversion block (asammdf raising while it converts): the group is one
+    problem naming it and its record, the other groups are read."""
+
+    def broken(self, *args, **kwargs):
+        raise ValueError("bad conversion block")
+
+    monkeypatch.setattr(asammdf.Signal, "physical", broken)
+    got, ctx, _ = run(mf4.read, ROOT / "tests" / "data" / "canedge" / "00000001-63BEF5CD.MF4")
+    assert len(got) == 0 and ctx.problems.count == 3  # the 3 groups with records
+    text = str(ctx.problems)
+    assert "record 1" in text and "bad conversion block" in text, text

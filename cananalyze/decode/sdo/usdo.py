@@ -139,9 +139,9 @@ class UsdoTracker:
             problem = self._count(xfer, f["counter"])
         if "data" in f:
             xfer.data += f["data"]
-        # A download's last segment waits for the server's answer; an upload's ends it.
-        if cmd.step == "end" or (cmd.step == "last" and not (cmd.layout == "last"
-                                                            and xfer.direction == "download")):  # fmt: skip
+        # the server's last frame ends a transfer; a client's (a download's last
+        # segment) waits for the server's answer
+        if cmd.step == "end" or (cmd.step == "last" and cmd.sender == "server"):
             self._finish(xfer, t, "ok")
         out = note | {"role": what + self._size_text(f)}
         if problem:

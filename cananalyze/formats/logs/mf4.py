@@ -183,14 +183,14 @@ class _Reader:
                     record_count=count,
                     raw=True,
                 )
-        except Exception as exc:  # asammdf raises many kinds on damaged data blocks
+                cols = {f: _values(f, s) for f, s in zip(names, signals, strict=True)}
+        except Exception as exc:  # asammdf raises many kinds on damaged blocks or conversions
             self.problem(
                 f"group {g.index} record {g.done + 1}",
                 f"{g.kind} records cannot be read ({_say(exc)}); the rest of the group is skipped",
             )
             g.done = g.records
             return None
-        cols = {f: _values(f, s) for f, s in zip(names, signals, strict=True)}
         first = g.done
         t = np.asarray(signals[0].timestamps)
         if t.ndim != 1 or t.dtype.kind not in "iuf":
@@ -401,8 +401,7 @@ def _values(name: str, signal) -> np.ndarray:
     data bytes stay raw; a value-to-text conversion is not applied (its numbers are kept)."""
     if name in ("ID", "DataBytes") or getattr(signal, "conversion", None) is None:
         return signal.samples
-    with _quiet():
-        return signal.physical(ignore_value2text_conversions=True).samples
+    return signal.physical(ignore_value2text_conversions=True).samples
 
 
 def _split(rows: _Rows, n: int) -> tuple[_Rows, list[_Rows]]:
