@@ -23,6 +23,7 @@
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
+#include <math.h>
 #include <stdint.h>
 #include <string.h>
 
@@ -1497,6 +1498,61 @@ done:
     return out;
 }
 
+PyDoc_STRVAR(float_repr_doc,
+             "float_repr(v, data, offsets, out) -> width\n\n"
+             "repr() of each float64 of v into the rows of out (uint8, len(v) x 24, zeroed:\n"
+             "NUL-padded; 24 bytes hold any double's repr), \"null\" where not finite (JSON);\n"
+             "returns the longest text's length. data/offsets (uint8; int64, len(v) + 1) are\n"
+             "Arrow's cast of v to text, which is repr's where it has no exponent and\n"
+             "1e-4 <= |v| < 1e16 (or v is 0) once \".0\" ends a whole number; any other row is\n"
+             "formatted by Python's own formatter (PyOS_double_to_string, as float.__repr__).\n"
+             "The numpy path's five passes over the text matrix were 0.25 s of a 1M-frame\n"
+             "JSONL decode's time column; Python's formatter alone is 4x Arrow's cast.");
+
+static PyObject *float_repr(PyObject *self, PyObject *args) {
+    PyObject *o_v, *o_data, *o_off, *o_out;
+    if (!PyArg_ParseTuple(args, "OOOO", &o_v, &o_data, &o_off, &o_out)) return NULL;
+    Bufs bs = {.n = 0};
+    if (bufs_get(&bs, o_v, 0, -1, "v") < 0 || bufs_get(&bs, o_data, 0, -1, "data") < 0) goto fail;
+    Py_ssize_t n = bs.b[0].len / 8, nd = bs.b[1].len, width = 0;
+    if (bufs_get(&bs, o_off, 0, (n + 1) * 8, "offsets") < 0 ||
+        bufs_get(&bs, o_out, 1, n * 24, "out") < 0)
+        goto fail;
+    const double *v = bs.b[0].buf;
+    const char *data = bs.b[1].buf;
+    const int64_t *off = bs.b[2].buf;
+    char *out = bs.b[3].buf;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double x = v[i], a = fabs(x);
+        char *o = out + 24 * i;
+        int64_t lo = off[i], len = off[i + 1] - lo;
+        if (!isfinite(x)) {
+            memcpy(o, "null", 4);
+            len = 4;
+        } else if ((a == 0 || (a >= 1e-4 && a < 1e16)) && lo >= 0 && len > 0 && len <= 22 &&
+                   lo + len <= nd && !memchr(data + lo, 'e', (size_t)len)) {
+            memcpy(o, data + lo, (size_t)len);
+            if (!memchr(o, '.', (size_t)len)) {
+                o[len++] = '.';
+                o[len++] = '0';
+            }
+        } else {
+            char *s = PyOS_double_to_string(x, 'r', 0, Py_DTSF_ADD_DOT_0, NULL);
+            if (!s) goto fail;
+            len = (int64_t)strlen(s);
+            if (len > 24) len = 24; /* never: no double's repr is longer */
+            memcpy(o, s, (size_t)len);
+            PyMem_Free(s);
+        }
+        if (len > width) width = len;
+    }
+    bufs_release(&bs);
+    return PyLong_FromSsize_t(width);
+fail:
+    bufs_release(&bs);
+    return NULL;
+}
+
 static PyMethodDef methods[] = {
     {"count_lines", count_lines, METH_VARARGS, count_lines_doc},
     {"split_lines", split_lines, METH_VARARGS, split_lines_doc},
@@ -1510,6 +1566,7 @@ static PyMethodDef methods[] = {
     {"compact_rows", compact_rows, METH_VARARGS, compact_rows_doc},
     {"gather_rows", gather_rows, METH_VARARGS, gather_rows_doc},
     {"frame_json", frame_json, METH_VARARGS, frame_json_doc},
+    {"float_repr", float_repr, METH_VARARGS, float_repr_doc},
     {NULL, NULL, 0, NULL},
 };
 

@@ -134,14 +134,25 @@ def test_signal_values_python_words_its_own_way(monkeypatch):
     assert first["signals"] == {"f": 2.0, "i": 0, "b": True}
 
 
-def test_float_text_equals_repr_or_null():
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "numpy"])
+def test_float_text_equals_repr_or_null(compiled, monkeypatch):
+    """Python's repr is the definition, on both paths: the compiled one copies Arrow's
+    text and mends it, the numpy one mends it in passes."""
+    if not compiled:
+        monkeypatch.setattr(jsonl_columns, "C", None)
+    elif getattr(jsonl_columns.C, "float_repr", None) is None:
+        pytest.skip("compiled helper not in use")
     rng = np.random.default_rng(9)
     v = np.sign(rng.normal(size=20000)) * 10.0 ** rng.uniform(-8, 20, 20000)
-    v = np.concatenate([v, np.round(v), [0.0, -0.0, np.nan, np.inf, 1e-4, 1e16]])
-    matrix, _ = jsonl_columns._floats(v)
-    got = [bytes(row[row != 0]).decode() for row in matrix]
+    stamps = 1767225600 + np.cumsum(rng.integers(1, 5000, 5000)) / 1e6  # candump -l times
+    edges = [0.0, -0.0, np.nan, -np.nan, np.inf, -np.inf, 1e-4, 9.999999999999999e-05, 1e16]
+    edges += [9999999999999998.0, 5e-324, -2.2250738585072014e-308, 1.7976931348623157e308]
+    edges += [0.1, 1 / 3, -123456789.0, 0.00012345678901234567, 2.0**53, 2.0**53 + 2]
+    v = np.concatenate([v, np.round(v), stamps, edges, rng.random(3000) * 1e-4])
+    got = [bytes(row[row != 0]).decode() for row in jsonl_columns._floats(v)]
     want = [repr(x) if np.isfinite(x) else "null" for x in v.tolist()]
     assert got == want
+    assert jsonl_columns._floats(np.zeros(0)).shape[0] == 0
 
 
 def test_records_of_rows_not_shown_come_last(monkeypatch):

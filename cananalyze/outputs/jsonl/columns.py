@@ -32,6 +32,7 @@ from cananalyze.outputs.text.sdo import fast_pairs
 from cananalyze.outputs.text.writer import _KEYED, Rendered, _key_groups, _padded_table
 from cananalyze.protocol.fields import frame_fields
 from cananalyze.protocol.services import SERVICE_NAMES, Service
+from cananalyze.runtime.speedups import C
 
 # keyed rows whose fields read the first data byte (boot-up's state too, unlike its text)
 _BYTE = np.zeros(256, bool)
@@ -80,7 +81,7 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
     flags, svc, dlc, data = fb.flags[sel], batch.service[sel], fb.dlc[sel], fb.data[sel]
     node, pdo = batch.node[sel], batch.pdo[sel]
     rtr = (flags & FLAG_RTR) != 0
-    parts = [bytecols.repeat(b'{"kind":"frame","t":', n), _floats(fb.t[sel])[0]]
+    parts = [bytecols.repeat(b'{"kind":"frame","t":', n), _floats(fb.t[sel])]
     channels = [json.dumps(fb.channel_label(c)).encode() for c in range(_channels(fb))]
     parts += [bytecols.repeat(b',"channel":', n), _padded_table(channels)[fb.channel[sel]]]
     parts += [bytecols.repeat(b',"can_id":', n), bytecols.decimal(fb.can_id[sel])]
@@ -215,7 +216,7 @@ def _signal_text(sb, pos: np.ndarray) -> np.ndarray | None:
     for j, (name, values) in enumerate(sb.columns.items()):
         v = np.asarray(values)[pos]
         if v.dtype.kind == "f":
-            text = _floats(v)[0]
+            text = _floats(v)
         elif v.dtype.kind == "b":
             text = _padded_table([b"false", b"true"])[v.astype(np.intp)]
         elif v.dtype.kind == "i" or (v.dtype.kind == "u" and int(v.max(initial=0)) < 1 << 63):
@@ -240,18 +241,23 @@ def _signal_text(sb, pos: np.ndarray) -> np.ndarray | None:
     return bytecols.left_aligned(*bytecols.compact(parts, m, with_ends=True))
 
 
-def _floats(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(NUL-padded `repr` of each float, or null where not finite; rows Python wrote)."""
+def _floats(v: np.ndarray) -> np.ndarray:
+    """NUL-padded `repr` of each float, or null where not finite."""
     import pyarrow as pa
 
     from cananalyze.core.columns import arrow_build as ab
     from cananalyze.core.columns.json_text import Texts
 
-    v = np.asarray(v, np.float64)
+    v = np.ascontiguousarray(v, np.float64)
     n = v.size
     # built from the buffer and cast by the kernel's name: pa.array imports pandas, and
     # pyarrow.compute its wrappers (0.2-0.3 s of a JSONL decode that needs neither)
     t = Texts.from_arrow(ab.cast(ab.numeric(v), pa.string()))
+    compiled = getattr(C, "float_repr", None)
+    if compiled is not None:  # one pass: Arrow's text copied, mended where it is not repr's
+        out = np.zeros((n, 24), np.uint8)
+        width = compiled(v, t.data, t.offsets, out)
+        return out[:, : max(width, 1)]
     lengths = t.lengths
     width = int(lengths.max()) + 2 if n else 2
     out = np.zeros((n, width), np.uint8)
@@ -262,12 +268,11 @@ def _floats(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     whole = usable & ~(out == ord(".")).any(axis=1)
     out[whole, lengths[whole]] = ord(".")
     out[whole, lengths[whole] + 1] = ord("0")
-    odd = ~usable
-    for i in np.flatnonzero(odd).tolist():
+    for i in np.flatnonzero(~usable).tolist():
         x = float(v[i])
         text = (repr(x) if x == x and abs(x) != float("inf") else "null").encode()
         if len(text) > out.shape[1]:
             out = np.concatenate([out, np.zeros((n, len(text) - out.shape[1]), np.uint8)], 1)
         out[i] = bytecols.PAD
         out[i, : len(text)] = np.frombuffer(text, np.uint8)
-    return out, odd & np.isfinite(v)
+    return out
