@@ -9,7 +9,8 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import ROOT, SAMPLES, real_file
+from conftest import ROOT, SAMPLES, generated_log, real_file
+from exported import DEVICES
 from helpers.broken_disk import broken_text_stream
 
 from cananalyze.cli.common import options
@@ -225,3 +226,54 @@ def test_cia402_signal_words_from_columns(monkeypatch):
     batches = _decode([str(log), "--device", "11=cia402"], step=300)
     assert any(sb.words for b in batches for sb in b.signals)
     assert _both(batches, monkeypatch) > 1000
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["faults.log", "--network", "network.toml"],
+        ["commissioning.log", "--network", "network.toml"],
+        ["generated"],
+    ],
+    ids=["faults", "commissioning", "generated"],
+)
+def test_sdo_record_lines_are_the_records_dumped(argv, tmp_path):
+    """Each transfer's JSON line from the columns is `dumps` of its record dict."""
+    from cananalyze.outputs.jsonl.encode import dumps
+    from cananalyze.outputs.jsonl.sdo import record_lines
+
+    args = [str(SAMPLES / a) if a.endswith((".log", ".toml")) else a for a in argv]
+    if args == ["generated"]:  # 16 DAT 7014 modules: named objects, values decoded
+        args = [str(generated_log(tmp_path, 30000))]
+        args += [a for n, d in DEVICES.items() for a in ("--device", f"{n}={d}")]
+    fast = 0
+    for b in _decode(args):
+        fields = b.records.fields()
+        fast += len(fields) - len(fields.held)
+        want = [(dumps(rec) + "\n").encode() for _, rec in b.records]
+        assert record_lines(fields) == want
+    assert fast > 0
+
+
+def test_sdo_record_lines_word_every_kind_of_value_as_dumps():
+    """Values the fast path can hold (ints, floats with -0.0 and NaN, text needing
+    escapes, bytes, words) and a NaN latency: each line is the record dumped."""
+    from cananalyze.outputs.jsonl.encode import dumps
+    from cananalyze.outputs.jsonl.sdo import record_lines
+
+    batches = _decode([str(SAMPLES / "faults.log"), "--network", str(SAMPLES / "network.toml")])
+    fields = next(b.records.fields() for b in batches if len(b.records.fields()) > 12)
+    kinds = [0, -0.0, 0.0, 2.5, float("nan"), 'é"\\\n\x01', "abc", b"\x01\xff", np.int64(-3)]
+    kinds += [np.float32(0.1), True, None, {"state": "operational", "bits": [1, 2]}]
+    values = np.empty(len(fields), object)
+    values[:] = [kinds[j % len(kinds)] for j in range(len(fields))]
+    fields.arrays["value"] = values
+    fields.arrays.pop("value_int", None)
+    words = np.empty(len(fields), object)
+    words[:] = [{"x": j} if j % 3 == 0 else None for j in range(len(fields))]
+    fields.arrays["words"] = words
+    fields.arrays["latency_ms"] = fields.arrays["latency_ms"].copy()
+    fields.arrays["latency_ms"][1] = np.nan
+    want = [(dumps(fields.record(j)) + "\n").encode() for j in range(len(fields))]
+    assert record_lines(fields) == want
+    assert b'"latency_ms":NaN' in b"".join(want) and b'"value":-0.0' in b"".join(want)

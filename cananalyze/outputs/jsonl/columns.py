@@ -26,7 +26,7 @@ from cananalyze.core.records import DecodedBatch
 from cananalyze.devices.words import fields_column
 from cananalyze.outputs.fields import row_fields
 from cananalyze.outputs.jsonl.encode import clean, clean_fields, dumps
-from cananalyze.outputs.jsonl.records import jsonl_records
+from cananalyze.outputs.jsonl.records import jsonl_record_lines
 from cananalyze.outputs.jsonl.sdo import pair_fields
 from cananalyze.outputs.text.sdo import fast_pairs
 from cananalyze.outputs.text.writer import _KEYED, Rendered, _key_groups, _padded_table
@@ -65,17 +65,13 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
     sel = np.arange(len(fb)) if mask is None else np.flatnonzero(mask)
     n = sel.size
     pairs = fast_pairs(batch) if mask is None else None  # before anything reads the notes
-    records = jsonl_records(batch)
-    by_row: dict[int, list[dict]] = {}
-    for row, rec in records:
-        by_row.setdefault(row, []).append(rec)
+    records = jsonl_record_lines(batch)
+    by_row: dict[int, list[bytes]] = {}
+    for row, line in records:
+        by_row.setdefault(row, []).append(line)
     shown = np.zeros(len(fb), bool)
     shown[sel] = True
-    tail = b"".join(
-        (dumps(rec) + "\n").encode()
-        for row, rec in records
-        if not (0 <= row < len(fb) and shown[row])
-    )
+    tail = b"".join(line for row, line in records if not (0 <= row < len(fb) and shown[row]))
     if n == 0:
         return Rendered([], 0, np.zeros(0, np.int64), [], tail)
     flags, svc, dlc, data = fb.flags[sel], batch.service[sel], fb.dlc[sel], fb.data[sel]
@@ -172,7 +168,7 @@ def render(batch: DecodedBatch, mask: np.ndarray | None) -> Rendered | None:
         rec_rows = np.zeros(len(fb), bool)
         rec_rows[[r for r in by_row if 0 <= r < len(fb)]] = True
         for i in np.flatnonzero(rec_rows[sel]).tolist():
-            records_after[i] = "".join(dumps(rec) + "\n" for rec in by_row[int(sel[i])]).encode()
+            records_after[i] = b"".join(by_row[int(sel[i])])
     after, inserts, back = [], [], []
     for i in sorted(spliced.keys() | records_after.keys()):
         for text, before in ((spliced.get(i), 2), (records_after.get(i), 0)):

@@ -18,8 +18,10 @@ import json
 import numpy as np
 
 from cananalyze.core.columns import bytecols
+from cananalyze.core.sdo_records import RecordColumns, hex_texts
 from cananalyze.decode.sdo.fastpath import pair_outputs
 from cananalyze.decode.sdo.roles import pair_roles
+from cananalyze.outputs.jsonl.encode import dumps
 from cananalyze.protocol.sdo import fields as sdo_fields
 
 _EXPEDITED = ("expedited", "size_indicated", "n", "size", "sdo_data")
@@ -79,3 +81,86 @@ def _group(fb, fast, a, is_req, rows, roles, js, fields_text) -> list[bytes] | N
     if blob[: int(ends[0])] != fields_text(f):  # the group's fixed text, checked on its first frame
         return None
     return bytecols.row_bytes(blob, ends)
+
+
+# the line of an ok expedited pair as `dumps(RecordColumns.record(j))` writes it, key for key
+_PAIR_LINE = (
+    '{"kind":"sdo","t_start":%s,"t":%s,"latency_ms":%s,"node":%d,"direction":"%s",'
+    '"protocol":"expedited","index":%d,"subindex":%d,"size":%d,"data":"%s","value":%s,'
+    '"name":%s,"result":"ok","abort_code":null,"abort_text":null,"detail":null,"words":%s,'
+    '"frames":2,"cob_ids":[%d,%d]}\n'
+)
+
+
+def record_lines(fields: RecordColumns) -> list[bytes]:
+    """`dumps(record) + "\\n"` of every transfer of a batch (`RecordColumns`, by
+    position): the fast path's pairs by one format each from the columns (a dict and a
+    `json.dumps` each were a tenth of a JSONL decode of a polled bus), the held records
+    dumped."""
+    m = len(fields)
+    if m == 0:
+        return []
+    a = fields.arrays
+    t_start, t, lat = (_json_floats(a[c]) for c in ("t_start", "t", "latency_ms"))
+    node, index, sub, size = (a[c].tolist() for c in ("node", "index", "subindex", "size"))
+    direction = np.where(a["upload"], "upload", "download").tolist()
+    data = hex_texts(a["raw"], a["data_len"])
+    names = [dumps(x) for x in fields.name_labels]
+    name = [names[c] for c in a["name_code"].tolist()]
+    value = _json_values(a["value"].tolist())
+    words = _json_values(a["words"].tolist())
+    held = fields.held
+    return [
+        (dumps(held[j]) + "\n").encode()
+        if j in held
+        else (
+            _PAIR_LINE
+            % (
+                t_start[j],
+                t[j],
+                lat[j],
+                node[j],
+                direction[j],
+                index[j],
+                sub[j],
+                size[j],
+                data[j],
+                value[j],
+                name[j],
+                words[j],
+                0x600 + node[j],
+                0x580 + node[j],
+            )
+        ).encode()
+        for j in range(m)
+    ]
+
+
+def _json_floats(v: np.ndarray) -> list[str]:
+    """json.dumps of each float: repr, or NaN / Infinity / -Infinity."""
+    return (
+        [dumps(x) for x in v.tolist()]
+        if not np.isfinite(v).all()
+        else list(map(float.__repr__, v.tolist()))
+    )
+
+
+def _json_values(values: list) -> list[str]:
+    """json.dumps of each value (as inside the record's dict); a text once per distinct
+    text value, a float each time (-0.0 == 0.0 as a key)."""
+    memo: dict[str, str] = {}
+    out = []
+    for v in values:
+        kind = type(v)
+        if v is None:
+            out.append("null")
+        elif kind is int:
+            out.append(int.__repr__(v))
+        elif kind is str:
+            text = memo.get(v)
+            if text is None:
+                text = memo[v] = dumps(v)
+            out.append(text)
+        else:  # floats, numpy scalars, bytes, a dict of words: as the dict's dumps does
+            out.append(dumps(v))
+    return out
