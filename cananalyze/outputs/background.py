@@ -18,6 +18,9 @@ class Finishable(Protocol):
     def bytes(self) -> bytes:
         """The finished bytes."""
 
+    def pieces(self) -> list:
+        """The finished bytes as bytes-like pieces, in order (no join)."""
+
 
 class ByteSink:
     """Bytes (or things that finish into bytes) to a text stream, through its binary
@@ -41,7 +44,7 @@ class ByteSink:
 
     def put(self, data: bytes | Finishable) -> None:
         if self._queue is None:
-            self._emit(data if isinstance(data, bytes) else data.bytes())
+            self._emit(data)
             return
         if self._error is not None:
             self.close()
@@ -67,7 +70,7 @@ class ByteSink:
                 return
             if self._error is None:  # after an error, drain so the caller never blocks
                 try:
-                    buffer.write(data if isinstance(data, bytes) else data.bytes())
+                    _write(buffer, data)
                 except BaseException as exc:  # noqa: BLE001 - re-raised by close()
                     self._error = exc
 
@@ -79,10 +82,19 @@ class ByteSink:
             return buffer
         return None
 
-    def _emit(self, data: bytes) -> None:
+    def _emit(self, data: bytes | Finishable) -> None:
         buffer = self.buffer()
         if buffer is not None:
             self.out.flush()
-            buffer.write(data)
+            _write(buffer, data)
         else:
-            self.out.write(data.decode("utf-8"))
+            self.out.write((data if isinstance(data, bytes) else data.bytes()).decode("utf-8"))
+
+
+def _write(buffer, data: bytes | Finishable) -> None:
+    """Bytes, or a finished batch piece by piece: not joined into one more copy."""
+    if isinstance(data, bytes):
+        buffer.write(data)
+        return
+    for piece in data.pieces():
+        buffer.write(piece)

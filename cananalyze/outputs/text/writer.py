@@ -451,22 +451,29 @@ class Rendered:
         self.back = back
 
     def bytes(self) -> bytes:
+        return b"".join(self.pieces())
+
+    def pieces(self) -> list:
+        """The finished bytes as pieces to write one after another (views into the
+        compacted block between the inserts): joined, a batch's 150 MB of JSONL were
+        copied twice more, by the slices and by the join."""
         blob, ends = _compact(self.parts, self.n, with_ends=self.after.size > 0)
         self.parts = []
         if not self.inserts:
-            return blob + self.tail if self.tail else blob
+            return [blob, self.tail] if self.tail else [blob]
         at = ends[self.after]
         if self.back is not None:
             at = at - np.asarray(self.back, np.int64)
-        pieces: list[bytes] = []
+        view = memoryview(blob)
+        pieces: list = []
         prev = 0
         for e, insert in zip(at.tolist(), self.inserts, strict=True):
-            pieces.append(blob[prev:e])
+            pieces.append(view[prev:e])
             pieces.append(insert)
             prev = e
-        pieces.append(blob[prev:])
+        pieces.append(view[prev:])
         pieces.append(self.tail)
-        return b"".join(pieces)
+        return pieces
 
 
 def _key_groups(
