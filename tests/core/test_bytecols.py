@@ -22,6 +22,19 @@ def test_decimal_and_hex_equal_python() -> None:
     assert _rows(bytecols.hex_upper(values)) == want
 
 
+def test_small_decimals_by_table_equal_python() -> None:
+    """Values in 0..65535 (identifiers, lengths, node-IDs) come from a table: the same
+    text, and the same matrix width (a sign column and the largest value's digits)."""
+    rng = np.random.default_rng(4)
+    for top in (1, 9, 10, 127, 2047, 65535):
+        values = np.array([0, top, *rng.integers(0, top + 1, 500).tolist()], np.int64)
+        got = bytecols.decimal(values)
+        assert _rows(got) == [str(v) for v in values.tolist()]
+        assert got.shape == (values.size, 1 + len(str(top)))
+        assert (got[:, 0] == bytecols.PAD).all()
+    assert _rows(bytecols.decimal(np.array([65536, 3]))) == ["65536", "3"]  # past the table
+
+
 def test_digits_equal_python_zero_padded() -> None:
     """Both of digits' word sizes: values that fit in 32 bits, and the 64-bit rest."""
     rng = np.random.default_rng(5)
