@@ -1498,51 +1498,107 @@ done:
     return out;
 }
 
+/* repr(x) into o when x is a whole number of microseconds below 2**32 (a logged time
+   stamp, a time relative to the first): the shortest text that reads back as x is then
+   its six decimals less their trailing zeros (one decimal kept), since no other text of
+   six decimals or fewer lies within half a unit in the last place of x (below 2**32
+   that unit is at most 2**-21 s < 1 us). Whether x is such a number: k = x * 1e6
+   rounded, and k / 1e6 (both exact below 2**53: one correctly rounded division) is x.
+   Returns the length, or 0 when x is not such a number. */
+static int micro_repr(double x, char *o) {
+    double a = fabs(x);
+    if (!(a >= 1e-4 && a < 4294967296.0)) return 0;
+    double r = nearbyint(a * 1e6);
+    if (r / 1e6 != a) return 0;
+    uint64_t k = (uint64_t)r, whole = k / 1000000, frac = k % 1000000;
+    char digits[24];
+    int nd = 0, len = 0;
+    do {
+        digits[nd++] = (char)('0' + whole % 10);
+        whole /= 10;
+    } while (whole);
+    if (signbit(x)) o[len++] = '-';
+    while (nd) o[len++] = digits[--nd];
+    o[len++] = '.';
+    int keep = 6;
+    while (keep > 1 && frac % 10 == 0) {
+        frac /= 10;
+        keep--;
+    }
+    for (int j = keep - 1; j >= 0; j--) {
+        o[len + j] = (char)('0' + frac % 10);
+        frac /= 10;
+    }
+    return len + keep;
+}
+
 PyDoc_STRVAR(float_repr_doc,
-             "float_repr(v, data, offsets, out) -> width\n\n"
+             "float_repr(v, data, offsets, out, todo) -> width\n\n"
              "repr() of each float64 of v into the rows of out (uint8, len(v) x 24, zeroed:\n"
              "NUL-padded; 24 bytes hold any double's repr), \"null\" where not finite (JSON);\n"
-             "returns the longest text's length. data/offsets (uint8; int64, len(v) + 1) are\n"
-             "Arrow's cast of v to text, which is repr's where it has no exponent and\n"
-             "1e-4 <= |v| < 1e16 (or v is 0) once \".0\" ends a whole number; any other row is\n"
-             "formatted by Python's own formatter (PyOS_double_to_string, as float.__repr__).\n"
-             "The numpy path's five passes over the text matrix were 0.25 s of a 1M-frame\n"
+             "returns the longest text's length. A whole number of microseconds below 2**32\n"
+             "(a time stamp) is written from its digits; any other row from data/offsets\n"
+             "(uint8; int64, len(v) + 1), Arrow's cast of v to text, which is repr's where\n"
+             "it has no exponent and 1e-4 <= |v| < 1e16 (or v is 0) once \".0\" ends a whole\n"
+             "number, else by Python's own formatter (PyOS_double_to_string, as\n"
+             "float.__repr__). With data None, such rows are left empty and marked in todo\n"
+             "(uint8, len(v)), for a second call with Arrow's text of those alone. The numpy\n"
+             "path's passes over the text matrix and Arrow's cast were 0.4 s of a 1M-frame\n"
              "JSONL decode's time column; Python's formatter alone is 4x Arrow's cast.");
 
 static PyObject *float_repr(PyObject *self, PyObject *args) {
-    PyObject *o_v, *o_data, *o_off, *o_out;
-    if (!PyArg_ParseTuple(args, "OOOO", &o_v, &o_data, &o_off, &o_out)) return NULL;
+    PyObject *o_v, *o_data, *o_off, *o_out, *o_todo;
+    if (!PyArg_ParseTuple(args, "OOOOO", &o_v, &o_data, &o_off, &o_out, &o_todo)) return NULL;
     Bufs bs = {.n = 0};
-    if (bufs_get(&bs, o_v, 0, -1, "v") < 0 || bufs_get(&bs, o_data, 0, -1, "data") < 0) goto fail;
-    Py_ssize_t n = bs.b[0].len / 8, nd = bs.b[1].len, width = 0;
-    if (bufs_get(&bs, o_off, 0, (n + 1) * 8, "offsets") < 0 ||
-        bufs_get(&bs, o_out, 1, n * 24, "out") < 0)
-        goto fail;
+    int arrow = o_data != Py_None;
+    if (bufs_get(&bs, o_v, 0, -1, "v") < 0) goto fail;
+    Py_ssize_t n = bs.b[0].len / 8, nd = 0, width = 0;
+    if (bufs_get(&bs, o_out, 1, n * 24, "out") < 0) goto fail;
+    const char *data = NULL;
+    const int64_t *off = NULL;
+    uint8_t *todo = NULL;
+    if (arrow) {
+        if (bufs_get(&bs, o_data, 0, -1, "data") < 0 ||
+            bufs_get(&bs, o_off, 0, (n + 1) * 8, "offsets") < 0)
+            goto fail;
+        data = bs.b[2].buf;
+        nd = bs.b[2].len;
+        off = bs.b[3].buf;
+    } else {
+        if (bufs_get(&bs, o_todo, 1, n, "todo") < 0) goto fail;
+        todo = bs.b[2].buf;
+    }
     const double *v = bs.b[0].buf;
-    const char *data = bs.b[1].buf;
-    const int64_t *off = bs.b[2].buf;
-    char *out = bs.b[3].buf;
+    char *out = bs.b[1].buf;
     for (Py_ssize_t i = 0; i < n; i++) {
         double x = v[i], a = fabs(x);
         char *o = out + 24 * i;
-        int64_t lo = off[i], len = off[i + 1] - lo;
-        if (!isfinite(x)) {
+        int64_t len = isfinite(x) ? micro_repr(x, o) : 0;
+        if (len) {
+            /* written from its digits */
+        } else if (!isfinite(x)) {
             memcpy(o, "null", 4);
             len = 4;
-        } else if ((a == 0 || (a >= 1e-4 && a < 1e16)) && lo >= 0 && len > 0 && len <= 22 &&
-                   lo + len <= nd && !memchr(data + lo, 'e', (size_t)len)) {
-            memcpy(o, data + lo, (size_t)len);
-            if (!memchr(o, '.', (size_t)len)) {
-                o[len++] = '.';
-                o[len++] = '0';
-            }
+        } else if (!arrow) {
+            todo[i] = 1;
         } else {
-            char *s = PyOS_double_to_string(x, 'r', 0, Py_DTSF_ADD_DOT_0, NULL);
-            if (!s) goto fail;
-            len = (int64_t)strlen(s);
-            if (len > 24) len = 24; /* never: no double's repr is longer */
-            memcpy(o, s, (size_t)len);
-            PyMem_Free(s);
+            int64_t lo = off[i];
+            len = off[i + 1] - lo;
+            if ((a == 0 || (a >= 1e-4 && a < 1e16)) && lo >= 0 && len > 0 && len <= 22 &&
+                lo + len <= nd && !memchr(data + lo, 'e', (size_t)len)) {
+                memcpy(o, data + lo, (size_t)len);
+                if (!memchr(o, '.', (size_t)len)) {
+                    o[len++] = '.';
+                    o[len++] = '0';
+                }
+            } else {
+                char *s = PyOS_double_to_string(x, 'r', 0, Py_DTSF_ADD_DOT_0, NULL);
+                if (!s) goto fail;
+                len = (int64_t)strlen(s);
+                if (len > 24) len = 24; /* never: no double's repr is longer */
+                memcpy(o, s, (size_t)len);
+                PyMem_Free(s);
+            }
         }
         if (len > width) width = len;
     }

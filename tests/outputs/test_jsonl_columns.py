@@ -146,6 +146,10 @@ def test_float_text_equals_repr_or_null(compiled, monkeypatch):
     rng = np.random.default_rng(9)
     v = np.sign(rng.normal(size=20000)) * 10.0 ** rng.uniform(-8, 20, 20000)
     stamps = 1767225600 + np.cumsum(rng.integers(1, 5000, 5000)) / 1e6  # candump -l times
+    rel = np.cumsum(rng.integers(1, 90, 5000)) / 1e6  # relative times from 1 us (5e-06)
+    tenths = rng.integers(0, 2**32 * 10, 3000) / 10  # whole and tenths of seconds
+    top = np.array([4294967295.999999, 4294967295.5, 4294967296.5, 4294967296.000001])
+    stamps = np.concatenate([stamps, -stamps[:100], rel, tenths, top, rel[:50] / 10])
     edges = [0.0, -0.0, np.nan, -np.nan, np.inf, -np.inf, 1e-4, 9.999999999999999e-05, 1e16]
     edges += [9999999999999998.0, 5e-324, -2.2250738585072014e-308, 1.7976931348623157e308]
     edges += [0.1, 1 / 3, -123456789.0, 0.00012345678901234567, 2.0**53, 2.0**53 + 2]

@@ -246,14 +246,21 @@ def _floats(v: np.ndarray) -> np.ndarray:
 
     v = np.ascontiguousarray(v, np.float64)
     n = v.size
+    compiled = getattr(C, "float_repr", None)
+    if compiled is not None:  # one pass: time stamps from their digits, the rest by Arrow
+        out = np.zeros((n, 24), np.uint8)
+        todo = np.zeros(n, np.uint8)
+        width = compiled(v, None, None, out, todo)
+        rest = np.flatnonzero(todo)
+        if rest.size:  # Arrow's text of those, mended where it is not repr's
+            sub, t = v[rest], Texts.from_arrow(ab.cast(ab.numeric(v[rest]), pa.string()))
+            part = np.zeros((rest.size, 24), np.uint8)
+            width = max(width, compiled(sub, t.data, t.offsets, part, None))
+            out[rest] = part
+        return out[:, : max(width, 1)]
     # built from the buffer and cast by the kernel's name: pa.array imports pandas, and
     # pyarrow.compute its wrappers (0.2-0.3 s of a JSONL decode that needs neither)
     t = Texts.from_arrow(ab.cast(ab.numeric(v), pa.string()))
-    compiled = getattr(C, "float_repr", None)
-    if compiled is not None:  # one pass: Arrow's text copied, mended where it is not repr's
-        out = np.zeros((n, 24), np.uint8)
-        width = compiled(v, t.data, t.offsets, out)
-        return out[:, : max(width, 1)]
     lengths = t.lengths
     width = int(lengths.max()) + 2 if n else 2
     out = np.zeros((n, width), np.uint8)
