@@ -1609,6 +1609,162 @@ fail:
     return NULL;
 }
 
+/* Python's own text of x in format 'f' or 'g' (PyOS_double_to_string, as format()
+   calls it) into o (at most cap bytes); returns its length, or -1 (error set, or longer
+   than cap: *too_long). */
+static int py_format(double x, char code, int precision, char *o, int cap, int *too_long) {
+    char *s = PyOS_double_to_string(x, code, precision, 0, NULL);
+    if (!s) return -1;
+    size_t len = strlen(s);
+    if ((int)len > cap) {
+        PyMem_Free(s);
+        *too_long = 1;
+        return -1;
+    }
+    memcpy(o, s, len);
+    PyMem_Free(s);
+    return (int)len;
+}
+
+static int write_uint(uint64_t v, char *o) {
+    char d[24];
+    int n = 0, len = 0;
+    do {
+        d[n++] = (char)('0' + v % 10);
+        v /= 10;
+    } while (v);
+    while (n) o[len++] = d[--n];
+    return len;
+}
+
+PyDoc_STRVAR(time_text_doc,
+             "time_text(v, out) -> width\n\n"
+             "f\"{x:12.6f}\" of each float64 of v, right-aligned in the rows of out (uint8,\n"
+             "len(v) x 40, zeroed: NUL on the left); returns the longest text's length, or\n"
+             "-(i + 1) for the first row i whose text is longer than 40. Rounded from x * 1e6\n"
+             "when that is no closer than 1e-3 to a half (its rounding error is far below);\n"
+             "negative, huge, not finite or near a tie, Python formats it (as format()).\n"
+             "numpy's passes (digits, blanking, a scatter) were 0.3 s per 1M frames of text.");
+
+static PyObject *time_text(PyObject *self, PyObject *args) {
+    PyObject *o_v, *o_out;
+    if (!PyArg_ParseTuple(args, "OO", &o_v, &o_out)) return NULL;
+    Bufs bs = {.n = 0};
+    if (bufs_get(&bs, o_v, 0, -1, "v") < 0) goto fail;
+    Py_ssize_t n = bs.b[0].len / 8, width = 0;
+    const int W = 40;
+    if (bufs_get(&bs, o_out, 1, n * W, "out") < 0) goto fail;
+    const double *v = bs.b[0].buf;
+    char *out = bs.b[1].buf;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double x = v[i], vv = x * 1e6;
+        char buf[48];
+        int len;
+        if (!signbit(x) && vv < 1e12 && fabs(vv - floor(vv) - 0.5) >= 1e-3) {
+            uint64_t k = (uint64_t)nearbyint(vv), frac = k % 1000000;
+            len = write_uint(k / 1000000, buf);
+            buf[len++] = '.';
+            for (int j = 5; j >= 0; j--) {
+                buf[len + j] = (char)('0' + frac % 10);
+                frac /= 10;
+            }
+            len += 6;
+        } else {
+            int too_long = 0;
+            len = py_format(x, 'f', 6, buf, W, &too_long);
+            if (len < 0) {
+                bufs_release(&bs);
+                return too_long ? PyLong_FromSsize_t(-(i + 1)) : NULL;
+            }
+        }
+        int shown = len < 12 ? 12 : len;
+        char *o = out + W * i + (W - shown);
+        memset(o, ' ', (size_t)(shown - len));
+        memcpy(o + (shown - len), buf, (size_t)len);
+        if (shown > width) width = shown;
+    }
+    bufs_release(&bs);
+    return PyLong_FromSsize_t(width);
+fail:
+    bufs_release(&bs);
+    return NULL;
+}
+
+static const double P10_9[10] = {1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9};
+
+PyDoc_STRVAR(g6_text_doc,
+             "g6_text(v, out) -> width\n\n"
+             "f\"{x:.6g}\" of each float64 of v, left-aligned in the rows of out (uint8,\n"
+             "len(v) x 24, zeroed); returns the longest text's length. Six digits rounded\n"
+             "from |x| * 10**(5 - e) (one rounding, exact power of ten) where the exponent e\n"
+             "is -4..5 and no tie is near (1e-6); any other value (an exponent, a near tie,\n"
+             "not finite) Python formats (as format()). numtext.g6_text's numpy twin.");
+
+static PyObject *g6_text(PyObject *self, PyObject *args) {
+    PyObject *o_v, *o_out;
+    if (!PyArg_ParseTuple(args, "OO", &o_v, &o_out)) return NULL;
+    Bufs bs = {.n = 0};
+    if (bufs_get(&bs, o_v, 0, -1, "v") < 0) goto fail;
+    Py_ssize_t n = bs.b[0].len / 8, width = 0;
+    const int W = 24;
+    if (bufs_get(&bs, o_out, 1, n * W, "out") < 0) goto fail;
+    const double *v = bs.b[0].buf;
+    char *out = bs.b[1].buf;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double x = v[i], a = fabs(x);
+        char *o = out + W * i;
+        int len = 0, fast = 0;
+        if (x == 0) {
+            if (signbit(x)) o[len++] = '-';
+            o[len++] = '0';
+            fast = 1;
+        } else if (isfinite(x)) {
+            int e = (int)floor(log10(a));
+            if (e >= -4 && e <= 5) {
+                double m = a * P10_9[5 - e], r = nearbyint(m), frac = m - floor(m);
+                if (m >= 1e5 && r < 1e6 && fabs(frac - 0.5) > 1e-6) {
+                    char d[6];
+                    uint64_t k = (uint64_t)r;
+                    for (int j = 5; j >= 0; j--) {
+                        d[j] = (char)('0' + k % 10);
+                        k /= 10;
+                    }
+                    int last = 5; /* the last non-zero digit, never inside the integer part */
+                    while (last > 0 && d[last] == '0') last--;
+                    if (signbit(x)) o[len++] = '-';
+                    if (e >= 0) {
+                        memcpy(o + len, d, (size_t)(e + 1));
+                        len += e + 1;
+                        if (last > e) {
+                            o[len++] = '.';
+                            memcpy(o + len, d + e + 1, (size_t)(last - e));
+                            len += last - e;
+                        }
+                    } else {
+                        o[len++] = '0';
+                        o[len++] = '.';
+                        for (int z = 0; z < -e - 1; z++) o[len++] = '0';
+                        memcpy(o + len, d, (size_t)(last + 1));
+                        len += last + 1;
+                    }
+                    fast = 1;
+                }
+            }
+        }
+        if (!fast) {
+            int too_long = 0;
+            len = py_format(x, 'g', 6, o, W, &too_long);
+            if (len < 0) goto fail; /* never too long: '-1.23457e+308' */
+        }
+        if (len > width) width = len;
+    }
+    bufs_release(&bs);
+    return PyLong_FromSsize_t(width);
+fail:
+    bufs_release(&bs);
+    return NULL;
+}
+
 static PyMethodDef methods[] = {
     {"count_lines", count_lines, METH_VARARGS, count_lines_doc},
     {"split_lines", split_lines, METH_VARARGS, split_lines_doc},
@@ -1623,6 +1779,8 @@ static PyMethodDef methods[] = {
     {"gather_rows", gather_rows, METH_VARARGS, gather_rows_doc},
     {"frame_json", frame_json, METH_VARARGS, frame_json_doc},
     {"float_repr", float_repr, METH_VARARGS, float_repr_doc},
+    {"time_text", time_text, METH_VARARGS, time_text_doc},
+    {"g6_text", g6_text, METH_VARARGS, g6_text_doc},
     {NULL, NULL, 0, NULL},
 };
 

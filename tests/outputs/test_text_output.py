@@ -215,9 +215,17 @@ def test_emcy_rows() -> None:
     assert _check([dec.decode(from_rows(rows)), dec.finish()], color=False) >= 10
 
 
-def test_signal_values_of_every_kind() -> None:
-    """Signal columns as text: floats (ties, exponents, NaN, -0), integers to 64 bits, booleans."""
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "numpy"])
+def test_signal_values_of_every_kind(compiled, monkeypatch) -> None:
+    """Signal columns as text: floats (ties, exponents, NaN, -0), integers to 64 bits,
+    booleans; the compiled helper's floats and the numpy twin's alike."""
     from cananalyze.core.columns.numtext import g6_text, int_text, value_text
+    from cananalyze.runtime import speedups
+
+    if not compiled:
+        monkeypatch.setattr(speedups, "C", None)
+    elif getattr(speedups.C, "g6_text", None) is None:
+        pytest.skip("compiled helper not in use")
 
     rng = np.random.default_rng(5)
     floats = np.concatenate(
@@ -226,6 +234,7 @@ def test_signal_values_of_every_kind() -> None:
             rng.standard_normal(5000) * 10.0 ** rng.integers(-9, 10, 5000),
             rng.integers(-1000, 1000, 2000) / 8.0,  # exact halves: ties
             [0.0, -0.0, np.nan, np.inf, -np.inf, 1e-5, 1e-4, 999999.5, 99999.95, 1e6, 5e-324],
+            [123456.5, 1234565.0, 9.999995, -0.000123456789, 1.7976931348623157e308, -np.nan],
         ]
     )
 
@@ -244,6 +253,30 @@ def test_signal_values_of_every_kind() -> None:
     assert text(int_text(big)) == [str(v) for v in big.tolist()]
     assert text(value_text(np.array([True, False]))) == ["True", "False"]
     assert text(value_text(np.array([1.5, 2], object))) == ["1.5", "2"]
+
+
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "numpy"])
+def test_time_column_is_python_fixed_point(compiled, monkeypatch) -> None:
+    """Each line's time, `f"{t:12.6f}"` of the time since the first frame: near ties,
+    days-long logs, negative, -0.0 and non-finite ones on both paths."""
+    from cananalyze.outputs.text import writer
+    from cananalyze.runtime import speedups
+
+    if not compiled:
+        monkeypatch.setattr(speedups, "C", None)
+    elif getattr(speedups.C, "time_text", None) is None:
+        pytest.skip("compiled helper not in use")
+    rng = np.random.default_rng(8)
+    rel = np.concatenate(
+        [
+            np.cumsum(rng.integers(1, 5000, 20000)) / 1e6,  # candump's microseconds
+            rng.random(3000) * 1e7,  # past the 12-character field
+            (rng.integers(0, 10**9, 2000) + 0.5) / 1e6,  # half-microsecond ties
+            [0.0, -0.0, -1.5, 1e6, 999999.9999995, 5e-7, 1.5e-6, 1e15, np.nan, np.inf, -np.inf],
+        ]
+    )
+    got = [bytes(r[r != 0]).decode() for r in writer._time_column(rel)]
+    assert got == [f"{x:12.6f}" for x in rel.tolist()]
 
 
 def test_background_writer_writes_the_same(tmp_path: Path) -> None:

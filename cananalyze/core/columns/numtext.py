@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from cananalyze.core.columns import bytecols
+from cananalyze.runtime import speedups
 
 _PAD = 0
 _ZERO = 48
@@ -35,6 +36,11 @@ def g6_text(values: np.ndarray) -> np.ndarray:
     """(n, w) NUL-padded `f"{v:.6g}"` of float64 values."""
     x = values.astype(np.float64, copy=False)
     n = x.size
+    compiled = getattr(speedups.C, "g6_text", None)
+    if compiled is not None:  # the same rounding and doubt, one pass
+        out = np.zeros((n, 24), np.uint8)
+        width = compiled(np.ascontiguousarray(x), out)
+        return out[:, : max(width, 1)]
     out = np.zeros((n, 13), np.uint8)  # sign, "0.", up to 3 more zeros, 6 digits, spare
     ax = np.abs(x)
     finite = np.isfinite(x)

@@ -46,6 +46,7 @@ from cananalyze.pipeline.sink import Sink
 from cananalyze.protocol import emcy as emcy_text
 from cananalyze.protocol.fields import annotation, frame_fields
 from cananalyze.protocol.services import SERVICE_NAMES, Service
+from cananalyze.runtime import speedups
 
 _HEX3 = [f"{i:02X} " for i in range(256)]
 # before the annotation of a frame whose bytes the reader rebuilt from the log's text
@@ -94,8 +95,14 @@ def _time_column(rel: np.ndarray) -> np.ndarray:
     microsecond), negative or huge are formatted by Python and written in.
     """
     n = rel.size
+    compiled = getattr(speedups.C, "time_text", None)
+    if compiled is not None:  # the same rounding and doubt, one pass
+        out = np.zeros((n, 40), np.uint8)
+        width = compiled(np.ascontiguousarray(rel, np.float64), out)
+        if width >= 0:
+            return out[:, 40 - max(width, 12) :]
     v = rel * 1e6
-    odd = ~(v >= 0) | (v >= 1e12)
+    odd = ~(v >= 0) | np.signbit(v) | (v >= 1e12)
     vv = np.where(odd, 0.0, v)
     k = np.rint(vv)
     odd |= np.abs(vv - np.floor(vv) - 0.5) < 1e-3
