@@ -265,7 +265,7 @@ def _events(batch: DecodedBatch) -> list[tuple[int, int]]:
     recs = batch.records
     if recs:
         c = recs.cols
-        idx = np.isin(c.index, (0x1000, 0x1018)) & c.upload
+        idx = ((c.index == 0x1000) | (c.index == 0x1018)) & c.upload
         pick = np.flatnonzero((~c.ok | ~c.upload | idx) & (c.node >= 0) & (c.index >= 0))
         events += [(recs.rows[int(k)], 1 + int(k)) for k in pick.tolist()]
     return sorted(events)
