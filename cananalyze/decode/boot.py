@@ -257,7 +257,10 @@ def _events(batch: DecodedBatch) -> list[tuple[int, int]]:
         # a story is operational, a later report changes nothing in it)
         op = np.flatnonzero(state == nmt.OPERATIONAL)
         if op.size:
-            key = beat_node[op].astype(np.int64) * (int(life.max()) + 1) + life[op]
+            lives = int(life.max()) + 1
+            key = beat_node[op].astype(np.int64) * lives + life[op]
+            if lives <= 255 and int(beat_node[op].max()) <= 127:  # 16 bits: a radix sort
+                key = key.astype(np.int16)
             keep[op[np.unique(key, return_index=True)[1]]] = True
         wanted[np.flatnonzero(is_beat)[keep]] = True
     rows = near[wanted]  # in row order, as `near`
