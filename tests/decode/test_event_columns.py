@@ -321,8 +321,8 @@ def test_finding_events_match_per_row(log):
 
 
 def test_node_prefix_table_is_the_text_of_each_node() -> None:
-    """"node N: " from the one table of the 128 node-IDs (indexed by node + 1) is the text
-    each node's own format gives; nothing for -1, and values off the table as before."""
+    """The "node N: " of the one table of the 128 node-IDs (indexed by node + 1) is the
+    text each node's own format gives; nothing for -1, and values off the table as before."""
     from cananalyze.core.columns import bytecols
     from cananalyze.decode.events.build import _node_prefix
 
