@@ -97,6 +97,22 @@ class Story:
         }
 
 
+# heartbeat, boot-up, guard request and guard response: Service 9..12, one range
+_NMT, _HEARTBEAT, _BOOTUP = int(Service.NMT), int(Service.HEARTBEAT), int(Service.BOOTUP)
+_GUARD_RESPONSE = int(Service.GUARD_RESPONSE)
+
+
+def _range_rows(svc: np.ndarray, lo: int, hi: int, other: int) -> np.ndarray:
+    """The rows whose service is lo..hi or `other`: a range test in two passes (uint8
+    codes wrap below lo), not a comparison per code."""
+    if svc.dtype == np.uint8:
+        mask = (svc - np.uint8(lo)) <= np.uint8(hi - lo)
+    else:
+        mask = (svc >= lo) & (svc <= hi)
+    mask |= svc == other
+    return np.flatnonzero(mask)
+
+
 class BootFollower:
     """Follows every node's boot story batch by batch; `stories(...)` judges them."""
 
@@ -216,24 +232,24 @@ def _events(batch: DecodedBatch) -> list[tuple[int, int]]:
     (and its first after each boot-up) and its first operational one in each life."""
     fb = batch.frames
     svc, node = batch.service, batch.node
-    wanted = (
-        (svc == Service.BOOTUP)
-        | (svc == Service.NMT)
-        | (svc == Service.GUARD_REQUEST)
-        | (svc == Service.GUARD_RESPONSE)
-    )
-    rows = np.flatnonzero(wanted)
+    # one scan of the batch (heartbeat, boot-up and guarding are one range of codes),
+    # then the few rows found are told apart
+    near = _range_rows(svc, _HEARTBEAT, _GUARD_RESPONSE, _NMT)
+    s = svc[near]
+    is_beat = s == _HEARTBEAT
+    wanted = ~is_beat  # boot-ups, NMT commands, guarding: every one
     # heartbeats: only a node's first after a boot-up, and operational reports
-    beats = np.flatnonzero(svc == Service.HEARTBEAT)
+    beats = near[is_beat]
     if beats.size:
-        state = fb.data[beats, 0] & nmt.STATE_MASK
-        first = np.unique(node[beats], return_index=True)[1]
+        state = fb.data[:, 0][beats] & nmt.STATE_MASK  # (2-D fancy indexing: ~10x)
+        beat_node = node[beats]
+        first = np.unique(beat_node, return_index=True)[1]
         keep = np.zeros(beats.size, bool)
         keep[first] = True
         # a node's life: the boot-ups of the node before the beat, in this batch
         life = np.zeros(beats.size, np.int64)
-        for r in np.flatnonzero(svc == Service.BOOTUP).tolist():  # the first after each
-            later = (beats > r) & (node[beats] == node[r])
+        for r in near[s == _BOOTUP].tolist():  # the first after each
+            later = (beats > r) & (beat_node == node[r])
             after = np.flatnonzero(later)
             keep[after[:1]] = True
             life += later
@@ -241,14 +257,18 @@ def _events(batch: DecodedBatch) -> list[tuple[int, int]]:
         # a story is operational, a later report changes nothing in it)
         op = np.flatnonzero(state == nmt.OPERATIONAL)
         if op.size:
-            key = node[beats[op]].astype(np.int64) * (int(life.max()) + 1) + life[op]
+            lives = int(life.max()) + 1
+            key = beat_node[op].astype(np.int64) * lives + life[op]
+            if lives <= 255 and int(beat_node[op].max()) <= 127:  # 16 bits: a radix sort
+                key = key.astype(np.int16)
             keep[op[np.unique(key, return_index=True)[1]]] = True
-        rows = np.union1d(rows, beats[keep])
+        wanted[np.flatnonzero(is_beat)[keep]] = True
+    rows = near[wanted]  # in row order, as `near`
     events = [(int(r), 0) for r in rows.tolist()]
     recs = batch.records
     if recs:
         c = recs.cols
-        idx = np.isin(c.index, (0x1000, 0x1018)) & c.upload
+        idx = ((c.index == 0x1000) | (c.index == 0x1018)) & c.upload
         pick = np.flatnonzero((~c.ok | ~c.upload | idx) & (c.node >= 0) & (c.index >= 0))
         events += [(recs.rows[int(k)], 1 + int(k)) for k in pick.tolist()]
     return sorted(events)

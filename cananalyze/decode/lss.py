@@ -61,6 +61,16 @@ class LssEvent:
         return row
 
 
+_LSS_MASTER = int(Service.LSS_MASTER)  # and LSS_SLAVE its next code
+
+
+def _is_lss(svc: np.ndarray) -> np.ndarray:
+    """LSS master or slave frames: one range test (uint8 codes wrap below the first)."""
+    if svc.dtype == np.uint8:
+        return (svc - np.uint8(_LSS_MASTER)) <= np.uint8(1)
+    return (svc == Service.LSS_MASTER) | (svc == Service.LSS_SLAVE)
+
+
 class LssFollower:
     """Follows LSS frames across batches; `add` gives each batch's completed events."""
 
@@ -74,9 +84,7 @@ class LssFollower:
 
     def add(self, batch: DecodedBatch) -> list[LssEvent]:
         fb = batch.frames
-        rows = np.flatnonzero(
-            (batch.service == Service.LSS_MASTER) | (batch.service == Service.LSS_SLAVE)
-        )
+        rows = np.flatnonzero(_is_lss(batch.service))
         for r in rows.tolist():
             data = bytes(fb.data[r, : min(int(fb.dlc[r]), 8)])
             if not data:

@@ -58,7 +58,7 @@ class NodeLoad:
         if present is None:  # one channel: no sort of the batch's channels
             one = len(fb.channels) <= 1 or not (fb.channel != fb.channel[0]).any()
             present = [int(fb.channel[0])] if one else np.unique(fb.channel).tolist()
-        sent = SENT[batch.service]
+        sent = np.take(SENT, batch.service)  # (half numpy's fancy indexing by uint8 codes)
         for c in present:
             mine = fb.channel == c if len(present) > 1 else slice(None)
             name = fb.channel_label(c)

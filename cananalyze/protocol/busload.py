@@ -112,10 +112,13 @@ def bits_per_node(flags: np.ndarray, dlc: np.ndarray, node: np.ndarray, sent: np
     if node.size and not (int(node.min()) >= -1 and int(node.max()) <= 127):
         keep = (node >= -1) & (node <= 127)  # not a node-ID: not counted
         flags, dlc, node, sent = flags[keep], dlc[keep], node[keep], sent[keep]
-    at = node.astype(np.intp)
+    classic = not (flags & _SHAPE_FLAGS).any() and int(dlc.max(initial=0)) < 16
+    # classic: every bin (node + 1) << 4 | dlc is below 2064, so 16-bit bins (node -1
+    # wraps to 0 with the + 1): a quarter of the memory the intp passes go over
+    at = node.astype(np.uint16 if classic else np.intp)
     at += 1
     at *= sent
-    if not (flags & _SHAPE_FLAGS).any() and int(dlc.max(initial=0)) < 16:
+    if classic:
         at <<= 4
         at |= dlc
         counts = np.bincount(at, minlength=129 * 16).reshape(129, 16)[1:]

@@ -230,3 +230,24 @@ def test_the_docs_simulated_faults_are_the_output(tmp_path):
         at = 0
         for line in shown:
             at = out.index(line, at) + 1
+
+
+def test_range_rows_are_the_rows_of_those_services() -> None:
+    """boot._range_rows (heartbeat..guard response and NMT by one range test, uint8 codes
+    wrapping below the range) finds the rows a comparison per code finds, for every code
+    and for a service column that is not uint8."""
+    import numpy as np
+
+    from cananalyze.decode.boot import _range_rows
+    from cananalyze.decode.lss import _is_lss
+    from cananalyze.protocol.services import Service
+
+    svc = np.arange(256, dtype=np.uint8).repeat(3)
+    codes = (Service.HEARTBEAT, Service.BOOTUP, Service.GUARD_REQUEST, Service.GUARD_RESPONSE)
+    want = np.flatnonzero(np.isin(svc, (*codes, Service.NMT)))
+    got = _range_rows(svc, Service.HEARTBEAT, Service.GUARD_RESPONSE, Service.NMT)
+    assert got.tolist() == want.tolist()
+    wide = svc.astype(np.int64)
+    assert _range_rows(wide, 9, 12, 1).tolist() == want.tolist()
+    lss = np.isin(svc, (Service.LSS_MASTER, Service.LSS_SLAVE))
+    assert (_is_lss(svc) == lss).all() and (_is_lss(wide) == lss).all()

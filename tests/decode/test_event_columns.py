@@ -318,3 +318,17 @@ def test_finding_events_match_per_row(log):
     findings = [f for b in batches for f in b.findings]
     assert findings
     assert _assert_same_events(batches) > len(findings)
+
+
+def test_node_prefix_table_is_the_text_of_each_node() -> None:
+    """The "node N: " of the one table of the 128 node-IDs (indexed by node + 1) is the
+    text each node's own format gives; nothing for -1, and values off the table as before."""
+    from cananalyze.core.columns import bytecols
+    from cananalyze.decode.events.build import _node_prefix
+
+    nodes = np.array([-1, *range(128), 5, -1, 127], np.int16)
+    want = ["" if k < 0 else f"node {k}: " for k in nodes.tolist()]
+    assert bytecols.joined_rows([_node_prefix(nodes)], nodes.size) == want
+    odd = np.array([300, 5, -1], np.int16)  # not a node-ID: the per-batch table
+    got = bytecols.joined_rows([_node_prefix(odd)], odd.size)
+    assert got == ["node 300: ", "node 5: ", ""]

@@ -423,3 +423,14 @@ def test_update_array_as_update_of_the_list(values):
     assert (a.kinds, a.lo, a.hi, a.rows) == (b.kinds, b.lo, b.hi, b.rows)
     with pytest.raises(TypeError):
         a.update_array(np.array(["x"], object))
+
+
+@pytest.mark.parametrize("n", [0, 1, 7])
+def test_take_in_constant_labels_as_update_of_the_list(n):
+    """A constant fast-path column (one label, code 0 on every row) is taken in as the
+    list of its values would be, rows and kinds alike, with no rows too."""
+    for label in ("ok", None, 0):
+        got, want = pl.ColumnStats(), pl.ColumnStats()
+        sc.take_in(got, ["x"], sc.Labels(np.zeros(n, np.int8), [label]))
+        want.update(["x", *[label] * n])
+        assert (got.rows, got.kinds, got.decide()) == (want.rows, want.kinds, want.decide())

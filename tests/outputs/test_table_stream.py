@@ -504,3 +504,15 @@ def test_export_with_findings_never_imports_pandas(tmp_path):
     assert "finding" in kinds  # the case that is re-sorted
     t = events.column("t").to_pylist()
     assert t == sorted(t)
+
+
+def test_event_messages_column_as_strings_with_nulls() -> None:
+    """The events' message column (texts taken as str, not looked at for None) is the
+    column `strings` with nulls builds, a None among them (a null) and non-ASCII too."""
+    from cananalyze.core.columns import arrow_build as ab
+    from cananalyze.outputs.tables.stream import _message_column
+
+    for values in (["a", "bé", ""], ["a", None, "c"], [], ["x" * 300, "\x1f"]):
+        got = _message_column(np.array(values + [0], object)[:-1])
+        want = ab.strings(values, large=True)
+        assert got.equals(want) and got.to_pylist() == values

@@ -167,8 +167,9 @@ def joined_rows(parts: list[np.ndarray], n: int) -> list[str]:
     row's own text holds one, which the count shows."""
     sep = np.full((n, 1), 0x1F, np.uint8)
     blob, _ = compact([*parts, sep], n, with_ends=False)
-    text = blob.decode("utf-8")
-    if text.count("\x1f") == n:
-        return text.split("\x1f")[:-1]
+    rows = blob.decode("utf-8").split("\x1f")
+    if len(rows) == n + 1:  # no row's own text holds one (no count pass, no copy)
+        rows.pop()
+        return rows
     blob, ends = compact(parts, n, with_ends=True)
     return split_rows(blob, ends)

@@ -329,8 +329,14 @@ def _marked(keys, n: int) -> np.ndarray:
     return mask
 
 
+# "node 5: " of each node-ID, row k + 1 (row 0: no node), NUL-padded
+_NODE_PREFIX = bytecols.padded_table([b"", *(f"node {k}: ".encode() for k in range(128))])
+
+
 def _node_prefix(nodes: np.ndarray) -> np.ndarray:
     """The "node 5: " of each row as a NUL-padded byte block (nothing for a row without a node)."""
+    if nodes.size and int(nodes.min()) >= -1 and int(nodes.max()) <= 127:
+        return _NODE_PREFIX[nodes.astype(np.intp) + 1]  # (the padding is dropped when joined)
     u, at = np.unique(nodes, return_inverse=True)
     table = bytecols.padded_table([f"node {k}: ".encode() if k >= 0 else b"" for k in u.tolist()])
     return table[at.reshape(-1)]
@@ -412,7 +418,7 @@ def _state_changes(batch: DecodedBatch, off: int, state: EventState, near: np.nd
         return []
     channel = fb.channel[rows]
     out: list[Row] = []
-    buses = np.unique(channel).tolist()
+    buses = np.flatnonzero(np.bincount(channel)).tolist()  # (small codes: no sort)
     for c in buses:
         mine = rows if len(buses) == 1 else rows[channel == c]
         follow = state.nmt.setdefault(int(c), NmtStates())

@@ -184,7 +184,10 @@ def take_in(stats: pl.ColumnStats, mine: list, fast: Piece | None) -> None:
     if fast is None:
         return
     if isinstance(fast, Labels):
-        used = np.flatnonzero(np.bincount(fast.codes, minlength=len(fast.labels))).tolist()
+        if len(fast.labels) == 1:  # a constant column: code 0 on every row
+            used = [0] if len(fast.codes) else []
+        else:
+            used = np.flatnonzero(np.bincount(fast.codes, minlength=len(fast.labels))).tolist()
         stats.update([fast.labels[i] for i in used], rows=len(fast.codes))
     elif isinstance(fast, Hex):
         stats.update(["x"] if len(fast.length) else [], rows=len(fast.length))

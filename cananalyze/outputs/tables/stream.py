@@ -482,7 +482,7 @@ class TableSink(OutputSink):
             "kind": Coded(lut[events.kind], vocab.snapshot()),
             "node": ab.numeric(np.where(no_node, 0, events.node), no_node, pa.int16()),
             "level": ab.dictionary(events.level - 1, _LEVELS, pa.int8()),
-            "message": ab.strings(events.message.tolist(), large=True),
+            "message": _message_column(events.message),
             "row": ab.numeric(np.where(no_row, 0, events.row), no_row, pa.int64()),
         }
         if self._events_bus:
@@ -1005,6 +1005,16 @@ def _type_changed(sink: Sink, column: str, final: list[str]) -> bool:
     if sink.schema is None or sink.fmt != "parquet":
         return False
     return sink.schema.field(column).type.index_type != pl.code_type(len(final))
+
+
+def _message_column(message: np.ndarray) -> pa.Array:
+    """The events' message column: texts, built as str, so not looked at one by one for
+    None (a None among them: a null, as `strings` with nulls makes it)."""
+    values = message.tolist()
+    try:
+        return ab.strings(values, large=True, nulls=False)
+    except TypeError:  # not all str: "".join refused them
+        return ab.strings(values, large=True)
 
 
 def _event_sort_py(t: list, key: list, horizon: float | None) -> tuple[list[int], int]:
