@@ -1765,6 +1765,69 @@ fail:
     return NULL;
 }
 
+PyDoc_STRVAR(frame_text_doc,
+             "frame_text(can_id, flags, dlc, data, out)\n\n"
+             "The text output's identifier, length and data columns of each frame into the\n"
+             "rows of out (uint8, n x 39): the identifier as 8 upper-case hex digits, the\n"
+             "first 5 blank unless flags has 0x01 or 0x04 (29-bit, error frame), 2 spaces;\n"
+             "'[' the length's tens (NUL when 0) and units ']' and 2 spaces; then the first\n"
+             "min(dlc, 8) bytes as 'HH ' (23 characters, spaces past them), or 'remote\n"
+             "request' when flags has 0x02. can_id uint32, flags and dlc uint8, data\n"
+             "(n, 8) uint8. The numpy twin (outputs/text/writer.py) builds the same\n"
+             "columns in a dozen passes: 0.1 s per 1M frames.");
+
+static PyObject *frame_text(PyObject *self, PyObject *args) {
+    PyObject *o[5];
+    if (!PyArg_ParseTuple(args, "OOOOO", &o[0], &o[1], &o[2], &o[3], &o[4])) return NULL;
+    Bufs bs = {.n = 0};
+    if (bufs_get(&bs, o[0], 0, -1, "can_id") < 0) goto fail;
+    Py_ssize_t n = bs.b[0].len / 4;
+    if (bufs_get(&bs, o[1], 0, n, "flags") < 0 || bufs_get(&bs, o[2], 0, n, "dlc") < 0 ||
+        bufs_get(&bs, o[3], 0, n * 8, "data") < 0 || bufs_get(&bs, o[4], 1, n * 39, "out") < 0)
+        goto fail;
+    const uint32_t *id = bs.b[0].buf;
+    const uint8_t *flags = bs.b[1].buf, *dlc = bs.b[2].buf, *data = bs.b[3].buf;
+    uint8_t *out = bs.b[4].buf;
+    static const char H[] = "0123456789ABCDEF";
+    static const char REMOTE[] = "remote request         ";
+    Py_BEGIN_ALLOW_THREADS;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        uint8_t *o = out + 39 * i;
+        uint32_t v = id[i];
+        for (int j = 0; j < 8; j++) o[j] = (uint8_t)H[(v >> (4 * (7 - j))) & 15];
+        if (!(flags[i] & 0x05)) memset(o, ' ', 5);
+        o[8] = o[9] = ' ';
+        uint8_t d = dlc[i];
+        o[10] = '[';
+        o[11] = d / 10 ? (uint8_t)('0' + d / 10) : 0;
+        o[12] = (uint8_t)('0' + d % 10);
+        o[13] = ']';
+        o[14] = o[15] = ' ';
+        uint8_t *h = o + 16;
+        if (flags[i] & 0x02) {
+            memcpy(h, REMOTE, 23);
+            continue;
+        }
+        int shown = d < 8 ? d : 8;
+        const uint8_t *b = data + 8 * i;
+        for (int j = 0; j < 8; j++) {
+            if (j < shown) {
+                h[3 * j] = (uint8_t)H[b[j] >> 4];
+                h[3 * j + 1] = (uint8_t)H[b[j] & 15];
+            } else {
+                h[3 * j] = h[3 * j + 1] = ' ';
+            }
+            if (j < 7) h[3 * j + 2] = ' ';
+        }
+    }
+    Py_END_ALLOW_THREADS;
+    bufs_release(&bs);
+    Py_RETURN_NONE;
+fail:
+    bufs_release(&bs);
+    return NULL;
+}
+
 static PyMethodDef methods[] = {
     {"count_lines", count_lines, METH_VARARGS, count_lines_doc},
     {"split_lines", split_lines, METH_VARARGS, split_lines_doc},
@@ -1781,6 +1844,7 @@ static PyMethodDef methods[] = {
     {"float_repr", float_repr, METH_VARARGS, float_repr_doc},
     {"time_text", time_text, METH_VARARGS, time_text_doc},
     {"g6_text", g6_text, METH_VARARGS, g6_text_doc},
+    {"frame_text", frame_text, METH_VARARGS, frame_text_doc},
     {NULL, NULL, 0, NULL},
 };
 
