@@ -89,11 +89,12 @@ def sender_shapes(
         return None
     if (flags & _SHAPE_FLAGS).any() or int(dlc.max(initial=0)) >= 16:
         return None
-    key = np.multiply(service, 129, dtype=np.intp)
-    key += node
-    key += 1
-    key <<= 4
-    key |= dlc
+    # (service * 129 + node + 1) * 16 + dlc, the node's and length's part in node's dtype
+    low = np.left_shift(node, 4)  # -16..2032
+    low += dlc
+    key = np.multiply(service, 129 * 16, dtype=np.intp)
+    key += low
+    key += 16
     counts = np.bincount(key)
     per = 129 * 16
     services = -(-counts.size // per)

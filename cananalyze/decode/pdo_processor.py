@@ -48,12 +48,22 @@ class PdoDecoder:
         if cobs:
             bound[cobs] = True
         bound[self.skip] = False
+        ids = np.flatnonzero(bound)
+        if ids.size == 0:
+            return
         if svc.dtype == np.uint8:  # TPDO 5, RPDO 6: one wrapping subtraction and a compare
             is_pdo = np.subtract(svc, np.uint8(Service.TPDO), dtype=np.uint8) <= 1
         else:
             is_pdo = (svc == Service.TPDO) | (svc == Service.RPDO)
         is_pdo &= (fb.flags & FLAG_RTR) == 0
-        is_pdo &= np.take(bound, fb.can_id, mode="clip")
+        lo, hi = int(ids[0]), int(ids[-1])
+        can_id = fb.can_id
+        if can_id.dtype == np.uint32 and bound[lo : hi + 1].all():
+            # the bound COB-IDs one range (a bus's TPDOs of consecutive nodes): a wrapping
+            # subtraction and a compare, not a gather of the table by every identifier
+            is_pdo &= np.subtract(can_id, np.uint32(lo), dtype=np.uint32) <= hi - lo
+        else:
+            is_pdo &= np.take(bound, can_id, mode="clip")
         rows = np.flatnonzero(is_pdo)
         if rows.size == 0:
             return
