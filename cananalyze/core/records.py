@@ -90,7 +90,7 @@ def sender_shapes(
     if (flags & _SHAPE_FLAGS).any() or int(dlc.max(initial=0)) >= 16:
         return None
     # (service * 129 + node + 1) * 16 + dlc, the node's and length's part in node's dtype
-    low = np.left_shift(node, 4)  # -16..2032
+    low = np.left_shift(node, 4, dtype=np.int16)  # -16..2032
     low += dlc
     key = np.multiply(service, 129 * 16, dtype=np.intp)
     key += low
@@ -319,11 +319,11 @@ class DecodedBatch:
         """`sender_shapes` of the batch's rows, kept for its service and node arrays like
         `sender_counts` (which sums it): the node tally's bits per node read it too."""
         got = self._shapes
-        if got is not None and got[0] is self.service and got[1] is self.node:
-            return got[2]
         fb = self.frames
+        if got is not None and got[0] is self.service and got[1] is self.node and got[3] is fb:
+            return got[2]
         shapes = sender_shapes(self.service, self.node, fb.flags, fb.dlc)
-        self._shapes = (self.service, self.node, shapes)
+        self._shapes = (self.service, self.node, shapes, fb)
         return shapes
 
 
