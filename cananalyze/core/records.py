@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from cananalyze.core.frames import FrameBatch
+from cananalyze.core.frames import FLAG_ERR, FLAG_EXT, FLAG_FD, FLAG_RTR, FrameBatch
 from cananalyze.core.sdo_records import SdoRecords
 
 if TYPE_CHECKING:
@@ -73,6 +73,36 @@ def sender_counts(service: np.ndarray, node: np.ndarray) -> np.ndarray | None:
     return np.bincount(key, minlength=256 * 129)[: 256 * 129].reshape(256, 129)
 
 
+_SHAPE_FLAGS = FLAG_EXT | FLAG_RTR | FLAG_ERR | FLAG_FD  # a frame's bits besides its length
+
+
+def sender_shapes(
+    service: np.ndarray, node: np.ndarray, flags: np.ndarray, dlc: np.ndarray
+) -> np.ndarray | None:
+    """Frames per service, node and length as `counts[service, node + 1, dlc]`, in one
+    bincount, when every row is a classic standard data frame (no flag that changes its
+    bits on the wire) of length below 16 and of a node in -1..127 (nearly every batch of a
+    CANopen bus); else None. Its first axis ends at the last service present (the
+    services past it have no rows). `sender_counts` and the bits per node
+    (protocol/busload) are sums of it: one pass over the rows for both."""
+    if node.size and not (int(node.min()) >= -1 and int(node.max()) <= 127):
+        return None
+    if (flags & _SHAPE_FLAGS).any() or int(dlc.max(initial=0)) >= 16:
+        return None
+    # (service * 129 + node + 1) * 16 + dlc, the node's and length's part in node's dtype
+    low = np.left_shift(node, 4, dtype=np.int16)  # -16..2032
+    low += dlc
+    key = np.multiply(service, 129 * 16, dtype=np.intp)
+    key += low
+    key += 16
+    counts = np.bincount(key)
+    per = 129 * 16
+    services = -(-counts.size // per)
+    if counts.size < services * per:
+        counts = np.concatenate((counts, np.zeros(services * per - counts.size, counts.dtype)))
+    return counts.reshape(services, 129, 16)
+
+
 @dataclass
 class DecodedBatch:
     frames: FrameBatch
@@ -101,6 +131,7 @@ class DecodedBatch:
     record_bus: np.ndarray | None = None
     _lazy: tuple | None = field(default=None, repr=False, compare=False)
     _senders: tuple | None = field(default=None, repr=False, compare=False)
+    _shapes: tuple | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.records, SdoRecords):
@@ -275,9 +306,25 @@ class DecodedBatch:
         got = self._senders
         if got is not None and got[0] is self.service and got[1] is self.node:
             return got[2]
-        counts = sender_counts(self.service, self.node)
+        shapes = self.sender_shapes()
+        if shapes is not None:
+            counts = np.zeros((256, 129), np.int64)
+            counts[: len(shapes)] = shapes.sum(axis=2)
+        else:
+            counts = sender_counts(self.service, self.node)
         self._senders = (self.service, self.node, counts)
         return counts
+
+    def sender_shapes(self) -> np.ndarray | None:
+        """`sender_shapes` of the batch's rows, kept for its service and node arrays like
+        `sender_counts` (which sums it): the node tally's bits per node read it too."""
+        got = self._shapes
+        fb = self.frames
+        if got is not None and got[0] is self.service and got[1] is self.node and got[3] is fb:
+            return got[2]
+        shapes = sender_shapes(self.service, self.node, fb.flags, fb.dlc)
+        self._shapes = (self.service, self.node, shapes, fb)
+        return shapes
 
 
 def _no_findings() -> FindingColumns:

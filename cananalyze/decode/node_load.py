@@ -17,7 +17,7 @@ import numpy as np
 
 from cananalyze.core.records import DecodedBatch
 from cananalyze.decode.senders import SENT
-from cananalyze.protocol.busload import bits_per_node
+from cananalyze.protocol.busload import bits_of_lengths, bits_per_node
 
 
 def run_bitrate(run) -> int | None:
@@ -58,6 +58,14 @@ class NodeLoad:
         if present is None:  # one channel: no sort of the batch's channels
             one = len(fb.channels) <= 1 or not (fb.channel != fb.channel[0]).any()
             present = [int(fb.channel[0])] if one else np.unique(fb.channel).tolist()
+        if len(present) == 1:  # the batch's counts per (service, node, length), shared
+            shapes = batch.sender_shapes()  # with the node tally (one pass, no gather)
+            if shapes is not None:
+                self._add(
+                    fb.channel_label(present[0]),
+                    bits_of_lengths(shapes[SENT[: len(shapes)]].sum(axis=0)),
+                )
+                return
         sent = np.take(SENT, batch.service)  # (half numpy's fancy indexing by uint8 codes)
         for c in present:
             mine = fb.channel == c if len(present) > 1 else slice(None)
@@ -65,8 +73,11 @@ class NodeLoad:
             frames, nbits = bits_per_node(
                 fb.flags[mine], fb.dlc[mine], batch.node[mine], sent[mine]
             )
-            got = self.sent.get(name)
-            self.sent[name] = (frames, nbits) if got is None else (got[0] + frames, got[1] + nbits)
+            self._add(name, (frames, nbits))
+
+    def _add(self, name: str, counted: tuple[np.ndarray, np.ndarray]) -> None:
+        got = self.sent.get(name)
+        self.sent[name] = counted if got is None else (got[0] + counted[0], got[1] + counted[1])
 
     def shares(self, bitrate: int | None) -> dict:
         """channel -> {node: mean bus load in percent of the frames it sent}; {} without a

@@ -48,33 +48,49 @@ class PdoDecoder:
         if cobs:
             bound[cobs] = True
         bound[self.skip] = False
-        is_pdo = ((svc == Service.TPDO) | (svc == Service.RPDO)) & ((fb.flags & FLAG_RTR) == 0)
-        is_pdo &= np.take(bound, fb.can_id, mode="clip")
+        ids = np.flatnonzero(bound)
+        if ids.size == 0:
+            return
+        if svc.dtype == np.uint8:  # TPDO 5, RPDO 6: one wrapping subtraction and a compare
+            is_pdo = np.subtract(svc, np.uint8(Service.TPDO), dtype=np.uint8) <= 1
+        else:
+            is_pdo = (svc == Service.TPDO) | (svc == Service.RPDO)
+        is_pdo &= (fb.flags & FLAG_RTR) == 0
+        lo, hi = int(ids[0]), int(ids[-1])
+        can_id = fb.can_id
+        if can_id.dtype == np.uint32 and bound[lo : hi + 1].all():
+            # the bound COB-IDs one range (a bus's TPDOs of consecutive nodes): a wrapping
+            # subtraction and a compare, not a gather of the table by every identifier
+            is_pdo &= np.subtract(can_id, np.uint32(lo), dtype=np.uint32) <= hi - lo
+        else:
+            is_pdo &= np.take(bound, can_id, mode="clip")
         rows = np.flatnonzero(is_pdo)
         if rows.size == 0:
             return
+        cob = fb.can_id[rows]  # each below 2048 (bound)
         bounds = [start for start, _ in segments[1:]]
-        seg_of = (
-            np.searchsorted(np.asarray(bounds, np.int64), rows, side="right") if bounds else None
-        )
-        # one sort groups rows by (segment, COB-ID), keeping row order inside each group
-        key = fb.can_id[rows].astype(np.int64)
-        if seg_of is not None:
-            key = key + seg_of.astype(np.int64) * 4096
-        # as uint16 (the usual case: few segments): a counting sort (or numpy's radix sort)
+        # one sort groups rows by (segment, COB-ID), keeping row order inside each group;
+        # as uint16 (the usual case: few segments) a counting sort (or numpy's radix sort)
         small = len(segments) <= 16
-        order = stable_order(key) if small else np.argsort(key, kind="stable")
+        key = cob.astype(np.uint16 if small else np.int64)
+        if bounds:
+            seg_of = np.searchsorted(np.asarray(bounds, np.int64), rows, side="right")
+            key += (seg_of * 4096).astype(key.dtype)
+        if small:
+            order = stable_order(key, top=(len(segments) - 1) * 4096 + 2047)
+        else:
+            order = np.argsort(key, kind="stable")
         key_sorted = key[order]
-        cuts = np.flatnonzero(np.diff(key_sorted)) + 1
-        starts = np.concatenate(([0], cuts))
-        ends = np.concatenate((cuts, [key_sorted.size]))
-        for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
-            k = int(key_sorted[a])
-            seg, cob = divmod(k, 4096)
-            binding = segments[seg][1].get(cob)
+        rows = rows[order]  # each group's rows a slice of these
+        cuts = np.flatnonzero(key_sorted[1:] != key_sorted[:-1]) + 1
+        starts = [0, *cuts.tolist()]
+        ends = [*starts[1:], int(key_sorted.size)]
+        for a, b in zip(starts, ends, strict=True):
+            seg, cob_id = divmod(int(key_sorted[a]), 4096)
+            binding = segments[seg][1].get(cob_id)
             if binding is None:
                 continue
-            group = rows[order[a:b]]
+            group = rows[a:b]
             if binding.config.mpdo:
                 self._decode_mpdo(batch, group, binding)
             elif binding.config.assumed and binding.config.mapping:
@@ -283,13 +299,14 @@ class PdoDecoder:
 
     def _words_of(self, node: int, mapping: list, values: dict) -> dict[str, int]:
         """Signals shown in words too (a CiA 402 node's statusword, controlword, modes)."""
-        if self.model.family(node) != 402:
-            return {}
-        return {
+        words = {
             e.name: e.index
             for e in mapping
             if e.index in WORDED and e.subindex == 0 and e.name in values
         }
+        if not words or self.model.family(node) != 402:  # the family asked only if it tells
+            return {}
+        return words
 
     def finish(self, batch: DecodedBatch) -> None:
         pass

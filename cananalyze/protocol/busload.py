@@ -121,13 +121,20 @@ def bits_per_node(flags: np.ndarray, dlc: np.ndarray, node: np.ndarray, sent: np
     if classic:
         at <<= 4
         at |= dlc
-        counts = np.bincount(at, minlength=129 * 16).reshape(129, 16)[1:]
-        return counts.sum(axis=1), counts @ _BITS_OF_SHAPE[:16]
+        return bits_of_lengths(np.bincount(at, minlength=129 * 16).reshape(129, 16))
     frames = np.bincount(at, minlength=129)[1:]
     shape = (flags & _SHAPE_FLAGS).astype(np.intp) << 8
     shape |= dlc
     bits = np.bincount(at, weights=_BITS_OF_SHAPE[shape], minlength=129)[1:]
     return frames, bits.astype(np.int64)
+
+
+def bits_of_lengths(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`bits_per_node` from counts[node + 1, dlc] (129 x 16) of classic standard data frames
+    the nodes sent (row 0, no node, dropped): records.sender_shapes summed over the
+    services a node sends."""
+    counts = counts[1:]
+    return counts.sum(axis=1), counts @ _BITS_OF_SHAPE[:16]
 
 
 # back to back: a frame that ends within its own time on the wire (nominal bits, up to a

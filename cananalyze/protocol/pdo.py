@@ -90,6 +90,37 @@ def _column(raw: np.ndarray, entry: MapEntry) -> np.ndarray:
     return raw  # _extract's own array (a shift always makes one): no copy
 
 
+# an integer or a REAL of 8, 16, 32 bits on a boundary of its own size: read as it lies in
+# the words' bytes (a strided view), one conversion instead of a shift, a mask and a sign
+# extension; the same numbers (an integer converts exactly, a REAL32 the same way)
+_ALIGNED = {
+    ("int", 8): "<i1",
+    ("int", 16): "<i2",
+    ("int", 32): "<i4",
+    ("uint", 8): "<u1",
+    ("uint", 16): "<u2",
+    ("uint", 32): "<u4",
+    ("float", 32): "<f4",
+}
+_WORD = np.dtype("<u8")
+_OUT = {"int": np.int64, "uint": np.uint64, "float": np.float64}
+
+
+def _aligned(words: np.ndarray, offset: int, entry: MapEntry, scaled) -> np.ndarray | None:
+    """`_column` of an aligned entry (as float64 when `scaled`), read in one pass; None when
+    the entry is not one (`_ALIGNED`) or the words not a contiguous array."""
+    bits = entry.bits
+    if offset % bits or offset + bits > 64 or words.dtype != _WORD or not words.flags.c_contiguous:
+        return None
+    dtype = DATA_TYPES.get(entry.datatype)
+    kind = dtype.kind if dtype is not None else "uint"
+    view = _ALIGNED.get((kind, bits))
+    if view is None:
+        return None
+    lanes = words.view(view).reshape(-1, 64 // bits)[:, offset // bits]
+    return lanes.astype(np.float64 if scaled else _OUT[kind])
+
+
 def words_of(data: np.ndarray) -> np.ndarray:
     """A batch's (n, 8) uint8 data as n little-endian uint64 words (a view when it can be).
 
@@ -135,15 +166,22 @@ def decode_pdo(
         if entry.index in DUMMY_INDICES or entry.bits == 0:
             offset += entry.bits
             continue
-        if long is not None:
-            raw = _extract(_window(long, offset), 0, entry.bits)
-        else:
-            raw = _extract(words, offset, entry.bits)
-        col = _column(raw, entry)
+        scaled = entry.scale is not None or entry.offset
+        col = None
+        if long is None:
+            col = _aligned(words, offset, entry, scaled)
+        if col is None:
+            if long is not None:
+                raw = _extract(_window(long, offset), 0, entry.bits)
+            else:
+                raw = _extract(words, offset, entry.bits)
+            col = _column(raw, entry)
+            if scaled:
+                col = col.astype(np.float64)
         offset += entry.bits
-        if entry.scale is not None or entry.offset:
-            scale = 1.0 if entry.scale is None else entry.scale
-            col = col.astype(np.float64) * scale + entry.offset
+        if scaled:
+            col *= 1.0 if entry.scale is None else entry.scale  # col is this entry's own
+            col += entry.offset
         if any_short:
             col = col.copy()
             col[short] = np.nan if col.dtype.kind == "f" else 0

@@ -28,6 +28,7 @@ from cananalyze.core.frames import (
 )
 from cananalyze.core.records import DecodedBatch
 from cananalyze.decode.nmt_state import NmtStates
+from cananalyze.decode.node_load import NodeLoad
 from cananalyze.decode.node_tally import NodeTally
 from cananalyze.formats.source import read_all
 from cananalyze.protocol.busload import bits_per_channel, frame_bits
@@ -106,6 +107,39 @@ def test_senders_are_the_nodes_with_a_row_they_sent():
         has = node >= 0
         np.add.at(per, (node[has], service[has]), 1)
         np.testing.assert_array_equal(tally.counts, per)
+
+
+@pytest.mark.parametrize("shaped", [False, True])
+def test_node_load_and_sender_counts_from_one_count_of_the_rows(shaped):
+    """The node load's bits and the sender counts, read from one count per (service, node,
+    length) (`DecodedBatch.sender_shapes`), are each frame's bits and each row summed per
+    node; with a frame whose flags change its bits (29-bit, RTR, FD) or a length past 15,
+    the rows are counted as before."""
+    rng = np.random.default_rng(11)
+    for n in (0, 1, 5000):
+        service = rng.integers(0, len(SERVICE_NAMES), n).astype(np.uint8)
+        node = rng.integers(-1, 128, n).astype(np.int16)
+        batch = _batch(service, node)
+        batch.frames.dlc[:] = rng.integers(0, 9, n)
+        if shaped and n:
+            batch.frames.flags[::7] = FLAG_EXT
+            batch.frames.flags[::11] |= FLAG_RTR
+        assert (batch.sender_shapes() is None) == (shaped and n > 0)
+        load = NodeLoad()
+        load.add(batch)
+        sent = _SENT[service] & (node >= 0)
+        bits = frame_bits(batch.frames.flags, batch.frames.dlc)
+        want_frames = np.bincount(node[sent], minlength=128)
+        want_bits = np.bincount(node[sent], weights=bits[sent], minlength=128).astype(np.int64)
+        if n:
+            [(frames, got_bits)] = load.sent.values()
+            np.testing.assert_array_equal(frames, want_frames)
+            np.testing.assert_array_equal(got_bits, want_bits)
+        want = np.zeros((256, 129), np.int64)
+        np.add.at(want, (service, node + 1), 1)
+        got = batch.sender_counts()
+        assert got.dtype == np.int64 and got.shape == (256, 129)
+        np.testing.assert_array_equal(got, want)
 
 
 def test_sender_counts_refuse_a_node_out_of_range():

@@ -210,3 +210,43 @@ def test_network_file_errors_name_file_and_line(tmp_path):
     toml.write_text('[nodes.200]\ndevice = "dat7014"\n')
     with pytest.raises(InputError, match="out of range 1..127"):
         load_network(toml)
+
+
+@pytest.mark.parametrize("nodes", [(1, 2, 3), (1, 3), (2,)])
+def test_bound_cob_ids_as_one_range_or_a_table_select_the_same_rows(nodes):
+    """The PDO rows the decoder takes: its bound COB-IDs as one range (a wrapping compare of
+    the uint32 identifiers) or, with a gap (or identifiers of another dtype), the table
+    looked up by every identifier; a DBC's identifier inside the range is left to it."""
+    prof = load_builtin("dat7014")
+    cobs = {
+        n: next(p.cob_id for p in prof.pdos(n) if p.direction == "tx" and p.valid)
+        for n in (1, 2, 3)
+    }
+    rng = np.random.default_rng(len(nodes))
+    ids = [0x080, 0x181, 0x182, *cobs.values(), 0x381, 0x701, 0x7FF]
+    seq = [
+        (int(rng.choice(ids)), bytes(rng.integers(0, 256, 8, dtype=np.uint8))) for _ in range(600)
+    ]
+    spec = NetworkSpec({n: NodeSpec(prof, "user --device") for n in nodes})
+    for skip in (frozenset(), frozenset({cobs[nodes[-1]]})):
+        got = []
+        for wide in (False, True):
+            fb = frames_at(seq)
+            if wide:
+                fb.can_id = fb.can_id.astype(np.int64)  # not uint32: the table's way
+            model = NetworkModel(spec)
+            decoder = Decoder([model, PdoDecoder(model, skip)])
+            model.attach(decoder)
+            batch = decoder.decode(fb)
+            got.append(
+                [
+                    (b.cob_id, b.rows.tolist(), {k: v.tolist() for k, v in b.columns.items()})
+                    for b in batch.signals
+                ]
+            )
+        assert got[0] == got[1]
+        want = sorted(cobs[n] for n in nodes if cobs[n] not in skip)
+        assert sorted(c for c, _, _ in got[0]) == want
+        for cob, rows, cols in got[0]:
+            assert rows == [i for i, (c, _) in enumerate(seq) if c == cob]
+            assert all(len(v) == len(rows) for v in cols.values())

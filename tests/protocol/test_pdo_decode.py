@@ -113,6 +113,53 @@ def test_scaling_gives_float_and_duplicates_keep_both():
     assert out.values["t_2"].tolist() == pytest.approx([100.0])
 
 
+# struct's reading of one aligned object, and its type code, per (format, bits)
+_ALIGNED_TYPES = [
+    ("<b", 8, 0x02),
+    ("<h", 16, I16),
+    ("<i", 32, I32),
+    ("<B", 8, U8),
+    ("<H", 16, U16),
+    ("<I", 32, U32),
+    ("<f", 32, REAL32),
+]
+
+
+@pytest.mark.parametrize("fmt,bits,code", _ALIGNED_TYPES)
+@pytest.mark.parametrize("scaled", [False, True])
+def test_aligned_objects_read_as_struct_reads_them(fmt, bits, code, scaled):
+    """An 8/16/32-bit object on its own boundary is read in one pass (`pdo._aligned`): the
+    same numbers and dtypes as struct unpacking each frame, and as the shift-and-mask path
+    (taken for words that are not one contiguous array), short rows 0 / NaN."""
+    import struct
+
+    rng = np.random.default_rng(bits * 7 + code)
+    data = rng.integers(0, 256, (300, 8), dtype=np.uint8)
+    data[:4] = [0x00, 0x00, 0xC0, 0x7F, 0x00, 0x00, 0x80, 0xFF]  # REAL32 NaN, -inf
+    dlc = np.full(300, 8, np.uint8)
+    dlc[5] = 7  # short: not decoded
+    scale, off = (0.25, -3.0) if scaled else (None, 0.0)
+    mapping = [
+        MapEntry(0x2000, k, bits, f"v{k}", code, None, scale, off) for k in range(64 // bits)
+    ]
+    words = np.ascontiguousarray(data).view("<u8").reshape(-1)
+    fast = decode_pdo(None, dlc, mapping, words=words)
+    spread = np.zeros(600, np.uint64)
+    spread[::2] = words
+    slow = decode_pdo(None, dlc, mapping, words=spread[::2])  # not contiguous: shift and mask
+    for k, e in enumerate(mapping):
+        got, ref = fast.values[e.name], slow.values[e.name]
+        assert got.dtype == ref.dtype
+        assert got.dtype == (np.float64 if scaled or fmt == "<f" else ref.dtype)
+        assert np.array_equal(got.view(np.uint64), ref.view(np.uint64))  # NaN bits too
+        want = [struct.unpack_from(fmt, bytes(row), k * bits // 8)[0] for row in data]
+        want = np.array(want, np.float64 if scaled or fmt == "<f" else got.dtype)
+        if scaled:
+            want = want * scale + off
+        want[5] = np.nan if want.dtype.kind == "f" else 0  # short: every column
+        np.testing.assert_array_equal(got, want)
+
+
 def test_empty_batch():
     data = np.zeros((0, 8), np.uint8)
     out = decode_pdo(data, np.zeros(0, np.uint8), [MapEntry(0x2000, 1, 8, "a", U8)])
