@@ -50,6 +50,17 @@ _IS_UPLOAD_RESP = np.isin(np.arange(256), _UPLOAD_RESP)
 
 
 @dataclass
+class Gathered:
+    """The SDO rows' columns as `plan` read them (payload bytes, times, COB-IDs), by
+    position in the rows list: the pair functions read them there (as they would a
+    FrameBatch's, positions for rows), not by gathering from the whole batch again."""
+
+    data: np.ndarray  # (m, width) uint8, the batch's data rows
+    t: np.ndarray  # float64
+    can_id: np.ndarray  # int64
+
+
+@dataclass
 class FastPlan:
     """Candidate pairs of one batch, indexed by position in the SDO rows list.
 
@@ -66,9 +77,17 @@ class FastPlan:
     req_cob: np.ndarray  # int: request COB-ID of each position's channel
     aborted: np.ndarray  # bool: the candidate answer is a server abort
     stray: np.ndarray  # bool: an initiate response that answers no candidate
+    seen: Gathered  # the rows' columns, by position
 
 
-def plan(batch: DecodedBatch, rows: np.ndarray, timeout: float, explicit: list[int]) -> FastPlan:
+def plan(
+    batch: DecodedBatch,
+    rows: np.ndarray,
+    timeout: float,
+    explicit: list[int],
+    d: np.ndarray | None = None,
+) -> FastPlan:
+    """`d`: the rows' data bytes when the caller read them already (`_rows(fb.data, rows)`)."""
     fb = batch.frames
     m = len(rows)
     cid = fb.can_id[rows].astype(np.int64)
@@ -81,7 +100,8 @@ def plan(batch: DecodedBatch, rows: np.ndarray, timeout: float, explicit: list[i
     if explicit:
         ex = np.asarray(explicit, np.int64)
         usable &= ~np.isin(0x600 + node, ex) & ~np.isin(0x580 + node, ex)
-    d = _rows(fb.data, rows)
+    if d is None:
+        d = _rows(fb.data, rows)
     b0 = d[:, 0]
     mux = (
         d[:, 1].astype(np.int64)
@@ -119,6 +139,7 @@ def plan(batch: DecodedBatch, rows: np.ndarray, timeout: float, explicit: list[i
         0x600 + node,
         b0 == _ABORT,
         stray,
+        Gathered(d, t, cid),
     )
 
 
@@ -152,13 +173,16 @@ def _rounded_latency(dt: np.ndarray) -> np.ndarray:
     return py_round(py_round(np.asarray(dt, np.float64) * 1000.0, 6), 3)
 
 
-def pair_columns(fb, a: np.ndarray, b: np.ndarray) -> SdoColumns:
-    """What summary, timing and the network model read of taken pairs, as columns."""
+def pair_columns(fb, a: np.ndarray, b: np.ndarray, rows: np.ndarray | None = None) -> SdoColumns:
+    """What summary, timing and the network model read of taken pairs, as columns.
+
+    `fb` a FrameBatch (a, b its rows) or a plan's `Gathered` (a, b positions in it, and
+    `rows` the batch row of each position)."""
     da, db = _rows(fb.data, a), _rows(fb.data, b)
     t0, t1 = fb.t[a], fb.t[b]
     return SdoColumns(
-        row=np.asarray(b, np.int64),
-        req_row=np.asarray(a, np.int64),
+        row=np.asarray(b if rows is None else rows[b], np.int64),
+        req_row=np.asarray(a if rows is None else rows[a], np.int64),
         node=fb.can_id[a].astype(np.int64) - 0x600,
         upload=da[:, 0] == _UPLOAD_REQ,
         index=da[:, 1].astype(np.int64) | (da[:, 2].astype(np.int64) << 8),
