@@ -210,12 +210,14 @@ def pair_record_columns(
     b: np.ndarray,
     object_info: ObjectInfo | None,
     latency: np.ndarray | None = None,
+    objects: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> RecordColumns:
     """The records' fields of taken pairs as columns, values as the tracker makes them.
 
     Names and data types are looked up once per distinct (node, index, subindex),
     values decoded per data type as numpy columns. Aborted pairs (rare) go through
-    `pair_outputs`.
+    `pair_outputs`. `objects`: np.unique(key, return_inverse=True) of the pairs' keys
+    (node << 24 | index << 8 | subindex) when the caller made it already.
     """
     m = len(a)
     if m == 0:
@@ -239,8 +241,10 @@ def pair_record_columns(
     value_int: np.ndarray | None = np.zeros(m, np.int64)
     value_none = np.ones(m, bool)
     if object_info is not None:
-        key = (node_a << 24) | (index_a << 8) | da[:, 3]
-        uniq, inv = np.unique(key, return_inverse=True)
+        if objects is None:
+            key = (node_a << 24) | (index_a << 8) | da[:, 3]
+            objects = np.unique(key, return_inverse=True)
+        uniq, inv = objects
         inv = inv.ravel()
         infos = [object_info(k >> 24, (k >> 8) & 0xFFFF, k & 0xFF) for k in uniq.tolist()]
         known = np.array([i is not None for i in infos], bool)

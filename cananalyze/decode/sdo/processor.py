@@ -344,7 +344,8 @@ class SdoProcessor:
         self._chunks.append((batch.records.reserve(hi - lo), lo, hi))
         cob, aborted = self._ended_cob[lo:hi], self._ended_aborted[lo:hi]
         if hi - lo > 16:  # only each channel's last answer tells: one update per channel
-            cob, last = np.unique(cob[::-1], return_index=True)
+            # (COB-IDs fit 16 bits: np.unique's stable sort of uint16 is a radix sort)
+            cob, last = np.unique(cob[::-1].astype(np.uint16), return_index=True)
             aborted = aborted[::-1][last]
         ended = zip(cob.tolist(), map(_ENDED.__getitem__, aborted.tolist()), strict=True)
         self.tracker._ended.update(ended)
@@ -366,10 +367,13 @@ class SdoProcessor:
         cols = fastpath.pair_columns(seen, pa, pb, rows)
         latency = cols.latency
         info = lookup = self.tracker.object_info
+        objects = None
         if info is not None:
             # answers as they are now: the records may be built after the model changed
-            keys = set(((cols.node << 24) | (cols.index << 8) | cols.subindex).tolist())
-            known = {k: info(k >> 24, (k >> 8) & 0xFFFF, k & 0xFF) for k in keys}
+            # (the distinct objects, sorted, and each pair's: what the records' build sorts)
+            key = (cols.node << 24) | (cols.index << 8) | cols.subindex
+            objects = np.unique(key, return_inverse=True)
+            known = {k: info(k >> 24, (k >> 8) & 0xFFFF, k & 0xFF) for k in objects[0].tolist()}
 
             def lookup(node: int, index: int, sub: int, known=known):
                 key = (node << 24) | (index << 8) | sub
@@ -382,7 +386,7 @@ class SdoProcessor:
         def columns() -> RecordColumns:
             """All the records' fields, built once (the export reads them, the dicts too)."""
             if not memo:
-                memo.append(fastpath.pair_record_columns(seen, pa, pb, lookup, latency))
+                memo.append(fastpath.pair_record_columns(seen, pa, pb, lookup, latency, objects))
             return memo[0]
 
         def build(js: np.ndarray | None) -> list[dict]:
