@@ -321,10 +321,9 @@ class SdoTable:
 
     def first_seen(self, codes: np.ndarray) -> list[int]:
         """Distinct codes in the order they first appear (dict insertion order of a loop)."""
-        if codes.size == 0:
-            return []
-        uniq, first = np.unique(codes, return_index=True)
-        return uniq[np.argsort(first)].tolist()
+        if codes is self.node or codes is self.result:  # numbered in that order already
+            return list(range(len(self.node_keys if codes is self.node else self.result_keys)))
+        return _int_codes(codes)[0]
 
     def groups(self, codes: np.ndarray, where: np.ndarray | None = None) -> list:
         """(code, positions in record order) per distinct code, first seen first.
@@ -335,7 +334,9 @@ class SdoTable:
         if sel.size == 0:
             return []
         c = codes[sel]
-        order = np.argsort(c, kind="stable")
+        small = c.dtype.kind in "iu" and int(c.min()) >= 0 and int(c.max()) <= 0xFFFF
+        # (codes that fit 16 bits: numpy's stable sort of uint16 is a radix sort)
+        order = np.argsort(c.astype(np.uint16) if small else c, kind="stable")
         cs = c[order]
         cut = np.flatnonzero(cs[1:] != cs[:-1]) + 1
         starts = np.concatenate(([0], cut))
@@ -422,9 +423,14 @@ class SdoRecords:
             for p in self._fast:
                 parts.append(p.cols)
                 at.append(p.at)
+            if not d and len(self._fast) == 1:  # the usual batch: one fast part, in order
+                parts, at = parts[1:], at[1:]
             pos = np.concatenate(at)
-            cols = SdoColumns.concat(parts)
-            if self._fast:
+            if len(parts) == 1:  # (a new SdoColumns of the same arrays: none is written to)
+                cols = SdoColumns(*(getattr(parts[0], f) for f in SdoColumns.FIELDS))
+            else:
+                cols = SdoColumns.concat(parts)
+            if self._fast and (pos[1:] < pos[:-1]).any():
                 cols = cols.take(np.argsort(pos, kind="stable"))
             self._cols = cols
         return self._cols
@@ -586,6 +592,21 @@ def _int_codes(values: np.ndarray) -> tuple[list, np.ndarray]:
     (`first_seen_codes`'s, the other way round)."""
     if values.size == 0:
         return [], np.zeros(0, np.int64)
+    lo, hi = (int(values.min()), int(values.max())) if values.dtype.kind in "iu" else (-2, 0)
+    if lo >= -1 and hi < 0xFFFF:
+        # small values (nodes, result codes): counted, and sorted by a radix sort of
+        # uint16 (stable: each value's first position is its run's first)
+        small = values.astype(np.uint16) + np.uint16(1)  # (-1 wraps to 0xFFFF, then 0)
+        counts = np.bincount(small)
+        present = np.flatnonzero(counts)
+        if present.size == 1:
+            return [lo], np.zeros(values.size, np.int64)
+        order = np.argsort(small, kind="stable")
+        starts = np.concatenate(([0], np.cumsum(counts[present])[:-1]))
+        by_first = np.argsort(order[starts])
+        code_of = np.zeros(counts.size, np.int64)
+        code_of[present[by_first]] = np.arange(present.size)
+        return (present[by_first] - 1).tolist(), code_of[small]
     uniq, first, inv = np.unique(values, return_index=True, return_inverse=True)
     order = np.argsort(first)
     rank = np.empty(order.size, np.int64)

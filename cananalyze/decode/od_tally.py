@@ -104,7 +104,8 @@ class OdTally:
             first = fb.channel_label(int(fb.channel[0]))
             self._first = self._first or first
             self.several = first != self._first or bool((fb.channel != fb.channel[0]).any())
-        boots = np.flatnonzero(batch.service == Service.BOOTUP)
+        boot = batch.service == np.uint8(Service.BOOTUP)
+        boots = np.flatnonzero(boot) if boot.any() else np.zeros(0, np.int64)
         recs = batch.records
         at = np.zeros(0, np.int64)
         if recs:
@@ -131,35 +132,62 @@ class OdTally:
         step here, the records read only for what is shown (first, changes, last)."""
         fb, recs = batch.frames, batch.records
         c = recs.cols
-        rows = np.asarray(recs.rows, np.int64)[at]
-        ch = np.zeros(len(at), np.int64)
-        inside = rows < len(fb)
-        ch[inside] = fb.channel[rows[inside]]
+        rows = c.row[at]  # the records' rows (`recs.rows`), as a column
         node, index, sub = c.node[at], c.index[at], c.subindex[at]
+        if len(fb) and int(fb.channel.max()) == int(fb.channel.min()):  # one bus: no gather
+            ch = np.where(rows < len(fb), np.int64(fb.channel[0]), np.int64(0))
+        else:
+            ch = np.zeros(len(at), np.int64)
+            inside = rows < len(fb)
+            ch[inside] = fb.channel[rows[inside]]
         # each transfer's life: the node's before this batch, plus its boot-ups before it
         pair = ch * 256 + node
-        uniq, inv = np.unique(pair, return_inverse=True)
-        before = [self.lives.get((labels[p // 256], int(p % 256)), 0) for p in uniq.tolist()]
-        life = np.asarray(before, np.int64)[inv]
+        if node.size and int(node.max()) < 256 and int(pair.max()) < 1 << 16:
+            # (few small pairs: the distinct ones by a count, each value by a lookup)
+            uniq = np.flatnonzero(np.bincount(pair))
+            before = np.zeros(int(uniq[-1]) + 1, np.int64)
+            before[uniq] = [self.lives.get((labels[p // 256], p % 256), 0) for p in uniq.tolist()]
+            life = before[pair]
+        else:
+            uniq, inv = np.unique(pair, return_inverse=True)
+            before = [self.lives.get((labels[p // 256], int(p % 256)), 0) for p in uniq.tolist()]
+            life = np.asarray(before, np.int64)[inv.reshape(-1)]
         for row, bch, bn in zip(boots.tolist(), boot_ch.tolist(), boot_node.tolist(), strict=True):
             life[(ch == bch) & (node == bn) & (rows > row)] += 1
         keys, texts = _data_keys(recs, at)
         codes = _codes(keys, texts)
-        order = np.lexsort((np.arange(len(at)), sub, index, life, node, ch))
-        cols = (ch, node, life, index, sub)
-        s = [x[order] for x in cols]
         new = np.ones(len(at), bool)
-        new[1:] = np.any([x[1:] != x[:-1] for x in s], axis=0)
+        if (
+            pair.size
+            and int(pair.max()) < 1 << 16
+            and int(life.max()) < 1 << 20
+            and int(index.max()) < 1 << 16
+            and int(sub.max()) < 1 << 8
+        ):
+            # one int64 key in the lexsort's order (bus and node, life, index, sub-index:
+            # 16 + 20 + 16 + 8 bits): one stable sort and one compare
+            k = (pair << 44) | (life << 24) | (index << 8) | sub
+            order = np.argsort(k, kind="stable")
+            ks = k[order]
+            new[1:] = ks[1:] != ks[:-1]
+        else:
+            order = np.lexsort((np.arange(len(at)), sub, index, life, node, ch))
+            s = [x[order] for x in (ch, node, life, index, sub)]
+            new[1:] = np.any([x[1:] != x[:-1] for x in s], axis=0)
         starts = np.flatnonzero(new)
         ends = np.append(starts[1:], len(at))
         code = codes[order]
         differs = np.zeros(len(at), bool)
         differs[1:] = code[1:] != code[:-1]
         t = c.t[at]
-        for lo, hi in zip(starts.tolist(), ends.tolist(), strict=True):
+        # the changes inside each group (not at its first transfer), found in one pass
+        moved = np.flatnonzero(differs & ~new)
+        cut = np.searchsorted(moved, starts).tolist() + [moved.size]
+        moved = moved.tolist()
+        for g, (lo, hi) in enumerate(zip(starts.tolist(), ends.tolist(), strict=True)):
             j0 = int(order[lo])
             key = (labels[ch[j0]], int(node[j0]), int(life[j0]), int(index[j0]), int(sub[j0]))
-            changed = (np.flatnonzero(differs[lo + 1 : hi]) + lo + 1).tolist()
+            changed = moved[cut[g] : cut[g + 1]]
             obj = self.objects.get(key)
             if obj is None:
                 shown = _shown(recs.record(int(at[j0])))
@@ -230,13 +258,15 @@ class OdTally:
             first = _scalar(values[0])
             m = self.mapped[key] = _Mapped(name, t[0], t[0], first, units.get(name))
             m.history.append(scalar_text(first))
-        changed = np.flatnonzero(values[1:] != values[:-1]) + 1
-        if m.frames and _scalar(values[0]) != m.last:
-            changed = np.r_[0, changed]
+        step = values[1:] != values[:-1]
+        first = bool(m.frames and _scalar(values[0]) != m.last)
+        changes = int(np.count_nonzero(step)) + first
         room = max(0, HISTORY - 1 - len(m.history))
-        m.history += [scalar_text(_scalar(values[k])) for k in changed[:room].tolist()]
-        m.more = m.more or changed.size > room
-        m.changes += int(changed.size)
+        if room and changes:  # where the history has room: the first changes' values
+            shown = ([0] if first else []) + (np.flatnonzero(step)[:room] + 1).tolist()
+            m.history += [scalar_text(_scalar(values[k])) for k in shown[:room]]
+        m.more = m.more or changes > room
+        m.changes += changes
         m.frames += int(values.size)
         m.last, m.t = _scalar(values[-1]), t[1]
 
@@ -363,21 +393,25 @@ def _data_keys(recs, at: np.ndarray) -> tuple[np.ndarray, dict[int, str]]:
     and the texts by position in `at` (`_key` reads one back)."""
     f = recs.fields()
     a = f.arrays
-    n = a["data_len"].astype(np.int64)[at]
-    raw = np.zeros((len(n), 4), np.int64)
+    n = a["data_len"][at].astype(np.int64)
+    raw = np.zeros((len(n), 4), np.uint8)
     raw[:, : min(4, a["raw"].shape[1])] = a["raw"][at, :4]
     raw[np.arange(4) >= n[:, None]] = 0
-    keys = (raw << (8 * np.arange(4, dtype=np.int64))).sum(1) | (n << 32)
+    # the 4 bytes as one little-endian int (byte j times 256**j), by a view of them
+    keys = raw.view("<u4").reshape(-1).astype(np.int64) | (n << 32)
     texts: dict[int, str] = {}
     if f.held:
-        for j, k in enumerate(at.tolist()):
-            if k in f.held:
-                data = f.held[k].get("data") or ""
-                raw_bytes = bytes.fromhex(data)
-                if len(raw_bytes) <= 4:
-                    keys[j] = int.from_bytes(raw_bytes, "little") | (len(raw_bytes) << 32)
-                else:
-                    texts[j] = data
+        held = np.array(sorted(f.held), np.int64)
+        pos = np.searchsorted(at, held)  # (at ascends: the held ones among them, in order)
+        mine = pos < at.size
+        mine[mine] = at[pos[mine]] == held[mine]
+        for j, k in zip(pos[mine].tolist(), held[mine].tolist(), strict=True):
+            data = f.held[k].get("data") or ""
+            raw_bytes = bytes.fromhex(data)
+            if len(raw_bytes) <= 4:
+                keys[j] = int.from_bytes(raw_bytes, "little") | (len(raw_bytes) << 32)
+            else:
+                texts[j] = data
     return keys, texts
 
 

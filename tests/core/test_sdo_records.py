@@ -122,3 +122,73 @@ def test_merge_puts_parts_in_row_order_unbuilt() -> None:
     f = merged.fields()  # the parts' columns in the merged order
     assert [f.record(k).get("node") for k in range(7)] == [3, 9, 7, 7, 7, None, 7]
     assert merged.fast_part() is None  # two parts: the roles are read from the notes
+
+
+def _unique_codes(values: np.ndarray) -> tuple[list, np.ndarray]:
+    """The first-seen codes by np.unique, as `_int_codes` always made them."""
+    if values.size == 0:
+        return [], np.zeros(0, np.int64)
+    uniq, first, inv = np.unique(values, return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    rank = np.empty(order.size, np.int64)
+    rank[order] = np.arange(order.size)
+    return uniq[order].tolist(), rank[inv.reshape(-1)]
+
+
+def test_int_codes_small_values_as_unique_gives_them() -> None:
+    """Nodes and result codes (-1..0xFFFE) are coded by a count and a radix sort; wider
+    values (and other kinds) by np.unique: the same keys and codes either way."""
+    from cananalyze.core.sdo_records import SdoTable, _int_codes
+
+    rng = np.random.default_rng(43)
+    cases = [
+        rng.integers(1, 17, 5000),
+        rng.integers(-1, 128, 5000),
+        np.zeros(300, np.int64),
+        np.full(7, -1, np.int64),
+        np.where(rng.random(4000) < 0.01, 1, 0),
+        rng.integers(0, 0xFFFF, 3000),  # 0xFFFF itself goes the other way
+        np.array([0xFFFF, 3, 0xFFFF, 2], np.int64),
+        rng.integers(-5, 3, 500),
+        rng.integers(0, 1 << 40, 500),
+        rng.integers(0, 256, 900).astype(np.uint8),
+        np.array([255, 0, 255], np.uint8),
+        np.zeros(0, np.int64),
+    ]
+    for values in cases:
+        keys, codes = _int_codes(values)
+        want_keys, want_codes = _unique_codes(values)
+        assert keys == want_keys and all(type(k) is int for k in keys)
+        assert codes.dtype == np.int64 and np.array_equal(codes, want_codes)
+        tab = SdoTable([], codes, [], codes, np.zeros(codes.size), np.arange(codes.size))
+        assert tab.first_seen(values) == want_keys
+        groups = tab.groups(values)
+        assert [g[0] for g in groups] == want_keys
+        for key, pos in groups:
+            assert np.array_equal(pos, np.flatnonzero(values == key))
+
+
+def test_first_seen_of_the_tables_own_codes() -> None:
+    """The table's node and result codes are numbered as they first come: first_seen of
+    them is their numbers in order, as np.unique finds them."""
+    recs, _ = _records()
+    recs.append(30, {"kind": "sdo", "node": 2, "index": 0x1000, "subindex": 0, "result": "timeout"})
+    tab = recs.table()
+    for codes, keys in ((tab.node, tab.node_keys), (tab.result, tab.result_keys)):
+        want = _unique_codes(codes.copy())[0]
+        assert tab.first_seen(codes) == want == list(range(len(keys)))
+        assert tab.first_seen(codes.copy()) == want
+
+
+def test_cols_of_one_fast_part_are_its_columns() -> None:
+    """A batch of one fast part in order: its columns as they are (no copy through a sort),
+    in a SdoColumns of their own; out of order or beside the tracker's records: sorted."""
+    recs = SdoRecords()
+    first = recs.reserve(3)
+    recs.defer(_part(np.arange(first, first + 3), [4, 6, 9], []))
+    cols = recs.cols
+    assert cols is not recs._fast[0].cols and cols.row is recs._fast[0].cols.row
+    assert cols.row.tolist() == [4, 6, 9] and recs.rows == [4, 6, 9]
+    recs.append(12, {"kind": "sdo", "node": 3, "index": 0x1000, "subindex": 0, "result": "ok"})
+    assert recs.cols.row.tolist() == [4, 6, 9, 12]
+    assert recs.cols.node.tolist() == [7, 7, 7, 3]

@@ -50,6 +50,17 @@ _IS_UPLOAD_RESP = np.isin(np.arange(256), _UPLOAD_RESP)
 
 
 @dataclass
+class Gathered:
+    """The SDO rows' columns as `plan` read them (payload bytes, times, COB-IDs), by
+    position in the rows list: the pair functions read them there (as they would a
+    FrameBatch's, positions for rows), not by gathering from the whole batch again."""
+
+    data: np.ndarray  # (m, width) uint8, the batch's data rows
+    t: np.ndarray  # float64
+    can_id: np.ndarray  # int64
+
+
+@dataclass
 class FastPlan:
     """Candidate pairs of one batch, indexed by position in the SDO rows list.
 
@@ -66,9 +77,17 @@ class FastPlan:
     req_cob: np.ndarray  # int: request COB-ID of each position's channel
     aborted: np.ndarray  # bool: the candidate answer is a server abort
     stray: np.ndarray  # bool: an initiate response that answers no candidate
+    seen: Gathered  # the rows' columns, by position
 
 
-def plan(batch: DecodedBatch, rows: np.ndarray, timeout: float, explicit: list[int]) -> FastPlan:
+def plan(
+    batch: DecodedBatch,
+    rows: np.ndarray,
+    timeout: float,
+    explicit: list[int],
+    d: np.ndarray | None = None,
+) -> FastPlan:
+    """`d`: the rows' data bytes when the caller read them already (`_rows(fb.data, rows)`)."""
     fb = batch.frames
     m = len(rows)
     cid = fb.can_id[rows].astype(np.int64)
@@ -81,7 +100,8 @@ def plan(batch: DecodedBatch, rows: np.ndarray, timeout: float, explicit: list[i
     if explicit:
         ex = np.asarray(explicit, np.int64)
         usable &= ~np.isin(0x600 + node, ex) & ~np.isin(0x580 + node, ex)
-    d = _rows(fb.data, rows)
+    if d is None:
+        d = _rows(fb.data, rows)
     b0 = d[:, 0]
     mux = (
         d[:, 1].astype(np.int64)
@@ -119,6 +139,7 @@ def plan(batch: DecodedBatch, rows: np.ndarray, timeout: float, explicit: list[i
         0x600 + node,
         b0 == _ABORT,
         stray,
+        Gathered(d, t, cid),
     )
 
 
@@ -152,13 +173,16 @@ def _rounded_latency(dt: np.ndarray) -> np.ndarray:
     return py_round(py_round(np.asarray(dt, np.float64) * 1000.0, 6), 3)
 
 
-def pair_columns(fb, a: np.ndarray, b: np.ndarray) -> SdoColumns:
-    """What summary, timing and the network model read of taken pairs, as columns."""
+def pair_columns(fb, a: np.ndarray, b: np.ndarray, rows: np.ndarray | None = None) -> SdoColumns:
+    """What summary, timing and the network model read of taken pairs, as columns.
+
+    `fb` a FrameBatch (a, b its rows) or a plan's `Gathered` (a, b positions in it, and
+    `rows` the batch row of each position)."""
     da, db = _rows(fb.data, a), _rows(fb.data, b)
     t0, t1 = fb.t[a], fb.t[b]
     return SdoColumns(
-        row=np.asarray(b, np.int64),
-        req_row=np.asarray(a, np.int64),
+        row=np.asarray(b if rows is None else rows[b], np.int64),
+        req_row=np.asarray(a if rows is None else rows[a], np.int64),
         node=fb.can_id[a].astype(np.int64) - 0x600,
         upload=da[:, 0] == _UPLOAD_REQ,
         index=da[:, 1].astype(np.int64) | (da[:, 2].astype(np.int64) << 8),
@@ -186,12 +210,14 @@ def pair_record_columns(
     b: np.ndarray,
     object_info: ObjectInfo | None,
     latency: np.ndarray | None = None,
+    objects: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> RecordColumns:
     """The records' fields of taken pairs as columns, values as the tracker makes them.
 
     Names and data types are looked up once per distinct (node, index, subindex),
     values decoded per data type as numpy columns. Aborted pairs (rare) go through
-    `pair_outputs`.
+    `pair_outputs`. `objects`: np.unique(key, return_inverse=True) of the pairs' keys
+    (node << 24 | index << 8 | subindex) when the caller made it already.
     """
     m = len(a)
     if m == 0:
@@ -215,8 +241,10 @@ def pair_record_columns(
     value_int: np.ndarray | None = np.zeros(m, np.int64)
     value_none = np.ones(m, bool)
     if object_info is not None:
-        key = (node_a << 24) | (index_a << 8) | da[:, 3]
-        uniq, inv = np.unique(key, return_inverse=True)
+        if objects is None:
+            key = (node_a << 24) | (index_a << 8) | da[:, 3]
+            objects = np.unique(key, return_inverse=True)
+        uniq, inv = objects
         inv = inv.ravel()
         infos = [object_info(k >> 24, (k >> 8) & 0xFFFF, k & 0xFF) for k in uniq.tolist()]
         known = np.array([i is not None for i in infos], bool)

@@ -134,7 +134,7 @@ class SdoProcessor:
                     self._feed(batch, row)
         elif self.fast and len(rows) > 1 and not self._may_learn(batch, rows):
             self._cur_rows_arr = rows
-            self._process_fast(batch, rows)
+            self._process_fast(batch, rows, self._rows_data)
             self._fill(batch)
             self._fill_strays(batch)
         else:
@@ -158,6 +158,7 @@ class SdoProcessor:
         goes through the tracker (a few batches of a log: where nodes start).
         """
         d = np.take(batch.frames.data, rows, axis=0)  # (~10x 2-D fancy indexing)
+        self._rows_data = d  # (the fast path's plan reads them too)
         index = d[:, 1].astype(np.uint16) | (d[:, 2].astype(np.uint16) << 8)
         if ((index >= 0x1200) & (index <= 0x12FF)).any():
             return True
@@ -202,7 +203,9 @@ class SdoProcessor:
         batch.notes.setdefault(row, {}).update(note)
         self._emit(batch)
 
-    def _process_fast(self, batch: DecodedBatch, rows: np.ndarray) -> None:
+    def _process_fast(
+        self, batch: DecodedBatch, rows: np.ndarray, d: np.ndarray | None = None
+    ) -> None:
         """Walk the SDO rows: quiet stretches in bulk, the rest one event at a time.
 
         Between two frames that must go through the tracker, nothing changes its
@@ -210,8 +213,7 @@ class SdoProcessor:
         request, advancing is a no-op and every candidate pair is taken as is.
         """
         tracker = self.tracker
-        fb = batch.frames
-        p = fastpath.plan(batch, rows, tracker.timeout, tracker.extra_cob_ids())
+        p = fastpath.plan(batch, rows, tracker.timeout, tracker.extra_cob_ids(), d)
         strays = np.flatnonzero(p.stray).tolist()
         self._strays = strays
         self._stray_chunks: list[tuple[int, int]] = []  # (lo, hi) in strays: taken
@@ -232,7 +234,7 @@ class SdoProcessor:
         self._cp: tuple[list[int], list[float]] | None = None  # built by _candidates if asked
         self._cand_of: dict[int, list[int]] = {}
         self._plan = p
-        self._plan_t = fb.t[rows]
+        self._plan_t = p.seen.t
         # per-position lists, built only when a frame is looked at alone: a quiet batch
         # is taken in one stretch and never reads them
         looked = False
@@ -342,7 +344,8 @@ class SdoProcessor:
         self._chunks.append((batch.records.reserve(hi - lo), lo, hi))
         cob, aborted = self._ended_cob[lo:hi], self._ended_aborted[lo:hi]
         if hi - lo > 16:  # only each channel's last answer tells: one update per channel
-            cob, last = np.unique(cob[::-1], return_index=True)
+            # (COB-IDs fit 16 bits: np.unique's stable sort of uint16 is a radix sort)
+            cob, last = np.unique(cob[::-1].astype(np.uint16), return_index=True)
             aborted = aborted[::-1][last]
         ended = zip(cob.tolist(), map(_ENDED.__getitem__, aborted.tolist()), strict=True)
         self.tracker._ended.update(ended)
@@ -353,18 +356,24 @@ class SdoProcessor:
             return
         rows = self._cur_rows_arr
         pick = np.concatenate([self._answers[lo:hi] for _, lo, hi in self._chunks])
-        a, b = rows[self._req_of_arr[pick]], rows[pick]
+        # the pairs' positions in the SDO rows (their columns as the plan read them), and rows
+        pa, pb = self._req_of_arr[pick], pick
+        a, b = rows[pa], rows[pb]
         fb = batch.frames
+        seen = self._plan.seen
         slots = np.concatenate(
             [np.arange(slot, slot + hi - lo, dtype=np.int64) for slot, lo, hi in self._chunks]
         )
-        cols = fastpath.pair_columns(fb, a, b)
+        cols = fastpath.pair_columns(seen, pa, pb, rows)
         latency = cols.latency
         info = lookup = self.tracker.object_info
+        objects = None
         if info is not None:
             # answers as they are now: the records may be built after the model changed
-            keys = set(((cols.node << 24) | (cols.index << 8) | cols.subindex).tolist())
-            known = {k: info(k >> 24, (k >> 8) & 0xFFFF, k & 0xFF) for k in keys}
+            # (the distinct objects, sorted, and each pair's: what the records' build sorts)
+            key = (cols.node << 24) | (cols.index << 8) | cols.subindex
+            objects = np.unique(key, return_inverse=True)
+            known = {k: info(k >> 24, (k >> 8) & 0xFFFF, k & 0xFF) for k in objects[0].tolist()}
 
             def lookup(node: int, index: int, sub: int, known=known):
                 key = (node << 24) | (index << 8) | sub
@@ -377,13 +386,13 @@ class SdoProcessor:
         def columns() -> RecordColumns:
             """All the records' fields, built once (the export reads them, the dicts too)."""
             if not memo:
-                memo.append(fastpath.pair_record_columns(fb, a, b, lookup, latency))
+                memo.append(fastpath.pair_record_columns(seen, pa, pb, lookup, latency, objects))
             return memo[0]
 
         def build(js: np.ndarray | None) -> list[dict]:
             if js is None:
                 return columns().records()
-            return fastpath.pair_records(fb, a[js], b[js], lookup, latency[js])
+            return fastpath.pair_records(seen, pa[js], pb[js], lookup, latency[js])
 
         batch.records.defer(FastPart(slots, cols, build, columns))
 
