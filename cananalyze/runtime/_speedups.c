@@ -1637,6 +1637,20 @@ static int write_uint(uint64_t v, char *o) {
     return len;
 }
 
+/* The arguments (v, out) of time_text and g6_text: v float64, out n rows of W bytes; the
+   row count, or -1 with an exception set (bs released). */
+static Py_ssize_t float_rows(PyObject *args, Bufs *bs, Py_ssize_t W) {
+    PyObject *o_v, *o_out;
+    if (!PyArg_ParseTuple(args, "OO", &o_v, &o_out)) return -1;
+    if (bufs_get(bs, o_v, 0, -1, "v") < 0) goto fail;
+    Py_ssize_t n = bs->b[0].len / 8;
+    if (bufs_get(bs, o_out, 1, n * W, "out") < 0) goto fail;
+    return n;
+fail:
+    bufs_release(bs);
+    return -1;
+}
+
 PyDoc_STRVAR(time_text_doc,
              "time_text(v, out) -> width\n\n"
              "f\"{x:12.6f}\" of each float64 of v, right-aligned in the rows of out (uint8,\n"
@@ -1647,13 +1661,10 @@ PyDoc_STRVAR(time_text_doc,
              "numpy's passes (digits, blanking, a scatter) were 0.3 s per 1M frames of text.");
 
 static PyObject *time_text(PyObject *self, PyObject *args) {
-    PyObject *o_v, *o_out;
-    if (!PyArg_ParseTuple(args, "OO", &o_v, &o_out)) return NULL;
     Bufs bs = {.n = 0};
-    if (bufs_get(&bs, o_v, 0, -1, "v") < 0) goto fail;
-    Py_ssize_t n = bs.b[0].len / 8, width = 0;
     const int W = 40;
-    if (bufs_get(&bs, o_out, 1, n * W, "out") < 0) goto fail;
+    Py_ssize_t n = float_rows(args, &bs, W), width = 0;
+    if (n < 0) return NULL;
     const double *v = bs.b[0].buf;
     char *out = bs.b[1].buf;
     for (Py_ssize_t i = 0; i < n; i++) {
@@ -1685,9 +1696,6 @@ static PyObject *time_text(PyObject *self, PyObject *args) {
     }
     bufs_release(&bs);
     return PyLong_FromSsize_t(width);
-fail:
-    bufs_release(&bs);
-    return NULL;
 }
 
 static const double P10_9[10] = {1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9};
@@ -1701,13 +1709,10 @@ PyDoc_STRVAR(g6_text_doc,
              "not finite) Python formats (as format()). numtext.g6_text's numpy twin.");
 
 static PyObject *g6_text(PyObject *self, PyObject *args) {
-    PyObject *o_v, *o_out;
-    if (!PyArg_ParseTuple(args, "OO", &o_v, &o_out)) return NULL;
     Bufs bs = {.n = 0};
-    if (bufs_get(&bs, o_v, 0, -1, "v") < 0) goto fail;
-    Py_ssize_t n = bs.b[0].len / 8, width = 0;
     const int W = 24;
-    if (bufs_get(&bs, o_out, 1, n * W, "out") < 0) goto fail;
+    Py_ssize_t n = float_rows(args, &bs, W), width = 0;
+    if (n < 0) return NULL;
     const double *v = bs.b[0].buf;
     char *out = bs.b[1].buf;
     for (Py_ssize_t i = 0; i < n; i++) {

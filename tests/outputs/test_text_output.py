@@ -215,17 +215,21 @@ def test_emcy_rows() -> None:
     assert _check([dec.decode(from_rows(rows)), dec.finish()], color=False) >= 10
 
 
-@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "numpy"])
-def test_signal_values_of_every_kind(compiled, monkeypatch) -> None:
+@pytest.fixture(params=["compiled", "numpy"])
+def both_paths(request, monkeypatch) -> None:
+    """The test runs with the compiled helper and with its numpy twin."""
+    from cananalyze.runtime import speedups
+
+    if request.param == "numpy":
+        monkeypatch.setattr(speedups, "C", None)
+    elif speedups.C is None:
+        pytest.skip("compiled helper not in use")
+
+
+def test_signal_values_of_every_kind(both_paths) -> None:
     """Signal columns as text: floats (ties, exponents, NaN, -0), integers to 64 bits,
     booleans; the compiled helper's floats and the numpy twin's alike."""
     from cananalyze.core.columns.numtext import g6_text, int_text, value_text
-    from cananalyze.runtime import speedups
-
-    if not compiled:
-        monkeypatch.setattr(speedups, "C", None)
-    elif getattr(speedups.C, "g6_text", None) is None:
-        pytest.skip("compiled helper not in use")
 
     rng = np.random.default_rng(5)
     floats = np.concatenate(
@@ -255,17 +259,11 @@ def test_signal_values_of_every_kind(compiled, monkeypatch) -> None:
     assert text(value_text(np.array([1.5, 2], object))) == ["1.5", "2"]
 
 
-@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "numpy"])
-def test_time_column_is_python_fixed_point(compiled, monkeypatch) -> None:
+def test_time_column_is_python_fixed_point(both_paths) -> None:
     """Each line's time, `f"{t:12.6f}"` of the time since the first frame: near ties,
     days-long logs, negative, -0.0 and non-finite ones on both paths."""
     from cananalyze.outputs.text import writer
-    from cananalyze.runtime import speedups
 
-    if not compiled:
-        monkeypatch.setattr(speedups, "C", None)
-    elif getattr(speedups.C, "time_text", None) is None:
-        pytest.skip("compiled helper not in use")
     rng = np.random.default_rng(8)
     rel = np.concatenate(
         [
