@@ -538,7 +538,17 @@ def test_live_recording_on_a_virtual_bus(tmp_path, monkeypatch, capsysbinary):
         reader = make_reader(f, validate_crcs=True)
         summary = reader.get_summary()
         assert reader.get_header().library.startswith("cananalyze")
-        assert summary.statistics.message_count == 190 and len(summary.chunk_indexes) >= 4
+        # a chunk whenever 40 frames wait after a batch (or a second passed), and the rest
+        # at close: as many as the batches as they came make, at least (a loaded machine
+        # drains the virtual bus in fewer, larger batches than batch_max)
+        waiting, flushes = 0, 0
+        for fb in seen:
+            waiting += len(fb)
+            if waiting >= 40:
+                flushes, waiting = flushes + 1, 0
+        flushes += waiting > 0
+        assert summary.statistics.message_count == 190
+        assert len(summary.chunk_indexes) >= flushes  # 4 with batch_max-sized batches
         assert [c.topic for c in summary.channels.values()] == [FRAMES_TOPIC]
     written = mcap_frames(rec_path)
     assert [d["ns"] for d in written] == log_time_ns(live.t).tolist()
