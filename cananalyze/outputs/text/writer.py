@@ -136,7 +136,7 @@ def _frame_columns(can_id, flags, dlc, data, rtr) -> np.ndarray:
     """Identifier, length and data columns (n, 39): one compiled pass, or numpy's."""
     n = can_id.size
     compiled = getattr(speedups.C, "frame_text", None)
-    if compiled is not None:
+    if compiled is not None and data.shape[1:] == (8,):  # (FrameBatch.data: 8 bytes a row)
         out = np.empty((n, 39), np.uint8)
         compiled(
             np.ascontiguousarray(can_id, np.uint32),
