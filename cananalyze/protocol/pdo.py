@@ -79,8 +79,9 @@ def _column(raw: np.ndarray, entry: MapEntry) -> np.ndarray:
     if kind == "bool":
         return raw != 0
     if kind == "float":
-        if bits == 32:
-            return raw.astype(np.uint32).view(np.float32).astype(np.float64)
+        if bits == 32:  # (a signalling NaN's bits quieten: numpy's warning is no news)
+            with np.errstate(invalid="ignore"):
+                return raw.astype(np.uint32).view(np.float32).astype(np.float64)
         if bits == 64:
             return raw.view(np.float64)  # raw is _extract's own array: no copy
         kind = "uint"  # a REAL mapped with an odd width cannot be a float: show the bits
@@ -118,7 +119,8 @@ def _aligned(words: np.ndarray, offset: int, entry: MapEntry, scaled) -> np.ndar
     if view is None:
         return None
     lanes = words.view(view).reshape(-1, 64 // bits)[:, offset // bits]
-    return lanes.astype(np.float64 if scaled else _OUT[kind])
+    with np.errstate(invalid="ignore"):  # a REAL32's signalling NaN quietens, as in _column
+        return lanes.astype(np.float64 if scaled else _OUT[kind])
 
 
 def words_of(data: np.ndarray) -> np.ndarray:

@@ -50,9 +50,10 @@ def g6_text(values: np.ndarray) -> np.ndarray:
     e = np.floor(np.log10(ax)).astype(np.int64)
     fast = usable & (e >= -4) & (e <= 5)
     e = np.where(fast, e, 0)
-    m = ax * (10.0 ** (5 - e))  # exact power of ten: one rounding, error far below 1e-6
-    r = np.rint(m)
-    frac = m - np.floor(m)
+    with np.errstate(over="ignore", invalid="ignore"):  # rows past 1e303: not fast anyway
+        m = ax * (10.0 ** (5 - e))  # exact power of ten: one rounding, error far below 1e-6
+        r = np.rint(m)
+        frac = m - np.floor(m)
     fast &= (m >= 1e5) & (r < 1e6) & (np.abs(frac - 0.5) > 1e-6)
     r = np.where(fast, r, 1e5).astype(np.int64)
     neg = np.signbit(x)
