@@ -1498,6 +1498,18 @@ done:
     return out;
 }
 
+/* The decimal digits of v into o; their count. */
+static int write_uint(uint64_t v, char *o) {
+    char d[24];
+    int n = 0, len = 0;
+    do {
+        d[n++] = (char)('0' + v % 10);
+        v /= 10;
+    } while (v);
+    while (n) o[len++] = d[--n];
+    return len;
+}
+
 /* repr(x) into o when x is a whole number of microseconds below 2**32 (a logged time
    stamp, a time relative to the first): the shortest text that reads back as x is then
    its six decimals less their trailing zeros (one decimal kept), since no other text of
@@ -1510,15 +1522,10 @@ static int micro_repr(double x, char *o) {
     if (!(a >= 1e-4 && a < 4294967296.0)) return 0;
     double r = nearbyint(a * 1e6);
     if (r / 1e6 != a) return 0;
-    uint64_t k = (uint64_t)r, whole = k / 1000000, frac = k % 1000000;
-    char digits[24];
-    int nd = 0, len = 0;
-    do {
-        digits[nd++] = (char)('0' + whole % 10);
-        whole /= 10;
-    } while (whole);
+    uint64_t k = (uint64_t)r, frac = k % 1000000;
+    int len = 0;
     if (signbit(x)) o[len++] = '-';
-    while (nd) o[len++] = digits[--nd];
+    len += write_uint(k / 1000000, o + len);
     o[len++] = '.';
     int keep = 6;
     while (keep > 1 && frac % 10 == 0) {
@@ -1624,17 +1631,6 @@ static int py_format(double x, char code, int precision, char *o, int cap, int *
     memcpy(o, s, len);
     PyMem_Free(s);
     return (int)len;
-}
-
-static int write_uint(uint64_t v, char *o) {
-    char d[24];
-    int n = 0, len = 0;
-    do {
-        d[n++] = (char)('0' + v % 10);
-        v /= 10;
-    } while (v);
-    while (n) o[len++] = d[--n];
-    return len;
 }
 
 /* The arguments (v, out) of time_text and g6_text: v float64, out n rows of W bytes; the
